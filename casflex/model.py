@@ -1,0 +1,277 @@
+"""assemble(scene) -> Model: the symbolic equations of motion of a scene (Eq. 1).
+
+    M(q) q'' + h(q, q') + f_int(q, p) + B(q)^T lambda - f_ext(t) - g(q) = 0,    Phi(q) = 0
+
+Every term comes from energies by CasADi's automatic differentiation: M = d2T/dqd2,
+f_int = dV_el/dq, g = -dV_g/dq, B = dPhi/dq. The velocity-dependent inertia term h has two
+forms (``inertia``):
+
+- ``"lagrange"`` (default): h = Mdot q' - dT/dq, from d/dt(dT/dq') - dT/dq; energy consistent.
+- ``"seed"``: h = Mbar q' = Mdot q', the paper's Eq. 2 (Mbar_i = Rdot^T M R + R^T M Rdot).
+
+Only the scene's elements and supports are modelled; properties declared as parameters are
+entries of the symbol p (in the scene's parameter order), all others are folded constants.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from casflex.constraints import FixedDof, constraint_vector, support_constraints
+from casflex.elements import BeamElement, LinearSpring, TorsionalSpring
+from casflex.scene import Parameter, Scene, SceneError
+
+__all__ = ["Model", "assemble", "INERTIA_FORMS"]
+
+INERTIA_FORMS = ("lagrange", "seed")
+
+
+@dataclass(frozen=True, eq=False)
+class Model:
+    """The assembled symbolic model of a scene.
+
+    Attributes
+    ----------
+    dof_names : tuple of str, length n_dof
+        ``x<node>``, ``y<node>``, ``theta<node>`` per node; user nodes first, in scene order,
+        then nodes added by meshing (named ``<beam>.<k>``).
+    constraint_names : tuple of str, length n_con
+        ``<support>.<x|y|theta>``.
+    output_names : tuple of str
+        Joint outputs: ``<spring>.force|length|fx|fy``, ``<torsion>.moment``,
+        ``<support>.<dof>`` (reaction exerted by the support), ``<beam>.<element>.N|V|Ma|Mb``.
+    q0, qd0 : ndarray, shape (n_dof,)
+        Initial configuration and velocity from the scene.
+    p_nominal : ndarray, shape (n_p,)
+        Nominal values of the declared parameters.
+
+    segments : tuple of (kind, name, node_a, node_b)
+        Beam elements and linear springs with node indices, for drawing.
+
+    Functions (all named, inputs and outputs named): ``energy(q, qd, p) -> (kinetic, elastic,
+    gravity)``, ``mass(q, p) -> M``, ``forces(q, qd, p) -> (h, f_int, g)``,
+    ``load(t, p) -> f_ext``, ``constraint(q) -> (phi, B)``,
+    ``equilibrium(q, qd, qdd, lam, t, p) -> (r, phi)`` (Eq. 11), ``outputs(q, lam, p) -> y``.
+    """
+
+    scene: Scene
+    inertia: str
+    node_names: tuple[str, ...]
+    dof_names: tuple[str, ...]
+    is_rotation: np.ndarray
+    constraints: tuple[FixedDof, ...]
+    parameters: tuple[Parameter, ...]
+    p_nominal: np.ndarray
+    q0: np.ndarray
+    qd0: np.ndarray
+    output_names: tuple[str, ...]
+    energy: ca.Function
+    mass: ca.Function
+    forces: ca.Function
+    load: ca.Function
+    constraint: ca.Function
+    equilibrium: ca.Function
+    outputs: ca.Function
+    segments: tuple[tuple[str, str, int, int], ...] = field(default=())
+
+    @property
+    def n_dof(self) -> int:
+        return len(self.dof_names)
+
+    @property
+    def n_con(self) -> int:
+        return len(self.constraints)
+
+    @property
+    def n_p(self) -> int:
+        return len(self.parameters)
+
+    @property
+    def constraint_names(self) -> tuple[str, ...]:
+        return tuple(c.name for c in self.constraints)
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        return tuple(p.name for p in self.parameters)
+
+    @property
+    def length_scale(self) -> float:
+        return self.scene.length_scale
+
+    def dof(self, name: str) -> int:
+        """Index of the dof called ``name`` (e.g. ``"y5"``)."""
+        try:
+            return self.dof_names.index(name)
+        except ValueError:
+            raise KeyError(f"unknown dof {name!r}; dofs are {list(self.dof_names)}") from None
+
+    def params(self, values: dict[str, float] | np.ndarray | None = None) -> np.ndarray:
+        """Parameter vector p from a {name: value} dict (others nominal), an array, or None."""
+        if values is None:
+            return self.p_nominal.copy()
+        if isinstance(values, dict):
+            p = self.p_nominal.copy()
+            for k, v in values.items():
+                if k not in self.parameter_names:
+                    raise KeyError(f"unknown parameter {k!r}; declared: {list(self.parameter_names)}")
+                p[self.parameter_names.index(k)] = float(v)
+            return p
+        p = np.asarray(values, dtype=float).reshape(-1)
+        if p.shape != (self.n_p,):
+            raise ValueError(f"p: expected {self.n_p} values {list(self.parameter_names)}, got shape {p.shape}")
+        return p
+
+
+def _mesh(scene: Scene):
+    """Nodes (user nodes, then mesh nodes) with initial state, and beam elements per beam."""
+    nodes = {n.name: (n.x, n.y, n.theta, n.vx, n.vy, n.omega) for n in scene.nodes}
+    order = [n.name for n in scene.nodes]
+    beam_elems = []  # (beam, k, node_a, node_b)
+    for b in scene.beams:
+        a, z = b.nodes
+        chain = [a]
+        for k in range(1, b.elements):
+            s = k / b.elements
+            name = f"{b.name}.{k}"
+            nodes[name] = tuple((1 - s) * va + s * vz for va, vz in zip(nodes[a], nodes[z]))
+            order.append(name)
+            chain.append(name)
+        chain.append(z)
+        beam_elems += [(b, k + 1, chain[k], chain[k + 1]) for k in range(b.elements)]
+    return order, nodes, beam_elems
+
+
+def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
+    """Build the symbolic model of ``scene`` (see the module docstring).
+
+    Parameters
+    ----------
+    scene : Scene
+    inertia : {"lagrange", "seed"}, optional
+        Form of the velocity-dependent inertia term; default ``scene.run.inertia``.
+    """
+    inertia = scene.run.inertia if inertia is None else inertia
+    if inertia not in INERTIA_FORMS:
+        raise ValueError(f"inertia: expected one of {INERTIA_FORMS}, got {inertia!r}")
+    order, nodes, beam_elems = _mesh(scene)
+    idx = {name: 3 * i for i, name in enumerate(order)}
+    dof_names = tuple(f"{d}{n}" for n in order for d in ("x", "y", "theta"))
+    n = len(dof_names)
+    q0 = np.array([v for name in order for v in nodes[name][:3]], dtype=float)
+    qd0 = np.array([v for name in order for v in nodes[name][3:]], dtype=float)
+    is_rot = np.array([i % 3 == 2 for i in range(n)])
+
+    p = ca.SX.sym("p", len(scene.parameters))
+    symbol = {par.target: p[i] for i, par in enumerate(scene.parameters)}
+
+    def prop(owner: str, name: str, value):
+        return symbol.get(f"{owner}.{name}", value)
+
+    q = ca.SX.sym("q", n)
+    qd = ca.SX.sym("qd", n)
+    qdd = ca.SX.sym("qdd", n)
+    t = ca.SX.sym("t")
+    gvec = (prop("gravity", "x", scene.gravity[0]), prop("gravity", "y", scene.gravity[1]))
+
+    T = ca.SX(0)
+    V_el = ca.SX(0)
+    V_g = ca.SX(0)
+    outs: list[tuple[str, ca.SX]] = []
+    used = np.zeros(n, dtype=bool)
+
+    def sl(name):
+        return slice(idx[name], idx[name] + 3)
+
+    for b, k, na, nb in beam_elems:
+        el = BeamElement(
+            name=f"{b.name}.{k}",
+            X0=(nodes[na][0], nodes[na][1], nodes[nb][0], nodes[nb][1]),
+            theta0=(nodes[na][2], nodes[nb][2]),
+            E=prop(b.name, "E", b.E), A=prop(b.name, "A", b.A), I=prop(b.name, "I", b.I),
+            rho=prop(b.name, "rho", b.rho), rotary_inertia=b.rotary_inertia,
+        )
+        qe = ca.vertcat(q[sl(na)], q[sl(nb)])
+        qde = ca.vertcat(qd[sl(na)], qd[sl(nb)])
+        T += el.kinetic_energy(qe, qde)
+        V_el += el.strain_energy(qe)
+        V_g += el.gravity_energy(qe, gvec)
+        used[sl(na)] = used[sl(nb)] = True
+        f = el.end_forces(qe)
+        outs += [(f"{el.name}.{c}", f[i]) for i, c in enumerate(("N", "V", "Ma", "Mb"))]
+    for s in scene.springs:
+        a, b2 = s.nodes
+        rest = scene.distance(a, b2) if s.rest_length is None else s.rest_length
+        el = LinearSpring(s.name, prop(s.name, "k", s.k), prop(s.name, "rest_length", rest))
+        V_el += el.strain_energy(q[sl(a)], q[sl(b2)])
+        used[idx[a]:idx[a] + 2] = used[idx[b2]:idx[b2] + 2] = True
+        outs += [(f"{s.name}.{key}", v) for key, v in el.outputs(q[sl(a)], q[sl(b2)]).items()]
+    for s in scene.torsion_springs:
+        a, b2 = s.nodes
+        rest = nodes[b2][2] - nodes[a][2] if s.rest_angle is None else s.rest_angle
+        el = TorsionalSpring(s.name, prop(s.name, "kt", s.kt), prop(s.name, "rest_angle", rest))
+        V_el += el.strain_energy(q[idx[a] + 2], q[idx[b2] + 2])
+        used[idx[a] + 2] = used[idx[b2] + 2] = True
+        outs += [(f"{s.name}.{key}", v) for key, v in el.outputs(q[idx[a] + 2], q[idx[b2] + 2]).items()]
+
+    cons = support_constraints(scene, {d: i for i, d in enumerate(dof_names)}, q0)
+    for c in cons:
+        used[c.dof] = True
+    if not used.all():
+        free = [dof_names[i] for i in np.flatnonzero(~used)]
+        raise SceneError(f"dofs {free} are acted on by nothing (no beam, spring or support): "
+                         "the equations of motion would be singular; add a support for them")
+    phi = constraint_vector(cons, q)
+    B = ca.jacobian(phi, q)
+    lam = ca.SX.sym("lam", len(cons))
+    for j, c in enumerate(cons):
+        outs.append((c.name, -lam[j]))
+
+    f_ext = ca.SX.zeros(n)
+    for ld in scene.loads:
+        rows = ld.rows()
+        for comp, key in enumerate(("fx", "fy", "mz")):
+            i = idx[ld.node] + comp
+            if len(rows) == 1:
+                f_ext[i] += prop(ld.name, key, rows[0][comp + 1])
+            else:
+                tt = ca.DM([r[0] for r in rows])
+                vv = ca.DM([r[comp + 1] for r in rows])
+                tc = ca.fmin(ca.fmax(t, tt[0]), tt[-1])  # hold the end values outside the table
+                f_ext[i] += ca.pw_lin(tc, tt, vv)
+
+    dT_dqd = ca.gradient(T, qd)
+    M = ca.jacobian(dT_dqd, qd)
+    mdot_qd = ca.jtimes(dT_dqd, q, qd)
+    h = mdot_qd - ca.gradient(T, q) if inertia == "lagrange" else mdot_qd
+    f_int = ca.gradient(V_el, q)
+    g = -ca.gradient(V_g, q)
+    r = ca.mtimes(M, qdd) + h + f_int + ca.mtimes(B.T, lam) - f_ext - g
+
+    names = tuple(o[0] for o in outs)
+    y = ca.vertcat(*[o[1] for o in outs]) if outs else ca.SX(0, 1)
+    return Model(
+        scene=scene,
+        inertia=inertia,
+        node_names=tuple(order),
+        dof_names=dof_names,
+        is_rotation=is_rot,
+        constraints=tuple(cons),
+        parameters=scene.parameters,
+        p_nominal=np.array([scene.property_value(par.target) for par in scene.parameters], dtype=float),
+        q0=q0,
+        qd0=qd0,
+        output_names=names,
+        energy=ca.Function("energy", [q, qd, p], [T, V_el, V_g], ["q", "qd", "p"], ["kinetic", "elastic", "gravity"]),
+        mass=ca.Function("mass", [q, p], [M], ["q", "p"], ["M"]),
+        forces=ca.Function("forces", [q, qd, p], [h, f_int, g], ["q", "qd", "p"], ["h", "f_int", "g"]),
+        load=ca.Function("load", [t, p], [f_ext], ["t", "p"], ["f_ext"]),
+        constraint=ca.Function("constraint", [q], [phi, B], ["q"], ["phi", "B"]),
+        equilibrium=ca.Function("equilibrium", [q, qd, qdd, lam, t, p], [r, phi],
+                                ["q", "qd", "qdd", "lam", "t", "p"], ["r", "phi"]),
+        outputs=ca.Function("joint_outputs", [q, lam, p], [y], ["q", "lam", "p"], ["y"]),
+        segments=tuple(("beam", f"{b.name}.{k}", idx[na] // 3, idx[nb] // 3) for b, k, na, nb in beam_elems)
+        + tuple(("spring", s.name, idx[s.nodes[0]] // 3, idx[s.nodes[1]] // 3) for s in scene.springs),
+    )

@@ -1,0 +1,474 @@
+"""Scenes: pure data describing a planar flexible multibody system.
+
+A scene lists nodes, elements (co-rotational beams, linear axial springs, torsional springs),
+supports, gravity, nodal loads, the properties declared as identification parameters and the
+run settings. It holds numbers only (no CasADi); :func:`casflex.model.assemble` turns it into
+a symbolic model. Every constructor validates its fields and raises :class:`SceneError` with
+a message that names the offending field, e.g. ``springs[0] (spring1).k: must be > 0, got -5``.
+
+Units are SI throughout: m, rad, s, kg, N, N m, Pa.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
+
+__all__ = [
+    "SceneError",
+    "Node",
+    "Beam",
+    "Spring",
+    "TorsionSpring",
+    "Support",
+    "Load",
+    "Parameter",
+    "RunSettings",
+    "Scene",
+    "SUPPORT_DOFS",
+]
+
+
+class SceneError(ValueError):
+    """A scene is malformed; the message names the offending field."""
+
+
+#: Which nodal dofs ("x", "y", "theta") each support kind fixes.
+SUPPORT_DOFS: dict[str, tuple[str, ...]] = {
+    "clamp": ("x", "y", "theta"),
+    "pin": ("x", "y"),
+    "x": ("x",),
+    "y": ("y",),
+    "theta": ("theta",),
+}
+
+_INERTIA_FORMS = ("lagrange", "seed")
+
+
+def _number(where: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise SceneError(f"{where}: expected a number, got {value!r} ({type(value).__name__})")
+    value = float(value)
+    if not math.isfinite(value):
+        raise SceneError(f"{where}: must be finite, got {value}")
+    return value
+
+
+def _positive(where: str, value: Any) -> float:
+    value = _number(where, value)
+    if value <= 0.0:
+        raise SceneError(f"{where}: must be > 0, got {value:g}")
+    return value
+
+
+def _non_negative(where: str, value: Any) -> float:
+    value = _number(where, value)
+    if value < 0.0:
+        raise SceneError(f"{where}: must be >= 0, got {value:g}")
+    return value
+
+
+def _name(where: str, value: Any) -> str:
+    if not isinstance(value, str) or not value.strip():
+        raise SceneError(f"{where}: expected a non-empty name, got {value!r}")
+    if any(c in value for c in ".:[] \t\n"):
+        raise SceneError(f"{where}: name {value!r} may not contain '.', ':', '[', ']' or spaces")
+    return value
+
+
+def _node_pair(where: str, value: Any) -> tuple[str, str]:
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise SceneError(f"{where}: expected two node names, got {value!r}")
+    a, b = (_name(f"{where}[{i}]", v) for i, v in enumerate(value))
+    if a == b:
+        raise SceneError(f"{where}: the two nodes must differ, got {a!r} twice")
+    return a, b
+
+
+@dataclass(frozen=True)
+class Node:
+    """A node: initial position (m), initial rotation (rad) and initial velocity.
+
+    The rotation dof ``theta`` is absolute; its initial value is ``theta`` and elements
+    attached to the node are stress-free in the initial configuration.
+    """
+
+    name: str
+    x: float
+    y: float
+    theta: float = 0.0
+    vx: float = 0.0
+    vy: float = 0.0
+    omega: float = 0.0
+
+    def __post_init__(self) -> None:
+        where = f"node {self.name!r}"
+        object.__setattr__(self, "name", _name("nodes[].name", self.name))
+        for f in ("x", "y", "theta", "vx", "vy", "omega"):
+            object.__setattr__(self, f, _number(f"{where}.{f}", getattr(self, f)))
+
+
+@dataclass(frozen=True)
+class Beam:
+    """A straight co-rotational Euler-Bernoulli beam between two nodes.
+
+    E (Pa), A (m^2), I (m^4), rho (kg/m^3); meshed into ``elements`` equal elements.
+    ``rotary_inertia`` adds the cross-section rotary inertia rho*I to the consistent mass.
+    """
+
+    name: str
+    nodes: tuple[str, str]
+    E: float
+    A: float
+    I: float  # noqa: E741 - the paper's symbol
+    rho: float
+    elements: int = 1
+    rotary_inertia: bool = False
+
+    def __post_init__(self) -> None:
+        where = f"beam {self.name!r}"
+        object.__setattr__(self, "name", _name("beams[].name", self.name))
+        object.__setattr__(self, "nodes", _node_pair(f"{where}.nodes", self.nodes))
+        for f in ("E", "A", "I"):
+            object.__setattr__(self, f, _positive(f"{where}.{f}", getattr(self, f)))
+        object.__setattr__(self, "rho", _non_negative(f"{where}.rho", self.rho))
+        n = self.elements
+        if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+            raise SceneError(f"{where}.elements: expected an integer >= 1, got {n!r}")
+        if not isinstance(self.rotary_inertia, bool):
+            raise SceneError(f"{where}.rotary_inertia: expected true or false, got {self.rotary_inertia!r}")
+
+
+@dataclass(frozen=True)
+class Spring:
+    """A massless co-rotational linear (axial, pin-to-pin) spring, stiffness k (N/m).
+
+    ``rest_length`` (m) defaults to the initial distance between the two nodes.
+    """
+
+    name: str
+    nodes: tuple[str, str]
+    k: float
+    rest_length: float | None = None
+
+    def __post_init__(self) -> None:
+        where = f"spring {self.name!r}"
+        object.__setattr__(self, "name", _name("springs[].name", self.name))
+        object.__setattr__(self, "nodes", _node_pair(f"{where}.nodes", self.nodes))
+        object.__setattr__(self, "k", _positive(f"{where}.k", self.k))
+        if self.rest_length is not None:
+            object.__setattr__(self, "rest_length", _non_negative(f"{where}.rest_length", self.rest_length))
+
+
+@dataclass(frozen=True)
+class TorsionSpring:
+    """A massless torsional spring kt (N m/rad) on the relative rotation theta_b - theta_a.
+
+    ``rest_angle`` (rad) defaults to the initial relative rotation.
+    """
+
+    name: str
+    nodes: tuple[str, str]
+    kt: float
+    rest_angle: float | None = None
+
+    def __post_init__(self) -> None:
+        where = f"torsion spring {self.name!r}"
+        object.__setattr__(self, "name", _name("torsion_springs[].name", self.name))
+        object.__setattr__(self, "nodes", _node_pair(f"{where}.nodes", self.nodes))
+        object.__setattr__(self, "kt", _positive(f"{where}.kt", self.kt))
+        if self.rest_angle is not None:
+            object.__setattr__(self, "rest_angle", _number(f"{where}.rest_angle", self.rest_angle))
+
+
+@dataclass(frozen=True)
+class Support:
+    """A support fixing some dofs of a node at their initial values.
+
+    kind: ``clamp`` (x, y, theta), ``pin`` (x, y), or a single dof ``x``, ``y``, ``theta``.
+    """
+
+    name: str
+    node: str
+    kind: str = "clamp"
+
+    def __post_init__(self) -> None:
+        where = f"support {self.name!r}"
+        object.__setattr__(self, "name", _name("supports[].name", self.name))
+        object.__setattr__(self, "node", _name(f"{where}.node", self.node))
+        if self.kind not in SUPPORT_DOFS:
+            raise SceneError(f"{where}.kind: unknown support kind {self.kind!r}; expected one of {sorted(SUPPORT_DOFS)}")
+
+    @property
+    def dofs(self) -> tuple[str, ...]:
+        return SUPPORT_DOFS[self.kind]
+
+
+@dataclass(frozen=True)
+class Load:
+    """A nodal load: force fx, fy (N) and moment mz (N m) in the global frame.
+
+    Constant, or a time table: rows (t, fx, fy, mz) with strictly increasing t (s), interpolated
+    linearly and held constant outside the table. A constant load is a table with one row.
+    """
+
+    name: str
+    node: str
+    fx: float = 0.0
+    fy: float = 0.0
+    mz: float = 0.0
+    table: tuple[tuple[float, float, float, float], ...] | None = None
+
+    def __post_init__(self) -> None:
+        where = f"load {self.name!r}"
+        object.__setattr__(self, "name", _name("loads[].name", self.name))
+        object.__setattr__(self, "node", _name(f"{where}.node", self.node))
+        for f in ("fx", "fy", "mz"):
+            object.__setattr__(self, f, _number(f"{where}.{f}", getattr(self, f)))
+        if self.table is None:
+            return
+        if not isinstance(self.table, (list, tuple)) or len(self.table) == 0:
+            raise SceneError(f"{where}.table: expected a non-empty list of rows [t, fx, fy, mz]")
+        if self.fx or self.fy or self.mz:
+            raise SceneError(f"{where}: give either fx/fy/mz or a table, not both")
+        rows = []
+        for i, row in enumerate(self.table):
+            if not isinstance(row, (list, tuple)) or len(row) != 4:
+                raise SceneError(f"{where}.table[{i}]: expected [t, fx, fy, mz], got {row!r}")
+            rows.append(tuple(_number(f"{where}.table[{i}][{j}]", v) for j, v in enumerate(row)))
+        for i in range(1, len(rows)):
+            if rows[i][0] <= rows[i - 1][0]:
+                raise SceneError(f"{where}.table[{i}][0]: times must increase strictly, got {rows[i][0]:g} after {rows[i - 1][0]:g}")
+        object.__setattr__(self, "table", tuple(rows))
+
+    def rows(self) -> tuple[tuple[float, float, float, float], ...]:
+        """The load as table rows (t, fx, fy, mz)."""
+        return self.table if self.table is not None else ((0.0, self.fx, self.fy, self.mz),)
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """A scene property declared as an identification parameter.
+
+    ``target`` names the property as ``"<element>.<field>"`` (e.g. ``"spring1.k"``), or
+    ``"gravity.<x|y>"`` or ``"<load>.<fx|fy|mz>"``. Its nominal value is the property's value in
+    the scene. ``lower``/``upper`` bound it (defaults: 0 and +inf for properties that must be
+    positive). ``scale`` is the typical magnitude used to scale the NLP (default: the nominal).
+    """
+
+    name: str
+    target: str
+    unit: str = ""
+    lower: float = -math.inf
+    upper: float = math.inf
+    scale: float | None = None
+
+    def __post_init__(self) -> None:
+        where = f"parameter {self.name!r}"
+        object.__setattr__(self, "name", _name("parameters[].name", self.name))
+        if not isinstance(self.target, str) or self.target.count(".") != 1:
+            raise SceneError(f"{where}.target: expected '<element>.<field>', got {self.target!r}")
+        if not isinstance(self.unit, str):
+            raise SceneError(f"{where}.unit: expected a string, got {self.unit!r}")
+        for f in ("lower", "upper"):
+            v = getattr(self, f)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or math.isnan(v):
+                raise SceneError(f"{where}.{f}: expected a number, got {v!r}")
+            object.__setattr__(self, f, float(v))
+        if self.lower >= self.upper:
+            raise SceneError(f"{where}: lower bound {self.lower:g} must be below upper bound {self.upper:g}")
+        if self.scale is not None:
+            object.__setattr__(self, "scale", _positive(f"{where}.scale", self.scale))
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """Default simulation settings: horizon t_end (s), step dt (s), HHT alpha, inertia form."""
+
+    t_end: float = 3.0
+    dt: float = 1e-3
+    alpha: float = -0.05
+    inertia: str = "lagrange"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "t_end", _positive("run.t_end", self.t_end))
+        object.__setattr__(self, "dt", _positive("run.dt", self.dt))
+        alpha = _number("run.alpha", self.alpha)
+        if not -1.0 / 3.0 - 1e-12 <= alpha <= 0.0:
+            raise SceneError(f"run.alpha: must lie in [-1/3, 0], got {alpha:g}")
+        object.__setattr__(self, "alpha", alpha)
+        if self.inertia not in _INERTIA_FORMS:
+            raise SceneError(f"run.inertia: expected one of {_INERTIA_FORMS}, got {self.inertia!r}")
+        if self.dt > self.t_end:
+            raise SceneError(f"run.dt: the step {self.dt:g} s is longer than t_end = {self.t_end:g} s")
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A whole planar flexible multibody system, validated on construction.
+
+    ``gravity`` is the acceleration vector (m/s^2), default (0, -9.81).
+    """
+
+    name: str
+    nodes: tuple[Node, ...]
+    beams: tuple[Beam, ...] = ()
+    springs: tuple[Spring, ...] = ()
+    torsion_springs: tuple[TorsionSpring, ...] = ()
+    supports: tuple[Support, ...] = ()
+    loads: tuple[Load, ...] = ()
+    parameters: tuple[Parameter, ...] = ()
+    gravity: tuple[float, float] = (0.0, -9.81)
+    run: RunSettings = field(default_factory=RunSettings)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name:
+            raise SceneError(f"scene.name: expected a non-empty string, got {self.name!r}")
+        for f in ("nodes", "beams", "springs", "torsion_springs", "supports", "loads", "parameters"):
+            value = getattr(self, f)
+            if not isinstance(value, (list, tuple)):
+                raise SceneError(f"{f}: expected a list, got {type(value).__name__}")
+            object.__setattr__(self, f, tuple(value))
+        if not self.nodes:
+            raise SceneError("nodes: a scene needs at least one node")
+        if not isinstance(self.gravity, (list, tuple)) or len(self.gravity) != 2:
+            raise SceneError(f"gravity: expected [gx, gy] in m/s^2, got {self.gravity!r}")
+        object.__setattr__(self, "gravity", tuple(_number(f"gravity[{i}]", g) for i, g in enumerate(self.gravity)))
+        if not isinstance(self.run, RunSettings):
+            raise SceneError(f"run: expected RunSettings, got {type(self.run).__name__}")
+        self._check_types()
+        self._check_references()
+        self._check_geometry()
+        self._check_parameters()
+
+    # -- validation -------------------------------------------------------------------------
+    def _check_types(self) -> None:
+        kinds = {"nodes": Node, "beams": Beam, "springs": Spring, "torsion_springs": TorsionSpring,
+                 "supports": Support, "loads": Load, "parameters": Parameter}
+        for f, cls in kinds.items():
+            for i, item in enumerate(getattr(self, f)):
+                if not isinstance(item, cls):
+                    raise SceneError(f"{f}[{i}]: expected a {cls.__name__}, got {type(item).__name__}")
+
+    def _check_references(self) -> None:
+        seen: dict[str, str] = {}
+        for i, n in enumerate(self.nodes):
+            if n.name in seen:
+                raise SceneError(f"nodes[{i}].name: duplicate node {n.name!r}")
+            seen[n.name] = "node"
+        names: dict[str, str] = {}
+        for f in ("beams", "springs", "torsion_springs", "supports", "loads"):
+            for i, item in enumerate(getattr(self, f)):
+                if item.name in names or item.name in ("gravity",):
+                    raise SceneError(f"{f}[{i}].name: duplicate name {item.name!r} (names are unique across elements, supports and loads)")
+                names[item.name] = f
+                refs = item.nodes if hasattr(item, "nodes") else (item.node,)
+                for r in refs:
+                    if r not in seen:
+                        raise SceneError(f"{f}[{i}] ({item.name}): unknown node {r!r}; known nodes: {sorted(seen)}")
+        fixed: dict[tuple[str, str], str] = {}
+        for i, s in enumerate(self.supports):
+            for d in s.dofs:
+                if (s.node, d) in fixed:
+                    raise SceneError(f"supports[{i}] ({s.name}): dof {d}{s.node} is already fixed by support {fixed[(s.node, d)]!r}")
+                fixed[(s.node, d)] = s.name
+
+    def _check_geometry(self) -> None:
+        for i, b in enumerate(self.beams):
+            if self.distance(*b.nodes) <= 0.0:
+                raise SceneError(f"beams[{i}] ({b.name}): zero length, nodes {b.nodes[0]!r} and {b.nodes[1]!r} coincide")
+        for i, s in enumerate(self.springs):
+            if self.distance(*s.nodes) <= 0.0 and (s.rest_length is None or s.rest_length > 0.0):
+                raise SceneError(f"springs[{i}] ({s.name}): nodes {s.nodes[0]!r} and {s.nodes[1]!r} coincide; "
+                                 "a spring needs a direction (only a zero-length spring, rest_length = 0, may start there)")
+
+    def _check_parameters(self) -> None:
+        seen: set[str] = set()
+        for i, p in enumerate(self.parameters):
+            if p.name in seen:
+                raise SceneError(f"parameters[{i}].name: duplicate parameter {p.name!r}")
+            seen.add(p.name)
+            value = self.property_value(p.target, where=f"parameters[{i}] ({p.name}).target")
+            if not p.lower <= value <= p.upper:
+                raise SceneError(f"parameters[{i}] ({p.name}): nominal value {value:g} of {p.target} "
+                                 f"lies outside its bounds [{p.lower:g}, {p.upper:g}]")
+        targets = [p.target for p in self.parameters]
+        for t in set(targets):
+            if targets.count(t) > 1:
+                raise SceneError(f"parameters: {t!r} is declared a parameter more than once")
+
+    # -- queries ----------------------------------------------------------------------------
+    def node(self, name: str) -> Node:
+        for n in self.nodes:
+            if n.name == name:
+                return n
+        raise SceneError(f"unknown node {name!r}")
+
+    def distance(self, a: str, b: str) -> float:
+        na, nb = self.node(a), self.node(b)
+        return math.hypot(nb.x - na.x, nb.y - na.y)
+
+    def item(self, name: str) -> Any:
+        """The element, support or load called ``name``."""
+        for f in ("beams", "springs", "torsion_springs", "supports", "loads"):
+            for it in getattr(self, f):
+                if it.name == name:
+                    return it
+        raise SceneError(f"unknown element or load {name!r}")
+
+    def property_value(self, target: str, *, where: str = "target") -> float:
+        """The numeric value of the property ``"<name>.<field>"`` (defaults resolved)."""
+        owner, _, prop = target.partition(".")
+        if owner == "gravity":
+            if prop not in ("x", "y"):
+                raise SceneError(f"{where}: gravity has components 'x' and 'y', got {prop!r}")
+            return self.gravity[0 if prop == "x" else 1]
+        try:
+            it = self.item(owner)
+        except SceneError:
+            raise SceneError(f"{where}: unknown element or load {owner!r} in {target!r}") from None
+        numeric = [f.name for f in fields(it) if f.name not in ("name", "nodes", "node", "elements", "table", "kind", "rotary_inertia")]
+        if prop not in numeric:
+            raise SceneError(f"{where}: {owner!r} has no numeric property {prop!r}; expected one of {numeric}")
+        if isinstance(it, Load) and it.table is not None:
+            raise SceneError(f"{where}: load {owner!r} is given as a table; tabulated loads cannot be parameters")
+        value = getattr(it, prop)
+        if value is None:
+            if isinstance(it, Spring):
+                value = self.distance(*it.nodes)
+            elif isinstance(it, TorsionSpring):
+                value = self.node(it.nodes[1]).theta - self.node(it.nodes[0]).theta
+        return float(value)
+
+    def parameter(self, name: str) -> Parameter:
+        for p in self.parameters:
+            if p.name == name:
+                return p
+        raise SceneError(f"unknown parameter {name!r}; declared: {[p.name for p in self.parameters]}")
+
+    def with_values(self, **values: float) -> Scene:
+        """A copy with the named parameters set to new nominal values (bounds still checked)."""
+        scene = self
+        for name, v in values.items():
+            target = self.parameter(name).target
+            owner, _, prop = target.partition(".")
+            if owner == "gravity":
+                g = list(scene.gravity)
+                g[0 if prop == "x" else 1] = v
+                scene = replace(scene, gravity=tuple(g))
+                continue
+            for f in ("beams", "springs", "torsion_springs", "loads"):
+                items = list(getattr(scene, f))
+                for i, it in enumerate(items):
+                    if it.name == owner:
+                        items[i] = replace(it, **{prop: v})
+                        scene = replace(scene, **{f: tuple(items)})
+        return scene
+
+    @property
+    def length_scale(self) -> float:
+        """Characteristic length (m): the largest distance between two nodes (>= 1e-3)."""
+        xs = [n.x for n in self.nodes]
+        ys = [n.y for n in self.nodes]
+        return max(math.hypot(max(xs) - min(xs), max(ys) - min(ys)), 1e-3)

@@ -1,0 +1,169 @@
+"""Read and write scenes as TOML; find built-in scenes by name.
+
+The format is documented field by field in ``docs/scene-format.md``. Reading checks every
+table for unknown or missing fields and wrong types, and reports the field by its path
+(``springs[1].k``) before the dataclasses validate the values.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tomllib
+from dataclasses import MISSING, fields
+from pathlib import Path
+from typing import Any
+
+from casflex.scene import (
+    Beam,
+    Load,
+    Node,
+    Parameter,
+    RunSettings,
+    Scene,
+    SceneError,
+    Spring,
+    Support,
+    TorsionSpring,
+)
+
+__all__ = ["load_scene", "loads_scene", "dumps_scene", "save_scene", "builtin_scenes", "scene_from_dict"]
+
+_BUILTIN_DIR = Path(__file__).parent / "scenes"
+_LISTS: dict[str, type] = {
+    "nodes": Node,
+    "beams": Beam,
+    "springs": Spring,
+    "torsion_springs": TorsionSpring,
+    "supports": Support,
+    "loads": Load,
+    "parameters": Parameter,
+}
+_TOP_KEYS = {"name", "gravity", "run", *_LISTS}
+
+
+def builtin_scenes() -> list[str]:
+    """Names of the scenes shipped with casflex (``casflex/scenes/*.toml``)."""
+    return sorted(p.stem for p in _BUILTIN_DIR.glob("*.toml"))
+
+
+def load_scene(source: str | os.PathLike[str]) -> Scene:
+    """Load a scene from a TOML file, or a built-in scene by name (e.g. ``"twobar"``)."""
+    text_source = str(source)
+    if text_source in builtin_scenes():
+        path = _BUILTIN_DIR / f"{text_source}.toml"
+    else:
+        path = Path(source)
+        if not path.is_file():
+            raise SceneError(f"scene {text_source!r}: no such file, and not a built-in scene (built-in: {builtin_scenes()})")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SceneError(f"scene file {path}: cannot be read ({exc})") from None
+    return loads_scene(text, source=str(path))
+
+
+def loads_scene(text: str, *, source: str = "<string>") -> Scene:
+    """Parse a scene from TOML text."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"{source}: not valid TOML: {exc}") from None
+    try:
+        return scene_from_dict(data)
+    except SceneError as exc:
+        raise SceneError(f"{source}: {exc}") from None
+
+
+def _build(cls: type, where: str, table: Any) -> Any:
+    if not isinstance(table, dict):
+        raise SceneError(f"{where}: expected a table, got {type(table).__name__}")
+    known = {f.name: f for f in fields(cls)}
+    for key in table:
+        if key not in known:
+            raise SceneError(f"{where}: unknown field {key!r}; expected some of {list(known)}")
+    for name, f in known.items():
+        if f.default is MISSING and f.default_factory is MISSING and name not in table:
+            raise SceneError(f"{where}: missing required field {name!r}")
+    kwargs = dict(table)
+    for key in ("nodes", "table"):
+        if key in kwargs and isinstance(kwargs[key], list):
+            kwargs[key] = tuple(tuple(r) if isinstance(r, list) else r for r in kwargs[key])
+    for key in ("lower", "upper"):
+        if key in kwargs and isinstance(kwargs[key], str) and kwargs[key] in ("inf", "-inf"):
+            kwargs[key] = float(kwargs[key])
+    for key in ("name", "node", "kind", "target", "unit", "inertia"):
+        if key in kwargs and key in known and not isinstance(kwargs[key], str):
+            raise SceneError(f"{where}.{key}: expected a string, got {kwargs[key]!r}")
+    try:
+        return cls(**kwargs)
+    except SceneError as exc:
+        raise SceneError(f"{where}: {exc}") from None
+
+
+def scene_from_dict(data: dict[str, Any]) -> Scene:
+    """Build a :class:`Scene` from the nested dict of a parsed TOML file."""
+    if not isinstance(data, dict):
+        raise SceneError(f"scene: expected a table, got {type(data).__name__}")
+    for key in data:
+        if key not in _TOP_KEYS:
+            raise SceneError(f"unknown top-level field {key!r}; expected some of {sorted(_TOP_KEYS)}")
+    if "name" not in data:
+        raise SceneError("missing required field 'name'")
+    if "nodes" not in data:
+        raise SceneError("missing required field 'nodes' (a list of [[nodes]] tables)")
+    kwargs: dict[str, Any] = {"name": data["name"]}
+    for key, cls in _LISTS.items():
+        items = data.get(key, [])
+        if not isinstance(items, list):
+            raise SceneError(f"{key}: expected a list of [[{key}]] tables, got {type(items).__name__}")
+        kwargs[key] = tuple(_build(cls, f"{key}[{i}]", t) for i, t in enumerate(items))
+    if "gravity" in data:
+        kwargs["gravity"] = data["gravity"]
+    if "run" in data:
+        kwargs["run"] = _build(RunSettings, "run", data["run"])
+    return Scene(**kwargs)
+
+
+# -- writing ---------------------------------------------------------------------------------
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        if math.isinf(v):
+            return "inf" if v > 0 else "-inf"
+        return repr(v)
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    raise TypeError(f"cannot write {v!r} to TOML")
+
+
+def _table_lines(obj: Any) -> list[str]:
+    lines = []
+    for f in fields(obj):
+        v = getattr(obj, f.name)
+        if v is None or (f.default is not MISSING and v == f.default and f.name != "kind"):
+            continue
+        lines.append(f"{f.name} = {_toml_value(v)}")
+    return lines
+
+
+def dumps_scene(scene: Scene) -> str:
+    """The scene as TOML text; ``loads_scene(dumps_scene(s)) == s``."""
+    out = [f"name = {_toml_value(scene.name)}", f"gravity = {_toml_value(scene.gravity)}", "", "[run]"]
+    out += [f"{f.name} = {_toml_value(getattr(scene.run, f.name))}" for f in fields(scene.run)]
+    for key in _LISTS:
+        for item in getattr(scene, key):
+            out += ["", f"[[{key}]]", *_table_lines(item)]
+    return "\n".join(out) + "\n"
+
+
+def save_scene(scene: Scene, path: str | os.PathLike[str]) -> Path:
+    """Write the scene to a TOML file atomically (temporary file, then rename)."""
+    from casflex.results import atomic_write_text
+
+    return atomic_write_text(Path(path), dumps_scene(scene))
