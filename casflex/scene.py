@@ -31,7 +31,24 @@ __all__ = [
 
 
 class SceneError(ValueError):
-    """A scene is malformed; the message names the offending field."""
+    """A scene is malformed; the message names the offending field.
+
+    Errors raised by an element's own validation also carry ``field`` (the field path inside
+    the element, e.g. ``"k"`` or ``"table[1][0]"``, or None) and ``reason`` (the message
+    without the location), so that a reader can relocate them, e.g. from
+    ``spring 'spring1'.k: must be > 0, got -5`` to ``springs[0] (spring1).k: must be > 0, got -5``.
+    """
+
+    def __init__(self, message: str, *, field: str | None = None, reason: str | None = None) -> None:
+        super().__init__(message)
+        self.field = field
+        self.reason = message if reason is None else reason
+
+    @classmethod
+    def at(cls, owner: str, field: str | None, reason: str) -> SceneError:
+        """The error ``"<owner>.<field>: <reason>"`` (``"<owner>: <reason>"`` without a field)."""
+        where = owner if field is None else (f"{owner}.{field}" if owner else field)
+        return cls(f"{where}: {reason}", field=field, reason=reason)
 
 
 #: Which nodal dofs ("x", "y", "theta") each support kind fixes.
@@ -44,46 +61,51 @@ SUPPORT_DOFS: dict[str, tuple[str, ...]] = {
 }
 
 _INERTIA_FORMS = ("lagrange", "seed")
+_NON_NUMERIC = ("name", "nodes", "node", "elements", "table", "kind", "rotary_inertia")
 
 
-def _number(where: str, value: Any) -> float:
+def _number(owner: str, field: str, value: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SceneError(f"{where}: expected a number, got {value!r} ({type(value).__name__})")
+        raise SceneError.at(owner, field, f"expected a number, got {value!r} ({type(value).__name__})")
     value = float(value)
     if not math.isfinite(value):
-        raise SceneError(f"{where}: must be finite, got {value}")
+        raise SceneError.at(owner, field, f"must be finite, got {value}")
     return value
 
 
-def _positive(where: str, value: Any) -> float:
-    value = _number(where, value)
+def _positive(owner: str, field: str, value: Any) -> float:
+    value = _number(owner, field, value)
     if value <= 0.0:
-        raise SceneError(f"{where}: must be > 0, got {value:g}")
+        raise SceneError.at(owner, field, f"must be > 0, got {value:g}")
     return value
 
 
-def _non_negative(where: str, value: Any) -> float:
-    value = _number(where, value)
+def _non_negative(owner: str, field: str, value: Any) -> float:
+    value = _number(owner, field, value)
     if value < 0.0:
-        raise SceneError(f"{where}: must be >= 0, got {value:g}")
+        raise SceneError.at(owner, field, f"must be >= 0, got {value:g}")
     return value
 
 
-def _name(where: str, value: Any) -> str:
+def _name(owner: str, field: str, value: Any) -> str:
     if not isinstance(value, str) or not value.strip():
-        raise SceneError(f"{where}: expected a non-empty name, got {value!r}")
+        raise SceneError.at(owner, field, f"expected a non-empty name (a string), got {value!r}")
     if any(c in value for c in ".:[] \t\n"):
-        raise SceneError(f"{where}: name {value!r} may not contain '.', ':', '[', ']' or spaces")
+        raise SceneError.at(owner, field, f"name {value!r} may not contain '.', ':', '[', ']' or spaces")
     return value
 
 
-def _node_pair(where: str, value: Any) -> tuple[str, str]:
-    if not isinstance(value, (list, tuple)) or len(value) != 2:
-        raise SceneError(f"{where}: expected two node names, got {value!r}")
-    a, b = (_name(f"{where}[{i}]", v) for i, v in enumerate(value))
+def _node_pair(owner: str, value: Any) -> tuple[str, str]:
+    if isinstance(value, str) or not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise SceneError.at(owner, "nodes", f"expected a list of two node names, got {value!r}")
+    a, b = (_name(owner, f"nodes[{i}]", v) for i, v in enumerate(value))
     if a == b:
-        raise SceneError(f"{where}: the two nodes must differ, got {a!r} twice")
+        raise SceneError.at(owner, "nodes", f"the two nodes must differ, got {a!r} twice")
     return a, b
+
+
+def _owner(kind: str, name: Any) -> str:
+    return f"{kind} {name!r}"
 
 
 @dataclass(frozen=True)
@@ -103,10 +125,10 @@ class Node:
     omega: float = 0.0
 
     def __post_init__(self) -> None:
-        where = f"node {self.name!r}"
-        object.__setattr__(self, "name", _name("nodes[].name", self.name))
+        where = _owner("node", self.name)
+        object.__setattr__(self, "name", _name(where, "name", self.name))
         for f in ("x", "y", "theta", "vx", "vy", "omega"):
-            object.__setattr__(self, f, _number(f"{where}.{f}", getattr(self, f)))
+            object.__setattr__(self, f, _number(where, f, getattr(self, f)))
 
 
 @dataclass(frozen=True)
@@ -127,17 +149,17 @@ class Beam:
     rotary_inertia: bool = False
 
     def __post_init__(self) -> None:
-        where = f"beam {self.name!r}"
-        object.__setattr__(self, "name", _name("beams[].name", self.name))
-        object.__setattr__(self, "nodes", _node_pair(f"{where}.nodes", self.nodes))
+        where = _owner("beam", self.name)
+        object.__setattr__(self, "name", _name(where, "name", self.name))
+        object.__setattr__(self, "nodes", _node_pair(where, self.nodes))
         for f in ("E", "A", "I"):
-            object.__setattr__(self, f, _positive(f"{where}.{f}", getattr(self, f)))
-        object.__setattr__(self, "rho", _non_negative(f"{where}.rho", self.rho))
+            object.__setattr__(self, f, _positive(where, f, getattr(self, f)))
+        object.__setattr__(self, "rho", _non_negative(where, "rho", self.rho))
         n = self.elements
         if isinstance(n, bool) or not isinstance(n, int) or n < 1:
-            raise SceneError(f"{where}.elements: expected an integer >= 1, got {n!r}")
+            raise SceneError.at(where, "elements", f"expected an integer >= 1, got {n!r}")
         if not isinstance(self.rotary_inertia, bool):
-            raise SceneError(f"{where}.rotary_inertia: expected true or false, got {self.rotary_inertia!r}")
+            raise SceneError.at(where, "rotary_inertia", f"expected true or false, got {self.rotary_inertia!r}")
 
 
 @dataclass(frozen=True)
@@ -153,12 +175,12 @@ class Spring:
     rest_length: float | None = None
 
     def __post_init__(self) -> None:
-        where = f"spring {self.name!r}"
-        object.__setattr__(self, "name", _name("springs[].name", self.name))
-        object.__setattr__(self, "nodes", _node_pair(f"{where}.nodes", self.nodes))
-        object.__setattr__(self, "k", _positive(f"{where}.k", self.k))
+        where = _owner("spring", self.name)
+        object.__setattr__(self, "name", _name(where, "name", self.name))
+        object.__setattr__(self, "nodes", _node_pair(where, self.nodes))
+        object.__setattr__(self, "k", _positive(where, "k", self.k))
         if self.rest_length is not None:
-            object.__setattr__(self, "rest_length", _non_negative(f"{where}.rest_length", self.rest_length))
+            object.__setattr__(self, "rest_length", _non_negative(where, "rest_length", self.rest_length))
 
 
 @dataclass(frozen=True)
@@ -174,12 +196,12 @@ class TorsionSpring:
     rest_angle: float | None = None
 
     def __post_init__(self) -> None:
-        where = f"torsion spring {self.name!r}"
-        object.__setattr__(self, "name", _name("torsion_springs[].name", self.name))
-        object.__setattr__(self, "nodes", _node_pair(f"{where}.nodes", self.nodes))
-        object.__setattr__(self, "kt", _positive(f"{where}.kt", self.kt))
+        where = _owner("torsion spring", self.name)
+        object.__setattr__(self, "name", _name(where, "name", self.name))
+        object.__setattr__(self, "nodes", _node_pair(where, self.nodes))
+        object.__setattr__(self, "kt", _positive(where, "kt", self.kt))
         if self.rest_angle is not None:
-            object.__setattr__(self, "rest_angle", _number(f"{where}.rest_angle", self.rest_angle))
+            object.__setattr__(self, "rest_angle", _number(where, "rest_angle", self.rest_angle))
 
 
 @dataclass(frozen=True)
@@ -194,11 +216,12 @@ class Support:
     kind: str = "clamp"
 
     def __post_init__(self) -> None:
-        where = f"support {self.name!r}"
-        object.__setattr__(self, "name", _name("supports[].name", self.name))
-        object.__setattr__(self, "node", _name(f"{where}.node", self.node))
-        if self.kind not in SUPPORT_DOFS:
-            raise SceneError(f"{where}.kind: unknown support kind {self.kind!r}; expected one of {sorted(SUPPORT_DOFS)}")
+        where = _owner("support", self.name)
+        object.__setattr__(self, "name", _name(where, "name", self.name))
+        object.__setattr__(self, "node", _name(where, "node", self.node))
+        if not isinstance(self.kind, str) or self.kind not in SUPPORT_DOFS:
+            raise SceneError.at(where, "kind",
+                                f"unknown support kind {self.kind!r}; expected one of {list(SUPPORT_DOFS)}")
 
     @property
     def dofs(self) -> tuple[str, ...]:
@@ -221,25 +244,29 @@ class Load:
     table: tuple[tuple[float, float, float, float], ...] | None = None
 
     def __post_init__(self) -> None:
-        where = f"load {self.name!r}"
-        object.__setattr__(self, "name", _name("loads[].name", self.name))
-        object.__setattr__(self, "node", _name(f"{where}.node", self.node))
+        where = _owner("load", self.name)
+        object.__setattr__(self, "name", _name(where, "name", self.name))
+        object.__setattr__(self, "node", _name(where, "node", self.node))
         for f in ("fx", "fy", "mz"):
-            object.__setattr__(self, f, _number(f"{where}.{f}", getattr(self, f)))
+            object.__setattr__(self, f, _number(where, f, getattr(self, f)))
         if self.table is None:
             return
         if not isinstance(self.table, (list, tuple)) or len(self.table) == 0:
-            raise SceneError(f"{where}.table: expected a non-empty list of rows [t, fx, fy, mz]")
+            raise SceneError.at(where, "table",
+                                f"expected a non-empty list of rows [t, fx, fy, mz], got {self.table!r}")
         if self.fx or self.fy or self.mz:
-            raise SceneError(f"{where}: give either fx/fy/mz or a table, not both")
+            given = [f for f in ("fx", "fy", "mz") if getattr(self, f)]
+            raise SceneError.at(where, "table",
+                                f"give either constant fx/fy/mz or a table, not both (also given: {given})")
         rows = []
         for i, row in enumerate(self.table):
-            if not isinstance(row, (list, tuple)) or len(row) != 4:
-                raise SceneError(f"{where}.table[{i}]: expected [t, fx, fy, mz], got {row!r}")
-            rows.append(tuple(_number(f"{where}.table[{i}][{j}]", v) for j, v in enumerate(row)))
+            if isinstance(row, str) or not isinstance(row, (list, tuple)) or len(row) != 4:
+                raise SceneError.at(where, f"table[{i}]", f"expected a row [t, fx, fy, mz], got {row!r}")
+            rows.append(tuple(_number(where, f"table[{i}][{j}]", v) for j, v in enumerate(row)))
         for i in range(1, len(rows)):
             if rows[i][0] <= rows[i - 1][0]:
-                raise SceneError(f"{where}.table[{i}][0]: times must increase strictly, got {rows[i][0]:g} after {rows[i - 1][0]:g}")
+                raise SceneError.at(where, f"table[{i}][0]",
+                                    f"times must increase strictly, got {rows[i][0]:g} after {rows[i - 1][0]:g}")
         object.__setattr__(self, "table", tuple(rows))
 
     def rows(self) -> tuple[tuple[float, float, float, float], ...]:
@@ -253,8 +280,9 @@ class Parameter:
 
     ``target`` names the property as ``"<element>.<field>"`` (e.g. ``"spring1.k"``), or
     ``"gravity.<x|y>"`` or ``"<load>.<fx|fy|mz>"``. Its nominal value is the property's value in
-    the scene. ``lower``/``upper`` bound it (defaults: 0 and +inf for properties that must be
-    positive). ``scale`` is the typical magnitude used to scale the NLP (default: the nominal).
+    the scene. ``lower``/``upper`` bound it (defaults -inf and +inf; give ``lower = 0`` for a
+    stiffness); the nominal value must lie within them. ``scale`` is the typical magnitude used
+    to scale the NLP (default: the nominal).
     """
 
     name: str
@@ -265,21 +293,24 @@ class Parameter:
     scale: float | None = None
 
     def __post_init__(self) -> None:
-        where = f"parameter {self.name!r}"
-        object.__setattr__(self, "name", _name("parameters[].name", self.name))
-        if not isinstance(self.target, str) or self.target.count(".") != 1:
-            raise SceneError(f"{where}.target: expected '<element>.<field>', got {self.target!r}")
+        where = _owner("parameter", self.name)
+        object.__setattr__(self, "name", _name(where, "name", self.name))
+        target = self.target
+        if not isinstance(target, str) or target.count(".") != 1 or not all(target.partition(".")[::2]):
+            raise SceneError.at(where, "target", f"expected '<element>.<field>', e.g. 'spring1.k', got {target!r}")
         if not isinstance(self.unit, str):
-            raise SceneError(f"{where}.unit: expected a string, got {self.unit!r}")
+            raise SceneError.at(where, "unit", f"expected a string, got {self.unit!r}")
         for f in ("lower", "upper"):
             v = getattr(self, f)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or math.isnan(v):
-                raise SceneError(f"{where}.{f}: expected a number, got {v!r}")
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                raise SceneError.at(where, f, f"expected a number (inf allowed), got {v!r} ({type(v).__name__})")
+            if math.isnan(v):
+                raise SceneError.at(where, f, "must not be nan")
             object.__setattr__(self, f, float(v))
         if self.lower >= self.upper:
-            raise SceneError(f"{where}: lower bound {self.lower:g} must be below upper bound {self.upper:g}")
+            raise SceneError.at(where, "lower", f"must be below upper = {self.upper:g}, got {self.lower:g}")
         if self.scale is not None:
-            object.__setattr__(self, "scale", _positive(f"{where}.scale", self.scale))
+            object.__setattr__(self, "scale", _positive(where, "scale", self.scale))
 
 
 @dataclass(frozen=True)
@@ -292,16 +323,16 @@ class RunSettings:
     inertia: str = "lagrange"
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "t_end", _positive("run.t_end", self.t_end))
-        object.__setattr__(self, "dt", _positive("run.dt", self.dt))
-        alpha = _number("run.alpha", self.alpha)
+        object.__setattr__(self, "t_end", _positive("run", "t_end", self.t_end))
+        object.__setattr__(self, "dt", _positive("run", "dt", self.dt))
+        alpha = _number("run", "alpha", self.alpha)
         if not -1.0 / 3.0 - 1e-12 <= alpha <= 0.0:
-            raise SceneError(f"run.alpha: must lie in [-1/3, 0], got {alpha:g}")
+            raise SceneError.at("run", "alpha", f"must lie in [-1/3, 0], got {alpha:g}")
         object.__setattr__(self, "alpha", alpha)
-        if self.inertia not in _INERTIA_FORMS:
-            raise SceneError(f"run.inertia: expected one of {_INERTIA_FORMS}, got {self.inertia!r}")
+        if not isinstance(self.inertia, str) or self.inertia not in _INERTIA_FORMS:
+            raise SceneError.at("run", "inertia", f"expected one of {list(_INERTIA_FORMS)}, got {self.inertia!r}")
         if self.dt > self.t_end:
-            raise SceneError(f"run.dt: the step {self.dt:g} s is longer than t_end = {self.t_end:g} s")
+            raise SceneError.at("run", "dt", f"the step {self.dt:g} s is longer than t_end = {self.t_end:g} s")
 
 
 @dataclass(frozen=True)
@@ -323,18 +354,18 @@ class Scene:
     run: RunSettings = field(default_factory=RunSettings)
 
     def __post_init__(self) -> None:
-        if not isinstance(self.name, str) or not self.name:
-            raise SceneError(f"scene.name: expected a non-empty string, got {self.name!r}")
+        if not isinstance(self.name, str) or not self.name.strip():
+            raise SceneError(f"name: expected a non-empty string (the scene's name), got {self.name!r}")
         for f in ("nodes", "beams", "springs", "torsion_springs", "supports", "loads", "parameters"):
             value = getattr(self, f)
-            if not isinstance(value, (list, tuple)):
+            if isinstance(value, str) or not isinstance(value, (list, tuple)):
                 raise SceneError(f"{f}: expected a list, got {type(value).__name__}")
             object.__setattr__(self, f, tuple(value))
         if not self.nodes:
             raise SceneError("nodes: a scene needs at least one node")
-        if not isinstance(self.gravity, (list, tuple)) or len(self.gravity) != 2:
-            raise SceneError(f"gravity: expected [gx, gy] in m/s^2, got {self.gravity!r}")
-        object.__setattr__(self, "gravity", tuple(_number(f"gravity[{i}]", g) for i, g in enumerate(self.gravity)))
+        if isinstance(self.gravity, str) or not isinstance(self.gravity, (list, tuple)) or len(self.gravity) != 2:
+            raise SceneError(f"gravity: expected [gx, gy] in m/s^2 (two numbers), got {self.gravity!r}")
+        object.__setattr__(self, "gravity", tuple(_number("", f"gravity[{i}]", g) for i, g in enumerate(self.gravity)))
         if not isinstance(self.run, RunSettings):
             raise SceneError(f"run: expected RunSettings, got {type(self.run).__name__}")
         self._check_types()
@@ -360,43 +391,55 @@ class Scene:
         names: dict[str, str] = {}
         for f in ("beams", "springs", "torsion_springs", "supports", "loads"):
             for i, item in enumerate(getattr(self, f)):
-                if item.name in names or item.name in ("gravity",):
-                    raise SceneError(f"{f}[{i}].name: duplicate name {item.name!r} (names are unique across elements, supports and loads)")
+                if item.name == "gravity":
+                    raise SceneError(f"{f}[{i}].name: 'gravity' is reserved "
+                                     "(parameter targets 'gravity.x', 'gravity.y')")
+                if item.name in names:
+                    raise SceneError(f"{f}[{i}].name: duplicate name {item.name!r}, already used in {names[item.name]} "
+                                     "(names are unique across beams, springs, torsion springs, supports and loads)")
                 names[item.name] = f
-                refs = item.nodes if hasattr(item, "nodes") else (item.node,)
-                for r in refs:
+                refs = ([(f"nodes[{j}]", r) for j, r in enumerate(item.nodes)] if hasattr(item, "nodes")
+                        else [("node", item.node)])
+                for key, r in refs:
                     if r not in seen:
-                        raise SceneError(f"{f}[{i}] ({item.name}): unknown node {r!r}; known nodes: {sorted(seen)}")
+                        raise SceneError(f"{f}[{i}] ({item.name}).{key}: unknown node {r!r}; known nodes: {list(seen)}")
         fixed: dict[tuple[str, str], str] = {}
         for i, s in enumerate(self.supports):
             for d in s.dofs:
                 if (s.node, d) in fixed:
-                    raise SceneError(f"supports[{i}] ({s.name}): dof {d}{s.node} is already fixed by support {fixed[(s.node, d)]!r}")
+                    raise SceneError(f"supports[{i}] ({s.name}).kind: dof {d}{s.node} is already fixed by support "
+                                     f"{fixed[(s.node, d)]!r}")
                 fixed[(s.node, d)] = s.name
 
     def _check_geometry(self) -> None:
         for i, b in enumerate(self.beams):
             if self.distance(*b.nodes) <= 0.0:
-                raise SceneError(f"beams[{i}] ({b.name}): zero length, nodes {b.nodes[0]!r} and {b.nodes[1]!r} coincide")
+                raise SceneError(f"beams[{i}] ({b.name}).nodes: zero length, "
+                                 f"nodes {b.nodes[0]!r} and {b.nodes[1]!r} coincide")
         for i, s in enumerate(self.springs):
             if self.distance(*s.nodes) <= 0.0 and (s.rest_length is None or s.rest_length > 0.0):
-                raise SceneError(f"springs[{i}] ({s.name}): nodes {s.nodes[0]!r} and {s.nodes[1]!r} coincide; "
-                                 "a spring needs a direction (only a zero-length spring, rest_length = 0, may start there)")
+                raise SceneError(f"springs[{i}] ({s.name}).nodes: nodes {s.nodes[0]!r} and {s.nodes[1]!r} coincide; "
+                                 "a spring needs a direction "
+                                 "(only a zero-length spring, rest_length = 0, may start there)")
 
     def _check_parameters(self) -> None:
         seen: set[str] = set()
+        targets: dict[str, str] = {}
         for i, p in enumerate(self.parameters):
             if p.name in seen:
                 raise SceneError(f"parameters[{i}].name: duplicate parameter {p.name!r}")
             seen.add(p.name)
-            value = self.property_value(p.target, where=f"parameters[{i}] ({p.name}).target")
-            if not p.lower <= value <= p.upper:
-                raise SceneError(f"parameters[{i}] ({p.name}): nominal value {value:g} of {p.target} "
-                                 f"lies outside its bounds [{p.lower:g}, {p.upper:g}]")
-        targets = [p.target for p in self.parameters]
-        for t in set(targets):
-            if targets.count(t) > 1:
-                raise SceneError(f"parameters: {t!r} is declared a parameter more than once")
+            where = f"parameters[{i}] ({p.name})"
+            if p.target in targets:
+                raise SceneError(f"{where}.target: {p.target!r} is already declared by parameter {targets[p.target]!r}")
+            targets[p.target] = p.name
+            value = self.property_value(p.target, where=f"{where}.target")
+            if value < p.lower:
+                raise SceneError(f"{where}.lower: the nominal value {value:g} of {p.target} "
+                                 f"is below the lower bound {p.lower:g}")
+            if value > p.upper:
+                raise SceneError(f"{where}.upper: the nominal value {value:g} of {p.target} "
+                                 f"is above the upper bound {p.upper:g}")
 
     # -- queries ----------------------------------------------------------------------------
     def node(self, name: str) -> Node:
@@ -427,8 +470,12 @@ class Scene:
         try:
             it = self.item(owner)
         except SceneError:
-            raise SceneError(f"{where}: unknown element or load {owner!r} in {target!r}") from None
-        numeric = [f.name for f in fields(it) if f.name not in ("name", "nodes", "node", "elements", "table", "kind", "rotary_inertia")]
+            known = [it.name for f in ("beams", "springs", "torsion_springs", "loads") for it in getattr(self, f)]
+            raise SceneError(f"{where}: unknown element or load {owner!r} in {target!r}; "
+                             f"known: {known + ['gravity']}") from None
+        if isinstance(it, Support):
+            raise SceneError(f"{where}: {owner!r} is a support; supports have no numeric properties to identify")
+        numeric = [f.name for f in fields(it) if f.name not in _NON_NUMERIC]
         if prop not in numeric:
             raise SceneError(f"{where}: {owner!r} has no numeric property {prop!r}; expected one of {numeric}")
         if isinstance(it, Load) and it.table is not None:
@@ -462,7 +509,10 @@ class Scene:
                 items = list(getattr(scene, f))
                 for i, it in enumerate(items):
                     if it.name == owner:
-                        items[i] = replace(it, **{prop: v})
+                        try:
+                            items[i] = replace(it, **{prop: v})
+                        except SceneError as exc:
+                            raise SceneError(f"with_values({name}={v!r}): {exc}") from None
                         scene = replace(scene, **{f: tuple(items)})
         return scene
 

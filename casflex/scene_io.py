@@ -55,7 +55,8 @@ def load_scene(source: str | os.PathLike[str]) -> Scene:
     else:
         path = Path(source)
         if not path.is_file():
-            raise SceneError(f"scene {text_source!r}: no such file, and not a built-in scene (built-in: {builtin_scenes()})")
+            raise SceneError(f"scene {text_source!r}: no such file, and not a built-in scene "
+                             f"(built-in: {builtin_scenes()})")
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
@@ -76,15 +77,19 @@ def loads_scene(text: str, *, source: str = "<string>") -> Scene:
 
 
 def _build(cls: type, where: str, table: Any) -> Any:
+    """``cls(**table)``, with errors located as ``<where> (<name>).<field>: <reason>``."""
     if not isinstance(table, dict):
-        raise SceneError(f"{where}: expected a table, got {type(table).__name__}")
+        raise SceneError(f"{where}: expected a table, got {type(table).__name__} {table!r}")
+    label = where
+    if isinstance(table.get("name"), str) and table["name"]:
+        label = f"{where} ({table['name']})"
     known = {f.name: f for f in fields(cls)}
     for key in table:
         if key not in known:
-            raise SceneError(f"{where}: unknown field {key!r}; expected some of {list(known)}")
+            raise SceneError(f"{label}: unknown field {key!r}; expected some of {list(known)}")
     for name, f in known.items():
         if f.default is MISSING and f.default_factory is MISSING and name not in table:
-            raise SceneError(f"{where}: missing required field {name!r}")
+            raise SceneError(f"{label}: missing required field {name!r}")
     kwargs = dict(table)
     for key in ("nodes", "table"):
         if key in kwargs and isinstance(kwargs[key], list):
@@ -94,11 +99,13 @@ def _build(cls: type, where: str, table: Any) -> Any:
             kwargs[key] = float(kwargs[key])
     for key in ("name", "node", "kind", "target", "unit", "inertia"):
         if key in kwargs and key in known and not isinstance(kwargs[key], str):
-            raise SceneError(f"{where}.{key}: expected a string, got {kwargs[key]!r}")
+            raise SceneError(f"{label}.{key}: expected a string, got {kwargs[key]!r} ({type(kwargs[key]).__name__})")
     try:
         return cls(**kwargs)
     except SceneError as exc:
-        raise SceneError(f"{where}: {exc}") from None
+        if exc.field is None:
+            raise SceneError(f"{label}: {exc.reason}") from None
+        raise SceneError(f"{label}.{exc.field}: {exc.reason}") from None
 
 
 def scene_from_dict(data: dict[str, Any]) -> Scene:
@@ -107,15 +114,15 @@ def scene_from_dict(data: dict[str, Any]) -> Scene:
         raise SceneError(f"scene: expected a table, got {type(data).__name__}")
     for key in data:
         if key not in _TOP_KEYS:
-            raise SceneError(f"unknown top-level field {key!r}; expected some of {sorted(_TOP_KEYS)}")
+            raise SceneError(f"{key}: unknown top-level field {key!r}; expected some of {sorted(_TOP_KEYS)}")
     if "name" not in data:
-        raise SceneError("missing required field 'name'")
+        raise SceneError("name: missing required top-level field 'name' (the scene's name)")
     if "nodes" not in data:
-        raise SceneError("missing required field 'nodes' (a list of [[nodes]] tables)")
+        raise SceneError("nodes: missing required field 'nodes' (a list of [[nodes]] tables)")
     kwargs: dict[str, Any] = {"name": data["name"]}
     for key, cls in _LISTS.items():
         items = data.get(key, [])
-        if not isinstance(items, list):
+        if not isinstance(items, list):  # e.g. [beams] instead of [[beams]]
             raise SceneError(f"{key}: expected a list of [[{key}]] tables, got {type(items).__name__}")
         kwargs[key] = tuple(_build(cls, f"{key}[{i}]", t) for i, t in enumerate(items))
     if "gravity" in data:
@@ -126,6 +133,15 @@ def scene_from_dict(data: dict[str, Any]) -> Scene:
 
 
 # -- writing ---------------------------------------------------------------------------------
+def _toml_char(c: str) -> str:
+    """One character of a TOML basic string, escaped if needed."""
+    if c in ('"', "\\"):
+        return "\\" + c
+    if c < " " or c == "\x7f":
+        return f"\\u{ord(c):04x}"
+    return c
+
+
 def _toml_value(v: Any) -> str:
     if isinstance(v, bool):
         return "true" if v else "false"
@@ -136,7 +152,7 @@ def _toml_value(v: Any) -> str:
             return "inf" if v > 0 else "-inf"
         return repr(v)
     if isinstance(v, str):
-        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+        return '"' + "".join(_toml_char(c) for c in v) + '"'
     if isinstance(v, (list, tuple)):
         return "[" + ", ".join(_toml_value(x) for x in v) + "]"
     raise TypeError(f"cannot write {v!r} to TOML")

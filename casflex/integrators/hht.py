@@ -70,7 +70,7 @@ class HHT:
 
     model: Model
     alpha: float = 0.0
-    tol: float = 1e-10
+    tol: float = 1e-12
     max_iter: int = 25
     _fn: dict = field(default_factory=dict, init=False, repr=False)
 

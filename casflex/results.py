@@ -1,0 +1,157 @@
+"""Result records and atomic file output.
+
+Every file casflex writes goes through :func:`atomic_write_bytes`: the data is written to a
+temporary file in the target directory, flushed, and renamed over the target, so a reader
+never sees a half-written file, even if the writer is interrupted.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["Trajectory", "atomic_write_bytes", "atomic_write_text", "atomic_write_json", "NPZ_KEYS"]
+
+
+def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically (temporary file + rename); returns the path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
+    return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def atomic_write_json(path: str | os.PathLike[str], obj: Any) -> Path:
+    return atomic_write_text(path, json.dumps(obj, indent=2, sort_keys=False) + "\n")
+
+
+#: Keys of a trajectory .npz file and what they hold (n = number of time points).
+NPZ_KEYS = {
+    "t": "(n,) time, s, from 0 to t_end in steps of dt, both ends included",
+    "q": "(n, n_dof) nodal dofs: x, y (m) and theta (rad) per node",
+    "qd": "(n, n_dof) velocities",
+    "qdd": "(n, n_dof) accelerations",
+    "lam": "(n, n_con) Lagrange multipliers (Eq. 1 sign: the support exerts -lam)",
+    "dof_names": "(n_dof,) 'x1', 'y1', 'theta1', ...",
+    "constraint_names": "(n_con,) '<support>.<x|y|theta>'",
+    "outputs": "(n, n_out) joint outputs (spring force/length/fx/fy, torsion moment, support reactions, beam end forces)",
+    "output_names": "(n_out,) names of the columns of outputs",
+    "energy_kinetic": "(n,) J", "energy_elastic": "(n,) J", "energy_gravity": "(n,) J",
+    "energy_total": "(n,) J, kinetic + elastic + gravity",
+    "work_external": "(n,) J, work of the nodal loads since t = 0 (trapezoidal)",
+    "energy_dissipated": "(n,) J, energy removed by numerical damping: E(0) + W_ext - E(t)",
+    "p": "(n_p,) parameter values used", "parameter_names": "(n_p,)",
+    "newton_iterations": "(n-1,) Newton iterations per step (-1 where not recorded: compiled runs)",
+    "meta": "JSON string: scene, alpha, dt, inertia, compiled, success, status, message, stats",
+}
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """A simulated motion (see :data:`NPZ_KEYS` for shapes and units).
+
+    ``success`` is False when the run stopped early; then the arrays hold the steps that
+    converged and ``message`` says where and why it stopped.
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    lam: np.ndarray
+    dof_names: tuple[str, ...]
+    constraint_names: tuple[str, ...]
+    outputs: np.ndarray
+    output_names: tuple[str, ...]
+    energies: dict[str, np.ndarray]
+    p: np.ndarray
+    parameter_names: tuple[str, ...]
+    newton_iterations: np.ndarray
+    success: bool = True
+    status: str = "success"
+    message: str = ""
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def stats(self) -> dict[str, Any]:
+        return self.meta.get("stats", {})
+
+    def dof(self, name: str) -> np.ndarray:
+        """Time series (n,) of the dof called ``name`` (e.g. ``"y5"``)."""
+        try:
+            return self.q[:, self.dof_names.index(name)]
+        except ValueError:
+            raise KeyError(f"unknown dof {name!r}; dofs are {list(self.dof_names)}") from None
+
+    def output(self, name: str) -> np.ndarray:
+        """Time series (n,) of the joint output called ``name`` (e.g. ``"spring1.force"``)."""
+        try:
+            return self.outputs[:, self.output_names.index(name)]
+        except ValueError:
+            raise KeyError(f"unknown output {name!r}; outputs are {list(self.output_names)}") from None
+
+    def at(self, t: float) -> int:
+        """Index of the time point nearest to ``t`` (s)."""
+        return int(np.argmin(np.abs(self.t - t)))
+
+    def save(self, path: str | os.PathLike[str]) -> Path:
+        """Write an .npz file atomically (keys: :data:`NPZ_KEYS`)."""
+        arrays = {
+            "t": self.t, "q": self.q, "qd": self.qd, "qdd": self.qdd, "lam": self.lam,
+            "dof_names": np.array(self.dof_names), "constraint_names": np.array(self.constraint_names),
+            "outputs": self.outputs, "output_names": np.array(self.output_names),
+            "p": self.p, "parameter_names": np.array(self.parameter_names),
+            "newton_iterations": self.newton_iterations,
+            "meta": np.array(json.dumps({**self.meta, "success": self.success, "status": self.status,
+                                         "message": self.message})),
+        }
+        for k, v in self.energies.items():
+            arrays[k if k.startswith("work") else f"energy_{k}"] = v
+        buf = io.BytesIO()
+        np.savez_compressed(buf, **arrays)
+        return atomic_write_bytes(path, buf.getvalue())
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> Trajectory:
+        """Read a trajectory written by :meth:`save`."""
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                data = {k: z[k] for k in z.files}
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"{path}: not a casflex trajectory file ({exc})") from None
+        missing = [k for k in NPZ_KEYS if k not in data]
+        if missing:
+            raise ValueError(f"{path}: not a casflex trajectory file, missing keys {missing}")
+        meta = json.loads(str(data["meta"]))
+        energies = {k[len("energy_"):] if k.startswith("energy_") else k: data[k]
+                    for k in NPZ_KEYS if k.startswith(("energy_", "work_"))}
+        return cls(
+            t=data["t"], q=data["q"], qd=data["qd"], qdd=data["qdd"], lam=data["lam"],
+            dof_names=tuple(str(s) for s in data["dof_names"]),
+            constraint_names=tuple(str(s) for s in data["constraint_names"]),
+            outputs=data["outputs"], output_names=tuple(str(s) for s in data["output_names"]),
+            energies=energies, p=data["p"], parameter_names=tuple(str(s) for s in data["parameter_names"]),
+            newton_iterations=data["newton_iterations"],
+            success=bool(meta.pop("success")), status=str(meta.pop("status")), message=str(meta.pop("message")),
+            meta=meta,
+        )

@@ -1,0 +1,85 @@
+"""Shared small scene factories for the tests.
+
+``cantilever`` and ``pendulum`` are plain functions (usable as ``from conftest import
+cantilever`` under pytest's default import mode) and are also offered as the fixtures
+``make_cantilever`` and ``make_pendulum`` that return the factory.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from casflex import Beam, Load, Node, Scene, Support
+
+#: A steel-like default section (SI): E (Pa), A (m^2), I (m^4), rho (kg/m^3).
+STEEL = {"E": 2.1e11, "A": 1e-4, "I": 1e-9, "rho": 7800.0}
+
+
+def cantilever(
+    n_elements: int = 8,
+    L: float = 1.0,
+    E: float = STEEL["E"],
+    A: float = STEEL["A"],
+    I: float = STEEL["I"],  # noqa: E741
+    rho: float = STEEL["rho"],
+    *,
+    load: tuple[float, float, float] | None = None,
+    gravity: tuple[float, float] = (0.0, 0.0),
+    angle: float = 0.0,
+    rotary_inertia: bool = False,
+) -> Scene:
+    """A beam clamped at node ``root`` (0, 0), free at node ``tip`` at distance L, direction ``angle``.
+
+    ``load = (fx, fy, mz)`` (N, N, N m) acts on the tip as load ``tipload``. The beam is called
+    ``beam`` and meshed into ``n_elements`` equal elements (mesh nodes ``beam.1`` ...). No gravity
+    unless given. Dof names: ``xtip``, ``ytip``, ``thetatip``, ...
+    """
+    loads = () if load is None else (Load("tipload", "tip", fx=load[0], fy=load[1], mz=load[2]),)
+    return Scene(
+        name="cantilever",
+        nodes=(Node("root", 0.0, 0.0, theta=angle), Node("tip", L * math.cos(angle), L * math.sin(angle), theta=angle)),
+        beams=(Beam("beam", ("root", "tip"), E=E, A=A, I=I, rho=rho, elements=n_elements, rotary_inertia=rotary_inertia),),
+        supports=(Support("clamp", "root", "clamp"),),
+        loads=loads,
+        gravity=gravity,
+    )
+
+
+def pendulum(
+    n_elements: int = 4,
+    L: float = 1.0,
+    E: float = STEEL["E"],
+    A: float = 1e-3,
+    I: float = 1e-7,  # noqa: E741
+    rho: float = STEEL["rho"],
+    *,
+    angle: float = math.pi / 6,
+    gravity: tuple[float, float] = (0.0, -9.81),
+) -> Scene:
+    """A stiff rod pinned at node ``pivot`` (0, 0), free end ``end`` at angle ``angle`` from hanging down.
+
+    The rod ``rod`` (mesh into ``n_elements``) starts straight and stress-free at
+    (L sin angle, -L cos angle); gravity acts, so it is not in equilibrium unless angle = 0.
+    """
+    th = angle - math.pi / 2  # chord direction
+    return Scene(
+        name="pendulum",
+        nodes=(Node("pivot", 0.0, 0.0, theta=th), Node("end", L * math.sin(angle), -L * math.cos(angle), theta=th)),
+        beams=(Beam("rod", ("pivot", "end"), E=E, A=A, I=I, rho=rho, elements=n_elements),),
+        supports=(Support("pin", "pivot", "pin"),),
+        gravity=gravity,
+    )
+
+
+@pytest.fixture
+def make_cantilever():
+    """The :func:`cantilever` factory."""
+    return cantilever
+
+
+@pytest.fixture
+def make_pendulum():
+    """The :func:`pendulum` factory."""
+    return pendulum

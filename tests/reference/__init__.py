@@ -1,0 +1,1 @@
+"""Independent reference solutions (plain numpy, no casflex) used by the tests."""

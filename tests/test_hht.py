@@ -1,0 +1,172 @@
+"""HHT-alpha against independent truth: the exact amplification matrix of the scheme on a
+linear oscillator, its spectral radius at infinite frequency, energy conservation at alpha = 0,
+second-order convergence, a physical pendulum's period, and AD derivatives of the
+trajectory Function against finite differences."""
+
+from __future__ import annotations
+
+import math
+
+import casadi as ca
+import numpy as np
+import pytest
+
+import casflex
+from casflex.integrators import HHT, hht_coefficients
+from casflex.scene import Beam, Node, RunSettings, Scene, Support
+from casflex.simulate import initial_state, simulate
+
+E, A, RHO, L = 2.0e7, 1e-3, 1000.0, 1.0  # axial bar: k = EA/L = 2e4 N/m, m = 1 kg
+
+
+def axial_oscillator(vx: float = 0.1) -> Scene:
+    """One bar element along x, clamped at node a; node b may only slide along x.
+
+    Linear 1-dof oscillator: m_eff = m/3 (consistent axial mass), k = EA/L."""
+    return Scene(
+        name="axial",
+        nodes=(Node("a", 0.0, 0.0), Node("b", L, 0.0, vx=vx)),
+        beams=(Beam("bar", ("a", "b"), E=E, A=A, I=1e-6, rho=RHO),),
+        supports=(Support("clamp", "a", "clamp"), Support("sy", "b", "y"), Support("st", "b", "theta")),
+        gravity=(0.0, 0.0),
+    )
+
+
+def hht_amplification(omega_h: float, alpha: float) -> np.ndarray:
+    """Exact one-step map (u, h v, h^2 a) -> next for m a + k u = 0 (Hilber, Hughes, Taylor 1977)."""
+    gamma, beta = hht_coefficients(alpha)
+    w2 = omega_h**2
+    # unknowns (u1, hv1, h2a1); equations: a1 + (1+alpha) w2 u1 - alpha w2 u0 = 0, Newmark
+    lhs = np.array([[(1 + alpha) * w2, 0.0, 1.0], [1.0, 0.0, -beta], [0.0, 1.0, -gamma]])
+    rhs = np.array([[alpha * w2, 0.0, 0.0], [1.0, 1.0, 0.5 - beta], [0.0, 1.0, 1 - gamma]])
+    return np.linalg.solve(lhs, rhs)
+
+
+@pytest.mark.parametrize("alpha", [0.0, -0.1, -1.0 / 3.0])
+@pytest.mark.parametrize("omega_h", [0.1, 1.0, 30.0])
+def test_one_step_map_is_the_exact_hht_amplification_matrix(alpha, omega_h):
+    model = casflex.assemble(axial_oscillator())
+    integ = HHT(model, alpha=alpha, tol=1e-13)
+    k, m_eff = E * A / L, RHO * A * L / 3.0
+    h = omega_h / math.sqrt(k / m_eff)
+    ix = model.dof("xb")
+    p = model.p_nominal
+    d = np.array(integ.scale(model.q0, model.qd0, p, h)).ravel()
+    G = np.empty((3, 3))
+    for j in range(3):
+        y0 = np.eye(3)[j] * 1e-3  # (u, h v, h^2 a)
+        x = np.concatenate([model.q0, np.zeros(2 * model.n_dof), np.zeros(model.n_con)])
+        n = model.n_dof
+        x[ix] += y0[0]
+        x[n + ix] = y0[1] / h
+        x[2 * n + ix] = y0[2] / h**2
+        x1, res = integ.step(x, 0.0, p, h, d)
+        x1 = np.array(x1).ravel()
+        G[:, j] = np.array([x1[ix] - L, x1[n + ix] * h, x1[2 * n + ix] * h**2]) / 1e-3
+    # 1e-7: Newton stops at a scaled residual of 1e-13 of a 1e-3 m motion; the map is linear
+    np.testing.assert_allclose(G, hht_amplification(omega_h, alpha), rtol=1e-7, atol=1e-7)
+
+
+@pytest.mark.parametrize("alpha", [0.0, -0.05, -0.2, -1.0 / 3.0])
+def test_spectral_radius_at_infinity(alpha):
+    rho = max(abs(np.linalg.eigvals(hht_amplification(1e10, alpha))))
+    # 1e-6: at alpha = -1/3 the limit eigenvalue is double, so it converges only like
+    # 1/sqrt(omega h); at omega h = 1e10 every alpha is within 1e-6 of the limit
+    assert rho == pytest.approx((1 + alpha) / (1 - alpha), abs=1e-6)
+    # and the scheme never amplifies (unconditional stability)
+    for wh in np.logspace(-2, 4, 25):
+        assert max(abs(np.linalg.eigvals(hht_amplification(wh, alpha)))) <= 1 + 1e-12
+
+
+def test_energy_conserved_at_alpha_zero_and_removed_otherwise():
+    model = casflex.assemble(axial_oscillator(vx=0.2))
+    tr0 = simulate(model, 0.5, dt=2e-4, alpha=0.0)
+    E0 = tr0.energies["total"][0]
+    # trapezoidal rule conserves the quadratic energy of a linear system to round-off
+    assert np.abs(tr0.energies["total"] - E0).max() < 1e-10 * E0
+    tr1 = simulate(model, 0.5, dt=2e-4, alpha=-0.3)
+    # the energy HHT removes is exactly what its amplification matrix predicts
+    k, m_eff = E * A / L, RHO * A * L / 3.0
+    h = 2e-4
+    y = np.array([0.0, 0.2 * h, 0.0])  # (u, h v, h^2 a) at rest length with vx = 0.2
+    y = np.linalg.matrix_power(hht_amplification(h * math.sqrt(k / m_eff), -0.3), 2500) @ y
+    E_pred = 0.5 * m_eff * (y[1] / h) ** 2 + 0.5 * k * y[0] ** 2
+    # 1e-9: round-off over 2500 steps of a linear map
+    assert tr1.energies["total"][-1] == pytest.approx(E_pred, rel=1e-9)
+    assert tr1.energies["dissipated"][-1] > 1e-4 * E0
+
+
+def _twobar_node5(dt: float, alpha: float, t_end: float = 0.4) -> np.ndarray:
+    model = casflex.assemble(casflex.load_scene("twobar"))
+    tr = simulate(model, t_end, dt=dt, alpha=alpha)
+    return tr.q[-1, 12:14]
+
+
+@pytest.mark.parametrize("alpha", [0.0, -0.1])
+def test_second_order_convergence_on_twobar(alpha):
+    ref = _twobar_node5(2.5e-5, alpha)
+    dts = np.array([4e-3, 2e-3, 1e-3])
+    err = np.array([np.linalg.norm(_twobar_node5(dt, alpha) - ref) for dt in dts])
+    slope = np.polyfit(np.log(dts), np.log(err), 1)[0]
+    # second order: fitted slope 2 within what the pre-asymptotic first point allows
+    assert 1.8 < slope < 2.3, (slope, err)
+
+
+def elliptic_k(m: float) -> float:
+    """Complete elliptic integral of the first kind K(m), m = k^2, by the AGM."""
+    a, b = 1.0, math.sqrt(1.0 - m)
+    while abs(a - b) > 1e-15:
+        a, b = (a + b) / 2, math.sqrt(a * b)
+    return math.pi / (2 * a)
+
+
+def test_physical_pendulum_period():
+    th0 = 0.3  # rad from the downward vertical
+    Lp = 1.0
+    scene = Scene(
+        name="pendulum",
+        nodes=(Node("o", 0.0, 0.0), Node("tip", Lp * math.sin(th0), -Lp * math.cos(th0))),
+        beams=(Beam("rod", ("o", "tip"), E=2.1e11, A=1e-4, I=1e-8, rho=7800.0, elements=2),),
+        supports=(Support("pivot", "o", "pin"),),
+        run=RunSettings(t_end=4.0, dt=1e-3, alpha=0.0),
+    )
+    tr = simulate(scene)
+    ang = np.arctan2(tr.dof("xtip"), -tr.dof("ytip"))
+    s = np.flatnonzero((ang[:-1] > 0) & (ang[1:] <= 0))  # downward zero crossings
+    tc = tr.t[s] + (tr.t[s + 1] - tr.t[s]) * ang[s] / (ang[s] - ang[s + 1])
+    period = np.mean(np.diff(tc))
+    # rigid rod about its end: J = m L^2 / 3, d = L/2 -> sqrt(J/(m g d)) = sqrt(2L/(3g))
+    T_exact = 4 * math.sqrt(2 * Lp / (3 * 9.81)) * elliptic_k(math.sin(th0 / 2) ** 2)
+    # 2e-5: HHT period error (omega h)^2/12 ~ 1e-6 plus rod flexibility ~1e-6
+    assert period == pytest.approx(T_exact, rel=2e-5)
+
+
+def test_trajectory_derivatives_match_finite_differences():
+    model = casflex.assemble(casflex.load_scene("twobar"))
+    # tol 1e-14: finite differences of a 1e-6 perturbation must not see Newton's stopping noise
+    integ = HHT(model, alpha=-0.05, tol=1e-14)
+    N, h = 150, 2e-3
+    F = integ.trajectory(N)
+    p0 = model.p_nominal
+    d = np.array(integ.scale(model.q0, model.qd0, p0, h)).ravel()
+    x0 = initial_state(integ, p0)
+    P = ca.MX.sym("p", model.n_p)
+    X0 = ca.MX.sym("x0", integ.nx)
+    X, _ = F(X0, 0.0, P, h, d)
+    out = X[[model.dof("x5"), model.dof("y5")], -1]
+    J = ca.Function("J", [X0, P], [ca.jacobian(out, ca.vertcat(X0, P))])
+    jac = np.array(J(x0, p0))
+    fx = ca.Function("fx", [X0, P], [out])
+    z0 = np.concatenate([x0, p0])
+    rel = np.concatenate([np.full(integ.nx, 1e-6), 1e-5 * p0])
+    fd = np.zeros_like(jac)
+    for k in list(range(model.n_dof)) + list(range(integ.nx, integ.nx + model.n_p)):
+        e = np.zeros_like(z0)
+        e[k] = rel[k]
+        fp = np.array(fx((z0 + e)[:integ.nx], (z0 + e)[integ.nx:])).ravel()
+        fm = np.array(fx((z0 - e)[:integ.nx], (z0 - e)[integ.nx:])).ravel()
+        fd[:, k] = (fp - fm) / (2 * rel[k])
+    cols = list(range(3, model.n_dof)) + list(range(integ.nx, integ.nx + model.n_p))  # free dofs and p
+    # central differences: truncation ~1e-10, round-off ~1e-16/1e-6; 1e-6 of the largest entry
+    scale = np.abs(jac[:, cols]).max()
+    np.testing.assert_allclose(jac[:, cols], fd[:, cols], atol=1e-6 * scale)
