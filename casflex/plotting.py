@@ -506,8 +506,9 @@ def plot_configuration(model: Model, q: np.ndarray | None = None, ax: Axes | Non
     drawer = _Drawer(model)
     drawer.draw(ax, q, labels=labels)
     (x0, x1), (y0, y1) = drawer.limits(q[None, :])
-    ax.set_xlim(x0, x1)
-    ax.set_ylim(y0, y1)
+    ax.update_datalim([(x0, y0), (x1, y1)])
+    ax.margins(0.0)
+    ax.autoscale_view()
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
@@ -553,27 +554,28 @@ def animate(model: Model, traj: Trajectory, path: str | os.PathLike[str], *, fps
     width = 6.0
     height = float(np.clip(width * h / max(w, 1e-12), 3.0, 8.0))
     fig = _new_figure((width, height))
+    fig.set_dpi(dpi)
     ax = fig.add_subplot()
     art = drawer.draw(ax, traj.q[frames[0]], labels=False)
     ax.set_xlim(x0, x1)
     ax.set_ylim(y0, y1)
-    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_aspect("equal", adjustable="box")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.grid(True, alpha=0.25)
     ax.set_title(f"{model.scene.name}", fontsize="medium")
     label = ax.text(0.02, 0.97, "", transform=ax.transAxes, va="top", ha="left", family="monospace",
                     bbox={"boxstyle": "round", "fc": "white", "ec": "0.7", "alpha": 0.9}, zorder=10)
-    fig.get_layout_engine().execute(fig)  # fix the layout once: every frame has the same geometry
-    fig.set_layout_engine("none")
-
-    from matplotlib.animation import PillowWriter
+    # lay out once, then drop the engine: every frame has the same geometry
+    fig.get_layout_engine().execute(fig)
+    fig.set_layout_engine(None)
+    moving = sorted([*art.values(), label], key=lambda a: a.get_zorder())  # type: ignore[attr-defined]
 
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp.gif")
     os.close(fd)
     try:
-        writer = PillowWriter(fps=fps)
+        writer = _BlitPillowWriter(moving, fps=fps)
         with writer.saving(fig, tmp, dpi):
             for k in frames:
                 drawer.update(art, traj.q[k])
@@ -584,6 +586,73 @@ def animate(model: Model, traj: Trajectory, path: str | os.PathLike[str], *, fps
         Path(tmp).unlink(missing_ok=True)
         raise
     return path
+
+
+def _blit_pillow_writer_class():
+    from matplotlib.animation import PillowWriter
+    from PIL import Image
+
+    class BlitPillowWriter(PillowWriter):
+        """PillowWriter that redraws only the moving artists over a cached background.
+
+        The static parts (axes, ticks, grid, labels) are rendered once; every frame restores
+        them and draws the moving artists (a full ``savefig`` per frame spends most of its
+        time on tick labels). Frames are mapped to the palette of the first frame, so the GIF
+        encoder does not quantize each frame again. Falls back to :class:`PillowWriter`'s own
+        frame grabbing if the figure's dpi differs from the writer's.
+        """
+
+        def __init__(self, moving: list, **kwargs):
+            super().__init__(**kwargs)
+            self._moving = moving
+            self._background = None
+            self._palette: Image.Image | None = None
+
+        def grab_frame(self, **savefig_kwargs):
+            canvas = self.fig.canvas
+            frames = getattr(self, "_frames", None)
+            if savefig_kwargs or frames is None or self.fig.dpi != self.dpi:
+                return super().grab_frame(**savefig_kwargs)
+            if self._background is None:
+                for a in self._moving:
+                    a.set_animated(True)
+                canvas.draw()
+                self._background = canvas.copy_from_bbox(self.fig.bbox)
+            canvas.restore_region(self._background)
+            renderer = canvas.get_renderer()
+            for a in self._moving:
+                a.draw(renderer)
+            im = Image.frombuffer("RGBA", canvas.get_width_height(), canvas.buffer_rgba(), "raw", "RGBA", 0, 1)
+            im = im.convert("RGB")
+            if self._palette is None:
+                self._palette = _palette_of(im)
+            frames.append(im.quantize(palette=self._palette, dither=Image.Dither.NONE))
+
+    return BlitPillowWriter
+
+
+def _palette_of(im):
+    """A 256-colour palette image for ``im`` (RGB): its 200 most frequent colours exactly
+    (background, lines, markers, text), plus 56 median-cut colours for the anti-aliased rest."""
+    from PIL import Image
+
+    counts = im.getcolors(im.width * im.height) or []
+    exact = [c for _, c in sorted(counts, key=lambda nc: nc[0], reverse=True)[:200]]
+    rest = im.quantize(colors=256 - len(exact), method=Image.Quantize.MEDIANCUT).getpalette()[: 3 * (256 - len(exact))]
+    flat = [v for c in exact for v in c] + list(rest)
+    pal = Image.new("P", (1, 1))
+    pal.putpalette(flat + [0] * (768 - len(flat)))
+    return pal
+
+
+def _BlitPillowWriter(moving: list, **kwargs):  # noqa: N802 - a lazy class
+    global _BLIT_WRITER
+    if _BLIT_WRITER is None:
+        _BLIT_WRITER = _blit_pillow_writer_class()
+    return _BLIT_WRITER(moving, **kwargs)
+
+
+_BLIT_WRITER = None
 
 
 # -- standard set -----------------------------------------------------------------------------

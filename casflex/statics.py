@@ -24,9 +24,18 @@ diagonal of the tangent at the start (the x and y entries of a node averaged, as
 :mod:`casflex.integrators.hht`) and l_i = ``model.length_scale`` for translations, 1 rad for
 rotations; the constraint rows by l_i. A scaled residual is then an equivalent displacement
 relative to the size of the structure, so one dimensionless ``tol`` serves stiffnesses from
-1e-3 to 1e12. A load step has converged when the scaled residual (infinity norm) is at most
-``tol``; the Newton update computed there is still applied, which in the quadratic regime
-leaves an error far below ``tol``.
+1e-3 to 1e12. The unknowns are scaled alike (q by l_i, lambda by d_i l_i). A load step has
+converged when the scaled residual (infinity norm) is at most ``tol`` *and* the scaled Newton
+update computed there (which is applied) is at most 0.01 sqrt(tol). The second test matters
+for soft motions: the rotation of a pendulum about its pin, resisted only by the geometric
+stiffness of gravity, leaves a tiny scaled residual while still far from equilibrium.
+
+A stress-free mechanism (e.g. a pendulum started at rest away from its equilibrium) has a
+singular tangent at the start. A Newton update larger than 1000 (structure lengths or rad) is
+taken as that sign, and replaced by the minimum-norm least-squares update, which leaves the
+mechanism motion alone; the stress it builds then supplies the missing geometric stiffness.
+Newton converges to the equilibrium nearest in its basin, which may be an unstable one (an
+inverted pendulum started above the horizontal); check with :func:`modes` (negative omega).
 """
 
 from __future__ import annotations
@@ -99,6 +108,12 @@ class ModesResult:
     omega: np.ndarray
     shapes: np.ndarray
     dof_names: tuple[str, ...]
+
+
+#: A Newton update larger than this (scaled: structure lengths or rad) means a singular tangent.
+_STEP_LIMIT = 1e3
+#: Relative singular-value cutoff of the minimum-norm step taken then.
+_RCOND = 1e-12
 
 
 def _params(model: Model, p) -> np.ndarray:
@@ -191,7 +206,9 @@ def equilibrium(
 
     factors = tuple((k + 1) / steps for k in range(steps))
     total = 0
-    res = np.inf
+    singular = 0
+    res = step = np.inf
+    step_tol = 1e-2 * tol**0.5
     for k, s in enumerate(factors):
         converged = False
         for it in range(1, max_iter + 1):
@@ -209,26 +226,32 @@ def equilibrium(
             try:
                 du = np.linalg.solve(Js, -rs)
             except np.linalg.LinAlgError:
-                raise StaticsError(
-                    f"static equilibrium failed at load factor {s:.4g} (step {k + 1}/{steps}), Newton iteration "
-                    f"{it}: the tangent is singular (scaled residual norm {res:.3e}); the structure is a mechanism "
-                    "at this configuration (add supports or springs), or try more load steps "
-                    f"(e.g. steps={4 * steps}) or another q_start."
-                ) from None
+                du = np.full_like(rs, np.inf)
+            if not np.all(np.isfinite(du)) or np.max(np.abs(du), initial=0.0) > _STEP_LIMIT:
+                # (Nearly) singular tangent: an unstressed mechanism (e.g. a pendulum started at rest
+                # away from its equilibrium). Take the minimum-norm step, which leaves the
+                # mechanism motion alone; the stress it builds supplies the geometric stiffness.
+                singular += 1
+                du = np.linalg.lstsq(Js, -rs, rcond=_RCOND)[0]
+            step = float(np.max(np.abs(du), initial=0.0))
             dz = du * col
-            q = q + dz[:n]
-            lam = lam + dz[n:]
-            if res <= tol:
+            q, lam = q + dz[:n], lam + dz[n:]
+            if res <= tol and step <= step_tol:
                 converged = True
                 break
         if not converged:
+            hint = ""
+            if singular:
+                hint = (f" The tangent was (nearly) singular in {singular} iteration(s): the structure may be a mechanism "
+                        "or unsupported (check the supports), or start from a stressed q_start nearer equilibrium.")
             raise StaticsError(
                 f"static equilibrium did not converge at load factor {s:.4g} (step {k + 1}/{steps}) after "
-                f"{max_iter} Newton iterations in that step ({total} in all): scaled residual norm {res:.3e} > "
-                f"tol {tol:.1e}. Try more load steps (e.g. steps={4 * steps}), a larger max_iter, "
-                "or a q_start closer to the solution."
+                f"{max_iter} Newton iterations in that step ({total} in all): scaled residual norm {res:.3e} "
+                f"(tol {tol:.1e}), last scaled Newton update {step:.3e} (tol {step_tol:.1e}). Try more load steps (e.g. steps={4 * steps}), a larger max_iter, "
+                f"or a q_start closer to the solution.{hint}"
             )
-    msg = f"converged: {total} Newton iterations in {steps} load steps, final scaled residual {res:.2e} <= tol {tol:.1e}"
+    msg = (f"converged: {total} Newton iterations in {steps} load steps; last scaled residual {res:.2e} <= {tol:.1e}, "
+           f"last scaled update {step:.2e} <= {step_tol:.1e}")
     return StaticResult(q=q, lam=lam, success=True, message=msg, iterations=total, load_factors=factors)
 
 

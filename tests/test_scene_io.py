@@ -539,3 +539,17 @@ def test_twobar_types_after_loading():
     assert all(isinstance(x, Parameter) for x in s.parameters)
     assert isinstance(s.nodes, tuple) and isinstance(s.beams[0].nodes, tuple)
     assert all(isinstance(v, float) for n in s.nodes for v in (n.x, n.y, n.theta))
+
+
+def test_examples_in_docs_scene_format_load():
+    doc = Path(__file__).resolve().parents[1] / "docs" / "scene-format.md"
+    if not doc.is_file():
+        pytest.skip("docs/scene-format.md not present")
+    text = doc.read_text(encoding="utf-8")
+    blocks = [b.split("```")[0] for b in text.split("```toml\n")[1:]]
+    assert len(blocks) >= 2
+    assert loads_scene(blocks[0], source="docs example 1") == load_scene("twobar")
+    cantilever = loads_scene(blocks[1], source="docs example 2")
+    assert cantilever.beams[0].elements == 4 and len(cantilever.loads[0].table) == 4
+    for block in blocks:  # every documented field is a real one
+        assert loads_scene(dumps_scene(loads_scene(block))) == loads_scene(block)

@@ -146,14 +146,13 @@ class RigidTwoBar:
         return self.potential(z[:6]) + self.kinetic(z[6:])
 
     def gradient_check(self, q, eps: float = 1e-30) -> float:
-        """max |Q_rhs + dV/dq| with dV/dq by complex-step? V uses math (real); use the analytic
-        forces against a central difference-free check: compare M q'' with -dV/dq from
-        numpy's complex arithmetic."""
+        """max |Q + dV/dq| (N or N m) at configuration q: the hand-derived generalised forces of
+        :meth:`rhs` against the gradient of the potential by complex-step differentiation."""
         p = self.p
         z = list(q) + [0.0] * 6
         acc = self.rhs(z)[6:]
         mass = (p.m, p.m, p.J, p.m, p.m, p.J)
-        Q = np.array([a * mm for a, mm in zip(acc, mass)])
+        Q = np.array([a * mm for a, mm in zip(acc, mass, strict=True)])
         g = np.array([_potential_complex(p, np.array(q, dtype=complex) + 1j * eps * np.eye(6)[i]).imag / eps
                       for i in range(6)])
         return float(np.max(np.abs(Q + g)))
@@ -170,10 +169,10 @@ class RigidTwoBar:
         h2, h6 = h / 2, h / 6
         for _ in range(n):
             k1 = f(z)
-            k2 = f(tuple(a + h2 * b for a, b in zip(z, k1)))
-            k3 = f(tuple(a + h2 * b for a, b in zip(z, k2)))
-            k4 = f(tuple(a + h * b for a, b in zip(z, k3)))
-            z = tuple(a + h6 * (b1 + 2 * b2 + 2 * b3 + b4) for a, b1, b2, b3, b4 in zip(z, k1, k2, k3, k4))
+            k2 = f(tuple(a + h2 * b for a, b in zip(z, k1, strict=True)))
+            k3 = f(tuple(a + h2 * b for a, b in zip(z, k2, strict=True)))
+            k4 = f(tuple(a + h * b for a, b in zip(z, k3, strict=True)))
+            z = tuple(a + h6 * (b1 + 2 * b2 + 2 * b3 + b4) for a, b1, b2, b3, b4 in zip(z, k1, k2, k3, k4, strict=True))
             out.append(z)
         return np.arange(n + 1) * h, np.array(out)
 

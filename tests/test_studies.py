@@ -1,0 +1,19 @@
+"""Every study runs in quick mode and passes its own self-checks (outputs go to a temp dir)."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+STUDIES = sorted((Path(__file__).resolve().parents[1] / "studies").glob("*.py"))
+
+
+@pytest.mark.parametrize("path", STUDIES, ids=[p.stem for p in STUDIES])
+def test_study_quick(path, tmp_path):
+    spec = importlib.util.spec_from_file_location(path.stem, path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    mod.main(quick=True, out_dir=tmp_path)
+    assert any(tmp_path.rglob("*.md")), "a study writes at least one table"
