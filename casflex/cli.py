@@ -79,11 +79,12 @@ def cmd_static(args) -> int:
 
     model = _model(args)
     res = equilibrium(model, steps=args.steps)
-    print(f"static equilibrium of {model.scene.name}: {res.iterations} Newton iterations over {len(res.load_factors)} load steps")
+    print(f"static equilibrium of {model.scene.name}: {res.iterations} Newton iterations "
+          f"over {len(res.load_factors)} load steps")
     for k, name in enumerate(model.node_names[:len(model.scene.nodes)]):
         print(f"  node {name:<6s} x = {res.q[3 * k]:11.6f} m  y = {res.q[3 * k + 1]:11.6f} m  "
               f"theta = {res.q[3 * k + 2]:10.6f} rad")
-    for name, lam in zip(model.constraint_names, res.lam):
+    for name, lam in zip(model.constraint_names, res.lam, strict=True):
         print(f"  reaction {name:<18s} {-lam:12.4f}")
     if args.out:
         import io

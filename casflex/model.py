@@ -136,7 +136,7 @@ def _mesh(scene: Scene):
         for k in range(1, b.elements):
             s = k / b.elements
             name = f"{b.name}.{k}"
-            nodes[name] = tuple((1 - s) * va + s * vz for va, vz in zip(nodes[a], nodes[z]))
+            nodes[name] = tuple((1 - s) * va + s * vz for va, vz in zip(nodes[a], nodes[z], strict=True))
             order.append(name)
             chain.append(name)
         chain.append(z)

@@ -154,8 +154,23 @@ def _title(traj: Trajectory, what: str) -> str:
     return title
 
 
+def _legend_above(ax: Axes, ncols: int) -> None:
+    """Legend in a row above the right end of ``ax`` (never over the curves)."""
+    ax.legend(loc="lower right", bbox_to_anchor=(1.0, 1.0), ncols=max(ncols, 1), fontsize="small",
+              frameon=False, borderaxespad=0.2, handlelength=2.5, columnspacing=1.2)
+
+
+def _plain_numbers(ax: Axes) -> None:
+    """Tick labels without an offset (``-3.131e2`` above the axis): values read directly."""
+    try:
+        ax.ticklabel_format(axis="y", useOffset=False)
+    except AttributeError:  # not a ScalarFormatter (e.g. log axis)
+        pass
+
+
 def _finish_time_axes(axes: Sequence[Axes], traj_t: np.ndarray) -> None:
     for ax in axes:
+        _plain_numbers(ax)
         ax.grid(True, alpha=0.3)
         ax.set_xlim(float(traj_t[0]), float(traj_t[-1]) if traj_t[-1] > traj_t[0] else float(traj_t[0]) + 1.0)
     axes[-1].set_xlabel("time t (s)")
@@ -202,13 +217,13 @@ def plot_energies(traj: Trajectory, path: str | os.PathLike[str] | None = None) 
     for key, (color, ls) in styles.items():
         top.plot(traj.t, e[key], color=color, ls=ls, lw=1.4, label=_ENERGY_LABELS[key])
     top.set_ylabel("energy (J)")
-    top.legend(loc="best", fontsize="small", ncols=2)
+    _legend_above(top, 4)
     bottom.plot(traj.t, e["dissipated"], color="C3", lw=1.4, label=_ENERGY_LABELS["dissipated"])
     work = e.get("work_external")
     if work is not None and np.any(work != 0.0):
         bottom.plot(traj.t, work, color="C4", lw=1.2, ls="-.", label=_ENERGY_LABELS["work_external"])
     bottom.set_ylabel("energy (J)")
-    bottom.legend(loc="best", fontsize="small")
+    _legend_above(bottom, 2)
     alpha = traj.meta.get("alpha")
     what = "energies" + (f" (HHT alpha = {alpha:g})" if isinstance(alpha, (int, float)) else "")
     fig.suptitle(_title(traj, what))
@@ -295,14 +310,14 @@ def plot_joint_forces(traj: Trajectory, element: str | int | Sequence[str] = "1"
                     label=f"{tag}$F_y$ on 2nd node")
         ax.set_ylabel("force (N)")
         ax.set_title(", ".join(springs), fontsize="medium", loc="left")
-        ax.legend(loc="best", fontsize="small")
+        _legend_above(ax, 3)
     if torsions:
         ax = next(ax_iter)
         for i, s in enumerate(torsions):
             ax.plot(traj.t, traj.output(f"{s}.moment"), lw=1.4, color=f"C{i + 4}", label=f"{s}: moment")
         ax.set_ylabel("moment (N m)")
         ax.set_title(", ".join(torsions), fontsize="medium", loc="left")
-        ax.legend(loc="best", fontsize="small")
+        _legend_above(ax, 3)
     numbers = {_trailing_number(e) for e in springs + torsions}
     what = f"joint {numbers.pop()}" if len(numbers) == 1 and None not in numbers else "joint"
     fig.suptitle(_title(traj, f"{what} forces ({', '.join(springs + torsions)})"))
@@ -340,7 +355,8 @@ def plot_comparison(trajs: Mapping[str, Trajectory], quantity: str | Sequence[st
             t_lo, t_hi = min(t_lo, float(traj.t[0])), max(t_hi, float(traj.t[-1]))
         ax.set_ylabel(f"{label} ({unit})" if unit else label)
         ax.grid(True, alpha=0.3)
-    axes[0].legend(loc="best", fontsize="small", ncols=min(len(trajs), 3))
+        _plain_numbers(ax)
+    _legend_above(axes[0], min(len(trajs), 4))
     for ax in axes:
         ax.set_xlim(t_lo, t_hi if t_hi > t_lo else t_lo + 1.0)
     axes[-1].set_xlabel("time t (s)")
@@ -597,16 +613,17 @@ def _blit_pillow_writer_class():
 
         The static parts (axes, ticks, grid, labels) are rendered once; every frame restores
         them and draws the moving artists (a full ``savefig`` per frame spends most of its
-        time on tick labels). Frames are mapped to the palette of the first frame, so the GIF
-        encoder does not quantize each frame again. Falls back to :class:`PillowWriter`'s own
-        frame grabbing if the figure's dpi differs from the writer's.
+        time on tick labels). Frames are mapped to the palette of the first frame
+        (:class:`_Palette`), so the GIF encoder does not quantize each frame again. Falls back
+        to :class:`PillowWriter`'s own frame grabbing if the figure's dpi differs from the
+        writer's.
         """
 
         def __init__(self, moving: list, **kwargs):
             super().__init__(**kwargs)
             self._moving = moving
             self._background = None
-            self._palette: Image.Image | None = None
+            self._palette: _Palette | None = None
 
         def grab_frame(self, **savefig_kwargs):
             canvas = self.fig.canvas
@@ -622,27 +639,45 @@ def _blit_pillow_writer_class():
             renderer = canvas.get_renderer()
             for a in self._moving:
                 a.draw(renderer)
-            im = Image.frombuffer("RGBA", canvas.get_width_height(), canvas.buffer_rgba(), "raw", "RGBA", 0, 1)
-            im = im.convert("RGB")
+            rgb = np.asarray(canvas.buffer_rgba())[..., :3]
             if self._palette is None:
-                self._palette = _palette_of(im)
-            frames.append(im.quantize(palette=self._palette, dither=Image.Dither.NONE))
+                self._palette = _Palette(rgb)
+            idx = self._palette.index(rgb)
+            im = Image.frombytes("P", (idx.shape[1], idx.shape[0]), idx.tobytes())
+            im.putpalette(self._palette.flat)
+            frames.append(im)
 
     return BlitPillowWriter
 
 
-def _palette_of(im):
-    """A 256-colour palette image for ``im`` (RGB): its 200 most frequent colours exactly
-    (background, lines, markers, text), plus 56 median-cut colours for the anti-aliased rest."""
-    from PIL import Image
+class _Palette:
+    """Maps RGB frames to the 256 most frequent colours of a reference frame (exactly where a
+    colour is in the palette, else to the nearest palette colour); numpy, so exact white stays
+    white (Pillow's own palette mapping rounds colours to 6 bits per channel)."""
 
-    counts = im.getcolors(im.width * im.height) or []
-    exact = [c for _, c in sorted(counts, key=lambda nc: nc[0], reverse=True)[:200]]
-    rest = im.quantize(colors=256 - len(exact), method=Image.Quantize.MEDIANCUT).getpalette()[: 3 * (256 - len(exact))]
-    flat = [v for c in exact for v in c] + list(rest)
-    pal = Image.new("P", (1, 1))
-    pal.putpalette(flat + [0] * (768 - len(flat)))
-    return pal
+    def __init__(self, rgb: np.ndarray):
+        keys, counts = np.unique(self._keys(rgb), return_counts=True)
+        top = np.sort(keys[np.argsort(counts, kind="stable")[::-1][:256]])
+        self.keys = top
+        self.colors = np.stack([(top >> 16) & 255, (top >> 8) & 255, top & 255], axis=1).astype(np.int32)
+        self.flat = self.colors.astype(np.uint8).ravel().tolist() + [0] * (768 - 3 * len(top))
+
+    @staticmethod
+    def _keys(rgb: np.ndarray) -> np.ndarray:
+        rgb = rgb.astype(np.int32)
+        return (rgb[..., 0] << 16) | (rgb[..., 1] << 8) | rgb[..., 2]
+
+    def index(self, rgb: np.ndarray) -> np.ndarray:
+        """(h, w) uint8 palette indices of an (h, w, 3) uint8 frame."""
+        keys = self._keys(rgb).ravel()
+        pos = np.clip(np.searchsorted(self.keys, keys), 0, len(self.keys) - 1)
+        miss = self.keys[pos] != keys
+        if miss.any():
+            uniq, inv = np.unique(keys[miss], return_inverse=True)
+            cols = np.stack([(uniq >> 16) & 255, (uniq >> 8) & 255, uniq & 255], axis=1)
+            d = ((cols[:, None, :] - self.colors[None, :, :]) ** 2).sum(axis=2)
+            pos[miss] = np.argmin(d, axis=1)[inv]
+        return pos.astype(np.uint8).reshape(rgb.shape[:2])
 
 
 def _BlitPillowWriter(moving: list, **kwargs):  # noqa: N802 - a lazy class

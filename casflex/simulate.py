@@ -145,7 +145,7 @@ def simulate(
     try:
         while done < n_steps:
             if lib is not None and n_steps - done >= CHUNK:
-                Xc, rc = lib["hht_trajectory_%d" % CHUNK](X[done], done * dt, pv, dt, d)
+                Xc, rc = lib[f"hht_trajectory_{CHUNK}"](X[done], done * dt, pv, dt, d)
                 Xc, rc = np.array(Xc).T, np.array(rc).ravel()
                 bad = ~(np.isfinite(Xc).all(axis=1) & (rc <= tol))
                 good = int(np.argmax(bad)) if bad.any() else CHUNK
@@ -206,7 +206,8 @@ def initial_state(integ: HHT, p: np.ndarray, *, q0: np.ndarray | None = None, qd
     qd = model.qd0 if qd0 is None else np.asarray(qd0, dtype=float).reshape(-1)
     for name, v in (("q0", q), ("qd0", qd)):
         if v.shape != (n,) or not np.isfinite(v).all():
-            raise ValueError(f"{name}: expected {n} finite values ({', '.join(model.dof_names[:6])}, ...), got shape {v.shape}")
+            raise ValueError(f"{name}: expected {n} finite values ({', '.join(model.dof_names[:6])}, ...), "
+                             f"got shape {v.shape}")
     phi, B = model.constraint(q)
     phi, B = np.array(phi).ravel(), np.array(B)
     scale = np.where(model.is_rotation, 1.0, model.length_scale)
@@ -223,9 +224,10 @@ def initial_state(integ: HHT, p: np.ndarray, *, q0: np.ndarray | None = None, qd
     qdd, lam = np.array(qdd).ravel(), np.array(lam).ravel()
     if not (np.isfinite(qdd).all() and np.isfinite(lam).all()) or np.abs(qdd).max() > 1e12:
         M = np.array(model.mass(q, p))
-        massless = [model.dof_names[i] for i in range(n) if M[i, i] == 0.0 and i not in [c.dof for c in model.constraints]]
-        raise ValueError("the initial accelerations are undefined: the mass matrix is singular on the free dofs"
-                         + (f" (massless free dofs: {massless}; give them mass through a beam or support them)" if massless else ""))
+        fixed = {c.dof for c in model.constraints}
+        massless = [model.dof_names[i] for i in range(n) if M[i, i] == 0.0 and i not in fixed]
+        hint = f" (massless free dofs: {massless}; give them mass through a beam or support them)" if massless else ""
+        raise ValueError("the initial accelerations are undefined: the mass matrix is singular on the free dofs" + hint)
     return np.concatenate([q, qd, qdd, lam])
 
 

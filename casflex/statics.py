@@ -242,12 +242,14 @@ def equilibrium(
         if not converged:
             hint = ""
             if singular:
-                hint = (f" The tangent was (nearly) singular in {singular} iteration(s): the structure may be a mechanism "
-                        "or unsupported (check the supports), or start from a stressed q_start nearer equilibrium.")
+                hint = (f" The tangent was (nearly) singular in {singular} iteration(s): the structure may be a "
+                        "mechanism or unsupported (check the supports), or start from a stressed q_start nearer "
+                        "equilibrium.")
             raise StaticsError(
                 f"static equilibrium did not converge at load factor {s:.4g} (step {k + 1}/{steps}) after "
                 f"{max_iter} Newton iterations in that step ({total} in all): scaled residual norm {res:.3e} "
-                f"(tol {tol:.1e}), last scaled Newton update {step:.3e} (tol {step_tol:.1e}). Try more load steps (e.g. steps={4 * steps}), a larger max_iter, "
+                f"(tol {tol:.1e}), last scaled Newton update {step:.3e} (tol {step_tol:.1e}). "
+                f"Try more load steps (e.g. steps={4 * steps}), a larger max_iter, "
                 f"or a q_start closer to the solution.{hint}"
             )
     msg = (f"converged: {total} Newton iterations in {steps} load steps; last scaled residual {res:.2e} <= {tol:.1e}, "

@@ -7,11 +7,20 @@ cantilever`` under pytest's default import mode) and are also offered as the fix
 
 from __future__ import annotations
 
-import math
+import os
 
-import pytest
+# The models in these tests are small (< 200 dofs): a multi-threaded BLAS only adds thread
+# start-up and contention, which on a busy 2-core machine made a 100 x 100 solve take 0.1 s
+# instead of 0.1 ms. Use one thread unless the caller chose otherwise. Effective only if numpy
+# is not imported yet (pytest imports this conftest before the test modules).
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
-from casflex import Beam, Load, Node, Scene, Support
+import math  # noqa: E402
+
+import pytest  # noqa: E402
+
+from casflex import Beam, Load, Node, Scene, Support  # noqa: E402
 
 #: A steel-like default section (SI): E (Pa), A (m^2), I (m^4), rho (kg/m^3).
 STEEL = {"E": 2.1e11, "A": 1e-4, "I": 1e-9, "rho": 7800.0}
@@ -30,17 +39,19 @@ def cantilever(
     angle: float = 0.0,
     rotary_inertia: bool = False,
 ) -> Scene:
-    """A beam clamped at node ``root`` (0, 0), free at node ``tip`` at distance L, direction ``angle``.
+    """A beam clamped at node ``root`` (0, 0), free at node ``tip`` at distance L (m) in direction ``angle`` (rad).
 
     ``load = (fx, fy, mz)`` (N, N, N m) acts on the tip as load ``tipload``. The beam is called
     ``beam`` and meshed into ``n_elements`` equal elements (mesh nodes ``beam.1`` ...). No gravity
     unless given. Dof names: ``xtip``, ``ytip``, ``thetatip``, ...
     """
     loads = () if load is None else (Load("tipload", "tip", fx=load[0], fy=load[1], mz=load[2]),)
+    tip = Node("tip", L * math.cos(angle), L * math.sin(angle), theta=angle)
+    beam = Beam("beam", ("root", "tip"), E=E, A=A, I=I, rho=rho, elements=n_elements, rotary_inertia=rotary_inertia)
     return Scene(
         name="cantilever",
-        nodes=(Node("root", 0.0, 0.0, theta=angle), Node("tip", L * math.cos(angle), L * math.sin(angle), theta=angle)),
-        beams=(Beam("beam", ("root", "tip"), E=E, A=A, I=I, rho=rho, elements=n_elements, rotary_inertia=rotary_inertia),),
+        nodes=(Node("root", 0.0, 0.0, theta=angle), tip),
+        beams=(beam,),
         supports=(Support("clamp", "root", "clamp"),),
         loads=loads,
         gravity=gravity,
@@ -55,20 +66,24 @@ def pendulum(
     I: float = 1e-7,  # noqa: E741
     rho: float = STEEL["rho"],
     *,
-    angle: float = math.pi / 6,
+    angle: float = 0.0,
     gravity: tuple[float, float] = (0.0, -9.81),
+    load: tuple[float, float, float] | None = None,
 ) -> Scene:
-    """A stiff rod pinned at node ``pivot`` (0, 0), free end ``end`` at angle ``angle`` from hanging down.
+    """A stiff rod pinned at node ``pivot`` (0, 0); free end ``end`` at ``angle`` (rad) from hanging straight down.
 
-    The rod ``rod`` (mesh into ``n_elements``) starts straight and stress-free at
-    (L sin angle, -L cos angle); gravity acts, so it is not in equilibrium unless angle = 0.
+    The rod ``rod`` (meshed into ``n_elements``) starts straight and stress-free at
+    (L sin angle, -L cos angle). Gravity acts, so the start is not an equilibrium (not even for
+    angle = 0: the rod stretches). ``load = (fx, fy, mz)`` acts on ``end`` as load ``endload``.
     """
     th = angle - math.pi / 2  # chord direction
+    loads = () if load is None else (Load("endload", "end", fx=load[0], fy=load[1], mz=load[2]),)
     return Scene(
         name="pendulum",
         nodes=(Node("pivot", 0.0, 0.0, theta=th), Node("end", L * math.sin(angle), -L * math.cos(angle), theta=th)),
         beams=(Beam("rod", ("pivot", "end"), E=E, A=A, I=I, rho=rho, elements=n_elements),),
         supports=(Support("pin", "pivot", "pin"),),
+        loads=loads,
         gravity=gravity,
     )
 
