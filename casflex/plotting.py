@@ -26,9 +26,11 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
+from matplotlib.animation import PillowWriter
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from PIL import Image
 
 from casflex.model import Model
 from casflex.results import Trajectory, atomic_write_bytes
@@ -597,57 +599,10 @@ def animate(model: Model, traj: Trajectory, path: str | os.PathLike[str], *, fps
                 drawer.update(art, traj.q[k])
                 label.set_text(f"t = {t[k]:6.3f} s")
                 writer.grab_frame()
-        os.replace(tmp, path)
-    except BaseException:
+        atomic_write_bytes(path, Path(tmp).read_bytes())
+    finally:
         Path(tmp).unlink(missing_ok=True)
-        raise
     return path
-
-
-def _blit_pillow_writer_class():
-    from matplotlib.animation import PillowWriter
-    from PIL import Image
-
-    class BlitPillowWriter(PillowWriter):
-        """PillowWriter that redraws only the moving artists over a cached background.
-
-        The static parts (axes, ticks, grid, labels) are rendered once; every frame restores
-        them and draws the moving artists (a full ``savefig`` per frame spends most of its
-        time on tick labels). Frames are mapped to the palette of the first frame
-        (:class:`_Palette`), so the GIF encoder does not quantize each frame again. Falls back
-        to :class:`PillowWriter`'s own frame grabbing if the figure's dpi differs from the
-        writer's.
-        """
-
-        def __init__(self, moving: list, **kwargs):
-            super().__init__(**kwargs)
-            self._moving = moving
-            self._background = None
-            self._palette: _Palette | None = None
-
-        def grab_frame(self, **savefig_kwargs):
-            canvas = self.fig.canvas
-            frames = getattr(self, "_frames", None)
-            if savefig_kwargs or frames is None or self.fig.dpi != self.dpi:
-                return super().grab_frame(**savefig_kwargs)
-            if self._background is None:
-                for a in self._moving:
-                    a.set_animated(True)
-                canvas.draw()
-                self._background = canvas.copy_from_bbox(self.fig.bbox)
-            canvas.restore_region(self._background)
-            renderer = canvas.get_renderer()
-            for a in self._moving:
-                a.draw(renderer)
-            rgb = np.asarray(canvas.buffer_rgba())[..., :3]
-            if self._palette is None:
-                self._palette = _Palette(rgb)
-            idx = self._palette.index(rgb)
-            im = Image.frombytes("P", (idx.shape[1], idx.shape[0]), idx.tobytes())
-            im.putpalette(self._palette.flat)
-            frames.append(im)
-
-    return BlitPillowWriter
 
 
 class _Palette:
@@ -675,19 +630,53 @@ class _Palette:
         if miss.any():
             uniq, inv = np.unique(keys[miss], return_inverse=True)
             cols = np.stack([(uniq >> 16) & 255, (uniq >> 8) & 255, uniq & 255], axis=1)
-            d = ((cols[:, None, :] - self.colors[None, :, :]) ** 2).sum(axis=2)
-            pos[miss] = np.argmin(d, axis=1)[inv]
+            near = np.empty(len(uniq), dtype=np.intp)
+            for i in range(0, len(uniq), 4096):  # bounded memory: 4096 x 256 distances at a time
+                c = cols[i:i + 4096]
+                near[i:i + 4096] = np.argmin(((c[:, None, :] - self.colors[None, :, :]) ** 2).sum(axis=2), axis=1)
+            pos[miss] = near[inv]
         return pos.astype(np.uint8).reshape(rgb.shape[:2])
 
 
-def _BlitPillowWriter(moving: list, **kwargs):  # noqa: N802 - a lazy class
-    global _BLIT_WRITER
-    if _BLIT_WRITER is None:
-        _BLIT_WRITER = _blit_pillow_writer_class()
-    return _BLIT_WRITER(moving, **kwargs)
+class _BlitPillowWriter(PillowWriter):
+    """PillowWriter that redraws only the moving artists over a cached background.
 
+    The static parts (axes, ticks, grid, labels) are rendered once; every frame restores
+    them and draws the moving artists (a full ``savefig`` per frame spends most of its
+    time on tick labels). Frames are mapped to the palette of the first frame
+    (:class:`_Palette`), so the GIF encoder does not quantize each frame again. The frames
+    go to PillowWriter's frame list ``_frames`` (as its own ``grab_frame`` does); if that
+    attribute is missing (another matplotlib version) or the figure's dpi differs from the
+    writer's, it falls back to PillowWriter's own frame grabbing.
+    """
 
-_BLIT_WRITER = None
+    def __init__(self, moving: list, **kwargs):
+        super().__init__(**kwargs)
+        self._moving = moving
+        self._background = None
+        self._palette: _Palette | None = None
+
+    def grab_frame(self, **savefig_kwargs):
+        canvas = self.fig.canvas
+        frames = getattr(self, "_frames", None)
+        if savefig_kwargs or frames is None or self.fig.dpi != self.dpi:
+            return super().grab_frame(**savefig_kwargs)
+        if self._background is None:
+            for a in self._moving:
+                a.set_animated(True)
+            canvas.draw()
+            self._background = canvas.copy_from_bbox(self.fig.bbox)
+        canvas.restore_region(self._background)
+        renderer = canvas.get_renderer()
+        for a in self._moving:
+            a.draw(renderer)
+        rgb = np.asarray(canvas.buffer_rgba())[..., :3]
+        if self._palette is None:
+            self._palette = _Palette(rgb)
+        idx = self._palette.index(rgb)
+        im = Image.frombytes("P", (idx.shape[1], idx.shape[0]), idx.tobytes())
+        im.putpalette(self._palette.flat)
+        frames.append(im)
 
 
 # -- standard set -----------------------------------------------------------------------------

@@ -346,15 +346,21 @@ def modes(
         L = np.linalg.cholesky(Mr)
     except np.linalg.LinAlgError as exc:  # pragma: no cover - guarded by the eigenvalue test above
         raise ModesError(f"the reduced mass matrix is not positive definite: {exc}") from None
-    Linv = np.linalg.inv(L)
-    A = Linv @ Kr @ Linv.T
-    w2, Y = np.linalg.eigh(0.5 * (A + A.T))
-    order = np.argsort(w2)
-    w2, Y = w2[order], Y[:, order]
     k = nf if count is None else int(count)
     if not 1 <= k <= nf:
         raise ValueError(f"count: expected 1 <= count <= {nf} (free motions), got {count!r}")
-    w2, Y = w2[:k], Y[:, :k]
-    shapes = N @ (Linv.T @ Y)
+    Linv = np.linalg.inv(L)
+    A = Linv @ Kr @ Linv.T
+    _, Y = np.linalg.eigh(0.5 * (A + A.T))
+    V = Linv.T @ Y  # reduced shapes, M-orthonormal
+    # eigh gives eigenvalues to eps * max|omega^2|: the low modes of a fine mesh (omega^2 range
+    # ~1e9) lose digits. The Rayleigh quotient of the original K, M with these vectors is
+    # accurate to second order in the vector error, restoring them.
+    mv = np.einsum("ij,ij->j", V, Mr @ V)
+    w2 = np.einsum("ij,ij->j", V, Kr @ V) / mv
+    V = V / np.sqrt(mv)
+    order = np.argsort(w2)[:k]
+    w2 = w2[order]
+    shapes = N @ V[:, order]
     omega = np.sign(w2) * np.sqrt(np.abs(w2))
     return ModesResult(freq_hz=omega / (2.0 * np.pi), omega=omega, shapes=shapes, dof_names=model.dof_names)
