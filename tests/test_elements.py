@@ -353,3 +353,20 @@ def test_assembled_free_beam_rigid_motion_is_force_free():
         _, fi, _ = model.forces(q, zero, model.p_nominal)
         assert float(model.energy(q, zero, model.p_nominal)[1]) <= 1e-20 * E * A
         assert np.max(np.abs(np.asarray(fi))) <= 1e-9 * E * A  # N and N m per metre of the 1 m beam
+
+
+def test_zero_length_spring_outputs_are_finite_when_nodes_coincide():
+    import casflex as cf
+
+    scene = cf.Scene(
+        name="zero", nodes=(cf.Node("a", 0.0, 0.0), cf.Node("b", 0.0, 0.0)),
+        springs=(cf.Spring("s", ("a", "b"), k=10.0, rest_length=0.0),),
+        supports=(cf.Support("c", "a", "clamp"), cf.Support("t", "b", "theta")), gravity=(0.0, 0.0),
+    )
+    m = cf.assemble(scene)
+    y = np.array(m.outputs(m.q0, np.zeros(m.n_con), m.p_nominal)).ravel()
+    assert np.isfinite(y).all()
+    q = m.q0.copy()
+    q[3:5] = [0.3, -0.4]  # force on b is -k (xb - xa)
+    y = dict(zip(m.output_names, np.array(m.outputs(q, np.zeros(m.n_con), m.p_nominal)).ravel(), strict=True))
+    assert y["s.fx"] == pytest.approx(-3.0) and y["s.fy"] == pytest.approx(4.0) and y["s.force"] == pytest.approx(5.0)

@@ -25,8 +25,12 @@ class LinearSpring:
     def _length(self, qa: ca.SX, qb: ca.SX) -> ca.SX:
         return ca.sqrt((qb[0] - qa[0]) ** 2 + (qb[1] - qa[1]) ** 2)
 
+    @property
+    def _zero_length(self) -> bool:
+        return isinstance(self.rest_length, float) and self.rest_length == 0.0
+
     def strain_energy(self, qa: ca.SX, qb: ca.SX) -> ca.SX:
-        if isinstance(self.rest_length, float) and self.rest_length == 0.0:
+        if self._zero_length:
             # smooth at L = 0, where sqrt is not
             return 0.5 * self.k * ((qb[0] - qa[0]) ** 2 + (qb[1] - qa[1]) ** 2)
         return 0.5 * self.k * (self._length(qa, qb) - self.rest_length) ** 2
@@ -35,6 +39,8 @@ class LinearSpring:
         """force N (tension positive, N), length L (m), fx, fy: force on node b (N)."""
         L = self._length(qa, qb)
         N = self.k * (L - self.rest_length)
+        if self._zero_length:  # N / L = k: no division, so no NaN when the nodes coincide
+            return {"force": N, "length": L, "fx": -self.k * (qb[0] - qa[0]), "fy": -self.k * (qb[1] - qa[1])}
         return {"force": N, "length": L, "fx": -N * (qb[0] - qa[0]) / L, "fy": -N * (qb[1] - qa[1]) / L}
 
 
