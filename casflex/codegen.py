@@ -21,8 +21,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import casadi as ca
+import numpy as np
 
-__all__ = ["CompiledLibrary", "compile_functions", "generate_c", "cache_dir", "CodegenError", "CFLAGS"]
+__all__ = ["BufferedCall", "CompiledLibrary", "compile_functions", "generate_c", "cache_dir", "CodegenError", "CFLAGS"]
 
 CFLAGS = ("-O3", "-ffp-contract=off", "-fPIC", "-shared")
 
@@ -57,6 +58,32 @@ class CompiledLibrary:
 
     def __getitem__(self, name: str) -> ca.Function:
         return self.functions[name]
+
+
+class BufferedCall:
+    """Evaluate a Function directly on numpy memory (CasADi's ``Function.buffer``).
+
+    Converting numpy arrays to and from ``DM`` costs about as much as a compiled chunk of
+    HHT steps; binding the arrays avoids it. Arrays must be float64 and C-contiguous; a
+    matrix output (n x m) is written column-major, i.e. into a numpy array of shape (m, n).
+    """
+
+    def __init__(self, f: ca.Function):
+        self.f = f
+        self._buf, self._eval = f.buffer()
+        self._n_in = [f.nnz_in(i) for i in range(f.n_in())]
+        self._n_out = [f.nnz_out(i) for i in range(f.n_out())]
+
+    def __call__(self, args: list, res: list) -> None:
+        for i, a in enumerate(args):
+            if a.dtype != np.float64 or not a.flags.c_contiguous or a.size != self._n_in[i]:
+                raise ValueError(f"{self.f.name()}: input {i} needs {self._n_in[i]} contiguous float64 values")
+            self._buf.set_arg(i, memoryview(a))
+        for i, r in enumerate(res):
+            if r.dtype != np.float64 or not r.flags.c_contiguous or r.size != self._n_out[i]:
+                raise ValueError(f"{self.f.name()}: output {i} needs {self._n_out[i]} contiguous float64 values")
+            self._buf.set_res(i, memoryview(r))
+        self._eval()
 
 
 def _compiler() -> str:

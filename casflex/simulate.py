@@ -23,7 +23,7 @@ from collections.abc import Callable
 import casadi as ca
 import numpy as np
 
-from casflex.codegen import CompiledLibrary, compile_functions
+from casflex.codegen import BufferedCall, CompiledLibrary, compile_functions
 from casflex.integrators.hht import HHT
 from casflex.model import Model, assemble
 from casflex.results import Trajectory
@@ -58,7 +58,8 @@ def integrator_for(model: Model, *, alpha: float, tol: float = 1e-12, max_iter: 
 def compiled_library(integ: HHT) -> CompiledLibrary:
     """The compiled step and chunk Functions of ``integ`` (built once per process)."""
     if integ not in _LIBRARIES:
-        _LIBRARIES[integ] = compile_functions([integ.step, integ.trajectory(CHUNK)], stem="casflex_hht")
+        funcs = [integ.step, integ.trajectory(CHUNK), integ.post.map(f"hht_post_{CHUNK}", "serial", CHUNK, [2], [])]
+        _LIBRARIES[integ] = compile_functions(funcs, stem="casflex_hht")
     return _LIBRARIES[integ]
 
 
@@ -141,27 +142,25 @@ def simulate(
     failure = ""
     status = "success"
     done = 0
+    if lib is not None:
+        chunk_fn = BufferedCall(lib[f"hht_trajectory_{CHUNK}"])
+        step_fn = BufferedCall(lib["hht_step"])
+        t_in, h_in = np.zeros(1), np.array([dt])
+        res = np.empty(CHUNK)
     t_run = time.perf_counter()
     try:
         while done < n_steps:
-            if lib is not None and n_steps - done >= CHUNK:
-                Xc, rc = lib[f"hht_trajectory_{CHUNK}"](X[done], done * dt, pv, dt, d)
-                Xc, rc = np.array(Xc).T, np.array(rc).ravel()
-                bad = ~(np.isfinite(Xc).all(axis=1) & (rc <= tol))
-                good = int(np.argmax(bad)) if bad.any() else CHUNK
-                X[done + 1:done + 1 + good] = Xc[:good]
+            if lib is not None:
+                m_steps = CHUNK if n_steps - done >= CHUNK else 1
+                t_in[0] = done * dt
+                out = X[done + 1:done + 1 + m_steps]  # written in place, no conversion
+                (chunk_fn if m_steps == CHUNK else step_fn)([X[done], t_in, pv, h_in, d], [out, res[:m_steps]])
+                bad = ~(np.isfinite(out).all(axis=1) & (res[:m_steps] <= tol))
+                good = int(np.argmax(bad)) if bad.any() else m_steps
                 done += good
-                if good < CHUNK:
+                if good < m_steps:
                     failure = _diagnose(integ, X[done], done, dt, pv, d, tol, max_iter)
                     break
-            elif lib is not None:
-                x1, r = lib["hht_step"](X[done], done * dt, pv, dt, d)
-                x1, r = np.array(x1).ravel(), float(r)
-                if not (np.isfinite(x1).all() and r <= tol):
-                    failure = _diagnose(integ, X[done], done, dt, pv, d, tol, max_iter)
-                    break
-                X[done + 1] = x1
-                done += 1
             else:
                 x1, r, it = _interpreted_step(integ, X[done], done * dt, pv, dt, d)
                 iters[done] = it
@@ -182,7 +181,7 @@ def simulate(
         if report:
             sys.stderr.write("\n")
 
-    traj = _trajectory(integ, X[:done + 1], iters[:done], dt, pv, status, failure, {
+    traj = _trajectory(integ, X[:done + 1], iters[:done], dt, pv, lib, status, failure, {
         "scene": model.scene.name, "alpha": alpha, "dt": dt, "t_end": t_end, "inertia": model.inertia,
         "compiled": bool(compiled), "tol": tol, "max_iter": max_iter,
         "stats": {"steps": done, "build_s": build_s, "run_s": run_s,
@@ -255,18 +254,26 @@ def _diagnose(integ: HHT, x: np.ndarray, step: int, dt: float, p, d, tol: float,
 
 
 def _trajectory(integ: HHT, X: np.ndarray, iters: np.ndarray, dt: float, p: np.ndarray,
-                status: str, message: str, meta: dict) -> Trajectory:
+                lib: CompiledLibrary | None, status: str, message: str, meta: dict) -> Trajectory:
     model = integ.model
     n = model.n_dof
     k = X.shape[0]
     q, qd, qdd, lam = X[:, :n], X[:, n:2 * n], X[:, 2 * n:3 * n], X[:, 3 * n:]
     t = np.arange(k) * dt
-    T, Ve, Vg = (np.array(v).ravel() for v in model.energy.map(k)(q.T, qd.T, p))
-    f = np.array(model.load.map(k)(ca.DM(t).T, p)).T
-    power = np.einsum("ij,ij->i", f, qd)
+    if lib is None:
+        Y = np.array(integ.post.map(k)(X.T, ca.DM(t).T, p)).T
+    else:  # compiled, CHUNK states per call; the last chunk padded with the last state
+        pad = -k % CHUNK
+        Xp, tp = np.vstack([X, np.repeat(X[-1:], pad, axis=0)]), np.concatenate([t, np.full(pad, t[-1])])
+        post = BufferedCall(lib[f"hht_post_{CHUNK}"])
+        Y = np.empty((k + pad, integ.post.nnz_out(0)))
+        pc = np.ascontiguousarray(p, dtype=float)
+        for i in range(0, k + pad, CHUNK):
+            post([Xp[i:i + CHUNK], tp[i:i + CHUNK], pc], [Y[i:i + CHUNK]])
+        Y = Y[:k]
+    T, Ve, Vg, power, outputs = Y[:, 0], Y[:, 1], Y[:, 2], Y[:, 3], Y[:, 4:]
     work = np.concatenate([[0.0], np.cumsum(0.5 * (power[1:] + power[:-1]) * dt)])
     total = T + Ve + Vg
-    outputs = np.array(model.outputs.map(k)(q.T, lam.T, p)).T.reshape(k, len(model.output_names))
     return Trajectory(
         t=t, q=q, qd=qd, qdd=qdd, lam=lam, dof_names=model.dof_names, constraint_names=model.constraint_names,
         outputs=outputs, output_names=model.output_names,

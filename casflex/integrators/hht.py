@@ -188,6 +188,14 @@ class HHT:
         self._fn["initial"] = ca.Function("hht_initial", [qsm, qdsm, tsm, psm], [sol[:n], sol[n:]],
                                           ["q", "qd", "t", "p"], ["qdd", "lam"])
 
+        # What a result reports per state: energies, power of the loads, joint outputs.
+        xs = ca.SX.sym("x", self.nx)
+        qx, qdx, lamx = xs[:n], xs[n:2 * n], xs[3 * n:]
+        T, Ve, Vg = m.energy(qx, qdx, p)
+        power = ca.dot(m.load(ts, p), qdx)
+        self._fn["post"] = ca.Function("hht_post", [xs, ts, p], [ca.vertcat(T, Ve, Vg, power, m.outputs(qx, lamx, p))],
+                                       ["x", "t", "p"], ["y"], {"cse": True})
+
         # The step as one Function.
         X0, T0, Pm, H, D = (ca.MX.sym(k, s) for k, s in (("x0", self.nx), ("t0", 1), ("p", m.n_p), ("h", 1), ("d", n)))
         zg, pr = self._fn["prepare"](X0, T0, Pm, H, D)
@@ -211,6 +219,12 @@ class HHT:
     def initial(self) -> ca.Function:
         """``hht_initial(q, qd, t, p) -> (qdd, lam)``: consistent accelerations and multipliers."""
         return self._fn["initial"]
+
+    @property
+    def post(self) -> ca.Function:
+        """``hht_post(x, t, p) -> y``: [kinetic, elastic, gravity energy (J), power of the loads (W),
+        joint outputs (``model.output_names``)] of one state."""
+        return self._fn["post"]
 
     @property
     def pieces(self) -> tuple[ca.Function, ca.Function, ca.Function]:
