@@ -22,11 +22,9 @@ import numpy as np
 
 from casflex.constraints import FixedDof, constraint_vector, support_constraints
 from casflex.elements import BeamElement, LinearSpring, TorsionalSpring
-from casflex.scene import Parameter, Scene, SceneError
+from casflex.scene import INERTIA_FORMS, Parameter, Scene, SceneError
 
 __all__ = ["Model", "assemble", "INERTIA_FORMS"]
-
-INERTIA_FORMS = ("lagrange", "seed")
 
 
 @dataclass(frozen=True, eq=False)

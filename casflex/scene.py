@@ -60,7 +60,8 @@ SUPPORT_DOFS: dict[str, tuple[str, ...]] = {
     "theta": ("theta",),
 }
 
-_INERTIA_FORMS = ("lagrange", "seed")
+#: Forms of the velocity-dependent inertia term (see casflex.model).
+INERTIA_FORMS = ("lagrange", "seed")
 _NON_NUMERIC = ("name", "nodes", "node", "elements", "table", "kind", "rotary_inertia")
 
 
@@ -329,8 +330,8 @@ class RunSettings:
         if not -1.0 / 3.0 - 1e-12 <= alpha <= 0.0:
             raise SceneError.at("run", "alpha", f"must lie in [-1/3, 0], got {alpha:g}")
         object.__setattr__(self, "alpha", alpha)
-        if not isinstance(self.inertia, str) or self.inertia not in _INERTIA_FORMS:
-            raise SceneError.at("run", "inertia", f"expected one of {list(_INERTIA_FORMS)}, got {self.inertia!r}")
+        if not isinstance(self.inertia, str) or self.inertia not in INERTIA_FORMS:
+            raise SceneError.at("run", "inertia", f"expected one of {list(INERTIA_FORMS)}, got {self.inertia!r}")
         if self.dt > self.t_end:
             raise SceneError.at("run", "dt", f"the step {self.dt:g} s is longer than t_end = {self.t_end:g} s")
 

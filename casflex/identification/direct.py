@@ -22,6 +22,7 @@ import numpy as np
 from casflex.data import MeasurementSet
 from casflex.identification.problem import (
     IdentificationResult,
+    bound_flags,
     gauss_newton_statistics,
     parameter_scale,
     start_values,
@@ -101,9 +102,8 @@ def identify_direct(
     if solver == "ipopt":
         opts["ipopt"] = {"print_level": 5 if verbose else 0, "tol": 1e-14, "acceptable_tol": 1e-12,
                          "sb": "yes"}
-    elif not verbose:
-        opts["print_status"] = False if solver == "sqpmethod" else None
-        opts = {k: v for k, v in opts.items() if v is not None}
+    elif solver == "sqpmethod" and not verbose:
+        opts["print_status"] = False
     opts.update(solver_options or {})
     try:
         S = ca.nlpsol("direct", solver, {"x": w, "f": 0.5 * ca.sumsqr(z)}, opts)
@@ -124,8 +124,7 @@ def identify_direct(
     p_hat = wv[:n_p] * scale
     names = model.parameter_names
     lams = [list(wv[n_p + i * n_c:n_p + (i + 1) * n_c] * fs) for i in range(len(samples))]
-    at_bound = {nm: bool(min(abs(v - par.lower), abs(v - par.upper)) <= 1e-8 * s)
-                for nm, v, par, s in zip(names, p_hat, model.parameters, scale, strict=True)}
+    at_bound = bound_flags(model, p_hat, scale)
     extra = {"force_scale": fs, "residual_norm": float(np.linalg.norm(zv) * fs), "gauss_newton_polish": polished}
     if w_lin is not None:
         extra["linear_solution"] = dict(zip(names, (w_lin[:n_p] * scale).tolist(), strict=True))

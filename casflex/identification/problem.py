@@ -14,7 +14,7 @@ import numpy as np
 from casflex.model import Model
 from casflex.results import atomic_write_json
 
-__all__ = ["IdentificationResult", "parameter_scale", "start_values", "gauss_newton_statistics"]
+__all__ = ["IdentificationResult", "parameter_scale", "start_values", "bound_flags", "gauss_newton_statistics"]
 
 
 def parameter_scale(model: Model) -> np.ndarray:
@@ -35,6 +35,12 @@ def start_values(model: Model, start: float | dict[str, float] | np.ndarray | No
             raise ValueError(f"start: a factor must be a positive number, got {start!r}")
         return model.p_nominal * float(start)
     return model.params(start)
+
+
+def bound_flags(model: Model, p: np.ndarray, scale: np.ndarray) -> dict[str, bool]:
+    """{name: True} for parameters within 1e-8 of their scale from a bound."""
+    return {par.name: bool(min(abs(v - par.lower), abs(v - par.upper)) <= 1e-8 * s)
+            for v, par, s in zip(p, model.parameters, scale, strict=True)}
 
 
 def gauss_newton_statistics(J: np.ndarray, r: np.ndarray, n_p: int, names: tuple[str, ...]) -> dict[str, Any]:
