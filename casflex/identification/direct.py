@@ -22,9 +22,11 @@ import numpy as np
 from casflex.data import MeasurementSet
 from casflex.identification.problem import (
     IdentificationResult,
+    ParameterMap,
     bound_flags,
+    gauss_newton_polish,
     gauss_newton_statistics,
-    parameter_scale,
+    solver_options_for,
     start_values,
 )
 from casflex.model import Model
@@ -53,6 +55,7 @@ def identify_direct(
     start: float | dict[str, float] | np.ndarray | None = None,
     solver: str = "ipopt",
     solver_options: dict | None = None,
+    transform: str = "linear",
     verbose: bool = False,
 ) -> IdentificationResult:
     """Identify the model's parameters from full kinematics at ``instants`` (s).
@@ -68,13 +71,17 @@ def identify_direct(
         Starting parameters (a number multiplies the nominal values); default nominal.
     solver : str
         A CasADi nlpsol plugin (``ipopt``, ``sqpmethod``, ...).
+    transform : {"linear", "log"}
+        Decision variables p / scale or log(p / scale) (see :class:`ParameterMap`); the exact
+        linear solution is computed with the linear one only.
     """
     t_build = time.perf_counter()
     samples = _instant_data(model, data, instants)
     n_p, n_c = model.n_p, model.n_con
     if n_p == 0:
         raise ValueError("the scene declares no parameters to identify ([[parameters]] in the scene file)")
-    scale = parameter_scale(model)
+    pmap = ParameterMap.of(model, transform)
+    scale = pmap.scale
     p0 = start_values(model, start)
     # force scale: the largest inertia or gravity force at the instants, for O(1) residuals
     fs = max(1.0, *(float(np.abs(np.array(model.mass(q, p0)) @ a).max()) +
@@ -82,12 +89,13 @@ def identify_direct(
 
     th = ca.SX.sym("theta", n_p)
     mus = [ca.SX.sym(f"mu{i}", n_c) for i in range(len(samples))]
-    p = th * scale
+    p = pmap.p(th)
     z = ca.vertcat(*[model.equilibrium(q, v, a, mu * fs, t, p)[0] / fs
                      for (t, q, v, a), mu in zip(samples, mus, strict=True)])
     w = ca.vertcat(th, *mus)
-    lbw = np.concatenate([[par.lower for par in model.parameters] / scale, np.full(n_c * len(samples), -np.inf)])
-    ubw = np.concatenate([[par.upper for par in model.parameters] / scale, np.full(n_c * len(samples), np.inf)])
+    lb_th, ub_th = pmap.bounds()
+    lbw = np.concatenate([lb_th, np.full(n_c * len(samples), -np.inf)])
+    ubw = np.concatenate([ub_th, np.full(n_c * len(samples), np.inf)])
     Jz = ca.jacobian(z, w)
     zJ = ca.Function("direct_residual", [w], [z, Jz], ["w"], ["z", "J"])
 
@@ -98,18 +106,12 @@ def identify_direct(
         z0, J0 = (np.array(v) for v in zJ(np.zeros(w.numel())))
         w_lin = np.linalg.lstsq(J0, -z0.ravel(), rcond=None)[0]
 
-    opts = {"print_time": False}
-    if solver == "ipopt":
-        opts["ipopt"] = {"print_level": 5 if verbose else 0, "tol": 1e-14, "acceptable_tol": 1e-12,
-                         "sb": "yes"}
-    elif solver == "sqpmethod" and not verbose:
-        opts["print_status"] = False
-    opts.update(solver_options or {})
     try:
-        S = ca.nlpsol("direct", solver, {"x": w, "f": 0.5 * ca.sumsqr(z)}, opts)
+        S = ca.nlpsol("direct", solver, {"x": w, "f": 0.5 * ca.sumsqr(z)},
+                      solver_options_for(solver, verbose, solver_options))
     except RuntimeError as exc:
         raise ValueError(f"solver {solver!r}: cannot be created ({str(exc).splitlines()[-1]})") from None
-    w0 = np.concatenate([p0 / scale, np.zeros(n_c * len(samples))])
+    w0 = np.concatenate([pmap.theta(p0), np.zeros(n_c * len(samples))])
     build_s = time.perf_counter() - t_build
 
     t_solve = time.perf_counter()
@@ -117,15 +119,15 @@ def identify_direct(
     solve_s = time.perf_counter() - t_solve
     st = S.stats()
     wv = np.array(sol["x"]).ravel()
-    wv, polished = _polish(zJ, wv, lbw, ubw)
+    wv, polished = gauss_newton_polish(zJ, wv, lbw, ubw)
     zv, Jv = (np.array(v) for v in zJ(wv))
-    stats = gauss_newton_statistics(Jv, zv.ravel(), n_p, model.parameter_names)
-    stats["std_errors"] = {k: v * s for (k, v), s in zip(stats["std_errors"].items(), scale, strict=True)}
-    p_hat = wv[:n_p] * scale
+    p_hat = pmap.p(wv[:n_p])
+    stats = gauss_newton_statistics(Jv, zv.ravel(), n_p, model.parameter_names, pmap.dp_dtheta(wv[:n_p]), p_hat)
     names = model.parameter_names
     lams = [list(wv[n_p + i * n_c:n_p + (i + 1) * n_c] * fs) for i in range(len(samples))]
     at_bound = bound_flags(model, p_hat, scale)
-    extra = {"force_scale": fs, "residual_norm": float(np.linalg.norm(zv) * fs), "gauss_newton_polish": polished}
+    extra = {"transform": transform, "force_scale": fs, "residual_norm": float(np.linalg.norm(zv) * fs),
+               "gauss_newton_polish": polished}
     if w_lin is not None:
         extra["linear_solution"] = dict(zip(names, (w_lin[:n_p] * scale).tolist(), strict=True))
     return IdentificationResult(
@@ -137,21 +139,3 @@ def identify_direct(
         identifiability=stats, instants=[float(t) for t, *_ in samples], multipliers=lams, extra=extra,
     )
 
-
-def _polish(zJ: ca.Function, w: np.ndarray, lb: np.ndarray, ub: np.ndarray, steps: int = 3) -> tuple[np.ndarray, int]:
-    """Gauss-Newton steps on 1/2 |z|^2 from the NLP solution, kept only while they stay inside
-    the bounds and lower the objective: an interior-point solver stops a barrier-size distance
-    (~1e-8 relative here) from the least-squares optimum of weakly determined parameters."""
-    taken = 0
-    z, J = (np.array(v) for v in zJ(w))
-    f = float(z.ravel() @ z.ravel())
-    for _ in range(steps):
-        w_new = w - np.linalg.lstsq(J, z.ravel(), rcond=None)[0]
-        if np.any(w_new < lb) or np.any(w_new > ub):
-            break
-        z_new, J_new = (np.array(v) for v in zJ(w_new))
-        f_new = float(z_new.ravel() @ z_new.ravel())
-        if not f_new < f:
-            break
-        w, z, J, f, taken = w_new, z_new, J_new, f_new, taken + 1
-    return w, taken

@@ -9,12 +9,14 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+import casadi as ca
 import numpy as np
 
 from casflex.model import Model
 from casflex.results import atomic_write_json
 
-__all__ = ["IdentificationResult", "parameter_scale", "start_values", "bound_flags", "gauss_newton_statistics"]
+__all__ = ["IdentificationResult", "parameter_scale", "start_values", "bound_flags", "gauss_newton_statistics",
+           "gauss_newton_polish", "solver_options_for", "ParameterMap", "TRANSFORMS"]
 
 
 def parameter_scale(model: Model) -> np.ndarray:
@@ -24,6 +26,66 @@ def parameter_scale(model: Model) -> np.ndarray:
     for par, nom in zip(model.parameters, model.p_nominal, strict=True):
         out.append(par.scale if par.scale else (abs(nom) if nom != 0 else 1.0))
     return np.array(out, dtype=float)
+
+
+TRANSFORMS = ("linear", "log")
+
+
+@dataclass(frozen=True, eq=False)
+class ParameterMap:
+    """Decision variables theta of the parameters p, all O(1):
+
+    - ``linear``: p = s theta, s the parameter scale (:func:`parameter_scale`);
+    - ``log``: p = s exp(theta), for parameters that must stay positive; their relative
+      changes become additive, which evens out parameters of very different sensitivity.
+    """
+
+    names: tuple[str, ...]
+    scale: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    transform: str = "linear"
+
+    @classmethod
+    def of(cls, model: Model, transform: str = "linear") -> ParameterMap:
+        if transform not in TRANSFORMS:
+            raise ValueError(f"transform: expected one of {TRANSFORMS}, got {transform!r}")
+        lower = np.array([par.lower for par in model.parameters], dtype=float)
+        if transform == "log":
+            bad = [par.name for par in model.parameters if par.lower < 0]
+            if bad:
+                raise ValueError(f"transform 'log': parameters {bad} may be negative (lower < 0); declare lower = 0 "
+                                 "or use the linear transform")
+        return cls(model.parameter_names, parameter_scale(model), lower,
+                   np.array([par.upper for par in model.parameters], dtype=float), transform)
+
+    def p(self, theta: Any) -> Any:
+        """Parameters from decision variables (numbers or CasADi symbols)."""
+        if self.transform == "linear":
+            return theta * self.scale
+        return (np.exp(theta) if isinstance(theta, np.ndarray) else ca.exp(theta)) * self.scale
+
+    def theta(self, p: np.ndarray) -> np.ndarray:
+        """Decision variables of parameter values ``p`` (e.g. a start)."""
+        p = np.asarray(p, dtype=float)
+        if self.transform == "linear":
+            return p / self.scale
+        if np.any(p <= 0):
+            bad = [nm for nm, v in zip(self.names, p, strict=True) if v <= 0]
+            raise ValueError(f"start: parameters {bad} must be > 0 for the log transform")
+        return np.log(p / self.scale)
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper) bounds on theta."""
+        if self.transform == "linear":
+            return self.lower / self.scale, self.upper / self.scale
+        # |theta| <= 40 (p within e^40 of its scale) keeps exp() finite during line searches
+        with np.errstate(divide="ignore"):
+            lo, hi = np.log(np.maximum(self.lower, 0.0) / self.scale), np.log(self.upper / self.scale)
+        return np.maximum(lo, -40.0), np.minimum(hi, 40.0)
+
+    def dp_dtheta(self, theta: np.ndarray) -> np.ndarray:
+        return self.scale if self.transform == "linear" else self.scale * np.exp(theta)
 
 
 def start_values(model: Model, start: float | dict[str, float] | np.ndarray | None) -> np.ndarray:
@@ -43,13 +105,25 @@ def bound_flags(model: Model, p: np.ndarray, scale: np.ndarray) -> dict[str, boo
             for v, par, s in zip(p, model.parameters, scale, strict=True)}
 
 
-def gauss_newton_statistics(J: np.ndarray, r: np.ndarray, n_p: int, names: tuple[str, ...]) -> dict[str, Any]:
-    """Standard errors and correlations of the first ``n_p`` unknowns of a least-squares fit.
+def gauss_newton_statistics(J: np.ndarray, r: np.ndarray, n_p: int, names: tuple[str, ...],
+                            dp_dtheta: np.ndarray | None = None, p: np.ndarray | None = None) -> dict[str, Any]:
+    """Standard errors, correlations and identifiability of the first ``n_p`` unknowns of a
+    least-squares fit.
 
-    J : (m, n) Jacobian of the residual r (m,) in the unknowns' own units. Covariance
-    s^2 (J^T J)^-1 with s^2 = r^T r / (m - n) (Gauss-Newton). The identifiability report
-    gives the rank and condition number of J's columns after scaling them to unit norm, and
-    the parameter combination the data pin down least (the last right singular vector).
+    J : (m, n) Jacobian of the residual r (m,) in the unknowns' own units; the first n_p
+    unknowns are the decision variables theta of the parameters p (see :class:`ParameterMap`).
+    Covariance s^2 (J^T J)^-1 with s^2 = r^T r / (m - n) (Gauss-Newton); standard errors are
+    returned in the parameters' units (times |dp/dtheta|, the delta method).
+
+    The identifiability report gives the rank and condition number of J's columns scaled to
+    unit norm. The rest is about the parameter block with the other unknowns profiled out
+    (projected off the span of their columns): the parameter combination the data pin down
+    least (its last right singular vector); the collinearity index 1 / sigma_min of its
+    unit-norm columns (Brun et al. 2001: above ~15 the parameters cannot be told apart); each
+    parameter's relative sensitivity |dr/d ln p_j| / max_k |dr/d ln p_k|, and ``weak``: those
+    relative sensitivity is below 1e-2 (a 1 % change of it moves the residual less than a
+    hundredth of what 1 % of the leading parameter does) or whose relative standard error
+    exceeds 10 %.
     """
     m, n = J.shape
     norms = np.linalg.norm(J, axis=0)
@@ -68,16 +142,71 @@ def gauss_newton_statistics(J: np.ndarray, r: np.ndarray, n_p: int, names: tuple
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(se, se)
-    # the parameter block alone: how well the data separate the parameters from each other
-    _, svp, vtp = np.linalg.svd(Js[:, :n_p], full_matrices=False)
+    # The parameter block with the other unknowns (multipliers, rotations, states) profiled
+    # out: what the residual still feels of a parameter change once they re-adjust.
+    Jp = J[:, :n_p]
+    if n > n_p:
+        Q, R_ = np.linalg.qr(J[:, n_p:])
+        Q = Q[:, np.abs(np.diag(R_)) > max(m, n) * np.finfo(float).eps * (np.abs(R_).max() if R_.size else 0.0)]
+        Jp = Jp - Q @ (Q.T @ Jp)
+    pn = np.linalg.norm(Jp, axis=0)
+    _, svp, vtp = np.linalg.svd(Jp / np.where(pn > 0, pn, 1.0), full_matrices=False)
     weakest = {nm: float(v) for nm, v in zip(names, vtp[-1], strict=True)} if n_p else {}
+    dpdt = np.ones(n_p) if dp_dtheta is None else np.abs(np.asarray(dp_dtheta, dtype=float))
+    p_abs = np.full(n_p, np.nan) if p is None else np.abs(np.asarray(p, dtype=float))
+    se = se * dpdt
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sens = pn * (p_abs / dpdt if p is not None else 1.0)  # |dr / d ln p|, others profiled out
+        rel_sens = sens / sens.max() if n_p and sens.max() > 0 else np.zeros(n_p)
+        rel_se = se / p_abs
+    weak = [nm for nm, s_, e_ in zip(names, rel_sens, rel_se, strict=True)
+            if s_ < 1e-2 or (np.isfinite(e_) and e_ > 0.1)]
     return {
         "std_errors": {nm: float(v) for nm, v in zip(names, se, strict=True)},
+        "relative_std_errors": {nm: float(v) for nm, v in zip(names, rel_se, strict=True)},
+        "relative_sensitivity": {nm: float(v) for nm, v in zip(names, rel_sens, strict=True)},
+        "collinearity_index": float(1.0 / svp[-1]) if n_p and svp[-1] > 0 else math.inf,
+        "weak": weak,
         "correlation": np.nan_to_num(corr).tolist(),
         "rank": rank, "n_unknowns": n, "condition": cond,
         "parameter_condition": float(svp[0] / svp[-1]) if n_p and svp[-1] > 0 else math.inf,
         "weakest_direction": weakest, "residual_variance": s2,
     }
+
+
+def solver_options_for(solver: str, verbose: bool, extra: dict | None, tol: float = 1e-14) -> dict:
+    """nlpsol options: quiet unless ``verbose``, IPOPT's tolerance ``tol`` (acceptable 100 tol,
+    adaptive barrier), then the user's options."""
+    opts: dict = {"print_time": False}
+    if solver == "ipopt":
+        opts["ipopt"] = {"print_level": 5 if verbose else 0, "tol": tol, "acceptable_tol": 100 * tol,
+                         "acceptable_iter": 5, "sb": "yes", "mu_strategy": "adaptive", "max_iter": 500}
+    elif solver == "sqpmethod" and not verbose:
+        opts["print_status"] = False
+    opts.update(extra or {})
+    return opts
+
+
+def gauss_newton_polish(zJ: Any, w: np.ndarray, lb: np.ndarray, ub: np.ndarray,
+                        steps: int = 3) -> tuple[np.ndarray, int]:
+    """Gauss-Newton steps on 1/2 |z(w)|^2 from an NLP solution, kept only while they stay inside
+    the bounds and lower the objective: an interior-point solver stops a barrier-size distance
+    (~1e-8 relative here) from the least-squares optimum of weakly determined parameters.
+
+    zJ: w -> (z, dz/dw). Returns the polished w and the number of steps taken."""
+    taken = 0
+    z, J = (np.array(v) for v in zJ(w))
+    f = float(z.ravel() @ z.ravel())
+    for _ in range(steps):
+        w_new = w - np.linalg.lstsq(J, z.ravel(), rcond=None)[0]
+        if np.any(w_new < lb) or np.any(w_new > ub):
+            break
+        z_new, J_new = (np.array(v) for v in zJ(w_new))
+        f_new = float(z_new.ravel() @ z_new.ravel())
+        if not (np.isfinite(f_new) and f_new < f):
+            break
+        w, z, J, f, taken = w_new, z_new, J_new, f_new, taken + 1
+    return w, taken
 
 
 @dataclass(frozen=True)
@@ -135,7 +264,12 @@ class IdentificationResult:
             lines.append(f"  {k:<8s} = {v:14.6g}  +- {se:.2g} (start {self.start[k]:.6g}){flag}")
         idf = self.identifiability
         lines.append(f"  identifiability: rank {idf['rank']} of {idf['n_unknowns']} unknowns, "
-                     f"parameter condition number {idf['parameter_condition']:.3g}")
+                     f"parameter condition number {idf['parameter_condition']:.3g}, "
+                     f"collinearity index {idf.get('collinearity_index', math.nan):.3g}")
+        if idf.get("weak"):
+            lines.append(f"  weakly identifiable: {', '.join(idf['weak'])}")
+        if self.message:
+            lines.append(f"  note: {self.message}")
         return "\n".join(lines)
 
 
