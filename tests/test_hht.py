@@ -170,6 +170,10 @@ def test_trajectory_derivatives_match_finite_differences():
     # central differences: truncation ~1e-10, round-off ~1e-16/1e-6; 1e-6 of the largest entry
     scale = np.abs(jac[:, cols]).max()
     np.testing.assert_allclose(jac[:, cols], fd[:, cols], atol=1e-6 * scale)
+    # reverse mode (what an NLP gradient uses) agrees with forward mode to round-off
+    seed = np.array([0.3, -1.7])
+    grad = ca.Function("g", [X0, P], [ca.gradient(ca.dot(ca.DM(seed), out), ca.vertcat(X0, P))])
+    np.testing.assert_allclose(np.array(grad(x0, p0)).ravel(), seed @ jac, atol=1e-9 * np.abs(jac).max())
 
 
 @pytest.mark.parametrize("k", [1e-3, 1.0, 1e6, 1e12])

@@ -1,0 +1,98 @@
+"""Indirect (output-error) identification, Eqs. 15-17, single and multiple shooting."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import casflex
+from casflex.data import MeasurementSet, simulated_set
+from casflex.identification import identify_indirect
+
+H = 0.1  # horizon (s): short enough for CI, long enough that every parameter is felt
+
+
+@pytest.fixture(scope="module")
+def twobar():
+    return casflex.assemble(casflex.load_scene("twobar"))
+
+
+@pytest.fixture(scope="module")
+def sim(twobar):
+    return simulated_set(twobar, t_end=0.3)  # Newton tol 1e-14, as the identification's default
+
+
+@pytest.mark.parametrize("transcription", ["single-shooting", "multiple-shooting"])
+@pytest.mark.parametrize("start", [0.8, 1.2])
+def test_recovers_truth_positions_only(twobar, sim, transcription, start):
+    r = identify_indirect(twobar, sim, H, transcription=transcription, start=start)
+    assert r.success, (r.status, r.message)
+    # 1e-6 (the issue's bar): on 0.1 s the torsional springs are felt weakly; measured 1e-7..3e-7,
+    # the floor set by the HHT Newton tolerance inside data and model
+    np.testing.assert_allclose(r.p, twobar.p_nominal, rtol=1e-6)
+    assert r.extra["transcription"] == transcription
+    assert r.extra["intervals"] == (5 if transcription == "multiple-shooting" else 1)
+    # multipliers over the window are the clamp reactions of the simulation
+    lam = np.array(r.multipliers)
+    assert lam.shape == (100, twobar.n_con)
+    np.testing.assert_allclose(lam, sim.meta["lam"][1:101], rtol=1e-5, atol=1e-5 * np.abs(lam).max())
+
+
+def test_full_residue_on_a_dof_subset_with_log_transform(twobar, sim):
+    r = identify_indirect(twobar, sim, H, transcription="single-shooting", residue="full",
+                          dofs=["x3", "y3", "x5", "y5"], start=0.5, transform="log")
+    assert r.success, r.status
+    np.testing.assert_allclose(r.p, twobar.p_nominal, rtol=1e-6)
+    assert r.extra["dofs"] == ["x3", "y3", "x5", "y5"] and r.extra["transform"] == "log"
+
+
+def test_multiple_shooting_from_far(twobar, sim):
+    r = identify_indirect(twobar, sim, H, start=2.0, interval=10)
+    assert r.success, r.status
+    assert r.extra["intervals"] == 10
+    np.testing.assert_allclose(r.p, twobar.p_nominal, rtol=1e-6)
+
+
+def test_noisy_positions_standard_errors_cover_truth(twobar, sim):
+    rng = np.random.default_rng(7)
+    sigma = 1e-5  # m, rad
+    noisy = MeasurementSet(sim.t, sim.channels, sim.q + rng.normal(0, sigma, sim.q.shape), None, None)
+    trans = [d for d in twobar.dof_names if not d.startswith("theta")]
+    r = identify_indirect(twobar, noisy, 0.2, transcription="single-shooting", start=1.2, dofs=trans)
+    assert r.success, r.status
+    err = np.abs(r.p - twobar.p_nominal)
+    se = np.array(list(r.std_errors.values()))
+    assert np.all(se > 0)
+    # 4 SE: a fixed-seed draw; each parameter's error is a ~N(0, SE) variable
+    assert np.all(err <= 4 * se), (err, se)
+    # the residual variance estimates the noise (the residue is translations / length scale)
+    s = np.sqrt(r.identifiability["residual_variance"]) * twobar.length_scale
+    assert s == pytest.approx(sigma, rel=0.1)
+
+
+@pytest.mark.parametrize(("kwargs", "match"), [
+    ({"residue": "velocities"}, "residue"),
+    ({"transcription": "collocation"}, "transcription"),
+    ({"dofs": ["x9"]}, "unknown dof 'x9'"),
+    ({"weights": (1.0, -1.0, 0.0)}, "weights"),
+    ({"transform": "sqrt"}, "transform"),
+    ({"interval": 0}, "interval"),
+    ({"solver": "no_such_solver"}, "solver 'no_such_solver'"),
+    ({"start": -1.0}, "start"),
+])
+def test_bad_options_are_named(twobar, sim, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        identify_indirect(twobar, sim, 0.01, **kwargs)
+
+
+def test_bad_horizons_and_data(twobar, sim):
+    with pytest.raises(ValueError, match="beyond the data"):
+        identify_indirect(twobar, sim, 1.0)
+    with pytest.raises(ValueError, match="whole number of steps"):
+        identify_indirect(twobar, sim, 0.0105)
+    pos = MeasurementSet(sim.t, sim.channels, sim.q, None, None)
+    with pytest.raises(ValueError, match="residue 'full'"):
+        identify_indirect(twobar, pos, 0.01, residue="full")
+    part = MeasurementSet(sim.t, ("x5", "y5"), sim.q[:, [12, 13]], None, None)
+    with pytest.raises(ValueError, match="'x3' is not in the data"):
+        identify_indirect(twobar, part, 0.01, dofs=["x3"])
