@@ -1,0 +1,198 @@
+"""Sweeps: many independent runs (basins, multi-start, Monte Carlo over noise, grids) on
+dask.distributed, resumable.
+
+Each run has a unique key and keyword arguments for one importable function. Its result (a
+JSON-serialisable dict) is written atomically to ``<record>/<key>.json`` as soon as it
+finishes, so an interrupted sweep restarted with the same record directory redoes only the
+runs without a file. A run that raises is recorded too, with ``{"error": "..."}``, and is
+not retried unless ``retry_failed=True``.
+
+By default the runs go to a ``LocalCluster`` of ``n_workers`` single-threaded processes;
+``scheduler="tcp://host:8786"`` sends them to an existing cluster (the workers must have
+casflex installed).
+
+``identification_run`` is the run function for identification sweeps: the model and the
+simulated data are built once per worker process and cached.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+import os
+import re
+import sys
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from casflex.results import atomic_write_json
+
+__all__ = ["Run", "SweepResult", "run_sweep", "identification_run"]
+
+_KEY = re.compile(r"^[A-Za-z0-9_.=+-]{1,200}$")
+
+
+@dataclass(frozen=True)
+class Run:
+    """One run of a sweep: ``fn(**kwargs)`` recorded under ``key`` (letters, digits, ``_.=+-``)."""
+
+    key: str
+    fn: Callable[..., dict]
+    kwargs: dict
+
+    def __post_init__(self) -> None:
+        if not _KEY.match(self.key):
+            raise ValueError(f"run key {self.key!r}: use 1-200 letters, digits or _.=+- (it names a file)")
+
+
+@dataclass(frozen=True)
+class SweepResult:
+    """results: {key: recorded dict} for every run of the sweep that has a record;
+    executed: keys run in this call; reused: keys taken from earlier records."""
+
+    results: dict[str, dict]
+    executed: tuple[str, ...]
+    reused: tuple[str, ...]
+    interrupted: bool
+    wall_s: float
+
+
+def _read(path: Path) -> dict | None:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None  # missing or unreadable: the run is redone
+
+
+def _call(fn: Callable[..., dict], kwargs: dict) -> dict:
+    try:
+        out = fn(**kwargs)
+        if not isinstance(out, dict):
+            return {"error": f"run function returned {type(out).__name__}, expected a dict"}
+        return out
+    except Exception as exc:  # noqa: BLE001 - a failed run is a result of the sweep, recorded
+        return {"error": f"{type(exc).__name__}: {exc}"}
+
+
+def run_sweep(runs: Iterable[Run], record: str | os.PathLike[str], *, scheduler: str | None = None,
+              n_workers: int = 2, retry_failed: bool = False,
+              progress: bool | Callable[[int, int, str], None] = True) -> SweepResult:
+    """Run every run without a record on dask.distributed; return all recorded results.
+
+    Ctrl-C cancels the pending runs, keeps every finished record and returns with
+    ``interrupted=True``; calling again with the same ``record`` resumes.
+    """
+    from distributed import Client, LocalCluster, as_completed
+
+    t0 = time.perf_counter()
+    runs = list(runs)
+    keys = [r.key for r in runs]
+    if len(set(keys)) != len(keys):
+        dup = sorted({k for k in keys if keys.count(k) > 1})
+        raise ValueError(f"run keys must be unique; repeated: {dup[:5]}")
+    if not (isinstance(n_workers, int) and n_workers >= 1):
+        raise ValueError(f"n_workers: expected an integer >= 1, got {n_workers!r}")
+    rec = Path(record)
+    rec.mkdir(parents=True, exist_ok=True)
+    results, reused, todo = {}, [], []
+    for r in runs:
+        old = _read(rec / f"{r.key}.json")
+        if old is not None and not (retry_failed and "error" in old):
+            results[r.key] = old
+            reused.append(r.key)
+        else:
+            todo.append(r)
+    report = progress if callable(progress) else (_text_progress if progress else None)
+    executed: list[str] = []
+    interrupted = False
+    if todo:
+        cluster = None
+        if scheduler is None:
+            cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=40)
+        client = Client(scheduler if scheduler is not None else cluster)
+        futures = {}
+        try:
+            futures = {client.submit(_call, r.fn, r.kwargs, key=f"casflex-{r.key}-{os.getpid()}", pure=False): r.key
+                       for r in todo}
+            for fut in as_completed(futures):
+                key = futures[fut]
+                out = fut.result()
+                atomic_write_json(rec / f"{key}.json", _jsonable(out))
+                results[key] = out
+                executed.append(key)
+                if report:
+                    report(len(reused) + len(executed), len(runs), key)
+        except KeyboardInterrupt:
+            interrupted = True
+            client.cancel(list(futures))
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    return SweepResult({k: results[k] for k in keys if k in results}, tuple(executed), tuple(reused), interrupted,
+                       time.perf_counter() - t0)
+
+
+def _text_progress(done: int, total: int, key: str) -> None:
+    sys.stderr.write(f"\r  sweep: {done}/{total} runs  (last: {key[:40]})" + " " * 10)
+    if done >= total:
+        sys.stderr.write("\n")
+    sys.stderr.flush()
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    if isinstance(x, (float, np.floating)):
+        return float(x) if math.isfinite(x) else str(float(x))
+    if isinstance(x, np.integer):
+        return int(x)
+    return x
+
+
+@functools.lru_cache(maxsize=8)
+def _setup(scene: str, t_end: float, noise: float, seed: int | None, data: str):
+    from casflex.data import measured_set, simulated_set
+    from casflex.model import assemble
+    from casflex.scene_io import load_scene
+
+    model = assemble(load_scene(scene))
+    sim = simulated_set(model, t_end=t_end)
+    if data == "measured" or noise > 0:
+        return model, measured_set(sim, noise=noise, seed=seed)
+    return model, sim
+
+
+def identification_run(*, method: str, start: float, scene: str = "twobar", instants: tuple[float, ...] = (0.69,),
+                       horizon: float = 0.69, t_end: float = 3.0, noise: float = 0.0, seed: int | None = None,
+                       data: str = "simulated", **options: Any) -> dict:
+    """One identification of a sweep (runs in a worker): returns the parameters, success,
+    iterations, wall time, standard errors, the relative error against the nominal values
+    and the weakly identifiable parameters."""
+    from casflex.identification import identify_adapted_direct, identify_direct, identify_indirect
+
+    model, dat = _setup(scene, float(t_end), float(noise), seed, data)
+    if method == "direct":
+        r = identify_direct(model, dat, list(instants), start=start, **options)
+    elif method == "adapted-direct":
+        r = identify_adapted_direct(model, dat, list(instants), start=start, **options)
+    elif method == "indirect":
+        r = identify_indirect(model, dat, horizon, start=start, **options)
+    else:
+        raise ValueError(f"method: expected direct, adapted-direct or indirect, got {method!r}")
+    rel = np.abs(r.p / model.p_nominal - 1.0)
+    return {"parameters": r.parameters, "success": r.success, "status": r.status, "iterations": r.iterations,
+            "wall_s": r.wall_s, "std_errors": r.std_errors, "max_rel_error": float(rel.max()),
+            "weak": r.identifiability.get("weak", []), "method": method, "start": start, "noise": noise,
+            "seed": seed}
