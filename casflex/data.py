@@ -4,18 +4,26 @@
   (run at a tight Newton tolerance so that the data satisfy Eq. 1 to round-off at alpha = 0);
 - measured set: positions only (optionally with Gaussian noise, sigma in m for x, y and rad
   for theta); velocities and accelerations by central differences (2nd order), so the first
-  and last samples are dropped.
+  and last samples are dropped;
+- user files: :func:`load_measurements` and :func:`save_measurements` read and write ``.npz``
+  and ``.csv`` files (format and error messages in ``docs/data-format.md``).
 """
 
 from __future__ import annotations
 
+import csv
+import io
+import math
+import os
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from casflex.model import Model
 
-__all__ = ["MeasurementSet", "simulated_set", "measured_set"]
+__all__ = ["MeasurementSet", "simulated_set", "measured_set", "load_measurements", "save_measurements",
+           "add_position_noise", "FILE_FORMATS"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -34,6 +42,11 @@ class MeasurementSet:
     meta: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        seen: set[str] = set()
+        for c in self.channels:
+            if c in seen:
+                raise ValueError(f"data.channels: duplicate channel name {c!r}")
+            seen.add(c)
         t = np.asarray(self.t, dtype=float)
         if t.ndim != 1 or t.size < 1 or not np.isfinite(t).all():
             raise ValueError("data.t: expected a 1-d array of finite times (s)")
@@ -93,3 +106,226 @@ def measured_set(data: MeasurementSet, *, noise: float = 0.0, seed: int | None =
     qdd = (q[2:] - 2 * q[1:-1] + q[:-2]) / h**2
     return MeasurementSet(data.t[1:-1], data.channels, q[1:-1], qd, qdd, source="measured",
                           meta={"noise": noise, "seed": seed, "from": data.source})
+
+
+# --------------------------------------------------------------------------------------------
+# user measurement files (docs/data-format.md)
+
+#: File extensions :func:`load_measurements` and :func:`save_measurements` understand.
+FILE_FORMATS = (".npz", ".csv")
+
+#: CSV column prefixes of velocities and accelerations: ``d:x5`` is dx5/dt (m/s), ``dd:x5`` d2x5/dt2 (m/s^2).
+CSV_PREFIXES = {1: "d:", 2: "dd:"}
+
+_NPZ_ARRAYS = ("t", "q", "qd", "qdd")
+
+# q, qd, qdd of a file: (t (n,) s, channels, q (n, k), qd (n, k) or None, qdd (n, k) or None)
+_Arrays = tuple[np.ndarray, tuple[str, ...], np.ndarray, np.ndarray | None, np.ndarray | None]
+
+
+def _format_of(path: Path) -> str:
+    """The file format (``.npz`` or ``.csv``) from the extension; ValueError otherwise."""
+    ext = path.suffix.lower()
+    if ext not in FILE_FORMATS:
+        raise ValueError(f"{path}: unknown extension {path.suffix or '(none)'!r}; measurement files are "
+                         f"{' or '.join(FILE_FORMATS)} (docs/data-format.md)")
+    return ext
+
+
+def load_measurements(path: str | os.PathLike[str]) -> MeasurementSet:
+    """Read a measurement file (``.npz`` or ``.csv``, see ``docs/data-format.md``).
+
+    Returns a :class:`MeasurementSet` with t in s, positions q (m, rad) and, when the file has
+    them, velocities qd (m/s, rad/s) and accelerations qdd (m/s^2, rad/s^2). Every problem
+    raises a one-line ValueError that names the file and the offending key, line or column.
+    Channel names are not checked against a model here: :meth:`MeasurementSet.select` does.
+    """
+    path = Path(path)
+    fmt = _format_of(path)
+    if not path.exists():
+        raise ValueError(f"{path}: no such file")
+    if not path.is_file():
+        raise ValueError(f"{path}: not a regular file")
+    t, channels, q, qd, qdd = _read_npz(path) if fmt == ".npz" else _read_csv(path)
+    if t.size == 0:
+        raise ValueError(f"{path}: no samples (t is empty)")
+    if not channels:
+        raise ValueError(f"{path}: no channels (expected at least one dof such as x5)")
+    bad_t = np.flatnonzero(~np.isfinite(t))
+    if bad_t.size:
+        raise ValueError(f"{path}: t: non-finite time {t[bad_t[0]]} at sample {bad_t[0]}")
+    try:
+        return MeasurementSet(t, channels, q, qd, qdd, source="file", meta={"path": str(path)})
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
+
+
+def _npz_array(path: Path, z, key: str) -> np.ndarray:
+    """Array ``key`` of an open .npz file, numeric (float) unless it is ``channels``."""
+    try:
+        a = z[key]
+    except ValueError:  # object arrays need pickle, which is never enabled for data files
+        raise ValueError(f"{path}: key {key!r}: holds Python objects; store plain numbers and strings") from None
+    if key in ("channels", "dof_names"):
+        if a.dtype.kind not in "US" or a.ndim != 1:
+            raise ValueError(f"{path}: key {key!r}: expected a 1-d array of strings (dof names such as x5), "
+                             f"got dtype {a.dtype} and shape {a.shape}")
+        return a
+    if a.dtype.kind not in "iuf":
+        raise ValueError(f"{path}: key {key!r}: expected numbers, got dtype {a.dtype}")
+    return a.astype(float)
+
+
+def _read_npz(path: Path) -> _Arrays:
+    """t, channels, q, qd, qdd of a .npz file (keys t, channels or dof_names, q, qd, qdd)."""
+    import zipfile
+
+    try:
+        z = np.load(path, allow_pickle=False)
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise ValueError(f"{path}: not a readable .npz file ({str(exc).splitlines()[0] if str(exc) else exc!r})") \
+            from None
+    if not isinstance(z, np.lib.npyio.NpzFile):
+        raise ValueError(f"{path}: not a .npz archive (a single .npy array?); expected keys t, channels, q")
+    with z:
+        ch_key = "channels" if "channels" in z.files else "dof_names" if "dof_names" in z.files else None
+        for key in ("t", "q"):
+            if key not in z.files:
+                raise ValueError(f"{path}: missing key {key!r} (keys present: {sorted(z.files)})")
+        if ch_key is None:
+            raise ValueError(f"{path}: missing key 'channels' (keys present: {sorted(z.files)})")
+        arrays = {key: _npz_array(path, z, key) for key in _NPZ_ARRAYS if key in z.files}
+        names = tuple(str(c).strip() for c in _npz_array(path, z, ch_key))
+    for i, c in enumerate(names):
+        if not c:
+            raise ValueError(f"{path}: key {ch_key!r}: channel {i} has an empty name")
+    t = arrays["t"]
+    if t.ndim != 1:
+        raise ValueError(f"{path}: key 't': expected a 1-d array of times (s), got shape {t.shape}")
+    for key in ("q", "qd", "qdd"):
+        a = arrays.get(key)
+        if a is not None and a.shape != (t.size, len(names)):
+            raise ValueError(f"{path}: key {key!r}: expected shape (len(t), len({ch_key})) = ({t.size}, {len(names)}), "
+                             f"got {a.shape}")
+    return t, names, arrays["q"], arrays.get("qd"), arrays.get("qdd")
+
+
+def _csv_rows(path: Path) -> list[tuple[int, list[str]]]:
+    """(line number, stripped cells) of every line that is not blank or a '#' comment."""
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path}: not a UTF-8 text file (byte {exc.start})") from None
+    rows = []
+    for ln, line in enumerate(text.splitlines(), 1):
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        rows.append((ln, [c.strip() for c in next(csv.reader([line]))]))
+    return rows
+
+
+def _csv_header(path: Path, ln: int, header: list[str]) -> tuple[list[str], dict[int, list[int]]]:
+    """Position channel names and, per derivative order 0/1/2, the column of each channel."""
+    if header[0] != "t":
+        raise ValueError(f"{path}: line {ln}: the header's first column must be 't' (time, s), got {header[0]!r}")
+    if len(header) < 2:
+        raise ValueError(f"{path}: line {ln}: no channel columns after 't' (expected e.g. t,x5,y5)")
+    seen: dict[str, int] = {"t": 0}
+    kinds: dict[int, dict[str, int]] = {0: {}, 1: {}, 2: {}}
+    for j, name in enumerate(header[1:], 1):
+        if not name:
+            raise ValueError(f"{path}: line {ln}: header column {j + 1} has an empty name")
+        if name in seen:
+            raise ValueError(f"{path}: line {ln}: duplicate column {name!r} (columns {seen[name] + 1} and {j + 1})")
+        seen[name] = j
+        order = 2 if name.startswith(CSV_PREFIXES[2]) else 1 if name.startswith(CSV_PREFIXES[1]) else 0
+        base = name[len(CSV_PREFIXES[order]):] if order else name
+        if not base:
+            raise ValueError(f"{path}: line {ln}: header column {j + 1} {name!r} names no channel")
+        kinds[order][base] = j
+    channels = list(kinds[0])
+    for order, what in ((1, "velocity"), (2, "acceleration")):
+        prefix = CSV_PREFIXES[order]
+        for base in kinds[order]:
+            if base not in kinds[0]:
+                raise ValueError(f"{path}: line {ln}: {what} column {prefix + base!r} has no position column {base!r}")
+        missing = [prefix + c for c in channels if c not in kinds[order]]
+        if kinds[order] and missing:
+            raise ValueError(f"{path}: line {ln}: {what} columns must cover every channel or none; missing {missing}")
+    cols = {order: [kinds[order][c] for c in channels] for order in (0, 1, 2) if kinds[order] or order == 0}
+    return channels, cols
+
+
+def _csv_float(path: Path, ln: int, row: int, column: str, cell: str) -> float:
+    """One cell as a float; ValueError naming line, data row and column otherwise."""
+    try:
+        return float(cell)
+    except ValueError:
+        what = "empty cell" if not cell else f"{cell!r} is not a number"
+        raise ValueError(f"{path}: line {ln} (data row {row}), column {column!r}: {what}") from None
+
+
+def _read_csv(path: Path) -> _Arrays:
+    """t, channels, q, qd, qdd of a .csv file (header ``t,<ch>...,d:<ch>...,dd:<ch>...``)."""
+    rows = _csv_rows(path)
+    if not rows:
+        raise ValueError(f"{path}: empty file (expected a header row 't,<channel>,...')")
+    (ln0, header), body = rows[0], rows[1:]
+    channels, cols = _csv_header(path, ln0, header)
+    if not body:
+        raise ValueError(f"{path}: no data rows after the header (line {ln0})")
+    values = np.empty((len(body), len(header)))
+    for r, (ln, cells) in enumerate(body, 1):
+        if len(cells) != len(header):
+            raise ValueError(f"{path}: line {ln} (data row {r}): expected {len(header)} cells as in the header, "
+                             f"got {len(cells)}")
+        values[r - 1] = [_csv_float(path, ln, r, name, cell) for name, cell in zip(header, cells, strict=True)]
+    parts = [values[:, cols[o]] if o in cols else None for o in (0, 1, 2)]
+    return values[:, 0], tuple(channels), parts[0], parts[1], parts[2]
+
+
+def save_measurements(data: MeasurementSet, path: str | os.PathLike[str]) -> Path:
+    """Write ``data`` to a ``.npz`` or ``.csv`` file atomically (see ``docs/data-format.md``).
+
+    Values are written at full precision (CSV: shortest round-trip decimal), so
+    ``load_measurements(save_measurements(d, p))`` reproduces t, q, qd, qdd exactly. Returns the path.
+    """
+    from casflex.results import atomic_write_bytes, atomic_write_text
+
+    path = Path(path)
+    if _format_of(path) == ".npz":
+        buf = io.BytesIO()
+        extra = {k: np.asarray(v, dtype=float) for k, v in (("qd", data.qd), ("qdd", data.qdd)) if v is not None}
+        np.savez(buf, t=np.asarray(data.t, dtype=float), channels=np.array(data.channels, dtype=str),
+                 q=np.asarray(data.q, dtype=float), **extra)
+        return atomic_write_bytes(path, buf.getvalue())
+    return atomic_write_text(path, _csv_text(data))
+
+
+def _csv_text(data: MeasurementSet) -> str:
+    """The CSV form of ``data``: comment lines, header, one row per sample."""
+    blocks = [(np.asarray(data.q, dtype=float), "")]
+    for order, arr in ((1, data.qd), (2, data.qdd)):
+        if arr is not None:
+            blocks.append((np.asarray(arr, dtype=float), CSV_PREFIXES[order]))
+    buf = io.StringIO()
+    buf.write(f"# casflex measurements ({data.source}): t in s; x, y in m; theta in rad; "
+              "d:<channel> velocity, dd:<channel> acceleration (docs/data-format.md)\n")
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["t"] + [prefix + c for _, prefix in blocks for c in data.channels])
+    table = np.column_stack([np.asarray(data.t, dtype=float)] + [a for a, _ in blocks])
+    for row in table:
+        w.writerow([repr(float(v)) for v in row])
+    return buf.getvalue()
+
+
+def add_position_noise(data: MeasurementSet, noise: float, seed: int | None = None) -> MeasurementSet:
+    """``data`` with seeded Gaussian noise of std ``noise`` (m for x, y; rad for theta) added to q.
+
+    Velocities and accelerations, if any, are left as they are."""
+    if not (math.isfinite(noise) and noise >= 0):
+        raise ValueError(f"noise: expected a standard deviation >= 0 (m, rad), got {noise!r}")
+    q = np.asarray(data.q, dtype=float)
+    q = q + np.random.default_rng(seed).normal(0.0, noise, q.shape) if noise > 0 else q
+    return MeasurementSet(data.t, data.channels, q, data.qd, data.qdd, source=data.source,
+                          meta={**data.meta, "noise": noise, "seed": seed})
