@@ -147,6 +147,21 @@ def cmd_demo(args) -> int:
     return 0
 
 
+def cmd_export(args) -> int:
+    from casflex.export import export_c
+
+    model = _model(args)
+    e = export_c(model, args.out, what=args.what, alpha=args.alpha, dt=args.dt, t_end=args.t_end)
+    print(f"casflex export ({args.what}) of scene {model.scene.name!r}: {', '.join(e.functions)}")
+    for f in e.files:
+        print(f"  wrote {f}")
+    if args.build:
+        print(f"  built {e.build()}")
+    else:
+        print(f"  build with: make -C {e.out_dir}")
+    return 0
+
+
 # --------------------------------------------------------------------------------------------
 # casflex identify
 
@@ -440,6 +455,20 @@ def _parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_demo)
 
     _add_identify_parser(sub)
+
+    from casflex.export import EXPORTS
+
+    s = sub.add_parser("export", help="write standalone C (sources, header, Makefile, example main.c)")
+    s.add_argument("scene", help="built-in scene name (twobar) or a TOML file")
+    s.add_argument("--out", required=True, help="output directory")
+    s.add_argument("--what", choices=EXPORTS, default="simulate",
+                   help="step | simulate (default: step functions plus an example program) | direct | indirect")
+    s.add_argument("--dt", type=float, help="example's time step, s (default: the scene's)")
+    s.add_argument("--t-end", type=float, help="example's horizon, s (default: the scene's)")
+    s.add_argument("--alpha", type=float, help="HHT alpha compiled into the step (default: the scene's)")
+    s.add_argument("--inertia", choices=("lagrange", "seed"), help="inertia form (default: the scene's)")
+    s.add_argument("--build", action="store_true", help="also compile it (needs gcc)")
+    s.set_defaults(func=cmd_export)
     return ap
 
 

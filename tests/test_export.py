@@ -49,3 +49,14 @@ def test_bad_export_options(twobar, tmp_path):
         export_c(twobar, tmp_path, what="everything")
     with pytest.raises(ValueError, match="whole number of steps"):
         export_c(twobar, tmp_path, t_end=0.0105, dt=1e-3)
+
+
+@needs_cc
+def test_cli_export_writes_and_builds(tmp_path, capsys):
+    from casflex.cli import main
+
+    assert main(["export", "twobar", "--out", str(tmp_path), "--what", "simulate", "--t-end", "0.05", "--build"]) == 0
+    out = capsys.readouterr().out
+    assert "hht_step" in out and (tmp_path / "simulate").exists()
+    assert main(["export", "twobar", "--out", str(tmp_path), "--t-end", "0.0105"]) == 2
+    assert "whole number of steps" in capsys.readouterr().err
