@@ -219,7 +219,6 @@ def identify_indirect(
 
     def simulate_from(nodes: list[ca.MX], lengths: list[int], first: list[int]) -> tuple[ca.MX, ca.MX]:
         """States after every step (nx, N) and Newton residuals (1, N), intervals mapped by length."""
-        blocks: dict[int, tuple[ca.MX, ca.MX]] = {}
         out_x, out_r = [None] * len(lengths), [None] * len(lengths)
         for K in sorted(set(lengths)):
             idx = [j for j, k in enumerate(lengths) if k == K]
@@ -227,7 +226,6 @@ def identify_indirect(
             if len(idx) > 1:
                 F = F.map(len(idx), "serial")
             Xk, Rk = F(ca.horzcat(*[nodes[j] for j in idx]), ca.DM([first[j] * h for j in idx]).T, p, h, d)
-            blocks[K] = (Xk, Rk)
             for i, j in enumerate(idx):
                 out_x[j] = Xk[:, i * K:(i + 1) * K]
                 out_r[j] = Rk[:, i * K:(i + 1) * K]
