@@ -319,7 +319,10 @@ def _run_identification(model: Model, data: MeasurementSet, args: argparse.Names
     """Call the chosen identification method with the command's options."""
     from casflex.identification import identify_adapted_direct, identify_direct, identify_indirect
 
-    common = {"start": start, "solver": args.solver, "transform": args.transform, "verbose": not args.quiet}
+    common = {"start": start, "solver": args.solver, "transform": args.transform, "compiled": args.compiled,
+              "verbose": not args.quiet}
+    if args.hessian is not None:
+        common["hessian"] = args.hessian
     if args.method == "direct":
         return identify_direct(model, data, args.instants, **common)
     if args.method == "adapted-direct":
@@ -381,7 +384,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
 
 def _add_identify_parser(sub: argparse._SubParsersAction) -> None:
     """The ``identify`` subcommand's options (method-specific ones default to None = not given)."""
-    from casflex.identification import RESIDUES, TRANSCRIPTIONS, TRANSFORMS
+    from casflex.identification import HESSIANS, RESIDUES, TRANSCRIPTIONS, TRANSFORMS
 
     s = sub.add_parser("identify", help="identify the scene's parameters from simulated, measured or file data",
                        description="Identify the scene's [[parameters]] from kinematic data. Examples and the data "
@@ -407,6 +410,11 @@ def _add_identify_parser(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--solver", default="ipopt", help="CasADi nlpsol plugin (default ipopt)")
     s.add_argument("--transform", choices=TRANSFORMS, default="linear",
                    help="decision variables p/scale (linear, default) or log(p/scale)")
+    s.add_argument("--hessian", choices=HESSIANS,
+                   help="solver's Hessian: exact or gauss-newton (default: exact for direct methods, gauss-newton "
+                        "for indirect)")
+    s.add_argument("--compiled", action="store_true",
+                   help="generate and compile C for the solver's functions (needs gcc; longer build, faster solve)")
     s.add_argument("--interval", type=int, metavar="STEPS",
                    help="indirect multiple shooting: steps per shooting interval (default 20)")
     s.add_argument("--out", metavar="FILE.json", help="write the result as JSON")

@@ -86,3 +86,20 @@ def test_result_json(twobar, sim, tmp_path):
         assert key in d
     assert d["method"] == "direct" and set(d["parameters"]) == {"k1", "kt1", "k3", "kt3"}
     assert "k1" in r.summary()
+
+
+@pytest.mark.parametrize("options", [{"hessian": "gauss-newton"}, {"compiled": True},
+                                     {"solver": "sqpmethod", "hessian": "gauss-newton"}],
+                         ids=["gauss-newton", "compiled", "sqpmethod-gauss-newton"])
+def test_hessian_and_compiled_options_reach_the_same_answer(twobar, sim, options):
+    ref = identify_direct(twobar, sim, [0.69], start=0.5)
+    r = identify_direct(twobar, sim, [0.69], start=0.5, **options)
+    assert r.success, (r.status, options)
+    np.testing.assert_allclose(r.p, ref.p, rtol=1e-9)
+    assert r.extra["hessian"] == options.get("hessian", "exact")
+    assert r.extra["compiled"] == options.get("compiled", False)
+
+
+def test_bad_hessian_named(twobar, sim):
+    with pytest.raises(ValueError, match="hessian: expected one of"):
+        identify_direct(twobar, sim, [0.69], hessian="bfgs")

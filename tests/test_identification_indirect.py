@@ -96,3 +96,19 @@ def test_bad_horizons_and_data(twobar, sim):
     part = MeasurementSet(sim.t, ("x5", "y5"), sim.q[:, [12, 13]], None, None)
     with pytest.raises(ValueError, match="'x3' is not in the data"):
         identify_indirect(twobar, part, 0.01, dofs=["x3"])
+
+
+def test_compiled_matches_interpreted(twobar, sim):
+    # generated C for every function IPOPT calls, and for the polish: same iterates, same answer
+    kw = {"transcription": "single-shooting", "start": 0.8}
+    ref = identify_indirect(twobar, sim, 0.05, **kw)
+    r = identify_indirect(twobar, sim, 0.05, compiled=True, **kw)
+    assert r.success and r.extra["compiled"]
+    assert r.iterations == ref.iterations
+    np.testing.assert_allclose(r.p, ref.p, rtol=1e-10)
+
+
+def test_exact_hessian_option(twobar, sim):
+    r = identify_indirect(twobar, sim, 0.05, transcription="single-shooting", start=0.8, hessian="exact")
+    assert r.success and r.extra["hessian"] == "exact"
+    np.testing.assert_allclose(r.p, twobar.p_nominal, rtol=1e-5)

@@ -3,7 +3,7 @@
 from casflex.identification.adapted import identify_adapted_direct
 from casflex.identification.direct import identify_direct
 from casflex.identification.indirect import RESIDUES, TRANSCRIPTIONS, identify_indirect
-from casflex.identification.problem import TRANSFORMS, IdentificationResult, ParameterMap
+from casflex.identification.problem import HESSIANS, TRANSFORMS, IdentificationResult, ParameterMap
 
 __all__ = ["identify_direct", "identify_adapted_direct", "identify_indirect", "IdentificationResult", "ParameterMap",
-           "RESIDUES", "TRANSCRIPTIONS", "TRANSFORMS"]
+           "RESIDUES", "TRANSCRIPTIONS", "TRANSFORMS", "HESSIANS"]

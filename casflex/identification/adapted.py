@@ -34,7 +34,7 @@ from casflex.identification.problem import (
     bound_flags,
     gauss_newton_polish,
     gauss_newton_statistics,
-    solver_options_for,
+    least_squares_nlp,
     start_values,
 )
 from casflex.model import Model
@@ -75,6 +75,8 @@ def identify_adapted_direct(
     solver: str = "ipopt",
     solver_options: dict | None = None,
     transform: str = "linear",
+    hessian: str = "exact",
+    compiled: bool = False,
     verbose: bool = False,
 ) -> IdentificationResult:
     """Identify the parameters from translations (q, q', q'') at ``instants`` and one sample later.
@@ -93,6 +95,10 @@ def identify_adapted_direct(
         A CasADi nlpsol plugin (IPOPT by default).
     transform : {"linear", "log"}
         Decision variables p / scale or log(p / scale) (see :class:`ParameterMap`).
+    hessian : {"exact", "gauss-newton"}
+        The solver's Hessian of the Lagrangian (see :func:`least_squares_nlp`).
+    compiled : bool
+        Generate and compile C for the solver's functions (CasADi JIT with the system compiler).
 
     Returns
     -------
@@ -180,13 +186,10 @@ def identify_adapted_direct(
     w0 = np.concatenate([pmap.theta(p0), *w0_inst])
     zJ = ca.Function("adapted_residual", [w], [z, ca.jacobian(z, w)], ["w"], ["z", "J"])
 
-    try:
-        S = ca.nlpsol("adapted_direct", solver, {"x": w, "f": 0.5 * ca.sumsqr(z)},
-                      # the residual at the optimum is the cubic's truncation error, not 0: the
-                      # gradient's round-off floor is ~1e-9, the Gauss-Newton polish does the rest
-                      solver_options_for(solver, verbose, solver_options, tol=1e-9))
-    except RuntimeError as exc:
-        raise ValueError(f"solver {solver!r}: cannot be created ({str(exc).splitlines()[-1]})") from None
+    # the residual at the optimum is the cubic's truncation error, not 0: the gradient's
+    # round-off floor is ~1e-9, the Gauss-Newton polish does the rest
+    S = least_squares_nlp("adapted_direct", solver, w, z, hessian=hessian, compiled=compiled, verbose=verbose,
+                          solver_options=solver_options, tol=1e-9)
     build_s = time.perf_counter() - t_build
 
     t_solve = time.perf_counter()
@@ -213,7 +216,8 @@ def identify_adapted_direct(
         std_errors=stats.pop("std_errors"), correlation=stats.pop("correlation"),
         at_bound=bound_flags(model, p_hat, scale), identifiability=stats,
         instants=[t for _, t, _ in samples], multipliers=lam_v.reshape(len(samples), n_c).tolist(),
-        extra={"transform": transform, "force_scale": fs, "residual_norm": float(np.linalg.norm(zv) * fs),
+        extra={"transform": transform, "hessian": hessian, "compiled": compiled,
+               "force_scale": fs, "residual_norm": float(np.linalg.norm(zv) * fs),
                "gauss_newton_polish": polished,
                "rotations": rotations, "ignored_channels": ignored, "rate_scale": om},
     )

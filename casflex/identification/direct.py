@@ -26,7 +26,7 @@ from casflex.identification.problem import (
     bound_flags,
     gauss_newton_polish,
     gauss_newton_statistics,
-    solver_options_for,
+    least_squares_nlp,
     start_values,
 )
 from casflex.model import Model
@@ -56,6 +56,8 @@ def identify_direct(
     solver: str = "ipopt",
     solver_options: dict | None = None,
     transform: str = "linear",
+    hessian: str = "exact",
+    compiled: bool = False,
     verbose: bool = False,
 ) -> IdentificationResult:
     """Identify the model's parameters from full kinematics at ``instants`` (s).
@@ -74,6 +76,10 @@ def identify_direct(
     transform : {"linear", "log"}
         Decision variables p / scale or log(p / scale) (see :class:`ParameterMap`); the exact
         linear solution is computed with the linear one only.
+    hessian : {"exact", "gauss-newton"}
+        The solver's Hessian of the Lagrangian (see :func:`least_squares_nlp`).
+    compiled : bool
+        Generate and compile C for the solver's functions (CasADi JIT with the system compiler).
     """
     t_build = time.perf_counter()
     samples = _instant_data(model, data, instants)
@@ -106,11 +112,8 @@ def identify_direct(
         z0, J0 = (np.array(v) for v in zJ(np.zeros(w.numel())))
         w_lin = np.linalg.lstsq(J0, -z0.ravel(), rcond=None)[0]
 
-    try:
-        S = ca.nlpsol("direct", solver, {"x": w, "f": 0.5 * ca.sumsqr(z)},
-                      solver_options_for(solver, verbose, solver_options))
-    except RuntimeError as exc:
-        raise ValueError(f"solver {solver!r}: cannot be created ({str(exc).splitlines()[-1]})") from None
+    S = least_squares_nlp("direct", solver, w, z, hessian=hessian, compiled=compiled, verbose=verbose,
+                          solver_options=solver_options)
     w0 = np.concatenate([pmap.theta(p0), np.zeros(n_c * len(samples))])
     build_s = time.perf_counter() - t_build
 
@@ -126,8 +129,8 @@ def identify_direct(
     names = model.parameter_names
     lams = [list(wv[n_p + i * n_c:n_p + (i + 1) * n_c] * fs) for i in range(len(samples))]
     at_bound = bound_flags(model, p_hat, scale)
-    extra = {"transform": transform, "force_scale": fs, "residual_norm": float(np.linalg.norm(zv) * fs),
-               "gauss_newton_polish": polished}
+    extra = {"transform": transform, "hessian": hessian, "compiled": compiled,
+             "force_scale": fs, "residual_norm": float(np.linalg.norm(zv) * fs), "gauss_newton_polish": polished}
     if w_lin is not None:
         extra["linear_solution"] = dict(zip(names, (w_lin[:n_p] * scale).tolist(), strict=True))
     return IdentificationResult(

@@ -48,7 +48,8 @@ from casflex.identification.problem import (
     bound_flags,
     gauss_newton_polish,
     gauss_newton_statistics,
-    solver_options_for,
+    jit_options,
+    least_squares_nlp,
     start_values,
 )
 from casflex.model import Model
@@ -114,6 +115,8 @@ def identify_indirect(
     newton_tol: float = 1e-14,
     polish: int = 3,
     transform: str = "linear",
+    hessian: str = "gauss-newton",
+    compiled: bool = False,
     verbose: bool = False,
 ) -> IdentificationResult:
     """Output-error identification over [0, ``horizon``] s.
@@ -147,6 +150,11 @@ def identify_indirect(
         Gauss-Newton steps on the single-shooting problem after the solver (0: none).
     transform : {"linear", "log"}
         Decision variables p / scale or log(p / scale) (see :class:`ParameterMap`).
+    hessian : {"gauss-newton", "exact"}
+        The solver's Hessian of the Lagrangian (see :func:`least_squares_nlp`); "exact" means
+        second derivatives through every HHT Newton solve, several times slower.
+    compiled : bool
+        Generate and compile C for the solver's functions (CasADi JIT with the system compiler).
     """
     from casflex.simulate import integrator_for, simulate
 
@@ -263,35 +271,22 @@ def identify_indirect(
     fr = ca.Function("residue", [w], [r])
     r_start = np.array(fr(w0)).ravel()
     f_scale = 1.0 / max(float(r_start @ r_start), 1e-30) if float(r_start @ r_start) > 0 else 1.0
-    f = 0.5 * f_scale * ca.sumsqr(r)
-    Jr = ca.jacobian(r, w)
-    lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", g.numel())
-    hess = ca.Function("nlp_hess_l", [w, ca.MX(0, 1), lam_f, lam_g], [ca.triu(lam_f * f_scale * ca.mtimes(Jr.T, Jr))],
-                       ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
-
     # IPOPT's dual infeasibility has a floor of ~1e-8 of its start from the HHT Newton tolerance
-    # inside the model: it stops there and the Gauss-Newton polish finishes the job. Other
-    # solvers get CasADi's exact Hessian unless told otherwise (e.g. a quasi-Newton option).
-    opts = solver_options_for(solver, verbose, solver_options, tol=1e-8)
-    if solver == "ipopt":
-        opts.setdefault("hess_lag", hess)
-    try:
-        nlp = ca.nlpsol("indirect", solver, {"x": w, "f": f, "g": g}, opts)
-    except RuntimeError as exc:
-        raise ValueError(f"solver {solver!r}: cannot be created ({str(exc).splitlines()[-1]})") from None
+    # inside the model: it stops there and the Gauss-Newton polish finishes the job
+    nlp = least_squares_nlp("indirect", solver, w, r, g, f_scale=f_scale, hessian=hessian, compiled=compiled,
+                            verbose=verbose, solver_options=solver_options, tol=1e-8)
+    # single-shooting residue of p alone: polish and statistics
+    Xf, Rf = (X, R) if transcription == "single-shooting" else simulate_from([x0], [N], [0])
+    ss_r = residue_of(Xf)
+    # NaN where a step's Newton did not converge, so that the polish rejects such a step
+    ss_ok = ca.if_else(ca.mmax(Rf) <= newton_tol, ss_r, np.nan * ss_r)
+    ss = ca.Function("ss_residue", [th], [ss_ok, ca.jacobian(ss_r, th)], jit_options() if compiled else {})
     build_s = time.perf_counter() - t_build
 
     t_solve = time.perf_counter()
     sol = nlp(x0=w0, lbx=lbw, ubx=ubw, lbg=0.0, ubg=0.0)
     st = nlp.stats()
     wv = np.array(sol["x"]).ravel()
-
-    # single-shooting residue of p alone: polish and statistics
-    Xf, Rf = (X, R) if transcription == "single-shooting" else simulate_from([x0], [N], [0])
-    ss_r = residue_of(Xf)
-    # NaN where a step's Newton did not converge, so that the polish rejects such a step
-    ss_ok = ca.if_else(ca.mmax(Rf) <= newton_tol, ss_r, np.nan * ss_r)
-    ss = ca.Function("ss_residue", [th], [ss_ok, ca.jacobian(ss_r, th)])
     th_v, polished = gauss_newton_polish(ss, wv[:n_p], lb_th, ub_th, polish)
     solve_s = time.perf_counter() - t_solve
     p_hat = pmap.p(th_v)
@@ -314,7 +309,8 @@ def identify_indirect(
         std_errors=stats.pop("std_errors"), correlation=stats.pop("correlation"),
         at_bound=bound_flags(model, p_hat, scale), identifiability=stats,
         instants=(h * np.arange(1, N + 1)).tolist(), multipliers=Xv[3 * n:, :].T.tolist(),
-        extra={"transform": transform, "transcription": transcription, "residue": residue, "dofs": names,
+        extra={"transform": transform, "hessian": hessian, "compiled": compiled,
+               "transcription": transcription, "residue": residue, "dofs": names,
                "weights": list(weights), "steps": N, "dt": h, "intervals": M, "samples": int(steps.size),
                "constraint_violation": float(np.abs(np.array(sol["g"])).max()) if M > 1 else 0.0,
                "gauss_newton_polish": polished, "solver_parameters": dict(zip(pn, pmap.p(wv[:n_p]).tolist(),

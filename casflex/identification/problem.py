@@ -16,7 +16,8 @@ from casflex.model import Model
 from casflex.results import atomic_write_json
 
 __all__ = ["IdentificationResult", "parameter_scale", "start_values", "bound_flags", "gauss_newton_statistics",
-           "gauss_newton_polish", "solver_options_for", "ParameterMap", "TRANSFORMS"]
+           "gauss_newton_polish", "solver_options_for", "least_squares_nlp", "jit_options", "ParameterMap",
+           "TRANSFORMS", "HESSIANS"]
 
 
 def parameter_scale(model: Model) -> np.ndarray:
@@ -185,6 +186,63 @@ def solver_options_for(solver: str, verbose: bool, extra: dict | None, tol: floa
         opts["print_status"] = False
     opts.update(extra or {})
     return opts
+
+
+HESSIANS = ("exact", "gauss-newton")
+
+
+def jit_options() -> dict:
+    """nlpsol options that generate C for every function the solver calls and compile it with
+    the system compiler (CasADi's 'shell' JIT)."""
+    from casflex.codegen import _compiler
+
+    return {"jit": True, "compiler": "shell",
+            "jit_options": {"compiler": _compiler(), "flags": ["-O1"], "verbose": False, "cleanup": True}}
+
+
+def least_squares_nlp(name: str, solver: str, w: Any, r: Any, g: Any = None, *, f_scale: float = 1.0,
+                      hessian: str = "exact", compiled: bool = False, verbose: bool = False,
+                      solver_options: dict | None = None, tol: float = 1e-14) -> ca.Function:
+    """The NLP  min_w 1/2 f_scale |r(w)|^2  s.t. g(w) = 0  as a CasADi nlpsol.
+
+    hessian: ``"exact"`` lets CasADi differentiate the Lagrangian twice; ``"gauss-newton"`` gives
+    the solver f_scale J^T J (J = dr/dw) as ``hess_lag``, constraint curvature ignored: exact at a
+    zero-residual fit and free of second derivatives through the model.
+    compiled: every function the solver evaluates is generated as C and compiled (build time
+    goes up by the compile, solve time down).
+    """
+    if hessian not in HESSIANS:
+        raise ValueError(f"hessian: expected one of {HESSIANS}, got {hessian!r}")
+    sym = ca.SX if isinstance(w, ca.SX) else ca.MX
+    g = sym(0, 1) if g is None else g
+    opts = solver_options_for(solver, verbose, None, tol=tol)
+    if compiled:
+        opts.update(jit_options())
+    hess = None
+    if hessian == "gauss-newton":
+        J = ca.jacobian(r, w)
+        lam_f = sym.sym("lam_f")
+        H = lam_f * f_scale * ca.mtimes(J.T, J)
+        lam_g = sym.sym("lam_g", g.numel())
+
+        def hess(triu: bool) -> ca.Function:
+            return ca.Function(f"{name}_hess_l", [w, sym(0, 1), lam_f, lam_g], [ca.triu(H) if triu else H],
+                               ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x" if triu else "hess_gamma_x_x"],
+                               jit_options() if compiled else {})
+
+    nlp = {"x": w, "f": 0.5 * f_scale * ca.sumsqr(r), "g": g}
+    # IPOPT and its kin take the upper triangle, the SQP methods the whole symmetric matrix
+    for triu in (True, False):
+        if hess is not None:
+            opts["hess_lag"] = hess(triu)
+        opts.update(solver_options or {})
+        try:
+            return ca.nlpsol(name, solver, nlp, opts)
+        except RuntimeError as exc:
+            msg = str(exc).splitlines()[-1]
+            if not (hess is not None and triu and "symmetric" in msg):
+                raise ValueError(f"solver {solver!r}: cannot be created ({msg})") from None
+    raise AssertionError("unreachable")
 
 
 def gauss_newton_polish(zJ: Any, w: np.ndarray, lb: np.ndarray, ub: np.ndarray,
