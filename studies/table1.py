@@ -106,7 +106,14 @@ def verdict_text(kind: str, p: np.ndarray, err: float, status: str) -> str:
         return f"converges elsewhere: p = {_fmt_p(p)} (max rel. error {err:.2e})"
     if kind == "bad":
         return f"converges to p = {_fmt_p(p)}: a stiffness <= 0 or collapsed to ~0, no mechanical meaning"
-    return f"fails ({status}; stops at p = {_fmt_p(p)})"
+    return f"fails ({status}; stops at p = {_fmt_p(p)}, max rel. error {err:.1e})"
+
+
+def _verdict(c: dict) -> str:
+    v = verdict_text(c["kind"], np.array(c["p"]), c["err"], c["status"])
+    if c["kind"] == "fails" and c["status"] == "Maximum_WallTime_Exceeded":
+        v += f" [wall-time cap {c['cap_s']:.0f} s]"
+    return v
 
 
 def hybrid_set(sim: MeasurementSet, meas: MeasurementSet) -> MeasurementSet:
@@ -190,7 +197,9 @@ def combine(cells: list[dict]) -> str:
     return "mixed"
 
 
-def main(quick: bool = False, out_dir: Path | None = None) -> dict:
+def main(quick: bool = False, out_dir: Path | None = None, raw_path: Path | None = None) -> dict:
+    """Run the study; write the page and figure under ``out_dir`` (default docs/) and, if
+    ``raw_path`` is given, the raw numbers as JSON (re-render them with ``--render``)."""
     out_dir = ROOT / "docs" if out_dir is None else Path(out_dir)
     wall0 = time.perf_counter()
     print("=" * 78)
@@ -249,23 +258,33 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
               f"h = {s['h']:.0e} s, t = {s['t']}: p = {_fmt_p(s['p'])}, max rel err {s['err']:.2e} "
               f"(k1, k3: {s['err_k']:.2e})", flush=True)
 
-    total = time.perf_counter() - wall0
-    lines = _page(quick, instants, starts, transcription, quick_horizon, results, cross, fd, spacing, ps, total)
-    suffix = "_quick" if quick else ""
-    table = atomic_write_text(out_dir / "tables" / f"table1{suffix}.md", "\n".join(lines))
-    print(f"wrote {table}")
-    png = atomic_write_bytes(out_dir / "figures" / f"table1{suffix}.png", _figure(results, cross, instants, starts))
-    print(f"wrote {png}")
-    print(f"total {total:.1f} s", flush=True)
-    if not quick:  # raw numbers, for inspection (not part of the docs)
-        Path("/tmp/casflex_table1_raw.json").write_text(json.dumps(
-            {"results": results, "cross_check": cross, "fd": fd, "spacing": spacing}, indent=1, default=str))
+    raw = {"quick": quick, "instants": instants, "starts": starts, "transcription": transcription,
+           "quick_horizon": quick_horizon, "p_nominal": ps.tolist(), "results": results, "cross_check": cross,
+           "fd": fd, "spacing": spacing, "total_s": time.perf_counter() - wall0}
+    if raw_path is not None:
+        Path(raw_path).write_text(json.dumps(raw, indent=1))
+        print(f"wrote {raw_path}")
+    write_outputs(raw, out_dir)
 
     # self-checks: what the page claims about the exact data
     direct_sim = [r for r in results if r["row"] == "1"]
     assert all(r["kind"] == "p*" for r in direct_sim), "direct identification on the simulated set must give p*"
     assert all(r["linear_err"] is not None and r["linear_err"] <= TOL for r in direct_sim)
-    return {"results": results, "cross_check": cross, "fd": fd, "spacing": spacing, "total_s": total}
+    return raw
+
+
+def write_outputs(raw: dict, out_dir: Path) -> None:
+    """The page and the figure from the raw numbers of a run (``main`` or a ``--raw`` file)."""
+    quick, instants, starts = raw["quick"], raw["instants"], raw["starts"]
+    results, cross = raw["results"], raw.get("cross_check") or []
+    lines = _page(quick, instants, starts, raw["transcription"], raw["quick_horizon"], results, cross, raw["fd"],
+                  raw["spacing"], np.array(raw["p_nominal"]), raw["total_s"])
+    suffix = "_quick" if quick else ""
+    table = atomic_write_text(out_dir / "tables" / f"table1{suffix}.md", "\n".join(lines))
+    print(f"wrote {table}")
+    png = atomic_write_bytes(out_dir / "figures" / f"table1{suffix}.png", _figure(results, cross, instants, starts))
+    print(f"wrote {png}")
+    print(f"total {raw['total_s']:.1f} s", flush=True)
 
 
 def _page(quick, instants, starts, transcription, quick_horizon, results, cross, fd, spacing, ps, total) -> list[str]:
@@ -303,17 +322,25 @@ def _page(quick, instants, starts, transcription, quick_horizon, results, cross,
             kind = combine(cs)
             paper_kind, paper_text = PAPER[(key, t)]
             errs = ", ".join(f"{c['start']:g}: {c['err']:.1e}" for c in cs)
-            ours = {"p*": "p*", "elsewhere": "elsewhere", "bad": "no mechanical meaning", "fails": "fails",
-                    "mixed": "mixed"}[kind]
-            cells.append(f"{paper_text} | {ours} (max rel. error from start {errs})")
+            words = {"p*": "p*", "elsewhere": "elsewhere", "bad": "no mechanical meaning", "fails": "fails",
+                     "mixed": "mixed"}
+            ours = words[kind]
+            ss = [c for c in cross if c["row"] == key and c["t"] == t]
+            extra = ""
+            if ss:
+                extra = (f"; single shooting: {words[combine(ss)]} ("
+                         + ", ".join(f"{c['start']:g}: {c['err']:.1e}" for c in ss) + ")")
+            cells.append(f"{paper_text} | {ours} (max rel. error from start {errs}){extra}")
             agrees.append(kind == paper_kind)
         agree_rows[key] = agrees
         mark = "yes" if all(agrees) else ("no" if not any(agrees) else "partly")
         if key == "2" and any(agrees):
             mark += " (qualitatively: off p*, by much less than p1/p2)"
         lines.append(f"| {key} | {row[2]} | {row[3]} | " + " | ".join(cells) + f" | {mark} |")
-    lines += ["", "Ranges: the paper reports the starting range from which it converges; we ran the starts above "
-              "(see `basins.md` for a scan of 0.3-3 x p*)." if not quick else "", ""]
+    lines += ["", ("'ours' is the table's transcription (multiple shooting for the indirect rows); where it missed "
+                   "p*, the same run by single shooting follows. 'agrees?' compares the table's transcription with "
+                   "the paper. Ranges: the paper reports the starting range from which it converges; we ran the "
+                   "starts above (see `basins.md` for a scan of 0.1-10 x p* at t1).") if not quick else "", ""]
 
     lines += ["## Every run", "",
               "| # | reference data | t (s) | start | identified p = [k1 kt1 k3 kt3] | max rel. error | success "
@@ -324,7 +351,7 @@ def _page(quick, instants, starts, transcription, quick_horizon, results, cross,
             for c in by[(row[0], t)]:
                 lines.append(f"| {row[0]} | {row[3]} | {t} | {c['start']:g} | {_fmt_p(c['p'])} | {c['err']:.2e} | "
                              f"{'yes' if c['success'] else 'no'} ({c['status']}) | {c['iterations']} | "
-                             f"{c['wall_s']:.2f} | {c['verdict']} |")
+                             f"{c['wall_s']:.2f} | {_verdict(c)} |")
     if cross:
         lines += ["", "Cross-check: every indirect run that did not reach p* by multiple shooting, repeated by single "
                   "shooting (same data, horizon, start and solver settings):", "",
@@ -335,7 +362,7 @@ def _page(quick, instants, starts, transcription, quick_horizon, results, cross,
         for c in cross:
             lines.append(f"| {c['row']} | {ref[c['row']]} | {c['t']} | {c['start']:g} | {_fmt_p(c['p'])} | "
                          f"{c['err']:.2e} | {'yes' if c['success'] else 'no'} ({c['status']}) | {c['iterations']} | "
-                         f"{c['wall_s']:.1f} | {c['verdict']} |")
+                         f"{c['wall_s']:.1f} | {_verdict(c)} |")
     lines += ["", "Exact linear least-squares solution of the direct rows (Eq. 11 is linear in the stiffnesses and "
               "the multipliers, so this is the unique minimiser, whatever the start):", "",
               "| # | t (s) | linear LS solution | max rel. error | IPOPT result equal to it (max rel. diff.) |",
@@ -458,69 +485,88 @@ def _narrative(by, cross, instants, fd, spacing, ps, quick, quick_horizon) -> li
                        "compare with the paper's horizons.")
         for key in keys:
             for t in instants:
-                cs = by[(key, t)]
-                kind = combine(cs)
-                pk, ptext = PAPER[(key, t)]
-                starts = ", ".join(f"{c['start']:g}" for c in cs)
-                errs = ", ".join(f"{c['err']:.1e}" for c in cs)
-                walls = ", ".join(f"{c['wall_s']:.0f}" for c in cs)
-                s = f"Row {key}, t = {t} s (starts {starts}: errors {errs}; {walls} s): "
-                if kind == "p*":
-                    s += "converges to p*"
-                    rng = PAPER_RANGE.get((key, t))
-                    if rng and not quick:
-                        outside = [c["start"] for c in cs if not (rng[0] <= c["start"] <= rng[1])]
-                        if outside:
-                            s += (f", also from {', '.join(f'{v:g}' for v in outside)} x p*, outside the paper's "
-                                  f"range {rng[0]:.2f}-{rng[1]:.2f}: exact derivatives and multiple shooting (each "
-                                  "20-step interval nearly linear in its unknowns) widen the basin")
-                    s += "."
-                elif kind in ("elsewhere", "mixed"):
-                    worst = max(cs, key=lambda c: c["err"])
-                    s += (f"{'mixed: ' if kind == 'mixed' else ''}the worst start stops at p = {_fmt_p(worst['p'])} "
-                          f"({worst['err']:.1e} from p*"
-                          + (", while the solver reports success)" if worst["success"] else
-                             f", {worst['status']})") + ".")
-                elif kind == "bad":
-                    s += "converges to a p without mechanical meaning."
-                else:
-                    s += "fails: " + "; ".join(f"{c['status']} after {c['iterations']} iterations" for c in cs) + "."
-                ss = [c for c in cross if c["row"] == key and c["t"] == t]
-                ss_kind = combine(ss) if ss else None
-                if ss:
-                    s += (" Single shooting on the same problem: "
-                          + "; ".join(f"start {c['start']:g}: {c['verdict']} ({c['wall_s']:.0f} s)" for c in ss) + ".")
-                # what the data allow: measured quantities make p* not the minimiser
-                if key in ("5", "6") and (kind in ("elsewhere", "mixed") or ss_kind in ("elsewhere", "mixed")):
-                    f = next((x for x in fd if x["t"] == t), None)
-                    if f is not None:
-                        what = "velocities" if key == "5" else "velocities and accelerations"
-                        s += (f" The data are not a solution of the model at p*: the central-difference {what} "
-                              f"differ from the exact ones by up to {f['qd_err']:.1e} m/s"
-                              + (f" and {f['qdd_err']:.1e} m/s^2" if key == "6" else "")
-                              + ", so the output-error minimiser is off p*, mostly in the weakly identifiable "
-                              "torsional stiffnesses.")
-                agree = kind == pk
-                s += f" Paper: {ptext} -> {'agrees' if agree else 'differs'}."
-                if not agree and not quick:
-                    if kind == "fails" and ss_kind in ("p*", "elsewhere", "mixed"):
-                        s += (" The difference is our transcription's, not the data's: multiple shooting stalls "
-                              "while single shooting (one differentiable simulation, like the paper's) does not.")
-                    elif pk == "p*" and (kind in ("elsewhere", "mixed") or ss_kind in ("elsewhere", "mixed")) \
-                            and key == "5":
-                        s += (" The paper's 'p*' can only hold to a looser tolerance than ours: with inexact "
-                              "velocities in the residue, p* is not the least-squares minimiser.")
-                    elif pk == "bad" and (kind in ("p*", "elsewhere", "mixed")
-                                          or ss_kind in ("p*", "elsewhere", "mixed")):
-                        s += (" Our measured set differentiates positions sampled at h = 1e-3 s; its errors (table "
-                              "above) are too small to push the minimiser to a meaningless p.")
-                    elif pk == "bad" and kind == "fails":
-                        s += " Like the paper, no usable p."
-                txt.append(s)
+                txt.append(_indirect_sentence(key, t, by[(key, t)], [c for c in cross if c["row"] == key
+                                                                      and c["t"] == t], fd, ps, quick))
         out += [" ".join(txt), ""]
     if quick:
         out += ["(Quick mode: the full study runs t1 and t2 with the paper's horizons.)", ""]
     return out
+
+
+def _describe(c: dict, ps: np.ndarray) -> str:
+    """One run in words: start, outcome, error (and where the error sits)."""
+    p = np.array(c["p"])
+    ek, ekt = _rel_err(p[[0, 2]], ps[[0, 2]]), _rel_err(p[[1, 3]], ps[[1, 3]])
+    head = f"from {c['start']:g}: "
+    if c["kind"] == "p*":
+        return head + f"p* ({c['err']:.1e}, {c['iterations']} it, {c['wall_s']:.0f} s)"
+    where = f"k1, k3 off by {ek:.1e}, kt1, kt3 by {ekt:.1e}"
+    if c["kind"] in ("elsewhere", "bad"):
+        what = "success at a p without mechanical meaning" if c["kind"] == "bad" else "success at"
+        return head + f"{what} p = {_fmt_p(p)} ({where}; {c['iterations']} it, {c['wall_s']:.0f} s)"
+    cap = f" at the {c['cap_s']:.0f} s cap" if c["status"] == "Maximum_WallTime_Exceeded" else ""
+    near = " (already at p* to the criterion: the solver's optimality test stalls)" if c["err"] <= TOL else ""
+    return head + f"no success ({c['status']}{cap}, {c['iterations']} it) at p = {_fmt_p(p)}, {where}{near}"
+
+
+def _indirect_sentence(key: str, t: float, cs: list[dict], ss: list[dict], fd: list[dict], ps: np.ndarray,
+                       quick: bool) -> str:
+    kind = combine(cs)
+    pk, ptext = PAPER[(key, t)]
+    tr = cs[0]["transcription"].replace("-", " ")
+    s = f"Row {key}, t = {t} s, {tr}: " + "; ".join(_describe(c, ps) for c in cs) + "."
+    if ss:
+        s += " Single shooting, same problem: " + "; ".join(_describe(c, ps) for c in ss) + "."
+    rng = PAPER_RANGE.get((key, t))
+    if kind == "p*" and rng and not quick:
+        outside = [c["start"] for c in cs if not (rng[0] <= c["start"] <= rng[1])]
+        if outside:
+            s += (f" Converges from {', '.join(f'{v:g}' for v in outside)} x p*, outside the paper's range "
+                  f"{rng[0]:.2f}-{rng[1]:.2f} (exact derivatives; see basins.md for the full basin).")
+    ss_kind = combine(ss) if ss else None
+    agree = kind == pk
+    s += f" Paper: {ptext} -> {tr} {'agrees' if agree else 'differs'}"
+    if ss:
+        s += f", single shooting {'agrees' if ss_kind == pk else 'differs'}"
+    s += "."
+    if quick:
+        return s
+    # why, from the numbers
+    ms_fail = {c["start"] for c in cs if c["kind"] == "fails"}
+    ss_ok = {c["start"] for c in ss if c["kind"] in ("p*", "elsewhere", "bad")}
+    rescued = sorted(ms_fail & ss_ok)
+    both = sorted(ms_fail - ss_ok)
+    if rescued:
+        s += (f" From {', '.join(f'{v:g}' for v in rescued)} the failure is the multiple-shooting transcription's, "
+              "not the data's: single shooting (one differentiable simulation, as in the paper) reaches a "
+              "solution.")
+    if both:
+        s += f" From {', '.join(f'{v:g}' for v in both)} neither transcription succeeds within the cap"
+        out_r = [v for v in both if rng and not (rng[0] <= v <= rng[1])]
+        s += (f"; {'these starts lie' if len(out_r) > 1 else 'this start lies'} outside the paper's own range "
+              f"{rng[0]:.2f}-{rng[1]:.2f} for this horizon." if out_r else ".")
+    done = [c for c in cs + ss if c["kind"] in ("elsewhere", "bad")]
+    if key in ("5", "6") and done:
+        f = next((x for x in fd if x["t"] == t), None)
+        p = np.array(max(done, key=lambda c: c["err"])["p"])
+        ek, ekt = _rel_err(p[[0, 2]], ps[[0, 2]]), _rel_err(p[[1, 3]], ps[[1, 3]])
+        what = "velocities" if key == "5" else "velocities and accelerations"
+        if f is not None:
+            s += (f" The data are not a solution of the model at p*: the central-difference {what} differ from the "
+                  f"exact ones by up to {f['qd_err']:.1e} m/s" + (f" and {f['qdd_err']:.1e} m/s^2" if key == "6"
+                                                                  else "")
+                  + ", so the output-error minimiser is off p* ("
+                  + ("mostly in the weakly identifiable torsional stiffnesses" if ekt > 10 * ek
+                     else "in the linear stiffnesses too") + f": k1, k3 by {ek:.1e}, kt1, kt3 by {ekt:.1e}).")
+        if pk == "p*":
+            s += (" The paper's 'p*' here can only hold to a looser tolerance than ours: with inexact "
+                  f"{what} in the residue, p* is not the least-squares minimiser.")
+        elif pk == "bad":
+            bad = [c for c in done if c["kind"] == "bad"]
+            s += (" As in the paper, the minimiser has no mechanical meaning (a stiffness collapses to ~0)." if bad
+                  else " Unlike the paper, the minimiser stays mechanically meaningful: our central-difference "
+                  "errors (table above) are too small to push it to a negative or vanishing stiffness.")
+    return s
 
 
 def _figure(results, cross, instants, starts) -> bytes:
@@ -571,4 +617,10 @@ def _figure(results, cross, instants, starts) -> bytes:
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
-    main(quick=ap.parse_args().quick)
+    ap.add_argument("--raw", type=Path, help="also save the raw numbers of the run to this JSON file")
+    ap.add_argument("--render", type=Path, help="only re-render docs from a --raw JSON file (no computation)")
+    args = ap.parse_args()
+    if args.render:
+        write_outputs(json.loads(args.render.read_text()), ROOT / "docs")
+    else:
+        main(quick=args.quick, raw_path=args.raw)
