@@ -17,7 +17,9 @@ Every start is p = factor x p* (all four parameters scaled alike), as in the pap
 
 Writes docs/tables/basins.md and docs/figures/basins.png.
 Run: ``python studies/basins.py`` (``--quick`` for the CI version: horizon 0.05 s, factors
-0.5 and 2, single shooting only for the indirect method).
+0.5 and 2, single shooting only for the indirect method). The runs go through casflex.sweep on
+dask.distributed (``--scheduler ADDRESS`` for a real cluster); ``--record DIR`` keeps one JSON per
+run, so an interrupted study resumes.
 """
 
 from __future__ import annotations
@@ -26,17 +28,17 @@ import argparse
 import io
 import json
 import platform
+import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-from casflex.data import simulated_set
-from casflex.identification import identify_adapted_direct, identify_direct, identify_indirect
 from casflex.identification.problem import solver_options_for
 from casflex.model import assemble
 from casflex.results import atomic_write_bytes, atomic_write_text
 from casflex.scene_io import load_scene
+from casflex.sweep import Run, identification_run, run_sweep
 
 ROOT = Path(__file__).resolve().parents[1]
 TOL = 1e-6  # max relative error of p (indirect, direct)
@@ -82,30 +84,57 @@ def _fmt_p(p) -> str:
     return "[" + " ".join(f"{v:.6g}" for v in p) + "]"
 
 
-def run(model, sim, key: str, factor: float, horizon: float) -> dict:
+def sweep_run(key: str, factor: float, horizon: float, t_end: float) -> Run:
+    """One identification of the grid, as a run of :func:`casflex.sweep.run_sweep` (any worker)."""
     _label, _paper, _rng, kind, opts = METHODS[key]
-    ps = model.p_nominal
-    t0 = time.perf_counter()
+    common = {"start": factor, "scene": "twobar", "t_end": t_end, "data": "simulated"}
     if kind == "direct":
-        res = identify_direct(model, sim, [T1], start=factor)
+        kw = {"method": "direct", "instants": (T1,), **common}
     elif kind == "adapted":
-        res = identify_adapted_direct(model, sim, ADAPTED_INSTANTS, start=factor)
+        kw = {"method": "adapted-direct", "instants": tuple(ADAPTED_INSTANTS), **common}
     else:
-        res = identify_indirect(model, sim, horizon, start=factor, solver_options=capped_ipopt(WALL_CAP), **opts)
-    wall = time.perf_counter() - t0
-    rel = np.abs(res.p / ps - 1.0)
-    err_k, err_kt = float(rel[[0, 2]].max()), float(rel[[1, 3]].max())
-    err = float(rel.max())
-    if kind == "adapted":
-        conv = bool(res.success and err_k <= TOL_ADAPTED)
-        metric = err_k
-    else:
-        conv = bool(res.success and err <= TOL)
-        metric = err
-    return {"method": key, "factor": factor, "p": res.p.tolist(), "err": err, "err_k": err_k, "err_kt": err_kt,
-            "metric": metric, "success": bool(res.success), "status": res.status, "iterations": res.iterations,
-            "wall_s": wall, "converged": conv, "false_success": bool(res.success and not conv),
-            "message": res.message}
+        kw = {"method": "indirect", "horizon": horizon, "solver_options": capped_ipopt(WALL_CAP), **opts, **common}
+    return Run(f"{key}_f{factor:g}_h{horizon:g}_T{t_end:g}", identification_run, kw)
+
+
+def cell(key: str, factor: float, out: dict, p_star: np.ndarray) -> dict:
+    """A recorded run as a cell of the basin table (a run that raised counts as not converged)."""
+    kind = METHODS[key][3]
+    if "error" in out:
+        return {"method": key, "factor": factor, "p": [float("nan")] * p_star.size, "err": float("inf"),
+                "err_k": float("inf"), "err_kt": float("inf"), "metric": float("inf"), "success": False,
+                "status": "error", "iterations": -1, "wall_s": 0.0, "converged": False, "false_success": False,
+                "message": str(out["error"]).splitlines()[-1][:200]}
+    p = np.array([float(v) for v in out["parameters"].values()])
+    rel = np.abs(p / p_star - 1.0)
+    err_k, err_kt, err = float(rel[[0, 2]].max()), float(rel[[1, 3]].max()), float(rel.max())
+    metric = err_k if kind == "adapted" else err
+    conv = bool(out["success"] and metric <= (TOL_ADAPTED if kind == "adapted" else TOL))
+    return {"method": key, "factor": factor, "p": p.tolist(), "err": err, "err_k": err_k, "err_kt": err_kt,
+            "metric": metric, "success": bool(out["success"]), "status": out["status"],
+            "iterations": out["iterations"], "wall_s": float(out["wall_s"]), "converged": conv,
+            "false_success": bool(out["success"] and not conv), "message": ""}
+
+
+def sweep(grid: list[tuple[str, float]], horizon: float, t_end: float, p_star: np.ndarray, record: Path,
+          scheduler: str | None) -> dict[str, list[dict]]:
+    """Run the (method, factor) grid through the sweep runner; cells per method, in grid order."""
+    runs = [sweep_run(key, f, horizon, t_end) for key, f in grid]
+    res = run_sweep(runs, record, scheduler=scheduler, n_workers=2)
+    if res.interrupted:
+        raise KeyboardInterrupt(f"interrupted: {len(res.results)} of {len(runs)} runs recorded in {record}; "
+                                "run again with the same --record to resume")
+    print(f"sweep: {len(res.executed)} runs executed, {len(res.reused)} taken from {record}, "
+          f"{res.wall_s:.0f} s", flush=True)
+    cells: dict[str, list[dict]] = {}
+    for (key, f), r in zip(grid, runs, strict=True):
+        c = cell(key, f, res.results[r.key], p_star)
+        cells.setdefault(key, []).append(c)
+        flag = "  ** success reported at a wrong p **" if c["false_success"] else ""
+        print(f"{key:<11s} start {f:>4g} x p*: {'OK ' if c['converged'] else 'no '} err {c['err']:.2e} "
+              f"(k {c['err_k']:.1e}, kt {c['err_kt']:.1e}) {c['status']}, {c['iterations']} it, "
+              f"{c['wall_s']:.1f} s{flag}", flush=True)
+    return cells
 
 
 def converged_range(cells: list[dict]) -> tuple[float | None, float | None, list[float]]:
@@ -148,45 +177,36 @@ def range_text(cells: list[dict]) -> str:
     return ", ".join(f"{r[0]:g}-{r[-1]:g}" if len(r) > 1 else f"{r[0]:g}" for r in runs)
 
 
-def main(quick: bool = False, out_dir: Path | None = None, raw_path: Path | None = None) -> dict:
+def main(quick: bool = False, out_dir: Path | None = None, raw_path: Path | None = None,
+         record: Path | None = None, scheduler: str | None = None) -> dict:
     """Run the study; write the page and figure under ``out_dir`` (default docs/) and, if
-    ``raw_path`` is given, the raw numbers as JSON (re-render them with ``--render``)."""
+    ``raw_path`` is given, the raw numbers as JSON (re-render them with ``--render``).
+
+    The runs go through :func:`casflex.sweep.run_sweep`: a local dask cluster of 2 workers, or
+    the cluster at ``scheduler``; each run is recorded under ``record``, so an interrupted study
+    resumes where it stopped."""
     out_dir = ROOT / "docs" if out_dir is None else Path(out_dir)
     wall0 = time.perf_counter()
     print("=" * 78)
     print(f"basins: starting factors that converge to p*, per method ({'quick' if quick else 'full'} mode)")
     print("=" * 78, flush=True)
-    model = assemble(load_scene("twobar"))
-    sim = simulated_set(model, 2.4 if quick else 3.0)
+    p_star = assemble(load_scene("twobar")).p_nominal
+    t_end = 2.4 if quick else 3.0
     factors = QUICK_FACTORS if quick else FACTORS
     horizon = 0.05 if quick else T1
     keys = ["direct", "adapted", "ss-pos"] if quick else list(METHODS)
-    results: dict[str, list[dict]] = {}
-    n_runs, k = len(keys) * len(factors), 0
+    if record is None:  # quick runs start afresh; full runs resume from the same place
+        record = Path(tempfile.mkdtemp(prefix="casflex-basins-")) if quick else \
+            Path(tempfile.gettempdir()) / "casflex-sweeps" / "basins"
+    print(f"sweep record: {record} ({'local cluster, 2 workers' if scheduler is None else scheduler})", flush=True)
+    results = sweep([(key, f) for key in keys for f in factors], horizon, t_end, p_star, record, scheduler)
     for key in keys:
-        results[key] = []
-        for f in factors:
-            r = run(model, sim, key, f, horizon)
-            results[key].append(r)
-            k += 1
-            flag = "  ** success reported at a wrong p **" if r["false_success"] else ""
-            print(f"[{k:3d}/{n_runs}] {key:<11s} start {f:>4g} x p*: {'OK ' if r['converged'] else 'no '} "
-                  f"err {r['err']:.2e} (k {r['err_k']:.1e}, kt {r['err_kt']:.1e}) {r['status']}, "
-                  f"{r['iterations']} it, {r['wall_s']:.1f} s{flag}", flush=True)
         print(f"    {key}: converged range {range_text(results[key])}", flush=True)
 
     edge: dict[str, list[dict]] = {}
     if not quick:
-        for key in keys:
-            if not all(c["converged"] for c in results[key]):
-                continue
-            edge[key] = []
-            for f in EDGE_FACTORS:
-                r = run(model, sim, key, f, horizon)
-                edge[key].append(r)
-                flag = "  ** success reported at a wrong p **" if r["false_success"] else ""
-                print(f"[edge] {key:<11s} start {f:>4g} x p*: {'OK ' if r['converged'] else 'no '} "
-                      f"err {r['err']:.2e} {r['status']}, {r['iterations']} it, {r['wall_s']:.1f} s{flag}", flush=True)
+        wide = [key for key in keys if all(c["converged"] for c in results[key])]
+        edge = sweep([(key, f) for key in wide for f in EDGE_FACTORS], horizon, t_end, p_star, record, scheduler)
 
     must = None
     if "ms-pos" in results:
@@ -394,8 +414,12 @@ if __name__ == "__main__":
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--raw", type=Path, help="also save the raw numbers of the run to this JSON file")
     ap.add_argument("--render", type=Path, help="only re-render docs from a --raw JSON file (no computation)")
+    ap.add_argument("--record", type=Path, help="sweep record directory (default: a temp dir; full mode resumes "
+                                                "from <tmp>/casflex-sweeps/basins)")
+    ap.add_argument("--scheduler", metavar="ADDRESS", help="dask scheduler, e.g. tcp://host:8786 (default: a local "
+                                                           "cluster of 2 workers)")
     args = ap.parse_args()
     if args.render:
         write_outputs(json.loads(args.render.read_text()), ROOT / "docs")
     else:
-        main(quick=args.quick, raw_path=args.raw)
+        main(quick=args.quick, raw_path=args.raw, record=args.record, scheduler=args.scheduler)

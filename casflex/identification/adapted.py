@@ -34,6 +34,7 @@ from casflex.identification.problem import (
     bound_flags,
     gauss_newton_polish,
     gauss_newton_statistics,
+    jit_options,
     least_squares_nlp,
     start_values,
 )
@@ -184,7 +185,8 @@ def identify_adapted_direct(
     ubw = np.full(n_w, np.inf)
     lbw[:n_p], ubw[:n_p] = pmap.bounds()
     w0 = np.concatenate([pmap.theta(p0), *w0_inst])
-    zJ = ca.Function("adapted_residual", [w], [z, ca.jacobian(z, w)], ["w"], ["z", "J"])
+    zJ = ca.Function("adapted_residual", [w], [z, ca.jacobian(z, w)], ["w"], ["z", "J"],
+                     jit_options() if compiled else {})
 
     # the residual at the optimum is the cubic's truncation error, not 0: the gradient's
     # round-off floor is ~1e-9, the Gauss-Newton polish does the rest

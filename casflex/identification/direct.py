@@ -26,6 +26,7 @@ from casflex.identification.problem import (
     bound_flags,
     gauss_newton_polish,
     gauss_newton_statistics,
+    jit_options,
     least_squares_nlp,
     start_values,
 )
@@ -103,7 +104,7 @@ def identify_direct(
     lbw = np.concatenate([lb_th, np.full(n_c * len(samples), -np.inf)])
     ubw = np.concatenate([ub_th, np.full(n_c * len(samples), np.inf)])
     Jz = ca.jacobian(z, w)
-    zJ = ca.Function("direct_residual", [w], [z, Jz], ["w"], ["z", "J"])
+    zJ = ca.Function("direct_residual", [w], [z, Jz], ["w"], ["z", "J"], jit_options() if compiled else {})
 
     # exact linear least squares where z is affine in (p, lambda)
     linear = not ca.depends_on(Jz, w)
