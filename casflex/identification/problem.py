@@ -3,8 +3,12 @@ the Gauss-Newton statistics (standard errors, correlations, identifiability)."""
 
 from __future__ import annotations
 
+import atexit
+import functools
 import math
 import os
+import shutil
+import tempfile
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -191,13 +195,23 @@ def solver_options_for(solver: str, verbose: bool, extra: dict | None, tol: floa
 HESSIANS = ("exact", "gauss-newton")
 
 
+@functools.cache
+def _jit_directory() -> str:
+    """One scratch directory per process for the JIT's sources and objects (never the user's
+    working directory), removed at exit; a loaded library survives the removal of its file."""
+    path = tempfile.mkdtemp(prefix="casflex-jit-")
+    atexit.register(shutil.rmtree, path, True)
+    return path
+
+
 def jit_options() -> dict:
-    """nlpsol options that generate C for every function the solver calls and compile it with
-    the system compiler (CasADi's 'shell' JIT)."""
+    """Function/nlpsol options that generate C for every function the solver calls and compile
+    it with the system compiler (CasADi's 'shell' JIT)."""
     from casflex.codegen import _compiler
 
-    return {"jit": True, "compiler": "shell",
-            "jit_options": {"compiler": _compiler(), "flags": ["-O1"], "verbose": False, "cleanup": True}}
+    return {"jit": True, "compiler": "shell", "jit_name": "casflex_jit",
+            "jit_options": {"compiler": _compiler(), "flags": ["-O1"], "verbose": False,
+                            "directory": _jit_directory()}}
 
 
 def least_squares_nlp(name: str, solver: str, w: Any, r: Any, g: Any = None, *, f_scale: float = 1.0,
