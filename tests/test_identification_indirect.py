@@ -112,3 +112,8 @@ def test_exact_hessian_option(twobar, sim):
     r = identify_indirect(twobar, sim, 0.05, transcription="single-shooting", start=0.8, hessian="exact")
     assert r.success and r.extra["hessian"] == "exact"
     np.testing.assert_allclose(r.p, twobar.p_nominal, rtol=1e-5)
+
+
+def test_multiple_shooting_full_residue_warns(twobar, sim):
+    with pytest.warns(UserWarning, match="single shooting is recommended"), pytest.raises(ValueError, match="dofs"):
+        identify_indirect(twobar, sim, 0.01, transcription="multiple-shooting", residue="full", dofs=["nope"])
