@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import sys
 from pathlib import Path
 
 import pytest
@@ -14,6 +15,7 @@ STUDIES = sorted((Path(__file__).resolve().parents[1] / "studies").glob("*.py"))
 def test_study_quick(path, tmp_path):
     spec = importlib.util.spec_from_file_location(path.stem, path)
     mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod  # as an import would: dataclasses and pickling look the module up
     spec.loader.exec_module(mod)
     mod.main(quick=True, out_dir=tmp_path)
     assert any(tmp_path.rglob("*.md")), "a study writes at least one table"
