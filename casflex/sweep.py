@@ -70,8 +70,30 @@ def _read(path: Path) -> dict | None:
         return None  # missing or unreadable: the run is redone
 
 
-def _call(fn: Callable[..., dict], kwargs: dict) -> dict:
+def _ship_by_value(fns: Iterable[Callable[..., Any]]) -> dict[Callable[..., Any], bytes]:
+    """Each run function pickled by cloudpickle, by value when its module cannot be imported
+    from sys.path (a study script run as a file, or loaded from its path): a worker that cannot
+    import a function by reference fails to unpickle it, and the sweep would wait forever."""
+    import importlib.machinery
+
+    import cloudpickle
+
+    out = {}
+    for fn in fns:
+        mod = sys.modules.get(getattr(fn, "__module__", "") or "")
+        if mod is not None and mod.__name__ != "__main__" and \
+                importlib.machinery.PathFinder.find_spec(mod.__name__.split(".")[0]) is None:
+            cloudpickle.register_pickle_by_value(mod)
+        out[fn] = cloudpickle.dumps(fn)
+    return out
+
+
+def _call(fn: Callable[..., dict] | bytes, kwargs: dict) -> dict:
     try:
+        if isinstance(fn, bytes):
+            import cloudpickle
+
+            fn = cloudpickle.loads(fn)
         out = fn(**kwargs)
         if not isinstance(out, dict):
             return {"error": f"run function returned {type(out).__name__}, expected a dict"}
@@ -118,12 +140,16 @@ def run_sweep(runs: Iterable[Run], record: str | os.PathLike[str], *, scheduler:
                                    dashboard_address=None, silence_logs=40)
         client = Client(scheduler if scheduler is not None else cluster)
         futures = {}
+        blobs = _ship_by_value({r.fn for r in todo})
         try:
-            futures = {client.submit(_call, r.fn, r.kwargs, key=f"casflex-{r.key}-{os.getpid()}", pure=False): r.key
-                       for r in todo}
+            futures = {client.submit(_call, blobs[r.fn], r.kwargs, key=f"casflex-{r.key}-{os.getpid()}",
+                                     pure=False): r.key for r in todo}
             for fut in as_completed(futures):
                 key = futures[fut]
-                out = fut.result()
+                try:
+                    out = fut.result()
+                except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker: the run crashed its worker process
+                    out = {"error": f"{type(exc).__name__}: {exc}"}
                 atomic_write_json(rec / f"{key}.json", _jsonable(out))
                 results[key] = out
                 executed.append(key)

@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import hashlib
 import io
 import json
 import math
@@ -463,27 +462,44 @@ def roundoff_probe(quick: bool) -> dict:
 # identification
 # ==============================================================================================
 
-def kt_variant_run(*, kt_factor: float, **kwargs) -> dict:
-    """``identification_run`` on twobar with kt1 = kt3 = kt_factor x nominal (0.5 N m/rad).
+def _make_kt_variant_run():
+    """The run function of the kt-near-zero sweep, defined inside a function on purpose: the dask
+    workers cannot import this study, and dask sends a local function by value (cloudpickle),
+    whereas a module-level one is pickled by reference to a module ("extremes") the workers do not
+    have. Everything it needs is imported inside it."""
 
-    Runs in a dask worker: the scene is written once per worker process to a file in its
-    temporary directory (named by the hash of its text), so ``identification_run`` caches the
-    model and the data for it like for a built-in scene."""
-    from casflex.scene_io import dumps_scene, load_scene, save_scene
+    def kt_variant_run(*, kt_factor: float, **kwargs) -> dict:
+        """``identification_run`` on twobar with kt1 = kt3 = kt_factor x nominal (0.5 N m/rad).
 
-    base = load_scene("twobar")
-    kt0 = base.property_value("torsion1.kt")
-    scene = dataclasses.replace(base.with_values(kt1=kt0 * kt_factor, kt3=kt0 * kt_factor),
-                                name=f"twobar_kt{kt_factor:g}")
-    text = dumps_scene(scene)
-    path = Path(tempfile.gettempdir()) / f"casflex_extremes_{hashlib.sha256(text.encode()).hexdigest()[:16]}.toml"
-    if not path.exists():
-        save_scene(scene, path)
-    out = identification_run(scene=str(path), **kwargs)
-    out["kt_factor"] = kt_factor
-    out["nominal"] = {"k1": base.property_value("spring1.k"), "kt1": kt0 * kt_factor,
-                      "k3": base.property_value("spring3.k"), "kt3": kt0 * kt_factor}
-    return out
+        The scene is written once per worker process to a file in its temporary directory (named
+        by the hash of its text), so ``identification_run`` caches the model and the data for it
+        like for a built-in scene."""
+        import dataclasses
+        import hashlib
+        import tempfile
+        from pathlib import Path
+
+        from casflex.scene_io import dumps_scene, load_scene, save_scene
+        from casflex.sweep import identification_run
+
+        base = load_scene("twobar")
+        kt0 = base.property_value("torsion1.kt")
+        scene = dataclasses.replace(base.with_values(kt1=kt0 * kt_factor, kt3=kt0 * kt_factor),
+                                    name=f"twobar_kt{kt_factor:g}")
+        text = dumps_scene(scene)
+        path = Path(tempfile.gettempdir()) / f"casflex_extremes_{hashlib.sha256(text.encode()).hexdigest()[:16]}.toml"
+        if not path.exists():
+            save_scene(scene, path)
+        out = identification_run(scene=str(path), **kwargs)
+        out["kt_factor"] = kt_factor
+        out["nominal"] = {"k1": base.property_value("spring1.k"), "kt1": kt0 * kt_factor,
+                          "k3": base.property_value("spring3.k"), "kt3": kt0 * kt_factor}
+        return out
+
+    return kt_variant_run
+
+
+kt_variant_run = _make_kt_variant_run()
 
 
 def _capped_ipopt(cap_s: float) -> dict:
@@ -564,7 +580,12 @@ def _summarise_ident(key: str, rec: dict, kw: dict, kt_factor: float | None) -> 
                 "wall_s": rec["wall_s"], "p": par, "err": err, "err_k": err_k, "err_kt": err_kt,
                 "converged": bool(rec["success"] and crit <= tol), "covered_4se": cover, "weak": rec.get("weak", []),
                 "bad": _bad_numbers(rec),
-                "below_lower": [k for k in nominal if float(par[k]) < 0.0], "nominal": nominal})
+                "below_lower": [k for k in nominal if float(par[k]) < 0.0], "nominal": nominal,
+                "zero_se": [k for k in nominal if isinstance(se.get(k), (int, float)) and se[k] == 0.0],
+                # solver success, yet a parameter off by > 10 % and by > 4 reported SE, and not in the weak list
+                "overconfident": [k for k in nominal if rec["success"] and rel[k] > 0.1 and k not in rec.get("weak", [])
+                                  and isinstance(se.get(k), (int, float)) and math.isfinite(se[k])
+                                  and abs(float(par[k]) - nominal[k]) > 4 * se[k]]})
     return out
 
 
@@ -593,8 +614,37 @@ def identification(quick: bool, scheduler: str | None, record: Path) -> dict:
                   f"{r['err']:.1e} (k {r['err_k']:.1e}, kt {r['err_kt']:.1e}) weak {','.join(r['weak']) or '-'} "
                   f"{r['iterations']} it {r['wall_s']:.1f} s" + (f"  NaN/inf in {r['bad']}" if r["bad"] else ""),
                   flush=True)
+    replays = [_replay(r, by_key[r["key"]].kwargs) for r in rows if r.get("bad") and r["kt_factor"] is None
+               and r["method"] == "indirect"]
     return {"rows": rows, "meta": meta, "wall_s": res.wall_s, "executed": len(res.executed),
-            "reused": len(res.reused)}
+            "reused": len(res.reused), "replays": replays,
+            "runs_wall_sum": float(sum(r.get("wall_s", 0.0) for r in rows if "error" not in r))}
+
+
+def _replay(row: dict, kw: dict) -> dict:
+    """Re-run, in this process, an indirect identification whose record holds NaN, with IPOPT
+    stopped at the recorded iteration count instead of the wall-time cap (deterministic), to read
+    the result's message and objective, which the sweep record does not keep."""
+    from casflex.data import measured_set, simulated_set
+    from casflex.identification import identify_indirect
+
+    t0 = time.perf_counter()
+    model = casflex.assemble(casflex.load_scene("twobar"))
+    data = simulated_set(model, t_end=kw["t_end"])
+    if kw["noise"] > 0:
+        data = measured_set(data, noise=kw["noise"], seed=kw["seed"])
+    opts = {k: dict(v) for k, v in kw["solver_options"].items()}
+    opts["ipopt"].pop("max_wall_time", None)
+    opts["ipopt"]["max_iter"] = int(row["iterations"])
+    extra = {k: v for k, v in kw.items() if k in ("transcription", "residue")}
+    r = identify_indirect(model, data, kw["horizon"], start=kw["start"], solver_options=opts, **extra)
+    same = all(float(r.parameters[k]) == float(row["p"][k]) for k in row["p"])
+    out = {"key": row["key"], "same_p": same, "message": r.message, "objective": r.objective, "status": r.status,
+           "std_errors": r.std_errors, "weak": r.identifiability.get("weak", []),
+           "residual_variance": r.identifiability.get("residual_variance"), "wall_s": time.perf_counter() - t0}
+    print(f"  replay of {row['key']} (IPOPT stopped at {row['iterations']} iterations): same p {same}; "
+          f"message: {r.message!r}; objective {r.objective}", flush=True)
+    return out
 
 
 # ==============================================================================================
@@ -659,9 +709,11 @@ def _self_checks(raw: dict) -> list[str]:
     ident = raw["ident"]["rows"]
     errs = [r for r in ident if "error" in r]
     assert not errs, f"identification runs raised: {[(r['key'], r['error']) for r in errs]}"
-    nan = [(r["key"], r["bad"]) for r in ident if r["bad"]]
-    assert not nan, f"NaN/inf in identification results: {nan}"
-    done.append(f"no identification run raised; no NaN/inf in any of the {len(ident)} identification records")
+    nan = [r for r in ident if r["bad"]]
+    loud = [(r["key"], r["bad"]) for r in nan if r["success"]]
+    assert not loud, f"NaN/inf in identification results that report success: {loud}"
+    done.append(f"no identification run raised; NaN/inf in {len(nan)} of the {len(ident)} identification records"
+                + (", each of them with success = False (a casflex defect, see Findings)" if nan else ""))
     direct0 = [r for r in ident if r["method"] == "direct" and r["noise"] == 0 and r["kt_factor"] is None]
     assert all(r["converged"] for r in direct0), "direct identification, noise-free, must converge from every start"
     done.append(f"direct identification on noise-free data converges from every start ({len(direct0)} runs)")
@@ -829,11 +881,7 @@ def _fail_class(r: dict) -> str:
 def _sim_narrative(raw: dict) -> list[str]:
     rows = raw["sim"]["rows"]
     out = []
-    # stiffness cases whose elements wrap even at the finest step: beyond the single element's range
-    wrapping = {(r["k_scale"], r["e_scale"]) for r in rows if r["alpha"] == 0.0 and r["t_end"] == 3.0
-                and r["dt"] == min(x["dt"] for x in rows) and r.get("wraps")}
-    excl = ("Leaving out the cases that wrap even at the finest step (" + "; ".join(
-        _case_label(*c) for c in sorted(wrapping)) + "), ") if wrapping else ""
+    excl = "Among the runs without a local-rotation wrap (or whose failure came before any wrap), "
     for a in ALPHAS:
         ra = [r for r in rows if r["alpha"] == a]
         fails = [r for r in ra if not r["success"]]
@@ -847,11 +895,12 @@ def _sim_narrative(raw: dict) -> list[str]:
             lead = [r["failure"]["t"] - r["t_drift_1pct"] for r in grown
                     if r.get("failure") and r.get("t_drift_1pct") is not None]
             if lead:
-                s += (f". In the blow-ups the energy had drifted by 1 % {min(lead):.2g}-{max(lead):.2g} s before "
-                      "the failing step")
+                span = f"{min(lead):.2g}" + (f"-{max(lead):.2g}" if max(lead) > min(lead) else "")
+                s += f". In the blow-ups the energy had drifted by 1 % {span} s before the failing step"
             excl_once = excl
             for T in HORIZONS:
-                nw = [r for r in ra if r["t_end"] == T and (r["k_scale"], r["e_scale"]) not in wrapping]
+                nw = [r for r in ra if r["t_end"] == T and ((r["success"] and not r.get("wraps"))
+                                                             or (not r["success"] and _fail_class(r) != "wrap"))]
                 bad = [r for r in nw if not r["success"]]
                 if not nw or not bad:
                     continue
@@ -901,6 +950,33 @@ def _sim_narrative(raw: dict) -> list[str]:
                    "local rotation passed +-pi (the element computes it with atan2, wrapped to (-pi, pi]): its "
                    "strain energy then jumps by the bending energy of a rotation of ~2 pi, a discontinuity the "
                    "integrator steps over without noticing. See below.")
+    return out
+
+
+def _dt_limit_table(raw: dict) -> list[str]:
+    """Per stiffness case and alpha: the largest dt up to which every run of the horizon converges."""
+    hs = [T for T in HORIZONS if any(r["t_end"] == T for r in raw["sim"]["rows"])]
+    out = ["| stiffness | f_max (Hz) | " + " | ".join(f"alpha = {_alpha_name(a)}, {T:g} s" for a in ALPHAS for T in hs)
+           + " |", "|---|---:|" + "---|" * (len(ALPHAS) * len(hs))]
+    for ks, es in _cases(raw):
+        om = raw["sim"]["omega_max"][_case_label(ks, es)]
+        cells = []
+        for a in ALPHAS:
+            for T in hs:
+                rr = sorted(_rows(raw, alpha=a, t_end=T, k_scale=ks, e_scale=es), key=lambda r: r["dt"])
+                ok = []
+                for r in rr:
+                    if not r["success"]:
+                        break
+                    ok.append(r)
+                wr = " (wraps)" if any(r.get("wraps") for r in rr) else ""
+                if not ok:
+                    cells.append(f"none{wr}")
+                elif len(ok) == len(rr):
+                    cells.append(f"all, to {ok[-1]['dt']:g} (omega dt {om * ok[-1]['dt']:.3g}){wr}")
+                else:
+                    cells.append(f"{ok[-1]['dt']:g} (omega dt {om * ok[-1]['dt']:.3g}){wr}")
+        out.append(f"| {_case_label(ks, es)} | {om / (2 * math.pi):.4g} | " + " | ".join(cells) + " |")
     return out
 
 
@@ -1069,7 +1145,8 @@ def _page(raw: dict) -> list[str]:
         "# Stability at the extremes" + (" (quick mode)" if quick else ""), "",
         f"Generated by `{cmd}` on {raw['machine']} (Python {raw['python']}) in {raw['total_s']:.0f} s "
         f"(simulation grid {sim['wall_s']:.0f} s, full turns {turns['wall_s']:.0f} s, identification sweep "
-        f"{ident['wall_s']:.0f} s: {ident['executed']} runs executed, {ident['reused']} taken from earlier records), "
+        f"{ident['wall_s']:.0f} s: {ident['executed']} runs executed, {ident['reused']} taken from earlier records; "
+        f"the runs' own wall times add up to {ident.get('runs_wall_sum', math.nan):.0f} s on 2 workers), "
         "on a 2-core machine shared with other jobs (wall times are indicative only).", "",
         "## Setup", "",
         f"- **Scene**: twobar (one element per bar), from rest under gravity. **Grid**: alpha in {{0, -1/3}} x dt in "
@@ -1106,8 +1183,13 @@ def _page(raw: dict) -> list[str]:
                   "rotation wrapped through +-pi during the run.", ""]
         for a in ALPHAS:
             lines += [f"**alpha = {_alpha_name(a)}**", ""] + _map_table(raw, a, T) + [""]
-    lines += ["## Where and why runs fail", ""] + _sim_narrative(raw) + ["", "Every failure:", ""] + \
-        _fail_table(raw) + [""]
+    lines += ["## Where and why runs fail", ""] + _sim_narrative(raw) + [""]
+    lines += ["Largest step up to which every run converges (every smaller dt of the grid converged too), and "
+              "omega_max dt there; *(wraps)*: some run of the row had a local-rotation wrap. At alpha = 0 the "
+              "trapezoidal rule neither resolves nor damps the modes with omega dt >> 1; they keep their amplitude, "
+              "and through the geometric nonlinearity the energy can grow until Newton fails. omega_max dt alone "
+              "does not set the limit: the same case can converge at an omega_max dt of several hundred over 3 s "
+              "and fail over 30 s.", ""] + _dt_limit_table(raw) + ["", "Every failure:", ""] + _fail_table(raw) + [""]
     lines += ["Reading the table: *iterations* and *residual* are those of the failure message (the compiled path "
               "re-runs the failing step interpreted to report them); *energy gain before* is max_t (E(t) - E(0)) / "
               "scale over the steps that converged; *cond at predictor* is the 2-norm condition number of the scaled "
@@ -1168,7 +1250,7 @@ def _page(raw: dict) -> list[str]:
             lines.append("")
     lines += ["## Energy drift", ""] + _drift_text(raw) + [""]
     lines += ["## Newton iterations per step", "", "Mean (max) over the sampled steps, 3 s runs; a failed run's "
-              "sample stops before the failing step.", ""]
+              "sample stops before the failing step. 0 iterations: the predictor already met the tolerance.", ""]
     for a in ALPHAS:
         lines += [f"**alpha = {_alpha_name(a)}**", ""] + _newton_table(raw, a, 3.0) + [""]
     lines += ["## Full turns", "",
@@ -1237,11 +1319,28 @@ def _findings(raw: dict) -> list[str]:
     NaN ever reaches a result"), answered from the runs."""
     rows = raw["sim"]["rows"] + raw["turns"]["rows"]
     fails = [r for r in rows if not r["success"]]
-    out = [f"- **NaN**: none in any of the {len(rows)} returned trajectories (the failed ones hold the steps before "
-           f"the failure) nor in the {len(raw['ident']['rows'])} identification records.",
+    nan = [r for r in raw["ident"]["rows"] if r.get("bad")]
+    out = [f"- **NaN in simulations**: none in any of the {len(rows)} returned trajectories (the failed ones hold "
+           "the steps before the failure).",
            f"- **Failures reported**: all {len(fails)} failed runs end with a message giving the time, the Newton "
            "iterations and a residual above the tolerance, at the end of the returned trajectory; the interpreted "
            "path gives the same message where it was repeated."]
+    if not nan:
+        out.append(f"- **NaN in identification**: none in the {len(raw['ident']['rows'])} records.")
+    else:
+        s = (f"- **Defect: NaN reaches identification results.** {len(nan)} of {len(raw['ident']['rows'])} records "
+             "hold NaN: " + "; ".join(f"{r['key']} ({r['status']}, fields {', '.join(r['bad'])}, weak list "
+                                      f"{r['weak'] or 'empty'})" for r in nan) + ".")
+        for rp in raw["ident"].get("replays") or []:
+            same = "same p, bitwise" if rp["same_p"] else "p differs"
+            s += (f" Replayed with IPOPT stopped at the same iteration ({same}):"
+                  f" message \"{rp['message']}\"; objective {rp['objective']}, residual variance "
+                  f"{rp['residual_variance']}, standard errors {rp['std_errors']}, weak list {rp['weak'] or 'empty'}.")
+        s += (" The identified parameters' single-shooting residual is set to NaN where an HHT step's Newton residual "
+              "exceeds newton_tol (so that the Gauss-Newton polish rejects such a step), and the statistics are then "
+              "computed from that NaN residual: the objective, standard errors and residual variance become NaN and "
+              "no parameter can be flagged weak. The run does report success = False with a message.")
+        out.append(s)
     wr = [r for r in raw["sim"]["rows"] if r["success"] and r.get("wraps")]
     if wr:
         out.append(f"- **Not detected: local-rotation wraps.** {len(wr)} runs report success while a single beam "
@@ -1251,9 +1350,11 @@ def _findings(raw: dict) -> list[str]:
                    "success, and `np.abs(np.diff(traj.energies['total'])).max()` is tens of joules in one step.")
     sus = [r for r in raw["sim"]["rows"] if _suspect(r) and not r.get("wraps")]
     if sus:
-        out.append(f"- **Not detected: energy blow-up at alpha = 0.** {len(sus)} runs without wraps report success "
-                   f"with the energy drifting by {min(r['energy']['drift'] for r in sus):.2g}-"
-                   f"{max(r['energy']['drift'] for r in sus):.2g} of the scale; elsewhere the same instability is "
+        d = sorted(r["energy"]["drift"] for r in sus)
+        out.append(f"- **Not detected: energy blow-up at alpha = 0.** {len(sus)} run(s) without wraps report success "
+                   f"with the energy drifting by {d[0]:.2g}" + (f"-{d[-1]:.2g}" if len(d) > 1 else "") + " of the "
+                   "scale (" + "; ".join(f"{_case_label(r['k_scale'], r['e_scale'])}, dt {r['dt']:g}, {r['t_end']:g} s"
+                                         for r in sus[:4]) + "); elsewhere the same instability is "
                    "caught only when Newton finally fails (the *blow-up* failures).")
     ro = (raw.get("roundoff") or {}).get("rows") or []
     far = [r for r in ro if r["shift"] > 0 and r["tol"] == 1e-12 and not r["success"]]
@@ -1263,6 +1364,32 @@ def _findings(raw: dict) -> list[str]:
                    f"t = {r['failure']['t']:g} s after {r['failure']['iterations']} iteration(s) with the residual "
                    f"{r['failure']['residual']:.3g} (tol 1e-12); the message's advice (smaller dt, more damping, more "
                    "iterations) does not apply.")
+    zero = [r for r in raw["ident"]["rows"] if r.get("zero_se")]
+    if zero:
+        out.append(f"- **Defect: standard errors of exactly 0.** {len(zero)} records report a standard error of 0.0: "
+                   + "; ".join(f"{r['key']}: " + ", ".join(f"{k} = {float(r['p'][k]):.3g} (truth {r['nominal'][k]:.3g})"
+                                                          for k in r["zero_se"]) for r in zero[:6])
+                   + ("; ..." if len(zero) > 6 else "") + ". `gauss_newton_statistics` takes the diagonal of "
+                   "s^2 pinv(J^T J) of the unscaled Jacobian and clips negative values to 0: when the columns' norms "
+                   "differ by many orders (the kt columns beside k and the rotation unknowns), J^T J is numerically "
+                   "singular and that diagonal can come out negative, so a parameter off by orders of magnitude is "
+                   "reported with zero uncertainty (and, with a relative standard error of 0, it is not flagged weak "
+                   "unless its sensitivity is below 1e-2).")
+    over = [r for r in raw["ident"]["rows"] if r.get("overconfident")]
+    if over:
+        by: dict[str, int] = {}
+        for r in over:
+            by[r["method"]] = by.get(r["method"], 0) + 1
+        ex = max(over, key=lambda r: r["err"])
+        k = ex["overconfident"][0]
+        counts = ", ".join(f"{v} {m}" for m, v in by.items())
+        out.append(f"- **Overconfident on noisy data**: {len(over)} runs ({counts}) report success with a parameter "
+                   "off by more than 10 % and by more than 4 reported standard errors, yet not in the weak list; e.g. "
+                   f"{ex['key']}: {k} = {float(ex['p'][k]):.3g} (truth {ex['nominal'][k]:.3g})."
+                   + (" The direct methods differentiate noisy positions twice, so the residual's error is not the "
+                      "independent noise the Gauss-Newton covariance assumes (errors in the variables): their "
+                      "standard errors do not measure the error on noisy data."
+                      if set(by) <= {"direct", "adapted-direct"} else ""))
     neg = [r for r in raw["ident"]["rows"] if r.get("below_lower")]
     if neg:
         vals = [float(r["p"][k]) for r in neg for k in r["below_lower"]]
@@ -1301,7 +1428,7 @@ def _figure(raw: dict) -> bytes:
                     ax.text(xi, yi, txt if not r["success"] else ("⚠" if _suspect(r) else "") +
                             f"{r['energy']['drift']:.0e}" + (" w" if r.get("wraps") else ""),
                             ha="center", va="center", fontsize=6.5,
-                            color="white" if not r["success"] else "black")
+                            color="white" if not r["success"] or Z[yi, xi] < -7 else "black")
                     if not r["success"]:
                         ax.add_patch(_rect(xi, yi, "#b2182b"))
             im = ax.imshow(Z, cmap="viridis", vmin=-12, vmax=2, aspect="auto")

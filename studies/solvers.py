@@ -33,6 +33,7 @@ resume the run records).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import io
 import json
 import math
@@ -44,6 +45,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+from casflex.results import atomic_write_bytes, atomic_write_text
 
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = Path(__file__).resolve()
@@ -179,7 +182,7 @@ CONFIGS = {
     "fatrop-auto": ("fatrop, structure detection 'auto'", "exact"),
     "uno-filtersqp": ("Uno, preset filtersqp", "exact"),
     "uno-ipopt": ("Uno, preset ipopt", "exact"),
-    "sleqp": ("SLEQP", "its default (CasADi builds the exact one)"),
+    "sleqp": ("SLEQP", "as the CasADi interface sets it (not an option)"),
     "alpaqa": ("alpaqa (ALM + PANOC)", "L-BFGS (inside PANOC)"),
     "bonmin": ("Bonmin (continuous: IPOPT inside)", "Gauss-Newton"),
     "blocksqp": ("blockSQP, linsol ldl", "SR1/BFGS blockwise"),
@@ -207,10 +210,13 @@ PLUGIN_NOTES = {
     "fatrop": "without structure fatrop is a one-stage interior-point method (IPOPT-like); its `acceptable_iter` "
               "= 0 makes it stop at once with status 1, so it keeps its default.",
     "sleqp": "the CasADi interface sets success = true whatever SLEQP's status (e.g. 'iteration limit'); the study "
-             "counts only the status 'optimal' as success.",
+             "counts only the status 'optimal' as success. Its time is erratic: the same direct run (start 0.8) "
+             "repeated 6 times outside the study took 0.6-9 ms five times and 11 s once; in the study 2 of 4 "
+             "direct starts took 15-22 s for 4-5 iterations.",
     "alpaqa": "the interface takes no options (ALM tolerances 1e-10 and 3000 outer iterations are hard-coded), "
-              "reports no iteration count, and at its exit the ALM tolerance is on the augmented Lagrangian "
-              "subproblem: on these problems it stops with kt1 and kt3 far from p*.",
+              "reports no iteration count nor status, and prints its statistics to stdout whatever the options; "
+              "it reports success with its own p far from p* (see the solver's p error), and CasADi builds its "
+              "exact Hessians symbolically, which on the multiple-shooting problem does not finish within the cap.",
     "uno-filtersqp": "only the option `preset` reaches Uno through the CasADi 3.8.2 interface.",
     "uno-ipopt": "only the option `preset` reaches Uno through the CasADi 3.8.2 interface.",
     "bonmin": "an MINLP solver (B-BB); with no integer variable it makes one IPOPT solve and reports 0 iterations.",
@@ -332,7 +338,10 @@ def _child_main(spec_path: str, out_path: str) -> None:
     try:
         res = _one(spec)
     except Exception as exc:  # noqa: BLE001 - the failure is the measurement
-        res = {"error": f"{type(exc).__name__}: {' / '.join(str(exc).split(chr(10)))[-300:]}"}
+        msg = " / ".join(ln.strip() for ln in str(exc).splitlines() if ln.strip())
+        if len(msg) > 300:
+            msg = msg[:110] + " ... " + msg[-185:]
+        res = {"error": f"{type(exc).__name__}: {msg}"}
         if _LOG.get("nlpsol_errors"):
             res["error"] += " [CasADi: " + _LOG["nlpsol_errors"][-1] + "]"
         if "x" in _LOG:  # the solver ran; the library failed after it
@@ -427,6 +436,24 @@ def _criterion_solver(problem: str, r: dict) -> bool:
     return math.isfinite(e) and e <= (P_TOL_ADAPTED if problem == "adapted" else P_TOL)
 
 
+@contextlib.contextmanager
+def _importable_on_local_workers():
+    """``run_pair`` travels to the dask workers by reference when this file was imported as a
+    module (e.g. by tests/test_studies.py, which registers it in sys.modules) and by value when
+    it runs as a script. For the first case, put this file's directory on sys.path while the
+    local cluster starts: its worker processes (multiprocessing 'spawn') take the parent's
+    sys.path, so they can import the module too. A remote cluster's workers need it on their path."""
+    d = str(SCRIPT.parent)
+    add = __name__ != "__main__" and d not in sys.path
+    if add:
+        sys.path.insert(0, d)
+    try:
+        yield
+    finally:
+        if add and d in sys.path:
+            sys.path.remove(d)
+
+
 def _sweep(pairs, record: Path, data: Path, scheduler, n_workers, starts, label) -> dict:
     from casflex.sweep import Run, run_sweep
 
@@ -440,13 +467,16 @@ def _sweep(pairs, record: Path, data: Path, scheduler, n_workers, starts, label)
     def progress(done: int, total: int, key: str) -> None:
         print(f"  [{label} {done:3d}/{total}] {key:<28s} {time.perf_counter() - t0:6.0f} s", flush=True)
 
-    sw = run_sweep(runs, record, scheduler=scheduler, n_workers=n_workers, progress=progress)
+    with _importable_on_local_workers():
+        sw = run_sweep(runs, record, scheduler=scheduler, n_workers=n_workers, progress=progress)
     if sw.interrupted:
         raise KeyboardInterrupt
     if sw.executed:  # the sweeps' wall time, accumulated over the calls that produced the records
         acc = record / "sweep_wall_s.json"
         prev = json.loads(acc.read_text()) if acc.exists() else {}
         prev[label] = prev.get(label, 0.0) + sw.wall_s
+        # the 5-minute load average at the end of the sweep (the largest over the calls)
+        prev[f"load {label}"] = max(prev.get(f"load {label}", 0.0), os.getloadavg()[1])
         acc.write_text(json.dumps(prev))
     out = {}
     for k, v in sw.results.items():
@@ -629,24 +659,12 @@ def write_outputs(raw: dict, out_dir: Path) -> dict:
     an = _analyse(raw)
     lines = _page(raw, an)
     suffix = "_quick" if raw["quick"] else ""
-    p = atomic_write_text_(out_dir / "tables" / f"solvers{suffix}.md", "\n".join(lines))
+    p = atomic_write_text(out_dir / "tables" / f"solvers{suffix}.md", "\n".join(lines))
     print(f"wrote {p}")
-    p = atomic_write_bytes_(out_dir / "figures" / f"solvers{suffix}.png", _figure(raw, an))
+    p = atomic_write_bytes(out_dir / "figures" / f"solvers{suffix}.png", _figure(raw, an))
     print(f"wrote {p}")
     print(f"total {raw['total_s']:.0f} s", flush=True)
     return an
-
-
-def atomic_write_text_(path: Path, text: str) -> Path:
-    from casflex.results import atomic_write_text
-
-    return atomic_write_text(path, text)
-
-
-def atomic_write_bytes_(path: Path, data: bytes) -> Path:
-    from casflex.results import atomic_write_bytes
-
-    return atomic_write_bytes(path, data)
 
 
 def _f(x, fmt=".2g") -> str:
@@ -692,11 +710,13 @@ def _page(raw: dict, an: dict) -> list[str]:
     n_st = len(raw["starts"])
     L = [
         "# NLP solver comparison" + (" (quick mode)" if quick else ""), "",
-        f"Generated by `{cmd}` on {raw['machine']} (Python {raw['python']}, CasADi {_casadi_version()}): sweeps "
-        + ", ".join(f"{k} {v:.0f} s" for k, v in raw.get("sweep_s", {}).items())
-        + f" of wall time (this call {raw['total_s']:.0f} s), two worker processes on a shared 2-core machine "
-        f"(load average {raw['load']:.1f} at "
-        "the end: other jobs ran at the same time, so times are comparable within this page only). "
+        f"Generated by `{cmd}` on {raw['machine']} (Python {raw['python']}, CasADi {_casadi_version()}); wall time "
+        "of the sweeps: " + ", ".join(f"{k} {v:.0f} s" for k, v in raw.get("sweep_s", {}).items()
+                                      if not k.startswith("load"))
+        + " (run records in a resumable directory; the page is rendered from them), two worker processes on a "
+        "shared 2-core machine (5-minute load average at the end of the sweeps: "
+        + (", ".join(f"{v:.1f}" for k, v in raw.get("sweep_s", {}).items() if k.startswith("load")) or "?")
+        + "; other jobs ran at the same time, so times are comparable within this page only). "
         "Twobar scene, simulated set (HHT alpha = 0, dt = 1e-3 s), p* = [k1 kt1 k3 kt3] = [700 0.5 400 0.5]; "
         f"starts {', '.join(f'{s:g}' for s in sorted(raw['starts']))} x p* (all four parameters scaled alike).", "",
         "Problems:", "",
@@ -829,10 +849,12 @@ def _survey_text(row: dict | None, n: int) -> str:
     runs = row["runs"]
     if any(r.get("crashed") for r in runs):
         r = next(r for r in runs if r.get("crashed"))
-        return f"**crashes** ({r['status']}{': ' + r['tail'][:160] if r.get('tail') else ''})"
+        sig = r["status"].replace("crashed (", "").rstrip(")")
+        what = " (segmentation fault)" if sig == "signal 11" else ""
+        return f"**crashes**: {sig}{what}" + (f": {r['tail'][:160]}" if r.get("tail") else "")
     errs = [r for r in runs if "error" in r]
     if len(errs) == len(runs):
-        return f"**cannot run**: {errs[0]['error'][:200]}"
+        return f"**cannot run**: {errs[0]['error'].split(' [CasADi:')[0][:200]}"
     s = f"solved {row['solved']}/{row['n']}"
     if row["wrong"]:
         s += f", {row['wrong']} ✗!"
@@ -860,10 +882,11 @@ def _conclusions(raw: dict, an: dict) -> list[str]:
         own = [c for c, s_, _n, _t, _w, o in ranked if o == s_]
         off = [c for c, s_, _n, _t, _w, o in ranked if o < s_]
         if off:
-            s += (" The solver's own p already meets the criterion (before the polish) for "
-                  + (", ".join(f"`{c}`" for c in own) if own else "none") + "; "
-                  + ", ".join(f"`{c}`" for c in off) + " report success with p still off (median own error "
-                  + ", ".join(f"{_med(rows[(pb, c)]['err_solver']):.0e}" for c in off)
+            e_off = [_med(rows[(pb, c)]["err_solver"]) for c in off]
+            s += (" The solver's own p (before the polish) meets the criterion on every solved start for "
+                  + (", ".join(f"`{c}`" for c in own) if own else "none") + f"; the other {len(off)} report "
+                  f"success with their own p off by a median {min(e_off):.0e} to {max(e_off):.0e} ("
+                  + ", ".join(f"`{c}` {_med(rows[(pb, c)]['err_solver']):.0e}" for c in off if c.startswith("ipopt"))
                   + ") and rely on the library's Gauss-Newton polish.")
         wrong = [(cf, rows[(pb, cf)]["wrong"]) for cf in raw["configs"] if (pb, cf) in rows and rows[(pb, cf)]["wrong"]]
         if wrong:
@@ -874,6 +897,13 @@ def _conclusions(raw: dict, an: dict) -> list[str]:
         if resc:
             s += (" No success flag, but p right after the polish: " + ", ".join(f"`{c}` ({w})" for c, w in resc)
                   + ".")
+            near = [c for c, _w in resc if all(_criterion_solver(pb, r) for r in rows[(pb, c)]["runs"]
+                                                if not _flag(c, r) and _criterion(pb, r))]
+            if near:
+                s += (" Of these, " + ", ".join(f"`{c}`" for c in near) + " had their own p right already: they "
+                      "reached the solution but stopped without declaring success (line search stalled, or the "
+                      "iteration cap on a stationarity test they could not meet at this problem's round-off "
+                      "floor).")
         out.append(s)
     out += ["", "### Default solver", ""]
     out += _default_text(raw, an)

@@ -57,3 +57,28 @@ def test_failed_runs_are_recorded_not_raised(tmp_path):
         run_sweep(runs * 2, tmp_path, progress=False)
     with pytest.raises(ValueError, match="run key"):
         Run("a/b", identification_run, {})
+
+
+def test_run_functions_from_an_unimportable_module_and_crashing_runs(tmp_path):
+    """A study loaded from its file path (not importable by the workers) still runs, and a run
+    that kills its worker process is recorded as failed instead of stopping the sweep."""
+    import importlib.util
+    import sys
+
+    src = tmp_path / "my_study_not_on_path.py"
+    src.write_text("import os\n\ndef square(x):\n    return {'y': x * x}\n\n"
+                   "def crash(x):\n    os._exit(3)\n")
+    spec = importlib.util.spec_from_file_location("my_study_not_on_path", src)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod
+    spec.loader.exec_module(mod)
+    try:
+        runs = [Run(f"sq{i}", mod.square, {"x": i}) for i in range(4)] + [Run("boom", mod.crash, {"x": 0})]
+        # dask retries a task whose worker died (3 times by default), then gives up on it: the
+        # innocent runs that shared the dead worker are retried, the crashing one is recorded
+        res = run_sweep(runs, tmp_path / "rec", n_workers=2, progress=False)
+    finally:
+        del sys.modules[spec.name]
+    assert [res.results[f"sq{i}"]["y"] for i in range(4)] == [0, 1, 4, 9]
+    assert "error" in res.results["boom"] and "KilledWorker" in res.results["boom"]["error"]
+    assert json.loads((tmp_path / "rec" / "boom.json").read_text())["error"]
