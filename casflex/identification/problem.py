@@ -4,11 +4,13 @@ the Gauss-Newton statistics (standard errors, correlations, identifiability)."""
 from __future__ import annotations
 
 import atexit
+import contextlib
 import functools
 import math
 import os
 import shutil
 import tempfile
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -204,6 +206,22 @@ def _jit_directory() -> str:
     return path
 
 
+@contextlib.contextmanager
+def _jit_working_directory(active: bool) -> Iterator[None]:
+    """Run a block in the JIT scratch directory: CasADi 3.8 writes the source of an nlpsol's
+    JIT-compiled oracle to the working directory whatever the compiler's ``directory`` option
+    says (plain Functions honour it). Not thread-safe: the working directory is per process."""
+    if not active:
+        yield
+        return
+    old = os.getcwd()
+    os.chdir(_jit_directory())
+    try:
+        yield
+    finally:
+        os.chdir(old)
+
+
 def jit_options() -> dict:
     """Function/nlpsol options that generate C for every function the solver calls and compile
     it with the system compiler (CasADi's 'shell' JIT)."""
@@ -251,7 +269,8 @@ def least_squares_nlp(name: str, solver: str, w: Any, r: Any, g: Any = None, *, 
             opts["hess_lag"] = hess(triu)
         opts.update(solver_options or {})
         try:
-            return ca.nlpsol(name, solver, nlp, opts)
+            with _jit_working_directory(compiled):
+                return ca.nlpsol(name, solver, nlp, opts)
         except RuntimeError as exc:
             msg = str(exc).splitlines()[-1]
             if not (hess is not None and triu and "symmetric" in msg):
