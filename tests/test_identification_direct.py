@@ -103,3 +103,10 @@ def test_hessian_and_compiled_options_reach_the_same_answer(twobar, sim, options
 def test_bad_hessian_named(twobar, sim):
     with pytest.raises(ValueError, match="hessian: expected one of"):
         identify_direct(twobar, sim, [0.69], hessian="bfgs")
+
+
+def test_solver_without_hessian_option_falls_back_with_a_warning(twobar, sim):
+    with pytest.warns(UserWarning, match="takes no Hessian function") as rec:
+        r = identify_direct(twobar, sim, [0.69], start=0.8, solver="sleqp", hessian="gauss-newton")
+    assert len(rec) == 1
+    np.testing.assert_allclose(r.p, twobar.p_nominal, rtol=1e-6)

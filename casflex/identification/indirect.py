@@ -285,7 +285,11 @@ def identify_indirect(
     ss_r = residue_of(Xf)
     # NaN where a step's Newton did not converge, so that the polish rejects such a step
     ss_ok = ca.if_else(ca.mmax(Rf) <= newton_tol, ss_r, np.nan * ss_r)
-    ss = ca.Function("ss_residue", [th], [ss_ok, ca.jacobian(ss_r, th)], jit_options() if compiled else {})
+    ss_all = ca.Function("ss_residue", [th], [ss_ok, ca.jacobian(ss_r, th), ss_r], jit_options() if compiled else {})
+
+    def ss(t: np.ndarray) -> list:
+        return ss_all(t)[:2]
+
     build_s = time.perf_counter() - t_build
 
     t_solve = time.perf_counter()
@@ -295,7 +299,9 @@ def identify_indirect(
     th_v, polished = gauss_newton_polish(ss, wv[:n_p], lb_th, ub_th, polish)
     solve_s = time.perf_counter() - t_solve
     p_hat = pmap.p(th_v)
-    rv, Jv = (np.array(v) for v in ss(th_v))
+    # statistics from the residue as computed, also where a step missed the Newton tolerance
+    # (then reported in the message below) rather than from its NaN-guarded form
+    _, Jv, rv = (np.array(v) for v in ss_all(th_v))
     stats = gauss_newton_statistics(Jv, rv.ravel(), n_p, model.parameter_names, pmap.dp_dtheta(th_v), p_hat)
 
     # states over the window at the identified parameters: multipliers (joint reactions)

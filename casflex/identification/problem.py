@@ -10,6 +10,7 @@ import math
 import os
 import shutil
 import tempfile
+import warnings
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -142,13 +143,6 @@ def gauss_newton_statistics(J: np.ndarray, r: np.ndarray, n_p: int, names: tuple
     cond = float(sv[0] / sv[-1]) if sv.size and sv[-1] > 0 else math.inf
     dof = m - n
     s2 = float(r @ r) / dof if dof > 0 else math.nan
-    try:
-        cov = s2 * np.linalg.pinv(J.T @ J)[:n_p, :n_p]
-    except np.linalg.LinAlgError:
-        cov = np.full((n_p, n_p), math.nan)
-    se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        corr = cov / np.outer(se, se)
     # The parameter block with the other unknowns (multipliers, rotations, states) profiled
     # out: what the residual still feels of a parameter change once they re-adjust.
     Jp = J[:, :n_p]
@@ -158,6 +152,21 @@ def gauss_newton_statistics(J: np.ndarray, r: np.ndarray, n_p: int, names: tuple
         Jp = Jp - Q @ (Q.T @ Jp)
     pn = np.linalg.norm(Jp, axis=0)
     _, svp, vtp = np.linalg.svd(Jp / np.where(pn > 0, pn, 1.0), full_matrices=False)
+    # Covariance of the parameters = s^2 (Jp^T Jp)^-1 (the Schur complement of J^T J), from the
+    # SVD of Jp: positive semi-definite by construction, where inverting J^T J with condition
+    # ~1e18 gave negative variances. A direction the data do not determine (singular value at
+    # round-off) gives an infinite variance to every parameter it involves.
+    resolved = svp > max(m, n_p) * np.finfo(float).eps * (svp[0] if svp.size else 0.0)
+    inv_s = np.where(resolved, 1.0 / np.where(resolved, svp, 1.0), 0.0)
+    scale = np.where(pn > 0, 1.0 / np.where(pn > 0, pn, 1.0), np.inf)
+    with np.errstate(invalid="ignore"):
+        cov = s2 * (vtp.T * inv_s**2) @ vtp * np.outer(scale, scale) if n_p else np.zeros((0, 0))
+    var = np.diag(cov).copy() if n_p else np.zeros(0)
+    undetermined = (np.abs(vtp[~resolved]) > 1e-8).any(axis=0) | (pn == 0) if n_p else np.zeros(0, bool)
+    var[undetermined] = math.inf
+    se = np.sqrt(var)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(se, se)
     weakest = {nm: float(v) for nm, v in zip(names, vtp[-1], strict=True)} if n_p else {}
     dpdt = np.ones(n_p) if dp_dtheta is None else np.abs(np.asarray(dp_dtheta, dtype=float))
     p_abs = np.full(n_p, np.nan) if p is None else np.abs(np.asarray(p, dtype=float))
@@ -167,7 +176,7 @@ def gauss_newton_statistics(J: np.ndarray, r: np.ndarray, n_p: int, names: tuple
         rel_sens = sens / sens.max() if n_p and sens.max() > 0 else np.zeros(n_p)
         rel_se = se / p_abs
     weak = [nm for nm, s_, e_ in zip(names, rel_sens, rel_se, strict=True)
-            if s_ < 1e-2 or (np.isfinite(e_) and e_ > 0.1)]
+            if s_ < 1e-2 or (not np.isnan(e_) and e_ > 0.1)]
     return {
         "std_errors": {nm: float(v) for nm, v in zip(names, se, strict=True)},
         "relative_std_errors": {nm: float(v) for nm, v in zip(names, rel_se, strict=True)},
@@ -263,19 +272,42 @@ def least_squares_nlp(name: str, solver: str, w: Any, r: Any, g: Any = None, *, 
                                jit_options() if compiled else {})
 
     nlp = {"x": w, "f": 0.5 * f_scale * ca.sumsqr(r), "g": g}
-    # IPOPT and its kin take the upper triangle, the SQP methods the whole symmetric matrix
-    for triu in (True, False):
-        if hess is not None:
+    # IPOPT and its kin take the upper triangle, the SQP methods the whole symmetric matrix;
+    # some plugins (fatrop, uno, sleqp, alpaqa, blocksqp, ...) take no Hessian at all
+    attempts = [True, False, None] if hess is not None else [None]
+    no_hessian = False
+    for triu in attempts:
+        if no_hessian and triu is not None:
+            continue
+        opts.pop("hess_lag", None)
+        if triu is not None:
             opts["hess_lag"] = hess(triu)
         opts.update(solver_options or {})
         try:
             with _jit_working_directory(compiled):
-                return ca.nlpsol(name, solver, nlp, opts)
+                S = ca.nlpsol(name, solver, nlp, opts)
         except RuntimeError as exc:
-            msg = str(exc).splitlines()[-1]
-            if not (hess is not None and triu and "symmetric" in msg):
-                raise ValueError(f"solver {solver!r}: cannot be created ({msg})") from None
+            msg = _casadi_reason(exc)
+            if triu is True and "symmetric" in msg:
+                continue
+            if triu is not None and "hess_lag" in msg:
+                no_hessian = True
+                warnings.warn(f"solver {solver!r} takes no Hessian function: hessian='gauss-newton' is not used, the "
+                              "solver runs with its own Hessian (approximation)", stacklevel=3)
+                continue
+            raise ValueError(f"solver {solver!r}: cannot be created ({msg})") from None
+        return S
     raise AssertionError("unreachable")
+
+
+def _casadi_reason(exc: Exception) -> str:
+    """The informative line of a CasADi error, without its suggestions and pointers to the docs."""
+    skip = (">", "Did you mean", "Use print_options", "https://", "Tried ", "Error code:")
+    lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip() and not ln.strip().startswith(skip)]
+    if not lines:
+        return type(exc).__name__
+    ln = lines[-1]
+    return ln.split(": ", 1)[-1] if ln.startswith(".../") else ln
 
 
 def gauss_newton_polish(zJ: Any, w: np.ndarray, lb: np.ndarray, ub: np.ndarray,
@@ -286,7 +318,11 @@ def gauss_newton_polish(zJ: Any, w: np.ndarray, lb: np.ndarray, ub: np.ndarray,
 
     zJ: w -> (z, dz/dw). Returns the polished w and the number of steps taken."""
     taken = 0
+    if not np.isfinite(w).all():  # the solver failed: nothing to polish
+        return w, 0
     z, J = (np.array(v) for v in zJ(w))
+    if not (np.isfinite(z).all() and np.isfinite(J).all()):
+        return w, 0
     f = float(z.ravel() @ z.ravel())
     for _ in range(steps):
         w_new = w - np.linalg.lstsq(J, z.ravel(), rcond=None)[0]

@@ -1,0 +1,47 @@
+"""Shared pieces of the identification methods: Gauss-Newton statistics and the polish."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from casflex.identification.problem import gauss_newton_polish, gauss_newton_statistics
+
+NAMES = ("a", "b", "c")
+
+
+def test_covariance_equals_the_inverse_normal_matrix_block():
+    # independent truth: s^2 [(J^T J)^-1]_pp on a well-conditioned problem with nuisance unknowns
+    rng = np.random.default_rng(0)
+    J = rng.normal(size=(40, 6))
+    r = rng.normal(size=40)
+    st = gauss_newton_statistics(J, r, 3, NAMES)
+    s2 = r @ r / (40 - 6)
+    cov = s2 * np.linalg.inv(J.T @ J)[:3, :3]
+    np.testing.assert_allclose(list(st["std_errors"].values()), np.sqrt(np.diag(cov)), rtol=1e-10)
+    np.testing.assert_allclose(st["correlation"], cov / np.outer(np.sqrt(np.diag(cov)), np.sqrt(np.diag(cov))),
+                               rtol=1e-9, atol=1e-12)
+
+
+def test_undetermined_parameters_get_infinite_standard_errors_and_are_weak():
+    # b and c enter only through b + c: neither is determined; a is. Inverting J^T J gave
+    # negative variances clipped to 0 (a confident zero error) on such problems.
+    rng = np.random.default_rng(1)
+    x = rng.normal(size=(30, 3))
+    J = np.column_stack([x[:, 0], x[:, 1], x[:, 1], x[:, 2]])  # a, b, c, one nuisance unknown
+    st = gauss_newton_statistics(J, rng.normal(size=30) * 1e-3, 3, NAMES, p=np.ones(3))
+    se = st["std_errors"]
+    assert math.isfinite(se["a"]) and se["a"] > 0
+    assert se["b"] == math.inf and se["c"] == math.inf
+    assert set(st["weak"]) == {"b", "c"}
+
+
+def test_polish_keeps_a_non_finite_start():
+    def zJ(w):
+        return np.array([w[0] - 1.0]), np.array([[1.0]])
+
+    w, taken = gauss_newton_polish(zJ, np.array([np.nan]), np.array([-np.inf]), np.array([np.inf]))
+    assert taken == 0 and np.isnan(w[0])
+    w, taken = gauss_newton_polish(zJ, np.array([3.0]), np.array([-np.inf]), np.array([np.inf]))
+    assert taken == 1 and w[0] == 1.0
