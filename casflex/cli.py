@@ -411,8 +411,8 @@ def _add_identify_parser(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--transform", choices=TRANSFORMS, default="linear",
                    help="decision variables p/scale (linear, default) or log(p/scale)")
     s.add_argument("--hessian", choices=HESSIANS,
-                   help="solver's Hessian: exact or gauss-newton (default: exact for direct methods, gauss-newton "
-                        "for indirect)")
+                   help="solver's Hessian: exact or gauss-newton (default: exact for direct, gauss-newton for "
+                        "adapted-direct and indirect)")
     s.add_argument("--compiled", action="store_true",
                    help="generate and compile C for the solver's functions (needs gcc; longer build, faster solve)")
     s.add_argument("--interval", type=int, metavar="STEPS",

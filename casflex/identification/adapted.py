@@ -76,7 +76,7 @@ def identify_adapted_direct(
     solver: str = "ipopt",
     solver_options: dict | None = None,
     transform: str = "linear",
-    hessian: str = "exact",
+    hessian: str = "gauss-newton",
     compiled: bool = False,
     verbose: bool = False,
 ) -> IdentificationResult:
