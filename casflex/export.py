@@ -13,7 +13,7 @@
 
 - ``step``: ``hht_step(x0, t0, p, h, d) -> (x1, res)`` (one HHT-alpha step, Eqs. 4-10),
   ``hht_initial(q, qd, t, p) -> (qdd, lam)`` (consistent start), ``hht_scale(q, qd, p, h) -> d``
-  (Newton scaling), ``hht_post(x, t, p) -> y`` (energies and joint outputs);
+  (Newton scaling), ``hht_post(x, t, p) -> y`` (energies, joint outputs, local rotations);
 - ``simulate``: the same plus ``main.c``;
 - ``direct``: ``equilibrium(q, qd, qdd, lam, t, p) -> (r, phi)`` (Eq. 1, the residual of the
   direct method, Eq. 11) and ``jac_equilibrium`` (its exact Jacobian in every input);

@@ -52,7 +52,9 @@ class Model:
     Functions (all named, inputs and outputs named): ``energy(q, qd, p) -> (kinetic, elastic,
     gravity)``, ``mass(q, p) -> M``, ``forces(q, qd, p) -> (h, f_int, g)``,
     ``load(t, p) -> f_ext``, ``constraint(q) -> (phi, B)``,
-    ``equilibrium(q, qd, qdd, lam, t, p) -> (r, phi)`` (Eq. 11), ``outputs(q, lam, p) -> y``.
+    ``equilibrium(q, qd, qdd, lam, t, p) -> (r, phi)`` (Eq. 11), ``outputs(q, lam, p) -> y``,
+    ``local_rotations(q) -> theta_l`` (rad, in (-pi, pi]: the co-rotational end rotations of the
+    beam elements, named ``<beam>.<element>.a|b`` in ``local_rotation_names``).
     """
 
     scene: Scene
@@ -73,6 +75,8 @@ class Model:
     constraint: ca.Function
     equilibrium: ca.Function
     outputs: ca.Function
+    local_rotations: ca.Function
+    local_rotation_names: tuple[str, ...]
     segments: tuple[tuple[str, str, int, int], ...] = field(default=())
 
     @property
@@ -178,6 +182,7 @@ def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
     V_el = ca.SX(0)
     V_g = ca.SX(0)
     outs: list[tuple[str, ca.SX]] = []
+    local: list[tuple[str, ca.SX]] = []
     used = np.zeros(n, dtype=bool)
 
     def sl(name):
@@ -197,6 +202,8 @@ def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
         V_el += el.strain_energy(qe)
         V_g += el.gravity_energy(qe, gvec)
         used[sl(na)] = used[sl(nb)] = True
+        kin = el.kinematics(qe)
+        local += [(f"{el.name}.a", kin["tha"]), (f"{el.name}.b", kin["thb"])]
         f = el.end_forces(qe)
         outs += [(f"{el.name}.{c}", f[i]) for i, c in enumerate(("N", "V", "Ma", "Mb"))]
     for s in scene.springs:
@@ -270,6 +277,9 @@ def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
         equilibrium=ca.Function("equilibrium", [q, qd, qdd, lam, t, p], [r, phi],
                                 ["q", "qd", "qdd", "lam", "t", "p"], ["r", "phi"]),
         outputs=ca.Function("joint_outputs", [q, lam, p], [y], ["q", "lam", "p"], ["y"]),
+        local_rotations=ca.Function("local_rotations", [q], [ca.vertcat(*[v for _, v in local]) if local
+                                                             else ca.SX(0, 1)], ["q"], ["theta_l"]),
+        local_rotation_names=tuple(k for k, _ in local),
         segments=tuple(("beam", f"{b.name}.{k}", idx[na] // 3, idx[nb] // 3) for b, k, na, nb in beam_elems)
         + tuple(("spring", s.name, idx[s.nodes[0]] // 3, idx[s.nodes[1]] // 3) for s in scene.springs),
     )

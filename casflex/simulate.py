@@ -10,7 +10,10 @@ Two execution paths give the same numbers (bitwise on x86-64, see :mod:`casflex.
 Both show progress, can be interrupted with Ctrl-C between steps or chunks, and check every
 step's final Newton residual: a step that fails stops the run with a message naming the
 time, the iteration count and the residual (:class:`SimulationError`, or a Trajectory with
-``success=False`` when ``raise_on_failure=False``). No NaN ever reaches a result.
+``success=False`` when ``raise_on_failure=False``). No NaN ever reaches a result. Two failures
+that every Newton step survives are caught after the run, and the result ends at the state
+before them: a beam element bent through +-pi (status ``element_range``) and energy created by
+an unstable integration (``energy_growth``); see :func:`_first_unsound_state`.
 """
 
 from __future__ import annotations
@@ -33,6 +36,8 @@ __all__ = ["simulate", "SimulationError", "integrator_for", "CHUNK"]
 
 #: Steps per compiled call: progress and Ctrl-C are handled between chunks.
 CHUNK = 250
+#: A run fails when the integrator has created this fraction of the energy in motion.
+ENERGY_GROWTH = 0.5
 
 _INTEGRATORS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _LIBRARIES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -136,6 +141,7 @@ def simulate(
     lib = compiled_library(integ) if compiled else None
     build_s = time.perf_counter() - t_build
 
+    n = model.n_dof
     X = np.empty((n_steps + 1, integ.nx))
     X[0] = x0
     iters = np.full(n_steps, -1, dtype=int)
@@ -155,17 +161,18 @@ def simulate(
                 t_in[0] = done * dt
                 out = X[done + 1:done + 1 + m_steps]  # written in place, no conversion
                 (chunk_fn if m_steps == CHUNK else step_fn)([X[done], t_in, pv, h_in, d], [out, res[:m_steps]])
-                bad = ~(np.isfinite(out).all(axis=1) & (res[:m_steps] <= tol))
+                bad = ~(np.isfinite(out).all(axis=1) & (res[:m_steps] <= integ.tolerance(out[:, :n])))
                 good = int(np.argmax(bad)) if bad.any() else m_steps
                 done += good
                 if good < m_steps:
-                    failure = _diagnose(integ, X[done], done, dt, pv, d, tol, max_iter)
+                    failure = _diagnose(integ, X[done], done, dt, pv, d, max_iter)
                     break
             else:
                 x1, r, it = _interpreted_step(integ, X[done], done * dt, pv, dt, d)
                 iters[done] = it
-                if not (np.isfinite(x1).all() and r <= tol):
-                    failure = _failure_message(done, dt, it, r, tol, max_iter)
+                if not (np.isfinite(x1).all() and r <= integ.tolerance(x1[:n])):
+                    q1 = x1[:n] if np.isfinite(x1).all() else X[done, :n]
+                    failure = _failure_message(done, dt, it, r, float(integ.tolerance(q1)), max_iter)
                     break
                 X[done + 1] = x1
                 done += 1
@@ -181,7 +188,12 @@ def simulate(
         if report:
             sys.stderr.write("\n")
 
-    traj = _trajectory(integ, X[:done + 1], iters[:done], dt, pv, lib, status, failure, {
+    Y = _post(integ, X[:done + 1], dt, pv, lib)
+    unsound = _first_unsound_state(integ, Y, dt, alpha)
+    if unsound is not None:  # the first thing that went wrong, before any Newton failure
+        done, status, failure = unsound[0] - 1, unsound[1], unsound[2]
+        Y = Y[:done + 1]
+    traj = _trajectory(integ, X[:done + 1], Y, iters[:done], dt, pv, status, failure, {
         "scene": model.scene.name, "alpha": alpha, "dt": dt, "t_end": t_end, "inertia": model.inertia,
         "compiled": bool(compiled), "tol": tol, "max_iter": max_iter,
         "stats": {"steps": done, "build_s": build_s, "run_s": run_s,
@@ -247,32 +259,94 @@ def _failure_message(step: int, dt: float, iters: int, res: float, tol: float, m
             "Try a smaller dt, a more negative alpha (more numerical damping), or a larger max_iter.")
 
 
-def _diagnose(integ: HHT, x: np.ndarray, step: int, dt: float, p, d, tol: float, max_iter: int) -> str:
+def _diagnose(integ: HHT, x: np.ndarray, step: int, dt: float, p, d, max_iter: int) -> str:
     """Re-run a failed compiled step interpreted to report its iterations and residual."""
-    _, r, it = _interpreted_step(integ, x, step * dt, p, dt, d)
-    return _failure_message(step, dt, it, r, tol, max_iter)
+    x1, r, it = _interpreted_step(integ, x, step * dt, p, dt, d)
+    q = x1 if np.isfinite(x1).all() else x
+    return _failure_message(step, dt, it, r, float(integ.tolerance(q[:integ.model.n_dof])), max_iter)
 
 
-def _trajectory(integ: HHT, X: np.ndarray, iters: np.ndarray, dt: float, p: np.ndarray,
-                lib: CompiledLibrary | None, status: str, message: str, meta: dict) -> Trajectory:
+def _post(integ: HHT, X: np.ndarray, dt: float, p: np.ndarray, lib: CompiledLibrary | None) -> np.ndarray:
+    """``integ.post`` of every state X (k, nx) at t = 0, dt, ...: shape (k, n_post)."""
+    k = X.shape[0]
+    t = np.arange(k) * dt
+    if lib is None:
+        return np.array(integ.post.map(k)(X.T, ca.DM(t).T, p)).T
+    # compiled, CHUNK states per call; the last chunk padded with the last state
+    pad = -k % CHUNK
+    Xp, tp = np.vstack([X, np.repeat(X[-1:], pad, axis=0)]), np.concatenate([t, np.full(pad, t[-1])])
+    post = BufferedCall(lib[f"hht_post_{CHUNK}"])
+    Y = np.empty((k + pad, integ.post.nnz_out(0)))
+    pc = np.ascontiguousarray(p, dtype=float)
+    for i in range(0, k + pad, CHUNK):
+        post([Xp[i:i + CHUNK], tp[i:i + CHUNK], pc], [Y[i:i + CHUNK]])
+    return Y[:k]
+
+
+def _work(power: np.ndarray, dt: float) -> np.ndarray:
+    """Work of the loads (J) from their power (W) by the trapezoidal rule, from t = 0."""
+    return np.concatenate([[0.0], np.cumsum(0.5 * (power[1:] + power[:-1]) * dt)])
+
+
+def _first_unsound_state(integ: HHT, Y: np.ndarray, dt: float, alpha: float) -> tuple[int, str, str] | None:
+    """(index, status, message) of the first state that converged but is not a solution, or None.
+
+    Two failures that Newton does not see:
+
+    - ``element_range``: a beam element's co-rotational local rotation jumped by more than pi
+      between two states, i.e. passed +-pi and wrapped (it is an atan2, in (-pi, pi]): the element
+      is bent beyond the range of its formulation and its strain energy jumped.
+    - ``energy_growth``: the energy created by the integrator, E(t) - E(0) - W(t), exceeds
+      ENERGY_GROWTH of the energy in motion so far (max of T + V_el, plus max |W|). HHT with
+      alpha <= 0 conserves (alpha = 0) or dissipates energy on a resolved motion; growth of this
+      size is an unstable integration (modes with omega dt >> 1 pumped by the nonlinearity).
+    """
+    model = integ.model
+    n_out = len(model.output_names)
+    th = Y[:, 4 + n_out:]
+    k_wrap = None
+    if th.shape[1] and th.shape[0] > 1:
+        jump = np.abs(np.diff(th, axis=0)) > np.pi
+        if jump.any():
+            k = int(np.argmax(jump.any(axis=1)))
+            k_wrap = (k + 1, int(np.argmax(jump[k])))
+    T, Ve, Vg, power = Y[:, 0], Y[:, 1], Y[:, 2], Y[:, 3]
+    W = _work(power, dt)
+    created = T + Ve + Vg - (T[0] + Ve[0] + Vg[0]) - W
+    in_motion = np.maximum.accumulate(T + Ve) + np.maximum.accumulate(np.abs(W))
+    # round-off of E(t) - E(0): the gravity energy can carry a large constant offset
+    floor = 1e-10 * np.maximum.accumulate(np.abs(T) + np.abs(Ve) + np.abs(Vg) + np.abs(W)) + 1e-300
+    grew = created > ENERGY_GROWTH * in_motion + floor
+    k_grow = int(np.argmax(grew)) if grew.any() else None
+    if k_wrap is not None and (k_grow is None or k_wrap[0] <= k_grow):
+        k, j = k_wrap
+        name = model.local_rotation_names[j]
+        return k, "element_range", (
+            f"beam element {name.rsplit('.', 1)[0]}: its co-rotational local rotation at end "
+            f"{name.rsplit('.', 1)[1]} passed +-pi between t = {(k - 1) * dt:.6g} s and {k * dt:.6g} s "
+            f"({th[k - 1, j]:+.3f} -> {th[k, j]:+.3f} rad): the element is bent beyond the range of the "
+            "co-rotational formulation and its strain energy jumped. Use more elements per beam "
+            "(Beam.elements) or check the stiffness.")
+    if k_grow is not None:
+        k = k_grow
+        return k, "energy_growth", (
+            f"the total energy grew by {created[k]:.4g} J more than the loads supplied, by t = {k * dt:.6g} s "
+            f"({100 * created[k] / in_motion[k]:.0f} % of the energy in motion, {in_motion[k]:.4g} J): the "
+            f"integration is unstable (HHT alpha = {alpha:g} neither resolves nor damps the stiff modes at "
+            f"dt = {dt:g} s). Try a smaller dt or a more negative alpha (more numerical damping).")
+    return None
+
+
+def _trajectory(integ: HHT, X: np.ndarray, Y: np.ndarray, iters: np.ndarray, dt: float, p: np.ndarray,
+                status: str, message: str, meta: dict) -> Trajectory:
     model = integ.model
     n = model.n_dof
     k = X.shape[0]
     q, qd, qdd, lam = X[:, :n], X[:, n:2 * n], X[:, 2 * n:3 * n], X[:, 3 * n:]
     t = np.arange(k) * dt
-    if lib is None:
-        Y = np.array(integ.post.map(k)(X.T, ca.DM(t).T, p)).T
-    else:  # compiled, CHUNK states per call; the last chunk padded with the last state
-        pad = -k % CHUNK
-        Xp, tp = np.vstack([X, np.repeat(X[-1:], pad, axis=0)]), np.concatenate([t, np.full(pad, t[-1])])
-        post = BufferedCall(lib[f"hht_post_{CHUNK}"])
-        Y = np.empty((k + pad, integ.post.nnz_out(0)))
-        pc = np.ascontiguousarray(p, dtype=float)
-        for i in range(0, k + pad, CHUNK):
-            post([Xp[i:i + CHUNK], tp[i:i + CHUNK], pc], [Y[i:i + CHUNK]])
-        Y = Y[:k]
-    T, Ve, Vg, power, outputs = Y[:, 0], Y[:, 1], Y[:, 2], Y[:, 3], Y[:, 4:]
-    work = np.concatenate([[0.0], np.cumsum(0.5 * (power[1:] + power[:-1]) * dt)])
+    n_out = len(model.output_names)
+    T, Ve, Vg, power, outputs = Y[:, 0], Y[:, 1], Y[:, 2], Y[:, 3], Y[:, 4:4 + n_out]
+    work = _work(power, dt)
     total = T + Ve + Vg
     return Trajectory(
         t=t, q=q, qd=qd, qdd=qdd, lam=lam, dof_names=model.dof_names, constraint_names=model.constraint_names,

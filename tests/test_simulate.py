@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import shutil
 
 import numpy as np
@@ -79,6 +80,54 @@ def test_failure_as_data_without_raising(twobar):
     tr = simulate(twobar, 3.0, dt=0.3, max_iter=2, raise_on_failure=False)
     assert not tr.success and "Newton failed" in tr.message
     assert len(tr.t) < 11
+
+
+def _twobar_variant(*, e_scale: float = 1.0, shift: float = 0.0, elements: int = 1) -> casflex.Model:
+    base = casflex.load_scene("twobar")
+    return casflex.assemble(dataclasses.replace(
+        base, beams=tuple(dataclasses.replace(b, E=b.E * e_scale, elements=elements) for b in base.beams),
+        nodes=tuple(dataclasses.replace(n, x=n.x + shift) for n in base.nodes)))
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_an_element_bent_through_pi_stops_the_run(compiled):
+    # E x 1e-6, one element per bar: bar 2 folds until its local rotation wraps at t = 0.542 s;
+    # Newton converges through the wrap, the strain energy jumps, the result must not say success
+    tr = simulate(_twobar_variant(e_scale=1e-6), 1.0, dt=1e-3, compiled=compiled, raise_on_failure=False)
+    assert tr.status == "element_range" and not tr.success
+    assert "bar2.1" in tr.message and "+-pi" in tr.message and "t = 0.541 s" in tr.message
+    assert tr.t[-1] == pytest.approx(0.541)  # ends at the last state before the wrap
+    assert abs(tr.energies["dissipated"]).max() < 1e-5 * tr.energies["kinetic"].max()  # sound up to there (1.5e-6)
+    with pytest.raises(SimulationError, match="more elements"):
+        simulate(_twobar_variant(e_scale=1e-6), 1.0, dt=1e-3, compiled=compiled)
+
+
+def test_the_same_bending_on_a_finer_mesh_does_not_stop():
+    tr = simulate(_twobar_variant(e_scale=1e-6, elements=4), 0.7, dt=1e-3, raise_on_failure=False, compiled=True)
+    assert tr.success, tr.message
+
+
+def test_energy_growth_of_an_unstable_integration_stops_the_run():
+    # springs x 1e3, E x 1e-3, dt = 0.05 s at alpha = 0: every Newton step converges while the
+    # energy grows to ~10 x its physical scale (found by studies/extremes.py)
+    model = _twobar_variant(e_scale=1e-3)
+    tr = simulate(model, 3.0, dt=0.05, alpha=0.0, p=1e3 * model.p_nominal, raise_on_failure=False)
+    assert tr.status == "energy_growth" and "grew by" in tr.message and "smaller dt" in tr.message
+    E = tr.energies
+    in_motion = np.maximum.accumulate(E["kinetic"] + E["elastic"])
+    assert (-E["dissipated"] <= 0.5 * in_motion + 1e-9).all()  # the result stops before the growth
+    # the damped integrator on the same case is sound
+    assert simulate(model, 3.0, dt=0.05, alpha=-1 / 3, p=1e3 * model.p_nominal, raise_on_failure=False).success
+
+
+def test_a_scene_far_from_the_origin_runs_to_the_round_off_floor(twobar):
+    # 10 km from the origin the scaled residual cannot go below ~eps 1e4 = 2e-12 > tol = 1e-12
+    far = simulate(_twobar_variant(shift=1e4), 0.5, dt=1e-3)
+    near = simulate(twobar, 0.5, dt=1e-3)
+    assert far.success
+    dx = far.q - near.q
+    dx[:, 0::3] -= 1e4
+    assert np.abs(dx).max() < 1e-7  # the same motion, to the round-off of 1e4 m coordinates
 
 
 @pytest.mark.parametrize("kw, match", [

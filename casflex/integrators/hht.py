@@ -3,7 +3,7 @@
 One step from (q_n, q'_n, q''_n, lambda_n) at t_n to t_n + h solves, for q_{n+1} and
 lambda_{n+1} (Eqs. 4, 5):
 
-    r   = M_{n+1} q''_{n+1} + (1+alpha) F_{n+1} - alpha F_n - f_ext(t_alpha) = 0
+    r   = M(q_alpha) q''_{n+1} + (1+alpha) F_{n+1} - alpha F_n - f_ext(t_alpha) = 0
     r_P = (1+alpha) Phi(q_{n+1}) - alpha Phi(q_n) = 0
 
 with F = h(q, q') + f_int + B^T lambda - g, t_alpha = t_n + (1+alpha) h and the Newmark
@@ -11,6 +11,11 @@ relations (gamma = 1/2 - alpha, beta = (1 - alpha)^2 / 4)
 
     q''_{n+1} = (q_{n+1} - q_n - h q'_n - (1/2 - beta) h^2 q''_n) / (beta h^2)
     q'_{n+1}  = q'_n + h ((1 - gamma) q''_n + gamma q''_{n+1}).
+
+The mass matrix is taken at q_alpha = (1+alpha) q_{n+1} - alpha q_n, where the paper writes
+M_{n+1}: q''_{n+1} approximates the acceleration at t_alpha, and pairing it with the mass of
+q_{n+1} made the method first order for alpha < 0 once co-rotational masses rotate
+(docs/theory.md). At alpha = 0, or with a constant mass matrix, the two forms coincide.
 
 Newton (Eqs. 8-10) uses the exact Jacobian from AD (the paper drops the inertia derivatives).
 The unknowns and equations are scaled so that one dimensionless tolerance works for any
@@ -21,7 +26,8 @@ the unknowns are u = (q_{n+1} - q_guess)/l and mu = lambda / (d l) of the constr
 Newton stops when the scaled residual is below ``tol``, or when a Newton update is below
 0.01 sqrt(tol): in the quadratic regime the residual after that update is ~1e-4 tol, which
 saves the Jacobian evaluation that would only confirm convergence. Either way the step
-returns its final residual, recomputed, and the driver rejects any step above ``tol``.
+returns its final residual, recomputed, and the driver rejects any step above ``tol`` (raised to
+the round-off floor of far-off coordinates, :meth:`HHT.tolerance`).
 The Newton guess is the constant-acceleration predictor (q''_{n+1} = q''_n, lambda_{n+1} =
 lambda_n), better than the paper's q''_{n+1} = 0 (Eq. 6); the converged step is the same.
 
@@ -40,7 +46,10 @@ import numpy as np
 
 from casflex.model import Model
 
-__all__ = ["HHT", "hht_coefficients"]
+__all__ = ["HHT", "hht_coefficients", "ROUNDOFF_FLOOR"]
+
+#: The residual of a step is accepted down to ROUNDOFF_FLOOR * eps * max|q / l| (see HHT.tolerance).
+ROUNDOFF_FLOOR = 10.0
 
 
 def hht_coefficients(alpha: float) -> tuple[float, float]:
@@ -73,6 +82,7 @@ class HHT:
     tol: float = 1e-12
     max_iter: int = 25
     _fn: dict = field(default_factory=dict, init=False, repr=False)
+    _ell: np.ndarray = field(default=None, init=False, repr=False)  # characteristic length per dof
 
     def __post_init__(self) -> None:
         hht_coefficients(self.alpha)
@@ -99,6 +109,7 @@ class HHT:
         gamma, beta = hht_coefficients(self.alpha)
         a = self.alpha
         ell = np.where(m.is_rotation, 1.0, m.length_scale)
+        object.__setattr__(self, "_ell", ell)
         cdof = [c.dof for c in m.constraints]
         ell_c = ell[cdof] if nc else np.zeros(0)
 
@@ -121,7 +132,7 @@ class HHT:
         f_n = F(q0, qd0, lam0)
         phi_n = m.constraint(q0)[0]
         f_ext = m.load(t0 + (1 + a) * h, p)
-        prm = ca.vertcat(q_pred, qd_pred, f_n, phi_n, f_ext, p, h, d)
+        prm = ca.vertcat(q_pred, qd_pred, f_n, phi_n, f_ext, p, h, d, q0)
         z_guess = ca.vertcat(beta * h**2 * qdd0 / ell, lam0 / s_lam if nc else ca.SX(0, 1))
         self._fn["prepare"] = ca.Function("hht_prepare", [x0, t0, p, h, d], [z_guess, prm],
                                           ["x0", "t0", "p", "h", "d"], ["z0", "prm"], {"cse": True})
@@ -131,7 +142,7 @@ class HHT:
         o = 0
         parts = {}
         for key, size in (("q_pred", n), ("qd_pred", n), ("f_n", n), ("phi_n", nc), ("f_ext", n),
-                          ("p", m.n_p), ("h", 1), ("d", n)):
+                          ("p", m.n_p), ("h", 1), ("d", n), ("q0", n)):
             parts[key] = P[o:o + size]
             o += size
         hp, dp, pp = parts["h"], parts["d"], parts["p"]
@@ -143,7 +154,8 @@ class HHT:
         hh1, f_int1, g1 = m.forces(q1, qd1, pp)
         phi1, B1 = m.constraint(q1)
         f1 = hh1 + f_int1 + ca.mtimes(B1.T, lam1) - g1
-        r = ca.mtimes(m.mass(q1, pp), qdd1) + (1 + a) * f1 - a * parts["f_n"] - parts["f_ext"]
+        q_alpha = (1 + a) * q1 - a * parts["q0"]  # where q''_{n+1} and the weighted forces act
+        r = ca.mtimes(m.mass(q_alpha, pp), qdd1) + (1 + a) * f1 - a * parts["f_n"] - parts["f_ext"]
         r_phi = (1 + a) * phi1 - a * parts["phi_n"]
         G = ca.vertcat(r / (dp * ell), r_phi / ell_c if nc else ca.SX(0, 1))
         cse = {"cse": True}  # common subexpression elimination: ~20 % fewer operations
@@ -193,7 +205,8 @@ class HHT:
         qx, qdx, lamx = xs[:n], xs[n:2 * n], xs[3 * n:]
         T, Ve, Vg = m.energy(qx, qdx, p)
         power = ca.dot(m.load(ts, p), qdx)
-        self._fn["post"] = ca.Function("hht_post", [xs, ts, p], [ca.vertcat(T, Ve, Vg, power, m.outputs(qx, lamx, p))],
+        post = ca.vertcat(T, Ve, Vg, power, m.outputs(qx, lamx, p), m.local_rotations(qx))
+        self._fn["post"] = ca.Function("hht_post", [xs, ts, p], [post],
                                        ["x", "t", "p"], ["y"], {"cse": True})
 
         # The step's exact derivative by the implicit-function theorem, written out: with
@@ -232,6 +245,18 @@ class HHT:
                                        ["x0", "t0", "p", "h", "d"], ["x1", "res"],
                                        {"custom_jacobian": jac, "jac_penalty": 0})
 
+    def tolerance(self, q: np.ndarray) -> np.ndarray:
+        """Largest accepted scaled residual of a step ending at q, shape (n_dof,) or (k, n_dof).
+
+        ``tol``, raised to the round-off floor of the coordinates: the residual of a step at
+        positions of magnitude |q| cannot be computed below ~eps |q| / l (the elastic forces
+        are differences of nearly equal coordinates), so a scene translated 10 km from the
+        origin would otherwise fail every step at tol = 1e-12.
+        """
+        q = np.asarray(q, dtype=float)
+        floor = ROUNDOFF_FLOOR * np.finfo(float).eps * np.abs(q / self._ell).max(axis=-1)
+        return np.maximum(self.tol, floor)
+
     # -- public Functions --------------------------------------------------------------------
     @property
     def step(self) -> ca.Function:
@@ -251,7 +276,8 @@ class HHT:
     @property
     def post(self) -> ca.Function:
         """``hht_post(x, t, p) -> y``: [kinetic, elastic, gravity energy (J), power of the loads (W),
-        joint outputs (``model.output_names``)] of one state."""
+        joint outputs (``model.output_names``), local rotations of the beam elements (rad,
+        ``model.local_rotation_names``)] of one state."""
         return self._fn["post"]
 
     @property
