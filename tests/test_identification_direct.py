@@ -110,3 +110,20 @@ def test_solver_without_hessian_option_falls_back_with_a_warning(twobar, sim):
         r = identify_direct(twobar, sim, [0.69], start=0.8, solver="sleqp", hessian="gauss-newton")
     assert len(rec) == 1
     np.testing.assert_allclose(r.p, twobar.p_nominal, rtol=1e-6)
+
+
+def test_objective_is_the_residual_at_the_reported_parameters(twobar, sim):
+    # recomputed from Eq. 11 through the model at the reported p and multipliers, after the polish
+    rng = np.random.default_rng(5)
+    noisy = MeasurementSet(sim.t, sim.channels, sim.q, sim.qd, sim.qdd + rng.normal(0, 1e-2, sim.qdd.shape))
+    instants = [0.5, 1.3, 2.1]
+    r = identify_direct(twobar, noisy, instants)
+    fs = r.extra["force_scale"]
+    f = 0.0
+    for t, lam in zip(instants, r.multipliers, strict=True):
+        i = noisy.index(t)
+        z, phi = (np.array(v).ravel() for v in twobar.equilibrium(noisy.q[i], noisy.qd[i], noisy.qdd[i], lam, t, r.p))
+        f += 0.5 * float(z @ z) / fs**2 + 0.5 * float(phi @ phi)
+    assert r.objective == pytest.approx(f, rel=1e-6)
+    assert set(r.extra["solver_parameters"]) == set(r.parameters)
+    assert 0.0 < r.extra["solver_s"] <= r.wall_solve_s

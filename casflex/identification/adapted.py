@@ -196,8 +196,10 @@ def identify_adapted_direct(
 
     t_solve = time.perf_counter()
     sol = S(x0=w0, lbx=lbw, ubx=ubw)
+    solver_s = time.perf_counter() - t_solve
     st = S.stats()
-    wv, polished = gauss_newton_polish(zJ, np.array(sol["x"]).ravel(), lbw, ubw)
+    w_solver = np.array(sol["x"]).ravel()
+    wv, polished = gauss_newton_polish(zJ, w_solver, lbw, ubw)
     solve_s = time.perf_counter() - t_solve
 
     zv, Jv = (np.array(v) for v in zJ(wv))
@@ -220,6 +222,7 @@ def identify_adapted_direct(
         instants=[t for _, t, _ in samples], multipliers=lam_v.reshape(len(samples), n_c).tolist(),
         extra={"transform": transform, "hessian": hessian, "compiled": compiled,
                "force_scale": fs, "residual_norm": float(np.linalg.norm(zv) * fs),
-               "gauss_newton_polish": polished,
+               "gauss_newton_polish": polished, "solver_s": solver_s,
+               "solver_parameters": dict(zip(names, pmap.p(w_solver[:n_p]).tolist(), strict=True)),
                "rotations": rotations, "ignored_channels": ignored, "rate_scale": om},
     )

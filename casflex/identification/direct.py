@@ -120,10 +120,11 @@ def identify_direct(
 
     t_solve = time.perf_counter()
     sol = S(x0=w0, lbx=lbw, ubx=ubw)
-    solve_s = time.perf_counter() - t_solve
+    solver_s = time.perf_counter() - t_solve
     st = S.stats()
-    wv = np.array(sol["x"]).ravel()
-    wv, polished = gauss_newton_polish(zJ, wv, lbw, ubw)
+    w_solver = np.array(sol["x"]).ravel()
+    wv, polished = gauss_newton_polish(zJ, w_solver, lbw, ubw)
+    solve_s = time.perf_counter() - t_solve
     zv, Jv = (np.array(v) for v in zJ(wv))
     p_hat = pmap.p(wv[:n_p])
     stats = gauss_newton_statistics(Jv, zv.ravel(), n_p, model.parameter_names, pmap.dp_dtheta(wv[:n_p]), p_hat)
@@ -131,14 +132,15 @@ def identify_direct(
     lams = [list(wv[n_p + i * n_c:n_p + (i + 1) * n_c] * fs) for i in range(len(samples))]
     at_bound = bound_flags(model, p_hat, scale)
     extra = {"transform": transform, "hessian": hessian, "compiled": compiled,
-             "force_scale": fs, "residual_norm": float(np.linalg.norm(zv) * fs), "gauss_newton_polish": polished}
+             "force_scale": fs, "residual_norm": float(np.linalg.norm(zv) * fs), "gauss_newton_polish": polished,
+             "solver_s": solver_s, "solver_parameters": dict(zip(names, pmap.p(w_solver[:n_p]).tolist(), strict=True))}
     if w_lin is not None:
         extra["linear_solution"] = dict(zip(names, (w_lin[:n_p] * scale).tolist(), strict=True))
     return IdentificationResult(
         method="direct", solver=solver, parameters=dict(zip(names, p_hat.tolist(), strict=True)),
         start=dict(zip(names, p0.tolist(), strict=True)), success=bool(st.get("success", False)),
         status=str(st.get("return_status", "unknown")), message="", iterations=int(st.get("iter_count", -1)),
-        wall_build_s=build_s, wall_solve_s=solve_s, objective=float(sol["f"]),
+        wall_build_s=build_s, wall_solve_s=solve_s, objective=0.5 * float(zv.ravel() @ zv.ravel()),
         std_errors=stats.pop("std_errors"), correlation=stats.pop("correlation"), at_bound=at_bound,
         identifiability=stats, instants=[float(t) for t, *_ in samples], multipliers=lams, extra=extra,
     )

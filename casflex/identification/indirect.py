@@ -294,6 +294,7 @@ def identify_indirect(
 
     t_solve = time.perf_counter()
     sol = nlp(x0=w0, lbx=lbw, ubx=ubw, lbg=0.0, ubg=0.0)
+    solver_s = time.perf_counter() - t_solve
     st = nlp.stats()
     wv = np.array(sol["x"]).ravel()
     th_v, polished = gauss_newton_polish(ss, wv[:n_p], lb_th, ub_th, polish)
@@ -324,7 +325,7 @@ def identify_indirect(
                "transcription": transcription, "residue": residue, "dofs": names,
                "weights": list(weights), "steps": N, "dt": h, "intervals": M, "samples": int(steps.size),
                "constraint_violation": float(np.abs(np.array(sol["g"])).max()) if M > 1 else 0.0,
-               "gauss_newton_polish": polished, "solver_parameters": dict(zip(pn, pmap.p(wv[:n_p]).tolist(),
-                                                                            strict=True))},
+               "gauss_newton_polish": polished, "solver_s": solver_s,
+               "solver_parameters": dict(zip(pn, pmap.p(wv[:n_p]).tolist(), strict=True))},
     )
 

@@ -343,7 +343,10 @@ class IdentificationResult:
     parameters: identified values {name: value} (units of the scene's parameters);
     std_errors, correlation, rank, condition: Gauss-Newton statistics at the solution
     (``identifiability`` holds the full report); multipliers: lambda at each instant;
-    wall_build_s / wall_solve_s: problem construction and solver time (s).
+    wall_build_s / wall_solve_s: problem construction and solve time (s), the solve being the NLP
+    solver and the Gauss-Newton polish; ``extra`` holds the solver's own time (``solver_s``) and
+    parameters before the polish (``solver_parameters``); objective: 1/2 |residual|^2 at the
+    reported parameters (after the polish).
     """
 
     method: str
