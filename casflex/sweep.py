@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import functools
 import json
-import math
 import os
 import re
 import sys
@@ -150,7 +149,7 @@ def run_sweep(runs: Iterable[Run], record: str | os.PathLike[str], *, scheduler:
                     out = fut.result()
                 except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker: the run crashed its worker process
                     out = {"error": f"{type(exc).__name__}: {exc}"}
-                atomic_write_json(rec / f"{key}.json", _jsonable(out))
+                atomic_write_json(rec / f"{key}.json", out)
                 results[key] = out
                 executed.append(key)
                 if report:
@@ -171,20 +170,6 @@ def _text_progress(done: int, total: int, key: str) -> None:
     if done >= total:
         sys.stderr.write("\n")
     sys.stderr.flush()
-
-
-def _jsonable(x: Any) -> Any:
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, (float, np.floating)):
-        return float(x) if math.isfinite(x) else str(float(x))
-    if isinstance(x, np.integer):
-        return int(x)
-    return x
 
 
 @functools.lru_cache(maxsize=8)

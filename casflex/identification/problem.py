@@ -383,7 +383,7 @@ class IdentificationResult:
 
     def save(self, path: str | os.PathLike[str]) -> Path:
         """Write the result as JSON, atomically."""
-        return atomic_write_json(path, _jsonable(self.to_dict()))
+        return atomic_write_json(path, self.to_dict())
 
     def summary(self) -> str:
         lines = [f"{self.method} identification with {self.solver}: {self.status} in {self.iterations} iterations "
@@ -401,17 +401,3 @@ class IdentificationResult:
         if self.message:
             lines.append(f"  note: {self.message}")
         return "\n".join(lines)
-
-
-def _jsonable(x: Any) -> Any:
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, (np.floating, float)):
-        return float(x) if math.isfinite(x) else str(float(x))
-    if isinstance(x, np.integer):
-        return int(x)
-    return x
