@@ -275,21 +275,26 @@ class Load:
         return self.table if self.table is not None else ((0.0, self.fx, self.fy, self.mz),)
 
 
+#: Fields whose parameters get a lower bound of 0 by default: no physical value is negative.
+NONNEGATIVE_FIELDS = frozenset({"k", "kt", "E", "A", "I", "rho", "rest_length"})
+
+
 @dataclass(frozen=True)
 class Parameter:
     """A scene property declared as an identification parameter.
 
     ``target`` names the property as ``"<element>.<field>"`` (e.g. ``"spring1.k"``), or
     ``"gravity.<x|y>"`` or ``"<load>.<fx|fy|mz>"``. Its nominal value is the property's value in
-    the scene. ``lower``/``upper`` bound it (defaults -inf and +inf; give ``lower = 0`` for a
-    stiffness); the nominal value must lie within them. ``scale`` is the typical magnitude used
-    to scale the NLP (default: the nominal).
+    the scene. ``lower``/``upper`` bound it; the nominal value must lie within them. The default
+    lower bound is 0 for properties that are non-negative by nature (``NONNEGATIVE_FIELDS``:
+    stiffnesses, section, density, rest length), else -inf; the default upper bound is +inf.
+    ``scale`` is the typical magnitude used to scale the NLP (default: the nominal).
     """
 
     name: str
     target: str
     unit: str = ""
-    lower: float = -math.inf
+    lower: float | None = None
     upper: float = math.inf
     scale: float | None = None
 
@@ -301,6 +306,9 @@ class Parameter:
             raise SceneError.at(where, "target", f"expected '<element>.<field>', e.g. 'spring1.k', got {target!r}")
         if not isinstance(self.unit, str):
             raise SceneError.at(where, "unit", f"expected a string, got {self.unit!r}")
+        if self.lower is None:
+            field_ = target.partition(".")[2]
+            object.__setattr__(self, "lower", 0.0 if field_ in NONNEGATIVE_FIELDS else -math.inf)
         for f in ("lower", "upper"):
             v = getattr(self, f)
             if isinstance(v, bool) or not isinstance(v, (int, float)):

@@ -164,6 +164,8 @@ def _table_lines(obj: Any) -> list[str]:
         v = getattr(obj, f.name)
         if v is None or (f.default is not MISSING and v == f.default and f.name != "kind"):
             continue
+        if isinstance(obj, Parameter) and f.name == "lower" and v == Parameter(obj.name, obj.target).lower:
+            continue  # the default bound of this target
         lines.append(f"{f.name} = {_toml_value(v)}")
     return lines
 

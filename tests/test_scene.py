@@ -119,7 +119,9 @@ def test_defaults():
     assert TorsionSpring("t", ("a", "b"), 1.0).rest_angle is None
     assert Support("s", "a").kind == "clamp"
     p = Parameter("p", "s.k")
-    assert (p.unit, p.lower, p.upper, p.scale) == ("", -math.inf, math.inf, None)
+    assert (p.unit, p.lower, p.upper, p.scale) == ("", 0.0, math.inf, None)  # a stiffness is >= 0
+    assert Parameter("g", "gravity.y").lower == Parameter("a", "t.rest_angle").lower == -math.inf
+    assert Parameter("e", "b.E", lower=-1.0).lower == -1.0  # given bounds are kept
     r = RunSettings()
     assert (r.t_end, r.dt, r.alpha, r.inertia) == (3.0, 1e-3, -0.05, "lagrange")
     assert small().gravity == (0.0, -9.81)

@@ -470,7 +470,7 @@ def test_everything_scene_loads_as_written():
     assert isinstance(ramp, Load) and ramp.table[2] == (1.5, 5.0, -10.0, 1.0)
     assert s.item("const_b").rows() == ((0.0, 1.0, -2.0, 0.3),)
     assert s.parameter("k_bc").upper == math.inf and s.parameter("g_y").lower == -math.inf
-    assert s.parameter("L_bc").lower == -math.inf  # default bounds
+    assert s.parameter("L_bc").lower == 0.0  # default bound of a rest length
     assert s.property_value("bc.rest_length") == pytest.approx(math.hypot(1.0, 0.5))  # default: initial distance
     assert s.property_value("tbc.rest_angle") == pytest.approx(-0.1)  # default: initial relative rotation
     assert s.property_value("gravity.y") == -9.81 and s.property_value("const_b.fx") == 1.0
