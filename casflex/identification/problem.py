@@ -274,7 +274,9 @@ def least_squares_nlp(name: str, solver: str, w: Any, r: Any, g: Any = None, *, 
     nlp = {"x": w, "f": 0.5 * f_scale * ca.sumsqr(r), "g": g}
     # IPOPT and its kin take the upper triangle, the SQP methods the whole symmetric matrix;
     # some plugins (fatrop, uno, sleqp, alpaqa, blocksqp, ...) take no Hessian at all
-    attempts = [True, False, None] if hess is not None else [None]
+    # (tried in that order, the likely form first: each attempt may cost a compile)
+    first_full = solver in ("sqpmethod", "feasiblesqpmethod", "scpgen")
+    attempts = ([False, True, None] if first_full else [True, False, None]) if hess is not None else [None]
     no_hessian = False
     for triu in attempts:
         if no_hessian and triu is not None:
