@@ -37,7 +37,7 @@ __all__ = ["simulate", "SimulationError", "integrator_for", "CHUNK"]
 #: Steps per compiled call: progress and Ctrl-C are handled between chunks.
 CHUNK = 250
 #: A run fails when the integrator has created this fraction of the energy in motion.
-ENERGY_GROWTH = 0.5
+ENERGY_GROWTH = 0.1
 
 _INTEGRATORS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _LIBRARIES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
