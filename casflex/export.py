@@ -220,6 +220,10 @@ def _readme(model: Model, funcs: list[ca.Function], what: str, alpha: float, dt:
         ins = ", ".join(f"{f.name_in(i)}[{f.size1_in(i)}x{f.size2_in(i)}]" for i in range(f.n_in()))
         outs = ", ".join(f"{f.name_out(i)}[{f.size1_out(i)}x{f.size2_out(i)}]" for i in range(f.n_out()))
         lines.append(f"- `{f.name()}({ins}) -> ({outs})`")
+    if any(f.name() == "hht_post" for f in funcs):
+        lines += ["", "`hht_post` y = [kinetic, elastic, gravity energy (J), power of the loads (W), joint outputs ("
+                  + ", ".join(model.output_names) + "), local rotations of the beam elements in rad ("
+                  + ", ".join(model.local_rotation_names) + ")]."]
     lines += ["", "Outputs are column-major and dense unless the header's sparsity says otherwise "
               "(see `<name>_sparsity_out`).", ""]
     return "\n".join(lines)
