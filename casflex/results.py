@@ -58,6 +58,8 @@ def jsonable(x: Any) -> Any:
         return float(x) if math.isfinite(x) else str(float(x))
     if isinstance(x, np.integer):
         return int(x)
+    if isinstance(x, np.bool_):
+        return bool(x)
     return x
 
 

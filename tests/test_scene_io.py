@@ -509,10 +509,6 @@ def test_round_trip_after_with_values():
 
 
 def test_save_scene_round_trip(tmp_path):
-    try:
-        from casflex.results import atomic_write_text  # noqa: F401 - written in parallel by another engineer
-    except ImportError:
-        pytest.skip("casflex.results.atomic_write_text is not available yet")
     scene = loads_scene(EVERYTHING)
     path = tmp_path / "sub" / "everything.toml"
     path.parent.mkdir()

@@ -1,0 +1,40 @@
+"""casflex.results: atomic writes and JSON conversion."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from casflex.results import atomic_write_bytes, atomic_write_json, jsonable
+
+
+def test_jsonable_converts_numpy_and_non_finite_values():
+    obj = {1: np.arange(3), "f": np.float32(0.5), "i": np.int64(7), "b": np.bool_(True),
+           "t": (math.nan, -math.inf, 2.0), "nested": [{"x": np.array([[1.0, math.inf]])}]}
+    out = jsonable(obj)
+    assert out == {"1": [0, 1, 2], "f": 0.5, "i": 7, "b": True, "t": ["nan", "-inf", 2.0],
+                   "nested": [{"x": [[1.0, "inf"]]}]}
+    json.dumps(out, allow_nan=False)  # strict JSON
+
+
+def test_atomic_write_json_round_trip(tmp_path):
+    path = atomic_write_json(tmp_path / "sub" / "r.json", {"p": np.array([1.5, 2.5]), "ok": np.bool_(False)})
+    assert json.loads(path.read_text()) == {"p": [1.5, 2.5], "ok": False}
+    assert [p.name for p in path.parent.iterdir()] == ["r.json"]
+
+
+def test_an_interrupted_write_leaves_the_old_file_and_no_temporary(tmp_path, monkeypatch):
+    path = tmp_path / "a.bin"
+    atomic_write_bytes(path, b"old")
+
+    def interrupted(fd):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("os.fsync", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        atomic_write_bytes(path, b"new")
+    assert path.read_bytes() == b"old"
+    assert [p.name for p in tmp_path.iterdir()] == ["a.bin"]
