@@ -224,6 +224,9 @@ def identify_indirect(
     xs = np.maximum(xs, np.abs(G).max(axis=0))
     xs[xs == 0] = 1.0
     d = np.array(integ.scale(model.q0, model.qd0, p0, h)).ravel()
+    # a step converged when its residual is within newton_tol, or the round-off floor of the
+    # scene's coordinates where that is higher (see HHT.tolerance)
+    tol_acc = float(np.max(integ.tolerance(G[:, :n])))
 
     th = ca.MX.sym("theta", n_p)
     p = pmap.p(th)
@@ -284,7 +287,7 @@ def identify_indirect(
     Xf, Rf = (X, R) if transcription == "single-shooting" else simulate_from([x0], [N], [0])
     ss_r = residue_of(Xf)
     # NaN where a step's Newton did not converge, so that the polish rejects such a step
-    ss_ok = ca.if_else(ca.mmax(Rf) <= newton_tol, ss_r, np.nan * ss_r)
+    ss_ok = ca.if_else(ca.mmax(Rf) <= tol_acc, ss_r, np.nan * ss_r)
     ss_all = ca.Function("ss_residue", [th], [ss_ok, ca.jacobian(ss_r, th), ss_r], jit_options() if compiled else {})
 
     def ss(t: np.ndarray) -> list:
@@ -308,11 +311,11 @@ def identify_indirect(
     # states over the window at the identified parameters: multipliers (joint reactions)
     xr = ca.Function("states", [th], [Xf, ca.mmax(Rf)])
     Xv, newton_res = np.array(xr(th_v)[0]), float(xr(th_v)[1])
-    converged = bool(newton_res <= newton_tol and np.isfinite(Xv).all())
+    converged = bool(newton_res <= tol_acc and np.isfinite(Xv).all())
     pn = model.parameter_names
     success = bool(st.get("success", False)) and converged
     message = "" if converged else (f"HHT Newton did not converge within the horizon at the identified parameters "
-                                    f"(largest scaled residual {newton_res:.3g} > tol {newton_tol:g})")
+                                    f"(largest scaled residual {newton_res:.3g} > tol {tol_acc:g})")
     return IdentificationResult(
         method="indirect", solver=solver, parameters=dict(zip(pn, p_hat.tolist(), strict=True)),
         start=dict(zip(pn, p0.tolist(), strict=True)), success=success,
