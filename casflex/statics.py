@@ -48,6 +48,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from casflex.integrators.hht import ROUNDOFF_FLOOR
 from casflex.model import Model
 
 __all__ = ["StaticsError", "ModesError", "StaticResult", "ModesResult", "equilibrium", "modes"]
@@ -239,7 +240,9 @@ def equilibrium(
             step = float(np.max(np.abs(du), initial=0.0))
             dz = du * col
             q, lam = q + dz[:n], lam + dz[n:]
-            if res <= tol and step <= step_tol:
+            # the round-off floor of far-off coordinates, as in HHT.tolerance
+            tol_k = max(tol, ROUNDOFF_FLOOR * np.finfo(float).eps * float(np.max(np.abs(q / ell), initial=0.0)))
+            if res <= tol_k and step <= step_tol:
                 converged = True
                 break
         if not converged:
@@ -251,12 +254,12 @@ def equilibrium(
             raise StaticsError(
                 f"static equilibrium did not converge at load factor {s:.4g} (step {k + 1}/{steps}) after "
                 f"{max_iter} Newton iterations in that step ({total} in all): scaled residual norm {res:.3e} "
-                f"(tol {tol:.1e}), last scaled Newton update {step:.3e} (tol {step_tol:.1e}). "
+                f"(tol {tol_k:.1e}), last scaled Newton update {step:.3e} (tol {step_tol:.1e}). "
                 f"Try more load steps (e.g. steps={4 * steps}), a larger max_iter, "
                 f"or a q_start closer to the solution.{hint}"
             )
-    msg = (f"converged: {total} Newton iterations in {steps} load steps; last scaled residual {res:.2e} <= {tol:.1e}, "
-           f"last scaled update {step:.2e} <= {step_tol:.1e}")
+    msg = (f"converged: {total} Newton iterations in {steps} load steps; last scaled residual {res:.2e} "
+           f"<= {tol_k:.1e}, last scaled update {step:.2e} <= {step_tol:.1e}")
     return StaticResult(q=q, lam=lam, success=True, message=msg, iterations=total, load_factors=factors)
 
 
