@@ -1,0 +1,43 @@
+"""Figure plumbing shared by every plot: an Agg figure outside pyplot, atomic saving, release.
+
+:func:`_new_figure` builds a :class:`matplotlib.figure.Figure` on its own Agg canvas (nothing
+depends on, or changes, pyplot's global state or the interactive backend); :func:`_save` renders
+it into memory and writes it with :func:`casflex.results.atomic_write_bytes` (format from the
+file suffix, PNG by default).
+"""
+
+from __future__ import annotations
+
+import io
+import os
+from pathlib import Path
+
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from casflex.results import atomic_write_bytes
+
+#: Resolution of saved PNG figures (dots per inch).
+DPI = 120
+
+
+def _new_figure(figsize: tuple[float, float]) -> Figure:
+    fig = Figure(figsize=figsize, layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _save(fig: Figure, path: str | os.PathLike[str] | None, dpi: float = DPI) -> None:
+    """Render ``fig`` into memory and write it atomically to ``path`` (format from the suffix)."""
+    if path is None:
+        return
+    path = Path(path)
+    fmt = path.suffix.lstrip(".").lower() or "png"
+    buf = io.BytesIO()
+    fig.savefig(buf, format=fmt, dpi=dpi)
+    atomic_write_bytes(path, buf.getvalue())
+
+
+def _close(fig: Figure) -> None:
+    """Drop a figure's artists (figures are not registered anywhere, so this only frees memory sooner)."""
+    fig.clear()

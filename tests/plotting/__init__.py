@@ -1,0 +1,1 @@
+"""Tests of :mod:`casflex.plotting`, one file per module of the package."""

@@ -1,0 +1,43 @@
+"""casflex.plotting.configuration: drawings of a configuration (new figure or given axes), legend
+entries, node positions, and the check of q."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import pendulum
+from matplotlib.figure import Figure
+
+import casflex
+from casflex import plotting
+
+from .helpers import assert_png, legend_texts
+
+
+def test_plot_configuration(twobar, tmp_path):
+    model, tr = twobar
+    path = tmp_path / "config.png"
+    fig = plotting.plot_configuration(model, tr.q[-1], path=path)
+    assert_png(path)
+    ax = fig.axes[0]
+    assert ax.get_aspect() == 1.0
+    assert ax.get_xlabel() == "x (m)" and ax.get_ylabel() == "y (m)"
+    assert legend_texts(ax) == ["beam", "spring", "torsion spring", "node", "clamp"]
+    nodes = next(line for line in ax.lines if line.get_label() == "node")
+    np.testing.assert_allclose(nodes.get_xdata(), tr.q[-1, 0::3])
+    # into a given axes
+    fig2 = Figure()
+    ax2 = fig2.add_subplot()
+    assert plotting.plot_configuration(model, None, ax2, legend=False) is fig2
+    assert ax2.get_legend() is None and len(ax2.lines) == len(ax.lines)
+    with pytest.raises(ValueError, match="q: expected 15 values"):
+        plotting.plot_configuration(model, np.zeros(3))
+
+
+def test_plot_configuration_mesh_and_pin(tmp_path):
+    model = casflex.assemble(pendulum(4))
+    fig = plotting.plot_configuration(model, path=tmp_path / "p.png")
+    ax = fig.axes[0]
+    assert legend_texts(ax) == ["beam", "node", "pin"]
+    mesh = next(line for line in ax.lines if line.get_label() == "_mesh node")
+    assert len(mesh.get_xdata()) == 3
