@@ -32,7 +32,7 @@ from casflex.model import Model, assemble
 from casflex.results import Trajectory
 from casflex.scene import Scene
 
-__all__ = ["simulate", "SimulationError", "integrator_for", "CHUNK"]
+__all__ = ["simulate", "SimulationError", "integrator_for", "CHUNK", "ENERGY_GROWTH"]
 
 #: Steps per compiled call: progress and Ctrl-C are handled between chunks.
 CHUNK = 250
