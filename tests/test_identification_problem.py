@@ -45,3 +45,13 @@ def test_polish_keeps_a_non_finite_start():
     assert taken == 0 and np.isnan(w[0])
     w, taken = gauss_newton_polish(zJ, np.array([3.0]), np.array([-np.inf]), np.array([np.inf]))
     assert taken == 1 and w[0] == 1.0
+
+
+def test_polish_returns_a_point_inside_the_bounds():
+    # least squares optimum at w = -1, below the bound 0: IPOPT stops a relaxed hair outside
+    def zJ(w):
+        return np.array([w[0] + 1.0, w[1] - 2.0]), np.eye(2)
+
+    w, taken = gauss_newton_polish(zJ, np.array([-3e-9, 1.5]), np.array([0.0, -np.inf]), np.array([np.inf, np.inf]))
+    assert w[0] == 0.0  # at its bound, not outside it; the step towards -1 is refused
+    assert taken == 0  # the full Gauss-Newton step leaves the bounds, so none is taken

@@ -318,8 +318,11 @@ def gauss_newton_polish(zJ: Any, w: np.ndarray, lb: np.ndarray, ub: np.ndarray,
     the bounds and lower the objective: an interior-point solver stops a barrier-size distance
     (~1e-8 relative here) from the least-squares optimum of weakly determined parameters.
 
-    zJ: w -> (z, dz/dw). Returns the polished w and the number of steps taken."""
+    zJ: w -> (z, dz/dw). Returns the polished w and the number of steps taken. w is first put
+    back inside [lb, ub]: IPOPT relaxes the bounds slightly (``bound_relax_factor``), so a
+    parameter pinned at a bound such as a stiffness of 0 comes back just outside it."""
     taken = 0
+    w = np.minimum(np.maximum(w, lb), ub)
     if not np.isfinite(w).all():  # the solver failed: nothing to polish
         return w, 0
     z, J = (np.array(v) for v in zJ(w))
