@@ -9,10 +9,15 @@ leave a broken file behind.
 bitwise identical to CasADi's interpreted evaluation on x86-64. ``-march=native`` (where the
 compiler accepts it) makes twobar's compiled simulation ~15 % faster; as the library is then
 tied to the processor, the processor's description is part of the cache key.
+
+CasADi's own JIT, which compiles an identification NLP's functions (``compiled=True``), is set
+up by :func:`jit_options` in a per-process scratch directory.
 """
 
 from __future__ import annotations
 
+import atexit
+import contextlib
 import functools
 import hashlib
 import os
@@ -21,13 +26,17 @@ import shutil
 import subprocess
 import tempfile
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import casadi as ca
 import numpy as np
 
-__all__ = ["BufferedCall", "CompiledLibrary", "compile_functions", "generate_c", "cache_dir", "CodegenError", "CFLAGS"]
+from casflex.results import atomic_write_text
+
+__all__ = ["BufferedCall", "CompiledLibrary", "compile_functions", "generate_c", "cache_dir", "CodegenError", "CFLAGS",
+           "jit_options", "jit_working_directory"]
 
 CFLAGS = ("-O3", "-ffp-contract=off", "-fPIC", "-shared")
 
@@ -99,13 +108,19 @@ def _compiler() -> str:
 
 @functools.lru_cache(maxsize=4)
 def _native_flags(cc: str) -> tuple[str, ...]:
-    """("-march=native",) if ``cc`` accepts it, else ()."""
+    """("-march=native",) if ``cc`` accepts it, else (); probed once per compiler and processor
+    (a compile of ~35 ms), the answer kept in the cache directory."""
+    note = cache_dir() / f"native-{hashlib.sha256((cc + _processor()).encode()).hexdigest()[:16]}.txt"
+    if note.is_file():
+        return tuple(note.read_text().split())
     with tempfile.TemporaryDirectory(prefix="casflex-cc-") as tmp:
         src = Path(tmp) / "t.c"
         src.write_text("int f(void) { return 0; }\n")
         proc = subprocess.run([cc, "-march=native", "-c", str(src), "-o", str(Path(tmp) / "t.o")],
                               capture_output=True)
-    return ("-march=native",) if proc.returncode == 0 else ()
+    flags = ("-march=native",) if proc.returncode == 0 else ()
+    atomic_write_text(note, " ".join(flags))
+    return flags
 
 
 @functools.lru_cache(maxsize=1)
@@ -147,3 +162,37 @@ def compile_functions(functions: list[ca.Function], *, stem: str = "casflex") ->
             os.replace(tmp_target, target)
     loaded = {f.name(): ca.external(f.name(), str(target)) for f in functions}
     return CompiledLibrary(target, loaded, time.perf_counter() - t0, cached)
+
+
+# -- CasADi's JIT (identification NLPs) ----------------------------------------------------
+@functools.cache
+def _jit_directory() -> str:
+    """One scratch directory per process for the JIT's sources and objects (never the user's
+    working directory), removed at exit; a loaded library survives the removal of its file."""
+    path = tempfile.mkdtemp(prefix="casflex-jit-")
+    atexit.register(shutil.rmtree, path, True)
+    return path
+
+
+@contextlib.contextmanager
+def jit_working_directory(active: bool) -> Iterator[None]:
+    """Run a block in the JIT scratch directory: CasADi 3.8 writes the source of an nlpsol's
+    JIT-compiled oracle to the working directory whatever the compiler's ``directory`` option
+    says (plain Functions honour it). Not thread-safe: the working directory is per process."""
+    if not active:
+        yield
+        return
+    old = os.getcwd()
+    os.chdir(_jit_directory())
+    try:
+        yield
+    finally:
+        os.chdir(old)
+
+
+def jit_options() -> dict:
+    """Function/nlpsol options that generate C for every function the solver calls and compile
+    it with the system compiler (CasADi's 'shell' JIT)."""
+    return {"jit": True, "compiler": "shell", "jit_name": "casflex_jit",
+            "jit_options": {"compiler": _compiler(), "flags": ["-O1"], "verbose": False,
+                            "directory": _jit_directory()}}

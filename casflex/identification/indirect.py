@@ -42,6 +42,7 @@ from collections.abc import Sequence
 import casadi as ca
 import numpy as np
 
+from casflex.codegen import jit_options
 from casflex.data import MeasurementSet
 from casflex.identification.problem import (
     IdentificationResult,
@@ -49,7 +50,6 @@ from casflex.identification.problem import (
     bound_flags,
     gauss_newton_polish,
     gauss_newton_statistics,
-    jit_options,
     least_squares_nlp,
     start_values,
 )

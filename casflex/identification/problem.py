@@ -3,15 +3,9 @@ the Gauss-Newton statistics (standard errors, correlations, identifiability)."""
 
 from __future__ import annotations
 
-import atexit
-import contextlib
-import functools
 import math
 import os
-import shutil
-import tempfile
 import warnings
-from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -19,11 +13,12 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from casflex.codegen import jit_options, jit_working_directory
 from casflex.model import Model
 from casflex.results import atomic_write_json
 
 __all__ = ["IdentificationResult", "parameter_scale", "start_values", "bound_flags", "gauss_newton_statistics",
-           "gauss_newton_polish", "solver_options_for", "least_squares_nlp", "jit_options", "ParameterMap",
+           "gauss_newton_polish", "solver_options_for", "least_squares_nlp", "ParameterMap",
            "TRANSFORMS", "HESSIANS"]
 
 
@@ -206,41 +201,6 @@ def solver_options_for(solver: str, verbose: bool, extra: dict | None, tol: floa
 HESSIANS = ("exact", "gauss-newton")
 
 
-@functools.cache
-def _jit_directory() -> str:
-    """One scratch directory per process for the JIT's sources and objects (never the user's
-    working directory), removed at exit; a loaded library survives the removal of its file."""
-    path = tempfile.mkdtemp(prefix="casflex-jit-")
-    atexit.register(shutil.rmtree, path, True)
-    return path
-
-
-@contextlib.contextmanager
-def _jit_working_directory(active: bool) -> Iterator[None]:
-    """Run a block in the JIT scratch directory: CasADi 3.8 writes the source of an nlpsol's
-    JIT-compiled oracle to the working directory whatever the compiler's ``directory`` option
-    says (plain Functions honour it). Not thread-safe: the working directory is per process."""
-    if not active:
-        yield
-        return
-    old = os.getcwd()
-    os.chdir(_jit_directory())
-    try:
-        yield
-    finally:
-        os.chdir(old)
-
-
-def jit_options() -> dict:
-    """Function/nlpsol options that generate C for every function the solver calls and compile
-    it with the system compiler (CasADi's 'shell' JIT)."""
-    from casflex.codegen import _compiler
-
-    return {"jit": True, "compiler": "shell", "jit_name": "casflex_jit",
-            "jit_options": {"compiler": _compiler(), "flags": ["-O1"], "verbose": False,
-                            "directory": _jit_directory()}}
-
-
 def least_squares_nlp(name: str, solver: str, w: Any, r: Any, g: Any = None, *, f_scale: float = 1.0,
                       hessian: str = "exact", compiled: bool = False, verbose: bool = False,
                       solver_options: dict | None = None, tol: float = 1e-14) -> ca.Function:
@@ -286,7 +246,7 @@ def least_squares_nlp(name: str, solver: str, w: Any, r: Any, g: Any = None, *, 
             opts["hess_lag"] = hess(triu)
         opts.update(solver_options or {})
         try:
-            with _jit_working_directory(compiled):
+            with jit_working_directory(compiled):
                 S = ca.nlpsol(name, solver, nlp, opts)
         except RuntimeError as exc:
             msg = _casadi_reason(exc)
