@@ -48,7 +48,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from casflex.integrators.hht import ROUNDOFF_FLOOR
+from casflex.integrators.hht import roundoff_tolerance
 from casflex.model import Model
 
 __all__ = ["StaticsError", "ModesError", "StaticResult", "ModesResult", "equilibrium", "modes"]
@@ -240,8 +240,7 @@ def equilibrium(
             step = float(np.max(np.abs(du), initial=0.0))
             dz = du * col
             q, lam = q + dz[:n], lam + dz[n:]
-            # the round-off floor of far-off coordinates, as in HHT.tolerance
-            tol_k = max(tol, ROUNDOFF_FLOOR * np.finfo(float).eps * float(np.max(np.abs(q / ell), initial=0.0)))
+            tol_k = float(roundoff_tolerance(tol, q, ell))
             if res <= tol_k and step <= step_tol:
                 converged = True
                 break

@@ -46,10 +46,19 @@ import numpy as np
 
 from casflex.model import Model
 
-__all__ = ["HHT", "hht_coefficients", "ROUNDOFF_FLOOR"]
+__all__ = ["HHT", "hht_coefficients", "roundoff_tolerance", "ROUNDOFF_FLOOR"]
 
-#: The residual of a step is accepted down to ROUNDOFF_FLOOR * eps * max|q / l| (see HHT.tolerance).
+#: A scaled residual is accepted down to ROUNDOFF_FLOOR * eps * max|q / l| (see roundoff_tolerance).
 ROUNDOFF_FLOOR = 10.0
+
+
+def roundoff_tolerance(tol: float, q: np.ndarray, ell: np.ndarray) -> np.ndarray:
+    """``tol``, raised to the round-off floor of the coordinates q (shape (n,) or (k, n); l the
+    characteristic length of each dof, 1 for rotations): a residual scaled by l cannot be
+    computed below ~eps max|q / l| (elastic forces are differences of nearly equal
+    coordinates), so a scene 10 km from the origin would otherwise fail at tol = 1e-12."""
+    q = np.asarray(q, dtype=float)
+    return np.maximum(tol, ROUNDOFF_FLOOR * np.finfo(float).eps * np.abs(q / ell).max(axis=-1, initial=0.0))
 
 
 def hht_coefficients(alpha: float) -> tuple[float, float]:
@@ -246,16 +255,9 @@ class HHT:
                                        {"custom_jacobian": jac, "jac_penalty": 0})
 
     def tolerance(self, q: np.ndarray) -> np.ndarray:
-        """Largest accepted scaled residual of a step ending at q, shape (n_dof,) or (k, n_dof).
-
-        ``tol``, raised to the round-off floor of the coordinates: the residual of a step at
-        positions of magnitude |q| cannot be computed below ~eps |q| / l (the elastic forces
-        are differences of nearly equal coordinates), so a scene translated 10 km from the
-        origin would otherwise fail every step at tol = 1e-12.
-        """
-        q = np.asarray(q, dtype=float)
-        floor = ROUNDOFF_FLOOR * np.finfo(float).eps * np.abs(q / self._ell).max(axis=-1)
-        return np.maximum(self.tol, floor)
+        """Largest accepted scaled residual of a step ending at q, shape (n_dof,) or (k, n_dof):
+        ``tol`` or the round-off floor of q (:func:`roundoff_tolerance`)."""
+        return roundoff_tolerance(self.tol, q, self._ell)
 
     # -- public Functions --------------------------------------------------------------------
     @property
