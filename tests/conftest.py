@@ -16,6 +16,7 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
+import dataclasses  # noqa: E402
 import math  # noqa: E402
 
 import pytest  # noqa: E402
@@ -98,3 +99,8 @@ def make_cantilever():
 def make_pendulum():
     """The :func:`pendulum` factory."""
     return pendulum
+
+
+def translated(scene: Scene, dx: float) -> Scene:
+    """``scene`` with every node moved by dx (m) along x: physically the same, numerically far off."""
+    return dataclasses.replace(scene, nodes=tuple(dataclasses.replace(n, x=n.x + dx) for n in scene.nodes))

@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
+from conftest import translated
 
 import casflex
 from casflex.data import MeasurementSet, simulated_set
@@ -124,9 +123,7 @@ def test_multiple_shooting_full_residue_warns(twobar, sim):
 def test_a_scene_far_from_the_origin_is_identified():
     # 10 km away the HHT residual cannot reach newton_tol = 1e-14 (round-off ~eps 1e4 / l); the
     # steps are accepted at that floor, so the identification is not declared failed
-    base = casflex.load_scene("twobar")
-    far = casflex.assemble(dataclasses.replace(base, nodes=tuple(dataclasses.replace(nd, x=nd.x + 1e4)
-                                                                  for nd in base.nodes)))
+    far = casflex.assemble(translated(casflex.load_scene("twobar"), 1e4))
     data = simulated_set(far, 0.3)
     r = identify_indirect(far, data, 0.3, transcription="single-shooting", start=1.2)
     assert r.success, r.message

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import STEEL, cantilever, pendulum
+from conftest import STEEL, cantilever, pendulum, translated
 
 import casflex
 from casflex import Load, Node, Scene, Spring, TorsionSpring
@@ -383,8 +383,7 @@ def test_a_scene_far_from_the_origin_reaches_equilibrium():
     # 1000 km away the residual's round-off (~eps 1e6 / l) is above tol = 1e-10: accepted at that floor
     base = casflex.load_scene("twobar")
     near = equilibrium(casflex.assemble(base))
-    far = equilibrium(casflex.assemble(dataclasses.replace(
-        base, nodes=tuple(dataclasses.replace(nd, x=nd.x + 1e6) for nd in base.nodes))))
+    far = equilibrium(casflex.assemble(translated(base, 1e6)))
     dq = far.q - near.q
     dq[0::3] -= 1e6
     assert np.abs(dq).max() < 1e-8  # measured 7e-11 m; the coordinates' own round-off is 2e-10 m
