@@ -109,7 +109,7 @@ def run_sweep(runs: Iterable[Run], record: str | os.PathLike[str], *, scheduler:
     Ctrl-C cancels the pending runs, keeps every finished record and returns with
     ``interrupted=True``; calling again with the same ``record`` resumes.
     """
-    from distributed import Client, LocalCluster, as_completed
+    from distributed import Client, LocalCluster
 
     t0 = time.perf_counter()
     runs = list(runs)
@@ -138,31 +138,62 @@ def run_sweep(runs: Iterable[Run], record: str | os.PathLike[str], *, scheduler:
             cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
                                    dashboard_address=None, silence_logs=40)
         client = Client(scheduler if scheduler is not None else cluster)
-        futures = {}
         blobs = _ship_by_value({r.fn for r in todo})
+
+        def finished(key: str, out: dict) -> None:
+            atomic_write_json(rec / f"{key}.json", out)
+            results[key] = out
+            executed.append(key)
+            if report:
+                report(len(reused) + len(executed), len(runs), key)
+
         try:
-            futures = {client.submit(_call, blobs[r.fn], r.kwargs, key=f"casflex-{r.key}-{os.getpid()}",
-                                     pure=False): r.key for r in todo}
-            for fut in as_completed(futures):
-                key = futures[fut]
-                try:
-                    out = fut.result()
-                except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker: the run crashed its worker process
-                    out = {"error": f"{type(exc).__name__}: {exc}"}
-                atomic_write_json(rec / f"{key}.json", out)
-                results[key] = out
-                executed.append(key)
-                if report:
-                    report(len(reused) + len(executed), len(runs), key)
+            killed = _execute(client, todo, blobs, finished, batch=len(todo))
+            # A worker that dies takes every run assigned to it along (a single-threaded worker
+            # holds up to two), and dask gives up on a run after its third such death: an
+            # innocent neighbour of a crashing run may be declared killed, depending on timing.
+            # Runs that died with their worker are run again one at a time, so only a run that
+            # kills a worker on its own is recorded as crashed.
+            _execute(client, [r for r in todo if r.key in killed], blobs, finished, batch=1, last=True)
         except KeyboardInterrupt:
             interrupted = True
-            client.cancel(list(futures))
         finally:
             client.close()
             if cluster is not None:
                 cluster.close()
     return SweepResult({k: results[k] for k in keys if k in results}, tuple(executed), tuple(reused), interrupted,
                        time.perf_counter() - t0)
+
+
+def _execute(client: Any, runs: list[Run], blobs: dict, finished: Callable[[str, dict], None], *, batch: int,
+             last: bool = False) -> set[str]:
+    """Run ``runs`` on ``client``, ``batch`` at a time, calling ``finished(key, record)`` as each
+    completes; returns the keys of runs whose worker died (recorded as failed only when
+    ``last``). Ctrl-C cancels what is pending and propagates."""
+    from distributed import as_completed
+    from distributed.scheduler import KilledWorker
+
+    killed: set[str] = set()
+    for i in range(0, len(runs), batch):
+        futures = {client.submit(_call, blobs[r.fn], r.kwargs, key=f"casflex-{r.key}-{os.getpid()}-{last}",
+                                 pure=False): r.key for r in runs[i:i + batch]}
+        try:
+            for fut in as_completed(futures):
+                key = futures[fut]
+                try:
+                    out = fut.result()
+                except KilledWorker as exc:
+                    if not last:
+                        killed.add(key)
+                        continue
+                    out = {"error": f"KilledWorker: {exc}"}
+                except Exception as exc:  # noqa: BLE001 - any other failure of the run is its result
+                    out = {"error": f"{type(exc).__name__}: {exc}"}
+                finished(key, out)
+        except KeyboardInterrupt:
+            client.cancel(list(futures))
+            raise
+    return killed
 
 
 def _text_progress(done: int, total: int, key: str) -> None:

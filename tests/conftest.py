@@ -104,3 +104,18 @@ def make_pendulum():
 def translated(scene: Scene, dx: float) -> Scene:
     """``scene`` with every node moved by dx (m) along x: physically the same, numerically far off."""
     return dataclasses.replace(scene, nodes=tuple(dataclasses.replace(n, x=n.x + dx) for n in scene.nodes))
+
+
+def pytest_terminal_summary(terminalreporter) -> None:
+    """The versions this run was made with (shown also under -q): a failure report is
+    reproducible only with them."""
+    import platform
+    from importlib.metadata import PackageNotFoundError, version
+
+    found = []
+    for pkg in ("casflex", "casadi", "numpy", "scipy", "matplotlib", "distributed"):
+        try:
+            found.append(f"{pkg} {version(pkg)}")
+        except PackageNotFoundError:
+            found.append(f"{pkg} (not installed)")
+    terminalreporter.write_line(f"versions: Python {platform.python_version()}, " + ", ".join(found))
