@@ -20,6 +20,7 @@ import atexit
 import contextlib
 import functools
 import hashlib
+import logging
 import os
 import platform
 import shutil
@@ -39,6 +40,9 @@ __all__ = ["BufferedCall", "CompiledLibrary", "compile_functions", "generate_c",
            "jit_options", "jit_working_directory"]
 
 CFLAGS = ("-O3", "-ffp-contract=off", "-fPIC", "-shared")
+
+#: Progress of the long phases (code generation, compilation), at level INFO; the command line shows it.
+log = logging.getLogger("casflex")
 
 
 class CodegenError(RuntimeError):
@@ -143,16 +147,21 @@ def compile_functions(functions: list[ca.Function], *, stem: str = "casflex") ->
     t0 = time.perf_counter()
     cc = _compiler()
     with tempfile.TemporaryDirectory(prefix="casflex-cg-") as tmp:
+        log.info("generating C for %s (%s)", stem, ", ".join(f.name() for f in functions))
         c_file, _ = generate_c(functions, tmp, stem)
         source = c_file.read_bytes()
         flags = (*CFLAGS, *_native_flags(cc))
         digest = hashlib.sha256(source + " ".join((cc, *flags, _processor())).encode()).hexdigest()[:24]
         target = cache_dir() / f"{stem}-{digest}.so"
         cached = target.is_file()
-        if not cached:
+        if cached:
+            log.info("using the compiled %s from the cache (%s)", stem, target)
+        else:
             target.parent.mkdir(parents=True, exist_ok=True)
             built = Path(tmp) / f"{stem}.so"
             cmd = [cc, *flags, str(c_file), "-o", str(built), "-lm"]
+            log.info("compiling %s.c (%d kB) with %s; the library is cached in %s for later runs",
+                     stem, len(source) // 1024, cc, target.parent)
             proc = subprocess.run(cmd, capture_output=True, text=True)
             if proc.returncode != 0:
                 raise CodegenError(f"compiling {stem}.c failed ({' '.join(cmd)}):\n{proc.stderr[-2000:]}")
@@ -160,6 +169,7 @@ def compile_functions(functions: list[ca.Function], *, stem: str = "casflex") ->
             os.close(fd)
             shutil.copyfile(built, tmp_target)
             os.replace(tmp_target, target)
+            log.info("compiled %s in %.1f s", stem, time.perf_counter() - t0)
     loaded = {f.name(): ca.external(f.name(), str(target)) for f in functions}
     return CompiledLibrary(target, loaded, time.perf_counter() - t0, cached)
 

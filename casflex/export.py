@@ -35,6 +35,7 @@ import numpy as np
 from casflex.codegen import CodegenError, generate_c
 from casflex.model import Model
 from casflex.results import atomic_write_text
+from casflex.simulate import step_count
 
 __all__ = ["export_c", "ExportedCode", "EXPORTS"]
 
@@ -84,11 +85,12 @@ def _functions(model: Model, what: str, alpha: float, tol: float) -> list[ca.Fun
 
 def export_c(model: Model, out_dir: str | os.PathLike[str], *, what: str = "simulate", alpha: float | None = None,
              dt: float | None = None, t_end: float | None = None, p: np.ndarray | dict | None = None,
-             tol: float = 1e-12) -> ExportedCode:
+             tol: float = 1e-12, names: tuple[str, str] = ("t_end", "dt")) -> ExportedCode:
     """Write the C export of ``model`` into ``out_dir`` (see the module docstring).
 
     alpha, dt, t_end default to the scene's run settings; p (parameters baked into the
-    example) to the nominal values; tol is the HHT Newton tolerance compiled into the step.
+    example) to the nominal values; tol is the HHT Newton tolerance compiled into the step;
+    ``names`` are how errors call t_end and dt.
     """
     if what not in EXPORTS:
         raise ValueError(f"what: expected one of {EXPORTS}, got {what!r}")
@@ -96,9 +98,7 @@ def export_c(model: Model, out_dir: str | os.PathLike[str], *, what: str = "simu
     alpha = float(run.alpha if alpha is None else alpha)
     dt = float(run.dt if dt is None else dt)
     t_end = float(run.t_end if t_end is None else t_end)
-    n_steps = int(round(t_end / dt))
-    if not (dt > 0 and n_steps >= 1 and abs(n_steps * dt - t_end) <= 1e-9 * max(t_end, 1.0)):
-        raise ValueError(f"t_end = {t_end:g} s is not a whole number of steps dt = {dt:g} s")
+    n_steps = step_count(t_end, dt, names=names)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     funcs = _functions(model, what, alpha, tol)

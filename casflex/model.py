@@ -103,6 +103,33 @@ class Model:
     def length_scale(self) -> float:
         return self.scene.length_scale
 
+    @property
+    def tip_node(self) -> str:
+        """The scene node farthest from the supports: most elements away (beams, springs, torsion
+        springs), ties broken by distance in space; the node summaries and standard figures show
+        (node 5 of twobar)."""
+        sc = self.scene
+        links: dict[str, set[str]] = {n.name: set() for n in sc.nodes}
+        for el in (*sc.beams, *sc.springs, *sc.torsion_springs):
+            a, b = el.nodes
+            links[a].add(b)
+            links[b].add(a)
+        roots = [s.node for s in sc.supports] or [sc.nodes[0].name]
+        hops = dict.fromkeys(roots, 0)
+        queue = list(roots)
+        for n in queue:  # breadth first: the queue grows while it is read
+            for m in sorted(links[n]):
+                if m not in hops:
+                    hops[m] = hops[n] + 1
+                    queue.append(m)
+        origin = np.array([[sc.node(r).x, sc.node(r).y] for r in roots])
+
+        def reach(name: str) -> tuple[int, float]:
+            xy = np.array([sc.node(name).x, sc.node(name).y])
+            return hops.get(name, -1), float(np.min(np.linalg.norm(origin - xy, axis=1)))
+
+        return max((n.name for n in sc.nodes), key=reach)
+
     def dof(self, name: str) -> int:
         """Index of the dof called ``name`` (e.g. ``"y5"``)."""
         try:

@@ -83,7 +83,8 @@ NPZ_KEYS = {
     "energy_kinetic": "(n,) J", "energy_elastic": "(n,) J", "energy_gravity": "(n,) J",
     "energy_total": "(n,) J, kinetic + elastic + gravity",
     "work_external": "(n,) J, work of the nodal loads since t = 0 (trapezoidal)",
-    "energy_dissipated": "(n,) J, energy removed by numerical damping: E(0) + W_ext - E(t)",
+    "energy_balance_error": "(n,) J, E(t) - E(0) - W_ext(t): at alpha = 0 the integration error (either sign, "
+    "O(dt^2)); at alpha < 0 mostly the energy HHT's numerical damping removed (negative)",
     "p": "(n_p,) parameter values used", "parameter_names": "(n_p,)",
     "newton_iterations": "(n-1,) Newton iterations per step (-1 where not recorded: compiled runs)",
     "meta": "JSON string: scene, alpha, dt, inertia, compiled, success, status, message, stats",
@@ -163,10 +164,12 @@ class Trajectory:
                 data = {k: z[k] for k in z.files}
         except (OSError, ValueError) as exc:
             raise ValueError(f"{path}: not a casflex trajectory file ({exc})") from None
+        meta = json.loads(str(data["meta"]))
+        if "energy_balance_error" not in data and "energy_dissipated" in data:  # written before 0.2
+            data["energy_balance_error"] = -data.pop("energy_dissipated")
         missing = [k for k in NPZ_KEYS if k not in data]
         if missing:
             raise ValueError(f"{path}: not a casflex trajectory file, missing keys {missing}")
-        meta = json.loads(str(data["meta"]))
         energies = {k[len("energy_"):] if k.startswith("energy_") else k: data[k]
                     for k in NPZ_KEYS if k.startswith(("energy_", "work_"))}
         return cls(

@@ -18,21 +18,24 @@ an unstable integration (``energy_growth``); see :func:`_first_unsound_state`.
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 import weakref
 from collections.abc import Callable
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
 
+from casflex import interrupt
 from casflex.codegen import BufferedCall, CompiledLibrary, compile_functions
 from casflex.integrators.hht import HHT
 from casflex.model import Model, assemble
 from casflex.results import Trajectory
 from casflex.scene import Scene
 
-__all__ = ["simulate", "SimulationError", "integrator_for", "CHUNK", "ENERGY_GROWTH"]
+__all__ = ["simulate", "SimulationError", "integrator_for", "step_count", "check_memory", "CHUNK", "ENERGY_GROWTH"]
 
 #: Steps per compiled call: progress and Ctrl-C are handled between chunks.
 CHUNK = 250
@@ -66,6 +69,55 @@ def compiled_library(integ: HHT) -> CompiledLibrary:
         funcs = [integ.step, integ.trajectory(CHUNK), integ.post.map(f"hht_post_{CHUNK}", "serial", CHUNK, [2], [])]
         _LIBRARIES[integ] = compile_functions(funcs, stem="casflex_hht")
     return _LIBRARIES[integ]
+
+
+def step_count(t_end: float, dt: float, *, names: tuple[str, str] = ("t_end", "dt")) -> int:
+    """The number of steps of ``dt`` (s) in ``t_end`` (s); ValueError naming the argument (``names``:
+    how the caller calls t_end and dt) when either is not positive or t_end is not a whole number of steps."""
+    if not (np.isfinite(dt) and dt > 0):
+        raise ValueError(f"{names[1]}: must be a positive number of seconds, got {dt!r}")
+    if not (np.isfinite(t_end) and t_end > 0):
+        raise ValueError(f"{names[0]}: must be a positive number of seconds, got {t_end!r}")
+    n_steps = int(round(t_end / dt))
+    if n_steps < 1 or abs(n_steps * dt - t_end) > 1e-9 * max(t_end, 1.0):
+        raise ValueError(f"{names[0]}: {t_end:g} s is not a whole number of steps {names[1]} = {dt:g} s")
+    return n_steps
+
+
+def memory_available() -> int | None:
+    """Bytes of memory available to a new allocation (MemAvailable of /proc/meminfo, else the
+    free physical pages), or None where neither can be read."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+def _bytes(n: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if n < 1024 or unit == "PiB":
+            return f"{n:.3g} {unit}"
+        n /= 1024
+    raise AssertionError("unreachable")
+
+
+def check_memory(model: Model, n_steps: int, dt: float, *, names: tuple[str, str] = ("t_end", "dt")) -> None:
+    """ValueError (naming t_end and dt as ``names``) when a run of ``n_steps`` would not fit in the
+    memory available: every state (q, qd, qdd, lambda) and its post-processed values (energies,
+    joint outputs) are kept, about twice over while the result is assembled and saved."""
+    n_values = 3 * model.n_dof + model.n_con + 4 + len(model.output_names) + len(model.local_rotation_names) + 6
+    need = 2 * 8 * (n_steps + 1) * n_values
+    avail = memory_available()
+    if avail is not None and need > avail:
+        raise ValueError(f"{names[0]}: {n_steps * dt:g} s at {names[1]} = {dt:g} s is {n_steps:,} steps of {n_values} "
+                         f"values each: the result needs about {_bytes(need)} of memory and {_bytes(avail)} are "
+                         f"available; shorten {names[0]} or raise {names[1]}")
 
 
 def _text_progress(done: int, total: int, t: float) -> None:
@@ -124,13 +176,8 @@ def simulate(
     t_end = float(run.t_end if t_end is None else t_end)
     dt = float(run.dt if dt is None else dt)
     alpha = float(run.alpha if alpha is None else alpha)
-    if not (np.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt: must be a positive number of seconds, got {dt!r}")
-    if not (np.isfinite(t_end) and t_end > 0):
-        raise ValueError(f"t_end: must be a positive number of seconds, got {t_end!r}")
-    n_steps = int(round(t_end / dt))
-    if n_steps < 1 or abs(n_steps * dt - t_end) > 1e-9 * max(t_end, 1.0):
-        raise ValueError(f"t_end = {t_end:g} s is not a whole number of steps dt = {dt:g} s")
+    n_steps = step_count(t_end, dt)
+    check_memory(model, n_steps, dt)
     integ = integrator_for(model, alpha=alpha, tol=tol, max_iter=max_iter)
     pv = model.params(p)
     report = _text_progress if progress is True else (progress or None)
@@ -178,6 +225,7 @@ def simulate(
                 done += 1
             if report and (lib is not None or done % max(n_steps // 100, 1) == 0 or done == n_steps):
                 report(done, n_steps, done * dt)
+            interrupt.check()
     except KeyboardInterrupt:
         status, failure = "interrupted", f"interrupted by the user at t = {done * dt:.6g} s (step {done} of {n_steps})"
         if report:
@@ -352,7 +400,7 @@ def _trajectory(integ: HHT, X: np.ndarray, Y: np.ndarray, iters: np.ndarray, dt:
         t=t, q=q, qd=qd, qdd=qdd, lam=lam, dof_names=model.dof_names, constraint_names=model.constraint_names,
         outputs=outputs, output_names=model.output_names,
         energies={"kinetic": T, "elastic": Ve, "gravity": Vg, "total": total, "work_external": work,
-                  "dissipated": total[0] + work - total},
+                  "balance_error": total - total[0] - work},
         p=np.asarray(p, dtype=float), parameter_names=model.parameter_names, newton_iterations=iters,
         success=status == "success", status=status, message=message or "ok", meta=meta,
     )

@@ -13,7 +13,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from casflex.codegen import jit_options, jit_working_directory
+from casflex.codegen import jit_options, jit_working_directory, log
 from casflex.model import Model
 from casflex.results import atomic_write_json
 
@@ -245,6 +245,9 @@ def least_squares_nlp(name: str, solver: str, w: Any, r: Any, g: Any = None, *, 
         if triu is not None:
             opts["hess_lag"] = hess(triu)
         opts.update(solver_options or {})
+        if compiled:
+            log.info("generating and compiling C for the %s NLP's functions with CasADi's JIT (not cached between "
+                     "processes; this can take minutes)", name)
         try:
             with jit_working_directory(compiled):
                 S = ca.nlpsol(name, solver, nlp, opts)

@@ -69,7 +69,7 @@ def save_standard_figures(model: Model, traj: Trajectory, out_dir: str | os.Path
     """Write the standard figures of a run into ``out_dir``; returns the paths written.
 
     - ``node<N>_q.png``, ``node<N>_qd.png``, ``node<N>_qdd.png``: displacements, velocities,
-      accelerations of node "5" if the scene has one, else of its last user node;
+      accelerations of the node farthest from the supports (:attr:`Model.tip_node`);
     - ``configuration.png``: the initial configuration;
     - ``energies.png``;
     - ``joint<k>.png`` for every joint (springs and torsion springs on the same node pair);
@@ -79,8 +79,7 @@ def save_standard_figures(model: Model, traj: Trajectory, out_dir: str | os.Path
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths: list[Path] = []
-    user = [n.name for n in model.scene.nodes]
-    node = "5" if "5" in user else user[-1]
+    node = model.tip_node
     for kind in KINDS:
         p = out / f"node{_safe(node)}_{kind}.png"
         _close(plot_node(traj, node, kind=kind, path=p))

@@ -15,6 +15,7 @@ from pathlib import Path
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from casflex import interrupt
 from casflex.results import atomic_write_bytes
 
 #: Resolution of saved PNG figures (dots per inch).
@@ -35,6 +36,7 @@ def _save(fig: Figure, path: str | os.PathLike[str] | None, dpi: float = DPI) ->
     fmt = path.suffix.lstrip(".").lower() or "png"
     buf = io.BytesIO()
     fig.savefig(buf, format=fmt, dpi=dpi)
+    interrupt.check()  # a Ctrl-C that matplotlib swallowed while rendering
     atomic_write_bytes(path, buf.getvalue())
 
 

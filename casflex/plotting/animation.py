@@ -15,6 +15,7 @@ import numpy as np
 from matplotlib.animation import PillowWriter
 from PIL import Image
 
+from casflex import interrupt
 from casflex.model import Model
 from casflex.plotting._figure import _new_figure
 from casflex.plotting.configuration import _Drawer
@@ -82,6 +83,7 @@ def animate(model: Model, traj: Trajectory, path: str | os.PathLike[str], *, fps
                 drawer.update(art, traj.q[k])
                 label.set_text(f"t = {t[k]:6.3f} s")
                 writer.grab_frame()
+                interrupt.check()  # a Ctrl-C that matplotlib swallowed
         atomic_write_bytes(path, Path(tmp).read_bytes())
     finally:
         Path(tmp).unlink(missing_ok=True)

@@ -32,7 +32,7 @@ _ENERGY_LABELS = {
     "gravity": "gravity potential",
     "total": "total",
     "work_external": "work of external loads",
-    "dissipated": "removed by numerical damping",
+    "balance_error": "balance error E - E(0) - W (integration; numerical damping if < 0)",
 }
 
 _OUTPUT_UNITS = {"force": "N", "fx": "N", "fy": "N", "length": "m", "moment": "N m",

@@ -80,8 +80,9 @@ def plot_energies(traj: Trajectory, path: str | os.PathLike[str] | None = None) 
     """Energies (J) over time.
 
     Top: kinetic, elastic, gravity potential and total energy. Bottom, on its own scale: the
-    energy removed by numerical damping, E(0) + W_ext - E(t) (zero up to round-off and
-    Newton tolerance when alpha = 0), and the work of the external loads when there is any.
+    energy balance error E(t) - E(0) - W_ext(t) (at alpha = 0 the integration error, of either
+    sign and O(dt^2); at alpha < 0 mostly the energy numerical damping removed, negative), and
+    the work of the external loads when there is any.
     """
     fig = _new_figure((7.0, 5.8))
     top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=[3, 1.4])
@@ -91,7 +92,7 @@ def plot_energies(traj: Trajectory, path: str | os.PathLike[str] | None = None) 
         top.plot(traj.t, e[key], color=color, ls=ls, lw=1.4, label=_ENERGY_LABELS[key])
     top.set_ylabel("energy (J)")
     _legend_above(top, 4)
-    bottom.plot(traj.t, e["dissipated"], color="C3", lw=1.4, label=_ENERGY_LABELS["dissipated"])
+    bottom.plot(traj.t, e["balance_error"], color="C3", lw=1.4, label=_ENERGY_LABELS["balance_error"])
     work = e.get("work_external")
     if work is not None and np.any(work != 0.0):
         bottom.plot(traj.t, work, color="C4", lw=1.2, ls="-.", label=_ENERGY_LABELS["work_external"])

@@ -1,0 +1,71 @@
+"""The ``casflex`` command: thin over the Python API (parse, call, print).
+
+Every option is checked before any work starts. Errors print one line, ``casflex: error: ...``
+naming the option, field or time step, and exit with status 2. Every file a command writes is
+reserved before the work (its directory must exist and be writable), written to a staging
+place and moved into place when the command has finished: Ctrl-C at any moment before that
+exits with 130 and leaves nothing behind (:class:`~casflex.cli._base.Outputs`). ``casflex
+identify`` exits with 1 when the identification does not succeed (its record is still written).
+"""
+
+from __future__ import annotations
+
+import sys
+
+from casflex import interrupt
+from casflex.cli import export, identify, simulate, statics
+from casflex.cli._base import CliParser, OptionError, Outputs, progress_messages
+
+__all__ = ["main"]
+
+
+def _parser() -> CliParser:
+    from casflex import __version__
+
+    ap = CliParser(prog="casflex",
+                   description="Planar flexible multibody dynamics and parameter identification on CasADi.")
+    ap.add_argument("--version", action="version", version=f"casflex {__version__}")
+    sub = ap.add_subparsers(dest="command", required=True)
+    for module in (simulate, statics, identify, export):
+        module.add_parsers(sub)
+    return ap
+
+
+def _known_errors() -> tuple[type[BaseException], ...]:
+    """The exceptions that are the user's input or a documented failure: one line, exit 2."""
+    from casflex.codegen import CodegenError
+    from casflex.simulate import SimulationError
+    from casflex.statics import StaticsError
+
+    return (OptionError, SimulationError, CodegenError, StaticsError, ValueError, KeyError, OSError)
+
+
+def main(argv: list[str] | None = None) -> int:
+    try:
+        args = _parser().parse_args(argv)  # one line on a bad option, before any work
+    except SystemExit as exc:  # 2 for a bad option, 0 for --help and --version
+        return int(exc.code or 0)
+    outputs = Outputs()
+    with interrupt.guard() as interrupts, progress_messages(not getattr(args, "quiet", False)):
+        try:
+            code = int(args.func(args, outputs) or 0)
+            if interrupts.count:  # a Ctrl-C that a library swallowed
+                raise KeyboardInterrupt
+            interrupts.armed = False  # the work is done: from here a Ctrl-C no longer stops the command
+            for path in outputs.commit():
+                print(f"  wrote {path}")
+            return code
+        except BaseException as exc:
+            outputs.discard()
+            if interrupts.count or isinstance(exc, KeyboardInterrupt):
+                print("\ncasflex: interrupted; nothing was written", file=sys.stderr)
+                return 130
+            if isinstance(exc, _known_errors()):
+                msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
+                print(f"casflex: error: {msg}", file=sys.stderr)
+                return 2
+            raise
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

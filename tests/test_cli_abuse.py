@@ -1,0 +1,52 @@
+"""What users throw at the command line: every wrong option gives one line naming it, exit status 2,
+and writes nothing (the working directory is left as it was)."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from casflex.cli import main
+
+CASES = [
+    # (arguments, the one line must match this)
+    ("simulate twobar --t-end 1e9", r"--t-end: 1e\+09 s at --dt = 0.001 s is 1,000,000,000,000 steps .* needs about "
+                                    r".*PiB of memory .* available; shorten --t-end or raise --dt"),
+    ("simulate twobar --dt 1e-9", r"--t-end: .* TiB of memory"),
+    ("simulate twobar --out x.csv", r"--out: 'x.csv' must end in .npz"),
+    ("simulate twobar --out nosuch/dir/x.npz", r"--out: directory 'nosuch/dir' does not exist"),
+    ("simulate twobar --out adir.npz", r"--out: 'adir.npz' is a directory"),
+    ("simulate twobar --plots /proc/figs", r"--plots: cannot write into '/proc'"),
+    ("simulate twobar --plots afile.txt", r"--plots: 'afile.txt' exists and is not a directory"),
+    ("simulate twobar --out a.npz --plots a.npz", r"--plots: 'a.npz' is already the target of another option"),
+    ("simulate twobar --dt -1e-3", r"argument --dt: must be a time step in s > 0, got -1e-3"),
+    ("simulate twobar --dt abc", r"argument --dt: expected a number, got 'abc'"),
+    ("simulate twobar --t-end -2", r"argument --t-end: must be a duration in s > 0, got -2"),
+    ("simulate twobar --alpha 0.5", r"argument --alpha: HHT alpha must lie in \[-1/3, 0\]"),
+    ("simulate twobar --dt 0.0007 --t-end 0.01", r"--t-end: 0.01 s is not a whole number of steps --dt = 0.0007 s"),
+    ("simulate nosuch.toml", r"scene 'nosuch.toml': no such file, and not a built-in scene"),
+    ("static twobar --steps -3", r"argument --steps: must be .* >= 1, got -3"),
+    ("modes twobar --count 0", r"argument --count: must be .* >= 1, got 0"),
+    ("identify twobar --method direct --out r.npz", r"--out: 'r.npz' must end in .json"),
+    ("identify twobar --method direct --start -2", r"argument --start: must be a factor of the nominal values > 0"),
+    ("identify twobar --method indirect --interval 0", r"argument --interval: must be a number of steps >= 1"),
+    ("identify twobar --method direct --data measured --noise 1e-3 --seed -1", r"argument --seed: must be a seed >= 0"),
+    ("export twobar --out nosuch/x", r"--out: directory 'nosuch' does not exist"),
+    ("export twobar --out e --dt 0.0007", r"--t-end: 3 s is not a whole number of steps --dt = 0.0007 s"),
+]
+
+
+@pytest.mark.parametrize("argv, match", CASES, ids=[c[0] for c in CASES])
+def test_a_wrong_option_is_one_line_exit_2_and_writes_nothing(argv, match, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "adir.npz").mkdir()
+    (tmp_path / "afile.txt").write_text("mine\n")
+    before = sorted(p.name for p in tmp_path.rglob("*"))
+    code = main(argv.split())
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert len(err) == 1 and err[0].startswith("casflex: error: "), err
+    assert re.search(match, err[0]), err[0]
+    assert sorted(p.name for p in tmp_path.rglob("*")) == before  # no file, no staging left behind
+    assert (tmp_path / "afile.txt").read_text() == "mine\n"
