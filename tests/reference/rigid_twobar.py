@@ -1,4 +1,4 @@
-"""Rigid-bar reference for the two-bar scene (shared/scenes/twobar.md), independent of casflex.
+"""Rigid-bar reference for the two-bar scene (docs/scene-format.md, Example 1), independent of casflex.
 
 Model
 -----
@@ -41,7 +41,7 @@ S6, C6 = math.sin(math.pi / 6), math.cos(math.pi / 6)
 
 @dataclass(frozen=True)
 class Params:
-    """Scene data (SI units), defaults as in shared/scenes/twobar.md."""
+    """Scene data (SI units), defaults as in docs/scene-format.md, Example 1."""
 
     k1: float = 700.0
     kt1: float = 0.5
