@@ -1,0 +1,252 @@
+"""A casflex scene simulated by Exudyn: an independent code for cross-checks and reference data.
+
+``pip install exudyn`` (the ``peers`` extra). :func:`build` turns a :class:`~casflex.scene.Scene`
+into an Exudyn model; :func:`simulate` runs it and returns the motion of the scene's nodes as a
+:class:`~casflex.data.MeasurementSet`, the form in which measured data reach identification.
+
+The translation, element by element (the same continuum, another discretisation and integrator):
+
+- beam: ``ObjectANCFCable2D`` elements (Euler-Bernoulli, cubic Hermite position field, consistent
+  mass, no rotary inertia) on ``NodePoint2DSlope1`` nodes (x, y and the slope vector dr/ds). An
+  Euler-Bernoulli beam's nodal rotation is the angle of its slope: theta = theta_0 + (angle of the
+  slope now - angle of the slope at t = 0);
+- node that is no beam end (a joint node, e.g. twobar's node 1): a slope node, which must be clamped
+  (it carries no mass);
+- linear spring: ``ObjectConnectorSpringDamper`` between node positions (k, rest length, c = 0);
+- torsion spring: ``ObjectConnectorTorsionalSpringDamper`` between node frames (kt; its offset is the
+  rest angle plus the initial angle between the two nodes' slopes, e.g. 90 degrees at a right-angled
+  joint, since a slope node's frame is its beam's direction);
+- supports: ``CoordinateConstraint``s (Lagrange multipliers, as in casflex); a clamp fixes x, y and
+  the slope component across the beam, which needs a beam along x or y (or a joint node, whose
+  whole slope is fixed);
+- gravity: ``LoadMassProportional`` on every element; constant nodal loads: ``LoadForceVector`` and
+  ``LoadTorqueVector``;
+- time integration: implicit generalized-alpha without numerical damping (spectral radius 1: the
+  trapezoidal rule, as HHT alpha = 0), Newton on the increment to ``newton_tol``.
+
+What casflex has and this translation does not (:class:`NotImplementedError` naming it): load
+tables, rotary inertia, a node where two beams meet, a clamp on a beam end at an angle.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from casflex.data import MeasurementSet
+from casflex.scene import Scene
+
+__all__ = ["build", "simulate", "ExudynModel"]
+
+
+def _exudyn():
+    try:
+        import exudyn
+    except ImportError:
+        raise ImportError("Exudyn is not installed: pip install exudyn (or casflex's extra 'peers')") from None
+    return exudyn
+
+
+@dataclass
+class ExudynModel:
+    """An Exudyn system of a scene: ``mbs`` and ``settings`` to solve, and per scene node its
+    Exudyn node and reference slope (``nodes``: name -> (node number, (sx, sy)))."""
+
+    system_container: Any
+    mbs: Any
+    settings: Any
+    nodes: dict[str, tuple[int, tuple[float, float]]]
+    sensors: dict[str, dict[str, int]]
+    h: float
+    t_end: float
+
+
+def _check_supported(scene: Scene) -> None:
+    if any(len(ld.rows()) > 1 for ld in scene.loads):
+        raise NotImplementedError("load tables are not translated to Exudyn (constant loads only)")
+    if any(b.rotary_inertia for b in scene.beams):
+        raise NotImplementedError("rotary inertia: Exudyn's ANCF cable element has none")
+    ends = [n for b in scene.beams for n in b.nodes]
+    shared = sorted({n for n in ends if ends.count(n) > 1})
+    if shared:
+        raise NotImplementedError(f"nodes {shared}: two beams meet there (a rigid joint between ANCF elements is "
+                                  "not translated)")
+
+
+def build(scene: Scene, *, elements: int, h: float, t_end: float, newton_tol: float = 1e-10) -> ExudynModel:
+    """The Exudyn model of ``scene``: every beam meshed into ``elements`` ANCF elements, steps of
+    ``h`` s to ``t_end`` s, Newton increments to ``newton_tol``; sensors (Position, Coordinates and
+    their rates of every scene node) recording every step."""
+    exu = _exudyn()
+    from exudyn import itemInterface as ii
+
+    _check_supported(scene)
+    SC = exu.SystemContainer()
+    mbs = SC.AddSystem()
+    ground = mbs.AddObject(ii.ObjectGround())
+    gx, gy = scene.gravity
+    nodes: dict[str, tuple[int, tuple[float, float]]] = {}
+    state = {n.name: n for n in scene.nodes}
+
+    def velocity(node, s: float, other, slope: tuple[float, float]) -> list[float]:
+        """Initial coordinate rates, interpolated between two scene nodes as casflex's meshing does."""
+        vx = (1 - s) * node.vx + s * other.vx
+        vy = (1 - s) * node.vy + s * other.vy
+        om = (1 - s) * node.omega + s * other.omega
+        return [vx, vy, -om * slope[1], om * slope[0]]
+
+    for b in scene.beams:
+        na, nb = (state[k] for k in b.nodes)
+        L = math.hypot(nb.x - na.x, nb.y - na.y)
+        ex, ey = (nb.x - na.x) / L, (nb.y - na.y) / L
+        chain = []
+        for k in range(elements + 1):
+            s = k / elements
+            chain.append(mbs.AddNode(ii.NodePoint2DSlope1(
+                referenceCoordinates=[na.x + s * (nb.x - na.x), na.y + s * (nb.y - na.y), ex, ey],
+                initialVelocities=velocity(na, s, nb, (ex, ey)))))
+        nodes[na.name], nodes[nb.name] = (chain[0], (ex, ey)), (chain[-1], (ex, ey))
+        for k in range(elements):
+            obj = mbs.AddObject(ii.ObjectANCFCable2D(nodeNumbers=[chain[k], chain[k + 1]], length=L / elements,
+                                                     massPerLength=b.rho * b.A, bendingStiffness=b.E * b.I,
+                                                     axialStiffness=b.E * b.A))
+            mark = mbs.AddMarker(ii.MarkerBodyMass(bodyNumber=obj))
+            mbs.AddLoad(ii.LoadMassProportional(markerNumber=mark, loadVector=[gx, gy, 0.0]))
+
+    supports = {s.node: s for s in scene.supports}
+    for el in (*scene.springs, *scene.torsion_springs):  # joint nodes: clamped slope nodes
+        for name, other in (el.nodes, el.nodes[::-1]):
+            if name in nodes:
+                continue
+            if name not in supports or supports[name].kind != "clamp":
+                raise NotImplementedError(f"node {name!r}: a node that is no beam end must be clamped (it has no mass)")
+            slope = nodes[other][1] if other in nodes else (1.0, 0.0)
+            nodes[name] = (mbs.AddNode(ii.NodePoint2DSlope1(
+                referenceCoordinates=[state[name].x, state[name].y, *slope])), slope)
+
+    def fix(node: int, coordinate: int) -> None:
+        mn = mbs.AddMarker(ii.MarkerNodeCoordinate(nodeNumber=node, coordinate=coordinate))
+        mg = mbs.AddMarker(ii.MarkerNodeCoordinate(nodeNumber=mbs.AddNode(ii.NodePointGround()), coordinate=0))
+        mbs.AddObject(ii.CoordinateConstraint(markerNumbers=[mg, mn], offset=0.0))
+
+    beam_ends = {n for b in scene.beams for n in b.nodes}
+    for s in scene.supports:
+        node, (sx, sy) = nodes[s.node]
+        coords = [c for d, c in (("x", 0), ("y", 1)) if d in s.dofs]
+        if "theta" in s.dofs:
+            if s.node not in beam_ends:
+                coords += [2, 3]
+            elif abs(sx) < 1e-14 or abs(sy) < 1e-14:
+                coords.append(3 if abs(sy) < 1e-14 else 2)  # the slope component across the beam
+            else:
+                raise NotImplementedError(f"support {s.name!r}: a clamped beam end at an angle is not translated")
+        for c in coords:
+            fix(node, c)
+
+    for sp in scene.springs:
+        a, b = sp.nodes
+        rest = scene.distance(a, b) if sp.rest_length is None else sp.rest_length
+        mbs.AddObject(ii.ObjectConnectorSpringDamper(
+            markerNumbers=[mbs.AddMarker(ii.MarkerNodePosition(nodeNumber=nodes[n][0])) for n in (a, b)],
+            referenceLength=rest, stiffness=sp.k, damping=0.0))
+    for ts in scene.torsion_springs:
+        a, b = ts.nodes
+        rest = state[b].theta - state[a].theta if ts.rest_angle is None else ts.rest_angle
+        # Exudyn's angle is that of node b's frame relative to node a's, the frames of slope nodes being
+        # the slope directions: psi = psi_0 + theta - theta_0, so kt (theta_b - theta_a - rest) is
+        # kt (psi_b - psi_a - offset) with this offset
+        psi = {n: math.atan2(nodes[n][1][1], nodes[n][1][0]) for n in (a, b)}
+        offset = rest + (psi[b] - psi[a]) - (state[b].theta - state[a].theta)
+        mbs.AddObject(ii.ObjectConnectorTorsionalSpringDamper(
+            markerNumbers=[mbs.AddMarker(ii.MarkerNodeRigid(nodeNumber=nodes[n][0])) for n in (a, b)],
+            stiffness=ts.kt, damping=0.0, offset=offset))
+    for ld in scene.loads:
+        node = nodes[ld.node][0]
+        if ld.fx or ld.fy:
+            mbs.AddLoad(ii.LoadForceVector(markerNumber=mbs.AddMarker(ii.MarkerNodePosition(nodeNumber=node)),
+                                           loadVector=[ld.fx, ld.fy, 0.0]))
+        if ld.mz:
+            mbs.AddLoad(ii.LoadTorqueVector(markerNumber=mbs.AddMarker(ii.MarkerNodeRigid(nodeNumber=node)),
+                                            loadVector=[0.0, 0.0, ld.mz]))
+    del ground
+
+    out = exu.OutputVariableType
+    sensors = {name: {kind: mbs.AddSensor(ii.SensorNode(nodeNumber=node, storeInternal=True, writeToFile=False,
+                                                        outputVariableType=getattr(out, kind)))
+                      for kind in ("Coordinates", "Coordinates_t", "Coordinates_tt")}
+               for name, (node, _) in nodes.items()}
+    mbs.Assemble()
+
+    ss = exu.SimulationSettings()
+    ti = ss.timeIntegration
+    ti.numberOfSteps = int(round(t_end / h))
+    ti.endTime = t_end
+    ti.verboseMode = 0
+    ti.generalizedAlpha.spectralRadius = 1.0
+    ti.newton.residualMode = 1  # tolerance on the Newton increment
+    ti.newton.relativeTolerance = ti.newton.absoluteTolerance = newton_tol
+    ss.solution.file.write = False
+    ss.solution.sensors.writePeriod = h
+    ss.show.computationTime = False
+    ss.show.statistics = False
+    return ExudynModel(SC, mbs, ss, nodes, sensors, h, t_end)
+
+
+def simulate(scene: Scene, t_end: float, *, elements: int = 8, h: float = 1e-4, sample_dt: float = 1e-3,
+             newton_tol: float = 1e-10) -> MeasurementSet:
+    """Exudyn's motion of ``scene`` from t = 0 to ``t_end`` s, sampled every ``sample_dt`` s.
+
+    Parameters
+    ----------
+    scene : Scene
+        Its current property values are simulated (e.g. ``scene.with_values(k1=800)``).
+    elements : int
+        ANCF elements per beam.
+    h, sample_dt : float, s
+        Integration step and sample spacing (a whole number of steps).
+
+    Returns
+    -------
+    MeasurementSet
+        Channels ``x<node>``, ``y<node>``, ``theta<node>`` of every scene node (casflex's dof names);
+        q (m, rad), qd (m/s, rad/s), qdd (m/s^2, rad/s^2), shape (n_samples, 3 n_nodes);
+        ``meta`` records the code, version and settings.
+    """
+    exu = _exudyn()
+    every = int(round(sample_dt / h))
+    if every < 1 or abs(every * h - sample_dt) > 1e-9 * sample_dt:
+        raise ValueError(f"sample_dt: {sample_dt:g} s is not a whole number of steps h = {h:g} s")
+    m = build(scene, elements=elements, h=h, t_end=t_end, newton_tol=newton_tol)
+    if not m.mbs.SolveDynamic(m.settings):
+        raise RuntimeError("Exudyn's dynamic solver failed")
+    n = int(round(t_end / h))
+    rows = np.arange(0, n + 1, every)
+    channels, cols = [], {"q": [], "qd": [], "qdd": []}
+    t = None
+    for node in scene.nodes:
+        number, (sx0, sy0) = m.nodes[node.name]
+        ref = np.array(m.mbs.GetNodeParameter(number, "referenceCoordinates"), dtype=float)
+        c, c_t, c_tt = (np.asarray(m.mbs.GetSensorStoredData(m.sensors[node.name][k]))[rows]
+                        for k in ("Coordinates", "Coordinates_t", "Coordinates_tt"))
+        t = c[:, 0]
+        x, y, sx, sy = (ref[None, :] + c[:, 1:5]).T
+        vx, vy, sxd, syd = c_t[:, 1:5].T
+        ax, ay, sxdd, sydd = c_tt[:, 1:5].T
+        s2 = sx**2 + sy**2
+        cross_d = sx * syd - sy * sxd
+        theta = node.theta + np.unwrap(np.arctan2(sy, sx)) - math.atan2(sy0, sx0)
+        omega = cross_d / s2
+        # d/dt (s x s' / |s|^2)
+        alpha = (sx * sydd - sy * sxdd) / s2 - 2 * cross_d * (sx * sxd + sy * syd) / s2**2
+        channels += [f"x{node.name}", f"y{node.name}", f"theta{node.name}"]
+        cols["q"] += [x, y, theta]
+        cols["qd"] += [vx, vy, omega]
+        cols["qdd"] += [ax, ay, alpha]
+    return MeasurementSet(t, tuple(channels), *(np.column_stack(cols[k]) for k in ("q", "qd", "qdd")),
+                          source="exudyn",
+                          meta={"code": f"Exudyn {exu.__version__}", "elements": elements, "h": h,
+                                "integrator": "generalized-alpha, spectral radius 1", "newton_tol": newton_tol,
+                                "scene": scene.name})

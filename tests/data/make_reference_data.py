@@ -1,0 +1,52 @@
+"""Writes the reference motions in this folder: casflex's built-in scenes simulated by another code.
+
+    python tests/data/make_reference_data.py        # needs Exudyn: pip install -e '.[peers]'
+
+For each scene, Exudyn (:mod:`casflex.peers.exudyn`: ANCF cable elements, generalized-alpha
+without damping) simulates 0-4 s with 8 elements per beam and h = 1e-4 s, Newton increments to
+1e-10, and every node's x, y, theta and their rates are kept at 1 kHz (``<scene>_exudyn.npz``:
+keys t, channels, q, qd, meta). The file's own error is measured against a run with 16
+elements per beam and h = 5e-5 s and recorded in ``meta`` (``error_xy``, m, and ``error_theta``, rad:
+max over samples and channels). These are the "measurements" the identification tests and
+``studies/realdata.py`` fit with casflex's own, different, discretisation.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+SCENES = ("twobar", "threelink")
+T_END = 4.0
+
+
+def make(scene_name: str) -> Path:
+    import casflex
+    from casflex.peers import exudyn
+    from casflex.results import atomic_write_bytes
+
+    scene = casflex.load_scene(scene_name)
+    data = exudyn.simulate(scene, T_END, elements=8, h=1e-4, sample_dt=1e-3)
+    # (16 short elements: Newton increments reach 1e-9 only, not 1e-10)
+    fine = exudyn.simulate(scene, T_END, elements=16, h=5e-5, sample_dt=1e-3, newton_tol=1e-9)
+    error = np.abs(fine.q - data.q).max(axis=0)
+    rot = np.array([c.startswith("theta") for c in data.channels])
+    meta = {**data.meta, "error_xy": float(error[~rot].max()), "error_theta": float(error[rot].max()),
+            "check": "against 16 elements per beam, h = 5e-5 s", "p": scene_name + " nominal"}
+    buf = io.BytesIO()
+    np.savez_compressed(buf, t=data.t, channels=np.array(data.channels), q=data.q, qd=data.qd,
+                        meta=np.array(json.dumps(meta)))
+    path = atomic_write_bytes(HERE / f"{scene_name}_exudyn.npz", buf.getvalue())
+    print(f"{path.name}: {data.t.size} samples of {len(data.channels)} channels, own error {meta['error_xy']:.2e} m, "
+          f"{meta['error_theta']:.2e} rad, {meta['code']}")
+    return path
+
+
+if __name__ == "__main__":
+    for name in sys.argv[1:] or SCENES:
+        make(name)
