@@ -235,6 +235,7 @@ class HHT:
                                                             ca.jacobian(Xw, zsym), ca.jacobian(Xw, wsym))]
         sens = ca.Function("hht_step_sensitivity", [x0, t0, p, h, d, x1s], blocks,
                            ["x0", "t0", "p", "h", "d", "x1"], ["G_z", "G_w", "X_z", "X_w"], cse)
+        self._fn["sensitivity"] = sens
 
         # The step as one Function.
         X0, T0, Pm, H, D = (ca.MX.sym(k, s) for k, s in (("x0", self.nx), ("t0", 1), ("p", m.n_p), ("h", 1), ("d", n)))
@@ -286,6 +287,36 @@ class HHT:
     def pieces(self) -> tuple[ca.Function, ca.Function, ca.Function]:
         """(prepare, newton, finish): the step in three calls, for the stepping driver."""
         return self._fn["prepare"], self._fn["newton"], self._fn["finish"]
+
+    def sensitivity(self, n_steps: int) -> ca.Function:
+        """``hht_sensitivity_<N>(x0, S0, t0, p, h, d) -> (X, S, res)``: N steps that also carry the
+        forward sensitivities S = dx/dw of the state to w = (x_0, p), w of size nx + n_p.
+
+        S0 (nx, nx + n_p) is dx0/dw (the identity beside zeros for a fixed start); S (nx, N (nx + n_p))
+        holds dx_k/dw after each step, side by side; X and res as in :meth:`trajectory`. Each step
+        propagates S_{k+1} = X_w E - X_z G_z^-1 G_w E with E = d(x_k, t_k, p, h)/dw: the implicit-
+        function derivative of the Newton solve, one small QR per step.
+        """
+        key = f"sens{n_steps}"
+        if key not in self._fn:
+            m = self.model
+            nx, npar = self.nx, m.n_p
+            nw = nx + npar
+            X0, T0, Pm, H, D = self.step.mx_in()
+            S0 = ca.MX.sym("S0", nx, nw)
+            X1, res = self.step(X0, T0, Pm, H, D)
+            G_z, G_w, X_z, X_w = self._fn["sensitivity"](X0, T0, Pm, H, D, X1)
+            E = ca.vertcat(S0, ca.MX(1, nw), ca.horzcat(ca.MX(npar, nx), ca.MX.eye(npar)), ca.MX(1, nw))
+            S1 = ca.mtimes(X_w, E) - ca.mtimes(X_z, ca.solve(G_z, ca.mtimes(G_w, E), "qr"))
+            one = ca.Function("hht_sensitivity_step", [X0, S0, T0, Pm, H, D], [X1, S1, res],
+                              ["x0", "S0", "t0", "p", "h", "d"], ["x1", "S1", "res"])
+            acc = one.mapaccum(f"hht_sensitivity_steps_{n_steps}", n_steps, 2)
+            grid = T0 + H * ca.DM(np.arange(n_steps)).T
+            X, S, R = acc(X0, S0, grid, ca.repmat(Pm, 1, n_steps), ca.repmat(H, 1, n_steps),
+                          ca.repmat(D, 1, n_steps))
+            self._fn[key] = ca.Function(f"hht_sensitivity_{n_steps}", [X0, S0, T0, Pm, H, D], [X, S, R],
+                                        ["x0", "S0", "t0", "p", "h", "d"], ["X", "S", "res"])
+        return self._fn[key]
 
     def trajectory(self, n_steps: int) -> ca.Function:
         """``hht_trajectory_<N>(x0, t0, p, h, d) -> (X, res)``: N steps chained by mapaccum.

@@ -1,0 +1,304 @@
+"""The measurement model of output-error identification: what was recorded, when, and what is
+known of the recording's initial state.
+
+An :class:`Experiment` is one recording (a :class:`~casflex.data.MeasurementSet`): channels are
+model dofs sampled at their own times (any rate, irregular, NaN for a missing sample); the
+model's clock starts at the first sample. The model is stepped on its own grid t0 + k dt and its
+outputs are interpolated at the sample times by the cubic Hermite through q and q' at the ends
+of the step that holds the sample (:class:`SampleMap`), which is what the trapezoidal rule
+integrates between two steps.
+
+The initial state is ``"scene"`` (the scene's q0, qd0 at the first sample), ``"velocities"``
+(the scene's q0, velocities estimated: the positions are trusted) or ``"estimate"`` (both
+estimated). An estimated state satisfies the constraints by construction (the supports' dofs
+are not unknowns) and starts from :func:`initial_guess`: the measured dofs from the data, the
+others from a constrained kinematic fit, the configuration of least elastic energy that passes
+through the measured positions, at each of the first samples; velocities from a local
+quadratic through those configurations.
+
+:func:`check_against_scene` stops before any fit when data and scene cannot belong together
+(positions in millimetres, times in milliseconds, a recording that does not start where the
+scene starts), with one line that says what to do.
+"""
+
+from __future__ import annotations
+
+import weakref
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from casflex.data import MeasurementSet
+from casflex.model import Model
+
+__all__ = ["Experiment", "SampleMap", "INITIAL_STATES", "check_against_scene", "initial_guess", "free_dofs"]
+
+INITIAL_STATES = ("scene", "velocities", "estimate")
+
+
+@dataclass(frozen=True, eq=False)
+class Experiment:
+    """One recording to fit.
+
+    Attributes
+    ----------
+    data : MeasurementSet
+        Positions (m, rad) of some model dofs at times t (s); NaN marks a missing sample.
+    initial_state : {"scene", "velocities", "estimate"}
+        What is known of the state at the first sample (module docstring).
+    channels : tuple of str, optional
+        The compared channels (model dof names); default every channel of the data.
+    noise : float, optional
+        Standard deviation of the measurement noise (m for translations, rad for rotations), if
+        known: weights the channels and is checked against the residuals. Default: estimated
+        from the residuals.
+    name : str
+        Reported with the experiment's results.
+    """
+
+    data: MeasurementSet
+    initial_state: str = "scene"
+    channels: tuple[str, ...] | None = None
+    noise: float | None = None
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        if self.initial_state not in INITIAL_STATES:
+            raise ValueError(f"initial_state: expected one of {INITIAL_STATES}, got {self.initial_state!r}")
+        if self.noise is not None and not (np.isfinite(self.noise) and self.noise > 0):
+            raise ValueError(f"noise: expected a standard deviation > 0 (m, rad), got {self.noise!r}")
+        if self.data.t.size < 2:
+            raise ValueError("data: output-error identification needs a time series (at least 2 samples)")
+
+    def compared(self, model: Model) -> tuple[str, ...]:
+        """The compared channels, checked against the model and the data."""
+        self.data.select(model)  # unknown channel names raise here
+        names = tuple(self.channels) if self.channels is not None else self.data.channels
+        for c in names:
+            if c not in model.dof_names:
+                raise ValueError(f"dofs: unknown dof {c!r}; the model's dofs are {list(model.dof_names)}")
+            if c not in self.data.channels:
+                raise ValueError(f"dofs: {c!r} is not in the data (channels: {list(self.data.channels)})")
+        if not names:
+            raise ValueError("dofs: no channel to compare")
+        return names
+
+
+def free_dofs(model: Model) -> np.ndarray:
+    """Indices of the dofs no support fixes (the unknowns of an estimated initial state)."""
+    fixed = {c.dof for c in model.constraints}
+    return np.array([i for i in range(model.n_dof) if i not in fixed], dtype=int)
+
+
+@dataclass(frozen=True, eq=False)
+class SampleMap:
+    """Every finite sample of an experiment as an interpolation of the model's step-end states.
+
+    The model steps from ``t0`` (the first sample) in ``n_steps`` steps of ``dt`` (s), past the
+    last sample. Observation j is channel ``channel[j]`` (model dof ``dof[j]``) measured ``y[j]``
+    at ``time[j]``, in step ``step[j]`` (from t_k = t0 + k dt) at s = (t - t_k)/dt, and the model
+    predicts w0 q_k + w1 q'_k + w2 q_k+1 + w3 q'_k+1 with ``weights[j]`` = (h00, dt h10, h01,
+    dt h11), the cubic Hermite basis at s.
+    """
+
+    t0: float
+    dt: float
+    n_steps: int
+    channels: tuple[str, ...]
+    channel: np.ndarray
+    dof: np.ndarray
+    time: np.ndarray
+    y: np.ndarray
+    step: np.ndarray
+    weights: np.ndarray
+
+    @classmethod
+    def of(cls, model: Model, experiment: Experiment, dt: float) -> SampleMap:
+        if not (np.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt: must be a positive number of seconds, got {dt!r}")
+        data = experiment.data
+        names = experiment.compared(model)
+        cols = [data.channels.index(c) for c in names]
+        t0 = float(data.t[0])
+        n_steps = max(1, int(np.ceil((data.t[-1] - t0) / dt - 1e-9)))
+        Y = np.asarray(data.q, dtype=float)[:, cols]
+        rows, ch = np.nonzero(np.isfinite(Y))
+        if rows.size == 0:
+            raise ValueError("data: no finite sample in the compared channels")
+        time = data.t[rows]
+        u = (time - t0) / dt
+        step = np.clip(np.floor(u + 1e-9).astype(int), 0, n_steps - 1)
+        s = np.clip(u - step, 0.0, 1.0)
+        s[np.abs(s) < 1e-9] = 0.0
+        weights = np.column_stack([2 * s**3 - 3 * s**2 + 1, dt * (s**3 - 2 * s**2 + s),
+                                   -2 * s**3 + 3 * s**2, dt * (s**3 - s**2)])
+        dof = np.array([model.dof(names[c]) for c in ch], dtype=int)
+        return cls(t0, float(dt), n_steps, names, ch, dof, time, Y[rows, ch], step, weights)
+
+    @property
+    def needed_steps(self) -> np.ndarray:
+        """The step-end indices (0 .. n_steps) whose states the observations use."""
+        return np.unique(np.concatenate([self.step, self.step + 1]))
+
+    def predict(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """Model outputs (m,) from q, qd at the step ends (n_steps + 1, n_dof)."""
+        k, d, w = self.step, self.dof, self.weights
+        return w[:, 0] * q[k, d] + w[:, 1] * qd[k, d] + w[:, 2] * q[k + 1, d] + w[:, 3] * qd[k + 1, d]
+
+
+# -- checks ------------------------------------------------------------------------------------
+
+def _rest_velocity(data: MeasurementSet, cols: list[int], m: int = 7) -> tuple[np.ndarray, np.ndarray]:
+    """Velocity at the first sample of each channel ``cols`` from a quadratic fitted through the
+    first ``m`` finite samples, and its standard error (from the fit's residuals, with a floor
+    of the noise a position can carry, 1e-6 of its magnitude)."""
+    v, se = np.zeros(len(cols)), np.full(len(cols), np.inf)
+    for j, c in enumerate(cols):
+        ok = np.flatnonzero(np.isfinite(data.q[:, c]))[:m]
+        if ok.size < 4:
+            continue
+        tt = data.t[ok] - data.t[0]
+        A = np.column_stack([np.ones_like(tt), tt, tt**2])
+        coef, *_ = np.linalg.lstsq(A, data.q[ok, c], rcond=None)
+        res = data.q[ok, c] - A @ coef
+        s2 = max(float(res @ res) / (ok.size - 3), (1e-6 * np.abs(data.q[ok, c]).max()) ** 2)
+        v[j] = coef[1]
+        se[j] = np.sqrt(s2 * np.linalg.inv(A.T @ A)[1, 1])
+    return v, se
+
+
+def check_against_scene(model: Model, experiment: Experiment) -> None:
+    """ValueError with one line when the data cannot belong to the scene: positions in other
+    units than metres, times in milliseconds, or (for ``initial_state`` "scene" and
+    "velocities") a first sample far from the scene's initial configuration, or (for "scene") a
+    recording that starts moving while the scene starts at rest."""
+    data, scene = experiment.data, model.scene
+    names = experiment.compared(model)
+    trans = [c for c in names if not c.startswith("theta")]
+    cols = [data.channels.index(c) for c in trans]
+    span = scene.length_scale
+    reach = max(span, max(abs(v) for n in scene.nodes for v in (n.x, n.y)))
+    if cols:
+        big = float(np.nanmax(np.abs(data.q[:, cols])))
+        if big > 30 * reach:
+            factor = 1000 if big > 300 * reach else 100
+            unit = "millimetres" if factor == 1000 else "centimetres"
+            raise ValueError(f"data: positions reach {big:.4g} while the scene spans {span:.3g} m: they look like "
+                             f"{unit} (x {factor}); give positions in metres")
+    t = data.t
+    dt_med = float(np.median(np.diff(t)))
+    if t[-1] - t[0] > 100 * max(scene.run.t_end, 1.0) and dt_med >= 0.1:
+        raise ValueError(f"data: t runs from {t[0]:g} to {t[-1]:g} in steps of {dt_med:g}: the times look like "
+                         f"milliseconds (the scene's run lasts {scene.run.t_end:g} s); give t in seconds")
+    if experiment.initial_state == "estimate":
+        return
+    noise = experiment.noise if experiment.noise is not None else 1e-3 * span
+    tol = 0.01 * span + 5 * noise
+    cols_all = [data.channels.index(c) for c in names]
+    first = np.array([data.q[np.flatnonzero(np.isfinite(data.q[:, c]))[0], c] for c in cols_all])
+    scene_q = np.array([model.q0[model.dof(c)] for c in names])
+    scale = np.array([1.0 if c.startswith("theta") else 1.0 / span for c in names])
+    off = np.abs(first - scene_q) * scale
+    j = int(np.argmax(off))
+    if off[j] > tol / span:
+        unit = "rad" if names[j].startswith("theta") else "m"
+        raise ValueError(f"data: the recording does not start at the scene's initial state: {names[j]} = "
+                         f"{first[j]:.4g} {unit} at the first sample (t = {t[0]:g} s), the scene has {scene_q[j]:.4g} "
+                         f"{unit}; use --initial-state estimate")
+    if experiment.initial_state == "scene" and cols:
+        v, se = _rest_velocity(data, cols)
+        v_scene = np.array([model.qd0[model.dof(c)] for c in trans])
+        moving = (np.abs(v - v_scene) > 5 * se) & (np.abs(v - v_scene) > 0.01 * span / max(t[-1] - t[0], 1e-9))
+        if moving.any():
+            j = int(np.argmax(np.where(moving, np.abs(v - v_scene), 0.0)))
+            raise ValueError(f"data: the recording starts moving ({trans[j]} at {v[j]:.3g} m/s at t = {t[0]:g} s) "
+                             f"while the scene starts at {v_scene[j]:.3g} m/s; use --initial-state velocities "
+                             "(positions trusted) or estimate")
+
+
+# -- initial state guess ----------------------------------------------------------------------
+
+_FITS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _kinematic_fit(model: Model, measured: tuple[int, ...]) -> ca.Function:
+    """``kinematic_fit(q_known, q_start) -> q``: the configuration of least elastic energy whose
+    measured and supported dofs take their values in ``q_known`` (IPOPT, exact Hessian), built
+    once per model and set of measured dofs."""
+    cache = _FITS.setdefault(model, {})
+    if measured not in cache:
+        unknown = [i for i in free_dofs(model) if i not in measured]
+        n = model.n_dof
+        if not unknown:  # every free dof is measured: nothing to fit
+            QK, Q0 = ca.MX.sym("q_known", n), ca.MX.sym("q_start", n)
+            cache[measured] = ca.Function("kinematic_fit", [QK, Q0], [QK], ["q_known", "q_start"], ["q"])
+            return cache[measured]
+        keep = np.ones(n)
+        keep[unknown] = 0.0
+        put = np.zeros((n, len(unknown)))
+        put[unknown, np.arange(len(unknown))] = 1.0
+        qk, u, u_ref = ca.SX.sym("q_known", n), ca.SX.sym("u", len(unknown)), ca.SX.sym("u_ref", len(unknown))
+        q = ca.DM(keep) * qk + ca.mtimes(ca.DM(put), u)
+        _, V_el, _ = model.energy(q, ca.DM.zeros(n), model.p_nominal)
+        ell = np.where(model.is_rotation[unknown], 1.0, model.length_scale)
+        # a weak pull toward the start fixes motions that cost no energy (e.g. a free spin)
+        reg = 1e-9 * ca.mmax(ca.fabs(ca.diag(ca.hessian(V_el, u)[0]))) + 1e-12
+        f = V_el + 0.5 * reg * model.length_scale**2 * ca.sumsqr((u - u_ref) / ell)
+        solver = ca.nlpsol("kinematic_fit_nlp", "ipopt", {"x": u, "p": ca.vertcat(qk, u_ref), "f": f},
+                           {"print_time": False, "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-12,
+                                                           "max_iter": 200}})
+        QK, Q0 = ca.MX.sym("q_known", n), ca.MX.sym("q_start", n)
+        U = solver(x0=Q0[unknown], p=ca.vertcat(QK, Q0[unknown]))["x"]
+        q_out = ca.DM(keep) * QK + ca.mtimes(ca.DM(put), U)
+        cache[measured] = ca.Function("kinematic_fit", [QK, Q0], [q_out], ["q_known", "q_start"], ["q"])
+    return cache[measured]
+
+
+def initial_guess(model: Model, experiment: Experiment, m: int = 5) -> tuple[np.ndarray, np.ndarray]:
+    """(q0, qd0), shape (n_dof,) each: a first guess of the state at the first sample.
+
+    Positions: the scene's for ``initial_state`` "scene" and "velocities"; for "estimate", the
+    kinematic fit at the first sample (measured dofs as measured, supports as fixed, the rest
+    of least elastic energy). Velocities: the scene's for "scene"; otherwise the derivative at
+    the first sample of a quadratic through the kinematic fits at the first ``m`` samples.
+    """
+    if experiment.initial_state == "scene":
+        return model.q0.copy(), model.qd0.copy()
+    data = experiment.data
+    names = experiment.compared(model)
+    dofs = tuple(sorted(model.dof(c) for c in names))
+    fit = _kinematic_fit(model, dofs)
+    q_prev = model.q0.copy()
+    fits, times = [], []
+    for i in range(min(m, data.t.size)):
+        known = q_prev.copy()
+        ok = True
+        for c in names:
+            v = data.q[i, data.channels.index(c)]
+            if not np.isfinite(v):
+                ok = False
+                break
+            known[model.dof(c)] = v
+        if not ok:
+            continue
+        for con in model.constraints:
+            known[con.dof] = con.value
+        q_prev = np.array(fit(known, q_prev)).ravel()
+        fits.append(q_prev)
+        times.append(data.t[i] - data.t[0])
+    if not fits:
+        raise ValueError("data: no sample among the first ones has every compared channel; cannot estimate the "
+                         "initial state")
+    Q, tt = np.array(fits), np.array(times)
+    q0 = Q[0] if experiment.initial_state == "estimate" else model.q0.copy()
+    if len(tt) >= 3:
+        A = np.column_stack([np.ones_like(tt), tt, tt**2])
+        qd0 = np.linalg.lstsq(A, Q, rcond=None)[0][1]
+    elif len(tt) == 2:
+        qd0 = (Q[1] - Q[0]) / (tt[1] - tt[0])
+    else:
+        qd0 = np.zeros(model.n_dof)
+    for con in model.constraints:
+        qd0[con.dof] = 0.0
+    return q0, qd0

@@ -1,0 +1,251 @@
+"""Output-error identification by single shooting with forward sensitivities (Eq. 16 on real data).
+
+The unknowns are the parameters (decision variables theta, :class:`ParameterMap`) and, per
+experiment, the unknown part of its initial state (:mod:`.measurement`). For given unknowns every
+experiment is simulated from its first sample on the model's own grid (``dt``, HHT ``alpha``) with
+the sensitivities of :mod:`.sensitivity`; the residuals are the measured positions minus the
+model's, Hermite-interpolated at the sample times, divided by the declared noise (or in metres,
+rotations times the scene's length), and their Jacobian follows exactly from the sensitivities.
+
+The least-squares problem is solved by scipy's trust-region reflective Gauss-Newton
+(``least_squares(method="trf")``, bounds from the parameters, unknowns scaled by the Jacobian's
+columns), within an explicit :class:`Budget` of iterations and wall time: the reason for stopping
+is always reported. A trial point at which the model does not run (a Newton failure) is
+rejected like a bad step.
+"""
+
+from __future__ import annotations
+
+import time
+import weakref
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+from scipy.optimize import least_squares
+
+from casflex import interrupt
+from casflex.identification.measurement import Experiment, SampleMap, free_dofs
+from casflex.identification.problem import ParameterMap
+from casflex.identification.sensitivity import run_sensitivities
+from casflex.model import Model
+
+__all__ = ["Budget", "OutputError", "Fit", "fit"]
+
+
+@dataclass(frozen=True)
+class Budget:
+    """Limits of one solve: Gauss-Newton iterations (model runs) and wall time (s)."""
+
+    max_iterations: int = 100
+    max_time: float = 600.0
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.max_iterations, int) and self.max_iterations >= 1):
+            raise ValueError(f"max_iterations: expected an integer >= 1, got {self.max_iterations!r}")
+        if not (np.isfinite(self.max_time) and self.max_time > 0):
+            raise ValueError(f"max_time: expected a positive number of seconds, got {self.max_time!r}")
+
+
+class _Diverged(Exception):
+    """The model did not run at these unknowns (a Newton step failed)."""
+
+
+class _OverBudget(Exception):
+    """The time budget ran out."""
+
+
+_X0: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _x0_map(integ) -> ca.Function:
+    """``x0_map(q0, qd0, t0, p) -> (x0, dx0/dq0, dx0/dqd0, dx0/dp)``: the consistent initial state."""
+    if integ not in _X0:
+        m = integ.model
+        q, qd, t, p = ca.MX.sym("q0", m.n_dof), ca.MX.sym("qd0", m.n_dof), ca.MX.sym("t0"), ca.MX.sym("p", m.n_p)
+        qdd, lam = integ.initial(q, qd, t, p)
+        x0 = ca.vertcat(q, qd, qdd, lam)
+        _X0[integ] = ca.Function("x0_map", [q, qd, t, p],
+                                 [x0, ca.jacobian(x0, q), ca.jacobian(x0, qd), ca.jacobian(x0, p)])
+    return _X0[integ]
+
+
+class OutputError:
+    """Residuals and Jacobian of the output error of ``experiments`` in the unknowns
+    w = (theta, xi_1, ..., xi_E); xi_e = q0 and/or qd0 of the free dofs of experiment e."""
+
+    def __init__(self, model: Model, experiments: list[Experiment], *, dt: float, alpha: float,
+                 pmap: ParameterMap, compiled: bool, newton_tol: float) -> None:
+        from casflex.simulate import integrator_for
+
+        self.model, self.experiments, self.dt, self.pmap, self.compiled = model, experiments, dt, pmap, compiled
+        self.integ = integrator_for(model, alpha=alpha, tol=newton_tol)
+        self.maps = [SampleMap.of(model, e, dt) for e in experiments]
+        self.free = free_dofs(model)
+        nf, npar = self.free.size, model.n_p
+        self.kinds = [e.initial_state for e in experiments]
+        sizes = [{"scene": 0, "velocities": nf, "estimate": 2 * nf}[k] for k in self.kinds]
+        self.offsets = np.concatenate([[npar], npar + np.cumsum(sizes)]).astype(int)
+        self.n_unknowns = int(self.offsets[-1])
+        ell = model.length_scale
+        self.sigma = []
+        for e, sm in zip(experiments, self.maps, strict=True):
+            rot = model.is_rotation[sm.dof]
+            base = np.where(rot, 1.0 / ell, 1.0)  # rotations compared as arc lengths at the scene's size
+            self.sigma.append(base * (e.noise if e.noise is not None else 1.0))
+        self.base_state: list[tuple[np.ndarray, np.ndarray]] = [(model.q0.copy(), model.qd0.copy())
+                                                                for _ in experiments]
+        self.evaluations = 0
+
+    # -- unknowns ----------------------------------------------------------------------------
+    def pack(self, theta: np.ndarray, states: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
+        """w from theta and each experiment's (q0, qd0) (full dof vectors)."""
+        parts = [np.asarray(theta, dtype=float)]
+        for kind, (q0, qd0) in zip(self.kinds, states, strict=True):
+            if kind == "estimate":
+                parts.append(q0[self.free])
+            if kind in ("estimate", "velocities"):
+                parts.append(qd0[self.free])
+        return np.concatenate(parts)
+
+    def state(self, w: np.ndarray, e: int) -> tuple[np.ndarray, np.ndarray]:
+        """(q0, qd0) of experiment e at unknowns w."""
+        q0, qd0 = (v.copy() for v in self.base_state[e])
+        xi = w[self.offsets[e]:self.offsets[e + 1]]
+        nf = self.free.size
+        if self.kinds[e] == "estimate":
+            q0[self.free], qd0[self.free] = xi[:nf], xi[nf:]
+        elif self.kinds[e] == "velocities":
+            qd0[self.free] = xi
+        return q0, qd0
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        lb, ub = self.pmap.bounds()
+        extra = self.n_unknowns - lb.size
+        return np.concatenate([lb, np.full(extra, -np.inf)]), np.concatenate([ub, np.full(extra, np.inf)])
+
+    # -- evaluation --------------------------------------------------------------------------
+    def evaluate(self, w: np.ndarray, jacobian: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+        """Residuals r (m,) (dimensionless: data units over noise) and, if asked, J = dr/dw (m, n)."""
+        model, n, npar = self.model, self.model.n_dof, self.model.n_p
+        nx = self.integ.nx
+        theta = w[:npar]
+        p = self.pmap.p(theta)
+        dp = self.pmap.dp_dtheta(theta)
+        rs, Js = [], []
+        self.evaluations += 1
+        for e, sm in enumerate(self.maps):
+            q0, qd0 = self.state(w, e)
+            x0, Jq, Jqd, Jp = (np.array(v) for v in _x0_map(self.integ)(q0, qd0, sm.t0, p))
+            run = run_sensitivities(self.integ, x0.ravel(), p, sm.t0, sm.dt, sm.n_steps, sm.needed_steps,
+                                    compiled=self.compiled)
+            if not run.converged:
+                raise _Diverged(f"experiment {e + 1}: the model's Newton failed at t = "
+                                f"{sm.t0 + run.failed_step * sm.dt:.6g} s")
+            i0 = np.searchsorted(run.steps, sm.step)
+            i1 = np.searchsorted(run.steps, sm.step + 1)
+            X = run.X
+            wts = sm.weights
+            y = (wts[:, 0] * X[i0, sm.dof] + wts[:, 1] * X[i0, n + sm.dof]
+                 + wts[:, 2] * X[i1, sm.dof] + wts[:, 3] * X[i1, n + sm.dof])
+            rs.append((y - sm.y) / self.sigma[e])
+            if not jacobian:
+                continue
+            # d x0 / d(p, xi_e): columns of the local unknowns
+            cols = [Jp]
+            if self.kinds[e] == "estimate":
+                cols.append(Jq[:, self.free])
+            if self.kinds[e] in ("estimate", "velocities"):
+                cols.append(Jqd[:, self.free])
+            M0 = np.hstack(cols)  # (nx, npar + n_xi)
+            sel = np.unique(np.concatenate([sm.dof, n + sm.dof]))
+            S = run.S[:, :, sel]  # (k, nw, nsel)
+            G = np.einsum("kws,wc->ksc", S[:, :nx, :], M0)
+            G[:, :, :npar] += np.transpose(S[:, nx:, :], (0, 2, 1))
+            pos = np.searchsorted(sel, sm.dof)
+            vel = np.searchsorted(sel, n + sm.dof)
+            D = (wts[:, 0, None] * G[i0, pos] + wts[:, 1, None] * G[i0, vel]
+                 + wts[:, 2, None] * G[i1, pos] + wts[:, 3, None] * G[i1, vel]) / self.sigma[e][:, None]
+            Je = np.zeros((sm.y.size, self.n_unknowns))
+            Je[:, :npar] = D[:, :npar] * dp
+            Je[:, self.offsets[e]:self.offsets[e + 1]] = D[:, npar:]
+            Js.append(Je)
+        return np.concatenate(rs), (np.vstack(Js) if jacobian else None)
+
+    def groups(self) -> list[list[np.ndarray]]:
+        """Rows of the residual vector per experiment and sample time, in time order."""
+        out, start = [], 0
+        for sm in self.maps:
+            _, inv = np.unique(sm.time, return_inverse=True)
+            out.append([start + np.flatnonzero(inv == k) for k in range(inv.max() + 1)])
+            start += sm.y.size
+        return out
+
+
+@dataclass(frozen=True)
+class Fit:
+    """The outcome of :func:`fit`: unknowns w, residuals r and Jacobian J there, the solver's
+    status (scipy's ``least_squares`` status, or "time_limit"), iterations and wall time."""
+
+    w: np.ndarray
+    r: np.ndarray
+    J: np.ndarray
+    status: str
+    converged: bool
+    iterations: int
+    solve_s: float
+    message: str
+
+
+_STATUS = {-1: "improper_input", 0: "iteration_limit", 1: "gradient_tolerance", 2: "cost_tolerance",
+           3: "step_tolerance", 4: "cost_and_step_tolerance"}
+
+
+def fit(problem: OutputError, w0: np.ndarray, budget: Budget, *, verbose: bool = False) -> Fit:
+    """Minimise 1/2 |r(w)|^2 from w0 within ``budget`` (trust-region reflective Gauss-Newton)."""
+    t0 = time.perf_counter()
+    memo: dict[str, object] = {}
+    best = {"cost": np.inf, "w": np.array(w0, dtype=float)}
+
+    def evaluate(w: np.ndarray, limited: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        if memo.get("w") is not None and np.array_equal(memo["w"], w):
+            return memo["r"], memo["J"]
+        if limited and time.perf_counter() - t0 > budget.max_time:
+            raise _OverBudget
+        interrupt.check()
+        r, J = problem.evaluate(w)
+        memo.update(w=w.copy(), r=r, J=J)
+        cost = 0.5 * float(r @ r)
+        if cost < best["cost"]:
+            best.update(cost=cost, w=w.copy())
+        return r, J
+
+    try:
+        r0, _ = evaluate(np.asarray(w0, dtype=float))
+    except _Diverged as exc:
+        raise ValueError(f"the model does not run at the start: {exc}; try a start closer to the expected "
+                         "parameters, a smaller dt or a more negative alpha") from None
+    big = 1e3 * max(float(np.abs(r0).max()), 1.0)
+
+    def fun(w: np.ndarray) -> np.ndarray:
+        try:
+            return evaluate(w)[0]
+        except _Diverged:  # a trial point where the model does not run: a step to reject
+            return np.full(r0.size, big)
+
+    def jac(w: np.ndarray) -> np.ndarray:
+        return evaluate(w)[1]
+
+    lb, ub = problem.bounds()
+    w_start = np.clip(np.asarray(w0, dtype=float), lb, ub)
+    try:
+        sol = least_squares(fun, w_start, jac=jac, bounds=(lb, ub), method="trf", x_scale="jac", xtol=1e-10,
+                            ftol=1e-10, gtol=1e-10, max_nfev=budget.max_iterations, verbose=2 if verbose else 0)
+        w, status, iters = sol.x, _STATUS.get(sol.status, str(sol.status)), int(sol.nfev)
+        converged = sol.status > 0
+        message = "" if converged else f"stopped at the iteration limit ({budget.max_iterations} model runs)"
+    except _OverBudget:
+        w, status, iters, converged = best["w"], "time_limit", problem.evaluations, False
+        message = f"stopped at the time limit ({budget.max_time:g} s); the best point so far is reported"
+    r, J = evaluate(w, limited=False)
+    return Fit(w, r, J, status, converged, iters, time.perf_counter() - t0, message)

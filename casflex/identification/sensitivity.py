@@ -1,0 +1,114 @@
+"""Forward sensitivities of HHT trajectories: the states at chosen steps and their derivatives
+with respect to the initial state and the parameters, for output-error identification.
+
+:meth:`HHT.sensitivity <casflex.integrators.hht.HHT.sensitivity>` carries, through every step,
+the state x_k and S_k = dx_k/d(x_0, p), shape (nx, nx + n_p), by the implicit-function
+derivative of each Newton solve: exact to the Newton tolerance, not finite differences. Chunks
+of :data:`CHUNK` steps run as one compiled C function (generated once per integrator and cached
+on disk by :func:`casflex.codegen.compile_functions`), the remainder step by step; without a C
+compiler the same Functions run in CasADi's virtual machine, some tens of times slower.
+
+The cost is linear in the number of steps: twobar (15 dofs, 4 parameters), 3000 steps with all
+52 directions take about 0.3 s compiled.
+"""
+
+from __future__ import annotations
+
+import shutil
+import weakref
+from dataclasses import dataclass
+
+import numpy as np
+
+from casflex import interrupt
+from casflex.codegen import BufferedCall, compile_functions, log
+from casflex.integrators.hht import HHT
+
+__all__ = ["SensitivityRun", "run_sensitivities", "CHUNK"]
+
+#: Steps per compiled call.
+CHUNK = 250
+
+_LIBS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+@dataclass(frozen=True)
+class SensitivityRun:
+    """States and sensitivities at the kept step ends.
+
+    steps : (m,) kept step-end indices (0: the initial state); X : (m, nx) states; S : (m, nw, nx)
+    with S[i, j, :] = dx_steps[i] / dw_j, w = (x_0, p); converged : every step's Newton met its
+    tolerance (if not, ``failed_step`` is the first that did not and the arrays stop before it).
+    """
+
+    steps: np.ndarray
+    X: np.ndarray
+    S: np.ndarray
+    converged: bool
+    failed_step: int | None
+
+
+def _functions(integ: HHT, compiled: bool) -> tuple:
+    """(chunk call, one-step call): BufferedCalls of compiled code, or the CasADi Functions."""
+    key = bool(compiled)
+    cache = _LIBS.setdefault(integ, {})
+    if key not in cache:
+        funcs = [integ.sensitivity(CHUNK), integ.sensitivity(1)]
+        if compiled and shutil.which("gcc") is None:
+            log.warning("no C compiler (gcc): the sensitivities run interpreted, some tens of times slower")
+            compiled = False
+        if compiled:
+            lib = compile_functions(funcs, stem="casflex_sensitivity")
+            cache[key] = tuple(BufferedCall(lib[f.name()]) for f in funcs)
+        else:
+            cache[key] = tuple(funcs)
+    return cache[key]
+
+
+def run_sensitivities(integ: HHT, x0: np.ndarray, p: np.ndarray, t0: float, dt: float, n_steps: int,
+                      keep: np.ndarray, *, compiled: bool = True) -> SensitivityRun:
+    """Step from x0 at t0 (s) ``n_steps`` steps of ``dt`` (s) with parameters p; keep the states
+    and sensitivities at the step ends in ``keep`` (sorted indices in 0..n_steps)."""
+    model = integ.model
+    n, nx, nw = model.n_dof, integ.nx, integ.nx + model.n_p
+    chunk_fn, step_fn = _functions(integ, compiled)
+    d = np.array(integ.scale(x0[:n], x0[n:2 * n], p, dt)).ravel()
+    keep = np.asarray(keep, dtype=int)
+    Xk = np.empty((keep.size, nx))
+    Sk = np.empty((keep.size, nw, nx))
+    x = np.ascontiguousarray(x0, dtype=float)
+    S = np.zeros((nw, nx))  # S^T: row j = dx/dw_j (a column-major nx x nw matrix)
+    S[:nx, :nx] = np.eye(nx)
+    pv = np.ascontiguousarray(p, dtype=float)
+    hv = np.array([float(dt)])
+    j = 0
+    if keep.size and keep[0] == 0:
+        Xk[0], Sk[0], j = x, S, 1
+    X = np.empty((CHUNK, nx))
+    SS = np.empty((CHUNK * nw, nx))
+    R = np.empty(CHUNK)
+    done = 0
+    while done < n_steps:
+        m = CHUNK if n_steps - done >= CHUNK else 1
+        fn = chunk_fn if m == CHUNK else step_fn
+        t_in = np.array([t0 + done * dt])
+        if isinstance(fn, BufferedCall):
+            fn([x, S, t_in, pv, hv, d], [X[:m], SS[:m * nw], R[:m]])
+        else:
+            out = fn(x, S.T, t_in, pv, hv, d)
+            X[:m] = np.array(out[0]).T
+            SS[:m * nw] = np.array(out[1]).T
+            R[:m] = np.array(out[2]).ravel()
+        bad = ~(np.isfinite(X[:m]).all(axis=1) & (R[:m] <= integ.tolerance(X[:m, :n])))
+        good = int(np.argmax(bad)) if bad.any() else m
+        while j < keep.size and keep[j] <= done + good:
+            i = keep[j] - done - 1
+            Xk[j], Sk[j] = X[i], SS[i * nw:(i + 1) * nw]
+            j += 1
+        if good < m:
+            return SensitivityRun(keep[:j], Xk[:j], Sk[:j], False, done + good + 1)
+        done += m
+        x = X[m - 1].copy()
+        S = SS[(m - 1) * nw:m * nw].copy()
+        interrupt.check()
+    return SensitivityRun(keep, Xk, Sk, True, None)
