@@ -1,5 +1,5 @@
 """Statics: static equilibrium (adaptive load stepping, stable by default), its stability,
-and linearised vibration modes.
+equilibrium paths through limit points, and linearised vibration modes.
 
 Every static solve treats the equilibrium equations
 
@@ -13,6 +13,8 @@ on the supports' constraint set (the loads are conservative and the supports fix
 - :func:`equilibrium` (:mod:`~casflex.statics.equilibrium`): adaptive load stepping over a
   trust-region minimisation of Pi (:mod:`~casflex.statics.solve`); the result reports its
   stability from the smallest eigenvalue of the reduced tangent.
+- :func:`equilibrium_path` (:mod:`~casflex.statics.path`): arc-length continuation through limit
+  points, with the stability along the path and its critical points.
 - :func:`modes` (:mod:`~casflex.statics.modes`): K v = omega^2 M v about a configuration, with
   a warning when that configuration is not an equilibrium.
 
@@ -21,6 +23,7 @@ The CasADi Functions of a model (:class:`StaticProblem`) are built once and reus
 
 from casflex.statics.equilibrium import StaticResult, UnstableEquilibrium, equilibrium
 from casflex.statics.modes import ModesResult, modes
+from casflex.statics.path import CriticalPoint, PathResult, equilibrium_path
 from casflex.statics.problem import (
     ModesError,
     Stability,
@@ -32,6 +35,7 @@ from casflex.statics.problem import (
 )
 
 __all__ = [
-    "ModesError", "ModesResult", "Stability", "StabilityWarning", "StaticOptions",
-    "StaticProblem", "StaticResult", "StaticsError", "UnstableEquilibrium", "equilibrium", "modes", "problem_for",
+    "CriticalPoint", "ModesError", "ModesResult", "PathResult", "Stability", "StabilityWarning", "StaticOptions",
+    "StaticProblem", "StaticResult", "StaticsError", "UnstableEquilibrium", "equilibrium", "equilibrium_path",
+    "modes", "problem_for",
 ]
