@@ -17,6 +17,8 @@ from scipy.special import ellipe, ellipk
 from statics_scenes import BAR, CHAIN, three_link_chain
 
 import casflex
+from casflex.cli import main
+from casflex.cli.statics import NAMES
 from casflex.statics import StabilityWarning, StaticOptions, StaticsError, equilibrium
 
 G = 9.81
@@ -63,6 +65,20 @@ def test_pinned_chain_hangs_straight_down_with_the_defaults(degrees):
     check_hanging(res.q, res.lam)
     assert res.stable and res.stability.kind == "stable"
     assert res.iterations <= 30  # measured 15 and 22
+
+
+def test_pinned_chain_through_the_command_line(tmp_path, capsys):
+    path = tmp_path / "chain3.toml"
+    casflex.save_scene(three_link_chain(math.radians(60)), path)
+    assert main(["static", str(path), "--out", str(tmp_path / "eq.npz")]) == 0
+    out = capsys.readouterr()
+    assert "stable (smallest tangent eigenvalue" in out.out and out.err == ""
+    with np.load(tmp_path / "eq.npz") as z:
+        check_hanging(z["q"], z["lam"])
+        assert bool(z["stable"]) and list(z["load_factors"]) == [1.0]
+
+
+# -- a column past its buckling load ----------------------------------------------------------
 
 
 def elastica_column(ratio: float) -> tuple[float, float, float]:
@@ -147,7 +163,7 @@ def test_failure_names_what_to_try_in_the_callers_terms():
     assert "load increment" in msg and "cut 10 times" in msg and "scaled residual" in msg
     assert "max_iter=4" in msg and "min_increment=1e-05" in msg
     with pytest.raises(StaticsError) as info:
-        equilibrium(model, max_iter=1, names={"max_iter": "--max-iter", "min_increment": "--min-increment"})
+        equilibrium(model, max_iter=1, names=NAMES)
     msg = str(info.value)
     assert "--max-iter 4" in msg and "--min-increment 1e-05" in msg
     assert "max_iter" not in msg and "q_start" not in msg and "steps=" not in msg

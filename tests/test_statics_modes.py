@@ -13,6 +13,7 @@ from conftest import pendulum
 from statics_scenes import three_link_chain
 
 import casflex
+from casflex.cli import main
 from casflex.statics import StabilityWarning, equilibrium, modes
 
 
@@ -44,3 +45,23 @@ def test_modes_warn_when_the_supports_are_violated():
     q[0] += 1e-3  # the pinned node moved: not an admissible configuration
     with pytest.warns(StabilityWarning, match="supports are not satisfied.*xpivot"):
         modes(model, q=q, count=1)
+
+
+def test_modes_command_warns_about_the_initial_configuration(tmp_path, capsys):
+    path = tmp_path / "chain3.toml"
+    casflex.save_scene(three_link_chain(math.radians(60)), path)
+    assert main(["modes", str(path), "--count", "3"]) == 0
+    out = capsys.readouterr()
+    (line,) = out.err.strip().splitlines()
+    assert line.startswith("casflex: warning: modes about a configuration that is not a static equilibrium")
+    assert line.endswith("(--about equilibrium)")
+    assert "Hz" in out.out
+    assert main(["modes", str(path), "--count", "3", "--about", "equilibrium", "--max-iter", "40"]) == 0
+    out = capsys.readouterr()
+    assert out.err == "" and "stable (smallest tangent eigenvalue" in out.out
+
+
+def test_modes_command_too_many_modes_is_one_line(capsys):
+    assert main(["modes", "twobar", "--count", "100"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--count: twobar has 12 free motions" in err[0]

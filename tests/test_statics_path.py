@@ -12,6 +12,7 @@ from conftest import STEEL, cantilever
 from statics_scenes import three_link_chain, two_beam_frame, von_mises_truss
 
 import casflex
+from casflex.cli import main
 from casflex.statics import StaticsError, equilibrium, equilibrium_path
 
 # von Mises truss: half-span a, rise h (m), spring stiffness k (N/m), reference load P (N).
@@ -122,3 +123,18 @@ def test_path_arguments_are_checked():
 def test_path_stops_at_max_points():
     path = equilibrium_path(casflex.assemble(von_mises_truss()), max_points=5)
     assert path.status == "max_points" and len(path.load_factors) == 5 and "stopped after 5 points" in path.message
+
+
+def test_static_path_command(tmp_path, capsys):
+    scene = tmp_path / "vonmises.toml"
+    casflex.save_scene(von_mises_truss(A_, H, K, P), scene)
+    to = 2 * P_LIMIT / P
+    assert main(["static", str(scene), "--path", "arc-length", "--to-factor", f"{to:.17g}",
+                 "--out", str(tmp_path / "path.npz")]) == 0
+    out = capsys.readouterr().out
+    assert out.count("<- limit point") == 2 and "yapex (m)" in out and "UNSTABLE (1)" in out
+    with np.load(tmp_path / "path.npz") as z:
+        k = z["load_factors"].size
+        assert z["q"].shape == (k, 9) and z["stable"].shape == (k,) and str(z["monitor"]) == "yapex"
+        assert list(z["critical_kind"]) == ["limit", "limit"]
+        assert z["critical_load_factor"][0] * P == pytest.approx(P_LIMIT, rel=1e-9)  # as in the API test
