@@ -126,11 +126,12 @@ def _failure(out: Outcome, s_try: float, s_done: float, inc: float, cuts: int, t
     if opts.seek == "nearest":
         more.append(spell(names, "seek", "stable"))
     return StaticsError(
-        f"static equilibrium not reached: the load increment from factor {s_done:.4g} was cut {cuts} times, to "
-        f"{inc:.3g} < {spell(names, 'min_increment', opts.min_increment)}, and the last attempt (to factor "
-        f"{s_try:.4g}) failed: {why}; scaled residual {out.residual:.3e} (tol {out.tol:.1e}), last scaled "
-        f"update {out.update:.3e} ({total} iterations in all).{singular}{drifted} Try {', '.join(more)}, "
-        "or start from a configuration nearer the equilibrium.")
+        f"static equilibrium not reached: the last attempt, from load factor {s_done:.4g} to {s_try:.4g}, failed "
+        f"({why}; scaled residual {out.residual:.3e}, tol {out.tol:.1e}; last scaled update {out.update:.3e}), "
+        f"and the next load increment, {inc:.3g}, would be below "
+        f"{spell(names, 'min_increment', opts.min_increment)} (the increment was cut {cuts} times, {total} "
+        f"iterations in all).{singular}{drifted} Try {', '.join(more)}, or start from a configuration nearer the "
+        "equilibrium.")
 
 
 def equilibrium(
