@@ -138,6 +138,7 @@ def simulate(
     p: dict[str, float] | np.ndarray | None = None,
     q0: np.ndarray | None = None,
     qd0: np.ndarray | None = None,
+    t0: float = 0.0,
     compiled: bool = False,
     tol: float = 1e-12,
     max_iter: int = 25,
@@ -158,6 +159,9 @@ def simulate(
         Parameter values; missing ones nominal.
     q0, qd0 : ndarray (n_dof,), optional
         Initial state (default: the scene's). qd0 must satisfy the velocity constraints.
+    t0 : float, s
+        Time of the initial state (the run covers t0 .. t0 + t_end; loads are taken at absolute
+        time).
     compiled : bool
         Run compiled C (see module docstring).
     tol, max_iter
@@ -183,7 +187,7 @@ def simulate(
     report = _text_progress if progress is True else (progress or None)
 
     t_build = time.perf_counter()
-    x0 = initial_state(integ, pv, q0=q0, qd0=qd0)
+    x0 = initial_state(integ, pv, q0=q0, qd0=qd0, t0=t0)
     d = np.array(integ.scale(x0[:model.n_dof], x0[model.n_dof:2 * model.n_dof], pv, dt)).ravel()
     lib = compiled_library(integ) if compiled else None
     build_s = time.perf_counter() - t_build
@@ -205,29 +209,30 @@ def simulate(
         while done < n_steps:
             if lib is not None:
                 m_steps = CHUNK if n_steps - done >= CHUNK else 1
-                t_in[0] = done * dt
+                t_in[0] = t0 + done * dt
                 out = X[done + 1:done + 1 + m_steps]  # written in place, no conversion
                 (chunk_fn if m_steps == CHUNK else step_fn)([X[done], t_in, pv, h_in, d], [out, res[:m_steps]])
                 bad = ~(np.isfinite(out).all(axis=1) & (res[:m_steps] <= integ.tolerance(out[:, :n])))
                 good = int(np.argmax(bad)) if bad.any() else m_steps
                 done += good
                 if good < m_steps:
-                    failure = _diagnose(integ, X[done], done, dt, pv, d, max_iter)
+                    failure = _diagnose(integ, X[done], done, dt, pv, d, max_iter, t0)
                     break
             else:
-                x1, r, it = _interpreted_step(integ, X[done], done * dt, pv, dt, d)
+                x1, r, it = _interpreted_step(integ, X[done], t0 + done * dt, pv, dt, d)
                 iters[done] = it
                 if not (np.isfinite(x1).all() and r <= integ.tolerance(x1[:n])):
                     q1 = x1[:n] if np.isfinite(x1).all() else X[done, :n]
-                    failure = _failure_message(done, dt, it, r, float(integ.tolerance(q1)), max_iter)
+                    failure = _failure_message(done, dt, it, r, float(integ.tolerance(q1)), max_iter, t0)
                     break
                 X[done + 1] = x1
                 done += 1
             if report and (lib is not None or done % max(n_steps // 100, 1) == 0 or done == n_steps):
-                report(done, n_steps, done * dt)
+                report(done, n_steps, t0 + done * dt)
             interrupt.check()
     except KeyboardInterrupt:
-        status, failure = "interrupted", f"interrupted by the user at t = {done * dt:.6g} s (step {done} of {n_steps})"
+        status = "interrupted"
+        failure = f"interrupted by the user at t = {t0 + done * dt:.6g} s (step {done} of {n_steps})"
         if report:
             sys.stderr.write("\n")
     run_s = time.perf_counter() - t_run
@@ -236,13 +241,13 @@ def simulate(
         if report:
             sys.stderr.write("\n")
 
-    Y = _post(integ, X[:done + 1], dt, pv, lib)
-    unsound = _first_unsound_state(integ, Y, dt, alpha)
+    Y = _post(integ, X[:done + 1], dt, pv, lib, t0)
+    unsound = _first_unsound_state(integ, Y, dt, alpha, t0)
     if unsound is not None:  # the first thing that went wrong, before any Newton failure
         done, status, failure = unsound[0] - 1, unsound[1], unsound[2]
         Y = Y[:done + 1]
-    traj = _trajectory(integ, X[:done + 1], Y, iters[:done], dt, pv, status, failure, {
-        "scene": model.scene.name, "alpha": alpha, "dt": dt, "t_end": t_end, "inertia": model.inertia,
+    traj = _trajectory(integ, X[:done + 1], Y, iters[:done], dt, pv, status, failure, t0, {
+        "scene": model.scene.name, "alpha": alpha, "dt": dt, "t0": t0, "t_end": t_end, "inertia": model.inertia,
         "compiled": bool(compiled), "tol": tol, "max_iter": max_iter,
         "stats": {"steps": done, "build_s": build_s, "run_s": run_s,
                   "compile_s": lib.build_s if lib is not None else 0.0,
@@ -299,25 +304,27 @@ def _interpreted_step(integ: HHT, x: np.ndarray, t: float, p: np.ndarray, dt: fl
     return np.array(x1).ravel(), float(r), it
 
 
-def _failure_message(step: int, dt: float, iters: int, res: float, tol: float, max_iter: int) -> str:
-    t = step * dt
+def _failure_message(step: int, dt: float, iters: int, res: float, tol: float, max_iter: int,
+                     t0: float = 0.0) -> str:
+    t = t0 + step * dt
     what = "produced NaN/inf" if not np.isfinite(res) else f"left the scaled residual at {res:.3g} (tol {tol:g})"
     return (f"Newton failed in the step from t = {t:.6g} s to {t + dt:.6g} s (step {step + 1}): "
             f"{iters} iterations (max_iter {max_iter}) {what}. "
             "Try a smaller dt, a more negative alpha (more numerical damping), or a larger max_iter.")
 
 
-def _diagnose(integ: HHT, x: np.ndarray, step: int, dt: float, p, d, max_iter: int) -> str:
+def _diagnose(integ: HHT, x: np.ndarray, step: int, dt: float, p, d, max_iter: int, t0: float = 0.0) -> str:
     """Re-run a failed compiled step interpreted to report its iterations and residual."""
-    x1, r, it = _interpreted_step(integ, x, step * dt, p, dt, d)
+    x1, r, it = _interpreted_step(integ, x, t0 + step * dt, p, dt, d)
     q = x1 if np.isfinite(x1).all() else x
-    return _failure_message(step, dt, it, r, float(integ.tolerance(q[:integ.model.n_dof])), max_iter)
+    return _failure_message(step, dt, it, r, float(integ.tolerance(q[:integ.model.n_dof])), max_iter, t0)
 
 
-def _post(integ: HHT, X: np.ndarray, dt: float, p: np.ndarray, lib: CompiledLibrary | None) -> np.ndarray:
-    """``integ.post`` of every state X (k, nx) at t = 0, dt, ...: shape (k, n_post)."""
+def _post(integ: HHT, X: np.ndarray, dt: float, p: np.ndarray, lib: CompiledLibrary | None,
+          t0: float = 0.0) -> np.ndarray:
+    """``integ.post`` of every state X (k, nx) at t = t0, t0 + dt, ...: shape (k, n_post)."""
     k = X.shape[0]
-    t = np.arange(k) * dt
+    t = t0 + np.arange(k) * dt
     if lib is None:
         return np.array(integ.post.map(k)(X.T, ca.DM(t).T, p)).T
     # compiled, CHUNK states per call; the last chunk padded with the last state
@@ -336,7 +343,8 @@ def _work(power: np.ndarray, dt: float) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(0.5 * (power[1:] + power[:-1]) * dt)])
 
 
-def _first_unsound_state(integ: HHT, Y: np.ndarray, dt: float, alpha: float) -> tuple[int, str, str] | None:
+def _first_unsound_state(integ: HHT, Y: np.ndarray, dt: float, alpha: float,
+                         t0: float = 0.0) -> tuple[int, str, str] | None:
     """(index, status, message) of the first state that converged but is not a solution, or None.
 
     Two failures that Newton does not see:
@@ -371,14 +379,14 @@ def _first_unsound_state(integ: HHT, Y: np.ndarray, dt: float, alpha: float) -> 
         name = model.local_rotation_names[j]
         return k, "element_range", (
             f"beam element {name.rsplit('.', 1)[0]}: its co-rotational local rotation at end "
-            f"{name.rsplit('.', 1)[1]} passed +-pi between t = {(k - 1) * dt:.6g} s and {k * dt:.6g} s "
+            f"{name.rsplit('.', 1)[1]} passed +-pi between t = {t0 + (k - 1) * dt:.6g} s and {t0 + k * dt:.6g} s "
             f"({th[k - 1, j]:+.3f} -> {th[k, j]:+.3f} rad): the element is bent beyond the range of the "
             "co-rotational formulation and its strain energy jumped. Use more elements per beam "
             "(Beam.elements) or check the stiffness.")
     if k_grow is not None:
         k = k_grow
         return k, "energy_growth", (
-            f"the total energy grew by {created[k]:.4g} J more than the loads supplied, by t = {k * dt:.6g} s "
+            f"the total energy grew by {created[k]:.4g} J more than the loads supplied, by t = {t0 + k * dt:.6g} s "
             f"({100 * created[k] / in_motion[k]:.0f} % of the energy in motion, {in_motion[k]:.4g} J): the "
             f"integration is unstable (HHT alpha = {alpha:g} neither resolves nor damps the stiff modes at "
             f"dt = {dt:g} s). Try a smaller dt or a more negative alpha (more numerical damping).")
@@ -386,12 +394,12 @@ def _first_unsound_state(integ: HHT, Y: np.ndarray, dt: float, alpha: float) -> 
 
 
 def _trajectory(integ: HHT, X: np.ndarray, Y: np.ndarray, iters: np.ndarray, dt: float, p: np.ndarray,
-                status: str, message: str, meta: dict) -> Trajectory:
+                status: str, message: str, t0: float, meta: dict) -> Trajectory:
     model = integ.model
     n = model.n_dof
     k = X.shape[0]
     q, qd, qdd, lam = X[:, :n], X[:, n:2 * n], X[:, 2 * n:3 * n], X[:, 3 * n:]
-    t = np.arange(k) * dt
+    t = t0 + np.arange(k) * dt
     n_out = len(model.output_names)
     T, Ve, Vg, power, outputs = Y[:, 0], Y[:, 1], Y[:, 2], Y[:, 3], Y[:, 4:4 + n_out]
     work = _work(power, dt)

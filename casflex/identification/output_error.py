@@ -127,7 +127,7 @@ class OutputError:
     # -- evaluation --------------------------------------------------------------------------
     def evaluate(self, w: np.ndarray, jacobian: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
         """Residuals r (m,) (dimensionless: data units over noise) and, if asked, J = dr/dw (m, n)."""
-        model, n, npar = self.model, self.model.n_dof, self.model.n_p
+        n, npar = self.model.n_dof, self.model.n_p
         nx = self.integ.nx
         theta = w[:npar]
         p = self.pmap.p(theta)
