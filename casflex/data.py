@@ -74,6 +74,15 @@ class MeasurementSet:
             raise ValueError(f"instant t = {t:g} s: no sample there (data cover {self.t[0]:g} .. {self.t[-1]:g} s)")
         return i
 
+    def window(self, t_from: float, t_to: float) -> MeasurementSet:
+        """The samples with t_from <= t <= t_to (s)."""
+        keep = (self.t >= t_from - 1e-12) & (self.t <= t_to + 1e-12)
+        if not keep.any():
+            raise ValueError(f"data: no sample between {t_from:g} and {t_to:g} s (data cover {self.t[0]:g} .. "
+                             f"{self.t[-1]:g} s)")
+        cut = [None if a is None else np.asarray(a)[keep] for a in (self.q, self.qd, self.qdd)]
+        return MeasurementSet(self.t[keep], self.channels, *cut, source=self.source, meta=self.meta)
+
     def select(self, model: Model) -> np.ndarray:
         """Column of each model dof in the data (-1 where the dof is not measured)."""
         unknown = [c for c in self.channels if c not in model.dof_names]

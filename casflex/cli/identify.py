@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from casflex.cli._base import OptionError, Outputs, integer, load_model, non_negative, positive
+from casflex.cli._base import OptionError, Outputs, alpha_value, integer, load_model, non_negative, positive
 
 if TYPE_CHECKING:
     from casflex.data import MeasurementSet
@@ -22,31 +22,49 @@ IDENTIFY_METHODS = ("direct", "adapted-direct", "indirect")
 DEFAULT_INSTANT_COUNT = 5
 #: options of the indirect method only (attribute -> option), and of the direct methods only
 _INDIRECT_ONLY = {"transcription": "--transcription", "horizon": "--horizon", "residue": "--residue",
-                  "dofs": "--dofs", "interval": "--interval"}
+                  "dofs": "--dofs", "interval": "--interval", "initial_state": "--initial-state", "dt": "--dt",
+                  "alpha": "--alpha", "sigma": "--sigma", "max_iter": "--max-iter", "max_time": "--max-time",
+                  "model_error": "--model-error", "plots": "--plots"}
 _DIRECT_ONLY = {"instants": "--instants"}
 
 
 def _check_options(args: argparse.Namespace) -> None:
     """Reject options that do not apply to the chosen method or data, naming the option."""
+    args.data = args.data or ["simulated"]
     direct = args.method != "indirect"
+    defaults = {"max_iter": 100, "max_time": 600.0}
     for attr, opt in (_INDIRECT_ONLY if direct else _DIRECT_ONLY).items():
-        if getattr(args, attr) is not None:
+        if getattr(args, attr) not in (None, defaults.get(attr)):
             where = "the indirect method" if direct else "the direct methods (direct, adapted-direct)"
             raise OptionError(f"{opt}: applies to {where} only, not to --method {args.method}")
     if args.interval is not None and args.transcription == "single-shooting":
         raise OptionError("--interval: applies to --transcription multiple-shooting only")
     if args.start is not None and args.start_values is not None:
         raise OptionError("--start and --start-values: give one or the other, not both")
-    if args.noise is not None and args.data == "simulated":
+    files = [d for d in args.data if d not in ("simulated", "measured")]
+    if len(args.data) > 1 and len(files) < len(args.data):
+        raise OptionError("--data: several recordings must all be files (simulated and measured are one set each)")
+    if len(args.data) > 1 and args.method != "indirect":
+        raise OptionError(f"--data: several recordings: the indirect method only, not --method {args.method}")
+    if args.noise is not None and args.data == ["simulated"]:
         raise OptionError("--noise: the simulated set is exact; use --data measured or --data FILE to add noise "
                           "to the positions")
     if args.seed is not None and args.noise is None:
         raise OptionError("--seed: seeds the noise; give --noise SIGMA too")
     import casadi as ca
 
-    if not ca.has_nlpsol(args.solver):
-        raise OptionError(f"--solver: {args.solver!r} is not an available CasADi nlpsol plugin (e.g. ipopt, "
-                          "sqpmethod)")
+    if args.solver is not None and args.solver != "gauss-newton" and not ca.has_nlpsol(args.solver):
+        raise OptionError(f"--solver: {args.solver!r} is neither gauss-newton nor an available CasADi nlpsol plugin "
+                          "(e.g. ipopt, sqpmethod)")
+    if args.method == "indirect" and args.solver == "gauss-newton" and (
+            args.transcription == "multiple-shooting" or args.residue == "full"):
+        raise OptionError("--solver gauss-newton: single shooting on positions only; use --solver ipopt for "
+                          "--transcription multiple-shooting or --residue full")
+    nlp = args.transcription == "multiple-shooting" or args.residue == "full" or args.solver not in (None,
+                                                                                                   "gauss-newton")
+    if args.initial_state not in (None, "scene") and nlp:
+        raise OptionError(f"--initial-state {args.initial_state}: estimated initial states need single shooting on "
+                          "positions with the gauss-newton solver")
 
 
 def _start(model: Model, args: argparse.Namespace) -> float | np.ndarray:
@@ -81,21 +99,24 @@ def _default_instants(t: np.ndarray, method: str) -> list[float]:
     return [float(t[i]) for i in np.unique(idx)]
 
 
-def _data(model: Model, args: argparse.Namespace) -> tuple[MeasurementSet, dict[str, Any]]:
-    """(MeasurementSet, description dict) for --data simulated | measured | FILE."""
+def _data(model: Model, args: argparse.Namespace) -> tuple[list[MeasurementSet], list[dict[str, Any]]]:
+    """The recordings and a description of each for --data simulated | measured | FILE [FILE ...]."""
     from casflex.data import add_position_noise, load_measurements, measured_set, simulated_set
 
     seed = args.seed
     if args.noise and seed is None:  # a fresh seed, reported so that the run can be repeated
         seed = int(np.random.default_rng().integers(2**31))
-    if args.data not in ("simulated", "measured"):
-        data = load_measurements(args.data)
-        info = {"kind": "file", "path": str(args.data), "samples": int(data.t.size),
-                "channels": list(data.channels)}
-        if args.noise:
-            data = add_position_noise(data, args.noise, seed)
-            info.update(noise=args.noise, seed=seed)
-        return data, info
+    if args.data[0] not in ("simulated", "measured"):
+        sets, infos = [], []
+        for i, path in enumerate(args.data):
+            data = load_measurements(path)
+            info = {"kind": "file", "path": str(path), "samples": int(data.t.size), "channels": list(data.channels)}
+            if args.noise:
+                data = add_position_noise(data, args.noise, seed + i)
+                info.update(noise=args.noise, seed=seed + i)
+            sets.append(data)
+            infos.append(info)
+        return sets, infos
     run = model.scene.run
     dt = run.dt
     # to the end of what the method reads: the horizon, or the last instant and one sample after it
@@ -105,15 +126,16 @@ def _data(model: Model, args: argparse.Namespace) -> tuple[MeasurementSet, dict[
     if args.method == "indirect" and abs(until / dt - round(until / dt)) > 1e-6:
         raise OptionError(f"--horizon: {until:g} s is not a whole number of the scene's steps dt = {dt:g} s")
     # one sample beyond what the method reads; measured_set drops the first and last samples
-    extra = 1 if args.data == "simulated" else 2
+    kind = args.data[0]
+    extra = 1 if kind == "simulated" else 2
     steps = math.ceil(until / dt - 1e-9) + extra
     data = simulated_set(model, t_end=steps * dt, dt=dt, alpha=0.0)
-    info = {"kind": args.data, "t_end": steps * dt, "dt": dt, "alpha": 0.0}
-    if args.data == "measured":
+    info = {"kind": kind, "t_end": steps * dt, "dt": dt, "alpha": 0.0}
+    if kind == "measured":
         data = measured_set(data, noise=args.noise or 0.0, seed=seed)
         info.update(noise=args.noise or 0.0, seed=seed if args.noise else None)
     info["samples"] = int(data.t.size)
-    return data, info
+    return [data], [info]
 
 
 def _describe_data(info: dict[str, Any]) -> str:
@@ -141,31 +163,45 @@ def _casadi_reason(exc: RuntimeError) -> str:
     return reason if len(reason) <= 200 else reason[:197] + "..."
 
 
-def _identify(model: Model, data: MeasurementSet, args: argparse.Namespace, start: float | np.ndarray,
+def _identify(model: Model, sets: list[MeasurementSet], args: argparse.Namespace, start: float | np.ndarray,
               dofs: list[str] | None) -> IdentificationResult:
     """Call the chosen identification method with the command's options."""
-    from casflex.identification import identify_adapted_direct, identify_direct, identify_indirect
+    from casflex.identification import Budget, Experiment, identify_adapted_direct, identify_direct, identify_indirect
 
-    common = {"start": start, "solver": args.solver, "transform": args.transform, "compiled": args.compiled,
-              "verbose": not args.quiet}
+    # the NLP solvers' iteration logs unless --quiet; Gauss-Newton reports its stages as progress messages
+    common = {"start": start, "transform": args.transform, "verbose": not args.quiet and args.method != "indirect"}
     if args.hessian is not None:
         common["hessian"] = args.hessian
     if args.method == "direct":
-        return identify_direct(model, data, args.instants, **common)
+        return identify_direct(model, sets[0], args.instants, solver=args.solver or "ipopt",
+                               compiled=args.compiled, **common)
     if args.method == "adapted-direct":
-        return identify_adapted_direct(model, data, args.instants, **common)
-    return identify_indirect(model, data, args.horizon, transcription=args.transcription, residue=args.residue,
-                             dofs=dofs, interval=args.interval, **common)
+        return identify_adapted_direct(model, sets[0], args.instants, solver=args.solver or "ipopt",
+                                       compiled=args.compiled, **common)
+    experiments = [Experiment(d, initial_state=args.initial_state, channels=None if dofs is None else tuple(dofs),
+                              noise=args.sigma, name=f"recording {i + 1}" if len(sets) > 1 else "data")
+                   for i, d in enumerate(sets)]
+    return identify_indirect(model, experiments, args.horizon, transcription=args.transcription,
+                             residue=args.residue, alpha=args.alpha, dt=args.dt, interval=args.interval,
+                             solver=args.solver, compiled=args.compiled or None,
+                             budget=Budget(args.max_iter, args.max_time), model_error=args.model_error, **common)
 
 
 def _heading(model: Model, args: argparse.Namespace, start: float | np.ndarray) -> str:
     """One line: what is identified, how, and from where."""
     start_text = (f"{start:g} x nominal" if isinstance(start, float)
                   else ", ".join(f"{k} = {v:g}" for k, v in zip(model.parameter_names, start, strict=True)))
-    where = (f"instants {', '.join(f'{t:g}' for t in args.instants)} s" if args.method != "indirect" else
-             f"horizon {args.horizon:g} s, {args.transcription}, residue {args.residue}")
+    if args.method != "indirect":
+        where = f"instants {', '.join(f'{t:g}' for t in args.instants)} s"
+    else:
+        run = model.scene.run
+        window = "the whole data" if args.horizon is None else f"horizon {args.horizon:g} s"
+        where = (f"{window}, {args.transcription}, residue {args.residue}, initial state {args.initial_state}, model "
+                 f"dt = {args.dt or run.dt:g} s, alpha = {run.alpha if args.alpha is None else args.alpha:g}")
+    solver = args.solver or ("gauss-newton" if args.method == "indirect" and args.transcription == "single-shooting"
+                             and args.residue == "positions" else "ipopt")
     return (f"identify {', '.join(model.parameter_names)} of scene {model.scene.name}: {args.method} method, "
-            f"{where}, start {start_text}, solver {args.solver}")
+            f"{where}, start {start_text}, solver {solver}")
 
 
 def cmd_identify(args: argparse.Namespace, outputs: Outputs) -> int:
@@ -174,26 +210,32 @@ def cmd_identify(args: argparse.Namespace, outputs: Outputs) -> int:
     model = load_model(args.scene)
     if model.n_p == 0:
         raise OptionError(f"scene {model.scene.name}: declares no parameters to identify ([[parameters]])")
+    plots = outputs.directory("--plots", args.plots) if args.plots else None
     start, dofs = _start(model, args), _dofs(model, args)
     if args.method == "indirect":
-        args.transcription = args.transcription or "multiple-shooting"
+        args.transcription = args.transcription or "single-shooting"
         args.residue = args.residue or "positions"
-    data, info = _data(model, args)
-    if args.method == "indirect" and args.horizon is None:
-        args.horizon = float(data.t[-1])  # the whole data
-    elif args.method != "indirect" and args.instants is None:
-        args.instants = _default_instants(data.t, args.method)
+        args.initial_state = args.initial_state or "scene"
+        args.model_error = args.model_error or "refine"
+    sets, infos = _data(model, args)
+    if args.method != "indirect" and args.instants is None:
+        args.instants = _default_instants(sets[0].t, args.method)
     print(_heading(model, args, start))
-    print(f"  {_describe_data(info)}")
+    for info in infos:
+        print(f"  {_describe_data(info)}")
     sys.stdout.flush()
     try:
-        result = _identify(model, data, args, start, dofs)
+        result = _identify(model, sets, args, start, dofs)
     except RuntimeError as exc:  # CasADi: e.g. a solver plugin that needs a missing library
         raise OptionError(f"--solver {args.solver}: the solver failed: {_casadi_reason(exc)}") from None
-    result.extra["data"] = info
+    result.extra["data"] = infos[0] if len(infos) == 1 else infos
     print(result.summary())
     if out is not None:
         result.save(out)
+    if plots is not None:
+        from casflex.plotting.identification import save_identification_figures
+
+        save_identification_figures(result, plots)
     if not result.success:
         why = f"{result.status}; {result.message}" if result.message else result.status
         print(f"casflex: identification did not succeed ({why})", file=sys.stderr)
@@ -203,7 +245,7 @@ def cmd_identify(args: argparse.Namespace, outputs: Outputs) -> int:
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
     """The ``identify`` subcommand's options (method-specific ones default to None = not given)."""
-    from casflex.identification import HESSIANS, RESIDUES, TRANSCRIPTIONS, TRANSFORMS
+    from casflex.identification import HESSIANS, INITIAL_STATES, MODEL_ERRORS, RESIDUES, TRANSCRIPTIONS, TRANSFORMS
 
     s = sub.add_parser("identify", help="identify the scene's parameters from simulated, measured or file data",
                        description="Identify the scene's [[parameters]] from kinematic data. Examples and the data "
@@ -211,16 +253,33 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("scene", help="built-in scene name (twobar) or a TOML file")
     s.add_argument("--method", required=True, choices=IDENTIFY_METHODS)
     s.add_argument("--transcription", choices=TRANSCRIPTIONS,
-                   help="indirect only (default multiple-shooting)")
-    s.add_argument("--data", default="simulated", metavar="simulated|measured|FILE",
+                   help="indirect only (default single-shooting)")
+    s.add_argument("--data", action="append", metavar="simulated|measured|FILE",
                    help="the exact simulated set (default), the measured set (positions, central differences), "
-                        "or a .npz/.csv file")
+                        "or a .npz/.csv file; repeat --data FILE for several recordings (indirect)")
+    s.add_argument("--initial-state", choices=INITIAL_STATES,
+                   help="indirect: the state at the first sample: the scene's (default), the scene's positions with "
+                        "estimated velocities, or estimated")
+    s.add_argument("--dt", type=positive("a time step in s"),
+                   help="indirect: the model's time step, s (default: the scene's, never the samples' spacing)")
+    s.add_argument("--alpha", type=alpha_value, help="indirect: the model's HHT alpha (default: the scene's)")
+    s.add_argument("--sigma", type=positive("a standard deviation (m, rad)"), metavar="SIGMA",
+                   help="indirect: the measurement noise of the data, if known (weights the channels; a fit whose "
+                        "residuals exceed 3 SIGMA does not succeed)")
+    s.add_argument("--max-iter", type=integer(1, "a number of iterations"), default=100,
+                   help="indirect: Gauss-Newton iterations per stage of the growing horizon (default 100)")
+    s.add_argument("--max-time", type=positive("a time in s"), default=600.0,
+                   help="indirect: wall-time budget of the solve, s (default 600); the best point is reported")
+    s.add_argument("--model-error", choices=MODEL_ERRORS,
+                   help="indirect: estimate the discretisation error by a refit on a refined model (refine, "
+                        "default) or not (none)")
+    s.add_argument("--plots", metavar="DIR", help="indirect: write measured-vs-fitted figures with the residuals")
     s.add_argument("--instants", type=non_negative("a time in s"), nargs="+", metavar="T",
                    help=f"direct methods: times, s (default: {DEFAULT_INSTANT_COUNT} samples evenly spread over the "
                         "data)")
     s.add_argument("--horizon", type=positive("a time in s"), metavar="T",
-                   help="indirect: compared window [0, T], s (default: the whole data; the scene's t_end for the "
-                        "simulated and measured sets)")
+                   help="indirect: compared window [t0, t0 + T] from the first sample t0, s (default: the whole "
+                        "data; the scene's t_end for the simulated and measured sets)")
     s.add_argument("--start", type=positive("a factor of the nominal values"), metavar="F",
                    help="start at F times the nominal values (default 1)")
     s.add_argument("--start-values", type=float, nargs="+", metavar="V",
@@ -231,7 +290,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="Gaussian noise std on the positions, m and rad (--data measured or FILE)")
     s.add_argument("--seed", type=integer(0, "a seed"), metavar="N",
                    help="seed of the noise (default: a fresh one, printed)")
-    s.add_argument("--solver", default="ipopt", help="CasADi nlpsol plugin (default ipopt)")
+    s.add_argument("--solver", help="gauss-newton (indirect single shooting, default) or a CasADi nlpsol plugin "
+                                    "(default ipopt)")
     s.add_argument("--transform", choices=TRANSFORMS, default="linear",
                    help="decision variables p/scale (linear, default) or log(p/scale)")
     s.add_argument("--hessian", choices=HESSIANS,
@@ -243,4 +303,4 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="indirect multiple shooting: steps per shooting interval (default 20)")
     s.add_argument("--out", metavar="FILE.json", help="write the result as JSON")
     s.add_argument("--quiet", action="store_true", help="no solver iteration log or progress messages")
-    s.set_defaults(func=cmd_identify)
+    s.set_defaults(func=cmd_identify, data=None)

@@ -10,11 +10,7 @@ integrates between two steps.
 
 The initial state is ``"scene"`` (the scene's q0, qd0 at the first sample), ``"velocities"``
 (the scene's q0, velocities estimated: the positions are trusted) or ``"estimate"`` (both
-estimated). An estimated state satisfies the constraints by construction (the supports' dofs
-are not unknowns) and starts from :func:`initial_guess`: the measured dofs from the data, the
-others from a constrained kinematic fit, the configuration of least elastic energy that passes
-through the measured positions, at each of the first samples; velocities from a local
-quadratic through those configurations.
+estimated): :mod:`.initial_state`.
 
 :func:`check_against_scene` stops before any fit when data and scene cannot belong together
 (positions in millimetres, times in milliseconds, a recording that does not start where the
@@ -23,16 +19,14 @@ scene starts), with one line that says what to do.
 
 from __future__ import annotations
 
-import weakref
 from dataclasses import dataclass
 
-import casadi as ca
 import numpy as np
 
 from casflex.data import MeasurementSet
 from casflex.model import Model
 
-__all__ = ["Experiment", "SampleMap", "INITIAL_STATES", "check_against_scene", "initial_guess", "free_dofs"]
+__all__ = ["Experiment", "SampleMap", "INITIAL_STATES", "check_against_scene", "free_dofs", "nyquist"]
 
 INITIAL_STATES = ("scene", "velocities", "estimate")
 
@@ -83,6 +77,11 @@ class Experiment:
         if not names:
             raise ValueError("dofs: no channel to compare")
         return names
+
+
+def nyquist(experiment: Experiment) -> float:
+    """The Nyquist circular frequency (rad/s) of the recording's median sample spacing."""
+    return float(np.pi / np.median(np.diff(experiment.data.t)))
 
 
 def free_dofs(model: Model) -> np.ndarray:
@@ -168,6 +167,18 @@ def _rest_velocity(data: MeasurementSet, cols: list[int], m: int = 7) -> tuple[n
     return v, se
 
 
+#: A recording "starts moving" when its first velocity exceeds this fraction of its typical speed.
+MOVING = 0.2
+
+
+def _speed(data: MeasurementSet, cols: list[int]) -> float:
+    """The recording's typical speed (m/s): the 90th percentile of |dy/dt| over every channel
+    and sample interval."""
+    rates = [np.abs(np.diff(data.q[:, c]) / np.diff(data.t)) for c in cols]
+    rates = np.concatenate([r[np.isfinite(r)] for r in rates])
+    return float(np.percentile(rates, 90)) if rates.size else 0.0
+
+
 def check_against_scene(model: Model, experiment: Experiment) -> None:
     """ValueError with one line when the data cannot belong to the scene: positions in other
     units than metres, times in milliseconds, or (for ``initial_state`` "scene" and
@@ -209,96 +220,11 @@ def check_against_scene(model: Model, experiment: Experiment) -> None:
     if experiment.initial_state == "scene" and cols:
         v, se = _rest_velocity(data, cols)
         v_scene = np.array([model.qd0[model.dof(c)] for c in trans])
-        moving = (np.abs(v - v_scene) > 5 * se) & (np.abs(v - v_scene) > 0.01 * span / max(t[-1] - t[0], 1e-9))
+        # against the recording's own speeds: a quadratic through the first samples of a release
+        # from rest carries the jerk as a velocity (twobar at 0.5 mm noise: 0.085 m/s, its speeds 2 m/s)
+        moving = (np.abs(v - v_scene) > 5 * se) & (np.abs(v - v_scene) > MOVING * _speed(data, cols))
         if moving.any():
             j = int(np.argmax(np.where(moving, np.abs(v - v_scene), 0.0)))
             raise ValueError(f"data: the recording starts moving ({trans[j]} at {v[j]:.3g} m/s at t = {t[0]:g} s) "
                              f"while the scene starts at {v_scene[j]:.3g} m/s; use --initial-state velocities "
                              "(positions trusted) or estimate")
-
-
-# -- initial state guess ----------------------------------------------------------------------
-
-_FITS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-
-
-def _kinematic_fit(model: Model, measured: tuple[int, ...]) -> ca.Function:
-    """``kinematic_fit(q_known, q_start) -> q``: the configuration of least elastic energy whose
-    measured and supported dofs take their values in ``q_known`` (IPOPT, exact Hessian), built
-    once per model and set of measured dofs."""
-    cache = _FITS.setdefault(model, {})
-    if measured not in cache:
-        unknown = [i for i in free_dofs(model) if i not in measured]
-        n = model.n_dof
-        if not unknown:  # every free dof is measured: nothing to fit
-            QK, Q0 = ca.MX.sym("q_known", n), ca.MX.sym("q_start", n)
-            cache[measured] = ca.Function("kinematic_fit", [QK, Q0], [QK], ["q_known", "q_start"], ["q"])
-            return cache[measured]
-        keep = np.ones(n)
-        keep[unknown] = 0.0
-        put = np.zeros((n, len(unknown)))
-        put[unknown, np.arange(len(unknown))] = 1.0
-        qk, u, u_ref = ca.SX.sym("q_known", n), ca.SX.sym("u", len(unknown)), ca.SX.sym("u_ref", len(unknown))
-        q = ca.DM(keep) * qk + ca.mtimes(ca.DM(put), u)
-        _, V_el, _ = model.energy(q, ca.DM.zeros(n), model.p_nominal)
-        ell = np.where(model.is_rotation[unknown], 1.0, model.length_scale)
-        # a weak pull toward the start fixes motions that cost no energy (e.g. a free spin)
-        reg = 1e-9 * ca.mmax(ca.fabs(ca.diag(ca.hessian(V_el, u)[0]))) + 1e-12
-        f = V_el + 0.5 * reg * model.length_scale**2 * ca.sumsqr((u - u_ref) / ell)
-        solver = ca.nlpsol("kinematic_fit_nlp", "ipopt", {"x": u, "p": ca.vertcat(qk, u_ref), "f": f},
-                           {"print_time": False, "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-12,
-                                                           "max_iter": 200}})
-        QK, Q0 = ca.MX.sym("q_known", n), ca.MX.sym("q_start", n)
-        U = solver(x0=Q0[unknown], p=ca.vertcat(QK, Q0[unknown]))["x"]
-        q_out = ca.DM(keep) * QK + ca.mtimes(ca.DM(put), U)
-        cache[measured] = ca.Function("kinematic_fit", [QK, Q0], [q_out], ["q_known", "q_start"], ["q"])
-    return cache[measured]
-
-
-def initial_guess(model: Model, experiment: Experiment, m: int = 5) -> tuple[np.ndarray, np.ndarray]:
-    """(q0, qd0), shape (n_dof,) each: a first guess of the state at the first sample.
-
-    Positions: the scene's for ``initial_state`` "scene" and "velocities"; for "estimate", the
-    kinematic fit at the first sample (measured dofs as measured, supports as fixed, the rest
-    of least elastic energy). Velocities: the scene's for "scene"; otherwise the derivative at
-    the first sample of a quadratic through the kinematic fits at the first ``m`` samples.
-    """
-    if experiment.initial_state == "scene":
-        return model.q0.copy(), model.qd0.copy()
-    data = experiment.data
-    names = experiment.compared(model)
-    dofs = tuple(sorted(model.dof(c) for c in names))
-    fit = _kinematic_fit(model, dofs)
-    q_prev = model.q0.copy()
-    fits, times = [], []
-    for i in range(min(m, data.t.size)):
-        known = q_prev.copy()
-        ok = True
-        for c in names:
-            v = data.q[i, data.channels.index(c)]
-            if not np.isfinite(v):
-                ok = False
-                break
-            known[model.dof(c)] = v
-        if not ok:
-            continue
-        for con in model.constraints:
-            known[con.dof] = con.value
-        q_prev = np.array(fit(known, q_prev)).ravel()
-        fits.append(q_prev)
-        times.append(data.t[i] - data.t[0])
-    if not fits:
-        raise ValueError("data: no sample among the first ones has every compared channel; cannot estimate the "
-                         "initial state")
-    Q, tt = np.array(fits), np.array(times)
-    q0 = Q[0] if experiment.initial_state == "estimate" else model.q0.copy()
-    if len(tt) >= 3:
-        A = np.column_stack([np.ones_like(tt), tt, tt**2])
-        qd0 = np.linalg.lstsq(A, Q, rcond=None)[0][1]
-    elif len(tt) == 2:
-        qd0 = (Q[1] - Q[0]) / (tt[1] - tt[0])
-    else:
-        qd0 = np.zeros(model.n_dof)
-    for con in model.constraints:
-        qd0[con.dof] = 0.0
-    return q0, qd0

@@ -25,6 +25,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from casflex import interrupt
+from casflex.identification.initial_state import InitialState, initial_state_of
 from casflex.identification.measurement import Experiment, SampleMap, free_dofs
 from casflex.identification.problem import ParameterMap
 from casflex.identification.sensitivity import run_sensitivities
@@ -72,19 +73,26 @@ def _x0_map(integ) -> ca.Function:
 
 class OutputError:
     """Residuals and Jacobian of the output error of ``experiments`` in the unknowns
-    w = (theta, xi_1, ..., xi_E); xi_e = q0 and/or qd0 of the free dofs of experiment e."""
+    w = (theta, xi_1, ..., xi_E).
+
+    ``initial``: per experiment its :class:`~.initial_state.InitialState` (default: the scene's),
+    which maps xi_e to (q0, qd0) and gives the derivatives.
+    """
 
     def __init__(self, model: Model, experiments: list[Experiment], *, dt: float, alpha: float,
-                 pmap: ParameterMap, compiled: bool, newton_tol: float) -> None:
+                 pmap: ParameterMap, compiled: bool, newton_tol: float,
+                 initial: list[InitialState] | None = None) -> None:
         from casflex.simulate import integrator_for
 
         self.model, self.experiments, self.dt, self.pmap, self.compiled = model, experiments, dt, pmap, compiled
         self.integ = integrator_for(model, alpha=alpha, tol=newton_tol)
         self.maps = [SampleMap.of(model, e, dt) for e in experiments]
         self.free = free_dofs(model)
-        nf, npar = self.free.size, model.n_p
-        self.kinds = [e.initial_state for e in experiments]
-        sizes = [{"scene": 0, "velocities": nf, "estimate": 2 * nf}[k] for k in self.kinds]
+        npar = model.n_p
+        if initial is None:
+            initial = [initial_state_of(model, e, model.p_nominal) for e in experiments]
+        self.initial = initial
+        sizes = [s.size for s in initial]
         self.offsets = np.concatenate([[npar], npar + np.cumsum(sizes)]).astype(int)
         self.n_unknowns = int(self.offsets[-1])
         ell = model.length_scale
@@ -93,31 +101,23 @@ class OutputError:
             rot = model.is_rotation[sm.dof]
             base = np.where(rot, 1.0 / ell, 1.0)  # rotations compared as arc lengths at the scene's size
             self.sigma.append(base * (e.noise if e.noise is not None else 1.0))
-        self.base_state: list[tuple[np.ndarray, np.ndarray]] = [(model.q0.copy(), model.qd0.copy())
-                                                                for _ in experiments]
         self.evaluations = 0
 
     # -- unknowns ----------------------------------------------------------------------------
-    def pack(self, theta: np.ndarray, states: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
-        """w from theta and each experiment's (q0, qd0) (full dof vectors)."""
-        parts = [np.asarray(theta, dtype=float)]
-        for kind, (q0, qd0) in zip(self.kinds, states, strict=True):
-            if kind == "estimate":
-                parts.append(q0[self.free])
-            if kind in ("estimate", "velocities"):
-                parts.append(qd0[self.free])
-        return np.concatenate(parts)
+    def pack(self, theta: np.ndarray) -> np.ndarray:
+        """w from theta, every initial state at its guess."""
+        return np.concatenate([np.asarray(theta, dtype=float), *(s.xi0 for s in self.initial)])
 
     def state(self, w: np.ndarray, e: int) -> tuple[np.ndarray, np.ndarray]:
         """(q0, qd0) of experiment e at unknowns w."""
-        q0, qd0 = (v.copy() for v in self.base_state[e])
-        xi = w[self.offsets[e]:self.offsets[e + 1]]
-        nf = self.free.size
-        if self.kinds[e] == "estimate":
-            q0[self.free], qd0[self.free] = xi[:nf], xi[nf:]
-        elif self.kinds[e] == "velocities":
-            qd0[self.free] = xi
-        return q0, qd0
+        return self.initial[e].state(w[self.offsets[e]:self.offsets[e + 1]])
+
+    def state_errors(self, w: np.ndarray, C: np.ndarray, e: int) -> tuple[np.ndarray, np.ndarray]:
+        """Standard errors of experiment e's q0 and qd0 (all dofs) from the covariance C of w."""
+        lo, hi = self.offsets[e], self.offsets[e + 1]
+        Ce = C[lo:hi, lo:hi]
+        return tuple(np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", D, Ce, D), 0.0))
+                     for D in self.initial[e].jacobian(w[lo:hi]))
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         lb, ub = self.pmap.bounds()
@@ -152,12 +152,8 @@ class OutputError:
             if not jacobian:
                 continue
             # d x0 / d(p, xi_e): columns of the local unknowns
-            cols = [Jp]
-            if self.kinds[e] == "estimate":
-                cols.append(Jq[:, self.free])
-            if self.kinds[e] in ("estimate", "velocities"):
-                cols.append(Jqd[:, self.free])
-            M0 = np.hstack(cols)  # (nx, npar + n_xi)
+            dq, dqd = self.initial[e].jacobian(w[self.offsets[e]:self.offsets[e + 1]])
+            M0 = np.hstack([Jp, Jq @ dq + Jqd @ dqd])  # (nx, npar + n_xi)
             sel = np.unique(np.concatenate([sm.dof, n + sm.dof]))
             S = run.S[:, :, sel]  # (k, nw, nsel)
             G = np.einsum("kws,wc->ksc", S[:, :nx, :], M0)
@@ -240,7 +236,7 @@ def fit(problem: OutputError, w0: np.ndarray, budget: Budget, *, verbose: bool =
     w_start = np.clip(np.asarray(w0, dtype=float), lb, ub)
     try:
         sol = least_squares(fun, w_start, jac=jac, bounds=(lb, ub), method="trf", x_scale="jac", xtol=1e-10,
-                            ftol=1e-10, gtol=1e-10, max_nfev=budget.max_iterations, verbose=2 if verbose else 0)
+                            ftol=1e-10, gtol=1e-10, max_nfev=budget.max_iterations, verbose=1 if verbose else 0)
         w, status, iters = sol.x, _STATUS.get(sol.status, str(sol.status)), int(sol.nfev)
         converged = sol.status > 0
         message = "" if converged else f"stopped at the iteration limit ({budget.max_iterations} model runs)"

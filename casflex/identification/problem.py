@@ -4,18 +4,16 @@ the Gauss-Newton statistics (standard errors, correlations, identifiability)."""
 from __future__ import annotations
 
 import math
-import os
 import warnings
-from dataclasses import asdict, dataclass, field
-from pathlib import Path
+from dataclasses import dataclass
 from typing import Any
 
 import casadi as ca
 import numpy as np
 
 from casflex.codegen import jit_options, jit_working_directory, log
+from casflex.identification.result import IdentificationResult
 from casflex.model import Model
-from casflex.results import atomic_write_json
 
 __all__ = ["IdentificationResult", "parameter_scale", "start_values", "bound_flags", "gauss_newton_statistics",
            "gauss_newton_polish", "solver_options_for", "least_squares_nlp", "ParameterMap",
@@ -302,70 +300,3 @@ def gauss_newton_polish(zJ: Any, w: np.ndarray, lb: np.ndarray, ub: np.ndarray,
             break
         w, z, J, f, taken = w_new, z_new, J_new, f_new, taken + 1
     return w, taken
-
-
-@dataclass(frozen=True)
-class IdentificationResult:
-    """The outcome of an identification (any method).
-
-    parameters: identified values {name: value} (units of the scene's parameters);
-    std_errors, correlation, rank, condition: Gauss-Newton statistics at the solution
-    (``identifiability`` holds the full report); multipliers: lambda at each instant;
-    wall_build_s / wall_solve_s: problem construction and solve time (s), the solve being the NLP
-    solver and the Gauss-Newton polish; ``extra`` holds the solver's own time (``solver_s``) and
-    parameters before the polish (``solver_parameters``); objective: 1/2 |residual|^2 at the
-    reported parameters (after the polish).
-    """
-
-    method: str
-    solver: str
-    parameters: dict[str, float]
-    start: dict[str, float]
-    success: bool
-    status: str
-    message: str
-    iterations: int
-    wall_build_s: float
-    wall_solve_s: float
-    objective: float
-    std_errors: dict[str, float]
-    correlation: list[list[float]]
-    at_bound: dict[str, bool]
-    identifiability: dict[str, Any]
-    instants: list[float] = field(default_factory=list)
-    multipliers: list[list[float]] = field(default_factory=list)
-    extra: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def p(self) -> np.ndarray:
-        return np.array(list(self.parameters.values()))
-
-    @property
-    def wall_s(self) -> float:
-        return self.wall_build_s + self.wall_solve_s
-
-    def to_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        d["wall_s"] = self.wall_s
-        return d
-
-    def save(self, path: str | os.PathLike[str]) -> Path:
-        """Write the result as JSON, atomically."""
-        return atomic_write_json(path, self.to_dict())
-
-    def summary(self) -> str:
-        lines = [f"{self.method} identification with {self.solver}: {self.status} in {self.iterations} iterations "
-                 f"({self.wall_build_s * 1e3:.0f} ms build, {self.wall_solve_s * 1e3:.0f} ms solve)"]
-        for k, v in self.parameters.items():
-            se = self.std_errors.get(k, math.nan)
-            flag = "  (at a bound)" if self.at_bound.get(k) else ""
-            lines.append(f"  {k:<8s} = {v:14.6g}  +- {se:.2g} (start {self.start[k]:.6g}){flag}")
-        idf = self.identifiability
-        lines.append(f"  identifiability: rank {idf['rank']} of {idf['n_unknowns']} unknowns, "
-                     f"parameter condition number {idf['parameter_condition']:.3g}, "
-                     f"collinearity index {idf.get('collinearity_index', math.nan):.3g}")
-        if idf.get("weak"):
-            lines.append(f"  weakly identifiable: {', '.join(idf['weak'])}")
-        if self.message:
-            lines.append(f"  note: {self.message}")
-        return "\n".join(lines)

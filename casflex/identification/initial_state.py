@@ -1,0 +1,250 @@
+"""The initial state of a recording that does not start at the scene's: a guess, and the few
+numbers a fit may adjust.
+
+**Guess** (:func:`initial_guess`): the measured dofs as measured, the supports' dofs as fixed, the
+others from a constrained kinematic fit, the configuration of least elastic energy through the
+measured positions, at each of the first samples; velocities from a quadratic through those
+configurations at the first sample.
+
+**What the fit adjusts** (:class:`InitialState`): only the *slow* part of the state. The model
+is linearised at the guess (tangent of the elastic and gravity forces, mass) and its modes are
+split at the samples' Nyquist frequency (:func:`slow_modes`). A faster mode (a steel bar's
+bending or stretching, at hundreds of hertz) cannot be seen in the samples, only aliased: left
+free, the fit uses it to follow the noise (twobar, 0.25 s at 100 Hz: initial rotation rates 19
+rad/s off, torsion stiffnesses 6 times too large). The unknowns are the slow-mode amplitudes
+a (positions) and v (velocities), and the state lies on the *slow manifold*:
+
+    q0(a) = argmin V_el(q)  subject to  C (q - q_g) = a,     qd0 = dq0/da v,
+
+C = B^T M the modal projection: the fast components take their quasi-static values for the slow
+ones, and move with them. A linear modal correction would not do: turning a bar by a few
+centimetres along its linearised mode stretches it by millimetres (megaNewtons in steel). The
+projection is a Newton solve of its optimality conditions (CasADi's rootfinder), with exact
+derivatives through it by the implicit-function theorem. The supports' dofs are never unknowns,
+so every estimated state satisfies the constraints.
+"""
+
+from __future__ import annotations
+
+import weakref
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+from scipy.linalg import LinAlgError, eigh
+
+from casflex.identification.measurement import Experiment, free_dofs, nyquist
+from casflex.model import Model
+
+__all__ = ["InitialState", "initial_guess", "slow_modes", "initial_state_of"]
+
+_FITS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_LINEAR: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_MANIFOLDS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _placement(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(free dofs, keep (n,) 1 on the fixed dofs, put (n, n_free) placing the free dofs)."""
+    free = free_dofs(model)
+    keep = np.ones(model.n_dof)
+    keep[free] = 0.0
+    put = np.zeros((model.n_dof, free.size))
+    put[free, np.arange(free.size)] = 1.0
+    return free, keep, put
+
+
+def _kinematic_fit(model: Model, measured: tuple[int, ...]) -> ca.Function:
+    """``kinematic_fit(q_known, q_start) -> q``: the configuration of least elastic energy whose
+    measured and supported dofs take their values in ``q_known`` (IPOPT, exact Hessian), built
+    once per model and set of measured dofs."""
+    cache = _FITS.setdefault(model, {})
+    if measured in cache:
+        return cache[measured]
+    n = model.n_dof
+    unknown = [i for i in free_dofs(model) if i not in measured]
+    QK, Q0 = ca.MX.sym("q_known", n), ca.MX.sym("q_start", n)
+    if not unknown:  # every free dof is measured: nothing to fit
+        cache[measured] = ca.Function("kinematic_fit", [QK, Q0], [QK], ["q_known", "q_start"], ["q"])
+        return cache[measured]
+    keep = np.ones(n)
+    keep[unknown] = 0.0
+    put = np.zeros((n, len(unknown)))
+    put[unknown, np.arange(len(unknown))] = 1.0
+    qk, u, u_ref = ca.SX.sym("q_known", n), ca.SX.sym("u", len(unknown)), ca.SX.sym("u_ref", len(unknown))
+    q = ca.DM(keep) * qk + ca.mtimes(ca.DM(put), u)
+    _, V_el, _ = model.energy(q, ca.DM.zeros(n), model.p_nominal)
+    ell = np.where(model.is_rotation[unknown], 1.0, model.length_scale)
+    # a weak pull toward the start fixes motions that cost no energy (e.g. a free spin)
+    reg = 1e-9 * ca.mmax(ca.fabs(ca.diag(ca.hessian(V_el, u)[0]))) + 1e-12
+    f = V_el + 0.5 * reg * model.length_scale**2 * ca.sumsqr((u - u_ref) / ell)
+    solver = ca.nlpsol("kinematic_fit_nlp", "ipopt", {"x": u, "p": ca.vertcat(qk, u_ref), "f": f},
+                       {"print_time": False, "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-12, "max_iter": 200}})
+    U = solver(x0=Q0[unknown], p=ca.vertcat(QK, Q0[unknown]))["x"]
+    cache[measured] = ca.Function("kinematic_fit", [QK, Q0], [ca.DM(keep) * QK + ca.mtimes(ca.DM(put), U)],
+                                  ["q_known", "q_start"], ["q"])
+    return cache[measured]
+
+
+def initial_guess(model: Model, experiment: Experiment, m: int = 5) -> tuple[np.ndarray, np.ndarray]:
+    """(q0, qd0), shape (n_dof,) each: a first guess of the state at the first sample.
+
+    Positions: the scene's for ``initial_state`` "scene" and "velocities"; for "estimate", the
+    kinematic fit at the first sample. Velocities: the scene's for "scene"; otherwise the
+    derivative at the first sample of a quadratic through the kinematic fits at the first ``m``
+    samples that have every compared channel.
+    """
+    if experiment.initial_state == "scene":
+        return model.q0.copy(), model.qd0.copy()
+    data = experiment.data
+    names = experiment.compared(model)
+    fit = _kinematic_fit(model, tuple(sorted(model.dof(c) for c in names)))
+    cols = [data.channels.index(c) for c in names]
+    dofs = [model.dof(c) for c in names]
+    q_prev = model.q0.copy()
+    fits, times = [], []
+    for i in range(data.t.size):
+        if len(fits) == m:
+            break
+        values = data.q[i, cols]
+        if not np.isfinite(values).all():
+            continue
+        known = q_prev.copy()
+        known[dofs] = values
+        for con in model.constraints:
+            known[con.dof] = con.value
+        q_prev = np.array(fit(known, q_prev)).ravel()
+        fits.append(q_prev)
+        times.append(data.t[i] - data.t[0])
+    if not fits:
+        raise ValueError("data: no sample has every compared channel; cannot estimate the initial state")
+    Q, tt = np.array(fits), np.array(times)
+    q0 = Q[0] if experiment.initial_state == "estimate" else model.q0.copy()
+    degree = min(2, len(tt) - 1)
+    qd0 = np.polynomial.polynomial.polyfit(tt, Q, degree)[1] if degree >= 1 else np.zeros(model.n_dof)
+    for con in model.constraints:
+        qd0[con.dof] = 0.0
+    return q0, qd0
+
+
+def slow_modes(model: Model, q: np.ndarray, p: np.ndarray, omega_cut: float) -> np.ndarray:
+    """Mode shapes (n_free, k) over the free dofs of the model linearised at q whose
+    |omega| < ``omega_cut`` (rad/s), M-orthonormal. Modes of negative stiffness (a pendulum
+    away from its rest) count as slow. Where the reduced mass is singular (free dofs without
+    mass), every free dof is kept (the identity)."""
+    if model not in _LINEAR:
+        qs, ps = ca.SX.sym("q", model.n_dof), ca.SX.sym("p", model.n_p)
+        _, f_int, g = model.forces(qs, ca.DM.zeros(model.n_dof), ps)
+        _LINEAR[model] = ca.Function("linearise", [qs, ps], [ca.jacobian(f_int - g, qs), model.mass(qs, ps)])
+    free = free_dofs(model)
+    K, M = (np.asarray(v, dtype=float)[np.ix_(free, free)] for v in _LINEAR[model](q, p))
+    try:
+        w2, V = eigh(0.5 * (K + K.T), 0.5 * (M + M.T))
+    except LinAlgError:  # singular mass: no modal reduction
+        return np.eye(free.size)
+    return V[:, np.abs(w2) < omega_cut**2]
+
+
+def _manifold(model: Model, k: int) -> tuple[ca.Function, ca.Function]:
+    """The slow-manifold map and its Jacobian for k slow modes (module docstring):
+    ``slow_state(a, v, q_g, C, B, p, d) -> (q0, qd0)`` on all dofs and
+    ``slow_state_jac(...) -> (dq0/da, dqd0/da, dqd0/dv)``. d scales the force rows (stiffness)."""
+    cache = _MANIFOLDS.setdefault(model, {})
+    if k in cache:
+        return cache[k]
+    n = model.n_dof
+    free, keep, put = _placement(model)
+    nf = free.size
+    qf, mu = ca.SX.sym("qf", nf), ca.SX.sym("mu", k)
+    a, qg, C, p, d = (ca.SX.sym(s, *shape) for s, shape in (("a", (k,)), ("q_g", (n,)), ("C", (k, nf)),
+                                                            ("p", (model.n_p,)), ("d", (nf,))))
+    q = ca.DM(keep) * qg + ca.mtimes(ca.DM(put), qf)
+    _, V_el, _ = model.energy(q, ca.DM.zeros(n), p)
+    kkt = ca.vertcat((ca.gradient(V_el, qf) + ca.mtimes(C.T, mu)) / d, ca.mtimes(C, qf - qg[free]) - a)
+    G = ca.Function("slow_manifold_kkt", [ca.vertcat(qf, mu), ca.vertcat(a, qg, ca.vec(C), p, d)], [kkt])
+    rf = ca.rootfinder("slow_manifold", "newton", G, {"abstol": 1e-13, "abstolStep": 1e-14, "max_iter": 50,
+                                                      "error_on_fail": True})
+    A, Vv, QG, CM, BM, P, D = (ca.MX.sym(s, *shape) for s, shape in (
+        ("a", (k,)), ("v", (k,)), ("q_g", (n,)), ("C", (k, nf)), ("B", (nf, k)), ("p", (model.n_p,)), ("d", (nf,))))
+    z = rf(ca.vertcat(QG[free] + ca.mtimes(BM, A), ca.DM.zeros(k)), ca.vertcat(A, QG, ca.vec(CM), P, D))
+    q0 = ca.DM(keep) * QG + ca.mtimes(ca.DM(put), z[:nf])
+    qd0 = ca.mtimes(ca.DM(put), ca.mtimes(ca.jacobian(z[:nf], A), Vv))
+    args = [A, Vv, QG, CM, BM, P, D]
+    names = ["a", "v", "q_g", "C", "B", "p", "d"]
+    cache[k] = (ca.Function("slow_state", args, [q0, qd0], names, ["q0", "qd0"]),
+                ca.Function("slow_state_jac", args, [ca.jacobian(q0, A), ca.jacobian(qd0, A), ca.jacobian(qd0, Vv)],
+                            names, ["dq0_da", "dqd0_da", "dqd0_dv"]))
+    return cache[k]
+
+
+@dataclass(frozen=True, eq=False)
+class InitialState:
+    """An experiment's initial state as a function of its unknowns xi (module docstring).
+
+    kind "scene": no unknowns. "velocities": xi = v (positions q_g trusted). "estimate":
+    xi = (a, v). ``xi0`` puts the state at the guess, its velocity projected on the manifold.
+    """
+
+    model: Model
+    kind: str
+    q_guess: np.ndarray
+    qd_guess: np.ndarray
+    basis: np.ndarray
+    projection: np.ndarray
+    p: np.ndarray
+    scale: np.ndarray
+
+    @property
+    def k(self) -> int:
+        return self.basis.shape[1]
+
+    @property
+    def size(self) -> int:
+        return {"scene": 0, "velocities": 1, "estimate": 2}[self.kind] * self.k
+
+    @property
+    def xi0(self) -> np.ndarray:
+        v = self.projection @ self.qd_guess[free_dofs(self.model)]
+        return {"scene": np.zeros(0), "velocities": v, "estimate": np.concatenate([np.zeros(self.k), v])}[self.kind]
+
+    def _split(self, xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return (xi[:self.k], xi[self.k:]) if self.kind == "estimate" else (np.zeros(self.k), xi)
+
+    def _args(self, xi: np.ndarray) -> list:
+        a, v = self._split(xi)
+        return [a, v, self.q_guess, self.projection, self.basis, self.p, self.scale]
+
+    def state(self, xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(q0, qd0), full dof vectors."""
+        if self.kind == "scene":
+            return self.q_guess.copy(), self.qd_guess.copy()
+        q0, qd0 = _manifold(self.model, self.k)[0](*self._args(xi))
+        return np.array(q0).ravel(), np.array(qd0).ravel()
+
+    def jacobian(self, xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(dq0/dxi, dqd0/dxi), each (n_dof, size)."""
+        n = self.model.n_dof
+        if self.kind == "scene":
+            return np.zeros((n, 0)), np.zeros((n, 0))
+        dq_da, dqd_da, dqd_dv = (np.array(v) for v in _manifold(self.model, self.k)[1](*self._args(xi)))
+        if self.kind == "velocities":
+            return np.zeros((n, self.k)), dqd_dv
+        return np.hstack([dq_da, np.zeros((n, self.k))]), np.hstack([dqd_da, dqd_dv])
+
+
+def initial_state_of(model: Model, experiment: Experiment, p: np.ndarray,
+                     guess: tuple[np.ndarray, np.ndarray] | None = None) -> InitialState:
+    """The :class:`InitialState` of ``experiment`` from its guess (or the given one), the slow
+    modes at the guess below the recording's Nyquist frequency, and the parameters p."""
+    q_g, qd_g = initial_guess(model, experiment) if guess is None else guess
+    free = free_dofs(model)
+    if experiment.initial_state == "scene":
+        empty = np.zeros((free.size, 0))
+        return InitialState(model, "scene", q_g, qd_g, empty, empty.T, p, np.ones(free.size))
+    B = slow_modes(model, q_g, p, nyquist(experiment))
+    K, M = (np.asarray(v, dtype=float)[np.ix_(free, free)] for v in _LINEAR[model](q_g, p))
+    C = B.T @ M
+    if np.linalg.matrix_rank(C) < B.shape[1]:  # no modal reduction (massless free dofs): C = B^T
+        C = B.T
+    d = np.abs(np.diag(K))
+    d = np.maximum(d, 1e-9 * d.max(initial=0.0) + 1e-300)
+    return InitialState(model, experiment.initial_state, q_g, qd_g, B, C, p, d)

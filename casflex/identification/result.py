@@ -1,0 +1,105 @@
+"""The record of an identification (any method): values, uncertainty, diagnostics; JSON output."""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from casflex.results import atomic_write_json
+
+__all__ = ["IdentificationResult"]
+
+
+@dataclass(frozen=True)
+class IdentificationResult:
+    """The outcome of an identification (any method).
+
+    parameters: identified values {name: value} (units of the scene's parameters);
+    std_errors: the standard errors the method stands by (output-error fits: the total of the
+    autocorrelation-consistent (HAC) and the model-error parts, ``extra["uncertainty"]`` holds
+    each part and the plain Gauss-Newton one; other methods: Gauss-Newton); correlation,
+    identifiability: the report at the solution (rank, condition, collinearity, ``weak``);
+    success: the solver converged *and* the fit is plausible (``message`` says why not);
+    multipliers: lambda at each instant; wall_build_s / wall_solve_s: problem construction and
+    solve time (s); objective: 1/2 |residual|^2 at the reported parameters; ``extra``: the
+    method's details (solver parameters and time, residual analysis, initial states, data).
+    ``trajectories``: the identified model's motion per experiment (output-error fits), for
+    plots and joint forces; ``samples``: per experiment {"name", "channels", "t", "channel",
+    "measured", "model"} at the samples (arrays); neither is written to JSON.
+    """
+
+    method: str
+    solver: str
+    parameters: dict[str, float]
+    start: dict[str, float]
+    success: bool
+    status: str
+    message: str
+    iterations: int
+    wall_build_s: float
+    wall_solve_s: float
+    objective: float
+    std_errors: dict[str, float]
+    correlation: list[list[float]]
+    at_bound: dict[str, bool]
+    identifiability: dict[str, Any]
+    instants: list[float] = field(default_factory=list)
+    multipliers: list[list[float]] = field(default_factory=list)
+    extra: dict[str, Any] = field(default_factory=dict)
+    trajectories: tuple = field(default=(), repr=False, compare=False)
+    samples: tuple = field(default=(), repr=False, compare=False)
+
+    @property
+    def p(self) -> np.ndarray:
+        return np.array(list(self.parameters.values()))
+
+    @property
+    def wall_s(self) -> float:
+        return self.wall_build_s + self.wall_solve_s
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d.pop("trajectories")
+        d.pop("samples")
+        d["wall_s"] = self.wall_s
+        return d
+
+    def save(self, path: str | os.PathLike[str]) -> Path:
+        """Write the result as JSON, atomically."""
+        return atomic_write_json(path, self.to_dict())
+
+    def interval(self, k: float = 3.0) -> dict[str, tuple[float, float]]:
+        """{name: (value - k SE, value + k SE)}: the interval the result stands by at k standard errors."""
+        return {n: (v - k * self.std_errors[n], v + k * self.std_errors[n]) for n, v in self.parameters.items()}
+
+    def summary(self) -> str:
+        unc = self.extra.get("uncertainty")
+        lines = [f"{self.method} identification with {self.solver}: {self.status} in {self.iterations} iterations "
+                 f"({self.wall_build_s:.2f} s build, {self.wall_solve_s:.2f} s solve)"]
+        for k, v in self.parameters.items():
+            se = self.std_errors.get(k, math.nan)
+            flag = "  (at a bound)" if self.at_bound.get(k) else ""
+            parts = ""
+            if unc:
+                parts = (f"  [HAC {unc['hac'][k]:.2g}, model error {unc['model_error'][k]:.2g}, "
+                         f"plain Gauss-Newton {unc['gauss_newton'][k]:.2g}]")
+            lines.append(f"  {k:<8s} = {v:14.6g}  +- {se:.2g}{parts} (start {self.start[k]:.6g}){flag}")
+        idf = self.identifiability
+        lines.append(f"  identifiability: rank {idf['rank']} of {idf['n_unknowns']} unknowns, "
+                     f"parameter condition number {idf['parameter_condition']:.3g}, "
+                     f"collinearity index {idf.get('collinearity_index', math.nan):.3g}")
+        if idf.get("weak"):
+            lines.append(f"  weakly identifiable (relative standard error > 10 %): {', '.join(idf['weak'])}")
+        for name, exp in self.extra.get("experiments", {}).items():
+            res = exp.get("residuals", {})
+            text = ", ".join(f"{c} {100 * ch['fit']:.2f} % fit, RMS {ch['rms']:.3g}"
+                             + ("" if ch["white"] else " (not white)") for c, ch in res.items())
+            lines.append(f"  {name}: {text}")
+        if self.message:
+            lines.append(f"  note: {self.message}")
+        return "\n".join(lines)

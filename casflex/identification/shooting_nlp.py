@@ -1,0 +1,328 @@
+"""Indirect identification as an NLP (Eqs. 15-17): single or multiple shooting for CasADi's NLP
+solvers (IPOPT by default), the transcription of the seed paper and of :mod:`casflex.identification`'s
+solver comparisons. The default, single shooting by Gauss-Newton on forward sensitivities, is in
+:mod:`.estimate`; this transcription hands its answer to it for the final polish and the
+statistics when the residue is Eq. 16.
+
+The model is simulated by HHT-alpha from the scene's initial state at the first sample t0 over
+[t0, t0 + horizon] and its kinematics are compared with the measured ones at every sample on
+the step grid t0 + k dt:
+
+    J = xi |q^ - q|^2 + psi |q'^ - q'|^2 + phi |q''^ - q''|^2                      (Eq. 15)
+
+``residue="positions"`` is Eq. 16 (xi only), ``"full"`` Eq. 17. Each residue is made
+dimensionless by the scene's length scale l (rotations by 1 rad), velocities by l / T and
+accelerations by l / T^2 with T the horizon, so the weights (xi, psi, phi) compare like with like.
+
+The initial state x_0 = [q0, q0', q0''(p), lambda_0(p)] takes the scene's q0, q0' and the
+consistent accelerations and multipliers of Eq. 1, which move with p.
+
+Transcriptions:
+
+- ``single-shooting``: the unknowns are p only; the trajectory is one differentiable CasADi
+  Function (HHT steps chained by ``mapaccum``, derivatives through the Newton rootfinder by the
+  implicit-function theorem).
+- ``multiple-shooting``: the horizon is cut into intervals of ``interval`` steps. The HHT state at
+  the start of each interval after the first is a decision variable, initialised from a
+  simulation at the starting parameters (a consistent state: interval states made of measured
+  positions and simulated rest, as before, put steel bars out of length by the noise, i.e.
+  kilonewtons, and failed on partial noisy data), and the state an interval ends in must equal
+  the next interval's start (equality constraints, in units of each component's typical
+  magnitude).
+
+Both hand the NLP solver the Gauss-Newton Hessian J_r^T J_r (r the residue, exact first
+derivatives). For Eq. 17, Gauss-Newton steps on the single-shooting problem polish p after the
+solver and the standard errors come from the same Jacobian.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from collections.abc import Sequence
+
+import casadi as ca
+import numpy as np
+
+from casflex.codegen import jit_options
+from casflex.data import MeasurementSet
+from casflex.identification.problem import (
+    IdentificationResult,
+    ParameterMap,
+    bound_flags,
+    gauss_newton_polish,
+    gauss_newton_statistics,
+    least_squares_nlp,
+    start_values,
+)
+from casflex.model import Model
+
+__all__ = ["identify_nlp", "RESIDUES", "TRANSCRIPTIONS"]
+
+RESIDUES = ("positions", "full")
+TRANSCRIPTIONS = ("multiple-shooting", "single-shooting")
+
+
+def _grid(data: MeasurementSet, horizon: float, dt: float) -> tuple[float, int, np.ndarray]:
+    """HHT step h, number of steps N, and the data row of each step 1..N from the first sample
+    (-1: no sample)."""
+    if data.t.size < 2:
+        raise ValueError("data: the indirect method needs a time series (at least 2 samples)")
+    h = float(dt)
+    if not (np.isfinite(h) and h > 0):
+        raise ValueError(f"dt: must be a positive number of seconds, got {dt!r}")
+    if not (np.isfinite(horizon) and horizon > 0):
+        raise ValueError(f"horizon: must be a positive number of seconds, got {horizon!r}")
+    N = int(round(horizon / h))
+    if N < 1 or abs(N * h - horizon) > 1e-6 * h:
+        raise ValueError(f"horizon: {horizon:g} s is not a whole number of steps dt = {h:g} s")
+    t0 = float(data.t[0])
+    if horizon > data.t[-1] - t0 + 1e-9 * h:
+        raise ValueError(f"horizon: {horizon:g} s goes beyond the data ({data.t[-1] - t0:g} s from its first sample)")
+    k = (data.t - t0) / h
+    on_grid = np.abs(k - np.round(k)) <= 1e-6
+    rows = np.full(N, -1)
+    for i in np.flatnonzero(on_grid):
+        step = int(round(k[i]))
+        if 1 <= step <= N:
+            rows[step - 1] = i
+    return h, N, rows
+
+
+def _intervals(N: int, interval: int | None, transcription: str) -> list[int]:
+    """Step counts of the shooting intervals (as equal as possible)."""
+    if transcription == "single-shooting":
+        return [N]
+    K = 20 if interval is None else interval
+    if not (isinstance(K, int) and K >= 1):
+        raise ValueError(f"interval: expected a whole number of steps >= 1, got {interval!r}")
+    M = max(1, round(N / K))
+    base, extra = divmod(N, M)
+    return [base + 1] * extra + [base] * (M - extra)
+
+
+def identify_nlp(
+    model: Model,
+    data: MeasurementSet,
+    horizon: float,
+    *,
+    transcription: str = "multiple-shooting",
+    residue: str = "positions",
+    dofs: Sequence[str] | None = None,
+    weights: tuple[float, float, float] = (1.0, 1.0, 1.0),
+    alpha: float = 0.0,
+    dt: float = 1e-3,
+    interval: int | None = None,
+    start: float | dict[str, float] | np.ndarray | None = None,
+    solver: str = "ipopt",
+    solver_options: dict | None = None,
+    newton_tol: float = 1e-14,
+    polish: int = 3,
+    transform: str = "linear",
+    hessian: str = "gauss-newton",
+    compiled: bool = False,
+    verbose: bool = False,
+) -> IdentificationResult:
+    """Output-error identification over [t0, t0 + ``horizon``] s as an NLP (t0: the first sample).
+
+    Parameters
+    ----------
+    model : Model
+        Its declared parameters are the unknowns, with their bounds.
+    data : MeasurementSet
+        Samples on the step grid t0 + k dt (others are ignored); positions for Eq. 16, plus
+        velocities and accelerations for Eq. 17.
+    horizon : float, s
+        End of the compared window (a whole number of steps).
+    transcription : {"multiple-shooting", "single-shooting"}
+    residue : {"positions", "full"}
+        Eq. 16 or Eq. 17.
+    dofs : names of the compared dofs (e.g. ``["x3", "y3", "x5", "y5"]``); default every
+        measured dof.
+    weights : (xi, psi, phi)
+        Eq. 15 weights of the dimensionless position, velocity and acceleration residues.
+    alpha, dt : HHT parameter and step (s).
+    interval : int
+        Steps per shooting interval (multiple shooting; default 20).
+    start : factor, dict or array, optional
+        Starting parameters (a number multiplies the nominal values).
+    solver : str
+        A CasADi nlpsol plugin (IPOPT by default).
+    newton_tol : float
+        Tolerance of the HHT Newton iterations inside the model (scaled, see HHT).
+    polish : int
+        Gauss-Newton steps on the single-shooting problem after the solver (0: none).
+    transform : {"linear", "log"}
+        Decision variables p / scale or log(p / scale) (see :class:`ParameterMap`).
+    hessian : {"gauss-newton", "exact"}
+        The solver's Hessian of the Lagrangian (see :func:`least_squares_nlp`); "exact" means
+        second derivatives through every HHT Newton solve, several times slower.
+    compiled : bool
+        Generate and compile C for the solver's functions (CasADi JIT with the system compiler).
+    """
+    from casflex.simulate import integrator_for, simulate
+
+    if transcription not in TRANSCRIPTIONS:
+        raise ValueError(f"transcription: expected one of {TRANSCRIPTIONS}, got {transcription!r}")
+    if residue not in RESIDUES:
+        raise ValueError(f"residue: expected one of {RESIDUES}, got {residue!r}")
+    if model.n_p == 0:
+        raise ValueError("the scene declares no parameters to identify ([[parameters]] in the scene file)")
+    if len(weights) != 3 or not all(np.isfinite(w) and w >= 0 for w in weights):
+        raise ValueError(f"weights: expected three numbers >= 0 (xi, psi, phi), got {weights!r}")
+    if residue == "full" and (data.qd is None or data.qdd is None):
+        raise ValueError("residue 'full' (Eq. 17) needs velocities and accelerations in the data")
+    if transcription == "multiple-shooting" and residue == "full":
+        warnings.warn("multiple shooting with residue 'full' (Eq. 17) fails on stiff models: accelerations react "
+                      "to interval start positions with gains of ~1e8 s^-2 (docs/identification.md, Known limits); "
+                      "single shooting is recommended for Eq. 17", stacklevel=2)
+    t_build = time.perf_counter()
+    h, N, rows = _grid(data, horizon, dt)
+    steps = np.flatnonzero(rows >= 0)  # steps (0-based: state after step k+1) with a sample
+    if steps.size == 0:
+        raise ValueError(f"data: no sample lies on the step grid k * {h:g} s within the horizon")
+    sel = data.select(model)
+    names = list(dofs) if dofs is not None else [d for d, s in zip(model.dof_names, sel, strict=True) if s >= 0]
+    if not names:
+        raise ValueError("dofs: no dof to compare")
+    for d in names:
+        if d not in model.dof_names:
+            raise ValueError(f"dofs: unknown dof {d!r}; the model's dofs are {list(model.dof_names)}")
+        if sel[model.dof(d)] < 0:
+            raise ValueError(f"dofs: {d!r} is not in the data (channels: {list(data.channels)})")
+    cols = [model.dof(d) for d in names]
+    dcols = [int(sel[c]) for c in cols]
+
+    n, nc, n_p = model.n_dof, model.n_con, model.n_p
+    integ = integrator_for(model, alpha=alpha, tol=newton_tol)
+    nx = integ.nx
+    pmap = ParameterMap.of(model, transform)
+    scale = pmap.scale
+    p0 = start_values(model, start)
+    ell = np.where(model.is_rotation, 1.0, model.length_scale)
+    T = N * h
+
+    # residue r(X): dimensionless, (n_samples * len(cols) * (1 or 3),)
+    sq = np.sqrt(np.asarray(weights, dtype=float))
+    drows = rows[steps]
+    obs = [(0, 1.0 / ell[cols], sq[0], data.q[np.ix_(drows, dcols)])]
+    if residue == "full":
+        obs += [(n, T / ell[cols], sq[1], data.qd[np.ix_(drows, dcols)]),
+                (2 * n, T**2 / ell[cols], sq[2], data.qdd[np.ix_(drows, dcols)])]
+
+    def residue_of(X: ca.MX) -> ca.MX:
+        """X: (nx, N) states after steps 1..N."""
+        parts = []
+        for off, inv_s, wgt, Y in obs:
+            sim = X[[off + c for c in cols], :][:, steps.tolist()]
+            parts.append(ca.vec(wgt * (sim - Y.T) * ca.repmat(ca.DM(inv_s), 1, steps.size)))
+        return ca.vertcat(*parts)
+
+    # typical magnitudes of the state components, from a simulation at the start
+    t0 = float(data.t[0])
+    guess = simulate(model, T, dt=h, alpha=alpha, p=p0, tol=newton_tol, t0=t0, raise_on_failure=False)
+    G = np.hstack([guess.q, guess.qd, guess.qdd, guess.lam])
+    if G.shape[0] < N + 1:  # the start diverged: hold its last state
+        G = np.vstack([G, np.repeat(G[-1:], N + 1 - G.shape[0], axis=0)])
+    xs = np.concatenate([ell, ell / T, ell / T**2, np.zeros(nc)])
+    xs = np.maximum(xs, np.abs(G).max(axis=0))
+    xs[xs == 0] = 1.0
+    d = np.array(integ.scale(model.q0, model.qd0, p0, h)).ravel()
+    # a step converged when its residual is within newton_tol, or the round-off floor of the
+    # scene's coordinates where that is higher (see HHT.tolerance)
+    tol_acc = float(np.max(integ.tolerance(G[:, :n])))
+
+    th = ca.MX.sym("theta", n_p)
+    p = pmap.p(th)
+    qdd0, lam0 = integ.initial(model.q0, model.qd0, t0, p)
+    x0 = ca.vertcat(ca.DM(model.q0), ca.DM(model.qd0), qdd0, lam0)
+
+    def simulate_from(nodes: list[ca.MX], lengths: list[int], first: list[int]) -> tuple[ca.MX, ca.MX]:
+        """States after every step (nx, N) and Newton residuals (1, N), intervals mapped by length."""
+        out_x, out_r = [None] * len(lengths), [None] * len(lengths)
+        for K in sorted(set(lengths)):
+            idx = [j for j, k in enumerate(lengths) if k == K]
+            F = integ.trajectory(K)
+            if len(idx) > 1:
+                F = F.map(len(idx), "serial")
+            Xk, Rk = F(ca.horzcat(*[nodes[j] for j in idx]), ca.DM([t0 + first[j] * h for j in idx]).T, p, h, d)
+            for i, j in enumerate(idx):
+                out_x[j] = Xk[:, i * K:(i + 1) * K]
+                out_r[j] = Rk[:, i * K:(i + 1) * K]
+        return ca.horzcat(*out_x), ca.horzcat(*out_r)
+
+    lengths = _intervals(N, interval, transcription)
+    first = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(int).tolist()
+    M = len(lengths)
+    S = ca.MX.sym("S", nx, M - 1)  # scaled interval start states 1..M-1
+    nodes = [x0] + [S[:, j] * ca.DM(xs) for j in range(M - 1)]
+    X, R = simulate_from(nodes, lengths, first)
+    r = residue_of(X)
+    ends = [X[:, first[j] + lengths[j] - 1] for j in range(M - 1)]
+    g = ca.vertcat(*[(ends[j] - nodes[j + 1]) / ca.DM(xs) for j in range(M - 1)]) if M > 1 else ca.MX(0, 1)
+    w = ca.vertcat(th, ca.vec(S))
+
+    # starting states of the intervals: the start simulation's (consistent; module docstring)
+    W0 = G[first[1:]].copy() if M > 1 else np.zeros((0, nx))
+    w0 = np.concatenate([pmap.theta(p0), (W0 / xs).ravel()])  # vec(S) stacks columns = states
+    lb_th, ub_th = pmap.bounds()
+    lbw = np.concatenate([lb_th, np.full(nx * (M - 1), -np.inf)])
+    ubw = np.concatenate([ub_th, np.full(nx * (M - 1), np.inf)])
+
+    # the objective scaled to ~1 at the start: solver tolerances then mean the same on any data
+    fr = ca.Function("residue", [w], [r])
+    r_start = np.array(fr(w0)).ravel()
+    f_scale = 1.0 / max(float(r_start @ r_start), 1e-30) if float(r_start @ r_start) > 0 else 1.0
+    # IPOPT's dual infeasibility has a floor of ~1e-8 of its start from the HHT Newton tolerance
+    # inside the model: it stops there and the Gauss-Newton polish finishes the job
+    nlp = least_squares_nlp("indirect", solver, w, r, g, f_scale=f_scale, hessian=hessian, compiled=compiled,
+                            verbose=verbose, solver_options=solver_options, tol=1e-8)
+    # single-shooting residue of p alone: polish and statistics
+    Xf, Rf = (X, R) if transcription == "single-shooting" else simulate_from([x0], [N], [0])
+    ss_r = residue_of(Xf)
+    # NaN where a step's Newton did not converge, so that the polish rejects such a step
+    ss_ok = ca.if_else(ca.mmax(Rf) <= tol_acc, ss_r, np.nan * ss_r)
+    ss_all = ca.Function("ss_residue", [th], [ss_ok, ca.jacobian(ss_r, th), ss_r], jit_options() if compiled else {})
+
+    def ss(t: np.ndarray) -> list:
+        return ss_all(t)[:2]
+
+    build_s = time.perf_counter() - t_build
+
+    t_solve = time.perf_counter()
+    sol = nlp(x0=w0, lbx=lbw, ubx=ubw, lbg=0.0, ubg=0.0)
+    solver_s = time.perf_counter() - t_solve
+    st = nlp.stats()
+    wv = np.array(sol["x"]).ravel()
+    th_v, polished = gauss_newton_polish(ss, wv[:n_p], lb_th, ub_th, polish)
+    solve_s = time.perf_counter() - t_solve
+    p_hat = pmap.p(th_v)
+    # statistics from the residue as computed, also where a step missed the Newton tolerance
+    # (then reported in the message below) rather than from its NaN-guarded form
+    _, Jv, rv = (np.array(v) for v in ss_all(th_v))
+    stats = gauss_newton_statistics(Jv, rv.ravel(), n_p, model.parameter_names, pmap.dp_dtheta(th_v), p_hat)
+
+    # states over the window at the identified parameters: multipliers (joint reactions)
+    xr = ca.Function("states", [th], [Xf, ca.mmax(Rf)])
+    Xv, newton_res = np.array(xr(th_v)[0]), float(xr(th_v)[1])
+    converged = bool(newton_res <= tol_acc and np.isfinite(Xv).all())
+    pn = model.parameter_names
+    success = bool(st.get("success", False)) and converged
+    message = "" if converged else (f"HHT Newton did not converge within the horizon at the identified parameters "
+                                    f"(largest scaled residual {newton_res:.3g} > tol {tol_acc:g})")
+    return IdentificationResult(
+        method="indirect", solver=solver, parameters=dict(zip(pn, p_hat.tolist(), strict=True)),
+        start=dict(zip(pn, p0.tolist(), strict=True)), success=success,
+        status=str(st.get("return_status", "unknown")), message=message, iterations=int(st.get("iter_count", -1)),
+        wall_build_s=build_s, wall_solve_s=solve_s, objective=0.5 * float(rv.ravel() @ rv.ravel()),
+        std_errors=stats.pop("std_errors"), correlation=stats.pop("correlation"),
+        at_bound=bound_flags(model, p_hat, scale), identifiability=stats,
+        instants=(t0 + h * np.arange(1, N + 1)).tolist(), multipliers=Xv[3 * n:, :].T.tolist(),
+        extra={"transform": transform, "hessian": hessian, "compiled": compiled,
+               "transcription": transcription, "residue": residue, "dofs": names,
+               "weights": list(weights), "steps": N, "dt": h, "intervals": M, "samples": int(steps.size),
+               "constraint_violation": float(np.abs(np.array(sol["g"])).max()) if M > 1 else 0.0,
+               "gauss_newton_polish": polished, "solver_s": solver_s,
+               "solver_parameters": dict(zip(pn, pmap.p(wv[:n_p]).tolist(), strict=True))},
+    )
+
