@@ -1,13 +1,35 @@
-"""casflex: planar flexible multibody dynamics and parameter identification on CasADi."""
+"""casflex: planar flexible multibody dynamics and parameter identification on CasADi.
 
-from casflex.model import Model, assemble
-from casflex.scene import Beam, Load, Node, Parameter, RunSettings, Scene, SceneError, Spring, Support, TorsionSpring
-from casflex.scene_io import builtin_scenes, dumps_scene, load_scene, loads_scene, save_scene
+The public names are imported on first use (PEP 562), so that ``import casflex`` and the command
+line's start stay light: a Ctrl-C while CasADi and numpy load is then still caught by the command.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
 
 __version__ = "0.1.0"
 
-__all__ = [
-    "Beam", "Load", "Model", "Node", "Parameter", "RunSettings", "Scene", "SceneError", "Spring",
-    "Support", "TorsionSpring", "assemble", "builtin_scenes", "dumps_scene", "load_scene",
-    "loads_scene", "save_scene", "__version__",
-]
+_EXPORTS = {
+    "Model": "casflex.model", "assemble": "casflex.model",
+    "Beam": "casflex.scene", "Load": "casflex.scene", "Node": "casflex.scene", "Parameter": "casflex.scene",
+    "RunSettings": "casflex.scene", "Scene": "casflex.scene", "SceneError": "casflex.scene",
+    "Spring": "casflex.scene", "Support": "casflex.scene", "TorsionSpring": "casflex.scene",
+    "builtin_scenes": "casflex.scene_io", "dumps_scene": "casflex.scene_io", "load_scene": "casflex.scene_io",
+    "loads_scene": "casflex.scene_io", "save_scene": "casflex.scene_io",
+}
+
+__all__ = [*sorted(_EXPORTS), "__version__"]
+
+
+def __getattr__(name: str) -> Any:
+    if name in _EXPORTS:
+        value = getattr(importlib.import_module(_EXPORTS[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'casflex' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))

@@ -2,6 +2,6 @@
 
 import sys
 
-from casflex.cli import main
+from casflex._entry import main
 
 sys.exit(main())

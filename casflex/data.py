@@ -30,7 +30,8 @@ __all__ = ["MeasurementSet", "simulated_set", "measured_set", "load_measurements
 class MeasurementSet:
     """Kinematic data: t (n,) s; q, qd, qdd (n, k) for the dofs named in ``channels``.
 
-    ``qd`` and ``qdd`` may be None when only positions are known.
+    ``qd`` and ``qdd`` may be None when only positions are known. NaN marks a missing sample
+    (a marker hidden for a while); times must be finite and increasing, no value infinite.
     """
 
     t: np.ndarray
@@ -60,9 +61,9 @@ class MeasurementSet:
             a = np.asarray(a, dtype=float)
             if a.shape != (t.size, len(self.channels)):
                 raise ValueError(f"data.{name}: expected shape ({t.size}, {len(self.channels)}), got {a.shape}")
-            if not np.isfinite(a).all():
-                r, c = np.argwhere(~np.isfinite(a))[0]
-                raise ValueError(f"data.{name}: non-finite value for channel {self.channels[c]} at t = {t[r]:g} s")
+            if np.isinf(a).any():  # NaN marks a missing sample; an infinity is an error
+                r, c = np.argwhere(np.isinf(a))[0]
+                raise ValueError(f"data.{name}: infinite value for channel {self.channels[c]} at t = {t[r]:g} s")
         if self.q is None:
             raise ValueError("data.q: positions are required")
 
@@ -266,7 +267,10 @@ def _csv_header(path: Path, ln: int, header: list[str]) -> tuple[list[str], dict
 
 
 def _csv_float(path: Path, ln: int, row: int, column: str, cell: str) -> float:
-    """One cell as a float; ValueError naming line, data row and column otherwise."""
+    """One cell as a float (an empty cell outside the time column: NaN, a missing sample);
+    ValueError naming line, data row and column otherwise."""
+    if not cell and column != "t":
+        return math.nan
     try:
         return float(cell)
     except ValueError:

@@ -112,7 +112,7 @@ def test_noise_on_a_data_file_is_seeded_and_reported(twobar_data, tmp_path, caps
     (["--method", "direct", "--start", "-1"], "argument --start: must be a factor of the nominal values > 0, got -1"),
     (["--method", "indirect", "--dofs", "x5,z9"], "--dofs: unknown dof 'z9'"),
     (["--method", "indirect", "--dofs", "x5,,y5"], "--dofs: empty name"),
-    (["--method", "direct", "--solver", "nosuch"], "--solver: 'nosuch' is not an available"),
+    (["--method", "direct", "--solver", "nosuch"], "--solver: 'nosuch' is neither gauss-newton nor an available"),
     (["--method", "direct", "--noise", "1e-3"], "--noise: the simulated set is exact"),
     (["--method", "direct", "--data", "measured", "--noise", "-1"], "argument --noise: must be a standard deviation"),
     (["--method", "direct", "--data", "measured", "--seed", "1"], "--seed: seeds the noise"),

@@ -20,8 +20,9 @@ import numpy as np
 import pytest
 
 ARGS = ["simulate", "twobar", "--t-end", "0.3", "--out", "run.npz", "--plots", "figs", "--quiet"]
-#: Python kills itself with SIGINT when a KeyboardInterrupt reaches the top level before casflex's
-#: own handler is installed (interpreter start-up, imports): a shell shows 128 + 2 = 130 for it too
+#: In the first tens of milliseconds, before the entry point runs (interpreter start-up), Python
+#: itself dies of SIGINT: a shell shows 128 + 2 = 130 for that too. From the entry point on, casflex
+#: catches it (casflex._entry: nothing heavy is imported before) and exits with 130.
 INTERRUPTED = (130, -signal.SIGINT)
 
 
@@ -79,5 +80,6 @@ def test_sigint_at_20_random_moments_exits_130_and_writes_nothing(tmp_path):
         assert "Traceback" not in err or code != 130, err
         codes.append(code)
     assert len(codes) == 20, f"only {len(codes)} moments fell inside the run"
-    # nearly every moment falls after casflex's handler is installed and gets its exit status
-    assert codes.count(130) >= 15, codes
+    # the window before the entry point is ~1 % of the run: at most one draw of 20 may fall in it
+    # by chance (P(2 or more) = 2 %, then this test is to be rerun, not widened)
+    assert codes.count(130) >= 19, codes

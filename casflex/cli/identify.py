@@ -227,7 +227,8 @@ def cmd_identify(args: argparse.Namespace, outputs: Outputs) -> int:
     try:
         result = _identify(model, sets, args, start, dofs)
     except RuntimeError as exc:  # CasADi: e.g. a solver plugin that needs a missing library
-        raise OptionError(f"--solver {args.solver}: the solver failed: {_casadi_reason(exc)}") from None
+        solver = args.solver or ("gauss-newton" if args.method == "indirect" else "ipopt")
+        raise OptionError(f"--solver {solver}: the solver failed: {_casadi_reason(exc)}") from None
     result.extra["data"] = infos[0] if len(infos) == 1 else infos
     print(result.summary())
     if out is not None:

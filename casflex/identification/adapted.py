@@ -130,6 +130,11 @@ def identify_adapted_direct(
         if i + 1 >= data.t.size:
             raise ValueError(f"instant t = {t:g} s: the method needs the sample after it; the data end at "
                              f"{data.t[-1]:g} s")
+        for j in (i, i + 1):
+            for name, arr in (("q", data.q), ("qd", data.qd), ("qdd", data.qdd)):
+                if not np.isfinite(arr[j, sel[trans]]).all():
+                    raise ValueError(f"instant t = {t:g} s: {name} of a translation is missing at t = {data.t[j]:g} s; "
+                                     "choose another instant")
         samples.append((i, float(data.t[i]), float(data.t[i + 1] - data.t[i])))
 
     pmap = ParameterMap.of(model, transform)

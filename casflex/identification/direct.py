@@ -45,6 +45,12 @@ def _instant_data(model: Model, data: MeasurementSet, instants: Sequence[float])
     if len(instants) == 0:
         raise ValueError("instants: give at least one time (s)")
     rows = [data.index(float(t)) for t in instants]
+    for i in rows:
+        for name, arr in (("q", data.q), ("qd", data.qd), ("qdd", data.qdd)):
+            if not np.isfinite(arr[i, sel]).all():
+                c = data.channels[int(sel[np.flatnonzero(~np.isfinite(arr[i, sel]))[0]])]
+                raise ValueError(f"instant t = {data.t[i]:g} s: {name} of {c} is missing in the data; choose another "
+                                 "instant")
     return [(data.t[i], data.q[i, sel], data.qd[i, sel], data.qdd[i, sel]) for i in rows]
 
 

@@ -19,9 +19,10 @@
    reported beside them. ``weak``: parameters whose total relative standard error exceeds 10 %.
 6. Residual analysis per experiment and channel, and the success rule: the solver converged,
    no parameter ends on a bound, every channel's fit (100 (1 - |y - y_model| / |y - mean y|)
-   percent, the measure system identification toolboxes report) is at least 95 %, the residual
-   RMS is at most 3 times the declared noise (when declared), and the identified model runs
-   through every recording. Otherwise ``success`` is False and ``message`` says why.
+   percent, the measure system identification toolboxes report) is at least 95 % or its residual
+   is white (a channel that hardly moves beyond its noise), the residual RMS is at most 3 times
+   the declared noise (when declared), and the identified model runs through every recording.
+   Otherwise ``success`` is False and ``message`` says why.
 """
 
 from __future__ import annotations
@@ -169,7 +170,9 @@ def _channels(problem: OutputError, fitted: Fit, e: int, rows: np.ndarray) -> di
         if name in res:
             y = sm.y[sm.channel == c]
             spread = np.linalg.norm(y - y.mean())
-            res[name]["fit"] = float(1 - np.linalg.norm(r[sm.channel == c]) / spread) if spread > 0 else 1.0
+            # a channel that does not move (a supported dof) has no motion to reproduce: no fit measure
+            still = spread <= 1e-9 * np.sqrt(y.size) * max(problem.model.length_scale, float(np.abs(y).max()))
+            res[name]["fit"] = None if still else float(1 - np.linalg.norm(r[sm.channel == c]) / spread)
     return res
 
 
@@ -185,9 +188,11 @@ def _plausibility(problem: OutputError, fitted: Fit, channels: list[dict], at_bo
         exp = problem.experiments[e]
         label = exp.name or f"experiment {e + 1}"
         for name, ch in res.items():
-            if ch["fit"] < FIT_THRESHOLD:
+            # a low fit with white residuals is a channel that hardly moves beyond its noise
+            if ch["fit"] is not None and ch["fit"] < FIT_THRESHOLD and not ch["white"]:
                 reasons.append(f"{label}: the model reproduces only {100 * ch['fit']:.0f} % of the measured motion "
-                               f"of {name} (a local minimum, a wrong scene or a model that misses the physics)")
+                               f"of {name} and leaves a structured residual (a local minimum, a wrong scene or a "
+                               "model that misses the physics)")
             if exp.noise is not None and ch["rms"] > 3 * exp.noise:
                 reasons.append(f"{label}: the residual RMS of {name} is {ch['rms'] / exp.noise:.1f} x the declared "
                                "noise: the model does not explain the data to the noise level")
@@ -285,7 +290,8 @@ def estimate(model: Model, experiments: Sequence[Experiment], *, dt: float | Non
         correlation=gn.pop("correlation"), at_bound=at_bound,
         identifiability={k: v for k, v in gn.items() if k != "std_errors"},
         instants=first.t.tolist(), multipliers=first.lam.tolist(),
-        extra={"transcription": "single-shooting", "residue": "positions", "transform": transform, "dt": dt,
+        extra={"transcription": "single-shooting", "residue": "positions", "dofs": list(problem.maps[0].channels),
+               "transform": transform, "dt": dt,
                "alpha": alpha, "steps": int(sum(sm.n_steps for sm in problem.maps)), "compiled": compiled,
                "budget": dataclasses.asdict(budget), "model_runs": problem.evaluations,
                "uncertainty": {"gauss_newton": dict(zip(names, se_gn.tolist(), strict=True)),

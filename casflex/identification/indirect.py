@@ -134,6 +134,8 @@ def identify_indirect(
         raise ValueError(f"transcription: expected one of {TRANSCRIPTIONS}, got {transcription!r}")
     if residue not in RESIDUES:
         raise ValueError(f"residue: expected one of {RESIDUES}, got {residue!r}")
+    if len(weights) != 3 or not all(np.isfinite(w) and w >= 0 for w in weights):
+        raise ValueError(f"weights: expected three numbers >= 0 (xi, psi, phi), got {weights!r}")
     if initial_state not in INITIAL_STATES:
         raise ValueError(f"initial_state: expected one of {INITIAL_STATES}, got {initial_state!r}")
     run = model.scene.run

@@ -97,8 +97,9 @@ class IdentificationResult:
             lines.append(f"  weakly identifiable (relative standard error > 10 %): {', '.join(idf['weak'])}")
         for name, exp in self.extra.get("experiments", {}).items():
             res = exp.get("residuals", {})
+            moving = {c: ch for c, ch in res.items() if ch["fit"] is not None}
             text = ", ".join(f"{c} {100 * ch['fit']:.2f} % fit, RMS {ch['rms']:.3g}"
-                             + ("" if ch["white"] else " (not white)") for c, ch in res.items())
+                             + ("" if ch["white"] else " (not white)") for c, ch in moving.items())
             lines.append(f"  {name}: {text}")
         if self.message:
             lines.append(f"  note: {self.message}")

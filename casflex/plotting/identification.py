@@ -47,7 +47,7 @@ def plot_fit(result: IdentificationResult, experiment: int = 0, path: str | os.P
         rms = k * res[name]["rms"] if name in res else float(np.sqrt(np.mean(r**2)))
         right.axhspan(-2 * rms, 2 * rms, color="C0", alpha=0.12, lw=0)
         right.axhline(0.0, color="black", lw=0.6)
-        fit = f"fit {100 * res[name]['fit']:.2f} %" if name in res else ""
+        fit = f"fit {100 * res[name]['fit']:.2f} %" if res.get(name, {}).get("fit") is not None else "no motion"
         white = "" if name not in res else ("white" if res[name]["white"] else "not white")
         right.set_title(f"residual, RMS {rms:.3g} {ru}; {fit}, {white}", fontsize="small")
         right.set_ylabel(ru)
