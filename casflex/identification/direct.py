@@ -24,6 +24,8 @@ from casflex.data import MeasurementSet
 from casflex.identification.problem import (
     IdentificationResult,
     ParameterMap,
+    beam_force_basis,
+    beam_forces_mode,
     bound_flags,
     gauss_newton_polish,
     gauss_newton_statistics,
@@ -38,10 +40,9 @@ __all__ = ["identify_direct"]
 def _instant_data(model: Model, data: MeasurementSet, instants: Sequence[float]):
     sel = data.select(model)
     missing = [model.dof_names[i] for i in np.flatnonzero(sel < 0)]
-    if missing or data.qd is None or data.qdd is None:
-        what = f"dofs {missing}" if missing else "velocities and accelerations"
-        raise ValueError(f"direct identification needs q, qd and qdd of every dof; the data lack {what} "
-                         "(use the adapted direct or indirect method for partial data)")
+    if missing:
+        raise ValueError(f"direct identification needs every dof; the data lack {missing} (the adapted direct "
+                         "method makes unmeasured dofs unknowns; the indirect method fits any channels)")
     if len(instants) == 0:
         raise ValueError("instants: give at least one time (s)")
     rows = [data.index(float(t)) for t in instants]
@@ -60,6 +61,9 @@ def identify_direct(
     instants: Sequence[float],
     *,
     start: float | dict[str, float] | np.ndarray | None = None,
+    beam_forces: str | None = None,
+    smoothing: str = "spline",
+    cutoff: float | None = None,
     solver: str = "ipopt",
     solver_options: dict | None = None,
     transform: str = "linear",
@@ -74,7 +78,12 @@ def identify_direct(
     model : Model
         Its declared parameters are the unknowns, with their bounds.
     data : MeasurementSet
-        Must hold q, qd, qdd of every dof (e.g. :func:`casflex.data.simulated_set`).
+        q of every dof; qd, qdd from the data (e.g. :func:`casflex.data.simulated_set`) or, when it
+        has none, by :func:`casflex.smoothing.smooth` (``smoothing``, ``cutoff``).
+    beam_forces : {"unknown", "model"}, optional
+        Beam deformation forces solved for at each instant (default for positions-only data) or
+        from the positions (the paper; default when the data bring derivatives):
+        :func:`.problem.beam_forces_mode`.
     instants : sequence of float, s
     start : factor, dict or array, optional
         Starting parameters (a number multiplies the nominal values); default nominal.
@@ -89,7 +98,16 @@ def identify_direct(
         Generate and compile C for the solver's functions (CasADi JIT with the system compiler).
     """
     t_build = time.perf_counter()
+    smoothing_info = None
+    if data.qd is None or data.qdd is None:
+        from casflex.smoothing import smooth
+
+        data = smooth(data, smoothing, cutoff)
+        smoothing_info = data.meta["smoothing"]
     samples = _instant_data(model, data, instants)
+    mode = beam_forces_mode(model, beam_forces, smoothed=smoothing_info is not None)
+    basis = beam_force_basis(model, set(range(model.n_dof)) if mode == "unknown" else set())  # every dof measured
+    n_ax = basis.size2_out(0)
     n_p, n_c = model.n_p, model.n_con
     if n_p == 0:
         raise ValueError("the scene declares no parameters to identify ([[parameters]] in the scene file)")
@@ -101,14 +119,14 @@ def identify_direct(
                     float(np.abs(np.array(model.forces(q, v, p0)[2])).max()) for _, q, v, a in samples))
 
     th = ca.SX.sym("theta", n_p)
-    mus = [ca.SX.sym(f"mu{i}", n_c) for i in range(len(samples))]
+    mus = [ca.SX.sym(f"mu{i}", n_c + n_ax) for i in range(len(samples))]  # multipliers, then beam forces
     p = pmap.p(th)
-    z = ca.vertcat(*[model.equilibrium(q, v, a, mu * fs, t, p)[0] / fs
+    z = ca.vertcat(*[(model.equilibrium(q, v, a, mu[:n_c] * fs, t, p)[0] + ca.mtimes(basis(q), mu[n_c:] * fs)) / fs
                      for (t, q, v, a), mu in zip(samples, mus, strict=True)])
     w = ca.vertcat(th, *mus)
     lb_th, ub_th = pmap.bounds()
-    lbw = np.concatenate([lb_th, np.full(n_c * len(samples), -np.inf)])
-    ubw = np.concatenate([ub_th, np.full(n_c * len(samples), np.inf)])
+    lbw = np.concatenate([lb_th, np.full((n_c + n_ax) * len(samples), -np.inf)])
+    ubw = np.concatenate([ub_th, np.full((n_c + n_ax) * len(samples), np.inf)])
     Jz = ca.jacobian(z, w)
     zJ = ca.Function("direct_residual", [w], [z, Jz], ["w"], ["z", "J"], jit_options() if compiled else {})
 
@@ -121,7 +139,7 @@ def identify_direct(
 
     S = least_squares_nlp("direct", solver, w, z, hessian=hessian, compiled=compiled, verbose=verbose,
                           solver_options=solver_options)
-    w0 = np.concatenate([pmap.theta(p0), np.zeros(n_c * len(samples))])
+    w0 = np.concatenate([pmap.theta(p0), np.zeros((n_c + n_ax) * len(samples))])
     build_s = time.perf_counter() - t_build
 
     t_solve = time.perf_counter()
@@ -135,17 +153,24 @@ def identify_direct(
     p_hat = pmap.p(wv[:n_p])
     stats = gauss_newton_statistics(Jv, zv.ravel(), n_p, model.parameter_names, pmap.dp_dtheta(wv[:n_p]), p_hat)
     names = model.parameter_names
-    lams = [list(wv[n_p + i * n_c:n_p + (i + 1) * n_c] * fs) for i in range(len(samples))]
+    k = n_c + n_ax
+    lams = [list(wv[n_p + i * k:n_p + i * k + n_c] * fs) for i in range(len(samples))]
     at_bound = bound_flags(model, p_hat, scale)
+    reasons = [] if st.get("success", False) else [f"the solver did not converge ({st.get('return_status')})"]
+    bound = [k for k, v in at_bound.items() if v]
+    if bound:
+        reasons.append(f"{', '.join(bound)} ended on a bound: the best fit lies outside the parameters' range")
     extra = {"transform": transform, "hessian": hessian, "compiled": compiled,
              "force_scale": fs, "residual_norm": float(np.linalg.norm(zv) * fs), "gauss_newton_polish": polished,
+             "beam_forces": mode, "smoothing": smoothing_info,
              "solver_s": solver_s, "solver_parameters": dict(zip(names, pmap.p(w_solver[:n_p]).tolist(), strict=True))}
     if w_lin is not None:
         extra["linear_solution"] = dict(zip(names, (w_lin[:n_p] * scale).tolist(), strict=True))
     return IdentificationResult(
         method="direct", solver=solver, parameters=dict(zip(names, p_hat.tolist(), strict=True)),
-        start=dict(zip(names, p0.tolist(), strict=True)), success=bool(st.get("success", False)),
-        status=str(st.get("return_status", "unknown")), message="", iterations=int(st.get("iter_count", -1)),
+        start=dict(zip(names, p0.tolist(), strict=True)), success=not reasons,
+        status=str(st.get("return_status", "unknown")), message="; ".join(reasons),
+        iterations=int(st.get("iter_count", -1)),
         wall_build_s=build_s, wall_solve_s=solve_s, objective=0.5 * float(zv.ravel() @ zv.ravel()),
         std_errors=stats.pop("std_errors"), correlation=stats.pop("correlation"), at_bound=at_bound,
         identifiability=stats, instants=[float(t) for t, *_ in samples], multipliers=lams, extra=extra,

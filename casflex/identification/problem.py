@@ -300,3 +300,47 @@ def gauss_newton_polish(zJ: Any, w: np.ndarray, lb: np.ndarray, ub: np.ndarray,
             break
         w, z, J, f, taken = w_new, z_new, J_new, f_new, taken + 1
     return w, taken
+
+
+BEAM_FORCES = ("unknown", "model")
+
+
+def beam_forces_mode(model: Model, beam_forces: str | None, smoothed: bool) -> str:
+    """The direct methods' treatment of the deformation forces of beam elements that the data
+    measure: ``"model"`` computes them from the measured positions (the seed paper; exact data only:
+    a steel bar's EA/L = 5e8 N/m turns 1 um of measurement error into 500 N), ``"unknown"`` solves
+    for them at every sample like constraint forces (:func:`beam_force_basis`: the axial force
+    where both ends' translations are measured, the end moments where their rotations are too).
+    What the data do not measure stays modelled: an unknown rotation then follows the measured
+    chord, an unmeasured end stays at the bar's length. Default: "unknown" for a recording of
+    positions (``smoothed``: the method derived its velocities and accelerations), "model" for data
+    that bring their own (the paper's simulated and measured sets), and "model" whenever a
+    parameter is a beam property (its forces must then be modelled)."""
+    beams = {b.name for b in model.scene.beams}
+    beam_parameter = any(par.target.split(".")[0] in beams for par in model.parameters)
+    mode = beam_forces or ("unknown" if smoothed and not beam_parameter else "model")
+    if mode not in BEAM_FORCES:
+        raise ValueError(f"beam_forces: expected one of {BEAM_FORCES}, got {beam_forces!r}")
+    if mode == "unknown" and beam_parameter:
+        raise ValueError("beam_forces 'unknown': a parameter is a beam property, whose forces must then be modelled "
+                         "(beam_forces='model', exact data)")
+    return mode
+
+
+def beam_force_basis(model: Model, measured: set[int]) -> ca.Function:
+    """``beam_force_basis(q) -> T``, T of shape (n_dof, k): the nodal forces of the beam deformation
+    forces that ``measured`` (dof indices) pins down: a unit axial force in each element whose two
+    ends' translations are measured, and unit end moments where both end rotations are measured
+    too; T = (d d / d q)^T, d = (L - L0, theta_a, theta_b) (co-rotational stretch and local end
+    rotations)."""
+    q = ca.SX.sym("q", model.n_dof)
+    th = model.local_rotations(q)
+    cols = []
+    for k, (_, _, a, b) in enumerate(s for s in model.segments if s[0] == "beam"):
+        if {3 * a, 3 * a + 1, 3 * b, 3 * b + 1} <= measured:
+            L = ca.sqrt((q[3 * b] - q[3 * a]) ** 2 + (q[3 * b + 1] - q[3 * a + 1]) ** 2)
+            cols.append(ca.gradient(L, q))
+            if {3 * a + 2, 3 * b + 2} <= measured:
+                cols += [ca.gradient(th[2 * k], q), ca.gradient(th[2 * k + 1], q)]
+    T = ca.horzcat(*cols) if cols else ca.SX(model.n_dof, 0)
+    return ca.Function("beam_force_basis", [q], [T], ["q"], ["T"])
