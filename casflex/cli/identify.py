@@ -25,7 +25,8 @@ _INDIRECT_ONLY = {"transcription": "--transcription", "horizon": "--horizon", "r
                   "dofs": "--dofs", "interval": "--interval", "initial_state": "--initial-state", "dt": "--dt",
                   "alpha": "--alpha", "sigma": "--sigma", "max_iter": "--max-iter", "max_time": "--max-time",
                   "model_error": "--model-error", "plots": "--plots"}
-_DIRECT_ONLY = {"instants": "--instants"}
+_DIRECT_ONLY = {"instants": "--instants", "smoothing": "--smoothing", "cutoff": "--cutoff", "window": "--window",
+                "beam_forces": "--beam-forces"}
 
 
 def _check_options(args: argparse.Namespace) -> None:
@@ -49,8 +50,12 @@ def _check_options(args: argparse.Namespace) -> None:
     if args.noise is not None and args.data == ["simulated"]:
         raise OptionError("--noise: the simulated set is exact; use --data measured or --data FILE to add noise "
                           "to the positions")
-    if args.seed is not None and args.noise is None:
-        raise OptionError("--seed: seeds the noise; give --noise SIGMA too")
+    if args.seed is not None and args.noise is None and args.starts == 1:
+        raise OptionError("--seed: seeds the noise and the multi-start; give --noise SIGMA or --starts N too")
+    if args.window is not None and args.method != "adapted-direct":
+        raise OptionError(f"--window: applies to --method adapted-direct only, not to --method {args.method}")
+    if args.cutoff is not None and args.smoothing != "butterworth":
+        raise OptionError("--cutoff: applies to --smoothing butterworth only")
     import casadi as ca
 
     if args.solver is not None and args.solver != "gauss-newton" and not ca.has_nlpsol(args.solver):
@@ -172,12 +177,12 @@ def _identify(model: Model, sets: list[MeasurementSet], args: argparse.Namespace
     common = {"start": start, "transform": args.transform, "verbose": not args.quiet and args.method != "indirect"}
     if args.hessian is not None:
         common["hessian"] = args.hessian
+    direct = {"smoothing": args.smoothing or "spline", "cutoff": args.cutoff, "beam_forces": args.beam_forces,
+              "solver": args.solver or "ipopt", "compiled": args.compiled}
     if args.method == "direct":
-        return identify_direct(model, sets[0], args.instants, solver=args.solver or "ipopt",
-                               compiled=args.compiled, **common)
+        return identify_direct(model, sets[0], args.instants, **direct, **common)
     if args.method == "adapted-direct":
-        return identify_adapted_direct(model, sets[0], args.instants, solver=args.solver or "ipopt",
-                                       compiled=args.compiled, **common)
+        return identify_adapted_direct(model, sets[0], args.instants, window=args.window, **direct, **common)
     experiments = [Experiment(d, initial_state=args.initial_state, channels=None if dofs is None else tuple(dofs),
                               noise=args.sigma, name=f"recording {i + 1}" if len(sets) > 1 else "data")
                    for i, d in enumerate(sets)]
@@ -185,6 +190,53 @@ def _identify(model: Model, sets: list[MeasurementSet], args: argparse.Namespace
                              residue=args.residue, alpha=args.alpha, dt=args.dt, interval=args.interval,
                              solver=args.solver, compiled=args.compiled or None,
                              budget=Budget(args.max_iter, args.max_time), model_error=args.model_error, **common)
+
+
+def run_start(*, scene: str, sets: list[MeasurementSet], options: dict[str, Any], start: list[float],
+              dofs: list[str] | None) -> dict[str, Any]:
+    """One start of a multi-start (a sweep run, in a worker process): the fit's summary record."""
+    model = load_model(scene)
+    r = _identify(model, sets, argparse.Namespace(**options), np.array(start), dofs)
+    return {"start": start, "success": r.success, "status": r.status, "objective": r.objective,
+            "parameters": r.parameters, "message": r.message}
+
+
+def _multistart(model: Model, sets: list[MeasurementSet], args: argparse.Namespace, start: float | np.ndarray,
+                dofs: list[str] | None) -> IdentificationResult:
+    """--starts N: the given start and N - 1 drawn log-uniformly within a factor 3 of it (seeded by
+    --seed), run as a sweep on a local cluster of 2 workers (casflex.sweep); the best successful
+    start (least objective) is fitted again here for the full result, which lists every start."""
+    import tempfile
+
+    from casflex.identification.problem import start_values
+    from casflex.sweep import Run, run_sweep
+
+    p0 = start_values(model, start)
+    rng = np.random.default_rng(args.seed)
+    starts = [p0] + [p0 * np.exp(rng.uniform(-np.log(3), np.log(3), p0.size)) for _ in range(args.starts - 1)]
+    options = {k: v for k, v in vars(args).items() if k not in ("func",)}
+    options["quiet"] = True
+    runs = [Run(f"start{k}", run_start, {"scene": args.scene, "sets": sets, "options": options,
+                                         "start": s.tolist(), "dofs": dofs}) for k, s in enumerate(starts)]
+    print(f"  multi-start: {len(runs)} starts on 2 worker processes", flush=True)
+    with tempfile.TemporaryDirectory(prefix="casflex-starts-") as rec:
+        sweep = run_sweep(runs, rec, n_workers=min(2, len(runs)), progress=not args.quiet)
+    if sweep.interrupted:
+        raise KeyboardInterrupt
+    records = [sweep.results[r.key] for r in runs]
+    for k, rec_k in enumerate(records):
+        what = (f"{'success' if rec_k['success'] else 'no success'}, objective {rec_k['objective']:.6g}"
+                if "error" not in rec_k else f"error: {rec_k['error'][:100]}")
+        print(f"    start {k}: " + ", ".join(f"{v:.4g}" for v in rec_k.get("start", [])) + f": {what}")
+    good = [k for k, r in enumerate(records) if r.get("success")]
+    pool = good or [k for k, r in enumerate(records) if "error" not in r]
+    if not pool:
+        raise OptionError("--starts: every start failed; see the errors above")
+    best = min(pool, key=lambda k: records[k]["objective"])
+    print(f"  best: start {best}{'' if good else ' (none succeeded)'}; fitted again for the full report", flush=True)
+    result = _identify(model, sets, args, starts[best], dofs)
+    result.extra["multistart"] = {"best": best, "starts": records}
+    return result
 
 
 def _heading(model: Model, args: argparse.Namespace, start: float | np.ndarray) -> str:
@@ -225,7 +277,10 @@ def cmd_identify(args: argparse.Namespace, outputs: Outputs) -> int:
         print(f"  {_describe_data(info)}")
     sys.stdout.flush()
     try:
-        result = _identify(model, sets, args, start, dofs)
+        if args.starts > 1:
+            result = _multistart(model, sets, args, start, dofs)
+        else:
+            result = _identify(model, sets, args, start, dofs)
     except RuntimeError as exc:  # CasADi: e.g. a solver plugin that needs a missing library
         solver = args.solver or ("gauss-newton" if args.method == "indirect" else "ipopt")
         raise OptionError(f"--solver {solver}: the solver failed: {_casadi_reason(exc)}") from None
@@ -247,6 +302,8 @@ def cmd_identify(args: argparse.Namespace, outputs: Outputs) -> int:
 def add_parsers(sub: argparse._SubParsersAction) -> None:
     """The ``identify`` subcommand's options (method-specific ones default to None = not given)."""
     from casflex.identification import HESSIANS, INITIAL_STATES, MODEL_ERRORS, RESIDUES, TRANSCRIPTIONS, TRANSFORMS
+    from casflex.identification.problem import BEAM_FORCES
+    from casflex.smoothing import SMOOTHERS
 
     s = sub.add_parser("identify", help="identify the scene's parameters from simulated, measured or file data",
                        description="Identify the scene's [[parameters]] from kinematic data. Examples and the data "
@@ -302,6 +359,19 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="generate and compile C for the solver's functions (needs gcc; longer build, faster solve)")
     s.add_argument("--interval", type=integer(1, "a number of steps"), metavar="STEPS",
                    help="indirect multiple shooting: steps per shooting interval (default 20)")
+    s.add_argument("--starts", type=integer(1, "a number of starts"), default=1,
+                   help="multi-start: the start and N - 1 drawn within a factor 3 of it (seeded by --seed), run in "
+                        "parallel; the best successful fit is reported (default 1)")
+    s.add_argument("--smoothing", choices=SMOOTHERS,
+                   help="direct methods on positions-only data: how velocities and accelerations are obtained "
+                        "(spline with cross-validation, default, or butterworth)")
+    s.add_argument("--cutoff", type=positive("a frequency in Hz"), help="--smoothing butterworth: cutoff, Hz")
+    s.add_argument("--window", type=integer(2, "a number of samples"),
+                   help="adapted-direct: samples per instant (default: the paper's 2, more when translations "
+                        "are unknown)")
+    s.add_argument("--beam-forces", choices=BEAM_FORCES,
+                   help="direct methods: beam deformation forces solved for (unknown; default for positions-only "
+                        "data) or computed from the positions (model; the paper)")
     s.add_argument("--out", metavar="FILE.json", help="write the result as JSON")
     s.add_argument("--quiet", action="store_true", help="no solver iteration log or progress messages")
     s.set_defaults(func=cmd_identify, data=None)

@@ -1,0 +1,235 @@
+"""Identification on data casflex did not generate: how close, how honest, how fast?
+
+The recordings are casflex's built-in scenes simulated by Exudyn (8 ANCF elements per beam,
+h = 1e-4 s; tests/data/make_reference_data.py), sampled at 100 Hz with Gaussian noise of 0, 0.1, 0.5
+and 1 mm on the markers, SEEDS seeds each, in two windows: one that starts at rest (the scene's
+initial state) and one that starts mid-motion (initial state estimated). casflex fits them with its
+default model, one element per beam at dt = 1 ms: the model is never exact.
+
+Methods (markers: the channels each method is given):
+
+- ``indirect``: output error, single shooting by Gauss-Newton (the default), twobar's nodes 3 and 5
+  (the seed paper's channels), threelink's link ends 3, 5, 7;
+- ``indirect-ms``: multiple shooting by IPOPT, windows at rest only (it takes the scene's state);
+- ``adapted``: adapted direct, every translation (the joints' nodes too), 9 instants, derivatives by
+  the cross-validated smoothing spline, beam axial forces as unknowns;
+- ``direct``: direct, every dof (rotations too, as if a gyroscope gave them), 9 instants.
+
+Per (scene, window, method, noise): the median relative error of the stiffnesses k and kt, the
+coverage of the truth by the reported 2- and 3-SE intervals (over parameters and seeds), the
+success rate, the "dishonest" successes (success with a parameter more than 3 SE from the truth),
+and the median wall time.
+
+Writes docs/tables/realdata.md and docs/figures/realdata.png (``--quick``: *_quick.*, twobar at rest,
+0.5 mm, one seed). Run: ``python studies/realdata.py`` (about an hour on 2 cores; the runs go through
+casflex.sweep, ``--record DIR`` resumes an interrupted study).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT / "tests" / "data"
+NOISES = (0.0, 1e-4, 5e-4, 1e-3)
+SEEDS = 10
+INSTANTS = np.linspace(0.3, 2.7, 9)
+SCENES = {  # markers for the indirect method, windows (start, end, initial state)
+    "twobar": {"markers": ("x3", "y3", "x5", "y5"), "rest": (0.0, 3.0, "scene"), "mid": (0.5, 2.5, "estimate")},
+    "threelink": {"markers": ("x3", "y3", "x5", "y5", "x7", "y7"), "rest": (0.0, 3.0, "scene"),
+                  "mid": (1.0, 3.0, "estimate")},
+}
+METHODS = ("indirect", "indirect-ms", "adapted", "direct")
+
+
+def recording(scene: str, names: tuple[str, ...], t_from: float, t_to: float, noise: float, seed: int):
+    """The channels ``names`` of Exudyn's motion from t_from to t_to at 100 Hz, with noise (m, rad)."""
+    from casflex.data import MeasurementSet
+
+    z = np.load(DATA / f"{scene}_exudyn.npz")
+    ch = [str(c) for c in z["channels"]]
+    rows = np.arange(int(round(t_from * 1000)), int(round(t_to * 1000)) + 1, 10)
+    q = z["q"][np.ix_(rows, [ch.index(c) for c in names])]
+    return MeasurementSet(z["t"][rows], names, q + np.random.default_rng(seed).normal(0, noise, q.shape), None, None)
+
+
+def one_run(*, scene: str, method: str, window: str, noise: float, seed: int, quick: bool) -> dict:
+    """One identification (a sweep run): errors, z-scores against the truth, success, wall time."""
+    import casflex
+    from casflex.identification import identify_adapted_direct, identify_direct, identify_indirect
+
+    model = casflex.assemble(casflex.load_scene(scene))
+    a, b, state = SCENES[scene][window]
+    if quick:
+        b = a + 1.0
+    start = 0.8  # every method starts 20 % below the truth
+    t0 = time.perf_counter()
+    if method.startswith("indirect"):
+        data = recording(scene, SCENES[scene]["markers"], a, b, noise, seed)
+        kw = {"transcription": "multiple-shooting", "solver": "ipopt"} if method == "indirect-ms" else {}
+        r = identify_indirect(model, data, dt=1e-3, initial_state=state, start=start,
+                              model_error="none" if quick else "refine", **kw)
+    else:
+        trans = tuple(d for d in model.dof_names if not d.startswith("theta")) if method == "adapted" \
+            else model.dof_names
+        data = recording(scene, trans, a, b, noise, seed)
+        instants = [float(data.t[np.argmin(np.abs(data.t - (a + t)))]) for t in INSTANTS if a + t < b - 0.05]
+        fn = identify_adapted_direct if method == "adapted" else identify_direct
+        r = fn(model, data, instants, start=start)
+    p = r.p
+    se = np.array([r.std_errors[k] for k in model.parameter_names])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = (p - model.p_nominal) / se
+    return {"success": bool(r.success), "status": r.status, "message": r.message[:300],
+            "rel_error": (p / model.p_nominal - 1).tolist(), "z": np.where(np.isfinite(z), z, 0.0).tolist(),
+            "se_finite": np.isfinite(se).tolist(), "names": list(model.parameter_names),
+            "wall_s": time.perf_counter() - t0}
+
+
+def _plan(quick: bool) -> list[dict]:
+    if quick:
+        return [{"scene": "twobar", "method": m, "window": "rest", "noise": 5e-4, "seed": 0, "quick": True}
+                for m in ("indirect", "adapted")]
+    runs = []
+    for scene in SCENES:
+        for noise in NOISES:
+            for seed in range(SEEDS):
+                for window in ("rest", "mid"):
+                    runs.append({"scene": scene, "method": "indirect", "window": window, "noise": noise, "seed": seed})
+                for method in ("adapted", "direct"):
+                    runs.append({"scene": scene, "method": method, "window": "rest", "noise": noise, "seed": seed})
+            runs.append({"scene": scene, "method": "indirect-ms", "window": "rest", "noise": noise, "seed": 0})
+    return [{**r, "quick": False} for r in runs]
+
+
+def _key(r: dict) -> str:
+    return f"{r['scene']}_{r['method']}_{r['window']}_{r['noise']:g}_{r['seed']}"
+
+
+def summarise(records: list[tuple[dict, dict]]) -> list[dict]:
+    """One row per (scene, window, method, noise)."""
+    groups: dict[tuple, list[dict]] = {}
+    for run, rec in records:
+        groups.setdefault((run["scene"], run["window"], run["method"], run["noise"]), []).append(rec)
+    rows = []
+    for (scene, window, method, noise), recs in sorted(groups.items()):
+        ok = [r for r in recs if "error" not in r]
+        if not ok:
+            rows.append({"scene": scene, "window": window, "method": method, "noise": noise, "runs": len(recs),
+                         "failed": len(recs)})
+            continue
+        names = ok[0]["names"]
+        err = np.abs(np.array([r["rel_error"] for r in ok]))
+        z = np.abs(np.array([r["z"] for r in ok]))
+        finite = np.array([r["se_finite"] for r in ok])
+        is_k = np.array([not n.startswith("kt") for n in names])
+        succ = np.array([r["success"] for r in ok])
+        # an infinite SE (undetermined) covers the truth: the result claims nothing
+        def cover(k: float, z=z, finite=finite) -> float:
+            return float(np.mean((z <= k) | ~finite))
+
+        rows.append({"scene": scene, "window": window, "method": method, "noise": noise, "runs": len(recs),
+                     "failed": len(recs) - len(ok), "k_err": float(np.median(err[:, is_k])),
+                     "kt_err": float(np.median(err[:, ~is_k])), "k_err_max": float(err[:, is_k].max()),
+                     "kt_err_max": float(err[:, ~is_k].max()), "cover2": cover(2.0), "cover3": cover(3.0),
+                     "success": float(succ.mean()),
+                     "dishonest": int(np.sum(succ & ((z > 3) & finite).any(axis=1))),
+                     "wall_s": float(np.median([r["wall_s"] for r in ok]))})
+    return rows
+
+
+def _page(rows: list[dict], quick: bool, wall: float) -> str:
+    lines = ["# Identification on data casflex did not generate", "",
+             f"Written by `python studies/realdata.py{' --quick' if quick else ''}` in {wall / 60:.1f} min on "
+             f"{platform.node() or 'this machine'} ({platform.processor() or platform.machine()}); the method and "
+             "the data are described in the script's docstring and in `docs/identification.md`.", "",
+             "Errors are relative to the truth (Exudyn's parameters); coverage: the fraction of parameters x seeds "
+             "whose reported k-SE interval holds the truth (an undetermined parameter, SE infinite, counts as "
+             "covered: it claims nothing); dishonest: runs that report success with a parameter more than 3 SE "
+             "from the truth.", "",
+             "| scene | window | method | noise (mm) | runs | k error (median / max) | kt error (median / max) "
+             "| 2 SE | 3 SE | success | dishonest | wall (s) |", "|" + "---|" * 12]
+    for r in rows:
+        if "k_err" not in r:
+            lines.append(f"| {r['scene']} | {r['window']} | {r['method']} | {1e3 * r['noise']:g} | {r['runs']} | "
+                         "all runs raised | | | | | | |")
+            continue
+        lines.append(f"| {r['scene']} | {r['window']} | {r['method']} | {1e3 * r['noise']:g} | {r['runs']} | "
+                     f"{100 * r['k_err']:.3g} % / {100 * r['k_err_max']:.3g} % | "
+                     f"{100 * r['kt_err']:.3g} % / {100 * r['kt_err_max']:.3g} % | {100 * r['cover2']:.0f} % | "
+                     f"{100 * r['cover3']:.0f} % | {100 * r['success']:.0f} % | {r['dishonest']} | {r['wall_s']:.1f} |")
+    return "\n".join(lines) + "\n"
+
+
+def _figure(rows: list[dict], path: Path) -> None:
+    from casflex.plotting._figure import _new_figure, _save
+
+    fig = _new_figure((9.0, 3.8))
+    ax1, ax2 = fig.subplots(1, 2)
+    for key, style in (("indirect", "-o"), ("adapted", "-s"), ("direct", "-^")):
+        for scene, color in (("twobar", "C0"), ("threelink", "C1")):
+            sel = [r for r in rows if r["method"] == key and r["scene"] == scene and r["window"] == "rest"
+                   and "k_err" in r]
+            if not sel:
+                continue
+            nz = [max(1e3 * r["noise"], 0.01) for r in sel]
+            ax1.loglog(nz, [max(r["kt_err"], 1e-6) for r in sel], style, color=color, label=f"{scene}, {key}")
+            ax2.semilogx(nz, [100 * r["cover3"] for r in sel], style, color=color)
+    ax1.set_xlabel("noise (mm; 0 drawn at 0.01)")
+    ax1.set_ylabel("median relative error of kt")
+    ax2.set_xlabel("noise (mm)")
+    ax2.set_ylabel("3-SE coverage (%)")
+    ax2.axhline(90, color="black", lw=0.6, ls="--")
+    ax1.legend(fontsize="x-small", frameon=False)
+    for ax in (ax1, ax2):
+        ax.grid(True, alpha=0.3)
+    fig.suptitle("identification on Exudyn's recordings, window at rest")
+    _save(fig, path)
+
+
+def main(quick: bool = False, out_dir: Path | None = None, record: Path | None = None) -> list[dict]:
+    from casflex.results import atomic_write_text
+    from casflex.sweep import Run, run_sweep
+
+    out_dir = ROOT / "docs" if out_dir is None else Path(out_dir)
+    t0 = time.perf_counter()
+    plan = _plan(quick)
+    runs = [Run(_key(r), one_run, r) for r in plan]
+    with tempfile.TemporaryDirectory(prefix="casflex-realdata-") as tmp:
+        rec = Path(record) if record is not None else Path(tmp)
+        sweep = run_sweep(runs, rec, n_workers=2, progress=not quick)
+        if sweep.interrupted:
+            raise KeyboardInterrupt
+        rows = summarise([(r, sweep.results[_key(r)]) for r in plan])
+    suffix = "_quick" if quick else ""
+    (out_dir / "tables").mkdir(parents=True, exist_ok=True)
+    (out_dir / "figures").mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out_dir / "tables" / f"realdata{suffix}.md", _page(rows, quick, time.perf_counter() - t0))
+    _figure(rows, out_dir / "figures" / f"realdata{suffix}.png")
+    for r in rows:
+        print(json.dumps(r))
+    # the study's own checks: the default method must hold the issue's bar on both scenes (on the
+    # full windows; the quick mode's 1 s window pins kt down to ~12 % only)
+    for r in rows:
+        if r["method"] == "indirect" and "k_err" in r:
+            assert r["dishonest"] <= max(1, round(0.1 * r["runs"])), r
+            if r["noise"] <= 5e-4 and not quick:
+                assert r["k_err_max"] < 0.01 and r["kt_err_max"] < 0.1, r
+                assert r["cover3"] >= 0.9, r
+    return rows
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--out-dir", type=Path)
+    ap.add_argument("--record", type=Path, help="sweep record directory: an interrupted study resumes there")
+    a = ap.parse_args()
+    main(quick=a.quick, out_dir=a.out_dir, record=a.record)
