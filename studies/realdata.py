@@ -47,6 +47,7 @@ SCENES = {  # markers for the indirect method, windows (start, end, initial stat
                   "mid": (1.0, 3.0, "estimate")},
 }
 METHODS = ("indirect", "indirect-ms", "adapted", "direct")
+MS_WALL = 600.0
 
 
 def recording(scene: str, names: tuple[str, ...], t_from: float, t_to: float, noise: float, seed: int):
@@ -73,7 +74,9 @@ def one_run(*, scene: str, method: str, window: str, noise: float, seed: int, qu
     t0 = time.perf_counter()
     if method.startswith("indirect"):
         data = recording(scene, SCENES[scene]["markers"], a, b, noise, seed)
-        kw = {"transcription": "multiple-shooting", "solver": "ipopt"} if method == "indirect-ms" else {}
+        # multiple shooting: IPOPT capped at MS_WALL s (a capped run counts as not converged)
+        kw = ({"transcription": "multiple-shooting", "solver": "ipopt",
+               "solver_options": {"ipopt": {"max_wall_time": MS_WALL}}} if method == "indirect-ms" else {})
         r = identify_indirect(model, data, dt=1e-3, initial_state=state, start=start,
                               model_error="none" if quick else "refine", **kw)
     else:
