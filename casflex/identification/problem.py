@@ -183,6 +183,17 @@ def gauss_newton_statistics(J: np.ndarray, r: np.ndarray, n_p: int, names: tuple
     }
 
 
+def merge_options(opts: dict, extra: dict) -> dict:
+    """``opts`` updated by ``extra``, nested dicts merged (``{"ipopt": {"max_wall_time": 60}}``
+    adds to casflex's IPOPT settings instead of replacing them all)."""
+    for k, v in extra.items():
+        if isinstance(v, dict) and isinstance(opts.get(k), dict):
+            merge_options(opts[k], v)
+        else:
+            opts[k] = v
+    return opts
+
+
 def solver_options_for(solver: str, verbose: bool, extra: dict | None, tol: float = 1e-14) -> dict:
     """nlpsol options: quiet unless ``verbose``, IPOPT's tolerance ``tol`` (acceptable 100 tol,
     adaptive barrier), then the user's options."""
@@ -192,7 +203,7 @@ def solver_options_for(solver: str, verbose: bool, extra: dict | None, tol: floa
                          "acceptable_iter": 5, "sb": "yes", "mu_strategy": "adaptive", "max_iter": 500}
     elif solver == "sqpmethod" and not verbose:
         opts["print_status"] = False
-    opts.update(extra or {})
+    merge_options(opts, extra or {})
     return opts
 
 
@@ -242,7 +253,7 @@ def least_squares_nlp(name: str, solver: str, w: Any, r: Any, g: Any = None, *, 
         opts.pop("hess_lag", None)
         if triu is not None:
             opts["hess_lag"] = hess(triu)
-        opts.update(solver_options or {})
+        merge_options(opts, solver_options or {})
         if compiled:
             log.info("generating and compiling C for the %s NLP's functions with CasADi's JIT (not cached between "
                      "processes; this can take minutes)", name)
