@@ -53,6 +53,9 @@ EDGE_FACTORS = [0.1, 0.2, 5.0, 10.0]  # full mode, for methods that converge fro
 WALL_CAP = 180.0
 MUST_SHOW = (0.5, 2.0)  # the issue's claim: multiple shooting, positions, 0..0.69 s converges from all of these
 
+#: the seed paper's NLP formulation, as this page was measured (IPOPT, model Newton tolerance 1e-14)
+PAPER_NLP = {"solver": "ipopt", "newton_tol": 1e-14, "model_error": "none"}
+
 # key: (label, paper's range, paper's range as numbers or None, kind, options)
 METHODS = {
     "direct": ("direct, simulated set, t = 0.69 s", "converges from near p* on the simulated set", None,
@@ -60,20 +63,21 @@ METHODS = {
     "adapted": ("adapted direct, instants [0.4 1.1 1.6 1.9 2.3] s (k1, k3 within 1e-4)",
                 "k1, k3 from 0.3 p* (kt weakly determined)", (0.3, None), "adapted", {}),
     "ss-pos": ("indirect Eq. 16, single shooting", "0.90-1.18 (Eq. 16, t1)", (0.90, 1.18), "indirect",
-               {"transcription": "single-shooting", "residue": "positions"}),
+               {"transcription": "single-shooting", "residue": "positions", **PAPER_NLP}),
     "ms-pos": ("indirect Eq. 16, multiple shooting", "0.90-1.18 (Eq. 16, t1)", (0.90, 1.18), "indirect",
-               {"transcription": "multiple-shooting", "residue": "positions"}),
+               {"transcription": "multiple-shooting", "residue": "positions", **PAPER_NLP}),
     "ms-pos-log": ("indirect Eq. 16, multiple shooting, log transform", "0.90-1.18 (Eq. 16, t1)", (0.90, 1.18),
-                   "indirect", {"transcription": "multiple-shooting", "residue": "positions", "transform": "log"}),
+                   "indirect", {"transcription": "multiple-shooting", "residue": "positions", "transform": "log",
+                                **PAPER_NLP}),
     "ss-full": ("indirect Eq. 17, single shooting", "0.93-1.10 (Eq. 17, t1)", (0.93, 1.10), "indirect",
-                {"transcription": "single-shooting", "residue": "full"}),
+                {"transcription": "single-shooting", "residue": "full", **PAPER_NLP}),
     "ms-full": ("indirect Eq. 17, multiple shooting", "0.93-1.10 (Eq. 17, t1)", (0.93, 1.10), "indirect",
-                {"transcription": "multiple-shooting", "residue": "full"}),
+                {"transcription": "multiple-shooting", "residue": "full", **PAPER_NLP}),
 }
 
 
 def capped_ipopt(cap_s: float) -> dict:
-    """identify_indirect's IPOPT options (tolerance 1e-8, see casflex/identification/indirect.py)
+    """identify_indirect's IPOPT options (tolerance 1e-8, see casflex/identification/shooting_nlp.py)
     with a wall-time cap."""
     ip = dict(solver_options_for("ipopt", False, None, tol=1e-8)["ipopt"])
     ip["max_wall_time"] = float(cap_s)
