@@ -23,13 +23,20 @@ def _exit_interrupted() -> None:
 
 
 def main() -> int:
-    try:
-        from casflex.cli import main as cli_main
+    from casflex import interrupt  # light: signal and contextlib only (casflex/__init__ is lazy)
 
-        code = cli_main()
-    except KeyboardInterrupt:  # before the command's own handler exists (it catches every later one)
-        sys.stderr.write("\ncasflex: interrupted; nothing was written\n")
-        code = INTERRUPTED
+    # One guard for the whole process, opened before any heavy import: an interrupt that an
+    # extension swallows while numpy, CasADi or matplotlib load is counted, and the command's
+    # own guard (the same object) honours it.
+    with interrupt.guard():
+        try:
+            from casflex.cli import main as cli_main
+
+            interrupt.check()
+            code = cli_main()
+        except KeyboardInterrupt:  # before the command's own handler runs (it catches every later one)
+            sys.stderr.write("\ncasflex: interrupted; nothing was written\n")
+            code = INTERRUPTED
     if code == INTERRUPTED:
         _exit_interrupted()
     return code

@@ -46,7 +46,14 @@ def check() -> None:
 @contextlib.contextmanager
 def guard() -> Iterator[Guard]:
     """Count SIGINT and raise KeyboardInterrupt for the block (main thread only: elsewhere the
-    handler cannot be installed and the block runs with Python's default behaviour)."""
+    handler cannot be installed and the block runs with Python's default behaviour).
+
+    Re-entrant: inside an active guard the same :class:`Guard` is yielded, so a signal swallowed
+    by an import before the command's own block began (the ``casflex`` entry point opens the
+    outer guard first) is still counted by the guard the command consults."""
+    if _active:
+        yield _active[-1]
+        return
     g = Guard()
     try:
         previous = signal.signal(signal.SIGINT, g.handler)
