@@ -4,7 +4,11 @@ numbers a fit may adjust.
 **Guess** (:func:`initial_guess`): the measured dofs as measured, the supports' dofs as fixed, the
 others from a constrained kinematic fit, the configuration of least elastic energy through the
 measured positions, at each of the first samples; velocities from a quadratic through those
-configurations at the first sample.
+configurations at the first sample. The first fit starts from the scene's configuration and
+moves the measured dofs to their first values along straight lines (:func:`first_fit`): a
+large motion taken in one step can end in a local minimum (threelink 1 s into its motion:
+its last joint stretched by 8 cm, 0.43 rad off), so paths of several lengths are taken and the
+end of least elastic energy is kept.
 
 **What the fit adjusts** (:class:`InitialState`): only the *slow* part of the state. The model
 is linearised at the guess (tangent of the elastic and gravity forces, mass) and its modes are
@@ -41,6 +45,10 @@ __all__ = ["InitialState", "initial_guess", "slow_modes", "initial_state_of"]
 _FITS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _LINEAR: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _MANIFOLDS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_ELASTIC: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+#: Step counts of the paths from the scene's configuration to the first sample (first_fit).
+HOMOTOPY_STEPS = (1, 4, 16)
 
 
 def _placement(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -85,6 +93,39 @@ def _kinematic_fit(model: Model, measured: tuple[int, ...]) -> ca.Function:
     return cache[measured]
 
 
+def _elastic_energy(model: Model) -> ca.Function:
+    """V_el(q) (J) at the nominal parameters, the kinematic fit's objective without its pull."""
+    if model not in _ELASTIC:
+        q = ca.SX.sym("q", model.n_dof)
+        _, V_el, _ = model.energy(q, ca.DM.zeros(model.n_dof), model.p_nominal)
+        _ELASTIC[model] = ca.Function("elastic_energy", [q], [V_el])
+    return _ELASTIC[model]
+
+
+def first_fit(model: Model, fit: ca.Function, dofs: list[int], values: np.ndarray) -> np.ndarray:
+    """The kinematic fit (``fit``, from :func:`_kinematic_fit`) at the first sample, whose measured
+    ``dofs`` take ``values``: reached from the scene's configuration q0 by paths of
+    :data:`HOMOTOPY_STEPS` steps (the measured dofs on the straight line from q0 to ``values``,
+    each step's fit started at the previous one); the end of least elastic energy."""
+    energy = _elastic_energy(model)
+    best, best_v = None, np.inf
+    for n in HOMOTOPY_STEPS:
+        q = model.q0.copy()
+        for s in np.arange(1, n + 1) / n:
+            known = q.copy()
+            known[dofs] = (1.0 - s) * model.q0[dofs] + s * values
+            for con in model.constraints:
+                known[con.dof] = con.value
+            q = np.array(fit(known, q)).ravel()
+        v = float(energy(q))
+        if np.isfinite(v) and v < best_v:
+            best, best_v = q, v
+    if best is None:
+        raise ValueError("data: the kinematic fit at the first sample failed (no finite elastic energy); check "
+                         "that the channels are the scene's dofs in m and rad")
+    return best
+
+
 def initial_guess(model: Model, experiment: Experiment, m: int = 5) -> tuple[np.ndarray, np.ndarray]:
     """(q0, qd0), shape (n_dof,) each: a first guess of the state at the first sample.
 
@@ -100,7 +141,6 @@ def initial_guess(model: Model, experiment: Experiment, m: int = 5) -> tuple[np.
     fit = _kinematic_fit(model, tuple(sorted(model.dof(c) for c in names)))
     cols = [data.channels.index(c) for c in names]
     dofs = [model.dof(c) for c in names]
-    q_prev = model.q0.copy()
     fits, times = [], []
     for i in range(data.t.size):
         if len(fits) == m:
@@ -108,11 +148,14 @@ def initial_guess(model: Model, experiment: Experiment, m: int = 5) -> tuple[np.
         values = data.q[i, cols]
         if not np.isfinite(values).all():
             continue
-        known = q_prev.copy()
-        known[dofs] = values
-        for con in model.constraints:
-            known[con.dof] = con.value
-        q_prev = np.array(fit(known, q_prev)).ravel()
+        if not fits:
+            q_prev = first_fit(model, fit, dofs, values)
+        else:
+            known = q_prev.copy()
+            known[dofs] = values
+            for con in model.constraints:
+                known[con.dof] = con.value
+            q_prev = np.array(fit(known, q_prev)).ravel()
         fits.append(q_prev)
         times.append(data.t[i] - data.t[0])
     if not fits:
