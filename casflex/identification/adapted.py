@@ -45,6 +45,7 @@ from casflex.identification.problem import (
     gauss_newton_polish,
     gauss_newton_statistics,
     least_squares_nlp,
+    robust_statistics,
     start_values,
 )
 from casflex.model import Model
@@ -253,6 +254,7 @@ def identify_adapted_direct(
     names = model.parameter_names
     p_hat = pmap.p(wv[:n_p])
     stats = gauss_newton_statistics(Jv, zv.ravel(), n_p, names, pmap.dp_dtheta(wv[:n_p]), p_hat)
+    uncertainty = robust_statistics(stats, Jv, zv.ravel(), len(samples), pmap.dp_dtheta(wv[:n_p]), p_hat)
     st_fn = ca.Function("states", [w], [ca.vertcat(*[ca.vec(r) for r in state_exprs]), ca.vertcat(*lam_syms)])
     st_v, lam_v = (np.array(v).ravel() for v in st_fn(wv))
     states = {f"{t:.10g}": {model.dof_names[d]: st_v[k * 3 * nu:(k + 1) * 3 * nu].reshape(3, nu).T[j].tolist()
@@ -276,7 +278,7 @@ def identify_adapted_direct(
         extra={"transform": transform, "hessian": hessian, "compiled": compiled,
                "force_scale": fs, "residual_norm": float(np.linalg.norm(zv) * fs),
                "gauss_newton_polish": polished, "solver_s": solver_s, "window": K, "smoothing": smoothing_info,
-               "beam_forces": mode,
+               "beam_forces": mode, "uncertainty": uncertainty,
                "solver_parameters": dict(zip(names, pmap.p(w_solver[:n_p]).tolist(), strict=True)),
                "unknown_dofs": states, "rotations": rotations, "ignored_channels": ignored, "rate_scale": om},
     )

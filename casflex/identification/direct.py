@@ -30,6 +30,7 @@ from casflex.identification.problem import (
     gauss_newton_polish,
     gauss_newton_statistics,
     least_squares_nlp,
+    robust_statistics,
     start_values,
 )
 from casflex.model import Model
@@ -152,6 +153,7 @@ def identify_direct(
     zv, Jv = (np.array(v) for v in zJ(wv))
     p_hat = pmap.p(wv[:n_p])
     stats = gauss_newton_statistics(Jv, zv.ravel(), n_p, model.parameter_names, pmap.dp_dtheta(wv[:n_p]), p_hat)
+    uncertainty = robust_statistics(stats, Jv, zv.ravel(), len(samples), pmap.dp_dtheta(wv[:n_p]), p_hat)
     names = model.parameter_names
     k = n_c + n_ax
     lams = [list(wv[n_p + i * k:n_p + i * k + n_c] * fs) for i in range(len(samples))]
@@ -162,7 +164,7 @@ def identify_direct(
         reasons.append(f"{', '.join(bound)} ended on a bound: the best fit lies outside the parameters' range")
     extra = {"transform": transform, "hessian": hessian, "compiled": compiled,
              "force_scale": fs, "residual_norm": float(np.linalg.norm(zv) * fs), "gauss_newton_polish": polished,
-             "beam_forces": mode, "smoothing": smoothing_info,
+             "beam_forces": mode, "smoothing": smoothing_info, "uncertainty": uncertainty,
              "solver_s": solver_s, "solver_parameters": dict(zip(names, pmap.p(w_solver[:n_p]).tolist(), strict=True))}
     if w_lin is not None:
         extra["linear_solution"] = dict(zip(names, (w_lin[:n_p] * scale).tolist(), strict=True))

@@ -16,7 +16,7 @@ from casflex.identification.result import IdentificationResult
 from casflex.model import Model
 
 __all__ = ["IdentificationResult", "parameter_scale", "start_values", "bound_flags", "gauss_newton_statistics",
-           "gauss_newton_polish", "solver_options_for", "least_squares_nlp", "ParameterMap",
+           "gauss_newton_polish", "robust_statistics", "solver_options_for", "least_squares_nlp", "ParameterMap",
            "TRANSFORMS", "HESSIANS"]
 
 
@@ -181,6 +181,27 @@ def gauss_newton_statistics(J: np.ndarray, r: np.ndarray, n_p: int, names: tuple
         "parameter_condition": float(svp[0] / svp[-1]) if n_p and svp[-1] > 0 else math.inf,
         "weakest_direction": weakest, "residual_variance": s2,
     }
+
+
+def robust_statistics(stats: dict[str, Any], J: np.ndarray, r: np.ndarray, n_instants: int, dp_dtheta: np.ndarray,
+                      p: np.ndarray) -> dict[str, dict[str, float]]:
+    """The direct methods' standard errors: ``stats`` (from :func:`gauss_newton_statistics`) updated
+    in place with the larger of Gauss-Newton's and the instant-clustered sandwich's
+    (:func:`~casflex.identification.statistics.instant_robust_std_errors`), ``weak`` recomputed;
+    returns both for the result's ``extra["uncertainty"]``."""
+    from casflex.identification.statistics import instant_robust_std_errors
+
+    names = list(stats["std_errors"])
+    se_gn = np.array([stats["std_errors"][k] for k in names])
+    se, se_cl = instant_robust_std_errors(J, r, n_instants, se_gn, dp_dtheta)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rel = se / np.abs(p)
+    stats["std_errors"] = dict(zip(names, se.tolist(), strict=True))
+    stats["relative_std_errors"] = dict(zip(names, rel.tolist(), strict=True))
+    stats["weak"] = [k for k, e in zip(names, rel, strict=True)
+                     if k in stats["weak"] or (not np.isnan(e) and e > 0.1)]
+    return {"gauss_newton": dict(zip(names, se_gn.tolist(), strict=True)),
+            "instant_robust": dict(zip(names, se_cl.tolist(), strict=True))}
 
 
 def merge_options(opts: dict, extra: dict) -> dict:

@@ -85,9 +85,10 @@ class IdentificationResult:
             se = self.std_errors.get(k, math.nan)
             flag = "  (at a bound)" if self.at_bound.get(k) else ""
             parts = ""
-            if unc:
-                parts = (f"  [HAC {unc['hac'][k]:.2g}, model error {unc['model_error'][k]:.2g}, "
-                         f"plain Gauss-Newton {unc['gauss_newton'][k]:.2g}]")
+            if unc:  # the parts of the standard error, as each method reports them
+                labels = {"hac": "HAC", "model_error": "model error", "instant_robust": "instant-clustered",
+                          "gauss_newton": "plain Gauss-Newton"}
+                parts = "  [" + ", ".join(f"{lab} {unc[key][k]:.2g}" for key, lab in labels.items() if key in unc) + "]"
             lines.append(f"  {k:<8s} = {v:14.6g}  +- {se:.2g}{parts} (start {self.start[k]:.6g}){flag}")
         idf = self.identifiability
         lines.append(f"  identifiability: rank {idf['rank']} of {idf['n_unknowns']} unknowns, "

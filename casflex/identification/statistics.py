@@ -13,6 +13,12 @@ data from another code, the truth lay more than 3 of them away). Two corrections
 - a discretisation error estimate from a refit on a refined model (output_error.py), since a
   bias is not a variance and no covariance of the residuals can hold it.
 
+The direct methods' residuals are equations of motion at a few instants, whose positions,
+velocities and accelerations come from smoothed measurements: one instant's errors enter all its
+equations together, with dof-dependent sizes. :func:`instant_robust_std_errors` clusters the
+sandwich by instant and reports the larger of it and Gauss-Newton's (threelink at 1 mm: the truth
+lay up to 3.9 Gauss-Newton standard errors away in 6 of 10 successful direct fits).
+
 :func:`residual_analysis` reports, per channel, the RMS (the noise level the fit implies), the
 autocorrelation and the Ljung-Box whiteness test.
 """
@@ -25,7 +31,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-__all__ = ["sandwich_covariance", "bartlett_bandwidth", "residual_analysis"]
+__all__ = ["sandwich_covariance", "bartlett_bandwidth", "residual_analysis", "instant_robust_std_errors"]
 
 
 def bartlett_bandwidth(scores: np.ndarray) -> int:
@@ -77,6 +83,27 @@ def sandwich_covariance(J: np.ndarray, r: np.ndarray, groups: list[np.ndarray],
     m = J.shape[0]
     # small-sample factor m / (m - n), as the plain estimate's s^2 = r^T r / (m - n)
     return Hinv @ omega @ Hinv * (m / max(m - n, 1)), info
+
+
+def instant_robust_std_errors(J: np.ndarray, r: np.ndarray, n_instants: int, se_gn: np.ndarray,
+                              dp_dtheta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(standard errors, cluster-robust ones) of the first len(se_gn) unknowns of a direct fit.
+
+    J (m, n), r (m,): the residuals at the optimum, ``n_instants`` equal blocks of rows in order
+    (one per instant). The cluster-robust sandwich (one cluster per instant, factor G/(G-1) on
+    top of m/(m-n), Cameron and Miller 2015) allows correlated, unequal errors within an instant;
+    with few instants it is itself uncertain, so the reported error is the larger of the two,
+    per parameter. An undetermined parameter (Gauss-Newton's infinite error) stays undetermined.
+    """
+    m, n_p = J.shape[0], se_gn.size
+    rows = m // n_instants
+    if n_instants < 2 or rows * n_instants != m:
+        return se_gn.copy(), np.full(n_p, np.nan)
+    groups = [[np.arange(i * rows, (i + 1) * rows)] for i in range(n_instants)]  # instants independent
+    C, _ = sandwich_covariance(J, r, groups, bandwidth=0)
+    se_cl = np.sqrt(np.maximum(np.diag(C)[:n_p], 0.0) * n_instants / (n_instants - 1)) * np.abs(dp_dtheta)
+    se = np.where(np.isinf(se_gn), np.inf, np.fmax(se_gn, se_cl))
+    return se, se_cl
 
 
 def residual_analysis(r: np.ndarray, channel: np.ndarray, names: tuple[str, ...], groups: list[np.ndarray],
