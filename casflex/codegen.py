@@ -5,10 +5,11 @@ command, in ``$CASFLEX_CACHE`` (default ``~/.cache/casflex``); a library is buil
 temporary directory and renamed into the cache, so concurrent or interrupted builds never
 leave a broken file behind.
 
-``-ffp-contract=off`` keeps the compiler from fusing multiply-adds, so compiled results are
-bitwise identical to CasADi's interpreted evaluation on x86-64. ``-march=native`` (where the
-compiler accepts it) makes twobar's compiled simulation ~15 % faster; as the library is then
-tied to the processor, the processor's description is part of the cache key.
+``-ffp-contract=off`` (and ``-mno-fma`` beside ``-march=native``) keep the compiler from fusing
+multiply-adds, so compiled results are bitwise identical to CasADi's interpreted evaluation on
+x86-64. ``-march=native`` (where the compiler accepts it) makes twobar's compiled simulation ~15 %
+faster; as the library is then tied to the processor, the processor's description is part of the
+cache key.
 
 CasADi's own JIT, which compiles an identification NLP's functions (``compiled=True``), is set
 up by :func:`jit_options` in a per-process scratch directory.
@@ -112,17 +113,25 @@ def _compiler() -> str:
 
 @functools.lru_cache(maxsize=4)
 def _native_flags(cc: str) -> tuple[str, ...]:
-    """("-march=native",) if ``cc`` accepts it, else (); probed once per compiler and processor
-    (a compile of ~35 ms), the answer kept in the cache directory."""
-    note = cache_dir() / f"native-{hashlib.sha256((cc + _processor()).encode()).hexdigest()[:16]}.txt"
+    """The first of ("-march=native", "-mno-fma"), ("-march=native",), () that ``cc`` accepts; probed
+    once per compiler and processor (a compile of ~35 ms), the answer kept in the cache directory.
+
+    -mno-fma: gcc's SLP vectoriser fuses multiply-adds into FMA instructions even under
+    -ffp-contract=off (gcc 12, x86-64 with FMA: one Jacobian entry of twobar's HHT step differed
+    from CasADi's interpreted value in the last bit, and compiled runs drifted from interpreted ones).
+    """
+    note = cache_dir() / f"native2-{hashlib.sha256((cc + _processor()).encode()).hexdigest()[:16]}.txt"
     if note.is_file():
         return tuple(note.read_text().split())
+    flags: tuple[str, ...] = ()
     with tempfile.TemporaryDirectory(prefix="casflex-cc-") as tmp:
         src = Path(tmp) / "t.c"
         src.write_text("int f(void) { return 0; }\n")
-        proc = subprocess.run([cc, "-march=native", "-c", str(src), "-o", str(Path(tmp) / "t.o")],
-                              capture_output=True)
-    flags = ("-march=native",) if proc.returncode == 0 else ()
+        for candidate in (("-march=native", "-mno-fma"), ("-march=native",)):
+            proc = subprocess.run([cc, *candidate, "-c", str(src), "-o", str(Path(tmp) / "t.o")], capture_output=True)
+            if proc.returncode == 0:
+                flags = candidate
+                break
     atomic_write_text(note, " ".join(flags))
     return flags
 

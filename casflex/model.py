@@ -10,7 +10,12 @@ forms (``inertia``):
 - ``"seed"``: h = Mbar q' = Mdot q', the paper's Eq. 2 (Mbar_i = Rdot^T M R + R^T M Rdot).
 
 Only the scene's elements and supports are modelled; properties declared as parameters are
-entries of the symbol p (in the scene's parameter order), all others are folded constants.
+entries of the symbol p (in the scene's parameter order), all others are constants.
+
+Structure is kept: the elements of each kind form a group (:mod:`casflex.assembly`) whose kernel
+(:mod:`casflex.elements.kernels`, one element's energies, forces, mass and outputs) is mapped
+over the group and summed into the global vectors and sparse matrices through constant index
+maps. The Functions are MX; evaluated on SX symbols they give the flat expressions.
 """
 
 from __future__ import annotations
@@ -20,8 +25,10 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from casflex.assembly import ElementGroup, MatrixAssembly, gather, scatter
 from casflex.constraints import FixedDof, constraint_vector, support_constraints
-from casflex.elements import BeamElement, LinearSpring, TorsionalSpring
+from casflex.elements import BeamElement
+from casflex.elements.kernels import KINDS, kernel
 from casflex.scene import INERTIA_FORMS, Parameter, Scene, SceneError
 
 __all__ = ["Model", "assemble", "INERTIA_FORMS"]
@@ -68,6 +75,8 @@ class Model:
     q0: np.ndarray
     qd0: np.ndarray
     output_names: tuple[str, ...]
+    groups: tuple[ElementGroup, ...]
+    gravity: ca.Function
     energy: ca.Function
     mass: ca.Function
     forces: ca.Function
@@ -173,6 +182,48 @@ def _mesh(scene: Scene):
     return order, nodes, beam_elems
 
 
+def _groups(scene: Scene, order, nodes, beam_elems, idx) -> tuple[ElementGroup, ...]:
+    """The scene's elements by kind, with their dofs and property tables (parameters in slots)."""
+    slot_of = {par.target: i for i, par in enumerate(scene.parameters)}
+    out = []
+
+    def group(kind: str, items: list[tuple[str, str, list[int], list[float], tuple[str, ...]]]):
+        # items: (element name, scene owner of the properties, dofs, values, scene field per property)
+        if not items:
+            return
+        base = np.array([it[3] for it in items], dtype=float).T
+        slots = tuple((r, e, slot_of[f"{it[1]}.{fld}"]) for e, it in enumerate(items)
+                      for r, fld in enumerate(it[4]) if f"{it[1]}.{fld}" in slot_of)
+        for r, e, _ in slots:
+            base[r, e] = 0.0
+        out.append(ElementGroup(kind, tuple(it[0] for it in items), np.array([it[2] for it in items], dtype=int),
+                                base, slots))
+
+    beams = []
+    for b, k, na, nb in beam_elems:
+        el = BeamElement.between(f"{b.name}.{k}", (nodes[na][0], nodes[na][1], nodes[nb][0], nodes[nb][1]),
+                                 (nodes[na][2], nodes[nb][2]), E=b.E, A=b.A, I=b.I, rho=b.rho)
+        beams.append((el.name, b.name, [idx[na] + j for j in range(3)] + [idx[nb] + j for j in range(3)],
+                      [el.L0, *el.offsets, b.E, b.A, b.I, b.rho, float(b.rotary_inertia)],
+                      ("", "", "", "E", "A", "I", "rho", "")))
+    group("beam", beams)
+    springs, zero = [], []
+    for s in scene.springs:
+        a, b2 = s.nodes
+        dofs = [idx[a], idx[a] + 1, idx[b2], idx[b2] + 1]
+        rest = scene.distance(a, b2) if s.rest_length is None else s.rest_length
+        if rest == 0.0 and f"{s.name}.rest_length" not in slot_of:  # smooth where the nodes meet
+            zero.append((s.name, s.name, dofs, [s.k], ("k",)))
+        else:
+            springs.append((s.name, s.name, dofs, [s.k, rest], ("k", "rest_length")))
+    group("spring", springs)
+    group("spring0", zero)
+    group("torsion", [(s.name, s.name, [idx[s.nodes[0]] + 2, idx[s.nodes[1]] + 2],
+                       [s.kt, nodes[s.nodes[1]][2] - nodes[s.nodes[0]][2] if s.rest_angle is None else s.rest_angle],
+                       ("kt", "rest_angle")) for s in scene.torsion_springs])
+    return tuple(out)
+
+
 def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
     """Build the symbolic model of ``scene`` (see the module docstring).
 
@@ -192,98 +243,80 @@ def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
     q0 = np.array([v for name in order for v in nodes[name][:3]], dtype=float)
     qd0 = np.array([v for name in order for v in nodes[name][3:]], dtype=float)
     is_rot = np.array([i % 3 == 2 for i in range(n)])
-
-    p = ca.SX.sym("p", len(scene.parameters))
-    symbol = {par.target: p[i] for i, par in enumerate(scene.parameters)}
-
-    def prop(owner: str, name: str, value):
-        return symbol.get(f"{owner}.{name}", value)
-
-    q = ca.SX.sym("q", n)
-    qd = ca.SX.sym("qd", n)
-    qdd = ca.SX.sym("qdd", n)
-    t = ca.SX.sym("t")
-    gvec = (prop("gravity", "x", scene.gravity[0]), prop("gravity", "y", scene.gravity[1]))
-
-    T = ca.SX(0)
-    V_el = ca.SX(0)
-    V_g = ca.SX(0)
-    outs: list[tuple[str, ca.SX]] = []
-    local: list[tuple[str, ca.SX]] = []
-    used = np.zeros(n, dtype=bool)
-
-    def sl(name):
-        return slice(idx[name], idx[name] + 3)
-
-    for b, k, na, nb in beam_elems:
-        el = BeamElement(
-            name=f"{b.name}.{k}",
-            X0=(nodes[na][0], nodes[na][1], nodes[nb][0], nodes[nb][1]),
-            theta0=(nodes[na][2], nodes[nb][2]),
-            E=prop(b.name, "E", b.E), A=prop(b.name, "A", b.A), I=prop(b.name, "I", b.I),
-            rho=prop(b.name, "rho", b.rho), rotary_inertia=b.rotary_inertia,
-        )
-        qe = ca.vertcat(q[sl(na)], q[sl(nb)])
-        qde = ca.vertcat(qd[sl(na)], qd[sl(nb)])
-        T += el.kinetic_energy(qe, qde)
-        V_el += el.strain_energy(qe)
-        V_g += el.gravity_energy(qe, gvec)
-        used[sl(na)] = used[sl(nb)] = True
-        kin = el.kinematics(qe)
-        local += [(f"{el.name}.a", kin["tha"]), (f"{el.name}.b", kin["thb"])]
-        f = el.end_forces(qe)
-        outs += [(f"{el.name}.{c}", f[i]) for i, c in enumerate(("N", "V", "Ma", "Mb"))]
-    for s in scene.springs:
-        a, b2 = s.nodes
-        rest = scene.distance(a, b2) if s.rest_length is None else s.rest_length
-        el = LinearSpring(s.name, prop(s.name, "k", s.k), prop(s.name, "rest_length", rest))
-        V_el += el.strain_energy(q[sl(a)], q[sl(b2)])
-        used[idx[a]:idx[a] + 2] = used[idx[b2]:idx[b2] + 2] = True
-        outs += [(f"{s.name}.{key}", v) for key, v in el.outputs(q[sl(a)], q[sl(b2)]).items()]
-    for s in scene.torsion_springs:
-        a, b2 = s.nodes
-        rest = nodes[b2][2] - nodes[a][2] if s.rest_angle is None else s.rest_angle
-        el = TorsionalSpring(s.name, prop(s.name, "kt", s.kt), prop(s.name, "rest_angle", rest))
-        V_el += el.strain_energy(q[idx[a] + 2], q[idx[b2] + 2])
-        used[idx[a] + 2] = used[idx[b2] + 2] = True
-        outs += [(f"{s.name}.{key}", v) for key, v in el.outputs(q[idx[a] + 2], q[idx[b2] + 2]).items()]
+    groups = _groups(scene, order, nodes, beam_elems, idx)
 
     cons = support_constraints(scene, {d: i for i, d in enumerate(dof_names)}, q0)
+    used = np.zeros(n, dtype=bool)
+    for grp in groups:
+        used[grp.dofs.ravel()] = True
     for c in cons:
         used[c.dof] = True
     if not used.all():
         free = [dof_names[i] for i in np.flatnonzero(~used)]
         raise SceneError(f"dofs {free} are acted on by nothing (no beam, spring or support): "
                          "the equations of motion would be singular; add a support for them")
-    phi = constraint_vector(cons, q)
-    B = ca.jacobian(phi, q)
-    lam = ca.SX.sym("lam", len(cons))
-    for j, c in enumerate(cons):
-        outs.append((c.name, -lam[j]))
 
+    # -- small SX pieces: gravity, loads, constraints ------------------------------------------
+    ps = ca.SX.sym("p", len(scene.parameters))
+    symbol = {par.target: ps[i] for i, par in enumerate(scene.parameters)}
+    gravity = ca.Function("gravity", [ps], [ca.vertcat(*(symbol.get(f"gravity.{c}", scene.gravity[i])
+                                                         for i, c in enumerate("xy")))], ["p"], ["g"])
+    ts = ca.SX.sym("t")
     f_ext = ca.SX.zeros(n)
     for ld in scene.loads:
         rows = ld.rows()
         for comp, key in enumerate(("fx", "fy", "mz")):
             i = idx[ld.node] + comp
             if len(rows) == 1:
-                f_ext[i] += prop(ld.name, key, rows[0][comp + 1])
+                f_ext[i] += symbol.get(f"{ld.name}.{key}", rows[0][comp + 1])
             else:
                 tt = ca.DM([r[0] for r in rows])
                 vv = ca.DM([r[comp + 1] for r in rows])
-                tc = ca.fmin(ca.fmax(t, tt[0]), tt[-1])  # hold the end values outside the table
+                tc = ca.fmin(ca.fmax(ts, tt[0]), tt[-1])  # hold the end values outside the table
                 f_ext[i] += ca.pw_lin(tc, tt, vv)
+    load = ca.Function("load", [ts, ps], [f_ext], ["t", "p"], ["f_ext"])
+    qs = ca.SX.sym("q", n)
+    phi = constraint_vector(cons, qs)
+    constraint = ca.Function("constraint", [qs], [phi, ca.jacobian(phi, qs)], ["q"], ["phi", "B"])
 
-    dT_dqd = ca.gradient(T, qd)
-    M = ca.jacobian(dT_dqd, qd)
-    mdot_qd = ca.jtimes(dT_dqd, q, qd)
-    h = mdot_qd - ca.gradient(T, q) if inertia == "lagrange" else mdot_qd
-    f_int = ca.gradient(V_el, q)
-    g = -ca.gradient(V_g, q)
-    r = ca.mtimes(M, qdd) + h + f_int + ca.mtimes(B.T, lam) - f_ext - g
+    # -- structured Functions: element kernels mapped over the groups ---------------------------
+    q, qd, qdd = ca.MX.sym("q", n), ca.MX.sym("qd", n), ca.MX.sym("qdd", n)
+    lam, t, p = ca.MX.sym("lam", len(cons)), ca.MX.sym("t"), ca.MX.sym("p", len(scene.parameters))
+    g = gravity(p)
+    props = [grp.props(p) for grp in groups]
 
-    names = tuple(o[0] for o in outs)
-    y = ca.vertcat(*[o[1] for o in outs]) if outs else ca.SX(0, 1)
+    def mapped(grp: ElementGroup, what: str, *args):
+        f = kernel(grp.kind, what, inertia)
+        return f.map(f"{f.name()}_{grp.n}", "serial", grp.n, [f.n_in() - 1] if f.name_in()[-1] == "g" else [], [])(
+            *args)
+
+    T = V_el = V_g = ca.MX(0)
+    h = f_int = gf = ca.MX.zeros(n)
+    for grp, pr in zip(groups, props, strict=True):
+        e = mapped(grp, "energy", gather(q, grp), gather(qd, grp), pr, g)
+        T, V_el, V_g = T + ca.sum2(e[0]), V_el + ca.sum2(e[1]), V_g + ca.sum2(e[2])
+        hh, fi, gg = mapped(grp, "forces", gather(q, grp), gather(qd, grp), pr, g)
+        h, f_int, gf = h + scatter(hh, grp, n), f_int + scatter(fi, grp, n), gf + scatter(gg, grp, n)
+    whole = np.arange(n)
+    mass_asm = MatrixAssembly(groups, whole, whole)
+    M = mass_asm([mapped(grp, "mass", gather(q, grp), pr) if grp.spec.massive else None
+                  for grp, pr in zip(groups, props, strict=True)])
+    _, B = constraint(q)
+    r = ca.mtimes(M, qdd) + h + f_int + ca.mtimes(B.T, lam) - load(t, p) - gf
+
+    # joint outputs in the scene's order: beams, springs, torsion springs, then the supports
+    out_vals, out_names = [], []
+    for grp, pr in zip(groups, props, strict=True):
+        out_vals.append(ca.vec(mapped(grp, "outputs", gather(q, grp), pr)))
+        out_names += [f"{nm}.{o}" for nm in grp.names for o in grp.spec.outputs]
+    want = ([f"{b.name}.{k}.{o}" for b, k, _, _ in beam_elems for o in KINDS["beam"].outputs]
+            + [f"{s.name}.{o}" for s in scene.springs for o in KINDS["spring"].outputs]
+            + [f"{s.name}.{o}" for s in scene.torsion_springs for o in KINDS["torsion"].outputs])
+    y = ca.vertcat(*out_vals)[[out_names.index(w) for w in want]] if want else ca.MX(0, 1)
+    y = ca.vertcat(y, -lam)
+    names = tuple(want) + tuple(c.name for c in cons)
+    beams = [grp for grp in groups if grp.kind == "beam"]  # local rotations: geometry only, never parameters
+    th_l = ca.vec(mapped(beams[0], "rotations", gather(q, beams[0]), ca.DM(beams[0].base))) if beams else ca.MX(0, 1)
     return Model(
         scene=scene,
         inertia=inertia,
@@ -296,17 +329,18 @@ def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
         q0=q0,
         qd0=qd0,
         output_names=names,
+        groups=groups,
+        gravity=gravity,
         energy=ca.Function("energy", [q, qd, p], [T, V_el, V_g], ["q", "qd", "p"], ["kinetic", "elastic", "gravity"]),
         mass=ca.Function("mass", [q, p], [M], ["q", "p"], ["M"]),
-        forces=ca.Function("forces", [q, qd, p], [h, f_int, g], ["q", "qd", "p"], ["h", "f_int", "g"]),
-        load=ca.Function("load", [t, p], [f_ext], ["t", "p"], ["f_ext"]),
-        constraint=ca.Function("constraint", [q], [phi, B], ["q"], ["phi", "B"]),
-        equilibrium=ca.Function("equilibrium", [q, qd, qdd, lam, t, p], [r, phi],
+        forces=ca.Function("forces", [q, qd, p], [h, f_int, gf], ["q", "qd", "p"], ["h", "f_int", "g"]),
+        load=load,
+        constraint=constraint,
+        equilibrium=ca.Function("equilibrium", [q, qd, qdd, lam, t, p], [r, constraint(q)[0]],
                                 ["q", "qd", "qdd", "lam", "t", "p"], ["r", "phi"]),
         outputs=ca.Function("joint_outputs", [q, lam, p], [y], ["q", "lam", "p"], ["y"]),
-        local_rotations=ca.Function("local_rotations", [q], [ca.vertcat(*[v for _, v in local]) if local
-                                                             else ca.SX(0, 1)], ["q"], ["theta_l"]),
-        local_rotation_names=tuple(k for k, _ in local),
+        local_rotations=ca.Function("local_rotations", [q], [th_l], ["q"], ["theta_l"]),
+        local_rotation_names=tuple(f"{b.name}.{k}.{e}" for b, k, _, _ in beam_elems for e in "ab"),
         segments=tuple(("beam", f"{b.name}.{k}", idx[na] // 3, idx[nb] // 3) for b, k, na, nb in beam_elems)
         + tuple(("spring", s.name, idx[s.nodes[0]] // 3, idx[s.nodes[1]] // 3) for s in scene.springs),
     )

@@ -299,7 +299,8 @@ def _interpreted_step(integ: HHT, x: np.ndarray, t: float, p: np.ndarray, dt: fl
     prepare, newton, finish = integ.pieces
     z0, prm = prepare(x, t, p, dt, d)
     z = newton(z0, prm)
-    it = int(newton.stats()["iter_count"])
+    st = newton.stats()  # iterations: Newton updates made (the last, when it stopped on its size, is not counted)
+    it = int(st["iter_count"]) + (st["return_status"] == "converged_abstol_step")
     x1, r = finish(z, prm)
     return np.array(x1).ravel(), float(r), it
 

@@ -106,6 +106,14 @@ def translated(scene: Scene, dx: float) -> Scene:
     return dataclasses.replace(scene, nodes=tuple(dataclasses.replace(n, x=n.x + dx) for n in scene.nodes))
 
 
+def twobar_meshed(elements: int) -> Scene:
+    """The built-in twobar scene with ``elements`` elements per bar."""
+    import casflex
+
+    scene = casflex.load_scene("twobar")
+    return dataclasses.replace(scene, beams=tuple(dataclasses.replace(b, elements=elements) for b in scene.beams))
+
+
 def pytest_terminal_summary(terminalreporter) -> None:
     """The versions this run was made with (shown also under -q): a failure report is
     reproducible only with them."""

@@ -30,7 +30,7 @@ MASS = RHO * A * L0
 
 
 def beam(rotary_inertia: bool = False) -> BeamElement:
-    return BeamElement("b", X0=X0, theta0=THETA0, E=E, A=A, I=I, rho=RHO, rotary_inertia=rotary_inertia)
+    return BeamElement.between("b", X0, THETA0, E=E, A=A, I=I, rho=RHO, rotary_inertia=rotary_inertia)
 
 
 def beam_functions(el: BeamElement) -> dict[str, ca.Function]:
@@ -196,7 +196,7 @@ def test_rigid_motion_kinetic_energy_is_exact(rotary_inertia):
 def test_consistent_gravity_load_on_a_horizontal_beam():
     # Uniform weight w = m g / L on a straight horizontal element: end forces m g / 2 and end
     # moments -/+ m g L / 12 (the consistent load of Hermite cubics), exactly.
-    el = BeamElement("h", X0=(0.0, 0.0, L0, 0.0), theta0=(0.0, 0.0), E=E, A=A, I=I, rho=RHO)
+    el = BeamElement.between("h", (0.0, 0.0, L0, 0.0), (0.0, 0.0), E=E, A=A, I=I, rho=RHO)
     q = ca.SX.sym("q", 6)
     g = ca.Function("g", [q], [-ca.gradient(el.gravity_energy(q, (0.0, -9.81)), q)])
     w = MASS * 9.81

@@ -17,23 +17,30 @@ M_{n+1}: q''_{n+1} approximates the acceleration at t_alpha, and pairing it with
 q_{n+1} made the method first order for alpha < 0 once co-rotational masses rotate
 (docs/theory.md). At alpha = 0, or with a constant mass matrix, the two forms coincide.
 
-Newton (Eqs. 8-10) uses the exact Jacobian from AD (the paper drops the inertia derivatives).
+The constraints of casflex's supports fix dofs, Phi_j = q_i - v_j, so r_P gives q_{n+1} of the
+fixed dofs outright and B^T lambda acts on their rows only: Newton (Eqs. 8-10) solves the rows
+of the free dofs for the free q_{n+1}, and the multipliers follow from the rows of the fixed
+dofs. This is the same solution as Newton on (q, lambda) together, with a smaller matrix that
+is not a saddle point. The Jacobian is exact (AD; the paper drops the inertia derivatives).
+Residual and Jacobian are assembled from element kernels (:mod:`casflex.elements.kernels`)
+mapped over the element groups, or, for models of a few elements, expanded into flat code
+(``expand``, :func:`expand_by_default`).
+
 The unknowns and equations are scaled so that one dimensionless tolerance works for any
 stiffness or mass: each momentum row i is divided by d_i * l_i, d_i a rotation-invariant
 diagonal of the iteration matrix S = M/(beta h^2) + gamma/(beta h) C + K (Eq. 9) at the
 initial state and l_i the characteristic length (m) for translations or 1 for rotations;
-the unknowns are u = (q_{n+1} - q_guess)/l and mu = lambda / (d l) of the constrained dof.
-Newton stops when the scaled residual is below ``tol``, or when a Newton update is below
-0.01 sqrt(tol): in the quadratic regime the residual after that update is ~1e-4 tol, which
-saves the Jacobian evaluation that would only confirm convergence. Either way the step
-returns its final residual, recomputed, and the driver rejects any step above ``tol`` (raised to
-the round-off floor of far-off coordinates, :meth:`HHT.tolerance`).
-The Newton guess is the constant-acceleration predictor (q''_{n+1} = q''_n, lambda_{n+1} =
-lambda_n), better than the paper's q''_{n+1} = 0 (Eq. 6); the converged step is the same.
+the unknowns are u = (q_{n+1} - q_guess)/l of the free dofs. Newton makes at least one update
+unless the guess is (nearly) exact, and stops when a Newton update is below 0.01 sqrt(tol) (in
+the quadratic regime the residual after it is ~1e-4 tol) or the scaled residual is below
+1e-3 tol. The step returns its final residual, recomputed, and the driver rejects any step
+above ``tol`` (raised to the round-off floor of far-off coordinates, :meth:`HHT.tolerance`).
+The Newton guess is the constant-acceleration predictor (q''_{n+1} = q''_n), better than the
+paper's q''_{n+1} = 0 (Eq. 6); the converged step is the same.
 
 The step is a CasADi Function built from three pieces, ``prepare`` -> ``newton`` (CasADi's
-code-generatable ``fast_newton`` rootfinder) -> ``finish``, so that the Python driver can
-call them one by one and read Newton's iteration count, while :meth:`HHT.trajectory` chains
+code-generatable ``fast_newton`` rootfinder, sparse QR) -> ``finish``, so that the Python driver
+can call them one by one and read Newton's iteration count, while :meth:`HHT.trajectory` chains
 steps with ``mapaccum`` into one differentiable, exportable Function.
 """
 
@@ -44,6 +51,8 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from casflex.assembly import MatrixAssembly, gather, scatter
+from casflex.elements.kernels import hht_kernel, kernel
 from casflex.model import Model
 
 __all__ = ["HHT", "hht_coefficients", "roundoff_tolerance", "ROUNDOFF_FLOOR"]
@@ -68,6 +77,17 @@ def hht_coefficients(alpha: float) -> tuple[float, float]:
     return 0.5 - alpha, (1.0 - alpha) ** 2 / 4.0
 
 
+#: Up to this many elements the Newton functions are expanded into flat SX (see expand_by_default).
+EXPAND_ELEMENTS = 8
+
+
+def expand_by_default(model: Model) -> bool:
+    """Flat SX code for models of at most EXPAND_ELEMENTS beam elements: a mapped kernel costs a
+    call and its index loops, which dominate a step of a few elements (twobar with one element per
+    bar: 2x), while flat code grows with the mesh and its compile time with it."""
+    return sum(g.n for g in model.groups if g.kind == "beam") <= EXPAND_ELEMENTS
+
+
 @dataclass(frozen=True, eq=False)
 class HHT:
     """HHT-alpha integrator for a :class:`~casflex.model.Model`.
@@ -82,6 +102,9 @@ class HHT:
         a force error of 1e-10 of what moves a dof by the characteristic length).
     max_iter : int
         Newton iterations per step before the step is declared failed.
+    expand : bool or None
+        Evaluate the Newton residual and Jacobian as flat SX code (True) or as the element
+        kernels mapped over the groups (False); None chooses by size (:func:`expand_by_default`).
 
     The state vector x stacks [q, qd, qdd, lam], shape (3 n_dof + n_con,).
     """
@@ -90,6 +113,7 @@ class HHT:
     alpha: float = 0.0
     tol: float = 1e-12
     max_iter: int = 25
+    expand: bool | None = None
     _fn: dict = field(default_factory=dict, init=False, repr=False)
     _ell: np.ndarray = field(default=None, init=False, repr=False)  # characteristic length per dof
 
@@ -114,146 +138,43 @@ class HHT:
     # -- construction ------------------------------------------------------------------------
     def _build(self) -> None:
         m = self.model
-        n, nc = m.n_dof, m.n_con
-        gamma, beta = hht_coefficients(self.alpha)
-        a = self.alpha
         ell = np.where(m.is_rotation, 1.0, m.length_scale)
         object.__setattr__(self, "_ell", ell)
-        cdof = [c.dof for c in m.constraints]
-        ell_c = ell[cdof] if nc else np.zeros(0)
-
-        x0 = ca.SX.sym("x0", self.nx)
-        t0 = ca.SX.sym("t0")
-        h = ca.SX.sym("h")
-        p = ca.SX.sym("p", m.n_p)
-        d = ca.SX.sym("d", n)
-        q0, qd0, qdd0, lam0 = x0[:n], x0[n:2 * n], x0[2 * n:3 * n], x0[3 * n:]
-        s_lam = d[cdof] * ell_c if nc else ca.SX(0, 1)
-
-        def F(q, qd, lam):
-            hh, f_int, g = m.forces(q, qd, p)
-            _, B = m.constraint(q)
-            return hh + f_int + ca.mtimes(B.T, lam) - g
-
-        # Parameters of the Newton problem: everything known at the start of the step.
-        q_pred = q0 + h * qd0 + (0.5 - beta) * h**2 * qdd0
-        qd_pred = qd0 + (1 - gamma) * h * qdd0
-        f_n = F(q0, qd0, lam0)
-        phi_n = m.constraint(q0)[0]
-        f_ext = m.load(t0 + (1 + a) * h, p)
-        prm = ca.vertcat(q_pred, qd_pred, f_n, phi_n, f_ext, p, h, d, q0)
-        z_guess = ca.vertcat(beta * h**2 * qdd0 / ell, lam0 / s_lam if nc else ca.SX(0, 1))
-        self._fn["prepare"] = ca.Function("hht_prepare", [x0, t0, p, h, d], [z_guess, prm],
-                                          ["x0", "t0", "p", "h", "d"], ["z0", "prm"], {"cse": True})
-
-        z = ca.SX.sym("z", n + nc)
-        P = ca.SX.sym("prm", prm.numel())
-        o = 0
-        parts = {}
-        for key, size in (("q_pred", n), ("qd_pred", n), ("f_n", n), ("phi_n", nc), ("f_ext", n),
-                          ("p", m.n_p), ("h", 1), ("d", n), ("q0", n)):
-            parts[key] = P[o:o + size]
-            o += size
-        hp, dp, pp = parts["h"], parts["d"], parts["p"]
-        u, mu = z[:n], z[n:]
-        q1 = parts["q_pred"] + ell * u
-        qdd1 = ell * u / (beta * hp**2)
-        qd1 = parts["qd_pred"] + gamma * hp * qdd1
-        lam1 = (dp[cdof] * ell_c) * mu if nc else ca.SX(0, 1)
-        hh1, f_int1, g1 = m.forces(q1, qd1, pp)
-        phi1, B1 = m.constraint(q1)
-        f1 = hh1 + f_int1 + ca.mtimes(B1.T, lam1) - g1
-        q_alpha = (1 + a) * q1 - a * parts["q0"]  # where q''_{n+1} and the weighted forces act
-        r = ca.mtimes(m.mass(q_alpha, pp), qdd1) + (1 + a) * f1 - a * parts["f_n"] - parts["f_ext"]
-        r_phi = (1 + a) * phi1 - a * parts["phi_n"]
-        G = ca.vertcat(r / (dp * ell), r_phi / ell_c if nc else ca.SX(0, 1))
-        cse = {"cse": True}  # common subexpression elimination: ~20 % fewer operations
-        resid = ca.Function("hht_residual", [z, P], [G], ["z", "prm"], ["G"], cse)
-        jac = ca.Function("hht_jacobian", [z, P], [ca.jacobian(G, z), G], ["z", "prm"], ["jac_G_z", "G"], cse)
-        self._fn["residual"] = resid
-        self._fn["newton"] = ca.rootfinder(
+        lay = _Layout.of(m, ell)
+        expand = self.expand if self.expand is not None else expand_by_default(m)
+        prepare = _prepare(m, lay, self.alpha)
+        resid, jac, finish = _newton_functions(m, lay, self.alpha, prepare.nnz_out(1), expand)
+        newton = ca.rootfinder(
             "hht_newton", "fast_newton", resid,
-            {"abstol": self.tol, "abstolStep": 1e-2 * self.tol**0.5, "max_iter": self.max_iter, "error_on_fail": False,
-             "jacobian_function": jac},
-        )
-        x1 = ca.vertcat(q1, qd1, qdd1, lam1)
-        self._fn["finish"] = ca.Function("hht_finish", [z, P], [x1, ca.norm_inf(G)], ["z", "prm"], ["x1", "res"], cse)
+            # abstol far below tol: a guess is accepted without a Newton update only when it is
+            # (nearly) exact. G scales a force by d ~ M / (beta h^2), so at a small step a predictor
+            # with G just under tol can still carry acceleration errors of tol l / (beta h^2):
+            # 0.05 m/s^2 at h = 1.25e-5 s, which accumulate in the velocities (7.6e-6 m over 0.4 s).
+            {"abstol": 1e-3 * self.tol, "abstolStep": 1e-2 * self.tol**0.5, "max_iter": self.max_iter,
+             "error_on_fail": False, "jacobian_function": jac})
+        self._fn.update(prepare=prepare, residual=resid, jacobian=jac, newton=newton, finish=finish,
+                        scale=_scale(m, self.alpha), initial=_initial(m, lay), post=_post(m))
+        self._fn["sensitivity"] = _step_blocks(m, lay, self.alpha, prepare, resid, finish, expand)
+        self._fn["step"] = self._step_with_derivative()
 
-        # Scaling d: rotation-invariant diagonal of S (Eq. 9) at a given state.
-        qs, qds = ca.SX.sym("q", n), ca.SX.sym("qd", n)
-        hh, f_int, g = m.forces(qs, qds, p)
-        Mq = m.mass(qs, p)
-        K = ca.jacobian(f_int - g, qs)
-        C = ca.jacobian(hh, qds)
-        diag = ca.diag(Mq) / (beta * h**2) + gamma / (beta * h) * ca.fabs(ca.diag(C)) + ca.fabs(ca.diag(K))
-        # Average x and y per node: the trace of a 2x2 block does not change under rotation.
-        avg = ca.vertcat(*[(diag[3 * k] + diag[3 * k + 1]) / 2 if i < 2 else diag[3 * k + 2]
-                           for k in range(n // 3) for i in range(3)])
-        floor = 1e-12 * ca.mmax(avg) + 1e-300
-        self._fn["scale"] = ca.Function("hht_scale", [qs, qds, p, h], [ca.fmax(avg, floor)],
-                                        ["q", "qd", "p", "h"], ["d"])
-
-        # Consistent initial accelerations and multipliers (index-1 form of Eq. 1).
-        qdd_s = ca.SX.sym("qdd", n)
-        lam_s = ca.SX.sym("lam", nc)
-        ts = ca.SX.sym("t")
-        r_eq, _ = m.equilibrium(qs, qds, qdd_s, lam_s, ts, p)
-        _, Bs = m.constraint(qs)
-        A = ca.blockcat([[Mq, Bs.T], [Bs, ca.SX(nc, nc)]])
-        rhs0 = -ca.substitute(r_eq, ca.vertcat(qdd_s, lam_s), ca.DM.zeros(n + nc))
-        bdot = -ca.jtimes(ca.mtimes(Bs, qds), qs, qds)
-        qsm, qdsm, tsm, psm = ca.MX.sym("q", n), ca.MX.sym("qd", n), ca.MX.sym("t"), ca.MX.sym("p", m.n_p)
-        sys_fn = ca.Function("initial_system", [qs, qds, ts, p], [A, ca.vertcat(rhs0, bdot)])
-        Am, bm = sys_fn(qsm, qdsm, tsm, psm)
-        sol = ca.solve(Am, bm, "qr")
-        self._fn["initial"] = ca.Function("hht_initial", [qsm, qdsm, tsm, psm], [sol[:n], sol[n:]],
-                                          ["q", "qd", "t", "p"], ["qdd", "lam"])
-
-        # What a result reports per state: energies, power of the loads, joint outputs.
-        xs = ca.SX.sym("x", self.nx)
-        qx, qdx, lamx = xs[:n], xs[n:2 * n], xs[3 * n:]
-        T, Ve, Vg = m.energy(qx, qdx, p)
-        power = ca.dot(m.load(ts, p), qdx)
-        post = ca.vertcat(T, Ve, Vg, power, m.outputs(qx, lamx, p), m.local_rotations(qx))
-        self._fn["post"] = ca.Function("hht_post", [xs, ts, p], [post],
-                                       ["x", "t", "p"], ["y"], {"cse": True})
-
-        # The step's exact derivative by the implicit-function theorem, written out: with
-        # G(z, prm(w)) = 0 and x1 = X(z, prm(w)), w = (x0, t0, p, h),
-        #     dx1/dw = X_w - X_z G_z^-1 G_w,
-        # one sparse QR of G_z per step. CasADi's generic rootfinder derivative gives the same
-        # numbers at about twice the cost; d only scales Newton and has no effect on x1.
-        x1s = ca.SX.sym("x1", self.nx)
-        zsym = ca.SX.sym("z", n + nc)
-        _, prm_w = self._fn["prepare"](x0, t0, p, h, d)
-        Gw = resid(zsym, prm_w)
-        Xw = self._fn["finish"](zsym, prm_w)[0]
-        wsym = ca.vertcat(x0, t0, p, h)
-        q_pred_w = x0[:n] + h * x0[n:2 * n] + (0.5 - beta) * h**2 * x0[2 * n:3 * n]
-        z_of_x1 = ca.vertcat((x1s[:n] - q_pred_w) / ell, x1s[3 * n:] / s_lam if nc else ca.SX(0, 1))
-        blocks = [ca.substitute(e, zsym, z_of_x1) for e in (ca.jacobian(Gw, zsym), ca.jacobian(Gw, wsym),
-                                                            ca.jacobian(Xw, zsym), ca.jacobian(Xw, wsym))]
-        sens = ca.Function("hht_step_sensitivity", [x0, t0, p, h, d, x1s], blocks,
-                           ["x0", "t0", "p", "h", "d", "x1"], ["G_z", "G_w", "X_z", "X_w"], cse)
-        self._fn["sensitivity"] = sens
-
-        # The step as one Function.
-        X0, T0, Pm, H, D = (ca.MX.sym(k, s) for k, s in (("x0", self.nx), ("t0", 1), ("p", m.n_p), ("h", 1), ("d", n)))
-        zg, pr = self._fn["prepare"](X0, T0, Pm, H, D)
-        zs = self._fn["newton"](zg, pr)
-        X1, res = self._fn["finish"](zs, pr)
-        OX1, ORES = ca.MX.sym("out_x1", self.nx), ca.MX.sym("out_res")
-        G_z, G_w, X_z, X_w = sens(X0, T0, Pm, H, D, OX1)
+    def _step_with_derivative(self) -> ca.Function:
+        """prepare -> newton -> finish as one Function, whose Jacobian is the implicit-function
+        derivative written out (:func:`_step_blocks`): dx1/dw = X_w - X_z G_z^-1 G_w."""
+        m = self.model
+        n, nx, npar = m.n_dof, self.nx, m.n_p
+        x0, t0, p, h, d = self._fn["prepare"].mx_in()
+        zg, pr = self._fn["prepare"](x0, t0, p, h, d)
+        X1, res1 = self._fn["finish"](self._fn["newton"](zg, pr), pr)
+        OX1, ORES = ca.MX.sym("out_x1", nx), ca.MX.sym("out_res")
+        G_z, G_w, X_z, X_w = self._fn["sensitivity"](x0, t0, p, h, d, OX1)
         J = X_w - ca.mtimes(X_z, ca.solve(G_z, G_w, "qr"))
-        nx, npar = self.nx, m.n_p
-        jac = ca.Function("jac_hht_step", [X0, T0, Pm, H, D, OX1, ORES],
+        jac = ca.Function("jac_hht_step", [x0, t0, p, h, d, OX1, ORES],
                           [J[:, :nx], J[:, nx], J[:, nx + 1:nx + 1 + npar], J[:, nx + 1 + npar], ca.MX(nx, n),
                            ca.MX(1, nx), ca.MX(1, 1), ca.MX(1, npar), ca.MX(1, 1), ca.MX(1, n)],
                           ["x0", "t0", "p", "h", "d", "out_x1", "out_res"],
                           [f"jac_{o}_{i}" for o in ("x1", "res") for i in ("x0", "t0", "p", "h", "d")])
-        self._fn["step"] = ca.Function("hht_step", [X0, T0, Pm, H, D], [X1, res],
-                                       ["x0", "t0", "p", "h", "d"], ["x1", "res"],
-                                       {"custom_jacobian": jac, "jac_penalty": 0})
+        return ca.Function("hht_step", [x0, t0, p, h, d], [X1, res1], ["x0", "t0", "p", "h", "d"], ["x1", "res"],
+                           {"custom_jacobian": jac, "jac_penalty": 0})
 
     def tolerance(self, q: np.ndarray) -> np.ndarray:
         """Largest accepted scaled residual of a step ending at q, shape (n_dof,) or (k, n_dof):
@@ -334,3 +255,198 @@ class HHT:
             self._fn[key] = ca.Function(f"hht_trajectory_{n_steps}", [X0, T0, Pm, H, D], [X, res],
                                         ["x0", "t0", "p", "h", "d"], ["X", "res"])
         return self._fn[key]
+
+
+# -- the pieces of a step ----------------------------------------------------------------------
+@dataclass(frozen=True)
+class _Layout:
+    """Free and fixed dofs: the unknowns of Newton and the dofs the supports hold."""
+
+    n: int
+    free: list[int]
+    fixed: list[int]
+    fixed_to: np.ndarray  # (n,): the supports' values on the fixed dofs, 0 elsewhere
+    ell: np.ndarray  # (n,): characteristic length (m) of translations, 1 for rotations
+
+    @classmethod
+    def of(cls, m: Model, ell: np.ndarray) -> _Layout:
+        fixed = [c.dof for c in m.constraints]
+        if len(set(fixed)) != len(fixed):
+            dup = sorted({m.dof_names[i] for i in fixed if fixed.count(i) > 1})
+            raise ValueError(f"dofs {dup} are fixed by more than one support: their reactions are not determined")
+        to = np.zeros(m.n_dof)
+        to[fixed] = [c.value for c in m.constraints]
+        return cls(m.n_dof, [i for i in range(m.n_dof) if i not in set(fixed)], fixed, to, ell)
+
+    def spread(self, z: ca.MX) -> ca.MX:
+        """The free dofs' values z (n_free,) in a vector of all dofs (zeros at the fixed ones)."""
+        nf = len(self.free)
+        if not nf:
+            return ca.MX.zeros(self.n)
+        return ca.mtimes(ca.DM(ca.Sparsity.triplet(self.n, nf, self.free, list(range(nf))), [1.0] * nf), z)
+
+    def reactions(self) -> ca.DM:
+        """B^T (n, n_con): the multipliers act on the fixed dofs' rows."""
+        B_T = ca.DM.zeros(self.n, len(self.fixed))
+        for j, i in enumerate(self.fixed):
+            B_T[i, j] = 1.0
+        return B_T
+
+
+def _prm_layout(m: Model) -> list[tuple[str, int]]:
+    """The known quantities a step's Newton solve takes (``prm``), in this order, with their sizes."""
+    n = m.n_dof
+    return [("q_pred", n), ("qd_pred", n), ("f_n", n), ("f_ext", n), ("p", m.n_p), ("h", 1), ("d", n), ("q0", n)]
+
+
+def _prepare(m: Model, lay: _Layout, alpha: float) -> ca.Function:
+    """``hht_prepare(x0, t0, p, h, d) -> (z0, prm)``: the Newton guess and everything known at the
+    start of the step (the Newmark predictors, F_n, the loads at t_alpha)."""
+    n = m.n_dof
+    gamma, beta = hht_coefficients(alpha)
+    x0, t0, h, p, d = (ca.MX.sym(k, s) for k, s in (("x0", 3 * n + m.n_con), ("t0", 1), ("h", 1), ("p", m.n_p),
+                                                    ("d", n)))
+    q0, qd0, qdd0, lam0 = x0[:n], x0[n:2 * n], x0[2 * n:3 * n], x0[3 * n:]
+    f_n = ca.MX.zeros(n)  # F_n has the weight -alpha
+    if alpha != 0.0:
+        hh, f_int, g = m.forces(q0, qd0, p)
+        f_n = hh + f_int - g + ca.mtimes(lay.reactions(), lam0)
+    prm = ca.vertcat(q0 + h * qd0 + (0.5 - beta) * h**2 * qdd0, qd0 + (1 - gamma) * h * qdd0, f_n,
+                     m.load(t0 + (1 + alpha) * h, p), p, h, d, q0)
+    z_guess = (beta * h**2 * qdd0 / lay.ell)[lay.free]
+    return ca.Function("hht_prepare", [x0, t0, p, h, d], [ca.densify(z_guess), ca.densify(prm)],
+                       ["x0", "t0", "p", "h", "d"], ["z0", "prm"])
+
+
+def _newton_functions(m: Model, lay: _Layout, alpha: float, n_prm: int, expand: bool):
+    """(residual, jacobian, finish) of the free dofs' unknowns z and the known ``prm``.
+
+    ``hht_residual(z, prm) -> G``, the scaled residual of the free rows; ``hht_jacobian(z, prm) ->
+    (dG/dz, G)``, sparse; ``hht_finish(z, prm) -> (x1, res)``, the state after the step (the
+    multipliers from the fixed rows) and the final max |G|.
+    """
+    n, free, ell = m.n_dof, lay.free, lay.ell
+    gamma, beta = hht_coefficients(alpha)
+    z, P = ca.MX.sym("z", len(free)), ca.MX.sym("prm", n_prm)
+    parts, o = {}, 0
+    for key, size in _prm_layout(m):
+        parts[key], o = P[o:o + size], o + size
+    hp, dp, pp, qp, q0 = parts["h"], parts["d"], parts["p"], parts["q_pred"], parts["q0"]
+    # HHT on Phi = q_c - v: (1 + alpha) Phi(q_{n+1}) = alpha Phi(q_n)
+    q_fix = ca.DM(lay.fixed_to) + alpha / (1 + alpha) * (q0 - ca.DM(lay.fixed_to))
+    is_fixed = np.zeros(n)
+    is_fixed[lay.fixed] = 1.0
+    du = ell * lay.spread(z) + ca.DM(is_fixed) * (q_fix - qp)  # q_{n+1} - q_pred: never formed as a difference
+    q1 = qp + du
+    qdd1 = du / (beta * hp**2)
+    qd1 = parts["qd_pred"] + gamma * hp * qdd1
+    q_alpha = (1 + alpha) * q1 - alpha * q0  # where q''_{n+1} and the weighted forces act
+    coef = ca.vertcat(gamma / (beta * hp), 1 / (beta * hp**2))
+    g = m.gravity(pp)
+    R = R_t = -alpha * parts["f_n"] - parts["f_ext"]
+    blocks = []
+    for grp in m.groups:
+        args = [gather(v, grp) for v in (q1, qd1, qdd1)] + ([gather(q_alpha, grp)] if alpha != 0.0 else [])
+        args += [grp.props(pp), g, coef]
+        fr, fk = (hht_kernel(grp.kind, alpha, m.inertia, tangent) for tangent in (False, True))
+        rep = [fr.n_in() - 2, fr.n_in() - 1]  # g and c: the same for every element
+        R = R + scatter(fr.map(f"{fr.name()}_{grp.n}", "serial", grp.n, rep, [])(*args), grp, n)
+        r_e, K_e = fk.map(f"{fk.name()}_{grp.n}", "serial", grp.n, rep, [])(*args)
+        R_t = R_t + scatter(r_e, grp, n)  # the same residual, from the kernel that also gives K
+        blocks.append(K_e)
+    row = -np.ones(n, dtype=int)
+    row[free] = np.arange(len(free))
+    asm = MatrixAssembly(m.groups, row, row)
+    fr_idx = np.array(free, dtype=int)
+    jnz = asm.nonzeros(blocks) * ca.DM(ell[fr_idx[asm.nz_cols]]) / (dp * ell)[fr_idx[asm.nz_rows].tolist()]
+    scale_f = (dp * ell)[free]
+    cse = {"cse": True}
+    resid = ca.Function("hht_residual", [z, P], [R[free] / scale_f], ["z", "prm"], ["G"], cse)
+    jac = ca.Function("hht_jacobian", [z, P], [ca.MX(asm.sparsity, jnz), R_t[free] / scale_f], ["z", "prm"],
+                      ["jac_G_z", "G"], cse)
+    if expand:
+        resid, jac = resid.expand(), jac.expand()
+    lam1 = -R[lay.fixed] / (1 + alpha) if lay.fixed else ca.MX(0, 1)
+    x1 = ca.densify(ca.vertcat(q1, qd1, qdd1, lam1))  # dense: the C interface is plain arrays
+    res = ca.norm_inf(resid(z, P)) if free else ca.MX(0)
+    finish = ca.Function("hht_finish", [z, P], [x1, res], ["z", "prm"], ["x1", "res"])
+    return resid, jac, finish
+
+
+def _mapped(grp, f: ca.Function, *args):
+    """``f`` of every element of ``grp``; its inputs named g (gravity) are the same for all."""
+    rep = [i for i in range(f.n_in()) if f.name_in(i) == "g"]
+    return f.map(f"{f.name()}_{grp.n}", "serial", grp.n, rep, [])(*args)
+
+
+def _scale(m: Model, alpha: float) -> ca.Function:
+    """``hht_scale(q, qd, p, h) -> d``: the rotation-invariant diagonal of S (Eq. 9) at a state."""
+    n = m.n_dof
+    gamma, beta = hht_coefficients(alpha)
+    q, qd, p, h = ca.MX.sym("q", n), ca.MX.sym("qd", n), ca.MX.sym("p", m.n_p), ca.MX.sym("h")
+    diag = [ca.MX.zeros(n) for _ in range(3)]
+    for grp in m.groups:
+        out = _mapped(grp, kernel(grp.kind, "scale", m.inertia), gather(q, grp), gather(qd, grp), grp.props(p),
+                      m.gravity(p))
+        diag = [dg + scatter(v, grp, n) for dg, v in zip(diag, out, strict=True)]
+    dm, dc, dk = diag
+    dS = dm / (beta * h**2) + gamma / (beta * h) * ca.fabs(dc) + ca.fabs(dk)
+    # Average x and y per node: the trace of a 2x2 block does not change under rotation.
+    avg = ca.vertcat(*[(dS[3 * k] + dS[3 * k + 1]) / 2 if i < 2 else dS[3 * k + 2]
+                       for k in range(n // 3) for i in range(3)])
+    floor = 1e-12 * ca.mmax(avg) + 1e-300
+    return ca.Function("hht_scale", [q, qd, p, h], [ca.densify(ca.fmax(avg, floor))], ["q", "qd", "p", "h"], ["d"])
+
+
+def _initial(m: Model, lay: _Layout) -> ca.Function:
+    """``hht_initial(q, qd, t, p) -> (qdd, lam)``: consistent accelerations and multipliers (index-1
+    form of Eq. 1): the fixed dofs do not accelerate, M_ff qdd_f = -(h + f_int - g - f_ext)_f, and
+    the multipliers balance the fixed rows."""
+    n = m.n_dof
+    q, qd, t, p = ca.MX.sym("q", n), ca.MX.sym("qd", n), ca.MX.sym("t"), ca.MX.sym("p", m.n_p)
+    hh, f_int, g = m.forces(q, qd, p)
+    rhs = hh + f_int - g - m.load(t, p)
+    M = m.mass(q, p)
+    qdd = lay.spread(-ca.solve(M[lay.free, lay.free], rhs[lay.free], "qr") if lay.free else ca.MX(0, 1))
+    lam = -(ca.mtimes(M, qdd) + rhs)[lay.fixed] if lay.fixed else ca.MX(0, 1)
+    return ca.Function("hht_initial", [q, qd, t, p], [ca.densify(qdd), ca.densify(lam)], ["q", "qd", "t", "p"],
+                       ["qdd", "lam"])
+
+
+def _post(m: Model) -> ca.Function:
+    """``hht_post(x, t, p) -> y``: what a result reports per state (see :attr:`HHT.post`)."""
+    n = m.n_dof
+    x, t, p = ca.MX.sym("x", 3 * n + m.n_con), ca.MX.sym("t"), ca.MX.sym("p", m.n_p)
+    q, qd, lam = x[:n], x[n:2 * n], x[3 * n:]
+    T, Ve, Vg = m.energy(q, qd, p)
+    y = ca.vertcat(T, Ve, Vg, ca.dot(m.load(t, p), qd), m.outputs(q, lam, p), m.local_rotations(q))
+    return ca.Function("hht_post", [x, t, p], [ca.densify(y)], ["x", "t", "p"], ["y"])
+
+
+def _step_blocks(m: Model, lay: _Layout, alpha: float, prepare: ca.Function, resid: ca.Function,
+                 finish: ca.Function, expand: bool) -> ca.Function:
+    """``hht_step_sensitivity(x0, t0, p, h, d, x1) -> (G_z, G_w, X_z, X_w)``: the blocks of the step's
+    exact derivative by the implicit-function theorem. With G(z, prm(w)) = 0 and x1 = X(z, prm(w)),
+    w = (x0, t0, p, h): dx1/dw = X_w - X_z G_z^-1 G_w, one sparse QR of G_z per step. CasADi's
+    generic rootfinder derivative gives the same numbers but differentiates through the Newton
+    solve in every direction: about twice the run time, and for the sensitivities' 50-odd
+    directions 3x the code to compile."""
+    n, nx = m.n_dof, 3 * m.n_dof + m.n_con
+    _, beta = hht_coefficients(alpha)
+    z = ca.MX.sym("z", len(lay.free))
+    w = ca.MX.sym("w", nx + 1 + m.n_p + 1)  # the blocks are differentiated in w, then called on the inputs
+    o = np.cumsum([0, nx, 1, m.n_p, 1])
+    d = ca.MX.sym("d", n)
+    _, prm = prepare(*(w[o[i]:o[i + 1]] for i in range(4)), d)
+    G, X = resid(z, prm), finish(z, prm)[0]
+    blocks = ca.Function("hht_step_blocks", [z, w, d], [ca.jacobian(e, v) for e in (G, X) for v in (z, w)],
+                         ["z", "w", "d"], ["G_z", "G_w", "X_z", "X_w"])
+    if expand:
+        blocks = blocks.expand()
+    x0, t0, p, h = ca.MX.sym("x0", nx), ca.MX.sym("t0"), ca.MX.sym("p", m.n_p), ca.MX.sym("h")
+    x1 = ca.MX.sym("x1", nx)
+    q_pred = x0[:n] + h * x0[n:2 * n] + (0.5 - beta) * h**2 * x0[2 * n:3 * n]
+    z_of_x1 = ((x1[:n] - q_pred) / lay.ell)[lay.free]  # the unknowns that give x1
+    return ca.Function("hht_step_sensitivity", [x0, t0, p, h, d, x1],
+                       list(blocks(z_of_x1, ca.vertcat(x0, t0, p, h), d)),
+                       ["x0", "t0", "p", "h", "d", "x1"], ["G_z", "G_w", "X_z", "X_w"])

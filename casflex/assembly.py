@@ -1,0 +1,128 @@
+"""Element groups and their assembly through the scene's index maps.
+
+All elements of one kind form an :class:`ElementGroup`: a table of their global dofs and of their
+properties. A kernel of that kind (:mod:`casflex.elements.kernels`) is evaluated over the whole
+group with ``Function.map``: the element dofs are gathered from the global vectors by a constant
+index list, and element vectors and matrices are summed into global vectors and sparse matrices
+by constant 0/1 matrices. The generated code therefore holds one copy of each kernel whatever
+the mesh, and the cost of an evaluation grows linearly with the number of elements.
+
+Works on MX (structured Functions) and on SX (a caller that evaluates the Functions on SX
+symbols gets the same expressions flattened).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from casflex.elements.kernels import KINDS, Kind
+
+__all__ = ["ElementGroup", "MatrixAssembly", "gather", "scatter"]
+
+
+@dataclass(frozen=True, eq=False)
+class ElementGroup:
+    """The elements of one kind.
+
+    names : tuple of str, length n_el
+    dofs : int ndarray, shape (n_el, n_dof of the kind): global dof indices of each element
+    base : ndarray, shape (n_props, n_el): property values (those that are parameters: 0)
+    slots : ((prop row, element, parameter index), ...): properties that are entries of p
+    """
+
+    kind: str
+    names: tuple[str, ...]
+    dofs: np.ndarray
+    base: np.ndarray
+    slots: tuple[tuple[int, int, int], ...] = ()
+    _scatter: dict = field(default_factory=dict, init=False, repr=False)
+
+    @property
+    def spec(self) -> Kind:
+        return KINDS[self.kind]
+
+    @property
+    def n(self) -> int:
+        return len(self.names)
+
+    def props(self, p: ca.MX | ca.SX) -> ca.MX | ca.SX | ca.DM:
+        """Property table (n_props, n_el) for parameters p: constants with p's entries in their slots."""
+        base = ca.DM(self.base)
+        if not self.slots:
+            return base
+        n_pr = self.base.shape[0]
+        rows = [e * n_pr + r for r, e, _ in self.slots]
+        sel = ca.DM(ca.Sparsity.triplet(n_pr * self.n, p.numel(), rows, [k for _, _, k in self.slots]),
+                    [1.0] * len(self.slots))
+        return base + ca.reshape(ca.mtimes(sel, p), n_pr, self.n)
+
+    def scatter_matrix(self, n: int) -> ca.DM:
+        """Sparse 0/1 matrix (n, n_dof * n_el) that sums element vectors into a global n-vector."""
+        if n not in self._scatter:
+            nd = self.spec.n_dof
+            rows = self.dofs.ravel().tolist()
+            self._scatter[n] = ca.DM(ca.Sparsity.triplet(n, nd * self.n, rows, list(range(nd * self.n))),
+                                     [1.0] * len(rows))
+        return self._scatter[n]
+
+
+def gather(v: ca.MX | ca.SX, group: ElementGroup) -> ca.MX | ca.SX:
+    """The group's element dofs of a global vector v (n,): shape (n_dof of the kind, n_el)."""
+    return ca.reshape(v[group.dofs.ravel().tolist()], group.spec.n_dof, group.n)
+
+
+def scatter(values: ca.MX | ca.SX, group: ElementGroup, n: int) -> ca.MX | ca.SX:
+    """Element vectors (n_dof of the kind, n_el) summed into a global vector (n,)."""
+    return ca.mtimes(group.scatter_matrix(n), ca.vec(values))
+
+
+class MatrixAssembly:
+    """Sums element matrices of several groups into one sparse matrix.
+
+    ``rows``/``cols``: for each global dof, its row/column in the assembled matrix, or -1 to
+    leave it out (e.g. constrained dofs). The sparsity is the union of the element blocks.
+    :meth:`__call__` takes each group's element matrices as the map of a kernel returns them,
+    (n_d, n_d * n_el) side by side, and returns the assembled sparse matrix.
+    """
+
+    def __init__(self, groups: tuple[ElementGroup, ...], rows: np.ndarray, cols: np.ndarray):
+        n_r, n_c = int(rows.max(initial=-1)) + 1, int(cols.max(initial=-1)) + 1
+        entries = []  # (group, position in vec(K) of the group, row, col)
+        for g, grp in enumerate(groups):
+            nd = grp.spec.n_dof
+            for e in range(grp.n):
+                for b in range(nd):
+                    for a in range(nd):
+                        r, c = rows[grp.dofs[e, a]], cols[grp.dofs[e, b]]
+                        if r >= 0 and c >= 0:
+                            entries.append((g, e * nd * nd + b * nd + a, int(r), int(c)))
+        self.sparsity = ca.Sparsity.triplet(n_r, n_c, [x[2] for x in entries], [x[3] for x in entries])
+        # nonzero index of each (row, col) in the column-major sparsity
+        colind, row = self.sparsity.colind(), self.sparsity.row()
+        where = {(row[k], c): k for c in range(n_c) for k in range(colind[c], colind[c + 1])}
+        self.maps = []
+        for g, grp in enumerate(groups):
+            mine = [x for x in entries if x[0] == g]
+            nd = grp.spec.n_dof
+            self.maps.append(ca.DM(ca.Sparsity.triplet(self.sparsity.nnz(), nd * nd * grp.n,
+                                                       [where[(x[2], x[3])] for x in mine], [x[1] for x in mine]),
+                                   [1.0] * len(mine)))
+        self.nz_rows = np.array(row, dtype=int)
+        self.nz_cols = np.repeat(np.arange(n_c), np.diff(np.array(colind)))
+
+    def nonzeros(self, blocks: list) -> ca.MX | ca.SX:
+        """The assembled nonzeros (nnz,) from each group's element matrices (None: group absent)."""
+        out = ca.DM.zeros(self.sparsity.nnz())
+        for A, K in zip(self.maps, blocks, strict=True):
+            if K is not None and A.nnz():
+                out = out + ca.mtimes(A, ca.vec(K))
+        return out
+
+    def __call__(self, blocks: list) -> ca.MX | ca.SX:
+        nz = self.nonzeros(blocks)
+        if isinstance(nz, ca.DM):
+            return ca.DM(self.sparsity, nz)
+        return type(nz)(self.sparsity, nz)

@@ -1,0 +1,172 @@
+"""Element kernels: the named CasADi Functions of ONE element of each kind, in its own dofs and
+properties, that :mod:`casflex.assembly` maps over every element of that kind.
+
+Kinds and their element dofs and properties (a property may be a parameter of the scene):
+
+- ``beam``: (x_a, y_a, theta_a, x_b, y_b, theta_b); L0 (m), off_a, off_b (rad: beta0 - theta0 at
+  each end), E (Pa), A (m^2), I (m^4), rho (kg/m^3), rotary (1 adds the section's rotary inertia);
+- ``spring``: (x_a, y_a, x_b, y_b); k (N/m), rest (m);
+- ``spring0``: a spring of rest length zero (smooth where the nodes meet); k (N/m);
+- ``torsion``: (theta_a, theta_b); kt (N m/rad), rest (rad).
+
+Kernels (all SX, common subexpressions eliminated), with ``g`` the gravity vector (m/s^2):
+
+- ``<kind>_energy(q, qd, props, g) -> (kinetic, elastic, gravity)`` (J);
+- ``<kind>_forces(q, qd, props, g) -> (h, f_int, g)``: inertia, elastic and gravity forces;
+- ``<kind>_mass(q, props) -> M`` (dense, n_dof x n_dof);
+- ``<kind>_outputs(q, props) -> y``: the joint outputs of the element (``OUTPUTS``);
+- ``<kind>_rotations(q, props) -> theta_l``: local end rotations (beams);
+- ``<kind>_scale(q, qd, props, g) -> (m, c, k)``: diagonals of M, dh/dqd and d(f_int - g)/dq;
+- ``<kind>_hht<tag>(q, qd, qdd, [qa,] props, g, c) -> (r, K)`` and ``..._r`` (r only): the
+  element's part of the HHT residual r = M(qa) qdd + (1 + alpha) (h + f_int - g) and its exact
+  tangent K = dr/dq along the Newmark relations, c = (gamma / (beta h), 1 / (beta h^2)).
+
+Kernels are cached per process: they depend on the kind (and the HHT settings) only.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import casadi as ca
+
+from casflex.elements.beam import BeamElement
+from casflex.elements.springs import LinearSpring, TorsionalSpring
+
+__all__ = ["KINDS", "Kind", "kernel", "hht_kernel"]
+
+
+@dataclass(frozen=True)
+class Kind:
+    """An element kind: its dof count, property names and joint outputs."""
+
+    name: str
+    n_dof: int
+    props: tuple[str, ...]
+    outputs: tuple[str, ...]
+    massive: bool
+
+
+KINDS = {
+    "beam": Kind("beam", 6, ("L0", "off_a", "off_b", "E", "A", "I", "rho", "rotary"), ("N", "V", "Ma", "Mb"), True),
+    "spring": Kind("spring", 4, ("k", "rest"), ("force", "length", "fx", "fy"), False),
+    "spring0": Kind("spring0", 4, ("k",), ("force", "length", "fx", "fy"), False),
+    "torsion": Kind("torsion", 2, ("kt", "rest"), ("moment",), False),
+}
+
+
+class _Element:
+    """Uniform view of one symbolic element: energies, forces and their tangents, outputs."""
+
+    def __init__(self, kind: str, pr: ca.SX):
+        self.kind = kind
+        if kind == "beam":
+            self.beam = BeamElement("e", pr[0], (pr[1], pr[2]), pr[3], pr[4], pr[5], pr[6], rotary_inertia=pr[7])
+        elif kind == "spring":
+            self.spring = LinearSpring("e", pr[0], pr[1])
+        elif kind == "spring0":
+            self.spring = LinearSpring("e", pr[0], 0.0)
+        else:
+            self.spring = TorsionalSpring("e", pr[0], pr[1])
+
+    def strain(self, q: ca.SX) -> ca.SX:
+        if self.kind == "beam":
+            return self.beam.strain_energy(q)
+        if self.kind == "torsion":
+            return self.spring.strain_energy(q[0], q[1])
+        return self.spring.strain_energy(q[:2], q[2:])
+
+    def gravity(self, q: ca.SX, g: ca.SX) -> ca.SX:
+        return self.beam.gravity_energy(q, g) if self.kind == "beam" else ca.SX(0)
+
+    def mass_terms(self, q: ca.SX, a: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
+        n = q.numel()
+        if self.kind != "beam":
+            return ca.SX.zeros(n), ca.SX.zeros(n, n), ca.SX.zeros(n, n)
+        return self.beam.mass_terms(q, a)
+
+    def inertia_terms(self, q: ca.SX, qd: ca.SX, form: str) -> tuple[ca.SX, ca.SX, ca.SX]:
+        n = q.numel()
+        if self.kind != "beam":
+            return ca.SX.zeros(n), ca.SX.zeros(n, n), ca.SX.zeros(n, n)
+        return self.beam.inertia_terms(q, qd, form)
+
+    def kinetic(self, q: ca.SX, qd: ca.SX) -> ca.SX:
+        M = self.mass_terms(q, qd)[1]
+        return 0.5 * ca.dot(qd, ca.mtimes(M, qd))
+
+    def outputs(self, q: ca.SX) -> ca.SX:
+        if self.kind == "beam":
+            return self.beam.end_forces(q)
+        if self.kind == "torsion":
+            return ca.vertcat(*self.spring.outputs(q[0], q[1]).values())
+        return ca.vertcat(*self.spring.outputs(q[:2], q[2:]).values())
+
+
+def _symbols(kind: str) -> tuple[Kind, ca.SX, ca.SX, ca.SX, ca.SX, _Element]:
+    k = KINDS[kind]
+    q, qd = ca.SX.sym("q", k.n_dof), ca.SX.sym("qd", k.n_dof)
+    pr, g = ca.SX.sym("props", len(k.props)), ca.SX.sym("g", 2)
+    return k, q, qd, pr, g, _Element(kind, pr)
+
+
+CSE = {"cse": True}  # common subexpression elimination
+
+
+@functools.cache
+def kernel(kind: str, what: str, form: str = "lagrange") -> ca.Function:
+    """The kernel ``what`` (energy, forces, mass, outputs, rotations, scale) of element ``kind``;
+    ``form``: the inertia form of ``forces`` and ``scale`` (``"lagrange"`` or ``"seed"``)."""
+    k, q, qd, pr, g, el = _symbols(kind)
+    name = f"{kind}_{what}"
+    if what == "energy":
+        return ca.Function(name, [q, qd, pr, g], [el.kinetic(q, qd), el.strain(q), el.gravity(q, g)],
+                           ["q", "qd", "props", "g"], ["kinetic", "elastic", "gravity"], CSE)
+    if what == "forces":
+        h = el.inertia_terms(q, qd, form)[0]
+        return ca.Function(name, [q, qd, pr, g], [h, ca.gradient(el.strain(q), q), -ca.gradient(el.gravity(q, g), q)],
+                           ["q", "qd", "props", "g"], ["h", "f_int", "f_g"], CSE)
+    if what == "mass":
+        return ca.Function(name, [q, pr], [ca.densify(el.mass_terms(q, qd)[1])], ["q", "props"], ["M"], CSE)
+    if what == "outputs":
+        return ca.Function(name, [q, pr], [el.outputs(q)], ["q", "props"], ["y"], CSE)
+    if what == "rotations":
+        kin = el.beam.kinematics(q)
+        return ca.Function(name, [q, pr], [ca.vertcat(kin["tha"], kin["thb"])], ["q", "props"], ["theta_l"], CSE)
+    if what == "scale":
+        _, M, _ = el.mass_terms(q, qd)
+        _, _, C = el.inertia_terms(q, qd, form)
+        K = ca.hessian(el.strain(q) + el.gravity(q, g), q)[0]
+        return ca.Function(name, [q, qd, pr, g], [ca.diag(M), ca.diag(C), ca.diag(K)],
+                           ["q", "qd", "props", "g"], ["m", "c", "k"], CSE)
+    raise ValueError(f"what: unknown kernel {what!r}")
+
+
+@functools.cache
+def hht_kernel(kind: str, alpha: float, form: str, with_tangent: bool) -> ca.Function:
+    """The element's part of the HHT residual (Eq. 4) and, ``with_tangent``, its exact tangent.
+
+    Inputs q, qd, qdd: the element's dofs at t_{n+1}; qa: its dofs at q_alpha = (1 + alpha) q_{n+1}
+    - alpha q_n, where the mass is taken (absent at alpha = 0, where qa = q); c = (gamma / (beta h),
+    1 / (beta h^2)). Outputs r = M(qa) qdd + (1 + alpha) (h + f_int - g) and K = dr/dq_{n+1} with
+    qd, qdd and qa following q_{n+1} through the Newmark relations (dqd/dq = c[0], dqdd/dq = c[1],
+    dqa/dq = 1 + alpha).
+    """
+    k, q, qd, pr, g, el = _symbols(kind)
+    qdd = ca.SX.sym("qdd", k.n_dof)
+    qa = q if alpha == 0.0 else ca.SX.sym("qa", k.n_dof)
+    c = ca.SX.sym("c", 2)
+    Ma, M, dMa = el.mass_terms(qa, qdd)
+    h, dh_dq, dh_dqd = el.inertia_terms(q, qd, form)
+    V = el.strain(q) + el.gravity(q, g)
+    f = ca.gradient(V, q)
+    w = 1.0 + alpha
+    r = Ma + w * (h + f)
+    ins = [q, qd, qdd] + ([] if alpha == 0.0 else [qa]) + [pr, g, c]
+    names = ["q", "qd", "qdd"] + ([] if alpha == 0.0 else ["qa"]) + ["props", "g", "c"]
+    tag = f"{kind}_hht_a{round(-alpha * 1e6)}_{form}"  # alpha in the name: one C symbol per variant
+    if not with_tangent:
+        return ca.Function(f"{tag}_r", ins, [r], names, ["r"], CSE)
+    K = c[1] * M + w * dMa + w * (dh_dq + ca.jacobian(f, q) + c[0] * dh_dqd)
+    return ca.Function(tag, ins, [r, ca.densify(K)], names, ["r", "K"], CSE)
