@@ -11,13 +11,14 @@ x86-64. ``-march=native`` (where the compiler accepts it) makes twobar's compile
 faster; as the library is then tied to the processor, the processor's description is part of the
 cache key.
 
-CasADi's own JIT, which compiles an identification NLP's functions (``compiled=True``), is set
-up by :func:`jit_options` in a per-process scratch directory.
+Everything casflex compiles goes through :func:`compile_functions`: simulation steps,
+sensitivities, and the functions of identification NLPs (:func:`compiled`,
+:func:`compiled_nlpsol`), so a later process pays no compile. ``casflex cache`` shows the cache
+and ``casflex cache --clear`` empties it (:func:`clear_cache`).
 """
 
 from __future__ import annotations
 
-import atexit
 import contextlib
 import functools
 import hashlib
@@ -37,8 +38,8 @@ import numpy as np
 
 from casflex.results import atomic_write_text
 
-__all__ = ["BufferedCall", "CompiledLibrary", "compile_functions", "generate_c", "cache_dir", "CodegenError", "CFLAGS",
-           "jit_options", "jit_working_directory"]
+__all__ = ["BufferedCall", "CompiledLibrary", "compile_functions", "compiled", "compiled_nlpsol", "generate_c",
+           "cache_dir", "cache_entries", "clear_cache", "CodegenError", "CFLAGS"]
 
 CFLAGS = ("-ffp-contract=off", "-fPIC", "-shared")
 
@@ -148,13 +149,40 @@ def _processor() -> str:
     return "\n".join(keep) or f"{platform.machine()} {platform.processor()}"
 
 
+@functools.lru_cache(maxsize=4)
+def _compiler_identity(cc: str) -> str:
+    """``cc --version``'s first line: part of the cache key, so a new compiler builds anew."""
+    try:
+        proc = subprocess.run([cc, "--version"], capture_output=True, text=True, timeout=30)
+        return (proc.stdout.splitlines() or [""])[0]
+    except (OSError, subprocess.SubprocessError):
+        return ""
+
+
+@contextlib.contextmanager
+def _locked(path: Path) -> Iterator[None]:
+    """An exclusive lock on ``path`` (created if needed) for the block: concurrent processes that
+    want the same library wait for the one that builds it instead of building it again."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a") as fh:
+        try:
+            import fcntl
+
+            fcntl.flock(fh, fcntl.LOCK_EX)
+        except (ImportError, OSError):  # no advisory locks here: the atomic rename still keeps the cache sound
+            pass
+        yield
+
+
 def compile_functions(functions: list[ca.Function], *, stem: str = "casflex", optimise: str = "-O3") -> CompiledLibrary:
     """Generate, compile (or take from the cache) and load ``functions``.
 
     ``optimise``: gcc's optimisation level. -O3 for code run millions of times (HHT steps); -O1
-    for large code run a few dozen times per use (the sensitivities: twobar refined to 2 elements
-    per bar compiles in 7 s instead of 60 s and runs 20 % slower).
+    for large code run a few dozen times per use (sensitivities, NLP functions).
 
+    The cache key is the SHA-256 of the generated source, the compiler (command and version),
+    its flags and the processor. A library is built in a temporary directory and renamed into
+    the cache under a lock, so concurrent processes build it once and never see a partial file.
     Returns a :class:`CompiledLibrary` whose ``functions`` map each name to a ``ca.external``.
     """
     t0 = time.perf_counter()
@@ -164,58 +192,72 @@ def compile_functions(functions: list[ca.Function], *, stem: str = "casflex", op
         c_file, _ = generate_c(functions, tmp, stem)
         source = c_file.read_bytes()
         flags = (optimise, *CFLAGS, *_native_flags(cc))
-        digest = hashlib.sha256(source + " ".join((cc, *flags, _processor())).encode()).hexdigest()[:24]
+        key = " ".join((cc, _compiler_identity(cc), *flags, _processor()))
+        digest = hashlib.sha256(source + key.encode()).hexdigest()[:24]
         target = cache_dir() / f"{stem}-{digest}.so"
         cached = target.is_file()
+        if not cached:
+            with _locked(cache_dir() / f".{stem}-{digest}.lock"):
+                cached = target.is_file()  # built by another process while this one waited
+                if not cached:
+                    _build(cc, flags, c_file, Path(tmp) / f"{stem}.so", target, stem, len(source))
         if cached:
             log.info("using the compiled %s from the cache (%s)", stem, target)
         else:
-            target.parent.mkdir(parents=True, exist_ok=True)
-            built = Path(tmp) / f"{stem}.so"
-            cmd = [cc, *flags, str(c_file), "-o", str(built), "-lm"]
-            log.info("compiling %s.c (%d kB) with %s; the library is cached in %s for later runs",
-                     stem, len(source) // 1024, cc, target.parent)
-            proc = subprocess.run(cmd, capture_output=True, text=True)
-            if proc.returncode != 0:
-                raise CodegenError(f"compiling {stem}.c failed ({' '.join(cmd)}):\n{proc.stderr[-2000:]}")
-            fd, tmp_target = tempfile.mkstemp(dir=target.parent, suffix=".so.tmp")
-            os.close(fd)
-            shutil.copyfile(built, tmp_target)
-            os.replace(tmp_target, target)
-            log.info("compiled %s in %.1f s", stem, time.perf_counter() - t0)
+            log.info("compiled %s in %.1f s (once: cached in %s)", stem, time.perf_counter() - t0, target.parent)
     loaded = {f.name(): ca.external(f.name(), str(target)) for f in functions}
     return CompiledLibrary(target, loaded, time.perf_counter() - t0, cached)
 
 
-# -- CasADi's JIT (identification NLPs) ----------------------------------------------------
-@functools.cache
-def _jit_directory() -> str:
-    """One scratch directory per process for the JIT's sources and objects (never the user's
-    working directory), removed at exit; a loaded library survives the removal of its file."""
-    path = tempfile.mkdtemp(prefix="casflex-jit-")
-    atexit.register(shutil.rmtree, path, True)
-    return path
+def _build(cc: str, flags: tuple[str, ...], c_file: Path, built: Path, target: Path, stem: str, size: int) -> None:
+    cmd = [cc, *flags, str(c_file), "-o", str(built), "-lm"]
+    log.info("building %s.c (%d kB) with %s: once, the library is cached for later runs", stem, size // 1024, cc)
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise CodegenError(f"compiling {stem}.c failed ({' '.join(cmd)}):\n{proc.stderr[-2000:]}")
+    fd, tmp_target = tempfile.mkstemp(dir=target.parent, suffix=".so.tmp")
+    os.close(fd)
+    shutil.copyfile(built, tmp_target)
+    os.replace(tmp_target, target)
 
 
-@contextlib.contextmanager
-def jit_working_directory(active: bool) -> Iterator[None]:
-    """Run a block in the JIT scratch directory: CasADi 3.8 writes the source of an nlpsol's
-    JIT-compiled oracle to the working directory whatever the compiler's ``directory`` option
-    says (plain Functions honour it). Not thread-safe: the working directory is per process."""
-    if not active:
-        yield
-        return
-    old = os.getcwd()
-    os.chdir(_jit_directory())
-    try:
-        yield
-    finally:
-        os.chdir(old)
+def compiled(f: ca.Function, *, optimise: str = "-O1") -> ca.Function:
+    """``f`` generated as C, compiled (or taken from the cache) and loaded: same inputs, outputs
+    and numbers."""
+    return compile_functions([f], stem=f.name(), optimise=optimise)[f.name()]
 
 
-def jit_options() -> dict:
-    """Function/nlpsol options that generate C for every function the solver calls and compile
-    it with the system compiler (CasADi's 'shell' JIT)."""
-    return {"jit": True, "compiler": "shell", "jit_name": "casflex_jit",
-            "jit_options": {"compiler": _compiler(), "flags": ["-O1"], "verbose": False,
-                            "directory": _jit_directory()}}
+def compiled_nlpsol(name: str, plugin: str, nlp: dict, opts: dict) -> ca.Function:
+    """``ca.nlpsol(name, plugin, nlp, opts)`` with every function the solver evaluates compiled
+    (gcc -O1) and cached on disk: the solver is set up interpreted, its functions (the NLP and the
+    derivatives it asked for, a ``hess_lag`` option included) are generated as one C library, and
+    the solver is made anew on that library (CasADi's documented route for compiled NLPs)."""
+    interpreted = ca.nlpsol(name, plugin, nlp, opts)
+    funcs = [interpreted.oracle()]
+    for fname in interpreted.get_function():
+        f = interpreted.get_function(fname)
+        if f.name() != fname:  # a Function given as an option: the library must hold it under the name sought
+            args = f.mx_in()
+            f = ca.Function(fname, args, f.call(args), f.name_in(), f.name_out())
+        funcs.append(f)
+    lib = compile_functions(funcs, stem=f"{name}_nlp", optimise="-O1")
+    return ca.nlpsol(name, plugin, str(lib.path), {k: v for k, v in opts.items() if k != "hess_lag"})
+
+
+def cache_entries() -> list[Path]:
+    """The compiled libraries in the cache directory."""
+    d = cache_dir()
+    return sorted(d.glob("*.so")) if d.is_dir() else []
+
+
+def clear_cache() -> tuple[int, int]:
+    """Remove every compiled library (and lock and probe file) from the cache: (files, bytes)."""
+    count = size = 0
+    d = cache_dir()
+    if not d.is_dir():
+        return 0, 0
+    for f in [*d.glob("*.so"), *d.glob(".*.lock"), *d.glob("native*.txt"), *d.glob("*.so.tmp")]:
+        size += f.stat().st_size
+        f.unlink(missing_ok=True)
+        count += 1
+    return count, size

@@ -71,3 +71,13 @@ def test_demo(tmp_path, capsys):
     assert "0.690" in out and "2.830" in out
     assert (tmp_path / "twobar.npz").is_file()
     assert any(tmp_path.glob("*.png"))
+
+
+def test_cache_lists_and_clears_the_compiled_libraries(tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("CASFLEX_CACHE", str(tmp_path))
+    assert main(["simulate", "twobar", "--t-end", "0.01", "--compiled", "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["cache"]) == 0
+    assert f"{tmp_path}" in capsys.readouterr().out and len(list(tmp_path.glob("*.so"))) == 1
+    assert main(["cache", "--clear"]) == 0
+    assert "removed" in capsys.readouterr().out and not list(tmp_path.glob("*.so"))

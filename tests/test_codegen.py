@@ -42,11 +42,43 @@ def test_compiled_steps_are_bitwise_the_interpreted_ones(alpha, elements):
         assert np.array_equal(x, y)
 
 
-def test_jit_scratch_directory_is_the_working_directory_only_inside_the_block():
-    cwd = os.getcwd()
-    with codegen.jit_working_directory(True):
-        inside = os.getcwd()
-    assert inside != cwd and os.getcwd() == cwd
-    assert codegen.jit_options()["jit_options"]["directory"] == inside
-    with codegen.jit_working_directory(False):
-        assert os.getcwd() == cwd
+_BUILD_ONE = """
+import casadi as ca, sys
+from casflex import codegen
+x = ca.SX.sym("x", 3)
+f = ca.Function("cache_probe", [x], [ca.sin(x) * float(sys.argv[1])])
+lib = codegen.compile_functions([f], stem="cache_probe", optimise="-O1")
+print("cached" if lib.cached else "built", float(lib["cache_probe"](ca.DM([1, 2, 3]))[1]))
+"""
+
+
+def test_two_processes_build_a_library_once_and_a_third_pays_nothing(tmp_path):
+    import subprocess
+    import sys
+
+    env = dict(os.environ, CASFLEX_CACHE=str(tmp_path))
+    cmd = [sys.executable, "-c", _BUILD_ONE, "2.5"]
+    procs = [subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, text=True) for _ in range(2)]
+    outs = sorted(p.communicate(timeout=300)[0].split()[0] for p in procs)
+    assert outs == ["built", "cached"]  # the second waited on the lock and loaded the first's library
+    again = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True).stdout.split()
+    assert again[0] == "cached" and float(again[1]) == pytest.approx(2.5 * np.sin(2.0), rel=1e-15)
+    assert len(list(tmp_path.glob("cache_probe-*.so"))) == 1 and not list(tmp_path.glob("*.tmp"))
+
+
+def test_a_compiled_nlp_solver_follows_the_interpreted_iterates_and_is_cached(tmp_path, monkeypatch):
+    import casadi as ca
+
+    monkeypatch.setenv("CASFLEX_CACHE", str(tmp_path))
+    w = ca.MX.sym("w", 2)
+    nlp = {"x": w, "f": (1 - w[0]) ** 2 + 100 * (w[1] - w[0] ** 2) ** 2}
+    opts = {"ipopt.print_level": 0, "print_time": False}
+    a = ca.nlpsol("rosen", "ipopt", nlp, opts)(x0=[-1.2, 1.0])
+    S = codegen.compiled_nlpsol("rosen", "ipopt", nlp, opts)
+    b = S(x0=[-1.2, 1.0])
+    assert np.array_equal(np.array(a["x"]), np.array(b["x"]))  # the same iterates: bitwise the same answer
+    assert len(codegen.cache_entries()) == 1
+    codegen.compiled_nlpsol("rosen", "ipopt", nlp, opts)
+    assert len(codegen.cache_entries()) == 1  # found, not built again
+    count, size = codegen.clear_cache()
+    assert count >= 1 and size > 0 and codegen.cache_entries() == []

@@ -33,7 +33,7 @@ from collections.abc import Sequence
 import casadi as ca
 import numpy as np
 
-from casflex.codegen import jit_options
+from casflex import codegen
 from casflex.data import MeasurementSet
 from casflex.identification.initial_state import _kinematic_fit
 from casflex.identification.problem import (
@@ -233,8 +233,8 @@ def identify_adapted_direct(
     ubw = np.full(n_w, np.inf)
     lbw[:n_p], ubw[:n_p] = pmap.bounds()
     w0 = np.concatenate([pmap.theta(p0), *w0_inst])
-    zJ = ca.Function("adapted_residual", [w], [z, ca.jacobian(z, w)], ["w"], ["z", "J"],
-                     jit_options() if compiled else {})
+    zJ = ca.Function("adapted_residual", [w], [z, ca.jacobian(z, w)], ["w"], ["z", "J"])
+    zJ = codegen.compiled(zJ) if compiled else zJ
 
     # the residual at the optimum is the cubic's truncation error, not 0: the gradient's
     # round-off floor is ~1e-9, the Gauss-Newton polish does the rest

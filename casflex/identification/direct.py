@@ -19,7 +19,7 @@ from collections.abc import Sequence
 import casadi as ca
 import numpy as np
 
-from casflex.codegen import jit_options
+from casflex import codegen
 from casflex.data import MeasurementSet
 from casflex.identification.problem import (
     IdentificationResult,
@@ -129,7 +129,8 @@ def identify_direct(
     lbw = np.concatenate([lb_th, np.full((n_c + n_ax) * len(samples), -np.inf)])
     ubw = np.concatenate([ub_th, np.full((n_c + n_ax) * len(samples), np.inf)])
     Jz = ca.jacobian(z, w)
-    zJ = ca.Function("direct_residual", [w], [z, Jz], ["w"], ["z", "J"], jit_options() if compiled else {})
+    zJ = ca.Function("direct_residual", [w], [z, Jz], ["w"], ["z", "J"])
+    zJ = codegen.compiled(zJ) if compiled else zJ
 
     # exact linear least squares where z is affine in (p, lambda)
     linear = not ca.depends_on(Jz, w)

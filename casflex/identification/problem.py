@@ -11,7 +11,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from casflex.codegen import jit_options, jit_working_directory, log
+from casflex.codegen import compiled_nlpsol, log
 from casflex.identification.result import IdentificationResult
 from casflex.model import Model
 
@@ -247,8 +247,6 @@ def least_squares_nlp(name: str, solver: str, w: Any, r: Any, g: Any = None, *, 
     sym = ca.SX if isinstance(w, ca.SX) else ca.MX
     g = sym(0, 1) if g is None else g
     opts = solver_options_for(solver, verbose, None, tol=tol)
-    if compiled:
-        opts.update(jit_options())
     hess = None
     if hessian == "gauss-newton":
         J = ca.jacobian(r, w)
@@ -258,8 +256,7 @@ def least_squares_nlp(name: str, solver: str, w: Any, r: Any, g: Any = None, *, 
 
         def hess(triu: bool) -> ca.Function:
             return ca.Function(f"{name}_hess_l", [w, sym(0, 1), lam_f, lam_g], [ca.triu(H) if triu else H],
-                               ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x" if triu else "hess_gamma_x_x"],
-                               jit_options() if compiled else {})
+                               ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x" if triu else "hess_gamma_x_x"])
 
     nlp = {"x": w, "f": 0.5 * f_scale * ca.sumsqr(r), "g": g}
     # IPOPT and its kin take the upper triangle, the SQP methods the whole symmetric matrix;
@@ -275,12 +272,8 @@ def least_squares_nlp(name: str, solver: str, w: Any, r: Any, g: Any = None, *, 
         if triu is not None:
             opts["hess_lag"] = hess(triu)
         merge_options(opts, solver_options or {})
-        if compiled:
-            log.info("generating and compiling C for the %s NLP's functions with CasADi's JIT (not cached between "
-                     "processes; this can take minutes)", name)
         try:
-            with jit_working_directory(compiled):
-                S = ca.nlpsol(name, solver, nlp, opts)
+            S = ca.nlpsol(name, solver, nlp, opts)
         except RuntimeError as exc:
             msg = _casadi_reason(exc)
             if triu is True and "symmetric" in msg:
@@ -291,6 +284,9 @@ def least_squares_nlp(name: str, solver: str, w: Any, r: Any, g: Any = None, *, 
                               "solver runs with its own Hessian (approximation)", stacklevel=3)
                 continue
             raise ValueError(f"solver {solver!r}: cannot be created ({msg})") from None
+        if compiled:  # the same solver on its functions compiled (cached on disk: a later process pays nothing)
+            log.info("compiling the %s NLP's functions", name)
+            S = compiled_nlpsol(name, solver, nlp, opts)
         return S
     raise AssertionError("unreachable")
 

@@ -44,7 +44,7 @@ from collections.abc import Sequence
 import casadi as ca
 import numpy as np
 
-from casflex.codegen import jit_options
+from casflex import codegen
 from casflex.data import MeasurementSet
 from casflex.identification.problem import (
     IdentificationResult,
@@ -282,7 +282,8 @@ def identify_nlp(
     ss_r = residue_of(Xf)
     # NaN where a step's Newton did not converge, so that the polish rejects such a step
     ss_ok = ca.if_else(ca.mmax(Rf) <= tol_acc, ss_r, np.nan * ss_r)
-    ss_all = ca.Function("ss_residue", [th], [ss_ok, ca.jacobian(ss_r, th), ss_r], jit_options() if compiled else {})
+    ss_all = ca.Function("ss_residue", [th], [ss_ok, ca.jacobian(ss_r, th), ss_r])
+    ss_all = codegen.compiled(ss_all) if compiled else ss_all
 
     def ss(t: np.ndarray) -> list:
         return ss_all(t)[:2]

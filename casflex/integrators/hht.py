@@ -364,11 +364,15 @@ def _newton_functions(m: Model, lay: _Layout, alpha: float, n_prm: int, expand: 
     resid = ca.Function("hht_residual", [z, P], [R[free] / scale_f], ["z", "prm"], ["G"], cse)
     jac = ca.Function("hht_jacobian", [z, P], [ca.MX(asm.sparsity, jnz), R_t[free] / scale_f], ["z", "prm"],
                       ["jac_G_z", "G"], cse)
+    # the residual once more at the solution, with the fixed rows that give the multipliers
+    resid_all = ca.Function("hht_residual_all", [z, P], [R[free] / scale_f, R[lay.fixed]], ["z", "prm"],
+                            ["G", "r_fixed"], cse)
     if expand:
-        resid, jac = resid.expand(), jac.expand()
-    lam1 = -R[lay.fixed] / (1 + alpha) if lay.fixed else ca.MX(0, 1)
+        resid, jac, resid_all = resid.expand(), jac.expand(), resid_all.expand()
+    G1, r_fixed = resid_all(z, P)
+    lam1 = -r_fixed / (1 + alpha) if lay.fixed else ca.MX(0, 1)
     x1 = ca.densify(ca.vertcat(q1, qd1, qdd1, lam1))  # dense: the C interface is plain arrays
-    res = ca.norm_inf(resid(z, P)) if free else ca.MX(0)
+    res = ca.norm_inf(G1) if free else ca.MX(0)
     finish = ca.Function("hht_finish", [z, P], [x1, res], ["z", "prm"], ["x1", "res"])
     return resid, jac, finish
 
