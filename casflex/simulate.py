@@ -219,7 +219,7 @@ def simulate(
                     failure = _diagnose(integ, X[done], done, dt, pv, d, max_iter, t0)
                     break
             else:
-                x1, r, it = _interpreted_step(integ, X[done], t0 + done * dt, pv, dt, d)
+                x1, r, it = integ.step_interpreted(X[done], t0 + done * dt, pv, dt, d)
                 iters[done] = it
                 if not (np.isfinite(x1).all() and r <= integ.tolerance(x1[:n])):
                     q1 = x1[:n] if np.isfinite(x1).all() else X[done, :n]
@@ -295,16 +295,6 @@ def initial_state(integ: HHT, p: np.ndarray, *, q0: np.ndarray | None = None, qd
     return np.concatenate([q, qd, qdd, lam])
 
 
-def _interpreted_step(integ: HHT, x: np.ndarray, t: float, p: np.ndarray, dt: float, d: np.ndarray):
-    prepare, newton, finish = integ.pieces
-    z0, prm = prepare(x, t, p, dt, d)
-    z = newton(z0, prm)
-    st = newton.stats()  # iterations: Newton updates made (the last, when it stopped on its size, is not counted)
-    it = int(st["iter_count"]) + (st["return_status"] == "converged_abstol_step")
-    x1, r = finish(z, prm)
-    return np.array(x1).ravel(), float(r), it
-
-
 def _failure_message(step: int, dt: float, iters: int, res: float, tol: float, max_iter: int,
                      t0: float = 0.0) -> str:
     t = t0 + step * dt
@@ -316,7 +306,7 @@ def _failure_message(step: int, dt: float, iters: int, res: float, tol: float, m
 
 def _diagnose(integ: HHT, x: np.ndarray, step: int, dt: float, p, d, max_iter: int, t0: float = 0.0) -> str:
     """Re-run a failed compiled step interpreted to report its iterations and residual."""
-    x1, r, it = _interpreted_step(integ, x, t0 + step * dt, p, dt, d)
+    x1, r, it = integ.step_interpreted(x, t0 + step * dt, p, dt, d)
     q = x1 if np.isfinite(x1).all() else x
     return _failure_message(step, dt, it, r, float(integ.tolerance(q[:integ.model.n_dof])), max_iter, t0)
 

@@ -162,24 +162,19 @@ def _finite(traj) -> bool:
 
 def _newton_sample(integ, traj, p: np.ndarray, dt: float, n_samples: int, failed: bool) -> dict:
     """Newton iterations of sampled steps, re-run from the run's own states with the interpreted
-    pieces (prepare, newton, finish) and the run's scaling d; also checks that they reproduce the
+    step (HHT.step_interpreted) and the run's scaling d; also checks that it reproduces the
     compiled states."""
     model = integ.model
     n = model.n_dof
     X = np.hstack([traj.q, traj.qd, traj.qdd, traj.lam])
     done = X.shape[0] - 1
     d = np.array(integ.scale(X[0, :n], X[0, n:2 * n], p, dt)).ravel()
-    prepare, newton, finish = integ.pieces
     idx = set(np.linspace(0, done - 1, min(done, n_samples)).astype(int).tolist()) if done else set()
     last = set(range(max(done - 20, 0), done))
     idx |= last
     its, its_last, mismatch = [], [], 0.0
     for k in sorted(idx):
-        z0, prm = prepare(X[k], k * dt, p, dt, d)
-        z = newton(z0, prm)
-        it = int(newton.stats()["iter_count"])
-        x1, _r = finish(z, prm)
-        x1 = np.array(x1).ravel()
+        x1, _r, it = integ.step_interpreted(X[k], k * dt, p, dt, d)
         scale = np.maximum(np.abs(X[k + 1]), 1.0)
         mismatch = max(mismatch, float(np.max(np.abs(x1 - X[k + 1]) / scale)))
         its.append(it)
@@ -187,10 +182,7 @@ def _newton_sample(integ, traj, p: np.ndarray, dt: float, n_samples: int, failed
             its_last.append(it)
     fail_it = fail_res = None
     if failed:
-        z0, prm = prepare(X[done], done * dt, p, dt, d)
-        z = newton(z0, prm)
-        fail_it = int(newton.stats()["iter_count"])
-        fail_res = float(finish(z, prm)[1])
+        _x, fail_res, fail_it = integ.step_interpreted(X[done], done * dt, p, dt, d)
     return {"sampled": len(its), "mean": float(np.mean(its)) if its else math.nan,
             "max": int(max(its)) if its else 0, "max_last20": int(max(its_last)) if its_last else 0,
             "mean_last20": float(np.mean(its_last)) if its_last else math.nan,
@@ -212,14 +204,13 @@ def _failing_step(integ, traj, p: np.ndarray, dt: float, tol: float) -> dict:
     n = model.n_dof
     X = np.hstack([traj.q, traj.qd, traj.qdd, traj.lam])
     k = X.shape[0] - 1
-    prepare, newton, finish = integ.pieces
     if integ not in _GJ:
-        G = newton.oracle()
+        G = integ.residual
         zs, ps = ca.SX.sym("z", G.nnz_in(0)), ca.SX.sym("prm", G.nnz_in(1))
         _GJ[integ] = ca.Function("gj", [zs, ps], [G(zs, ps), ca.jacobian(G(zs, ps), zs)])
     gj = _GJ[integ]
     d = np.array(integ.scale(X[0, :n], X[0, n:2 * n], p, dt)).ravel()
-    z0, prm = prepare(X[k], k * dt, p, dt, d)
+    z0, prm = integ.prepare(X[k], k * dt, p, dt, d)
     z = np.array(z0).ravel()
     trace, cond0 = [], math.nan
     for i in range(integ.max_iter + 1):
@@ -239,9 +230,7 @@ def _failing_step(integ, traj, p: np.ndarray, dt: float, tol: float) -> dict:
     x = X[k]
     dh = np.array(integ.scale(X[0, :n], X[0, n:2 * n], p, dt / 2)).ravel()
     for j in range(2):
-        z0h, prmh = prepare(x, k * dt + j * dt / 2, p, dt / 2, dh)
-        x1, r = finish(newton(z0h, prmh), prmh)
-        x = np.array(x1).ravel()
+        x, r, _ = integ.step_interpreted(x, k * dt + j * dt / 2, p, dt / 2, dh)
         if not (np.isfinite(x).all() and float(r) <= float(integ.tolerance(x[:n]))):
             half_ok = False
             break
@@ -307,10 +296,8 @@ def _next_state(integ, traj, p: np.ndarray, dt: float) -> tuple[np.ndarray, floa
     n = integ.model.n_dof
     X = np.hstack([traj.q, traj.qd, traj.qdd, traj.lam])
     d = np.array(integ.scale(X[0, :n], X[0, n:2 * n], p, dt)).ravel()
-    prepare, newton, finish = integ.pieces
-    z0, prm = prepare(X[-1], (X.shape[0] - 1) * dt, p, dt, d)
-    x1, r = finish(newton(z0, prm), prm)
-    return np.array(x1).ravel(), float(r)
+    x1, r, _ = integ.step_interpreted(X[-1], (X.shape[0] - 1) * dt, p, dt, d)
+    return x1, r
 
 
 def _cross_check(integ, traj, p: np.ndarray, dt: float) -> dict:

@@ -31,17 +31,19 @@ stiffness or mass: each momentum row i is divided by d_i * l_i, d_i a rotation-i
 diagonal of the iteration matrix S = M/(beta h^2) + gamma/(beta h) C + K (Eq. 9) at the
 initial state and l_i the characteristic length (m) for translations or 1 for rotations;
 the unknowns are u = (q_{n+1} - q_guess)/l of the free dofs. Newton makes at least one update
-unless the guess is (nearly) exact, and stops when a Newton update is below 0.01 sqrt(tol) (in
-the quadratic regime the residual after it is ~1e-4 tol) or the scaled residual is below
-1e-3 tol. The step returns its final residual, recomputed, and the driver rejects any step
+unless the guess is (nearly) exact, and stops when the scaled residual is below tol or a Newton
+update is below 0.01 sqrt(tol) (in the quadratic regime the residual after it is ~1e-4 tol). The step returns its final residual, recomputed, and the driver rejects any step
 above ``tol`` (raised to the round-off floor of far-off coordinates, :meth:`HHT.tolerance`).
 The Newton guess is the constant-acceleration predictor (q''_{n+1} = q''_n), better than the
 paper's q''_{n+1} = 0 (Eq. 6); the converged step is the same.
 
-The step is a CasADi Function built from three pieces, ``prepare`` -> ``newton`` (CasADi's
-code-generatable ``fast_newton`` rootfinder, sparse QR) -> ``finish``, so that the Python driver
-can call them one by one and read Newton's iteration count, while :meth:`HHT.trajectory` chains
-steps with ``mapaccum`` into one differentiable, exportable Function.
+The step is a CasADi Function built from pieces: ``prepare``, one Newton update (CasADi's
+code-generatable ``fast_newton`` rootfinder, sparse QR), ``finish`` (the state and the residual
+there), and only when that update did not converge the step, more Newton iterations (a
+conditional call). On a resolved motion one update converges: each step evaluates the Jacobian
+once, factorises once and evaluates the residual twice. :meth:`HHT.step_interpreted` drives the
+same pieces from Python to count the updates; :meth:`HHT.trajectory` chains steps with
+``mapaccum`` into one differentiable, exportable Function.
 """
 
 from __future__ import annotations
@@ -143,17 +145,27 @@ class HHT:
         lay = _Layout.of(m, ell)
         expand = self.expand if self.expand is not None else expand_by_default(m)
         prepare = _prepare(m, lay, self.alpha)
-        resid, jac, finish = _newton_functions(m, lay, self.alpha, prepare.nnz_out(1), expand)
-        newton = ca.rootfinder(
-            "hht_newton", "fast_newton", resid,
-            # abstol far below tol: a guess is accepted without a Newton update only when it is
-            # (nearly) exact. G scales a force by d ~ M / (beta h^2), so at a small step a predictor
-            # with G just under tol can still carry acceleration errors of tol l / (beta h^2):
-            # 0.05 m/s^2 at h = 1.25e-5 s, which accumulate in the velocities (7.6e-6 m over 0.4 s).
-            {"abstol": 1e-3 * self.tol, "abstolStep": 1e-2 * self.tol**0.5, "max_iter": self.max_iter,
-             "error_on_fail": False, "jacobian_function": jac})
-        self._fn.update(prepare=prepare, residual=resid, jacobian=jac, newton=newton, finish=finish,
-                        scale=_scale(m, self.alpha), initial=_initial(m, lay), post=_post(m))
+        resid, jac, finish = _newton_functions(m, lay, self.alpha, self.tol, prepare.nnz_out(1), expand)
+
+        def newton(name: str, max_iter: int, abstol: float) -> ca.Function:
+            return ca.rootfinder(name, "fast_newton", resid, {
+                "abstol": abstol, "abstolStep": 1e-2 * self.tol**0.5, "max_iter": max_iter, "error_on_fail": False,
+                "jacobian_function": jac})
+
+        # The first update is made unless the guess is (nearly) exact (1e-3 tol): G scales a force by
+        # d ~ M / (beta h^2), so at a small step a predictor with G just under tol can carry acceleration
+        # errors of tol l / (beta h^2): 0.05 m/s^2 at h = 1.25e-5 s, which accumulate in the velocities
+        # (7.6e-6 m over 0.4 s). After it, tol decides, as it does for the iterations that may follow.
+        self._fn.update(prepare=prepare, residual=resid, jacobian=jac, finish=finish, scale=_scale(m, self.alpha),
+                        initial=_initial(m, lay), post=_post(m), first=newton("hht_newton_first", 1, 1e-3 * self.tol),
+                        newton=newton("hht_newton", max(self.max_iter - 1, 1), self.tol))
+        # after the first update: done if converged, else Newton goes on from there (rare at small steps)
+        z1, P = ca.MX.sym("z1", resid.nnz_in(0)), ca.MX.sym("prm", resid.nnz_in(1))
+        xa, ra = ca.MX.sym("x1", self.nx), ca.MX.sym("res")
+        keep = ca.Function("hht_done", [z1, P, xa, ra], [xa, ra])
+        more = ca.Function("hht_more", [z1, P, xa, ra], finish(self._fn["newton"](z1, P), P)[:2]
+                           if self.max_iter > 1 else [xa, ra])
+        self._fn["more"] = ca.Function.conditional("hht_converge", [keep], more)
         self._fn["sensitivity"] = _step_blocks(m, lay, self.alpha, prepare, resid, finish, expand)
         self._fn["step"] = self._step_with_derivative()
 
@@ -164,7 +176,9 @@ class HHT:
         n, nx, npar = m.n_dof, self.nx, m.n_p
         x0, t0, p, h, d = self._fn["prepare"].mx_in()
         zg, pr = self._fn["prepare"](x0, t0, p, h, d)
-        X1, res1 = self._fn["finish"](self._fn["newton"](zg, pr), pr)
+        z1 = self._fn["first"](zg, pr)
+        xa, ra, done = self._fn["finish"](z1, pr)
+        X1, res1 = self._fn["more"](1 - done, z1, pr, xa, ra)
         OX1, ORES = ca.MX.sym("out_x1", nx), ca.MX.sym("out_res")
         G_z, G_w, X_z, X_w = self._fn["sensitivity"](x0, t0, p, h, d, OX1)
         J = X_w - ca.mtimes(X_z, ca.solve(G_z, G_w, "qr"))
@@ -205,9 +219,29 @@ class HHT:
         return self._fn["post"]
 
     @property
-    def pieces(self) -> tuple[ca.Function, ca.Function, ca.Function]:
-        """(prepare, newton, finish): the step in three calls, for the stepping driver."""
-        return self._fn["prepare"], self._fn["newton"], self._fn["finish"]
+    def prepare(self) -> ca.Function:
+        """``hht_prepare(x0, t0, p, h, d) -> (z0, prm)``: the Newton guess (the free dofs' scaled
+        unknowns) and the known quantities of a step."""
+        return self._fn["prepare"]
+
+    @property
+    def residual(self) -> ca.Function:
+        """``hht_residual(z, prm) -> G``: the scaled residual of the free dofs' rows (Eq. 4)."""
+        return self._fn["residual"]
+
+    def step_interpreted(self, x0: np.ndarray, t0: float, p: np.ndarray, h: float,
+                         d: np.ndarray) -> tuple[np.ndarray, float, int]:
+        """One step as :attr:`step` takes it (bitwise), driven from Python so that the Newton
+        updates can be counted: (x1, final scaled residual, Newton updates)."""
+        z0, prm = self._fn["prepare"](x0, t0, p, h, d)
+        z = self._fn["first"](z0, prm)
+        updates = _updates(self._fn["first"])
+        x1, res, done = self._fn["finish"](z, prm)
+        if not bool(done) and self.max_iter > 1:
+            z = self._fn["newton"](z, prm)
+            updates += _updates(self._fn["newton"])
+            x1, res, _ = self._fn["finish"](z, prm)
+        return np.array(x1).ravel(), float(res), updates
 
     def sensitivity(self, n_steps: int) -> ca.Function:
         """``hht_sensitivity_<N>(x0, S0, t0, p, h, d) -> (X, S, res)``: N steps that also carry the
@@ -255,6 +289,13 @@ class HHT:
             self._fn[key] = ca.Function(f"hht_trajectory_{n_steps}", [X0, T0, Pm, H, D], [X, res],
                                         ["x0", "t0", "p", "h", "d"], ["X", "res"])
         return self._fn[key]
+
+
+def _updates(newton: ca.Function) -> int:
+    """Newton updates made by a fast_newton rootfinder's last call: its iterations, plus the last
+    update when it stopped on the update's size (counted before the iteration ends)."""
+    st = newton.stats()
+    return int(st["iter_count"]) + (st["return_status"] == "converged_abstol_step")
 
 
 # -- the pieces of a step ----------------------------------------------------------------------
@@ -318,12 +359,13 @@ def _prepare(m: Model, lay: _Layout, alpha: float) -> ca.Function:
                        ["x0", "t0", "p", "h", "d"], ["z0", "prm"])
 
 
-def _newton_functions(m: Model, lay: _Layout, alpha: float, n_prm: int, expand: bool):
+def _newton_functions(m: Model, lay: _Layout, alpha: float, tol: float, n_prm: int, expand: bool):
     """(residual, jacobian, finish) of the free dofs' unknowns z and the known ``prm``.
 
     ``hht_residual(z, prm) -> G``, the scaled residual of the free rows; ``hht_jacobian(z, prm) ->
-    (dG/dz, G)``, sparse; ``hht_finish(z, prm) -> (x1, res)``, the state after the step (the
-    multipliers from the fixed rows) and the final max |G|.
+    (dG/dz, G)``, sparse; ``hht_finish(z, prm) -> (x1, res, done)``, the state after the step (the
+    multipliers from the fixed rows), the final max |G|, and whether that converges the step: res at
+    most tol, or the round-off floor of the coordinates (:func:`roundoff_tolerance`).
     """
     n, free, ell = m.n_dof, lay.free, lay.ell
     gamma, beta = hht_coefficients(alpha)
@@ -373,7 +415,9 @@ def _newton_functions(m: Model, lay: _Layout, alpha: float, n_prm: int, expand: 
     lam1 = -r_fixed / (1 + alpha) if lay.fixed else ca.MX(0, 1)
     x1 = ca.densify(ca.vertcat(q1, qd1, qdd1, lam1))  # dense: the C interface is plain arrays
     res = ca.norm_inf(G1) if free else ca.MX(0)
-    finish = ca.Function("hht_finish", [z, P], [x1, res], ["z", "prm"], ["x1", "res"])
+    floor = ROUNDOFF_FLOOR * np.finfo(float).eps * ca.mmax(ca.fabs(q1 / ell))
+    done = res <= ca.fmax(tol, floor)
+    finish = ca.Function("hht_finish", [z, P], [x1, res, done], ["z", "prm"], ["x1", "res", "done"])
     return resid, jac, finish
 
 
