@@ -146,13 +146,14 @@ def _page(scale: list[dict], acc: list[dict], order: float, expo: dict, quick: b
           "of elements (a least-squares line through the log-log points).", "",
           "## Accuracy and the two paths (1 element per bar)", "",
           "| dt (s) | steps | interpreted (ms) | compiled (ms) | compiled, integration only (ms) | speed-up "
-          "| Newton it./step | error node 5 (m) | max abs interp - compiled |", "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+          "| Newton it./step | error node 5 (m) | max abs interp - compiled |",
+          "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in acc:
         L.append(f"| {r['dt']:.0e} | {r['steps']} | {r['interpreted_s'] * 1e3:.1f} | {r['compiled_s'] * 1e3:.2f} | "
                  f"{r['compiled_run_s'] * 1e3:.2f} | {r['speedup']:.1f} | {r['newton_per_step']:.2f} | "
                  f"{r['err_node5_m']:.3e} | {r['max_diff_paths']:.1e} |")
-    L += ["", f"Error: max over the coarsest step's grid of the distance of node 5 from a dt = {acc[-1]['dt'] / 10:g} s "
-          f"reference. Fitted convergence order over dt <= 2e-3: **{order:.3f}** (HHT-alpha is second order).", ""]
+    L += ["", f"Error: max over the coarsest step's grid of the distance of node 5 from a dt = "
+          f"{acc[-1]['dt'] / 10:g} s reference. Fitted convergence order over dt <= 2e-3: **{order:.3f}** (HHT-alpha is second order).", ""]
     return "\n".join(L)
 
 
