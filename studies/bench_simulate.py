@@ -153,7 +153,8 @@ def _page(scale: list[dict], acc: list[dict], order: float, expo: dict, quick: b
                  f"{r['compiled_run_s'] * 1e3:.2f} | {r['speedup']:.1f} | {r['newton_per_step']:.2f} | "
                  f"{r['err_node5_m']:.3e} | {r['max_diff_paths']:.1e} |")
     L += ["", f"Error: max over the coarsest step's grid of the distance of node 5 from a dt = "
-          f"{acc[-1]['dt'] / 10:g} s reference. Fitted convergence order over dt <= 2e-3: **{order:.3f}** (HHT-alpha is second order).", ""]
+          f"{acc[-1]['dt'] / 10:g} s reference. Fitted convergence order over dt <= 2e-3: **{order:.3f}** "
+          "(HHT-alpha is second order).", ""]
     return "\n".join(L)
 
 

@@ -33,7 +33,8 @@ initial state and l_i the characteristic length (m) for translations or 1 for ro
 the unknowns are u = (q_{n+1} - q_guess)/l of the free dofs. Newton makes at least one update
 unless the guess is (nearly) exact, and stops when the scaled residual is below tol or a Newton
 update is below 0.01 sqrt(tol) (in the quadratic regime the residual after it is ~1e-4 tol).
-The step returns its final residual, recomputed, and the driver rejects any step above ``tol`` (raised to the round-off floor of far-off coordinates, :meth:`HHT.tolerance`).
+The step returns its final residual, recomputed, and the driver rejects any step above ``tol``
+(raised to the round-off floor of far-off coordinates, :meth:`HHT.tolerance`).
 The Newton guess is the constant-acceleration predictor (q''_{n+1} = q''_n), better than the
 paper's q''_{n+1} = 0 (Eq. 6); the converged step is the same.
 
