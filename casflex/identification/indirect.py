@@ -24,6 +24,7 @@ from casflex.data import MeasurementSet
 from casflex.identification.estimate import MODEL_ERRORS, estimate
 from casflex.identification.measurement import INITIAL_STATES, Experiment
 from casflex.identification.output_error import Budget
+from casflex.identification.problem import merge_options
 from casflex.identification.result import IdentificationResult
 from casflex.identification.shooting_nlp import RESIDUES, TRANSCRIPTIONS, identify_nlp
 from casflex.model import Model
@@ -121,10 +122,11 @@ def identify_indirect(
     polish, transform, hessian, solver_options : the NLP's (see :func:`.shooting_nlp.identify_nlp`);
         ``transform`` applies to both.
     compiled : bool, optional
-        Generate and compile C: the sensitivities (default True, cached on disk), the NLP's
-        functions (default False; CasADi's JIT, not cached).
+        Generate and compile C (cached on disk, see :mod:`casflex.codegen`): the sensitivities
+        (default True), the NLP's functions (default False).
     budget : Budget, optional
-        Gauss-Newton iterations and wall time (default 100 per stage, 600 s).
+        Gauss-Newton iterations and wall time (default 100 per stage, 600 s); for an NLP solver
+        the wall time is IPOPT's ``max_wall_time`` too, unless ``solver_options`` set it.
     model_error : {"refine", "none"}
         Estimate the model's discretisation error in the parameters by a refit on a refined model.
     check_data : bool
@@ -155,6 +157,9 @@ def identify_indirect(
                          f"use solver {GAUSS_NEWTON!r} (single shooting) for several recordings or an estimated "
                          "initial state")
     exp = experiments[0]
+    if solver == "ipopt":  # the budget's time holds for IPOPT too: no one waits unboundedly for a failure
+        solver_options = merge_options({"ipopt": {"max_wall_time": (budget or Budget()).max_time}},
+                                       solver_options or {})
     r = identify_nlp(model, exp.data, float(exp.data.t[-1] - exp.data.t[0]), transcription=transcription,
                      residue=residue, dofs=exp.channels, weights=weights, alpha=alpha, dt=dt, interval=interval,
                      start=start, solver=solver, solver_options=solver_options, newton_tol=newton_tol, polish=polish,

@@ -48,6 +48,10 @@ class Budget:
             raise ValueError(f"max_time: expected a positive number of seconds, got {self.max_time!r}")
 
 
+class StartDoesNotRun(ValueError):
+    """The model does not run through the recording at the start of a fit."""
+
+
 class _Diverged(Exception):
     """The model did not run at these unknowns (a Newton step failed)."""
 
@@ -219,8 +223,8 @@ def fit(problem: OutputError, w0: np.ndarray, budget: Budget, *, verbose: bool =
     try:
         r0, _ = evaluate(np.asarray(w0, dtype=float))
     except _Diverged as exc:
-        raise ValueError(f"the model does not run at the start: {exc}; try a start closer to the expected "
-                         "parameters, a smaller dt or a more negative alpha") from None
+        raise StartDoesNotRun(f"the model does not run at the start: {exc}; try a start closer to the expected "
+                              "parameters, a smaller dt or a more negative alpha") from None
     big = 1e3 * max(float(np.abs(r0).max()), 1.0)
 
     def fun(w: np.ndarray) -> np.ndarray:
