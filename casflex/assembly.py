@@ -59,13 +59,10 @@ class ElementGroup:
                     [1.0] * len(self.slots))
         return base + ca.reshape(ca.mtimes(sel, p), n_pr, self.n)
 
-    def scatter_matrix(self, n: int) -> ca.DM:
-        """Sparse 0/1 matrix (n, n_dof * n_el) that sums element vectors into a global n-vector."""
+    def scatter_lists(self, n: int) -> list[list[int]]:
+        """Index lists that sum element vectors into a global n-vector (see :func:`summed`)."""
         if n not in self._scatter:
-            nd = self.spec.n_dof
-            rows = self.dofs.ravel().tolist()
-            self._scatter[n] = ca.DM(ca.Sparsity.triplet(n, nd * self.n, rows, list(range(nd * self.n))),
-                                     [1.0] * len(rows))
+            self._scatter[n] = sum_lists(_targets(self.dofs.ravel(), n), self.dofs.size)
         return self._scatter[n]
 
 
@@ -76,7 +73,34 @@ def gather(v: ca.MX | ca.SX, group: ElementGroup) -> ca.MX | ca.SX:
 
 def scatter(values: ca.MX | ca.SX, group: ElementGroup, n: int) -> ca.MX | ca.SX:
     """Element vectors (n_dof of the kind, n_el) summed into a global vector (n,)."""
-    return ca.mtimes(group.scatter_matrix(n), ca.vec(values))
+    return summed(ca.vec(values), group.scatter_lists(n))
+
+
+def _targets(where: np.ndarray, size: int) -> list[list[int]]:
+    """For each target 0..size-1 the source positions i with where[i] == target."""
+    out: list[list[int]] = [[] for _ in range(size)]
+    for i, t in enumerate(where):
+        if t >= 0:
+            out[int(t)].append(i)
+    return out
+
+
+def sum_lists(sources: list[list[int]], zero: int) -> list[list[int]]:
+    """Gather lists for :func:`summed`: list c holds each target's c-th source (or ``zero``, the
+    position of a 0 appended to the sources)."""
+    depth = max((len(s) for s in sources), default=0)
+    return [[s[c] if c < len(s) else zero for s in sources] for c in range(depth)]
+
+
+def summed(values: ca.MX | ca.SX, lists: list[list[int]]) -> ca.MX | ca.SX:
+    """out[t] = sum of ``values`` at the positions ``lists[c][t]`` (c = 0, 1, ...): sums of element
+    contributions as a few plain gathers (a 0/1 matrix product costs CasADi's generated code several
+    times more)."""
+    ext = ca.vertcat(values, 0)
+    out = ext[lists[0]]
+    for idx in lists[1:]:
+        out = out + ext[idx]
+    return out
 
 
 class MatrixAssembly:
@@ -103,23 +127,20 @@ class MatrixAssembly:
         # nonzero index of each (row, col) in the column-major sparsity
         colind, row = self.sparsity.colind(), self.sparsity.row()
         where = {(row[k], c): k for c in range(n_c) for k in range(colind[c], colind[c + 1])}
-        self.maps = []
-        for g, grp in enumerate(groups):
-            mine = [x for x in entries if x[0] == g]
-            nd = grp.spec.n_dof
-            self.maps.append(ca.DM(ca.Sparsity.triplet(self.sparsity.nnz(), nd * nd * grp.n,
-                                                       [where[(x[2], x[3])] for x in mine], [x[1] for x in mine]),
-                                   [1.0] * len(mine)))
+        self.offsets = np.cumsum([0] + [grp.spec.n_dof ** 2 * grp.n for grp in groups]).tolist()
+        sources: list[list[int]] = [[] for _ in range(self.sparsity.nnz())]
+        for g, pos, r, c in entries:
+            sources[where[(r, c)]].append(self.offsets[g] + pos)
+        self.lists = sum_lists(sources, self.offsets[-1])
         self.nz_rows = np.array(row, dtype=int)
         self.nz_cols = np.repeat(np.arange(n_c), np.diff(np.array(colind)))
 
     def nonzeros(self, blocks: list) -> ca.MX | ca.SX:
-        """The assembled nonzeros (nnz,) from each group's element matrices (None: group absent)."""
-        out = ca.DM.zeros(self.sparsity.nnz())
-        for A, K in zip(self.maps, blocks, strict=True):
-            if K is not None and A.nnz():
-                out = out + ca.mtimes(A, ca.vec(K))
-        return out
+        """The assembled nonzeros (nnz,) from each group's element matrices (None: a group without
+        this matrix, e.g. the mass of a spring)."""
+        parts = [ca.vec(K) if K is not None else ca.DM.zeros(b - a)
+                 for K, a, b in zip(blocks, self.offsets[:-1], self.offsets[1:], strict=True)]
+        return summed(ca.vertcat(*parts), self.lists)
 
     def __call__(self, blocks: list) -> ca.MX | ca.SX:
         nz = self.nonzeros(blocks)

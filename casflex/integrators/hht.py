@@ -56,6 +56,7 @@ import numpy as np
 
 from casflex.assembly import MatrixAssembly, gather, scatter
 from casflex.elements.kernels import hht_kernel, kernel
+from casflex.integrators.band import band_solver
 from casflex.model import Model
 
 __all__ = ["HHT", "hht_coefficients", "roundoff_tolerance", "ROUNDOFF_FLOOR"]
@@ -148,25 +149,28 @@ class HHT:
         prepare = _prepare(m, lay, self.alpha)
         resid, jac, finish = _newton_functions(m, lay, self.alpha, self.tol, prepare.nnz_out(1), expand)
 
-        def newton(name: str, max_iter: int, abstol: float) -> ca.Function:
-            return ca.rootfinder(name, "fast_newton", resid, {
-                "abstol": abstol, "abstolStep": 1e-2 * self.tol**0.5, "max_iter": max_iter, "error_on_fail": False,
-                "jacobian_function": jac})
-
-        # The first update is made unless the guess is (nearly) exact (1e-3 tol): G scales a force by
-        # d ~ M / (beta h^2), so at a small step a predictor with G just under tol can carry acceleration
-        # errors of tol l / (beta h^2): 0.05 m/s^2 at h = 1.25e-5 s, which accumulate in the velocities
-        # (7.6e-6 m over 0.4 s). After it, tol decides, as it does for the iterations that may follow.
-        self._fn.update(prepare=prepare, residual=resid, jacobian=jac, finish=finish, scale=_scale(m, self.alpha),
-                        initial=_initial(m, lay), post=_post(m), first=newton("hht_newton_first", 1, 1e-3 * self.tol),
-                        newton=newton("hht_newton", max(self.max_iter - 1, 1), self.tol))
-        # after the first update: done if converged, else Newton goes on from there (rare at small steps)
-        z1, P = ca.MX.sym("z1", resid.nnz_in(0)), ca.MX.sym("prm", resid.nnz_in(1))
+        # The first Newton update solves with the banded LU (band.py); when the residual after it is
+        # above tol, CasADi's Newton (sparse QR) goes on, from that point or, if the update made things
+        # worse, from the guess. Even a guess with G just under tol gets its update: G scales a force by
+        # d ~ M / (beta h^2), so at a small step such a guess carries acceleration errors up to
+        # tol l / (beta h^2): 0.05 m/s^2 at h = 1.25e-5 s, which accumulate in the velocities (7.6e-6 m
+        # over 0.4 s).
+        solve, _ = band_solver(jac.sparsity_out(0), "hht_band_solve")
+        if expand:
+            solve = solve.expand()
+        z0, P = ca.MX.sym("z0", resid.nnz_in(0)), ca.MX.sym("prm", resid.nnz_in(1))
+        J0, G0 = jac(z0, P)
+        update = ca.Function("hht_update", [z0, P], [z0 - solve(J0.nz[:], G0), ca.norm_inf(G0)], ["z0", "prm"],
+                             ["z1", "g0"])
+        newton = ca.rootfinder("hht_newton", "fast_newton", resid, {
+            "abstol": self.tol, "abstolStep": 1e-2 * self.tol**0.5, "max_iter": max(self.max_iter - 1, 1),
+            "error_on_fail": False, "jacobian_function": jac})
         xa, ra = ca.MX.sym("x1", self.nx), ca.MX.sym("res")
-        keep = ca.Function("hht_done", [z1, P, xa, ra], [xa, ra])
-        more = ca.Function("hht_more", [z1, P, xa, ra], finish(self._fn["newton"](z1, P), P)[:2]
-                           if self.max_iter > 1 else [xa, ra])
-        self._fn["more"] = ca.Function.conditional("hht_converge", [keep], more)
+        keep = ca.Function("hht_done", [z0, P, xa, ra], [xa, ra])
+        more = ca.Function("hht_more", [z0, P, xa, ra], finish(newton(z0, P), P)[:2] if self.max_iter > 1 else [xa, ra])
+        self._fn.update(prepare=prepare, residual=resid, jacobian=jac, finish=finish, scale=_scale(m, self.alpha),
+                        initial=_initial(m, lay), post=_post(m), update=update, newton=newton,
+                        more=ca.Function.conditional("hht_converge", [keep], more))
         self._fn["sensitivity"] = _step_blocks(m, lay, self.alpha, prepare, resid, finish, expand)
         self._fn["step"] = self._step_with_derivative()
 
@@ -177,9 +181,9 @@ class HHT:
         n, nx, npar = m.n_dof, self.nx, m.n_p
         x0, t0, p, h, d = self._fn["prepare"].mx_in()
         zg, pr = self._fn["prepare"](x0, t0, p, h, d)
-        z1 = self._fn["first"](zg, pr)
+        z1, g0 = self._fn["update"](zg, pr)
         xa, ra, done = self._fn["finish"](z1, pr)
-        X1, res1 = self._fn["more"](1 - done, z1, pr, xa, ra)
+        X1, res1 = self._fn["more"](1 - done, ca.if_else(ra < g0, z1, zg), pr, xa, ra)
         OX1, ORES = ca.MX.sym("out_x1", nx), ca.MX.sym("out_res")
         G_z, G_w, X_z, X_w = self._fn["sensitivity"](x0, t0, p, h, d, OX1)
         J = X_w - ca.mtimes(X_z, ca.solve(G_z, G_w, "qr"))
@@ -235,11 +239,11 @@ class HHT:
         """One step as :attr:`step` takes it (bitwise), driven from Python so that the Newton
         updates can be counted: (x1, final scaled residual, Newton updates)."""
         z0, prm = self._fn["prepare"](x0, t0, p, h, d)
-        z = self._fn["first"](z0, prm)
-        updates = _updates(self._fn["first"])
-        x1, res, done = self._fn["finish"](z, prm)
+        z1, g0 = self._fn["update"](z0, prm)
+        x1, res, done = self._fn["finish"](z1, prm)
+        updates = 1
         if not bool(done) and self.max_iter > 1:
-            z = self._fn["newton"](z, prm)
+            z = self._fn["newton"](z1 if float(res) < float(g0) else z0, prm)
             updates += _updates(self._fn["newton"])
             x1, res, _ = self._fn["finish"](z, prm)
         return np.array(x1).ravel(), float(res), updates
@@ -322,10 +326,9 @@ class _Layout:
 
     def spread(self, z: ca.MX) -> ca.MX:
         """The free dofs' values z (n_free,) in a vector of all dofs (zeros at the fixed ones)."""
-        nf = len(self.free)
-        if not nf:
-            return ca.MX.zeros(self.n)
-        return ca.mtimes(ca.DM(ca.Sparsity.triplet(self.n, nf, self.free, list(range(nf))), [1.0] * nf), z)
+        slot = np.full(self.n, len(self.free))  # the 0 appended to z
+        slot[self.free] = np.arange(len(self.free))
+        return ca.vertcat(z, 0)[slot.tolist()]
 
     def reactions(self) -> ca.DM:
         """B^T (n, n_con): the multipliers act on the fixed dofs' rows."""
