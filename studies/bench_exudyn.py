@@ -12,10 +12,13 @@ its planar beams:
 - ``ancf``: ``ObjectANCFCable2D`` on ``NodePoint2DSlope1`` nodes (Euler-Bernoulli, cubic Hermite
   positions, consistent mass: the same continuum as casflex's beam);
 - ``ge``: ``ObjectBeamGeometricallyExact2D`` on ``NodeRigidBody2D`` nodes (Simo-Reissner, linear
-  interpolation: shear stiffness 5/6 G A with nu = 0.3; rotary inertia 1e-3 rho I: casflex's beam,
-  like the seed paper's, has none, and this element needs some for a regular mass matrix; with
-  rho I itself its converged motion is 1.2e-5 m from the Euler-Bernoulli one over 0.3 s, with
-  1e-3 rho I 2.5e-8 m, measured);
+  interpolation, shear stiffness 5/6 G A with nu = 0.3). Its rotations carry the section's rotary
+  inertia rho I, which the seed paper's beam does not have (and which this element needs for a
+  regular mass matrix; the bars are thick, and rho I moves node 5 by 1.2e-4 m over 0.5 s), so it is
+  compared with casflex's beam with ``rotary_inertia = true`` (``casflex-rot``). Converged, the two
+  differ by the beam's shear flexibility: 1.6e-6 m over 3 s at 16 elements per bar, 4.8e-7 m with
+  100 times the shear stiffness (measured); the errors of ``ge`` are therefore taken against its own
+  converged motion;
 
 node 1 clamped by coordinate constraints (Lagrange multipliers, as in casflex); the joints an
 ``ObjectConnectorSpringDamper`` (k, rest length) and an ``ObjectConnectorTorsionalSpringDamper`` (kt)
@@ -23,7 +26,9 @@ without damping; gravity by ``LoadMassProportional``; implicit generalized-alpha
 (the trapezoidal rule, as HHT alpha = 0), Exudyn's default modified Newton; node 5 recorded at every
 step by an internal sensor, no solution file; the time is the ``SolveDynamic`` call (model setup apart).
 
-Errors: max over t = 0, 0.01, ..., t_end of the distance of node 5 from a converged casflex reference.
+Errors: max over t = 0, 0.01, ..., t_end of the distance of node 5 from a converged reference of the
+same continuum: casflex's without rotary inertia for casflex and ancf, casflex's with it for
+casflex-rot, Exudyn's own finest ge run for ge.
 Writes docs/tables/bench_exudyn.md and docs/figures/bench_exudyn.png (``--quick``: *_quick.*, 0.3 s).
 Run: ``python studies/bench_exudyn.py`` (about 15 min). Without Exudyn the casflex side still runs.
 """
@@ -47,22 +52,26 @@ from casflex.simulate import compiled_library, integrator_for, simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 GRID = 1e-2  # errors on t = 0, 0.01, ...
-#: Physics check, node 5 (m): converged Exudyn (both beams) against the converged casflex reference;
-#: the reference's own error is about 1e-7 m over 3 s (printed), so 1e-6 m separates discretisation
-#: noise from a different problem (at h = 1e-3 the codes' errors are 3e-5 .. 1e-4 m).
-TOL_PHYSICS = 1e-6
-CODES = ("casflex", "ancf", "ge")
+#: Physics check, node 5 (m): converged Exudyn against the converged casflex reference of its continuum.
+#: Converged runs of either code keep up to ~1e-6 m of discretisation error over 3 s (the reference
+#: against its checks, Exudyn against a coarser twin: printed); 2e-6 m separates that from a different
+#: problem (at h = 1e-3 the errors are 2e-5 .. 1e-4 m, and rotary inertia alone moves node 5 by 1e-4 m).
+#: The geometrically exact beam also has shear flexibility (1.6e-6 m over 3 s, see the docstring): 5e-6 m.
+TOL_PHYSICS = {"ancf": 2e-6, "ge": 5e-6}
+CODES = ("casflex", "ancf", "casflex-rot", "ge")
+PAIRS = (("ancf", "casflex"), ("ge", "casflex-rot"))  # each Exudyn beam against casflex on its continuum
 LEVELS = (1e-3, 3e-4, 1e-4, 3e-5, 1e-5, 3e-6, 1e-6)  # accuracy levels of the fronts (m)
 
 
 def _plan(quick: bool) -> dict:
     if quick:
         return {"t_end": 0.3, "meshes": (1, 2), "ref": (4, 1e-4), "checks": ((4, 2e-4), (2, 1e-4)),
-                "converged": {"ancf": (4, 1e-4), "ge": (8, 1e-4)}, "front_meshes": {c: (1, 2) for c in CODES},
-                "front_hs": (1e-3, 5e-4), "repeat": 2}
+                "converged": {"ancf": ((4, 1e-4), (2, 1e-4)), "ge": ((16, 1e-4), (8, 1e-4))},
+                "front_meshes": {c: (1, 2) for c in CODES}, "front_hs": (1e-3, 5e-4), "repeat": 2}
     return {"t_end": 3.0, "meshes": (1, 2, 4, 8, 16, 32), "ref": (16, 2.5e-5), "checks": ((8, 2.5e-5), (16, 5e-5)),
-            "converged": {"ancf": (8, 5e-5), "ge": (32, 5e-5)},
-            "front_meshes": {"casflex": (1, 2, 4, 8), "ancf": (1, 2, 4, 8), "ge": (4, 8, 16, 32)},
+            "converged": {"ancf": ((8, 5e-5), (4, 5e-5)), "ge": ((64, 2.5e-5), (32, 5e-5))},
+            "front_meshes": {"casflex": (1, 2, 4, 8), "ancf": (1, 2, 4, 8), "casflex-rot": (1, 2, 4, 8),
+                             "ge": (4, 8, 16, 32)},
             "front_hs": (2e-3, 1e-3, 5e-4, 2.5e-4, 1e-4), "repeat": 5}
 
 
@@ -83,14 +92,14 @@ def _best(fn, repeat: int):
 
 
 # -- casflex --------------------------------------------------------------------------------------
-def _model(elements: int):
+def _model(elements: int, rotary: bool = False):
     scene = casflex.load_scene("twobar")
     return casflex.assemble(dataclasses.replace(
-        scene, beams=tuple(dataclasses.replace(b, elements=elements) for b in scene.beams)))
+        scene, beams=tuple(dataclasses.replace(b, elements=elements, rotary_inertia=rotary) for b in scene.beams)))
 
 
-def run_casflex(elements: int, h: float, t_end: float, repeat: int = 1) -> dict:
-    model = _model(elements)
+def run_casflex(elements: int, h: float, t_end: float, repeat: int = 1, rotary: bool = False) -> dict:
+    model = _model(elements, rotary)
     compiled_library(integrator_for(model, alpha=0.0))  # built (or loaded) once, not timed
     t, tr = _best(lambda: simulate(model, t_end, dt=h, alpha=0.0, compiled=True), repeat)
     p5 = np.stack([tr.dof("x5"), tr.dof("y5")], axis=1)
@@ -133,10 +142,9 @@ def build_exudyn(exu, kind: str, elements: int, h: float, t_end: float, *, conve
                                            bendingStiffness=b.E * b.I, axialStiffness=b.E * b.A)
             else:
                 obj = ii.ObjectBeamGeometricallyExact2D(
-                    nodeNumbers=chain[k:k + 2], physicsLength=L / elements, physicsMassPerLength=b.rho * b.A,
-                    physicsCrossSectionInertia=1e-3 * b.rho * b.I, physicsBendingStiffness=b.E * b.I,
-                    physicsAxialStiffness=b.E * b.A, physicsShearStiffness=5 / 6 * b.E / 2.6 * b.A,
-                    includeReferenceRotations=True)
+                    nodeNumbers=chain[k:k + 2], length=L / elements, massPerLength=b.rho * b.A,
+                    crossSectionInertia=b.rho * b.I, bendingStiffness=b.E * b.I, axialStiffness=b.E * b.A,
+                    shearStiffness=5 / 6 * b.E / 2.6 * b.A, includeReferenceRotations=True)
             mark = mbs.AddMarker(ii.MarkerBodyMass(bodyNumber=mbs.AddObject(obj)))
             mbs.AddLoad(ii.LoadMassProportional(markerNumber=mark, loadVector=[*scene.gravity, 0.0]))
     ground = mbs.AddNode(ii.NodePointGround())
@@ -220,34 +228,45 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
     codes = CODES if exu else ("casflex",)
     print(f"exudyn: {exu.__version__ if exu else 'NOT INSTALLED (casflex side only)'}")
 
+    def run(code: str, n: int, h: float, repeat: int = 1, converged: bool = False) -> dict:
+        if code.startswith("casflex"):
+            return run_casflex(n, h, T, repeat, rotary=code == "casflex-rot")
+        return run_exudyn(exu, code, n, h, T, repeat, converged=converged)
+
     ne, h = plan["ref"]
-    ref = run_casflex(ne, h, T)["p5"]
-    ref_err = max(_err(run_casflex(n2, h2, T)["p5"], ref) for n2, h2 in plan["checks"])
-    print(f"reference: casflex {ne} el./bar, dt = {h:g}; against {plan['checks']}: {ref_err:.1e} m", flush=True)
+    refs, ref_err = {}, {}
+    for rot in (False, True):  # the converged motion of each continuum, and its own error
+        refs[rot] = run_casflex(ne, h, T, rotary=rot)["p5"]
+        ref_err[rot] = max(_err(run_casflex(n2, h2, T, rotary=rot)["p5"], refs[rot]) for n2, h2 in plan["checks"])
+        print(f"reference{' with rotary inertia' if rot else ''}: casflex {ne} el./bar, dt = {h:g}; against "
+              f"{plan['checks']}: {ref_err[rot]:.1e} m", flush=True)
+    ref_of = {c: refs[c in ("ge", "casflex-rot")] for c in CODES}
     physics = {}
     if exu:
-        for kind, (n2, h2) in plan["converged"].items():
-            physics[kind] = _err(run_exudyn(exu, kind, n2, h2, T, converged=True)["p5"], ref)
-            print(f"Exudyn {kind} {n2} el./bar, h = {h2:g}, converged: {physics[kind]:.2e} m from the reference")
+        for kind, ((n2, h2), (n3, h3)) in plan["converged"].items():
+            p_fine, p_coarse = (run(kind, nn, hh, converged=True)["p5"] for nn, hh in ((n2, h2), (n3, h3)))
+            physics[kind] = {"err": _err(p_fine, ref_of[kind]), "self": _err(p_fine, p_coarse), "setting": (n2, h2),
+                             "twin": (n3, h3)}
+            if kind == "ge":  # its own continuum's converged motion (shear included)
+                ref_of[kind] = p_fine
+            print(f"Exudyn {kind} {n2} el./bar, h = {h2:g}, converged: {physics[kind]['err']:.2e} m from the "
+                  f"reference (against its {n3}-element twin: {physics[kind]['self']:.1e} m)", flush=True)
 
     rows = []  # the meshes at h = 1e-3
     for n in plan["meshes"]:
         row = {"elements": n}
         for code in codes:
-            r = (run_casflex(n, 1e-3, T, plan["repeat"]) if code == "casflex"
-                 else run_exudyn(exu, code, n, 1e-3, T, plan["repeat"]))
-            row[code] = r["time"]
-            row[f"{code}_err"] = _err(r["p5"], ref)
+            r = run(code, n, 1e-3, plan["repeat"])
+            row[code], row[f"{code}_err"] = r["time"], _err(r["p5"], ref_of[code])
         rows.append(row)
-        print(f"{n:2d} el./bar, h = 1e-3: " + ", ".join(f"{c} {row[c] * 1e3:8.1f} ms ({row[c + '_err']:.1e} m)"
+        print(f"{n:2d} el./bar, h = 1e-3: " + ", ".join(f"{c} {row[c] * 1e3:7.1f} ms ({row[c + '_err']:.1e} m)"
                                                        for c in codes), flush=True)
     pts: dict[str, list[tuple[float, float, int, float]]] = {c: [] for c in codes}
     for code in codes:
         for n in plan["front_meshes"][code]:
             for hh in plan["front_hs"]:
-                r = (run_casflex(n, hh, T, plan["repeat"]) if code == "casflex"
-                     else run_exudyn(exu, code, n, hh, T, plan["repeat"]))
-                pts[code].append((r["time"], _err(r["p5"], ref), n, hh))
+                r = run(code, n, hh, plan["repeat"])
+                pts[code].append((r["time"], _err(r["p5"], ref_of[code]), n, hh))
         print(f"front of {code}: {len(pts[code])} settings", flush=True)
     fronts = {c: [front([(t, e) for t, e, _, _ in pts[c]], lv) for lv in LEVELS] for c in codes}
     for lv, *ts in zip(LEVELS, *(fronts[c] for c in codes), strict=True):
@@ -259,8 +278,8 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
     print("wrote", atomic_write_bytes(out_dir / "figures" / f"bench_exudyn{suffix}.png", _figure(rows, pts, codes)))
     # self-checks: every casflex run finite and converging with the mesh; ANCF is the same physics
     assert all(math.isfinite(r["casflex_err"]) for r in rows)
-    for kind, e in physics.items():
-        assert e <= TOL_PHYSICS, f"Exudyn's {kind} model is {e:.2e} m from casflex's: not the same problem"
+    for kind, ph in physics.items():
+        assert ph["err"] <= TOL_PHYSICS[kind], f"Exudyn's {kind} is {ph['err']:.2e} m from casflex's: another problem"
     return {"rows": rows, "points": pts, "fronts": fronts, "physics": physics}
 
 
@@ -268,39 +287,47 @@ def _page(plan, rows, pts, fronts, physics, ref_err, codes, exu, load0, quick) -
     T = plan["t_end"]
     cpu = next((ln.split(":", 1)[1].strip() for ln in Path("/proc/cpuinfo").read_text().splitlines()
                 if ln.startswith("model name")), platform.processor()) if Path("/proc/cpuinfo").exists() else ""
+    pairs = [(x, c) for x, c in PAIRS if x in codes]
     L = ["# casflex vs Exudyn: twobar", "",
          f"Generated by `python studies/bench_exudyn.py{' --quick' if quick else ''}` on {cpu} ({os.cpu_count()} "
          f"CPUs), casflex {casflex.__version__}, Exudyn {exu.__version__ if exu else 'not installed'}; load average "
          f"{load0[0]:.2f} at the start, {os.getloadavg()[0]:.2f} at the end. Horizon {T:g} s. The models and the "
-         "measurement are described in the script's docstring; both codes run the trapezoidal rule.", "",
+         "measurement are described in the script's docstring; both codes run the trapezoidal rule. casflex-rot "
+         "is casflex's beam with the section's rotary inertia, the continuum of Exudyn's geometrically exact "
+         "beam (ge); ancf is the continuum of casflex's default beam.", "",
          "## The same problem", "",
-         f"Reference: casflex {plan['ref'][0]} elements per bar, dt = {plan['ref'][1]:g} s; its own error, against "
-         f"{', '.join(f'{n} el. at {h:g} s' for n, h in plan['checks'])}: {ref_err:.1e} m."]
-    for kind, e in physics.items():
-        n, h = plan["converged"][kind]
-        L.append(f"Exudyn {kind}, {n} elements per bar at h = {h:g} s, Newton to 1e-10: **{e:.2e} m** from it "
-                 f"(the physics check, tolerance {TOL_PHYSICS:g} m).")
+         f"References: casflex {plan['ref'][0]} elements per bar, dt = {plan['ref'][1]:g} s, without and with rotary "
+         f"inertia; their own errors, against {', '.join(f'{n} el. at {h:g} s' for n, h in plan['checks'])}: "
+         f"{ref_err[False]:.1e} m and {ref_err[True]:.1e} m."]
+    for kind, ph in physics.items():
+        (n, h), (n2, _) = ph["setting"], ph["twin"]
+        L.append(f"Exudyn {kind}, {n} elements per bar at h = {h:g} s, Newton to 1e-10: **{ph['err']:.2e} m** from "
+                 f"casflex's reference of its continuum (its own error, against {n2} elements: {ph['self']:.1e} m; the "
+                 f"physics check's tolerance {TOL_PHYSICS[kind]:g} m)." + (" This run is ge's own reference." if kind
+                                                                           == "ge" else ""))
     L += ["", "## Same mesh, same step (h = 1e-3 s): time of the whole run", "",
           "| el./bar | " + " | ".join(f"{c} (ms) | {c} error (m)" for c in codes)
-          + (" | ANCF / casflex | GE / casflex |" if exu else " |"),
-          "|---:|" + "---:|---:|" * len(codes) + ("---:|---:|" if exu else "")]
+          + "".join(f" | {x} / {c}" for x, c in pairs) + " |",
+          "|---:|" + "---:|---:|" * len(codes) + "---:|" * len(pairs)]
     for r in rows:
         cells = " | ".join(f"{r[c] * 1e3:.1f} | {r[c + '_err']:.1e}" for c in codes)
-        ratio = f" | **{r['ancf'] / r['casflex']:.1f}** | **{r['ge'] / r['casflex']:.1f}** |" if exu else " |"
-        L.append(f"| {r['elements']} | {cells}{ratio}")
+        L.append(f"| {r['elements']} | {cells}" + "".join(f" | **{r[x] / r[c]:.1f}**" for x, c in pairs) + " |")
     meshes = ", ".join(f"{c}: {list(plan['front_meshes'][c])}" for c in codes)
     L += ["", "## Accuracy against time", "",
           f"For each accuracy, the least time each code needs among its settings (elements per bar {meshes}; steps "
           f"{', '.join(f'{h:g}' for h in plan['front_hs'])} s); '-': no setting reaches it.", "",
           "| error of node 5 at most (m) | " + " | ".join(f"{c} (ms)" for c in codes)
-          + (" | best Exudyn / casflex |" if exu else " |"), "|---:|" + "---:|" * len(codes) + ("---:|" if exu else "")]
+          + "".join(f" | {x} / {c}" for x, c in pairs) + " |",
+          "|---:|" + "---:|" * (len(codes) + len(pairs))]
+
+    def ms(t: float) -> str:
+        return "-" if not math.isfinite(t) else f"{t * 1e3:.1f}"
+
     for i, lv in enumerate(LEVELS):
-        ts = [fronts[c][i] for c in codes]
-        cells = " | ".join("-" if not math.isfinite(t) else f"{t * 1e3:.1f}" for t in ts)
-        best_x = min(ts[1:]) if exu else math.inf
-        ratio = (f" | **{best_x / ts[0]:.1f}** |" if math.isfinite(best_x) and math.isfinite(ts[0]) else " | - |") \
-            if exu else " |"
-        L.append(f"| {lv:.0e} | {cells}{ratio}")
+        t = {c: fronts[c][i] for c in codes}
+        ratios = "".join(f" | **{t[x] / t[c]:.1f}**" if math.isfinite(t[x]) and math.isfinite(t[c]) else " | -"
+                         for x, c in pairs)
+        L.append(f"| {lv:.0e} | " + " | ".join(ms(t[c]) for c in codes) + ratios + " |")
     L += ["", "Every setting measured (time in ms, error in m):", ""]
     for c in codes:
         L.append(f"- {c}: " + "; ".join(f"{n} el. h {h:g}: {t * 1e3:.1f} ms, {e:.1e}" for t, e, n, h in pts[c]))
@@ -314,7 +341,7 @@ def _figure(rows, pts, codes) -> bytes:
     fig = Figure(figsize=(11, 4.2))
     FigureCanvasAgg(fig)
     ax1, ax2 = fig.subplots(1, 2)
-    style = {"casflex": "o-", "ancf": "s--", "ge": "^:"}
+    style = {"casflex": "o-", "ancf": "s--", "casflex-rot": "D-", "ge": "^:"}
     for c in codes:
         ax1.loglog([r["elements"] for r in rows], [r[c] for r in rows], style[c], label=c)
         p = sorted((t, e) for t, e, _, _ in pts[c] if math.isfinite(e))

@@ -141,8 +141,12 @@ class BeamElement:
         return _rotated(self.kinematics(qe)["beta"], self._local_mass())
 
     def kinetic_energy(self, qe: ca.SX, qde: ca.SX) -> ca.SX:
-        """T = 1/2 qd^T M(q) qd (J)."""
-        return 0.5 * ca.dot(qde, ca.mtimes(self.mass(qe), qde))
+        """T = 1/2 w^T M_l w with w = R(beta) qd the local velocities (J): 1/2 qd^T M(q) qd."""
+        beta = self.kinematics(qe)["beta"]
+        c, s = ca.cos(beta), ca.sin(beta)
+        w = ca.vertcat(c * qde[0] + s * qde[1], -s * qde[0] + c * qde[1], qde[2],
+                       c * qde[3] + s * qde[4], -s * qde[3] + c * qde[4], qde[5])
+        return 0.5 * ca.dot(w, ca.mtimes(self._local_mass(), w))
 
     def gravity_energy(self, qe: ca.SX, g: tuple[Scalar, Scalar] | ca.SX) -> ca.SX:
         """V = -m g . c, c the centroid of the Hermite-interpolated deformed element (J).

@@ -93,8 +93,7 @@ class _Element:
         return self.beam.inertia_terms(q, qd, form)
 
     def kinetic(self, q: ca.SX, qd: ca.SX) -> ca.SX:
-        M = self.mass_terms(q, qd)[1]
-        return 0.5 * ca.dot(qd, ca.mtimes(M, qd))
+        return self.beam.kinetic_energy(q, qd) if self.kind == "beam" else ca.SX(0)
 
     def outputs(self, q: ca.SX) -> ca.SX:
         if self.kind == "beam":
