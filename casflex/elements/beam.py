@@ -136,10 +136,6 @@ class BeamElement:
             return local_mass(self.mass_total, self.L0, self.rho * self.I if w else None)
         return local_mass(self.mass_total, self.L0, w * self.rho * self.I)
 
-    def mass(self, qe: ca.SX) -> ca.SX:
-        """M(q) = R(beta)^T M_l R(beta), 6x6 (kg, kg m, kg m^2)."""
-        return _rotated(self.kinematics(qe)["beta"], self._local_mass())
-
     def kinetic_energy(self, qe: ca.SX, qde: ca.SX) -> ca.SX:
         """T = 1/2 w^T M_l w with w = R(beta) qd the local velocities (J): 1/2 qd^T M(q) qd."""
         beta = self.kinematics(qe)["beta"]
