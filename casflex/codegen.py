@@ -174,14 +174,16 @@ def _locked(path: Path) -> Iterator[None]:
         yield
 
 
-def compile_functions(functions: list[ca.Function], *, stem: str = "casflex", optimise: str = "-O3") -> CompiledLibrary:
+def compile_functions(functions: list[ca.Function], *, stem: str = "casflex", optimise: str = "-O3",
+                      key: str | None = None) -> CompiledLibrary:
     """Generate, compile (or take from the cache) and load ``functions``.
 
     ``optimise``: gcc's optimisation level. -O3 for code run millions of times (HHT steps); -O1
     for large code run a few dozen times per use (sensitivities, NLP functions).
 
     The cache key is the SHA-256 of the generated source, the compiler (command and version),
-    its flags and the processor. A library is built in a temporary directory and renamed into
+    its flags and the processor, or ``key`` when the caller has one that identifies the functions
+    before they are generated (:func:`compiled_nlpsol`). A library is built in a temporary directory and renamed into
     the cache under a lock, so concurrent processes build it once and never see a partial file.
     Returns a :class:`CompiledLibrary` whose ``functions`` map each name to a ``ca.external``.
     """
@@ -192,8 +194,8 @@ def compile_functions(functions: list[ca.Function], *, stem: str = "casflex", op
         c_file, _ = generate_c(functions, tmp, stem)
         source = c_file.read_bytes()
         flags = (optimise, *CFLAGS, *_native_flags(cc))
-        key = " ".join((cc, _compiler_identity(cc), *flags, _processor()))
-        digest = hashlib.sha256(source + key.encode()).hexdigest()[:24]
+        build = " ".join((cc, _compiler_identity(cc), *flags, _processor()))
+        digest = key or hashlib.sha256(source + build.encode()).hexdigest()[:24]
         target = cache_dir() / f"{stem}-{digest}.so"
         cached = target.is_file()
         if not cached:
@@ -231,17 +233,35 @@ def compiled_nlpsol(name: str, plugin: str, nlp: dict, opts: dict) -> ca.Functio
     """``ca.nlpsol(name, plugin, nlp, opts)`` with every function the solver evaluates compiled
     (gcc -O1) and cached on disk: the solver is set up interpreted, its functions (the NLP and the
     derivatives it asked for, a ``hess_lag`` option included) are generated as one C library, and
-    the solver is made anew on that library (CasADi's documented route for compiled NLPs)."""
-    interpreted = ca.nlpsol(name, plugin, nlp, opts)
-    funcs = [interpreted.oracle()]
-    for fname in interpreted.get_function():
-        f = interpreted.get_function(fname)
-        if f.name() != fname:  # a Function given as an option: the library must hold it under the name sought
-            args = f.mx_in()
-            f = ca.Function(fname, args, f.call(args), f.name_in(), f.name_out())
-        funcs.append(f)
-    lib = compile_functions(funcs, stem=f"{name}_nlp", optimise="-O1")
-    return ca.nlpsol(name, plugin, str(lib.path), {k: v for k, v in opts.items() if k != "hess_lag"})
+    the solver is made anew on that library (CasADi's documented route for compiled NLPs).
+
+    A later process finds the library by the NLP itself (its serialised expressions, the options,
+    CasADi's version), before any set-up: for twobar's multiple shooting over 0.69 s the set-up
+    alone takes 7 s.
+    """
+    sym = ca.MX if isinstance(nlp["x"], ca.MX) else ca.SX
+    p = nlp.get("p", sym(0, 1))
+    problem = ca.Function("nlp", [nlp["x"], p], [nlp.get("f", 0), nlp.get("g", sym(0, 1))])
+    lib_opts = {k: v for k, v in opts.items() if k != "hess_lag"}
+    cc = _compiler()
+    key = hashlib.sha256("\n".join([
+        problem.serialize(), opts["hess_lag"].serialize() if "hess_lag" in opts else "", plugin, repr(sorted(
+            lib_opts.items(), key=str)), ca.__version__, cc, _compiler_identity(cc), *CFLAGS, *_native_flags(cc),
+        _processor()]).encode()).hexdigest()[:24]
+    target = cache_dir() / f"{name}_nlp-{key}.so"
+    if target.is_file():
+        log.info("using the compiled %s NLP from the cache (%s)", name, target)
+    else:
+        interpreted = ca.nlpsol(name, plugin, nlp, opts)
+        funcs = [interpreted.oracle()]
+        for fname in interpreted.get_function():
+            f = interpreted.get_function(fname)
+            if f.name() != fname:  # a Function given as an option: the library must hold it under the name sought
+                args = f.mx_in()
+                f = ca.Function(fname, args, f.call(args), f.name_in(), f.name_out())
+            funcs.append(f)
+        target = compile_functions(funcs, stem=f"{name}_nlp", optimise="-O1", key=key).path
+    return ca.nlpsol(name, plugin, str(target), lib_opts)
 
 
 def cache_entries() -> list[Path]:
