@@ -54,19 +54,25 @@ class SimulationError(RuntimeError):
         self.trajectory = trajectory
 
 
-def integrator_for(model: Model, *, alpha: float, tol: float = 1e-12, max_iter: int = 25) -> HHT:
+def integrator_for(model: Model, *, alpha: float, tol: float = 1e-12, max_iter: int = 25,
+                   newton: str = "exact") -> HHT:
     """The HHT integrator of ``model`` with these settings, built once and reused."""
     cache = _INTEGRATORS.setdefault(model, {})
-    key = (float(alpha), float(tol), int(max_iter))
+    key = (float(alpha), float(tol), int(max_iter), newton)
     if key not in cache:
-        cache[key] = HHT(model, alpha=float(alpha), tol=float(tol), max_iter=int(max_iter))
+        cache[key] = HHT(model, alpha=float(alpha), tol=float(tol), max_iter=int(max_iter), newton=newton)
     return cache[key]
 
 
 def compiled_library(integ: HHT) -> CompiledLibrary:
     """The compiled step and chunk Functions of ``integ`` (built once per process)."""
     if integ not in _LIBRARIES:
-        funcs = [integ.step, integ.trajectory(CHUNK), integ.post.map(f"hht_post_{CHUNK}", "serial", CHUNK, [2], [])]
+        if integ.newton == "modified":
+            mod = integ.modified
+            funcs = [mod.chunk(CHUNK), mod.chunk(1), mod.factor_at]
+        else:
+            funcs = [integ.step, integ.trajectory(CHUNK)]
+        funcs.append(integ.post.map(f"hht_post_{CHUNK}", "serial", CHUNK, [2], []))
         _LIBRARIES[integ] = compile_functions(funcs, stem="casflex_hht")
     return _LIBRARIES[integ]
 
@@ -142,6 +148,7 @@ def simulate(
     compiled: bool = False,
     tol: float = 1e-12,
     max_iter: int = 25,
+    newton: str = "exact",
     progress: bool | Callable[[int, int, float], None] | None = None,
     raise_on_failure: bool = True,
 ) -> Trajectory:
@@ -166,6 +173,10 @@ def simulate(
         Run compiled C (see module docstring).
     tol, max_iter
         Newton tolerance (scaled, see :class:`~casflex.integrators.HHT`) and iteration limit.
+    newton : {"exact", "modified"}
+        "modified" keeps the factorised Jacobian from step to step while a chord update converges
+        the step (:mod:`casflex.integrators.modified`): cheaper at loose tolerances (1e-8), not at
+        the default 1e-12.
     progress : bool or callable(done_steps, total_steps, t)
         True prints a progress bar on stderr.
 
@@ -182,7 +193,7 @@ def simulate(
     alpha = float(run.alpha if alpha is None else alpha)
     n_steps = step_count(t_end, dt)
     check_memory(model, n_steps, dt)
-    integ = integrator_for(model, alpha=alpha, tol=tol, max_iter=max_iter)
+    integ = integrator_for(model, alpha=alpha, tol=tol, max_iter=max_iter, newton=newton)
     pv = model.params(p)
     report = _text_progress if progress is True else (progress or None)
 
@@ -192,41 +203,20 @@ def simulate(
     lib = compiled_library(integ) if compiled else None
     build_s = time.perf_counter() - t_build
 
-    n = model.n_dof
     X = np.empty((n_steps + 1, integ.nx))
     X[0] = x0
     iters = np.full(n_steps, -1, dtype=int)
     failure = ""
     status = "success"
     done = 0
-    if lib is not None:
-        chunk_fn = BufferedCall(lib[f"hht_trajectory_{CHUNK}"])
-        step_fn = BufferedCall(lib["hht_step"])
-        t_in, h_in = np.zeros(1), np.array([dt])
-        res = np.empty(CHUNK)
+    stepper = _Stepper(integ, lib, pv, dt, d, t0, X[0])
     t_run = time.perf_counter()
     try:
         while done < n_steps:
-            if lib is not None:
-                m_steps = CHUNK if n_steps - done >= CHUNK else 1
-                t_in[0] = t0 + done * dt
-                out = X[done + 1:done + 1 + m_steps]  # written in place, no conversion
-                (chunk_fn if m_steps == CHUNK else step_fn)([X[done], t_in, pv, h_in, d], [out, res[:m_steps]])
-                bad = ~(np.isfinite(out).all(axis=1) & (res[:m_steps] <= integ.tolerance(out[:, :n])))
-                good = int(np.argmax(bad)) if bad.any() else m_steps
-                done += good
-                if good < m_steps:
-                    failure = _diagnose(integ, X[done], done, dt, pv, d, max_iter, t0)
-                    break
-            else:
-                x1, r, it = integ.step_interpreted(X[done], t0 + done * dt, pv, dt, d)
-                iters[done] = it
-                if not (np.isfinite(x1).all() and r <= integ.tolerance(x1[:n])):
-                    q1 = x1[:n] if np.isfinite(x1).all() else X[done, :n]
-                    failure = _failure_message(done, dt, it, r, float(integ.tolerance(q1)), max_iter, t0)
-                    break
-                X[done + 1] = x1
-                done += 1
+            good, failure = stepper.advance(X, iters, done, n_steps - done)
+            done += good
+            if failure:
+                break
             if report and (lib is not None or done % max(n_steps // 100, 1) == 0 or done == n_steps):
                 report(done, n_steps, t0 + done * dt)
             interrupt.check()
@@ -248,8 +238,8 @@ def simulate(
         Y = Y[:done + 1]
     traj = _trajectory(integ, X[:done + 1], Y, iters[:done], dt, pv, status, failure, t0, {
         "scene": model.scene.name, "alpha": alpha, "dt": dt, "t0": t0, "t_end": t_end, "inertia": model.inertia,
-        "compiled": bool(compiled), "tol": tol, "max_iter": max_iter,
-        "stats": {"steps": done, "build_s": build_s, "run_s": run_s,
+        "compiled": bool(compiled), "tol": tol, "max_iter": max_iter, "newton": newton,
+        "stats": {"steps": done, "build_s": build_s, "run_s": run_s, "jacobian_refreshes": stepper.refreshes,
                   "compile_s": lib.build_s if lib is not None else 0.0,
                   "compile_cached": lib.cached if lib is not None else None,
                   "newton_iterations": int(iters[:done].sum()) if not compiled else None},
@@ -259,6 +249,57 @@ def simulate(
     if status != "success" and raise_on_failure:
         raise SimulationError(failure, traj)
     return traj
+
+
+class _Stepper:
+    """Advances a run: compiled (chunks of CHUNK steps, the remainder one by one) or interpreted
+    (one step at a time, Newton updates counted), with the exact or the modified Newton."""
+
+    def __init__(self, integ: HHT, lib: CompiledLibrary | None, p: np.ndarray, dt: float, d: np.ndarray,
+                 t0: float, x0: np.ndarray):
+        self.integ, self.lib, self.p, self.dt, self.d, self.t0 = integ, lib, p, dt, d, t0
+        self.modified = integ.newton == "modified"
+        self.refreshes = 0 if self.modified else None
+        self.F = (np.array(integ.modified.factor_at(x0, t0, p, dt, d)).ravel() if self.modified else None)
+        if lib is not None:
+            names = ((integ.modified.chunk(CHUNK).name(), integ.modified.chunk(1).name()) if self.modified
+                     else (f"hht_trajectory_{CHUNK}", "hht_step"))
+            self.fns = (BufferedCall(lib[names[0]]), BufferedCall(lib[names[1]]))
+            self.t_in, self.h_in, self.res, self.nref = np.zeros(1), np.array([dt]), np.empty(CHUNK), np.zeros(1)
+
+    def advance(self, X: np.ndarray, iters: np.ndarray, done: int, left: int) -> tuple[int, str]:
+        """Steps from X[done], written into X[done + 1 ...]: (steps that converged, failure message)."""
+        integ, n, t = self.integ, self.integ.model.n_dof, self.t0 + done * self.dt
+        if self.lib is None:
+            if self.modified:
+                x1, r, self.F, it, refreshed = integ.modified.step_interpreted(X[done], t, self.p, self.dt, self.d,
+                                                                             self.F)
+                self.refreshes += refreshed
+            else:
+                x1, r, it = integ.step_interpreted(X[done], t, self.p, self.dt, self.d)
+            iters[done] = it
+            if not (np.isfinite(x1).all() and r <= integ.tolerance(x1[:n])):
+                q1 = x1[:n] if np.isfinite(x1).all() else X[done, :n]
+                return 0, _failure_message(done, self.dt, it, r, float(integ.tolerance(q1)), integ.max_iter, self.t0)
+            X[done + 1] = x1
+            return 1, ""
+        m = CHUNK if left >= CHUNK else 1
+        self.t_in[0] = t
+        out, res = X[done + 1:done + 1 + m], self.res[:m]  # written in place, no conversion
+        fn = self.fns[0 if m == CHUNK else 1]
+        if self.modified:
+            F_next = np.empty_like(self.F)
+            fn([X[done], self.F, self.t_in, self.p, self.h_in, self.d], [out, res, F_next, self.nref])
+            self.F = F_next
+            self.refreshes += int(self.nref[0])
+        else:
+            fn([X[done], self.t_in, self.p, self.h_in, self.d], [out, res])
+        bad = ~(np.isfinite(out).all(axis=1) & (res <= integ.tolerance(out[:, :n])))
+        good = int(np.argmax(bad)) if bad.any() else m
+        if good < m:
+            return good, _diagnose(integ, X[done + good], done + good, self.dt, self.p, self.d, integ.max_iter,
+                                   self.t0)
+        return m, ""
 
 
 def initial_state(integ: HHT, p: np.ndarray, *, q0: np.ndarray | None = None, qd0: np.ndarray | None = None,

@@ -6,7 +6,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from casflex.integrators.band import BLOCK, band_solver
+from casflex.integrators.band import BLOCK, band_lu
 
 
 def _matrix(n: int, rng, shuffle: bool) -> np.ndarray:
@@ -27,8 +27,8 @@ def _matrix(n: int, rng, shuffle: bool) -> np.ndarray:
 def _solve(A: np.ndarray, b: np.ndarray, expand: bool) -> tuple[np.ndarray, int]:
     r, c = np.nonzero(A.T)  # column-major nonzeros, as CasADi keeps them
     sp = ca.Sparsity.triplet(A.shape[0], A.shape[1], c.tolist(), r.tolist())
-    f, bw = band_solver(sp)
-    f = f.expand() if expand else f
+    lu = band_lu(sp)
+    f, bw = (lu.solve.expand() if expand else lu.solve), lu.bandwidth
     nz = [A[i, j] for j, i in zip(r, c, strict=True)]
     return np.array(f(nz, b)).ravel(), bw
 

@@ -170,3 +170,17 @@ def test_parameters_change_the_motion(twobar):
     np.testing.assert_allclose(b.output("spring1.force"), 900.0 * (L - 0.1), rtol=1e-10, atol=1e-9)
     th = b.dof("theta2")
     np.testing.assert_allclose(b.output("torsion1.moment"), 0.5 * th, rtol=1e-12, atol=1e-15)
+
+
+def test_modified_newton_keeps_the_factors_and_agrees_with_the_exact_one():
+    model = casflex.assemble(casflex.load_scene("twobar"))
+    exact = simulate(model, 0.5, dt=2e-4, compiled=True)
+    a = simulate(model, 0.5, dt=2e-4, newton="modified")
+    b = simulate(model, 0.5, dt=2e-4, newton="modified", compiled=True)
+    assert a.success and b.success and np.array_equal(a.q, b.q)  # compiled and interpreted: the same steps
+    assert a.stats["jacobian_refreshes"] == b.stats["jacobian_refreshes"] < 0.5 * a.stats["steps"]  # measured 0.095
+    # each step it accepts after a chord update holds up to cond(G_z) tol ~ 2.5e-9 of error (the exact Newton's
+    # final update leaves ~1e-15): measured 2.5e-7 m over 0.5 s, as much as the step's own error at this dt
+    # (2.5e-7 m against dt = 1e-4); 1e-6 m is four times that
+    assert np.abs(a.q - exact.q).max() < 1e-6
+    assert (a.newton_iterations >= 1).all()

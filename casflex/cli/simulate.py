@@ -62,7 +62,8 @@ def _run(model, args: argparse.Namespace, *, t_end: float, compiled: bool, progr
     dt = run.dt if getattr(args, "dt", None) is None else args.dt
     n_steps = step_count(t_end, dt, names=("--t-end", "--dt"))
     check_memory(model, n_steps, dt, names=("--t-end", "--dt"))
-    traj = simulate(model, t_end, dt=dt, alpha=getattr(args, "alpha", None), compiled=compiled, progress=progress)
+    traj = simulate(model, t_end, dt=dt, alpha=getattr(args, "alpha", None), compiled=compiled, progress=progress,
+                    newton=getattr(args, "newton", "exact"))
     summary(model, traj, times)
     if out is not None:
         traj.save(out)
@@ -100,6 +101,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--alpha", type=alpha_value, help="HHT alpha in [-1/3, 0] (default: the scene's)")
     s.add_argument("--inertia", choices=("lagrange", "seed"), help="inertia form (default: the scene's)")
     s.add_argument("--compiled", action="store_true", help="run generated C code (needs gcc)")
+    s.add_argument("--newton", choices=("exact", "modified"), default="exact",
+                   help="exact: a Jacobian per step (default); modified: the factorised Jacobian kept while it "
+                        "converges the steps (faster at small steps of some scenes, docs/tables/bench_simulate.md)")
     s.add_argument("--out", metavar="FILE.npz", help="write the trajectory to this .npz file")
     s.add_argument("--plots", metavar="DIR", help="write figures and an animation into this directory")
     s.add_argument("--no-animation", action="store_true", help="with --plots: skip the GIF")

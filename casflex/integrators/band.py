@@ -18,10 +18,12 @@ did not converge, continues with CasADi's Newton and its QR (pivoting by Househo
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import casadi as ca
 import numpy as np
 
-__all__ = ["band_solver", "BLOCK"]
+__all__ = ["BandLU", "band_lu", "BLOCK"]
 
 #: Elimination steps written out in one block Function.
 BLOCK = 16
@@ -77,9 +79,28 @@ def _blocks(b: int) -> tuple[ca.Function, ca.Function, ca.Function]:
     return lu, fwd, bwd
 
 
-def band_solver(sp: ca.Sparsity, name: str = "band_solve") -> tuple[ca.Function, int]:
-    """``band_solve(nz, rhs) -> x`` solving A x = rhs for A with sparsity ``sp`` (square, structurally
-    symmetric) and nonzeros ``nz`` (CasADi's column-major order); and the bandwidth it works with."""
+@dataclass(frozen=True)
+class BandLU:
+    """The banded LU of matrices of one sparsity, as three CasADi Functions.
+
+    ``factor(nz) -> F``: the factors of the matrix with nonzeros ``nz`` (CasADi's column-major
+    order), packed in one vector F = [pivots, U, L] (size :attr:`size`); ``apply(F, rhs) -> x``:
+    the solution of A x = rhs with them; ``solve(nz, rhs) -> x``: both in one. A factorisation can
+    thus be kept and applied again (the modified Newton of :class:`~casflex.integrators.HHT`).
+    """
+
+    factor: ca.Function
+    apply: ca.Function
+    solve: ca.Function
+    bandwidth: int
+
+    @property
+    def size(self) -> int:
+        return self.factor.nnz_out(0)
+
+
+def band_lu(sp: ca.Sparsity, name: str = "band") -> BandLU:
+    """The :class:`BandLU` of matrices with sparsity ``sp`` (square, structurally symmetric)."""
     n = sp.size1()
     perm, inv, rc, b = _order(sp)
     w, K = b + 1, BLOCK
@@ -91,22 +112,27 @@ def band_solver(sp: ca.Sparsity, name: str = "band_solve") -> tuple[ca.Function,
     def at(i: int, j: int) -> int:  # index into [nz, 0, 1] of entry (i, j) of the permuted, padded matrix
         return (one if i == j else zero) if i >= n or j >= n else where.get((i, j), zero)
 
-    nz, rhs = ca.MX.sym("nz", sp.nnz()), ca.MX.sym("rhs", n)
+    lu, fwd, bwd = _blocks(b)
+    nz = ca.MX.sym("nz", sp.nnz())
     ext = ca.vertcat(nz, ca.DM([0.0, 1.0]))
     first = ca.reshape(ext[[at(i, j) for j in range(w) for i in range(w)]], w, w)
     borders_c = ca.reshape(ext[[at(k + 1 + i, k + w) for k in range(N) for i in range(w)]], w, N)
     borders_r = ca.reshape(ext[[at(k + w, k + 1 + j) for k in range(N) for j in range(b)]], b, N)
-    lu, fwd, bwd = _blocks(b)
-    _, piv, U, L = lu.mapaccum(f"band_lu_{blocks}", blocks, 1)(first, borders_c, borders_r)
-    piv = ca.vec(piv)
+    _, piv, U, L = lu.mapaccum(f"{name}_lu_{blocks}", blocks, 1)(first, borders_c, borders_r)
+    factor = ca.Function(f"{name}_factor", [nz], [ca.vertcat(ca.vec(piv), ca.vec(U), ca.vec(L))], ["nz"], ["F"])
+
+    F, rhs = ca.MX.sym("F", N * (1 + 2 * b)), ca.MX.sym("rhs", n)
+    piv, U, L = F[:N], ca.reshape(F[N:N + b * N], b, N), F[N + b * N:]
     # L's column k holds the multipliers of rows k+1 .. k+b; row k of the forward sweep needs L[k, k-1-i]
-    L = ca.vec(ca.horzcat(ca.MX.zeros(b, b), L))
+    L = ca.vertcat(ca.MX.zeros(b * b), L)
     lk = ca.reshape(L[[(k - 1 - i + b) * b + i for k in range(N) for i in range(b)]], b, N)
-    _, y = fwd.mapaccum(f"band_forward_{blocks}", blocks, [0], [0])(
+    _, y = fwd.mapaccum(f"{name}_forward_{blocks}", blocks, [0], [0])(
         ca.MX.zeros(b), ca.reshape(ca.vertcat(rhs[perm.tolist()], ca.MX.zeros(N - n)), K, blocks), lk)
     y = ca.vec(y)
     back = list(range(N - 1, -1, -1))
-    _, x = bwd.mapaccum(f"band_backward_{blocks}", blocks, [0], [0])(
+    _, x = bwd.mapaccum(f"{name}_backward_{blocks}", blocks, [0], [0])(
         ca.MX.zeros(b), ca.reshape(y[back], K, blocks), U[:, back], ca.reshape(piv[back], K, blocks))
-    x = ca.vec(x)[back]
-    return ca.Function(name, [nz, rhs], [x[inv.tolist()]], ["nz", "rhs"], ["x"]), b
+    apply = ca.Function(f"{name}_apply", [F, rhs], [ca.vec(x)[back][inv.tolist()]], ["F", "rhs"], ["x"])
+    nz2, rhs2 = ca.MX.sym("nz", sp.nnz()), ca.MX.sym("rhs", n)
+    solve = ca.Function(f"{name}_solve", [nz2, rhs2], [apply(factor(nz2), rhs2)], ["nz", "rhs"], ["x"])
+    return BandLU(factor, apply, solve, b)

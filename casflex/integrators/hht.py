@@ -56,10 +56,11 @@ import numpy as np
 
 from casflex.assembly import MatrixAssembly, gather, scatter
 from casflex.elements.kernels import hht_kernel, kernel
-from casflex.integrators.band import band_solver
+from casflex.integrators.band import band_lu
+from casflex.integrators.modified import ModifiedNewton
 from casflex.model import Model
 
-__all__ = ["HHT", "hht_coefficients", "roundoff_tolerance", "ROUNDOFF_FLOOR"]
+__all__ = ["HHT", "hht_coefficients", "roundoff_tolerance", "ROUNDOFF_FLOOR", "NEWTON"]
 
 #: A scaled residual is accepted down to ROUNDOFF_FLOOR * eps * max|q / l| (see roundoff_tolerance).
 ROUNDOFF_FLOOR = 10.0
@@ -81,6 +82,8 @@ def hht_coefficients(alpha: float) -> tuple[float, float]:
     return 0.5 - alpha, (1.0 - alpha) ** 2 / 4.0
 
 
+#: The Newton variants of simulate (HHT.newton).
+NEWTON = ("exact", "modified")
 #: Up to this many elements the Newton functions are expanded into flat SX (see expand_by_default).
 EXPAND_ELEMENTS = 8
 
@@ -109,6 +112,10 @@ class HHT:
     expand : bool or None
         Evaluate the Newton residual and Jacobian as flat SX code (True) or as the element
         kernels mapped over the groups (False); None chooses by size (:func:`expand_by_default`).
+    newton : {"exact", "modified"}
+        How :func:`~casflex.simulate.simulate` steps: a Jacobian per step, or the factorised
+        Jacobian kept while it converges the steps (:attr:`modified`). The Functions :attr:`step`
+        and :meth:`trajectory` are the exact Newton's either way.
 
     The state vector x stacks [q, qd, qdd, lam], shape (3 n_dof + n_con,).
     """
@@ -118,6 +125,7 @@ class HHT:
     tol: float = 1e-12
     max_iter: int = 25
     expand: bool | None = None
+    newton: str = "exact"
     _fn: dict = field(default_factory=dict, init=False, repr=False)
     _ell: np.ndarray = field(default=None, init=False, repr=False)  # characteristic length per dof
 
@@ -127,6 +135,8 @@ class HHT:
             raise ValueError(f"tol: expected a float in (0, 1e-2), got {self.tol!r}")
         if not (isinstance(self.max_iter, int) and self.max_iter >= 1):
             raise ValueError(f"max_iter: expected an integer >= 1, got {self.max_iter!r}")
+        if self.newton not in NEWTON:
+            raise ValueError(f"newton: expected one of {NEWTON}, got {self.newton!r}")
         self._build()
 
     # -- sizes -------------------------------------------------------------------------------
@@ -155,13 +165,13 @@ class HHT:
         # d ~ M / (beta h^2), so at a small step such a guess carries acceleration errors up to
         # tol l / (beta h^2): 0.05 m/s^2 at h = 1.25e-5 s, which accumulate in the velocities (7.6e-6 m
         # over 0.4 s).
-        solve, _ = band_solver(jac.sparsity_out(0), "hht_band_solve")
-        if expand:
-            solve = solve.expand()
+        band = band_lu(jac.sparsity_out(0), "hht_band")
+        factor, apply = (band.factor.expand(), band.apply.expand()) if expand else (band.factor, band.apply)
         z0, P = ca.MX.sym("z0", resid.nnz_in(0)), ca.MX.sym("prm", resid.nnz_in(1))
         J0, G0 = jac(z0, P)
-        update = ca.Function("hht_update", [z0, P], [z0 - solve(J0.nz[:], G0), ca.norm_inf(G0)], ["z0", "prm"],
-                             ["z1", "g0"])
+        F0 = factor(J0.nz[:])
+        update = ca.Function("hht_update", [z0, P], [z0 - apply(F0, G0), ca.norm_inf(G0), F0], ["z0", "prm"],
+                             ["z1", "g0", "F"])
         newton = ca.rootfinder("hht_newton", "fast_newton", resid, {
             "abstol": self.tol, "abstolStep": 1e-2 * self.tol**0.5, "max_iter": max(self.max_iter - 1, 1),
             "error_on_fail": False, "jacobian_function": jac})
@@ -170,7 +180,7 @@ class HHT:
         more = ca.Function("hht_more", [z0, P, xa, ra], finish(newton(z0, P), P)[:2] if self.max_iter > 1 else [xa, ra])
         post = _post(m).expand() if expand else _post(m)  # per state, and for a few elements flat code is 3x faster
         self._fn.update(prepare=prepare, residual=resid, jacobian=jac, finish=finish, scale=_scale(m, self.alpha),
-                        initial=_initial(m, lay), post=post, update=update, newton=newton,
+                        initial=_initial(m, lay), post=post, update=update, newton=newton, band_apply=apply,
                         more=ca.Function.conditional("hht_converge", [keep], more))
         self._fn["sensitivity"] = _step_blocks(m, lay, self.alpha, prepare, resid, finish, expand)
         self._fn["step"] = self._step_with_derivative()
@@ -182,7 +192,7 @@ class HHT:
         n, nx, npar = m.n_dof, self.nx, m.n_p
         x0, t0, p, h, d = self._fn["prepare"].mx_in()
         zg, pr = self._fn["prepare"](x0, t0, p, h, d)
-        z1, g0 = self._fn["update"](zg, pr)
+        z1, g0, _ = self._fn["update"](zg, pr)
         xa, ra, done = self._fn["finish"](z1, pr)
         X1, res1 = self._fn["more"](1 - done, ca.if_else(ra < g0, z1, zg), pr, xa, ra)
         OX1, ORES = ca.MX.sym("out_x1", nx), ca.MX.sym("out_res")
@@ -225,6 +235,13 @@ class HHT:
         return self._fn["post"]
 
     @property
+    def modified(self) -> ModifiedNewton:
+        """The modified Newton's Functions (:mod:`casflex.integrators.modified`), built on first use."""
+        if "modified" not in self._fn:
+            self._fn["modified"] = ModifiedNewton(self._fn, self.max_iter)
+        return self._fn["modified"]
+
+    @property
     def prepare(self) -> ca.Function:
         """``hht_prepare(x0, t0, p, h, d) -> (z0, prm)``: the Newton guess (the free dofs' scaled
         unknowns) and the known quantities of a step."""
@@ -240,7 +257,7 @@ class HHT:
         """One step as :attr:`step` takes it (bitwise), driven from Python so that the Newton
         updates can be counted: (x1, final scaled residual, Newton updates)."""
         z0, prm = self._fn["prepare"](x0, t0, p, h, d)
-        z1, g0 = self._fn["update"](z0, prm)
+        z1, g0, _ = self._fn["update"](z0, prm)
         x1, res, done = self._fn["finish"](z1, prm)
         updates = 1
         if not bool(done) and self.max_iter > 1:
