@@ -137,7 +137,8 @@ def newton_kinds(meshes: tuple[int, ...], dts: tuple[float, ...], t_end: float) 
             runs = {}
             for kind in ("exact", "modified"):
                 simulate(model, t_end, dt=dt, newton=kind, compiled=True)  # build, not timed
-                runs[kind] = _best_time(lambda k=kind, m=model, dt=dt: simulate(m, t_end, dt=dt, newton=k, compiled=True), 3)
+                runs[kind] = _best_time(lambda k=kind, m=model, dt=dt: simulate(m, t_end, dt=dt, newton=k,
+                                                                                compiled=True), 3)
             (te, ex), (tm, mo) = runs["exact"], runs["modified"]
             rows.append({"elements": ne, "dt": dt, "t_end": t_end, "exact_s": te, "modified_s": tm,
                          "refresh": mo.stats["jacobian_refreshes"] / mo.stats["steps"],
