@@ -13,7 +13,7 @@
 
 - ``step``: ``hht_step(x0, t0, p, h, d) -> (x1, res)`` (one HHT-alpha step, Eqs. 4-10),
   ``hht_initial(q, qd, t, p) -> (qdd, lam)`` (consistent start), ``hht_scale(q, qd, p, h) -> d``
-  (Newton scaling), ``hht_post(x, t, p) -> y`` (energies, joint outputs, local rotations);
+  (Newton scaling), ``hht_post(x, t, p) -> y`` (energies, powers, joint outputs, local rotations);
 - ``simulate``: the same plus ``main.c``;
 - ``direct``: ``equilibrium(q, qd, qdd, lam, t, p) -> (r, phi)`` (Eq. 1, the residual of the
   direct method, Eq. 11) and ``jac_equilibrium`` (its exact Jacobian in every input);
@@ -221,7 +221,8 @@ def _readme(model: Model, funcs: list[ca.Function], what: str, alpha: float, dt:
         outs = ", ".join(f"{f.name_out(i)}[{f.size1_out(i)}x{f.size2_out(i)}]" for i in range(f.n_out()))
         lines.append(f"- `{f.name()}({ins}) -> ({outs})`")
     if any(f.name() == "hht_post" for f in funcs):
-        lines += ["", "`hht_post` y = [kinetic, elastic, gravity energy (J), power of the loads (W), joint outputs ("
+        lines += ["", "`hht_post` y = [kinetic, elastic, gravity energy (J), power of the loads (W), power "
+                  "dissipated by the dampers (W), joint outputs ("
                   + ", ".join(model.output_names) + "), local rotations of the beam elements in rad ("
                   + ", ".join(model.local_rotation_names) + ")]."]
     lines += ["", "Outputs are column-major and dense unless the header's sparsity says otherwise "

@@ -9,6 +9,9 @@ forms (``inertia``):
 - ``"lagrange"`` (default): h = Mdot q' - dT/dq, from d/dt(dT/dq') - dT/dq; energy consistent.
 - ``"seed"``: h = Mbar q' = Mdot q', the paper's Eq. 2 (Mbar_i = Rdot^T M R + R^T M Rdot).
 
+Viscous dampers (a spring's ``c``, a torsion spring's ``ct``) add their forces dD/dq' (D the
+Rayleigh dissipation function) to h: they are the other velocity-dependent term.
+
 Only the scene's elements and supports are modelled; properties declared as parameters are
 entries of the symbol p (in the scene's parameter order), all others are constants.
 
@@ -28,7 +31,7 @@ import numpy as np
 from casflex.assembly import ElementGroup, MatrixAssembly, gather, scatter
 from casflex.constraints import FixedDof, constraint_vector, support_constraints
 from casflex.elements import BeamElement
-from casflex.elements.kernels import KINDS, kernel
+from casflex.elements.kernels import DAMPERS, KINDS, kernel
 from casflex.scene import INERTIA_FORMS, Parameter, Scene, SceneError
 
 __all__ = ["Model", "assemble", "INERTIA_FORMS"]
@@ -58,6 +61,7 @@ class Model:
 
     Functions (all named, inputs and outputs named): ``energy(q, qd, p) -> (kinetic, elastic,
     gravity)``, ``mass(q, p) -> M``, ``forces(q, qd, p) -> (h, f_int, g)``,
+    ``dissipation(q, qd, p) -> P`` (W, the power of the dampers, 0 without them),
     ``load(t, p) -> f_ext``, ``constraint(q) -> (phi, B)``,
     ``equilibrium(q, qd, qdd, lam, t, p) -> (r, phi)`` (Eq. 11), ``outputs(q, lam, p) -> y``,
     ``local_rotations(q) -> theta_l`` (rad, in (-pi, pi]: the co-rotational end rotations of the
@@ -80,6 +84,7 @@ class Model:
     energy: ca.Function
     mass: ca.Function
     forces: ca.Function
+    dissipation: ca.Function
     load: ca.Function
     constraint: ca.Function
     equilibrium: ca.Function
@@ -221,6 +226,17 @@ def _groups(scene: Scene, order, nodes, beam_elems, idx) -> tuple[ElementGroup, 
     group("torsion", [(s.name, s.name, [idx[s.nodes[0]] + 2, idx[s.nodes[1]] + 2],
                        [s.kt, nodes[s.nodes[1]][2] - nodes[s.nodes[0]][2] if s.rest_angle is None else s.rest_angle],
                        ("kt", "rest_angle")) for s in scene.torsion_springs])
+
+    # dampers: only those with a coefficient or a parameter on it, so a scene without them is unchanged
+    def damped(s, fld: str) -> bool:
+        return getattr(s, fld) > 0.0 or f"{s.name}.{fld}" in slot_of
+
+    zero_names = {it[0] for it in zero}
+    for kind, bushing in (("damper", False), ("damper0", True)):
+        group(kind, [(s.name, s.name, [idx[s.nodes[0]], idx[s.nodes[0]] + 1, idx[s.nodes[1]], idx[s.nodes[1]] + 1],
+                      [s.c], ("c",)) for s in scene.springs if damped(s, "c") and (s.name in zero_names) == bushing])
+    group("tdamper", [(s.name, s.name, [idx[s.nodes[0]] + 2, idx[s.nodes[1]] + 2], [s.ct], ("ct",))
+                      for s in scene.torsion_springs if damped(s, "ct")])
     return tuple(out)
 
 
@@ -290,11 +306,14 @@ def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
         return f.map(f"{f.name()}_{grp.n}", "serial", grp.n, [f.n_in() - 1] if f.name_in()[-1] == "g" else [], [])(
             *args)
 
-    T = V_el = V_g = ca.MX(0)
+    T = V_el = V_g = P_d = ca.MX(0)
     h = f_int = gf = ca.MX.zeros(n)
     for grp, pr in zip(groups, props, strict=True):
-        e = mapped(grp, "energy", gather(q, grp), gather(qd, grp), pr, g)
-        T, V_el, V_g = T + ca.sum2(e[0]), V_el + ca.sum2(e[1]), V_g + ca.sum2(e[2])
+        if grp.kind in DAMPERS:
+            P_d += ca.sum2(mapped(grp, "dissipation", gather(q, grp), gather(qd, grp), pr))
+        else:
+            e = mapped(grp, "energy", gather(q, grp), gather(qd, grp), pr, g)
+            T, V_el, V_g = T + ca.sum2(e[0]), V_el + ca.sum2(e[1]), V_g + ca.sum2(e[2])
         hh, fi, gg = mapped(grp, "forces", gather(q, grp), gather(qd, grp), pr, g)
         h, f_int, gf = h + scatter(hh, grp, n), f_int + scatter(fi, grp, n), gf + scatter(gg, grp, n)
     whole = np.arange(n)
@@ -307,6 +326,8 @@ def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
     # joint outputs in the scene's order: beams, springs, torsion springs, then the supports
     out_vals, out_names = [], []
     for grp, pr in zip(groups, props, strict=True):
+        if grp.kind in DAMPERS:
+            continue
         out_vals.append(ca.vec(mapped(grp, "outputs", gather(q, grp), pr)))
         out_names += [f"{nm}.{o}" for nm in grp.names for o in grp.spec.outputs]
     want = ([f"{b.name}.{k}.{o}" for b, k, _, _ in beam_elems for o in KINDS["beam"].outputs]
@@ -334,6 +355,7 @@ def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
         energy=ca.Function("energy", [q, qd, p], [T, V_el, V_g], ["q", "qd", "p"], ["kinetic", "elastic", "gravity"]),
         mass=ca.Function("mass", [q, p], [M], ["q", "p"], ["M"]),
         forces=ca.Function("forces", [q, qd, p], [h, f_int, gf], ["q", "qd", "p"], ["h", "f_int", "g"]),
+        dissipation=ca.Function("dissipation", [q, qd, p], [P_d], ["q", "qd", "p"], ["P"]),
         load=load,
         constraint=constraint,
         equilibrium=ca.Function("equilibrium", [q, qd, qdd, lam, t, p], [r, constraint(q)[0]],

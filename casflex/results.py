@@ -83,8 +83,9 @@ NPZ_KEYS = {
     "energy_kinetic": "(n,) J", "energy_elastic": "(n,) J", "energy_gravity": "(n,) J",
     "energy_total": "(n,) J, kinetic + elastic + gravity",
     "work_external": "(n,) J, work of the nodal loads since t = 0 (trapezoidal)",
-    "energy_balance_error": "(n,) J, E(t) - E(0) - W_ext(t): at alpha = 0 the integration error (either sign, "
-    "O(dt^2)); at alpha < 0 mostly the energy HHT's numerical damping removed (negative)",
+    "work_dampers": "(n,) J, energy the dampers dissipated since t = 0 (trapezoidal, >= 0)",
+    "energy_balance_error": "(n,) J, E(t) - E(0) - W_ext(t) + W_dampers(t): at alpha = 0 the integration error "
+    "(either sign, O(dt^2)); at alpha < 0 mostly the energy HHT's numerical damping removed (negative)",
     "p": "(n_p,) parameter values used", "parameter_names": "(n_p,)",
     "newton_iterations": "(n-1,) Newton iterations per step (-1 where not recorded: compiled runs)",
     "meta": "JSON string: scene, alpha, dt, inertia, compiled, success, status, message, stats",
@@ -167,6 +168,8 @@ class Trajectory:
         meta = json.loads(str(data["meta"]))
         if "energy_balance_error" not in data and "energy_dissipated" in data:  # written before 0.2
             data["energy_balance_error"] = -data.pop("energy_dissipated")
+        if "work_dampers" not in data and "t" in data:  # written before dampers: none
+            data["work_dampers"] = np.zeros_like(data["t"])
         missing = [k for k in NPZ_KEYS if k not in data]
         if missing:
             raise ValueError(f"{path}: not a casflex trajectory file, missing keys {missing}")

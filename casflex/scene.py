@@ -165,15 +165,20 @@ class Beam:
 
 @dataclass(frozen=True)
 class Spring:
-    """A massless co-rotational linear (axial, pin-to-pin) spring, stiffness k (N/m).
+    """A massless co-rotational linear (axial, pin-to-pin) spring, stiffness k (N/m), with an
+    optional viscous damper c (N s/m) in parallel.
 
-    ``rest_length`` (m) defaults to the initial distance between the two nodes.
+    ``rest_length`` (m) defaults to the initial distance between the two nodes. The damper acts
+    along the spring on the rate of its length (force c dL/dt); a spring of rest length 0 (a
+    bushing) is damped on the relative velocity of its nodes instead (force c (v_b - v_a)).
+    ``c = 0`` (the default) adds nothing to the model.
     """
 
     name: str
     nodes: tuple[str, str]
     k: float
     rest_length: float | None = None
+    c: float = 0.0
 
     def __post_init__(self) -> None:
         where = _owner("spring", self.name)
@@ -182,19 +187,23 @@ class Spring:
         object.__setattr__(self, "k", _positive(where, "k", self.k))
         if self.rest_length is not None:
             object.__setattr__(self, "rest_length", _non_negative(where, "rest_length", self.rest_length))
+        object.__setattr__(self, "c", _non_negative(where, "c", self.c))
 
 
 @dataclass(frozen=True)
 class TorsionSpring:
-    """A massless torsional spring kt (N m/rad) on the relative rotation theta_b - theta_a.
+    """A massless torsional spring kt (N m/rad) on the relative rotation theta_b - theta_a, with an
+    optional viscous damper ct (N m s/rad) in parallel on the relative angular velocity.
 
-    ``rest_angle`` (rad) defaults to the initial relative rotation.
+    ``rest_angle`` (rad) defaults to the initial relative rotation; ``ct = 0`` (the default) adds
+    nothing to the model.
     """
 
     name: str
     nodes: tuple[str, str]
     kt: float
     rest_angle: float | None = None
+    ct: float = 0.0
 
     def __post_init__(self) -> None:
         where = _owner("torsion spring", self.name)
@@ -203,6 +212,7 @@ class TorsionSpring:
         object.__setattr__(self, "kt", _positive(where, "kt", self.kt))
         if self.rest_angle is not None:
             object.__setattr__(self, "rest_angle", _number(where, "rest_angle", self.rest_angle))
+        object.__setattr__(self, "ct", _non_negative(where, "ct", self.ct))
 
 
 @dataclass(frozen=True)
@@ -276,7 +286,7 @@ class Load:
 
 
 #: Fields whose parameters get a lower bound of 0 by default: no physical value is negative.
-NONNEGATIVE_FIELDS = frozenset({"k", "kt", "E", "A", "I", "rho", "rest_length"})
+NONNEGATIVE_FIELDS = frozenset({"k", "kt", "c", "ct", "E", "A", "I", "rho", "rest_length"})
 
 
 @dataclass(frozen=True)
@@ -287,8 +297,8 @@ class Parameter:
     ``"gravity.<x|y>"`` or ``"<load>.<fx|fy|mz>"``. Its nominal value is the property's value in
     the scene. ``lower``/``upper`` bound it; the nominal value must lie within them. The default
     lower bound is 0 for properties that are non-negative by nature (``NONNEGATIVE_FIELDS``:
-    stiffnesses, section, density, rest length), else -inf; the default upper bound is +inf.
-    ``scale`` is the typical magnitude used to scale the NLP (default: the nominal).
+    stiffnesses, damping coefficients, section, density, rest length), else -inf; the default
+    upper bound is +inf. ``scale`` is the typical magnitude used to scale the NLP (default: the nominal).
     """
 
     name: str

@@ -371,7 +371,7 @@ def _post(integ: HHT, X: np.ndarray, dt: float, p: np.ndarray, lib: CompiledLibr
 
 
 def _work(power: np.ndarray, dt: float) -> np.ndarray:
-    """Work of the loads (J) from their power (W) by the trapezoidal rule, from t = 0."""
+    """Work (J) from a power (W) by the trapezoidal rule, from the first state."""
     return np.concatenate([[0.0], np.cumsum(0.5 * (power[1:] + power[:-1]) * dt)])
 
 
@@ -384,23 +384,24 @@ def _first_unsound_state(integ: HHT, Y: np.ndarray, dt: float, alpha: float,
     - ``element_range``: a beam element's co-rotational local rotation jumped by more than pi
       between two states, i.e. passed +-pi and wrapped (it is an atan2, in (-pi, pi]): the element
       is bent beyond the range of its formulation and its strain energy jumped.
-    - ``energy_growth``: the energy created by the integrator, E(t) - E(0) - W(t), exceeds
+    - ``energy_growth``: the energy created by the integrator, E(t) - E(0) - W(t) + W_d(t) (W_d the
+      energy the dampers dissipated), exceeds
       ENERGY_GROWTH of the energy in motion so far (max of T + V_el, plus max |W|). HHT with
       alpha <= 0 conserves (alpha = 0) or dissipates energy on a resolved motion; growth of this
       size is an unstable integration (modes with omega dt >> 1 pumped by the nonlinearity).
     """
     model = integ.model
     n_out = len(model.output_names)
-    th = Y[:, 4 + n_out:]
+    th = Y[:, 5 + n_out:]
     k_wrap = None
     if th.shape[1] and th.shape[0] > 1:
         jump = np.abs(np.diff(th, axis=0)) > np.pi
         if jump.any():
             k = int(np.argmax(jump.any(axis=1)))
             k_wrap = (k + 1, int(np.argmax(jump[k])))
-    T, Ve, Vg, power = Y[:, 0], Y[:, 1], Y[:, 2], Y[:, 3]
+    T, Ve, Vg, power, dissipated = Y[:, 0], Y[:, 1], Y[:, 2], Y[:, 3], _work(Y[:, 4], dt)
     W = _work(power, dt)
-    created = T + Ve + Vg - (T[0] + Ve[0] + Vg[0]) - W
+    created = T + Ve + Vg - (T[0] + Ve[0] + Vg[0]) - W + dissipated
     in_motion = np.maximum.accumulate(T + Ve) + np.maximum.accumulate(np.abs(W))
     # round-off of E(t) - E(0): the gravity energy can carry a large constant offset
     floor = 1e-10 * np.maximum.accumulate(np.abs(T) + np.abs(Ve) + np.abs(Vg) + np.abs(W)) + 1e-300
@@ -433,14 +434,14 @@ def _trajectory(integ: HHT, X: np.ndarray, Y: np.ndarray, iters: np.ndarray, dt:
     q, qd, qdd, lam = X[:, :n], X[:, n:2 * n], X[:, 2 * n:3 * n], X[:, 3 * n:]
     t = t0 + np.arange(k) * dt
     n_out = len(model.output_names)
-    T, Ve, Vg, power, outputs = Y[:, 0], Y[:, 1], Y[:, 2], Y[:, 3], Y[:, 4:4 + n_out]
-    work = _work(power, dt)
+    T, Ve, Vg, power, outputs = Y[:, 0], Y[:, 1], Y[:, 2], Y[:, 3], Y[:, 5:5 + n_out]
+    work, dissipated = _work(power, dt), _work(Y[:, 4], dt)
     total = T + Ve + Vg
     return Trajectory(
         t=t, q=q, qd=qd, qdd=qdd, lam=lam, dof_names=model.dof_names, constraint_names=model.constraint_names,
         outputs=outputs, output_names=model.output_names,
         energies={"kinetic": T, "elastic": Ve, "gravity": Vg, "total": total, "work_external": work,
-                  "balance_error": total - total[0] - work},
+                  "work_dampers": dissipated, "balance_error": total - total[0] - work + dissipated},
         p=np.asarray(p, dtype=float), parameter_names=model.parameter_names, newton_iterations=iters,
         success=status == "success", status=status, message=message or "ok", meta=meta,
     )

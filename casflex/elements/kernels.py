@@ -7,7 +7,15 @@ Kinds and their element dofs and properties (a property may be a parameter of th
   each end), E (Pa), A (m^2), I (m^4), rho (kg/m^3), rotary (1 adds the section's rotary inertia);
 - ``spring``: (x_a, y_a, x_b, y_b); k (N/m), rest (m);
 - ``spring0``: a spring of rest length zero (smooth where the nodes meet); k (N/m);
-- ``torsion``: (theta_a, theta_b); kt (N m/rad), rest (rad).
+- ``torsion``: (theta_a, theta_b); kt (N m/rad), rest (rad);
+- ``damper``: (x_a, y_a, x_b, y_b); c (N s/m): a viscous damper along the line of its nodes,
+  Rayleigh function D = c/2 (dL/dt)^2 (its nodes must stay apart, as a spring's of rest length > 0);
+- ``damper0``: the damper of a zero-length spring (a bushing), D = c/2 |v_b - v_a|^2;
+- ``tdamper``: (theta_a, theta_b); ct (N m s/rad), D = ct/2 (theta_b' - theta_a')^2.
+
+A damper's force dD/dqd is velocity dependent: it joins the inertia term h (in ``forces``,
+``scale`` and the HHT kernels, with its exact tangents in q and qd); ``dissipation`` gives its
+power qd . dD/dqd = 2 D (W).
 
 Kernels (all SX, common subexpressions eliminated), with ``g`` the gravity vector (m/s^2):
 
@@ -16,6 +24,7 @@ Kernels (all SX, common subexpressions eliminated), with ``g`` the gravity vecto
 - ``<kind>_mass(q, props) -> M`` (dense, n_dof x n_dof);
 - ``<kind>_outputs(q, props) -> y``: the joint outputs of the element (``OUTPUTS``);
 - ``<kind>_rotations(q, props) -> theta_l``: local end rotations (beams);
+- ``<kind>_dissipation(q, qd, props) -> P``: power dissipated by a damper (W);
 - ``<kind>_scale(q, qd, props, g) -> (m, c, k)``: diagonals of M, dh/dqd and d(f_int - g)/dq;
 - ``<kind>_hht<tag>(q, qd, qdd, [qa,] props, g, c) -> (r, K)`` and ``..._r`` (r only): the
   element's part of the HHT residual r = M(qa) qdd + (1 + alpha) (h + f_int - g) and its exact
@@ -34,7 +43,7 @@ import casadi as ca
 from casflex.elements.beam import BeamElement
 from casflex.elements.springs import LinearSpring, TorsionalSpring
 
-__all__ = ["KINDS", "Kind", "kernel", "hht_kernel"]
+__all__ = ["DAMPERS", "KINDS", "Kind", "kernel", "hht_kernel"]
 
 
 @dataclass(frozen=True)
@@ -53,7 +62,13 @@ KINDS = {
     "spring": Kind("spring", 4, ("k", "rest"), ("force", "length", "fx", "fy"), False),
     "spring0": Kind("spring0", 4, ("k",), ("force", "length", "fx", "fy"), False),
     "torsion": Kind("torsion", 2, ("kt", "rest"), ("moment",), False),
+    "damper": Kind("damper", 4, ("c",), (), False),
+    "damper0": Kind("damper0", 4, ("c",), (), False),
+    "tdamper": Kind("tdamper", 2, ("ct",), (), False),
 }
+
+#: Kinds whose force depends on the velocities only (no energy, mass or outputs).
+DAMPERS = ("damper", "damper0", "tdamper")
 
 
 class _Element:
@@ -67,10 +82,26 @@ class _Element:
             self.spring = LinearSpring("e", pr[0], pr[1])
         elif kind == "spring0":
             self.spring = LinearSpring("e", pr[0], 0.0)
-        else:
+        elif kind == "torsion":
             self.spring = TorsionalSpring("e", pr[0], pr[1])
+        else:
+            self.c = pr[0]
+
+    def rayleigh(self, q: ca.SX, qd: ca.SX) -> ca.SX:
+        """The damper's Rayleigh dissipation function D(q, qd) (W / 2); 0 for other kinds."""
+        if self.kind == "damper":
+            d = q[2:] - q[:2]
+            rate = ca.dot(d, qd[2:] - qd[:2]) / ca.norm_2(d)  # dL/dt
+            return 0.5 * self.c * rate**2
+        if self.kind == "damper0":
+            return 0.5 * self.c * ca.sumsqr(qd[2:] - qd[:2])
+        if self.kind == "tdamper":
+            return 0.5 * self.c * (qd[1] - qd[0]) ** 2
+        return ca.SX(0)
 
     def strain(self, q: ca.SX) -> ca.SX:
+        if self.kind in DAMPERS:
+            return ca.SX(0)
         if self.kind == "beam":
             return self.beam.strain_energy(q)
         if self.kind == "torsion":
@@ -87,7 +118,11 @@ class _Element:
         return self.beam.mass_terms(q, a)
 
     def inertia_terms(self, q: ca.SX, qd: ca.SX, form: str) -> tuple[ca.SX, ca.SX, ca.SX]:
+        """(h, dh/dq, dh/dqd): the velocity-dependent forces, a damper's included."""
         n = q.numel()
+        if self.kind in DAMPERS:
+            f = ca.gradient(self.rayleigh(q, qd), qd)
+            return f, ca.jacobian(f, q), ca.jacobian(f, qd)
         if self.kind != "beam":
             return ca.SX.zeros(n), ca.SX.zeros(n, n), ca.SX.zeros(n, n)
         return self.beam.inertia_terms(q, qd, form)
@@ -96,6 +131,8 @@ class _Element:
         return self.beam.kinetic_energy(q, qd) if self.kind == "beam" else ca.SX(0)
 
     def outputs(self, q: ca.SX) -> ca.SX:
+        if self.kind in DAMPERS:
+            return ca.SX(0, 1)
         if self.kind == "beam":
             return self.beam.end_forces(q)
         if self.kind == "torsion":
@@ -115,7 +152,7 @@ CSE = {"cse": True}  # common subexpression elimination
 
 @functools.cache
 def kernel(kind: str, what: str, form: str = "lagrange") -> ca.Function:
-    """The kernel ``what`` (energy, forces, mass, outputs, rotations, scale) of element ``kind``;
+    """The kernel ``what`` (energy, forces, mass, outputs, rotations, dissipation, scale) of element ``kind``;
     ``form``: the inertia form of ``forces`` and ``scale`` (``"lagrange"`` or ``"seed"``)."""
     k, q, qd, pr, g, el = _symbols(kind)
     name = f"{kind}_{what}"
@@ -133,6 +170,8 @@ def kernel(kind: str, what: str, form: str = "lagrange") -> ca.Function:
     if what == "rotations":
         kin = el.beam.kinematics(q)
         return ca.Function(name, [q, pr], [ca.vertcat(kin["tha"], kin["thb"])], ["q", "props"], ["theta_l"], CSE)
+    if what == "dissipation":
+        return ca.Function(name, [q, qd, pr], [2 * el.rayleigh(q, qd)], ["q", "qd", "props"], ["P"], CSE)
     if what == "scale":
         _, M, _ = el.mass_terms(q, qd)
         _, _, C = el.inertia_terms(q, qd, form)

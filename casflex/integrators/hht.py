@@ -230,8 +230,8 @@ class HHT:
     @property
     def post(self) -> ca.Function:
         """``hht_post(x, t, p) -> y``: [kinetic, elastic, gravity energy (J), power of the loads (W),
-        joint outputs (``model.output_names``), local rotations of the beam elements (rad,
-        ``model.local_rotation_names``)] of one state."""
+        power dissipated by the dampers (W), joint outputs (``model.output_names``), local rotations
+        of the beam elements (rad, ``model.local_rotation_names``)] of one state."""
         return self._fn["post"]
 
     @property
@@ -489,7 +489,8 @@ def _post(m: Model) -> ca.Function:
     x, t, p = ca.MX.sym("x", 3 * n + m.n_con), ca.MX.sym("t"), ca.MX.sym("p", m.n_p)
     q, qd, lam = x[:n], x[n:2 * n], x[3 * n:]
     T, Ve, Vg = m.energy(q, qd, p)
-    y = ca.vertcat(T, Ve, Vg, ca.dot(m.load(t, p), qd), m.outputs(q, lam, p), m.local_rotations(q))
+    y = ca.vertcat(T, Ve, Vg, ca.dot(m.load(t, p), qd), m.dissipation(q, qd, p), m.outputs(q, lam, p),
+                   m.local_rotations(q))
     return ca.Function("hht_post", [x, t, p], [ca.densify(y)], ["x", "t", "p"], ["y"])
 
 

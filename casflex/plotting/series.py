@@ -32,7 +32,8 @@ _ENERGY_LABELS = {
     "gravity": "gravity potential",
     "total": "total",
     "work_external": "work of external loads",
-    "balance_error": "balance error E - E(0) - W (integration; numerical damping if < 0)",
+    "work_dampers": "energy dissipated by the dampers",
+    "balance_error": "balance error E - E(0) - W + W_d (integration; numerical damping if < 0)",
 }
 
 _OUTPUT_UNITS = {"force": "N", "fx": "N", "fy": "N", "length": "m", "moment": "N m",

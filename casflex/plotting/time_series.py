@@ -80,9 +80,9 @@ def plot_energies(traj: Trajectory, path: str | os.PathLike[str] | None = None) 
     """Energies (J) over time.
 
     Top: kinetic, elastic, gravity potential and total energy. Bottom, on its own scale: the
-    energy balance error E(t) - E(0) - W_ext(t) (at alpha = 0 the integration error, of either
-    sign and O(dt^2); at alpha < 0 mostly the energy numerical damping removed, negative), and
-    the work of the external loads when there is any.
+    energy balance error E(t) - E(0) - W_ext(t) + W_d(t) (at alpha = 0 the integration error, of
+    either sign and O(dt^2); at alpha < 0 mostly the energy numerical damping removed, negative),
+    the work of the external loads and the energy the dampers dissipated, when there are any.
     """
     fig = _new_figure((7.0, 5.8))
     top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=[3, 1.4])
@@ -93,9 +93,10 @@ def plot_energies(traj: Trajectory, path: str | os.PathLike[str] | None = None) 
     top.set_ylabel("energy (J)")
     _legend_above(top, 4)
     bottom.plot(traj.t, e["balance_error"], color="C3", lw=1.4, label=_ENERGY_LABELS["balance_error"])
-    work = e.get("work_external")
-    if work is not None and np.any(work != 0.0):
-        bottom.plot(traj.t, work, color="C4", lw=1.2, ls="-.", label=_ENERGY_LABELS["work_external"])
+    for key, color in (("work_external", "C4"), ("work_dampers", "C5")):
+        work = e.get(key)
+        if work is not None and np.any(work != 0.0):
+            bottom.plot(traj.t, work, color=color, lw=1.2, ls="-.", label=_ENERGY_LABELS[key])
     bottom.set_ylabel("energy (J)")
     _legend_above(bottom, 2)
     alpha = traj.meta.get("alpha")

@@ -50,7 +50,7 @@ def test_plot_energies(twobar, tmp_path):
     top, bottom = fig.axes
     assert len(top.lines) == 4 and len(bottom.lines) == 1  # no external loads: no work line
     assert legend_texts(top) == ["kinetic", "elastic (springs, beams)", "gravity potential", "total"]
-    assert legend_texts(bottom) == ["balance error E - E(0) - W (integration; numerical damping if < 0)"]
+    assert legend_texts(bottom) == ["balance error E - E(0) - W + W_d (integration; numerical damping if < 0)"]
     assert top.get_ylabel() == bottom.get_ylabel() == "energy (J)"
     np.testing.assert_array_equal(top.lines[3].get_ydata(), tr.energies["total"])
 

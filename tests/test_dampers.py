@@ -1,0 +1,131 @@
+"""Viscous dampers on springs (c) and torsion springs (ct): the damped oscillator against its
+closed form, the energy balance with the dissipated energy, the kernels' tangents against
+finite differences, k and c identified from the closed form's recording, and a scene without
+dampers assembled exactly as before."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from conftest import pendulum
+from scipy.linalg import expm
+
+from casflex import Beam, Node, Parameter, Scene, Spring, Support, TorsionSpring, assemble
+from casflex.data import MeasurementSet
+from casflex.elements.kernels import DAMPERS, hht_kernel
+from casflex.identification.estimate import estimate
+from casflex.identification.measurement import Experiment
+from casflex.simulate import simulate
+
+K, C, EA, L, M_BAR, V0 = 1000.0, 2.0, 1000.0, 0.5, 0.05, 0.1  # N/m, N s/m, N, m, kg, m/s
+
+
+def slider(bushing: bool = False) -> Scene:
+    """A bar a-b sliding along x (y and theta held at both ends) on a spring-damper to ground g.
+
+    Exactly linear: the spring stays along x (or is a bushing of rest length 0 at a's position),
+    the bar's chord does not turn. Two dofs xa, xb; mass m = rho A L = 0.05 kg (consistent), axial
+    stiffness EA / L; both ends start at V0 with the spring at rest.
+    """
+    g = Node("g", 1.0 if bushing else 0.0, 0.0)
+    nodes = (g, Node("a", 1.0, 0.0, vx=V0), Node("b", 1.0 + L, 0.0, vx=V0))
+    sup = (Support("ground", "g"), Support("ya", "a", "y"), Support("ta", "a", "theta"),
+           Support("yb", "b", "y"), Support("tb", "b", "theta"))
+    bar = Beam("bar", ("a", "b"), E=EA / 1e-4, A=1e-4, I=1e-8, rho=M_BAR / (1e-4 * L))
+    spring = Spring("s", ("g", "a"), k=K, c=C, rest_length=0.0 if bushing else None)
+    return Scene(name="slider", nodes=nodes, beams=(bar,), springs=(spring,), supports=sup, gravity=(0.0, 0.0))
+
+
+def closed_form(t: np.ndarray) -> np.ndarray:
+    """xa - 1, xb - 1.5 (m) at times t: x' = A x of the linear two-dof system, by the matrix exponential."""
+    Mm = M_BAR / 6 * np.array([[2.0, 1.0], [1.0, 2.0]])
+    Km = np.array([[K + EA / L, -EA / L], [-EA / L, EA / L]])
+    Cm = np.diag([C, 0.0])
+    A = np.block([[np.zeros((2, 2)), np.eye(2)], [-np.linalg.solve(Mm, Km), -np.linalg.solve(Mm, Cm)]])
+    x0 = np.array([0.0, 0.0, V0, V0])
+    return np.array([(expm(A * ti) @ x0)[:2] for ti in t])
+
+
+@pytest.mark.parametrize("bushing", [False, True])
+def test_damped_oscillator_against_its_closed_form(bushing):
+    model = assemble(slider(bushing))
+    assert {g.kind for g in model.groups} >= {"damper0" if bushing else "damper"}
+    errors = []
+    for dt in (2e-4, 1e-4):
+        tr = simulate(model, 0.2, dt=dt, alpha=0.0, compiled=False)
+        assert tr.success
+        ia, ib = model.dof_names.index("xa"), model.dof_names.index("xb")
+        exact = closed_form(tr.t)
+        errors.append(np.abs(np.column_stack([tr.q[:, ia] - 1.0, tr.q[:, ib] - 1.5]) - exact).max())
+    amp = np.abs(closed_form(np.linspace(0, 0.2, 400))).max()
+    order = np.log2(errors[0] / errors[1])
+    # HHT at alpha = 0 is second order; the error at dt = 1e-4, ~(omega dt)^2 with omega ~ 400 rad/s
+    assert 1.8 < order < 2.2, errors
+    assert errors[1] < 2e-4 * amp, (errors, amp)  # measured 1.0e-4 amp: HHT's phase error ~(omega dt)^2
+
+
+def _balance(scene: Scene, dt: float, t_end: float = 0.5):
+    tr = simulate(assemble(scene), t_end, dt=dt, alpha=0.0, compiled=False)
+    assert tr.success
+    return np.abs(tr.energies["balance_error"]).max(), tr.energies["work_dampers"]
+
+
+@pytest.mark.parametrize("case", ["spring", "torsion"])
+def test_energy_balance_includes_the_dissipation(case):
+    """E(t) - E(0) - W_ext + W_dampers = O(dt^2) at alpha = 0, while the dampers take a finite share."""
+    if case == "spring":
+        scene = slider()
+    else:  # a rod swinging from a pin under gravity, a torsion spring-damper between it and the ground
+        base = pendulum(n_elements=2, angle=0.4)
+        ground = Node("g", 0.0, 0.0, theta=base.nodes[0].theta)
+        scene = dataclasses.replace(base, nodes=(*base.nodes, ground), supports=(*base.supports,
+                                    Support("ground", "g")),
+                                    torsion_springs=(TorsionSpring("hip", ("g", "pivot"), kt=50.0, ct=0.8),))
+    err1, wd1 = _balance(scene, 2e-4)
+    err2, wd2 = _balance(scene, 1e-4)
+    assert wd2[-1] > 0.05 * (np.abs(wd2).max() + err2) and np.all(np.diff(wd2) >= -1e-15)
+    assert err2 < 1e-3 * wd2[-1]
+    assert 3.0 < err1 / err2 < 5.0, (err1, err2)  # second order: 4
+
+
+@pytest.mark.parametrize("kind", DAMPERS)
+def test_damper_tangent_against_finite_differences(kind):
+    f = hht_kernel(kind, -0.1, "lagrange", True)
+    n = 2 if kind == "tdamper" else 4
+    rng = np.random.default_rng(5)
+    q = np.array([0.1, -0.2, 0.7, 0.4])[:n] + 1e-2 * rng.normal(size=n)
+    qd, qdd = rng.normal(size=n), rng.normal(size=n)
+    c = np.array([2.0e3, 4.0e6])
+    args = lambda dq: [q + dq, qd + c[0] * dq, qdd + c[1] * dq, q + 0.9 * dq, [3.0], [0.0, -9.81], c]  # noqa: E731
+    r, Kt = (np.array(v) for v in f(*args(np.zeros(n))))
+    e = 1e-6
+    fd = np.column_stack([(np.array(f(*args(e * ei))[0]) - np.array(f(*args(-e * ei))[0])).ravel() / (2 * e)
+                          for ei in np.eye(n)])
+    # the damper's r does not hold qa (massless): dqa/dq = 0.9 in args is ignored; central differences
+    np.testing.assert_allclose(Kt, fd, rtol=0, atol=1e-7 * np.abs(Kt).max())
+    assert np.abs(r).max() > 0
+
+
+def test_identify_stiffness_and_damping_from_a_closed_form_recording():
+    """k and c from the closed form's positions at 200 Hz with 10 um of noise, started at 0.7 x truth."""
+    scene = dataclasses.replace(slider(), parameters=(Parameter("k", "s.k"), Parameter("c", "s.c")))
+    scene = dataclasses.replace(scene, run=dataclasses.replace(scene.run, dt=2e-4, alpha=0.0))
+    t = np.arange(0.0, 0.1 + 1e-12, 5e-3)
+    x = closed_form(t) + [1.0, 1.5] + 1e-5 * np.random.default_rng(1).normal(size=(t.size, 2))
+    data = MeasurementSet(t=t, channels=("xa", "xb"), q=x, qd=None, qdd=None)
+    r = estimate(assemble(scene), [Experiment(data)], start=0.7, compiled=False)
+    assert r.success, r.message
+    truth = np.array([K, C])
+    # measured: k -0.23 %, c +1.3 %; the issue's bar for dampers is 5 %
+    assert abs(r.p[0] / K - 1) < 0.01 and abs(r.p[1] / C - 1) < 0.05, r.p
+    se = np.array([r.std_errors[n] for n in ("k", "c")])
+    assert np.all(np.abs(r.p - truth) < 3 * se), (r.p, se)
+
+
+def test_a_scene_without_dampers_assembles_as_before():
+    scene = slider()
+    undamped = dataclasses.replace(scene, springs=(dataclasses.replace(scene.springs[0], c=0.0),))
+    assert not {g.kind for g in assemble(undamped).groups} & set(DAMPERS)
+    assert float(assemble(undamped).dissipation(np.ones(9), np.ones(9), [])) == 0.0
