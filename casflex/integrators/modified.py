@@ -9,10 +9,11 @@ are kept from then on: a refresh.
 
 An update with a Jacobian one step old contracts the error by about 7e-3 on twobar at dt = 1e-3
 (measured), so at casflex's tolerance 1e-12 a chord update converges a step when the predictor is
-already close: on twobar at dt = 2e-4, 9 steps in 10, where the modified Newton is 2x faster; at
-dt = 1e-3, or with 32 elements per bar, it refreshes in 8 or 9 steps of 10 and is slower than the
-exact one (docs/tables/bench_simulate.md). A looser tol does not help: the residual is scaled by
-M / (beta h^2), and chord iterates accepted at 1e-8 moved twobar's node 5 by 9 mm in 3 s.
+already close: on twobar at dt = 2e-4 with 1 or 8 elements per bar, 8 or 9 steps in 10, where the
+modified Newton costs 0.83-1.0 of the exact one's time; at dt = 1e-3, or with 32 elements per bar,
+it refreshes in 8 or 9 steps of 10 and is up to 1.5x slower (docs/tables/bench_simulate.md). A
+looser tol does not help: the residual is scaled by M / (beta h^2), and chord iterates accepted at
+1e-8 moved twobar's node 5 by 9 mm in 3 s.
 
 A state accepted after a chord update carries up to cond(G_z) tol of error (the exact Newton's
 final update leaves round-off): on twobar, 2.5e-7 m over 0.5 s at dt = 2e-4, as much as the
