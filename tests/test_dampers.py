@@ -129,3 +129,16 @@ def test_a_scene_without_dampers_assembles_as_before():
     undamped = dataclasses.replace(scene, springs=(dataclasses.replace(scene.springs[0], c=0.0),))
     assert not {g.kind for g in assemble(undamped).groups} & set(DAMPERS)
     assert float(assemble(undamped).dissipation(np.ones(9), np.ones(9), [])) == 0.0
+
+
+def test_scene_file_round_trip_and_cli_summary(tmp_path, capsys):
+    """c and ct survive the TOML file; `casflex simulate` reports the dissipated energy."""
+    from casflex import dumps_scene, loads_scene
+    from casflex.cli import main
+
+    scene = slider()
+    assert loads_scene(dumps_scene(scene)) == scene
+    path = tmp_path / "slider.toml"
+    path.write_text(dumps_scene(scene))
+    assert main(["simulate", str(path), "--t-end", "0.05", "--dt", "1e-4", "--alpha", "0"]) == 0
+    assert "dissipated by the dampers" in capsys.readouterr().out

@@ -48,8 +48,11 @@ def summary(model, traj, times: Sequence[float] | None = None) -> None:
     e = traj.energies
     err = e["balance_error"]
     what = "integration error" if traj.meta["alpha"] == 0 else "integration error and numerical damping"
+    wd = e.get("work_dampers")
+    damped = wd is not None and wd[-1] > 0.0
     print(f"  energy: E(0) = {e['total'][0]:.6f} J, E(end) = {e['total'][-1]:.6f} J, work of loads "
-          f"{e['work_external'][-1]:.6f} J; balance E - E(0) - W = {err[-1]:.3e} J at the end, max |.| "
+          f"{e['work_external'][-1]:.6f} J" + (f", dissipated by the dampers {wd[-1]:.6f} J" if damped else "")
+          + f"; balance E - E(0) - W{' + W_d' if damped else ''} = {err[-1]:.3e} J at the end, max |.| "
           f"{np.abs(err).max():.3e} J ({what})")
 
 
