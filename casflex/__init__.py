@@ -14,7 +14,8 @@ __version__ = "0.1.0"
 _EXPORTS = {
     "Model": "casflex.model", "assemble": "casflex.model",
     "Beam": "casflex.scene", "Load": "casflex.scene", "Node": "casflex.scene", "Parameter": "casflex.scene",
-    "RunSettings": "casflex.scene", "Scene": "casflex.scene", "SceneError": "casflex.scene",
+    "RigidBody": "casflex.scene", "RunSettings": "casflex.scene", "Scene": "casflex.scene",
+    "SceneError": "casflex.scene",
     "Spring": "casflex.scene", "Support": "casflex.scene", "TorsionSpring": "casflex.scene",
     "builtin_scenes": "casflex.scene_io", "dumps_scene": "casflex.scene_io", "load_scene": "casflex.scene_io",
     "loads_scene": "casflex.scene_io", "save_scene": "casflex.scene_io",

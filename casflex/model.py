@@ -23,6 +23,7 @@ maps. The Functions are MX; evaluated on SX symbols they give the flat expressio
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -237,6 +238,15 @@ def _groups(scene: Scene, order, nodes, beam_elems, idx) -> tuple[ElementGroup, 
                       [s.c], ("c",)) for s in scene.springs if damped(s, "c") and (s.name in zero_names) == bushing])
     group("tdamper", [(s.name, s.name, [idx[s.nodes[0]] + 2, idx[s.nodes[1]] + 2], [s.ct], ("ct",))
                       for s in scene.torsion_springs if damped(s, "ct")])
+    bodies = []
+    for bd in scene.bodies:
+        x0, y0, th0 = nodes[bd.node][:3]
+        dx = (x0 if bd.com_x is None else bd.com_x) - x0
+        dy = (y0 if bd.com_y is None else bd.com_y) - y0
+        c, s_ = math.cos(th0), math.sin(th0)  # the offset in the node's frame: R(theta0)^T (com - node)
+        bodies.append((bd.name, bd.name, [idx[bd.node] + j for j in range(3)],
+                       [bd.mass, bd.inertia, c * dx + s_ * dy, -s_ * dx + c * dy], ("mass", "inertia", "", "")))
+    group("body", bodies)
     return tuple(out)
 
 
@@ -326,7 +336,7 @@ def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
     # joint outputs in the scene's order: beams, springs, torsion springs, then the supports
     out_vals, out_names = [], []
     for grp, pr in zip(groups, props, strict=True):
-        if grp.kind in DAMPERS:
+        if not grp.spec.outputs:  # dampers, bodies
             continue
         out_vals.append(ca.vec(mapped(grp, "outputs", gather(q, grp), pr)))
         out_names += [f"{nm}.{o}" for nm in grp.names for o in grp.spec.outputs]

@@ -21,6 +21,7 @@ __all__ = [
     "Beam",
     "Spring",
     "TorsionSpring",
+    "RigidBody",
     "Support",
     "Load",
     "Parameter",
@@ -216,6 +217,33 @@ class TorsionSpring:
 
 
 @dataclass(frozen=True)
+class RigidBody:
+    """A planar rigid body fixed to a node: mass (kg), moment of inertia about its centre of mass
+    (kg m^2), centre of mass initially at (com_x, com_y) (m; default: the node).
+
+    The body turns with the node's rotation dof: its centre of mass stays at the initial offset
+    from the node in the node's frame. A body of zero inertia at the node is a point mass.
+    """
+
+    name: str
+    node: str
+    mass: float
+    inertia: float = 0.0
+    com_x: float | None = None
+    com_y: float | None = None
+
+    def __post_init__(self) -> None:
+        where = _owner("rigid body", self.name)
+        object.__setattr__(self, "name", _name(where, "name", self.name))
+        object.__setattr__(self, "node", _name(where, "node", self.node))
+        object.__setattr__(self, "mass", _positive(where, "mass", self.mass))
+        object.__setattr__(self, "inertia", _non_negative(where, "inertia", self.inertia))
+        for f in ("com_x", "com_y"):
+            if getattr(self, f) is not None:
+                object.__setattr__(self, f, _number(where, f, getattr(self, f)))
+
+
+@dataclass(frozen=True)
 class Support:
     """A support fixing some dofs of a node at their initial values.
 
@@ -286,7 +314,7 @@ class Load:
 
 
 #: Fields whose parameters get a lower bound of 0 by default: no physical value is negative.
-NONNEGATIVE_FIELDS = frozenset({"k", "kt", "c", "ct", "E", "A", "I", "rho", "rest_length"})
+NONNEGATIVE_FIELDS = frozenset({"k", "kt", "c", "ct", "E", "A", "I", "rho", "rest_length", "mass", "inertia"})
 
 
 @dataclass(frozen=True)
@@ -297,7 +325,7 @@ class Parameter:
     ``"gravity.<x|y>"`` or ``"<load>.<fx|fy|mz>"``. Its nominal value is the property's value in
     the scene. ``lower``/``upper`` bound it; the nominal value must lie within them. The default
     lower bound is 0 for properties that are non-negative by nature (``NONNEGATIVE_FIELDS``:
-    stiffnesses, damping coefficients, section, density, rest length), else -inf; the default
+    stiffnesses, damping coefficients, section, density, rest length, masses), else -inf; the default
     upper bound is +inf. ``scale`` is the typical magnitude used to scale the NLP (default: the nominal).
     """
 
@@ -366,6 +394,7 @@ class Scene:
     beams: tuple[Beam, ...] = ()
     springs: tuple[Spring, ...] = ()
     torsion_springs: tuple[TorsionSpring, ...] = ()
+    bodies: tuple[RigidBody, ...] = ()
     supports: tuple[Support, ...] = ()
     loads: tuple[Load, ...] = ()
     parameters: tuple[Parameter, ...] = ()
@@ -375,7 +404,7 @@ class Scene:
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.strip():
             raise SceneError(f"name: expected a non-empty string (the scene's name), got {self.name!r}")
-        for f in ("nodes", "beams", "springs", "torsion_springs", "supports", "loads", "parameters"):
+        for f in ("nodes", "beams", "springs", "torsion_springs", "bodies", "supports", "loads", "parameters"):
             value = getattr(self, f)
             if isinstance(value, str) or not isinstance(value, (list, tuple)):
                 raise SceneError(f"{f}: expected a list, got {type(value).__name__}")
@@ -395,7 +424,7 @@ class Scene:
     # -- validation -------------------------------------------------------------------------
     def _check_types(self) -> None:
         kinds = {"nodes": Node, "beams": Beam, "springs": Spring, "torsion_springs": TorsionSpring,
-                 "supports": Support, "loads": Load, "parameters": Parameter}
+                 "bodies": RigidBody, "supports": Support, "loads": Load, "parameters": Parameter}
         for f, cls in kinds.items():
             for i, item in enumerate(getattr(self, f)):
                 if not isinstance(item, cls):
@@ -408,14 +437,15 @@ class Scene:
                 raise SceneError(f"nodes[{i}].name: duplicate node {n.name!r}")
             seen[n.name] = "node"
         names: dict[str, str] = {}
-        for f in ("beams", "springs", "torsion_springs", "supports", "loads"):
+        for f in ("beams", "springs", "torsion_springs", "bodies", "supports", "loads"):
             for i, item in enumerate(getattr(self, f)):
                 if item.name == "gravity":
                     raise SceneError(f"{f}[{i}].name: 'gravity' is reserved "
                                      "(parameter targets 'gravity.x', 'gravity.y')")
                 if item.name in names:
                     raise SceneError(f"{f}[{i}].name: duplicate name {item.name!r}, already used in {names[item.name]} "
-                                     "(names are unique across beams, springs, torsion springs, supports and loads)")
+                                     "(names are unique across beams, springs, torsion springs, bodies, supports "
+                                     "and loads)")
                 names[item.name] = f
                 refs = ([(f"nodes[{j}]", r) for j, r in enumerate(item.nodes)] if hasattr(item, "nodes")
                         else [("node", item.node)])
@@ -473,7 +503,7 @@ class Scene:
 
     def item(self, name: str) -> Any:
         """The element, support or load called ``name``."""
-        for f in ("beams", "springs", "torsion_springs", "supports", "loads"):
+        for f in ("beams", "springs", "torsion_springs", "bodies", "supports", "loads"):
             for it in getattr(self, f):
                 if it.name == name:
                     return it
@@ -489,12 +519,15 @@ class Scene:
         try:
             it = self.item(owner)
         except SceneError:
-            known = [it.name for f in ("beams", "springs", "torsion_springs", "loads") for it in getattr(self, f)]
+            known = [it.name for f in ("beams", "springs", "torsion_springs", "bodies", "loads")
+                     for it in getattr(self, f)]
             raise SceneError(f"{where}: unknown element or load {owner!r} in {target!r}; "
                              f"known: {known + ['gravity']}") from None
         if isinstance(it, Support):
             raise SceneError(f"{where}: {owner!r} is a support; supports have no numeric properties to identify")
         numeric = [f.name for f in fields(it) if f.name not in _NON_NUMERIC]
+        if isinstance(it, RigidBody):
+            numeric = ["mass", "inertia"]  # where the centre of mass sits is geometry, not a parameter
         if prop not in numeric:
             raise SceneError(f"{where}: {owner!r} has no numeric property {prop!r}; expected one of {numeric}")
         if isinstance(it, Load) and it.table is not None:
@@ -524,7 +557,7 @@ class Scene:
                 g[0 if prop == "x" else 1] = v
                 scene = replace(scene, gravity=tuple(g))
                 continue
-            for f in ("beams", "springs", "torsion_springs", "loads"):
+            for f in ("beams", "springs", "torsion_springs", "bodies", "loads"):
                 items = list(getattr(scene, f))
                 for i, it in enumerate(items):
                     if it.name == owner:

@@ -19,6 +19,7 @@ from casflex.scene import (
     Load,
     Node,
     Parameter,
+    RigidBody,
     RunSettings,
     Scene,
     SceneError,
@@ -35,6 +36,7 @@ _LISTS: dict[str, type] = {
     "beams": Beam,
     "springs": Spring,
     "torsion_springs": TorsionSpring,
+    "bodies": RigidBody,
     "supports": Support,
     "loads": Load,
     "parameters": Parameter,
@@ -97,8 +99,8 @@ def _build(cls: type, where: str, table: Any) -> Any:
     for key in ("lower", "upper"):
         if key in kwargs and isinstance(kwargs[key], str) and kwargs[key] in ("inf", "-inf"):
             kwargs[key] = float(kwargs[key])
-    for key in ("name", "node", "kind", "target", "unit", "inertia"):
-        if key in kwargs and key in known and not isinstance(kwargs[key], str):
+    for key in kwargs:
+        if known[key].type == "str" and not isinstance(kwargs[key], str):  # text fields: name, node, kind, ...
             raise SceneError(f"{label}.{key}: expected a string, got {kwargs[key]!r} ({type(kwargs[key]).__name__})")
     try:
         return cls(**kwargs)

@@ -12,6 +12,10 @@ Kinds and their element dofs and properties (a property may be a parameter of th
   Rayleigh function D = c/2 (dL/dt)^2 (its nodes must stay apart, as a spring's of rest length > 0);
 - ``damper0``: the damper of a zero-length spring (a bushing), D = c/2 |v_b - v_a|^2;
 - ``tdamper``: (theta_a, theta_b); ct (N m s/rad), D = ct/2 (theta_b' - theta_a')^2.
+- ``body``: (x, y, theta) of its node; m (kg), J (kg m^2, about the centre of mass), rx, ry (m: the
+  centre of mass from the node in the node's frame, c = (x, y) + R(theta) r). T = m/2 |c'|^2 +
+  J/2 theta'^2, V_g = -m g . c; its inertia term is Lagrange's in either form (the paper's
+  form concerns beams): h = -m R(theta) r theta'^2 on x, y.
 
 A damper's force dD/dqd is velocity dependent: it joins the inertia term h (in ``forces``,
 ``scale`` and the HHT kernels, with its exact tangents in q and qd); ``dissipation`` gives its
@@ -65,6 +69,7 @@ KINDS = {
     "damper": Kind("damper", 4, ("c",), (), False),
     "damper0": Kind("damper0", 4, ("c",), (), False),
     "tdamper": Kind("tdamper", 2, ("ct",), (), False),
+    "body": Kind("body", 3, ("m", "J", "rx", "ry"), (), True),
 }
 
 #: Kinds whose force depends on the velocities only (no energy, mass or outputs).
@@ -84,8 +89,16 @@ class _Element:
             self.spring = LinearSpring("e", pr[0], 0.0)
         elif kind == "torsion":
             self.spring = TorsionalSpring("e", pr[0], pr[1])
+        elif kind == "body":
+            self.m, self.J, self.r = pr[0], pr[1], pr[2:4]
         else:
             self.c = pr[0]
+
+    def _body_offset(self, q: ca.SX) -> tuple[ca.SX, ca.SX]:
+        """u = R(theta) r, the centre of mass from the node (m), and du/dtheta."""
+        c, s = ca.cos(q[2]), ca.sin(q[2])
+        u = ca.vertcat(c * self.r[0] - s * self.r[1], s * self.r[0] + c * self.r[1])
+        return u, ca.vertcat(-u[1], u[0])
 
     def rayleigh(self, q: ca.SX, qd: ca.SX) -> ca.SX:
         """The damper's Rayleigh dissipation function D(q, qd) (W / 2); 0 for other kinds."""
@@ -100,7 +113,7 @@ class _Element:
         return ca.SX(0)
 
     def strain(self, q: ca.SX) -> ca.SX:
-        if self.kind in DAMPERS:
+        if self.kind in DAMPERS or self.kind == "body":
             return ca.SX(0)
         if self.kind == "beam":
             return self.beam.strain_energy(q)
@@ -109,10 +122,22 @@ class _Element:
         return self.spring.strain_energy(q[:2], q[2:])
 
     def gravity(self, q: ca.SX, g: ca.SX) -> ca.SX:
+        if self.kind == "body":
+            return -self.m * ca.dot(g, q[:2] + self._body_offset(q)[0])
         return self.beam.gravity_energy(q, g) if self.kind == "beam" else ca.SX(0)
 
     def mass_terms(self, q: ca.SX, a: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
         n = q.numel()
+        if self.kind == "body":
+            u, du = self._body_offset(q)
+            m = self.m
+            M = ca.SX.zeros(3, 3)
+            M[0, 0] = M[1, 1] = m
+            M[0, 2] = M[2, 0] = m * du[0]
+            M[1, 2] = M[2, 1] = m * du[1]
+            M[2, 2] = self.J + m * ca.sumsqr(u)
+            Ma = ca.mtimes(M, a)
+            return Ma, M, ca.jacobian(Ma, q)
         if self.kind != "beam":
             return ca.SX.zeros(n), ca.SX.zeros(n, n), ca.SX.zeros(n, n)
         return self.beam.mass_terms(q, a)
@@ -123,15 +148,21 @@ class _Element:
         if self.kind in DAMPERS:
             f = ca.gradient(self.rayleigh(q, qd), qd)
             return f, ca.jacobian(f, q), ca.jacobian(f, qd)
+        if self.kind == "body":
+            f = ca.vertcat(-self.m * self._body_offset(q)[0] * qd[2] ** 2, 0)
+            return f, ca.jacobian(f, q), ca.jacobian(f, qd)
         if self.kind != "beam":
             return ca.SX.zeros(n), ca.SX.zeros(n, n), ca.SX.zeros(n, n)
         return self.beam.inertia_terms(q, qd, form)
 
     def kinetic(self, q: ca.SX, qd: ca.SX) -> ca.SX:
+        if self.kind == "body":
+            vc = qd[:2] + self._body_offset(q)[1] * qd[2]
+            return 0.5 * self.m * ca.sumsqr(vc) + 0.5 * self.J * qd[2] ** 2
         return self.beam.kinetic_energy(q, qd) if self.kind == "beam" else ca.SX(0)
 
     def outputs(self, q: ca.SX) -> ca.SX:
-        if self.kind in DAMPERS:
+        if self.kind in DAMPERS or self.kind == "body":
             return ca.SX(0, 1)
         if self.kind == "beam":
             return self.beam.end_forces(q)
