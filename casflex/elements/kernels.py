@@ -11,7 +11,7 @@ Kinds and their element dofs and properties (a property may be a parameter of th
 - ``damper``: (x_a, y_a, x_b, y_b); c (N s/m): a viscous damper along the line of its nodes,
   Rayleigh function D = c/2 (dL/dt)^2 (its nodes must stay apart, as a spring's of rest length > 0);
 - ``damper0``: the damper of a zero-length spring (a bushing), D = c/2 |v_b - v_a|^2;
-- ``tdamper``: (theta_a, theta_b); ct (N m s/rad), D = ct/2 (theta_b' - theta_a')^2.
+- ``tdamper``: (theta_a, theta_b); ct (N m s/rad), D = ct/2 (theta_b' - theta_a')^2;
 - ``body``: (x, y, theta) of its node; m (kg), J (kg m^2, about the centre of mass), rx, ry (m: the
   centre of mass from the node in the node's frame, c = (x, y) + R(theta) r). T = m/2 |c'|^2 +
   J/2 theta'^2, V_g = -m g . c; its inertia term is Lagrange's in either form (the paper's
