@@ -89,6 +89,18 @@ def pendulum(
     )
 
 
+def newmark_fd(r, q, qd, qdd, qa, c, alpha: float, e: float = 1e-6):
+    """Central differences of r(q, qd, qdd, qa) along the Newmark relations (dqd/dq = c[0],
+    dqdd/dq = c[1], dqa/dq = 1 + alpha): the columns of an element's HHT tangent K = dr/dq.
+    Truncation ~e^2 times the third derivative, round-off eps |r| / e ~ 1e-10 |K| at e = 1e-6."""
+    import numpy as np
+
+    def at(d):
+        return np.array(r(q + d, qd + c[0] * d, qdd + c[1] * d, qa + (1 + alpha) * d)).ravel()
+
+    return np.column_stack([(at(e * ei) - at(-e * ei)) / (2 * e) for ei in np.eye(len(q))])
+
+
 @pytest.fixture
 def make_cantilever():
     """The :func:`cantilever` factory."""

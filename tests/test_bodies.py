@@ -9,6 +9,7 @@ import math
 import casadi as ca
 import numpy as np
 import pytest
+from conftest import newmark_fd
 from scipy.special import ellipk
 
 from casflex import Node, Parameter, RigidBody, Scene, SceneError, Support, assemble, dumps_scene, loads_scene
@@ -52,11 +53,7 @@ def test_body_kernel_is_lagranges_equations(alpha):
         r, K = (np.array(v) for v in f(*args))
         r_ref = np.array(ref(q, qd, qdd, qa)).ravel()
         np.testing.assert_allclose(r.ravel(), r_ref, rtol=0, atol=1e-13 * np.abs(r_ref).max())  # round-off
-        e = 1e-6
-        fd = np.column_stack([
-            (np.array(ref(q + e * ei, qd + c[0] * e * ei, qdd + c[1] * e * ei, qa + (1 + alpha) * e * ei))
-             - np.array(ref(q - e * ei, qd - c[0] * e * ei, qdd - c[1] * e * ei, qa - (1 + alpha) * e * ei))).ravel()
-            / (2 * e) for ei in np.eye(3)])
+        fd = newmark_fd(ref, q, qd, qdd, qa, c, alpha)
         # central differences: truncation ~e^2 and round-off eps |r| / e ~ 1e-10 |K|
         np.testing.assert_allclose(K, fd, rtol=0, atol=1e-7 * np.abs(K).max())
 

@@ -8,6 +8,7 @@ import math
 import casadi as ca
 import numpy as np
 import pytest
+from conftest import newmark_fd
 
 from casflex.elements.beam import BeamElement
 from casflex.elements.kernels import hht_kernel, kernel
@@ -52,11 +53,7 @@ def test_beam_hht_kernel_is_lagranges_equations(alpha, form, rotary):
         # the same numbers computed in another order: round-off of the largest term (EA/L0 ~ 1e7 N/m)
         np.testing.assert_allclose(r.ravel(), r_ref, rtol=0, atol=1e-12 * np.abs(r_ref).max())
         # K = dr/dq along the Newmark relations: dqd/dq = c0, dqdd/dq = c1, dqa/dq = 1 + alpha
-        e = 1e-6
-        fd = np.column_stack([
-            (np.array(ref(q + e * ei, qd + c[0] * e * ei, qdd + c[1] * e * ei, qa + (1 + alpha) * e * ei))
-             - np.array(ref(q - e * ei, qd - c[0] * e * ei, qdd - c[1] * e * ei, qa - (1 + alpha) * e * ei))).ravel()
-            / (2 * e) for ei in np.eye(6)])
+        fd = newmark_fd(ref, q, qd, qdd, qa, c, alpha)
         # central differences: truncation ~e^2 r''' and round-off eps |r| / e ~ 1e-10 |K|
         np.testing.assert_allclose(K, fd, rtol=0, atol=1e-7 * np.abs(K).max())
 
