@@ -304,7 +304,7 @@ def estimate(model: Model, experiments: Sequence[Experiment], *, dt: float | Non
         extra={"transcription": "single-shooting", "residue": "positions", "dofs": list(problem.maps[0].channels),
                "transform": transform, "dt": dt,
                "alpha": alpha, "steps": int(sum(sm.n_steps for sm in problem.maps)), "compiled": compiled,
-               "budget": dataclasses.asdict(budget), "model_runs": problem.evaluations,
+               "budget": dataclasses.asdict(budget), "model_runs": problem.evaluations, "offset_se": f.offset,
                "uncertainty": {"gauss_newton": dict(zip(names, se_gn.tolist(), strict=True)),
                                "hac": dict(zip(names, se_hac.tolist(), strict=True)),
                                "model_error": dict(zip(names, me.tolist(), strict=True)),
