@@ -1,6 +1,9 @@
-"""The growing horizon of output-error fits: windows that double, and shorten where the model stops running."""
+"""The growing horizon of output-error fits: windows that double, shorten where the model stops running,
+and stages before the last anchored to the start within a capped budget."""
 
 from __future__ import annotations
+
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -24,13 +27,19 @@ class _Stage:
         self.window = float(e.data.t[-1] - e.data.t[0])
 
 
-def _fit_that_fails(bad, windows: list[float]):
-    """A stand-in for fit: fails to start where ``bad(window)``; records the windows tried."""
+MODEL = SimpleNamespace(n_p=1)
+
+
+def _fit_that_fails(bad, windows: list[float], status: str = "cost_tolerance"):
+    """A stand-in for fit: fails to start where ``bad(window)``; records the windows tried; stages
+    before the last end with ``status``."""
     def fake_fit(problem, w, budget, verbose=False):
         windows.append(round(problem.window, 3))
         if bad(problem.window):
             raise StartDoesNotRun("the model does not run at the start: stand-in")
-        return Fit(w + 1, np.zeros(1), np.zeros((1, 1)), "cost_tolerance", True, 3, 0.0, "")
+        last = not isinstance(problem, est._Anchored)
+        return Fit(w + 1, np.zeros(1 if last else 2), np.zeros((1 if last else 2, 1)),
+                   "cost_tolerance" if last else status, True, 3, 0.0, "")
     return fake_fit
 
 
@@ -38,7 +47,7 @@ def test_windows_double_to_the_whole_recording(monkeypatch):
     windows: list[float] = []
     monkeypatch.setattr(est, "OutputError", _Stage)
     monkeypatch.setattr(est, "fit", _fit_that_fails(lambda w: False, windows))
-    problem, f = est._fit_growing(None, [_experiment(1.6)], np.zeros(1), Budget(), verbose=False)
+    problem, f = est._fit_growing(MODEL, [_experiment(1.6)], np.zeros(1), Budget(), verbose=False)
     assert windows == [0.25, 0.5, 1.0, 1.6] and f.converged and f.iterations == 12
 
 
@@ -47,7 +56,7 @@ def test_a_window_the_model_does_not_run_through_is_shortened(monkeypatch):
     windows: list[float] = []
     monkeypatch.setattr(est, "OutputError", _Stage)
     monkeypatch.setattr(est, "fit", _fit_that_fails(lambda w: abs(w - 0.5) < 1e-9, windows))
-    problem, f = est._fit_growing(None, [_experiment(1.0)], np.zeros(1), Budget(), verbose=False)
+    problem, f = est._fit_growing(MODEL, [_experiment(1.0)], np.zeros(1), Budget(), verbose=False)
     assert windows == [0.25, 0.5, 0.375, 0.75, 1.0] and f.converged
 
 
@@ -55,7 +64,7 @@ def test_the_fit_ends_where_the_horizon_cannot_grow(monkeypatch):
     windows: list[float] = []
     monkeypatch.setattr(est, "OutputError", _Stage)
     monkeypatch.setattr(est, "fit", _fit_that_fails(lambda w: w > 0.2505, windows))
-    problem, f = est._fit_growing(None, [_experiment(1.0)], np.zeros(1), Budget(), verbose=False)
+    problem, f = est._fit_growing(MODEL, [_experiment(1.0)], np.zeros(1), Budget(), verbose=False)
     assert len(windows) == 2 + est.MAX_CUTS and problem.window == 0.25
     assert not f.converged and "stopped at 0.25 s" in f.message
 
@@ -64,4 +73,39 @@ def test_a_start_that_does_not_run_is_the_users(monkeypatch):
     monkeypatch.setattr(est, "OutputError", _Stage)
     monkeypatch.setattr(est, "fit", _fit_that_fails(lambda w: True, []))
     with pytest.raises(StartDoesNotRun, match="does not run at the start"):
-        est._fit_growing(None, [_experiment(1.0)], np.zeros(1), Budget(), verbose=False)
+        est._fit_growing(MODEL, [_experiment(1.0)], np.zeros(1), Budget(), verbose=False)
+
+
+def test_stages_before_the_last_go_on_when_they_run_out(monkeypatch):
+    # a stage before the last only brings a start: at its cap of model runs the horizon still grows
+    windows: list[float] = []
+    monkeypatch.setattr(est, "OutputError", _Stage)
+    monkeypatch.setattr(est, "fit", _fit_that_fails(lambda w: False, windows, status="iteration_limit"))
+    problem, f = est._fit_growing(MODEL, [_experiment(1.0)], np.zeros(1), Budget(), verbose=False)
+    assert windows == [0.25, 0.5, 1.0] and f.converged
+
+
+class _Linear:
+    """r = A w - y with a second column felt 1e4 times less than the first (1e8 in information)."""
+
+    evaluations = 0
+    A = np.array([[1.0, 1e-4], [1.0, -1e-4], [1.0, 0.0]])
+    y = np.array([1.501, 1.499, 1.5])  # least squares: w = (1.5, 10)
+
+    def bounds(self):
+        return np.full(2, -np.inf), np.full(2, np.inf)
+
+    def evaluate(self, w, jacobian=True):
+        return self.A @ w - self.y, self.A
+
+
+def test_the_anchor_holds_what_the_window_cannot_tell():
+    stage = est._Anchored(_Linear(), np.array([0.0, 3.0]))
+    r, J = stage.evaluate(np.array([1.0, 1.0]))
+    weight = np.sqrt(est.ANCHOR * 3.0)  # ANCHOR x the largest column's information, |A[:, 0]|^2 = 3
+    assert np.allclose(r[3:], weight * (np.array([1.0, 1.0]) - [0.0, 3.0]))
+    assert np.allclose(J[3:], weight * np.eye(2)) and stage.bounds()[0].size == 2
+    w = np.linalg.lstsq(J, -r + J @ [1.0, 1.0], rcond=None)[0]
+    # the well-felt unknown takes the data's value (1.5) to ANCHOR, the weak one stays near its start 3
+    # (it would be 10: moved by 7 x its information over the anchor's, 2e-8 / 3e-6)
+    assert abs(w[0] - 1.5) < 1e-5 and abs(w[1] - 3.0) < 0.1

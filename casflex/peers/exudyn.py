@@ -12,8 +12,9 @@ The translation, element by element (the same continuum, another discretisation 
   slope now - angle of the slope at t = 0);
 - node that is no beam end (a joint node, e.g. twobar's node 1): a slope node, which must be clamped
   (it carries no mass);
-- linear spring: ``ObjectConnectorSpringDamper`` between node positions (k, rest length, c = 0);
-- torsion spring: ``ObjectConnectorTorsionalSpringDamper`` between node frames (kt; its offset is the
+- linear spring: ``ObjectConnectorSpringDamper`` between node positions (k, rest length, damper c along
+  the spring, as casflex's);
+- torsion spring: ``ObjectConnectorTorsionalSpringDamper`` between node frames (kt, damper ct; its offset is the
   rest angle plus the initial angle between the two nodes' slopes, e.g. 90 degrees at a right-angled
   joint, since a slope node's frame is its beam's direction);
 - supports: ``CoordinateConstraint``s (Lagrange multipliers, as in casflex); a clamp fixes x, y and
@@ -25,7 +26,8 @@ The translation, element by element (the same continuum, another discretisation 
   trapezoidal rule, as HHT alpha = 0), Newton on the increment to ``newton_tol``.
 
 What casflex has and this translation does not (:class:`NotImplementedError` naming it): load
-tables, rotary inertia, a node where two beams meet, a clamp on a beam end at an angle.
+tables, rotary inertia, a node where two beams meet, a clamp on a beam end at an angle, a damper on a
+zero-length spring (casflex damps its relative velocity, Exudyn along an undefined direction).
 """
 
 from __future__ import annotations
@@ -69,6 +71,9 @@ def _check_supported(scene: Scene) -> None:
         raise NotImplementedError("load tables are not translated to Exudyn (constant loads only)")
     if any(b.rotary_inertia for b in scene.beams):
         raise NotImplementedError("rotary inertia: Exudyn's ANCF cable element has none")
+    for sp in scene.springs:
+        if sp.c and (scene.distance(*sp.nodes) if sp.rest_length is None else sp.rest_length) == 0.0:
+            raise NotImplementedError(f"spring {sp.name!r}: a damper on a zero-length spring is not translated")
     ends = [n for b in scene.beams for n in b.nodes]
     shared = sorted({n for n in ends if ends.count(n) > 1})
     if shared:
@@ -151,7 +156,7 @@ def build(scene: Scene, *, elements: int, h: float, t_end: float, newton_tol: fl
         rest = scene.distance(a, b) if sp.rest_length is None else sp.rest_length
         mbs.AddObject(ii.ObjectConnectorSpringDamper(
             markerNumbers=[mbs.AddMarker(ii.MarkerNodePosition(nodeNumber=nodes[n][0])) for n in (a, b)],
-            referenceLength=rest, stiffness=sp.k, damping=0.0))
+            referenceLength=rest, stiffness=sp.k, damping=sp.c))
     for ts in scene.torsion_springs:
         a, b = ts.nodes
         rest = state[b].theta - state[a].theta if ts.rest_angle is None else ts.rest_angle
@@ -162,7 +167,7 @@ def build(scene: Scene, *, elements: int, h: float, t_end: float, newton_tol: fl
         offset = rest + (psi[b] - psi[a]) - (state[b].theta - state[a].theta)
         mbs.AddObject(ii.ObjectConnectorTorsionalSpringDamper(
             markerNumbers=[mbs.AddMarker(ii.MarkerNodeRigid(nodeNumber=nodes[n][0])) for n in (a, b)],
-            stiffness=ts.kt, damping=0.0, offset=offset))
+            stiffness=ts.kt, damping=ts.ct, offset=offset))
     for ld in scene.loads:
         node = nodes[ld.node][0]
         if ld.fx or ld.fy:

@@ -2,7 +2,8 @@
 
     python tests/data/make_reference_data.py        # needs Exudyn: pip install -e '.[peers]'
 
-For each scene, Exudyn (:mod:`casflex.peers.exudyn`: ANCF cable elements, generalized-alpha
+For each scene (the built-in twobar and threelink, and twobar_damped.toml here: twobar with dampers
+in its joints), Exudyn (:mod:`casflex.peers.exudyn`: ANCF cable elements, generalized-alpha
 without damping) simulates 0-4 s with 8 elements per beam and h = 1e-4 s, Newton increments to
 1e-10, and every node's x, y, theta and their rates are kept at 1 kHz (``<scene>_exudyn.npz``:
 keys t, channels, q, qd, meta). The file's own error is measured against a run with 16
@@ -21,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-SCENES = ("twobar", "threelink")
+SCENES = ("twobar", "threelink", str(HERE / "twobar_damped.toml"))
 T_END = 4.0
 
 
@@ -31,6 +32,7 @@ def make(scene_name: str) -> Path:
     from casflex.results import atomic_write_bytes
 
     scene = casflex.load_scene(scene_name)
+    scene_name = Path(scene_name).stem
     data = exudyn.simulate(scene, T_END, elements=8, h=1e-4, sample_dt=1e-3)
     # (16 short elements: Newton increments reach 1e-9 only, not 1e-10)
     fine = exudyn.simulate(scene, T_END, elements=16, h=5e-5, sample_dt=1e-3, newton_tol=1e-9)

@@ -1,0 +1,156 @@
+"""Can the joints' dampers be identified from a few noisy markers, with honest standard errors?
+
+The recording: twobar with viscous dampers in its four joints (tests/data/twobar_damped.toml:
+c1 = 20, c3 = 10 N s/m along the springs, ct1 = ct3 = 1 N m s/rad), simulated by Exudyn (8 ANCF
+elements per beam, h = 1e-4 s; tests/data/make_reference_data.py), x and y of nodes 3 and 5 at
+100 Hz with 1 mm of Gaussian noise, SEEDS seeds, in a window at rest (0-3 s, the scene's initial
+state) and one mid-motion (0.5-2.5 s, initial state estimated). casflex fits the eight joint
+parameters (k, kt, c, ct of both joints) with its default indirect method and model (one element
+per beam, dt = 1 ms), from 20 % below the truth.
+
+Per window and parameter: the median and largest relative error, the coverage of the truth by the
+reported 2- and 3-SE intervals, and per window the success rate and the "dishonest" successes (a
+parameter more than 3 SE from the truth). Writes docs/tables/dampers.md and docs/figures/dampers.png
+(``--quick``: *_quick.*, the window at rest cut to 1 s, one seed). Run: ``python studies/dampers.py``
+(about 5 min on 2 cores).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT / "tests" / "data"
+MARKERS = ("x3", "y3", "x5", "y5")
+NOISE = 1e-3
+SEEDS = 10
+WINDOWS = {"rest": (0.0, 3.0, "scene"), "mid": (0.5, 2.5, "estimate")}
+
+
+def one_run(*, window: str, seed: int, quick: bool) -> dict:
+    """One identification (a sweep run): relative errors, z-scores against the truth, success, wall time."""
+    import casflex
+    from casflex.data import MeasurementSet
+    from casflex.identification import identify_indirect
+
+    model = casflex.assemble(casflex.load_scene(DATA / "twobar_damped.toml"))
+    a, b, state = WINDOWS[window]
+    b = a + 1.0 if quick else b
+    z = np.load(DATA / "twobar_damped_exudyn.npz")
+    ch = [str(c) for c in z["channels"]]
+    rows = np.arange(int(round(a * 1000)), int(round(b * 1000)) + 1, 10)  # 100 Hz from Exudyn's 1 kHz
+    q = z["q"][np.ix_(rows, [ch.index(c) for c in MARKERS])]
+    data = MeasurementSet(z["t"][rows], MARKERS, q + np.random.default_rng(seed).normal(0, NOISE, q.shape), None,
+                          None)
+    t0 = time.perf_counter()
+    r = identify_indirect(model, data, dt=1e-3, initial_state=state, start=0.8)
+    se = np.array([r.std_errors[k] for k in model.parameter_names])
+    err = r.p - model.p_nominal
+    return {"names": list(model.parameter_names), "rel_error": (err / model.p_nominal).tolist(),
+            "z": (err / se).tolist(), "success": bool(r.success), "message": r.message,
+            "wall_s": time.perf_counter() - t0}
+
+
+def summarise(records: list[tuple[dict, dict]]) -> list[dict]:
+    """One row per (window, parameter), and the window's success and dishonest counts."""
+    rows = []
+    for window in WINDOWS:
+        recs = [rec for run, rec in records if run["window"] == window and "error" not in rec]
+        if not recs:
+            continue
+        err = np.abs(np.array([r["rel_error"] for r in recs]))
+        z = np.abs(np.array([r["z"] for r in recs]))
+        succ = np.array([r["success"] for r in recs])
+        dishonest = int(np.sum(succ & (z > 3).any(axis=1)))
+        for j, name in enumerate(recs[0]["names"]):
+            rows.append({"window": window, "parameter": name, "runs": len(recs),
+                         "err_median": float(np.median(err[:, j])), "err_max": float(err[:, j].max()),
+                         "cover2": float(np.mean(z[:, j] <= 2)),
+                         "cover3": float(np.mean(z[:, j] <= 3)), "success": float(succ.mean()),
+                         "dishonest": dishonest, "wall_s": float(np.median([r["wall_s"] for r in recs])),
+                         "z": [r["z"][j] for r in recs]})
+    return rows
+
+
+def _page(rows: list[dict], quick: bool, wall: float) -> str:
+    lines = ["# Identifying joint dampers from markers", "",
+             f"Written by `python studies/dampers.py{' --quick' if quick else ''}` in {wall / 60:.1f} min on "
+             f"{platform.node() or 'this machine'} ({platform.processor() or platform.machine()}); the set-up is in "
+             "the script's docstring. Truth: Exudyn's parameters; noise 1 mm on x, y of nodes 3 and 5 at 100 Hz.", "",
+             "| window | parameter | runs | error (median / max) | 2 SE | 3 SE | success | dishonest | wall (s) |",
+             "|" + "---|" * 9]
+    for r in rows:
+        lines.append(f"| {r['window']} | {r['parameter']} | {r['runs']} | {100 * r['err_median']:.3g} % / "
+                     f"{100 * r['err_max']:.3g} % | {100 * r['cover2']:.0f} % | {100 * r['cover3']:.0f} % | "
+                     f"{100 * r['success']:.0f} % | {r['dishonest']} | {r['wall_s']:.1f} |")
+    return "\n".join(lines) + "\n"
+
+
+def _figure(rows: list[dict], path: Path) -> None:
+    from casflex.plotting._figure import _new_figure, _save
+
+    fig = _new_figure((8.0, 3.4))
+    ax = fig.subplots()
+    names = list(dict.fromkeys(r["parameter"] for r in rows))
+    for k, (window, color) in enumerate((("rest", "C0"), ("mid", "C1"))):
+        for r in (r for r in rows if r["window"] == window):
+            x = names.index(r["parameter"]) + (k - 0.5) * 0.25
+            ax.plot(np.full(len(r["z"]), x), r["z"], "o", ms=3, color=color, alpha=0.7,
+                    label=window if r["parameter"] == names[0] else None)
+    for level in (-3, -2, 2, 3):
+        ax.axhline(level, color="black", lw=0.5, ls="--" if abs(level) == 2 else "-")
+    ax.set_xticks(range(len(names)), names)
+    ax.set_ylabel("(estimate - truth) / reported SE")
+    ax.legend(fontsize="small", frameon=False)
+    ax.grid(True, axis="y", alpha=0.3)
+    fig.suptitle("twobar with dampers, Exudyn's markers at 1 mm: z-scores of the eight joint parameters")
+    _save(fig, path)
+
+
+def main(quick: bool = False, out_dir: Path | None = None, record: Path | None = None) -> list[dict]:
+    from casflex.results import atomic_write_text
+    from casflex.sweep import Run, run_sweep
+
+    out_dir = ROOT / "docs" if out_dir is None else Path(out_dir)
+    t0 = time.perf_counter()
+    plan = [{"window": w, "seed": s, "quick": quick} for w in (("rest",) if quick else WINDOWS)
+            for s in range(1 if quick else SEEDS)]
+    runs = [Run(f"{r['window']}_{r['seed']}", one_run, r) for r in plan]
+    with tempfile.TemporaryDirectory(prefix="casflex-dampers-") as tmp:
+        sweep = run_sweep(runs, Path(record) if record is not None else Path(tmp), n_workers=2, progress=not quick)
+        if sweep.interrupted:
+            raise KeyboardInterrupt
+        rows = summarise([(r, sweep.results[run.key]) for r, run in zip(plan, runs, strict=True)])
+    suffix = "_quick" if quick else ""
+    (out_dir / "tables").mkdir(parents=True, exist_ok=True)
+    (out_dir / "figures").mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out_dir / "tables" / f"dampers{suffix}.md", _page(rows, quick, time.perf_counter() - t0))
+    _figure(rows, out_dir / "figures" / f"dampers{suffix}.png")
+    for r in rows:
+        print(json.dumps({k: v for k, v in r.items() if k != "z"}))
+    # the study's checks (issue 13's bar): from the recording at rest, every damper within 5 % of the
+    # truth at 1 mm in every run; in both windows honest: a success more than 3 SE from the truth at
+    # most once in ten runs. Mid-motion (2 s, initial state estimated) the accuracy is reported only.
+    # The quick mode's 1 s window is checked for honesty only.
+    assert rows, "no run finished"
+    for r in rows:
+        assert r["dishonest"] <= max(1, round(0.1 * r["runs"])), r
+        if not quick and r["window"] == "rest" and r["parameter"].startswith("c"):
+            assert r["err_max"] < 0.05, r
+    return rows
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--out-dir", type=Path)
+    ap.add_argument("--record", type=Path, help="sweep record directory: an interrupted study resumes there")
+    a = ap.parse_args()
+    main(quick=a.quick, out_dir=a.out_dir, record=a.record)
