@@ -32,7 +32,7 @@ import numpy as np
 from casflex.assembly import ElementGroup, MatrixAssembly, gather, scatter
 from casflex.constraints import FixedDof, constraint_vector, support_constraints
 from casflex.elements import BeamElement
-from casflex.elements.kernels import DAMPERS, KINDS, kernel
+from casflex.elements.kernels import KINDS, NONCONSERVATIVE, kernel
 from casflex.scene import INERTIA_FORMS, Parameter, Scene, SceneError
 
 __all__ = ["Model", "assemble", "INERTIA_FORMS"]
@@ -63,6 +63,7 @@ class Model:
     Functions (all named, inputs and outputs named): ``energy(q, qd, p) -> (kinetic, elastic,
     gravity)``, ``mass(q, p) -> M``, ``forces(q, qd, p) -> (h, f_int, g)``,
     ``dissipation(q, qd, p) -> P`` (W, the power of the dampers, 0 without them),
+    ``follower_power(q, qd, p) -> P`` (W, the power the follower loads supply, 0 without them),
     ``load(t, p) -> f_ext``, ``constraint(q) -> (phi, B)``,
     ``equilibrium(q, qd, qdd, lam, t, p) -> (r, phi)`` (Eq. 11), ``outputs(q, lam, p) -> y``,
     ``local_rotations(q) -> theta_l`` (rad, in (-pi, pi]: the co-rotational end rotations of the
@@ -86,6 +87,7 @@ class Model:
     mass: ca.Function
     forces: ca.Function
     dissipation: ca.Function
+    follower_power: ca.Function
     load: ca.Function
     constraint: ca.Function
     equilibrium: ca.Function
@@ -247,6 +249,8 @@ def _groups(scene: Scene, order, nodes, beam_elems, idx) -> tuple[ElementGroup, 
         bodies.append((bd.name, bd.name, [idx[bd.node] + j for j in range(3)],
                        [bd.mass, bd.inertia, c * dx + s_ * dy, -s_ * dx + c * dy], ("mass", "inertia", "", "")))
     group("body", bodies)
+    group("follower", [(ld.name, ld.name, [idx[ld.node] + j for j in range(3)], [ld.fx, ld.fy], ("fx", "fy"))
+                       for ld in scene.loads if ld.follower])
     return tuple(out)
 
 
@@ -292,6 +296,8 @@ def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
     for ld in scene.loads:
         rows = ld.rows()
         for comp, key in enumerate(("fx", "fy", "mz")):
+            if ld.follower and key != "mz":  # an element of kind follower (_groups)
+                continue
             i = idx[ld.node] + comp
             if len(rows) == 1:
                 f_ext[i] += symbol.get(f"{ld.name}.{key}", rows[0][comp + 1])
@@ -316,10 +322,12 @@ def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
         return f.map(f"{f.name()}_{grp.n}", "serial", grp.n, [f.n_in() - 1] if f.name_in()[-1] == "g" else [], [])(
             *args)
 
-    T = V_el = V_g = P_d = ca.MX(0)
+    T = V_el = V_g = P_d = P_f = ca.MX(0)
     h = f_int = gf = ca.MX.zeros(n)
     for grp, pr in zip(groups, props, strict=True):
-        if grp.kind in DAMPERS:
+        if grp.kind == "follower":  # its kernel's "dissipation" is minus the power it supplies
+            P_f -= ca.sum2(mapped(grp, "dissipation", gather(q, grp), gather(qd, grp), pr))
+        elif grp.kind in NONCONSERVATIVE:
             P_d += ca.sum2(mapped(grp, "dissipation", gather(q, grp), gather(qd, grp), pr))
         else:
             e = mapped(grp, "energy", gather(q, grp), gather(qd, grp), pr, g)
@@ -366,6 +374,7 @@ def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
         mass=ca.Function("mass", [q, p], [M], ["q", "p"], ["M"]),
         forces=ca.Function("forces", [q, qd, p], [h, f_int, gf], ["q", "qd", "p"], ["h", "f_int", "g"]),
         dissipation=ca.Function("dissipation", [q, qd, p], [P_d], ["q", "qd", "p"], ["P"]),
+        follower_power=ca.Function("follower_power", [q, qd, p], [P_f], ["q", "qd", "p"], ["P"]),
         load=load,
         constraint=constraint,
         equilibrium=ca.Function("equilibrium", [q, qd, qdd, lam, t, p], [r, constraint(q)[0]],

@@ -63,7 +63,7 @@ SUPPORT_DOFS: dict[str, tuple[str, ...]] = {
 
 #: Forms of the velocity-dependent inertia term (see casflex.model).
 INERTIA_FORMS = ("lagrange", "seed")
-_NON_NUMERIC = ("name", "nodes", "node", "elements", "table", "kind", "rotary_inertia")
+_NON_NUMERIC = ("name", "nodes", "node", "elements", "table", "kind", "rotary_inertia", "follower")
 
 
 def _number(owner: str, field: str, value: Any) -> float:
@@ -273,6 +273,11 @@ class Load:
 
     Constant, or a time table: rows (t, fx, fy, mz) with strictly increasing t (s), interpolated
     linearly and held constant outside the table. A constant load is a table with one row.
+
+    ``follower = true``: the force turns with its node, R(theta) (fx, fy) with theta the node's
+    rotation (fx, fy are its components while theta = 0), as a muscle or a thruster acts; not
+    conservative, so statics solves it by Newton (``seek = "nearest"``) and modes may flutter.
+    Constant components only; mz is the same moment in any frame.
     """
 
     name: str
@@ -281,6 +286,7 @@ class Load:
     fy: float = 0.0
     mz: float = 0.0
     table: tuple[tuple[float, float, float, float], ...] | None = None
+    follower: bool = False
 
     def __post_init__(self) -> None:
         where = _owner("load", self.name)
@@ -288,6 +294,10 @@ class Load:
         object.__setattr__(self, "node", _name(where, "node", self.node))
         for f in ("fx", "fy", "mz"):
             object.__setattr__(self, f, _number(where, f, getattr(self, f)))
+        if not isinstance(self.follower, bool):
+            raise SceneError.at(where, "follower", f"expected true or false, got {self.follower!r}")
+        if self.follower and self.table is not None:
+            raise SceneError.at(where, "table", "a follower load takes constant fx, fy (and mz), not a table")
         if self.table is None:
             return
         if not isinstance(self.table, (list, tuple)) or len(self.table) == 0:

@@ -168,11 +168,12 @@ def cmd_modes(args: argparse.Namespace, outputs: Outputs) -> int:
     with _warnings_as_lines("" if q is not None else " (--about equilibrium)"):
         res = modes(model, q=q, count=args.count)
     print(f"natural frequencies of {model.scene.name} linearised about {where}:")
-    for k, f in enumerate(res.freq_hz, 1):
-        print(f"  mode {k:3d}: {f:14.6f} Hz")
+    growth = np.abs(np.sqrt(res.omega2.astype(complex)).imag)
+    for k, (f, g) in enumerate(zip(res.freq_hz, growth, strict=True), 1):
+        print(f"  mode {k:3d}: {f:14.6f} Hz" + (f"  flutter: grows at {g:.6g} 1/s" if g > 0 and res.flutter else ""))
     if out is not None:
         _write_npz(out, freq_hz=res.freq_hz, shapes=res.shapes, dof_names=np.array(model.dof_names),
-                   equilibrium=np.array(res.equilibrium))
+                   equilibrium=np.array(res.equilibrium), omega2=res.omega2)
     return 0
 
 

@@ -15,7 +15,11 @@ Kinds and their element dofs and properties (a property may be a parameter of th
 - ``body``: (x, y, theta) of its node; m (kg), J (kg m^2, about the centre of mass), rx, ry (m: the
   centre of mass from the node in the node's frame, c = (x, y) + R(theta) r). T = m/2 |c'|^2 +
   J/2 theta'^2, V_g = -m g . c; its inertia term is Lagrange's in either form (the paper's
-  form concerns beams): h = -m R(theta) r theta'^2 on x, y.
+  form concerns beams): h = -m R(theta) r theta'^2 on x, y;
+- ``follower``: (x, y, theta) of its node; fx, fy (N): a force R(theta) (fx, fy) that turns with the
+  node. Not conservative: it joins h (as -R(theta) f, a force on the left-hand side that depends on
+  q only) with its load stiffness dh/dq, non-symmetric in general; ``dissipation`` gives minus the
+  power it supplies, -R(theta) f . (x', y') (W), so the energy balance holds as for dampers.
 
 A damper's force dD/dqd is velocity dependent: it joins the inertia term h (in ``forces``,
 ``scale`` and the HHT kernels, with its exact tangents in q and qd); ``dissipation`` gives its
@@ -28,7 +32,7 @@ Kernels (all SX, common subexpressions eliminated), with ``g`` the gravity vecto
 - ``<kind>_mass(q, props) -> M`` (dense, n_dof x n_dof);
 - ``<kind>_outputs(q, props) -> y``: the joint outputs of the element (``OUTPUTS``);
 - ``<kind>_rotations(q, props) -> theta_l``: local end rotations (beams);
-- ``<kind>_dissipation(q, qd, props) -> P``: power dissipated by a damper (W);
+- ``<kind>_dissipation(q, qd, props) -> P``: power taken out by a damper or follower load (W);
 - ``<kind>_scale(q, qd, props, g) -> (m, c, k)``: diagonals of M, dh/dqd and d(f_int - g)/dq;
 - ``<kind>_hht<tag>(q, qd, qdd, [qa,] props, g, c) -> (r, K)`` and ``..._r`` (r only): the
   element's part of the HHT residual r = M(qa) qdd + (1 + alpha) (h + f_int - g) and its exact
@@ -47,7 +51,7 @@ import casadi as ca
 from casflex.elements.beam import BeamElement
 from casflex.elements.springs import LinearSpring, TorsionalSpring
 
-__all__ = ["DAMPERS", "KINDS", "Kind", "kernel", "hht_kernel"]
+__all__ = ["DAMPERS", "NONCONSERVATIVE", "KINDS", "Kind", "kernel", "hht_kernel"]
 
 
 @dataclass(frozen=True)
@@ -70,10 +74,13 @@ KINDS = {
     "damper0": Kind("damper0", 4, ("c",), (), False),
     "tdamper": Kind("tdamper", 2, ("ct",), (), False),
     "body": Kind("body", 3, ("m", "J", "rx", "ry"), (), True),
+    "follower": Kind("follower", 3, ("fx", "fy"), (), False),
 }
 
 #: Kinds whose force depends on the velocities only (no energy, mass or outputs).
 DAMPERS = ("damper", "damper0", "tdamper")
+#: Kinds with no potential: their power is reported by ``dissipation`` instead of an energy.
+NONCONSERVATIVE = (*DAMPERS, "follower")
 
 
 class _Element:
@@ -91,6 +98,8 @@ class _Element:
             self.spring = TorsionalSpring("e", pr[0], pr[1])
         elif kind == "body":
             self.m, self.J, self.r = pr[0], pr[1], pr[2:4]
+        elif kind == "follower":
+            self.f = pr[0:2]
         else:
             self.c = pr[0]
 
@@ -112,8 +121,19 @@ class _Element:
             return 0.5 * self.c * (qd[1] - qd[0]) ** 2
         return ca.SX(0)
 
+    def follower_force(self, q: ca.SX) -> ca.SX:
+        """R(theta) f: the follower load on the node's x, y (N)."""
+        c, s = ca.cos(q[2]), ca.sin(q[2])
+        return ca.vertcat(c * self.f[0] - s * self.f[1], s * self.f[0] + c * self.f[1])
+
+    def power(self, q: ca.SX, qd: ca.SX) -> ca.SX:
+        """Power taken out of the system (W): 2 D for a damper, minus the follower load's power."""
+        if self.kind == "follower":
+            return -ca.dot(self.follower_force(q), qd[:2])
+        return 2 * self.rayleigh(q, qd)
+
     def strain(self, q: ca.SX) -> ca.SX:
-        if self.kind in DAMPERS or self.kind == "body":
+        if self.kind in NONCONSERVATIVE or self.kind == "body":
             return ca.SX(0)
         if self.kind == "beam":
             return self.beam.strain_energy(q)
@@ -148,6 +168,9 @@ class _Element:
         if self.kind in DAMPERS:
             f = ca.gradient(self.rayleigh(q, qd), qd)
             return f, ca.jacobian(f, q), ca.jacobian(f, qd)
+        if self.kind == "follower":
+            f = ca.vertcat(-self.follower_force(q), 0)
+            return f, ca.jacobian(f, q), ca.SX.zeros(n, n)
         if self.kind == "body":
             f = ca.vertcat(-self.m * self._body_offset(q)[0] * qd[2] ** 2, 0)
             return f, ca.jacobian(f, q), ca.jacobian(f, qd)
@@ -162,7 +185,7 @@ class _Element:
         return self.beam.kinetic_energy(q, qd) if self.kind == "beam" else ca.SX(0)
 
     def outputs(self, q: ca.SX) -> ca.SX:
-        if self.kind in DAMPERS or self.kind == "body":
+        if self.kind in NONCONSERVATIVE or self.kind == "body":
             return ca.SX(0, 1)
         if self.kind == "beam":
             return self.beam.end_forces(q)
@@ -202,7 +225,7 @@ def kernel(kind: str, what: str, form: str = "lagrange") -> ca.Function:
         kin = el.beam.kinematics(q)
         return ca.Function(name, [q, pr], [ca.vertcat(kin["tha"], kin["thb"])], ["q", "props"], ["theta_l"], CSE)
     if what == "dissipation":
-        return ca.Function(name, [q, qd, pr], [2 * el.rayleigh(q, qd)], ["q", "qd", "props"], ["P"], CSE)
+        return ca.Function(name, [q, qd, pr], [el.power(q, qd)], ["q", "qd", "props"], ["P"], CSE)
     if what == "scale":
         _, M, _ = el.mass_terms(q, qd)
         _, _, C = el.inertia_terms(q, qd, form)

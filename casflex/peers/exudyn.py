@@ -26,7 +26,7 @@ The translation, element by element (the same continuum, another discretisation 
   trapezoidal rule, as HHT alpha = 0), Newton on the increment to ``newton_tol``.
 
 What casflex has and this translation does not (:class:`NotImplementedError` naming it): load
-tables, rotary inertia, a node where two beams meet, a clamp on a beam end at an angle, a damper on a
+tables, follower loads, rotary inertia, a node where two beams meet, a clamp on a beam end at an angle, a damper on a
 zero-length spring (casflex damps its relative velocity, Exudyn along an undefined direction).
 """
 
@@ -67,6 +67,8 @@ class ExudynModel:
 
 
 def _check_supported(scene: Scene) -> None:
+    if any(ld.follower for ld in scene.loads):
+        raise NotImplementedError("follower loads are not translated to Exudyn")
     if any(len(ld.rows()) > 1 for ld in scene.loads):
         raise NotImplementedError("load tables are not translated to Exudyn (constant loads only)")
     if any(b.rotary_inertia for b in scene.beams):

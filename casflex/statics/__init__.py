@@ -22,6 +22,7 @@ The CasADi Functions of a model (:class:`StaticProblem`) are built once and reus
 """
 
 from casflex.statics.equilibrium import StaticResult, UnstableEquilibrium, equilibrium
+from casflex.statics.flutter import CriticalLoad, critical_load
 from casflex.statics.modes import ModesResult, modes
 from casflex.statics.path import CriticalPoint, PathResult, equilibrium_path
 from casflex.statics.problem import (
@@ -35,7 +36,7 @@ from casflex.statics.problem import (
 )
 
 __all__ = [
-    "CriticalPoint", "ModesError", "ModesResult", "PathResult", "Stability", "StabilityWarning", "StaticOptions",
-    "StaticProblem", "StaticResult", "StaticsError", "UnstableEquilibrium", "equilibrium", "equilibrium_path",
-    "modes", "problem_for",
+    "CriticalLoad", "CriticalPoint", "ModesError", "ModesResult", "PathResult", "Stability", "StabilityWarning",
+    "StaticOptions", "StaticProblem", "StaticResult", "StaticsError", "UnstableEquilibrium", "equilibrium",
+    "equilibrium_path", "critical_load", "modes", "problem_for",
 ]

@@ -183,6 +183,9 @@ def equilibrium(
     """
     opts = resolve_options(options, settings)
     prob = problem_for(model)
+    if not prob.conservative and opts.seek == "stable":
+        raise StaticsError(f"the scene has follower loads: they have no potential to minimise; solve with "
+                           f"{spell(names, 'seek', 'nearest')} (Newton on the residual)")
     pv = model.p_nominal.copy() if p is None else model.params(p)
     sp = Scaled(prob, pv, t, _start(model, q_start))
     sp.check_supported()
@@ -221,7 +224,7 @@ def equilibrium(
     if unstable:
         msg += (f"; left {len(unstable)} unstable equilibri{'a' if len(unstable) > 1 else 'um'} on the way "
                 f"(first at load factor {unstable[0].load_factor:.4g})")
-    if not stab.stable:
+    if stab.assessed and not stab.stable:
         warnings.warn(f"the static equilibrium is {stab.describe()}"
                       + (f"; {spell(names, 'seek', 'stable')} looks for a stable one" if opts.seek == "nearest"
                          else ""), StabilityWarning, stacklevel=2)

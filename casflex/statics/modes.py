@@ -54,6 +54,12 @@ class ModesResult:
         The scaled static residual at q (dimensionless, as the statics ``tol``).
     equilibrium : bool
         Whether q is a static equilibrium (residual within ``tol``, supports satisfied).
+    omega2 : ndarray, shape (k,), complex
+        The eigenvalues omega^2 (rad^2/s^2), ascending in real part. Real for conservative loads;
+        with follower loads K is not symmetric and a complex pair is flutter: motions that grow
+        as they oscillate. ``omega`` is then Re sqrt(omega^2) and ``shapes`` are complex.
+    flutter : bool
+        Whether a complex pair is among the modes (relative imaginary part above 1e-8).
     """
 
     freq_hz: np.ndarray
@@ -62,6 +68,8 @@ class ModesResult:
     dof_names: tuple[str, ...]
     residual: float = 0.0
     equilibrium: bool = True
+    omega2: np.ndarray | None = None
+    flutter: bool = False
 
 
 def modes(
@@ -147,6 +155,8 @@ def modes(
             f"dofs {names}. Massless springs alone give a node no inertia; support those dofs, attach a beam, "
             "or remove the node."
         )
+    if not prob.conservative:
+        return _nonsymmetric(model, Kr, Mr, free, k, residual, is_eq)
     _, V = scipy.linalg.eigh(Kr, Mr, subset_by_index=None)
     # eigh gives eigenvalues to eps * max|omega^2|: the low modes of a fine mesh (omega^2 range
     # ~1e9) lose digits. The Rayleigh quotient of the original K, M with these vectors is
@@ -160,7 +170,27 @@ def modes(
     shapes[free] = V[:, order]
     omega = np.sign(w2) * np.sqrt(np.abs(w2))
     return ModesResult(freq_hz=omega / (2.0 * np.pi), omega=omega, shapes=shapes, dof_names=model.dof_names,
-                       residual=residual, equilibrium=is_eq)
+                       residual=residual, equilibrium=is_eq, omega2=w2.astype(complex), flutter=False)
+
+
+def _nonsymmetric(model: Model, Kr: np.ndarray, Mr: np.ndarray, free: np.ndarray, k: int, residual: float,
+                  is_eq: bool) -> ModesResult:
+    """Modes of a non-symmetric tangent (follower loads): K v = omega^2 M v by ``scipy.linalg.eig``."""
+    w2, V = scipy.linalg.eig(Kr, Mr)
+    top = float(np.max(np.abs(w2)))
+    order = np.argsort(w2.real)[:k]
+    w2, V = w2[order], V[:, order]
+    V = V / np.sqrt(np.abs(np.einsum("ij,ij->j", V.conj(), Mr @ V)))
+    # a pair is complex beyond round-off: eig's absolute error is ~eps max|omega^2| (the stiff axial
+    # modes), far above the low modes' own digits; relative to each eigenvalue, 1e-8
+    pair = np.abs(w2.imag) > np.maximum(1e-8 * np.abs(w2), 1e3 * np.finfo(float).eps * top)
+    flutter = bool(np.any(pair))
+    root = np.sqrt(w2.astype(complex))
+    omega = np.where(pair, root.real, np.sign(w2.real) * np.sqrt(np.abs(w2.real)))
+    shapes = np.zeros((model.n_dof, k), dtype=complex)
+    shapes[free] = V
+    return ModesResult(freq_hz=omega / (2.0 * np.pi), omega=omega, shapes=shapes if flutter else shapes.real,
+                       dof_names=model.dof_names, residual=residual, equilibrium=is_eq, omega2=w2, flutter=flutter)
 
 
 def _equilibrium_check(prob, pv: np.ndarray, t: float, q: np.ndarray, tol: float) -> tuple[float, bool]:

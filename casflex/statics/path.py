@@ -311,6 +311,9 @@ def equilibrium_path(
     opts = resolve_options(options, settings)
     _validate(to_factor, max_points, arc_length, names)
     prob = problem_for(model)
+    if not prob.conservative:  # the path's stability tests read the symmetric tangent of a potential
+        raise StaticsError("the scene has follower loads: equilibrium paths are traced for conservative loads only; "
+                           "step the follower load as a parameter with equilibrium(seek='nearest') instead")
     pv = model.p_nominal.copy() if p is None else model.params(p)
     q0 = np.array(model.q0 if q_start is None else q_start, dtype=float).reshape(-1)
     if q0.shape != (model.n_dof,):

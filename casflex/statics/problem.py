@@ -7,7 +7,9 @@ Assumptions, checked when the problem is built (:class:`StaticsError` otherwise)
   set is an affine subspace: the solvers work in the free dofs only and recover the multipliers
   of the fixed dofs from their residual rows, lambda_j = -dPi/dq_i;
 - the loads are conservative: f_ext(t, p) does not depend on q (tabulated loads are evaluated at
-  a fixed t) and gravity derives from the potential V_g.
+  a fixed t) and gravity derives from the potential V_g; or, with follower loads (which turn with
+  their nodes: no potential), the residual below gains their forces and its tangent their load
+  stiffness, non-symmetric, and only Newton (``seek = "nearest"``) applies.
 
 Static equilibrium at load factor s is then a stationary point of the total potential
 
@@ -229,8 +231,12 @@ class StaticProblem:
         f_ext = model.load(t, p)
         work = ca.dot(f_ext, q)
         pi = v_el + s * (v_g - work)
-        hess, grad = ca.hessian(pi, q)
-        load = f_ext - ca.gradient(v_g, q)  # f_ext + g, g = -dV_g/dq
+        #: False with follower loads: the "gradient" is then a residual and K its non-symmetric Jacobian
+        self.conservative = not any(grp.kind == "follower" for grp in model.groups)
+        follower = ca.SX.zeros(n) if self.conservative else model.forces(q, ca.DM.zeros(n), p)[0]  # -R(theta) f
+        grad = ca.gradient(pi, q) + s * follower
+        hess = ca.jacobian(grad, q)
+        load = f_ext - ca.gradient(v_g, q) - follower  # f_ext + g (+ the follower loads), g = -dV_g/dq
         magnitude = ca.fabs(v_el) + ca.fabs(s) * (ca.fabs(v_g) + ca.sum1(ca.fabs(f_ext * q)))
         self._sym = (q, s, t, p, pi, grad, model.constraint)
         # No common-subexpression elimination: it costs 0.3 s to build at 40 elements and saves
@@ -261,9 +267,10 @@ class StaticProblem:
         return float(pi[0, 0]), grad.reshape(-1), load.reshape(-1), float(mag[0, 0])
 
     def hessian(self, q: np.ndarray, factor: float, t: float, p: np.ndarray) -> np.ndarray:
-        """The tangent K (n_dof, n_dof) at q, symmetrised."""
+        """The tangent K (n_dof, n_dof) at q, symmetrised (as it is exactly) when the loads are
+        conservative; with follower loads the Jacobian of the residual as it is."""
         K = self._tangent(q, factor, t, p)[0]
-        return 0.5 * (K + K.T)
+        return 0.5 * (K + K.T) if self.conservative else K
 
     def rotations(self, q: np.ndarray) -> np.ndarray:
         """The co-rotational local end rotations of the beam elements (rad), shape (n_local,)."""
@@ -424,10 +431,13 @@ class Stability:
     negative: int
     scale: float
     mode: np.ndarray
+    assessed: bool = True
 
     @property
     def kind(self) -> str:
-        """``"stable"``, ``"neutral"`` or ``"unstable"``."""
+        """``"stable"``, ``"neutral"``, ``"unstable"`` or, with follower loads, ``"not assessed"``."""
+        if not self.assessed:
+            return "not assessed"
         if self.min_eigenvalue > self.threshold:
             return "stable"
         return "unstable" if self.min_eigenvalue < -self.threshold else "neutral"
@@ -439,6 +449,8 @@ class Stability:
 
     def describe(self) -> str:
         """One line: the verdict and the smallest tangent eigenvalue."""
+        if not self.assessed:
+            return "stability not assessed: with follower loads it is a question of dynamics (modes: flutter)"
         if not math.isfinite(self.min_eigenvalue):
             return "stable (the supports fix every dof)"
         ev = f"smallest tangent eigenvalue {self.min_eigenvalue:.3g} of the largest"
@@ -454,6 +466,8 @@ def stability_of(sp: Scaled, H: np.ndarray) -> tuple[Stability, np.ndarray]:
     """The :class:`Stability` of the scaled reduced tangent H (n, n), and its eigenvalues (ascending)."""
     if H.shape[0] == 0:
         return Stability(math.inf, 0.0, 0, 0.0, np.zeros(sp.problem.n_dof)), np.zeros(0)
+    if not sp.problem.conservative:  # a non-symmetric tangent: stability needs the mass (modes)
+        return Stability(math.nan, 0.0, 0, 0.0, np.zeros(sp.problem.n_dof), assessed=False), np.zeros(0)
     lam, V = scipy.linalg.eigh(H, check_finite=True)
     scale = float(np.max(np.abs(lam)))
     band = neutral_band(lam)
