@@ -32,7 +32,7 @@ import numpy as np
 from casflex.assembly import ElementGroup, MatrixAssembly, gather, scatter
 from casflex.constraints import FixedDof, constraint_vector, support_constraints
 from casflex.elements import BeamElement
-from casflex.elements.kernels import KINDS, NONCONSERVATIVE, kernel
+from casflex.elements.kernels import DAMPERS, KINDS, NONCONSERVATIVE, kernel
 from casflex.scene import INERTIA_FORMS, Parameter, Scene, SceneError
 
 __all__ = ["Model", "assemble", "INERTIA_FORMS"]
@@ -65,7 +65,7 @@ class Model:
     ``dissipation(q, qd, p) -> P`` (W, the power of the dampers, 0 without them),
     ``follower_power(q, qd, p) -> P`` (W, the power the follower loads supply, 0 without them),
     ``load(t, p) -> f_ext``, ``constraint(q) -> (phi, B)``,
-    ``equilibrium(q, qd, qdd, lam, t, p) -> (r, phi)`` (Eq. 11), ``outputs(q, lam, p) -> y``,
+    ``equilibrium(q, qd, qdd, lam, t, p) -> (r, phi)`` (Eq. 11), ``outputs(q, qd, lam, p) -> y``,
     ``local_rotations(q) -> theta_l`` (rad, in (-pi, pi]: the co-rotational end rotations of the
     beam elements, named ``<beam>.<element>.a|b`` in ``local_rotation_names``).
     """
@@ -341,16 +341,19 @@ def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
     _, B = constraint(q)
     r = ca.mtimes(M, qdd) + h + f_int + ca.mtimes(B.T, lam) - load(t, p) - gf
 
-    # joint outputs in the scene's order: beams, springs, torsion springs, then the supports
+    # joint outputs in the scene's order: beams, springs, torsion springs, their dampers, the supports
     out_vals, out_names = [], []
     for grp, pr in zip(groups, props, strict=True):
-        if not grp.spec.outputs:  # dampers, bodies
+        if not grp.spec.outputs:  # bodies, follower loads
             continue
-        out_vals.append(ca.vec(mapped(grp, "outputs", gather(q, grp), pr)))
+        out_vals.append(ca.vec(mapped(grp, "outputs", gather(q, grp), gather(qd, grp), pr)))
         out_names += [f"{nm}.{o}" for nm in grp.names for o in grp.spec.outputs]
+    damper_outputs = [o for kind in DAMPERS for o in KINDS[kind].outputs]
     want = ([f"{b.name}.{k}.{o}" for b, k, _, _ in beam_elems for o in KINDS["beam"].outputs]
             + [f"{s.name}.{o}" for s in scene.springs for o in KINDS["spring"].outputs]
-            + [f"{s.name}.{o}" for s in scene.torsion_springs for o in KINDS["torsion"].outputs])
+            + [f"{s.name}.{o}" for s in scene.torsion_springs for o in KINDS["torsion"].outputs]
+            + [f"{s.name}.{o}" for s in (*scene.springs, *scene.torsion_springs) for o in damper_outputs
+               if f"{s.name}.{o}" in out_names])
     y = ca.vertcat(*out_vals)[[out_names.index(w) for w in want]] if want else ca.MX(0, 1)
     y = ca.vertcat(y, -lam)
     names = tuple(want) + tuple(c.name for c in cons)
@@ -379,7 +382,7 @@ def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
         constraint=constraint,
         equilibrium=ca.Function("equilibrium", [q, qd, qdd, lam, t, p], [r, constraint(q)[0]],
                                 ["q", "qd", "qdd", "lam", "t", "p"], ["r", "phi"]),
-        outputs=ca.Function("joint_outputs", [q, lam, p], [y], ["q", "lam", "p"], ["y"]),
+        outputs=ca.Function("joint_outputs", [q, qd, lam, p], [y], ["q", "qd", "lam", "p"], ["y"]),
         local_rotations=ca.Function("local_rotations", [q], [th_l], ["q"], ["theta_l"]),
         local_rotation_names=tuple(f"{b.name}.{k}.{e}" for b, k, _, _ in beam_elems for e in "ab"),
         segments=tuple(("beam", f"{b.name}.{k}", idx[na] // 3, idx[nb] // 3) for b, k, na, nb in beam_elems)

@@ -77,8 +77,8 @@ NPZ_KEYS = {
     "lam": "(n, n_con) Lagrange multipliers (Eq. 1 sign: the support exerts -lam)",
     "dof_names": "(n_dof,) 'x1', 'y1', 'theta1', ...",
     "constraint_names": "(n_con,) '<support>.<x|y|theta>'",
-    "outputs": "(n, n_out) joint outputs: spring force/length/fx/fy, torsion moment, support reactions, "
-    "beam end forces",
+    "outputs": "(n, n_out) joint outputs: spring force/length/fx/fy, torsion moment, damper forces and "
+    "moments, support reactions, beam end forces",
     "output_names": "(n_out,) names of the columns of outputs",
     "energy_kinetic": "(n,) J", "energy_elastic": "(n,) J", "energy_gravity": "(n,) J",
     "energy_total": "(n,) J, kinetic + elastic + gravity",

@@ -193,3 +193,23 @@ def test_dampers_identified_from_exudyn_markers():
     rel = dict(zip(model.parameter_names, err / model.p_nominal, strict=True))
     assert np.all(np.abs(err[dampers] / model.p_nominal[dampers]) < 0.05), rel
     assert np.all(np.abs(err) <= 3 * se), dict(zip(model.parameter_names, err / se, strict=True))
+
+
+def test_damper_forces_are_joint_outputs():
+    # the joint force a user asks for includes the damper's: c dL/dt along the spring, ct (omega_b -
+    # omega_a), a bushing's c (v_b - v_a) on node b; against the velocities of the run itself
+    scene = casflex.load_scene(DAMPED / "twobar_damped.toml")
+    model = assemble(scene)
+    tr = simulate(model, 0.2, dt=1e-3)
+    q, qd = tr.q[-1], tr.qd[-1]
+    d = np.array([q[model.dof("x2")] - q[model.dof("x1")], q[model.dof("y2")] - q[model.dof("y1")]])
+    v = np.array([qd[model.dof("x2")] - qd[model.dof("x1")], qd[model.dof("y2")] - qd[model.dof("y1")]])
+    assert np.isclose(tr.output("spring1.damper_force")[-1], 20.0 * d @ v / np.linalg.norm(d), rtol=1e-12)
+    rate = qd[model.dof("theta4")] - qd[model.dof("theta3")]
+    assert np.isclose(tr.output("torsion3.damper_moment")[-1], 1.0 * rate, rtol=1e-12)
+    assert abs(tr.output("spring1.damper_force")[-1]) > 1.0  # the check is not 0 = 0
+    bushing = assemble(slider(bushing=True))
+    tb = simulate(bushing, 0.01, dt=1e-3)
+    va = tb.qd[-1][bushing.dof("xa")]
+    assert np.isclose(tb.output("s.damper_fx")[-1], -C * (va - 0.0), rtol=1e-12)
+    assert "s.damper_force" not in bushing.output_names

@@ -30,7 +30,9 @@ Kernels (all SX, common subexpressions eliminated), with ``g`` the gravity vecto
 - ``<kind>_energy(q, qd, props, g) -> (kinetic, elastic, gravity)`` (J);
 - ``<kind>_forces(q, qd, props, g) -> (h, f_int, g)``: inertia, elastic and gravity forces;
 - ``<kind>_mass(q, props) -> M`` (dense, n_dof x n_dof);
-- ``<kind>_outputs(q, props) -> y``: the joint outputs of the element (``OUTPUTS``);
+- ``<kind>_outputs(q, qd, props) -> y``: the joint outputs of the element (``Kind.outputs``; a
+  damper's force, N or N m, as its spring reports its own: along the line of the nodes, tension
+  positive; a bushing's on node b; a torsion damper's moment);
 - ``<kind>_rotations(q, props) -> theta_l``: local end rotations (beams);
 - ``<kind>_dissipation(q, qd, props) -> P``: power taken out by a damper or follower load (W);
 - ``<kind>_scale(q, qd, props, g) -> (m, c, k)``: diagonals of M, dh/dqd and d(f_int - g)/dq;
@@ -70,9 +72,9 @@ KINDS = {
     "spring": Kind("spring", 4, ("k", "rest"), ("force", "length", "fx", "fy"), False),
     "spring0": Kind("spring0", 4, ("k",), ("force", "length", "fx", "fy"), False),
     "torsion": Kind("torsion", 2, ("kt", "rest"), ("moment",), False),
-    "damper": Kind("damper", 4, ("c",), (), False),
-    "damper0": Kind("damper0", 4, ("c",), (), False),
-    "tdamper": Kind("tdamper", 2, ("ct",), (), False),
+    "damper": Kind("damper", 4, ("c",), ("damper_force",), False),
+    "damper0": Kind("damper0", 4, ("c",), ("damper_fx", "damper_fy"), False),
+    "tdamper": Kind("tdamper", 2, ("ct",), ("damper_moment",), False),
     "body": Kind("body", 3, ("m", "J", "rx", "ry"), (), True),
     "follower": Kind("follower", 3, ("fx", "fy"), (), False),
 }
@@ -184,7 +186,13 @@ class _Element:
             return 0.5 * self.m * ca.sumsqr(vc) + 0.5 * self.J * qd[2] ** 2
         return self.beam.kinetic_energy(q, qd) if self.kind == "beam" else ca.SX(0)
 
-    def outputs(self, q: ca.SX) -> ca.SX:
+    def outputs(self, q: ca.SX, qd: ca.SX) -> ca.SX:
+        if self.kind in DAMPERS:  # the damper's force dD/dqd as the spring's outputs give it
+            f = ca.gradient(self.rayleigh(q, qd), qd)
+            if self.kind == "damper":  # along the line of the nodes, tension positive: c dL/dt
+                d = q[2:] - q[:2]
+                return ca.dot(f[2:], d) / ca.norm_2(d)
+            return -f[2:] if self.kind == "damper0" else f[1]  # on node b; the moment, as a torsion spring's
         if self.kind in NONCONSERVATIVE or self.kind == "body":
             return ca.SX(0, 1)
         if self.kind == "beam":
@@ -220,7 +228,7 @@ def kernel(kind: str, what: str, form: str = "lagrange") -> ca.Function:
     if what == "mass":
         return ca.Function(name, [q, pr], [ca.densify(el.mass_terms(q, qd)[1])], ["q", "props"], ["M"], CSE)
     if what == "outputs":
-        return ca.Function(name, [q, pr], [el.outputs(q)], ["q", "props"], ["y"], CSE)
+        return ca.Function(name, [q, qd, pr], [el.outputs(q, qd)], ["q", "qd", "props"], ["y"], CSE)
     if what == "rotations":
         kin = el.beam.kinematics(q)
         return ca.Function(name, [q, pr], [ca.vertcat(kin["tha"], kin["thb"])], ["q", "props"], ["theta_l"], CSE)

@@ -490,8 +490,7 @@ def _post(m: Model) -> ca.Function:
     q, qd, lam = x[:n], x[n:2 * n], x[3 * n:]
     T, Ve, Vg = m.energy(q, qd, p)
     y = ca.vertcat(T, Ve, Vg, ca.dot(m.load(t, p), qd) + m.follower_power(q, qd, p), m.dissipation(q, qd, p),
-                   m.outputs(q, lam, p),
-                   m.local_rotations(q))
+                   m.outputs(q, qd, lam, p), m.local_rotations(q))
     return ca.Function("hht_post", [x, t, p], [ca.densify(y)], ["x", "t", "p"], ["y"])
 
 
