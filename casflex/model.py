@@ -240,6 +240,9 @@ def _groups(scene: Scene, order, nodes, beam_elems, idx) -> tuple[ElementGroup, 
                       [s.c], ("c",)) for s in scene.springs if damped(s, "c") and (s.name in zero_names) == bushing])
     group("tdamper", [(s.name, s.name, [idx[s.nodes[0]] + 2, idx[s.nodes[1]] + 2], [s.ct], ("ct",))
                       for s in scene.torsion_springs if damped(s, "ct")])
+    group("bdamper", [(f"{nm}.damping", owner, dofs, [vals[0], *vals[3:6], b.beta], ("", "E", "A", "I", "beta"))
+                      for (nm, owner, dofs, vals, _), (b, *_) in zip(beams, beam_elems, strict=True)
+                      if damped(b, "beta")])
     bodies = []
     for bd in scene.bodies:
         x0, y0, th0 = nodes[bd.node][:3]

@@ -139,6 +139,8 @@ class Beam:
 
     E (Pa), A (m^2), I (m^4), rho (kg/m^3); meshed into ``elements`` equal elements.
     ``rotary_inertia`` adds the cross-section rotary inertia rho*I to the consistent mass.
+    ``beta`` (s): stiffness-proportional (Rayleigh) damping of the element's deformation rates,
+    modal damping ratio beta omega / 2; 0 (the default) adds nothing to the model.
     """
 
     name: str
@@ -149,6 +151,7 @@ class Beam:
     rho: float
     elements: int = 1
     rotary_inertia: bool = False
+    beta: float = 0.0
 
     def __post_init__(self) -> None:
         where = _owner("beam", self.name)
@@ -157,6 +160,7 @@ class Beam:
         for f in ("E", "A", "I"):
             object.__setattr__(self, f, _positive(where, f, getattr(self, f)))
         object.__setattr__(self, "rho", _non_negative(where, "rho", self.rho))
+        object.__setattr__(self, "beta", _non_negative(where, "beta", self.beta))
         n = self.elements
         if isinstance(n, bool) or not isinstance(n, int) or n < 1:
             raise SceneError.at(where, "elements", f"expected an integer >= 1, got {n!r}")
@@ -324,7 +328,8 @@ class Load:
 
 
 #: Fields whose parameters get a lower bound of 0 by default: no physical value is negative.
-NONNEGATIVE_FIELDS = frozenset({"k", "kt", "c", "ct", "E", "A", "I", "rho", "rest_length", "mass", "inertia"})
+NONNEGATIVE_FIELDS = frozenset({"k", "kt", "c", "ct", "E", "A", "I", "rho", "rest_length", "mass", "inertia",
+                                "beta"})
 
 
 @dataclass(frozen=True)

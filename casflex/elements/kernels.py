@@ -12,6 +12,9 @@ Kinds and their element dofs and properties (a property may be a parameter of th
   Rayleigh function D = c/2 (dL/dt)^2 (its nodes must stay apart, as a spring's of rest length > 0);
 - ``damper0``: the damper of a zero-length spring (a bushing), D = c/2 |v_b - v_a|^2;
 - ``tdamper``: (theta_a, theta_b); ct (N m s/rad), D = ct/2 (theta_b' - theta_a')^2;
+- ``bdamper``: a beam element's dofs; L0, E, A, I, beta (s): stiffness-proportional damping of its
+  co-rotational deformation rates e' = (L', tha', thb'), D = beta U(e') with U the element's strain
+  energy as a quadratic form, beta/2 e'^T K_l e' (a rigid motion has e' = 0 and is not damped);
 - ``body``: (x, y, theta) of its node; m (kg), J (kg m^2, about the centre of mass), rx, ry (m: the
   centre of mass from the node in the node's frame, c = (x, y) + R(theta) r). T = m/2 |c'|^2 +
   J/2 theta'^2, V_g = -m g . c; its inertia term is Lagrange's in either form (the paper's
@@ -75,12 +78,13 @@ KINDS = {
     "damper": Kind("damper", 4, ("c",), ("damper_force",), False),
     "damper0": Kind("damper0", 4, ("c",), ("damper_fx", "damper_fy"), False),
     "tdamper": Kind("tdamper", 2, ("ct",), ("damper_moment",), False),
+    "bdamper": Kind("bdamper", 6, ("L0", "E", "A", "I", "beta"), (), False),
     "body": Kind("body", 3, ("m", "J", "rx", "ry"), (), True),
     "follower": Kind("follower", 3, ("fx", "fy"), (), False),
 }
 
 #: Kinds whose force depends on the velocities only (no energy, mass or outputs).
-DAMPERS = ("damper", "damper0", "tdamper")
+DAMPERS = ("damper", "damper0", "tdamper", "bdamper")
 #: Kinds with no potential: their power is reported by ``dissipation`` instead of an energy.
 NONCONSERVATIVE = (*DAMPERS, "follower")
 
@@ -102,6 +106,8 @@ class _Element:
             self.m, self.J, self.r = pr[0], pr[1], pr[2:4]
         elif kind == "follower":
             self.f = pr[0:2]
+        elif kind == "bdamper":
+            self.props = pr
         else:
             self.c = pr[0]
 
@@ -121,6 +127,14 @@ class _Element:
             return 0.5 * self.c * ca.sumsqr(qd[2:] - qd[:2])
         if self.kind == "tdamper":
             return 0.5 * self.c * (qd[1] - qd[0]) ** 2
+        if self.kind == "bdamper":
+            L0, E, A, I, beta = (self.props[i] for i in range(5))
+            d, v = q[3:5] - q[0:2], qd[3:5] - qd[0:2]
+            L2 = ca.sumsqr(d)
+            rate_L = ca.dot(d, v) / ca.sqrt(L2)
+            rate_chord = (d[0] * v[1] - d[1] * v[0]) / L2
+            ra, rb = qd[2] - rate_chord, qd[5] - rate_chord
+            return beta * (E * A / (2 * L0) * rate_L**2 + E * I / L0 * (2 * ra**2 + 2 * ra * rb + 2 * rb**2))
         return ca.SX(0)
 
     def follower_force(self, q: ca.SX) -> ca.SX:
@@ -192,6 +206,8 @@ class _Element:
             if self.kind == "damper":  # along the line of the nodes, tension positive: c dL/dt
                 d = q[2:] - q[:2]
                 return ca.dot(f[2:], d) / ca.norm_2(d)
+            if self.kind == "bdamper":
+                return ca.SX(0, 1)
             return -f[2:] if self.kind == "damper0" else f[1]  # on node b; the moment, as a torsion spring's
         if self.kind in NONCONSERVATIVE or self.kind == "body":
             return ca.SX(0, 1)

@@ -7,7 +7,8 @@ into an Exudyn model; :func:`simulate` runs it and returns the motion of the sce
 The translation, element by element (the same continuum, another discretisation and integrator):
 
 - beam: ``ObjectANCFCable2D`` elements (Euler-Bernoulli, cubic Hermite position field, consistent
-  mass, no rotary inertia) on ``NodePoint2DSlope1`` nodes (x, y and the slope vector dr/ds). An
+  mass, no rotary inertia; damping beta: Kelvin-Voigt bending and axial damping beta EI, beta EA,
+  the continuum of stiffness-proportional damping) on ``NodePoint2DSlope1`` nodes (x, y and the slope vector dr/ds). An
   Euler-Bernoulli beam's nodal rotation is the angle of its slope: theta = theta_0 + (angle of the
   slope now - angle of the slope at t = 0);
 - node that is no beam end (a joint node, e.g. twobar's node 1): a slope node, which must be clamped
@@ -119,7 +120,8 @@ def build(scene: Scene, *, elements: int, h: float, t_end: float, newton_tol: fl
         for k in range(elements):
             obj = mbs.AddObject(ii.ObjectANCFCable2D(nodeNumbers=[chain[k], chain[k + 1]], length=L / elements,
                                                      massPerLength=b.rho * b.A, bendingStiffness=b.E * b.I,
-                                                     axialStiffness=b.E * b.A))
+                                                     axialStiffness=b.E * b.A, bendingDamping=b.beta * b.E * b.I,
+                                                     axialDamping=b.beta * b.E * b.A))
             mark = mbs.AddMarker(ii.MarkerBodyMass(bodyNumber=obj))
             mbs.AddLoad(ii.LoadMassProportional(markerNumber=mark, loadVector=[gx, gy, 0.0]))
 
