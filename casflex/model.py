@@ -23,6 +23,7 @@ maps. The Functions are MX; evaluated on SX symbols they give the flat expressio
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -30,7 +31,7 @@ import casadi as ca
 import numpy as np
 
 from casflex.assembly import ElementGroup, MatrixAssembly, gather, scatter
-from casflex.constraints import FixedDof, constraint_vector, support_constraints
+from casflex.constraints import FixedDof, constraint_vector, prescribed, support_constraints
 from casflex.elements import BeamElement
 from casflex.elements.kernels import DAMPERS, KINDS, NONCONSERVATIVE, kernel
 from casflex.scene import INERTIA_FORMS, Parameter, Scene, SceneError
@@ -95,6 +96,17 @@ class Model:
     local_rotations: ca.Function
     local_rotation_names: tuple[str, ...]
     segments: tuple[tuple[str, str, int, int], ...] = field(default=())
+
+    @property
+    def moving(self) -> bool:
+        """Whether a support follows a path (``motion``): the constraints then depend on t."""
+        return any(c.path is not None for c in self.constraints)
+
+    @functools.cached_property
+    def prescribed(self) -> ca.Function:
+        """``prescribed(t) -> (v, vd, vdd)`` (n_con,): the supports' values at t and their rates
+        (:func:`casflex.constraints.prescribed`); constants and zeros for fixed supports."""
+        return prescribed(list(self.constraints))
 
     @property
     def n_dof(self) -> int:

@@ -63,7 +63,7 @@ SUPPORT_DOFS: dict[str, tuple[str, ...]] = {
 
 #: Forms of the velocity-dependent inertia term (see casflex.model).
 INERTIA_FORMS = ("lagrange", "seed")
-_NON_NUMERIC = ("name", "nodes", "node", "elements", "table", "kind", "rotary_inertia", "follower")
+_NON_NUMERIC = ("name", "nodes", "node", "elements", "table", "kind", "rotary_inertia", "follower", "motion")
 
 
 def _number(owner: str, field: str, value: Any) -> float:
@@ -249,14 +249,21 @@ class RigidBody:
 
 @dataclass(frozen=True)
 class Support:
-    """A support fixing some dofs of a node at their initial values.
+    """A support fixing some dofs of a node at their initial values, or moving them along a path.
 
     kind: ``clamp`` (x, y, theta), ``pin`` (x, y), or a single dof ``x``, ``y``, ``theta``.
+
+    ``motion``: rows (t, dx, dy, dtheta) (s, m, m, rad), at least 4, t strictly increasing: the
+    displacement of the fixed dofs from the node's initial position (the components of dofs the
+    support does not fix are ignored), interpolated by a cubic spline (continuous velocity and
+    acceleration: a rheonomic constraint) and held at the end values outside the table. The
+    multipliers are then the forces and moments that drive the node along the path.
     """
 
     name: str
     node: str
     kind: str = "clamp"
+    motion: tuple[tuple[float, float, float, float], ...] | None = None
 
     def __post_init__(self) -> None:
         where = _owner("support", self.name)
@@ -265,6 +272,21 @@ class Support:
         if not isinstance(self.kind, str) or self.kind not in SUPPORT_DOFS:
             raise SceneError.at(where, "kind",
                                 f"unknown support kind {self.kind!r}; expected one of {list(SUPPORT_DOFS)}")
+        if self.motion is None:
+            return
+        if not isinstance(self.motion, (list, tuple)) or len(self.motion) < 4:
+            raise SceneError.at(where, "motion", f"expected at least 4 rows [t, dx, dy, dtheta] (a cubic spline "
+                                f"runs through them), got {self.motion!r}")
+        rows = []
+        for i, row in enumerate(self.motion):
+            if isinstance(row, str) or not isinstance(row, (list, tuple)) or len(row) != 4:
+                raise SceneError.at(where, f"motion[{i}]", f"expected a row [t, dx, dy, dtheta], got {row!r}")
+            rows.append(tuple(_number(where, f"motion[{i}][{j}]", v) for j, v in enumerate(row)))
+        for i in range(1, len(rows)):
+            if rows[i][0] <= rows[i - 1][0]:
+                raise SceneError.at(where, f"motion[{i}][0]",
+                                    f"times must increase strictly, got {rows[i][0]:g} after {rows[i - 1][0]:g}")
+        object.__setattr__(self, "motion", tuple(rows))
 
     @property
     def dofs(self) -> tuple[str, ...]:

@@ -307,21 +307,31 @@ def initial_state(integ: HHT, p: np.ndarray, *, q0: np.ndarray | None = None, qd
     """The full state x0 = [q0, qd0, qdd0, lam0] with consistent qdd0 and lam0 (Eq. 1, index 1)."""
     model = integ.model
     n = model.n_dof
-    q = model.q0 if q0 is None else np.asarray(q0, dtype=float).reshape(-1)
-    qd = model.qd0 if qd0 is None else np.asarray(qd0, dtype=float).reshape(-1)
+    q = model.q0.copy() if q0 is None else np.asarray(q0, dtype=float).reshape(-1)
+    qd = model.qd0.copy() if qd0 is None else np.asarray(qd0, dtype=float).reshape(-1)
     for name, v in (("q0", q), ("qd0", qd)):
         if v.shape != (n,) or not np.isfinite(v).all():
             raise ValueError(f"{name}: expected {n} finite values ({', '.join(model.dof_names[:6])}, ...), "
                              f"got shape {v.shape}")
+    vd = np.zeros(model.n_con)
+    if model.moving:  # the supports' values and rates at t0; the scene's state takes them
+        v, vd, _ = (np.array(a).ravel() for a in model.prescribed(t0))
+        fixed = [c.dof for c in model.constraints]
+        if q0 is None:
+            q[fixed] = v
+        if qd0 is None:
+            qd[fixed] = vd
     phi, B = model.constraint(q)
     phi, B = np.array(phi).ravel(), np.array(B)
+    if model.moving:
+        phi = phi - (v - np.array([c.value for c in model.constraints]))
     scale = np.where(model.is_rotation, 1.0, model.length_scale)
     if model.n_con:
         cs = scale[[c.dof for c in model.constraints]]
         if np.abs(phi / cs).max() > 1e-9:
             j = int(np.argmax(np.abs(phi / cs)))
             raise ValueError(f"q0 violates constraint {model.constraint_names[j]} by {phi[j]:.3g}")
-        v = B @ qd
+        v = B @ qd - vd
         if np.abs(v).max() > 1e-9 * max(np.abs(qd).max(), 1.0):
             j = int(np.argmax(np.abs(v)))
             raise ValueError(f"qd0 violates the velocity constraint of {model.constraint_names[j]} by {v[j]:.3g}")

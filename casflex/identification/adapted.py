@@ -45,6 +45,7 @@ from casflex.identification.problem import (
     gauss_newton_polish,
     gauss_newton_statistics,
     least_squares_nlp,
+    require_fixed_supports,
     robust_statistics,
     start_values,
 )
@@ -177,6 +178,7 @@ def identify_adapted_direct(
 
     pmap = ParameterMap.of(model, transform)
     scale = pmap.scale
+    require_fixed_supports(model)
     p0 = start_values(model, start)
     ell = model.length_scale
     unit = np.where(model.is_rotation[unknown], 1.0, ell)  # rad for rotations, m for translations

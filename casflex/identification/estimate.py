@@ -37,7 +37,13 @@ from casflex.codegen import log
 from casflex.identification.initial_state import initial_state_of
 from casflex.identification.measurement import Experiment, check_against_scene
 from casflex.identification.output_error import Budget, Fit, OutputError, StartDoesNotRun, fit
-from casflex.identification.problem import ParameterMap, bound_flags, gauss_newton_statistics, start_values
+from casflex.identification.problem import (
+    ParameterMap,
+    bound_flags,
+    gauss_newton_statistics,
+    require_fixed_supports,
+    start_values,
+)
 from casflex.identification.result import IdentificationResult
 from casflex.identification.statistics import residual_analysis, sandwich_covariance
 from casflex.model import Model, assemble
@@ -268,6 +274,7 @@ def estimate(model: Model, experiments: Sequence[Experiment], *, dt: float | Non
         raise ValueError(f"model_error: expected one of {MODEL_ERRORS}, got {model_error!r}")
     if model.n_p == 0:
         raise ValueError("the scene declares no parameters to identify ([[parameters]] in the scene file)")
+    require_fixed_supports(model)
     run = model.scene.run
     dt = float(run.dt if dt is None else dt)
     alpha = float(run.alpha if alpha is None else alpha)

@@ -89,6 +89,14 @@ class ParameterMap:
         return self.scale if self.transform == "linear" else self.scale * np.exp(theta)
 
 
+def require_fixed_supports(model: Model) -> None:
+    """ValueError when a support moves: identification takes the supports' values as constants."""
+    if model.moving:
+        moving = sorted({c.name.rsplit(".", 1)[0] for c in model.constraints if c.path is not None})
+        raise ValueError(f"supports {moving} move (motion): identification does not take moving supports yet; "
+                         "fix them in the scene to identify")
+
+
 def start_values(model: Model, start: float | dict[str, float] | np.ndarray | None) -> np.ndarray:
     """Starting parameters: None (nominal), a factor times nominal, a dict, or an array."""
     if start is None:

@@ -53,6 +53,7 @@ from casflex.identification.problem import (
     gauss_newton_polish,
     gauss_newton_statistics,
     least_squares_nlp,
+    require_fixed_supports,
     start_values,
 )
 from casflex.model import Model
@@ -198,6 +199,7 @@ def identify_nlp(
     nx = integ.nx
     pmap = ParameterMap.of(model, transform)
     scale = pmap.scale
+    require_fixed_supports(model)
     p0 = start_values(model, start)
     ell = np.where(model.is_rotation, 1.0, model.length_scale)
     T = N * h

@@ -359,7 +359,10 @@ class _Layout:
 def _prm_layout(m: Model) -> list[tuple[str, int]]:
     """The known quantities a step's Newton solve takes (``prm``), in this order, with their sizes."""
     n = m.n_dof
-    return [("q_pred", n), ("qd_pred", n), ("f_n", n), ("f_ext", n), ("p", m.n_p), ("h", 1), ("d", n), ("q0", n)]
+    # moving supports: values at t_n and t_{n+1}, rates and accelerations at t_{n+1}
+    moving = [("to0", n), ("to1", n), ("vd1", n), ("vdd1", n)] if m.moving else []
+    return [("q_pred", n), ("qd_pred", n), ("f_n", n), ("f_ext", n), ("p", m.n_p), ("h", 1), ("d", n), ("q0", n),
+            *moving]
 
 
 def _prepare(m: Model, lay: _Layout, alpha: float) -> ca.Function:
@@ -376,6 +379,9 @@ def _prepare(m: Model, lay: _Layout, alpha: float) -> ca.Function:
         f_n = hh + f_int - g + ca.mtimes(lay.reactions(), lam0)
     prm = ca.vertcat(q0 + h * qd0 + (0.5 - beta) * h**2 * qdd0, qd0 + (1 - gamma) * h * qdd0, f_n,
                      m.load(t0 + (1 + alpha) * h, p), p, h, d, q0)
+    if m.moving:
+        v1 = m.prescribed(t0 + h)
+        prm = ca.vertcat(prm, *(ca.mtimes(lay.reactions(), v) for v in (m.prescribed(t0)[0], *v1)))
     z_guess = (beta * h**2 * qdd0 / lay.ell)[lay.free]
     return ca.Function("hht_prepare", [x0, t0, p, h, d], [ca.densify(z_guess), ca.densify(prm)],
                        ["x0", "t0", "p", "h", "d"], ["z0", "prm"])
@@ -397,13 +403,24 @@ def _newton_functions(m: Model, lay: _Layout, alpha: float, tol: float, n_prm: i
         parts[key], o = P[o:o + size], o + size
     hp, dp, pp, qp, q0 = parts["h"], parts["d"], parts["p"], parts["q_pred"], parts["q0"]
     # HHT on Phi = q_c - v: (1 + alpha) Phi(q_{n+1}) = alpha Phi(q_n)
-    q_fix = ca.DM(lay.fixed_to) + alpha / (1 + alpha) * (q0 - ca.DM(lay.fixed_to))
+    # a moving support: Phi = q_c - v(t), HHT on it as on a fixed one. With alpha < 0 its rates and
+    # accelerations follow from Newmark's relations like every dof's (the path's own, taken at t_{n+1},
+    # are only first order there: the balance is struck at t_{n+1+alpha}); at alpha = 0 they are the
+    # path's, since Newmark's accelerations of a prescribed path oscillate undamped (a pendulum on a
+    # shaking pivot, dt = 1 ms: its reaction 223 N off instead of 57 N, the rest being the stress-free
+    # rod's own undamped axial vibration; the energy balance of order 2 instead of 1.2)
+    to0, to1 = (parts["to0"], parts["to1"]) if m.moving else (ca.DM(lay.fixed_to), ca.DM(lay.fixed_to))
+    q_fix = to1 + alpha / (1 + alpha) * (q0 - to0)
     is_fixed = np.zeros(n)
     is_fixed[lay.fixed] = 1.0
     du = ell * lay.spread(z) + ca.DM(is_fixed) * (q_fix - qp)  # q_{n+1} - q_pred: never formed as a difference
     q1 = qp + du
     qdd1 = du / (beta * hp**2)
     qd1 = parts["qd_pred"] + gamma * hp * qdd1
+    if m.moving and alpha == 0.0:
+        free_mask = ca.DM(1.0 - is_fixed)
+        qdd1 = free_mask * qdd1 + parts["vdd1"]
+        qd1 = free_mask * qd1 + parts["vd1"]
     q_alpha = (1 + alpha) * q1 - alpha * q0  # where q''_{n+1} and the weighted forces act
     coef = ca.vertcat(gamma / (beta * hp), 1 / (beta * hp**2))
     g = m.gravity(pp)
@@ -470,14 +487,16 @@ def _scale(m: Model, alpha: float) -> ca.Function:
 
 def _initial(m: Model, lay: _Layout) -> ca.Function:
     """``hht_initial(q, qd, t, p) -> (qdd, lam)``: consistent accelerations and multipliers (index-1
-    form of Eq. 1): the fixed dofs do not accelerate, M_ff qdd_f = -(h + f_int - g - f_ext)_f, and
-    the multipliers balance the fixed rows."""
+    form of Eq. 1): the fixed dofs accelerate as their supports do (not at all unless they move),
+    M_ff qdd_f = -(h + f_int - g - f_ext + M qdd_c)_f, and the multipliers balance the fixed rows."""
     n = m.n_dof
     q, qd, t, p = ca.MX.sym("q", n), ca.MX.sym("qd", n), ca.MX.sym("t"), ca.MX.sym("p", m.n_p)
     hh, f_int, g = m.forces(q, qd, p)
     rhs = hh + f_int - g - m.load(t, p)
     M = m.mass(q, p)
-    qdd = lay.spread(-ca.solve(M[lay.free, lay.free], rhs[lay.free], "qr") if lay.free else ca.MX(0, 1))
+    qdd_c = ca.mtimes(lay.reactions(), m.prescribed(t)[2]) if m.moving else ca.MX.zeros(n)
+    shifted = rhs + ca.mtimes(M, qdd_c) if m.moving else rhs
+    qdd = qdd_c + lay.spread(-ca.solve(M[lay.free, lay.free], shifted[lay.free], "qr") if lay.free else ca.MX(0, 1))
     lam = -(ca.mtimes(M, qdd) + rhs)[lay.fixed] if lay.fixed else ca.MX(0, 1)
     return ca.Function("hht_initial", [q, qd, t, p], [ca.densify(qdd), ca.densify(lam)], ["q", "qd", "t", "p"],
                        ["qdd", "lam"])
@@ -489,7 +508,10 @@ def _post(m: Model) -> ca.Function:
     x, t, p = ca.MX.sym("x", 3 * n + m.n_con), ca.MX.sym("t"), ca.MX.sym("p", m.n_p)
     q, qd, lam = x[:n], x[n:2 * n], x[3 * n:]
     T, Ve, Vg = m.energy(q, qd, p)
-    y = ca.vertcat(T, Ve, Vg, ca.dot(m.load(t, p), qd) + m.follower_power(q, qd, p), m.dissipation(q, qd, p),
+    power = ca.dot(m.load(t, p), qd) + m.follower_power(q, qd, p)
+    if m.moving:  # a moving support works on the structure: -lambda (its force) times its velocity
+        power -= ca.dot(lam, qd[[c.dof for c in m.constraints]])
+    y = ca.vertcat(T, Ve, Vg, power, m.dissipation(q, qd, p),
                    m.outputs(q, qd, lam, p), m.local_rotations(q))
     return ca.Function("hht_post", [x, t, p], [ca.densify(y)], ["x", "t", "p"], ["y"])
 

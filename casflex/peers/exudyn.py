@@ -27,8 +27,9 @@ The translation, element by element (the same continuum, another discretisation 
   trapezoidal rule, as HHT alpha = 0), Newton on the increment to ``newton_tol``.
 
 What casflex has and this translation does not (:class:`NotImplementedError` naming it): load
-tables, follower loads, rotary inertia, a node where two beams meet, a clamp on a beam end at an angle, a damper on a
-zero-length spring (casflex damps its relative velocity, Exudyn along an undefined direction).
+tables, follower loads, moving supports, rotary inertia, a node where two beams meet, a clamp on a
+beam end at an angle, a damper on a zero-length spring (casflex damps its relative velocity, Exudyn
+along an undefined direction).
 """
 
 from __future__ import annotations
@@ -68,6 +69,8 @@ class ExudynModel:
 
 
 def _check_supported(scene: Scene) -> None:
+    if any(sp.motion is not None for sp in scene.supports):
+        raise NotImplementedError("moving supports (motion) are not translated to Exudyn")
     if any(ld.follower for ld in scene.loads):
         raise NotImplementedError("follower loads are not translated to Exudyn")
     if any(len(ld.rows()) > 1 for ld in scene.loads):

@@ -201,7 +201,7 @@ def _equilibrium_check(prob, pv: np.ndarray, t: float, q: np.ndarray, tol: float
     _, _, g = sp.gradient(u, 1.0)
     res = sp.residual(g)
     tol_k = sp.tol(tol, u)
-    off = np.abs(q[prob.fixed] - prob.fixed_values) / prob.ell[prob.fixed]
+    off = np.abs(q[prob.fixed] - prob.fixed_at(t)) / prob.ell[prob.fixed]
     violated = float(np.max(off, initial=0.0))
     if res <= tol_k and violated <= tol_k:
         return res, True

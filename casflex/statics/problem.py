@@ -195,7 +195,7 @@ class StaticProblem:
     free, fixed : ndarray of int
         Indices of the free dofs and of the fixed dofs (in constraint order).
     fixed_values : ndarray, shape (n_con,)
-        The values the supports hold the fixed dofs at.
+        The values the supports hold the fixed dofs at (moving supports: at t = 0; :meth:`fixed_at`).
     ell : ndarray, shape (n_dof,)
         Characteristic length per dof: ``model.length_scale`` for translations, 1 for rotations.
     """
@@ -222,6 +222,7 @@ class StaticProblem:
         self.fixed = fixed
         self.free = np.setdiff1d(np.arange(n), fixed)
         self.fixed_values = np.array([c.value for c in model.constraints], dtype=float)
+        self._prescribed = model.prescribed if model.moving else None
         self.is_rotation = np.asarray(model.is_rotation, dtype=bool)
         self.ell = np.where(self.is_rotation, 1.0, model.length_scale)
         self.dof_names = model.dof_names
@@ -260,6 +261,12 @@ class StaticProblem:
         r = ca.vertcat(grad + ca.mtimes(B.T, lam), phi)
         return ca.Function("statics_residual", [q, lam, s, t, p], [r, ca.jacobian(r, ca.vertcat(q, lam))],
                            ["q", "lam", "factor", "t", "p"], ["r", "J"])
+
+    def fixed_at(self, t: float) -> np.ndarray:
+        """The values of the fixed dofs at time t (s): a moving support where its path has it then."""
+        if self._prescribed is None:
+            return self.fixed_values
+        return np.array(self._prescribed(t)[0], dtype=float).ravel()
 
     def evaluate(self, q: np.ndarray, factor: float, t: float, p: np.ndarray):
         """(Pi, grad, load, magnitude) at q, as floats and arrays of shape (n_dof,)."""
@@ -310,7 +317,7 @@ class Scaled:
         self.p = np.asarray(p, dtype=float)
         self.t = float(t)
         q = np.array(q_start, dtype=float).reshape(-1)
-        q[problem.fixed] = problem.fixed_values
+        q[problem.fixed] = problem.fixed_at(t)
         self.base = q
         self.free = problem.free
         self.ell = problem.ell[self.free]
