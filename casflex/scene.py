@@ -247,6 +247,20 @@ class RigidBody:
                 object.__setattr__(self, f, _number(where, f, getattr(self, f)))
 
 
+def _time_rows(where: str, field: str, rows: Any, header: str) -> tuple[tuple[float, ...], ...]:
+    """Rows of 4 finite numbers whose first (a time, s) increases strictly, as tuples."""
+    out = []
+    for i, row in enumerate(rows):
+        if isinstance(row, str) or not isinstance(row, (list, tuple)) or len(row) != 4:
+            raise SceneError.at(where, f"{field}[{i}]", f"expected a row {header}, got {row!r}")
+        out.append(tuple(_number(where, f"{field}[{i}][{j}]", v) for j, v in enumerate(row)))
+    for i in range(1, len(out)):
+        if out[i][0] <= out[i - 1][0]:
+            raise SceneError.at(where, f"{field}[{i}][0]",
+                                f"times must increase strictly, got {out[i][0]:g} after {out[i - 1][0]:g}")
+    return tuple(out)
+
+
 @dataclass(frozen=True)
 class Support:
     """A support fixing some dofs of a node at their initial values, or moving them along a path.
@@ -277,16 +291,7 @@ class Support:
         if not isinstance(self.motion, (list, tuple)) or len(self.motion) < 4:
             raise SceneError.at(where, "motion", f"expected at least 4 rows [t, dx, dy, dtheta] (a cubic spline "
                                 f"runs through them), got {self.motion!r}")
-        rows = []
-        for i, row in enumerate(self.motion):
-            if isinstance(row, str) or not isinstance(row, (list, tuple)) or len(row) != 4:
-                raise SceneError.at(where, f"motion[{i}]", f"expected a row [t, dx, dy, dtheta], got {row!r}")
-            rows.append(tuple(_number(where, f"motion[{i}][{j}]", v) for j, v in enumerate(row)))
-        for i in range(1, len(rows)):
-            if rows[i][0] <= rows[i - 1][0]:
-                raise SceneError.at(where, f"motion[{i}][0]",
-                                    f"times must increase strictly, got {rows[i][0]:g} after {rows[i - 1][0]:g}")
-        object.__setattr__(self, "motion", tuple(rows))
+        object.__setattr__(self, "motion", _time_rows(where, "motion", self.motion, "[t, dx, dy, dtheta]"))
 
     @property
     def dofs(self) -> tuple[str, ...]:
@@ -333,16 +338,7 @@ class Load:
             given = [f for f in ("fx", "fy", "mz") if getattr(self, f)]
             raise SceneError.at(where, "table",
                                 f"give either constant fx/fy/mz or a table, not both (also given: {given})")
-        rows = []
-        for i, row in enumerate(self.table):
-            if isinstance(row, str) or not isinstance(row, (list, tuple)) or len(row) != 4:
-                raise SceneError.at(where, f"table[{i}]", f"expected a row [t, fx, fy, mz], got {row!r}")
-            rows.append(tuple(_number(where, f"table[{i}][{j}]", v) for j, v in enumerate(row)))
-        for i in range(1, len(rows)):
-            if rows[i][0] <= rows[i - 1][0]:
-                raise SceneError.at(where, f"table[{i}][0]",
-                                    f"times must increase strictly, got {rows[i][0]:g} after {rows[i - 1][0]:g}")
-        object.__setattr__(self, "table", tuple(rows))
+        object.__setattr__(self, "table", _time_rows(where, "table", self.table, "[t, fx, fy, mz]"))
 
     def rows(self) -> tuple[tuple[float, float, float, float], ...]:
         """The load as table rows (t, fx, fy, mz)."""
