@@ -364,9 +364,9 @@ def test_zero_length_spring_outputs_are_finite_when_nodes_coincide():
         supports=(cf.Support("c", "a", "clamp"), cf.Support("t", "b", "theta")), gravity=(0.0, 0.0),
     )
     m = cf.assemble(scene)
-    y = np.array(m.outputs(m.q0, np.zeros(m.n_con), m.p_nominal)).ravel()
+    y = np.array(m.outputs(m.q0, m.qd0, np.zeros(m.n_con), m.p_nominal)).ravel()
     assert np.isfinite(y).all()
     q = m.q0.copy()
     q[3:5] = [0.3, -0.4]  # force on b is -k (xb - xa)
-    y = dict(zip(m.output_names, np.array(m.outputs(q, np.zeros(m.n_con), m.p_nominal)).ravel(), strict=True))
+    y = dict(zip(m.output_names, np.array(m.outputs(q, m.qd0, np.zeros(m.n_con), m.p_nominal)).ravel(), strict=True))
     assert y["s.fx"] == pytest.approx(-3.0) and y["s.fy"] == pytest.approx(4.0) and y["s.force"] == pytest.approx(5.0)

@@ -8,7 +8,9 @@
    from the last, up to the whole recording. Over a short window the motion depends almost
    linearly on the initial state and the parameters; over seconds a pendulum's does not, and a
    fit of the whole recording from a guessed initial state ends in a local minimum (twobar,
-   0.5-2.5 s at 0.5 mm noise: 72 % fit without the stages; see the study realdata).
+   0.5-2.5 s at 0.5 mm noise: 72 % fit without the stages; see the study realdata). The stages
+   before the last only bring a start: they take at most STAGE_RUNS model runs and hold what
+   their window cannot tell near the start (:class:`_Anchored`).
 4. Model error (``model_error="refine"``): the same fit on a refined model (every beam in twice
    the elements, half the step) from the first fit's answer. The model's error in the parameters
    is estimated as 4/3 of the change, Richardson's factor for a method of second order in element
