@@ -17,14 +17,13 @@ parameter more than 3 SE from the truth). Writes docs/tables/dampers.md and docs
 
 from __future__ import annotations
 
-import argparse
 import json
 import platform
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+from _study import cli, sweep, write_outputs
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data"
@@ -116,24 +115,12 @@ def _figure(rows: list[dict], path: Path) -> None:
 
 
 def main(quick: bool = False, out_dir: Path | None = None, record: Path | None = None) -> list[dict]:
-    from casflex.results import atomic_write_text
-    from casflex.sweep import Run, run_sweep
-
-    out_dir = ROOT / "docs" if out_dir is None else Path(out_dir)
     t0 = time.perf_counter()
     plan = [{"window": w, "seed": s, "quick": quick} for w in (("rest",) if quick else WINDOWS)
             for s in range(1 if quick else SEEDS)]
-    runs = [Run(f"{r['window']}_{r['seed']}", one_run, r) for r in plan]
-    with tempfile.TemporaryDirectory(prefix="casflex-dampers-") as tmp:
-        sweep = run_sweep(runs, Path(record) if record is not None else Path(tmp), n_workers=2, progress=not quick)
-        if sweep.interrupted:
-            raise KeyboardInterrupt
-        rows = summarise([(r, sweep.results[run.key]) for r, run in zip(plan, runs, strict=True)])
-    suffix = "_quick" if quick else ""
-    (out_dir / "tables").mkdir(parents=True, exist_ok=True)
-    (out_dir / "figures").mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out_dir / "tables" / f"dampers{suffix}.md", _page(rows, quick, time.perf_counter() - t0))
-    _figure(rows, out_dir / "figures" / f"dampers{suffix}.png")
+    rows = summarise(sweep("dampers", plan, lambda r: f"{r['window']}_{r['seed']}", one_run, record=record,
+                           quick=quick))
+    write_outputs("dampers", out_dir, quick, _page(rows, quick, time.perf_counter() - t0), lambda f: _figure(rows, f))
     for r in rows:
         print(json.dumps({k: v for k, v in r.items() if k != "z"}))
     # the study's checks (issue 13's bar): from the recording at rest, every damper within 5 % of the
@@ -149,9 +136,4 @@ def main(quick: bool = False, out_dir: Path | None = None, record: Path | None =
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--out-dir", type=Path)
-    ap.add_argument("--record", type=Path, help="sweep record directory: an interrupted study resumes there")
-    a = ap.parse_args()
-    main(quick=a.quick, out_dir=a.out_dir, record=a.record)
+    cli(__doc__, main)

@@ -8,11 +8,13 @@ from pathlib import Path
 
 import pytest
 
-STUDIES = sorted((Path(__file__).resolve().parents[1] / "studies").glob("*.py"))
+HERE = Path(__file__).resolve().parents[1] / "studies"
+STUDIES = sorted(p for p in HERE.glob("*.py") if not p.name.startswith("_"))  # _study.py: their shared parts
 
 
 @pytest.mark.parametrize("path", STUDIES, ids=[p.stem for p in STUDIES])
-def test_study_quick(path, tmp_path):
+def test_study_quick(path, tmp_path, monkeypatch):
+    monkeypatch.syspath_prepend(str(HERE))  # as ``python studies/<name>.py`` has it
     spec = importlib.util.spec_from_file_location(path.stem, path)
     mod = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = mod  # as an import would: dataclasses and pickling look the module up
