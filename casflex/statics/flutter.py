@@ -75,29 +75,27 @@ def critical_load(model: Model, parameter: str, stop: float, *, start: float | N
         raise ValueError(f"parameter: {parameter!r} is not declared; declared: {list(model.parameter_names)}")
     if not (isinstance(points, int) and points >= 1):
         raise ValueError(f"points: expected an integer >= 1, got {points!r}")
-    a = float(model.p_nominal[model.parameter_names.index(parameter)] if start is None else start)
+    a = a0 = float(model.p_nominal[model.parameter_names.index(parameter)] if start is None else start)
     q_a, m_a = _state(model, parameter, a, model.q0, statics_tol)
     if _unstable(m_a):
         raise ValueError(f"start: the equilibrium at {parameter} = {a:g} is already unstable ({_unstable(m_a)})")
-    found = None
+    kind = None
     for b in np.linspace(a, float(stop), points + 1)[1:]:
         q_b, m_b = _state(model, parameter, b, q_a, statics_tol)
-        if _unstable(m_b):
-            found = b
+        kind = _unstable(m_b)
+        if kind:
             break
         a, q_a, m_a = b, q_b, m_b
-    if found is None:
-        raise StaticsError(f"no loss of stability for {parameter} from {start if start is not None else 'nominal'} "
-                           f"to {stop:g}; widen the range")
-    b, width = found, tol * abs(float(stop) - (a if start is None else start))
+    if kind is None:
+        raise StaticsError(f"no loss of stability for {parameter} from {a0:g} to {stop:g}; widen the range")
+    width = tol * abs(float(stop) - a0)
     while abs(b - a) > width:
         c = 0.5 * (a + b)
         q_c, m_c = _state(model, parameter, c, q_a, statics_tol)
         if _unstable(m_c):
-            b = c
+            b, kind = c, _unstable(m_c)
         else:
             a, q_a, m_a = c, q_c, m_c
-    kind = _unstable(_state(model, parameter, b, q_a, statics_tol)[1])
     omega = 0.0
     if kind == "flutter":
         w = np.sort(m_a.omega2.real)
