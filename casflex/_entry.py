@@ -37,6 +37,6 @@ def main() -> int:
         except KeyboardInterrupt:  # before the command's own handler runs (it catches every later one)
             sys.stderr.write("\ncasflex: interrupted; nothing was written\n")
             code = INTERRUPTED
-    if code == INTERRUPTED:
-        _exit_interrupted()
+        if code == INTERRUPTED:  # inside the guard: its hook keeps finalizer noise off stderr to the end
+            _exit_interrupted()
     return code

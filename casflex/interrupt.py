@@ -62,8 +62,11 @@ def guard() -> Iterator[Guard]:
         return
     hook = sys.unraisablehook
 
-    def quiet(unraisable) -> None:  # a swallowed interrupt is counted and honoured later: no report
-        if not issubclass(unraisable.exc_type, KeyboardInterrupt):
+    def quiet(unraisable) -> None:
+        # A swallowed interrupt is counted and honoured later: no report. Once one arrived, the
+        # finalizers of objects it left half-built (an import it cut short) fail too: a consequence
+        # of the Ctrl-C already reported in one line, not news for the user.
+        if not (g.count or issubclass(unraisable.exc_type, KeyboardInterrupt)):
             hook(unraisable)
 
     sys.unraisablehook = quiet

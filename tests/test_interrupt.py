@@ -45,3 +45,24 @@ def test_a_nested_guard_is_the_outer_one():
             with pytest.raises(KeyboardInterrupt):
                 interrupt.check()
         assert signal.getsignal(signal.SIGINT) == outer.handler  # the inner block left it installed
+
+
+class _HalfBuilt:
+    """An object whose finalizer fails, as one an interrupted import left half-built does
+    (pyparsing's Forward once printed "Exception ignored in ... __del__" after a Ctrl-C in CI)."""
+
+    def __del__(self) -> None:
+        raise AttributeError("'_HalfBuilt' object has no attribute 'expr'")
+
+
+def test_finalizer_failures_are_reported_until_an_interrupt_and_silent_after(monkeypatch):
+    seen: list[type] = []
+    monkeypatch.setattr("sys.unraisablehook", lambda u: seen.append(u.exc_type))
+    with interrupt.guard():
+        _HalfBuilt()  # no interrupt yet: a real bug, reported as Python would
+        assert seen == [AttributeError]
+        _swallowed_sigint()
+        _HalfBuilt()  # after the Ctrl-C: a consequence of it, kept off stderr
+        assert seen == [AttributeError]
+    _HalfBuilt()  # the guard restored the hook it found
+    assert seen == [AttributeError, AttributeError]
