@@ -34,7 +34,9 @@ def support_constraints(scene: Scene, dof_index: dict[str, int], q0: np.ndarray)
         for d in s.dofs:
             i = dof_index[f"{d}{s.node}"]
             col = {"x": 1, "y": 2, "theta": 3}[d]
-            path = None if s.motion is None else tuple((r[0], r[col]) for r in s.motion)
+            # a dof the motion leaves still (all its rows 0) stays a constant: no spline to evaluate
+            moves = s.motion is not None and any(r[col] != 0 for r in s.motion)
+            path = tuple((r[0], r[col]) for r in s.motion) if moves else None
             out.append(FixedDof(f"{s.name}.{d}", i, float(q0[i]), path))
     return out
 

@@ -304,7 +304,8 @@ class _Stepper:
 
 def initial_state(integ: HHT, p: np.ndarray, *, q0: np.ndarray | None = None, qd0: np.ndarray | None = None,
                   t0: float = 0.0) -> np.ndarray:
-    """The full state x0 = [q0, qd0, qdd0, lam0] with consistent qdd0 and lam0 (Eq. 1, index 1)."""
+    """The full state x0 = [q0, qd0, qdd0, lam0] with consistent qdd0 and lam0 (Eq. 1, index 1).
+    The dofs of a moving support take its path's values and rates at t0."""
     model = integ.model
     n = model.n_dof
     q = model.q0.copy() if q0 is None else np.asarray(q0, dtype=float).reshape(-1)
@@ -314,13 +315,11 @@ def initial_state(integ: HHT, p: np.ndarray, *, q0: np.ndarray | None = None, qd
             raise ValueError(f"{name}: expected {n} finite values ({', '.join(model.dof_names[:6])}, ...), "
                              f"got shape {v.shape}")
     vd = np.zeros(model.n_con)
-    if model.moving:  # the supports' values and rates at t0; the scene's state takes them
+    if model.moving:  # the supports' dofs follow their paths: values and rates at t0, whatever state was given
         v, vd, _ = (np.array(a).ravel() for a in model.prescribed(t0))
         fixed = [c.dof for c in model.constraints]
-        if q0 is None:
-            q[fixed] = v
-        if qd0 is None:
-            qd[fixed] = vd
+        q[fixed] = v
+        qd[fixed] = vd
     phi, B = model.constraint(q)
     phi, B = np.array(phi).ravel(), np.array(B)
     if model.moving:

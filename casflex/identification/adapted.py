@@ -178,7 +178,7 @@ def identify_adapted_direct(
 
     pmap = ParameterMap.of(model, transform)
     scale = pmap.scale
-    require_fixed_supports(model)
+    require_fixed_supports(model, "the adapted direct method")
     p0 = start_values(model, start)
     ell = model.length_scale
     unit = np.where(model.is_rotation[unknown], 1.0, ell)  # rad for rotations, m for translations

@@ -115,7 +115,7 @@ def identify_direct(
         raise ValueError("the scene declares no parameters to identify ([[parameters]] in the scene file)")
     pmap = ParameterMap.of(model, transform)
     scale = pmap.scale
-    require_fixed_supports(model)
+    require_fixed_supports(model, "the direct method")
     p0 = start_values(model, start)
     # force scale: the largest inertia or gravity force at the instants, for O(1) residuals
     fs = max(1.0, *(float(np.abs(np.array(model.mass(q, p0)) @ a).max()) +

@@ -43,7 +43,6 @@ from casflex.identification.problem import (
     ParameterMap,
     bound_flags,
     gauss_newton_statistics,
-    require_fixed_supports,
     start_values,
 )
 from casflex.identification.result import IdentificationResult
@@ -276,7 +275,6 @@ def estimate(model: Model, experiments: Sequence[Experiment], *, dt: float | Non
         raise ValueError(f"model_error: expected one of {MODEL_ERRORS}, got {model_error!r}")
     if model.n_p == 0:
         raise ValueError("the scene declares no parameters to identify ([[parameters]] in the scene file)")
-    require_fixed_supports(model)
     run = model.scene.run
     dt = float(run.dt if dt is None else dt)
     alpha = float(run.alpha if alpha is None else alpha)

@@ -61,6 +61,13 @@ def _placement(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return free, keep, put
 
 
+def supports_at(model: Model, t: float) -> tuple[np.ndarray, np.ndarray]:
+    """(values, rates) of the supports' dofs at t (s), shape (n_con,) each: constants and zeros,
+    or a moving support's path (:attr:`Model.prescribed`)."""
+    v, vd, _ = (np.array(a, dtype=float).ravel() for a in model.prescribed(t))
+    return v, vd
+
+
 def _kinematic_fit(model: Model, measured: tuple[int, ...]) -> ca.Function:
     """``kinematic_fit(q_known, q_start) -> q``: the configuration of least elastic energy whose
     measured and supported dofs take their values in ``q_known`` (IPOPT, exact Hessian), built
@@ -102,20 +109,22 @@ def _elastic_energy(model: Model) -> ca.Function:
     return _ELASTIC[model]
 
 
-def first_fit(model: Model, fit: ca.Function, dofs: list[int], values: np.ndarray) -> np.ndarray:
-    """The kinematic fit (``fit``, from :func:`_kinematic_fit`) at the first sample, whose measured
-    ``dofs`` take ``values``: reached from the scene's configuration q0 by paths of
-    :data:`HOMOTOPY_STEPS` steps (the measured dofs on the straight line from q0 to ``values``,
-    each step's fit started at the previous one); the end of least elastic energy."""
+def first_fit(model: Model, fit: ca.Function, dofs: list[int], values: np.ndarray, t: float = 0.0) -> np.ndarray:
+    """The kinematic fit (``fit``, from :func:`_kinematic_fit`) at the first sample (time t, s), whose
+    measured ``dofs`` take ``values``: reached from the scene's configuration q0 by paths of
+    :data:`HOMOTOPY_STEPS` steps (the measured dofs and the supports on the straight line from q0
+    to ``values`` and the supports' values at t, each step's fit started at the previous one); the
+    end of least elastic energy."""
     energy = _elastic_energy(model)
+    fixed = [con.dof for con in model.constraints]
+    support, _ = supports_at(model, t)
     best, best_v = None, np.inf
     for n in HOMOTOPY_STEPS:
         q = model.q0.copy()
         for s in np.arange(1, n + 1) / n:
             known = q.copy()
             known[dofs] = (1.0 - s) * model.q0[dofs] + s * values
-            for con in model.constraints:
-                known[con.dof] = con.value
+            known[fixed] = (1.0 - s) * model.q0[fixed] + s * support
             q = np.array(fit(known, q)).ravel()
         v = float(energy(q))
         if np.isfinite(v) and v < best_v:
@@ -134,9 +143,12 @@ def initial_guess(model: Model, experiment: Experiment, m: int = 5) -> tuple[np.
     derivative at the first sample of a quadratic through the kinematic fits at the first ``m``
     samples that have every compared channel.
     """
-    if experiment.initial_state == "scene":
-        return model.q0.copy(), model.qd0.copy()
     data = experiment.data
+    fixed = [con.dof for con in model.constraints]
+    if experiment.initial_state == "scene":
+        q0, qd0 = model.q0.copy(), model.qd0.copy()
+        q0[fixed], qd0[fixed] = supports_at(model, float(data.t[0]))
+        return q0, qd0
     names = experiment.compared(model)
     fit = _kinematic_fit(model, tuple(sorted(model.dof(c) for c in names)))
     cols = [data.channels.index(c) for c in names]
@@ -149,12 +161,11 @@ def initial_guess(model: Model, experiment: Experiment, m: int = 5) -> tuple[np.
         if not np.isfinite(values).all():
             continue
         if not fits:
-            q_prev = first_fit(model, fit, dofs, values)
+            q_prev = first_fit(model, fit, dofs, values, float(data.t[i]))
         else:
             known = q_prev.copy()
             known[dofs] = values
-            for con in model.constraints:
-                known[con.dof] = con.value
+            known[fixed] = supports_at(model, float(data.t[i]))[0]
             q_prev = np.array(fit(known, q_prev)).ravel()
         fits.append(q_prev)
         times.append(data.t[i] - data.t[0])
@@ -164,8 +175,8 @@ def initial_guess(model: Model, experiment: Experiment, m: int = 5) -> tuple[np.
     q0 = Q[0] if experiment.initial_state == "estimate" else model.q0.copy()
     degree = min(2, len(tt) - 1)
     qd0 = np.polynomial.polynomial.polyfit(tt, Q, degree)[1] if degree >= 1 else np.zeros(model.n_dof)
-    for con in model.constraints:
-        qd0[con.dof] = 0.0
+    v, vd = supports_at(model, float(data.t[0]))
+    q0[fixed], qd0[fixed] = v, vd
     return q0, qd0
 
 
@@ -260,8 +271,10 @@ class InitialState:
         """(q0, qd0), full dof vectors."""
         if self.kind == "scene":
             return self.q_guess.copy(), self.qd_guess.copy()
-        q0, qd0 = _manifold(self.model, self.k)[0](*self._args(xi))
-        return np.array(q0).ravel(), np.array(qd0).ravel()
+        q0, qd0 = (np.array(v).ravel() for v in _manifold(self.model, self.k)[0](*self._args(xi)))
+        fixed = [con.dof for con in self.model.constraints]
+        qd0[fixed] = self.qd_guess[fixed]  # a moving support's rates (the manifold keeps the supports still)
+        return q0, qd0
 
     def jacobian(self, xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(dq0/dxi, dqd0/dxi), each (n_dof, size)."""

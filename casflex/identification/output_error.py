@@ -141,7 +141,11 @@ class OutputError:
         rs, Js = [], []
         self.evaluations += 1
         for e, sm in enumerate(self.maps):
-            q0, qd0 = self.state(w, e)
+            try:
+                q0, qd0 = self.state(w, e)
+            except RuntimeError:  # CasADi's Newton on the slow manifold found no state there
+                raise _Diverged(f"experiment {e + 1}: no initial state on the slow manifold at these unknowns") \
+                    from None
             x0, Jq, Jqd, Jp = (np.array(v) for v in _x0_map(self.integ)(q0, qd0, sm.t0, p))
             run = run_sensitivities(self.integ, x0.ravel(), p, sm.t0, sm.dt, sm.n_steps, sm.needed_steps,
                                     compiled=self.compiled)

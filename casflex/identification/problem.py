@@ -89,12 +89,13 @@ class ParameterMap:
         return self.scale if self.transform == "linear" else self.scale * np.exp(theta)
 
 
-def require_fixed_supports(model: Model) -> None:
-    """ValueError when a support moves: identification takes the supports' values as constants."""
+def require_fixed_supports(model: Model, method: str) -> None:
+    """ValueError when a support moves: ``method`` takes the supports' values as constants (only the
+    default indirect method, single shooting by Gauss-Newton, follows their paths)."""
     if model.moving:
         moving = sorted({c.name.rsplit(".", 1)[0] for c in model.constraints if c.path is not None})
-        raise ValueError(f"supports {moving} move (motion): identification does not take moving supports yet; "
-                         "fix them in the scene to identify")
+        raise ValueError(f"supports {moving} move (motion): {method} takes fixed supports only; use the indirect "
+                         "method's default (single shooting by Gauss-Newton), which follows their paths")
 
 
 def start_values(model: Model, start: float | dict[str, float] | np.ndarray | None) -> np.ndarray:

@@ -199,7 +199,7 @@ def identify_nlp(
     nx = integ.nx
     pmap = ParameterMap.of(model, transform)
     scale = pmap.scale
-    require_fixed_supports(model)
+    require_fixed_supports(model, "the NLP transcription (solver other than gauss-newton)")
     p0 = start_values(model, start)
     ell = np.where(model.is_rotation, 1.0, model.length_scale)
     T = N * h
