@@ -17,6 +17,7 @@ _EXPORTS = {
     "RigidBody": "casflex.scene", "RunSettings": "casflex.scene", "Scene": "casflex.scene",
     "SceneError": "casflex.scene",
     "Spring": "casflex.scene", "Support": "casflex.scene", "TorsionSpring": "casflex.scene",
+    "Marker": "casflex.markers",
     "builtin_scenes": "casflex.scene_io", "dumps_scene": "casflex.scene_io", "load_scene": "casflex.scene_io",
     "loads_scene": "casflex.scene_io", "save_scene": "casflex.scene_io",
 }

@@ -85,10 +85,15 @@ class MeasurementSet:
         return MeasurementSet(self.t[keep], self.channels, *cut, source=self.source, meta=self.meta)
 
     def select(self, model: Model) -> np.ndarray:
-        """Column of each model dof in the data (-1 where the dof is not measured)."""
-        unknown = [c for c in self.channels if c not in model.dof_names]
+        """Column of each model dof in the data (-1 where the dof is not measured). Channels of the
+        scene's markers (``x<marker>``, ``y<marker>``) are known channels, but no dof's."""
+        from casflex.markers import marker_channels
+
+        markers = marker_channels(model)
+        unknown = [c for c in self.channels if c not in model.dof_names and c not in markers]
         if unknown:
-            raise ValueError(f"data: unknown channels {unknown}; the model's dofs are {list(model.dof_names)}")
+            raise ValueError(f"data: unknown channels {unknown}; the model's dofs are {list(model.dof_names)}"
+                             + (f", its markers' channels {list(markers)}" if markers else ""))
         return np.array([self.channels.index(d) if d in self.channels else -1 for d in model.dof_names])
 
 

@@ -78,7 +78,7 @@ NPZ_KEYS = {
     "dof_names": "(n_dof,) 'x1', 'y1', 'theta1', ...",
     "constraint_names": "(n_con,) '<support>.<x|y|theta>'",
     "outputs": "(n, n_out) joint outputs: spring force/length/fx/fy, torsion moment, damper forces and "
-    "moments, support reactions, beam end forces",
+    "moments, support reactions, beam end forces; the markers' positions (<marker>.x, .y, m)",
     "output_names": "(n_out,) names of the columns of outputs",
     "energy_kinetic": "(n,) J", "energy_elastic": "(n,) J", "energy_gravity": "(n,) J",
     "energy_total": "(n,) J, kinetic + elastic + gravity",

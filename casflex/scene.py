@@ -433,11 +433,13 @@ class Scene:
     parameters: tuple[Parameter, ...] = ()
     gravity: tuple[float, float] = (0.0, -9.81)
     run: RunSettings = field(default_factory=RunSettings)
+    markers: tuple[Any, ...] = ()  # casflex.markers.Marker
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.strip():
             raise SceneError(f"name: expected a non-empty string (the scene's name), got {self.name!r}")
-        for f in ("nodes", "beams", "springs", "torsion_springs", "bodies", "supports", "loads", "parameters"):
+        for f in ("nodes", "beams", "springs", "torsion_springs", "bodies", "supports", "loads", "parameters",
+                  "markers"):
             value = getattr(self, f)
             if isinstance(value, str) or not isinstance(value, (list, tuple)):
                 raise SceneError(f"{f}: expected a list, got {type(value).__name__}")
@@ -453,11 +455,16 @@ class Scene:
         self._check_references()
         self._check_geometry()
         self._check_parameters()
+        from casflex.markers import check_markers
+
+        check_markers(self)
 
     # -- validation -------------------------------------------------------------------------
     def _check_types(self) -> None:
+        from casflex.markers import Marker
+
         kinds = {"nodes": Node, "beams": Beam, "springs": Spring, "torsion_springs": TorsionSpring,
-                 "bodies": RigidBody, "supports": Support, "loads": Load, "parameters": Parameter}
+                 "bodies": RigidBody, "supports": Support, "loads": Load, "parameters": Parameter, "markers": Marker}
         for f, cls in kinds.items():
             for i, item in enumerate(getattr(self, f)):
                 if not isinstance(item, cls):

@@ -14,6 +14,7 @@ from dataclasses import MISSING, fields
 from pathlib import Path
 from typing import Any
 
+from casflex.markers import Marker
 from casflex.scene import (
     Beam,
     Load,
@@ -40,6 +41,7 @@ _LISTS: dict[str, type] = {
     "supports": Support,
     "loads": Load,
     "parameters": Parameter,
+    "markers": Marker,
 }
 _TOP_KEYS = {"name", "gravity", "run", *_LISTS}
 

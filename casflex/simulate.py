@@ -446,9 +446,15 @@ def _trajectory(integ: HHT, X: np.ndarray, Y: np.ndarray, iters: np.ndarray, dt:
     T, Ve, Vg, power, outputs = Y[:, 0], Y[:, 1], Y[:, 2], Y[:, 3], Y[:, 5:5 + n_out]
     work, dissipated = _work(power, dt), _work(Y[:, 4], dt)
     total = T + Ve + Vg
+    names = model.output_names
+    if model.scene.markers:  # the markers' positions join the outputs as <marker>.x, <marker>.y
+        from casflex.markers import marker_positions
+
+        outputs = np.hstack([outputs, marker_positions(model, q)])
+        names = names + tuple(f"{m.name}.{c}" for m in model.scene.markers for c in "xy")
     return Trajectory(
         t=t, q=q, qd=qd, qdd=qdd, lam=lam, dof_names=model.dof_names, constraint_names=model.constraint_names,
-        outputs=outputs, output_names=model.output_names,
+        outputs=outputs, output_names=names,
         energies={"kinetic": T, "elastic": Ve, "gravity": Vg, "total": total, "work_external": work,
                   "work_dampers": dissipated, "balance_error": total - total[0] - work + dissipated},
         p=np.asarray(p, dtype=float), parameter_names=model.parameter_names, newton_iterations=iters,

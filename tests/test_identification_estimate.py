@@ -109,3 +109,24 @@ def test_the_anchor_holds_what_the_window_cannot_tell():
     # the well-felt unknown takes the data's value (1.5) to ANCHOR, the weak one stays near its start 3
     # (it would be 10: moved by 7 x its information over the anchor's, 2e-8 / 3e-6)
     assert abs(w[0] - 1.5) < 1e-5 and abs(w[1] - 3.0) < 0.1
+
+
+def test_transfer_state_puts_every_mesh_node_where_the_coarse_beam_has_it():
+    # a beam of 2 elements on a fine mesh of 4: its mesh node "bar.1" is the midpoint in the coarse
+    # model and the quarter point in the fine one (copying it by name put the fine model's quarter
+    # node at the midpoint, and the refit for the model error failed at its first step)
+    from casflex import Beam, Node, Scene, Support, assemble
+
+    scene = Scene(name="bar", nodes=(Node("a", 0.0, 0.0), Node("b", 2.0, 1.0, vy=0.4)),
+                  beams=(Beam("bar", ("a", "b"), E=2e11, A=1e-4, I=1e-8, rho=7800.0, elements=2),),
+                  supports=(Support("clamp", "a", "clamp"),))
+    model = assemble(scene)
+    fine = est.refined(model)
+    q, qd = est.transfer_state(model, fine, model.q0, model.qd0 + np.arange(model.n_dof))
+    for k in range(1, 4):
+        assert q[fine.dof(f"xbar.{k}")] == pytest.approx(0.5 * k)
+        assert q[fine.dof(f"ybar.{k}")] == pytest.approx(0.25 * k)
+    # velocities: linear along the coarse chain, between the coarse nodes' values
+    mid = model.qd0[model.dof("ybar.1")] + model.dof("ybar.1")
+    assert qd[fine.dof("ybar.2")] == pytest.approx(mid)
+    assert q[fine.dof("yb")] == model.q0[model.dof("yb")]

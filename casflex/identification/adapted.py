@@ -46,6 +46,7 @@ from casflex.identification.problem import (
     gauss_newton_statistics,
     least_squares_nlp,
     require_fixed_supports,
+    require_node_channels,
     robust_statistics,
     start_values,
 )
@@ -136,6 +137,8 @@ def identify_adapted_direct(
         [value, rate, acceleration] of every unknown dof at each t_i (key ``rotations`` too, for
         the rotations).
     """
+    require_fixed_supports(model, "the adapted direct method")
+    require_node_channels(model, data.channels, "the adapted direct method")
     t_build = time.perf_counter()
     if model.n_p == 0:
         raise ValueError("the scene declares no parameters to identify ([[parameters]] in the scene file)")
@@ -178,7 +181,6 @@ def identify_adapted_direct(
 
     pmap = ParameterMap.of(model, transform)
     scale = pmap.scale
-    require_fixed_supports(model, "the adapted direct method")
     p0 = start_values(model, start)
     ell = model.length_scale
     unit = np.where(model.is_rotation[unknown], 1.0, ell)  # rad for rotations, m for translations

@@ -31,6 +31,7 @@ from casflex.identification.problem import (
     gauss_newton_statistics,
     least_squares_nlp,
     require_fixed_supports,
+    require_node_channels,
     robust_statistics,
     start_values,
 )
@@ -99,6 +100,8 @@ def identify_direct(
     compiled : bool
         Generate and compile C for the solver's functions (CasADi JIT with the system compiler).
     """
+    require_fixed_supports(model, "the direct method")
+    require_node_channels(model, data.channels, "the direct method")
     t_build = time.perf_counter()
     smoothing_info = None
     if data.qd is None or data.qdd is None:
@@ -115,7 +118,6 @@ def identify_direct(
         raise ValueError("the scene declares no parameters to identify ([[parameters]] in the scene file)")
     pmap = ParameterMap.of(model, transform)
     scale = pmap.scale
-    require_fixed_supports(model, "the direct method")
     p0 = start_values(model, start)
     # force scale: the largest inertia or gravity force at the instants, for O(1) residuals
     fs = max(1.0, *(float(np.abs(np.array(model.mass(q, p0)) @ a).max()) +

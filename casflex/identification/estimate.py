@@ -174,12 +174,13 @@ def transfer_state(model: Model, fine: Model, q: np.ndarray, qd: np.ndarray) -> 
         names = [b.nodes[0], *(f"{b.name}.{k}" for k in range(1, b.elements)), b.nodes[1]]
         chains[b.name] = (np.linspace(0.0, 1.0, b.elements + 1), names)
     fine_elements = {b.name: b.elements for b in fine.scene.beams}
+    scene_nodes = {n.name for n in model.scene.nodes}
     for i, dof in enumerate(fine.dof_names):
-        if dof in model.dof_names:
+        kind = next(k for k in ("theta", "x", "y") if dof.startswith(k))
+        if dof[len(kind):] in scene_nodes:  # a mesh node's name ("<beam>.<k>") means another point in each mesh
             j = model.dof(dof)
             out_q[i], out_qd[i] = q[j], qd[j]
             continue
-        kind = next(k for k in ("theta", "x", "y") if dof.startswith(k))
         beam, k = dof[len(kind):].rsplit(".", 1)
         s_all, names = chains[beam]
         s = int(k) / fine_elements[beam]

@@ -149,7 +149,12 @@ def initial_guess(model: Model, experiment: Experiment, m: int = 5) -> tuple[np.
         q0, qd0 = model.q0.copy(), model.qd0.copy()
         q0[fixed], qd0[fixed] = supports_at(model, float(data.t[0]))
         return q0, qd0
-    names = experiment.compared(model)
+    compared = experiment.compared(model)
+    names = [c for c in compared if c in model.dof_names]  # the kinematic fit takes node channels
+    if not names:
+        raise ValueError(f"initial_state {experiment.initial_state!r}: the state is estimated from node channels "
+                         f"(x<node>, y<node>, theta<node>), and the data have markers' only ({list(compared)}); add "
+                         "a node channel or start the recording at the scene's state (initial_state 'scene')")
     fit = _kinematic_fit(model, tuple(sorted(model.dof(c) for c in names)))
     cols = [data.channels.index(c) for c in names]
     dofs = [model.dof(c) for c in names]

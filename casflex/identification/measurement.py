@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from casflex.data import MeasurementSet
+from casflex.markers import channel_index, channel_values, marker_channels
 from casflex.model import Model
 
 __all__ = ["Experiment", "SampleMap", "INITIAL_STATES", "check_against_scene", "free_dofs", "nyquist"]
@@ -69,9 +70,11 @@ class Experiment:
         """The compared channels, checked against the model and the data."""
         self.data.select(model)  # unknown channel names raise here
         names = tuple(self.channels) if self.channels is not None else self.data.channels
+        markers = marker_channels(model)
         for c in names:
-            if c not in model.dof_names:
-                raise ValueError(f"dofs: unknown dof {c!r}; the model's dofs are {list(model.dof_names)}")
+            if c not in model.dof_names and c not in markers:
+                raise ValueError(f"dofs: unknown dof {c!r}; the model's dofs are {list(model.dof_names)}"
+                                 + (f", its markers' channels {list(markers)}" if markers else ""))
             if c not in self.data.channels:
                 raise ValueError(f"dofs: {c!r} is not in the data (channels: {list(self.data.channels)})")
         if not names:
@@ -95,10 +98,11 @@ class SampleMap:
     """Every finite sample of an experiment as an interpolation of the model's step-end states.
 
     The model steps from ``t0`` (the first sample) in ``n_steps`` steps of ``dt`` (s), past the
-    last sample. Observation j is channel ``channel[j]`` (model dof ``dof[j]``) measured ``y[j]``
-    at ``time[j]``, in step ``step[j]`` (from t_k = t0 + k dt) at s = (t - t_k)/dt, and the model
-    predicts w0 q_k + w1 q'_k + w2 q_k+1 + w3 q'_k+1 with ``weights[j]`` = (h00, dt h10, h01,
-    dt h11), the cubic Hermite basis at s.
+    last sample. Observation j is channel ``channel[j]`` (model dof ``dof[j]``; from n_dof on a
+    marker's coordinate, :func:`casflex.markers.channel_index`) measured ``y[j]`` at ``time[j]``,
+    in step ``step[j]`` (from t_k = t0 + k dt) at s = (t - t_k)/dt, and the model predicts
+    w0 q_k + w1 q'_k + w2 q_k+1 + w3 q'_k+1 with ``weights[j]`` = (h00, dt h10, h01, dt h11), the
+    cubic Hermite basis at s.
     """
 
     t0: float
@@ -132,7 +136,7 @@ class SampleMap:
         s[np.abs(s) < 1e-9] = 0.0
         weights = np.column_stack([2 * s**3 - 3 * s**2 + 1, dt * (s**3 - 2 * s**2 + s),
                                    -2 * s**3 + 3 * s**2, dt * (s**3 - s**2)])
-        dof = np.array([model.dof(names[c]) for c in ch], dtype=int)
+        dof = np.array([channel_index(model, names[c]) for c in ch], dtype=int)  # >= n_dof: a marker's
         return cls(t0, float(dt), n_steps, names, ch, dof, time, Y[rows, ch], step, weights)
 
     @property
@@ -141,7 +145,8 @@ class SampleMap:
         return np.unique(np.concatenate([self.step, self.step + 1]))
 
     def predict(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        """Model outputs (m,) from q, qd at the step ends (n_steps + 1, n_dof)."""
+        """Model outputs (m,) from the channels' values and rates at the step ends (n_steps + 1,
+        n_channels; :func:`casflex.markers.channel_values`)."""
         k, d, w = self.step, self.dof, self.weights
         return w[:, 0] * q[k, d] + w[:, 1] * qd[k, d] + w[:, 2] * q[k + 1, d] + w[:, 3] * qd[k + 1, d]
 
@@ -208,7 +213,8 @@ def check_against_scene(model: Model, experiment: Experiment) -> None:
     tol = 0.01 * span + 5 * noise
     cols_all = [data.channels.index(c) for c in names]
     first = np.array([data.q[np.flatnonzero(np.isfinite(data.q[:, c]))[0], c] for c in cols_all])
-    scene_q = np.array([model.q0[model.dof(c)] for c in names])
+    q0_all, qd0_all = (v[0] for v in channel_values(model, model.q0, model.qd0))
+    scene_q = np.array([q0_all[channel_index(model, c)] for c in names])
     scale = np.array([1.0 if c.startswith("theta") else 1.0 / span for c in names])
     off = np.abs(first - scene_q) * scale
     j = int(np.argmax(off))
@@ -219,7 +225,7 @@ def check_against_scene(model: Model, experiment: Experiment) -> None:
                          f"{unit}; use --initial-state estimate")
     if experiment.initial_state == "scene" and cols:
         v, se = _rest_velocity(data, cols)
-        v_scene = np.array([model.qd0[model.dof(c)] for c in trans])
+        v_scene = np.array([qd0_all[channel_index(model, c)] for c in trans])
         # against the recording's own speeds: a quadratic through the first samples of a release
         # from rest carries the jerk as a velocity (twobar at 0.5 mm noise: 0.085 m/s, its speeds 2 m/s)
         moving = (np.abs(v - v_scene) > 5 * se) & (np.abs(v - v_scene) > MOVING * _speed(data, cols))

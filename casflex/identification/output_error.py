@@ -31,6 +31,7 @@ from casflex.identification.initial_state import InitialState, initial_state_of
 from casflex.identification.measurement import Experiment, SampleMap, free_dofs
 from casflex.identification.problem import ParameterMap
 from casflex.identification.sensitivity import run_sensitivities
+from casflex.markers import channel_values, marker_jacobians
 from casflex.model import Model
 
 __all__ = ["Budget", "OutputError", "Fit", "fit"]
@@ -104,7 +105,7 @@ class OutputError:
         ell = model.length_scale
         self.sigma = []
         for e, sm in zip(experiments, self.maps, strict=True):
-            rot = model.is_rotation[sm.dof]
+            rot = np.append(model.is_rotation, np.zeros(2 * len(model.scene.markers), bool))[sm.dof]
             base = np.where(rot, 1.0 / ell, 1.0)  # rotations compared as arc lengths at the scene's size
             self.sigma.append(base * (e.noise if e.noise is not None else 1.0))
         self.evaluations = 0
@@ -156,22 +157,31 @@ class OutputError:
             i1 = np.searchsorted(run.steps, sm.step + 1)
             X = run.X
             wts = sm.weights
-            y = (wts[:, 0] * X[i0, sm.dof] + wts[:, 1] * X[i0, n + sm.dof]
-                 + wts[:, 2] * X[i1, sm.dof] + wts[:, 3] * X[i1, n + sm.dof])
+            marked = bool(sm.dof.max() >= n)  # some channels are markers' (casflex.markers)
+            Z, ZD = channel_values(self.model, X[:, :n], X[:, n:2 * n]) if marked else (X[:, :n], X[:, n:2 * n])
+            y = (wts[:, 0] * Z[i0, sm.dof] + wts[:, 1] * ZD[i0, sm.dof]
+                 + wts[:, 2] * Z[i1, sm.dof] + wts[:, 3] * ZD[i1, sm.dof])
             rs.append((y - sm.y) / self.sigma[e])
             if not jacobian:
                 continue
             # d x0 / d(p, xi_e): columns of the local unknowns
             dq, dqd = self.initial[e].jacobian(w[self.offsets[e]:self.offsets[e + 1]])
             M0 = np.hstack([Jp, Jq @ dq + Jqd @ dqd])  # (nx, npar + n_xi)
-            sel = np.unique(np.concatenate([sm.dof, n + sm.dof]))
+            sel = np.arange(2 * n) if marked else np.unique(np.concatenate([sm.dof, n + sm.dof]))
             S = run.S[:, :, sel]  # (k, nw, nsel)
             G = np.einsum("kws,wc->ksc", S[:, :nx, :], M0)
             G[:, :, :npar] += np.transpose(S[:, nx:, :], (0, 2, 1))
-            pos = np.searchsorted(sel, sm.dof)
-            vel = np.searchsorted(sel, n + sm.dof)
-            D = (wts[:, 0, None] * G[i0, pos] + wts[:, 1, None] * G[i0, vel]
-                 + wts[:, 2, None] * G[i1, pos] + wts[:, 3, None] * G[i1, vel]) / self.sigma[e][:, None]
+            if marked:  # a marker's sensitivities by the chain rule: y = y(q), yd = (dy/dq) qd
+                Jy, Jyd = marker_jacobians(self.model, X[:, :n], X[:, n:2 * n])
+                GP = np.concatenate([G[:, :n], np.einsum("kmn,knc->kmc", Jy, G[:, :n])], axis=1)
+                GV = np.concatenate([G[:, n:], np.einsum("kmn,knc->kmc", Jyd, G[:, :n])
+                                     + np.einsum("kmn,knc->kmc", Jy, G[:, n:])], axis=1)
+                pos = vel = sm.dof
+            else:
+                GP = GV = G
+                pos, vel = np.searchsorted(sel, sm.dof), np.searchsorted(sel, n + sm.dof)
+            D = (wts[:, 0, None] * GP[i0, pos] + wts[:, 1, None] * GV[i0, vel]
+                 + wts[:, 2, None] * GP[i1, pos] + wts[:, 3, None] * GV[i1, vel]) / self.sigma[e][:, None]
             Je = np.zeros((sm.y.size, self.n_unknowns))
             Je[:, :npar] = D[:, :npar] * dp
             Je[:, self.offsets[e]:self.offsets[e + 1]] = D[:, npar:]

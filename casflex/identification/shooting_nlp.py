@@ -54,6 +54,7 @@ from casflex.identification.problem import (
     gauss_newton_statistics,
     least_squares_nlp,
     require_fixed_supports,
+    require_node_channels,
     start_values,
 )
 from casflex.model import Model
@@ -200,6 +201,7 @@ def identify_nlp(
     pmap = ParameterMap.of(model, transform)
     scale = pmap.scale
     require_fixed_supports(model, "the NLP transcription (solver other than gauss-newton)")
+    require_node_channels(model, data.channels, "the NLP transcription (solver other than gauss-newton)")
     p0 = start_values(model, start)
     ell = np.where(model.is_rotation, 1.0, model.length_scale)
     T = N * h

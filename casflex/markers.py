@@ -1,0 +1,177 @@
+"""Markers: named points fixed on a beam or a rigid body, whose positions are outputs of a
+simulation and channels of a recording (``x<name>``, ``y<name>``, as a node's ``x<node>``).
+
+A marker is declared by its position at the scene's initial configuration (x, y, m) and what it
+is fixed on (``on``: a beam or a rigid body), as a motion-capture marker is placed on a subject in
+a known pose. On a rigid body it keeps its offset from the body's node in the node's frame. On a
+beam it is found on the beam's initial chord: a distance s along it (within the beam) and e
+across it (to the left of the first-to-second node direction). As the beam deforms, the marker
+follows its element's co-rotational kinematics: the chord point at xi = s_element / L, displaced
+across the current chord by the cubic Hermite deflection of the element's local end rotations
+
+    v(xi) = L (xi (1 - xi)^2 th_a - xi^2 (1 - xi) th_b),   psi(xi) = v'(xi),
+
+and the offset e along the cross-section's normal, turned by psi (Euler-Bernoulli: sections stay
+normal to the centreline). The same interpolation the element's energy uses (Crisfield 1991).
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+__all__ = ["Marker", "marker_kinematics", "marker_channels", "check_markers"]
+
+_KIN: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+@dataclass(frozen=True)
+class Marker:
+    """A point fixed on the beam or rigid body ``on``, at (x, y) (m) in the scene's initial
+    configuration."""
+
+    name: str
+    on: str
+    x: float
+    y: float
+
+    def __post_init__(self) -> None:
+        from casflex.scene import _name, _number, _owner
+
+        where = _owner("marker", self.name)
+        object.__setattr__(self, "name", _name(where, "name", self.name))
+        object.__setattr__(self, "on", _name(where, "on", self.on))
+        for f in ("x", "y"):
+            object.__setattr__(self, f, _number(where, f, getattr(self, f)))
+
+
+def check_markers(scene) -> None:
+    """SceneError for a marker on nothing known, a name clashing with a node's or another
+    marker's (their channels would coincide), or a point beyond its beam's ends."""
+    from casflex.scene import SceneError
+
+    nodes = {n.name for n in scene.nodes}
+    beams = {b.name: b for b in scene.beams}
+    bodies = {b.name for b in scene.bodies}
+    seen: set[str] = set()
+    for i, m in enumerate(scene.markers):
+        where = f"markers[{i}] ({m.name})"
+        if m.name in nodes or m.name in seen:
+            raise SceneError(f"{where}.name: {m.name!r} is already a {'node' if m.name in nodes else 'marker'}; "
+                             "its channels x, y would coincide")
+        seen.add(m.name)
+        if m.on not in beams and m.on not in bodies:
+            raise SceneError(f"{where}.on: {m.on!r} is no beam or rigid body; beams {sorted(beams)}, "
+                             f"bodies {sorted(bodies)}")
+        if m.on in beams:
+            a, b = (scene.node(n) for n in beams[m.on].nodes)
+            L = math.hypot(b.x - a.x, b.y - a.y)
+            s = ((m.x - a.x) * (b.x - a.x) + (m.y - a.y) * (b.y - a.y)) / L
+            if not -1e-9 * L <= s <= L * (1 + 1e-9):
+                raise SceneError(f"{where}: the point ({m.x:g}, {m.y:g}) lies {s:g} m along beam {m.on!r}, beyond its "
+                                 f"ends (0 to {L:g} m)")
+
+
+def marker_channels(model) -> tuple[str, ...]:
+    """The channels of the scene's markers: x<name>, y<name> for each, in the scene's order."""
+    return tuple(f"{c}{m.name}" for m in model.scene.markers for c in "xy")
+
+
+def _element_of(model, beam: str, px: float, py: float) -> tuple[int, int, int, float, float]:
+    """(k, node a, node b, xi, e): the element of ``beam`` holding the point's projection on its
+    initial chord, the point's fraction along that element and its distance across (m)."""
+    q0 = model.q0
+    elems = [(int(name.rsplit(".", 1)[1]), a, b) for kind, name, a, b in model.segments
+             if kind == "beam" and name.rsplit(".", 1)[0] == beam]
+    elems.sort()
+    xa, ya = q0[3 * elems[0][1]], q0[3 * elems[0][1] + 1]
+    xb, yb = q0[3 * elems[-1][2]], q0[3 * elems[-1][2] + 1]
+    L = math.hypot(xb - xa, yb - ya)
+    tx, ty = (xb - xa) / L, (yb - ya) / L
+    s = (px - xa) * tx + (py - ya) * ty
+    e = -(px - xa) * ty + (py - ya) * tx
+    j = min(max(int(s / L * len(elems)), 0), len(elems) - 1)
+    k, a, b = elems[j]
+    la = (q0[3 * a] - xa) * tx + (q0[3 * a + 1] - ya) * ty
+    lb = (q0[3 * b] - xa) * tx + (q0[3 * b + 1] - ya) * ty
+    return k, a, b, (s - la) / (lb - la), e
+
+
+def marker_kinematics(model) -> ca.Function:
+    """``marker_kinematics(q, qd) -> (y, yd, dy_dq, dyd_dq)``: the markers' positions (2 m,) as
+    [x1, y1, x2, y2, ...] (m, :func:`marker_channels`), their velocities (m/s), and the Jacobians
+    (2 m, n_dof) of both in q (dyd/dqd is dy/dq)."""
+    if model in _KIN:
+        return _KIN[model]
+    q, qd = ca.SX.sym("q", model.n_dof), ca.SX.sym("qd", model.n_dof)
+    th_l = model.local_rotations(q)
+    bodies = {b.name: b for b in model.scene.bodies}
+    ys = []
+    for m in model.scene.markers:
+        if m.on in bodies:
+            i = model.node_names.index(bodies[m.on].node)
+            rx, ry = m.x - model.q0[3 * i], m.y - model.q0[3 * i + 1]
+            phi = q[3 * i + 2] - model.q0[3 * i + 2]
+            ys += [q[3 * i] + ca.cos(phi) * rx - ca.sin(phi) * ry, q[3 * i + 1] + ca.sin(phi) * rx + ca.cos(phi) * ry]
+            continue
+        k, a, b, xi, e = _element_of(model, m.on, m.x, m.y)
+        j = model.local_rotation_names.index(f"{m.on}.{k}.a")
+        ta, tb = th_l[j], th_l[j + 1]
+        dx, dy = q[3 * b] - q[3 * a], q[3 * b + 1] - q[3 * a + 1]
+        L = ca.sqrt(dx * dx + dy * dy)
+        tx, ty = dx / L, dy / L
+        v = L * (xi * (1 - xi) ** 2 * ta - xi**2 * (1 - xi) * tb)
+        psi = (1 - xi) * (1 - 3 * xi) * ta - xi * (2 - 3 * xi) * tb
+        nx, ny = -ty * ca.cos(psi) - tx * ca.sin(psi), tx * ca.cos(psi) - ty * ca.sin(psi)
+        ys += [q[3 * a] + xi * dx - v * ty + e * nx, q[3 * a + 1] + xi * dy + v * tx + e * ny]
+    y = ca.vertcat(*ys) if ys else ca.SX(0, 1)
+    J = ca.jacobian(y, q)
+    yd = ca.mtimes(J, qd)
+    _KIN[model] = ca.Function("marker_kinematics", [q, qd], [y, yd, J, ca.jacobian(yd, q)],
+                              ["q", "qd"], ["y", "yd", "dy_dq", "dyd_dq"])
+    return _KIN[model]
+
+
+def marker_positions(model, q: np.ndarray) -> np.ndarray:
+    """The markers' positions along a motion: q (k, n_dof) -> (k, 2 m), columns as
+    :func:`marker_channels`."""
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    if not model.scene.markers:
+        return np.zeros((q.shape[0], 0))
+    f = marker_kinematics(model).map(q.shape[0])
+    return np.array(f(q.T, np.zeros_like(q.T))[0]).T
+
+
+def channel_index(model, name: str) -> int:
+    """Column of channel ``name`` in the model's channels: a dof's index, or n_dof + j for the j-th
+    marker coordinate (:func:`marker_channels`). KeyError for neither."""
+    if name in model.dof_names:
+        return model.dof(name)
+    markers = marker_channels(model)
+    if name in markers:
+        return model.n_dof + markers.index(name)
+    raise KeyError(f"unknown channel {name!r}; the model's dofs are {list(model.dof_names)}"
+                   + (f" and its markers' channels {list(markers)}" if markers else ""))
+
+
+def channel_values(model, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every channel's value and rate, (k, n_dof + 2 m) each, from states q, qd (k, n_dof)."""
+    q, qd = np.atleast_2d(q), np.atleast_2d(qd)
+    if not model.scene.markers:
+        return q, qd
+    f = marker_kinematics(model).map(q.shape[0])
+    y, yd = (np.array(v).T for v in f(q.T, qd.T)[:2])
+    return np.hstack([q, y]), np.hstack([qd, yd])
+
+
+def marker_jacobians(model, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """dy/dq and dyd/dq of the markers at states q, qd (k, n_dof): (k, 2 m, n_dof) each."""
+    k, n = q.shape
+    f = marker_kinematics(model).map(k)
+    J, Jd = (np.array(v) for v in f(q.T, qd.T)[2:])
+    m2 = J.shape[0]
+    return J.reshape(m2, k, n).transpose(1, 0, 2), Jd.reshape(m2, k, n).transpose(1, 0, 2)
