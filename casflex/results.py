@@ -129,6 +129,13 @@ class Trajectory:
         except ValueError:
             raise KeyError(f"unknown dof {name!r}; dofs are {list(self.dof_names)}") from None
 
+    def channel(self, name: str) -> np.ndarray:
+        """Time series (n,) of a recording's channel: a dof (``"y5"``) or a marker's coordinate
+        (``"xTOE"``, the output ``"TOE.x"``)."""
+        if name in self.dof_names or not name.startswith(("x", "y")):
+            return self.dof(name)
+        return self.output(f"{name[1:]}.{name[0]}")
+
     def output(self, name: str) -> np.ndarray:
         """Time series (n,) of the joint output called ``name`` (e.g. ``"spring1.force"``)."""
         try:

@@ -123,5 +123,48 @@ def test_stiffness_identified_from_markers_only_and_what_is_refused():
     # the truth within 3 SE (the SE include the model error, from the refit on 4 elements), and
     # the SE say something: below 0.5 % (measured 0.009 %)
     assert abs(r.parameters["E"] - E) < 3 * r.std_errors["E"] < 0.005 * E
+    from casflex.plotting.identification import plot_fit
+
+    plot_fit(r)  # measured markers against the identified model's
+    assert np.array_equal(r.trajectories[0].channel("yend"), r.trajectories[0].output("end.y"))
     with pytest.raises(ValueError, match=r"channels \['xmid', 'ymid', 'xend', 'yend'\] are markers'; the adapted"):
         identify_adapted_direct(model, data, [0.5])
+
+
+def test_markers_on_twobar_agree_with_exudyns():
+    # Exudyn's MarkerBodyPosition on its ANCF elements (8 per bar, h = 1e-4 s; tests/data/
+    # make_reference_data.py) against casflex's markers (4 elements per bar, same step), off the bars'
+    # axes by 2 and 3 cm, over 1 s of swinging: a marker is interpolated from the nodes, so it
+    # agrees with Exudyn to the order of the nodes' own agreement in the same run (measured: markers
+    # 2.9e-7 m, nodes 3.2e-7 m; a wrong side of the offset would be 4 cm off)
+    import dataclasses
+    from pathlib import Path
+
+    from casflex import load_scene
+    from casflex.simulate import simulate
+
+    here = Path(__file__).parent / "data"
+    z = np.load(here / "twobar_markers_exudyn.npz")
+    ch = [str(c) for c in z["channels"]]
+    scene = load_scene(here / "twobar_markers.toml")
+    scene = dataclasses.replace(scene, beams=tuple(dataclasses.replace(b, elements=4) for b in scene.beams))
+    tr = simulate(assemble(scene), 1.0, dt=1e-4, alpha=0.0)
+    rows = np.arange(0, tr.t.size, 10)
+    assert np.allclose(tr.t[rows], z["t"])
+
+    def off(names: tuple[str, ...]) -> float:
+        return max(float(np.abs(tr.channel(c)[rows] - z["q"][:, ch.index(c)]).max()) for c in names)
+
+    nodes = off(("x3", "y3", "x5", "y5"))
+    assert nodes < 1e-6  # the two codes agree (measured 3.2e-7 m)
+    assert off(("xm2", "ym2", "xm4", "ym4")) < 2 * nodes
+
+
+def test_exudyn_translation_refuses_rigid_bodies_and_their_markers():
+    # Exudyn's translation has no rigid body: a scene with one must not run there without it
+    from casflex.peers.exudyn import build
+
+    scene = Scene(name="plate", nodes=(Node("c", 1.0, 2.0),), bodies=(RigidBody("plate", "c", 2.0, 0.1),),
+                  markers=(Marker("m", "plate", 1.5, 2.2),))
+    with pytest.raises(NotImplementedError, match="rigid bodies are not translated"):
+        build(scene, elements=2, h=1e-3, t_end=0.1)

@@ -23,13 +23,16 @@ The translation, element by element (the same continuum, another discretisation 
   whole slope is fixed);
 - gravity: ``LoadMassProportional`` on every element; constant nodal loads: ``LoadForceVector`` and
   ``LoadTorqueVector``;
+- marker on a beam: ``MarkerBodyPosition`` on the ANCF element that holds it, at its distance along
+  the element and across the beam (Exudyn's local y, to the left of the beam's direction, as
+  casflex's), recorded by ``SensorMarker`` (positions and velocities; channels x<marker>, y<marker>);
 - time integration: implicit generalized-alpha without numerical damping (spectral radius 1: the
   trapezoidal rule, as HHT alpha = 0), Newton on the increment to ``newton_tol``.
 
 What casflex has and this translation does not (:class:`NotImplementedError` naming it): load
-tables, follower loads, moving supports, rotary inertia, a node where two beams meet, a clamp on a
-beam end at an angle, a damper on a zero-length spring (casflex damps its relative velocity, Exudyn
-along an undefined direction).
+tables, follower loads, moving supports, rigid bodies (and markers on them), rotary inertia, a node
+where two beams meet, a clamp on a beam end at an angle, a damper on a zero-length spring (casflex
+damps its relative velocity, Exudyn along an undefined direction).
 """
 
 from __future__ import annotations
@@ -75,6 +78,8 @@ def _check_supported(scene: Scene) -> None:
         raise NotImplementedError("follower loads are not translated to Exudyn")
     if any(len(ld.rows()) > 1 for ld in scene.loads):
         raise NotImplementedError("load tables are not translated to Exudyn (constant loads only)")
+    if scene.bodies:
+        raise NotImplementedError("rigid bodies are not translated to Exudyn (nor markers on them)")
     if any(b.rotary_inertia for b in scene.beams):
         raise NotImplementedError("rotary inertia: Exudyn's ANCF cable element has none")
     for sp in scene.springs:
@@ -91,15 +96,16 @@ def build(scene: Scene, *, elements: int, h: float, t_end: float, newton_tol: fl
     """The Exudyn model of ``scene``: every beam meshed into ``elements`` ANCF elements, steps of
     ``h`` s to ``t_end`` s, Newton increments to ``newton_tol``; sensors (Position, Coordinates and
     their rates of every scene node) recording every step."""
+    _check_supported(scene)  # before the import: what is not translated is said with or without Exudyn
     exu = _exudyn()
     from exudyn import itemInterface as ii
 
-    _check_supported(scene)
     SC = exu.SystemContainer()
     mbs = SC.AddSystem()
     ground = mbs.AddObject(ii.ObjectGround())
     gx, gy = scene.gravity
     nodes: dict[str, tuple[int, tuple[float, float]]] = {}
+    objects: dict[str, tuple[Any, float, float, float, list[int]]] = {}  # beam: (node a, L, ex, ey, elements)
     state = {n.name: n for n in scene.nodes}
 
     def velocity(node, s: float, other, slope: tuple[float, float]) -> list[float]:
@@ -120,11 +126,13 @@ def build(scene: Scene, *, elements: int, h: float, t_end: float, newton_tol: fl
                 referenceCoordinates=[na.x + s * (nb.x - na.x), na.y + s * (nb.y - na.y), ex, ey],
                 initialVelocities=velocity(na, s, nb, (ex, ey)))))
         nodes[na.name], nodes[nb.name] = (chain[0], (ex, ey)), (chain[-1], (ex, ey))
+        objects[b.name] = (na, L, ex, ey, [])
         for k in range(elements):
             obj = mbs.AddObject(ii.ObjectANCFCable2D(nodeNumbers=[chain[k], chain[k + 1]], length=L / elements,
                                                      massPerLength=b.rho * b.A, bendingStiffness=b.E * b.I,
                                                      axialStiffness=b.E * b.A, bendingDamping=b.beta * b.E * b.I,
                                                      axialDamping=b.beta * b.E * b.A))
+            objects[b.name][4].append(obj)
             mark = mbs.AddMarker(ii.MarkerBodyMass(bodyNumber=obj))
             mbs.AddLoad(ii.LoadMassProportional(markerNumber=mark, loadVector=[gx, gy, 0.0]))
 
@@ -190,6 +198,15 @@ def build(scene: Scene, *, elements: int, h: float, t_end: float, newton_tol: fl
                                                         outputVariableType=getattr(out, kind)))
                       for kind in ("Coordinates", "Coordinates_t", "Coordinates_tt")}
                for name, (node, _) in nodes.items()}
+    for mk in scene.markers:  # on a beam (bodies are refused): the element's point at (along, across)
+        na, L, ex, ey, objs = objects[mk.on]
+        along = (mk.x - na.x) * ex + (mk.y - na.y) * ey
+        k = min(int(along / L * elements), elements - 1)
+        local = [along - k * L / elements, -(mk.x - na.x) * ey + (mk.y - na.y) * ex, 0.0]
+        number = mbs.AddMarker(ii.MarkerBodyPosition(bodyNumber=objs[k], localPosition=local))
+        sensors[f"marker {mk.name}"] = {kind: mbs.AddSensor(ii.SensorMarker(
+            markerNumber=number, storeInternal=True, writeToFile=False, outputVariableType=getattr(out, kind)))
+            for kind in ("Position", "Velocity")}
     mbs.Assemble()
 
     ss = exu.SimulationSettings()
@@ -257,6 +274,13 @@ def simulate(scene: Scene, t_end: float, *, elements: int = 8, h: float = 1e-4, 
         cols["q"] += [x, y, theta]
         cols["qd"] += [vx, vy, omega]
         cols["qdd"] += [ax, ay, alpha]
+    for mk in scene.markers:  # positions and velocities; Exudyn reports no marker accelerations (NaN)
+        c, c_t = (np.asarray(m.mbs.GetSensorStoredData(m.sensors[f"marker {mk.name}"][k]))[rows]
+                  for k in ("Position", "Velocity"))
+        channels += [f"x{mk.name}", f"y{mk.name}"]
+        cols["q"] += [c[:, 1], c[:, 2]]
+        cols["qd"] += [c_t[:, 1], c_t[:, 2]]
+        cols["qdd"] += [np.full(c.shape[0], np.nan)] * 2
     return MeasurementSet(t, tuple(channels), *(np.column_stack(cols[k]) for k in ("q", "qd", "qdd")),
                           source="exudyn",
                           meta={"code": f"Exudyn {exu.__version__}", "elements": elements, "h": h,

@@ -38,7 +38,7 @@ def plot_fit(result: IdentificationResult, experiment: int = 0, path: str | os.P
         t, y, ym = s["t"][mine], s["measured"][mine], s["model"][mine]
         left, right = axes[c]
         left.plot(t, y, ".", color="C3", ms=2.5, alpha=0.7, label="measured")
-        left.plot(tr.t, tr.dof(name), color="C0", lw=1.0, zorder=3, label="identified model")
+        left.plot(tr.t, tr.channel(name), color="C0", lw=1.0, zorder=3, label="identified model")
         unit = "rad" if name.startswith("theta") else "m"
         left.set_ylabel(f"{name} ({unit})")
         ru, k = _unit(name)

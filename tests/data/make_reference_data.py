@@ -10,7 +10,8 @@ keys t, channels, q, qd, meta). The file's own error is measured against a run w
 elements per beam and h = 5e-5 s and recorded in ``meta`` (``error_xy``, m, and ``error_theta``, rad:
 max over samples and channels). These are the "measurements" the identification tests and
 ``studies/realdata.py`` fit with casflex's own, different, discretisation. Without arguments it also
-writes ``cantilever_damped_exudyn.npz`` (:func:`make_cantilever`), the check of beam damping.
+writes ``cantilever_damped_exudyn.npz`` (:func:`make_cantilever`), the check of beam damping, and
+``twobar_markers_exudyn.npz`` (:func:`make_markers`), the check of markers on beams.
 """
 
 from __future__ import annotations
@@ -67,8 +68,25 @@ def make_cantilever() -> Path:
     return path
 
 
+def make_markers() -> Path:
+    """twobar_markers_exudyn.npz: twobar_markers.toml (twobar with two markers off its bars' axes) over
+    1 s at 1 kHz, 8 elements, h = 1e-4 s: every node's and marker's x, y (Exudyn's MarkerBodyPosition)."""
+    import casflex
+    from casflex.peers import exudyn
+    from casflex.results import atomic_write_bytes
+
+    data = exudyn.simulate(casflex.load_scene(HERE / "twobar_markers.toml"), 1.0, elements=8, h=1e-4, sample_dt=1e-3)
+    buf = io.BytesIO()
+    np.savez_compressed(buf, t=data.t, channels=np.array(data.channels), q=data.q,
+                        meta=np.array(json.dumps(data.meta)))
+    path = atomic_write_bytes(HERE / "twobar_markers_exudyn.npz", buf.getvalue())
+    print(f"{path.name}: {data.t.size} samples, {data.meta['code']}")
+    return path
+
+
 if __name__ == "__main__":
     for name in sys.argv[1:] or SCENES:
         make(name)
     if not sys.argv[1:]:
         make_cantilever()
+        make_markers()
