@@ -15,6 +15,8 @@ _BEAM_COLOR = "#1f4e79"
 _SPRING_COLOR = "#c0392b"
 _TORSION_COLOR = "#8e44ad"
 _NODE_COLOR = "black"
+_BODY_COLOR = "#e67e22"
+_MARKER_COLOR = "#16a085"
 _SUPPORT_MARKERS = {"clamp": "s", "pin": "^", "x": ">", "y": "v", "theta": "D"}
 _SUPPORT_LABELS = {"clamp": "clamp", "pin": "pin", "x": "x support", "y": "y support", "theta": "rotation support"}
 
@@ -54,6 +56,26 @@ class _Drawer:
         for s in model.scene.supports:
             self.supports.setdefault(s.kind, []).append(idx[s.node])
         self.n_user = len(model.scene.nodes)
+        # a rigid body is drawn at its centre of mass: the node plus its initial offset, turned with the node
+        self.body_node = np.array([idx[b.node] for b in model.scene.bodies], dtype=int)
+        self.body_offset = np.array([[(b.com_x if b.com_x is not None else xy0[idx[b.node], 0]) - xy0[idx[b.node], 0],
+                                      (b.com_y if b.com_y is not None else xy0[idx[b.node], 1]) - xy0[idx[b.node], 1]]
+                                     for b in model.scene.bodies], dtype=float).reshape(-1, 2)
+
+    def bodies(self, q: np.ndarray) -> np.ndarray:
+        """(k, 2) centres of mass of the rigid bodies."""
+        xy = q.reshape(-1, 3)
+        n = self.body_node
+        phi = xy[n, 2] - np.asarray(self.model.q0, dtype=float).reshape(-1, 3)[n, 2]
+        c, s_ = np.cos(phi), np.sin(phi)
+        ox, oy = self.body_offset[:, 0], self.body_offset[:, 1]
+        return np.column_stack([xy[n, 0] + c * ox - s_ * oy, xy[n, 1] + s_ * ox + c * oy])
+
+    def markers(self, q: np.ndarray) -> np.ndarray:
+        """(k, 2) positions of the scene's markers."""
+        from casflex.markers import marker_positions
+
+        return marker_positions(self.model, q).reshape(-1, 2)
 
     def beams(self, q: np.ndarray) -> np.ndarray:
         """(k, 2) polyline of all beam elements (Hermite cubics), NaN-separated."""
@@ -124,6 +146,11 @@ class _Drawer:
                                 color=_NODE_COLOR, label="node", zorder=6)
         art["mesh_nodes"], = ax.plot(xy[self.n_user:, 0], xy[self.n_user:, 1], ls="none", marker="o", ms=2.5,
                                      color=_NODE_COLOR, label="_mesh node", zorder=6)
+        bp, mp = self.bodies(q), self.markers(q)
+        art["bodies"], = ax.plot(bp[:, 0], bp[:, 1], ls="none", marker="D", ms=8, color=_BODY_COLOR,
+                                 label="rigid body (centre of mass)" if len(bp) else "_body", zorder=5)
+        art["markers"], = ax.plot(mp[:, 0], mp[:, 1], ls="none", marker="x", ms=7, mew=1.8, color=_MARKER_COLOR,
+                                  label="marker" if len(mp) else "_marker", zorder=7)
         for kind, nodes in self.supports.items():
             art[f"support:{kind}"], = ax.plot(xy[nodes, 0], xy[nodes, 1], ls="none", marker=_SUPPORT_MARKERS[kind],
                                               ms=12, color="0.45", mec="black", label=_SUPPORT_LABELS[kind], zorder=5)
@@ -139,6 +166,8 @@ class _Drawer:
             art[key].set_data(pts[:, 0], pts[:, 1])  # type: ignore[attr-defined]
         art["nodes"].set_data(xy[:self.n_user, 0], xy[:self.n_user, 1])  # type: ignore[attr-defined]
         art["mesh_nodes"].set_data(xy[self.n_user:, 0], xy[self.n_user:, 1])  # type: ignore[attr-defined]
+        for key, pts in (("bodies", self.bodies(q)), ("markers", self.markers(q))):
+            art[key].set_data(pts[:, 0], pts[:, 1])  # type: ignore[attr-defined]
         for kind, nodes in self.supports.items():
             art[f"support:{kind}"].set_data(xy[nodes, 0], xy[nodes, 1])  # type: ignore[attr-defined]
 

@@ -41,3 +41,25 @@ def test_plot_configuration_mesh_and_pin(tmp_path):
     assert legend_texts(ax) == ["beam", "node", "pin"]
     mesh = next(line for line in ax.lines if line.get_label() == "_mesh node")
     assert len(mesh.get_xdata()) == 3
+
+
+def test_plot_configuration_draws_markers_and_bodies_where_they_are():
+    # the leg: five markers (on both beams and the foot) and the foot's centre of mass, in a turned state
+    model = casflex.assemble(casflex.load_scene("leg"))
+    q = model.q0.copy()
+    q[model.dof("thetaankle")] += 0.4
+    ax = plotting.plot_configuration(model, q).axes[0]
+    assert legend_texts(ax) == ["beam", "spring", "torsion spring", "node", "rigid body (centre of mass)", "marker",
+                                "clamp"]
+    from casflex.markers import marker_positions
+
+    markers = next(line for line in ax.lines if line.get_label() == "marker")
+    np.testing.assert_allclose(np.column_stack([markers.get_xdata(), markers.get_ydata()]),
+                               marker_positions(model, q).reshape(-1, 2))
+    foot = model.scene.bodies[0]
+    a = model.node_names.index(foot.node)
+    r = np.array([foot.com_x - model.q0[3 * a], foot.com_y - model.q0[3 * a + 1]])
+    c, s = np.cos(0.4), np.sin(0.4)
+    body = next(line for line in ax.lines if line.get_label().startswith("rigid body"))
+    np.testing.assert_allclose([body.get_xdata()[0], body.get_ydata()[0]],
+                               q[3 * a:3 * a + 2] + np.array([[c, -s], [s, c]]) @ r)
