@@ -51,37 +51,32 @@ def make(scene_name: str) -> Path:
     return path
 
 
-def make_cantilever() -> Path:
-    """cantilever_damped_exudyn.npz: the tip's motion of cantilever_damped.toml over 2 s at 1 kHz, 8
-    elements, h = 1e-4 s (Exudyn's Kelvin-Voigt bending and axial damping beta EI, beta EA)."""
+def _positions(toml: str, t_end: float) -> Path:
+    """<toml stem>_exudyn.npz: the scene's motion over t_end s at 1 kHz, 8 elements per beam,
+    h = 1e-4 s (keys t, channels, q, meta)."""
     import casflex
     from casflex.peers import exudyn
     from casflex.results import atomic_write_bytes
 
-    scene = casflex.load_scene(HERE / "cantilever_damped.toml")
-    data = exudyn.simulate(scene, 2.0, elements=8, h=1e-4, sample_dt=1e-3)
+    data = exudyn.simulate(casflex.load_scene(HERE / toml), t_end, elements=8, h=1e-4, sample_dt=1e-3)
     buf = io.BytesIO()
     np.savez_compressed(buf, t=data.t, channels=np.array(data.channels), q=data.q,
                         meta=np.array(json.dumps(data.meta)))
-    path = atomic_write_bytes(HERE / "cantilever_damped_exudyn.npz", buf.getvalue())
+    path = atomic_write_bytes(HERE / f"{Path(toml).stem}_exudyn.npz", buf.getvalue())
     print(f"{path.name}: {data.t.size} samples, {data.meta['code']}")
     return path
+
+
+def make_cantilever() -> Path:
+    """cantilever_damped_exudyn.npz: cantilever_damped.toml over 2 s (Exudyn's Kelvin-Voigt bending
+    and axial damping beta EI, beta EA)."""
+    return _positions("cantilever_damped.toml", 2.0)
 
 
 def make_markers() -> Path:
     """twobar_markers_exudyn.npz: twobar_markers.toml (twobar with two markers off its bars' axes) over
-    1 s at 1 kHz, 8 elements, h = 1e-4 s: every node's and marker's x, y (Exudyn's MarkerBodyPosition)."""
-    import casflex
-    from casflex.peers import exudyn
-    from casflex.results import atomic_write_bytes
-
-    data = exudyn.simulate(casflex.load_scene(HERE / "twobar_markers.toml"), 1.0, elements=8, h=1e-4, sample_dt=1e-3)
-    buf = io.BytesIO()
-    np.savez_compressed(buf, t=data.t, channels=np.array(data.channels), q=data.q,
-                        meta=np.array(json.dumps(data.meta)))
-    path = atomic_write_bytes(HERE / "twobar_markers_exudyn.npz", buf.getvalue())
-    print(f"{path.name}: {data.t.size} samples, {data.meta['code']}")
-    return path
+    1 s: every node's and marker's x, y (Exudyn's MarkerBodyPosition)."""
+    return _positions("twobar_markers.toml", 1.0)
 
 
 if __name__ == "__main__":
