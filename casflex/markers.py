@@ -24,9 +24,11 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-__all__ = ["Marker", "marker_kinematics", "marker_channels", "check_markers"]
+__all__ = ["Marker", "marker_kinematics", "marker_states", "marker_positions", "marker_channels", "body_centres",
+           "channel_index", "channel_values", "check_markers"]
 
 _KIN: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_CENTRES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 @dataclass(frozen=True)
@@ -101,6 +103,29 @@ def _element_of(model, beam: str, px: float, py: float) -> tuple[int, int, int, 
     return k, a, b, (s - la) / (lb - la), e
 
 
+def _on_body(model, q: ca.SX, node: str, px: float, py: float) -> list[ca.SX]:
+    """[x, y] of the point initially at (px, py) (m) on a rigid body fixed to ``node``: its initial
+    offset from the node, turned with the node's rotation since the start."""
+    i = model.node_names.index(node)
+    rx, ry = px - model.q0[3 * i], py - model.q0[3 * i + 1]
+    phi = q[3 * i + 2] - model.q0[3 * i + 2]
+    return [q[3 * i] + ca.cos(phi) * rx - ca.sin(phi) * ry, q[3 * i + 1] + ca.sin(phi) * rx + ca.cos(phi) * ry]
+
+
+def _on_beam(model, q: ca.SX, th_l: ca.SX, beam: str, px: float, py: float) -> list[ca.SX]:
+    """[x, y] of the point initially at (px, py) (m) on ``beam`` (module docstring)."""
+    k, a, b, xi, e = _element_of(model, beam, px, py)
+    j = model.local_rotation_names.index(f"{beam}.{k}.a")
+    ta, tb = th_l[j], th_l[j + 1]
+    dx, dy = q[3 * b] - q[3 * a], q[3 * b + 1] - q[3 * a + 1]
+    L = ca.sqrt(dx * dx + dy * dy)
+    tx, ty = dx / L, dy / L
+    v = L * (xi * (1 - xi) ** 2 * ta - xi**2 * (1 - xi) * tb)
+    psi = (1 - xi) * (1 - 3 * xi) * ta - xi * (2 - 3 * xi) * tb
+    nx, ny = -ty * ca.cos(psi) - tx * ca.sin(psi), tx * ca.cos(psi) - ty * ca.sin(psi)
+    return [q[3 * a] + xi * dx - v * ty + e * nx, q[3 * a + 1] + xi * dy + v * tx + e * ny]
+
+
 def marker_kinematics(model) -> ca.Function:
     """``marker_kinematics(q, qd) -> (y, yd, dy_dq, dyd_dq)``: the markers' positions (2 m,) as
     [x1, y1, x2, y2, ...] (m, :func:`marker_channels`), their velocities (m/s), and the Jacobians
@@ -112,22 +137,8 @@ def marker_kinematics(model) -> ca.Function:
     bodies = {b.name: b for b in model.scene.bodies}
     ys = []
     for m in model.scene.markers:
-        if m.on in bodies:
-            i = model.node_names.index(bodies[m.on].node)
-            rx, ry = m.x - model.q0[3 * i], m.y - model.q0[3 * i + 1]
-            phi = q[3 * i + 2] - model.q0[3 * i + 2]
-            ys += [q[3 * i] + ca.cos(phi) * rx - ca.sin(phi) * ry, q[3 * i + 1] + ca.sin(phi) * rx + ca.cos(phi) * ry]
-            continue
-        k, a, b, xi, e = _element_of(model, m.on, m.x, m.y)
-        j = model.local_rotation_names.index(f"{m.on}.{k}.a")
-        ta, tb = th_l[j], th_l[j + 1]
-        dx, dy = q[3 * b] - q[3 * a], q[3 * b + 1] - q[3 * a + 1]
-        L = ca.sqrt(dx * dx + dy * dy)
-        tx, ty = dx / L, dy / L
-        v = L * (xi * (1 - xi) ** 2 * ta - xi**2 * (1 - xi) * tb)
-        psi = (1 - xi) * (1 - 3 * xi) * ta - xi * (2 - 3 * xi) * tb
-        nx, ny = -ty * ca.cos(psi) - tx * ca.sin(psi), tx * ca.cos(psi) - ty * ca.sin(psi)
-        ys += [q[3 * a] + xi * dx - v * ty + e * nx, q[3 * a + 1] + xi * dy + v * tx + e * ny]
+        ys += _on_body(model, q, bodies[m.on].node, m.x, m.y) if m.on in bodies else \
+            _on_beam(model, q, th_l, m.on, m.x, m.y)
     y = ca.vertcat(*ys) if ys else ca.SX(0, 1)
     J = ca.jacobian(y, q)
     yd = ca.mtimes(J, qd)
@@ -136,14 +147,34 @@ def marker_kinematics(model) -> ca.Function:
     return _KIN[model]
 
 
+def marker_states(model, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The markers at states q, qd (k, n_dof): positions and velocities (k, 2 m), and their
+    Jacobians in q (k, 2 m, n_dof) each (:func:`marker_kinematics`, one evaluation for all)."""
+    q, qd = np.atleast_2d(np.asarray(q, dtype=float)), np.atleast_2d(np.asarray(qd, dtype=float))
+    k, n = q.shape
+    y, yd, J, Jd = (np.array(v) for v in marker_kinematics(model).map(k)(q.T, qd.T))
+    m2 = y.shape[0]
+    return y.T.reshape(k, m2), yd.T.reshape(k, m2), *(a.reshape(m2, k, n).transpose(1, 0, 2) for a in (J, Jd))
+
+
 def marker_positions(model, q: np.ndarray) -> np.ndarray:
     """The markers' positions along a motion: q (k, n_dof) -> (k, 2 m), columns as
     :func:`marker_channels`."""
     q = np.atleast_2d(np.asarray(q, dtype=float))
-    if not model.scene.markers:
-        return np.zeros((q.shape[0], 0))
-    f = marker_kinematics(model).map(q.shape[0])
-    return np.array(f(q.T, np.zeros_like(q.T))[0]).T
+    return marker_states(model, q, np.zeros_like(q))[0]
+
+
+def body_centres(model, q: np.ndarray) -> np.ndarray:
+    """(k, 2) centres of mass of the scene's rigid bodies at one state q (n_dof,)."""
+    if model not in _CENTRES:
+        qs = ca.SX.sym("q", model.n_dof)
+        pts = []
+        for b in model.scene.bodies:
+            node = model.scene.node(b.node)
+            pts += _on_body(model, qs, b.node, node.x if b.com_x is None else b.com_x,
+                            node.y if b.com_y is None else b.com_y)
+        _CENTRES[model] = ca.Function("body_centres", [qs], [ca.vertcat(*pts) if pts else ca.SX(0, 1)])
+    return np.array(_CENTRES[model](np.asarray(q, dtype=float).ravel())).reshape(-1, 2)
 
 
 def channel_index(model, name: str) -> int:
@@ -161,17 +192,6 @@ def channel_index(model, name: str) -> int:
 def channel_values(model, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Every channel's value and rate, (k, n_dof + 2 m) each, from states q, qd (k, n_dof)."""
     q, qd = np.atleast_2d(q), np.atleast_2d(qd)
-    if not model.scene.markers:
-        return q, qd
-    f = marker_kinematics(model).map(q.shape[0])
-    y, yd = (np.array(v).T for v in f(q.T, qd.T)[:2])
+    y, yd, _, _ = marker_states(model, q, qd)
     return np.hstack([q, y]), np.hstack([qd, yd])
 
-
-def marker_jacobians(model, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """dy/dq and dyd/dq of the markers at states q, qd (k, n_dof): (k, 2 m, n_dof) each."""
-    k, n = q.shape
-    f = marker_kinematics(model).map(k)
-    J, Jd = (np.array(v) for v in f(q.T, qd.T)[2:])
-    m2 = J.shape[0]
-    return J.reshape(m2, k, n).transpose(1, 0, 2), Jd.reshape(m2, k, n).transpose(1, 0, 2)

@@ -108,6 +108,12 @@ class Model:
         (:func:`casflex.constraints.prescribed`); constants and zeros for fixed supports."""
         return prescribed(list(self.constraints))
 
+    def supports_at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """(values, rates) of the supports' dofs at t (s), shape (n_con,) each, in constraint order:
+        constants and zeros, or where a moving support's path has them."""
+        v, vd, _ = (np.array(a, dtype=float).ravel() for a in self.prescribed(t))
+        return v, vd
+
     @property
     def n_dof(self) -> int:
         return len(self.dof_names)

@@ -316,7 +316,7 @@ def initial_state(integ: HHT, p: np.ndarray, *, q0: np.ndarray | None = None, qd
                              f"got shape {v.shape}")
     vd = np.zeros(model.n_con)
     if model.moving:  # the supports' dofs follow their paths: values and rates at t0, whatever state was given
-        v, vd, _ = (np.array(a).ravel() for a in model.prescribed(t0))
+        v, vd = model.supports_at(t0)
         fixed = [c.dof for c in model.constraints]
         q[fixed] = v
         qd[fixed] = vd

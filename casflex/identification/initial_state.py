@@ -61,13 +61,6 @@ def _placement(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return free, keep, put
 
 
-def supports_at(model: Model, t: float) -> tuple[np.ndarray, np.ndarray]:
-    """(values, rates) of the supports' dofs at t (s), shape (n_con,) each: constants and zeros,
-    or a moving support's path (:attr:`Model.prescribed`)."""
-    v, vd, _ = (np.array(a, dtype=float).ravel() for a in model.prescribed(t))
-    return v, vd
-
-
 def _kinematic_fit(model: Model, measured: tuple[int, ...]) -> ca.Function:
     """``kinematic_fit(q_known, q_start) -> q``: the configuration of least elastic energy whose
     measured and supported dofs take their values in ``q_known`` (IPOPT, exact Hessian), built
@@ -117,7 +110,7 @@ def first_fit(model: Model, fit: ca.Function, dofs: list[int], values: np.ndarra
     end of least elastic energy."""
     energy = _elastic_energy(model)
     fixed = [con.dof for con in model.constraints]
-    support, _ = supports_at(model, t)
+    support, _ = model.supports_at(t)
     best, best_v = None, np.inf
     for n in HOMOTOPY_STEPS:
         q = model.q0.copy()
@@ -147,7 +140,7 @@ def initial_guess(model: Model, experiment: Experiment, m: int = 5) -> tuple[np.
     fixed = [con.dof for con in model.constraints]
     if experiment.initial_state == "scene":
         q0, qd0 = model.q0.copy(), model.qd0.copy()
-        q0[fixed], qd0[fixed] = supports_at(model, float(data.t[0]))
+        q0[fixed], qd0[fixed] = model.supports_at(float(data.t[0]))
         return q0, qd0
     compared = experiment.compared(model)
     names = [c for c in compared if c in model.dof_names]  # the kinematic fit takes node channels
@@ -170,7 +163,7 @@ def initial_guess(model: Model, experiment: Experiment, m: int = 5) -> tuple[np.
         else:
             known = q_prev.copy()
             known[dofs] = values
-            known[fixed] = supports_at(model, float(data.t[i]))[0]
+            known[fixed] = model.supports_at(float(data.t[i]))[0]
             q_prev = np.array(fit(known, q_prev)).ravel()
         fits.append(q_prev)
         times.append(data.t[i] - data.t[0])
@@ -180,8 +173,7 @@ def initial_guess(model: Model, experiment: Experiment, m: int = 5) -> tuple[np.
     q0 = Q[0] if experiment.initial_state == "estimate" else model.q0.copy()
     degree = min(2, len(tt) - 1)
     qd0 = np.polynomial.polynomial.polyfit(tt, Q, degree)[1] if degree >= 1 else np.zeros(model.n_dof)
-    v, vd = supports_at(model, float(data.t[0]))
-    q0[fixed], qd0[fixed] = v, vd
+    q0[fixed], qd0[fixed] = model.supports_at(float(data.t[0]))
     return q0, qd0
 
 

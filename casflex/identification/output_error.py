@@ -31,7 +31,7 @@ from casflex.identification.initial_state import InitialState, initial_state_of
 from casflex.identification.measurement import Experiment, SampleMap, free_dofs
 from casflex.identification.problem import ParameterMap
 from casflex.identification.sensitivity import run_sensitivities
-from casflex.markers import channel_values, marker_jacobians
+from casflex.markers import marker_states
 from casflex.model import Model
 
 __all__ = ["Budget", "OutputError", "Fit", "fit"]
@@ -158,7 +158,10 @@ class OutputError:
             X = run.X
             wts = sm.weights
             marked = bool(sm.dof.max() >= n)  # some channels are markers' (casflex.markers)
-            Z, ZD = channel_values(self.model, X[:, :n], X[:, n:2 * n]) if marked else (X[:, :n], X[:, n:2 * n])
+            Z, ZD = X[:, :n], X[:, n:2 * n]
+            if marked:  # the markers' positions, velocities and Jacobians at every recorded step, at once
+                Y, YD, Jy, Jyd = marker_states(self.model, Z, ZD)
+                Z, ZD = np.hstack([Z, Y]), np.hstack([ZD, YD])
             y = (wts[:, 0] * Z[i0, sm.dof] + wts[:, 1] * ZD[i0, sm.dof]
                  + wts[:, 2] * Z[i1, sm.dof] + wts[:, 3] * ZD[i1, sm.dof])
             rs.append((y - sm.y) / self.sigma[e])
@@ -172,7 +175,6 @@ class OutputError:
             G = np.einsum("kws,wc->ksc", S[:, :nx, :], M0)
             G[:, :, :npar] += np.transpose(S[:, nx:, :], (0, 2, 1))
             if marked:  # a marker's sensitivities by the chain rule: y = y(q), yd = (dy/dq) qd
-                Jy, Jyd = marker_jacobians(self.model, X[:, :n], X[:, n:2 * n])
                 GP = np.concatenate([G[:, :n], np.einsum("kmn,knc->kmc", Jy, G[:, :n])], axis=1)
                 GV = np.concatenate([G[:, n:], np.einsum("kmn,knc->kmc", Jyd, G[:, :n])
                                      + np.einsum("kmn,knc->kmc", Jy, G[:, n:])], axis=1)

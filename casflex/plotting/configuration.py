@@ -56,20 +56,12 @@ class _Drawer:
         for s in model.scene.supports:
             self.supports.setdefault(s.kind, []).append(idx[s.node])
         self.n_user = len(model.scene.nodes)
-        # a rigid body is drawn at its centre of mass: the node plus its initial offset, turned with the node
-        self.body_node = np.array([idx[b.node] for b in model.scene.bodies], dtype=int)
-        self.body_offset = np.array([[(b.com_x if b.com_x is not None else xy0[idx[b.node], 0]) - xy0[idx[b.node], 0],
-                                      (b.com_y if b.com_y is not None else xy0[idx[b.node], 1]) - xy0[idx[b.node], 1]]
-                                     for b in model.scene.bodies], dtype=float).reshape(-1, 2)
 
     def bodies(self, q: np.ndarray) -> np.ndarray:
         """(k, 2) centres of mass of the rigid bodies."""
-        xy = q.reshape(-1, 3)
-        n = self.body_node
-        phi = xy[n, 2] - np.asarray(self.model.q0, dtype=float).reshape(-1, 3)[n, 2]
-        c, s_ = np.cos(phi), np.sin(phi)
-        ox, oy = self.body_offset[:, 0], self.body_offset[:, 1]
-        return np.column_stack([xy[n, 0] + c * ox - s_ * oy, xy[n, 1] + s_ * ox + c * oy])
+        from casflex.markers import body_centres
+
+        return body_centres(self.model, q)
 
     def markers(self, q: np.ndarray) -> np.ndarray:
         """(k, 2) positions of the scene's markers."""
