@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from casflex.identification.problem import gauss_newton_polish, gauss_newton_statistics
 
@@ -55,3 +56,37 @@ def test_polish_returns_a_point_inside_the_bounds():
     w, taken = gauss_newton_polish(zJ, np.array([-3e-9, 1.5]), np.array([0.0, -np.inf]), np.array([np.inf, np.inf]))
     assert w[0] == 0.0  # at its bound, not outside it; the step towards -1 is refused
     assert taken == 0  # the full Gauss-Newton step leaves the bounds, so none is taken
+
+
+def test_one_option_path_checks_every_front_end_before_any_work():
+    """The direct, adapted direct, indirect and shooting-NLP front ends share NLPOptions: a bad option
+    is named before the model is touched (None stands in for the model and data here)."""
+    from casflex.identification import identify_adapted_direct, identify_direct, identify_indirect
+    from casflex.identification.shooting_nlp import identify_nlp
+
+    calls = {"identify_direct": lambda **o: identify_direct(None, None, [0.1], **o),
+             "identify_adapted_direct": lambda **o: identify_adapted_direct(None, None, [0.1], **o),
+             "identify_nlp": lambda **o: identify_nlp(None, None, 1.0, **o)}
+    for name, call in calls.items():
+        with pytest.raises(TypeError, match=rf"{name}\(\) got an unexpected keyword argument 'solvr'"):
+            call(solvr="ipopt")
+        with pytest.raises(ValueError, match="solver 'nosuch': not"):
+            call(solver="nosuch")
+        with pytest.raises(ValueError, match="transform: expected one of"):
+            call(transform="exp")
+        with pytest.raises(ValueError, match="hessian: expected one of"):
+            call(hessian="bfgs")
+        with pytest.raises(ValueError, match="compiled: expected True or False"):
+            call(compiled="yes")
+        with pytest.raises(ValueError, match="solver 'gauss-newton': the indirect method's single shooting"):
+            call(solver="gauss-newton")
+    with pytest.raises(ValueError, match="solver_options: expected a dict"):
+        identify_indirect(None, None, solver_options=["tol", 1])
+
+
+def test_nlp_options_record_and_defaults():
+    from casflex.identification.problem import NLPOptions
+
+    o = NLPOptions.of("f", {"transform": "log", "compiled": None}, hessian="exact")
+    assert (o.solver, o.transform, o.hessian, o.compiled) == ("ipopt", "log", "exact", None)
+    assert o.record() == {"transform": "log", "hessian": "exact", "compiled": False}

@@ -29,27 +29,17 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
+from typing import Unpack
 
 import casadi as ca
 import numpy as np
 
 from casflex import codegen
 from casflex.data import MeasurementSet
+from casflex.identification import problem as pb
+from casflex.identification.direct import DirectKeywords, direct_options
 from casflex.identification.initial_state import _kinematic_fit
-from casflex.identification.problem import (
-    IdentificationResult,
-    ParameterMap,
-    beam_force_basis,
-    beam_forces_mode,
-    bound_flags,
-    gauss_newton_polish,
-    gauss_newton_statistics,
-    least_squares_nlp,
-    require_fixed_supports,
-    require_node_channels,
-    robust_statistics,
-    start_values,
-)
+from casflex.identification.problem import IdentificationResult
 from casflex.model import Model
 
 __all__ = ["identify_adapted_direct"]
@@ -91,28 +81,12 @@ def _guesses(model: Model, q_rows: np.ndarray, dt: np.ndarray, unknown: list[int
     return out
 
 
-def identify_adapted_direct(
-    model: Model,
-    data: MeasurementSet,
-    instants: Sequence[float],
-    *,
-    start: float | dict[str, float] | np.ndarray | None = None,
-    window: int | None = None,
-    beam_forces: str | None = None,
-    smoothing: str = "spline",
-    cutoff: float | None = None,
-    solver: str = "ipopt",
-    solver_options: dict | None = None,
-    transform: str = "linear",
-    hessian: str = "gauss-newton",
-    compiled: bool = False,
-    verbose: bool = False,
-) -> IdentificationResult:
+def identify_adapted_direct(model: Model, data: MeasurementSet, instants: Sequence[float], *,
+                            window: int | None = None, **options: Unpack[DirectKeywords]) -> IdentificationResult:
     """Identify the parameters from the measured dofs around ``instants`` (module docstring).
 
     Parameters
     ----------
-    model : Model
     data : MeasurementSet
         Positions of some translations (m), with or without their velocities and accelerations;
         measured rotations, if any, are ignored (``extra["ignored_channels"]``).
@@ -120,15 +94,9 @@ def identify_adapted_direct(
         Each needs ``window - 1`` samples after it.
     window : int, optional
         Samples per instant (default: module docstring).
-    beam_forces : {"unknown", "model"}, optional
-        Axial forces of beams with both ends measured solved for at every sample (default, for
-        measured data) or computed from the positions (the paper; exact data only):
-        :func:`.problem.beam_forces_mode`.
-    smoothing, cutoff : how velocities and accelerations are obtained when the data lack them
-        (:func:`casflex.smoothing.smooth`).
-    start : factor, dict or array, optional
-        Starting parameters (a number multiplies the nominal values).
-    solver, solver_options, transform, hessian, compiled : as for the other methods.
+    **options : :class:`.direct.DirectKeywords`
+        Here ``beam_forces="unknown"`` frees the axial forces of beams with both ends measured;
+        IPOPT, the Gauss-Newton Hessian, not compiled by default.
 
     Returns
     -------
@@ -137,8 +105,10 @@ def identify_adapted_direct(
         [value, rate, acceleration] of every unknown dof at each t_i (key ``rotations`` too, for
         the rotations).
     """
-    require_fixed_supports(model, "the adapted direct method")
-    require_node_channels(model, data.channels, "the adapted direct method")
+    own, opts = direct_options("identify_adapted_direct", dict(options))
+    start, beam_forces, smoothing, cutoff = (own[k] for k in ("start", "beam_forces", "smoothing", "cutoff"))
+    pb.require_fixed_supports(model, "the adapted direct method")
+    pb.require_node_channels(model, data.channels, "the adapted direct method")
     t_build = time.perf_counter()
     if model.n_p == 0:
         raise ValueError("the scene declares no parameters to identify ([[parameters]] in the scene file)")
@@ -148,17 +118,12 @@ def identify_adapted_direct(
     trans_measured = [i for i in np.flatnonzero(~model.is_rotation) if sel[i] >= 0]
     if not trans_measured:
         raise ValueError("adapted direct identification needs measured translations; the data have none")
-    smoothing_info = None
-    if data.qd is None or data.qdd is None:
-        from casflex.smoothing import smooth
-
-        data = smooth(data, smoothing, cutoff)
-        smoothing_info = data.meta["smoothing"]
-    mode = beam_forces_mode(model, beam_forces, smoothed=smoothing_info is not None)
+    data, smoothing_info = pb.smoothed_if_needed(data, smoothing, cutoff)
+    mode = pb.beam_forces_mode(model, beam_forces, smoothed=smoothing_info is not None)
     # rotations are unknowns here (measured ones are ignored): only axial forces are freed
     known = {i for i in range(model.n_dof) if (sel[i] >= 0 and not model.is_rotation[i]) or
              (i in {c.dof for c in model.constraints} and not model.is_rotation[i])}
-    basis = beam_force_basis(model, known if mode == "unknown" else set())
+    basis = pb.beam_force_basis(model, known if mode == "unknown" else set())
     n_beam = basis.size2_out(0)
     fixed = {c.dof: c.value for c in model.constraints}
     unknown = [i for i in range(model.n_dof) if i not in fixed and (model.is_rotation[i] or sel[i] < 0)]
@@ -179,9 +144,9 @@ def identify_adapted_direct(
                                      f"t = {data.t[j]:g} s; choose another instant")
         samples.append((i, float(data.t[i]), data.t[i:i + K] - data.t[i]))
 
-    pmap = ParameterMap.of(model, transform)
+    pmap = pb.ParameterMap.of(model, opts.transform)
     scale = pmap.scale
-    p0 = start_values(model, start)
+    p0 = pb.start_values(model, start)
     ell = model.length_scale
     unit = np.where(model.is_rotation[unknown], 1.0, ell)  # rad for rotations, m for translations
     idx = [i for i, *_ in samples]
@@ -238,40 +203,32 @@ def identify_adapted_direct(
     lbw[:n_p], ubw[:n_p] = pmap.bounds()
     w0 = np.concatenate([pmap.theta(p0), *w0_inst])
     zJ = ca.Function("adapted_residual", [w], [z, ca.jacobian(z, w)], ["w"], ["z", "J"])
-    zJ = codegen.compiled(zJ) if compiled else zJ
+    zJ = codegen.compiled(zJ) if opts.compiled else zJ
 
     # the residual at the optimum is the cubic's truncation error, not 0: the gradient's
     # round-off floor is ~1e-9, the Gauss-Newton polish does the rest
-    S = least_squares_nlp("adapted_direct", solver, w, z, hessian=hessian, compiled=compiled, verbose=verbose,
-                          solver_options=solver_options, tol=1e-9)
+    S = opts.nlp("adapted_direct", w, z, tol=1e-9)
     build_s = time.perf_counter() - t_build
 
-    t_solve = time.perf_counter()
-    sol = S(x0=w0, lbx=lbw, ubx=ubw)
-    solver_s = time.perf_counter() - t_solve
-    st = S.stats()
-    w_solver = np.array(sol["x"]).ravel()
-    wv, polished = gauss_newton_polish(zJ, w_solver, lbw, ubw)
-    solve_s = time.perf_counter() - t_solve
+    out = pb.solve_and_polish(S, zJ, w0, lbw, ubw)
+    st, w_solver, wv, polished, solver_s, solve_s = (out[k] for k in ("stats", "w_solver", "w", "polished",
+                                                                     "solver_s", "solve_s"))
 
     zv, Jv = (np.array(v) for v in zJ(wv))
     names = model.parameter_names
     p_hat = pmap.p(wv[:n_p])
-    stats = gauss_newton_statistics(Jv, zv.ravel(), n_p, names, pmap.dp_dtheta(wv[:n_p]), p_hat)
-    uncertainty = robust_statistics(stats, Jv, zv.ravel(), len(samples), pmap.dp_dtheta(wv[:n_p]), p_hat)
+    stats = pb.gauss_newton_statistics(Jv, zv.ravel(), n_p, names, pmap.dp_dtheta(wv[:n_p]), p_hat)
+    uncertainty = pb.robust_statistics(stats, Jv, zv.ravel(), len(samples), pmap.dp_dtheta(wv[:n_p]), p_hat)
     st_fn = ca.Function("states", [w], [ca.vertcat(*[ca.vec(r) for r in state_exprs]), ca.vertcat(*lam_syms)])
     st_v, lam_v = (np.array(v).ravel() for v in st_fn(wv))
     states = {f"{t:.10g}": {model.dof_names[d]: st_v[k * 3 * nu:(k + 1) * 3 * nu].reshape(3, nu).T[j].tolist()
                             for j, d in enumerate(unknown)}
               for k, (_, t, _) in enumerate(samples)}
     rotations = {t: {d: v for d, v in s.items() if d.startswith("theta")} for t, s in states.items()}
-    at_bound = bound_flags(model, p_hat, scale)
-    reasons = [] if st.get("success", False) else [f"the solver did not converge ({st.get('return_status')})"]
-    bound = [k for k, v in at_bound.items() if v]
-    if bound:
-        reasons.append(f"{', '.join(bound)} ended on a bound: the best fit lies outside the parameters' range")
+    at_bound = pb.bound_flags(model, p_hat, scale)
+    reasons = pb.failure_reasons(st, at_bound)
     return IdentificationResult(
-        method="adapted-direct", solver=solver, parameters=dict(zip(names, p_hat.tolist(), strict=True)),
+        method="adapted-direct", solver=opts.solver, parameters=dict(zip(names, p_hat.tolist(), strict=True)),
         start=dict(zip(names, p0.tolist(), strict=True)), success=not reasons,
         status=str(st.get("return_status", "unknown")), message="; ".join(reasons),
         iterations=int(st.get("iter_count", -1)), wall_build_s=build_s, wall_solve_s=solve_s,
@@ -279,7 +236,7 @@ def identify_adapted_direct(
         std_errors=stats.pop("std_errors"), correlation=stats.pop("correlation"), at_bound=at_bound,
         identifiability=stats, instants=[t for _, t, _ in samples],
         multipliers=lam_v.reshape(len(samples), n_c).tolist(),
-        extra={"transform": transform, "hessian": hessian, "compiled": compiled,
+        extra={**opts.record(),
                "force_scale": fs, "residual_norm": float(np.linalg.norm(zv) * fs),
                "gauss_newton_polish": polished, "solver_s": solver_s, "window": K, "smoothing": smoothing_info,
                "beam_forces": mode, "uncertainty": uncertainty,

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from typing import Any, Unpack
 
 import casadi as ca
 import numpy as np
@@ -23,21 +24,24 @@ from casflex import codegen
 from casflex.data import MeasurementSet
 from casflex.identification.problem import (
     IdentificationResult,
+    NLPKeywords,
+    NLPOptions,
     ParameterMap,
     beam_force_basis,
     beam_forces_mode,
     bound_flags,
-    gauss_newton_polish,
+    failure_reasons,
     gauss_newton_statistics,
-    least_squares_nlp,
     require_fixed_supports,
     require_node_channels,
     robust_statistics,
+    smoothed_if_needed,
+    solve_and_polish,
     start_values,
 )
 from casflex.model import Model
 
-__all__ = ["identify_direct"]
+__all__ = ["identify_direct", "DirectKeywords", "direct_options"]
 
 
 def _instant_data(model: Model, data: MeasurementSet, instants: Sequence[float]):
@@ -58,57 +62,49 @@ def _instant_data(model: Model, data: MeasurementSet, instants: Sequence[float])
     return [(data.t[i], data.q[i, sel], data.qd[i, sel], data.qdd[i, sel]) for i in rows]
 
 
-def identify_direct(
-    model: Model,
-    data: MeasurementSet,
-    instants: Sequence[float],
-    *,
-    start: float | dict[str, float] | np.ndarray | None = None,
-    beam_forces: str | None = None,
-    smoothing: str = "spline",
-    cutoff: float | None = None,
-    solver: str = "ipopt",
-    solver_options: dict | None = None,
-    transform: str = "linear",
-    hessian: str = "exact",
-    compiled: bool = False,
-    verbose: bool = False,
-) -> IdentificationResult:
-    """Identify the model's parameters from full kinematics at ``instants`` (s).
+class DirectKeywords(NLPKeywords, total=False):
+    """The keywords of the direct and adapted direct methods: the NLP's (:class:`.problem.NLPOptions`) and
 
-    Parameters
-    ----------
-    model : Model
-        Its declared parameters are the unknowns, with their bounds.
-    data : MeasurementSet
-        q of every dof; qd, qdd from the data (e.g. :func:`casflex.data.simulated_set`) or, when it
-        has none, by :func:`casflex.smoothing.smooth` (``smoothing``, ``cutoff``).
-    beam_forces : {"unknown", "model"}, optional
-        Beam deformation forces solved for at each instant (default for positions-only data) or
-        from the positions (the paper; default when the data bring derivatives):
-        :func:`.problem.beam_forces_mode`.
-    instants : sequence of float, s
-    start : factor, dict or array, optional
-        Starting parameters (a number multiplies the nominal values); default nominal.
-    solver : str
-        A CasADi nlpsol plugin (``ipopt``, ``sqpmethod``, ...).
-    transform : {"linear", "log"}
-        Decision variables p / scale or log(p / scale) (see :class:`ParameterMap`); the exact
-        linear solution is computed with the linear one only.
-    hessian : {"exact", "gauss-newton"}
-        The solver's Hessian of the Lagrangian (see :func:`least_squares_nlp`).
-    compiled : bool
-        Generate and compile C for the solver's functions (CasADi JIT with the system compiler).
+    - ``start``: starting parameters, a factor on the nominal values, a dict or an array (default nominal);
+    - ``beam_forces``: {"unknown", "model"}, beam deformation forces solved for at each instant (default
+      for positions-only data) or from the positions (the paper; default when the data bring
+      derivatives), :func:`.problem.beam_forces_mode`;
+    - ``smoothing``, ``cutoff``: how velocities and accelerations are obtained when the data lack them
+      (:func:`casflex.smoothing.smooth`; default a GCV smoothing spline).
     """
+
+    start: float | dict[str, float] | np.ndarray | None
+    beam_forces: str | None
+    smoothing: str
+    cutoff: float | None
+
+
+def direct_options(method: str, options: dict, **defaults: Any) -> tuple[dict[str, Any], NLPOptions]:
+    """The method's own keywords of :class:`DirectKeywords` (with their defaults) and its NLP options,
+    checked before any work."""
+    own = {"start": None, "beam_forces": None, "smoothing": "spline", "cutoff": None}
+    own.update({k: options.pop(k) for k in list(options) if k in own})
+    opts = NLPOptions.of(method, options, **defaults)
+    opts.nlp_solver(f"{method}()")
+    return own, opts
+
+
+def identify_direct(model: Model, data: MeasurementSet, instants: Sequence[float],
+                    **options: Unpack[DirectKeywords]) -> IdentificationResult:
+    """Identify the model's parameters (its declared ones, within their bounds) from full
+    kinematics at ``instants`` (s).
+
+    ``data`` hold q of every dof; qd, qdd from the data (e.g. :func:`casflex.data.simulated_set`) or,
+    when it has none, by smoothing. ``options``: :class:`DirectKeywords`; here IPOPT, the exact
+    Hessian, not compiled by default. The exact linear solution is computed with transform
+    "linear" only.
+    """
+    own, opts = direct_options("identify_direct", dict(options), hessian="exact")
+    start, beam_forces, smoothing, cutoff = (own[k] for k in ("start", "beam_forces", "smoothing", "cutoff"))
     require_fixed_supports(model, "the direct method")
     require_node_channels(model, data.channels, "the direct method")
     t_build = time.perf_counter()
-    smoothing_info = None
-    if data.qd is None or data.qdd is None:
-        from casflex.smoothing import smooth
-
-        data = smooth(data, smoothing, cutoff)
-        smoothing_info = data.meta["smoothing"]
+    data, smoothing_info = smoothed_if_needed(data, smoothing, cutoff)
     samples = _instant_data(model, data, instants)
     mode = beam_forces_mode(model, beam_forces, smoothed=smoothing_info is not None)
     basis = beam_force_basis(model, set(range(model.n_dof)) if mode == "unknown" else set())  # every dof measured
@@ -116,7 +112,7 @@ def identify_direct(
     n_p, n_c = model.n_p, model.n_con
     if n_p == 0:
         raise ValueError("the scene declares no parameters to identify ([[parameters]] in the scene file)")
-    pmap = ParameterMap.of(model, transform)
+    pmap = ParameterMap.of(model, opts.transform)
     scale = pmap.scale
     p0 = start_values(model, start)
     # force scale: the largest inertia or gravity force at the instants, for O(1) residuals
@@ -134,7 +130,7 @@ def identify_direct(
     ubw = np.concatenate([ub_th, np.full((n_c + n_ax) * len(samples), np.inf)])
     Jz = ca.jacobian(z, w)
     zJ = ca.Function("direct_residual", [w], [z, Jz], ["w"], ["z", "J"])
-    zJ = codegen.compiled(zJ) if compiled else zJ
+    zJ = codegen.compiled(zJ) if opts.compiled else zJ
 
     # exact linear least squares where z is affine in (p, lambda)
     linear = not ca.depends_on(Jz, w)
@@ -143,18 +139,13 @@ def identify_direct(
         z0, J0 = (np.array(v) for v in zJ(np.zeros(w.numel())))
         w_lin = np.linalg.lstsq(J0, -z0.ravel(), rcond=None)[0]
 
-    S = least_squares_nlp("direct", solver, w, z, hessian=hessian, compiled=compiled, verbose=verbose,
-                          solver_options=solver_options)
+    S = opts.nlp("direct", w, z)
     w0 = np.concatenate([pmap.theta(p0), np.zeros((n_c + n_ax) * len(samples))])
     build_s = time.perf_counter() - t_build
 
-    t_solve = time.perf_counter()
-    sol = S(x0=w0, lbx=lbw, ubx=ubw)
-    solver_s = time.perf_counter() - t_solve
-    st = S.stats()
-    w_solver = np.array(sol["x"]).ravel()
-    wv, polished = gauss_newton_polish(zJ, w_solver, lbw, ubw)
-    solve_s = time.perf_counter() - t_solve
+    out = solve_and_polish(S, zJ, w0, lbw, ubw)
+    st, w_solver, wv, polished, solver_s, solve_s = (out[k] for k in ("stats", "w_solver", "w", "polished",
+                                                                     "solver_s", "solve_s"))
     zv, Jv = (np.array(v) for v in zJ(wv))
     p_hat = pmap.p(wv[:n_p])
     stats = gauss_newton_statistics(Jv, zv.ravel(), n_p, model.parameter_names, pmap.dp_dtheta(wv[:n_p]), p_hat)
@@ -163,18 +154,15 @@ def identify_direct(
     k = n_c + n_ax
     lams = [list(wv[n_p + i * k:n_p + i * k + n_c] * fs) for i in range(len(samples))]
     at_bound = bound_flags(model, p_hat, scale)
-    reasons = [] if st.get("success", False) else [f"the solver did not converge ({st.get('return_status')})"]
-    bound = [k for k, v in at_bound.items() if v]
-    if bound:
-        reasons.append(f"{', '.join(bound)} ended on a bound: the best fit lies outside the parameters' range")
-    extra = {"transform": transform, "hessian": hessian, "compiled": compiled,
+    reasons = failure_reasons(st, at_bound)
+    extra = {**opts.record(),
              "force_scale": fs, "residual_norm": float(np.linalg.norm(zv) * fs), "gauss_newton_polish": polished,
              "beam_forces": mode, "smoothing": smoothing_info, "uncertainty": uncertainty,
              "solver_s": solver_s, "solver_parameters": dict(zip(names, pmap.p(w_solver[:n_p]).tolist(), strict=True))}
     if w_lin is not None:
         extra["linear_solution"] = dict(zip(names, (w_lin[:n_p] * scale).tolist(), strict=True))
     return IdentificationResult(
-        method="direct", solver=solver, parameters=dict(zip(names, p_hat.tolist(), strict=True)),
+        method="direct", solver=opts.solver, parameters=dict(zip(names, p_hat.tolist(), strict=True)),
         start=dict(zip(names, p0.tolist(), strict=True)), success=not reasons,
         status=str(st.get("return_status", "unknown")), message="; ".join(reasons),
         iterations=int(st.get("iter_count", -1)),

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
+from typing import Unpack
 
 import numpy as np
 
@@ -24,7 +25,7 @@ from casflex.data import MeasurementSet
 from casflex.identification.estimate import MODEL_ERRORS, estimate
 from casflex.identification.measurement import INITIAL_STATES, Experiment
 from casflex.identification.output_error import Budget
-from casflex.identification.problem import merge_options
+from casflex.identification.problem import GAUSS_NEWTON, NLPKeywords, NLPOptions, merge_options
 from casflex.identification.result import IdentificationResult
 from casflex.identification.shooting_nlp import RESIDUES, TRANSCRIPTIONS, identify_nlp
 from casflex.model import Model
@@ -33,7 +34,6 @@ __all__ = ["identify_indirect", "RESIDUES", "TRANSCRIPTIONS", "INITIAL_STATES", 
 
 #: The default solver of single shooting on Eq. 16: not a CasADi plugin but scipy's trust-region
 #: Gauss-Newton on forward sensitivities.
-GAUSS_NEWTON = "gauss-newton"
 
 
 def _experiments(data: MeasurementSet | Experiment | Sequence[Experiment], horizon: float | None,
@@ -78,17 +78,12 @@ def identify_indirect(
     dt: float | None = None,
     interval: int | None = None,
     start: float | dict[str, float] | np.ndarray | None = None,
-    solver: str | None = None,
-    solver_options: dict | None = None,
     newton_tol: float = 1e-12,
     polish: int = 3,
-    transform: str = "linear",
-    hessian: str = "gauss-newton",
-    compiled: bool | None = None,
     budget: Budget | None = None,
     model_error: str = "refine",
     check_data: bool = True,
-    verbose: bool = False,
+    **options: Unpack[NLPKeywords],
 ) -> IdentificationResult:
     """Output-error identification of the model's parameters from measured motion.
 
@@ -116,14 +111,9 @@ def identify_indirect(
     interval : int, steps per multiple-shooting interval (default 20).
     start : factor, dict or array, optional
         Starting parameters (a number multiplies the nominal values).
-    solver : "gauss-newton" (default for single shooting on Eq. 16) or a CasADi nlpsol plugin.
     newton_tol : float
         Tolerance of the HHT Newton iterations inside the model (scaled, see HHT).
-    polish, transform, hessian, solver_options : the NLP's (see :func:`.shooting_nlp.identify_nlp`);
-        ``transform`` applies to both.
-    compiled : bool, optional
-        Generate and compile C (cached on disk, see :mod:`casflex.codegen`): the sensitivities
-        (default True), the NLP's functions (default False).
+    polish : Gauss-Newton steps after an NLP solver (see :func:`.shooting_nlp.identify_nlp`).
     budget : Budget, optional
         Gauss-Newton iterations and wall time (default 100 per stage, 600 s); for an NLP solver
         the wall time is IPOPT's ``max_wall_time`` too, unless ``solver_options`` set it.
@@ -131,7 +121,15 @@ def identify_indirect(
         Estimate the model's discretisation error in the parameters by a refit on a refined model.
     check_data : bool
         Stop when the data cannot belong to the scene (units, times, initial state).
+    **options : solver, solver_options, transform, hessian, compiled, verbose (:class:`.problem.NLPOptions`)
+        ``solver`` is "gauss-newton" (default for single shooting on Eq. 16) or a CasADi nlpsol
+        plugin (default ipopt otherwise); ``transform`` applies to both. ``compiled``: generate
+        and compile C (cached on disk, see :mod:`casflex.codegen`), the sensitivities (default
+        True) or the NLP's functions (default False).
     """
+    default = GAUSS_NEWTON if transcription == "single-shooting" and residue == "positions" else "ipopt"
+    opts = NLPOptions.of("identify_indirect", options, solver=default)
+    solver, transform, verbose = opts.solver, opts.transform, opts.verbose
     if transcription not in TRANSCRIPTIONS:
         raise ValueError(f"transcription: expected one of {TRANSCRIPTIONS}, got {transcription!r}")
     if residue not in RESIDUES:
@@ -143,27 +141,27 @@ def identify_indirect(
     run = model.scene.run
     alpha = float(run.alpha if alpha is None else alpha)
     dt = float(run.dt if dt is None else dt)
-    solver = solver or (GAUSS_NEWTON if transcription == "single-shooting" and residue == "positions" else "ipopt")
     experiments = _experiments(data, horizon, initial_state, dofs, noise)
     if solver == GAUSS_NEWTON:
         if transcription != "single-shooting" or residue != "positions":
             raise ValueError(f"solver {GAUSS_NEWTON!r}: single shooting on positions (Eq. 16) only; use an NLP solver "
                              "(e.g. ipopt) for multiple shooting or residue 'full'")
         return estimate(model, experiments, dt=dt, alpha=alpha, start=start, transform=transform, budget=budget,
-                        compiled=True if compiled is None else compiled, newton_tol=newton_tol,
+                        compiled=True if opts.compiled is None else opts.compiled, newton_tol=newton_tol,
                         model_error=model_error, check_data=check_data, verbose=verbose)
     if len(experiments) > 1 or experiments[0].initial_state != "scene":
         raise ValueError(f"solver {solver!r} ({transcription}): one recording from the scene's initial state only; "
                          f"use solver {GAUSS_NEWTON!r} (single shooting) for several recordings or an estimated "
                          "initial state")
     exp = experiments[0]
+    solver_options = opts.solver_options
     if solver == "ipopt":  # the budget's time holds for IPOPT too: no one waits unboundedly for a failure
         solver_options = merge_options({"ipopt": {"max_wall_time": (budget or Budget()).max_time}},
                                        solver_options or {})
     r = identify_nlp(model, exp.data, float(exp.data.t[-1] - exp.data.t[0]), transcription=transcription,
                      residue=residue, dofs=exp.channels, weights=weights, alpha=alpha, dt=dt, interval=interval,
-                     start=start, solver=solver, solver_options=solver_options, newton_tol=newton_tol, polish=polish,
-                     transform=transform, hessian=hessian, compiled=bool(compiled), verbose=verbose)
+                     start=start, newton_tol=newton_tol, polish=polish,
+                     **{**dataclasses.asdict(opts), "solver_options": solver_options})
     if residue == "full":
         return r
     # Eq. 16: the default procedure polishes the NLP's answer and reports it as every result is
@@ -173,7 +171,7 @@ def identify_indirect(
     reasons = [m for m in (f"the NLP solver did not succeed ({r.status})" if not r.success else "", final.message)
                if m]
     extra = {**final.extra, "transcription": transcription, "intervals": r.extra["intervals"],
-             "hessian": hessian, "nlp": {k: r.extra[k] for k in ("solver_s", "solver_parameters",
+             "hessian": opts.hessian, "nlp": {k: r.extra[k] for k in ("solver_s", "solver_parameters",
                                                                   "constraint_violation")},
              "nlp_status": r.status, "nlp_iterations": r.iterations}
     return dataclasses.replace(final, solver=solver, status=r.status, iterations=r.iterations,

@@ -4,9 +4,10 @@ the Gauss-Newton statistics (standard errors, correlations, identifiability)."""
 from __future__ import annotations
 
 import math
+import time
 import warnings
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypedDict
 
 import casadi as ca
 import numpy as np
@@ -17,7 +18,8 @@ from casflex.model import Model
 
 __all__ = ["IdentificationResult", "parameter_scale", "start_values", "bound_flags", "gauss_newton_statistics",
            "gauss_newton_polish", "robust_statistics", "solver_options_for", "least_squares_nlp", "ParameterMap",
-           "TRANSFORMS", "HESSIANS"]
+           "TRANSFORMS", "HESSIANS", "GAUSS_NEWTON", "NLPOptions", "NLPKeywords", "solve_and_polish", "failure_reasons",
+           "smoothed_if_needed"]
 
 
 def parameter_scale(model: Model) -> np.ndarray:
@@ -249,6 +251,83 @@ def solver_options_for(solver: str, verbose: bool, extra: dict | None, tol: floa
 
 HESSIANS = ("exact", "gauss-newton")
 
+#: casflex's own solver: single shooting by Gauss-Newton on forward sensitivities (the indirect method).
+GAUSS_NEWTON = "gauss-newton"
+
+
+class NLPKeywords(TypedDict, total=False):
+    """The keyword options every identification front end takes (see :class:`NLPOptions`)."""
+
+    solver: str
+    solver_options: dict
+    transform: str
+    hessian: str
+    compiled: bool
+    verbose: bool
+
+
+@dataclass(frozen=True)
+class NLPOptions:
+    """How an identification problem is solved: the one option path of the direct, adapted direct,
+    indirect and shooting-NLP front ends, checked before any work starts.
+
+    solver : a CasADi nlpsol plugin (``ipopt``, ``sqpmethod``, ...) or ``"gauss-newton"`` (the
+        indirect method's own, single shooting on positions).
+    solver_options : nlpsol options merged into casflex's (nested dicts merged, :func:`merge_options`).
+    transform : {"linear", "log"}, the decision variables (:class:`ParameterMap`).
+    hessian : {"exact", "gauss-newton"}, the NLP solver's Hessian of the Lagrangian (:func:`least_squares_nlp`).
+    compiled : generate and compile C for the solver's functions (None: the front end's default).
+    verbose : the solver's iteration log.
+    """
+
+    solver: str = "ipopt"
+    solver_options: dict | None = None
+    transform: str = "linear"
+    hessian: str = "gauss-newton"
+    compiled: bool | None = None
+    verbose: bool = False
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.solver, str) or not (self.solver == GAUSS_NEWTON or ca.has_nlpsol(self.solver)):
+            raise ValueError(f"solver {self.solver!r}: not {GAUSS_NEWTON!r} nor a CasADi NLP solver plugin available "
+                             "here (e.g. ipopt, sqpmethod)")
+        if self.solver_options is not None and not isinstance(self.solver_options, dict):
+            raise ValueError(f"solver_options: expected a dict of nlpsol options, got {self.solver_options!r}")
+        if self.transform not in TRANSFORMS:
+            raise ValueError(f"transform: expected one of {TRANSFORMS}, got {self.transform!r}")
+        if self.hessian not in HESSIANS:
+            raise ValueError(f"hessian: expected one of {HESSIANS}, got {self.hessian!r}")
+        for name in ("compiled", "verbose"):
+            value = getattr(self, name)
+            if not (isinstance(value, bool) or (name == "compiled" and value is None)):
+                raise ValueError(f"{name}: expected True or False, got {value!r}")
+
+    @classmethod
+    def of(cls, method: str, options: dict, **defaults: Any) -> NLPOptions:
+        """The options of a front end ``method`` called with keywords ``options`` over its ``defaults``;
+        an unknown keyword is a TypeError, as Python's own."""
+        unknown = sorted(set(options) - set(NLPKeywords.__annotations__))
+        if unknown:
+            raise TypeError(f"{method}() got an unexpected keyword argument {unknown[0]!r}")
+        return cls(**{**defaults, **{k: v for k, v in options.items() if v is not None}})
+
+    def nlp_solver(self, method: str) -> str:
+        """The NLP solver plugin; ``"gauss-newton"`` is refused where ``method`` is an NLP."""
+        if self.solver == GAUSS_NEWTON:
+            raise ValueError(f"solver {GAUSS_NEWTON!r}: the indirect method's single shooting; {method} needs a "
+                             "CasADi NLP solver (e.g. ipopt)")
+        return self.solver
+
+    def nlp(self, name: str, w: Any, r: Any, g: Any = None, *, f_scale: float = 1.0, tol: float = 1e-14) -> ca.Function:
+        """:func:`least_squares_nlp` with these options."""
+        return least_squares_nlp(name, self.nlp_solver(name), w, r, g, f_scale=f_scale, hessian=self.hessian,
+                                 compiled=bool(self.compiled), verbose=self.verbose,
+                                 solver_options=self.solver_options, tol=tol)
+
+    def record(self) -> dict[str, Any]:
+        """What a result's ``extra`` says of how it was solved."""
+        return {"transform": self.transform, "hessian": self.hessian, "compiled": bool(self.compiled)}
+
 
 def least_squares_nlp(name: str, solver: str, w: Any, r: Any, g: Any = None, *, f_scale: float = 1.0,
                       hessian: str = "exact", compiled: bool = False, verbose: bool = False,
@@ -308,6 +387,41 @@ def least_squares_nlp(name: str, solver: str, w: Any, r: Any, g: Any = None, *, 
             S = compiled_nlpsol(name, solver, nlp, opts)
         return S
     raise AssertionError("unreachable")
+
+
+def solve_and_polish(S: ca.Function, zJ: Any, w0: np.ndarray, lbw: np.ndarray, ubw: np.ndarray,
+                     **bounds: float) -> dict[str, Any]:
+    """Run the NLP solver ``S`` from ``w0`` within [lbw, ubw] (``bounds``: lbg, ubg), then polish its
+    answer by Gauss-Newton steps on ``zJ`` (:func:`gauss_newton_polish`): ``w_solver`` (the solver's
+    answer), ``w`` (polished), ``polished`` (steps taken), ``stats`` (the solver's), ``solver_s``
+    and ``solve_s`` (s, the solver alone and with the polish)."""
+    t0 = time.perf_counter()
+    sol = S(x0=w0, lbx=lbw, ubx=ubw, **bounds)
+    solver_s = time.perf_counter() - t0
+    w_solver = np.array(sol["x"]).ravel()
+    w, polished = gauss_newton_polish(zJ, w_solver, lbw, ubw)
+    return {"w_solver": w_solver, "w": w, "polished": polished, "stats": S.stats(), "solver_s": solver_s,
+            "solve_s": time.perf_counter() - t0}
+
+
+def failure_reasons(stats: dict, at_bound: dict[str, bool]) -> list[str]:
+    """Why an NLP result is not a success: the solver did not converge, a parameter ended on a bound."""
+    reasons = [] if stats.get("success", False) else [f"the solver did not converge ({stats.get('return_status')})"]
+    bound = [k for k, v in at_bound.items() if v]
+    if bound:
+        reasons.append(f"{', '.join(bound)} ended on a bound: the best fit lies outside the parameters' range")
+    return reasons
+
+
+def smoothed_if_needed(data: Any, smoothing: str, cutoff: float | None) -> tuple[Any, dict | None]:
+    """``data`` with velocities and accelerations (:func:`casflex.smoothing.smooth` when it has none)
+    and the smoothing's report (None: the data brought their own)."""
+    if data.qd is not None and data.qdd is not None:
+        return data, None
+    from casflex.smoothing import smooth
+
+    data = smooth(data, smoothing, cutoff)
+    return data, data.meta["smoothing"]
 
 
 def _casadi_reason(exc: Exception) -> str:

@@ -40,23 +40,15 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Sequence
+from typing import Unpack
 
 import casadi as ca
 import numpy as np
 
 from casflex import codegen
 from casflex.data import MeasurementSet
-from casflex.identification.problem import (
-    IdentificationResult,
-    ParameterMap,
-    bound_flags,
-    gauss_newton_polish,
-    gauss_newton_statistics,
-    least_squares_nlp,
-    require_fixed_supports,
-    require_node_channels,
-    start_values,
-)
+from casflex.identification import problem as pb
+from casflex.identification.problem import IdentificationResult, NLPKeywords
 from casflex.model import Model
 
 __all__ = ["identify_nlp", "RESIDUES", "TRANSCRIPTIONS"]
@@ -116,14 +108,9 @@ def identify_nlp(
     dt: float = 1e-3,
     interval: int | None = None,
     start: float | dict[str, float] | np.ndarray | None = None,
-    solver: str = "ipopt",
-    solver_options: dict | None = None,
     newton_tol: float = 1e-14,
     polish: int = 3,
-    transform: str = "linear",
-    hessian: str = "gauss-newton",
-    compiled: bool = False,
-    verbose: bool = False,
+    **options: Unpack[NLPKeywords],
 ) -> IdentificationResult:
     """Output-error identification over [t0, t0 + ``horizon``] s as an NLP (t0: the first sample).
 
@@ -148,22 +135,19 @@ def identify_nlp(
         Steps per shooting interval (multiple shooting; default 20).
     start : factor, dict or array, optional
         Starting parameters (a number multiplies the nominal values).
-    solver : str
-        A CasADi nlpsol plugin (IPOPT by default).
     newton_tol : float
         Tolerance of the HHT Newton iterations inside the model (scaled, see HHT).
     polish : int
         Gauss-Newton steps on the single-shooting problem after the solver (0: none).
-    transform : {"linear", "log"}
-        Decision variables p / scale or log(p / scale) (see :class:`ParameterMap`).
-    hessian : {"gauss-newton", "exact"}
-        The solver's Hessian of the Lagrangian (see :func:`least_squares_nlp`); "exact" means
-        second derivatives through every HHT Newton solve, several times slower.
-    compiled : bool
-        Generate and compile C for the solver's functions (CasADi JIT with the system compiler).
+    **options : solver, solver_options, transform, hessian, compiled, verbose
+        How the NLP is solved (:class:`.problem.NLPOptions`; here IPOPT, the Gauss-Newton Hessian,
+        not compiled by default). ``hessian="exact"`` means second derivatives through every HHT
+        Newton solve, several times slower.
     """
     from casflex.simulate import integrator_for, simulate
 
+    opts = pb.NLPOptions.of("identify_nlp", options)
+    opts.nlp_solver("the NLP transcription")
     if transcription not in TRANSCRIPTIONS:
         raise ValueError(f"transcription: expected one of {TRANSCRIPTIONS}, got {transcription!r}")
     if residue not in RESIDUES:
@@ -198,11 +182,11 @@ def identify_nlp(
     n, nc, n_p = model.n_dof, model.n_con, model.n_p
     integ = integrator_for(model, alpha=alpha, tol=newton_tol)
     nx = integ.nx
-    pmap = ParameterMap.of(model, transform)
+    pmap = pb.ParameterMap.of(model, opts.transform)
     scale = pmap.scale
-    require_fixed_supports(model, "the NLP transcription (solver other than gauss-newton)")
-    require_node_channels(model, data.channels, "the NLP transcription (solver other than gauss-newton)")
-    p0 = start_values(model, start)
+    pb.require_fixed_supports(model, "the NLP transcription (solver other than gauss-newton)")
+    pb.require_node_channels(model, data.channels, "the NLP transcription (solver other than gauss-newton)")
+    p0 = pb.start_values(model, start)
     ell = np.where(model.is_rotation, 1.0, model.length_scale)
     T = N * h
 
@@ -279,15 +263,14 @@ def identify_nlp(
     f_scale = 1.0 / max(float(r_start @ r_start), 1e-30) if float(r_start @ r_start) > 0 else 1.0
     # IPOPT's dual infeasibility has a floor of ~1e-8 of its start from the HHT Newton tolerance
     # inside the model: it stops there and the Gauss-Newton polish finishes the job
-    nlp = least_squares_nlp("indirect", solver, w, r, g, f_scale=f_scale, hessian=hessian, compiled=compiled,
-                            verbose=verbose, solver_options=solver_options, tol=1e-8)
+    nlp = opts.nlp("indirect", w, r, g, f_scale=f_scale, tol=1e-8)
     # single-shooting residue of p alone: polish and statistics
     Xf, Rf = (X, R) if transcription == "single-shooting" else simulate_from([x0], [N], [0])
     ss_r = residue_of(Xf)
     # NaN where a step's Newton did not converge, so that the polish rejects such a step
     ss_ok = ca.if_else(ca.mmax(Rf) <= tol_acc, ss_r, np.nan * ss_r)
     ss_all = ca.Function("ss_residue", [th], [ss_ok, ca.jacobian(ss_r, th), ss_r])
-    ss_all = codegen.compiled(ss_all) if compiled else ss_all
+    ss_all = codegen.compiled(ss_all) if opts.compiled else ss_all
 
     def ss(t: np.ndarray) -> list:
         return ss_all(t)[:2]
@@ -299,13 +282,13 @@ def identify_nlp(
     solver_s = time.perf_counter() - t_solve
     st = nlp.stats()
     wv = np.array(sol["x"]).ravel()
-    th_v, polished = gauss_newton_polish(ss, wv[:n_p], lb_th, ub_th, polish)
+    th_v, polished = pb.gauss_newton_polish(ss, wv[:n_p], lb_th, ub_th, polish)
     solve_s = time.perf_counter() - t_solve
     p_hat = pmap.p(th_v)
     # statistics from the residue as computed, also where a step missed the Newton tolerance
     # (then reported in the message below) rather than from its NaN-guarded form
     _, Jv, rv = (np.array(v) for v in ss_all(th_v))
-    stats = gauss_newton_statistics(Jv, rv.ravel(), n_p, model.parameter_names, pmap.dp_dtheta(th_v), p_hat)
+    stats = pb.gauss_newton_statistics(Jv, rv.ravel(), n_p, model.parameter_names, pmap.dp_dtheta(th_v), p_hat)
 
     # states over the window at the identified parameters: multipliers (joint reactions)
     xr = ca.Function("states", [th], [Xf, ca.mmax(Rf)])
@@ -316,18 +299,18 @@ def identify_nlp(
     message = "" if converged else (f"HHT Newton did not converge within the horizon at the identified parameters "
                                     f"(largest scaled residual {newton_res:.3g} > tol {tol_acc:g})")
     return IdentificationResult(
-        method="indirect", solver=solver, parameters=dict(zip(pn, p_hat.tolist(), strict=True)),
+        method="indirect", solver=opts.solver, parameters=dict(zip(pn, p_hat.tolist(), strict=True)),
         start=dict(zip(pn, p0.tolist(), strict=True)), success=success,
         status=str(st.get("return_status", "unknown")), message=message, iterations=int(st.get("iter_count", -1)),
         wall_build_s=build_s, wall_solve_s=solve_s, objective=0.5 * float(rv.ravel() @ rv.ravel()),
         std_errors=stats.pop("std_errors"), correlation=stats.pop("correlation"),
-        at_bound=bound_flags(model, p_hat, scale), identifiability=stats,
+        at_bound=pb.bound_flags(model, p_hat, scale), identifiability=stats,
         instants=(t0 + h * np.arange(1, N + 1)).tolist(), multipliers=Xv[3 * n:, :].T.tolist(),
-        extra={"transform": transform, "hessian": hessian, "compiled": compiled,
+        extra={**opts.record(),
                "transcription": transcription, "residue": residue, "dofs": names,
                "weights": list(weights), "steps": N, "dt": h, "intervals": M, "samples": int(steps.size),
                "constraint_violation": float(np.abs(np.array(sol["g"])).max()) if M > 1 else 0.0,
-               "gauss_newton_polish": polished, "solver_s": solver_s,
+               "pb.gauss_newton_polish": polished, "solver_s": solver_s,
                "solver_parameters": dict(zip(pn, pmap.p(wv[:n_p]).tolist(), strict=True))},
     )
 
