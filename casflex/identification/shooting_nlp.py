@@ -310,7 +310,7 @@ def identify_nlp(
                "transcription": transcription, "residue": residue, "dofs": names,
                "weights": list(weights), "steps": N, "dt": h, "intervals": M, "samples": int(steps.size),
                "constraint_violation": float(np.abs(np.array(sol["g"])).max()) if M > 1 else 0.0,
-               "pb.gauss_newton_polish": polished, "solver_s": solver_s,
+               "gauss_newton_polish": polished, "solver_s": solver_s,
                "solver_parameters": dict(zip(pn, pmap.p(wv[:n_p]).tolist(), strict=True))},
     )
 
