@@ -40,7 +40,8 @@ from scipy.linalg import LinAlgError, eigh
 from casflex.identification.measurement import Experiment, free_dofs, nyquist
 from casflex.model import Model
 
-__all__ = ["InitialState", "initial_guess", "slow_modes", "initial_state_of"]
+__all__ = ["InitialState", "initial_guess", "slow_modes", "slow_projection", "initial_state_of", "slow_manifold",
+           "kinematic_fits"]
 
 _FITS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _LINEAR: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -148,12 +149,26 @@ def initial_guess(model: Model, experiment: Experiment, m: int = 5) -> tuple[np.
         raise ValueError(f"initial_state {experiment.initial_state!r}: the state is estimated from node channels "
                          f"(x<node>, y<node>, theta<node>), and the data have markers' only ({list(compared)}); add "
                          "a node channel or start the recording at the scene's state (initial_state 'scene')")
+    tt, Q = kinematic_fits(model, data, names, limit=m)
+    tt = tt - data.t[0]
+    q0 = Q[0] if experiment.initial_state == "estimate" else model.q0.copy()
+    degree = min(2, len(tt) - 1)
+    qd0 = np.polynomial.polynomial.polyfit(tt, Q, degree)[1] if degree >= 1 else np.zeros(model.n_dof)
+    q0[fixed], qd0[fixed] = model.supports_at(float(data.t[0]))
+    return q0, qd0
+
+
+def kinematic_fits(model: Model, data, names: list[str], limit: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(times (s, m), configurations (m, n_dof)): the kinematic fit at each sample that has every
+    channel of ``names`` (node dofs), the first one by :func:`first_fit`, each later one started at
+    the one before; the first ``limit`` such samples (default all)."""
     fit = _kinematic_fit(model, tuple(sorted(model.dof(c) for c in names)))
+    fixed = [con.dof for con in model.constraints]
     cols = [data.channels.index(c) for c in names]
     dofs = [model.dof(c) for c in names]
     fits, times = [], []
     for i in range(data.t.size):
-        if len(fits) == m:
+        if len(fits) == limit:
             break
         values = data.q[i, cols]
         if not np.isfinite(values).all():
@@ -166,15 +181,10 @@ def initial_guess(model: Model, experiment: Experiment, m: int = 5) -> tuple[np.
             known[fixed] = model.supports_at(float(data.t[i]))[0]
             q_prev = np.array(fit(known, q_prev)).ravel()
         fits.append(q_prev)
-        times.append(data.t[i] - data.t[0])
+        times.append(data.t[i])
     if not fits:
         raise ValueError("data: no sample has every compared channel; cannot estimate the initial state")
-    Q, tt = np.array(fits), np.array(times)
-    q0 = Q[0] if experiment.initial_state == "estimate" else model.q0.copy()
-    degree = min(2, len(tt) - 1)
-    qd0 = np.polynomial.polynomial.polyfit(tt, Q, degree)[1] if degree >= 1 else np.zeros(model.n_dof)
-    q0[fixed], qd0[fixed] = model.supports_at(float(data.t[0]))
-    return q0, qd0
+    return np.array(times), np.array(fits)
 
 
 def slow_modes(model: Model, q: np.ndarray, p: np.ndarray, omega_cut: float) -> np.ndarray:
@@ -195,7 +205,7 @@ def slow_modes(model: Model, q: np.ndarray, p: np.ndarray, omega_cut: float) -> 
     return V[:, np.abs(w2) < omega_cut**2]
 
 
-def _manifold(model: Model, k: int) -> tuple[ca.Function, ca.Function]:
+def slow_manifold(model: Model, k: int) -> tuple[ca.Function, ca.Function]:
     """The slow-manifold map and its Jacobian for k slow modes (module docstring):
     ``slow_state(a, v, q_g, C, B, p, d) -> (q0, qd0)`` on all dofs and
     ``slow_state_jac(...) -> (dq0/da, dqd0/da, dqd0/dv)``. d scales the force rows (stiffness)."""
@@ -212,8 +222,10 @@ def _manifold(model: Model, k: int) -> tuple[ca.Function, ca.Function]:
     _, V_el, _ = model.energy(q, ca.DM.zeros(n), p)
     kkt = ca.vertcat((ca.gradient(V_el, qf) + ca.mtimes(C.T, mu)) / d, ca.mtimes(C, qf - qg[free]) - a)
     G = ca.Function("slow_manifold_kkt", [ca.vertcat(qf, mu), ca.vertcat(a, qg, ca.vec(C), p, d)], [kkt])
+    # plain Newton steps: CasADi's line search on |kkt| stalls near the solution where the KKT matrix
+    # is ill-conditioned (threelink mid-motion: cond 6e9, a residual of 2e-8 never decreased)
     rf = ca.rootfinder("slow_manifold", "newton", G, {"abstol": 1e-13, "abstolStep": 1e-14, "max_iter": 50,
-                                                      "error_on_fail": True})
+                                                      "line_search": False, "error_on_fail": True})
     A, Vv, QG, CM, BM, P, D = (ca.MX.sym(s, *shape) for s, shape in (
         ("a", (k,)), ("v", (k,)), ("q_g", (n,)), ("C", (k, nf)), ("B", (nf, k)), ("p", (model.n_p,)), ("d", (nf,))))
     z = rf(ca.vertcat(QG[free] + ca.mtimes(BM, A), ca.DM.zeros(k)), ca.vertcat(A, QG, ca.vec(CM), P, D))
@@ -268,7 +280,7 @@ class InitialState:
         """(q0, qd0), full dof vectors."""
         if self.kind == "scene":
             return self.q_guess.copy(), self.qd_guess.copy()
-        q0, qd0 = (np.array(v).ravel() for v in _manifold(self.model, self.k)[0](*self._args(xi)))
+        q0, qd0 = (np.array(v).ravel() for v in slow_manifold(self.model, self.k)[0](*self._args(xi)))
         fixed = [con.dof for con in self.model.constraints]
         qd0[fixed] = self.qd_guess[fixed]  # a moving support's rates (the manifold keeps the supports still)
         return q0, qd0
@@ -278,7 +290,7 @@ class InitialState:
         n = self.model.n_dof
         if self.kind == "scene":
             return np.zeros((n, 0)), np.zeros((n, 0))
-        dq_da, dqd_da, dqd_dv = (np.array(v) for v in _manifold(self.model, self.k)[1](*self._args(xi)))
+        dq_da, dqd_da, dqd_dv = (np.array(v) for v in slow_manifold(self.model, self.k)[1](*self._args(xi)))
         if self.kind == "velocities":
             return np.zeros((n, self.k)), dqd_dv
         return np.hstack([dq_da, np.zeros((n, self.k))]), np.hstack([dqd_da, dqd_dv])
@@ -293,11 +305,19 @@ def initial_state_of(model: Model, experiment: Experiment, p: np.ndarray,
     if experiment.initial_state == "scene":
         empty = np.zeros((free.size, 0))
         return InitialState(model, "scene", q_g, qd_g, empty, empty.T, p, np.ones(free.size))
-    B = slow_modes(model, q_g, p, nyquist(experiment))
-    K, M = (np.asarray(v, dtype=float)[np.ix_(free, free)] for v in _LINEAR[model](q_g, p))
+    B, C, d = slow_projection(model, q_g, p, nyquist(experiment))
+    return InitialState(model, experiment.initial_state, q_g, qd_g, B, C, p, d)
+
+
+def slow_projection(model: Model, q: np.ndarray, p: np.ndarray, omega_cut: float
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The slow manifold's data at q (module docstring): the slow modes B (n_free, k) below
+    ``omega_cut`` (rad/s), their projection C = B^T M (k, n_free) and the force rows' scales d (n_free,)."""
+    free = free_dofs(model)
+    B = slow_modes(model, q, p, omega_cut)
+    K, M = (np.asarray(v, dtype=float)[np.ix_(free, free)] for v in _LINEAR[model](q, p))
     C = B.T @ M
     if np.linalg.matrix_rank(C) < B.shape[1]:  # no modal reduction (massless free dofs): C = B^T
         C = B.T
     d = np.abs(np.diag(K))
-    d = np.maximum(d, 1e-9 * d.max(initial=0.0) + 1e-300)
-    return InitialState(model, experiment.initial_state, q_g, qd_g, B, C, p, d)
+    return B, C, np.maximum(d, 1e-9 * d.max(initial=0.0) + 1e-300)

@@ -22,13 +22,21 @@ Transcriptions:
 - ``single-shooting``: the unknowns are p only; the trajectory is one differentiable CasADi
   Function (HHT steps chained by ``mapaccum``, derivatives through the Newton rootfinder by the
   implicit-function theorem).
-- ``multiple-shooting``: the horizon is cut into intervals of ``interval`` steps. The HHT state at
-  the start of each interval after the first is a decision variable, initialised from a
-  simulation at the starting parameters (a consistent state: interval states made of measured
-  positions and simulated rest, as before, put steel bars out of length by the noise, i.e.
-  kilonewtons, and failed on partial noisy data), and the state an interval ends in must equal
-  the next interval's start (equality constraints, in units of each component's typical
-  magnitude).
+- ``multiple-shooting``: the horizon is cut into intervals of ``interval`` steps. Each interval
+  after the first starts on the *slow manifold* (:mod:`.initial_state`) through the recording:
+  the kinematic fit of the measured dofs at the samples, a quadratic in time through the five
+  nearest, gives (q_g, qd_g) at the interval's start; its modes below the samples' Nyquist
+  frequency are the slow ones, and the decision variables are their amplitudes and rates
+  (a, v). The fast components (the bars' stretching and bending, hundreds of hertz) take their
+  quasi-static values, the accelerations and multipliers their consistent ones (Eq. 1). The end
+  of an interval, projected on the next start's slow modes, must equal its (a, v) (equality
+  constraints, scaled by the modal size of one length scale). Full HHT states as unknowns made
+  the NLP as stiff as the bars' axial modes (accelerations respond to positions with ~1e8 s^-2)
+  and IPOPT regularised its KKT matrix by 1e8-1e17 on 3 s of twobar; starts simulated at the
+  starting parameters drifted from the data and IPOPT crawled. The transcription's optimum
+  drops the fast modes' motion at each interval start, so it is near, not at, the
+  single-shooting optimum: the Gauss-Newton polish (``polish``) and the statistics are single
+  shooting's.
 
 Both hand the NLP solver the Gauss-Newton Hessian J_r^T J_r (r the residue, exact first
 derivatives). For Eq. 17, Gauss-Newton steps on the single-shooting problem polish p after the
@@ -93,6 +101,67 @@ def _intervals(N: int, interval: int | None, transcription: str) -> list[int]:
     M = max(1, round(N / K))
     base, extra = divmod(N, M)
     return [base + 1] * extra + [base] * (M - extra)
+
+
+def _data_states(model: Model, data: MeasurementSet, names: list[str], times: list[float]
+                 ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(q, qd) at each of ``times`` (s) from the recording: the kinematic fits at the samples
+    (:func:`.initial_state.kinematic_fits`), a quadratic in time through the 5 nearest."""
+    from casflex.identification.initial_state import kinematic_fits
+
+    if not times:
+        return []
+    tk, Q = kinematic_fits(model, data, [c for c in names if c in model.dof_names])
+    out = []
+    for t in times:
+        near = np.sort(np.argsort(np.abs(tk - t))[:5])
+        deg = min(2, near.size - 1)
+        c = np.polynomial.polynomial.polyfit(tk[near] - t, Q[near], deg)
+        out.append((c[0], c[1] if deg >= 1 else np.zeros(model.n_dof)))
+    return out
+
+
+class _SlowStart:
+    """The start of a multiple-shooting interval on the slow manifold (module docstring).
+
+    At the start simulation's state (q_g, qd_g) there, the modes below ``omega_cut`` (rad/s) are
+    the slow ones (:func:`.initial_state.slow_projection`). The unknowns are their amplitudes a
+    and rates v, scaled: xi = (a / s_a, v / s_v), s_a the modal size of one length scale per dof,
+    s_v = s_a / T. The state is the slow manifold's point (q, qd)(a, v; p), its accelerations and
+    multipliers consistent (Eq. 1). The fast components take their quasi-static values.
+    """
+
+    def __init__(self, model: Model, integ, q_g: np.ndarray, qd_g: np.ndarray, t: float, p0: np.ndarray,
+                 omega_cut: float, ell: np.ndarray, T: float) -> None:
+        from casflex.identification.initial_state import free_dofs, slow_manifold, slow_projection
+
+        self.model, self.integ, self.q_g, self.t = model, integ, q_g, t
+        self.free = free_dofs(model)
+        self.B, self.C, self.d = slow_projection(model, q_g, p0, omega_cut)
+        self.k = self.B.shape[1]
+        self.fn = slow_manifold(model, self.k)[0]
+        s_a = np.abs(self.C) @ ell[self.free]
+        self.s_a = np.where(s_a > 0, s_a, 1.0)
+        self.s_v = self.s_a / T
+        self.xi0 = np.concatenate([np.zeros(self.k), self.C @ qd_g[self.free] / self.s_v])
+
+    @property
+    def size(self) -> int:
+        return 2 * self.k
+
+    def state(self, xi: ca.MX, p: ca.MX) -> ca.MX:
+        """The HHT state [q, qd, qdd, lambda] at the start of the interval."""
+        a, v = xi[:self.k] * ca.DM(self.s_a), xi[self.k:] * ca.DM(self.s_v)
+        q, qd = self.fn(a, v, self.q_g, self.C, self.B, p, self.d)
+        qdd, lam = self.integ.initial(q, qd, self.t, p)
+        return ca.vertcat(q, qd, qdd, lam)
+
+    def defect(self, x_end: ca.MX, xi: ca.MX) -> ca.MX:
+        """The previous interval's end projected on the slow modes, minus this start's (a, v), scaled."""
+        n = self.model.n_dof
+        a = ca.mtimes(ca.DM(self.C), x_end[self.free.tolist()] - ca.DM(self.q_g[self.free])) / ca.DM(self.s_a)
+        v = ca.mtimes(ca.DM(self.C), x_end[(n + self.free).tolist()]) / ca.DM(self.s_v)
+        return ca.vertcat(a - xi[:self.k], v - xi[self.k:])
 
 
 def identify_nlp(
@@ -179,9 +248,8 @@ def identify_nlp(
     cols = [model.dof(d) for d in names]
     dcols = [int(sel[c]) for c in cols]
 
-    n, nc, n_p = model.n_dof, model.n_con, model.n_p
+    n, n_p = model.n_dof, model.n_p
     integ = integrator_for(model, alpha=alpha, tol=newton_tol)
-    nx = integ.nx
     pmap = pb.ParameterMap.of(model, opts.transform)
     scale = pmap.scale
     pb.require_fixed_supports(model, "the NLP transcription (solver other than gauss-newton)")
@@ -212,9 +280,7 @@ def identify_nlp(
     G = np.hstack([guess.q, guess.qd, guess.qdd, guess.lam])
     if G.shape[0] < N + 1:  # the start diverged: hold its last state
         G = np.vstack([G, np.repeat(G[-1:], N + 1 - G.shape[0], axis=0)])
-    xs = np.concatenate([ell, ell / T, ell / T**2, np.zeros(nc)])
-    xs = np.maximum(xs, np.abs(G).max(axis=0))
-    xs[xs == 0] = 1.0
+    omega_cut = float(np.pi / np.median(np.diff(data.t)))  # the samples' Nyquist: faster modes only alias
     d = np.array(integ.scale(model.q0, model.qd0, p0, h)).ravel()
     # a step converged when its residual is within newton_tol, or the round-off floor of the
     # scene's coordinates where that is higher (see HHT.tolerance)
@@ -242,20 +308,23 @@ def identify_nlp(
     lengths = _intervals(N, interval, transcription)
     first = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(int).tolist()
     M = len(lengths)
-    S = ca.MX.sym("S", nx, M - 1)  # scaled interval start states 1..M-1
-    nodes = [x0] + [S[:, j] * ca.DM(xs) for j in range(M - 1)]
+    # the interval starts 1..M-1 on the slow manifold of the start simulation's states there
+    guesses = _data_states(model, data, names, [t0 + first[j] * h for j in range(1, M)])
+    starts = [_SlowStart(model, integ, q_g, qd_g, t0 + first[j] * h, p0, omega_cut, ell, T)
+              for j, (q_g, qd_g) in enumerate(guesses, 1)]
+    xi = [ca.MX.sym(f"xi{j}", s.size) for j, s in enumerate(starts, 1)]  # scaled (a, v) of each start
+    nodes = [x0] + [s.state(x, p) for s, x in zip(starts, xi, strict=True)]
     X, R = simulate_from(nodes, lengths, first)
     r = residue_of(X)
     ends = [X[:, first[j] + lengths[j] - 1] for j in range(M - 1)]
-    g = ca.vertcat(*[(ends[j] - nodes[j + 1]) / ca.DM(xs) for j in range(M - 1)]) if M > 1 else ca.MX(0, 1)
-    w = ca.vertcat(th, ca.vec(S))
+    g = ca.vertcat(*[s.defect(e, x) for s, e, x in zip(starts, ends, xi, strict=True)]) if M > 1 else ca.MX(0, 1)
+    w = ca.vertcat(th, *xi)
 
-    # starting states of the intervals: the start simulation's (consistent; module docstring)
-    W0 = G[first[1:]].copy() if M > 1 else np.zeros((0, nx))
-    w0 = np.concatenate([pmap.theta(p0), (W0 / xs).ravel()])  # vec(S) stacks columns = states
+    w0 = np.concatenate([pmap.theta(p0), *[s.xi0 for s in starts]])
     lb_th, ub_th = pmap.bounds()
-    lbw = np.concatenate([lb_th, np.full(nx * (M - 1), -np.inf)])
-    ubw = np.concatenate([ub_th, np.full(nx * (M - 1), np.inf)])
+    n_xi = w0.size - n_p
+    lbw = np.concatenate([lb_th, np.full(n_xi, -np.inf)])
+    ubw = np.concatenate([ub_th, np.full(n_xi, np.inf)])
 
     # the objective scaled to ~1 at the start: solver tolerances then mean the same on any data
     fr = ca.Function("residue", [w], [r])
