@@ -271,8 +271,7 @@ def page(raw: dict) -> list[str]:
               "|---:|---:|---|---|---:|---:|"]
         L += [f"| {s['t']} | {s['h']:.0e} | {'velocities only (row 2)' if s['velocities_only'] else 'set (row 3)'} | "
               f"{fmt_p(s['p'])} | {s['err']:.2e} | {s['err_k']:.2e} |" for s in spacing]
-    return L + ["", "## What the numbers say", "", *direct_findings(by, instants, fd, spacing, ps), "",
-                *indirect_findings(by, cross, instants, fd, ps, quick)]
+    return L + ["", "## What the numbers say", "", *findings(by, cross, instants, spacing, ps, quick), ""]
 
 
 def _errs(cells: list[dict]) -> str:
@@ -293,71 +292,37 @@ def _slope(spacing: list[dict], t: float, vel_only: bool) -> float | None:
     return float(np.polyfit(np.log([x["h"] for x in s]), np.log([x["err"] for x in s]), 1)[0]) if len(s) >= 3 else None
 
 
-def direct_findings(by, instants, fd, spacing, ps) -> list[str]:
-    """Rows 1-3: the measured offsets beside the paper's, and how they scale with the spacing."""
+def findings(by, cross, instants, spacing, ps, quick) -> list[str]:
+    """The measured sentences: the direct offsets beside the paper's and their growth with the spacing;
+    per indirect row, agreement with the paper and the failures single shooting rescues."""
     paper_k = {T1: _rel_err(P1[[0, 2]], ps[[0, 2]]), T2: _rel_err(P2[[0, 2]], ps[[0, 2]])}
     r1 = [c for t in instants for c in by[("1", t)]]
     same = all(_rel_err(c["p"], np.array(c["linear"])) <= 1e-6 for k in "123" for t in instants for c in by[(k, t)])
-    txt = [f"**Direct (rows 1-3).** On the simulated set: {'p*' if all(c['kind'] == 'p*' for c in r1) else 'not p*'} "
-           f"at every instant and start (largest error {max(c['err'] for c in r1):.1e}); IPOPT's result "
-           + ("equals" if same else "does not always equal") + " the exact linear least-squares solution."]
-    for t, f in zip(instants, fd, strict=True):
-        r2, r3 = by[("2", t)], by[("3", t)]
-        weak = sorted({w for c in r2 + r3 for w in c["weak"]})
-        txt.append(f"At t = {t} s, measured velocities alone (row 2) shift p by at most {max(c['err'] for c in r2):.1e}"
-                   f" relative, k1, k3 by {max(_rel_err(np.array(c['p'])[[0, 2]], ps[[0, 2]]) for c in r2):.1e} "
-                   f"(weak: {', '.join(weak) or '-'}); the paper's {'p1' if t == T1 else 'p2'} is "
-                   f"{_rel_err(P1 if t == T1 else P2, ps):.1e} from p* ({paper_k[t]:.1e} in k1, k3). On the measured "
-                   f"set (row 3): {WORDS[combine(r3)]}, {max(c['err'] for c in r3):.1e} from p*; Eq. 1 is violated at "
-                   f"p* by {f['imb_hyb']:.1e} N (measured velocities) and {f['imb_meas']:.1e} N (measured set), force "
-                   f"scale {f['force_scale']:.3g} N.")
+    s = (f"- **Direct (rows 1-3).** Simulated set: {'p*' if all(c['kind'] == 'p*' for c in r1) else 'not p*'} "
+         f"everywhere (largest error {max(c['err'] for c in r1):.1e}); IPOPT's result "
+         + ("equals" if same else "does not always equal") + " the linear least-squares solution.")
     for t in instants:
-        sv, sl = _slope(spacing, t, True), _slope(spacing, t, False)
         pts = [x for x in spacing if x["t"] == t and x["velocities_only"]]
-        if sl is None and sv is None:
-            continue
-        hmax = max(x["h"] for x in pts)
-        txt.append(f"Coarser sampling at t = {t} s: the row-2 offset grows like h^{sv or np.nan:.1f}, the row-3 "
-                   f"offset like h^{sl or np.nan:.1f}; at h = {hmax:.0e} s measured velocities move k1, k3 by "
-                   f"{max(x['err_k'] for x in pts if x['h'] == hmax):.1e} (the paper's offset: {paper_k[t]:.0e}).")
-    return [" ".join(txt)]
-
-
-def indirect_findings(by, cross, instants, fd, ps, quick) -> list[str]:
-    """Rows 4-7: agreement with the paper, per transcription, and which failures single shooting rescues."""
-    out = []
-    for keys, title in ((("4", "5", "6"), "Indirect, Eq. 17 (rows 4-6)."), (("7",), "Indirect, Eq. 16 (row 7).")):
-        txt = [f"**{title}**"]
-        if quick:
-            txt.append(f"Quick mode: single shooting on 0..{QUICK_HORIZON} s only, a CI check; the verdicts do not "
-                       "compare with the paper's horizons.")
-        for key in keys:
-            for t in instants:
-                cs, ss = by[(key, t)], [c for c in cross if c["row"] == key and c["t"] == t]
-                pk, tr = PAPER[(key, t)][0], cs[0]["transcription"].replace("-", " ")
-                s = f"Row {key}, t = {t} s: {tr} {'agrees' if combine(cs) == pk else 'differs'}"
-                s += f", single shooting {'agrees' if combine(ss) == pk else 'differs'}" if ss else ""
-                fails, ss_ok = {c["start"] for c in cs if c["kind"] == "fails"}, {c["start"] for c in ss
-                                                                                  if c["kind"] != "fails"}
-                if fails & ss_ok:
-                    s += f"; single shooting succeeds from {_starts(fails & ss_ok)}"
-                if fails - ss_ok:
-                    s += f"; neither succeeds from {_starts(fails - ss_ok)}"
-                near = [c for c in cs + ss if c["kind"] == "fails" and c["err"] <= TOL]
-                if near:
-                    s += f"; stopped at p* to the criterion without success from {_starts({c['start'] for c in near})}"
-                done = [c for c in cs + ss if c["kind"] in ("elsewhere", "bad")]
-                if key in ("5", "6") and done:
-                    p = np.array(max(done, key=lambda c: c["err"])["p"])
-                    s += (f"; the minimiser is off p* (k1, k3 by {_rel_err(p[[0, 2]], ps[[0, 2]]):.1e}, kt1, kt3 by "
-                          f"{_rel_err(p[[1, 3]], ps[[1, 3]]):.1e})")
-                rng = PAPER_RANGE.get((key, t))
-                outside = [c["start"] for c in cs if c["kind"] == "p*" and rng and not rng[0] <= c["start"] <= rng[1]]
-                if outside and not quick:
-                    s += f"; converges from {_starts(outside)} x p*, outside the paper's {rng[0]:.2f}-{rng[1]:.2f}"
-                txt.append(s + ".")
-        out += [" ".join(txt), ""]
-    return out + (["(Quick mode: the full study runs t1 and t2 with the paper's horizons.)", ""] if quick else [])
+        s += (f" At t = {t} s measured velocities (row 2) move k1, k3 by "
+              f"{max(_rel_err(np.array(c['p'])[[0, 2]], ps[[0, 2]]) for c in by[('2', t)]):.1e} (the paper's "
+              f"{'p1' if t == T1 else 'p2'}: {paper_k[t]:.1e}), {max(x['err_k'] for x in pts):.1e} at "
+              f"h = {max(x['h'] for x in pts):.0e} s; the offsets grow like h^{_slope(spacing, t, True) or np.nan:.1f} "
+              f"(row 2) and h^{_slope(spacing, t, False) or np.nan:.1f} (row 3).")
+    out = [s]
+    for key in ("4", "5", "6", "7"):
+        for t in instants:
+            cs, ss = by[(key, t)], [c for c in cross if c["row"] == key and c["t"] == t]
+            pk = PAPER[(key, t)][0]
+            s = (f"- Row {key}, t = {t} s: {cs[0]['transcription'].replace('-', ' ')} "
+                 f"{'agrees' if combine(cs) == pk else 'differs'}")
+            s += f", single shooting {'agrees' if combine(ss) == pk else 'differs'}" if ss else ""
+            fails = {c["start"] for c in cs if c["kind"] == "fails"}
+            ss_ok = {c["start"] for c in ss if c["kind"] != "fails"}
+            s += f"; single shooting succeeds where it fails from {_starts(fails & ss_ok)}" if fails & ss_ok else ""
+            s += f"; neither succeeds from {_starts(fails - ss_ok)}" if fails - ss_ok else ""
+            out.append(s + ".")
+    return out + (["", f"(Quick mode: single shooting on 0..{QUICK_HORIZON} s only, a CI check; the full study runs "
+                   "t1 and t2 with the paper's horizons.)"] if quick else [])
 
 
 def _starts(values) -> str:
