@@ -303,6 +303,8 @@ def findings(by, cross, instants, spacing, ps, quick) -> list[str]:
          + ("equals" if same else "does not always equal") + " the linear least-squares solution.")
     for t in instants:
         pts = [x for x in spacing if x["t"] == t and x["velocities_only"]]
+        if not pts:  # no coarser spacing fits this instant
+            continue
         s += (f" At t = {t} s measured velocities (row 2) move k1, k3 by "
               f"{max(_rel_err(np.array(c['p'])[[0, 2]], ps[[0, 2]]) for c in by[('2', t)]):.1e} (the paper's "
               f"{'p1' if t == T1 else 'p2'}: {paper_k[t]:.1e}), {max(x['err_k'] for x in pts):.1e} at "
