@@ -1,4 +1,4 @@
-"""Benchmark: what an identification costs the first time and every later time.
+"""Benchmark: what does an identification cost the first time, and every later time?
 
 Twobar measured by Exudyn (tests/data/twobar_exudyn.npz: 8 ANCF elements per bar), the paper's
 channels x, y of nodes 3 and 5 at 100 Hz with 0.5 mm of noise, from rest, start 0.8 x p*. Each case
@@ -18,22 +18,17 @@ Run: ``python studies/bench_identification.py`` (about 10 min; ``--quick``: two 
 
 from __future__ import annotations
 
-import argparse
-import io
 import json
 import os
-import platform
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+from _small import exudyn_recording, in_fresh_process
+from _study import Banner, cli, png, write_outputs
 
-from casflex.results import atomic_write_bytes, atomic_write_text
-
-ROOT = Path(__file__).resolve().parents[1]
 NOISE, SEED, START = 5e-4, 0, 0.8
 CASES = {  # name: (method, horizon (s), options)
     "default, 0.69 s": ("indirect", 0.69, {}),
@@ -49,18 +44,7 @@ CASES = {  # name: (method, horizon (s), options)
 QUICK = ("default without model-error refit, 0.69 s", "direct, simulated set, t = 0.69 s (compiled)")
 
 
-def _recording(t_end: float):
-    from casflex.data import MeasurementSet
-
-    z = np.load(ROOT / "tests" / "data" / "twobar_exudyn.npz")
-    names = ("x3", "y3", "x5", "y5")
-    cols = [[str(c) for c in z["channels"]].index(c) for c in names]
-    rows = np.arange(0, int(round(t_end * 1000)) + 1, 10)  # 100 Hz from the 1 kHz recording
-    q = z["q"][np.ix_(rows, cols)]
-    return MeasurementSet(z["t"][rows], names, q + np.random.default_rng(SEED).normal(0, NOISE, q.shape), None, None)
-
-
-def _worker(case: str) -> dict:
+def worker(case: str) -> dict:
     """One identification in this (fresh) process: its recorded times, result and the process's."""
     t0 = time.perf_counter()
     import casflex
@@ -73,53 +57,21 @@ def _worker(case: str) -> dict:
 
         r = identify_direct(model, simulated_set(model, 1.0), [horizon], start=START, **opts)
     else:
-        r = identify_indirect(model, _recording(horizon), dt=1e-3, start=START, noise=NOISE, **opts)
-    err = np.abs(r.p / model.p_nominal - 1)
-    names = model.parameter_names
+        data = exudyn_recording("twobar_exudyn", ("x3", "y3", "x5", "y5"), 0.0, horizon, NOISE, SEED)
+        r = identify_indirect(model, data, dt=1e-3, start=START, noise=NOISE, **opts)
+    err, names = np.abs(r.p / model.p_nominal - 1), model.parameter_names
     return {"build_s": r.wall_build_s, "solve_s": r.wall_solve_s, "process_s": time.perf_counter() - t0,
             "iterations": r.iterations, "success": bool(r.success),
             "k_err": float(max(err[i] for i, n in enumerate(names) if n.startswith("k") and not n.startswith("kt"))),
             "kt_err": float(max(err[i] for i, n in enumerate(names) if n.startswith("kt")))}
 
 
-def _run(case: str, env: dict) -> dict:
-    out = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--worker", case], env=env, text=True,
-                         capture_output=True, timeout=3600, check=True)
-    return json.loads(out.stdout.strip().splitlines()[-1])
-
-
-def main(quick: bool = False, out_dir: Path | None = None) -> dict:
-    out_dir = ROOT / "docs" if out_dir is None else Path(out_dir)
-    print("=" * 78)
-    print("bench_identification: cold and cached builds, solve times, twobar from Exudyn's recording")
-    print("=" * 78, flush=True)
-    rows = []
-    for case in QUICK if quick else CASES:
-        with tempfile.TemporaryDirectory(prefix="casflex-bench-cache-") as cache:
-            env = dict(os.environ, CASFLEX_CACHE=cache)
-            cold, warm = _run(case, env), _run(case, env)
-        rows.append({"case": case, "cold": cold, "warm": warm})
-        print(f"{case:<48s} cold {cold['build_s'] + cold['solve_s']:7.1f} s, cached: build {warm['build_s']:5.2f} s "
-              f"+ solve {warm['solve_s']:6.2f} s ({warm['iterations']} it.), k {warm['k_err']:.1e}, kt "
-              f"{warm['kt_err']:.1e}, success {warm['success']}", flush=True)
-    suffix = "_quick" if quick else ""
-    print("wrote", atomic_write_text(out_dir / "tables" / f"bench_identification{suffix}.md", _page(rows, quick)))
-    print("wrote", atomic_write_bytes(out_dir / "figures" / f"bench_identification{suffix}.png", _figure(rows)))
-    # self-checks: the second process compiles nothing (its build is at most a few seconds of set-up), and
-    # the answers do not depend on the cache
-    for r in rows:
-        assert r["warm"]["success"] == r["cold"]["success"], f"{r['case']}: the cache changed the outcome"
-        assert abs(r["warm"]["k_err"] - r["cold"]["k_err"]) <= 1e-12, f"{r['case']}: the cache changed the answer"
-    return {"rows": rows}
-
-
-def _page(rows: list[dict], quick: bool) -> str:
+def page(rows: list[dict], banner: str) -> str:
+    """Cold and cached times per case, and the answers."""
     L = ["# Identification benchmark: first and later runs", "",
-         f"Generated by `python studies/bench_identification.py{' --quick' if quick else ''}` on "
-         f"{platform.machine()} ({os.cpu_count()} CPUs, Python {platform.python_version()}); load average at the end "
-         f"{os.getloadavg()[0]:.2f}. Data, cases and what is timed: the script's docstring. Errors are the largest "
-         "relative error of the spring stiffnesses k and of the torsion stiffnesses kt (truth: Exudyn's parameters, "
-         "the scene's nominal values).", "",
+         f"{banner} Data, cases and what is timed: the script's docstring. Errors are the largest relative error of "
+         "the spring stiffnesses k and of the torsion stiffnesses kt (truth: Exudyn's parameters, the scene's nominal "
+         "values).", "",
          "| case | first process: build + solve (s) | later process: build (s) | later: solve (s) | later: total (s) "
          "| iterations | k error | kt error | success |", "|---|---:|---:|---:|---:|---:|---:|---:|---|"]
     for r in rows:
@@ -132,34 +84,43 @@ def _page(rows: list[dict], quick: bool) -> str:
     return "\n".join(L)
 
 
-def _figure(rows: list[dict]) -> bytes:
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+def figure(rows: list[dict]) -> bytes:
+    """Build + solve of the first and a later process, per case."""
+    from casflex.plotting._figure import _new_figure
 
-    fig = Figure(figsize=(10, 4.5))
-    FigureCanvasAgg(fig)
+    fig = _new_figure((10, 4.5))
     ax = fig.subplots()
     x = np.arange(len(rows))
-    ax.bar(x - 0.2, [r["cold"]["build_s"] + r["cold"]["solve_s"] for r in rows], 0.4, label="first process")
-    ax.bar(x + 0.2, [r["warm"]["build_s"] + r["warm"]["solve_s"] for r in rows], 0.4, label="later process")
+    for dx, which, label in ((-0.2, "cold", "first process"), (0.2, "warm", "later process")):
+        ax.bar(x + dx, [r[which]["build_s"] + r[which]["solve_s"] for r in rows], 0.4, label=label)
     ax.set_xticks(x, [r["case"].replace(", ", ",\n", 1) for r in rows], fontsize=7)
     ax.set_yscale("log")
     ax.set_ylabel("build + solve (s)")
     ax.legend()
     ax.grid(True, axis="y", which="both", alpha=0.3)
-    fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100)
-    return buf.getvalue()
+    return png(fig)
+
+
+def main(quick: bool = False, out_dir: Path | None = None) -> dict:
+    banner = Banner("bench_identification", quick)
+    rows = []
+    for case in QUICK if quick else CASES:
+        with tempfile.TemporaryDirectory(prefix="casflex-bench-cache-") as cache:
+            env = dict(os.environ, CASFLEX_CACHE=cache)
+            cold, warm = (in_fresh_process(__file__, ["--worker", case], env) for _ in range(2))
+        rows.append({"case": case, "cold": cold, "warm": warm})
+        print(f"{case:<48s} cold {cold['build_s'] + cold['solve_s']:7.1f} s, cached: build {warm['build_s']:5.2f} s "
+              f"+ solve {warm['solve_s']:6.2f} s ({warm['iterations']} it.)", flush=True)
+    write_outputs("bench_identification", out_dir, quick, page(rows, banner.line()), figure(rows))
+    # self-checks: the answers do not depend on the cache
+    for r in rows:
+        assert r["warm"]["success"] == r["cold"]["success"], f"{r['case']}: the cache changed the outcome"
+        assert abs(r["warm"]["k_err"] - r["cold"]["k_err"]) <= 1e-12, f"{r['case']}: the cache changed the answer"
+    return {"rows": rows}
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--out-dir", type=Path)
-    ap.add_argument("--worker", help=argparse.SUPPRESS)
-    a = ap.parse_args()
-    if a.worker:
-        print(json.dumps(_worker(a.worker)))
+    if sys.argv[1:2] == ["--worker"]:  # hidden: one case in this fresh process, JSON on stdout
+        print(json.dumps(worker(sys.argv[2])))
     else:
-        main(quick=a.quick, out_dir=a.out_dir)
+        cli(__doc__, main)

@@ -18,15 +18,13 @@ parameter more than 3 SE from the truth). Writes docs/tables/dampers.md and docs
 from __future__ import annotations
 
 import json
-import platform
 import time
 from pathlib import Path
 
 import numpy as np
-from _study import cli, sweep, write_outputs
+from _small import DATA, exudyn_recording, honesty
+from _study import Banner, cli, sweep, write_outputs
 
-ROOT = Path(__file__).resolve().parents[1]
-DATA = ROOT / "tests" / "data"
 MARKERS = ("x3", "y3", "x5", "y5")
 NOISE = 1e-3
 SEEDS = 10
@@ -36,18 +34,11 @@ WINDOWS = {"rest": (0.0, 3.0, "scene"), "mid": (0.5, 2.5, "estimate")}
 def one_run(*, window: str, seed: int, quick: bool) -> dict:
     """One identification (a sweep run): relative errors, z-scores against the truth, success, wall time."""
     import casflex
-    from casflex.data import MeasurementSet
     from casflex.identification import identify_indirect
 
     model = casflex.assemble(casflex.load_scene(DATA / "twobar_damped.toml"))
     a, b, state = WINDOWS[window]
-    b = a + 1.0 if quick else b
-    z = np.load(DATA / "twobar_damped_exudyn.npz")
-    ch = [str(c) for c in z["channels"]]
-    rows = np.arange(int(round(a * 1000)), int(round(b * 1000)) + 1, 10)  # 100 Hz from Exudyn's 1 kHz
-    q = z["q"][np.ix_(rows, [ch.index(c) for c in MARKERS])]
-    data = MeasurementSet(z["t"][rows], MARKERS, q + np.random.default_rng(seed).normal(0, NOISE, q.shape), None,
-                          None)
+    data = exudyn_recording("twobar_damped_exudyn", MARKERS, a, a + 1.0 if quick else b, NOISE, seed)
     t0 = time.perf_counter()
     r = identify_indirect(model, data, dt=1e-3, initial_state=state, start=0.8)
     se = np.array([r.std_errors[k] for k in model.parameter_names])
@@ -64,35 +55,30 @@ def summarise(records: list[tuple[dict, dict]]) -> list[dict]:
         recs = [rec for run, rec in records if run["window"] == window and "error" not in rec]
         if not recs:
             continue
-        err = np.abs(np.array([r["rel_error"] for r in recs]))
-        z = np.abs(np.array([r["z"] for r in recs]))
-        succ = np.array([r["success"] for r in recs])
-        dishonest = int(np.sum(succ & (z > 3).any(axis=1)))
-        for j, name in enumerate(recs[0]["names"]):
-            rows.append({"window": window, "parameter": name, "runs": len(recs),
-                         "err_median": float(np.median(err[:, j])), "err_max": float(err[:, j].max()),
-                         "cover2": float(np.mean(z[:, j] <= 2)),
-                         "cover3": float(np.mean(z[:, j] <= 3)), "success": float(succ.mean()),
-                         "dishonest": dishonest, "wall_s": float(np.median([r["wall_s"] for r in recs])),
-                         "z": [r["z"][j] for r in recs]})
+        err, h = np.abs(np.array([r["rel_error"] for r in recs])), honesty(recs)
+        rows += [{"window": window, "parameter": name, "runs": len(recs), "err_median": float(np.median(err[:, j])),
+                  "err_max": float(err[:, j].max()), "cover2": float(h["cover2"][:, j].mean()),
+                  "cover3": float(h["cover3"][:, j].mean()), "success": float(h["success"].mean()),
+                  "dishonest": h["dishonest"], "wall_s": float(np.median([r["wall_s"] for r in recs])),
+                  "z": [r["z"][j] for r in recs]} for j, name in enumerate(recs[0]["names"])]
     return rows
 
 
-def _page(rows: list[dict], quick: bool, wall: float) -> str:
+def page(rows: list[dict], banner: str) -> str:
+    """The table of errors, coverage and honesty per window and parameter."""
     lines = ["# Identifying joint dampers from markers", "",
-             f"Written by `python studies/dampers.py{' --quick' if quick else ''}` in {wall / 60:.1f} min on "
-             f"{platform.node() or 'this machine'} ({platform.processor() or platform.machine()}); the set-up is in "
-             "the script's docstring. Truth: Exudyn's parameters; noise 1 mm on x, y of nodes 3 and 5 at 100 Hz.", "",
+             f"{banner} The set-up is in the script's docstring. Truth: Exudyn's parameters; noise 1 mm on x, y of "
+             "nodes 3 and 5 at 100 Hz.", "",
              "| window | parameter | runs | error (median / max) | 2 SE | 3 SE | success | dishonest | wall (s) |",
              "|" + "---|" * 9]
-    for r in rows:
-        lines.append(f"| {r['window']} | {r['parameter']} | {r['runs']} | {100 * r['err_median']:.3g} % / "
-                     f"{100 * r['err_max']:.3g} % | {100 * r['cover2']:.0f} % | {100 * r['cover3']:.0f} % | "
-                     f"{100 * r['success']:.0f} % | {r['dishonest']} | {r['wall_s']:.1f} |")
+    lines += [f"| {r['window']} | {r['parameter']} | {r['runs']} | {100 * r['err_median']:.3g} % / "
+              f"{100 * r['err_max']:.3g} % | {100 * r['cover2']:.0f} % | {100 * r['cover3']:.0f} % | "
+              f"{100 * r['success']:.0f} % | {r['dishonest']} | {r['wall_s']:.1f} |" for r in rows]
     return "\n".join(lines) + "\n"
 
 
-def _figure(rows: list[dict], path: Path) -> None:
+def figure(rows: list[dict], path: Path) -> None:
+    """z-scores of every run, per parameter and window, against the 2- and 3-SE lines."""
     from casflex.plotting._figure import _new_figure, _save
 
     fig = _new_figure((8.0, 3.4))
@@ -100,9 +86,8 @@ def _figure(rows: list[dict], path: Path) -> None:
     names = list(dict.fromkeys(r["parameter"] for r in rows))
     for k, (window, color) in enumerate((("rest", "C0"), ("mid", "C1"))):
         for r in (r for r in rows if r["window"] == window):
-            x = names.index(r["parameter"]) + (k - 0.5) * 0.25
-            ax.plot(np.full(len(r["z"]), x), r["z"], "o", ms=3, color=color, alpha=0.7,
-                    label=window if r["parameter"] == names[0] else None)
+            ax.plot(np.full(len(r["z"]), names.index(r["parameter"]) + (k - 0.5) * 0.25), r["z"], "o", ms=3,
+                    color=color, alpha=0.7, label=window if r["parameter"] == names[0] else None)
     for level in (-3, -2, 2, 3):
         ax.axhline(level, color="black", lw=0.5, ls="--" if abs(level) == 2 else "-")
     ax.set_xticks(range(len(names)), names)
@@ -115,12 +100,12 @@ def _figure(rows: list[dict], path: Path) -> None:
 
 
 def main(quick: bool = False, out_dir: Path | None = None, record: Path | None = None) -> list[dict]:
-    t0 = time.perf_counter()
+    banner = Banner("dampers", quick)
     plan = [{"window": w, "seed": s, "quick": quick} for w in (("rest",) if quick else WINDOWS)
             for s in range(1 if quick else SEEDS)]
     rows = summarise(sweep("dampers", plan, lambda r: f"{r['window']}_{r['seed']}", one_run, record=record,
                            quick=quick))
-    write_outputs("dampers", out_dir, quick, _page(rows, quick, time.perf_counter() - t0), lambda f: _figure(rows, f))
+    write_outputs("dampers", out_dir, quick, page(rows, banner.line()), lambda f: figure(rows, f))
     for r in rows:
         print(json.dumps({k: v for k, v in r.items() if k != "z"}))
     # the study's checks (issue 13's bar): from the recording at rest, every damper within 5 % of the

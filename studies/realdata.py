@@ -28,15 +28,13 @@ casflex.sweep, ``--record DIR`` resumes an interrupted study).
 from __future__ import annotations
 
 import json
-import platform
 import time
 from pathlib import Path
 
 import numpy as np
-from _study import cli, sweep, write_outputs
+from _small import exudyn_recording, honesty
+from _study import Banner, cli, sweep, write_outputs
 
-ROOT = Path(__file__).resolve().parents[1]
-DATA = ROOT / "tests" / "data"
 NOISES = (0.0, 1e-4, 5e-4, 1e-3)
 SEEDS = 10
 INSTANTS = np.linspace(0.3, 2.7, 9)
@@ -45,19 +43,7 @@ SCENES = {  # markers for the indirect method, windows (start, end, initial stat
     "threelink": {"markers": ("x3", "y3", "x5", "y5", "x7", "y7"), "rest": (0.0, 3.0, "scene"),
                   "mid": (1.0, 3.0, "estimate")},
 }
-METHODS = ("indirect", "indirect-ms", "adapted", "direct")
 MS_WALL = 600.0
-
-
-def recording(scene: str, names: tuple[str, ...], t_from: float, t_to: float, noise: float, seed: int):
-    """The channels ``names`` of Exudyn's motion from t_from to t_to at 100 Hz, with noise (m, rad)."""
-    from casflex.data import MeasurementSet
-
-    z = np.load(DATA / f"{scene}_exudyn.npz")
-    ch = [str(c) for c in z["channels"]]
-    rows = np.arange(int(round(t_from * 1000)), int(round(t_to * 1000)) + 1, 10)
-    q = z["q"][np.ix_(rows, [ch.index(c) for c in names])]
-    return MeasurementSet(z["t"][rows], names, q + np.random.default_rng(seed).normal(0, noise, q.shape), None, None)
 
 
 def one_run(*, scene: str, method: str, window: str, noise: float, seed: int, quick: bool) -> dict:
@@ -67,35 +53,33 @@ def one_run(*, scene: str, method: str, window: str, noise: float, seed: int, qu
 
     model = casflex.assemble(casflex.load_scene(scene))
     a, b, state = SCENES[scene][window]
-    if quick:
-        b = a + 1.0
+    b = a + 1.0 if quick else b
     start = 0.8  # every method starts 20 % below the truth
     t0 = time.perf_counter()
     if method.startswith("indirect"):
-        data = recording(scene, SCENES[scene]["markers"], a, b, noise, seed)
+        data = exudyn_recording(f"{scene}_exudyn", SCENES[scene]["markers"], a, b, noise, seed)
         # multiple shooting: IPOPT capped at MS_WALL s (a capped run counts as not converged)
         kw = ({"transcription": "multiple-shooting", "solver": "ipopt",
                "solver_options": {"ipopt": {"max_wall_time": MS_WALL}}} if method == "indirect-ms" else {})
         r = identify_indirect(model, data, dt=1e-3, initial_state=state, start=start,
                               model_error="none" if quick else "refine", **kw)
     else:
-        trans = tuple(d for d in model.dof_names if not d.startswith("theta")) if method == "adapted" \
+        names = tuple(d for d in model.dof_names if not d.startswith("theta")) if method == "adapted" \
             else model.dof_names
-        data = recording(scene, trans, a, b, noise, seed)
+        data = exudyn_recording(f"{scene}_exudyn", names, a, b, noise, seed)
         instants = [float(data.t[np.argmin(np.abs(data.t - (a + t)))]) for t in INSTANTS if a + t < b - 0.05]
-        fn = identify_adapted_direct if method == "adapted" else identify_direct
-        r = fn(model, data, instants, start=start)
-    p = r.p
+        r = (identify_adapted_direct if method == "adapted" else identify_direct)(model, data, instants, start=start)
     se = np.array([r.std_errors[k] for k in model.parameter_names])
     with np.errstate(divide="ignore", invalid="ignore"):
-        z = (p - model.p_nominal) / se
+        z = (r.p - model.p_nominal) / se
     return {"success": bool(r.success), "status": r.status, "message": r.message[:300],
-            "rel_error": (p / model.p_nominal - 1).tolist(), "z": np.where(np.isfinite(z), z, 0.0).tolist(),
+            "rel_error": (r.p / model.p_nominal - 1).tolist(), "z": np.where(np.isfinite(z), z, 0.0).tolist(),
             "se_finite": np.isfinite(se).tolist(), "names": list(model.parameter_names),
             "wall_s": time.perf_counter() - t0}
 
 
-def _plan(quick: bool) -> list[dict]:
+def plan(quick: bool) -> list[dict]:
+    """Every run of the study (quick: the default and the adapted direct method, once)."""
     if quick:
         return [{"scene": "twobar", "method": m, "window": "rest", "noise": 5e-4, "seed": 0, "quick": True}
                 for m in ("indirect", "adapted")]
@@ -103,16 +87,12 @@ def _plan(quick: bool) -> list[dict]:
     for scene in SCENES:
         for noise in NOISES:
             for seed in range(SEEDS if noise > 0 else 1):  # without noise every seed is the same run
-                for window in ("rest", "mid"):
-                    runs.append({"scene": scene, "method": "indirect", "window": window, "noise": noise, "seed": seed})
-                for method in ("adapted", "direct"):
-                    runs.append({"scene": scene, "method": method, "window": "rest", "noise": noise, "seed": seed})
+                runs += [{"scene": scene, "method": "indirect", "window": w, "noise": noise, "seed": seed}
+                         for w in ("rest", "mid")]
+                runs += [{"scene": scene, "method": m, "window": "rest", "noise": noise, "seed": seed}
+                         for m in ("adapted", "direct")]
             runs.append({"scene": scene, "method": "indirect-ms", "window": "rest", "noise": noise, "seed": 0})
     return [{**r, "quick": False} for r in runs]
-
-
-def _key(r: dict) -> str:
-    return f"{r['scene']}_{r['method']}_{r['window']}_{r['noise']:g}_{r['seed']}"
 
 
 def summarise(records: list[tuple[dict, dict]]) -> list[dict]:
@@ -123,35 +103,26 @@ def summarise(records: list[tuple[dict, dict]]) -> list[dict]:
     rows = []
     for (scene, window, method, noise), recs in sorted(groups.items()):
         ok = [r for r in recs if "error" not in r]
-        if not ok:
-            rows.append({"scene": scene, "window": window, "method": method, "noise": noise, "runs": len(recs),
-                         "failed": len(recs)})
-            continue
-        names = ok[0]["names"]
-        err = np.abs(np.array([r["rel_error"] for r in ok]))
-        z = np.abs(np.array([r["z"] for r in ok]))
-        finite = np.array([r["se_finite"] for r in ok])
-        is_k = np.array([not n.startswith("kt") for n in names])
-        succ = np.array([r["success"] for r in ok])
-        # an infinite SE (undetermined) covers the truth: the result claims nothing
-        def cover(k: float, z=z, finite=finite) -> float:
-            return float(np.mean((z <= k) | ~finite))
-
-        rows.append({"scene": scene, "window": window, "method": method, "noise": noise, "runs": len(recs),
-                     "failed": len(recs) - len(ok), "k_err": float(np.median(err[:, is_k])),
-                     "kt_err": float(np.median(err[:, ~is_k])), "k_err_max": float(err[:, is_k].max()),
-                     "kt_err_max": float(err[:, ~is_k].max()), "cover2": cover(2.0), "cover3": cover(3.0),
-                     "success": float(succ.mean()),
-                     "dishonest": int(np.sum(succ & ((z > 3) & finite).any(axis=1))),
-                     "wall_s": float(np.median([r["wall_s"] for r in ok]))})
+        row = {"scene": scene, "window": window, "method": method, "noise": noise, "runs": len(recs),
+               "failed": len(recs) - len(ok)}
+        if ok:
+            err = np.abs(np.array([r["rel_error"] for r in ok]))
+            is_k = np.array([not n.startswith("kt") for n in ok[0]["names"]])
+            h = honesty(ok, np.array([r["se_finite"] for r in ok]))  # an infinite SE claims nothing: it covers
+            row |= {"k_err": float(np.median(err[:, is_k])), "kt_err": float(np.median(err[:, ~is_k])),
+                    "k_err_max": float(err[:, is_k].max()), "kt_err_max": float(err[:, ~is_k].max()),
+                    "cover2": float(h["cover2"].mean()), "cover3": float(h["cover3"].mean()),
+                    "success": float(h["success"].mean()), "dishonest": h["dishonest"],
+                    "wall_s": float(np.median([r["wall_s"] for r in ok]))}
+        rows.append(row)
     return rows
 
 
-def _page(rows: list[dict], quick: bool, wall: float) -> str:
+def page(rows: list[dict], banner: str) -> str:
+    """One table: errors, coverage, honesty and time per (scene, window, method, noise)."""
     lines = ["# Identification on data casflex did not generate", "",
-             f"Written by `python studies/realdata.py{' --quick' if quick else ''}` in {wall / 60:.1f} min on "
-             f"{platform.node() or 'this machine'} ({platform.processor() or platform.machine()}); the method and "
-             "the data are described in the script's docstring and in `docs/identification.md`.", "",
+             f"{banner} The method and the data are described in the script's docstring and in "
+             "`docs/identification.md`.", "",
              "Errors are relative to the truth (Exudyn's parameters); coverage: the fraction of parameters x seeds "
              "whose reported k-SE interval holds the truth (an undetermined parameter, SE infinite, counts as "
              "covered: it claims nothing); dishonest: runs that report success with a parameter more than 3 SE "
@@ -159,18 +130,16 @@ def _page(rows: list[dict], quick: bool, wall: float) -> str:
              "| scene | window | method | noise (mm) | runs | k error (median / max) | kt error (median / max) "
              "| 2 SE | 3 SE | success | dishonest | wall (s) |", "|" + "---|" * 12]
     for r in rows:
-        if "k_err" not in r:
-            lines.append(f"| {r['scene']} | {r['window']} | {r['method']} | {1e3 * r['noise']:g} | {r['runs']} | "
-                         "all runs raised | | | | | | |")
-            continue
-        lines.append(f"| {r['scene']} | {r['window']} | {r['method']} | {1e3 * r['noise']:g} | {r['runs']} | "
-                     f"{100 * r['k_err']:.3g} % / {100 * r['k_err_max']:.3g} % | "
-                     f"{100 * r['kt_err']:.3g} % / {100 * r['kt_err_max']:.3g} % | {100 * r['cover2']:.0f} % | "
-                     f"{100 * r['cover3']:.0f} % | {100 * r['success']:.0f} % | {r['dishonest']} | {r['wall_s']:.1f} |")
+        head = f"| {r['scene']} | {r['window']} | {r['method']} | {1e3 * r['noise']:g} | {r['runs']} | "
+        lines.append(head + ("all runs raised | | | | | | |" if "k_err" not in r else
+                             f"{100 * r['k_err']:.3g} % / {100 * r['k_err_max']:.3g} % | {100 * r['kt_err']:.3g} % / "
+                             f"{100 * r['kt_err_max']:.3g} % | {100 * r['cover2']:.0f} % | {100 * r['cover3']:.0f} % | "
+                             f"{100 * r['success']:.0f} % | {r['dishonest']} | {r['wall_s']:.1f} |"))
     return "\n".join(lines) + "\n"
 
 
-def _figure(rows: list[dict], path: Path) -> None:
+def figure(rows: list[dict], path: Path) -> None:
+    """kt's error and the 3-SE coverage against the noise, window at rest."""
     from casflex.plotting._figure import _new_figure, _save
 
     fig = _new_figure((9.0, 3.8))
@@ -179,15 +148,12 @@ def _figure(rows: list[dict], path: Path) -> None:
         for scene, color in (("twobar", "C0"), ("threelink", "C1")):
             sel = [r for r in rows if r["method"] == key and r["scene"] == scene and r["window"] == "rest"
                    and "k_err" in r]
-            if not sel:
-                continue
             nz = [max(1e3 * r["noise"], 0.01) for r in sel]
-            ax1.loglog(nz, [max(r["kt_err"], 1e-6) for r in sel], style, color=color, label=f"{scene}, {key}")
-            ax2.semilogx(nz, [100 * r["cover3"] for r in sel], style, color=color)
-    ax1.set_xlabel("noise (mm; 0 drawn at 0.01)")
-    ax1.set_ylabel("median relative error of kt")
-    ax2.set_xlabel("noise (mm)")
-    ax2.set_ylabel("3-SE coverage (%)")
+            if sel:
+                ax1.loglog(nz, [max(r["kt_err"], 1e-6) for r in sel], style, color=color, label=f"{scene}, {key}")
+                ax2.semilogx(nz, [100 * r["cover3"] for r in sel], style, color=color)
+    ax1.set(xlabel="noise (mm; 0 drawn at 0.01)", ylabel="median relative error of kt")
+    ax2.set(xlabel="noise (mm)", ylabel="3-SE coverage (%)")
     ax2.axhline(90, color="black", lw=0.6, ls="--")
     ax1.legend(fontsize="x-small", frameon=False)
     for ax in (ax1, ax2):
@@ -196,10 +162,14 @@ def _figure(rows: list[dict], path: Path) -> None:
     _save(fig, path)
 
 
+def _key(r: dict) -> str:
+    return f"{r['scene']}_{r['method']}_{r['window']}_{r['noise']:g}_{r['seed']}"
+
+
 def main(quick: bool = False, out_dir: Path | None = None, record: Path | None = None) -> list[dict]:
-    t0 = time.perf_counter()
-    rows = summarise(sweep("realdata", _plan(quick), _key, one_run, record=record, quick=quick))
-    write_outputs("realdata", out_dir, quick, _page(rows, quick, time.perf_counter() - t0), lambda f: _figure(rows, f))
+    banner = Banner("realdata", quick)
+    rows = summarise(sweep("realdata", plan(quick), _key, one_run, record=record, quick=quick))
+    write_outputs("realdata", out_dir, quick, page(rows, banner.line()), lambda f: figure(rows, f))
     for r in rows:
         print(json.dumps(r))
     # the study's own checks, on the default method: honest on both scenes (a success more than 3 SE

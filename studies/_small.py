@@ -1,0 +1,84 @@
+"""What several studies share beyond the harness (:mod:`_study`): to be hoisted there or into the
+library. Not a study itself (no ``main``).
+
+- :data:`PAPER_NLP`, :func:`capped_ipopt`: the seed paper's NLP formulation with a wall-time cap
+  (table1, basins);
+- :func:`fmt_p`: a parameter vector in brackets, 6 digits;
+- :func:`exudyn_recording`: channels of an Exudyn reference recording at 100 Hz with noise
+  (dampers, realdata, bench_identification);
+- :func:`twobar`: the twobar model meshed into n elements per bar (bench_simulate, bench_exudyn);
+- :func:`in_fresh_process`: a study's hidden worker switch run in a new Python process, its JSON
+  answer (bench_simulate, bench_identification);
+- :func:`honesty`: success, coverage and "dishonest" successes of repeated fits (dampers, leg,
+  realdata).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+DATA = Path(__file__).resolve().parents[1] / "tests" / "data"
+#: the seed paper's NLP formulation, as table1 and basins were measured (IPOPT, model Newton tolerance 1e-14)
+PAPER_NLP = {"solver": "ipopt", "newton_tol": 1e-14, "model_error": "none"}
+
+
+def capped_ipopt(cap_s: float) -> dict:
+    """identify_indirect's IPOPT options (tolerance 1e-8, see casflex/identification/shooting_nlp.py)
+    with a wall-time cap: a stalled run would otherwise go on for IPOPT's 500 iterations."""
+    from casflex.identification.problem import solver_options_for
+
+    ip = dict(solver_options_for("ipopt", False, None, tol=1e-8)["ipopt"])
+    ip["max_wall_time"] = float(cap_s)
+    return {"ipopt": ip}
+
+
+def fmt_p(p) -> str:
+    """[v1 v2 ...] with 6 significant digits."""
+    return "[" + " ".join(f"{v:.6g}" for v in p) + "]"
+
+
+def exudyn_recording(file: str, names: tuple[str, ...], t_from: float, t_to: float, noise: float, seed: int):
+    """The channels ``names`` of tests/data/<file>.npz (Exudyn's motion at 1 kHz) from t_from to t_to
+    at 100 Hz, with Gaussian noise of std ``noise`` (m, rad) drawn from ``seed``."""
+    from casflex.data import MeasurementSet
+
+    z = np.load(DATA / f"{file}.npz")
+    ch = [str(c) for c in z["channels"]]
+    rows = np.arange(int(round(t_from * 1000)), int(round(t_to * 1000)) + 1, 10)
+    q = z["q"][np.ix_(rows, [ch.index(c) for c in names])]
+    return MeasurementSet(z["t"][rows], names, q + np.random.default_rng(seed).normal(0, noise, q.shape), None, None)
+
+
+def twobar(elements: int, rotary: bool = False):
+    """The twobar scene's model with ``elements`` beam elements per bar (and rotary inertia)."""
+    import dataclasses
+
+    import casflex
+
+    scene = casflex.load_scene("twobar")
+    return casflex.assemble(dataclasses.replace(scene, beams=tuple(
+        dataclasses.replace(b, elements=elements, rotary_inertia=rotary) for b in scene.beams)))
+
+
+def in_fresh_process(script: str, args: list[str], env: dict, timeout: float = 3600) -> dict:
+    """Run ``python <script> <args>`` in a new process; the JSON on its last line of output."""
+    out = subprocess.run([sys.executable, script, *args], env=env, capture_output=True, text=True, check=True,
+                         timeout=timeout)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def honesty(recs: list[dict], finite: np.ndarray | None = None) -> dict:
+    """Over fits (dicts with "z" (estimate - truth) / SE per parameter and "success"): the success
+    rate, the coverage of the truth by the 2- and 3-SE intervals per parameter, and the "dishonest"
+    successes (a parameter more than 3 SE from the truth). ``finite``: where the SE is finite (an
+    infinite SE claims nothing and covers the truth)."""
+    z = np.abs(np.array([r["z"] for r in recs]))
+    ok = np.ones_like(z, dtype=bool) if finite is None else np.asarray(finite)
+    succ = np.array([r["success"] for r in recs])
+    return {"z": z, "success": succ, "cover2": (z <= 2) | ~ok, "cover3": (z <= 3) | ~ok,
+            "dishonest": int(np.sum(succ & ((z > 3) & ok).any(axis=1)))}
