@@ -18,149 +18,18 @@ on a loaded 2-core machine with the C libraries cached, about 5 min more to buil
 
 from __future__ import annotations
 
-import dataclasses
 import os
 from pathlib import Path
-from typing import NamedTuple
 
 import numpy as np
 from _study import Banner, best_of, cli, png, write_outputs
+from _tradeoff import CENTRE, GRID_STEP, Config, Models, fmt_alpha, fmt_e, grid, measure, ms, plan_for, run, tasks_for
 
-import casflex
-from casflex.results import Trajectory
-from casflex.simulate import compiled_library, integrator_for, simulate
+from casflex.simulate import simulate
 
-ALPHAS = (0.0, -0.05, -0.1, -0.3, -1.0 / 3.0)
-NODES = ("3", "5")
-FORCES = ("spring1.force", "spring3.force", "torsion1.moment", "torsion3.moment")
 LEVELS = ((1e-3, 5.0), (1e-4, 1.0), (1e-5, 0.1))  # stated accuracies: (node positions, m; joint forces, %)
 HEADLINE = (1e-4, 1.0)
-GRID_STEP = 1e-2  # the common time grid: every multiple of the coarsest step
 TIE = 0.15  # recommended: among settings within 15 % of the cheapest (timing noise), lagrange first
-NAN = {"pos": np.nan, "force_rel": np.nan}
-
-
-class Config(NamedTuple):
-    """One setting: elements per bar, inertia form, HHT alpha."""
-
-    elements: int
-    inertia: str
-    alpha: float
-
-    @property
-    def label(self) -> str:
-        return f"{self.elements} el., {self.inertia}, alpha {_a(self.alpha)}"
-
-
-CENTRE = Config(1, "lagrange", 0.0)
-
-
-def _a(alpha: float) -> str:
-    return "-1/3" if abs(alpha + 1.0 / 3.0) < 1e-12 else f"{alpha:g}"
-
-
-def _plan(quick: bool) -> dict:
-    if quick:
-        return {"t_end": 0.5, "dts": [1e-2, 5e-3, 2e-3, 1e-3, 5e-4], "dt_fine": 5e-5, "alphas": (0.0, -1.0 / 3.0),
-                "meshes": (1, 2), "mesh_dts": [1e-2, 1e-3], "alt_alpha": None, "seed_alphas": (0.0,),
-                "seed_meshes": (1,), "window": 300, "fit": (5e-4, 2e-3), "fit_small": None, "validate_dt": 5e-4}
-    return {"t_end": 3.0, "dts": [1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4, 5e-5, 2e-5], "dt_fine": 1e-5,
-            "alphas": ALPHAS, "meshes": (1, 2, 4, 8), "mesh_dts": [1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4],
-            "alt_alpha": -0.05, "seed_alphas": ALPHAS, "seed_meshes": (1, 2, 4, 8), "window": 3000,
-            "fit": (1e-4, 2e-3), "fit_small": (5e-5, 2e-4), "validate_dt": 1e-4}
-
-
-def _tasks(plan: dict) -> list[tuple[Config, float, bool]]:
-    """(config, dt, time the interpreted path too) in run order; the reference first."""
-    fine, ref = plan["dt_fine"], Config(plan["meshes"][-1], "lagrange", 0.0)
-    tasks = [(ref, fine, True), (ref, 2 * fine, True)]
-    for a in plan["alphas"]:
-        tasks += [(Config(1, "lagrange", a), dt, True) for dt in [*plan["dts"], fine]]
-    for a in plan["seed_alphas"]:
-        tasks += [(Config(1, "seed", a), dt, a == 0.0) for dt in [*plan["dts"], fine]]
-    for ne in plan["meshes"][1:]:
-        tasks += [(Config(ne, "lagrange", 0.0), dt, True) for dt in [*plan["mesh_dts"], fine]]
-        if plan["alt_alpha"] is not None:
-            tasks += [(Config(ne, "lagrange", plan["alt_alpha"]), dt, False) for dt in plan["mesh_dts"]]
-        if ne in plan["seed_meshes"]:
-            tasks.append((Config(ne, "seed", 0.0), fine, False))
-    first: dict = {}
-    for t in tasks:
-        first.setdefault(t[:2], t)
-    return list(first.values())
-
-
-# -- runs -------------------------------------------------------------------------------------
-
-class _Models:
-    """Models and integrators built once per setting; the one-off build times, for the page."""
-
-    def __init__(self) -> None:
-        self.models: dict[tuple[int, str], casflex.Model] = {}
-        self.builds: dict[Config, dict] = {}
-
-    def __call__(self, cfg: Config) -> casflex.Model:
-        key = (cfg.elements, cfg.inertia)
-        if key not in self.models:
-            scene = casflex.load_scene("twobar")
-            scene = dataclasses.replace(scene, beams=tuple(dataclasses.replace(b, elements=cfg.elements)
-                                                           for b in scene.beams))
-            self.models[key] = casflex.assemble(scene, inertia=cfg.inertia)
-        m = self.models[key]
-        if cfg not in self.builds:
-            t_i, integ = best_of(lambda: integrator_for(m, alpha=cfg.alpha), 1)
-            t_l, lib = best_of(lambda: compiled_library(integ), 1)
-            self.builds[cfg] = {"integrator_s": t_i, "library_s": t_l, "cached": lib.cached, "n_dof": m.n_dof}
-        return m
-
-
-def _sample(tr: Trajectory, t_end: float) -> dict:
-    """Node positions (k, 2 nodes, 2), joint forces (k, 4) and energy drift on the common grid."""
-    idx = np.round(np.arange(0.0, t_end + 1e-12, GRID_STEP) / tr.meta["dt"]).astype(int)
-    pos = np.stack([np.stack([tr.dof(f"x{n}")[idx], tr.dof(f"y{n}")[idx]], axis=1) for n in NODES], axis=1)
-    energy = tr.energies["total"][idx]
-    return {"pos": pos, "forces": np.stack([tr.output(k)[idx] for k in FORCES], axis=1),
-            "drift": float(np.abs(energy - energy[0]).max())}
-
-
-def _diff(s: dict, ref: dict) -> dict:
-    """Max over the grid: position distance (m), force errors (% of the reference's peak)."""
-    rel = 100.0 * np.abs(s["forces"] - ref["forces"]).max(axis=0) / np.abs(ref["forces"]).max(axis=0)
-    return {"pos": float(np.linalg.norm(s["pos"] - ref["pos"], axis=2).max()), "force_rel": float(rel.max())}
-
-
-def _run(cfg: Config, dt: float, interp: bool, plan: dict, m: casflex.Model) -> tuple[dict, dict | None]:
-    """(row, samples or None): the compiled run over the horizon, and the interpreted one over the
-    first ``window`` steps checked against it."""
-    t_end = plan["t_end"]
-    steps = int(round(t_end / dt))
-    w = min(steps, plan["window"])
-    t_c, tr = best_of(lambda: simulate(m, t_end, dt=dt, alpha=cfg.alpha, compiled=True, raise_on_failure=False), 3)
-    row = {"cfg": cfg, "dt": dt, "steps": steps, "ok": tr.success, "message": tr.message,
-           "compiled_s": t_c if tr.success else None, "interp_s": None, "interp_projected": False, "interp_steps": 0,
-           "newton_per_step": None, "paths_diff": None, "is_ref": cfg.elements == plan["meshes"][-1]
-           and cfg.inertia == "lagrange" and cfg.alpha == 0.0 and dt == plan["dt_fine"]}
-    if not tr.success:
-        return row, None
-    sample, q, y = _sample(tr, t_end), tr.q[:w + 1].copy(), tr.outputs[:w + 1].copy()
-    del tr
-    if interp:
-        t_i, ti = best_of(lambda: simulate(m, w * dt, dt=dt, alpha=cfg.alpha, raise_on_failure=False), 3)
-        if ti.success:
-            dy = (np.abs(ti.outputs - y).max(axis=0) / np.maximum(np.abs(y).max(axis=0), 1e-300)).max()
-            row.update(interp_s=t_i / w * steps, interp_projected=w < steps, interp_steps=w,
-                       newton_per_step=ti.stats["newton_iterations"] / max(ti.stats["steps"], 1),
-                       paths_diff=max(float(np.abs(ti.q - q).max()), float(dy)))
-    print(f"  {cfg.label:34s} dt {dt:7.0e}: compiled {_ms(t_c)}"
-          + (f", interpreted {_ms(row['interp_s'])}" if row["interp_s"] else ""), flush=True)
-    return row, sample
-
-
-def _fit(dts, errs, lo: float, hi: float) -> float:
-    """Least-squares slope of log(error) vs log(dt) over lo <= dt <= hi."""
-    d, e = np.asarray(dts), np.asarray(errs)
-    m = (d >= lo * (1 - 1e-9)) & (d <= hi * (1 + 1e-9)) & np.isfinite(e) & (e > 0)
-    return float(np.polyfit(np.log(d[m]), np.log(e[m]), 1)[0]) if m.sum() >= 2 else float("nan")
 
 
 def _pareto(points: list[tuple[float, float]]) -> list[int]:
@@ -192,43 +61,9 @@ def _pick(rows: list[dict], key: str, pos_tol: float, force_tol: float) -> tuple
 
 
 def _analyse(plan: dict, rows: list[dict], samples: dict) -> dict:
-    """Errors of every row, orders in dt, the reference's own error, seed vs lagrange, picks, fronts."""
-    fine, meshes = plan["dt_fine"], plan["meshes"]
-    ref_cfg = Config(meshes[-1], "lagrange", 0.0)
-    ref = samples[(ref_cfg, fine)]
-    for r in rows:
-        s, base = samples.get((r["cfg"], r["dt"])), samples.get((r["cfg"]._replace(alpha=0.0), fine))
-        r["err"] = _diff(s, ref) if s is not None else NAN
-        r["err_dt"] = _diff(s, base) if s is not None and base is not None else NAN  # time discretisation alone
-        r["drift"] = s["drift"] if s is not None else np.nan
-    orders = {}
-    for cfg in dict.fromkeys(r["cfg"] for r in rows):
-        rs = [r for r in rows if r["cfg"] == cfg and r["dt"] != fine]
-        dts, ep, ef = [r["dt"] for r in rs], [r["err_dt"]["pos"] for r in rs], [r["err_dt"]["force_rel"] for r in rs]
-        lo, hi = plan["fit"]
-        small = plan["fit_small"]
-        orders[cfg] = {"pos": _fit(dts, ep, lo, hi), "force": _fit(dts, ef, lo, hi),
-                       "n": sum(lo * (1 - 1e-9) <= d <= hi * (1 + 1e-9) for d in dts),
-                       "pos_small": _fit(dts, ep, *small) if small else np.nan,
-                       "force_small": _fit(dts, ef, *small) if small else np.nan}
-    # the reference's own error: time (same mesh at 2 dt, order 2: e = d / (2^2 - 1)) and mesh (geometric)
-    d_time = _diff(samples[(ref_cfg, 2 * fine)], ref)
-    ref_time = {k: d_time[k] / 3.0 for k in NAN}
-    mesh_d = {ne: _diff(samples[(Config(ne, "lagrange", 0.0), fine)], ref) for ne in meshes[:-1]}
-    mesh_ratio, ref_mesh = {}, dict(NAN)
-    if len(meshes) >= 3:
-        d_ab = _diff(samples[(Config(meshes[-3], "lagrange", 0.0), fine)], samples[(Config(meshes[-2], "lagrange",
-                                                                                           0.0), fine)])
-        for k in NAN:
-            mesh_ratio[k] = d_ab[k] / mesh_d[meshes[-2]][k]
-            ref_mesh[k] = mesh_d[meshes[-2]][k] / (mesh_ratio[k] - 1.0) if mesh_ratio[k] > 1.0 else np.inf
-    ref_err = {k: ref_time[k] + (ref_mesh[k] if np.isfinite(ref_mesh[k]) else 0.0) for k in NAN}
-    seed_cmp = []
-    for ne in meshes:
-        s_seed, s_lag = samples.get((Config(ne, "seed", 0.0), fine)), samples.get((Config(ne, "lagrange", 0.0), fine))
-        if s_seed is not None and s_lag is not None:
-            seed_cmp.append({"ne": ne, "diff": _diff(s_seed, s_lag), "seed_err": _diff(s_seed, ref),
-                             "lag_err": _diff(s_lag, ref) if ne != meshes[-1] else None})
+    """The errors (see _tradeoff.measure), then the recommended settings and the Pareto fronts."""
+    an = measure(plan, rows, samples)
+    ref_err, ref_mesh = an["ref_err"], an["ref_mesh"]
     cand = [r for r in rows if r["ok"] and not r["is_ref"]]
     recs = []
     for pos_tol, f_tol in LEVELS:
@@ -242,9 +77,7 @@ def _analyse(plan: dict, rows: list[dict], samples: dict) -> dict:
         pts = [r for r in cand if r[key] is not None]
         for ek in ("pos", "force_rel"):
             fronts[(key, ek)] = [pts[i] for i in _pareto([(r[key], r["err"][ek]) for r in pts])]
-    return {"orders": orders, "d_time": d_time, "ref_time": ref_time, "ref_mesh": ref_mesh, "ref_err": ref_err,
-            "mesh_d": mesh_d, "mesh_ratio": mesh_ratio, "seed_cmp": seed_cmp, "cand": cand, "recs": recs,
-            "fronts": fronts}
+    return dict(an, cand=cand, recs=recs, fronts=fronts)
 
 
 def _checks(rows: list[dict], an: dict) -> list[tuple[str, bool, str, bool]]:
@@ -281,12 +114,12 @@ def _checks(rows: list[dict], an: dict) -> list[tuple[str, bool, str, bool]]:
 def main(quick: bool = False, out_dir: Path | None = None) -> dict:
     """Run every setting, write the page and the Pareto plot, assert the self-checks."""
     banner = Banner("tradeoff", quick)
-    plan = _plan(quick)
-    models, rows, samples = _Models(), [], {}
-    tasks = _tasks(plan)
+    plan = plan_for(quick)
+    models, rows, samples = Models(), [], {}
+    tasks = tasks_for(plan)
     print(f"{len(tasks)} settings, horizon {plan['t_end']} s, reference dt {plan['dt_fine']:g} s")
     for cfg, dt, interp in tasks:
-        row, s = _run(cfg, dt, interp, plan, models(cfg))
+        row, s = run(cfg, dt, interp, plan, models(cfg))
         rows.append(row)
         if s is not None:
             samples[(cfg, dt)] = s
@@ -306,25 +139,6 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
 
 # -- page and figure ----------------------------------------------------------------------------
 
-def _ms(s: float | None) -> str:
-    return "" if s is None or not np.isfinite(s) else (f"{s * 1e3:.1f} ms" if s < 10 else f"{s:.1f} s")
-
-
-def _e(v: float | None, fmt: str = ".2e") -> str:
-    return "" if v is None or not np.isfinite(v) else format(v, fmt)
-
-
-def _grid(title: str, cols: list[Config], heads: list[str], dts, rowmap: dict, fmt, t_end: float | None = None):
-    """A table of fmt(row) over dt (rows) and settings (columns); ``t_end``: with a column of steps."""
-    out = [f"**{title}**", "", "| dt (s) | " + ("steps | " if t_end else "") + " | ".join(heads) + " |",
-           "|---:|" + ("---:|" if t_end else "") + "---:|" * len(cols)]
-    for dt in dts:
-        cells = ["" if (r := rowmap.get((c, dt))) is None else "failed" if not r["ok"] else
-                 "reference" if r["is_ref"] else fmt(r) for c in cols]
-        out.append(f"| {dt:g} | " + (f"{int(round(t_end / dt))} | " if t_end else "") + " | ".join(cells) + " |")
-    return out + [""]
-
-
 def _noise(rows: list[dict]) -> str:
     """Timing noise of this run: spread of compiled times between settings with the same work."""
     groups: dict[tuple[int, float], list[float]] = {}
@@ -338,8 +152,8 @@ def _noise(rows: list[dict]) -> str:
 
 
 def _setting(r: dict, cost: float, inertia: bool = True) -> str:
-    return (f"dt = {r['dt']:g} s, alpha = {_a(r['cfg'].alpha)}, {r['cfg'].elements} el./bar"
-            + (f", {r['cfg'].inertia}" if inertia else "") + f", compiled {_ms(cost)} (error {r['err']['pos']:.2e} m, "
+    return (f"dt = {r['dt']:g} s, alpha = {fmt_alpha(r['cfg'].alpha)}, {r['cfg'].elements} el./bar"
+            + (f", {r['cfg'].inertia}" if inertia else "") + f", compiled {ms(cost)} (error {r['err']['pos']:.2e} m, "
             f"{r['err']['force_rel']:.2e} %)")
 
 
@@ -359,8 +173,8 @@ def _recommendations(plan: dict, rows: list[dict], recs: list[dict]) -> list[str
                 continue
             r, cost, n = rc[key]
             star = "*" if key == "interp" and r["interp_projected"] else ""
-            L.append(f"{head} | {path} | {r['dt']:g} | {_a(r['cfg'].alpha)} | {r['cfg'].elements} | "
-                     f"{r['cfg'].inertia} | {_ms(cost)}{star} ({n}) | {_ms(r[key + '_s'])}{star} | "
+            L.append(f"{head} | {path} | {r['dt']:g} | {fmt_alpha(r['cfg'].alpha)} | {r['cfg'].elements} | "
+                     f"{r['cfg'].inertia} | {ms(cost)}{star} ({n}) | {ms(r[key + '_s'])}{star} | "
                      f"{r['err']['pos']:.2e} | {r['err']['force_rel']:.2e} |")
     L.append("")
     head = next(rc for rc in recs if (rc["pos"], rc["force"]) == HEADLINE)["compiled"]
@@ -371,11 +185,13 @@ def _recommendations(plan: dict, rows: list[dict], recs: list[dict]) -> list[str
         margin = _pick(pool, "compiled_s", *tol)
         margin_lag = _pick([x for x in pool if x["cfg"].inertia == "lagrange"], "compiled_s", *tol)
         s = (f"**For node positions within {HEADLINE[0]:g} m and joint forces within {HEADLINE[1]:g} % over "
-             f"{plan['t_end']:g} s: dt = {r['dt']:g} s, alpha = {_a(r['cfg'].alpha)}, elements = {r['cfg'].elements} "
-             f"per bar, inertia = {r['cfg'].inertia}, compiled: {_ms(cost)}** (median over the {n} measured settings "
-             f"with this mesh and dt; this setting {_ms(r['compiled_s'])}; measured error {r['err']['pos']:.2e} m, "
-             f"{r['err']['force_rel']:.2e} %" + (f"; interpreted, same setting: {_ms(r['interp_s'])}"
-                                                 f"{'*' if r['interp_projected'] else ''}" if r["interp_s"] else "") + ").")
+             f"{plan['t_end']:g} s: dt = {r['dt']:g} s, alpha = {fmt_alpha(r['cfg'].alpha)}, "
+             f"elements = {r['cfg'].elements} "
+             f"per bar, inertia = {r['cfg'].inertia}, compiled: {ms(cost)}** (median over the {n} measured settings "
+             f"with this mesh and dt; this setting {ms(r['compiled_s'])}; measured error {r['err']['pos']:.2e} m, "
+             f"{r['err']['force_rel']:.2e} %" + (f"; interpreted, same setting: {ms(r['interp_s'])}"
+                                                 f"{'*' if r['interp_projected'] else ''}" if r["interp_s"] else "")
+             + ").")
         if r["err"]["pos"] > tol[0] or r["err"]["force_rel"] > tol[1]:
             s += (f" The position error is {r['err']['pos'] / HEADLINE[0]:.0%} of the tolerance; with a 20 % margin "
                   f"(errors below {tol[0]:g} m and {tol[1]:g} %): "
@@ -401,7 +217,7 @@ def _page(quick: bool, plan: dict, rows: list[dict], an: dict, checks: list, ban
             os.cpu_count() or 1) else ""), "", "## Setup", "",
          f"Horizon **{t_end:g} s**; reference **{meshes[-1]} elements per bar, alpha = 0, dt = {fine:g} s, "
          f"`lagrange`** (compiled); errors on the grid t = 0, {GRID_STEP:g}, ..., {t_end:g} s; one factor at a time "
-         f"around the centre ({CENTRE.label})" + (f", the meshes also at alpha = {_a(plan['alt_alpha'])}"
+         f"around the centre ({CENTRE.label})" + (f", the meshes also at alpha = {fmt_alpha(plan['alt_alpha'])}"
                                                  if plan["alt_alpha"] is not None else "")
          + f". Interpreted time: over the whole horizon up to {window} steps (dt >= {t_end / window:g} s), else over "
          f"the **first {window} steps**, projected (marked `*`). Projection check: centre setting at dt = "
@@ -429,22 +245,22 @@ def _page(quick: bool, plan: dict, rows: list[dict], an: dict, checks: list, ban
           "accuracy counts as resolved when it is at least 10x the estimate.", ""]
 
     def interp_cell(r):
-        return "" if r["interp_s"] is None else (f"{_ms(r['interp_s'])}{'*' if r['interp_projected'] else ''} "
+        return "" if r["interp_s"] is None else (f"{ms(r['interp_s'])}{'*' if r['interp_projected'] else ''} "
                                                  f"(x{r['interp_s'] / r['compiled_s']:.0f})")
 
     pos, force = (lambda r: f"{r['err']['pos']:.2e}"), (lambda r: f"{r['err']['force_rel']:.2e}")
     dts = [*plan["dts"], fine]
     lag = [Config(1, "lagrange", a) for a in plan["alphas"]]
-    alphas = [f"alpha {_a(a)}" for a in plan["alphas"]]
+    alphas = [f"alpha {fmt_alpha(a)}" for a in plan["alphas"]]
     L += ["## Factor: dt x alpha (1 element per bar, `lagrange`)", ""]
     for title, fmt in (("Position error against the reference (m)", pos),
                        ("Joint force error against the reference (% of peak)", force),
                        (f"Time-discretisation error of the positions: against the same model at dt = {fine:g} s, "
-                        "alpha = 0 (m)", lambda r: _e(r["err_dt"]["pos"])),
-                       ("Compiled wall time", lambda r: _ms(r["compiled_s"])),
+                        "alpha = 0 (m)", lambda r: fmt_e(r["err_dt"]["pos"])),
+                       ("Compiled wall time", lambda r: ms(r["compiled_s"])),
                        ("Interpreted wall time (* projected from the first steps; in brackets the ratio to compiled)",
                         interp_cell)):
-        L += _grid(title, lag, alphas, dts, rowmap, fmt, t_end)
+        L += grid(title, lag, alphas, dts, rowmap, fmt, t_end)
     nwt = [f"{r['newton_per_step']:.2f} (dt {r['dt']:g})" for r in rows
            if r["cfg"] == CENTRE and r["newton_per_step"] is not None and r["newton_per_step"] > 1.005]
     L += [f"Newton iterations per step (interpreted runs of the centre setting): 1.00 at every dt except "
@@ -455,24 +271,25 @@ def _page(quick: bool, plan: dict, rows: list[dict], an: dict, checks: list, ban
     mesh_dts = sorted({r["dt"] for r in rows if r["cfg"] in mesh}, reverse=True)
     L += ["## Factor: elements per bar (alpha = 0, `lagrange`)", ""]
     for title, fmt in (("Position error against the reference (m)", pos), ("Joint force error (% of peak)", force),
-                       ("Compiled wall time", lambda r: _ms(r["compiled_s"])),
+                       ("Compiled wall time", lambda r: ms(r["compiled_s"])),
                        ("Interpreted wall time (* projected; ratio to compiled)", interp_cell)):
-        L += _grid(title, mesh, heads, mesh_dts, rowmap, fmt)
+        L += grid(title, mesh, heads, mesh_dts, rowmap, fmt)
     if plan["alt_alpha"] is not None:
-        L += _grid(f"alpha = {_a(plan['alt_alpha'])}: position error (m) / force error (%) / compiled wall time",
+        L += grid(f"alpha = {fmt_alpha(plan['alt_alpha'])}: position error (m) / force error (%) / compiled wall time",
                    [c._replace(alpha=plan["alt_alpha"]) for c in mesh], heads, plan["mesh_dts"], rowmap,
-                   lambda r: f"{pos(r)} / {force(r)} / {_ms(r['compiled_s'])}")
+                   lambda r: f"{pos(r)} / {force(r)} / {ms(r['compiled_s'])}")
     L += _inertia(plan, rows, an["seed_cmp"])
     seed = [Config(1, "seed", a) for a in plan["seed_alphas"]]
-    L += _grid("`seed`, 1 element per bar: position error against the reference (m)", seed,
-               [f"alpha {_a(a)}" for a in plan["seed_alphas"]], dts, rowmap, pos, t_end)
-    L += _grid("`seed`, 1 element per bar: joint force error (% of peak)", seed,
-               [f"alpha {_a(a)}" for a in plan["seed_alphas"]], dts, rowmap, force, t_end)
+    L += grid("`seed`, 1 element per bar: position error against the reference (m)", seed,
+               [f"alpha {fmt_alpha(a)}" for a in plan["seed_alphas"]], dts, rowmap, pos, t_end)
+    L += grid("`seed`, 1 element per bar: joint force error (% of peak)", seed,
+               [f"alpha {fmt_alpha(a)}" for a in plan["seed_alphas"]], dts, rowmap, force, t_end)
     L += ["## Pareto fronts", "", f"![Pareto plot](../figures/tradeoff{'_quick' * quick}.png)", "",
           "Non-dominated settings (no other measured setting is both faster and more accurate), node positions:", "",
-          "| path | setting | dt (s) | wall time | position error (m) | force error (%) |", "|---|---|---:|---:|---:|---:|"]
+          "| path | setting | dt (s) | wall time | position error (m) | force error (%) |",
+          "|---|---|---:|---:|---:|---:|"]
     for key, path in (("compiled_s", "compiled"), ("interp_s", "interpreted")):
-        L += [f"| {path} | {r['cfg'].label} | {r['dt']:g} | {_ms(r[key])}"
+        L += [f"| {path} | {r['cfg'].label} | {r['dt']:g} | {ms(r[key])}"
               f"{'*' if key == 'interp_s' and r['interp_projected'] else ''} | {pos(r)} | {force(r)} |"
               for r in an["fronts"][(key, "pos")]]
     L += ["", "## Findings", "", *_findings(plan, rows, rowmap, an), "", "## One-off builds (not in the times above)",
@@ -498,18 +315,20 @@ def _orders(plan: dict, orders: dict, rowmap: dict) -> list[str]:
          + (" order, positions, small dt | order, forces, small dt |" if small else ""),
          "|---|---:|---:|---:|" + ("---:|---:|" if small else "")]
     L += [f"| {cfg.label} | {o['n']} | {o['pos']:.3f} | {o['force']:.3f} |"
-          + (f" {_e(o['pos_small'], '.3f')} | {_e(o['force_small'], '.3f')} |" if small else "")
+          + (f" {fmt_e(o['pos_small'], '.3f')} | {fmt_e(o['force_small'], '.3f')} |" if small else "")
           for cfg, o in orders.items() if o["n"] >= 2]
     lin = [(a, r["err_dt"]["pos"]) for a in plan["alphas"] if a != 0.0
            and (r := rowmap.get((Config(1, "lagrange", a), fine))) is not None]
     return L + ([""] + ([f"Difference between alpha < 0 and alpha = 0 at the same dt = {fine:g} s (1 el., `lagrange`), "
-                         "divided by |alpha|: " + ", ".join(f"{v / abs(a):.3e} m (alpha {_a(a)})" for a, v in lin)
+                         "divided by |alpha|: "
+                         + ", ".join(f"{v / abs(a):.3e} m (alpha {fmt_alpha(a)})" for a, v in lin)
                          + ": proportional to alpha.", ""] if lin else []))
 
 
 def _inertia(plan: dict, rows: list[dict], seed_cmp: list[dict]) -> list[str]:
     fine = plan["dt_fine"]
-    L = ["## Factor: inertia form (`seed` vs `lagrange`)", "", f"Both forms on every mesh at dt = {fine:g} s, alpha = 0:",
+    L = ["## Factor: inertia form (`seed` vs `lagrange`)", "",
+         f"Both forms on every mesh at dt = {fine:g} s, alpha = 0:",
          "", "| elements/bar | seed - lagrange, positions (m) | seed - lagrange, forces (%) | seed vs reference (m) | "
          "lagrange vs reference (m) |", "|---:|---:|---:|---:|---:|"]
     L += [f"| {c['ne']} | {c['diff']['pos']:.2e} | {c['diff']['force_rel']:.2e} | {c['seed_err']['pos']:.2e} | "
@@ -536,8 +355,9 @@ def _findings(plan: dict, rows: list[dict], rowmap: dict, an: dict) -> list[str]
     if len(errs) >= 2:
         a_last = plan["alphas"][-1]
         out.append(f"- **alpha**: at dt = {dt0:g} s the time-discretisation error of the positions is "
-                   + ", ".join(f"{v:.2e} m (alpha {_a(a)})" for a, v in errs.items())
-                   + f"; the smallest is at alpha = {_a(min(errs, key=errs.get))}; alpha = {_a(a_last)} costs "
+                   + ", ".join(f"{v:.2e} m (alpha {fmt_alpha(a)})" for a, v in errs.items())
+                   + f"; the smallest is at alpha = {fmt_alpha(min(errs, key=errs.get))}; "
+                   f"alpha = {fmt_alpha(a_last)} costs "
                    f"{errs[a_last] / errs[0.0]:.1f}x the error of alpha = 0 at the same cost per step.")
     if mesh_d:
         ne1 = min(mesh_d)
@@ -581,8 +401,8 @@ def _figure(an: dict, plan: dict):
     meshes = sorted({r["cfg"].elements for r in cand})
 
     def series(c: Config) -> str:
-        return (f"alpha {_a(c.alpha)}, 1 el., {c.inertia}" if c.elements == 1 else
-                f"{c.elements} el., alpha {_a(c.alpha)}, {c.inertia}")
+        return (f"alpha {fmt_alpha(c.alpha)}, 1 el., {c.inertia}" if c.elements == 1 else
+                f"{c.elements} el., alpha {fmt_alpha(c.alpha)}, {c.inertia}")
 
     def style(c: Config) -> tuple[str, str, str]:
         ls = "-" if c.inertia == "lagrange" else ":"
@@ -598,7 +418,8 @@ def _figure(an: dict, plan: dict):
         for row, ek in enumerate(("pos", "force_rel")):
             ax = axes[row, col]
             for name in names:
-                pts = sorted((r for r in cand if series(r["cfg"]) == name and r[key] is not None), key=lambda r: r["dt"])
+                pts = sorted((r for r in cand if series(r["cfg"]) == name and r[key] is not None),
+                             key=lambda r: r["dt"])
                 if not pts:
                     continue
                 color, marker, ls = style(pts[0]["cfg"])
