@@ -83,7 +83,7 @@ def _message_ok(r: dict) -> bool:
 
 def self_checks(raw: dict) -> list[tuple[bool, str]]:
     """(passed, statement) of each of the study's assertions."""
-    rows = sim = raw["sim"]["rows"]
+    rows = raw["sim"]["rows"]
     fails, rng = [r for r in rows if not r["success"]], [r for r in rows if r["status"] == "element_range"]
     same = [r["interpreted_same"] for r in rows if "interpreted_same" in r]
     mism = max(r["newton"]["replay_mismatch"] for r in rows)
@@ -100,7 +100,7 @@ def self_checks(raw: dict) -> list[tuple[bool, str]]:
                 for r in rng), f"each of the {len(rng)} element_range failures is confirmed by the study's own wrap "
             "check of the rejected step, at the element end the message names")]
     for T, tol in DRIFT_TOL.items():
-        small = [r["energy"]["drift"] for r in sim if r["alpha"] == 0.0 and r["success"] and not r["wraps"]
+        small = [r["energy"]["drift"] for r in rows if r["alpha"] == 0.0 and r["success"] and not r["wraps"]
                  and r["dt"] <= 1e-3 and r["t_end"] == T]
         if small:
             out.append((max(small) < tol, f"alpha = 0, {T:g} s, converged, dt <= 1e-3: energy drift < {tol:g} in all "

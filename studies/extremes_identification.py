@@ -4,7 +4,8 @@ do to the estimates and to their standard errors, and is any NaN ever reported?
 Runs (``casflex.sweep.identification_run`` through the study harness's sweep, resumable with ``--record``):
 starts {0.1, 0.2, 0.5, 2, 5, 10} x p* (all four parameters) x position noise {0, 1e-6, 1e-5, 1e-4, 1e-3} m
 (seed 1) x method: direct at t = 0.69 s, adapted direct at (0.4, 1.1, 1.6, 1.9, 2.3) s, indirect over
-0..0.3 s (not the paper's 0.69 s, to keep the grid affordable; 60 s IPOPT wall-time cap per run). Data: the
+0..0.3 s (not the paper's 0.69 s, to keep the grid affordable; IPOPT options with a 60 s wall-time cap are
+passed, which identify_indirect's default Gauss-Newton does not use). Data: the
 simulated set over 3 s (noise 0) or the measured set (positions plus noise, derivatives by central
 differences). Also twobar with kt1 = kt3 = 1e-3 and 1e-6 x nominal (the scene written for the workers by
 ``one_run``): is kt reported weak, is there any NaN?
@@ -202,8 +203,8 @@ def page(rows: list[dict], quick: bool, banner: str, checks: list[tuple[bool, st
     lines = ["# Identification at the extremes" + (" (quick mode)" if quick else ""), "", banner, "",
              "What is run, how to read it and what it shows: [docs/studies/extremes.md](../studies/extremes.md); the "
              "simulation at the extremes: [extremes.md](extremes.md).", "",
-             f"Adapted direct at {ADAPTED_INSTANTS[quick]} s; indirect ({'single' if quick else 'multiple'} shooting) "
-             f"over 0..{0.05 if quick else 0.3:g} s, data over {1.2 if quick else 3.0:g} s. Cell: max relative error "
+             f"Adapted direct at {ADAPTED_INSTANTS[quick]} s; indirect (single shooting) over "
+             f"0..{0.05 if quick else 0.3:g} s, data over {1.2 if quick else 3.0:g} s. Cell: max relative error "
              "of p (adapted direct: of k1, k3); noise 0: ✓ converged, ✗! success missing the criterion; noise > 0: ✓ "
              "success, truth within 4 reported SE and error <= 10 %, ~ within 4 SE but error > 10 %, ✗! success with "
              "the truth outside 4 SE; ✗ solver failure.", ""]
