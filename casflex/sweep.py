@@ -204,16 +204,24 @@ def _text_progress(done: int, total: int, key: str) -> None:
 
 
 @functools.lru_cache(maxsize=8)
-def _setup(scene: str, t_end: float, noise: float, seed: int | None, data: str):
-    from casflex.data import measured_set, simulated_set
+def _setup(scene: str, t_end: float, noise: float, seed: int | None, data: str, method: str):
+    """The model and the recording: the simulated set, or positions with noise. The direct methods take
+    the measured set (central differences, from the second sample); the indirect method the noisy
+    positions from the first, the scene's initial state (the measured set's first sample, one step
+    into the motion, would start the model one step behind the data)."""
+    from casflex.data import MeasurementSet, measured_set, simulated_set
     from casflex.model import assemble
     from casflex.scene_io import load_scene
 
     model = assemble(load_scene(scene))
     sim = simulated_set(model, t_end=t_end)
-    if data == "measured" or noise > 0:
-        return model, measured_set(sim, noise=noise, seed=seed)
-    return model, sim
+    if data != "measured" and noise <= 0:
+        return model, sim
+    if method == "indirect":
+        q = sim.q + (np.random.default_rng(seed).normal(0.0, noise, sim.q.shape) if noise > 0 else 0.0)
+        return model, MeasurementSet(sim.t, sim.channels, q, None, None, source="measured",
+                                     meta={"noise": noise, "seed": seed, "from": sim.source})
+    return model, measured_set(sim, noise=noise, seed=seed)
 
 
 def identification_run(*, method: str, start: float, scene: str = "twobar", instants: tuple[float, ...] = (0.69,),
@@ -224,7 +232,7 @@ def identification_run(*, method: str, start: float, scene: str = "twobar", inst
     and the weakly identifiable parameters."""
     from casflex.identification import identify_adapted_direct, identify_direct, identify_indirect
 
-    model, dat = _setup(scene, float(t_end), float(noise), seed, data)
+    model, dat = _setup(scene, float(t_end), float(noise), seed, data, method)
     if method == "direct":
         r = identify_direct(model, dat, list(instants), start=start, **options)
     elif method == "adapted-direct":

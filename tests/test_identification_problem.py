@@ -90,3 +90,11 @@ def test_nlp_options_record_and_defaults():
     o = NLPOptions.of("f", {"transform": "log", "compiled": None}, hessian="exact")
     assert (o.solver, o.transform, o.hessian, o.compiled) == ("ipopt", "log", "exact", None)
     assert o.record() == {"transform": "log", "hessian": "exact", "compiled": False}
+
+
+def test_nlp_options_given_to_gauss_newton_are_refused():
+    from casflex.identification import identify_indirect
+
+    for key, value in (("solver_options", {"ipopt": {"max_wall_time": 60}}), ("hessian", "exact")):
+        with pytest.raises(ValueError, match=rf"{key}: an NLP solver's option, and the solver is 'gauss-newton'"):
+            identify_indirect(None, None, **{key: value})

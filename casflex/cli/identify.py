@@ -67,6 +67,9 @@ def _check_options(args: argparse.Namespace) -> None:
                           "--transcription multiple-shooting or --residue full")
     nlp = args.transcription == "multiple-shooting" or args.residue == "full" or args.solver not in (None,
                                                                                                    "gauss-newton")
+    if args.method == "indirect" and args.hessian is not None and not nlp:
+        raise OptionError("--hessian: the NLP solver's Hessian; the indirect method here is single shooting by "
+                          "gauss-newton: give --solver ipopt (or another nlpsol) or leave --hessian out")
     if args.initial_state not in (None, "scene") and nlp:
         raise OptionError(f"--initial-state {args.initial_state}: estimated initial states need single shooting on "
                           "positions with the gauss-newton solver")

@@ -130,6 +130,11 @@ def identify_indirect(
     default = GAUSS_NEWTON if transcription == "single-shooting" and residue == "positions" else "ipopt"
     opts = NLPOptions.of("identify_indirect", options, solver=default)
     solver, transform, verbose = opts.solver, opts.transform, opts.verbose
+    unused = [k for k in ("solver_options", "hessian") if solver == GAUSS_NEWTON and options.get(k) is not None]
+    if unused:
+        raise ValueError(f"{unused[0]}: an NLP solver's option, and the solver is {GAUSS_NEWTON!r} (single shooting "
+                         "on Eq. 16, the default); set solver='ipopt' (or another nlpsol) or leave it out (the "
+                         "Gauss-Newton budget is budget=)")
     if transcription not in TRANSCRIPTIONS:
         raise ValueError(f"transcription: expected one of {TRANSCRIPTIONS}, got {transcription!r}")
     if residue not in RESIDUES:
