@@ -29,7 +29,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from _small import PAPER_NLP, capped_ipopt, fmt_p
+from _shared import PAPER_NLP, capped_ipopt, fmt_p
 from _study import Banner, cli, png, save_raw, sweep, write_outputs
 
 from casflex.model import assemble

@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _small import twobar
+from _shared import twobar
 from _study import Banner, best_of, cli, png, write_outputs
 
 import casflex

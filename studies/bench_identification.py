@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _small import exudyn_recording, in_fresh_process
+from _shared import exudyn_recording, in_fresh_process
 from _study import Banner, cli, png, write_outputs
 
 NOISE, SEED, START = 5e-4, 0, 0.8

@@ -29,7 +29,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _small import in_fresh_process, twobar
+from _shared import in_fresh_process, twobar
 from _study import Banner, best_of, cli, png, write_outputs
 
 from casflex.simulate import simulate

@@ -22,7 +22,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _small import DATA, exudyn_recording, honesty
+from _shared import DATA, exudyn_recording, honesty
 from _study import Banner, cli, sweep, write_outputs
 
 MARKERS = ("x3", "y3", "x5", "y5")

@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _small import honesty
+from _shared import honesty
 from _study import Banner, cli, sweep, write_outputs
 
 MARKERS = ("THI", "KNE", "TIB", "ANK", "TOE")

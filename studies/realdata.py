@@ -33,7 +33,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _small import exudyn_recording, honesty
+from _shared import exudyn_recording, honesty
 from _study import Banner, cli, sweep, write_outputs
 
 NOISES = (0.0, 1e-4, 5e-4, 1e-3)

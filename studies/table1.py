@@ -24,7 +24,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _small import PAPER_NLP, capped_ipopt, fmt_p
+from _shared import PAPER_NLP, capped_ipopt, fmt_p
 from _study import Banner, cli, png, save_raw, write_outputs
 
 from casflex.data import MeasurementSet, measured_set, simulated_set
