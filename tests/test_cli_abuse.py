@@ -11,6 +11,10 @@ from casflex.cli import main
 
 CASES = [
     # (arguments, the one line must match this)
+    ("identify twobar --method indirect --initial-state estimate --residue full",
+     r"--initial-state estimate: an estimated state needs --residue positions"),
+    ("identify twobar --method indirect --initial-state velocities --transcription multiple-shooting",
+     r"--initial-state velocities: estimated velocities need single shooting"),
     ("identify twobar --method indirect --hessian exact", r"--hessian: the NLP solver's Hessian; .*--solver ipopt"),
     ("simulate twobar --t-end 1e9", r"--t-end: 1e\+09 s at --dt = 0.001 s is 1,000,000,000,000 steps .* needs about "
                                     r".*PiB of memory .* available; shorten --t-end or raise --dt"),

@@ -89,7 +89,8 @@ def test_noisy_positions_standard_errors_cover_truth(twobar, sim):
     ({"solver": "no_such_solver"}, "solver 'no_such_solver'"),
     ({"start": -1.0}, "start"),
     ({"initial_state": "guess"}, "initial_state"),
-    ({"initial_state": "estimate", "solver": "ipopt"}, "one recording from the scene's initial state"),
+    ({"initial_state": "velocities", "solver": "ipopt"}, "from the scene's initial state or an estimated one"),
+    ({"initial_state": "estimate", "solver": "ipopt", "residue": "full"}, "an estimated one .residue 'positions'"),
     ({"solver": "gauss-newton", "residue": "full"}, "single shooting on positions"),
 ])
 def test_bad_options_are_named(twobar, sim, kwargs, match):

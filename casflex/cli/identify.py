@@ -70,9 +70,11 @@ def _check_options(args: argparse.Namespace) -> None:
     if args.method == "indirect" and args.hessian is not None and not nlp:
         raise OptionError("--hessian: the NLP solver's Hessian; the indirect method here is single shooting by "
                           "gauss-newton: give --solver ipopt (or another nlpsol) or leave --hessian out")
-    if args.initial_state not in (None, "scene") and nlp:
-        raise OptionError(f"--initial-state {args.initial_state}: estimated initial states need single shooting on "
-                          "positions with the gauss-newton solver")
+    if args.initial_state == "velocities" and nlp:
+        raise OptionError("--initial-state velocities: estimated velocities need single shooting on positions with "
+                          "the gauss-newton solver")
+    if args.initial_state == "estimate" and args.residue == "full":
+        raise OptionError("--initial-state estimate: an estimated state needs --residue positions")
 
 
 def _start(model: Model, args: argparse.Namespace) -> float | np.ndarray:

@@ -99,7 +99,7 @@ def identify_indirect(
     transcription : {"single-shooting", "multiple-shooting"}
     initial_state : {"scene", "velocities", "estimate"}
         The state at the first sample: the scene's, the scene's positions with estimated
-        velocities, or estimated (:mod:`.initial_state`; the NLP transcription: "scene" only).
+        velocities, or estimated (:mod:`.initial_state`; the NLP transcription: "scene" or "estimate").
     dofs : names of the compared dofs; default every channel of the data.
     noise : float, optional
         The measurement noise's standard deviation (m, rad), if known (weights and checks).
@@ -154,10 +154,11 @@ def identify_indirect(
         return estimate(model, experiments, dt=dt, alpha=alpha, start=start, transform=transform, budget=budget,
                         compiled=True if opts.compiled is None else opts.compiled, newton_tol=newton_tol,
                         model_error=model_error, check_data=check_data, verbose=verbose)
-    if len(experiments) > 1 or experiments[0].initial_state != "scene":
-        raise ValueError(f"solver {solver!r} ({transcription}): one recording from the scene's initial state only; "
-                         f"use solver {GAUSS_NEWTON!r} (single shooting) for several recordings or an estimated "
-                         "initial state")
+    if len(experiments) > 1 or experiments[0].initial_state == "velocities" or (
+            experiments[0].initial_state == "estimate" and residue != "positions"):
+        raise ValueError(f"solver {solver!r} ({transcription}): one recording, from the scene's initial state or an "
+                         f"estimated one (residue 'positions'); use solver {GAUSS_NEWTON!r} (single shooting) for "
+                         "several recordings or estimated velocities")
     exp = experiments[0]
     solver_options = opts.solver_options
     if solver == "ipopt":  # the budget's time holds for IPOPT too: no one waits unboundedly for a failure
@@ -165,7 +166,7 @@ def identify_indirect(
                                        solver_options or {})
     r = identify_nlp(model, exp.data, float(exp.data.t[-1] - exp.data.t[0]), transcription=transcription,
                      residue=residue, dofs=exp.channels, weights=weights, alpha=alpha, dt=dt, interval=interval,
-                     start=start, newton_tol=newton_tol, polish=polish,
+                     start=start, initial_state=exp.initial_state, newton_tol=newton_tol, polish=polish,
                      **{**dataclasses.asdict(opts), "solver_options": solver_options})
     if residue == "full":
         return r

@@ -177,6 +177,7 @@ def identify_nlp(
     dt: float = 1e-3,
     interval: int | None = None,
     start: float | dict[str, float] | np.ndarray | None = None,
+    initial_state: str = "scene",
     newton_tol: float = 1e-14,
     polish: int = 3,
     **options: Unpack[NLPKeywords],
@@ -204,6 +205,10 @@ def identify_nlp(
         Steps per shooting interval (multiple shooting; default 20).
     start : factor, dict or array, optional
         Starting parameters (a number multiplies the nominal values).
+    initial_state : {"scene", "estimate"}
+        The state at the first sample: the scene's, or on the slow manifold through the
+        recording's first samples with its slow-mode amplitudes and rates as unknowns (as the
+        interval starts of multiple shooting; positions residue only).
     newton_tol : float
         Tolerance of the HHT Newton iterations inside the model (scaled, see HHT).
     polish : int
@@ -225,6 +230,11 @@ def identify_nlp(
         raise ValueError("the scene declares no parameters to identify ([[parameters]] in the scene file)")
     if len(weights) != 3 or not all(np.isfinite(w) and w >= 0 for w in weights):
         raise ValueError(f"weights: expected three numbers >= 0 (xi, psi, phi), got {weights!r}")
+    if initial_state not in ("scene", "estimate"):
+        raise ValueError(f"initial_state: expected 'scene' or 'estimate' for the NLP transcription, got "
+                         f"{initial_state!r}")
+    if initial_state == "estimate" and residue != "positions":
+        raise ValueError("initial_state 'estimate': with residue 'positions' (Eq. 16) only")
     if residue == "full" and (data.qd is None or data.qdd is None):
         raise ValueError("residue 'full' (Eq. 17) needs velocities and accelerations in the data")
     if transcription == "multiple-shooting" and residue == "full":
@@ -288,8 +298,17 @@ def identify_nlp(
 
     th = ca.MX.sym("theta", n_p)
     p = pmap.p(th)
-    qdd0, lam0 = integ.initial(model.q0, model.qd0, t0, p)
-    x0 = ca.vertcat(ca.DM(model.q0), ca.DM(model.qd0), qdd0, lam0)
+    if initial_state == "estimate":  # the first state on the slow manifold through the first samples
+        (q_g, qd_g), = _data_states(model, data, names, [t0])
+        first_start = [_SlowStart(model, integ, q_g, qd_g, t0, p0, omega_cut, ell, T)]
+        xi_init = ca.MX.sym("xi_init", first_start[0].size)
+        x0 = first_start[0].state(xi_init, p)
+    else:
+        first_start, xi_init = [], ca.MX.sym("xi_init", 0)
+        qdd0, lam0 = integ.initial(model.q0, model.qd0, t0, p)
+        x0 = ca.vertcat(ca.DM(model.q0), ca.DM(model.qd0), qdd0, lam0)
+    u = ca.vertcat(th, xi_init)  # the single-shooting problem's unknowns
+    n_u = u.numel()
 
     def simulate_from(nodes: list[ca.MX], lengths: list[int], first: list[int]) -> tuple[ca.MX, ca.MX]:
         """States after every step (nx, N) and Newton residuals (1, N), intervals mapped by length."""
@@ -318,9 +337,9 @@ def identify_nlp(
     r = residue_of(X)
     ends = [X[:, first[j] + lengths[j] - 1] for j in range(M - 1)]
     g = ca.vertcat(*[s.defect(e, x) for s, e, x in zip(starts, ends, xi, strict=True)]) if M > 1 else ca.MX(0, 1)
-    w = ca.vertcat(th, *xi)
+    w = ca.vertcat(u, *xi)
 
-    w0 = np.concatenate([pmap.theta(p0), *[s.xi0 for s in starts]])
+    w0 = np.concatenate([pmap.theta(p0), *[s.xi0 for s in first_start + starts]])
     lb_th, ub_th = pmap.bounds()
     n_xi = w0.size - n_p
     lbw = np.concatenate([lb_th, np.full(n_xi, -np.inf)])
@@ -338,7 +357,7 @@ def identify_nlp(
     ss_r = residue_of(Xf)
     # NaN where a step's Newton did not converge, so that the polish rejects such a step
     ss_ok = ca.if_else(ca.mmax(Rf) <= tol_acc, ss_r, np.nan * ss_r)
-    ss_all = ca.Function("ss_residue", [th], [ss_ok, ca.jacobian(ss_r, th), ss_r])
+    ss_all = ca.Function("ss_residue", [u], [ss_ok, ca.jacobian(ss_r, u), ss_r])
     ss_all = codegen.compiled(ss_all) if opts.compiled else ss_all
 
     def ss(t: np.ndarray) -> list:
@@ -351,17 +370,18 @@ def identify_nlp(
     solver_s = time.perf_counter() - t_solve
     st = nlp.stats()
     wv = np.array(sol["x"]).ravel()
-    th_v, polished = pb.gauss_newton_polish(ss, wv[:n_p], lb_th, ub_th, polish)
+    u_v, polished = pb.gauss_newton_polish(ss, wv[:n_u], lbw[:n_u], ubw[:n_u], polish)
+    th_v = u_v[:n_p]
     solve_s = time.perf_counter() - t_solve
     p_hat = pmap.p(th_v)
     # statistics from the residue as computed, also where a step missed the Newton tolerance
     # (then reported in the message below) rather than from its NaN-guarded form
-    _, Jv, rv = (np.array(v) for v in ss_all(th_v))
+    _, Jv, rv = (np.array(v) for v in ss_all(u_v))
     stats = pb.gauss_newton_statistics(Jv, rv.ravel(), n_p, model.parameter_names, pmap.dp_dtheta(th_v), p_hat)
 
     # states over the window at the identified parameters: multipliers (joint reactions)
-    xr = ca.Function("states", [th], [Xf, ca.mmax(Rf)])
-    Xv, newton_res = np.array(xr(th_v)[0]), float(xr(th_v)[1])
+    xr = ca.Function("states", [u], [Xf, ca.mmax(Rf)])
+    Xv, newton_res = np.array(xr(u_v)[0]), float(xr(u_v)[1])
     converged = bool(newton_res <= tol_acc and np.isfinite(Xv).all())
     pn = model.parameter_names
     success = bool(st.get("success", False)) and converged
@@ -377,7 +397,8 @@ def identify_nlp(
         instants=(t0 + h * np.arange(1, N + 1)).tolist(), multipliers=Xv[3 * n:, :].T.tolist(),
         extra={**opts.record(),
                "transcription": transcription, "residue": residue, "dofs": names,
-               "weights": list(weights), "steps": N, "dt": h, "intervals": M, "samples": int(steps.size),
+               "weights": list(weights), "initial_state": initial_state,
+               "steps": N, "dt": h, "intervals": M, "samples": int(steps.size),
                "constraint_violation": float(np.abs(np.array(sol["g"])).max()) if M > 1 else 0.0,
                "gauss_newton_polish": polished, "solver_s": solver_s,
                "solver_parameters": dict(zip(pn, pmap.p(wv[:n_p]).tolist(), strict=True))},
