@@ -168,3 +168,35 @@ def test_exudyn_translation_refuses_rigid_bodies_and_their_markers():
                   markers=(Marker("m", "plate", 1.5, 2.2),))
     with pytest.raises(NotImplementedError, match="rigid bodies are not translated"):
         build(scene, elements=2, h=1e-3, t_end=0.1)
+
+
+def test_initial_state_estimated_from_markers_only():
+    # a recording of markers only (no node channel) that starts mid-motion: Exudyn's twobar with a
+    # marker on each bar, 0.3-1 s at 100 Hz, 0.1 mm of noise. The kinematic fit reproduces the markers
+    # (equality constraints) at least elastic energy, the slow-manifold fit does the rest.
+    from pathlib import Path
+
+    from casflex import load_scene
+    from casflex.data import MeasurementSet
+    from casflex.identification import identify_indirect
+    from casflex.identification.initial_state import kinematic_fits
+
+    here = Path(__file__).parent / "data"
+    z = np.load(here / "twobar_markers_exudyn.npz")
+    ch = [str(c) for c in z["channels"]]
+    names = ("xm2", "ym2", "xm4", "ym4")
+    rows = np.arange(300, 1001, 10)
+    y = z["q"][np.ix_(rows, [ch.index(c) for c in names])]
+    data = MeasurementSet(z["t"][rows], names, y + np.random.default_rng(3).normal(0, 1e-4, y.shape), None, None)
+    model = assemble(load_scene(here / "twobar_markers.toml"))
+    # the kinematic fit puts the markers where the data have them (its springs at rest, where the
+    # motion stretches them by centimetres: a guess the fit of the state's slow part then corrects)
+    _, Q = kinematic_fits(model, data, list(names), limit=1)
+    assert np.abs(marker_positions(model, Q[0]) - data.q[0]).max() < 1e-9
+    r = identify_indirect(model, data, dt=1e-3, start=0.8, initial_state="estimate", noise=1e-4)
+    # measured on seeds 0-3: every fit a success, k within 1e-4, kt within 26 %, the estimated nodes
+    # within 0.33 mm of Exudyn's at 0.3 s; largest |z| 3.2 (k3, seed 2), 2.4 otherwise: the refit on
+    # a refined mesh does not hold all of the co-rotational vs ANCF difference at 0.1 mm
+    assert r.success, r.message
+    for name, truth in zip(model.parameter_names, model.p_nominal, strict=True):
+        assert abs(r.parameters[name] - truth) <= 3 * r.std_errors[name], name

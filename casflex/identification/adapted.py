@@ -68,7 +68,7 @@ def _guesses(model: Model, q_rows: np.ndarray, dt: np.ndarray, unknown: list[int
         known[list(measured)] = row[list(measured)]
         for c in model.constraints:
             known[c.dof] = c.value
-        q_prev = np.array(fit(known, q_prev)).ravel()
+        q_prev = np.array(fit(known, q_prev, np.zeros(0))).ravel()
         Q.append(q_prev)
     Q = np.array(Q)[:, unknown]
     deg = min(2, len(dt) - 1)

@@ -62,36 +62,46 @@ def _placement(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return free, keep, put
 
 
-def _kinematic_fit(model: Model, measured: tuple[int, ...]) -> ca.Function:
-    """``kinematic_fit(q_known, q_start) -> q``: the configuration of least elastic energy whose
-    measured and supported dofs take their values in ``q_known`` (IPOPT, exact Hessian), built
-    once per model and set of measured dofs."""
+def _kinematic_fit(model: Model, measured: tuple[int, ...], markers: tuple[int, ...] = ()) -> ca.Function:
+    """``kinematic_fit(q_known, q_start, y_known) -> q``: the configuration of least elastic energy
+    whose measured and supported dofs take their values in ``q_known`` and whose markers
+    ``markers`` (indices into :func:`casflex.markers.marker_channels`) are at ``y_known`` (equality
+    constraints), by IPOPT with the exact Hessian; built once per model, dofs and markers."""
     cache = _FITS.setdefault(model, {})
-    if measured in cache:
-        return cache[measured]
+    key = (measured, markers)
+    if key in cache:
+        return cache[key]
     n = model.n_dof
     unknown = [i for i in free_dofs(model) if i not in measured]
-    QK, Q0 = ca.MX.sym("q_known", n), ca.MX.sym("q_start", n)
+    QK, Q0, YK = ca.MX.sym("q_known", n), ca.MX.sym("q_start", n), ca.MX.sym("y_known", len(markers))
+    names = ["q_known", "q_start", "y_known"]
     if not unknown:  # every free dof is measured: nothing to fit
-        cache[measured] = ca.Function("kinematic_fit", [QK, Q0], [QK], ["q_known", "q_start"], ["q"])
-        return cache[measured]
+        cache[key] = ca.Function("kinematic_fit", [QK, Q0, YK], [QK], names, ["q"])
+        return cache[key]
     keep = np.ones(n)
     keep[unknown] = 0.0
     put = np.zeros((n, len(unknown)))
     put[unknown, np.arange(len(unknown))] = 1.0
     qk, u, u_ref = ca.SX.sym("q_known", n), ca.SX.sym("u", len(unknown)), ca.SX.sym("u_ref", len(unknown))
+    yk = ca.SX.sym("y_known", len(markers))
     q = ca.DM(keep) * qk + ca.mtimes(ca.DM(put), u)
     _, V_el, _ = model.energy(q, ca.DM.zeros(n), model.p_nominal)
     ell = np.where(model.is_rotation[unknown], 1.0, model.length_scale)
     # a weak pull toward the start fixes motions that cost no energy (e.g. a free spin)
     reg = 1e-9 * ca.mmax(ca.fabs(ca.diag(ca.hessian(V_el, u)[0]))) + 1e-12
     f = V_el + 0.5 * reg * model.length_scale**2 * ca.sumsqr((u - u_ref) / ell)
-    solver = ca.nlpsol("kinematic_fit_nlp", "ipopt", {"x": u, "p": ca.vertcat(qk, u_ref), "f": f},
+    g = ca.SX(0, 1)
+    if markers:
+        from casflex.markers import marker_kinematics
+
+        y = marker_kinematics(model)(q, ca.DM.zeros(n))[0]
+        g = (y[list(markers)] - yk) / model.length_scale
+    solver = ca.nlpsol("kinematic_fit_nlp", "ipopt", {"x": u, "p": ca.vertcat(qk, u_ref, yk), "f": f, "g": g},
                        {"print_time": False, "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-12, "max_iter": 200}})
-    U = solver(x0=Q0[unknown], p=ca.vertcat(QK, Q0[unknown]))["x"]
-    cache[measured] = ca.Function("kinematic_fit", [QK, Q0], [ca.DM(keep) * QK + ca.mtimes(ca.DM(put), U)],
-                                  ["q_known", "q_start"], ["q"])
-    return cache[measured]
+    U = solver(x0=Q0[unknown], p=ca.vertcat(QK, Q0[unknown], YK), lbg=0.0, ubg=0.0)["x"]
+    cache[key] = ca.Function("kinematic_fit", [QK, Q0, YK], [ca.DM(keep) * QK + ca.mtimes(ca.DM(put), U)], names,
+                             ["q"])
+    return cache[key]
 
 
 def _elastic_energy(model: Model) -> ca.Function:
@@ -103,15 +113,18 @@ def _elastic_energy(model: Model) -> ca.Function:
     return _ELASTIC[model]
 
 
-def first_fit(model: Model, fit: ca.Function, dofs: list[int], values: np.ndarray, t: float = 0.0) -> np.ndarray:
+def first_fit(model: Model, fit: ca.Function, dofs: list[int], values: np.ndarray, t: float = 0.0,
+              markers: tuple[int, ...] = (), y: np.ndarray | None = None) -> np.ndarray:
     """The kinematic fit (``fit``, from :func:`_kinematic_fit`) at the first sample (time t, s), whose
-    measured ``dofs`` take ``values``: reached from the scene's configuration q0 by paths of
-    :data:`HOMOTOPY_STEPS` steps (the measured dofs and the supports on the straight line from q0
-    to ``values`` and the supports' values at t, each step's fit started at the previous one); the
-    end of least elastic energy."""
+    measured ``dofs`` take ``values`` and ``markers`` the positions ``y``: reached from the scene's
+    configuration q0 by paths of :data:`HOMOTOPY_STEPS` steps (the measured dofs, markers and
+    supports on the straight line from their scene values to the sample's, each step's fit
+    started at the previous one); the end of least elastic energy."""
     energy = _elastic_energy(model)
     fixed = [con.dof for con in model.constraints]
     support, _ = model.supports_at(t)
+    y = np.zeros(0) if y is None else np.asarray(y, dtype=float)
+    y0 = _marker_values(model, model.q0, markers)
     best, best_v = None, np.inf
     for n in HOMOTOPY_STEPS:
         q = model.q0.copy()
@@ -119,14 +132,23 @@ def first_fit(model: Model, fit: ca.Function, dofs: list[int], values: np.ndarra
             known = q.copy()
             known[dofs] = (1.0 - s) * model.q0[dofs] + s * values
             known[fixed] = (1.0 - s) * model.q0[fixed] + s * support
-            q = np.array(fit(known, q)).ravel()
+            q = np.array(fit(known, q, (1.0 - s) * y0 + s * y)).ravel()
         v = float(energy(q))
         if np.isfinite(v) and v < best_v:
             best, best_v = q, v
     if best is None:
         raise ValueError("data: the kinematic fit at the first sample failed (no finite elastic energy); check "
-                         "that the channels are the scene's dofs in m and rad")
+                         "that the channels are the scene's dofs and markers in m and rad")
     return best
+
+
+def _marker_values(model: Model, q: np.ndarray, markers: tuple[int, ...]) -> np.ndarray:
+    """Positions (m) of the marker coordinates ``markers`` (indices into the marker channels) at q."""
+    if not markers:
+        return np.zeros(0)
+    from casflex.markers import marker_positions
+
+    return marker_positions(model, q)[0][list(markers)]
 
 
 def initial_guess(model: Model, experiment: Experiment, m: int = 5) -> tuple[np.ndarray, np.ndarray]:
@@ -143,13 +165,7 @@ def initial_guess(model: Model, experiment: Experiment, m: int = 5) -> tuple[np.
         q0, qd0 = model.q0.copy(), model.qd0.copy()
         q0[fixed], qd0[fixed] = model.supports_at(float(data.t[0]))
         return q0, qd0
-    compared = experiment.compared(model)
-    names = [c for c in compared if c in model.dof_names]  # the kinematic fit takes node channels
-    if not names:
-        raise ValueError(f"initial_state {experiment.initial_state!r}: the state is estimated from node channels "
-                         f"(x<node>, y<node>, theta<node>), and the data have markers' only ({list(compared)}); add "
-                         "a node channel or start the recording at the scene's state (initial_state 'scene')")
-    tt, Q = kinematic_fits(model, data, names, limit=m)
+    tt, Q = kinematic_fits(model, data, list(experiment.compared(model)), limit=m)
     tt = tt - data.t[0]
     q0 = Q[0] if experiment.initial_state == "estimate" else model.q0.copy()
     degree = min(2, len(tt) - 1)
@@ -160,26 +176,34 @@ def initial_guess(model: Model, experiment: Experiment, m: int = 5) -> tuple[np.
 
 def kinematic_fits(model: Model, data, names: list[str], limit: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(times (s, m), configurations (m, n_dof)): the kinematic fit at each sample that has every
-    channel of ``names`` (node dofs), the first one by :func:`first_fit`, each later one started at
-    the one before; the first ``limit`` such samples (default all)."""
-    fit = _kinematic_fit(model, tuple(sorted(model.dof(c) for c in names)))
+    channel of ``names`` (node dofs and markers), the first one by :func:`first_fit`, each later
+    one started at the one before; the first ``limit`` such samples (default all)."""
+    from casflex.markers import marker_channels
+
+    channels = marker_channels(model)
+    dof_names = [c for c in names if c in model.dof_names]
+    marker_names = [c for c in names if c in channels]
+    dofs = [model.dof(c) for c in dof_names]
+    markers = tuple(channels.index(c) for c in marker_names)
+    order = np.argsort(dofs)
+    fit = _kinematic_fit(model, tuple(np.asarray(dofs, dtype=int)[order].tolist()), markers)
     fixed = [con.dof for con in model.constraints]
-    cols = [data.channels.index(c) for c in names]
-    dofs = [model.dof(c) for c in names]
+    cols = [data.channels.index(c) for c in dof_names]
+    mcols = [data.channels.index(c) for c in marker_names]
     fits, times = [], []
     for i in range(data.t.size):
         if len(fits) == limit:
             break
-        values = data.q[i, cols]
-        if not np.isfinite(values).all():
+        values, y = data.q[i, cols], data.q[i, mcols]
+        if not (np.isfinite(values).all() and np.isfinite(y).all()):
             continue
         if not fits:
-            q_prev = first_fit(model, fit, dofs, values, float(data.t[i]))
+            q_prev = first_fit(model, fit, dofs, values, float(data.t[i]), markers, y)
         else:
             known = q_prev.copy()
             known[dofs] = values
             known[fixed] = model.supports_at(float(data.t[i]))[0]
-            q_prev = np.array(fit(known, q_prev)).ravel()
+            q_prev = np.array(fit(known, q_prev, y)).ravel()
         fits.append(q_prev)
         times.append(data.t[i])
     if not fits:
