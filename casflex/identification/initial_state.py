@@ -132,7 +132,7 @@ def first_fit(model: Model, fit: ca.Function, dofs: list[int], values: np.ndarra
             known = q.copy()
             known[dofs] = (1.0 - s) * model.q0[dofs] + s * values
             known[fixed] = (1.0 - s) * model.q0[fixed] + s * support
-            q = np.array(fit(known, q, (1.0 - s) * y0 + s * y)).ravel()
+            q = fit_step(model, fit, known, q, (1.0 - s) * y0 + s * y)
         v = float(energy(q))
         if np.isfinite(v) and v < best_v:
             best, best_v = q, v
@@ -140,6 +140,18 @@ def first_fit(model: Model, fit: ca.Function, dofs: list[int], values: np.ndarra
         raise ValueError("data: the kinematic fit at the first sample failed (no finite elastic energy); check "
                          "that the channels are the scene's dofs and markers in m and rad")
     return best
+
+
+def fit_step(model: Model, fit: ca.Function, known: np.ndarray, q_start: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """``fit(known, q_start, y)``, kept within half a turn of ``q_start`` in every rotation: the beams
+    cannot tell a node turned by whole turns (their local rotations are wrapped) and IPOPT may land
+    there, the torsion springs can (leg from its markers mid-motion: the shank's knee node 3 turns
+    off, 1528 J of elastic energy instead of 6). Such a fit is redone from the unwound point."""
+    q = np.array(fit(known, q_start, y)).ravel()
+    turns = np.where(model.is_rotation, np.round((q - q_start) / (2 * np.pi)), 0.0)
+    if turns.any():
+        q = np.array(fit(known, q - 2 * np.pi * turns, y)).ravel()
+    return q
 
 
 def _marker_values(model: Model, q: np.ndarray, markers: tuple[int, ...]) -> np.ndarray:
@@ -203,7 +215,7 @@ def kinematic_fits(model: Model, data, names: list[str], limit: int | None = Non
             known = q_prev.copy()
             known[dofs] = values
             known[fixed] = model.supports_at(float(data.t[i]))[0]
-            q_prev = np.array(fit(known, q_prev, y)).ravel()
+            q_prev = fit_step(model, fit, known, q_prev, y)
         fits.append(q_prev)
         times.append(data.t[i])
     if not fits:
