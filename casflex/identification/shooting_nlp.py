@@ -124,9 +124,9 @@ def _data_states(model: Model, data: MeasurementSet, names: list[str], times: li
 class _SlowStart:
     """The start of a multiple-shooting interval on the slow manifold (module docstring).
 
-    At the start simulation's state (q_g, qd_g) there, the modes below ``omega_cut`` (rad/s) are
-    the slow ones (:func:`.initial_state.slow_projection`). The unknowns are their amplitudes a
-    and rates v, scaled: xi = (a / s_a, v / s_v), s_a the modal size of one length scale per dof,
+    At the recording's state (q_g, qd_g) there (:func:`_data_states`), the modes below
+    ``omega_cut`` (rad/s) are the slow ones (:func:`.initial_state.slow_projection`). The unknowns
+    are their amplitudes a and rates v, scaled: xi = (a / s_a, v / s_v), s_a the modal size of one length scale per dof,
     s_v = s_a / T. The state is the slow manifold's point (q, qd)(a, v; p), its accelerations and
     multipliers consistent (Eq. 1). The fast components take their quasi-static values.
     """
