@@ -115,6 +115,8 @@ def main(quick: bool = False, out_dir: Path | None = None, record: Path | None =
     assert rows, "no run finished"
     for r in rows:
         assert r["dishonest"] <= max(1, round(0.1 * r["runs"])), r
+        # one that a single run can fail: with honest SE a 5-SE miss has probability 6e-7
+        assert max(abs(z) for z in r["z"]) < 5, r
         if not quick and r["window"] == "rest" and r["parameter"].startswith("c"):
             assert r["err_max"] < 0.05, r
     return rows
