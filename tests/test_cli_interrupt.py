@@ -1,6 +1,6 @@
 """Ctrl-C at any moment of a command: exit status 130 and no file left behind.
 
-The command is interrupted by SIGINT at 20 random moments spread over its whole run: start-up,
+The command is interrupted by SIGINT at MOMENTS random moments spread over its whole run: start-up,
 model assembly, the HHT steps, post-processing, every figure and the animation. A moment is
 used only while the command has not yet reported its outputs as written: once the outputs are in
 place the command has finished and a later Ctrl-C no longer undoes it (casflex.cli docstring).
@@ -24,6 +24,10 @@ ARGS = ["simulate", "twobar", "--t-end", "0.3", "--out", "run.npz", "--plots", "
 #: or killed by the signal: a shell shows 130); the moments are drawn after it. From the entry point
 #: on, casflex catches it (casflex._entry: nothing heavy is imported before) and exits with 130.
 INTERRUPTED = (130, -signal.SIGINT, 1)
+#: 14 moments, about 2.5 s each (20 until stop 21, cut for the suite's 10-minute budget). A moment is
+#: uniform over the run: a phase of a tenth of it is hit with probability 0.77 per run (0.88 with 20);
+#: the seed is fixed, the run's timing is not, so successive CI runs hit different moments.
+MOMENTS = 14
 
 
 def _start_up() -> float:
@@ -56,7 +60,7 @@ def _wrote(lines: list[tuple[float, str]]) -> float | None:
 
 
 @pytest.mark.slow
-def test_sigint_at_20_random_moments_exits_130_and_writes_nothing(tmp_path):
+def test_sigint_at_random_moments_exits_130_and_writes_nothing(tmp_path):
     # calibration: how long until the outputs are written (the fastest of two runs)
     until = []
     for k in range(2):
@@ -72,7 +76,7 @@ def test_sigint_at_20_random_moments_exits_130_and_writes_nothing(tmp_path):
     codes = []
     early = 1.5 * _start_up()  # Python's own start-up (see INTERRUPTED), with a margin for the load
     for attempt in range(100):
-        if len(codes) == 20:
+        if len(codes) == MOMENTS:
             break
         moment = rng.uniform(early, 0.95 * min(until))
         cwd = tmp_path / f"run{attempt}"
@@ -90,5 +94,5 @@ def test_sigint_at_20_random_moments_exits_130_and_writes_nothing(tmp_path):
         assert list(cwd.iterdir()) == [], f"SIGINT at {moment:.2f} s left {sorted(os.listdir(cwd))}"
         assert "Traceback" not in err or code != 130, err
         codes.append(code)
-    assert len(codes) == 20, f"only {len(codes)} moments fell inside the run"
-    assert codes.count(130) == 20, codes
+    assert len(codes) == MOMENTS, f"only {len(codes)} moments fell inside the run"
+    assert codes.count(130) == MOMENTS, codes
