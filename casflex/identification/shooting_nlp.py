@@ -111,7 +111,7 @@ def _data_states(model: Model, data: MeasurementSet, names: list[str], times: li
 
     if not times:
         return []
-    tk, Q = kinematic_fits(model, data, [c for c in names if c in model.dof_names])
+    tk, Q = kinematic_fits(model, data, names)
     out = []
     for t in times:
         near = np.sort(np.argsort(np.abs(tk - t))[:5])
@@ -298,8 +298,15 @@ def identify_nlp(
 
     th = ca.MX.sym("theta", n_p)
     p = pmap.p(th)
-    if initial_state == "estimate":  # the first state on the slow manifold through the first samples
-        (q_g, qd_g), = _data_states(model, data, names, [t0])
+    lengths = _intervals(N, interval, transcription)
+    first = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(int).tolist()
+    M = len(lengths)
+    # the recording's states at the interval starts (and at t0 for an estimated initial state): one
+    # pass of kinematic fits over the samples serves them all
+    est = initial_state == "estimate"
+    guesses = _data_states(model, data, names, [t0] * est + [t0 + first[j] * h for j in range(1, M)])
+    if est:  # the first state on the slow manifold through the first samples
+        q_g, qd_g = guesses.pop(0)
         first_start = [_SlowStart(model, integ, q_g, qd_g, t0, p0, omega_cut, ell, T)]
         xi_init = ca.MX.sym("xi_init", first_start[0].size)
         x0 = first_start[0].state(xi_init, p)
@@ -324,11 +331,7 @@ def identify_nlp(
                 out_r[j] = Rk[:, i * K:(i + 1) * K]
         return ca.horzcat(*out_x), ca.horzcat(*out_r)
 
-    lengths = _intervals(N, interval, transcription)
-    first = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(int).tolist()
-    M = len(lengths)
-    # the interval starts 1..M-1 on the slow manifold of the start simulation's states there
-    guesses = _data_states(model, data, names, [t0 + first[j] * h for j in range(1, M)])
+    # the interval starts 1..M-1 on the slow manifold through the recording's states there
     starts = [_SlowStart(model, integ, q_g, qd_g, t0 + first[j] * h, p0, omega_cut, ell, T)
               for j, (q_g, qd_g) in enumerate(guesses, 1)]
     xi = [ca.MX.sym(f"xi{j}", s.size) for j, s in enumerate(starts, 1)]  # scaled (a, v) of each start
