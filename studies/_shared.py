@@ -3,7 +3,6 @@ library. Not a study itself (no ``main``).
 
 - :data:`PAPER_NLP`, :func:`capped_ipopt`: the seed paper's NLP formulation with a wall-time cap
   (table1, basins);
-- :func:`fmt_p`: a parameter vector in brackets, 6 digits;
 - :func:`exudyn_recording`: channels of an Exudyn reference recording at 100 Hz with noise
   (dampers, realdata, bench_identification);
 - :func:`twobar`: the twobar model meshed into n elements per bar (bench_simulate, bench_exudyn);
@@ -35,11 +34,6 @@ def capped_ipopt(cap_s: float) -> dict:
     ip = dict(solver_options_for("ipopt", False, None, tol=1e-8)["ipopt"])
     ip["max_wall_time"] = float(cap_s)
     return {"ipopt": ip}
-
-
-def fmt_p(p) -> str:
-    """[v1 v2 ...] with 6 significant digits."""
-    return "[" + " ".join(f"{v:.6g}" for v in p) + "]"
 
 
 def exudyn_recording(file: str, names: tuple[str, ...], t_from: float, t_to: float, noise: float, seed: int):
