@@ -1,27 +1,8 @@
-"""Basins of convergence: which starting factors in [0.3, 3] x p* lead each method to p*?
+"""Basins of convergence: which starting factors in [0.3, 3] x p* lead each method (direct, adapted
+direct, indirect by single and multiple shooting) to p*?
 
-Methods (twobar scene, simulated set, p* = [700 0.5 400 0.5]):
-
-- direct, instant t1 = 0.69 s;
-- adapted direct, instants [0.4 1.1 1.6 1.9 2.3] s (criterion on k1, k3 only, within 1e-4:
-  the torsional stiffnesses are weakly identifiable by design; their errors are reported);
-- indirect, Eq. 16 (positions), horizon 0..0.69 s, single shooting;
-- indirect, Eq. 16, multiple shooting, linear and log parameter transforms;
-- indirect, Eq. 17 (full kinematics), single and multiple shooting.
-
-Methods that converge from every factor of the list are probed further out (0.1, 0.2, 5, 10) to
-find where their basins end.
-
-Convergence (all but the adapted direct): max_j |p_j / p*_j - 1| <= 1e-6 and solver success.
-Every start is p = factor x p* (all four parameters scaled alike), as in the paper. What the
-outcomes mean: docs/studies/basins.md.
-
-Writes docs/tables/basins.md and docs/figures/basins.png (``--raw FILE`` also saves the run's
-numbers, ``--render FILE`` re-renders the page from them). Run: ``python studies/basins.py``
-(about 53 min; ``--quick`` for the CI version: horizon 0.05 s, factors 0.5 and 2, single shooting
-only for the indirect method). The runs go through casflex.sweep on dask.distributed
-(``--scheduler ADDRESS`` for a real cluster); ``--record DIR`` keeps one JSON per run, so an
-interrupted study resumes.
+Set-up and how to read the page: docs/studies/basins.md. Run: ``python studies/basins.py`` (about 53 min; ``--quick``:
+horizon 0.05 s, factors 0.5 and 2; ``--record DIR``, ``--scheduler ADDRESS``, ``--raw FILE``, ``--render FILE``).
 """
 
 from __future__ import annotations
@@ -29,8 +10,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from _shared import PAPER_NLP, capped_ipopt, fmt_p
-from _study import Banner, cli, png, save_raw, sweep, write_outputs
+from _shared import PAPER_NLP, capped_ipopt
+from _study import Banner, cli, fmt_p, png, save_raw, sweep, write_outputs
 
 from casflex.model import assemble
 from casflex.scene_io import load_scene

@@ -1,22 +1,8 @@
-"""Benchmark against Exudyn: the same twobar system in both codes, side by side in one run.
+"""Benchmark against Exudyn: do the two codes solve the same twobar problem, which is faster at the
+same mesh and step, and which is cheaper for a required accuracy of node 5?
 
-Questions: (1) do the two codes solve the same problem? (2) at the same mesh and step, which is
-faster, from 1 to 32 elements per bar? (3) for a required accuracy of node 5, which is cheaper
-(the error-against-time fronts of both codes, 1e-3 to 1e-6 m)?
-
-casflex: the scene file ``casflex/scenes/twobar.toml`` meshed into n co-rotational Euler-Bernoulli
-elements per bar, HHT alpha = 0, compiled, whole ``simulate()`` calls (energies and joint outputs
-included). Exudyn (C++, ``pip install exudyn``), built here from the same scene data, with both of
-its planar beams: ``ancf`` (ANCF cable, the continuum of casflex's beam) and ``ge`` (geometrically
-exact, with shear and the section's rotary inertia, compared with casflex's beam with
-``rotary_inertia = true``: ``casflex-rot``); trapezoidal rule in both. How the Exudyn model is
-built and why (solver settings, what is timed): docs/studies/bench_exudyn.md.
-
-Errors: max over t = 0, 0.01, ..., t_end of the distance of node 5 from a converged reference of the
-same continuum: casflex's without rotary inertia for casflex and ancf, casflex's with it for
-casflex-rot, Exudyn's own finest ge run for ge.
-Writes docs/tables/bench_exudyn.md and docs/figures/bench_exudyn.png (``--quick``: *_quick.*, 0.3 s).
-Run: ``python studies/bench_exudyn.py`` (about 15 min). Without Exudyn the casflex side still runs.
+Set-up and how to read the page: docs/studies/bench_exudyn.md. Run: ``python studies/bench_exudyn.py`` (about 15 min;
+``--quick``: 0.3 s). Without Exudyn the casflex side still runs.
 """
 
 from __future__ import annotations

@@ -1,19 +1,7 @@
-"""Benchmark: what does an identification cost the first time, and every later time?
+"""Benchmark: what does an identification cost the first time (cold cache), and every later time?
 
-Twobar measured by Exudyn (tests/data/twobar_exudyn.npz: 8 ANCF elements per bar), the paper's
-channels x, y of nodes 3 and 5 at 100 Hz with 0.5 mm of noise, from rest, start 0.8 x p*. Each case
-runs in two fresh processes that share a new, empty cache directory: the first builds every
-compiled function (cold), the second finds them on disk (cached). Reported per process: the
-identification's build and solve times as it records them (``wall_build_s``, ``wall_solve_s``; a
-compile happens inside whichever phase first needs the function) and their sum.
-
-Cases: the default output-error fit (Gauss-Newton single shooting on compiled forward sensitivities)
-with and without its model-error refit (the same fit on a refined model), over 0.69 s (the paper's
-horizon) and 3 s; the seed paper's NLP transcriptions with IPOPT and compiled functions (single
-and multiple shooting, 0.69 s); the direct method on the simulated set (compiled residual).
-
-Writes docs/tables/bench_identification.md and docs/figures/bench_identification.png.
-Run: ``python studies/bench_identification.py`` (about 10 min; ``--quick``: two short cases).
+Set-up and how to read the page: docs/studies/bench_identification.md. Run: ``python studies/bench_identification.py``
+(about 10 min; ``--quick``: two short cases).
 """
 
 from __future__ import annotations

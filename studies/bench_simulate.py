@@ -1,20 +1,8 @@
-"""Benchmark: what does a twobar simulation cost as the mesh grows, and how accurate is it per step?
+"""Benchmark: what does a twobar simulation cost as the mesh grows, how accurate is it per step, and
+what does modified Newton save?
 
-1. Scaling (the question of issue 12): twobar with 1, 2, 4, 8, 16, 32 elements per bar, 3 s at
-   dt = 1e-3, compiled. Each mesh runs in two fresh processes sharing one new cache directory: the
-   first builds the C library from nothing (cold build), the second finds it (cached build) and
-   times whole ``simulate()`` calls (best of several), the integration alone, and the process's peak
-   memory. Growth exponents of the per-step cost are fitted against the number of dofs and of elements.
-2. Accuracy and paths (one element per bar): for each dt, interpreted (CasADi's virtual machine,
-   stepped from Python) and compiled wall times side by side, Newton iterations per step, the error of
-   node 5 against a fine-step reference and the fitted convergence order; the two paths must agree.
-3. Exact against modified Newton (``newton="modified"``: the factorised Jacobian kept while a chord
-   update converges the step): compiled run times side by side, the fraction of steps that refresh
-   the Jacobian and how far node 5 moves from the exact Newton's, 1 s of twobar.
-
-What the numbers mean (the exponents, the flat-code/mapped-kernel line, when modified Newton pays):
-docs/studies/bench_simulate.md. Writes docs/tables/bench_simulate.md and docs/figures/bench_simulate.png.
-Run: ``python studies/bench_simulate.py`` (about 5 min; ``--quick`` for the CI version).
+Set-up and how to read the page: docs/studies/bench_simulate.md. Run: ``python studies/bench_simulate.py`` (about 5
+min; ``--quick``).
 """
 
 from __future__ import annotations

@@ -1,18 +1,7 @@
 """Can the joints' dampers be identified from a few noisy markers, with honest standard errors?
 
-The recording: twobar with viscous dampers in its four joints (tests/data/twobar_damped.toml:
-c1 = 20, c3 = 10 N s/m along the springs, ct1 = ct3 = 1 N m s/rad), simulated by Exudyn (8 ANCF
-elements per beam, h = 1e-4 s; tests/data/make_reference_data.py), x and y of nodes 3 and 5 at
-100 Hz with 1 mm of Gaussian noise, SEEDS seeds, in a window at rest (0-3 s, the scene's initial
-state) and one mid-motion (0.5-2.5 s, initial state estimated). casflex fits the eight joint
-parameters (k, kt, c, ct of both joints) with its default indirect method and model (one element
-per beam, dt = 1 ms), from 20 % below the truth.
-
-Per window and parameter: the median and largest relative error, the coverage of the truth by the
-reported 2- and 3-SE intervals, and per window the success rate and the "dishonest" successes (a
-parameter more than 3 SE from the truth). Writes docs/tables/dampers.md and docs/figures/dampers.png
-(``--quick``: *_quick.*, the window at rest cut to 1 s, one seed). Run: ``python studies/dampers.py``
-(about 5 min on 2 cores).
+Set-up and how to read the page: docs/studies/dampers.md. Run: ``python studies/dampers.py`` (about 5 min on 2 cores;
+``--quick``: 1 s at rest, one seed).
 """
 
 from __future__ import annotations

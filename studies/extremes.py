@@ -1,18 +1,8 @@
 """Stability at the extremes: where does HHT-alpha on twobar stop converging, and is every failure
 detected and reported with its time?
 
-Set-up (``simulate(..., compiled=True, raise_on_failure=False)``): alpha in {0, -1/3} x dt in {1e-5 .. 5e-2}
-s x stiffness (the springs' k, kt scaled x1e-3 .. x1e6 through p; the beams' E x1 .. x1e-6 in the scene) x
-horizon 3 s and 30 s (30 s for dt >= 1e-4). Per run (studies/_extremes.py): status and message, energy drift,
-omega_max dt, Newton iterations of sampled steps (re-run with the interpreted step pieces, which reproduce the
-compiled step bitwise; runs of <= 300 steps also wholly on the interpreted path), and the study's own
-cross-check of simulate's detection: every element's co-rotational local rotation (a wrap through +-pi) and
-the energy, on the returned states and on the step simulate rejected (replayed); a Newton failure's step
-replayed with a plain Newton iteration and as two half steps. Full turns, a finer mesh and the round-off
-floor: studies/extremes_rotations.py; identification at the extremes: studies/extremes_identification.py.
-
-Writes docs/tables/extremes.md and docs/figures/extremes.png (``--quick``: *_quick.*, seconds); how to read
-them and what they show: docs/studies/extremes.md. Run: ``python studies/extremes.py`` (about 4 min).
+Set-up and how to read the page: docs/studies/extremes.md. Run: ``python studies/extremes.py`` (about 4 min;
+``--quick``: seconds; ``--raw FILE``, ``--render FILE``).
 """
 
 from __future__ import annotations

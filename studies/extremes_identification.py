@@ -1,18 +1,8 @@
-"""Identification at the extremes: does each method find twobar's parameters from far starts, what does noise
-do to the estimates and to their standard errors, and is any NaN ever reported?
+"""Identification at the extremes: does each method find twobar's parameters from far starts, what
+does noise do to the estimates and their standard errors, and is any NaN ever reported?
 
-Runs (``casflex.sweep.identification_run`` through the study harness's sweep, resumable with ``--record``):
-starts {0.1, 0.2, 0.5, 2, 5, 10} x p* (all four parameters) x position noise {0, 1e-6, 1e-5, 1e-4, 1e-3} m
-(seed 1) x method: direct at t = 0.69 s, adapted direct at (0.4, 1.1, 1.6, 1.9, 2.3) s, indirect over
-0..0.3 s (not the paper's 0.69 s, to keep the grid affordable) by its default, single shooting by
-Gauss-Newton. Data: the simulated set over 3 s (noise 0) or positions plus noise (the direct
-methods: the measured set, derivatives by central differences). Also twobar with kt1 = kt3 = 1e-3
-and 1e-6 x nominal (the scene written for the workers by ``one_run``): is kt reported weak, is there
-any NaN?
-
-Writes docs/tables/extremes_identification.md and docs/figures/extremes_identification.png (``--quick``:
-*_quick.*, 9 cheap runs over 1.2 s); reading: docs/studies/extremes.md. Run:
-``python studies/extremes_identification.py`` (about 8 min on 2 cores).
+Set-up and how to read the page: docs/studies/extremes.md. Run: ``python studies/extremes_identification.py`` (about 8
+min on 2 cores; ``--quick``: 9 cheap runs).
 """
 
 from __future__ import annotations

@@ -1,20 +1,8 @@
-"""Rotations at the extremes: do the absolute rotation dofs carry the chain through full turns, does a finer
-mesh keep the co-rotational local rotations in range, and where is the round-off floor of the tolerance?
+"""Rotations at the extremes: do the absolute rotation dofs carry the chain through full turns, does a
+finer mesh keep the local rotations in range, and where is the round-off floor of the tolerance?
 
-- Full turns: twobar spun about the clamp, every free node starting with the rigid-body velocity of a
-  rotation at 10 rad/s (v = omega x r), springs x1e3 (so that it stays a chain), torsion springs nominal;
-  alpha in {0, -1/3} x dt in {1e-3, 1e-4} s x 3 s and 30 s, compiled path. Measured: turns of theta5, the
-  largest step of a rotation, theta5 against the unwrapped chord of bar 4 (a 2 pi jump would show as ~6.3),
-  the torsion spring's moment against kt times the unwrapped relative rotation, energy drift, wraps.
-- A finer mesh: E x1e-6 (bending stiffness 0.109 N m^2), alpha = 0, dt = 1e-4, 3 s, with one and with eight
-  elements per bar: does one element stop with element_range, and do eight run through?
-- Round-off: the same scene translated along x by up to 1e6 m (physically the same motion): does every
-  step still converge at tol = 1e-12 (raised to the floor 10 eps max|q / l|), and how far does the motion,
-  translated back, differ from the untranslated scene's?
-
-Writes docs/tables/extremes_rotations.md (``--quick``: *_quick.md, the 3 s runs at dt = 1e-3, no mesh
-check, shifts 0 and 1e4 m over 0.2 s); reading: docs/studies/extremes.md. Run:
-``python studies/extremes_rotations.py`` (about 1 min).
+Set-up and how to read the page: docs/studies/extremes.md. Run: ``python studies/extremes_rotations.py`` (about 1 min;
+``--quick``).
 """
 
 from __future__ import annotations

@@ -1,16 +1,8 @@
 """Figures 2-5 of the seed paper: how sensitive are the motion and the first joint's forces to the
 parameter sets p*, p1 = [663 0.49 379 0.49] and p2 = [757 0.50 465 0.53]?
 
-Fig. 2: node-5 displacements (x5, y5, theta5); Fig. 3: their velocities; Fig. 4: their
-accelerations; Fig. 5: force (x, y) and torque in the first joint (spring1.fx, spring1.fy,
-torsion1.moment). Each figure: the three runs overlaid (left) and their differences from p*
-(right). The table gives max and RMS differences, relative to the p* run's peak and RMS, their
-growth with the horizon, and checks the paper's statement ("displacements barely change,
-velocities more, accelerations strongly; force levels stay similar") against the numbers.
-
-Writes docs/figures/fig2_displacements.png, fig3_velocities.png, fig4_accelerations.png,
-fig5_joint_forces.png and docs/tables/figures2_5.md.
-Run: ``python studies/figures2_5.py`` (``--quick`` for the CI version: 0.5 s horizon).
+Set-up and how to read the page: docs/studies/figures2_5.md. Run: ``python studies/figures2_5.py`` (``--quick``: 0.5 s
+horizon).
 """
 
 from __future__ import annotations

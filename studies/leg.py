@@ -1,26 +1,8 @@
 """The hip joint force of a swinging leg, from markers: the joint parameters identified, the force
 reported with its uncertainty band.
 
-The scene is casflex's built-in ``leg`` (casflex/scenes/leg.toml, its sources in its header): thigh
-and shank as flexible beams, hip and knee as spring-damper joints, a foot mass, the pelvis moving
-along a gait-like path (a moving support). The recording is made by a finer casflex model than the
-one that fits it (4 elements per beam, dt = 0.25 ms, against 1 element and 1 ms): x, y of the
-scene's five markers (thigh, knee, tibia, ankle, toe; on the beams off their axes and on the foot)
-at 100 Hz with 1 mm of Gaussian noise, two strides (2.2 s) from toe-off, SEEDS seeds.
-casflex's default indirect method fits the hip's and the knee's torsional stiffness and damping
-from 30 % below the truth.
-
-The hip joint force is the force of the hip bushing (elastic and damper), on the thigh. Its band:
-the model simulated at DRAWS parameter sets drawn from the reported normal distribution (estimate,
-covariance from the standard errors and correlations); the band spans the 2.5 and 97.5 percentiles
-of the force magnitude at each instant. To it the model's own error is added on both sides:
-Richardson's estimate from the model refined (twice the elements, half the step) at the identified
-parameters. Reported per seed: the parameters' errors and z-scores, the RMS difference of the
-identified force from the truth (the fine model's), the bands' widths, and the fraction of the
-strides where the truth lies in the parameter band and in the whole band.
-
-Writes docs/tables/leg.md and docs/figures/leg.png (``--quick``: *_quick.*, one stride, one seed,
-10 draws). Run: ``python studies/leg.py`` (about 5 min on 2 cores).
+Set-up and how to read the page: docs/studies/leg.md. Run: ``python studies/leg.py`` (about 5 min on 2 cores;
+``--quick``: one stride, one seed, 10 draws).
 """
 
 from __future__ import annotations

@@ -1,29 +1,7 @@
-"""Identification on data casflex did not generate: how close, how honest, how fast?
+"""Identification on data casflex did not generate (Exudyn's recordings): how close, how honest, how fast?
 
-The recordings are casflex's built-in scenes simulated by Exudyn (8 ANCF elements per beam,
-h = 1e-4 s; tests/data/make_reference_data.py), sampled at 100 Hz with Gaussian noise of 0, 0.1, 0.5
-and 1 mm on the markers, SEEDS seeds each (one without noise), in two windows: one that starts at rest (the scene's
-initial state) and one that starts mid-motion (initial state estimated). casflex fits them with its
-default model, one element per beam at dt = 1 ms: the model is never exact.
-
-Methods (markers: the channels each method is given):
-
-- ``indirect``: output error, single shooting by Gauss-Newton (the default), twobar's nodes 3 and 5
-  (the seed paper's channels), threelink's link ends 3, 5, 7;
-- ``indirect-ms``: multiple shooting by IPOPT, windows at rest only (it takes the scene's state);
-  threelink with one seed per noise level (it does not converge);
-- ``adapted``: adapted direct, every translation (the joints' nodes too), 9 instants, derivatives by
-  the cross-validated smoothing spline, beam axial forces as unknowns;
-- ``direct``: direct, every dof (rotations too, as if a gyroscope gave them), 9 instants.
-
-Per (scene, window, method, noise): the median relative error of the stiffnesses k and kt, the
-coverage of the truth by the reported 2- and 3-SE intervals (over parameters and seeds), the
-success rate, the "dishonest" successes (success with a parameter more than 3 SE from the truth),
-and the median wall time.
-
-Writes docs/tables/realdata.md and docs/figures/realdata.png (``--quick``: *_quick.*, twobar at rest,
-0.5 mm, one seed). Run: ``python studies/realdata.py`` (about an hour on 2 cores; the runs go through
-casflex.sweep, ``--record DIR`` resumes an interrupted study).
+Set-up and how to read the page: docs/studies/realdata.md. Run: ``python studies/realdata.py`` (about an hour on 2
+cores; ``--quick``: twobar at rest, 0.5 mm, one seed; ``--record DIR`` resumes).
 """
 
 from __future__ import annotations

@@ -1,21 +1,8 @@
 """Table 1 of the seed paper: do the direct and indirect identifications at t1 = 0.69 s and
 t2 = 2.83 s reach p*, and do they agree with the paper's verdicts?
 
-Seven rows (procedure x reference data), each run from the paper's starting range (0.8 and
-1.2 x p*), our numbers beside the paper's verdicts. Direct rows use the single instant t
-(instants=[t]) and also report the exact linear least-squares solution; indirect rows compare
-over the horizon 0..t (the paper's meaning) with the multiple-shooting transcription (where it
-misses p*, the same run by single shooting follows). The central-difference error of the measured
-set is measured at t1 and t2 (velocities, accelerations, and the Eq. 1 imbalance at p*), and the
-direct method is re-run on measured sets sampled more coarsely, to show how the offset scales
-with the sample spacing. The reasons behind the verdicts: docs/studies/table1.md.
-
-Convergence criterion: max_j |p_j / p*_j - 1| <= 1e-6 and the solver reports success.
-
-Writes docs/tables/table1.md and docs/figures/table1.png (``--raw FILE`` also saves the run's
-numbers, ``--render FILE`` re-renders the page from them). Run: ``python studies/table1.py``
-(about 2.3 h; ``--quick`` for the CI version: t1 only, indirect horizons cut to 0.05 s and single
-shooting, one start).
+Set-up and how to read the page: docs/studies/table1.md. Run: ``python studies/table1.py`` (about 2.3 h; ``--quick``:
+t1 only, 0.05 s single shooting, one start; ``--raw FILE``, ``--render FILE``).
 """
 
 from __future__ import annotations
@@ -24,8 +11,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _shared import PAPER_NLP, capped_ipopt, fmt_p
-from _study import Banner, cli, png, save_raw, write_outputs
+from _shared import PAPER_NLP, capped_ipopt
+from _study import Banner, cli, fmt_p, png, save_raw, write_outputs
 
 from casflex.data import MeasurementSet, measured_set, simulated_set
 from casflex.identification import identify_direct, identify_indirect

@@ -1,21 +1,7 @@
 """Table 2 of the seed paper: what does the adapted direct identification (Eq. 14) give on its
 three instant sets, and why does it differ from the paper?
 
-The data are the simulated set (x, y of every node with exact velocities and accelerations from
-the HHT run; the rotations are unknowns). For each of the paper's instant sets and each start
-(0.3, 1.0, 3.0 x p*) the identified [k1 kt1 k3 kt3] are set beside the paper's, with relative
-errors, solver status, iterations, wall time and the identifiability report. Then:
-
-- the same with the log transform of the parameters (a second solver path);
-- the measured set (central-difference velocities and accelerations, no noise), the data the
-  paper's values are closest to;
-- a noise experiment on the third set: position noise sigma in {1e-6, 1e-5, 1e-4} m, several
-  seeds; identified p and whether |p - p*| <= 3 SE (the reported standard errors cover the truth);
-- early instants [0.1 0.2] s, where the joints have hardly rotated;
-- the reasons the numbers differ from the paper's, computed from the data (their physics, which
-  does not change from run to run: docs/studies/table2.md).
-
-Writes docs/tables/table2.md. Run: ``python studies/table2.py`` (``--quick`` for the CI version).
+Set-up and how to read the page: docs/studies/table2.md. Run: ``python studies/table2.py`` (``--quick``).
 """
 
 from __future__ import annotations

@@ -1,13 +1,7 @@
 """Table 3 of the seed paper: how accurately does the adapted direct procedure (Eq. 14) give the
 rotations and the node-1 torsion multiplier on the instant set [0.4 1.1 1.6 1.9 2.3] s?
 
-Relative errors (x 1e-3) of the identified theta2..theta5 at each instant against the simulated
-truth, and of the clamp's rotation multiplier (the torsion reaction at node 1) against the
-simulation's multipliers; beyond the paper, the errors of the rotation rates and accelerations,
-and the same with central-difference (measured-set) derivatives. Why the numbers are what they
-are: docs/studies/table3.md.
-
-Writes docs/tables/table3.md. Run: ``python studies/table3.py`` (``--quick`` for the CI version).
+Set-up and how to read the page: docs/studies/table3.md. Run: ``python studies/table3.py`` (``--quick``).
 """
 
 from __future__ import annotations

@@ -1,19 +1,8 @@
-"""Speed-accuracy trade-off: which step dt, HHT alpha, mesh and inertia form reach a stated accuracy at the
-least wall time, compiled or interpreted?
+"""Speed-accuracy trade-off: which step dt, HHT alpha, mesh and inertia form reach a stated accuracy at
+the least wall time, compiled or interpreted?
 
-Twobar over 3 s: the error of the node positions (nodes 3 and 5, m) and of the joint forces (% of the
-reference's peak) against a converged reference (8 elements per bar, alpha = 0, the finest dt, its own error
-estimated by self-convergence), and the wall time of the interpreted (CasADi VM stepped from Python) and
-compiled (generated C) paths, measured side by side. One factor at a time around 1 element per bar, alpha = 0,
-``lagrange``: dt (1e-2 .. 1e-5) x alpha for both inertia forms; elements per bar {1, 2, 4, 8} x dt; ``seed``
-against ``lagrange`` on every mesh. Derived: convergence orders in dt, Pareto fronts, the recommended settings
-per stated accuracy. Asserted: order 2 for alpha = 0, compiled == interpreted, the reference resolves the
-tightest accuracy, the mesh converges, compiled is faster, the headline accuracy is reachable (the order for
-alpha < 0 is reported, not asserted). Definitions and the reading of the results: docs/studies/tradeoff.md.
-
-Writes docs/tables/tradeoff.md and docs/figures/tradeoff.png. Run: ``python studies/tradeoff.py`` (10-15 min
-on a loaded 2-core machine with the C libraries cached, about 5 min more to build them) or ``--quick``
-(a 0.5 s horizon and a reduced grid).
+Set-up and how to read the page: docs/studies/tradeoff.md. Run: ``python studies/tradeoff.py`` (10-15 min;
+``--quick``: 0.5 s, a reduced grid).
 """
 
 from __future__ import annotations
