@@ -23,9 +23,8 @@ from _extremes import (
     parse_failure,
     run_case,
     scene_E,
-    table,
 )
-from _study import Banner, cli, write_outputs
+from _study import Banner, cli, fnum, table, write_outputs
 
 import casflex
 from casflex.simulate import integrator_for, simulate
@@ -97,10 +96,6 @@ def roundoff_probe(quick: bool) -> list[dict]:
 
 
 
-def _f(x, spec: str) -> str:
-    return "-" if x is None else format(x, spec)
-
-
 def self_checks(raw: dict) -> list[tuple[bool, str]]:
     """(passed, statement) of each of the study's assertions."""
     turns, mesh, ro = raw["turns"]["rows"], raw["mesh"], raw["roundoff"]
@@ -135,7 +130,7 @@ def page(raw: dict, checks: list[tuple[bool, str]]) -> str:
     lines += table(["alpha", "dt (s)", "horizon (s)", "converged", "theta5 spans (turns)", "net turns",
                     "max step of a rotation (rad)", "rotation vs chord (rad)", "local-rotation wraps",
                     "torsion1 max moment (N m)", "moment vs kt dtheta", "spring1 max length (m)", "energy drift",
-                    "Newton mean (max)"], "lrrlrrrrrrrrrl", [
+                    "Newton mean (max)"], align="lrrlrrrrrrrrrl", rows=[
         ["0" if r["alpha"] == 0 else "-1/3", f"{r['dt']:g}", f"{r['t_end']:g}", "yes" if r["success"] else "no",
          f"{r['turns']:.2f}", f"{r['net_turns']:+.2f}", f"{r['max_step']:.3g}", f"{r['rot_vs_chord']:.2e}", r["wraps"],
          f"{r['m1_max']:.3g}", f"{r['m1_vs_kt']:.1e}", f"{r['spring1_max']:.4f}", f"{r['energy']['drift']:.1e}",
@@ -145,8 +140,9 @@ def page(raw: dict, checks: list[tuple[bool, str]]) -> str:
         m1, m8 = mesh["1"], mesh["8"]
         lines += ["E x1e-6, alpha = 0, dt = 1e-4, 3 s:", ""] + table(
             ["elements per bar", "result", "stopped at t (s)", "message", "energy drift (returned states)",
-             "wraps in the returned states", "max abs local rotation (rad)", "study: the rejected step"], "rlrlrrrl",
-            [[ne, "success" if m["success"] else m["status"], "-" if m["success"] else f"{m['t_reached']:.4g}",
+             "wraps in the returned states", "max abs local rotation (rad)", "study: the rejected step"],
+            align="rlrlrrrl",
+            rows=[[ne, "success" if m["success"] else m["status"], "-" if m["success"] else f"{m['t_reached']:.4g}",
               detail(m["failure"]) if m["failure"] else "-", f"{m['energy']['drift']:.2e}", m["wraps"],
               f"{m['max_local_rot']:.3f}", "-" if not m.get("flagged") else "wrap: " + ", ".join(
                   f"{k} {a:+.3f} -> {b:+.3f}" for k, a, b in m["flagged"]["wrap"]) if m["flagged"]["wrap"] else
@@ -162,10 +158,10 @@ def page(raw: dict, checks: list[tuple[bool, str]]) -> str:
               "1e-12, interpreted path; the motion compared with the untranslated scene's, translated back:", ""]
     lines += table(["shift (m)", "result", "accepted residual (max over the run)", "Newton it./step mean (max)",
                     "max abs position difference (m)", "in eps x shift", "max abs rotation difference (rad)",
-                    "max abs velocity difference (m/s, rad/s)", "energy drift"], "rlrrrrrrr", [
+                    "max abs velocity difference (m/s, rad/s)", "energy drift"], align="rlrrrrrrr", rows=[
         [f"{r['shift']:g}", "ok" if r["success"] else f"{r['status']} at t = {r['failure']['t']:.4g} s"
          if r["failure"] else r["status"], f"{r['accepted_tol']:.2g}",
-         f"{_f(r['newton_mean'], '.2f')} ({_f(r['newton_max'], 'd')})", f"{r['max_dpos']:.2g}",
+         f"{fnum(r['newton_mean'], '.2f')} ({fnum(r['newton_max'], 'd')})", f"{r['max_dpos']:.2g}",
          f"{r['max_dpos'] / (EPS * r['shift']):.2g}" if r["shift"] else "-", f"{r['max_drot']:.2g}",
          f"{r['max_dqd']:.2g}", f"{r['drift']:.1e}"] for r in ro])
     if ok:
