@@ -215,13 +215,6 @@ def label(ks: float, es: float) -> str:
     return f"springs x{ks:g}, E x{es:g}"
 
 
-def table(head: list, align: str, rows: list[list]) -> list[str]:
-    """Markdown table; ``align``: one of l, r, c per column."""
-    a = {"l": "---", "r": "---:", "c": ":-:"}
-    return ["| " + " | ".join(map(str, head)) + " |", "|" + "|".join(a[c] for c in align) + "|",
-            *("| " + " | ".join(map(str, r)) + " |" for r in rows)]
-
-
 def detail(f: dict) -> str:
     """What a failure message says beyond the time."""
     return {"newton_failed": lambda: f"{f['iterations']} it., residual {f['residual']:.2g} (tol {f['tol']:.2g})",

@@ -11,8 +11,8 @@ import math
 from pathlib import Path
 
 import numpy as np
-from _extremes import ALPHAS, DRIFT_TOL, HORIZONS, STATUSES, detail, label, omega_max_of, run_case, scene_E, table
-from _study import Banner, cli, png, save_raw, write_outputs
+from _extremes import ALPHAS, DRIFT_TOL, HORIZONS, STATUSES, detail, label, omega_max_of, run_case, scene_E
+from _study import Banner, cli, fnum, save_raw, table, write_outputs
 
 import casflex
 from casflex.simulate import ENERGY_GROWTH
@@ -102,10 +102,6 @@ def _an(a: float) -> str:
     return "0" if a == 0.0 else "-1/3"
 
 
-def _f(x, spec: str = ".2g") -> str:
-    return "-" if x is None else format(x, spec)
-
-
 def _mark(r: dict | None, short: bool = False) -> str:
     """Map cell: ✓ drift, ⚠ drift (a success the study does not believe), ✗ status and time; w: a wrap."""
     if r is None:
@@ -156,8 +152,8 @@ def _map_tables(raw: dict, T: float, newton: bool = False) -> list[str]:
                     cell[(*c, d)]["newton"] if (*c, d) in cell else None) if newton else _mark(cell.get((*c, d)))
                    for d in dts] for c in cases]
         head = ["stiffness"] + ([] if newton else ["f_max (Hz)"]) + [f"{d:g}" for d in dts]
-        out += [f"**alpha = {_an(a)}**", ""] + table(head, "l" + ("r" * len(dts) if newton else "r" + "c" * len(dts)),
-                                                     body) + [""]
+        out += [f"**alpha = {_an(a)}**", ""] + table(head, body, "l" + ("r" * len(dts) if newton
+                                                                               else "r" + "c" * len(dts))) + [""]
     return out
 
 
@@ -176,7 +172,7 @@ def _dt_limit(raw: dict) -> list[str]:
                          f"{om * d:.3g}){wr}")
         body.append([label(*c), f"{om / (2 * math.pi):.4g}", *cells])
     return table(["stiffness", "f_max (Hz)", *(f"alpha = {_an(a)}, {T:g} s" for a in ALPHAS for T in hs)],
-                  "lr" + "l" * 2 * len(hs), body)
+                 body, "lr" + "l" * 2 * len(hs))
 
 
 def _fail_table(rows: list[dict]) -> list[str]:
@@ -186,8 +182,8 @@ def _fail_table(rows: list[dict]) -> list[str]:
     for r in fails:
         f, fs, nw = r["failure"], r.get("failing_step"), r["newton"]
         body.append([label(r["k_scale"], r["e_scale"]), _an(r["alpha"]), f"{r['dt']:g}", f"{r['t_end']:g}",
-                     r["status"], _f(f and f["t"], ".4g"), detail(f) if f else "-", _cross(r), f"{r['omega_dt']:.3g}",
-                     f"{r['energy']['max_gain']:.2g}", _f(r["t_drift_1pct"], ".3g"),
+                     r["status"], fnum(f and f["t"], ".4g"), detail(f) if f else "-", _cross(r), f"{r['omega_dt']:.3g}",
+                     f"{r['energy']['max_gain']:.2g}", fnum(r["t_drift_1pct"], ".3g"),
                      f"{r['spring_rel'][0]:.2g}-{r['spring_rel'][1]:.3g}",
                      f"{nw['mean_last20']:.1f} ({nw['max_last20']})",
                      *([f"{fs['kind']}, min {fs['min_residual']:.1e}", f"{fs['cond_predictor']:.1e}",
@@ -195,7 +191,7 @@ def _fail_table(rows: list[dict]) -> list[str]:
     return table(["stiffness", "alpha", "dt (s)", "horizon (s)", "status", "failed at t (s)", "message",
                    "study's cross-check", "omega_max dt", "energy gain before (max)", "1 % drift from t (s)",
                    "spring length / rest (min-max)", "Newton last 20 steps: mean (max)", "failing step: plain Newton",
-                   "cond at predictor", "two half steps"], "llrrlrllrrrlllrl", body)
+                   "cond at predictor", "two half steps"], body, "llrrlrllrrrlllrl")
 
 
 def _why(rows: list[dict]) -> list[str]:
@@ -279,32 +275,6 @@ def page(raw: dict, checks: list[tuple[bool, str]]) -> str:
         "", *(f"- {t}" if passed else f"- **FAILED**: {t}" for passed, t in checks)]) + "\n"
 
 
-def figure(raw: dict) -> bytes:
-    """The stability maps: log10 energy drift of each converged run, failed runs in red with status and time."""
-    from matplotlib.figure import Figure
-
-    rows = raw["sim"]["rows"]
-    cases = list(dict.fromkeys((r["k_scale"], r["e_scale"]) for r in rows))
-    hs = [T for T in HORIZONS if _sel(rows, t_end=T)]
-    fig = Figure(figsize=(16, 5.0 * len(hs)), layout="constrained")
-    for i, (T, a) in enumerate((T, a) for T in hs for a in ALPHAS):
-        ax, dts = fig.add_subplot(len(hs), 2, i + 1), sorted({r["dt"] for r in _sel(rows, t_end=T)})
-        Z = np.full((len(cases), len(dts)), np.nan)
-        for r in _sel(rows, t_end=T, alpha=a):
-            y, x = cases.index((r["k_scale"], r["e_scale"])), dts.index(r["dt"])
-            Z[y, x] = np.clip(np.log10(max(r["energy"]["drift"], 1e-16)), -12, 2) if r["success"] else np.nan
-            ax.text(x, y, _mark(r, True).replace("✗ ", "").replace("✓ ", "").replace("⚠ ", "⚠"), ha="center",
-                    va="center", fontsize=6.5, color="white" if not Z[y, x] >= -7 else "black")
-        cmap = __import__("matplotlib").colormaps["viridis"].with_extremes(bad="#b2182b")
-        fig.colorbar(ax.imshow(Z, cmap=cmap, vmin=-12, vmax=2, aspect="auto"), ax=ax, fraction=0.03)
-        ax.set_xticks(range(len(dts)), [f"{d:g}" for d in dts], fontsize=8)
-        ax.set_yticks(range(len(cases)), [f"k x{k:g}, E x{e:g}" for k, e in cases], fontsize=8)
-        ax.set_xlabel("dt (s)")
-        ax.set_title(f"alpha = {_an(a)}, {T:g} s: log10 energy drift (red: failed at t, R element_range, "
-                     "E energy_growth, N newton_failed)", fontsize=9)
-    return png(fig)
-
-
 def main(quick: bool = False, out_dir: Path | None = None, raw_path: Path | None = None) -> dict:
     banner = Banner("extremes", quick)
     raw = {"quick": quick, "sim": simulation_grid(quick)}
@@ -314,9 +284,9 @@ def main(quick: bool = False, out_dir: Path | None = None, raw_path: Path | None
 
 
 def render(raw: dict, out_dir: Path | None = None) -> dict:
-    """Self-checks, the page (failed checks stated) and the figure; then a failed check raises."""
+    """Self-checks and the page (failed checks stated); then a failed check raises."""
     checks = self_checks(raw)
-    write_outputs("extremes", out_dir, raw["quick"], page(raw, checks), figure(raw))
+    write_outputs("extremes", out_dir, raw["quick"], page(raw, checks))
     failed = [t for ok, t in checks if not ok]
     assert not failed, "self-checks failed: " + "; ".join(failed)
     return raw
