@@ -6,8 +6,8 @@ library. Not a study itself (no ``main``).
 - :func:`exudyn_recording`: channels of an Exudyn reference recording at 100 Hz with noise
   (dampers, realdata, bench_identification);
 - :func:`twobar`: the twobar model meshed into n elements per bar (bench_simulate, bench_exudyn);
-- :func:`in_fresh_process`: a study's hidden worker switch run in a new Python process, its JSON
-  answer (bench_simulate, bench_identification);
+- :func:`in_fresh_process`, :func:`cold_and_cached`: a study's hidden worker switch run in a new Python
+  process (twice, sharing a new cache), its JSON answer (bench_simulate, bench_identification);
 - :func:`honesty`: success, coverage and "dishonest" successes of repeated fits (dampers, leg,
   realdata).
 """
@@ -15,8 +15,10 @@ library. Not a study itself (no ``main``).
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -64,6 +66,14 @@ def in_fresh_process(script: str, args: list[str], env: dict, timeout: float = 3
     out = subprocess.run([sys.executable, script, *args], env=env, capture_output=True, text=True, check=True,
                          timeout=timeout)
     return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def cold_and_cached(script: str, cold: list[str], cached: list[str], timeout: float = 3600) -> tuple[dict, dict]:
+    """``in_fresh_process`` twice with one new, empty ``CASFLEX_CACHE``: the first process builds every
+    compiled function (cold), the second finds them on disk (cached). Their JSON answers."""
+    with tempfile.TemporaryDirectory(prefix="casflex-bench-cache-") as cache:
+        env = dict(os.environ, CASFLEX_CACHE=cache)
+        return in_fresh_process(script, cold, env, timeout), in_fresh_process(script, cached, env, timeout)
 
 
 def honesty(recs: list[dict], finite: np.ndarray | None = None) -> dict:

@@ -7,15 +7,13 @@ Set-up and how to read the page: docs/studies/bench_identification.md. Run: ``py
 from __future__ import annotations
 
 import json
-import os
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
-from _shared import exudyn_recording, in_fresh_process
-from _study import Banner, cli, png, write_outputs
+from _shared import cold_and_cached, exudyn_recording
+from _study import Banner, cli, table, write_outputs
 
 NOISE, SEED, START = 5e-4, 0, 0.8
 CASES = {  # name: (method, horizon (s), options)
@@ -56,50 +54,26 @@ def worker(case: str) -> dict:
 
 def page(rows: list[dict], banner: str) -> str:
     """Cold and cached times per case, and the answers."""
-    L = ["# Identification benchmark: first and later runs", "",
-         f"{banner} Data, cases and what is timed: the script's docstring. Errors are the largest relative error of "
-         "the spring stiffnesses k and of the torsion stiffnesses kt (truth: Exudyn's parameters, the scene's nominal "
-         "values).", "",
-         "| case | first process: build + solve (s) | later process: build (s) | later: solve (s) | later: total (s) "
-         "| iterations | k error | kt error | success |", "|---|---:|---:|---:|---:|---:|---:|---:|---|"]
-    for r in rows:
-        c, w = r["cold"], r["warm"]
-        L.append(f"| {r['case']} | {c['build_s'] + c['solve_s']:.1f} | {w['build_s']:.2f} | **{w['solve_s']:.2f}** | "
-                 f"{w['build_s'] + w['solve_s']:.2f} | {w['iterations']} | {w['k_err']:.1e} | {w['kt_err']:.1e} | "
-                 f"{w['success']} |")
-    L += ["", "The first process pays for code generation and gcc once; every later process, on this machine or "
-          "any sharing `CASFLEX_CACHE`, loads the compiled functions from disk (`casflex cache` lists them).", ""]
-    return "\n".join(L)
-
-
-def figure(rows: list[dict]) -> bytes:
-    """Build + solve of the first and a later process, per case."""
-    from casflex.plotting._figure import _new_figure
-
-    fig = _new_figure((10, 4.5))
-    ax = fig.subplots()
-    x = np.arange(len(rows))
-    for dx, which, label in ((-0.2, "cold", "first process"), (0.2, "warm", "later process")):
-        ax.bar(x + dx, [r[which]["build_s"] + r[which]["solve_s"] for r in rows], 0.4, label=label)
-    ax.set_xticks(x, [r["case"].replace(", ", ",\n", 1) for r in rows], fontsize=7)
-    ax.set_yscale("log")
-    ax.set_ylabel("build + solve (s)")
-    ax.legend()
-    ax.grid(True, axis="y", which="both", alpha=0.3)
-    return png(fig)
+    return "\n".join(["# Identification benchmark: first and later runs", "",
+                      f"{banner} Data, cases and what is timed: "
+                      "[studies/bench_identification.md](../studies/bench_identification.md).", "",
+                      *table(["case", "first process: build + solve (s)", "later process: build (s)",
+                              "later: solve (s)", "later: total (s)", "iterations", "k error", "kt error", "success"],
+                             [[r["case"], f"{c['build_s'] + c['solve_s']:.1f}", f"{w['build_s']:.2f}",
+                               f"**{w['solve_s']:.2f}**", f"{w['build_s'] + w['solve_s']:.2f}", w["iterations"],
+                               f"{w['k_err']:.1e}", f"{w['kt_err']:.1e}", w["success"]]
+                              for r in rows for c, w in [(r["cold"], r["warm"])]], "lrrrrrrrl"), ""])
 
 
 def main(quick: bool = False, out_dir: Path | None = None) -> dict:
     banner = Banner("bench_identification", quick)
     rows = []
     for case in QUICK if quick else CASES:
-        with tempfile.TemporaryDirectory(prefix="casflex-bench-cache-") as cache:
-            env = dict(os.environ, CASFLEX_CACHE=cache)
-            cold, warm = (in_fresh_process(__file__, ["--worker", case], env) for _ in range(2))
+        cold, warm = cold_and_cached(__file__, ["--worker", case], ["--worker", case])
         rows.append({"case": case, "cold": cold, "warm": warm})
         print(f"{case:<48s} cold {cold['build_s'] + cold['solve_s']:7.1f} s, cached: build {warm['build_s']:5.2f} s "
               f"+ solve {warm['solve_s']:6.2f} s ({warm['iterations']} it.)", flush=True)
-    write_outputs("bench_identification", out_dir, quick, page(rows, banner.line()), figure(rows))
+    write_outputs("bench_identification", out_dir, quick, page(rows, banner.line()))
     # self-checks: the answers do not depend on the cache
     for r in rows:
         assert r["warm"]["success"] == r["cold"]["success"], f"{r['case']}: the cache changed the outcome"
