@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 from _shared import exudyn_recording, honesty
-from _study import Banner, cli, sweep, write_outputs
+from _study import Banner, cli, sweep, table, write_outputs
 
 NOISES = (0.0, 1e-4, 5e-4, 1e-3)
 SEEDS = 10
@@ -102,46 +102,18 @@ def summarise(records: list[tuple[dict, dict]]) -> list[dict]:
 
 def page(rows: list[dict], banner: str) -> str:
     """One table: errors, coverage, honesty and time per (scene, window, method, noise)."""
-    lines = ["# Identification on data casflex did not generate", "",
-             f"{banner} The method and the data are described in the script's docstring and in "
-             "`docs/identification.md`.", "",
-             "Errors are relative to the truth (Exudyn's parameters); coverage: the fraction of parameters x seeds "
-             "whose reported k-SE interval holds the truth (an undetermined parameter, SE infinite, counts as "
-             "covered: it claims nothing); dishonest: runs that report success with a parameter more than 3 SE "
-             "from the truth.", "",
-             "| scene | window | method | noise (mm) | runs | k error (median / max) | kt error (median / max) "
-             "| 2 SE | 3 SE | success | dishonest | wall (s) |", "|" + "---|" * 12]
-    for r in rows:
-        head = f"| {r['scene']} | {r['window']} | {r['method']} | {1e3 * r['noise']:g} | {r['runs']} | "
-        lines.append(head + ("all runs raised | | | | | | |" if "k_err" not in r else
-                             f"{100 * r['k_err']:.3g} % / {100 * r['k_err_max']:.3g} % | {100 * r['kt_err']:.3g} % / "
-                             f"{100 * r['kt_err_max']:.3g} % | {100 * r['cover2']:.0f} % | {100 * r['cover3']:.0f} % | "
-                             f"{100 * r['success']:.0f} % | {r['dishonest']} | {r['wall_s']:.1f} |"))
-    return "\n".join(lines) + "\n"
+    def cells(r: dict) -> list:
+        return ["all runs raised", *[""] * 6] if "k_err" not in r else [
+            f"{100 * r['k_err']:.3g} % / {100 * r['k_err_max']:.3g} %",
+            f"{100 * r['kt_err']:.3g} % / {100 * r['kt_err_max']:.3g} %", f"{100 * r['cover2']:.0f} %",
+            f"{100 * r['cover3']:.0f} %", f"{100 * r['success']:.0f} %", r["dishonest"], f"{r['wall_s']:.1f}"]
 
-
-def figure(rows: list[dict], path: Path) -> None:
-    """kt's error and the 3-SE coverage against the noise, window at rest."""
-    from casflex.plotting._figure import _new_figure, _save
-
-    fig = _new_figure((9.0, 3.8))
-    ax1, ax2 = fig.subplots(1, 2)
-    for key, style in (("indirect", "-o"), ("adapted", "-s"), ("direct", "-^")):
-        for scene, color in (("twobar", "C0"), ("threelink", "C1")):
-            sel = [r for r in rows if r["method"] == key and r["scene"] == scene and r["window"] == "rest"
-                   and "k_err" in r]
-            nz = [max(1e3 * r["noise"], 0.01) for r in sel]
-            if sel:
-                ax1.loglog(nz, [max(r["kt_err"], 1e-6) for r in sel], style, color=color, label=f"{scene}, {key}")
-                ax2.semilogx(nz, [100 * r["cover3"] for r in sel], style, color=color)
-    ax1.set(xlabel="noise (mm; 0 drawn at 0.01)", ylabel="median relative error of kt")
-    ax2.set(xlabel="noise (mm)", ylabel="3-SE coverage (%)")
-    ax2.axhline(90, color="black", lw=0.6, ls="--")
-    ax1.legend(fontsize="x-small", frameon=False)
-    for ax in (ax1, ax2):
-        ax.grid(True, alpha=0.3)
-    fig.suptitle("identification on Exudyn's recordings, window at rest")
-    _save(fig, path)
+    return "\n".join(["# Identification on data casflex did not generate", "", f"{banner} The data, the methods and "
+                      "the measures: [studies/realdata.md](../studies/realdata.md).", "", *table(
+                          ["scene", "window", "method", "noise (mm)", "runs", "k error (median / max)",
+                           "kt error (median / max)", "2 SE", "3 SE", "success", "dishonest", "wall (s)"],
+                          [[r["scene"], r["window"], r["method"], f"{1e3 * r['noise']:g}", r["runs"], *cells(r)]
+                           for r in rows]), ""])
 
 
 def _key(r: dict) -> str:
@@ -151,7 +123,7 @@ def _key(r: dict) -> str:
 def main(quick: bool = False, out_dir: Path | None = None, record: Path | None = None) -> list[dict]:
     banner = Banner("realdata", quick)
     rows = summarise(sweep("realdata", plan(quick), _key, one_run, record=record, quick=quick))
-    write_outputs("realdata", out_dir, quick, page(rows, banner.line()), lambda f: figure(rows, f))
+    write_outputs("realdata", out_dir, quick, page(rows, banner.line()))
     for r in rows:
         print(json.dumps(r))
     # the study's own checks, on the default method: honest on both scenes (a success more than 3 SE
