@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 from _shared import DATA, exudyn_recording, honesty
-from _study import Banner, cli, sweep, write_outputs
+from _study import Banner, cli, sweep, table, write_outputs
 
 MARKERS = ("x3", "y3", "x5", "y5")
 NOISE = 1e-3
@@ -55,15 +55,14 @@ def summarise(records: list[tuple[dict, dict]]) -> list[dict]:
 
 def page(rows: list[dict], banner: str) -> str:
     """The table of errors, coverage and honesty per window and parameter."""
-    lines = ["# Identifying joint dampers from markers", "",
-             f"{banner} The set-up is in the script's docstring. Truth: Exudyn's parameters; noise 1 mm on x, y of "
-             "nodes 3 and 5 at 100 Hz.", "",
-             "| window | parameter | runs | error (median / max) | 2 SE | 3 SE | success | dishonest | wall (s) |",
-             "|" + "---|" * 9]
-    lines += [f"| {r['window']} | {r['parameter']} | {r['runs']} | {100 * r['err_median']:.3g} % / "
-              f"{100 * r['err_max']:.3g} % | {100 * r['cover2']:.0f} % | {100 * r['cover3']:.0f} % | "
-              f"{100 * r['success']:.0f} % | {r['dishonest']} | {r['wall_s']:.1f} |" for r in rows]
-    return "\n".join(lines) + "\n"
+    return "\n".join(["# Identifying joint dampers from markers", "", f"{banner} The set-up and the measures: "
+                      "[studies/dampers.md](../studies/dampers.md).", "", *table(
+                          ["window", "parameter", "runs", "error (median / max)", "2 SE", "3 SE", "success",
+                           "dishonest", "wall (s)"],
+                          [[r["window"], r["parameter"], r["runs"],
+                            f"{100 * r['err_median']:.3g} % / {100 * r['err_max']:.3g} %", f"{100 * r['cover2']:.0f} %",
+                            f"{100 * r['cover3']:.0f} %", f"{100 * r['success']:.0f} %", r["dishonest"],
+                            f"{r['wall_s']:.1f}"] for r in rows]), ""])
 
 
 def figure(rows: list[dict], path: Path) -> None:
