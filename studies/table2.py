@@ -9,7 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from _study import Banner, cli, write_outputs
+from _study import Banner, cli, fmt_p, table, write_outputs
 
 from casflex.data import MeasurementSet, measured_set, simulated_set
 from casflex.identification import identify_adapted_direct
@@ -43,12 +43,8 @@ def run(model, data: MeasurementSet, instants, start, transform="linear", solver
            "rel_se": np.array(list(idf["relative_std_errors"].values())),
            "collinearity": idf["collinearity_index"], "pcond": idf["parameter_condition"],
            "polish": r.extra["gauss_newton_polish"], "start": start, "transform": transform, **tags}
-    print({k: v for k, v in tags.items() if k != "paper"}, f"start {start} {transform}: {_p(r.p)} {r.status}")
+    print({k: v for k, v in tags.items() if k != "paper"}, f"start {start} {transform}: {fmt_p(r.p)} {r.status}")
     return out
-
-
-def _p(v) -> str:
-    return "[" + " ".join(f"{x:.6g}" for x in v) + "]"
 
 
 def _pct(v) -> str:
@@ -127,68 +123,53 @@ def study(quick: bool) -> dict:
 
 
 def tables(d: dict) -> list[str]:
-    """The measured tables, each with the few words needed to read it."""
-    p_star, best = d["model"].p_nominal, d["best"]
-    L = ["## Identified parameters (linear transform)", "", "Relative errors in %, in the order k1 / kt1 / k3 / kt3.",
-         "", "| instant set (s) | start | paper [k1 kt1 k3 kt3] | paper rel. err. (%) | ours | ours rel. err. (%) "
-         "| success (status) | iter. | time (ms) | objective |", "|---|---:|---|---|---|---|---|---:|---:|---:|"]
-    L += [f"| {r['label']} | {r['start']:g} p* | {_p(r['paper'])} | {_pct(r['paper'] / p_star - 1)} | {_p(r['p'])} | "
-          f"{_pct(r['rel_err'])} | {r['success']} ({r['status']}) | {r['iterations']} | {r['wall_s'] * 1e3:.0f} | "
-          f"{r['objective']:.2e} |" for r in d["main"]]
-    L += ["", "## Identifiability report", "",
-          "From `r.identifiability` at the solution (the same from every start, shown for start 1.0 p*). "
-          "Relative sensitivity: |dr/d ln p_j| with the rotations and multipliers profiled out, over the "
-          "largest; a parameter is flagged weak below 1e-2 or above 10 % relative standard error.", "",
-          "| instant set (s) | weak | rel. sensitivity k1 / kt1 / k3 / kt3 | rel. std. error k1 / kt1 / k3 / kt3 "
-          "| collinearity index | parameter condition |", "|---|---|---|---|---:|---:|"]
-    L += [f"| {r['label']} | {_weak(r)} | {_e(r['rel_sens'])} | {_e(r['rel_se'])} | {r['collinearity']:.3g} | "
-          f"{r['pcond']:.3g} |" for r in d["main"] if r["start"] == 1.0]
-    L += ["", "## Log transform (p = scale exp(theta))", "",
-          "Same problems with log-scaled parameters. 'stalled' marks a reported success whose objective is "
-          f"over {STALL:g} x the lowest found for that set (a stop on a flat valley, not a minimum; the "
-          "objective's floor is reproduced to 3 digits by every run that reaches it).", "",
-          "| instant set (s) | start | ours | rel. err. (%) | status | iter. | time (ms) | objective "
-          "| objective / best |", "|---|---:|---|---|---|---:|---:|---:|---:|"]
-    for r in d["log"]:
-        ratio = r["objective"] / best[r["label"]]
-        L.append(f"| {r['label']} | {r['start']:g} p* | {_p(r['p'])} | {_pct(r['rel_err'])} | {r['status']} | "
-                 f"{r['iterations']} | {r['wall_s'] * 1e3:.0f} | {r['objective']:.2e} | {ratio:.3g}"
-                 f"{' **stalled**' if ratio > STALL else ''} |")
+    """The measured tables (how to read each: docs/studies/table2.md)."""
+    p_star, best, noise = d["model"].p_nominal, d["best"], d["noise"]
     (fd_v, v_max), (fd_a, a_max) = d["fd_qd"], d["fd_qdd"]
-    L += ["", "## Measured set: derivatives by central differences (no noise)", "",
-          "Positions only, velocities and accelerations by 2nd-order central differences (h = 1e-3 s), start 1.0 p*, "
-          f"linear transform. At the instants the difference quotients are off by up to {fd_v:.2e} m/s (of "
-          f"{v_max:.3g}) in velocity and {fd_a:.2e} m/s^2 (of {a_max:.3g}) in acceleration.", "",
-          "| instant set (s) | paper | paper rel. err. (%) | ours, measured set | rel. err. (%) | status | weak |",
-          "|---|---|---|---|---|---|---|"]
-    L += [f"| {r['label']} | {_p(r['paper'])} | {_pct(r['paper'] / p_star - 1)} | {_p(r['p'])} | "
-          f"{_pct(r['rel_err'])} | {r['status']} | {_weak(r)} |" for r in d["measured"]]
-    noise = d["noise"]
-    L += ["", f"## Noise experiment: instant set {d['noise_label']}", "",
-          "Measured set with Gaussian position noise sigma (m; seeds as listed), central differences, start "
-          "1.0 p*, linear transform. 'covered' lists, per parameter, whether |p - p*| <= 3 SE with the "
-          "reported Gauss-Newton standard error. The acceleration noise is the measured std of the "
-          "difference-quotient accelerations' error (theory sqrt(6) sigma / h^2); the RMS translational "
-          f"acceleration at the instants is {d['acc_rms']:.3g} m/s^2.", "",
-          "| sigma (m) | seed | accel. noise (m/s^2) | identified [k1 kt1 k3 kt3] | SE | covered k1 kt1 k3 kt3 "
-          "| status | iter. | weak |", "|---:|---:|---:|---|---|---|---|---:|---|"]
-    L += [f"| {r['sigma']:.0e} | {r['seed']} | {r['acc_noise']:.3g} | {_p(r['p'])} | {_e(r['se'])} | "
-          f"{' '.join('yes' if c else '**no**' for c in r['covered'])} | {r['status']} | {r['iterations']} | "
-          f"{_weak(r)} |" for r in noise]
-    L += ["", "Coverage over all noisy runs: " + coverage(d) + "; largest linear-stiffness error "
-          f"{100 * max(float(np.abs(r['rel_err'][K]).max()) for r in noise):.3g} %; successes "
-          f"{sum(r['success'] for r in noise)} of {len(noise)}."]
-    L += ["", f"## Early instants {EARLY} s", "", "Relative joint rotations (rad) theta2 - theta1 / theta4 - theta3 at "
-          + ", ".join(f"{t:g} s: {a:+.2e} / {b:+.2e}" for t, (a, b) in d["rel_rot"].items()) + ". "
-          "The torsion moment is kt times these. 'default': the library's IPOPT settings (tol 1e-9); "
-          "'tight': tol 1e-16, up to 3000 iterations.", "",
-          "| transform | start | solver | identified [k1 kt1 k3 kt3] | status | iter. | objective | weak "
-          "| rel. sensitivity kt1 / kt3 | rel. SE kt1 / kt3 | collinearity |",
-          "|---|---:|---|---|---|---:|---:|---|---|---|---:|"]
-    L += [f"| {r['transform']} | {r['start']:g} p* | {'tight' if r['tight'] else 'default'} | {_p(r['p'])} | "
-          f"{r['status']} | {r['iterations']} | {r['objective']:.2e} | {_weak(r)} | {_e(r['rel_sens'][KT])} | "
-          f"{_e(r['rel_se'][KT])} | {r['collinearity']:.3g} |" for r in d["early"]]
-    return L
+    return [
+        "## Identified parameters (linear transform)", "", "Relative errors in %, in the order k1 / kt1 / k3 / kt3.",
+        "", *table(["instant set (s)", "start", "paper [k1 kt1 k3 kt3]", "paper rel. err. (%)", "ours",
+                    "ours rel. err. (%)", "success (status)", "iter.", "time (ms)", "objective"],
+                   [[r["label"], f"{r['start']:g} p*", fmt_p(r["paper"]), _pct(r["paper"] / p_star - 1), fmt_p(r["p"]),
+                     _pct(r["rel_err"]), f"{r['success']} ({r['status']})", r["iterations"], f"{r['wall_s'] * 1e3:.0f}",
+                 f"{r['objective']:.2e}"] for r in d["main"]], "lrlllllrrr"),
+        "", "## Identifiability report", "", "At the solution, start 1.0 p*.", "",
+        *table(["instant set (s)", "weak", "rel. sensitivity k1 / kt1 / k3 / kt3",
+                "rel. std. error k1 / kt1 / k3 / kt3", "collinearity index", "parameter condition"],
+               [[r["label"], _weak(r), _e(r["rel_sens"]), _e(r["rel_se"]), f"{r['collinearity']:.3g}",
+                 f"{r['pcond']:.3g}"] for r in d["main"] if r["start"] == 1.0], "llllrr"),
+        "", "## Log transform (p = scale exp(theta))", "",
+        f"'stalled': a reported success whose objective is over {STALL:g} x the lowest found for that set.", "",
+        *table(["instant set (s)", "start", "ours", "rel. err. (%)", "status", "iter.", "time (ms)", "objective",
+                "objective / best"],
+               [[r["label"], f"{r['start']:g} p*", fmt_p(r["p"]), _pct(r["rel_err"]), r["status"], r["iterations"],
+                 f"{r['wall_s'] * 1e3:.0f}", f"{r['objective']:.2e}",
+                 f"{ratio:.3g}" + (" **stalled**" if ratio > STALL else "")]
+                for r in d["log"] for ratio in [r["objective"] / best[r["label"]]]], "lrlllrrrr"),
+        "", "## Measured set: derivatives by central differences (no noise)", "",
+        f"At the instants the difference quotients are off by up to {fd_v:.2e} m/s (of {v_max:.3g}) in velocity and "
+        f"{fd_a:.2e} m/s^2 (of {a_max:.3g}) in acceleration.", "",
+        *table(["instant set (s)", "paper", "paper rel. err. (%)", "ours, measured set", "rel. err. (%)", "status",
+                "weak"],
+               [[r["label"], fmt_p(r["paper"]), _pct(r["paper"] / p_star - 1), fmt_p(r["p"]), _pct(r["rel_err"]),
+                 r["status"], _weak(r)] for r in d["measured"]]),
+        "", f"## Noise experiment: instant set {d['noise_label']}", "",
+        f"The RMS translational acceleration at the instants is {d['acc_rms']:.3g} m/s^2.", "",
+        *table(["sigma (m)", "seed", "accel. noise (m/s^2)", "identified [k1 kt1 k3 kt3]", "SE",
+                "covered k1 kt1 k3 kt3", "status", "iter.", "weak"],
+               [[f"{r['sigma']:.0e}", r["seed"], f"{r['acc_noise']:.3g}", fmt_p(r["p"]), _e(r["se"]),
+                 " ".join("yes" if c else "**no**" for c in r["covered"]), r["status"], r["iterations"], _weak(r)]
+                for r in noise], "rrrllllrl"),
+        "", "Coverage over all noisy runs: " + coverage(d) + "; largest linear-stiffness error "
+        f"{100 * max(float(np.abs(r['rel_err'][K]).max()) for r in noise):.3g} %; successes "
+        f"{sum(r['success'] for r in noise)} of {len(noise)}.",
+        "", f"## Early instants {EARLY} s", "", "Relative joint rotations (rad) theta2 - theta1 / theta4 - theta3 at "
+        + ", ".join(f"{t:g} s: {a:+.2e} / {b:+.2e}" for t, (a, b) in d["rel_rot"].items()) + ".", "",
+        *table(["transform", "start", "solver", "identified [k1 kt1 k3 kt3]", "status", "iter.", "objective", "weak",
+                "rel. sensitivity kt1 / kt3", "rel. SE kt1 / kt3", "collinearity"],
+               [[r["transform"], f"{r['start']:g} p*", "tight" if r["tight"] else "default", fmt_p(r["p"]),
+                 r["status"], r["iterations"], f"{r['objective']:.2e}", _weak(r), _e(r["rel_sens"][KT]),
+                 _e(r["rel_se"][KT]), f"{r['collinearity']:.3g}"] for r in d["early"]], "lrlllrrlllr")]
 
 
 def coverage(d: dict) -> str:
@@ -271,12 +252,8 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
     d = study(quick)
     p_star = d["model"].p_nominal
     head = ["# Table 2: adapted direct identification", "",
-            f"{banner.line()} Scene `twobar`, p* = {_p(p_star)} ({', '.join(d['model'].parameter_names)}). Data: the "
-            f"**simulated set** (HHT, alpha = 0, dt = 1e-3 s, 0..{d['t_end']} s): x, y of every node with their exact "
-            "velocities and accelerations; the rotations, their derivatives, the multipliers and p are unknowns "
-            "(Eq. 14). Solver: IPOPT with exact (SX) derivatives, then Gauss-Newton polish (`identify_adapted_direct`)."
-            " Bounds: stiffnesses >= 0, so a negative kt like the paper's -0.47 cannot occur here. Times are build + "
-            "solve of one call; wall times vary with the machine's load.", ""]
+            f"{banner.line()} p* = {fmt_p(p_star)} ({', '.join(d['model'].parameter_names)}); simulated set over "
+            f"0..{d['t_end']} s. Set-up and how to read the tables: [studies/table2.md](../studies/table2.md).", ""]
     write_outputs("table2", out_dir, quick, "\n".join(head + tables(d) + findings(d)))
     # self-checks: the claims the page makes
     for r in d["main"]:
