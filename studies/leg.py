@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 from _shared import honesty
-from _study import Banner, cli, sweep, write_outputs
+from _study import Banner, cli, sweep, table, write_outputs
 
 MARKERS = ("THI", "KNE", "TIB", "ANK", "TOE")
 NOISE = 1e-3
@@ -98,27 +98,25 @@ def page(recs: list[dict], banner: str) -> str:
 
     names, h = recs[0]["names"], honesty(recs)
     err = np.abs(np.array([r["rel_error"] for r in recs]))
-    lines = ["# The hip joint force of a swinging leg, from markers", "",
-             f"{banner} The set-up is in the script's docstring: scene `leg`, truth a finer casflex model, x, y of its "
-             "five markers at 100 Hz with 1 mm of noise. How the band is built and read: "
-             "[studies/leg.md](../studies/leg.md).", "",
-             f"Runs: {len(recs)}; success {100 * h['success'].mean():.0f} %; dishonest (success with a parameter more "
-             f"than 3 SE from the truth): {h['dishonest']}; an identification takes "
-             f"{np.median([r['wall_s'] for r in recs]):.0f} s (median, 2 runs at a time on 2 cores).", "",
-             "| parameter | truth | error (median / max) | 2 SE | 3 SE |", "|---|---|---|---|---|"]
-    lines += [f"| {n} | {recs[0]['truth'][j]:g} | {100 * np.median(err[:, j]):.3g} % / {100 * err[:, j].max():.3g} % "
-              f"| {100 * h['cover2'][:, j].mean():.0f} % | {100 * h['cover3'][:, j].mean():.0f} % |"
-              for j, n in enumerate(names)]
-    lines += ["", "| seed | success | hip force RMS error (N) | parameter band, median width (N) | truth inside it | "
-              "model error, median (N) | truth inside both | wall (s) |", "|---|---|---|---|---|---|---|---|"]
-    lines += [f"| {k} | {'yes' if r['success'] else 'no: ' + r['message']} | {r['force_rms']:.3g} | "
-              f"{r['band_width']:.3g} | {100 * r['inside']:.0f} % | {r['model_error_median']:.3g} | "
-              f"{100 * r['inside_all']:.0f} % | {r['wall_s']:.1f} |" for k, r in enumerate(recs)]
     scene = casflex.load_scene("leg")
     mass = sum(b.rho * b.A * scene.distance(*b.nodes) for b in scene.beams) + sum(b.mass for b in scene.bodies)
-    lines += ["", f"The hip force peaks at {max(max(r['f_true']) for r in recs):.0f} N (the leg weighs "
-              f"{9.81 * mass:.0f} N)."]
-    return "\n".join(lines) + "\n"
+    return "\n".join([
+        "# The hip joint force of a swinging leg, from markers", "",
+        f"{banner} The set-up, how the band is built and read: [studies/leg.md](../studies/leg.md).", "",
+        f"Runs: {len(recs)}; success {100 * h['success'].mean():.0f} %; dishonest (success with a parameter more "
+        f"than 3 SE from the truth): {h['dishonest']}; an identification takes "
+        f"{np.median([r['wall_s'] for r in recs]):.0f} s (median, 2 runs at a time on 2 cores).", "",
+        *table(["parameter", "truth", "error (median / max)", "2 SE", "3 SE"],
+               [[n, f"{recs[0]['truth'][j]:g}", f"{100 * np.median(err[:, j]):.3g} % / {100 * err[:, j].max():.3g} %",
+                 f"{100 * h['cover2'][:, j].mean():.0f} %", f"{100 * h['cover3'][:, j].mean():.0f} %"]
+                for j, n in enumerate(names)]), "",
+        *table(["seed", "success", "hip force RMS error (N)", "parameter band, median width (N)", "truth inside it",
+                "model error, median (N)", "truth inside both", "wall (s)"],
+               [[k, "yes" if r["success"] else "no: " + r["message"], f"{r['force_rms']:.3g}", f"{r['band_width']:.3g}",
+                 f"{100 * r['inside']:.0f} %", f"{r['model_error_median']:.3g}", f"{100 * r['inside_all']:.0f} %",
+                 f"{r['wall_s']:.1f}"] for k, r in enumerate(recs)]),
+        "", f"The hip force peaks at {max(max(r['f_true']) for r in recs):.0f} N (the leg weighs "
+        f"{9.81 * mass:.0f} N).", ""])
 
 
 def figure(rec: dict, path: Path) -> None:
