@@ -148,23 +148,24 @@ def _setting(r: dict, cost: float, inertia: bool = True) -> str:
 def _recommendations(plan: dict, rows: list[dict], recs: list[dict]) -> list[str]:
     L = ["## Recommended settings for a stated accuracy", "",
          "Chosen by the script from the measured tables, by the rule in [studies/tradeoff.md](../studies/tradeoff.md"
-         "#recommended-settings)." + _noise(rows), "",
-         "| accuracy: positions / forces | resolved by the reference | path | dt (s) | alpha | elements/bar | "
-         "inertia | cost (median of n) | this setting's time | position error (m) | force error (%) |",
-         "|---|:-:|---|---:|---:|---:|---|---:|---:|---:|---:|"]
-    for rc in recs:
-        head = f"| {rc['pos']:g} m / {rc['force']:g} % | " + {True: "yes", False: "**no**", None: "mesh part not "
-                                                              "estimated"}[rc["resolved"]]
-        for key, path in (("compiled", "compiled"), ("interp", "interpreted")):
-            if rc[key] is None:
-                L.append(f"{head} | {path} | none measured | | | | | | | |")
-                continue
-            r, cost, n = rc[key]
-            star = "*" if key == "interp" and r["interp_projected"] else ""
-            L.append(f"{head} | {path} | {r['dt']:g} | {fmt_alpha(r['cfg'].alpha)} | {r['cfg'].elements} | "
-                     f"{r['cfg'].inertia} | {ms(cost)}{star} ({n}) | {ms(r[key + '_s'])}{star} | "
-                     f"{r['err']['pos']:.2e} | {r['err']['force_rel']:.2e} |")
-    L.append("")
+         "#recommended-settings)." + _noise(rows), ""]
+
+    def cells(rc: dict, key: str) -> list:
+        if rc[key] is None:
+            return ["none measured", *[""] * 7]
+        r, cost, n = rc[key]
+        star = "*" if key == "interp" and r["interp_projected"] else ""
+        return [f"{r['dt']:g}", fmt_alpha(r["cfg"].alpha), r["cfg"].elements, r["cfg"].inertia,
+                f"{ms(cost)}{star} ({n})", f"{ms(r[key + '_s'])}{star}", f"{r['err']['pos']:.2e}",
+                f"{r['err']['force_rel']:.2e}"]
+
+    L += [*table(["accuracy: positions / forces", "resolved by the reference", "path", "dt (s)", "alpha",
+                  "elements/bar", "inertia", "cost (median of n)", "this setting's time", "position error (m)",
+                  "force error (%)"],
+                 [[f"{rc['pos']:g} m / {rc['force']:g} %", {True: "yes", False: "**no**", None: "mesh part not "
+                                                              "estimated"}[rc["resolved"]], path, *cells(rc, key)]
+                  for rc in recs for key, path in (("compiled", "compiled"), ("interp", "interpreted"))],
+                 "lclrrrlrrrr"), ""]
     head = next(rc for rc in recs if (rc["pos"], rc["force"]) == HEADLINE)["compiled"]
     if head is not None:
         r, cost, n = head
@@ -296,12 +297,11 @@ def _orders(plan: dict, orders: dict, rowmap: dict) -> list[str]:
          f"Least-squares slope of log(error) vs log(dt) over {plan['fit'][0]:g} <= dt <= {plan['fit'][1]:g} s, the "
          f"error measured against the same model (mesh, inertia form) at dt = {fine:g} s, alpha = 0."
          + (f" The last two columns fit the small steps only, {small[0]:g} <= dt <= {small[1]:g} s." if small else ""),
-         "", "| setting | points | order, node positions | order, joint forces |"
-         + (" order, positions, small dt | order, forces, small dt |" if small else ""),
-         "|---|---:|---:|---:|" + ("---:|---:|" if small else "")]
-    L += [f"| {cfg.label} | {o['n']} | {o['pos']:.3f} | {o['force']:.3f} |"
-          + (f" {fmt_e(o['pos_small'], '.3f')} | {fmt_e(o['force_small'], '.3f')} |" if small else "")
-          for cfg, o in orders.items() if o["n"] >= 2]
+         "", *table(["setting", "points", "order, node positions", "order, joint forces",
+                     *(["order, positions, small dt", "order, forces, small dt"] if small else [])],
+                    [[cfg.label, o["n"], f"{o['pos']:.3f}", f"{o['force']:.3f}",
+                      *([fmt_e(o["pos_small"], ".3f"), fmt_e(o["force_small"], ".3f")] if small else [])]
+                     for cfg, o in orders.items() if o["n"] >= 2], "lrrr" + "rr" * bool(small))]
     lin = [(a, r["err_dt"]["pos"]) for a in plan["alphas"] if a != 0.0
            and (r := rowmap.get((Config(1, "lagrange", a), fine))) is not None]
     return L + ([""] + ([f"Difference between alpha < 0 and alpha = 0 at the same dt = {fine:g} s (1 el., `lagrange`), "
