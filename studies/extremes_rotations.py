@@ -31,6 +31,8 @@ from casflex.simulate import integrator_for, simulate
 
 SPIN_OMEGA, SPIN_SPRING_SCALE = 10.0, 1e3  # rad/s; springs x1e3: centrifugal forces stretch them by mm, not m
 EPS = float(np.finfo(float).eps)
+
+
 def full_turns(quick: bool) -> dict:
     """The chain spun about the clamp: the rigid-body velocity field v = omega x r, omega at every node."""
     model = casflex.assemble(casflex.load_scene("twobar"))
@@ -92,8 +94,6 @@ def roundoff_probe(quick: bool) -> list[dict]:
                      "max_dpos": float(np.abs(dq[:, ~rot]).max()), "max_drot": float(np.abs(dq[:, rot]).max()),
                      "max_dqd": float(np.abs(tr.qd[:k] - ref.qd[:k]).max()), "max_qd": float(np.abs(ref.qd[:k]).max())})
     return rows
-
-
 
 
 def self_checks(raw: dict) -> list[tuple[bool, str]]:
