@@ -195,17 +195,13 @@ def _fail_table(rows: list[dict]) -> list[str]:
 
 
 def _why(rows: list[dict]) -> list[str]:
-    """The sentences whose numbers change: per alpha the failures by status, from which dt, the diagnosis of
-    the Newton failures; the study's own measure of the element_range and energy_growth flags."""
+    """Per alpha, the failures by status and the study's diagnosis of the Newton failures (each failure is a
+    row of the failure table; what the statuses and flags show: docs/studies/extremes.md)."""
     out = []
     for a in ALPHAS:
         fails = [r for r in _sel(rows, alpha=a) if not r["success"]]
         s = f"- **alpha = {_an(a)}**: {len(fails)} of {len(_sel(rows, alpha=a))} runs fail (" + ", ".join(
             f"{len(_sel(fails, status=st))} {st}" for st in STATUSES) + ")"
-        for T in HORIZONS:
-            if bad := [r for r in _sel(fails, t_end=T) if r["status"] != "element_range"]:
-                s += (f"; at {T:g} s, element_range aside, the first failure at dt = {min(r['dt'] for r in bad):g} s "
-                      f"(omega_max dt >= {min(r['omega_dt'] for r in bad):.3g})")
         if nf := _sel(fails, status="newton_failed"):
             cls = [_newton_class(r) for r in nf]
             s += ("; the study's diagnosis of the Newton failures: " + ", ".join(f"{cls.count(c)} {c}" for c in
@@ -213,22 +209,6 @@ def _why(rows: list[dict]) -> list[str]:
                   f"{sum(r['failing_step']['half_steps_converge'] for r in nf)} of {len(nf)}")
         rise = sum(r["newton"]["max_last20"] > 2 * max(r["newton"]["mean"], 1.0) for r in fails)
         out.append(s + f"; Newton's count rose before the failure (last 20 steps' max > 2 x mean) in {rise}.")
-    if rng := _sel(rows, status="element_range"):
-        out.append(f"- **element_range** ({len(rng)} runs): the study's own local rotations jump through +-pi at the "
-                   f"named element end in the rejected step in {sum(bool(r['flagged']['wrap']) for r in rng)}; "
-                   f"Newton converged in that step in {sum(r['flagged']['converged'] for r in rng)}.")
-    if grown := _sel(rows, status="energy_growth"):
-        g = [r["flagged"]["dE_J"] / r["energy"]["scale_J"] for r in grown]
-        lead = [r["failure"]["t1"] - r["t_drift_1pct"] for r in grown if r["t_drift_1pct"] is not None]
-        own = [r["energy"]["max_gain"] * r["energy"]["scale_J"] / r["energy"]["own_scale_J"] for r in grown]
-        gain = [r["energy"]["max_gain"] for r in grown]
-        out.append(f"- **energy_growth** ({len(grown)} runs; Newton converged in the rejected step in "
-                   f"{sum(r['flagged']['converged'] for r in grown)}): the flagged state holds {min(g):.2g}-"
-                   f"{max(g):.2g} x the scale above E(0); the 1 % drift came "
-                   + (f"{min(lead):.2g}-{max(lead):.2g} s before the flag ({len(grown) - len(lead)} without it)"
-                      if lead else "at no earlier state") + f"; the returned states hold up to {max(own):.2g} of "
-                   f"their own max T + V_el ({max(gain):.2g} x the scale; more than {SUSPECT_DRIFT:g} in "
-                   f"{sum(x > SUSPECT_DRIFT for x in gain)} runs).")
     return out
 
 
