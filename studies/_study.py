@@ -135,9 +135,9 @@ def png(fig) -> bytes:
 
 
 def write_outputs(name: str, out_dir: Path | None, quick: bool, page: str,
-                  figure: Callable[[Path], None] | bytes | None = None) -> None:
+                  figure: Callable[[Path], None] | bytes | dict[str, bytes] | None = None) -> None:
     """docs/tables/<name>.md and docs/figures/<name>.png (or under ``out_dir``), atomically. ``figure``
-    writes itself to the path it is given, or is the PNG's bytes."""
+    writes itself to the path it is given, or is the PNG's bytes, or {file stem: PNG bytes} of several."""
     from casflex.results import atomic_write_bytes, atomic_write_text
 
     out = ROOT / "docs" if out_dir is None else Path(out_dir)
@@ -146,8 +146,9 @@ def write_outputs(name: str, out_dir: Path | None, quick: bool, page: str,
     atomic_write_text(out / "tables" / f"{name}{suffix}.md", page)
     if figure is not None:
         (out / "figures").mkdir(parents=True, exist_ok=True)
-        path = out / "figures" / f"{name}{suffix}.png"
-        atomic_write_bytes(path, figure) if isinstance(figure, bytes) else figure(path)
+        for stem, fig in (figure if isinstance(figure, dict) else {name: figure}).items():
+            path = out / "figures" / f"{stem}{suffix}.png"
+            atomic_write_bytes(path, fig) if isinstance(fig, bytes) else fig(path)
 
 
 def save_raw(raw: dict, path: Path | None) -> None:
