@@ -6,14 +6,12 @@ iterations of sampled steps, and replays of the step that failed or that ``simul
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import re
 import warnings
 
 import numpy as np
 
-import casflex
 from casflex.simulate import integrator_for, simulate
 from casflex.statics import StabilityWarning, modes
 
@@ -203,12 +201,6 @@ def omega_max_of(model, p) -> float:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", StabilityWarning)
         return float(np.max(modes(model, p=p).omega))
-
-
-def scene_E(e_scale: float, elements: int = 1):
-    base = casflex.load_scene("twobar")
-    return dataclasses.replace(base, beams=tuple(dataclasses.replace(b, E=b.E * e_scale, elements=elements)
-                                                 for b in base.beams))
 
 
 def label(ks: float, es: float) -> str:

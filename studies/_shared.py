@@ -5,7 +5,8 @@ library. Not a study itself (no ``main``).
   (table1, basins);
 - :func:`exudyn_recording`: channels of an Exudyn reference recording at 100 Hz with noise
   (dampers, realdata, bench_identification);
-- :func:`twobar`: the twobar model meshed into n elements per bar (bench_simulate, bench_exudyn);
+- :func:`twobar`: the twobar model meshed into n elements per bar (bench_simulate, bench_exudyn, tradeoff,
+  extremes);
 - :func:`in_fresh_process`, :func:`cold_and_cached`: a study's hidden worker switch run in a new Python
   process (twice, sharing a new cache), its JSON answer (bench_simulate, bench_identification);
 - :func:`honesty`: success, coverage and "dishonest" successes of repeated fits (dampers, leg,
@@ -50,15 +51,17 @@ def exudyn_recording(file: str, names: tuple[str, ...], t_from: float, t_to: flo
     return MeasurementSet(z["t"][rows], names, q + np.random.default_rng(seed).normal(0, noise, q.shape), None, None)
 
 
-def twobar(elements: int, rotary: bool = False):
-    """The twobar scene's model with ``elements`` beam elements per bar (and rotary inertia)."""
+def twobar(elements: int, rotary: bool = False, inertia: str = "lagrange", e_scale: float = 1.0):
+    """The twobar scene's model with ``elements`` beam elements per bar (and rotary inertia), the inertia
+    form ``inertia``, the beams' Young's modulus times ``e_scale``."""
     import dataclasses
 
     import casflex
 
     scene = casflex.load_scene("twobar")
     return casflex.assemble(dataclasses.replace(scene, beams=tuple(
-        dataclasses.replace(b, elements=elements, rotary_inertia=rotary) for b in scene.beams)))
+        dataclasses.replace(b, elements=elements, rotary_inertia=rotary, E=b.E * e_scale) for b in scene.beams)),
+        inertia=inertia)
 
 
 def in_fresh_process(script: str, args: list[str], env: dict, timeout: float = 3600) -> dict:

@@ -11,10 +11,10 @@ import math
 from pathlib import Path
 
 import numpy as np
-from _extremes import ALPHAS, DRIFT_TOL, HORIZONS, STATUSES, detail, label, omega_max_of, run_case, scene_E
+from _extremes import ALPHAS, DRIFT_TOL, HORIZONS, STATUSES, detail, label, omega_max_of, run_case
+from _shared import twobar
 from _study import Banner, cli, fnum, save_raw, table, write_outputs
 
-import casflex
 from casflex.simulate import ENERGY_GROWTH
 
 GRID = {False: {"dts": (1e-5, 1e-4, 1e-3, 3e-3, 1e-2, 2e-2, 5e-2), "k": (1e-3, 1.0, 1e3, 1e6),
@@ -29,7 +29,7 @@ def simulation_grid(quick: bool) -> dict:
     g = GRID[quick]
     rows, omega, ref_scale = [], {}, {}  # ref_scale: per case, its finest converged alpha = 0, 3 s run's
     for es in g["E"]:
-        model = casflex.assemble(scene_E(es))
+        model = twobar(1, e_scale=es)
         for ks in g["k"]:
             omega[label(ks, es)] = om = omega_max_of(model, model.p_nominal * ks)
             for a in ALPHAS:

@@ -22,8 +22,8 @@ from _extremes import (
     omega_max_of,
     parse_failure,
     run_case,
-    scene_E,
 )
+from _shared import twobar
 from _study import Banner, cli, fnum, table, write_outputs
 
 import casflex
@@ -65,7 +65,7 @@ def mesh_check() -> dict:
     """E x1e-6, whose single elements wrap: the same chain with 1 and 8 elements per bar."""
     out = {}
     for ne in (1, 8):
-        model = casflex.assemble(scene_E(1e-6, ne))
+        model = twobar(ne, e_scale=1e-6)
         row, _ = run_case(model, k_scale=1.0, e_scale=1e-6, alpha=0.0, dt=1e-4, t_end=3.0, omega_max=math.nan,
                           n_samples=0)
         out[str(ne)] = row
