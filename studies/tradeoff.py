@@ -11,7 +11,7 @@ import os
 from pathlib import Path
 
 import numpy as np
-from _study import Banner, best_of, cli, table, write_outputs
+from _study import Banner, best_of, cli, png, table, write_outputs
 from _tradeoff import CENTRE, GRID_STEP, Config, Models, fmt_alpha, fmt_e, grid, measure, ms, plan_for, run, tasks_for
 
 from casflex.simulate import simulate
@@ -59,12 +59,13 @@ def _analyse(plan: dict, rows: list[dict], samples: dict) -> dict:
         resolved = bool(ref_err["pos"] <= 0.1 * pos_tol and ref_err["force_rel"] <= 0.1 * f_tol)
         recs.append({"pos": pos_tol, "force": f_tol,
                      "resolved": None if resolved and not np.isfinite(ref_mesh["pos"]) else resolved,
-                     "compiled": _pick(cand, "compiled_s", pos_tol, f_tol),
-                     "interp": _pick(cand, "interp_s", pos_tol, f_tol)})
-    fronts = {}  # of the node positions' error against time, per path
+                     "compiled": _pick(cand, "compiled_s", pos_tol, f_tol), "interp": _pick(cand, "interp_s", pos_tol,
+                                                                                             f_tol)})
+    fronts = {}
     for key in ("compiled_s", "interp_s"):
         pts = [r for r in cand if r[key] is not None]
-        fronts[key] = [pts[i] for i in _pareto([(r[key], r["err"]["pos"]) for r in pts])]
+        for ek in ("pos", "force_rel"):
+            fronts[(key, ek)] = [pts[i] for i in _pareto([(r[key], r["err"][ek]) for r in pts])]
     return dict(an, cand=cand, recs=recs, fronts=fronts)
 
 
@@ -100,7 +101,7 @@ def _checks(rows: list[dict], an: dict) -> list[tuple[str, bool, str, bool]]:
 
 
 def main(quick: bool = False, out_dir: Path | None = None) -> dict:
-    """Run every setting, write the page, assert the self-checks."""
+    """Run every setting, write the page and the Pareto plot, assert the self-checks."""
     banner = Banner("tradeoff", quick)
     plan = plan_for(quick)
     models, rows, samples = Models(), [], {}
@@ -117,8 +118,8 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
     an = _analyse(plan, rows, samples)
     an.update(vcheck=(v_full, vrow, v_full / vrow["interp_s"]), builds=models.builds)
     checks = _checks(rows, an)
-    page = _page(plan, rows, an, checks, banner)
-    write_outputs("tradeoff", out_dir, quick, "\n".join(page) + "\n")
+    page = _page(quick, plan, rows, an, checks, banner)
+    write_outputs("tradeoff", out_dir, quick, "\n".join(page) + "\n", png(_figure(an, plan)))
     failed = [c for c in checks if c[3] and not c[1]]
     assert not failed, "self-checks failed: " + "; ".join(f"{n} ({v})" for n, _, v, _ in failed)
     return {"rows": rows, "orders": an["orders"], "recommendations": an["recs"], "reference_error": an["ref_err"],
@@ -195,7 +196,7 @@ def _recommendations(plan: dict, rows: list[dict], recs: list[dict]) -> list[str
     return L + [""]
 
 
-def _page(plan: dict, rows: list[dict], an: dict, checks: list, banner: Banner) -> list[str]:
+def _page(quick: bool, plan: dict, rows: list[dict], an: dict, checks: list, banner: Banner) -> list[str]:
     t_end, fine, window, meshes = plan["t_end"], plan["dt_fine"], plan["window"], plan["meshes"]
     rowmap = {(r["cfg"], r["dt"]): r for r in rows}
     v_full, vrow, v_ratio = an["vcheck"]
@@ -270,13 +271,13 @@ def _page(plan: dict, rows: list[dict], an: dict, checks: list, banner: Banner) 
                [f"alpha {fmt_alpha(a)}" for a in plan["seed_alphas"]], dts, rowmap, pos, t_end)
     L += grid("`seed`, 1 element per bar: joint force error (% of peak)", seed,
                [f"alpha {fmt_alpha(a)}" for a in plan["seed_alphas"]], dts, rowmap, force, t_end)
-    L += ["## Pareto fronts", "",
+    L += ["## Pareto fronts", "", f"![Pareto plot](../figures/tradeoff{'_quick' * quick}.png)", "",
           "Non-dominated settings (no other measured setting is both faster and more accurate), node positions:", "",
           *table(["path", "setting", "dt (s)", "wall time", "position error (m)", "force error (%)"],
                  [[path, r["cfg"].label, f"{r['dt']:g}",
                    ms(r[key]) + ("*" if key == "interp_s" and r["interp_projected"] else ""), pos(r), force(r)]
                   for key, path in (("compiled_s", "compiled"), ("interp_s", "interpreted"))
-                  for r in an["fronts"][key]], "llrrrr"),
+                  for r in an["fronts"][(key, "pos")]], "llrrrr"),
           "", "## One-off builds (not in the times above)", "",
           *table(["setting", "dofs", "integrator build (s)", "C library (s)"],
                  [[cfg.label, b["n_dof"], f"{b['integrator_s']:.2f}",
@@ -324,6 +325,67 @@ def _inertia(plan: dict, rows: list[dict], seed_cmp: list[dict]) -> list[str]:
           if r["cfg"].elements == 1 and r["cfg"].alpha == 0.0 and r["dt"] in (1e-3, fine) and r["ok"]]
     return L + (["Energy drift, max |E(t) - E(0)| over the grid (1 el., alpha = 0; gravity and strain energy "
                  "included): " + ", ".join(f"{i} dt {d:g}: {v:.2e} J" for i, d, v in dr) + ".", ""] if dr else [])
+
+
+def _figure(an: dict, plan: dict):
+    """Error against wall time, compiled and interpreted, positions and forces, with the Pareto fronts."""
+    from matplotlib.lines import Line2D
+
+    from casflex.plotting._figure import _new_figure
+
+    cand = an["cand"]
+    fig = _new_figure((13, 10.5))
+    axes = fig.subplots(2, 2)
+    alphas = list(dict.fromkeys(r["cfg"].alpha for r in cand if r["cfg"].elements == 1))
+    meshes = sorted({r["cfg"].elements for r in cand})
+
+    def series(c: Config) -> str:
+        return (f"alpha {fmt_alpha(c.alpha)}, 1 el., {c.inertia}" if c.elements == 1 else
+                f"{c.elements} el., alpha {fmt_alpha(c.alpha)}, {c.inertia}")
+
+    def style(c: Config) -> tuple[str, str, str]:
+        ls = "-" if c.inertia == "lagrange" else ":"
+        if c.elements == 1:
+            return f"C{alphas.index(c.alpha)}", "o" if c.inertia == "lagrange" else "s", ls
+        return f"C{5 + meshes.index(c.elements)}", ("^" if c.alpha == 0.0 else "v") if ls == "-" else "D", ls
+
+    cfgs = list(dict.fromkeys(r["cfg"] for r in sorted(cand, key=lambda r: (r["cfg"].elements, r["cfg"].inertia,
+                                                                            -r["cfg"].alpha))))
+    names = list(dict.fromkeys(series(c) for c in cfgs))
+    handles = {}
+    for col, key in enumerate(("compiled_s", "interp_s")):
+        for row, ek in enumerate(("pos", "force_rel")):
+            ax = axes[row, col]
+            for name in names:
+                pts = sorted((r for r in cand if series(r["cfg"]) == name and r[key] is not None),
+                             key=lambda r: r["dt"])
+                if not pts:
+                    continue
+                color, marker, ls = style(pts[0]["cfg"])
+                ax.plot([r[key] for r in pts], [r["err"][ek] for r in pts], ls=ls, color=color, lw=0.8, alpha=0.7)
+                for r in pts:  # hollow: interpreted time projected from the first steps
+                    hollow = key == "interp_s" and r["interp_projected"]
+                    ax.plot(r[key], r["err"][ek], marker=marker, color=color, ms=5, ls="none",
+                            mfc="none" if hollow else color)
+                handles[name] = Line2D([], [], color=color, marker=marker, ls=ls, label=name)
+            fr = an["fronts"][(key, ek)]
+            ax.step([r[key] for r in fr], [r["err"][ek] for r in fr], where="post", color="k", lw=1.2, alpha=0.8)
+            ax.plot([r[key] for r in fr], [r["err"][ek] for r in fr], "o", ms=11, mfc="none", mec="k", mew=1.3)
+            for lv in sorted({lv[row] for lv in LEVELS}):
+                ax.axhline(lv, color="0.5", ls="--", lw=0.8)
+            ax.set(xscale="log", yscale="log", xlabel=f"wall time of simulate() over {plan['t_end']:g} s, "
+                   f"{'compiled C' if col == 0 else 'interpreted'} (s)",
+                   ylabel="max error, nodes 3 and 5 (m)" if ek == "pos" else "max joint force error (% of peak)")
+            ax.grid(True, which="both", alpha=0.25)
+            ax.tick_params(which="minor", labelsize="x-small")  # a narrow log range labels its minor ticks
+            ax.set_title(f"{'node positions' if ek == 'pos' else 'joint forces'}, "
+                         f"{'compiled' if col == 0 else 'interpreted (hollow: projected from the first steps)'}",
+                         fontsize="medium")
+    handles["front"] = Line2D([], [], color="k", marker="o", mfc="none", ms=9, label="Pareto front (non-dominated)")
+    fig.legend(handles=list(handles.values()), loc="outside lower center", ncol=4, fontsize="small")
+    fig.suptitle(f"twobar, {plan['t_end']:g} s: error against a converged reference vs wall time "
+                 f"(dt {max(plan['dts']):g} .. {plan['dt_fine']:g} s; dashed: stated accuracies)")
+    return fig
 
 
 if __name__ == "__main__":
