@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 from _shared import cold_and_cached, twobar
-from _study import Banner, best_of, cli, table, write_outputs
+from _study import Banner, best_of, cli, png, table, write_outputs
 
 from casflex.simulate import simulate
 
@@ -99,10 +99,11 @@ def newton_kinds(meshes: tuple[int, ...], dts: tuple[float, ...], t_end: float) 
 
 
 def page(scale: list[dict], acc: list[dict], order: float, expo: dict, t_end: float, kinds: list[dict],
-         banner: str) -> str:
+         banner: str, quick: bool) -> str:
     """The three tables and the fitted exponents and order."""
     L = ["# Simulation benchmark: twobar", "", f"{banner} What is measured and what the numbers mean: "
          "[studies/bench_simulate.md](../studies/bench_simulate.md).", "",
+         f"![cost against the mesh, time and error against dt](../figures/bench_simulate{'_quick' * quick}.png)", "",
          f"## Cost against the mesh ({t_end:g} s, dt = 1e-3, compiled)", "",
          *table(["el./bar", "dofs", "cold build (s)", "cached build (s)", "library (kB)", "simulate (ms)",
                  "integration (ms)", "per step (us)", "peak memory (MB)"],
@@ -127,6 +128,32 @@ def page(scale: list[dict], acc: list[dict], order: float, expo: dict, t_end: fl
     return "\n".join(L + [""])
 
 
+def figure(scale: list[dict], acc: list[dict]) -> bytes:
+    """Cost against the mesh; both paths' time and node 5's error against dt (1 element per bar)."""
+    from casflex.plotting._figure import _new_figure
+
+    fig = _new_figure((12, 4))
+    ax1, ax2, ax3 = fig.subplots(1, 3)
+    dofs, d = [r["dofs"] for r in scale], [r["dt"] for r in acc]
+    cost = (("per_step_us", 1, "o-", "per step (us)"), ("cold_build_s", 1e3, "s-", "cold build (ms)"),
+            ("peak_mb", 1, "^-", "peak memory (MB)"))
+    for key, f, mark, label in cost:
+        ax1.loglog(dofs, [r[key] * f for r in scale], mark, label=label)
+    ax1.set_xticks(dofs, [str(n) for n in dofs])
+    ax1.tick_params(axis="x", which="minor", labelbottom=False)  # the dofs themselves are the ticks
+    ax1.set(xlabel=f"dofs ({scale[0]['elements']} ... {scale[-1]['elements']} elements per bar)",
+            title="cost against the mesh (compiled)")
+    ax2.loglog(d, [r["interpreted_s"] for r in acc], "o-", label="interpreted")
+    ax2.loglog(d, [r["compiled_s"] for r in acc], "s-", label="compiled C")
+    ax2.set(xlabel="dt (s)", ylabel="wall time of simulate() (s)", title="the two paths")
+    ax3.loglog(d, [r["err_node5_m"] for r in acc], "o-", label="against a 10x finer dt")
+    ax3.set(xlabel="dt (s)", ylabel="max error of node 5 (m)", title="accuracy (HHT-alpha, order 2)")
+    for ax in (ax1, ax2, ax3):
+        ax.legend()
+        ax.grid(True, which="both", alpha=0.3)
+    return png(fig)
+
+
 def main(quick: bool = False, out_dir: Path | None = None) -> dict:
     banner = Banner("bench_simulate", quick)
     t_end = 0.3 if quick else 3.0
@@ -135,7 +162,8 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
     acc, order = accuracy(0.5 if quick else 3.0,
                           [1e-2, 5e-3, 2e-3, 1e-3] if quick else [1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4])
     kinds = newton_kinds((1,) if quick else (1, 8, 32), (1e-3,) if quick else (1e-3, 2e-4), 0.2 if quick else KINDS_T)
-    write_outputs("bench_simulate", out_dir, quick, page(scale, acc, order, expo, t_end, kinds, banner.line()))
+    write_outputs("bench_simulate", out_dir, quick, page(scale, acc, order, expo, t_end, kinds, banner.line(), quick),
+                  figure(scale, acc))
     # self-checks: what the docs claim
     same = 0.0 if platform.machine() in ("x86_64", "AMD64") else 1e-10  # bitwise where claimed (codegen.CFLAGS)
     assert all(r["max_diff_paths"] <= same for r in acc), "compiled and interpreted paths disagree"
