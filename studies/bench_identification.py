@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 from _shared import cold_and_cached, exudyn_recording
-from _study import Banner, cli, table, write_outputs
+from _study import Banner, cli, png, table, write_outputs
 
 NOISE, SEED, START = 5e-4, 0, 0.8
 CASES = {  # name: (method, horizon (s), options)
@@ -52,17 +52,35 @@ def worker(case: str) -> dict:
             "kt_err": float(max(err[i] for i, n in enumerate(names) if n.startswith("kt")))}
 
 
-def page(rows: list[dict], banner: str) -> str:
+def page(rows: list[dict], banner: str, quick: bool) -> str:
     """Cold and cached times per case, and the answers."""
     return "\n".join(["# Identification benchmark: first and later runs", "",
                       f"{banner} Data, cases and what is timed: "
                       "[studies/bench_identification.md](../studies/bench_identification.md).", "",
+                      f"![build + solve per case](../figures/bench_identification{'_quick' * quick}.png)", "",
                       *table(["case", "first process: build + solve (s)", "later process: build (s)",
                               "later: solve (s)", "later: total (s)", "iterations", "k error", "kt error", "success"],
                              [[r["case"], f"{c['build_s'] + c['solve_s']:.1f}", f"{w['build_s']:.2f}",
                                f"**{w['solve_s']:.2f}**", f"{w['build_s'] + w['solve_s']:.2f}", w["iterations"],
                                f"{w['k_err']:.1e}", f"{w['kt_err']:.1e}", w["success"]]
                               for r in rows for c, w in [(r["cold"], r["warm"])]], "lrrrrrrrl"), ""])
+
+
+def figure(rows: list[dict]) -> bytes:
+    """Build + solve of the first and a later process, per case."""
+    from casflex.plotting._figure import _new_figure
+
+    fig = _new_figure((9, 1.2 + 0.6 * len(rows)))
+    ax = fig.subplots()
+    y = np.arange(len(rows))
+    for dy, which, label in ((-0.2, "cold", "first process (code generation, gcc)"), (0.2, "warm", "later process")):
+        ax.barh(y + dy, [r[which]["build_s"] + r[which]["solve_s"] for r in rows], 0.4, label=label)
+    ax.set_yticks(y, [r["case"] for r in rows], fontsize="small")
+    ax.invert_yaxis()  # the table's order, top down
+    ax.set(xscale="log", xlabel="build + solve wall time (s)", title="twobar identification: first and later runs")
+    ax.legend(fontsize="small")
+    ax.grid(True, axis="x", which="both", alpha=0.3)
+    return png(fig)
 
 
 def main(quick: bool = False, out_dir: Path | None = None) -> dict:
@@ -73,7 +91,7 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
         rows.append({"case": case, "cold": cold, "warm": warm})
         print(f"{case:<48s} cold {cold['build_s'] + cold['solve_s']:7.1f} s, cached: build {warm['build_s']:5.2f} s "
               f"+ solve {warm['solve_s']:6.2f} s ({warm['iterations']} it.)", flush=True)
-    write_outputs("bench_identification", out_dir, quick, page(rows, banner.line()))
+    write_outputs("bench_identification", out_dir, quick, page(rows, banner.line(), quick), figure(rows))
     # self-checks: the answers do not depend on the cache
     for r in rows:
         assert r["warm"]["success"] == r["cold"]["success"], f"{r['case']}: the cache changed the outcome"
