@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 from _shared import twobar
-from _study import Banner, best_of, cli, table, write_outputs
+from _study import Banner, best_of, cli, png, table, write_outputs
 
 import casflex
 from casflex.simulate import compiled_library, integrator_for, simulate
@@ -147,7 +147,8 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
     fronts = {c: [front([(t, e) for t, e, _, _ in pts[c]], lv) for lv in LEVELS] for c in codes}
 
     banner_line = banner.line(Exudyn=exu.__version__ if exu else "not installed")
-    write_outputs("bench_exudyn", out_dir, quick, page(plan, rows, pts, fronts, physics, ref_err, codes, banner_line))
+    write_outputs("bench_exudyn", out_dir, quick, page(plan, rows, pts, fronts, physics, ref_err, codes, banner_line,
+                                                       quick), figure(plan, rows, pts, codes))
     # self-checks: every casflex run finite and converging with the mesh; ANCF is the same physics
     assert all(math.isfinite(r["casflex_err"]) for r in rows)
     for kind, ph in physics.items():
@@ -155,7 +156,7 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
     return {"rows": rows, "points": pts, "fronts": fronts, "physics": physics}
 
 
-def page(plan, rows, pts, fronts, physics, ref_err, codes, banner: str) -> str:
+def page(plan, rows, pts, fronts, physics, ref_err, codes, banner: str, quick: bool) -> str:
     """The physics check, the same-mesh times and the accuracy-against-time fronts."""
     pairs, meshes = [(x, c) for x, c in PAIRS if x in codes], plan["front_meshes"]
 
@@ -163,7 +164,9 @@ def page(plan, rows, pts, fronts, physics, ref_err, codes, banner: str) -> str:
         return f"**{t[x] / t[c]:.1f}**" if math.isfinite(t[x]) and math.isfinite(t[c]) else "-"
 
     L = ["# casflex vs Exudyn: twobar", "", f"{banner} Horizon {plan['t_end']:g} s. The models, the codes' names and "
-         "the measurement: [studies/bench_exudyn.md](../studies/bench_exudyn.md).", "", "## The same problem", "",
+         "the measurement: [studies/bench_exudyn.md](../studies/bench_exudyn.md).", "",
+         f"![time against the mesh, error against time](../figures/bench_exudyn{'_quick' * quick}.png)", "",
+         "## The same problem", "",
          f"References: casflex {plan['ref'][0]} elements per bar, dt = {plan['ref'][1]:g} s, without and with rotary "
          f"inertia; their own errors, against {', '.join(f'{n} el. at {h:g} s' for n, h in plan['checks'])}: "
          f"{ref_err[False]:.1e} m and {ref_err[True]:.1e} m."]
@@ -193,6 +196,32 @@ def page(plan, rows, pts, fronts, physics, ref_err, codes, banner: str) -> str:
 def ms(t: float) -> str:
     """A time in ms, or 'failed'."""
     return "failed" if not math.isfinite(t) else f"{t * 1e3:.1f}"
+
+
+def figure(plan, rows, pts, codes) -> bytes:
+    """Time against the mesh at h = 1e-3; every setting's error against time, and each code's Pareto front."""
+    from casflex.plotting._figure import _new_figure
+
+    fig = _new_figure((11, 4.2))
+    ax1, ax2 = fig.subplots(1, 2)
+    for i, c in enumerate(codes):
+        style = {"color": f"C{i}", "marker": "osD^"[i], "ls": "-" if c.startswith("casflex") else "--"}
+        ax1.loglog([r["elements"] for r in rows], [r[c] for r in rows], label=c, **style)
+        p = sorted((t, e) for t, e, _, _ in pts[c] if math.isfinite(t) and math.isfinite(e))
+        ax2.loglog([t for t, _ in p], [e for _, e in p], style["marker"], color=style["color"], alpha=0.35)
+        fr = [(t, e) for j, (t, e) in enumerate(p) if all(e < e2 for _, e2 in p[:j])]  # faster ones are less accurate
+        ax2.loglog([t for t, _ in fr], [e for _, e in fr], label=f"{c}: front", **style)
+    ax1.set_xticks(plan["meshes"], [str(n) for n in plan["meshes"]])
+    ax1.tick_params(axis="x", which="minor", labelbottom=False)  # the meshes themselves are the ticks
+    ax1.set(xlabel="elements per bar", ylabel=f"wall time of {plan['t_end']:g} s at h = 1e-3 s (s)",
+            title="same mesh, same step")
+    ax2.set(xlabel="wall time (s)", ylabel="max error of node 5 (m)",
+            title="accuracy against time (faint: every setting)")
+    ax2.tick_params(which="minor", labelsize="x-small")  # a narrow log range labels its minor ticks
+    for ax in (ax1, ax2):
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize="small")
+    return png(fig)
 
 
 if __name__ == "__main__":
