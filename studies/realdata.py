@@ -100,7 +100,7 @@ def summarise(records: list[tuple[dict, dict]]) -> list[dict]:
     return rows
 
 
-def page(rows: list[dict], banner: str) -> str:
+def page(rows: list[dict], banner: str, quick: bool) -> str:
     """One table: errors, coverage, honesty and time per (scene, window, method, noise)."""
     def cells(r: dict) -> list:
         return ["all runs raised", *[""] * 6] if "k_err" not in r else [
@@ -109,11 +109,38 @@ def page(rows: list[dict], banner: str) -> str:
             f"{100 * r['cover3']:.0f} %", f"{100 * r['success']:.0f} %", r["dishonest"], f"{r['wall_s']:.1f}"]
 
     return "\n".join(["# Identification on data casflex did not generate", "", f"{banner} The data, the methods and "
-                      "the measures: [studies/realdata.md](../studies/realdata.md).", "", *table(
+                      "the measures: [studies/realdata.md](../studies/realdata.md).", "",
+                      f"![kt's error, 3-SE coverage](../figures/realdata{'_quick' * quick}.png)",
+                      "", *table(
                           ["scene", "window", "method", "noise (mm)", "runs", "k error (median / max)",
                            "kt error (median / max)", "2 SE", "3 SE", "success", "dishonest", "wall (s)"],
                           [[r["scene"], r["window"], r["method"], f"{1e3 * r['noise']:g}", r["runs"], *cells(r)]
                            for r in rows]), ""])
+
+
+def figure(rows: list[dict], path: Path) -> None:
+    """kt's median error and the 3-SE coverage against the noise, window at rest."""
+    from casflex.plotting._figure import _new_figure, _save
+
+    fig = _new_figure((9.0, 3.8))
+    ax1, ax2 = fig.subplots(1, 2)
+    for key, style in (("indirect", "-o"), ("adapted", "-s"), ("direct", "-^")):
+        for scene, color in (("twobar", "C0"), ("threelink", "C1")):
+            sel = [r for r in rows if r["method"] == key and r["scene"] == scene and r["window"] == "rest"
+                   and "k_err" in r]
+            nz = [max(1e3 * r["noise"], 0.01) for r in sel]  # noise-free runs drawn at 0.01 mm on the log axis
+            if sel:
+                ax1.loglog(nz, [max(r["kt_err"], 1e-6) for r in sel], style, color=color, label=f"{scene}, {key}")
+                ax2.semilogx(nz, [100 * r["cover3"] for r in sel], style, color=color)
+    ax1.set(xlabel="noise (mm; 0 drawn at 0.01)", ylabel="median relative error of kt")
+    ax2.set(xlabel="noise (mm; 0 drawn at 0.01)", ylabel="3-SE coverage (%)", ylim=(0, 105))
+    ax2.axhline(90, color="black", lw=0.6, ls="--", label="90 %: the default method's bar")
+    ax1.legend(fontsize="x-small", frameon=False)
+    ax2.legend(fontsize="x-small", frameon=False, loc="lower left")
+    for ax in (ax1, ax2):
+        ax.grid(True, alpha=0.3)
+    fig.suptitle("identification on Exudyn's recordings, window at rest")
+    _save(fig, path)
 
 
 def _key(r: dict) -> str:
@@ -123,7 +150,7 @@ def _key(r: dict) -> str:
 def main(quick: bool = False, out_dir: Path | None = None, record: Path | None = None) -> list[dict]:
     banner = Banner("realdata", quick)
     rows = summarise(sweep("realdata", plan(quick), _key, one_run, record=record, quick=quick))
-    write_outputs("realdata", out_dir, quick, page(rows, banner.line()))
+    write_outputs("realdata", out_dir, quick, page(rows, banner.line(), quick), lambda f: figure(rows, f))
     for r in rows:
         print(json.dumps(r))
     # the study's own checks, on the default method: honest on both scenes (a success more than 3 SE
