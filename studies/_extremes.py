@@ -6,14 +6,12 @@ iterations of sampled steps, and replays of the step that failed or that ``simul
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import re
 import warnings
 
 import numpy as np
 
-import casflex
 from casflex.simulate import integrator_for, simulate
 from casflex.statics import StabilityWarning, modes
 
@@ -205,21 +203,8 @@ def omega_max_of(model, p) -> float:
         return float(np.max(modes(model, p=p).omega))
 
 
-def scene_E(e_scale: float, elements: int = 1):
-    base = casflex.load_scene("twobar")
-    return dataclasses.replace(base, beams=tuple(dataclasses.replace(b, E=b.E * e_scale, elements=elements)
-                                                 for b in base.beams))
-
-
 def label(ks: float, es: float) -> str:
     return f"springs x{ks:g}, E x{es:g}"
-
-
-def table(head: list, align: str, rows: list[list]) -> list[str]:
-    """Markdown table; ``align``: one of l, r, c per column."""
-    a = {"l": "---", "r": "---:", "c": ":-:"}
-    return ["| " + " | ".join(map(str, head)) + " |", "|" + "|".join(a[c] for c in align) + "|",
-            *("| " + " | ".join(map(str, r)) + " |" for r in rows)]
 
 
 def detail(f: dict) -> str:

@@ -3,12 +3,12 @@ library. Not a study itself (no ``main``).
 
 - :data:`PAPER_NLP`, :func:`capped_ipopt`: the seed paper's NLP formulation with a wall-time cap
   (table1, basins);
-- :func:`fmt_p`: a parameter vector in brackets, 6 digits;
 - :func:`exudyn_recording`: channels of an Exudyn reference recording at 100 Hz with noise
   (dampers, realdata, bench_identification);
-- :func:`twobar`: the twobar model meshed into n elements per bar (bench_simulate, bench_exudyn);
-- :func:`in_fresh_process`: a study's hidden worker switch run in a new Python process, its JSON
-  answer (bench_simulate, bench_identification);
+- :func:`twobar`: the twobar model meshed into n elements per bar (bench_simulate, bench_exudyn, tradeoff,
+  extremes);
+- :func:`in_fresh_process`, :func:`cold_and_cached`: a study's hidden worker switch run in a new Python
+  process (twice, sharing a new cache), its JSON answer (bench_simulate, bench_identification);
 - :func:`honesty`: success, coverage and "dishonest" successes of repeated fits (dampers, leg,
   realdata).
 """
@@ -16,8 +16,10 @@ library. Not a study itself (no ``main``).
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -37,11 +39,6 @@ def capped_ipopt(cap_s: float) -> dict:
     return {"ipopt": ip}
 
 
-def fmt_p(p) -> str:
-    """[v1 v2 ...] with 6 significant digits."""
-    return "[" + " ".join(f"{v:.6g}" for v in p) + "]"
-
-
 def exudyn_recording(file: str, names: tuple[str, ...], t_from: float, t_to: float, noise: float, seed: int):
     """The channels ``names`` of tests/data/<file>.npz (Exudyn's motion at 1 kHz) from t_from to t_to
     at 100 Hz, with Gaussian noise of std ``noise`` (m, rad) drawn from ``seed``."""
@@ -54,15 +51,17 @@ def exudyn_recording(file: str, names: tuple[str, ...], t_from: float, t_to: flo
     return MeasurementSet(z["t"][rows], names, q + np.random.default_rng(seed).normal(0, noise, q.shape), None, None)
 
 
-def twobar(elements: int, rotary: bool = False):
-    """The twobar scene's model with ``elements`` beam elements per bar (and rotary inertia)."""
+def twobar(elements: int, rotary: bool = False, inertia: str = "lagrange", e_scale: float = 1.0):
+    """The twobar scene's model with ``elements`` beam elements per bar (and rotary inertia), the inertia
+    form ``inertia``, the beams' Young's modulus times ``e_scale``."""
     import dataclasses
 
     import casflex
 
     scene = casflex.load_scene("twobar")
     return casflex.assemble(dataclasses.replace(scene, beams=tuple(
-        dataclasses.replace(b, elements=elements, rotary_inertia=rotary) for b in scene.beams)))
+        dataclasses.replace(b, elements=elements, rotary_inertia=rotary, E=b.E * e_scale) for b in scene.beams)),
+        inertia=inertia)
 
 
 def in_fresh_process(script: str, args: list[str], env: dict, timeout: float = 3600) -> dict:
@@ -70,6 +69,14 @@ def in_fresh_process(script: str, args: list[str], env: dict, timeout: float = 3
     out = subprocess.run([sys.executable, script, *args], env=env, capture_output=True, text=True, check=True,
                          timeout=timeout)
     return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def cold_and_cached(script: str, cold: list[str], cached: list[str], timeout: float = 3600) -> tuple[dict, dict]:
+    """``in_fresh_process`` twice with one new, empty ``CASFLEX_CACHE``: the first process builds every
+    compiled function (cold), the second finds them on disk (cached). Their JSON answers."""
+    with tempfile.TemporaryDirectory(prefix="casflex-bench-cache-") as cache:
+        env = dict(os.environ, CASFLEX_CACHE=cache)
+        return in_fresh_process(script, cold, env, timeout), in_fresh_process(script, cached, env, timeout)
 
 
 def honesty(recs: list[dict], finite: np.ndarray | None = None) -> dict:

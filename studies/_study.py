@@ -10,6 +10,7 @@ its table and figure, and the assertions on its key numbers. Not a study itself 
   recorded so that an interrupted study resumes.
 - :func:`write_outputs`: the page ``docs/tables/<name>.md`` and figure ``docs/figures/<name>.png``
   (``--quick``: ``*_quick.*``), atomically; :func:`png` turns a matplotlib figure into bytes.
+- :func:`table`: a markdown table's lines; :func:`fmt_p`, :func:`fnum`, :func:`med_range`: the pages' number formats.
 """
 
 from __future__ import annotations
@@ -17,12 +18,15 @@ from __future__ import annotations
 import argparse
 import inspect
 import json
+import math
 import os
 import platform
 import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -94,6 +98,33 @@ def sweep(name: str, plan: list[dict], key: Callable[[dict], str], fn: Callable[
         return [(r, done.results[run.key]) for r, run in zip(plan, runs, strict=True)]
 
 
+def table(head: list, rows, align: str | None = None) -> list[str]:
+    """A markdown table's lines: the header cells ``head``, one list of cells a row; ``align``: one of
+    l, r, c per column (default: every column l)."""
+    a = {"l": "---", "r": "---:", "c": ":-:"}
+    return ["| " + " | ".join(map(str, head)) + " |", "|" + "|".join(a[c] for c in align or "l" * len(head)) + "|",
+            *("| " + " | ".join(map(str, r)) + " |" for r in rows)]
+
+
+def fmt_p(p) -> str:
+    """A parameter vector: [v1 v2 ...] with 6 significant digits."""
+    return "[" + " ".join(f"{v:.6g}" for v in p) + "]"
+
+
+def fnum(x, spec: str = ".2g", none: str = "-") -> str:
+    """``x`` formatted by ``spec``, or ``none`` where it is None or not finite."""
+    return none if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, spec)
+
+
+def med_range(v, spec: str = ".2g", none: str = "-") -> str:
+    """median (min-max) of the finite values of ``v``; the median alone where all are equal."""
+    v = [x for x in v if x is not None and math.isfinite(x)]
+    if not v:
+        return none
+    lo, md, hi = min(v), float(np.median(v)), max(v)
+    return format(md, spec) if lo == hi else f"{format(md, spec)} ({format(lo, spec)}-{format(hi, spec)})"
+
+
 def png(fig) -> bytes:
     """A matplotlib figure as PNG bytes (100 dpi)."""
     import io
@@ -104,9 +135,9 @@ def png(fig) -> bytes:
 
 
 def write_outputs(name: str, out_dir: Path | None, quick: bool, page: str,
-                  figure: Callable[[Path], None] | bytes | None = None) -> None:
+                  figure: Callable[[Path], None] | bytes | dict[str, bytes] | None = None) -> None:
     """docs/tables/<name>.md and docs/figures/<name>.png (or under ``out_dir``), atomically. ``figure``
-    writes itself to the path it is given, or is the PNG's bytes."""
+    writes itself to the path it is given, or is the PNG's bytes, or {file stem: PNG bytes} of several."""
     from casflex.results import atomic_write_bytes, atomic_write_text
 
     out = ROOT / "docs" if out_dir is None else Path(out_dir)
@@ -115,8 +146,9 @@ def write_outputs(name: str, out_dir: Path | None, quick: bool, page: str,
     atomic_write_text(out / "tables" / f"{name}{suffix}.md", page)
     if figure is not None:
         (out / "figures").mkdir(parents=True, exist_ok=True)
-        path = out / "figures" / f"{name}{suffix}.png"
-        atomic_write_bytes(path, figure) if isinstance(figure, bytes) else figure(path)
+        for stem, fig in (figure if isinstance(figure, dict) else {name: figure}).items():
+            path = out / "figures" / f"{stem}{suffix}.png"
+            atomic_write_bytes(path, fig) if isinstance(fig, bytes) else fig(path)
 
 
 def save_raw(raw: dict, path: Path | None) -> None:

@@ -6,10 +6,10 @@ number formats and its dt x setting table. Not a study itself (no ``main``)."""
 
 from __future__ import annotations
 
-import dataclasses
 from typing import NamedTuple
 
 import numpy as np
+from _shared import twobar
 from _study import best_of
 
 import casflex
@@ -83,10 +83,7 @@ class Models:
     def __call__(self, cfg: Config) -> casflex.Model:
         key = (cfg.elements, cfg.inertia)
         if key not in self.models:
-            scene = casflex.load_scene("twobar")
-            scene = dataclasses.replace(scene, beams=tuple(dataclasses.replace(b, elements=cfg.elements)
-                                                           for b in scene.beams))
-            self.models[key] = casflex.assemble(scene, inertia=cfg.inertia)
+            self.models[key] = twobar(cfg.elements, inertia=cfg.inertia)
         m = self.models[key]
         if cfg not in self.builds:
             t_i, integ = best_of(lambda: integrator_for(m, alpha=cfg.alpha), 1)

@@ -1,22 +1,8 @@
-"""Benchmark against Exudyn: the same twobar system in both codes, side by side in one run.
+"""Benchmark against Exudyn: do the two codes solve the same twobar problem, which is faster at the
+same mesh and step, and which is cheaper for a required accuracy of node 5?
 
-Questions: (1) do the two codes solve the same problem? (2) at the same mesh and step, which is
-faster, from 1 to 32 elements per bar? (3) for a required accuracy of node 5, which is cheaper
-(the error-against-time fronts of both codes, 1e-3 to 1e-6 m)?
-
-casflex: the scene file ``casflex/scenes/twobar.toml`` meshed into n co-rotational Euler-Bernoulli
-elements per bar, HHT alpha = 0, compiled, whole ``simulate()`` calls (energies and joint outputs
-included). Exudyn (C++, ``pip install exudyn``), built here from the same scene data, with both of
-its planar beams: ``ancf`` (ANCF cable, the continuum of casflex's beam) and ``ge`` (geometrically
-exact, with shear and the section's rotary inertia, compared with casflex's beam with
-``rotary_inertia = true``: ``casflex-rot``); trapezoidal rule in both. How the Exudyn model is
-built and why (solver settings, what is timed): docs/studies/bench_exudyn.md.
-
-Errors: max over t = 0, 0.01, ..., t_end of the distance of node 5 from a converged reference of the
-same continuum: casflex's without rotary inertia for casflex and ancf, casflex's with it for
-casflex-rot, Exudyn's own finest ge run for ge.
-Writes docs/tables/bench_exudyn.md and docs/figures/bench_exudyn.png (``--quick``: *_quick.*, 0.3 s).
-Run: ``python studies/bench_exudyn.py`` (about 15 min). Without Exudyn the casflex side still runs.
+Set-up and how to read the page: docs/studies/bench_exudyn.md. Run: ``python studies/bench_exudyn.py`` (about 15 min;
+``--quick``: 0.3 s). Without Exudyn the casflex side still runs.
 """
 
 from __future__ import annotations
@@ -27,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 from _shared import twobar
-from _study import Banner, best_of, cli, png, write_outputs
+from _study import Banner, best_of, cli, png, table, write_outputs
 
 import casflex
 from casflex.simulate import compiled_library, integrator_for, simulate
@@ -74,92 +60,30 @@ def _exudyn():
     return exudyn
 
 
-def build_exudyn(exu, kind: str, elements: int, h: float, t_end: float):
-    """The twobar scene as an Exudyn model with ``kind`` ('ancf' or 'ge') beams: (mbs, settings, sensor)."""
-    from exudyn import itemInterface as ii
+def run_exudyn(exu, kind: str, elements: int, h: float, t_end: float, repeat: int = 1) -> dict:
+    """Exudyn's node 5 on the error grid (its ``kind`` of beam, casflex.peers.exudyn's translation of the scene),
+    and the best time of ``repeat`` solves (inf if Exudyn stops)."""
+    from casflex.peers.exudyn import build
 
     scene = casflex.load_scene("twobar")
-    xy = {n.name: (n.x, n.y) for n in scene.nodes}
-    assert all(s.kind == "clamp" for s in scene.supports) and not scene.loads
-    SC = exu.SystemContainer()
-    mbs = SC.AddSystem()
-    node_of, angle = {}, {}
-    for b in scene.beams:
-        (xa, ya), (xb, yb) = xy[b.nodes[0]], xy[b.nodes[1]]
-        L, beta = math.hypot(xb - xa, yb - ya), math.atan2(yb - ya, xb - xa)
-        pts = [(xa + k / elements * (xb - xa), ya + k / elements * (yb - ya)) for k in range(elements + 1)]
-        if kind == "ancf":
-            chain = [mbs.AddNode(ii.NodePoint2DSlope1(referenceCoordinates=[x, y, math.cos(beta), math.sin(beta)]))
-                     for x, y in pts]
-        else:
-            chain = [mbs.AddNode(ii.NodeRigidBody2D(referenceCoordinates=[x, y, beta])) for x, y in pts]
-        node_of[b.nodes[0]], node_of[b.nodes[1]] = chain[0], chain[-1]
-        angle[b.nodes[0]] = angle[b.nodes[1]] = beta
-        for k in range(elements):
-            if kind == "ancf":
-                obj = ii.ObjectANCFCable2D(nodeNumbers=chain[k:k + 2], length=L / elements, massPerLength=b.rho * b.A,
-                                           bendingStiffness=b.E * b.I, axialStiffness=b.E * b.A)
-            else:
-                obj = ii.ObjectBeamGeometricallyExact2D(
-                    nodeNumbers=chain[k:k + 2], length=L / elements, massPerLength=b.rho * b.A,
-                    crossSectionInertia=b.rho * b.I, bendingStiffness=b.E * b.I, axialStiffness=b.E * b.A,
-                    shearStiffness=5 / 6 * b.E / 2.6 * b.A, includeReferenceRotations=True)
-            mark = mbs.AddMarker(ii.MarkerBodyMass(bodyNumber=mbs.AddObject(obj)))
-            mbs.AddLoad(ii.LoadMassProportional(markerNumber=mark, loadVector=[*scene.gravity, 0.0]))
-    ground = mbs.AddNode(ii.NodePointGround())
-    for s in scene.supports:  # a clamped joint node that is no bar end: a node along the bar it holds
-        n = s.node
-        if n not in node_of:
-            other = next(b for sp in scene.springs if n in sp.nodes for b in sp.nodes if b != n)
-            angle[n] = angle[other]
-            c, sn = math.cos(angle[n]), math.sin(angle[n])
-            node_of[n] = mbs.AddNode(ii.NodePoint2DSlope1(referenceCoordinates=[*xy[n], c, sn]) if kind == "ancf"
-                                     else ii.NodeRigidBody2D(referenceCoordinates=[*xy[n], angle[n]]))
-        for coord in range(4 if kind == "ancf" else 3):  # slope nodes: the massless slope's length is held too
-            mbs.AddObject(ii.CoordinateConstraint(markerNumbers=[
-                mbs.AddMarker(ii.MarkerNodeCoordinate(nodeNumber=ground, coordinate=0)),
-                mbs.AddMarker(ii.MarkerNodeCoordinate(nodeNumber=node_of[n], coordinate=coord))]))
-    for s in scene.springs:
-        rest = math.dist(xy[s.nodes[0]], xy[s.nodes[1]]) if s.rest_length is None else s.rest_length
-        mbs.AddObject(ii.ObjectConnectorSpringDamper(markerNumbers=[
-            mbs.AddMarker(ii.MarkerNodePosition(nodeNumber=node_of[n])) for n in s.nodes], referenceLength=rest,
-            stiffness=s.k, damping=0.0))
-    for s in scene.torsion_springs:
-        assert abs(angle[s.nodes[1]] - angle[s.nodes[0]]) < 1e-12 and not s.rest_angle, "straight joints only"
-        mbs.AddObject(ii.ObjectConnectorTorsionalSpringDamper(markerNumbers=[
-            mbs.AddMarker(ii.MarkerNodeRigid(nodeNumber=node_of[n])) for n in s.nodes], stiffness=s.kt, damping=0.0))
-    sensor = mbs.AddSensor(ii.SensorNode(nodeNumber=node_of["5"], storeInternal=True, writeToFile=False,
-                                         outputVariableType=exu.OutputVariableType.Position))
-    mbs.Assemble()
-    ss = exu.SimulationSettings()
-    ti = ss.timeIntegration
-    ti.numberOfSteps, ti.endTime, ti.verboseMode = int(round(t_end / h)), t_end, 0
-    ti.generalizedAlpha.spectralRadius = 1.0  # no numerical damping: trapezoidal rule, as HHT alpha = 0
-    ti.newton.residualMode = 1  # Newton's test on the increment, to 1e-10 (docstring)
-    ti.newton.relativeTolerance = ti.newton.absoluteTolerance = 1e-10
-    ss.solution.file.write = False
-    ss.solution.sensors.writePeriod = h
-    ss.show.computationTime = ss.show.statistics = False
-    return mbs, ss, sensor
 
-
-def run_exudyn(exu, kind: str, elements: int, h: float, t_end: float, repeat: int = 1) -> dict:
-    """Exudyn's node 5 on the error grid, and the best time of ``repeat`` solves (inf if Exudyn stops)."""
     def once():
-        mbs, ss, sensor = build_exudyn(exu, kind, elements, h, t_end)
+        m = build(scene, elements=elements, h=h, t_end=t_end, beam=kind, record=("5",))
         t0 = time.perf_counter()
         try:
-            ok = mbs.SolveDynamic(ss)
+            ok = m.mbs.SolveDynamic(m.settings)
         except exu.SolverError:
-            return math.inf, False, np.zeros((0, 3))
-        return time.perf_counter() - t0, ok, np.asarray(mbs.GetSensorStoredData(sensor))
+            return math.inf, False, np.zeros((0, 2))
+        ref = np.asarray(m.mbs.GetNodeParameter(m.nodes["5"][0], "referenceCoordinates"))[:2]
+        return time.perf_counter() - t0, ok, np.asarray(m.mbs.GetSensorStoredData(m.sensors["5"]["Coordinates"]))[
+            :, 1:3] + ref
 
     runs = []  # best of repeat, timing SolveDynamic only (the model's set-up apart); one is enough past 2 s
     while len(runs) < repeat and (not runs or min(r[0] for r in runs) <= 2.0):
         runs.append(once())
-    t, ok, data = min(runs, key=lambda r: r[0])
+    t, ok, p5 = min(runs, key=lambda r: r[0])
     n = int(round(t_end / h))
-    p5 = data[:, 1:3] if data.ndim == 2 and data.shape[0] >= n + 1 else np.full((n + 1, 2), np.nan)
+    p5 = p5 if p5.shape[0] >= n + 1 else np.full((n + 1, 2), np.nan)
     return {"time": t, "p5": _node5_grid(p5, h, t_end), "ok": bool(ok)}
 
 
@@ -223,8 +147,8 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
     fronts = {c: [front([(t, e) for t, e, _, _ in pts[c]], lv) for lv in LEVELS] for c in codes}
 
     banner_line = banner.line(Exudyn=exu.__version__ if exu else "not installed")
-    write_outputs("bench_exudyn", out_dir, quick, page(plan, rows, pts, fronts, physics, ref_err, codes, banner_line),
-                  figure(rows, pts, codes))
+    write_outputs("bench_exudyn", out_dir, quick, page(plan, rows, pts, fronts, physics, ref_err, codes, banner_line,
+                                                       quick), figure(plan, rows, pts, codes))
     # self-checks: every casflex run finite and converging with the mesh; ANCF is the same physics
     assert all(math.isfinite(r["casflex_err"]) for r in rows)
     for kind, ph in physics.items():
@@ -232,49 +156,40 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
     return {"rows": rows, "points": pts, "fronts": fronts, "physics": physics}
 
 
-def page(plan, rows, pts, fronts, physics, ref_err, codes, banner: str) -> str:
+def page(plan, rows, pts, fronts, physics, ref_err, codes, banner: str, quick: bool) -> str:
     """The physics check, the same-mesh times and the accuracy-against-time fronts."""
-    pairs = [(x, c) for x, c in PAIRS if x in codes]
-    L = ["# casflex vs Exudyn: twobar", "",
-         f"{banner} Horizon {plan['t_end']:g} s. The models and the measurement are described in the script's "
-         "docstring and in [studies/bench_exudyn.md](../studies/bench_exudyn.md); both codes run the trapezoidal "
-         "rule. casflex-rot "
-         "is casflex's beam with the section's rotary inertia, the continuum of Exudyn's geometrically exact "
-         "beam (ge); ancf is the continuum of casflex's default beam.", "",
+    pairs, meshes = [(x, c) for x, c in PAIRS if x in codes], plan["front_meshes"]
+
+    def ratio(t: dict, x: str, c: str) -> str:
+        return f"**{t[x] / t[c]:.1f}**" if math.isfinite(t[x]) and math.isfinite(t[c]) else "-"
+
+    L = ["# casflex vs Exudyn: twobar", "", f"{banner} Horizon {plan['t_end']:g} s. The models, the codes' names and "
+         "the measurement: [studies/bench_exudyn.md](../studies/bench_exudyn.md).", "",
+         f"![time against the mesh, error against time](../figures/bench_exudyn{'_quick' * quick}.png)", "",
          "## The same problem", "",
          f"References: casflex {plan['ref'][0]} elements per bar, dt = {plan['ref'][1]:g} s, without and with rotary "
          f"inertia; their own errors, against {', '.join(f'{n} el. at {h:g} s' for n, h in plan['checks'])}: "
          f"{ref_err[False]:.1e} m and {ref_err[True]:.1e} m."]
-    for kind, ph in physics.items():
-        (n, h), (n2, _) = ph["setting"], ph["twin"]
-        L.append(f"Exudyn {kind}, {n} elements per bar at h = {h:g} s: **{ph['err']:.2e} m** from "
-                 f"casflex's reference of its continuum (its own error, against {n2} elements: {ph['self']:.1e} m; the "
-                 f"physics check's tolerance {TOL_PHYSICS[kind]:g} m)." + (" This run is ge's own reference." if kind
-                                                                           == "ge" else ""))
+    L += [f"Exudyn {kind}, {ph['setting'][0]} elements per bar at h = {ph['setting'][1]:g} s: **{ph['err']:.2e} m** "
+          f"from casflex's reference of its continuum (its own error, against {ph['twin'][0]} elements: "
+          f"{ph['self']:.1e} m; the physics check's tolerance {TOL_PHYSICS[kind]:g} m)."
+          + (" This run is ge's own reference." if kind == "ge" else "") for kind, ph in physics.items()]
     L += ["", "## Same mesh, same step (h = 1e-3 s): time of the whole run", "",
-          "| el./bar | " + " | ".join(f"{c} (ms) | {c} error (m)" for c in codes)
-          + "".join(f" | {x} / {c}" for x, c in pairs) + " |",
-          "|---:|" + "---:|---:|" * len(codes) + "---:|" * len(pairs)]
-    for r in rows:
-        cells = " | ".join(f"{ms(r[c])} | {r[c + '_err']:.1e}" for c in codes)
-        L.append(f"| {r['elements']} | {cells}" + "".join(f" | **{r[x] / r[c]:.1f}**" if math.isfinite(r[x]) else " | -"
-                                                          for x, c in pairs) + " |")
-    meshes = ", ".join(f"{c}: {list(plan['front_meshes'][c])}" for c in codes)
-    L += ["", "## Accuracy against time", "",
-          f"For each accuracy, the least time each code needs among its settings (elements per bar {meshes}; steps "
+          *table(["el./bar", *(f"{c}{u}" for c in codes for u in (" (ms)", " error (m)")),
+                  *(f"{x} / {c}" for x, c in pairs)],
+                 [[r["elements"], *(v for c in codes for v in (ms(r[c]), f"{r[c + '_err']:.1e}")),
+                   *(ratio(r, x, c) for x, c in pairs)] for r in rows], "r" * (1 + 2 * len(codes) + len(pairs))),
+          "", "## Accuracy against time", "",
+          "For each accuracy, the least time each code needs among its settings (elements per bar "
+          f"{', '.join(f'{c}: {list(meshes[c])}' for c in codes)}; steps "
           f"{', '.join(f'{h:g}' for h in plan['front_hs'])} s); '-': no setting reaches it.", "",
-          "| error of node 5 at most (m) | " + " | ".join(f"{c} (ms)" for c in codes)
-          + "".join(f" | {x} / {c}" for x, c in pairs) + " |",
-          "|---:|" + "---:|" * (len(codes) + len(pairs))]
-
-    for i, lv in enumerate(LEVELS):
-        t = {c: fronts[c][i] for c in codes}
-        ratios = "".join(f" | **{t[x] / t[c]:.1f}**" if math.isfinite(t[x]) and math.isfinite(t[c]) else " | -"
-                         for x, c in pairs)
-        L.append(f"| {lv:.0e} | " + " | ".join(ms(t[c]) if math.isfinite(t[c]) else "-" for c in codes) + ratios + " |")
-    L += ["", "Every setting measured (time in ms, error in m):", ""]
-    for c in codes:
-        L.append(f"- {c}: " + "; ".join(f"{n} el. h {h:g}: {t * 1e3:.1f} ms, {e:.1e}" for t, e, n, h in pts[c]))
+          *table(["error of node 5 at most (m)", *(f"{c} (ms)" for c in codes), *(f"{x} / {c}" for x, c in pairs)],
+                 [[f"{lv:.0e}", *(ms(t[c]) if math.isfinite(t[c]) else "-" for c in codes),
+                   *(ratio(t, x, c) for x, c in pairs)]
+                  for i, lv in enumerate(LEVELS) for t in [{c: fronts[c][i] for c in codes}]],
+                 "r" * (1 + len(codes) + len(pairs))), "", "Every setting measured (time in ms, error in m):", ""]
+    L += [f"- {c}: " + "; ".join(f"{n} el. h {h:g}: {t * 1e3:.1f} ms, {e:.1e}" for t, e, n, h in pts[c])
+          for c in codes]
     return "\n".join(L) + "\n"
 
 
@@ -283,24 +198,29 @@ def ms(t: float) -> str:
     return "failed" if not math.isfinite(t) else f"{t * 1e3:.1f}"
 
 
-def figure(rows, pts, codes) -> bytes:
-    """Time against the mesh at h = 1e-3; every setting's error against time, and the Pareto fronts."""
+def figure(plan, rows, pts, codes) -> bytes:
+    """Time against the mesh at h = 1e-3; every setting's error against time, and each code's Pareto front."""
     from casflex.plotting._figure import _new_figure
 
     fig = _new_figure((11, 4.2))
     ax1, ax2 = fig.subplots(1, 2)
-    style = {"casflex": "o-", "ancf": "s--", "casflex-rot": "D-", "ge": "^:"}
-    for c in codes:
-        ax1.loglog([r["elements"] for r in rows], [r[c] for r in rows], style[c], label=c)
-        p = sorted((t, e) for t, e, _, _ in pts[c] if math.isfinite(e))
-        ax2.loglog([t for t, _ in p], [e for _, e in p], style[c][0], alpha=0.35)
-        fr = [(t, e) for i, (t, e) in enumerate(p) if all(e < e2 for _, e2 in p[:i])]  # the Pareto front
-        ax2.loglog([t for t, _ in fr], [e for _, e in fr], style[c], label=f"{c} front")
-    ax1.set(xlabel="elements per bar", ylabel="time of 3 s at h = 1e-3 (s)", title="same mesh, same step")
-    ax2.set(xlabel="time (s)", ylabel="max error of node 5 (m)", title="accuracy against time")
+    for i, c in enumerate(codes):
+        style = {"color": f"C{i}", "marker": "osD^"[i], "ls": "-" if c.startswith("casflex") else "--"}
+        ax1.loglog([r["elements"] for r in rows], [r[c] for r in rows], label=c, **style)
+        p = sorted((t, e) for t, e, _, _ in pts[c] if math.isfinite(t) and math.isfinite(e))
+        ax2.loglog([t for t, _ in p], [e for _, e in p], style["marker"], color=style["color"], alpha=0.35)
+        fr = [(t, e) for j, (t, e) in enumerate(p) if all(e < e2 for _, e2 in p[:j])]  # faster ones are less accurate
+        ax2.loglog([t for t, _ in fr], [e for _, e in fr], label=f"{c}: front", **style)
+    ax1.set_xticks(plan["meshes"], [str(n) for n in plan["meshes"]])
+    ax1.tick_params(axis="x", which="minor", labelbottom=False)  # the meshes themselves are the ticks
+    ax1.set(xlabel="elements per bar", ylabel=f"wall time of {plan['t_end']:g} s at h = 1e-3 s (s)",
+            title="same mesh, same step")
+    ax2.set(xlabel="wall time (s)", ylabel="max error of node 5 (m)",
+            title="accuracy against time (faint: every setting)")
+    ax2.tick_params(which="minor", labelsize="x-small")  # a narrow log range labels its minor ticks
     for ax in (ax1, ax2):
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend()
+        ax.legend(fontsize="small")
     return png(fig)
 
 

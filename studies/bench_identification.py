@@ -1,33 +1,19 @@
-"""Benchmark: what does an identification cost the first time, and every later time?
+"""Benchmark: what does an identification cost the first time (cold cache), and every later time?
 
-Twobar measured by Exudyn (tests/data/twobar_exudyn.npz: 8 ANCF elements per bar), the paper's
-channels x, y of nodes 3 and 5 at 100 Hz with 0.5 mm of noise, from rest, start 0.8 x p*. Each case
-runs in two fresh processes that share a new, empty cache directory: the first builds every
-compiled function (cold), the second finds them on disk (cached). Reported per process: the
-identification's build and solve times as it records them (``wall_build_s``, ``wall_solve_s``; a
-compile happens inside whichever phase first needs the function) and their sum.
-
-Cases: the default output-error fit (Gauss-Newton single shooting on compiled forward sensitivities)
-with and without its model-error refit (the same fit on a refined model), over 0.69 s (the paper's
-horizon) and 3 s; the seed paper's NLP transcriptions with IPOPT and compiled functions (single
-and multiple shooting, 0.69 s); the direct method on the simulated set (compiled residual).
-
-Writes docs/tables/bench_identification.md and docs/figures/bench_identification.png.
-Run: ``python studies/bench_identification.py`` (about 10 min; ``--quick``: two short cases).
+Set-up and how to read the page: docs/studies/bench_identification.md. Run: ``python studies/bench_identification.py``
+(about 10 min; ``--quick``: two short cases).
 """
 
 from __future__ import annotations
 
 import json
-import os
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
-from _shared import exudyn_recording, in_fresh_process
-from _study import Banner, cli, png, write_outputs
+from _shared import cold_and_cached, exudyn_recording
+from _study import Banner, cli, png, table, write_outputs
 
 NOISE, SEED, START = 5e-4, 0, 0.8
 CASES = {  # name: (method, horizon (s), options)
@@ -66,38 +52,34 @@ def worker(case: str) -> dict:
             "kt_err": float(max(err[i] for i, n in enumerate(names) if n.startswith("kt")))}
 
 
-def page(rows: list[dict], banner: str) -> str:
+def page(rows: list[dict], banner: str, quick: bool) -> str:
     """Cold and cached times per case, and the answers."""
-    L = ["# Identification benchmark: first and later runs", "",
-         f"{banner} Data, cases and what is timed: the script's docstring. Errors are the largest relative error of "
-         "the spring stiffnesses k and of the torsion stiffnesses kt (truth: Exudyn's parameters, the scene's nominal "
-         "values).", "",
-         "| case | first process: build + solve (s) | later process: build (s) | later: solve (s) | later: total (s) "
-         "| iterations | k error | kt error | success |", "|---|---:|---:|---:|---:|---:|---:|---:|---|"]
-    for r in rows:
-        c, w = r["cold"], r["warm"]
-        L.append(f"| {r['case']} | {c['build_s'] + c['solve_s']:.1f} | {w['build_s']:.2f} | **{w['solve_s']:.2f}** | "
-                 f"{w['build_s'] + w['solve_s']:.2f} | {w['iterations']} | {w['k_err']:.1e} | {w['kt_err']:.1e} | "
-                 f"{w['success']} |")
-    L += ["", "The first process pays for code generation and gcc once; every later process, on this machine or "
-          "any sharing `CASFLEX_CACHE`, loads the compiled functions from disk (`casflex cache` lists them).", ""]
-    return "\n".join(L)
+    return "\n".join(["# Identification benchmark: first and later runs", "",
+                      f"{banner} Data, cases and what is timed: "
+                      "[studies/bench_identification.md](../studies/bench_identification.md).", "",
+                      f"![build + solve per case](../figures/bench_identification{'_quick' * quick}.png)", "",
+                      *table(["case", "first process: build + solve (s)", "later process: build (s)",
+                              "later: solve (s)", "later: total (s)", "iterations", "k error", "kt error", "success"],
+                             [[r["case"], f"{c['build_s'] + c['solve_s']:.1f}", f"{w['build_s']:.2f}",
+                               f"**{w['solve_s']:.2f}**", f"{w['build_s'] + w['solve_s']:.2f}", w["iterations"],
+                               f"{w['k_err']:.1e}", f"{w['kt_err']:.1e}", w["success"]]
+                              for r in rows for c, w in [(r["cold"], r["warm"])]], "lrrrrrrrl"), ""])
 
 
 def figure(rows: list[dict]) -> bytes:
     """Build + solve of the first and a later process, per case."""
     from casflex.plotting._figure import _new_figure
 
-    fig = _new_figure((10, 4.5))
+    fig = _new_figure((9, 1.2 + 0.6 * len(rows)))
     ax = fig.subplots()
-    x = np.arange(len(rows))
-    for dx, which, label in ((-0.2, "cold", "first process"), (0.2, "warm", "later process")):
-        ax.bar(x + dx, [r[which]["build_s"] + r[which]["solve_s"] for r in rows], 0.4, label=label)
-    ax.set_xticks(x, [r["case"].replace(", ", ",\n", 1) for r in rows], fontsize=7)
-    ax.set_yscale("log")
-    ax.set_ylabel("build + solve (s)")
-    ax.legend()
-    ax.grid(True, axis="y", which="both", alpha=0.3)
+    y = np.arange(len(rows))
+    for dy, which, label in ((-0.2, "cold", "first process (code generation, gcc)"), (0.2, "warm", "later process")):
+        ax.barh(y + dy, [r[which]["build_s"] + r[which]["solve_s"] for r in rows], 0.4, label=label)
+    ax.set_yticks(y, [r["case"] for r in rows], fontsize="small")
+    ax.invert_yaxis()  # the table's order, top down
+    ax.set(xscale="log", xlabel="build + solve wall time (s)", title="twobar identification: first and later runs")
+    ax.legend(fontsize="small")
+    ax.grid(True, axis="x", which="both", alpha=0.3)
     return png(fig)
 
 
@@ -105,13 +87,11 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
     banner = Banner("bench_identification", quick)
     rows = []
     for case in QUICK if quick else CASES:
-        with tempfile.TemporaryDirectory(prefix="casflex-bench-cache-") as cache:
-            env = dict(os.environ, CASFLEX_CACHE=cache)
-            cold, warm = (in_fresh_process(__file__, ["--worker", case], env) for _ in range(2))
+        cold, warm = cold_and_cached(__file__, ["--worker", case], ["--worker", case])
         rows.append({"case": case, "cold": cold, "warm": warm})
         print(f"{case:<48s} cold {cold['build_s'] + cold['solve_s']:7.1f} s, cached: build {warm['build_s']:5.2f} s "
               f"+ solve {warm['solve_s']:6.2f} s ({warm['iterations']} it.)", flush=True)
-    write_outputs("bench_identification", out_dir, quick, page(rows, banner.line()), figure(rows))
+    write_outputs("bench_identification", out_dir, quick, page(rows, banner.line(), quick), figure(rows))
     # self-checks: the answers do not depend on the cache
     for r in rows:
         assert r["warm"]["success"] == r["cold"]["success"], f"{r['case']}: the cache changed the outcome"

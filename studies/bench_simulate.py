@@ -1,36 +1,22 @@
-"""Benchmark: what does a twobar simulation cost as the mesh grows, and how accurate is it per step?
+"""Benchmark: what does a twobar simulation cost as the mesh grows, how accurate is it per step, and
+what does modified Newton save?
 
-1. Scaling (the question of issue 12): twobar with 1, 2, 4, 8, 16, 32 elements per bar, 3 s at
-   dt = 1e-3, compiled. Each mesh runs in two fresh processes sharing one new cache directory: the
-   first builds the C library from nothing (cold build), the second finds it (cached build) and
-   times whole ``simulate()`` calls (best of several), the integration alone, and the process's peak
-   memory. Growth exponents of the per-step cost are fitted against the number of dofs and of elements.
-2. Accuracy and paths (one element per bar): for each dt, interpreted (CasADi's virtual machine,
-   stepped from Python) and compiled wall times side by side, Newton iterations per step, the error of
-   node 5 against a fine-step reference and the fitted convergence order; the two paths must agree.
-3. Exact against modified Newton (``newton="modified"``: the factorised Jacobian kept while a chord
-   update converges the step): compiled run times side by side, the fraction of steps that refresh
-   the Jacobian and how far node 5 moves from the exact Newton's, 1 s of twobar.
-
-What the numbers mean (the exponents, the flat-code/mapped-kernel line, when modified Newton pays):
-docs/studies/bench_simulate.md. Writes docs/tables/bench_simulate.md and docs/figures/bench_simulate.png.
-Run: ``python studies/bench_simulate.py`` (about 5 min; ``--quick`` for the CI version).
+Set-up and how to read the page: docs/studies/bench_simulate.md. Run: ``python studies/bench_simulate.py`` (about 5
+min; ``--quick``).
 """
 
 from __future__ import annotations
 
 import json
-import os
 import platform
 import resource
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
-from _shared import in_fresh_process, twobar
-from _study import Banner, best_of, cli, png, write_outputs
+from _shared import cold_and_cached, twobar
+from _study import Banner, best_of, cli, png, table, write_outputs
 
 from casflex.simulate import simulate
 
@@ -57,10 +43,8 @@ def scaling(meshes: tuple[int, ...], t_end: float, repeat: int) -> list[dict]:
     """Per mesh: a cold build, then a cached build and the timed simulations, in two fresh processes."""
     rows = []
     for ne in meshes:
-        with tempfile.TemporaryDirectory(prefix="casflex-bench-cache-") as cache:
-            env = dict(os.environ, CASFLEX_CACHE=cache)
-            cold, warm = (in_fresh_process(__file__, ["--mesh-worker", str(ne), repr(t_end), str(n)], env, 1800)
-                          for n in (1, repeat))
+        cold, warm = cold_and_cached(__file__, *(["--mesh-worker", str(ne), repr(t_end), str(n)] for n in (1, repeat)),
+                                     timeout=1800)
         assert not cold["cached"] and warm["cached"], "the second process must find the first one's library"
         rows.append({**warm, "cold_build_s": cold["build_s"], "cached_build_s": warm["build_s"],
                      "per_step_us": 1e6 * warm["run_s"] / warm["steps"]})
@@ -115,57 +99,55 @@ def newton_kinds(meshes: tuple[int, ...], dts: tuple[float, ...], t_end: float) 
 
 
 def page(scale: list[dict], acc: list[dict], order: float, expo: dict, t_end: float, kinds: list[dict],
-         banner: str) -> str:
+         banner: str, quick: bool) -> str:
     """The three tables and the fitted exponents and order."""
-    L = ["# Simulation benchmark: twobar", "", f"{banner} What the numbers mean: "
+    L = ["# Simulation benchmark: twobar", "", f"{banner} What is measured and what the numbers mean: "
          "[studies/bench_simulate.md](../studies/bench_simulate.md).", "",
+         f"![cost against the mesh, time and error against dt](../figures/bench_simulate{'_quick' * quick}.png)", "",
          f"## Cost against the mesh ({t_end:g} s, dt = 1e-3, compiled)", "",
-         "Each mesh in two fresh processes sharing a new cache: the first builds the library (cold), the second "
-         "loads it (cached) and times whole `simulate()` calls (best of several; energies, joint outputs and "
-         "checks included) and the integration alone. Peak: the second process's maximum resident memory "
-         "(about 100 MB of it is Python, NumPy and CasADi).", "",
-         "| el./bar | dofs | cold build (s) | cached build (s) | library (kB) | simulate (ms) | integration (ms) "
-         "| per step (us) | peak memory (MB) |", "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
-    L += [f"| {r['elements']} | {r['dofs']} | {r['cold_build_s']:.1f} | {r['cached_build_s']:.2f} | {r['code_kb']} | "
-          f"{r['simulate_s'] * 1e3:.1f} | {r['run_s'] * 1e3:.1f} | {r['per_step_us']:.1f} | {r['peak_mb']:.0f} |"
-          for r in scale]
-    L += ["", f"Growth of the per-step cost from {scale[0]['elements']} to {scale[-1]['elements']} elements per bar: "
-          f"exponent **{expo['elements']:.2f}** against the number of elements, {expo['dofs']:.2f} against the number "
-          "of dofs (least-squares lines through the log-log points).", "",
-          "## Accuracy and the two paths (1 element per bar)", "",
-          "| dt (s) | steps | interpreted (ms) | compiled (ms) | compiled, integration only (ms) | speed-up "
-          "| Newton it./step | error node 5 (m) | max abs interp - compiled |",
-          "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
-    L += [f"| {r['dt']:.0e} | {r['steps']} | {r['interpreted_s'] * 1e3:.1f} | {r['compiled_s'] * 1e3:.2f} | "
-          f"{r['compiled_run_s'] * 1e3:.2f} | {r['speedup']:.1f} | {r['newton_per_step']:.2f} | "
-          f"{r['err_node5_m']:.3e} | {r['max_diff_paths']:.1e} |" for r in acc]
-    L += ["", f"Error: max over the coarsest step's grid of the distance of node 5 from a dt = "
-          f"{acc[-1]['dt'] / 10:g} s reference. Fitted convergence order over dt <= 2e-3: **{order:.3f}** "
-          "(HHT-alpha is second order).", "",
-          f"## Exact and modified Newton ({kinds[0]['t_end']:g} s, compiled)", "",
-          "| el./bar | dt (s) | exact (ms) | modified (ms) | modified / exact | steps that refresh the Jacobian "
-          "| node 5 from the exact Newton's (m) |", "|---:|---:|---:|---:|---:|---:|---:|"]
-    L += [f"| {r['elements']} | {r['dt']:g} | {r['exact_s'] * 1e3:.1f} | {r['modified_s'] * 1e3:.1f} | "
-          f"{r['modified_s'] / r['exact_s']:.2f} | {100 * r['refresh']:.0f} % | {r['deviation_m']:.1e} |"
-          for r in kinds]
+         *table(["el./bar", "dofs", "cold build (s)", "cached build (s)", "library (kB)", "simulate (ms)",
+                 "integration (ms)", "per step (us)", "peak memory (MB)"],
+                [[r["elements"], r["dofs"], f"{r['cold_build_s']:.1f}", f"{r['cached_build_s']:.2f}", r["code_kb"],
+                  f"{r['simulate_s'] * 1e3:.1f}", f"{r['run_s'] * 1e3:.1f}", f"{r['per_step_us']:.1f}",
+                  f"{r['peak_mb']:.0f}"] for r in scale], "r" * 9),
+         "", f"Growth of the per-step cost from {scale[0]['elements']} to {scale[-1]['elements']} elements per bar: "
+         f"exponent **{expo['elements']:.2f}** against the number of elements, {expo['dofs']:.2f} against the number "
+         "of dofs.", "", "## Accuracy and the two paths (1 element per bar)", "",
+         *table(["dt (s)", "steps", "interpreted (ms)", "compiled (ms)", "compiled, integration only (ms)", "speed-up",
+                 "Newton it./step", "error node 5 (m)", "max abs interp - compiled"],
+                [[f"{r['dt']:.0e}", r["steps"], f"{r['interpreted_s'] * 1e3:.1f}", f"{r['compiled_s'] * 1e3:.2f}",
+                  f"{r['compiled_run_s'] * 1e3:.2f}", f"{r['speedup']:.1f}", f"{r['newton_per_step']:.2f}",
+                  f"{r['err_node5_m']:.3e}", f"{r['max_diff_paths']:.1e}"] for r in acc], "r" * 9),
+         "", f"Error: against a dt = {acc[-1]['dt'] / 10:g} s reference. Fitted convergence order over dt <= 2e-3: "
+         f"**{order:.3f}**.", "", f"## Exact and modified Newton ({kinds[0]['t_end']:g} s, compiled)", "",
+         *table(["el./bar", "dt (s)", "exact (ms)", "modified (ms)", "modified / exact",
+                 "steps that refresh the Jacobian", "node 5 from the exact Newton's (m)"],
+                [[r["elements"], f"{r['dt']:g}", f"{r['exact_s'] * 1e3:.1f}", f"{r['modified_s'] * 1e3:.1f}",
+                  f"{r['modified_s'] / r['exact_s']:.2f}", f"{100 * r['refresh']:.0f} %", f"{r['deviation_m']:.1e}"]
+                 for r in kinds], "r" * 7)]
     return "\n".join(L + [""])
 
 
 def figure(scale: list[dict], acc: list[dict]) -> bytes:
-    """Cost against the mesh; both paths' time and node 5's error against dt."""
+    """Cost against the mesh; both paths' time and node 5's error against dt (1 element per bar)."""
     from casflex.plotting._figure import _new_figure
 
-    fig = _new_figure((11, 4))
+    fig = _new_figure((12, 4))
     ax1, ax2, ax3 = fig.subplots(1, 3)
     dofs, d = [r["dofs"] for r in scale], [r["dt"] for r in acc]
-    ax1.loglog(dofs, [r["per_step_us"] for r in scale], "o-", label="per step (us)")
-    ax1.loglog(dofs, [r["cold_build_s"] * 1e3 for r in scale], "s-", label="cold build (ms)")
-    ax1.set(xlabel="dofs (1 ... 32 elements per bar)", title="cost against the mesh")
+    cost = (("per_step_us", 1, "o-", "per step (us)"), ("cold_build_s", 1e3, "s-", "cold build (ms)"),
+            ("peak_mb", 1, "^-", "peak memory (MB)"))
+    for key, f, mark, label in cost:
+        ax1.loglog(dofs, [r[key] * f for r in scale], mark, label=label)
+    ax1.set_xticks(dofs, [str(n) for n in dofs])
+    ax1.tick_params(axis="x", which="minor", labelbottom=False)  # the dofs themselves are the ticks
+    ax1.set(xlabel=f"dofs ({scale[0]['elements']} ... {scale[-1]['elements']} elements per bar)",
+            title="cost against the mesh (compiled)")
     ax2.loglog(d, [r["interpreted_s"] for r in acc], "o-", label="interpreted")
     ax2.loglog(d, [r["compiled_s"] for r in acc], "s-", label="compiled C")
-    ax2.set(xlabel="dt (s)", ylabel="wall time (s)")
-    ax3.loglog(d, [r["err_node5_m"] for r in acc], "o-", label="error node 5 (m)")
-    ax3.set_xlabel("dt (s)")
+    ax2.set(xlabel="dt (s)", ylabel="wall time of simulate() (s)", title="the two paths")
+    ax3.loglog(d, [r["err_node5_m"] for r in acc], "o-", label="against a 10x finer dt")
+    ax3.set(xlabel="dt (s)", ylabel="max error of node 5 (m)", title="accuracy (HHT-alpha, order 2)")
     for ax in (ax1, ax2, ax3):
         ax.legend()
         ax.grid(True, which="both", alpha=0.3)
@@ -180,7 +162,7 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
     acc, order = accuracy(0.5 if quick else 3.0,
                           [1e-2, 5e-3, 2e-3, 1e-3] if quick else [1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4])
     kinds = newton_kinds((1,) if quick else (1, 8, 32), (1e-3,) if quick else (1e-3, 2e-4), 0.2 if quick else KINDS_T)
-    write_outputs("bench_simulate", out_dir, quick, page(scale, acc, order, expo, t_end, kinds, banner.line()),
+    write_outputs("bench_simulate", out_dir, quick, page(scale, acc, order, expo, t_end, kinds, banner.line(), quick),
                   figure(scale, acc))
     # self-checks: what the docs claim
     same = 0.0 if platform.machine() in ("x86_64", "AMD64") else 1e-10  # bitwise where claimed (codegen.CFLAGS)

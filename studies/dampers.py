@@ -1,18 +1,7 @@
 """Can the joints' dampers be identified from a few noisy markers, with honest standard errors?
 
-The recording: twobar with viscous dampers in its four joints (tests/data/twobar_damped.toml:
-c1 = 20, c3 = 10 N s/m along the springs, ct1 = ct3 = 1 N m s/rad), simulated by Exudyn (8 ANCF
-elements per beam, h = 1e-4 s; tests/data/make_reference_data.py), x and y of nodes 3 and 5 at
-100 Hz with 1 mm of Gaussian noise, SEEDS seeds, in a window at rest (0-3 s, the scene's initial
-state) and one mid-motion (0.5-2.5 s, initial state estimated). casflex fits the eight joint
-parameters (k, kt, c, ct of both joints) with its default indirect method and model (one element
-per beam, dt = 1 ms), from 20 % below the truth.
-
-Per window and parameter: the median and largest relative error, the coverage of the truth by the
-reported 2- and 3-SE intervals, and per window the success rate and the "dishonest" successes (a
-parameter more than 3 SE from the truth). Writes docs/tables/dampers.md and docs/figures/dampers.png
-(``--quick``: *_quick.*, the window at rest cut to 1 s, one seed). Run: ``python studies/dampers.py``
-(about 5 min on 2 cores).
+Set-up and how to read the page: docs/studies/dampers.md. Run: ``python studies/dampers.py`` (about 5 min on 2 cores;
+``--quick``: 1 s at rest, one seed).
 """
 
 from __future__ import annotations
@@ -23,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 from _shared import DATA, exudyn_recording, honesty
-from _study import Banner, cli, sweep, write_outputs
+from _study import Banner, cli, sweep, table, write_outputs
 
 MARKERS = ("x3", "y3", "x5", "y5")
 NOISE = 1e-3
@@ -66,15 +55,14 @@ def summarise(records: list[tuple[dict, dict]]) -> list[dict]:
 
 def page(rows: list[dict], banner: str) -> str:
     """The table of errors, coverage and honesty per window and parameter."""
-    lines = ["# Identifying joint dampers from markers", "",
-             f"{banner} The set-up is in the script's docstring. Truth: Exudyn's parameters; noise 1 mm on x, y of "
-             "nodes 3 and 5 at 100 Hz.", "",
-             "| window | parameter | runs | error (median / max) | 2 SE | 3 SE | success | dishonest | wall (s) |",
-             "|" + "---|" * 9]
-    lines += [f"| {r['window']} | {r['parameter']} | {r['runs']} | {100 * r['err_median']:.3g} % / "
-              f"{100 * r['err_max']:.3g} % | {100 * r['cover2']:.0f} % | {100 * r['cover3']:.0f} % | "
-              f"{100 * r['success']:.0f} % | {r['dishonest']} | {r['wall_s']:.1f} |" for r in rows]
-    return "\n".join(lines) + "\n"
+    return "\n".join(["# Identifying joint dampers from markers", "", f"{banner} The set-up and the measures: "
+                      "[studies/dampers.md](../studies/dampers.md).", "", *table(
+                          ["window", "parameter", "runs", "error (median / max)", "2 SE", "3 SE", "success",
+                           "dishonest", "wall (s)"],
+                          [[r["window"], r["parameter"], r["runs"],
+                            f"{100 * r['err_median']:.3g} % / {100 * r['err_max']:.3g} %", f"{100 * r['cover2']:.0f} %",
+                            f"{100 * r['cover3']:.0f} %", f"{100 * r['success']:.0f} %", r["dishonest"],
+                            f"{r['wall_s']:.1f}"] for r in rows]), ""])
 
 
 def figure(rows: list[dict], path: Path) -> None:

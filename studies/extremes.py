@@ -1,18 +1,8 @@
 """Stability at the extremes: where does HHT-alpha on twobar stop converging, and is every failure
 detected and reported with its time?
 
-Set-up (``simulate(..., compiled=True, raise_on_failure=False)``): alpha in {0, -1/3} x dt in {1e-5 .. 5e-2}
-s x stiffness (the springs' k, kt scaled x1e-3 .. x1e6 through p; the beams' E x1 .. x1e-6 in the scene) x
-horizon 3 s and 30 s (30 s for dt >= 1e-4). Per run (studies/_extremes.py): status and message, energy drift,
-omega_max dt, Newton iterations of sampled steps (re-run with the interpreted step pieces, which reproduce the
-compiled step bitwise; runs of <= 300 steps also wholly on the interpreted path), and the study's own
-cross-check of simulate's detection: every element's co-rotational local rotation (a wrap through +-pi) and
-the energy, on the returned states and on the step simulate rejected (replayed); a Newton failure's step
-replayed with a plain Newton iteration and as two half steps. Full turns, a finer mesh and the round-off
-floor: studies/extremes_rotations.py; identification at the extremes: studies/extremes_identification.py.
-
-Writes docs/tables/extremes.md and docs/figures/extremes.png (``--quick``: *_quick.*, seconds); how to read
-them and what they show: docs/studies/extremes.md. Run: ``python studies/extremes.py`` (about 4 min).
+Set-up and how to read the page: docs/studies/extremes.md. Run: ``python studies/extremes.py`` (about 4 min;
+``--quick``: seconds; ``--raw FILE``, ``--render FILE``).
 """
 
 from __future__ import annotations
@@ -21,10 +11,10 @@ import math
 from pathlib import Path
 
 import numpy as np
-from _extremes import ALPHAS, DRIFT_TOL, HORIZONS, STATUSES, detail, label, omega_max_of, run_case, scene_E, table
-from _study import Banner, cli, png, save_raw, write_outputs
+from _extremes import ALPHAS, DRIFT_TOL, HORIZONS, STATUSES, detail, label, omega_max_of, run_case
+from _shared import twobar
+from _study import Banner, cli, fnum, save_raw, table, write_outputs
 
-import casflex
 from casflex.simulate import ENERGY_GROWTH
 
 GRID = {False: {"dts": (1e-5, 1e-4, 1e-3, 3e-3, 1e-2, 2e-2, 5e-2), "k": (1e-3, 1.0, 1e3, 1e6),
@@ -39,7 +29,7 @@ def simulation_grid(quick: bool) -> dict:
     g = GRID[quick]
     rows, omega, ref_scale = [], {}, {}  # ref_scale: per case, its finest converged alpha = 0, 3 s run's
     for es in g["E"]:
-        model = casflex.assemble(scene_E(es))
+        model = twobar(1, e_scale=es)
         for ks in g["k"]:
             omega[label(ks, es)] = om = omega_max_of(model, model.p_nominal * ks)
             for a in ALPHAS:
@@ -112,10 +102,6 @@ def _an(a: float) -> str:
     return "0" if a == 0.0 else "-1/3"
 
 
-def _f(x, spec: str = ".2g") -> str:
-    return "-" if x is None else format(x, spec)
-
-
 def _mark(r: dict | None, short: bool = False) -> str:
     """Map cell: ✓ drift, ⚠ drift (a success the study does not believe), ✗ status and time; w: a wrap."""
     if r is None:
@@ -166,8 +152,8 @@ def _map_tables(raw: dict, T: float, newton: bool = False) -> list[str]:
                     cell[(*c, d)]["newton"] if (*c, d) in cell else None) if newton else _mark(cell.get((*c, d)))
                    for d in dts] for c in cases]
         head = ["stiffness"] + ([] if newton else ["f_max (Hz)"]) + [f"{d:g}" for d in dts]
-        out += [f"**alpha = {_an(a)}**", ""] + table(head, "l" + ("r" * len(dts) if newton else "r" + "c" * len(dts)),
-                                                     body) + [""]
+        out += [f"**alpha = {_an(a)}**", ""] + table(head, body, "l" + ("r" * len(dts) if newton
+                                                                               else "r" + "c" * len(dts))) + [""]
     return out
 
 
@@ -186,7 +172,7 @@ def _dt_limit(raw: dict) -> list[str]:
                          f"{om * d:.3g}){wr}")
         body.append([label(*c), f"{om / (2 * math.pi):.4g}", *cells])
     return table(["stiffness", "f_max (Hz)", *(f"alpha = {_an(a)}, {T:g} s" for a in ALPHAS for T in hs)],
-                  "lr" + "l" * 2 * len(hs), body)
+                 body, "lr" + "l" * 2 * len(hs))
 
 
 def _fail_table(rows: list[dict]) -> list[str]:
@@ -196,8 +182,8 @@ def _fail_table(rows: list[dict]) -> list[str]:
     for r in fails:
         f, fs, nw = r["failure"], r.get("failing_step"), r["newton"]
         body.append([label(r["k_scale"], r["e_scale"]), _an(r["alpha"]), f"{r['dt']:g}", f"{r['t_end']:g}",
-                     r["status"], _f(f and f["t"], ".4g"), detail(f) if f else "-", _cross(r), f"{r['omega_dt']:.3g}",
-                     f"{r['energy']['max_gain']:.2g}", _f(r["t_drift_1pct"], ".3g"),
+                     r["status"], fnum(f and f["t"], ".4g"), detail(f) if f else "-", _cross(r), f"{r['omega_dt']:.3g}",
+                     f"{r['energy']['max_gain']:.2g}", fnum(r["t_drift_1pct"], ".3g"),
                      f"{r['spring_rel'][0]:.2g}-{r['spring_rel'][1]:.3g}",
                      f"{nw['mean_last20']:.1f} ({nw['max_last20']})",
                      *([f"{fs['kind']}, min {fs['min_residual']:.1e}", f"{fs['cond_predictor']:.1e}",
@@ -205,21 +191,17 @@ def _fail_table(rows: list[dict]) -> list[str]:
     return table(["stiffness", "alpha", "dt (s)", "horizon (s)", "status", "failed at t (s)", "message",
                    "study's cross-check", "omega_max dt", "energy gain before (max)", "1 % drift from t (s)",
                    "spring length / rest (min-max)", "Newton last 20 steps: mean (max)", "failing step: plain Newton",
-                   "cond at predictor", "two half steps"], "llrrlrllrrrlllrl", body)
+                   "cond at predictor", "two half steps"], body, "llrrlrllrrrlllrl")
 
 
 def _why(rows: list[dict]) -> list[str]:
-    """The sentences whose numbers change: per alpha the failures by status, from which dt, the diagnosis of
-    the Newton failures; the study's own measure of the element_range and energy_growth flags."""
+    """Per alpha, the failures by status and the study's diagnosis of the Newton failures (each failure is a
+    row of the failure table; what the statuses and flags show: docs/studies/extremes.md)."""
     out = []
     for a in ALPHAS:
         fails = [r for r in _sel(rows, alpha=a) if not r["success"]]
         s = f"- **alpha = {_an(a)}**: {len(fails)} of {len(_sel(rows, alpha=a))} runs fail (" + ", ".join(
             f"{len(_sel(fails, status=st))} {st}" for st in STATUSES) + ")"
-        for T in HORIZONS:
-            if bad := [r for r in _sel(fails, t_end=T) if r["status"] != "element_range"]:
-                s += (f"; at {T:g} s, element_range aside, the first failure at dt = {min(r['dt'] for r in bad):g} s "
-                      f"(omega_max dt >= {min(r['omega_dt'] for r in bad):.3g})")
         if nf := _sel(fails, status="newton_failed"):
             cls = [_newton_class(r) for r in nf]
             s += ("; the study's diagnosis of the Newton failures: " + ", ".join(f"{cls.count(c)} {c}" for c in
@@ -227,22 +209,6 @@ def _why(rows: list[dict]) -> list[str]:
                   f"{sum(r['failing_step']['half_steps_converge'] for r in nf)} of {len(nf)}")
         rise = sum(r["newton"]["max_last20"] > 2 * max(r["newton"]["mean"], 1.0) for r in fails)
         out.append(s + f"; Newton's count rose before the failure (last 20 steps' max > 2 x mean) in {rise}.")
-    if rng := _sel(rows, status="element_range"):
-        out.append(f"- **element_range** ({len(rng)} runs): the study's own local rotations jump through +-pi at the "
-                   f"named element end in the rejected step in {sum(bool(r['flagged']['wrap']) for r in rng)}; "
-                   f"Newton converged in that step in {sum(r['flagged']['converged'] for r in rng)}.")
-    if grown := _sel(rows, status="energy_growth"):
-        g = [r["flagged"]["dE_J"] / r["energy"]["scale_J"] for r in grown]
-        lead = [r["failure"]["t1"] - r["t_drift_1pct"] for r in grown if r["t_drift_1pct"] is not None]
-        own = [r["energy"]["max_gain"] * r["energy"]["scale_J"] / r["energy"]["own_scale_J"] for r in grown]
-        gain = [r["energy"]["max_gain"] for r in grown]
-        out.append(f"- **energy_growth** ({len(grown)} runs; Newton converged in the rejected step in "
-                   f"{sum(r['flagged']['converged'] for r in grown)}): the flagged state holds {min(g):.2g}-"
-                   f"{max(g):.2g} x the scale above E(0); the 1 % drift came "
-                   + (f"{min(lead):.2g}-{max(lead):.2g} s before the flag ({len(grown) - len(lead)} without it)"
-                      if lead else "at no earlier state") + f"; the returned states hold up to {max(own):.2g} of "
-                   f"their own max T + V_el ({max(gain):.2g} x the scale; more than {SUSPECT_DRIFT:g} in "
-                   f"{sum(x > SUSPECT_DRIFT for x in gain)} runs).")
     return out
 
 
@@ -289,32 +255,6 @@ def page(raw: dict, checks: list[tuple[bool, str]]) -> str:
         "", *(f"- {t}" if passed else f"- **FAILED**: {t}" for passed, t in checks)]) + "\n"
 
 
-def figure(raw: dict) -> bytes:
-    """The stability maps: log10 energy drift of each converged run, failed runs in red with status and time."""
-    from matplotlib.figure import Figure
-
-    rows = raw["sim"]["rows"]
-    cases = list(dict.fromkeys((r["k_scale"], r["e_scale"]) for r in rows))
-    hs = [T for T in HORIZONS if _sel(rows, t_end=T)]
-    fig = Figure(figsize=(16, 5.0 * len(hs)), layout="constrained")
-    for i, (T, a) in enumerate((T, a) for T in hs for a in ALPHAS):
-        ax, dts = fig.add_subplot(len(hs), 2, i + 1), sorted({r["dt"] for r in _sel(rows, t_end=T)})
-        Z = np.full((len(cases), len(dts)), np.nan)
-        for r in _sel(rows, t_end=T, alpha=a):
-            y, x = cases.index((r["k_scale"], r["e_scale"])), dts.index(r["dt"])
-            Z[y, x] = np.clip(np.log10(max(r["energy"]["drift"], 1e-16)), -12, 2) if r["success"] else np.nan
-            ax.text(x, y, _mark(r, True).replace("✗ ", "").replace("✓ ", "").replace("⚠ ", "⚠"), ha="center",
-                    va="center", fontsize=6.5, color="white" if not Z[y, x] >= -7 else "black")
-        cmap = __import__("matplotlib").colormaps["viridis"].with_extremes(bad="#b2182b")
-        fig.colorbar(ax.imshow(Z, cmap=cmap, vmin=-12, vmax=2, aspect="auto"), ax=ax, fraction=0.03)
-        ax.set_xticks(range(len(dts)), [f"{d:g}" for d in dts], fontsize=8)
-        ax.set_yticks(range(len(cases)), [f"k x{k:g}, E x{e:g}" for k, e in cases], fontsize=8)
-        ax.set_xlabel("dt (s)")
-        ax.set_title(f"alpha = {_an(a)}, {T:g} s: log10 energy drift (red: failed at t, R element_range, "
-                     "E energy_growth, N newton_failed)", fontsize=9)
-    return png(fig)
-
-
 def main(quick: bool = False, out_dir: Path | None = None, raw_path: Path | None = None) -> dict:
     banner = Banner("extremes", quick)
     raw = {"quick": quick, "sim": simulation_grid(quick)}
@@ -324,9 +264,9 @@ def main(quick: bool = False, out_dir: Path | None = None, raw_path: Path | None
 
 
 def render(raw: dict, out_dir: Path | None = None) -> dict:
-    """Self-checks, the page (failed checks stated) and the figure; then a failed check raises."""
+    """Self-checks and the page (failed checks stated); then a failed check raises."""
     checks = self_checks(raw)
-    write_outputs("extremes", out_dir, raw["quick"], page(raw, checks), figure(raw))
+    write_outputs("extremes", out_dir, raw["quick"], page(raw, checks))
     failed = [t for ok, t in checks if not ok]
     assert not failed, "self-checks failed: " + "; ".join(failed)
     return raw

@@ -1,18 +1,8 @@
-"""Identification at the extremes: does each method find twobar's parameters from far starts, what does noise
-do to the estimates and to their standard errors, and is any NaN ever reported?
+"""Identification at the extremes: does each method find twobar's parameters from far starts, what
+does noise do to the estimates and their standard errors, and is any NaN ever reported?
 
-Runs (``casflex.sweep.identification_run`` through the study harness's sweep, resumable with ``--record``):
-starts {0.1, 0.2, 0.5, 2, 5, 10} x p* (all four parameters) x position noise {0, 1e-6, 1e-5, 1e-4, 1e-3} m
-(seed 1) x method: direct at t = 0.69 s, adapted direct at (0.4, 1.1, 1.6, 1.9, 2.3) s, indirect over
-0..0.3 s (not the paper's 0.69 s, to keep the grid affordable) by its default, single shooting by
-Gauss-Newton. Data: the simulated set over 3 s (noise 0) or positions plus noise (the direct
-methods: the measured set, derivatives by central differences). Also twobar with kt1 = kt3 = 1e-3
-and 1e-6 x nominal (the scene written for the workers by ``one_run``): is kt reported weak, is there
-any NaN?
-
-Writes docs/tables/extremes_identification.md and docs/figures/extremes_identification.png (``--quick``:
-*_quick.*, 9 cheap runs over 1.2 s); reading: docs/studies/extremes.md. Run:
-``python studies/extremes_identification.py`` (about 8 min on 2 cores).
+Set-up and how to read the page: docs/studies/extremes.md. Run: ``python studies/extremes_identification.py`` (about 8
+min on 2 cores; ``--quick``: 9 cheap runs).
 """
 
 from __future__ import annotations
@@ -20,9 +10,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import numpy as np
-from _extremes import table
-from _study import Banner, cli, png, sweep, write_outputs
+from _study import Banner, cli, sweep, table, write_outputs
 
 STARTS = (0.1, 0.2, 0.5, 2.0, 5.0, 10.0)
 NOISES = (0.0, 1e-6, 1e-5, 1e-4, 1e-3)
@@ -146,8 +134,8 @@ def _method_table(rows: list[dict], method: str, starts: list, noises: list) -> 
                  for s in starts]
         weak = sorted({k for r in g.values() if "error" not in r for k in r["weak"]})
         body.append([f"{nz:g}", *cells, ", ".join(weak) or "-"])
-    return table(["noise (m)", *(f"{s:g} x p*" for s in starts), "weak (any start)"], "r" + "c" * len(starts) + "l",
-                 body)
+    return table(["noise (m)", *(f"{s:g} x p*" for s in starts), "weak (any start)"], body,
+                 "r" + "c" * len(starts) + "l")
 
 
 def _walls(rows: list[dict]) -> str:
@@ -172,7 +160,7 @@ def _kt_table(rows: list[dict]) -> list[str]:
                                  f"{sum('error' not in r and {'kt1', 'kt3'} <= set(r['weak']) for r in g.values())}"
                                  f"/{len(g)}"])
     return table(["kt / nominal", "method", "noise (m)", *(f"{s:g} x p*" for s in starts), "kt weak in"],
-                 "rlr" + "l" * (len(starts) + 1), body)
+                 body, "rlr" + "l" * (len(starts) + 1))
 
 
 def _anomalies(rows: list[dict]) -> list[str]:
@@ -212,27 +200,6 @@ def page(rows: list[dict], quick: bool, banner: str, checks: list[tuple[bool, st
     return "\n".join(lines) + "\n"
 
 
-def figure(rows: list[dict]) -> bytes:
-    """Per method, noise x start: log10 of the max relative error, with the cell's mark."""
-    from matplotlib.figure import Figure
-
-    rows = [r for r in rows if r["kt_factor"] is None and "error" not in r]
-    starts, noises = sorted({r["start"] for r in rows}), sorted({r["noise"] for r in rows})
-    fig = Figure(figsize=(16, 4.5), layout="constrained")
-    for j, m in enumerate(METHODS):
-        ax, Z = fig.add_subplot(1, 3, j + 1), np.full((len(noises), len(starts)), np.nan)
-        for r in (r for r in rows if r["method"] == m):
-            y, x = noises.index(r["noise"]), starts.index(r["start"])
-            Z[y, x] = np.clip(np.log10(max(_err(r), 1e-16)), -12, 4)
-            ax.text(x, y, _mark(r), ha="center", va="center", fontsize=9, color="white" if Z[y, x] < -3 else "black")
-        fig.colorbar(ax.imshow(Z, cmap="magma", vmin=-12, vmax=4, aspect="auto"), ax=ax, fraction=0.04)
-        ax.set_xticks(range(len(starts)), [f"{s:g}" for s in starts])
-        ax.set_yticks(range(len(noises)), [f"{n:g}" for n in noises])
-        ax.set(xlabel="start factor (x p*)", ylabel="noise sigma (m)")
-        ax.set_title(f"{m}: log10 max rel. error" + (" of k1, k3" if m == "adapted-direct" else ""), fontsize=9)
-    return png(fig)
-
-
 def main(quick: bool = False, out_dir: Path | None = None, record: Path | None = None,
          scheduler: str | None = None) -> list[dict]:
     banner = Banner("extremes_identification", quick)
@@ -247,7 +214,7 @@ def main(quick: bool = False, out_dir: Path | None = None, record: Path | None =
                "records"),
               (all(r["converged"] for r in direct0), f"direct identification on noise-free data converges from every "
                f"start ({len(direct0)} runs)")]
-    write_outputs("extremes_identification", out_dir, quick, page(rows, quick, banner.line(), checks), figure(rows))
+    write_outputs("extremes_identification", out_dir, quick, page(rows, quick, banner.line(), checks))
     failed = [t for ok, t in checks if not ok]
     assert not failed, "self-checks failed: " + "; ".join(failed)
     return rows

@@ -1,20 +1,8 @@
-"""Rotations at the extremes: do the absolute rotation dofs carry the chain through full turns, does a finer
-mesh keep the co-rotational local rotations in range, and where is the round-off floor of the tolerance?
+"""Rotations at the extremes: do the absolute rotation dofs carry the chain through full turns, does a
+finer mesh keep the local rotations in range, and where is the round-off floor of the tolerance?
 
-- Full turns: twobar spun about the clamp, every free node starting with the rigid-body velocity of a
-  rotation at 10 rad/s (v = omega x r), springs x1e3 (so that it stays a chain), torsion springs nominal;
-  alpha in {0, -1/3} x dt in {1e-3, 1e-4} s x 3 s and 30 s, compiled path. Measured: turns of theta5, the
-  largest step of a rotation, theta5 against the unwrapped chord of bar 4 (a 2 pi jump would show as ~6.3),
-  the torsion spring's moment against kt times the unwrapped relative rotation, energy drift, wraps.
-- A finer mesh: E x1e-6 (bending stiffness 0.109 N m^2), alpha = 0, dt = 1e-4, 3 s, with one and with eight
-  elements per bar: does one element stop with element_range, and do eight run through?
-- Round-off: the same scene translated along x by up to 1e6 m (physically the same motion): does every
-  step still converge at tol = 1e-12 (raised to the floor 10 eps max|q / l|), and how far does the motion,
-  translated back, differ from the untranslated scene's?
-
-Writes docs/tables/extremes_rotations.md (``--quick``: *_quick.md, the 3 s runs at dt = 1e-3, no mesh
-check, shifts 0 and 1e4 m over 0.2 s); reading: docs/studies/extremes.md. Run:
-``python studies/extremes_rotations.py`` (about 1 min).
+Set-up and how to read the page: docs/studies/extremes.md. Run: ``python studies/extremes_rotations.py`` (about 1 min;
+``--quick``).
 """
 
 from __future__ import annotations
@@ -34,16 +22,17 @@ from _extremes import (
     omega_max_of,
     parse_failure,
     run_case,
-    scene_E,
-    table,
 )
-from _study import Banner, cli, write_outputs
+from _shared import twobar
+from _study import Banner, cli, fnum, table, write_outputs
 
 import casflex
 from casflex.simulate import integrator_for, simulate
 
 SPIN_OMEGA, SPIN_SPRING_SCALE = 10.0, 1e3  # rad/s; springs x1e3: centrifugal forces stretch them by mm, not m
 EPS = float(np.finfo(float).eps)
+
+
 def full_turns(quick: bool) -> dict:
     """The chain spun about the clamp: the rigid-body velocity field v = omega x r, omega at every node."""
     model = casflex.assemble(casflex.load_scene("twobar"))
@@ -76,7 +65,7 @@ def mesh_check() -> dict:
     """E x1e-6, whose single elements wrap: the same chain with 1 and 8 elements per bar."""
     out = {}
     for ne in (1, 8):
-        model = casflex.assemble(scene_E(1e-6, ne))
+        model = twobar(ne, e_scale=1e-6)
         row, _ = run_case(model, k_scale=1.0, e_scale=1e-6, alpha=0.0, dt=1e-4, t_end=3.0, omega_max=math.nan,
                           n_samples=0)
         out[str(ne)] = row
@@ -105,12 +94,6 @@ def roundoff_probe(quick: bool) -> list[dict]:
                      "max_dpos": float(np.abs(dq[:, ~rot]).max()), "max_drot": float(np.abs(dq[:, rot]).max()),
                      "max_dqd": float(np.abs(tr.qd[:k] - ref.qd[:k]).max()), "max_qd": float(np.abs(ref.qd[:k]).max())})
     return rows
-
-
-
-
-def _f(x, spec: str) -> str:
-    return "-" if x is None else format(x, spec)
 
 
 def self_checks(raw: dict) -> list[tuple[bool, str]]:
@@ -147,7 +130,7 @@ def page(raw: dict, checks: list[tuple[bool, str]]) -> str:
     lines += table(["alpha", "dt (s)", "horizon (s)", "converged", "theta5 spans (turns)", "net turns",
                     "max step of a rotation (rad)", "rotation vs chord (rad)", "local-rotation wraps",
                     "torsion1 max moment (N m)", "moment vs kt dtheta", "spring1 max length (m)", "energy drift",
-                    "Newton mean (max)"], "lrrlrrrrrrrrrl", [
+                    "Newton mean (max)"], align="lrrlrrrrrrrrrl", rows=[
         ["0" if r["alpha"] == 0 else "-1/3", f"{r['dt']:g}", f"{r['t_end']:g}", "yes" if r["success"] else "no",
          f"{r['turns']:.2f}", f"{r['net_turns']:+.2f}", f"{r['max_step']:.3g}", f"{r['rot_vs_chord']:.2e}", r["wraps"],
          f"{r['m1_max']:.3g}", f"{r['m1_vs_kt']:.1e}", f"{r['spring1_max']:.4f}", f"{r['energy']['drift']:.1e}",
@@ -157,8 +140,9 @@ def page(raw: dict, checks: list[tuple[bool, str]]) -> str:
         m1, m8 = mesh["1"], mesh["8"]
         lines += ["E x1e-6, alpha = 0, dt = 1e-4, 3 s:", ""] + table(
             ["elements per bar", "result", "stopped at t (s)", "message", "energy drift (returned states)",
-             "wraps in the returned states", "max abs local rotation (rad)", "study: the rejected step"], "rlrlrrrl",
-            [[ne, "success" if m["success"] else m["status"], "-" if m["success"] else f"{m['t_reached']:.4g}",
+             "wraps in the returned states", "max abs local rotation (rad)", "study: the rejected step"],
+            align="rlrlrrrl",
+            rows=[[ne, "success" if m["success"] else m["status"], "-" if m["success"] else f"{m['t_reached']:.4g}",
               detail(m["failure"]) if m["failure"] else "-", f"{m['energy']['drift']:.2e}", m["wraps"],
               f"{m['max_local_rot']:.3f}", "-" if not m.get("flagged") else "wrap: " + ", ".join(
                   f"{k} {a:+.3f} -> {b:+.3f}" for k, a, b in m["flagged"]["wrap"]) if m["flagged"]["wrap"] else
@@ -174,10 +158,10 @@ def page(raw: dict, checks: list[tuple[bool, str]]) -> str:
               "1e-12, interpreted path; the motion compared with the untranslated scene's, translated back:", ""]
     lines += table(["shift (m)", "result", "accepted residual (max over the run)", "Newton it./step mean (max)",
                     "max abs position difference (m)", "in eps x shift", "max abs rotation difference (rad)",
-                    "max abs velocity difference (m/s, rad/s)", "energy drift"], "rlrrrrrrr", [
+                    "max abs velocity difference (m/s, rad/s)", "energy drift"], align="rlrrrrrrr", rows=[
         [f"{r['shift']:g}", "ok" if r["success"] else f"{r['status']} at t = {r['failure']['t']:.4g} s"
          if r["failure"] else r["status"], f"{r['accepted_tol']:.2g}",
-         f"{_f(r['newton_mean'], '.2f')} ({_f(r['newton_max'], 'd')})", f"{r['max_dpos']:.2g}",
+         f"{fnum(r['newton_mean'], '.2f')} ({fnum(r['newton_max'], 'd')})", f"{r['max_dpos']:.2g}",
          f"{r['max_dpos'] / (EPS * r['shift']):.2g}" if r["shift"] else "-", f"{r['max_drot']:.2g}",
          f"{r['max_dqd']:.2g}", f"{r['drift']:.1e}"] for r in ro])
     if ok:

@@ -1,16 +1,8 @@
 """Figures 2-5 of the seed paper: how sensitive are the motion and the first joint's forces to the
 parameter sets p*, p1 = [663 0.49 379 0.49] and p2 = [757 0.50 465 0.53]?
 
-Fig. 2: node-5 displacements (x5, y5, theta5); Fig. 3: their velocities; Fig. 4: their
-accelerations; Fig. 5: force (x, y) and torque in the first joint (spring1.fx, spring1.fy,
-torsion1.moment). Each figure: the three runs overlaid (left) and their differences from p*
-(right). The table gives max and RMS differences, relative to the p* run's peak and RMS, their
-growth with the horizon, and checks the paper's statement ("displacements barely change,
-velocities more, accelerations strongly; force levels stay similar") against the numbers.
-
-Writes docs/figures/fig2_displacements.png, fig3_velocities.png, fig4_accelerations.png,
-fig5_joint_forces.png and docs/tables/figures2_5.md.
-Run: ``python studies/figures2_5.py`` (``--quick`` for the CI version: 0.5 s horizon).
+Set-up and how to read the page: docs/studies/figures2_5.md. Run: ``python studies/figures2_5.py`` (``--quick``: 0.5 s
+horizon).
 """
 
 from __future__ import annotations
@@ -18,10 +10,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from _study import ROOT, Banner, cli, png, write_outputs
+from _study import Banner, cli, png, table, write_outputs
 
 from casflex.model import assemble
-from casflex.results import Trajectory, atomic_write_bytes
+from casflex.results import Trajectory
 from casflex.scene_io import load_scene
 from casflex.simulate import simulate
 
@@ -134,34 +126,27 @@ def verdicts(rows: list[dict], windows: list[float], t_end: float) -> tuple[list
     ], order_ok
 
 
-def page(rows: list[dict], verdict: list[str], windows: list[float], p_star, t_end: float, quick: bool,
-         banner: str) -> str:
+def page(rows: list[dict], verdict: list[str], windows: list[float], p_star, t_end: float, banner: str) -> str:
     """The verdicts, the table of differences and their growth with the horizon."""
-    L = ["# Figures 2-5: sensitivity to the parameter sets p*, p1, p2", "",
-         f"{banner} Scene `twobar`, HHT alpha = 0, dt = {DT:g} s, 0..{t_end:g} s; p = [k1 kt1 k3 kt3]: "
-         f"p* = {p_star.tolist()}, p1 = {PARAMS['p1']}, p2 = {PARAMS['p2']}. Figures: "
-         + ", ".join(f"`figures/{stem}{'_quick' if quick else ''}.png`" for stem, *_ in FIGURES) + ".", "",
-         "## What the paper says, checked", "", *verdict, "",
-         "## Differences from the p* run", "",
-         "max and RMS over the horizon of (run - p* run); rel. = divided by the p* run's peak |.| (max) or RMS; "
-         "level ratio = peak |.| and RMS of the run over those of p*.", "",
-         "| figure | quantity | unit | p* peak | p* RMS | p1 max diff | p1 RMS diff | p1 rel. max / RMS (%) "
-         "| p1 level ratio peak / RMS | p2 max diff | p2 RMS diff | p2 rel. max / RMS (%) "
-         "| p2 level ratio peak / RMS |",
-         "|---|---|---|---:|---:|---:|---:|---|---|---:|---:|---|---|"]
-    for row in rows:
-        cells = [f"{d['max']:.3g} | {d['rms']:.3g} | {100 * d['rel_max']:.3g} / {100 * d['rel_rms']:.3g} | "
-                 f"{d['peak_ratio']:.3f} / {d['rms_ratio']:.3f}" for d in (row["p1"], row["p2"])]
-        L.append(f"| {row['fig'].split('_')[0]} | {KIND_WORD[row['kind']]} {row['name']} | {row['unit']} | "
-                 f"{row['ref_max']:.3g} | {row['ref_rms']:.3g} | " + " | ".join(cells) + " |")
-    L += ["", "## Growth with the horizon", "",
-          "Relative max difference (% of the p* run's peak over the whole horizon) within 0..T.", "",
-          "| quantity | run | " + " | ".join(f"T = {w:g} s" for w in windows) + " |",
-          "|---|---|" + "---:|" * len(windows)]
-    L += [f"| {KIND_WORD[row['kind']]} {row['name']} | {lab} | "
-          + " | ".join(f"{100 * row[lab]['window'][w]:.3g}" for w in windows) + " |"
-          for row in rows for lab in ("p1", "p2")]
-    return "\n".join(L + [""])
+    return "\n".join([
+        "# Figures 2-5: sensitivity to the parameter sets p*, p1, p2", "",
+        f"{banner} dt = {DT:g} s, 0..{t_end:g} s; p = [k1 kt1 k3 kt3]: p* = {p_star.tolist()}, p1 = {PARAMS['p1']}, "
+        f"p2 = {PARAMS['p2']}. The figures and how to read the tables: "
+        "[studies/figures2_5.md](../studies/figures2_5.md).", "", "## What the paper says, checked", "", *verdict, "",
+        "## Differences from the p* run", "",
+        *table(["figure", "quantity", "unit", "p* peak", "p* RMS",
+                *(f"{lab} {h}" for lab in ("p1", "p2") for h in ("max diff", "RMS diff", "rel. max / RMS (%)",
+                                                                 "level ratio peak / RMS"))],
+               [[row["fig"].split("_")[0], f"{KIND_WORD[row['kind']]} {row['name']}", row["unit"],
+                 f"{row['ref_max']:.3g}", f"{row['ref_rms']:.3g}", *(v for d in (row["p1"], row["p2"]) for v in (
+                     f"{d['max']:.3g}", f"{d['rms']:.3g}", f"{100 * d['rel_max']:.3g} / {100 * d['rel_rms']:.3g}",
+                     f"{d['peak_ratio']:.3f} / {d['rms_ratio']:.3f}"))] for row in rows], "lllrr" + "rrll" * 2),
+        "", "## Growth with the horizon", "",
+        "Relative max difference (% of the p* run's peak over the whole horizon) within 0..T.", "",
+        *table(["quantity", "run", *(f"T = {w:g} s" for w in windows)],
+               [[f"{KIND_WORD[row['kind']]} {row['name']}", lab,
+                 *(f"{100 * row[lab]['window'][w]:.3g}" for w in windows)] for row in rows for lab in ("p1", "p2")],
+               "ll" + "r" * len(windows)), ""])
 
 
 def main(quick: bool = False, out_dir: Path | None = None) -> dict:
@@ -173,11 +158,8 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
     windows = [w for w in (0.5, 1.0, 2.0, 3.0) if w <= t_end + 1e-12]
     rows = differences(trajs, windows)
     verdict, order_ok = verdicts(rows, windows, t_end)
-    figures = ROOT / "docs" / "figures" if out_dir is None else Path(out_dir) / "figures"
-    for stem, title, kind, names, units in FIGURES:
-        atomic_write_bytes(figures / f"{stem}{'_quick' if quick else ''}.png", figure(trajs, title, kind, names, units))
-    write_outputs("figures2_5", out_dir, quick, page(rows, verdict, windows, model.p_nominal, t_end, quick,
-                                                      banner.line()))
+    write_outputs("figures2_5", out_dir, quick, page(rows, verdict, windows, model.p_nominal, t_end, banner.line()),
+                  {stem: figure(trajs, title, kind, names, units) for stem, title, kind, names, units in FIGURES})
     print("\n".join(verdict))
     # self-checks: the claims the page makes
     assert all(tr.success for tr in trajs.values())

@@ -1,26 +1,8 @@
 """The hip joint force of a swinging leg, from markers: the joint parameters identified, the force
 reported with its uncertainty band.
 
-The scene is casflex's built-in ``leg`` (casflex/scenes/leg.toml, its sources in its header): thigh
-and shank as flexible beams, hip and knee as spring-damper joints, a foot mass, the pelvis moving
-along a gait-like path (a moving support). The recording is made by a finer casflex model than the
-one that fits it (4 elements per beam, dt = 0.25 ms, against 1 element and 1 ms): x, y of the
-scene's five markers (thigh, knee, tibia, ankle, toe; on the beams off their axes and on the foot)
-at 100 Hz with 1 mm of Gaussian noise, two strides (2.2 s) from toe-off, SEEDS seeds.
-casflex's default indirect method fits the hip's and the knee's torsional stiffness and damping
-from 30 % below the truth.
-
-The hip joint force is the force of the hip bushing (elastic and damper), on the thigh. Its band:
-the model simulated at DRAWS parameter sets drawn from the reported normal distribution (estimate,
-covariance from the standard errors and correlations); the band spans the 2.5 and 97.5 percentiles
-of the force magnitude at each instant. To it the model's own error is added on both sides:
-Richardson's estimate from the model refined (twice the elements, half the step) at the identified
-parameters. Reported per seed: the parameters' errors and z-scores, the RMS difference of the
-identified force from the truth (the fine model's), the bands' widths, and the fraction of the
-strides where the truth lies in the parameter band and in the whole band.
-
-Writes docs/tables/leg.md and docs/figures/leg.png (``--quick``: *_quick.*, one stride, one seed,
-10 draws). Run: ``python studies/leg.py`` (about 5 min on 2 cores).
+Set-up and how to read the page: docs/studies/leg.md. Run: ``python studies/leg.py`` (about 5 min on 2 cores;
+``--quick``: one stride, one seed, 10 draws).
 """
 
 from __future__ import annotations
@@ -31,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 from _shared import honesty
-from _study import Banner, cli, sweep, write_outputs
+from _study import Banner, cli, sweep, table, write_outputs
 
 MARKERS = ("THI", "KNE", "TIB", "ANK", "TOE")
 NOISE = 1e-3
@@ -116,27 +98,25 @@ def page(recs: list[dict], banner: str) -> str:
 
     names, h = recs[0]["names"], honesty(recs)
     err = np.abs(np.array([r["rel_error"] for r in recs]))
-    lines = ["# The hip joint force of a swinging leg, from markers", "",
-             f"{banner} The set-up is in the script's docstring: scene `leg`, truth a finer casflex model, x, y of its "
-             "five markers at 100 Hz with 1 mm of noise. How the band is built and read: "
-             "[studies/leg.md](../studies/leg.md).", "",
-             f"Runs: {len(recs)}; success {100 * h['success'].mean():.0f} %; dishonest (success with a parameter more "
-             f"than 3 SE from the truth): {h['dishonest']}; an identification takes "
-             f"{np.median([r['wall_s'] for r in recs]):.0f} s (median, 2 runs at a time on 2 cores).", "",
-             "| parameter | truth | error (median / max) | 2 SE | 3 SE |", "|---|---|---|---|---|"]
-    lines += [f"| {n} | {recs[0]['truth'][j]:g} | {100 * np.median(err[:, j]):.3g} % / {100 * err[:, j].max():.3g} % "
-              f"| {100 * h['cover2'][:, j].mean():.0f} % | {100 * h['cover3'][:, j].mean():.0f} % |"
-              for j, n in enumerate(names)]
-    lines += ["", "| seed | success | hip force RMS error (N) | parameter band, median width (N) | truth inside it | "
-              "model error, median (N) | truth inside both | wall (s) |", "|---|---|---|---|---|---|---|---|"]
-    lines += [f"| {k} | {'yes' if r['success'] else 'no: ' + r['message']} | {r['force_rms']:.3g} | "
-              f"{r['band_width']:.3g} | {100 * r['inside']:.0f} % | {r['model_error_median']:.3g} | "
-              f"{100 * r['inside_all']:.0f} % | {r['wall_s']:.1f} |" for k, r in enumerate(recs)]
     scene = casflex.load_scene("leg")
     mass = sum(b.rho * b.A * scene.distance(*b.nodes) for b in scene.beams) + sum(b.mass for b in scene.bodies)
-    lines += ["", f"The hip force peaks at {max(max(r['f_true']) for r in recs):.0f} N (the leg weighs "
-              f"{9.81 * mass:.0f} N)."]
-    return "\n".join(lines) + "\n"
+    return "\n".join([
+        "# The hip joint force of a swinging leg, from markers", "",
+        f"{banner} The set-up, how the band is built and read: [studies/leg.md](../studies/leg.md).", "",
+        f"Runs: {len(recs)}; success {100 * h['success'].mean():.0f} %; dishonest (success with a parameter more "
+        f"than 3 SE from the truth): {h['dishonest']}; an identification takes "
+        f"{np.median([r['wall_s'] for r in recs]):.0f} s (median, 2 runs at a time on 2 cores).", "",
+        *table(["parameter", "truth", "error (median / max)", "2 SE", "3 SE"],
+               [[n, f"{recs[0]['truth'][j]:g}", f"{100 * np.median(err[:, j]):.3g} % / {100 * err[:, j].max():.3g} %",
+                 f"{100 * h['cover2'][:, j].mean():.0f} %", f"{100 * h['cover3'][:, j].mean():.0f} %"]
+                for j, n in enumerate(names)]), "",
+        *table(["seed", "success", "hip force RMS error (N)", "parameter band, median width (N)", "truth inside it",
+                "model error, median (N)", "truth inside both", "wall (s)"],
+               [[k, "yes" if r["success"] else "no: " + r["message"], f"{r['force_rms']:.3g}", f"{r['band_width']:.3g}",
+                 f"{100 * r['inside']:.0f} %", f"{r['model_error_median']:.3g}", f"{100 * r['inside_all']:.0f} %",
+                 f"{r['wall_s']:.1f}"] for k, r in enumerate(recs)]),
+        "", f"The hip force peaks at {max(max(r['f_true']) for r in recs):.0f} N (the leg weighs "
+        f"{9.81 * mass:.0f} N).", ""])
 
 
 def figure(rec: dict, path: Path) -> None:

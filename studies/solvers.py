@@ -1,18 +1,9 @@
 """NLP solver comparison: which CasADi nlpsol plugin, with which Hessian, solves each identification NLP
-from the most starts, and fastest?
+(direct, adapted, indirect by single and multiple shooting) from the most starts, and fastest?
 
-Problems (twobar scene, simulated set, p* = [k1 kt1 k3 kt3] = [700 0.5 400 0.5]): ``direct`` (Eqs. 11-13 at
-t = 0.69 s), ``adapted`` (Eq. 14 on [0.4 1.1 1.6 1.9 2.3] s), ``ss`` and ``ms`` (indirect, Eq. 16, positions,
-0..0.1 s, single and multiple shooting). Solvers: every nlpsol plugin that runs here (CONFIGS), one
-tolerance TOL mapped onto each one's own optimality measure, one iteration cap, one wall-time cap. Every start
-runs in its own Python process (``--one``), so a crash or a stall is recorded, not fatal. Stage 1: every
-configuration on direct and adapted; stage 2: those that solved direct from a start, on ss and ms. The
-measures, the tolerance mapping and notes on each plugin are in docs/studies/solvers.md.
-
-Writes docs/tables/solvers.md and docs/figures/solvers.png (the performance profile). Run:
-``python studies/solvers.py [--quick] [--record DIR] [--scheduler ADDRESS] [--raw FILE]`` (about 40 min on a
-shared 2-core machine; ``--quick``: IPOPT and sqpmethod on direct, 2 starts), or ``--render FILE`` to
-re-render the page and figure from a ``--raw`` file.
+Set-up, measures, the tolerance each plugin gets and notes on the plugins: docs/studies/solvers.md.
+Run: ``python studies/solvers.py [--quick] [--record DIR] [--scheduler ADDRESS] [--raw FILE | --render FILE]``
+(about 40 min on a shared 2-core machine; ``--quick``: IPOPT and sqpmethod on direct, 2 starts).
 """
 
 from __future__ import annotations
@@ -23,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 from _isolated import run_isolated
-from _study import Banner, cli, png, save_raw, sweep, write_outputs
+from _study import Banner, cli, fnum, med_range, png, save_raw, sweep, table, write_outputs
 
 TOL = 1e-8  # the one optimality tolerance, mapped onto every solver
 MAX_ITER = 200  # iteration cap (solvers that take one)
@@ -234,19 +225,6 @@ def _med(v) -> float:
     return float(np.median(v)) if v else math.nan
 
 
-def _f(x, fmt=".2g") -> str:
-    return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, fmt)
-
-
-def _rng(v, fmt=".2g") -> str:
-    """median (min-max) of the finite values."""
-    v = [x for x in v if x is not None and math.isfinite(x)]
-    if not v:
-        return "–"
-    lo, md, hi = min(v), float(np.median(v)), max(v)
-    return format(md, fmt) if lo == hi else f"{format(md, fmt)} ({format(lo, fmt)}-{format(hi, fmt)})"
-
-
 def _analyse(raw: dict) -> dict:
     """Per (problem, config) counts and measures; the cross-solver spread of p among flagged runs."""
     rows = {}
@@ -329,58 +307,55 @@ def _survey_text(row: dict | None) -> str:
 def _page(raw: dict, an: dict) -> list[str]:
     rows, spread, quick = an["rows"], an["spread"], raw["quick"]
     L = ["# NLP solver comparison" + (" (quick mode)" if quick else ""), "", raw["banner"], "",
-         "Twobar scene, simulated set (HHT alpha = 0, dt = 1e-3 s), p* = [k1 kt1 k3 kt3] = [700 0.5 400 0.5]; starts "
-         f"{', '.join(f'{s:g}' for s in sorted(raw['starts']))} x p* (all four parameters scaled alike), run nearest "
-         f"first ({', '.join(f'{s:g}' for s in raw['starts'])}). The set-up, the measures (*solved*, *flag*, ✗!, "
+         f"Starts {', '.join(f'{s:g}' for s in sorted(raw['starts']))} x p*, run nearest first "
+         f"({', '.join(f'{s:g}' for s in raw['starts'])}). The set-up, the measures (*solved*, *flag*, ✗!, "
          "*rescued*, the solver's own p), the tolerance given to each plugin and notes on the plugins: "
          "[studies/solvers.md](../studies/solvers.md).", "", "Problems:", ""]
     L += [f"- `{pb}`: {PROBLEMS[pb][0]}" for pb in raw["problems"]]
-    L += ["", "## Which plugins work here", "",
-          "| configuration | plugin, linear/QP solver | Hessian | direct problem (stage 1) |", "|---|---|---|---|"]
-    L += [f"| `{cf}` | {' | '.join(CONFIGS[cf][:2])} | {_survey_text(rows.get(('direct', cf)))} |"
-          for cf in raw["configs"]]
+    L += ["", "## Which plugins work here", "", *table(
+        ["configuration", "plugin, linear/QP solver", "Hessian", "direct problem (stage 1)"],
+        [[f"`{cf}`", *CONFIGS[cf][:2], _survey_text(rows.get(("direct", cf)))] for cf in raw["configs"]])]
     if not quick:
         dropped = ", ".join(f"`{c}`" for c in raw["configs"] if c not in raw["screened"])
         L += ["", f"Stage 2 (indirect problems) runs the {len(raw['screened'])} configurations that solved the direct "
               "problem from at least one start" + (f"; not run there: {dropped}." if dropped else ".")]
     L.append("")
     for pb in raw["problems"]:
-        L += [f"## {PROBLEMS[pb][0]}", "",
-              "| configuration | solved | flag | ✗! | rescued | flag, solver's p off | iterations | build (s) | "
-              "solve (s) | error of p (final) | solver's p error | status |",
-              "|---|:-:|:-:|:-:|:-:|:-:|---:|---:|---:|---:|---:|---|"]
-        for cf in raw["configs"]:
-            if (row := rows.get((pb, cf))) is not None:
-                L.append(f"| `{cf}` | {row['solved']}/{row['n']} | {row['flag']} | {row['wrong'] or ''} | "
-                         f"{row['rescued'] or ''} | {row['solver_off'] or ''} | {_rng(row['it'], 'g')} | "
-                         f"{_f(_med(row['build']), '.3g')} | {_rng(row['solve'], '.3g')} | {_rng(row['err'], '.1e')} | "
-                         f"{_rng(row['err_solver'], '.1e')} | {'; '.join(row['statuses'])[:160]} |")
-        L += ["", "Cells: median (min-max) over the starts that ran to the end"
+        L += [f"## {PROBLEMS[pb][0]}", "", *table(
+            ["configuration", "solved", "flag", "✗!", "rescued", "flag, solver's p off", "iterations", "build (s)",
+             "solve (s)", "error of p (final)", "solver's p error", "status"],
+            [[f"`{cf}`", f"{row['solved']}/{row['n']}", row["flag"], row["wrong"] or "", row["rescued"] or "",
+              row["solver_off"] or "", med_range(row["it"], "g", "–"), fnum(_med(row["build"]), ".3g", "–"),
+              med_range(row["solve"], ".3g", "–"), med_range(row["err"], ".1e", "–"),
+              med_range(row["err_solver"], ".1e", "–"), "; ".join(row["statuses"])[:160]]
+             for cf in raw["configs"] if (row := rows.get((pb, cf))) is not None], "lcccccrrrrrl"),
+              "", "Cells: median (min-max) over the starts that ran to the end"
               + ("; errors of p: of k1 and k3." if pb == "adapted" else "."), ""]
     L += ["## Cross-solver consistency", "",
           "Among all runs that report success on a problem (any solver, any start): the median p, and the largest "
-          "relative deviation from it, of the final p and of the solvers' own p (before the polish).", "",
-          "| problem | runs | median p = [k1 kt1 k3 kt3] | max deviation, final p (per parameter) | "
-          "max deviation, solvers' own p (per parameter) |", "|---|---:|---|---|---|"]
-    for pb, sp in spread.items():
-        per = " / ".join(f"{v:.1e}" for v in sp["final_per_param"])
-        pers = " / ".join(f"{v:.1e}" for v in sp["solver_per_param"]) if sp["solver_per_param"] else "–"
-        L.append(f"| `{pb}` | {sp['n']} | [{' '.join(f'{v:.7g}' for v in sp['median_p'])}] | {sp['final']:.1e} "
-                 f"({per}) | {_f(sp['solver'], '.1e')} ({pers}) |")
+          "relative deviation from it, of the final p and of the solvers' own p (before the polish).", "", *table(
+              ["problem", "runs", "median p = [k1 kt1 k3 kt3]", "max deviation, final p (per parameter)",
+               "max deviation, solvers' own p (per parameter)"],
+              [[f"`{pb}`", sp["n"], f"[{' '.join(f'{v:.7g}' for v in sp['median_p'])}]",
+                f"{sp['final']:.1e} ({' / '.join(f'{v:.1e}' for v in sp['final_per_param'])})",
+                f"{fnum(sp['solver'], '.1e', '–')} ("
+                + (" / ".join(f"{v:.1e}" for v in sp["solver_per_param"]) if sp["solver_per_param"] else "–") + ")"]
+               for pb, sp in spread.items()], "lrlll")]
     R, Rt = _profile(raw, rows, "solve"), _profile(raw, rows, "total")
     L += ["", "## Performance profile", "", f"![performance profile](../figures/solvers{'_quick' * quick}.png)", "",
-          "| configuration | solved | fastest (solve) | within 2x | within 10x | fastest (build + solve) |",
-          "|---|---:|---:|---:|---:|---:|"]
-    for i in sorted(range(len(R)), key=lambda i: (-np.isfinite(R[i]).sum(), -(R[i] <= 2).sum())):
-        L.append(f"| `{raw['configs'][i]}` | {np.isfinite(R[i]).sum()}/{R.shape[1]} | {(R[i] <= 1.0).sum()} | "
-                 f"{(R[i] <= 2).sum()} | {(R[i] <= 10).sum()} | {(Rt[i] <= 1.0).sum()} |")
+          *table(["configuration", "solved", "fastest (solve)", "within 2x", "within 10x", "fastest (build + solve)"],
+                 [[f"`{raw['configs'][i]}`", f"{np.isfinite(R[i]).sum()}/{R.shape[1]}", (R[i] <= 1.0).sum(),
+                   (R[i] <= 2).sum(), (R[i] <= 10).sum(), (Rt[i] <= 1.0).sum()]
+                  for i in sorted(range(len(R)), key=lambda i: (-np.isfinite(R[i]).sum(), -(R[i] <= 2).sum()))],
+                 "lrrrrr")]
     return L + ["", "## What the numbers say", "", *_conclusions(raw, rows), "", "### Default solver", "",
                 *_default_text(raw, rows), "", "The rule for replacing a default is in "
                 "[studies/solvers.md](../studies/solvers.md#default-solver).", ""]
 
 
 def _conclusions(raw: dict, rows: dict) -> list[str]:
-    """Per problem: how many configurations solve it, the best, IPOPT's rank, who needs the polish."""
+    """Per problem: how many configurations solve it, the best, IPOPT's rank, and those that stopped at the
+    solution without declaring success (the flags, ✗! and rescued counts are in the tables)."""
     out = []
     for pb in raw["problems"]:
         ranked, n_cfg, what = _choice(raw, rows, pb), sum(1 for k in rows if k[0] == pb), PROBLEMS[pb][1]
@@ -392,29 +367,12 @@ def _conclusions(raw: dict, rows: dict) -> list[str]:
              f"start. Best (starts solved, then median build + solve time of the solved starts): {top}.")
         for x in (x for name in ("ipopt", "ipopt-gn") for x in ranked if x[0] == name):
             s += f" `{x[0]}`: {x[1]}/{x[2]} in {x[3]:.3g} s (rank {ranked.index(x) + 1})."
-        own = [c for c, s_, _n, _t, _w, o in ranked if o == s_]
-        off = [c for c, s_, _n, _t, _w, o in ranked if o < s_]
-        if off:
-            e_off = [_med(rows[(pb, c)]["err_solver"]) for c in off]
-            s += (" The solver's own p (before the polish) meets the criterion on every solved start for "
-                  + (", ".join(f"`{c}`" for c in own) if own else "none") + f"; the other {len(off)} report "
-                  f"success with their own p off by a median {min(e_off):.0e} to {max(e_off):.0e} ("
-                  + ", ".join(f"`{c}` {_med(rows[(pb, c)]['err_solver']):.0e}" for c in off if c.startswith("ipopt"))
-                  + ") and rely on the library's Gauss-Newton polish.")
-        listed = {k: [(cf, rows[(pb, cf)][k]) for cf in raw["configs"] if rows.get((pb, cf), {}).get(k)]
-                  for k in ("wrong", "rescued")}
-        if listed["wrong"]:
-            s += (" **Success reported at a wrong p** (after the polish): "
-                  + ", ".join(f"`{c}` ({w})" for c, w in listed["wrong"]) + ".")
-        if listed["rescued"]:
-            s += (" No success flag, but p right after the polish: "
-                  + ", ".join(f"`{c}` ({w})" for c, w in listed["rescued"]) + ".")
-            near = [c for c, _w in listed["rescued"] if all(
-                _right(pb, _solver_err(pb, r)) for r in rows[(pb, c)]["runs"] if not _flag(c, r) and _criterion(pb, r))]
-            if near:
-                s += (" Of these, " + ", ".join(f"`{c}`" for c in near) + " had their own p right already: they "
-                      "reached the solution but stopped without declaring success (line search stalled, or the "
-                      "iteration cap on a stationarity test they could not meet at this problem's round-off floor).")
+        near = [cf for cf in raw["configs"] if rows.get((pb, cf), {}).get("rescued") and all(
+            _right(pb, _solver_err(pb, r)) for r in rows[(pb, cf)]["runs"] if not _flag(cf, r) and _criterion(pb, r))]
+        if near:
+            s += (" " + ", ".join(f"`{c}`" for c in near) + " had their own p right where they did not declare "
+                  "success: they reached the solution but stopped without it (line search stalled, or the "
+                  "iteration cap on a stationarity test they could not meet at this problem's round-off floor).")
         out.append(s)
     return out
 

@@ -1,21 +1,8 @@
 """Table 1 of the seed paper: do the direct and indirect identifications at t1 = 0.69 s and
 t2 = 2.83 s reach p*, and do they agree with the paper's verdicts?
 
-Seven rows (procedure x reference data), each run from the paper's starting range (0.8 and
-1.2 x p*), our numbers beside the paper's verdicts. Direct rows use the single instant t
-(instants=[t]) and also report the exact linear least-squares solution; indirect rows compare
-over the horizon 0..t (the paper's meaning) with the multiple-shooting transcription (where it
-misses p*, the same run by single shooting follows). The central-difference error of the measured
-set is measured at t1 and t2 (velocities, accelerations, and the Eq. 1 imbalance at p*), and the
-direct method is re-run on measured sets sampled more coarsely, to show how the offset scales
-with the sample spacing. The reasons behind the verdicts: docs/studies/table1.md.
-
-Convergence criterion: max_j |p_j / p*_j - 1| <= 1e-6 and the solver reports success.
-
-Writes docs/tables/table1.md and docs/figures/table1.png (``--raw FILE`` also saves the run's
-numbers, ``--render FILE`` re-renders the page from them). Run: ``python studies/table1.py``
-(about 2.3 h; ``--quick`` for the CI version: t1 only, indirect horizons cut to 0.05 s and single
-shooting, one start).
+Set-up and how to read the page: docs/studies/table1.md. Run: ``python studies/table1.py`` (about 2.3 h; ``--quick``:
+t1 only, 0.05 s single shooting, one start; ``--raw FILE``, ``--render FILE``).
 """
 
 from __future__ import annotations
@@ -24,8 +11,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _shared import PAPER_NLP, capped_ipopt, fmt_p
-from _study import Banner, cli, png, save_raw, write_outputs
+from _shared import PAPER_NLP, capped_ipopt
+from _study import Banner, cli, fmt_p, save_raw, table, write_outputs
 
 from casflex.data import MeasurementSet, measured_set, simulated_set
 from casflex.identification import identify_direct, identify_indirect
@@ -199,8 +186,8 @@ def main(quick: bool = False, out_dir: Path | None = None, raw_path: Path | None
 
 
 def render(raw: dict, out_dir: Path | None) -> None:
-    """The page and the figure from the raw numbers of a run (``main`` or a ``--raw`` file)."""
-    write_outputs("table1", out_dir, raw["quick"], "\n".join(page(raw)), png(figure(raw)))
+    """The page from the raw numbers of a run (``main`` or a ``--raw`` file)."""
+    write_outputs("table1", out_dir, raw["quick"], "\n".join(page(raw)))
 
 
 def page(raw: dict) -> list[str]:
@@ -215,63 +202,49 @@ def page(raw: dict) -> list[str]:
     tr_text = ("single shooting on the horizon 0..0.05 s (quick mode: the CI check, not the paper's horizon)" if quick
                else "multiple shooting (intervals of 20 steps), horizon 0..t")
     L = ["# Table 1 of the seed paper: direct and indirect identification" + (" (quick mode)" if quick else ""), "",
-         f"{banner} Twobar scene, p* = [k1 kt1 k3 kt3] = [700 0.5 400 0.5]; data from an HHT (alpha = 0) simulation "
-         "with dt = 1e-3 s (the simulated set) and its positions differentiated by central differences (the measured "
-         "set). Direct rows use the single instant t (`instants=[t]`); indirect rows compare every sample of the "
-         f"window: {tr_text}. Starts: {', '.join(f'{s:g}' for s in starts)} x p* (the paper's starting range is "
-         f"0.8-1.2 p*). Convergence: max_j |p_j/p*_j - 1| <= {TOL:g} and the solver reports success. "
-         "Solver: IPOPT with exact derivatives (CasADi AD), then Gauss-Newton polish"
+         f"{banner} Indirect rows: {tr_text}. Starts: {', '.join(f'{s:g}' for s in starts)} x p*. Convergence: "
+         f"max_j |p_j/p*_j - 1| <= {TOL:g} and the solver reports success"
          + ("" if quick else f"; each indirect run is capped at {WALL_CAP[T1]:.0f} s (t1) / {WALL_CAP[T2]:.0f} s (t2) "
-            "of solver wall time, a capped run counts as a failure (status Maximum_WallTime_Exceeded)") + ". "
-         "Why the numbers are what they are: [studies/table1.md](../studies/table1.md).", "",
-         "## Summary beside the paper", "",
-         "| # | procedure | reference data | " + " | ".join(f"paper, t = {t} s | ours, t = {t} s" for t in instants)
-         + " | agrees? |", "|---|---|---|" + "---|---|" * len(instants) + "---|"]
+            "of solver wall time, a capped run counts as a failure") + ". Set-up and why the numbers are what they "
+         "are: [studies/table1.md](../studies/table1.md).", "", "## Summary beside the paper", ""]
+    body = []
     for key, proc, ref, *_ in ROWS:
         cells, agrees = [], []
         for t in instants:
             cs, ss = by[(key, t)], [c for c in cross if c["row"] == key and c["t"] == t]
             extra = f"; single shooting: {WORDS[combine(ss)]} ({_errs(ss)})" if ss else ""
-            cells.append(f"{PAPER[(key, t)][1]} | {WORDS[combine(cs)]} (max rel. error from start {_errs(cs)}){extra}")
+            cells += [PAPER[(key, t)][1], f"{WORDS[combine(cs)]} (max rel. error from start {_errs(cs)}){extra}"]
             agrees.append(combine(cs) == PAPER[(key, t)][0])
         mark = "yes" if all(agrees) else ("no" if not any(agrees) else "partly")
         mark += " (qualitatively: off p*, by much less than p1/p2)" if key == "2" and any(agrees) else ""
-        L.append(f"| {key} | {proc} | {ref} | " + " | ".join(cells) + f" | {mark} |")
-    L += ["", ("'ours' is the table's transcription (multiple shooting for the indirect rows); where it missed "
-               "p*, the same run by single shooting follows. 'agrees?' compares the table's transcription with "
-               "the paper. Ranges: the paper reports the starting range from which it converges; we ran the "
-               "starts above (see `basins.md` for a scan of 0.1-10 x p* at t1).") if not quick else "", ""]
-    L += ["## Every run", "", *_runs_table(results, "identified p = [k1 kt1 k3 kt3]", ".2f")]
+        body.append([key, proc, ref, *cells, mark])
+    L += table(["#", "procedure", "reference data", *(f"{w}, t = {t} s" for t in instants for w in ("paper", "ours")),
+                "agrees?"], body)
+    L += ["", "## Every run", "", *_runs_table(results, "identified p = [k1 kt1 k3 kt3]", ".2f")]
     if cross:
         L += ["", "Cross-check: every indirect run that did not reach p* by multiple shooting, repeated by single "
               "shooting (same data, horizon, start and solver settings):", "",
               *_runs_table(cross, "identified p (single shooting)", ".1f")]
-    L += ["", "Exact linear least-squares solution of the direct rows (Eq. 11 is linear in the stiffnesses and "
-          "the multipliers, so this is the unique minimiser, whatever the start):", "",
-          "| # | t (s) | linear LS solution | max rel. error | IPOPT result equal to it (max rel. diff.) |",
-          "|---|---:|---|---:|---:|"]
-    for key in ("1", "2", "3"):
-        for t in instants:
-            c = by[(key, t)][0]
-            diff = max(_rel_err(cc["p"], np.array(cc["linear"])) for cc in by[(key, t)])
-            L.append(f"| {key} | {t} | {fmt_p(c['linear'])} | {c['linear_err']:.2e} | {diff:.1e} |")
-    L += ["", "## Error of the measured set (central differences, h = 1e-3 s)", "",
-          "The measured set's velocities and accelerations are central differences of exact positions: their "
-          "error is O(h^2) (h^2/6 q''' and h^2/12 q''''). Compared with the simulated set's own values:", "",
-          "| t (s) | max abs error qd (m/s or rad/s) | relative to max abs qd | max abs error qdd | relative to "
-          "max abs qdd | Eq. 1 imbalance at p*: simulated set (N) | measured qd | measured set | force scale (N) |",
-          "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
-    L += [f"| {f['t']} | {f['qd_err']:.3e} | {f['qd_err'] / f['qd_max']:.1e} | {f['qdd_err']:.3e} | "
-          f"{f['qdd_err'] / f['qdd_max']:.1e} | {f['imb_sim']:.1e} | {f['imb_hyb']:.1e} | {f['imb_meas']:.1e} | "
-          f"{f['force_scale']:.3g} |" for f in fd]
+    L += ["", "Exact linear least-squares solution of the direct rows (the unique minimiser, whatever the start):", "",
+          *table(["#", "t (s)", "linear LS solution", "max rel. error", "IPOPT result equal to it (max rel. diff.)"],
+                 [[key, t, fmt_p(by[(key, t)][0]["linear"]), f"{by[(key, t)][0]['linear_err']:.2e}",
+                   f"{max(_rel_err(cc['p'], np.array(cc['linear'])) for cc in by[(key, t)]):.1e}"]
+                  for key in ("1", "2", "3") for t in instants], "lrlrr"),
+          "", "## Error of the measured set (central differences, h = 1e-3 s)", "",
+          "Compared with the simulated set's own values:", "",
+          *table(["t (s)", "max abs error qd (m/s or rad/s)", "relative to max abs qd", "max abs error qdd",
+                  "relative to max abs qdd", "Eq. 1 imbalance at p*: simulated set (N)", "measured qd",
+                  "measured set", "force scale (N)"],
+                 [[f["t"], f"{f['qd_err']:.3e}", f"{f['qd_err'] / f['qd_max']:.1e}", f"{f['qdd_err']:.3e}",
+                   f"{f['qdd_err'] / f['qdd_max']:.1e}", f"{f['imb_sim']:.1e}", f"{f['imb_hyb']:.1e}",
+                   f"{f['imb_meas']:.1e}", f"{f['force_scale']:.3g}"] for f in fd], "r" * 9)]
     if spacing:
         L += ["", "Direct identification (start p*) with the measured quantities taken from positions sampled "
-              "at a coarser spacing h (same simulation, every k-th sample): the offset of p grows like h^2.", "",
-              "| t (s) | h (s) | measured | identified p | max rel. error | error of k1, k3 |",
-              "|---:|---:|---|---|---:|---:|"]
-        L += [f"| {s['t']} | {s['h']:.0e} | {'velocities only (row 2)' if s['velocities_only'] else 'set (row 3)'} | "
-              f"{fmt_p(s['p'])} | {s['err']:.2e} | {s['err_k']:.2e} |" for s in spacing]
-    return L + ["", "## What the numbers say", "", *findings(by, cross, instants, spacing, ps, quick), ""]
+              "at a coarser spacing h (same simulation, every k-th sample):", "",
+              *table(["t (s)", "h (s)", "measured", "identified p", "max rel. error", "error of k1, k3"],
+                     [[s["t"], f"{s['h']:.0e}", "velocities only (row 2)" if s["velocities_only"] else "set (row 3)",
+                       fmt_p(s["p"]), f"{s['err']:.2e}", f"{s['err_k']:.2e}"] for s in spacing], "rrllrr")]
+    return L + ["", "## What the numbers say", "", *findings(by, instants, spacing, ps), ""]
 
 
 def _errs(cells: list[dict]) -> str:
@@ -280,11 +253,11 @@ def _errs(cells: list[dict]) -> str:
 
 def _runs_table(cells: list[dict], p_head: str, wall: str) -> list[str]:
     """Every run of ``cells``, one a line."""
-    return [f"| # | reference data | t (s) | start | {p_head} | max rel. error | success | iterations | wall (s) "
-            "| verdict |", "|---|---|---:|---:|---|---:|---|---:|---:|---|"] + [
-        f"| {c['row']} | {REF[c['row']]} | {c['t']} | {c['start']:g} | {fmt_p(c['p'])} | {c['err']:.2e} | "
-        f"{'yes' if c['success'] else 'no'} ({c['status']}) | {c['iterations']} | {c['wall_s']:{wall}} | "
-        f"{verdict(c)} |" for c in sorted(cells, key=lambda c: (int(c["row"]), c["t"]))]
+    return table(["#", "reference data", "t (s)", "start", p_head, "max rel. error", "success", "iterations",
+                  "wall (s)", "verdict"],
+                 [[c["row"], REF[c["row"]], c["t"], f"{c['start']:g}", fmt_p(c["p"]), f"{c['err']:.2e}",
+                   f"{'yes' if c['success'] else 'no'} ({c['status']})", c["iterations"], f"{c['wall_s']:{wall}}",
+                   verdict(c)] for c in sorted(cells, key=lambda c: (int(c["row"]), c["t"]))], "llrrlrlrrl")
 
 
 def _slope(spacing: list[dict], t: float, vel_only: bool) -> float | None:
@@ -292,79 +265,21 @@ def _slope(spacing: list[dict], t: float, vel_only: bool) -> float | None:
     return float(np.polyfit(np.log([x["h"] for x in s]), np.log([x["err"] for x in s]), 1)[0]) if len(s) >= 3 else None
 
 
-def findings(by, cross, instants, spacing, ps, quick) -> list[str]:
-    """The measured sentences: the direct offsets beside the paper's and their growth with the spacing;
-    per indirect row, agreement with the paper and the failures single shooting rescues."""
+def findings(by, instants, spacing, ps) -> list[str]:
+    """The direct offsets beside the paper's and their growth with the spacing (the verdicts per row, the
+    agreement with the paper and the single-shooting cross-check are in the tables)."""
     paper_k = {T1: _rel_err(P1[[0, 2]], ps[[0, 2]]), T2: _rel_err(P2[[0, 2]], ps[[0, 2]])}
-    r1 = [c for t in instants for c in by[("1", t)]]
-    same = all(_rel_err(c["p"], np.array(c["linear"])) <= 1e-6 for k in "123" for t in instants for c in by[(k, t)])
-    s = (f"- **Direct (rows 1-3).** Simulated set: {'p*' if all(c['kind'] == 'p*' for c in r1) else 'not p*'} "
-         f"everywhere (largest error {max(c['err'] for c in r1):.1e}); IPOPT's result "
-         + ("equals" if same else "does not always equal") + " the linear least-squares solution.")
+    out = []
     for t in instants:
         pts = [x for x in spacing if x["t"] == t and x["velocities_only"]]
-        if not pts:  # no coarser spacing fits this instant
-            continue
-        s += (f" At t = {t} s measured velocities (row 2) move k1, k3 by "
-              f"{max(_rel_err(np.array(c['p'])[[0, 2]], ps[[0, 2]]) for c in by[('2', t)]):.1e} (the paper's "
-              f"{'p1' if t == T1 else 'p2'}: {paper_k[t]:.1e}), {max(x['err_k'] for x in pts):.1e} at "
-              f"h = {max(x['h'] for x in pts):.0e} s; the offsets grow like h^{_slope(spacing, t, True) or np.nan:.1f} "
-              f"(row 2) and h^{_slope(spacing, t, False) or np.nan:.1f} (row 3).")
-    out = [s]
-    for key in ("4", "5", "6", "7"):
-        for t in instants:
-            cs, ss = by[(key, t)], [c for c in cross if c["row"] == key and c["t"] == t]
-            pk = PAPER[(key, t)][0]
-            s = (f"- Row {key}, t = {t} s: {cs[0]['transcription'].replace('-', ' ')} "
-                 f"{'agrees' if combine(cs) == pk else 'differs'}")
-            s += f", single shooting {'agrees' if combine(ss) == pk else 'differs'}" if ss else ""
-            fails = {c["start"] for c in cs if c["kind"] == "fails"}
-            ss_ok = {c["start"] for c in ss if c["kind"] != "fails"}
-            s += f"; single shooting succeeds where it fails from {_starts(fails & ss_ok)}" if fails & ss_ok else ""
-            s += f"; neither succeeds from {_starts(fails - ss_ok)}" if fails - ss_ok else ""
-            out.append(s + ".")
-    return out + (["", f"(Quick mode: single shooting on 0..{QUICK_HORIZON} s only, a CI check; the full study runs "
-                   "t1 and t2 with the paper's horizons.)"] if quick else [])
-
-
-def _starts(values) -> str:
-    return ", ".join(f"{v:g}" for v in sorted(values))
-
-
-def figure(raw: dict):
-    """Max relative error of every run, per row, instant and start."""
-    from matplotlib.lines import Line2D
-
-    from casflex.plotting._figure import _new_figure
-
-    instants, starts, cross = raw["instants"], raw["starts"], raw.get("cross_check") or []
-    fig = _new_figure((10, 4.5))
-    ax = fig.subplots()
-    markers, colors = {0.8: "v", 1.2: "^", 1.0: "o"}, {T1: "tab:blue", T2: "tab:red"}
-    for r in raw["results"] + cross:
-        k = instants.index(r["t"]) * len(starts) + starts.index(r["start"])
-        x, y = int(r["row"]) - 1 + (k + 0.5) / (len(instants) * len(starts)) * 0.7 - 0.35, max(r["err"], 1e-16)
-        if r in cross:  # single-shooting cross-check of a multiple-shooting run that missed p*
-            ax.semilogy([x], [y], "x" if r["success"] else "+", color=colors[r["t"]], ms=9, mew=2)
-        else:
-            ax.semilogy([x], [y], markers.get(r["start"], "o"), color=colors[r["t"]],
-                        mfc=colors[r["t"]] if r["success"] else "none", ms=8)
-    ax.axhline(TOL, color="k", ls="--", lw=1)
-    ax.text(len(ROWS) - 0.5, TOL * 1.5, f"criterion {TOL:g}", ha="right", va="bottom", fontsize=8)
-    short = ["direct\nsimulated", "direct\nmeas. qd", "direct\nmeasured", "Eq.17\nsimulated", "Eq.17\nmeas. qd",
-             "Eq.17\nmeasured", "Eq.16\nsimulated"]
-    ax.set_xticks(range(len(ROWS)), [f"{i + 1}: {s}" for i, s in enumerate(short)], fontsize=8)
-    ax.set_ylabel("max relative error of p")
-    handles = [Line2D([], [], ls="", marker=markers.get(s, "o"), color=colors[t], label=f"t = {t} s, start {s:g}")
-               for t in instants for s in starts]
-    handles.append(Line2D([], [], ls="", marker="o", color="gray", mfc="none", label="solver failure (open)"))
-    if cross:
-        handles.append(Line2D([], [], ls="", marker="x", color="gray", mew=2,
-                              label="single-shooting cross-check (+: failure)"))
-    ax.legend(handles=handles, fontsize=7, loc="upper left")
-    ax.grid(True, which="both", axis="y", alpha=0.3)
-    ax.set_title("Table 1: relative error of the identified parameters (floor 1e-16)")
-    return fig
+        if pts:  # a coarser spacing fits this instant
+            out.append(f"- At t = {t} s measured velocities (row 2) move k1, k3 by "
+                       f"{max(_rel_err(np.array(c['p'])[[0, 2]], ps[[0, 2]]) for c in by[('2', t)]):.1e} (the paper's "
+                       f"{'p1' if t == T1 else 'p2'}: {paper_k[t]:.1e}), {max(x['err_k'] for x in pts):.1e} at "
+                       f"h = {max(x['h'] for x in pts):.0e} s; the offsets grow like "
+                       f"h^{_slope(spacing, t, True) or np.nan:.1f} (row 2) and "
+                       f"h^{_slope(spacing, t, False) or np.nan:.1f} (row 3).")
+    return out or ["- No coarser spacing fits the instants of this run."]
 
 
 if __name__ == "__main__":

@@ -1,13 +1,7 @@
 """Table 3 of the seed paper: how accurately does the adapted direct procedure (Eq. 14) give the
 rotations and the node-1 torsion multiplier on the instant set [0.4 1.1 1.6 1.9 2.3] s?
 
-Relative errors (x 1e-3) of the identified theta2..theta5 at each instant against the simulated
-truth, and of the clamp's rotation multiplier (the torsion reaction at node 1) against the
-simulation's multipliers; beyond the paper, the errors of the rotation rates and accelerations,
-and the same with central-difference (measured-set) derivatives. Why the numbers are what they
-are: docs/studies/table3.md.
-
-Writes docs/tables/table3.md. Run: ``python studies/table3.py`` (``--quick`` for the CI version).
+Set-up and how to read the page: docs/studies/table3.md. Run: ``python studies/table3.py`` (``--quick``).
 """
 
 from __future__ import annotations
@@ -15,7 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from _study import Banner, cli, write_outputs
+from _study import Banner, cli, table, write_outputs
 
 from casflex.data import MeasurementSet, measured_set, simulated_set
 from casflex.identification import identify_adapted_direct
@@ -58,60 +52,40 @@ def _x3(v: float) -> str:
     return f"{1e3 * v:.2g}"
 
 
-def _span(values) -> str:
-    """'lo .. hi' (x 1e-3) of an array of relative errors."""
-    v = np.ravel(np.asarray(values, dtype=float))
-    return f"{_x3(v.min())} .. {_x3(v.max())}"
-
-
 def page(runs: dict, instants: list[float], banner: str) -> str:
     """The tables and the sentences whose numbers change (the reasons: docs/studies/table3.md)."""
     (s_lab, sim), (m_lab, meas) = runs.items()
-    L = ["# Table 3: identified rotations and torsion multiplier", "",
-         f"{banner} Adapted direct identification (`identify_adapted_direct`, start 1.0 p*, linear transform) on the "
-         f"instants {instants} s of scene `twobar` ({sim['iterations']} / {meas['iterations']} iterations, "
-         f"{sim['wall_s'] * 1e3:.0f} / {meas['wall_s'] * 1e3:.0f} ms on exact / central-difference data). Relative "
-         "errors |identified - true| / |true|, **x 1e-3**; truth: the simulated set's rotations (`data.q`) and "
-         "multipliers (`data.meta['lam']`). lambda is the clamp's rotation multiplier at node 1 (`support1.theta`), "
-         "i.e. the torsion reaction there. Paper values from the OCR of its Table 3 ('?' where unreadable). Why the "
-         "numbers are what they are: [studies/table3.md](../studies/table3.md).", "",
-         "## Rotations and multiplier (x 1e-3)", "",
-         "| t (s) | paper theta2 / theta3 / theta4 / theta5 | paper lambda | ours, simulated set: theta2 / theta3 / "
-         "theta4 / theta5 | lambda | ours, measured set: theta2 / theta3 / theta4 / theta5 | lambda |",
-         "|---:|---|---:|---|---:|---|---:|"]
-    for rs, rm in zip(sim["rows"], meas["rows"], strict=True):
-        paper = PAPER.get(round(rs["t"], 6))
-        p_rot = " / ".join("?" if v is None else f"{v:g}" for v in paper[:4]) if paper else "-"
-        L.append(f"| {rs['t']:.2f} | {p_rot} | {f'{paper[4]:g}' if paper else '-'} | "
-                 f"{' / '.join(map(_x3, rs['err'][0]))} | {_x3(rs['lam_err'])} | "
-                 f"{' / '.join(map(_x3, rm['err'][0]))} | {_x3(rm['lam_err'])} |")
-    L += ["", "## Rotation rates and accelerations (ours only, x 1e-3)", "",
-          "| t (s) | data | theta' 2 / 3 / 4 / 5 | theta'' 2 / 3 / 4 / 5 |", "|---:|---|---|---|"]
-    L += [f"| {row['t']:.2f} | {label.split(' (')[0]} | {' / '.join(map(_x3, row['err'][1]))} | "
-          f"{' / '.join(map(_x3, row['err'][2]))} |" for label, res in runs.items() for row in res["rows"]]
 
-    def err(res, what):  # every relative error of theta (0), theta' (1) or theta'' (2) of a run
-        return [row["err"][what] for row in res["rows"]]
+    def cells(row: dict, what: int) -> str:  # theta2..theta5's relative errors of theta (0), theta' (1), theta'' (2)
+        return " / ".join(map(_x3, row["err"][what]))
 
-    at = [round(row["t"], 6) for row in sim["rows"]]
-    paper_rot = [x for t, v in PAPER.items() if t in at for x in v[:4] if x is not None]
-    paper_lam = [v[4] for t, v in PAPER.items() if t in at]
+    paper = [PAPER.get(round(rs["t"], 6)) for rs in sim["rows"]]
+    paper_lam = [v[4] for v in paper if v]
     s_abs, m_abs = (max(float(row["abs_rot"].max()) for row in res["rows"]) for res in (sim, meas))
-    L += ["", "## What the numbers say", "",
-          f"- **Rotations.** Ours, from exact data: {_span(err(sim, 0))} x 1e-3 (largest absolute error {s_abs:.1e} "
-          f"rad); from central-difference data: {_span(err(meas, 0))} x 1e-3 ({m_abs:.1e} rad); the paper: "
-          f"{min(paper_rot):g} .. {max(paper_rot):g} x 1e-3.",
-          f"- **Torsion multiplier at node 1.** Ours: {_span([r['lam_err'] for r in sim['rows']])} x 1e-3 (exact "
-          f"data), {_span([r['lam_err'] for r in meas['rows']])} x 1e-3 (central differences); the paper: "
-          + (f"{min(paper_lam):g} .. {max(paper_lam):g} x 1e-3" if paper_lam else "-") + ". Ours equals |kt1 error| "
-          f"({_x3(abs(sim['kt1_err']))} x 1e-3 exact data, {_x3(abs(meas['kt1_err']))} x 1e-3 central differences) "
-          f"to {lam_vs_kt(sim):.1e} / {lam_vs_kt(meas):.1e} at every instant. The paper's varies between instants by "
-          "a factor " + (f"{max(paper_lam) / min(paper_lam):.1f}" if paper_lam else "?") + "; its kt1 = "
-          f"{PAPER_KT1:g} (Table 2) alone is an error of at least {1e3 * (PAPER_KT1 - 0.005 - 0.5) / 0.5:g} x 1e-3.",
-          f"- **Rates and accelerations.** Exact data: rates {_span(err(sim, 1))}, accelerations {_span(err(sim, 2))} "
-          f"x 1e-3; central differences: rates {_span(err(meas, 1))}, accelerations {_span(err(meas, 2))} x 1e-3.",
-          ""]
-    return "\n".join(L)
+    return "\n".join([
+        "# Table 3: identified rotations and torsion multiplier", "",
+        f"{banner} Instants {instants} s ({sim['iterations']} / {meas['iterations']} iterations, "
+        f"{sim['wall_s'] * 1e3:.0f} / {meas['wall_s'] * 1e3:.0f} ms on exact / central-difference data). Relative "
+        "errors, **x 1e-3**; the set-up and why the numbers are what they are: "
+        "[studies/table3.md](../studies/table3.md).", "", "## Rotations and multiplier (x 1e-3)", "",
+        *table(["t (s)", "paper theta2 / theta3 / theta4 / theta5", "paper lambda",
+                "ours, simulated set: theta2 / theta3 / theta4 / theta5", "lambda",
+                "ours, measured set: theta2 / theta3 / theta4 / theta5", "lambda"],
+               [[f"{rs['t']:.2f}", " / ".join("?" if v is None else f"{v:g}" for v in pp[:4]) if pp else "-",
+                 f"{pp[4]:g}" if pp else "-", cells(rs, 0), _x3(rs["lam_err"]), cells(rm, 0), _x3(rm["lam_err"])]
+                for rs, rm, pp in zip(sim["rows"], meas["rows"], paper, strict=True)], "rlrlrlr"),
+        "", "## Rotation rates and accelerations (ours only, x 1e-3)", "",
+        *table(["t (s)", "data", "theta' 2 / 3 / 4 / 5", "theta'' 2 / 3 / 4 / 5"],
+               [[f"{row['t']:.2f}", label.split(" (")[0], cells(row, 1), cells(row, 2)]
+                for label, res in runs.items() for row in res["rows"]], "rlll"),
+        "", "## What the numbers say", "",
+        f"- **Rotations.** Largest absolute error {s_abs:.1e} rad from exact data, {m_abs:.1e} rad from "
+        "central-difference data.",
+        f"- **Torsion multiplier at node 1.** Ours equals |kt1 error| ({_x3(abs(sim['kt1_err']))} x 1e-3 exact data, "
+        f"{_x3(abs(meas['kt1_err']))} x 1e-3 central differences) to {lam_vs_kt(sim):.1e} / {lam_vs_kt(meas):.1e} at "
+        "every instant. The paper's varies between instants by a factor "
+        + (f"{max(paper_lam) / min(paper_lam):.1f}" if paper_lam else "?") + f"; its kt1 = {PAPER_KT1:g} (Table 2) "
+        f"alone is an error of at least {1e3 * (PAPER_KT1 - 0.005 - 0.5) / 0.5:g} x 1e-3.", ""])
 
 
 def lam_vs_kt(res: dict) -> float:

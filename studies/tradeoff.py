@@ -1,19 +1,8 @@
-"""Speed-accuracy trade-off: which step dt, HHT alpha, mesh and inertia form reach a stated accuracy at the
-least wall time, compiled or interpreted?
+"""Speed-accuracy trade-off: which step dt, HHT alpha, mesh and inertia form reach a stated accuracy at
+the least wall time, compiled or interpreted?
 
-Twobar over 3 s: the error of the node positions (nodes 3 and 5, m) and of the joint forces (% of the
-reference's peak) against a converged reference (8 elements per bar, alpha = 0, the finest dt, its own error
-estimated by self-convergence), and the wall time of the interpreted (CasADi VM stepped from Python) and
-compiled (generated C) paths, measured side by side. One factor at a time around 1 element per bar, alpha = 0,
-``lagrange``: dt (1e-2 .. 1e-5) x alpha for both inertia forms; elements per bar {1, 2, 4, 8} x dt; ``seed``
-against ``lagrange`` on every mesh. Derived: convergence orders in dt, Pareto fronts, the recommended settings
-per stated accuracy. Asserted: order 2 for alpha = 0, compiled == interpreted, the reference resolves the
-tightest accuracy, the mesh converges, compiled is faster, the headline accuracy is reachable (the order for
-alpha < 0 is reported, not asserted). Definitions and the reading of the results: docs/studies/tradeoff.md.
-
-Writes docs/tables/tradeoff.md and docs/figures/tradeoff.png. Run: ``python studies/tradeoff.py`` (10-15 min
-on a loaded 2-core machine with the C libraries cached, about 5 min more to build them) or ``--quick``
-(a 0.5 s horizon and a reduced grid).
+Set-up and how to read the page: docs/studies/tradeoff.md. Run: ``python studies/tradeoff.py`` (10-15 min;
+``--quick``: 0.5 s, a reduced grid).
 """
 
 from __future__ import annotations
@@ -22,7 +11,7 @@ import os
 from pathlib import Path
 
 import numpy as np
-from _study import Banner, best_of, cli, png, write_outputs
+from _study import Banner, best_of, cli, png, table, write_outputs
 from _tradeoff import CENTRE, GRID_STEP, Config, Models, fmt_alpha, fmt_e, grid, measure, ms, plan_for, run, tasks_for
 
 from casflex.simulate import simulate
@@ -160,23 +149,24 @@ def _setting(r: dict, cost: float, inertia: bool = True) -> str:
 def _recommendations(plan: dict, rows: list[dict], recs: list[dict]) -> list[str]:
     L = ["## Recommended settings for a stated accuracy", "",
          "Chosen by the script from the measured tables, by the rule in [studies/tradeoff.md](../studies/tradeoff.md"
-         "#recommended-settings)." + _noise(rows), "",
-         "| accuracy: positions / forces | resolved by the reference | path | dt (s) | alpha | elements/bar | "
-         "inertia | cost (median of n) | this setting's time | position error (m) | force error (%) |",
-         "|---|:-:|---|---:|---:|---:|---|---:|---:|---:|---:|"]
-    for rc in recs:
-        head = f"| {rc['pos']:g} m / {rc['force']:g} % | " + {True: "yes", False: "**no**", None: "mesh part not "
-                                                              "estimated"}[rc["resolved"]]
-        for key, path in (("compiled", "compiled"), ("interp", "interpreted")):
-            if rc[key] is None:
-                L.append(f"{head} | {path} | none measured | | | | | | | |")
-                continue
-            r, cost, n = rc[key]
-            star = "*" if key == "interp" and r["interp_projected"] else ""
-            L.append(f"{head} | {path} | {r['dt']:g} | {fmt_alpha(r['cfg'].alpha)} | {r['cfg'].elements} | "
-                     f"{r['cfg'].inertia} | {ms(cost)}{star} ({n}) | {ms(r[key + '_s'])}{star} | "
-                     f"{r['err']['pos']:.2e} | {r['err']['force_rel']:.2e} |")
-    L.append("")
+         "#recommended-settings)." + _noise(rows), ""]
+
+    def cells(rc: dict, key: str) -> list:
+        if rc[key] is None:
+            return ["none measured", *[""] * 7]
+        r, cost, n = rc[key]
+        star = "*" if key == "interp" and r["interp_projected"] else ""
+        return [f"{r['dt']:g}", fmt_alpha(r["cfg"].alpha), r["cfg"].elements, r["cfg"].inertia,
+                f"{ms(cost)}{star} ({n})", f"{ms(r[key + '_s'])}{star}", f"{r['err']['pos']:.2e}",
+                f"{r['err']['force_rel']:.2e}"]
+
+    L += [*table(["accuracy: positions / forces", "resolved by the reference", "path", "dt (s)", "alpha",
+                  "elements/bar", "inertia", "cost (median of n)", "this setting's time", "position error (m)",
+                  "force error (%)"],
+                 [[f"{rc['pos']:g} m / {rc['force']:g} %", {True: "yes", False: "**no**", None: "mesh part not "
+                                                              "estimated"}[rc["resolved"]], path, *cells(rc, key)]
+                  for rc in recs for key, path in (("compiled", "compiled"), ("interp", "interpreted"))],
+                 "lclrrrlrrrr"), ""]
     head = next(rc for rc in recs if (rc["pos"], rc["force"]) == HEADLINE)["compiled"]
     if head is not None:
         r, cost, n = head
@@ -216,11 +206,9 @@ def _page(quick: bool, plan: dict, rows: list[dict], an: dict, checks: list, ban
         "compiled/interpreted, measured side by side, are more reliable." if max(banner.load0, load) > 0.5 * (
             os.cpu_count() or 1) else ""), "", "## Setup", "",
          f"Horizon **{t_end:g} s**; reference **{meshes[-1]} elements per bar, alpha = 0, dt = {fine:g} s, "
-         f"`lagrange`** (compiled); errors on the grid t = 0, {GRID_STEP:g}, ..., {t_end:g} s; one factor at a time "
-         f"around the centre ({CENTRE.label})" + (f", the meshes also at alpha = {fmt_alpha(plan['alt_alpha'])}"
-                                                 if plan["alt_alpha"] is not None else "")
-         + f". Interpreted time: over the whole horizon up to {window} steps (dt >= {t_end / window:g} s), else over "
-         f"the **first {window} steps**, projected (marked `*`). Projection check: centre setting at dt = "
+         f"`lagrange`**; errors on the grid t = 0, {GRID_STEP:g}, ..., {t_end:g} s. Interpreted time: over the whole "
+         f"horizon up to {window} steps, else over the **first {window} steps**, projected (marked `*`). Projection "
+         "check: centre setting at dt = "
          f"{plan['validate_dt']:g} s, interpreted over the whole {t_end:g} s measured {v_full:.2f} s against "
          f"{vrow['interp_s']:.2f} s projected from {vrow['interp_steps']} steps (ratio measured/projected "
          f"**{v_ratio:.2f}**" + ("; the projected interpreted times are probably optimistic by about this factor)."
@@ -230,19 +218,18 @@ def _page(quick: bool, plan: dict, rows: list[dict], an: dict, checks: list, ban
          "[studies/tradeoff.md](../studies/tradeoff.md).", ""]
     L += _recommendations(plan, rows, an["recs"])
     d_time, rt, rm, re_, ratio = an["d_time"], an["ref_time"], an["ref_mesh"], an["ref_err"], an["mesh_ratio"]
-    L += ["## The reference and its self-convergence", "", "| comparison | position diff. (m) | force diff. (%) |",
-          "|---|---:|---:|", f"| reference vs {meshes[-1]} el., dt = {2 * fine:g} s | {d_time['pos']:.2e} | "
-          f"{d_time['force_rel']:.2e} |"]
-    L += [f"| reference vs {ne} el., dt = {fine:g} s (mesh error of {ne} el.) | {d['pos']:.2e} | "
-          f"{d['force_rel']:.2e} |" for ne, d in an["mesh_d"].items()]
+    L += ["## The reference and its self-convergence", "", *table(
+        ["comparison", "position diff. (m)", "force diff. (%)"],
+        [[f"reference vs {meshes[-1]} el., dt = {2 * fine:g} s", f"{d_time['pos']:.2e}", f"{d_time['force_rel']:.2e}"]]
+        + [[f"reference vs {ne} el., dt = {fine:g} s (mesh error of {ne} el.)", f"{d['pos']:.2e}",
+            f"{d['force_rel']:.2e}"] for ne, d in an["mesh_d"].items()], "lrr")]
     L += ["", f"Estimated error of the reference: time discretisation {rt['pos']:.1e} m / {rt['force_rel']:.1e} % "
           "(difference to 2 dt divided by 2^2 - 1, order 2 as measured below); "
           + (f"mesh {rm['pos']:.1e} m / {rm['force_rel']:.1e} % (geometric extrapolation: the difference between "
              f"{meshes[-3]} and {meshes[-2]} el. is {ratio['pos']:.1f}x (positions) and {ratio['force_rel']:.1f}x "
              f"(forces) that between {meshes[-2]} and {meshes[-1]} el.)" if np.isfinite(rm["pos"]) else
              "mesh: not estimated (needs three meshes; quick mode has two)")
-          + f". Total {re_['pos']:.1e} m / {re_['force_rel']:.1e} %: errors well above that are resolved; a stated "
-          "accuracy counts as resolved when it is at least 10x the estimate.", ""]
+          + f". Total {re_['pos']:.1e} m / {re_['force_rel']:.1e} %.", ""]
 
     def interp_cell(r):
         return "" if r["interp_s"] is None else (f"{ms(r['interp_s'])}{'*' if r['interp_projected'] else ''} "
@@ -286,23 +273,23 @@ def _page(quick: bool, plan: dict, rows: list[dict], an: dict, checks: list, ban
                [f"alpha {fmt_alpha(a)}" for a in plan["seed_alphas"]], dts, rowmap, force, t_end)
     L += ["## Pareto fronts", "", f"![Pareto plot](../figures/tradeoff{'_quick' * quick}.png)", "",
           "Non-dominated settings (no other measured setting is both faster and more accurate), node positions:", "",
-          "| path | setting | dt (s) | wall time | position error (m) | force error (%) |",
-          "|---|---|---:|---:|---:|---:|"]
-    for key, path in (("compiled_s", "compiled"), ("interp_s", "interpreted")):
-        L += [f"| {path} | {r['cfg'].label} | {r['dt']:g} | {ms(r[key])}"
-              f"{'*' if key == 'interp_s' and r['interp_projected'] else ''} | {pos(r)} | {force(r)} |"
-              for r in an["fronts"][(key, "pos")]]
-    L += ["", "## Findings", "", *_findings(plan, rows, rowmap, an), "", "## One-off builds (not in the times above)",
-          "", "| setting | dofs | integrator build (s) | C library (s) |", "|---|---:|---:|---:|"]
-    L += [f"| {cfg.label} | {b['n_dof']} | {b['integrator_s']:.2f} | {b['library_s']:.2f} "
-          f"({'cached' if b['cached'] else 'compiled'}) |" for cfg, b in an["builds"].items()]
-    L.append("")
+          *table(["path", "setting", "dt (s)", "wall time", "position error (m)", "force error (%)"],
+                 [[path, r["cfg"].label, f"{r['dt']:g}",
+                   ms(r[key]) + ("*" if key == "interp_s" and r["interp_projected"] else ""), pos(r), force(r)]
+                  for key, path in (("compiled_s", "compiled"), ("interp_s", "interpreted"))
+                  for r in an["fronts"][(key, "pos")]], "llrrrr"),
+          "", "## One-off builds (not in the times above)", "",
+          *table(["setting", "dofs", "integrator build (s)", "C library (s)"],
+                 [[cfg.label, b["n_dof"], f"{b['integrator_s']:.2f}",
+                   f"{b['library_s']:.2f} ({'cached' if b['cached'] else 'compiled'})"]
+                  for cfg, b in an["builds"].items()], "lrrr"), ""]
     if failed := [r for r in rows if not r["ok"]]:
         L += ["Runs that failed: " + "; ".join(f"{r['cfg'].label} dt {r['dt']:g}: {r['message']}" for r in failed), ""]
-    L += ["## Self-checks", "", "Asserted checks stop the script when they fail (after this page is written).", "",
-          "| check | value | asserted | result |", "|---|---|:-:|:-:|"]
-    return L + [f"| {name} | {val} | {'yes' if asserted else 'no'} | {'pass' if ok else '**FAIL**'} |"
-                for name, ok, val, asserted in checks]
+    return L + ["## Self-checks", "", "Asserted checks stop the script when they fail (after this page is written).",
+                "",
+                *table(["check", "value", "asserted", "result"],
+                       [[name, val, "yes" if asserted else "no", "pass" if ok else "**FAIL**"]
+                        for name, ok, val, asserted in checks], "llcc")]
 
 
 def _orders(plan: dict, orders: dict, rowmap: dict) -> list[str]:
@@ -311,12 +298,11 @@ def _orders(plan: dict, orders: dict, rowmap: dict) -> list[str]:
          f"Least-squares slope of log(error) vs log(dt) over {plan['fit'][0]:g} <= dt <= {plan['fit'][1]:g} s, the "
          f"error measured against the same model (mesh, inertia form) at dt = {fine:g} s, alpha = 0."
          + (f" The last two columns fit the small steps only, {small[0]:g} <= dt <= {small[1]:g} s." if small else ""),
-         "", "| setting | points | order, node positions | order, joint forces |"
-         + (" order, positions, small dt | order, forces, small dt |" if small else ""),
-         "|---|---:|---:|---:|" + ("---:|---:|" if small else "")]
-    L += [f"| {cfg.label} | {o['n']} | {o['pos']:.3f} | {o['force']:.3f} |"
-          + (f" {fmt_e(o['pos_small'], '.3f')} | {fmt_e(o['force_small'], '.3f')} |" if small else "")
-          for cfg, o in orders.items() if o["n"] >= 2]
+         "", *table(["setting", "points", "order, node positions", "order, joint forces",
+                     *(["order, positions, small dt", "order, forces, small dt"] if small else [])],
+                    [[cfg.label, o["n"], f"{o['pos']:.3f}", f"{o['force']:.3f}",
+                      *([fmt_e(o["pos_small"], ".3f"), fmt_e(o["force_small"], ".3f")] if small else [])]
+                     for cfg, o in orders.items() if o["n"] >= 2], "lrrr" + "rr" * bool(small))]
     lin = [(a, r["err_dt"]["pos"]) for a in plan["alphas"] if a != 0.0
            and (r := rowmap.get((Config(1, "lagrange", a), fine))) is not None]
     return L + ([""] + ([f"Difference between alpha < 0 and alpha = 0 at the same dt = {fine:g} s (1 el., `lagrange`), "
@@ -328,74 +314,27 @@ def _orders(plan: dict, orders: dict, rowmap: dict) -> list[str]:
 def _inertia(plan: dict, rows: list[dict], seed_cmp: list[dict]) -> list[str]:
     fine = plan["dt_fine"]
     L = ["## Factor: inertia form (`seed` vs `lagrange`)", "",
-         f"Both forms on every mesh at dt = {fine:g} s, alpha = 0:",
-         "", "| elements/bar | seed - lagrange, positions (m) | seed - lagrange, forces (%) | seed vs reference (m) | "
-         "lagrange vs reference (m) |", "|---:|---:|---:|---:|---:|"]
-    L += [f"| {c['ne']} | {c['diff']['pos']:.2e} | {c['diff']['force_rel']:.2e} | {c['seed_err']['pos']:.2e} | "
-          + ("0 (reference)" if c["lag_err"] is None else f"{c['lag_err']['pos']:.2e}") + " |" for c in seed_cmp]
-    L.append("")
-    if len(seed_cmp) >= 2:
-        first, last = seed_cmp[0], seed_cmp[-1]
-        L += [f"Measured: the difference between the two forms falls from {first['diff']['pos']:.1e} m at "
-              f"{first['ne']} element(s) per bar to {last['diff']['pos']:.1e} m at {last['ne']}, so "
-              + ("**`seed` converges to the same solution as `lagrange` under mesh refinement** (why: "
-                 "[studies/tradeoff.md](../studies/tradeoff.md#inertia-form))."
-                 if last["diff"]["pos"] < 0.1 * first["diff"]["pos"] else "the two forms do **not** approach each "
-                 "other under mesh refinement here: `seed` is a different model, not a different discretisation."), ""]
+         f"Both forms on every mesh at dt = {fine:g} s, alpha = 0 (how to read it: "
+         "[studies/tradeoff.md](../studies/tradeoff.md#inertia-form)):", "",
+         *table(["elements/bar", "seed - lagrange, positions (m)", "seed - lagrange, forces (%)",
+                 "seed vs reference (m)", "lagrange vs reference (m)"],
+                [[c["ne"], f"{c['diff']['pos']:.2e}", f"{c['diff']['force_rel']:.2e}", f"{c['seed_err']['pos']:.2e}",
+                  "0 (reference)" if c["lag_err"] is None else f"{c['lag_err']['pos']:.2e}"] for c in seed_cmp],
+                "rrrrr"), ""]
     dr = [(r["cfg"].inertia, r["dt"], r["drift"]) for r in rows
           if r["cfg"].elements == 1 and r["cfg"].alpha == 0.0 and r["dt"] in (1e-3, fine) and r["ok"]]
     return L + (["Energy drift, max |E(t) - E(0)| over the grid (1 el., alpha = 0; gravity and strain energy "
                  "included): " + ", ".join(f"{i} dt {d:g}: {v:.2e} J" for i, d, v in dr) + ".", ""] if dr else [])
 
 
-def _findings(plan: dict, rows: list[dict], rowmap: dict, an: dict) -> list[str]:
-    out, orders, mesh_d = [], an["orders"], an["mesh_d"]
-    dt0 = 1e-3 if any(r["dt"] == 1e-3 for r in rows) else plan["dts"][-1]
-    errs = {a: r["err_dt"]["pos"] for a in plan["alphas"] if (r := rowmap.get((Config(1, "lagrange", a), dt0)))}
-    if len(errs) >= 2:
-        a_last = plan["alphas"][-1]
-        out.append(f"- **alpha**: at dt = {dt0:g} s the time-discretisation error of the positions is "
-                   + ", ".join(f"{v:.2e} m (alpha {fmt_alpha(a)})" for a, v in errs.items())
-                   + f"; the smallest is at alpha = {fmt_alpha(min(errs, key=errs.get))}; "
-                   f"alpha = {fmt_alpha(a_last)} costs "
-                   f"{errs[a_last] / errs[0.0]:.1f}x the error of alpha = 0 at the same cost per step.")
-    if mesh_d:
-        ne1 = min(mesh_d)
-        out.append(f"- **mesh**: with {ne1} element per bar the error cannot go below the mesh error "
-                   f"{mesh_d[ne1]['pos']:.1e} m / {mesh_d[ne1]['force_rel']:.1e} % (at dt = {plan['dt_fine']:g} s), "
-                   "whatever the step" + "".join(f"; {ne} el.: {d['pos']:.1e} m / {d['force_rel']:.1e} %"
-                                                 for ne, d in mesh_d.items() if ne != ne1) + ".")
-    red = [(c, o) for c, o in orders.items() if c.alpha != 0.0 and o["n"] >= 2 and not 1.5 <= o["pos"] <= 2.5]
-    if red:
-        out.append("- **order reduction for alpha < 0 (a defect: HHT-alpha is second order, `tests/test_hht.py`)**: "
-                   "fitted orders " + ", ".join(f"{o['pos']:.2f} ({c.label})" for c, o in red) + ".")
-    if o := orders.get(CENTRE):
-        out.append(f"- **order**: positions converge at order {o['pos']:.2f} and joint forces at {o['force']:.2f} in "
-                   "dt for alpha = 0 (the table above gives all settings).")
-    dt_c = 1e-3 if plan["t_end"] < 1 else 1e-4
-    per = {ne: r["compiled_s"] / r["steps"] for ne in plan["meshes"]
-           if (r := rowmap.get((Config(ne, "lagrange", 0.0), dt_c))) is not None and r["compiled_s"]}
-    if len(per) >= 2:
-        out.append("- **cost per step, compiled**: " + ", ".join(f"{ne} el.: {v * 1e6:.1f} us" for ne, v in per.items())
-                   + " (same dt).")
-    sp = [(r["dt"], r["interp_s"] / r["compiled_s"]) for r in rows if r["ok"] and r["interp_s"] and r["compiled_s"]]
-    if sp:
-        v = [x for _, x in sp]
-        coarse, small = [x for d, x in sp if d >= 5e-3], [x for d, x in sp if d <= 1e-3]
-        out.append(f"- **compiled vs interpreted**: the compiled path is {np.median(v):.0f}x faster (median over "
-                   f"{len(v)} settings, range {min(v):.0f}-{max(v):.0f}x)"
-                   + (f"; median {np.median(coarse):.0f}x for dt >= 5e-3 and {np.median(small):.0f}x for dt <= 1e-3"
-                      if coarse and small else "") + ".")
-    return out
-
-
 def _figure(an: dict, plan: dict):
     """Error against wall time, compiled and interpreted, positions and forces, with the Pareto fronts."""
-    from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
 
+    from casflex.plotting._figure import _new_figure
+
     cand = an["cand"]
-    fig = Figure(figsize=(13, 10.5), layout="constrained")
+    fig = _new_figure((13, 10.5))
     axes = fig.subplots(2, 2)
     alphas = list(dict.fromkeys(r["cfg"].alpha for r in cand if r["cfg"].elements == 1))
     meshes = sorted({r["cfg"].elements for r in cand})
@@ -438,6 +377,7 @@ def _figure(an: dict, plan: dict):
                    f"{'compiled C' if col == 0 else 'interpreted'} (s)",
                    ylabel="max error, nodes 3 and 5 (m)" if ek == "pos" else "max joint force error (% of peak)")
             ax.grid(True, which="both", alpha=0.25)
+            ax.tick_params(which="minor", labelsize="x-small")  # a narrow log range labels its minor ticks
             ax.set_title(f"{'node positions' if ek == 'pos' else 'joint forces'}, "
                          f"{'compiled' if col == 0 else 'interpreted (hollow: projected from the first steps)'}",
                          fontsize="medium")

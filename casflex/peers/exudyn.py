@@ -29,6 +29,12 @@ The translation, element by element (the same continuum, another discretisation 
 - time integration: implicit generalized-alpha without numerical damping (spectral radius 1: the
   trapezoidal rule, as HHT alpha = 0), Newton on the increment to ``newton_tol``.
 
+``beam="ge"`` builds the beams of ``ObjectBeamGeometricallyExact2D`` elements instead (on ``NodeRigidBody2D``
+nodes: x, y, theta), a Timoshenko beam with the section's rotary inertia rho I and shear stiffness
+kappa G A (kappa = 5/6, G = E / (2 (1 + 0.3))): the continuum of casflex's beam with ``rotary_inertia = true``
+up to shear (studies/bench_exudyn.py compares the two). Its nodal rotation is Exudyn's theta; it takes no
+beam damping.
+
 What casflex has and this translation does not (:class:`NotImplementedError` naming it): load
 tables, follower loads, moving supports, rigid bodies (and markers on them), rotary inertia, a node
 where two beams meet, a clamp on a beam end at an angle, a damper on a zero-length spring (casflex
@@ -71,7 +77,9 @@ class ExudynModel:
     t_end: float
 
 
-def _check_supported(scene: Scene) -> None:
+def _check_supported(scene: Scene, beam: str) -> None:
+    if beam not in ("ancf", "ge"):
+        raise ValueError(f"beam: {beam!r} is not an Exudyn beam of this translation (ancf, ge)")
     if any(sp.motion is not None for sp in scene.supports):
         raise NotImplementedError("moving supports (motion) are not translated to Exudyn")
     if any(ld.follower for ld in scene.loads):
@@ -80,8 +88,10 @@ def _check_supported(scene: Scene) -> None:
         raise NotImplementedError("load tables are not translated to Exudyn (constant loads only)")
     if scene.bodies:
         raise NotImplementedError("rigid bodies are not translated to Exudyn (nor markers on them)")
-    if any(b.rotary_inertia for b in scene.beams):
-        raise NotImplementedError("rotary inertia: Exudyn's ANCF cable element has none")
+    if beam == "ancf" and any(b.rotary_inertia for b in scene.beams):
+        raise NotImplementedError("rotary inertia: Exudyn's ANCF cable element has none (beam='ge' has)")
+    if beam == "ge" and any(b.beta for b in scene.beams):
+        raise NotImplementedError("beam damping (beta) on the geometrically exact beam is not translated")
     for sp in scene.springs:
         if sp.c and (scene.distance(*sp.nodes) if sp.rest_length is None else sp.rest_length) == 0.0:
             raise NotImplementedError(f"spring {sp.name!r}: a damper on a zero-length spring is not translated")
@@ -92,11 +102,13 @@ def _check_supported(scene: Scene) -> None:
                                   "not translated)")
 
 
-def build(scene: Scene, *, elements: int, h: float, t_end: float, newton_tol: float = 1e-10) -> ExudynModel:
-    """The Exudyn model of ``scene``: every beam meshed into ``elements`` ANCF elements, steps of
-    ``h`` s to ``t_end`` s, Newton increments to ``newton_tol``; sensors (Position, Coordinates and
-    their rates of every scene node) recording every step."""
-    _check_supported(scene)  # before the import: what is not translated is said with or without Exudyn
+def build(scene: Scene, *, elements: int, h: float, t_end: float, newton_tol: float = 1e-10, beam: str = "ancf",
+          record: tuple[str, ...] | None = None) -> ExudynModel:
+    """The Exudyn model of ``scene``: every beam meshed into ``elements`` elements of the Exudyn beam
+    ``beam`` ("ancf" or "ge", see the module's docstring), steps of ``h`` s to ``t_end`` s, Newton increments
+    to ``newton_tol``; sensors (Coordinates and their rates) of the scene nodes ``record`` (default: every node)
+    and of the markers, recording every step."""
+    _check_supported(scene, beam)  # before the import: what is not translated is said with or without Exudyn
     exu = _exudyn()
     from exudyn import itemInterface as ii
 
@@ -122,16 +134,21 @@ def build(scene: Scene, *, elements: int, h: float, t_end: float, newton_tol: fl
         chain = []
         for k in range(elements + 1):
             s = k / elements
-            chain.append(mbs.AddNode(ii.NodePoint2DSlope1(
-                referenceCoordinates=[na.x + s * (nb.x - na.x), na.y + s * (nb.y - na.y), ex, ey],
-                initialVelocities=velocity(na, s, nb, (ex, ey)))))
+            xy, v = [na.x + s * (nb.x - na.x), na.y + s * (nb.y - na.y)], velocity(na, s, nb, (ex, ey))
+            chain.append(mbs.AddNode(ii.NodePoint2DSlope1(referenceCoordinates=[*xy, ex, ey], initialVelocities=v)
+                                     if beam == "ancf" else ii.NodeRigidBody2D(
+                referenceCoordinates=[*xy, math.atan2(ey, ex)],
+                initialVelocities=[*v[:2], (1 - s) * na.omega + s * nb.omega])))
         nodes[na.name], nodes[nb.name] = (chain[0], (ex, ey)), (chain[-1], (ex, ey))
         objects[b.name] = (na, L, ex, ey, [])
         for k in range(elements):
-            obj = mbs.AddObject(ii.ObjectANCFCable2D(nodeNumbers=[chain[k], chain[k + 1]], length=L / elements,
-                                                     massPerLength=b.rho * b.A, bendingStiffness=b.E * b.I,
-                                                     axialStiffness=b.E * b.A, bendingDamping=b.beta * b.E * b.I,
-                                                     axialDamping=b.beta * b.E * b.A))
+            common = {"nodeNumbers": [chain[k], chain[k + 1]], "length": L / elements, "massPerLength": b.rho * b.A,
+                      "bendingStiffness": b.E * b.I, "axialStiffness": b.E * b.A}
+            obj = mbs.AddObject(ii.ObjectANCFCable2D(**common, bendingDamping=b.beta * b.E * b.I,
+                                                     axialDamping=b.beta * b.E * b.A) if beam == "ancf" else
+                                ii.ObjectBeamGeometricallyExact2D(**common, crossSectionInertia=b.rho * b.I,
+                                                                  shearStiffness=5 / 6 * b.E / 2.6 * b.A,
+                                                                  includeReferenceRotations=True))
             objects[b.name][4].append(obj)
             mark = mbs.AddMarker(ii.MarkerBodyMass(bodyNumber=obj))
             mbs.AddLoad(ii.LoadMassProportional(markerNumber=mark, loadVector=[gx, gy, 0.0]))
@@ -144,8 +161,9 @@ def build(scene: Scene, *, elements: int, h: float, t_end: float, newton_tol: fl
             if name not in supports or supports[name].kind != "clamp":
                 raise NotImplementedError(f"node {name!r}: a node that is no beam end must be clamped (it has no mass)")
             slope = nodes[other][1] if other in nodes else (1.0, 0.0)
-            nodes[name] = (mbs.AddNode(ii.NodePoint2DSlope1(
-                referenceCoordinates=[state[name].x, state[name].y, *slope])), slope)
+            nodes[name] = (mbs.AddNode(ii.NodePoint2DSlope1(referenceCoordinates=[state[name].x, state[name].y, *slope])
+                                       if beam == "ancf" else ii.NodeRigidBody2D(
+                referenceCoordinates=[state[name].x, state[name].y, math.atan2(slope[1], slope[0])])), slope)
 
     def fix(node: int, coordinate: int) -> None:
         mn = mbs.AddMarker(ii.MarkerNodeCoordinate(nodeNumber=node, coordinate=coordinate))
@@ -156,7 +174,9 @@ def build(scene: Scene, *, elements: int, h: float, t_end: float, newton_tol: fl
     for s in scene.supports:
         node, (sx, sy) = nodes[s.node]
         coords = [c for d, c in (("x", 0), ("y", 1)) if d in s.dofs]
-        if "theta" in s.dofs:
+        if "theta" in s.dofs and beam == "ge":  # a rigid-body node: its rotation is a coordinate
+            coords.append(2)
+        elif "theta" in s.dofs:
             if s.node not in beam_ends:
                 coords += [2, 3]
             elif abs(sx) < 1e-14 or abs(sy) < 1e-14:
@@ -175,8 +195,8 @@ def build(scene: Scene, *, elements: int, h: float, t_end: float, newton_tol: fl
     for ts in scene.torsion_springs:
         a, b = ts.nodes
         rest = state[b].theta - state[a].theta if ts.rest_angle is None else ts.rest_angle
-        # Exudyn's angle is that of node b's frame relative to node a's, the frames of slope nodes being
-        # the slope directions: psi = psi_0 + theta - theta_0, so kt (theta_b - theta_a - rest) is
+        # Exudyn's angle is that of node b's frame relative to node a's, the frames of slope (and of ge)
+        # nodes being the beam directions: psi = psi_0 + theta - theta_0, so kt (theta_b - theta_a - rest) is
         # kt (psi_b - psi_a - offset) with this offset
         psi = {n: math.atan2(nodes[n][1][1], nodes[n][1][0]) for n in (a, b)}
         offset = rest + (psi[b] - psi[a]) - (state[b].theta - state[a].theta)
@@ -197,7 +217,7 @@ def build(scene: Scene, *, elements: int, h: float, t_end: float, newton_tol: fl
     sensors = {name: {kind: mbs.AddSensor(ii.SensorNode(nodeNumber=node, storeInternal=True, writeToFile=False,
                                                         outputVariableType=getattr(out, kind)))
                       for kind in ("Coordinates", "Coordinates_t", "Coordinates_tt")}
-               for name, (node, _) in nodes.items()}
+               for name, (node, _) in nodes.items() if record is None or name in record}
     for mk in scene.markers:  # on a beam (bodies are refused): the element's point at (along, across)
         na, L, ex, ey, objs = objects[mk.on]
         along = (mk.x - na.x) * ex + (mk.y - na.y) * ey
@@ -225,7 +245,7 @@ def build(scene: Scene, *, elements: int, h: float, t_end: float, newton_tol: fl
 
 
 def simulate(scene: Scene, t_end: float, *, elements: int = 8, h: float = 1e-4, sample_dt: float = 1e-3,
-             newton_tol: float = 1e-10) -> MeasurementSet:
+             newton_tol: float = 1e-10, beam: str = "ancf") -> MeasurementSet:
     """Exudyn's motion of ``scene`` from t = 0 to ``t_end`` s, sampled every ``sample_dt`` s.
 
     Parameters
@@ -233,7 +253,10 @@ def simulate(scene: Scene, t_end: float, *, elements: int = 8, h: float = 1e-4, 
     scene : Scene
         Its current property values are simulated (e.g. ``scene.with_values(k1=800)``).
     elements : int
-        ANCF elements per beam.
+        Elements per beam.
+    beam : str
+        "ancf" (Euler-Bernoulli, no rotary inertia) or "ge" (geometrically exact, with shear and rotary
+        inertia); see the module's docstring.
     h, sample_dt : float, s
         Integration step and sample spacing (a whole number of steps).
 
@@ -248,7 +271,7 @@ def simulate(scene: Scene, t_end: float, *, elements: int = 8, h: float = 1e-4, 
     every = int(round(sample_dt / h))
     if every < 1 or abs(every * h - sample_dt) > 1e-9 * sample_dt:
         raise ValueError(f"sample_dt: {sample_dt:g} s is not a whole number of steps h = {h:g} s")
-    m = build(scene, elements=elements, h=h, t_end=t_end, newton_tol=newton_tol)
+    m = build(scene, elements=elements, h=h, t_end=t_end, newton_tol=newton_tol, beam=beam)
     if not m.mbs.SolveDynamic(m.settings):
         raise RuntimeError("Exudyn's dynamic solver failed")
     n = int(round(t_end / h))
@@ -261,15 +284,20 @@ def simulate(scene: Scene, t_end: float, *, elements: int = 8, h: float = 1e-4, 
         c, c_t, c_tt = (np.asarray(m.mbs.GetSensorStoredData(m.sensors[node.name][k]))[rows]
                         for k in ("Coordinates", "Coordinates_t", "Coordinates_tt"))
         t = c[:, 0]
-        x, y, sx, sy = (ref[None, :] + c[:, 1:5]).T
-        vx, vy, sxd, syd = c_t[:, 1:5].T
-        ax, ay, sxdd, sydd = c_tt[:, 1:5].T
-        s2 = sx**2 + sy**2
-        cross_d = sx * syd - sy * sxd
-        theta = node.theta + np.unwrap(np.arctan2(sy, sx)) - math.atan2(sy0, sx0)
-        omega = cross_d / s2
-        # d/dt (s x s' / |s|^2)
-        alpha = (sx * sydd - sy * sxdd) / s2 - 2 * cross_d * (sx * sxd + sy * syd) / s2**2
+        if beam == "ge":  # a rigid-body node: x, y and its rotation psi, psi(0) the beam's direction
+            x, y, psi = (ref[None, :] + c[:, 1:4]).T
+            (vx, vy, omega), (ax, ay, alpha) = c_t[:, 1:4].T, c_tt[:, 1:4].T
+            theta = node.theta + psi - ref[2]
+        else:
+            x, y, sx, sy = (ref[None, :] + c[:, 1:5]).T
+            vx, vy, sxd, syd = c_t[:, 1:5].T
+            ax, ay, sxdd, sydd = c_tt[:, 1:5].T
+            s2 = sx**2 + sy**2
+            cross_d = sx * syd - sy * sxd
+            theta = node.theta + np.unwrap(np.arctan2(sy, sx)) - math.atan2(sy0, sx0)
+            omega = cross_d / s2
+            # d/dt (s x s' / |s|^2)
+            alpha = (sx * sydd - sy * sxdd) / s2 - 2 * cross_d * (sx * sxd + sy * syd) / s2**2
         channels += [f"x{node.name}", f"y{node.name}", f"theta{node.name}"]
         cols["q"] += [x, y, theta]
         cols["qd"] += [vx, vy, omega]
@@ -283,6 +311,6 @@ def simulate(scene: Scene, t_end: float, *, elements: int = 8, h: float = 1e-4, 
         cols["qdd"] += [np.full(c.shape[0], np.nan)] * 2
     return MeasurementSet(t, tuple(channels), *(np.column_stack(cols[k]) for k in ("q", "qd", "qdd")),
                           source="exudyn",
-                          meta={"code": f"Exudyn {exu.__version__}", "elements": elements, "h": h,
+                          meta={"code": f"Exudyn {exu.__version__}", "beam": beam, "elements": elements, "h": h,
                                 "integrator": "generalized-alpha, spectral radius 1", "newton_tol": newton_tol,
                                 "scene": scene.name})
