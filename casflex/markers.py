@@ -42,7 +42,7 @@ class Marker:
     y: float
 
     def __post_init__(self) -> None:
-        from casflex.scene import _name, _number, _owner
+        from casflex.scene_items import _name, _number, _owner
 
         where = _owner("marker", self.name)
         object.__setattr__(self, "name", _name(where, "name", self.name))

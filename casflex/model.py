@@ -33,8 +33,9 @@ import numpy as np
 from casflex.assembly import ElementGroup, MatrixAssembly, gather, scatter
 from casflex.constraints import FixedDof, constraint_vector, prescribed, support_constraints
 from casflex.elements import BeamElement
-from casflex.elements.kernels import DAMPERS, KINDS, NONCONSERVATIVE, kernel
-from casflex.scene import INERTIA_FORMS, Parameter, Scene, SceneError
+from casflex.elements.kernels import AT_POINTS, DAMPERS, KINDS, NONCONSERVATIVE, kernel
+from casflex.scene import Parameter, Scene, SceneError
+from casflex.scene_items import INERTIA_FORMS
 
 __all__ = ["Model", "assemble", "INERTIA_FORMS"]
 
@@ -233,17 +234,32 @@ def _groups(scene: Scene, order, nodes, beam_elems, idx) -> tuple[ElementGroup, 
                       [el.L0, *el.offsets, b.E, b.A, b.I, b.rho, float(b.rotary_inertia)],
                       ("", "", "", "E", "A", "I", "rho", "")))
     group("beam", beams)
-    springs, zero = [], []
+    def ends(s) -> tuple[list[int], list[float]]:
+        """A spring's dofs and, for ends at points off its nodes, the points' offsets in the nodes'
+        frames, R(theta0)^T (point - node) (m); only such springs carry their nodes' rotations."""
+        if s.point_a is None and s.point_b is None:
+            return [idx[s.nodes[0]], idx[s.nodes[0]] + 1, idx[s.nodes[1]], idx[s.nodes[1]] + 1], []
+        offsets = []
+        for nd, (px, py) in zip(s.nodes, scene.spring_ends(s), strict=True):
+            x0, y0, th0 = nodes[nd][:3]
+            c, s_ = math.cos(th0), math.sin(th0)
+            offsets += [c * (px - x0) + s_ * (py - y0), -s_ * (px - x0) + c * (py - y0)]
+        return [idx[nd] + j for nd in s.nodes for j in range(3)], offsets
+
+    springs: dict[str, list] = {"spring": [], "spring0": [], "ospring": [], "ospring0": []}
+    zero_names = set()
     for s in scene.springs:
-        a, b2 = s.nodes
-        dofs = [idx[a], idx[a] + 1, idx[b2], idx[b2] + 1]
-        rest = scene.distance(a, b2) if s.rest_length is None else s.rest_length
-        if rest == 0.0 and f"{s.name}.rest_length" not in slot_of:  # smooth where the nodes meet
-            zero.append((s.name, s.name, dofs, [s.k], ("k",)))
+        dofs, offsets = ends(s)
+        rest = scene.spring_length(s) if s.rest_length is None else s.rest_length
+        if rest == 0.0 and f"{s.name}.rest_length" not in slot_of:  # smooth where the ends meet
+            zero_names.add(s.name)
+            springs[AT_POINTS["spring0"] if offsets else "spring0"].append(
+                (s.name, s.name, dofs, [s.k, *offsets], ("k", "", "", "", "")))
         else:
-            springs.append((s.name, s.name, dofs, [s.k, rest], ("k", "rest_length")))
-    group("spring", springs)
-    group("spring0", zero)
+            springs[AT_POINTS["spring"] if offsets else "spring"].append(
+                (s.name, s.name, dofs, [s.k, rest, *offsets], ("k", "rest_length", "", "", "", "")))
+    for kind, items in springs.items():
+        group(kind, items)
     group("torsion", [(s.name, s.name, [idx[s.nodes[0]] + 2, idx[s.nodes[1]] + 2],
                        [s.kt, nodes[s.nodes[1]][2] - nodes[s.nodes[0]][2] if s.rest_angle is None else s.rest_angle],
                        ("kt", "rest_angle")) for s in scene.torsion_springs])
@@ -252,10 +268,12 @@ def _groups(scene: Scene, order, nodes, beam_elems, idx) -> tuple[ElementGroup, 
     def damped(s, fld: str) -> bool:
         return getattr(s, fld) > 0.0 or f"{s.name}.{fld}" in slot_of
 
-    zero_names = {it[0] for it in zero}
     for kind, bushing in (("damper", False), ("damper0", True)):
-        group(kind, [(s.name, s.name, [idx[s.nodes[0]], idx[s.nodes[0]] + 1, idx[s.nodes[1]], idx[s.nodes[1]] + 1],
-                      [s.c], ("c",)) for s in scene.springs if damped(s, "c") and (s.name in zero_names) == bushing])
+        for at_points in (False, True):
+            group(AT_POINTS[kind] if at_points else kind,
+                  [(s.name, s.name, dofs, [s.c, *offsets], ("c", "", "", "", "")) for s in scene.springs
+                   for dofs, offsets in [ends(s)]
+                   if damped(s, "c") and (s.name in zero_names) == bushing and bool(offsets) == at_points])
     group("tdamper", [(s.name, s.name, [idx[s.nodes[0]] + 2, idx[s.nodes[1]] + 2], [s.ct], ("ct",))
                       for s in scene.torsion_springs if damped(s, "ct")])
     group("bdamper", [(f"{nm}.damping", owner, dofs, [vals[0], *vals[3:6], b.beta], ("", "E", "A", "I", "beta"))
@@ -369,7 +387,7 @@ def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
             continue
         out_vals.append(ca.vec(mapped(grp, "outputs", gather(q, grp), gather(qd, grp), pr)))
         out_names += [f"{nm}.{o}" for nm in grp.names for o in grp.spec.outputs]
-    damper_outputs = [o for kind in DAMPERS for o in KINDS[kind].outputs]
+    damper_outputs = list(dict.fromkeys(o for kind in DAMPERS for o in KINDS[kind].outputs))
     want = ([f"{b.name}.{k}.{o}" for b, k, _, _ in beam_elems for o in KINDS["beam"].outputs]
             + [f"{s.name}.{o}" for s in scene.springs for o in KINDS["spring"].outputs]
             + [f"{s.name}.{o}" for s in scene.torsion_springs for o in KINDS["torsion"].outputs]

@@ -18,7 +18,7 @@ from scipy.linalg import expm
 import casflex
 from casflex import Beam, Node, Parameter, Scene, Spring, Support, TorsionSpring, assemble
 from casflex.data import MeasurementSet
-from casflex.elements.kernels import DAMPERS, hht_kernel
+from casflex.elements.kernels import DAMPERS, KINDS, hht_kernel
 from casflex.identification import identify_indirect
 from casflex.identification.estimate import estimate
 from casflex.identification.measurement import Experiment
@@ -101,12 +101,14 @@ def test_energy_balance_includes_the_dissipation(case):
 @pytest.mark.parametrize("kind", DAMPERS)
 def test_damper_tangent_against_finite_differences(kind):
     f = hht_kernel(kind, -0.1, "lagrange", True)
-    n = {"tdamper": 2, "bdamper": 6}.get(kind, 4)
+    n = KINDS[kind].n_dof
     rng = np.random.default_rng(5)
     q = np.array([0.1, -0.2, 0.7, 0.4, 0.5, 0.3])[:n] + 1e-2 * rng.normal(size=n)
     qd, qdd = rng.normal(size=n), rng.normal(size=n)
     c = np.array([2.0e3, 4.0e6])
-    props = [0.5, 2e3, 1e-2, 1e-6, 1e-3] if kind == "bdamper" else [3.0]  # L0, E, A, I, beta
+    # bdamper: L0, E, A, I, beta; a damper at points: c and the points' offsets in their nodes' frames
+    props = ([0.5, 2e3, 1e-2, 1e-6, 1e-3] if kind == "bdamper"
+             else [3.0] + ([0.1, -0.05, 0.2, 0.03] if n == 6 else []))
     g = [0.0, -9.81]
     r, Kt = (np.array(v) for v in f(q, qd, qdd, q, props, g, c))
     # a damper is massless: its r does not depend on qa

@@ -52,3 +52,34 @@ def test_state_guessed_from_the_markers_mid_stride_does_not_wind_a_node():
     assert np.abs(q_g[rot] - tr.q[550, rot]).max() < 0.01  # rad (measured 6e-4 on the finer model's motion)
     energy = _elastic_energy(model)
     assert float(energy(q_g)) <= float(energy(tr.q[550])) * 1.001  # least energy through the markers
+
+
+def test_rigid_leg_is_the_leg_derived_and_its_stiffened_bones_limit():
+    """leg_rigid is what tests/leg_rigid.py derives from leg; the flexible leg with bones E times
+    stiffer converges to it at the rate of the bones' compliance, 1 / E."""
+    import dataclasses
+
+    from leg_rigid import rigid_leg
+
+    from casflex.markers import marker_positions
+    from casflex.simulate import simulate
+
+    leg, rigid = casflex.load_scene("leg"), casflex.load_scene("leg_rigid")
+    assert rigid == dataclasses.replace(rigid_leg(leg), name="leg_rigid")
+    model = casflex.assemble(rigid)
+    assert model.n_dof == 9 and list(model.parameter_names) == ["kt_hip", "ct_hip", "kt_knee", "ct_knee"]
+    M = np.array(model.mass(model.q0, model.p_nominal))
+    u = np.array([1.0 if d.startswith("x") else 0.0 for d in model.dof_names])
+    u[[c.dof for c in model.constraints]] = 0.0
+    assert u @ M @ u == pytest.approx((0.100 + 0.0465 + 0.0145) * BODY, rel=1e-12)  # Winter's masses, as leg
+
+    def markers(scene) -> np.ndarray:
+        m = casflex.assemble(scene)
+        return marker_positions(m, simulate(m, 0.4, dt=1e-3, alpha=-0.05).q)
+
+    y_rigid = markers(rigid)
+    gaps = [np.abs(markers(dataclasses.replace(leg, beams=tuple(dataclasses.replace(b, E=b.E * s) for b in leg.beams)))
+                   - y_rigid).max() for s in (10.0, 100.0)]
+    # first order in the compliance: the gap shrinks tenfold per tenfold stiffness (measured 10.5)
+    assert 8.0 < gaps[0] / gaps[1] < 12.0, gaps
+    assert gaps[1] < 2e-5  # m: with 100 x stiffer bones the markers move within 7.6 um of the rigid links' (measured)

@@ -140,10 +140,11 @@ def test_spring_and_damper_identified_under_a_moving_support(t_from, state):
     sol = solve_ivp(rhs, (0.0, t[-1]), [-L0, AMP * W_B], t_eval=t, rtol=1e-11, atol=1e-12)
     noise = np.random.default_rng(7).normal(0.0, 1e-3, (t.size, 2))
     data = MeasurementSet(t, ("xm", "ym"), np.column_stack([np.zeros(t.size), sol.y[0]]) + noise, None, None)
-    r = identify_indirect(assemble(bouncer()), data, dt=1e-3, initial_state=state, start=0.7,
+    # dt = 2 ms: half the cost of 1 ms, the same estimates to 1e-4 (the model error 0.05 N/m in k)
+    r = identify_indirect(assemble(bouncer()), data, dt=2e-3, initial_state=state, start=0.7,
                           compiled=False)  # a model of 6 dofs: interpreted beats a compile
     assert r.success, r.message
     for name, truth in (("k", k), ("c", c)):
-        # the 3-SE interval holds the truth (the model's own error at dt = 1 ms is far below 1 mm)
+        # the 3-SE interval holds the truth (the model's own error at dt = 2 ms is far below 1 mm)
         assert abs(r.parameters[name] - truth) < 3 * r.std_errors[name], (name, r.parameters, r.std_errors)
         assert r.std_errors[name] < 0.05 * truth  # and says something: the data pin both down

@@ -82,9 +82,15 @@ KINDS = {
     "body": Kind("body", 3, ("m", "J", "rx", "ry"), (), True),
     "follower": Kind("follower", 3, ("fx", "fy"), (), False),
 }
+#: Springs and dampers whose ends are points off their nodes: the plain kind's law on the points
+#: x + R(theta) r, with the points' offsets r in their nodes' frames as four more properties.
+AT_POINTS = {"spring": "ospring", "spring0": "ospring0", "damper": "odamper", "damper0": "odamper0"}
+KINDS.update({o: Kind(o, 6, (*KINDS[k].props, "rax", "ray", "rbx", "rby"), KINDS[k].outputs, False)
+              for k, o in AT_POINTS.items()})
+_PLAIN = {o: k for k, o in AT_POINTS.items()}
 
 #: Kinds whose force depends on the velocities only (no energy, mass or outputs).
-DAMPERS = ("damper", "damper0", "tdamper", "bdamper")
+DAMPERS = ("damper", "damper0", "tdamper", "bdamper", "odamper", "odamper0")
 #: Kinds with no potential: their power is reported by ``dissipation`` instead of an energy.
 NONCONSERVATIVE = (*DAMPERS, "follower")
 
@@ -94,7 +100,9 @@ class _Element:
 
     def __init__(self, kind: str, pr: ca.SX):
         self.kind = kind
-        if kind == "beam":
+        if kind in _PLAIN:  # the plain element on the end points (x_a, y_a, x_b, y_b)
+            self.plain, self.r = _Element(_PLAIN[kind], pr[:-4]), pr[-4:]
+        elif kind == "beam":
             self.beam = BeamElement("e", pr[0], (pr[1], pr[2]), pr[3], pr[4], pr[5], pr[6], rotary_inertia=pr[7])
         elif kind == "spring":
             self.spring = LinearSpring("e", pr[0], pr[1])
@@ -117,8 +125,19 @@ class _Element:
         u = ca.vertcat(c * self.r[0] - s * self.r[1], s * self.r[0] + c * self.r[1])
         return u, ca.vertcat(-u[1], u[0])
 
+    def _points(self, q: ca.SX, qd: ca.SX) -> tuple[ca.SX, ca.SX]:
+        """The end points (x_a, y_a, x_b, y_b) = (x + R(theta) r)_a,b (m) and their velocities (m/s)."""
+        ends = []
+        for j, r in ((0, self.r[0:2]), (3, self.r[2:4])):
+            c, s = ca.cos(q[j + 2]), ca.sin(q[j + 2])
+            ends.append(q[j:j + 2] + ca.vertcat(c * r[0] - s * r[1], s * r[0] + c * r[1]))
+        P = ca.vertcat(*ends)
+        return P, ca.jtimes(P, q, qd)
+
     def rayleigh(self, q: ca.SX, qd: ca.SX) -> ca.SX:
         """The damper's Rayleigh dissipation function D(q, qd) (W / 2); 0 for other kinds."""
+        if self.kind in _PLAIN:
+            return self.plain.rayleigh(*self._points(q, qd))
         if self.kind == "damper":
             d = q[2:] - q[:2]
             rate = ca.dot(d, qd[2:] - qd[:2]) / ca.norm_2(d)  # dL/dt
@@ -149,6 +168,8 @@ class _Element:
         return 2 * self.rayleigh(q, qd)
 
     def strain(self, q: ca.SX) -> ca.SX:
+        if self.kind == "ospring" or self.kind == "ospring0":
+            return self.plain.strain(self._points(q, ca.SX.zeros(6))[0])
         if self.kind in NONCONSERVATIVE or self.kind == "body":
             return ca.SX(0)
         if self.kind == "beam":
@@ -201,6 +222,9 @@ class _Element:
         return self.beam.kinetic_energy(q, qd) if self.kind == "beam" else ca.SX(0)
 
     def outputs(self, q: ca.SX, qd: ca.SX) -> ca.SX:
+        if self.kind in _PLAIN:  # the plain element's, at the end points: forces on point b
+            Ps, Pds = ca.SX.sym("P", 4), ca.SX.sym("Pd", 4)  # symbols: a damper's output differentiates in Pd
+            return ca.substitute([self.plain.outputs(Ps, Pds)], [Ps, Pds], list(self._points(q, qd)))[0]
         if self.kind in DAMPERS:  # the damper's force dD/dqd as the spring's outputs give it
             f = ca.gradient(self.rayleigh(q, qd), qd)
             if self.kind == "damper":  # along the line of the nodes, tension positive: c dL/dt

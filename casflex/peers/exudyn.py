@@ -93,6 +93,8 @@ def _check_supported(scene: Scene, beam: str) -> None:
     if beam == "ge" and any(b.beta for b in scene.beams):
         raise NotImplementedError("beam damping (beta) on the geometrically exact beam is not translated")
     for sp in scene.springs:
+        if sp.point_a is not None or sp.point_b is not None:
+            raise NotImplementedError(f"spring {sp.name!r}: ends at points off the nodes are not translated")
         if sp.c and (scene.distance(*sp.nodes) if sp.rest_length is None else sp.rest_length) == 0.0:
             raise NotImplementedError(f"spring {sp.name!r}: a damper on a zero-length spring is not translated")
     ends = [n for b in scene.beams for n in b.nodes]

@@ -52,6 +52,21 @@ class _Drawer:
         idx = {n: i for i, n in enumerate(model.node_names)}
         self.torsion_pairs = np.array([(idx[t.nodes[0]], idx[t.nodes[1]]) for t in model.scene.torsion_springs],
                                       dtype=int).reshape(-1, 2)
+        # a spring's ends: offsets from their nodes in the initial configuration, turned with the node
+        # (points off the nodes, casflex.scene.Spring.point_a/b; zero at a node)
+        ends = [model.scene.spring_ends(sp) for sp in model.scene.springs]
+        self.end_offsets = np.array([[pt[0] - xy0[idx[n], 0], pt[1] - xy0[idx[n], 1]]
+                                     for e, sp in zip(ends, model.scene.springs, strict=True)
+                                     for pt, n in zip(e, sp.nodes, strict=True)]).reshape(-1, 2)
+        self.end_nodes = np.array([idx[n] for sp in model.scene.springs for n in sp.nodes], dtype=int)
+        # a torsion spring is drawn where a linear spring between the same nodes has its ends (a joint)
+        pair_spring = {frozenset(sp.nodes): k for k, sp in enumerate(model.scene.springs)}
+        self.torsion_at = np.array([pair_spring.get(frozenset(t.nodes), -1) for t in model.scene.torsion_springs],
+                                   dtype=int)
+        # rigid links: from a body's node to its centre of mass and to the spring ends fixed off it
+        self.link_nodes = np.array([idx[b.node] for b in model.scene.bodies], dtype=int)
+        off = np.linalg.norm(self.end_offsets, axis=1) > 1e-12 * self.extent if len(self.end_offsets) else []
+        self.link_ends = np.flatnonzero(off)
         self.supports: dict[str, list[int]] = {}
         for s in model.scene.supports:
             self.supports.setdefault(s.kind, []).append(idx[s.node])
@@ -89,12 +104,32 @@ class _Drawer:
         pts = np.concatenate([pts, np.full((len(L), 1, 2), np.nan)], axis=1)
         return pts.reshape(-1, 2)
 
+    def ends(self, q: np.ndarray) -> np.ndarray:
+        """(2 k, 2) the springs' ends, a and b of each in turn: node + R(theta - theta0) offset."""
+        xy = q.reshape(-1, 3)
+        n = self.end_nodes
+        turn = xy[n, 2] - np.asarray(self.model.q0, dtype=float).reshape(-1, 3)[n, 2]
+        c, s = np.cos(turn), np.sin(turn)
+        d = self.end_offsets
+        return xy[n, :2] + np.column_stack([c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1]])
+
+    def links(self, q: np.ndarray) -> np.ndarray:
+        """(k, 2) polyline of the rigid links, NaN-separated: each body's node to its centre of mass,
+        and each spring end off its node to that node."""
+        xy = q.reshape(-1, 3)
+        pieces = [(xy[n, :2], c) for n, c in zip(self.link_nodes, self.bodies(q), strict=True)]
+        pieces += [(xy[self.end_nodes[k], :2], p)
+                   for k, p in zip(self.link_ends, self.ends(q)[self.link_ends], strict=True)]
+        if not pieces:
+            return np.empty((0, 2))
+        return np.vstack([np.vstack([a, b, [np.nan, np.nan]]) for a, b in pieces])
+
     def springs(self, q: np.ndarray) -> np.ndarray:
-        """(k, 2) polyline of all linear springs (zigzags), NaN-separated."""
+        """(k, 2) polyline of all linear springs (zigzags between their ends), NaN-separated."""
         if not len(self.spring_a):
             return np.empty((0, 2))
-        xy = q.reshape(-1, 3)
-        pa, pb = xy[self.spring_a, :2], xy[self.spring_b, :2]
+        e = self.ends(q)
+        pa, pb = e[0::2], e[1::2]
         d = pb - pa
         L = np.hypot(d[:, 0], d[:, 1])
         safe = np.where(L > 0, L, 1.0)
@@ -110,14 +145,25 @@ class _Drawer:
         return pts.reshape(-1, 2)
 
     def torsions(self, q: np.ndarray) -> np.ndarray:
-        """(k, 2) midpoints of the torsion springs' node pairs."""
+        """(k, 2) where the torsion springs are drawn: the middle of the ends of a linear spring
+        between the same nodes (a joint's bushing), else the middle of the node pair."""
         xy = q.reshape(-1, 3)[:, :2]
-        return 0.5 * (xy[self.torsion_pairs[:, 0]] + xy[self.torsion_pairs[:, 1]])
+        at = 0.5 * (xy[self.torsion_pairs[:, 0]] + xy[self.torsion_pairs[:, 1]])
+        if (self.torsion_at >= 0).any():
+            e = self.ends(q)
+            joint = self.torsion_at >= 0
+            at[joint] = 0.5 * (e[2 * self.torsion_at[joint]] + e[2 * self.torsion_at[joint] + 1])
+        return at
 
     def limits(self, qs: np.ndarray, margin: float = 0.08) -> tuple[tuple[float, float], tuple[float, float]]:
-        """Axis limits (m) covering the node positions of all rows of ``qs`` (n, n_dof)."""
+        """Axis limits (m) covering the nodes, bodies, markers and spring ends of all rows of ``qs``
+        (n, n_dof)."""
         qs = np.atleast_2d(qs)
         x, y = qs[:, 0::3], qs[:, 1::3]
+        if len(self.link_nodes) or len(self.model.scene.markers) or len(self.link_ends):
+            rows = qs[np.unique(np.linspace(0, len(qs) - 1, min(len(qs), 200)).astype(int))]
+            pts = np.vstack([np.vstack([self.bodies(r), self.markers(r), self.ends(r)]) for r in rows])
+            x, y = np.append(x, pts[:, 0]), np.append(y, pts[:, 1])
         pad = margin * self.extent + (float(self.spring_width.max()) if len(self.spring_width) else 0.0)
         return ((float(x.min()) - pad, float(x.max()) + pad), (float(y.min()) - pad, float(y.max()) + pad))
 
@@ -128,6 +174,9 @@ class _Drawer:
         b = self.beams(q)
         art["beams"], = ax.plot(b[:, 0], b[:, 1], color=_BEAM_COLOR, lw=4.5, solid_capstyle="round",
                                 label="beam" if len(b) else "_beam", zorder=2)
+        lk = self.links(q)
+        art["links"], = ax.plot(lk[:, 0], lk[:, 1], color=_BODY_COLOR, lw=3.0, solid_capstyle="round",
+                                label="rigid link" if len(lk) else "_link", zorder=2)
         sp = self.springs(q)
         art["springs"], = ax.plot(sp[:, 0], sp[:, 1], color=_SPRING_COLOR, lw=1.1,
                                   label="spring" if len(sp) else "_spring", zorder=3)
@@ -154,7 +203,8 @@ class _Drawer:
 
     def update(self, art: dict[str, object], q: np.ndarray) -> None:
         xy = q.reshape(-1, 3)
-        for key, pts in (("beams", self.beams(q)), ("springs", self.springs(q)), ("torsions", self.torsions(q))):
+        for key, pts in (("beams", self.beams(q)), ("links", self.links(q)), ("springs", self.springs(q)),
+                         ("torsions", self.torsions(q))):
             art[key].set_data(pts[:, 0], pts[:, 1])  # type: ignore[attr-defined]
         art["nodes"].set_data(xy[:self.n_user, 0], xy[:self.n_user, 1])  # type: ignore[attr-defined]
         art["mesh_nodes"].set_data(xy[self.n_user:, 0], xy[self.n_user:, 1])  # type: ignore[attr-defined]
@@ -177,9 +227,11 @@ def plot_configuration(model: Model, q: np.ndarray | None = None, ax: Axes | Non
     """Draw the system in configuration ``q`` (n_dof,), default the initial one ``model.q0``.
 
     Beams are thick lines (each element a cubic Hermite curve through its end rotations, so
-    bending shows at true scale), linear springs zigzags, torsion springs rings at the middle
-    of their node pair, nodes dots (user nodes labelled), supports grey markers (square clamp,
-    triangle pin). Axes in m with equal aspect. Draws into ``ax`` if given, else a new figure;
+    bending shows at true scale), linear springs zigzags between their ends, torsion springs rings
+    (at the ends of a linear spring between the same nodes, else the middle of their node pair),
+    rigid bodies diamonds at their centres of mass joined to their node (with the spring ends fixed
+    off a node: rigid links), markers crosses, nodes dots (user nodes labelled), supports grey
+    markers (square clamp, triangle pin). Axes in m with equal aspect. Draws into ``ax`` if given, else a new figure;
     returns the figure.
     """
     q = _check_q(model, q)

@@ -49,8 +49,8 @@ def test_plot_configuration_draws_markers_and_bodies_where_they_are():
     q = model.q0.copy()
     q[model.dof("thetaankle")] += 0.4
     ax = plotting.plot_configuration(model, q).axes[0]
-    assert legend_texts(ax) == ["beam", "spring", "torsion spring", "node", "rigid body (centre of mass)", "marker",
-                                "clamp"]
+    assert legend_texts(ax) == ["beam", "rigid link", "spring", "torsion spring", "node",
+                                "rigid body (centre of mass)", "marker", "clamp"]
     from casflex.markers import marker_positions
 
     markers = next(line for line in ax.lines if line.get_label() == "marker")
@@ -63,3 +63,23 @@ def test_plot_configuration_draws_markers_and_bodies_where_they_are():
     body = next(line for line in ax.lines if line.get_label().startswith("rigid body"))
     np.testing.assert_allclose([body.get_xdata()[0], body.get_ydata()[0]],
                                q[3 * a:3 * a + 2] + np.array([[c, -s], [s, c]]) @ r)
+
+
+def test_rigid_links_drawn_to_the_joints_they_carry():
+    # leg_rigid turned at the hip: the thigh's link runs from the hip to the knee bushing's end on it,
+    # which meets the shank's node; the knee's torsion spring is drawn there, not mid-thigh
+    model = casflex.assemble(casflex.load_scene("leg_rigid"))
+    q = model.q0.copy()
+    q[model.dof("thetahip")] += 0.3
+    ax = plotting.plot_configuration(model, q).axes[0]
+    knee = model.scene.springs[1].point_a
+    hip = model.q0[model.dof("xhip"):model.dof("xhip") + 2]
+    c, s = np.cos(0.3), np.sin(0.3)
+    at_knee = hip + np.array([[c, -s], [s, c]]) @ (np.array(knee) - hip)
+    link = next(line for line in ax.lines if line.get_label() == "rigid link")
+    pts = np.column_stack([link.get_xdata(), link.get_ydata()])
+    assert np.isclose(pts, at_knee, atol=1e-12).all(axis=1).any()  # the thigh's end, turned with the hip
+    ring = next(line for line in ax.lines if line.get_label() == "torsion spring")
+    rings = np.column_stack([ring.get_xdata(), ring.get_ydata()])
+    kn = q[model.dof("xknee_s"):model.dof("xknee_s") + 2]
+    np.testing.assert_allclose(rings[1], 0.5 * (at_knee + kn), atol=1e-12)  # the middle of the bushing's ends
