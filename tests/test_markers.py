@@ -173,7 +173,7 @@ def test_exudyn_translation_refuses_rigid_bodies_and_their_markers():
 def test_initial_state_estimated_from_markers_only():
     # a recording of markers only (no node channel) that starts mid-motion: Exudyn's twobar with a
     # marker on each bar, 0.3-1 s at 100 Hz, 0.1 mm of noise. The kinematic fit reproduces the markers
-    # (equality constraints) at least elastic energy, the slow-manifold fit does the rest.
+    # (least squares, elastic energy as a weak prior), the slow-manifold fit does the rest.
     from pathlib import Path
 
     from casflex import load_scene
@@ -192,7 +192,8 @@ def test_initial_state_estimated_from_markers_only():
     # the kinematic fit puts the markers where the data have them (its springs at rest, where the
     # motion stretches them by centimetres: a guess the fit of the state's slow part then corrects)
     _, Q = kinematic_fits(model, data, list(names), limit=1)
-    assert np.abs(marker_positions(model, Q[0]) - data.q[0]).max() < 1e-9
+    # (to 0.22 um measured: the bars' axial stretch weighs as much as the markers; the noise is 0.1 mm)
+    assert np.abs(marker_positions(model, Q[0]) - data.q[0]).max() < 1e-6
     r = identify_indirect(model, data, dt=1e-3, start=0.8, initial_state="estimate", noise=1e-4)
     # measured on seeds 0-3: every fit a success, k within 1e-4, kt within 26 %, the estimated nodes
     # within 0.33 mm of Exudyn's at 0.3 s; largest |z| 3.2 (k3, seed 2), 2.4 otherwise: the refit on
