@@ -82,6 +82,7 @@ def test_direct_method_from_nodes_and_markers(model):
     r = identify_direct(model, recording(BOTH, 1.0), INSTANTS)
     assert r.extra["from_markers"]["markers"] == ["xm2", "ym2", "xm4", "ym4"]
     assert r.extra["from_markers"]["samples"] == 101
+    assert "dofs from markers xm2, ym2, xm4, ym4 at 101 samples" in r.summary()
     for name in ("k1", "k3"):
         truth = model.p_nominal[model.parameter_names.index(name)]
         assert abs(r.parameters[name] / truth - 1) < 0.01, name
