@@ -156,17 +156,13 @@ class _SlowStart:
 
     def __init__(self, model: Model, integ, q_g: np.ndarray, qd_g: np.ndarray, t: float, p0: np.ndarray,
                  omega_cut: float, ell: np.ndarray, T: float) -> None:
-        from casflex.identification.initial_state import free_dofs, slow_manifold, slow_projection
+        from casflex.identification.initial_state import free_dofs, relaxed_projection, slow_manifold
 
         self.free = free_dofs(model)
-        # relaxed first: where channels over-determine a bar (a node and a marker on it) the kinematic
-        # fit stretches it by the noise (2e5 N at 0.1 mm on twobar), whose geometric stiffness made
-        # the modes there wrong and IPOPT stop 'acceptable' with k3 55-92 % off
-        B, C, d = slow_projection(model, q_g, p0, omega_cut)
-        k = B.shape[1]
-        q_g = np.array(slow_manifold(model, k)[0](np.zeros(k), np.zeros(k), q_g, C, B, p0, d)[0]).ravel()
+        # relaxed first: from a fit that stretches a bar by the noise, IPOPT stopped 'acceptable'
+        # with k3 55-92 % off (twobar, node 3 and two markers)
+        q_g, self.B, self.C, self.d = relaxed_projection(model, q_g, p0, omega_cut)
         self.model, self.integ, self.q_g, self.t = model, integ, q_g, t
-        self.B, self.C, self.d = slow_projection(model, q_g, p0, omega_cut)
         self.k = self.B.shape[1]
         self.fn = slow_manifold(model, self.k)[0]
         s_a = np.abs(self.C) @ ell[self.free]
