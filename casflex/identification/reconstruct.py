@@ -80,7 +80,7 @@ def dofs_from_markers(model: Model, data: MeasurementSet, method: str, rotations
     t, Q = kinematic_fits(model, data, names)
     keep = [i for i in range(model.n_dof) if rotations or not model.is_rotation[i]]
     out = MeasurementSet(t, tuple(model.dof_names[i] for i in keep), Q[:, keep], None, None,
-                         source=data.source, meta={**data.meta, "from_markers": markers})
+                         source=data.source, meta=data.meta)
     report = {"markers": markers, "channels": names, "samples": int(t.size),
               "dropped_samples": int(data.t.size - t.size),
               "note": "nodes' dofs from the kinematic fit through the recorded channels at each sample (least "
