@@ -40,6 +40,7 @@ from casflex.identification import problem as pb
 from casflex.identification.direct import DirectKeywords, direct_options
 from casflex.identification.initial_state import _kinematic_fit
 from casflex.identification.problem import IdentificationResult
+from casflex.identification.reconstruct import dofs_from_markers
 from casflex.model import Model
 
 __all__ = ["identify_adapted_direct"]
@@ -89,7 +90,10 @@ def identify_adapted_direct(model: Model, data: MeasurementSet, instants: Sequen
     ----------
     data : MeasurementSet
         Positions of some translations (m), with or without their velocities and accelerations;
-        measured rotations, if any, are ignored (``extra["ignored_channels"]``).
+        measured rotations, if any, are ignored (``extra["ignored_channels"]``). Markers' channels
+        are first turned into every node's translations by the kinematic fit through the channels
+        at each sample (:mod:`.reconstruct`, reported in ``extra["from_markers"]``); the standard
+        errors then ignore that fit's own uncertainty.
     instants : sequence of float, s
         Each needs ``window - 1`` samples after it.
     window : int, optional
@@ -108,8 +112,8 @@ def identify_adapted_direct(model: Model, data: MeasurementSet, instants: Sequen
     own, opts = direct_options("identify_adapted_direct", dict(options))
     start, beam_forces, smoothing, cutoff = (own[k] for k in ("start", "beam_forces", "smoothing", "cutoff"))
     pb.require_fixed_supports(model, "the adapted direct method")
-    pb.require_node_channels(model, data.channels, "the adapted direct method")
     t_build = time.perf_counter()
+    data, from_markers = dofs_from_markers(model, data, "the adapted direct method", rotations=False)
     if model.n_p == 0:
         raise ValueError("the scene declares no parameters to identify ([[parameters]] in the scene file)")
     if len(instants) == 0:
@@ -241,5 +245,6 @@ def identify_adapted_direct(model: Model, data: MeasurementSet, instants: Sequen
                "gauss_newton_polish": polished, "solver_s": solver_s, "window": K, "smoothing": smoothing_info,
                "beam_forces": mode, "uncertainty": uncertainty,
                "solver_parameters": dict(zip(names, pmap.p(w_solver[:n_p]).tolist(), strict=True)),
-               "unknown_dofs": states, "rotations": rotations, "ignored_channels": ignored, "rate_scale": om},
+               "unknown_dofs": states, "rotations": rotations, "ignored_channels": ignored, "rate_scale": om,
+               **({"from_markers": from_markers} if from_markers is not None else {})},
     )

@@ -33,12 +33,12 @@ from casflex.identification.problem import (
     failure_reasons,
     gauss_newton_statistics,
     require_fixed_supports,
-    require_node_channels,
     robust_statistics,
     smoothed_if_needed,
     solve_and_polish,
     start_values,
 )
+from casflex.identification.reconstruct import dofs_from_markers
 from casflex.model import Model
 
 __all__ = ["identify_direct", "DirectKeywords", "direct_options"]
@@ -95,15 +95,17 @@ def identify_direct(model: Model, data: MeasurementSet, instants: Sequence[float
     kinematics at ``instants`` (s).
 
     ``data`` hold q of every dof; qd, qdd from the data (e.g. :func:`casflex.data.simulated_set`) or,
-    when it has none, by smoothing. ``options``: :class:`DirectKeywords`; here IPOPT, the exact
-    Hessian, not compiled by default. The exact linear solution is computed with transform
-    "linear" only.
+    when it has none, by smoothing. A recording with markers' channels is first turned into every
+    dof by the kinematic fit through its channels at each sample (:mod:`.reconstruct`, reported in
+    ``extra["from_markers"]``); the standard errors then ignore that fit's own uncertainty.
+    ``options``: :class:`DirectKeywords`; here IPOPT, the exact Hessian, not compiled by default.
+    The exact linear solution is computed with transform "linear" only.
     """
     own, opts = direct_options("identify_direct", dict(options), hessian="exact")
     start, beam_forces, smoothing, cutoff = (own[k] for k in ("start", "beam_forces", "smoothing", "cutoff"))
     require_fixed_supports(model, "the direct method")
-    require_node_channels(model, data.channels, "the direct method")
     t_build = time.perf_counter()
+    data, from_markers = dofs_from_markers(model, data, "the direct method")
     data, smoothing_info = smoothed_if_needed(data, smoothing, cutoff)
     samples = _instant_data(model, data, instants)
     mode = beam_forces_mode(model, beam_forces, smoothed=smoothing_info is not None)
@@ -159,6 +161,8 @@ def identify_direct(model: Model, data: MeasurementSet, instants: Sequence[float
              "force_scale": fs, "residual_norm": float(np.linalg.norm(zv) * fs), "gauss_newton_polish": polished,
              "beam_forces": mode, "smoothing": smoothing_info, "uncertainty": uncertainty,
              "solver_s": solver_s, "solver_parameters": dict(zip(names, pmap.p(w_solver[:n_p]).tolist(), strict=True))}
+    if from_markers is not None:
+        extra["from_markers"] = from_markers
     if w_lin is not None:
         extra["linear_solution"] = dict(zip(names, (w_lin[:n_p] * scale).tolist(), strict=True))
     return IdentificationResult(

@@ -43,7 +43,7 @@ class Experiment:
     initial_state : {"scene", "velocities", "estimate"}
         What is known of the state at the first sample (module docstring).
     channels : tuple of str, optional
-        The compared channels (model dof names); default every channel of the data.
+        The compared channels (model dof names, markers' channels); default every channel of the data.
     noise : float, optional
         Standard deviation of the measurement noise (m for translations, rad for rotations), if
         known: weights the channels and is checked against the residuals. Default: estimated

@@ -100,16 +100,6 @@ def require_fixed_supports(model: Model, method: str) -> None:
                          "method's default (single shooting by Gauss-Newton), which follows their paths")
 
 
-def require_node_channels(model: Model, channels, method: str) -> None:
-    """ValueError when the data hold markers' channels: ``method`` compares nodes' dofs only."""
-    from casflex.markers import marker_channels
-
-    markers = [c for c in channels if c in marker_channels(model)]
-    if markers:
-        raise ValueError(f"data: channels {markers} are markers'; {method} takes nodes' channels only; use the "
-                         "indirect method's default (single shooting by Gauss-Newton), which compares markers")
-
-
 def start_values(model: Model, start: float | dict[str, float] | np.ndarray | None) -> np.ndarray:
     """Starting parameters: None (nominal), a factor times nominal, a dict, or an array."""
     if start is None:

@@ -102,6 +102,10 @@ class IdentificationResult:
             text = ", ".join(f"{c} {100 * ch['fit']:.2f} % fit, RMS {ch['rms']:.3g}"
                              + ("" if ch["white"] else " (not white)") for c, ch in moving.items())
             lines.append(f"  {name}: {text}")
+        rebuilt = self.extra.get("from_markers")
+        if rebuilt:
+            lines.append(f"  dofs from markers {', '.join(rebuilt['markers'])} at {rebuilt['samples']} samples: "
+                         f"{rebuilt['note']}")
         if self.message:
             lines.append(f"  note: {self.message}")
         return "\n".join(lines)
