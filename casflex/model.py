@@ -234,6 +234,7 @@ def _groups(scene: Scene, order, nodes, beam_elems, idx) -> tuple[ElementGroup, 
                       [el.L0, *el.offsets, b.E, b.A, b.I, b.rho, float(b.rotary_inertia)],
                       ("", "", "", "E", "A", "I", "rho", "")))
     group("beam", beams)
+
     def ends(s) -> tuple[list[int], list[float]]:
         """A spring's dofs and, for ends at points off its nodes, the points' offsets in the nodes'
         frames, R(theta0)^T (point - node) (m); only such springs carry their nodes' rotations."""

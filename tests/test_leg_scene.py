@@ -65,7 +65,7 @@ def test_rigid_leg_is_the_leg_derived_and_its_stiffened_bones_limit():
     from casflex.simulate import simulate
 
     leg, rigid = casflex.load_scene("leg"), casflex.load_scene("leg_rigid")
-    assert rigid == dataclasses.replace(rigid_leg(leg), name="leg_rigid")
+    assert rigid == rigid_leg(leg)
     model = casflex.assemble(rigid)
     assert model.n_dof == 9 and list(model.parameter_names) == ["kt_hip", "ct_hip", "kt_knee", "ct_knee"]
     M = np.array(model.mass(model.q0, model.p_nominal))
