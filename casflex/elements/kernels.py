@@ -125,13 +125,17 @@ class _Element:
         u = ca.vertcat(c * self.r[0] - s * self.r[1], s * self.r[0] + c * self.r[1])
         return u, ca.vertcat(-u[1], u[0])
 
-    def _points(self, q: ca.SX, qd: ca.SX) -> tuple[ca.SX, ca.SX]:
-        """The end points (x_a, y_a, x_b, y_b) = (x + R(theta) r)_a,b (m) and their velocities (m/s)."""
+    def _ends(self, q: ca.SX) -> ca.SX:
+        """The end points (x_a, y_a, x_b, y_b) = (x + R(theta) r)_a,b (m)."""
         ends = []
         for j, r in ((0, self.r[0:2]), (3, self.r[2:4])):
             c, s = ca.cos(q[j + 2]), ca.sin(q[j + 2])
             ends.append(q[j:j + 2] + ca.vertcat(c * r[0] - s * r[1], s * r[0] + c * r[1]))
-        P = ca.vertcat(*ends)
+        return ca.vertcat(*ends)
+
+    def _points(self, q: ca.SX, qd: ca.SX) -> tuple[ca.SX, ca.SX]:
+        """The end points (m) and their velocities (m/s)."""
+        P = self._ends(q)
         return P, ca.jtimes(P, q, qd)
 
     def rayleigh(self, q: ca.SX, qd: ca.SX) -> ca.SX:
@@ -169,7 +173,7 @@ class _Element:
 
     def strain(self, q: ca.SX) -> ca.SX:
         if self.kind == "ospring" or self.kind == "ospring0":
-            return self.plain.strain(self._points(q, ca.SX.zeros(6))[0])
+            return self.plain.strain(self._ends(q))
         if self.kind in NONCONSERVATIVE or self.kind == "body":
             return ca.SX(0)
         if self.kind == "beam":

@@ -84,6 +84,7 @@ def dofs_from_markers(model: Model, data: MeasurementSet, method: str, rotations
                          source=data.source, meta=data.meta)
     report = {"markers": markers, "channels": names, "samples": int(t.size),
               "dropped_samples": int(data.t.size - t.size),
-              "note": "nodes' dofs from the kinematic fit through the recorded channels at each sample (least "
-                      "elastic energy at the nominal parameters); the standard errors ignore the fit's uncertainty"}
+              "note": "nodes' dofs from the kinematic fit through the recorded channels at each sample (markers "
+                      "by least squares, the elastic energy at the nominal parameters weighing what they do not "
+                      "fix); the standard errors ignore the fit's uncertainty"}
     return out, report

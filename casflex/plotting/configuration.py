@@ -59,6 +59,7 @@ class _Drawer:
                                      for e, sp in zip(ends, model.scene.springs, strict=True)
                                      for pt, n in zip(e, sp.nodes, strict=True)]).reshape(-1, 2)
         self.end_nodes = np.array([idx[n] for sp in model.scene.springs for n in sp.nodes], dtype=int)
+        self.end_th0 = xy0[self.end_nodes, 2]
         # a torsion spring is drawn where a linear spring between the same nodes has its ends (a joint)
         pair_spring = {frozenset(sp.nodes): k for k, sp in enumerate(model.scene.springs)}
         self.torsion_at = np.array([pair_spring.get(frozenset(t.nodes), -1) for t in model.scene.torsion_springs],
@@ -108,7 +109,7 @@ class _Drawer:
         """(2 k, 2) the springs' ends, a and b of each in turn: node + R(theta - theta0) offset."""
         xy = q.reshape(-1, 3)
         n = self.end_nodes
-        turn = xy[n, 2] - np.asarray(self.model.q0, dtype=float).reshape(-1, 3)[n, 2]
+        turn = xy[n, 2] - self.end_th0
         c, s = np.cos(turn), np.sin(turn)
         d = self.end_offsets
         return xy[n, :2] + np.column_stack([c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1]])
