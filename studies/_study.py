@@ -10,6 +10,7 @@ its table and figure, and the assertions on its key numbers. Not a study itself 
   recorded so that an interrupted study resumes.
 - :func:`write_outputs`: the page ``docs/tables/<name>.md`` and figure ``docs/figures/<name>.png``
   (``--quick``: ``*_quick.*``), atomically; :func:`png` turns a matplotlib figure into bytes.
+- :func:`checks`: the page's self-checks section and the assertion that stops a study when one fails;
 - :func:`table`: a markdown table's lines; :func:`fmt_p`, :func:`fnum`, :func:`med_range`: the pages' number formats.
 """
 
@@ -104,6 +105,22 @@ def table(head: list, rows, align: str | None = None) -> list[str]:
     a = {"l": "---", "r": "---:", "c": ":-:"}
     return ["| " + " | ".join(map(str, head)) + " |", "|" + "|".join(a[c] for c in align or "l" * len(head)) + "|",
             *("| " + " | ".join(map(str, r)) + " |" for r in rows)]
+
+
+def checks(rows: list[tuple]) -> tuple[list[str], list[str]]:
+    """``rows``: (check, measured value, passed) or (check, value, passed, asserted). The page's
+    "Self-checks" section, and the failed asserted checks (pass them to :func:`assert_checks` once the page
+    is written, so that a failing study still leaves its page to read)."""
+    rows = [(*r, True) if len(r) == 3 else r for r in rows]
+    lines = ["## Self-checks", "", *table(["check", "value", "asserted", "result"],
+             [[n, v, "yes" if a else "no (theory, reported)", "pass" if ok else "**FAIL**"] for n, v, ok, a in rows],
+             "llcc"), ""]
+    return lines, [f"{n} ({v})" for n, v, ok, a in rows if a and not ok]
+
+
+def assert_checks(failed: list[str]) -> None:
+    """Stop the study when an asserted self-check failed (after its page was written)."""
+    assert not failed, "self-checks failed: " + "; ".join(failed)
 
 
 def fmt_p(p) -> str:
