@@ -21,6 +21,7 @@ GRID = {False: {"dts": (1e-5, 1e-4, 1e-3, 3e-3, 1e-2, 2e-2, 5e-2), "k": (1e-3, 1
                 "E": (1.0, 1e-3, 1e-6), "long_min_dt": 1e-4},  # 30 s for dt >= 1e-4: 3e5 steps at most
         True: {"dts": (1e-3, 1e-2, 5e-2), "k": (1.0, 1e6), "E": (1.0,), "long_min_dt": 1e-2}}
 NEWTON_SAMPLES = {3.0: 300, 30.0: 100}  # steps re-run interpreted per run to count Newton iterations
+AN = dict(zip(ALPHAS, ("0", "-1/3"), strict=True))  # alpha as the page writes it
 SUSPECT_DRIFT = 0.1  # a success at alpha = 0 with a larger drift is not a credible solution
 
 
@@ -36,25 +37,19 @@ def simulation_grid(quick: bool) -> dict:
         model = twobar(1, e_scale=es)
         for ks in g["k"]:
             omega[label(ks, es)] = om = omega_max_of(model, model.p_nominal * ks)
-            for a in ALPHAS:
-                for dt in g["dts"]:
-                    for T in (T for T in HORIZONS if T < 10 or dt >= g["long_min_dt"]):
-                        row, _ = run_case(model, k_scale=ks, e_scale=es, alpha=a, dt=dt, t_end=T, omega_max=om,
-                                          n_samples=NEWTON_SAMPLES[T],
-                                          interpreted_check=T < 10 and round(T / dt) <= 300,
-                                          ref_scale=ref_scale.get((ks, es)))
-                        if (ks, es) not in ref_scale and a == 0.0 and T < 10 and row["success"]:
-                            ref_scale[(ks, es)] = row["energy"]["own_scale_J"]
-                        rows.append(row)
+            for a, dt, T in ((a, dt, T) for a in ALPHAS for dt in g["dts"] for T in HORIZONS
+                             if T < 10 or dt >= g["long_min_dt"]):
+                row, _ = run_case(model, k_scale=ks, e_scale=es, alpha=a, dt=dt, t_end=T, omega_max=om,
+                                  n_samples=NEWTON_SAMPLES[T], interpreted_check=T < 10 and round(T / dt) <= 300,
+                                  ref_scale=ref_scale.get((ks, es)))
+                if (ks, es) not in ref_scale and a == 0.0 and T < 10 and row["success"]:
+                    ref_scale[(ks, es)] = row["energy"]["own_scale_J"]
+                rows.append(row)
     return {"rows": rows, "omega_max": omega}
 
 
 def _sel(rows: list[dict], **match) -> list[dict]:
     return [r for r in rows if all(r[k] == v for k, v in match.items())]
-
-
-def _an(a: float) -> str:
-    return "0" if a == 0.0 else "-1/3"
 
 
 def _suspect(r: dict) -> bool:
@@ -138,39 +133,32 @@ def _cross(r: dict) -> str:
     return _newton_class(r)
 
 
+def _limit(cells: list[dict | None], om: float) -> str:
+    """The largest dt up to which every run of a map row converges, and omega_max dt there."""
+    rr = [r for r in cells if r]
+    n_ok = next((i for i, r in enumerate(rr) if not r["success"]), len(rr))
+    wr = " (range)" if _sel(rr, status="element_range") else ""
+    d = rr[n_ok - 1]["dt"] if n_ok else math.nan
+    return f"{'all, to ' if n_ok == len(rr) else ''}{d:g} (omega dt {om * d:.3g}){wr}" if n_ok else f"none{wr}"
+
+
 def _map_tables(raw: dict, T: float, newton: bool = False) -> list[str]:
-    """Per alpha, stiffness x dt: the map cell, or Newton iterations mean (max) of the sampled steps."""
-    rows, out = _sel(raw["sim"]["rows"], t_end=T), []
-    cases = list(dict.fromkeys((r["k_scale"], r["e_scale"]) for r in rows))
+    """Per alpha, stiffness x dt: the map cells, f_max and the largest dt every run converges with; or
+    (``newton``) Newton iterations mean (max) of the sampled steps."""
+    out = []
     for a in ALPHAS:
-        cell = {(r["k_scale"], r["e_scale"], r["dt"]): r for r in _sel(rows, alpha=a)}
-        dts = sorted({d for *_, d in cell})
-        nw = [[f"{n['mean']:.2f} ({n['max']})" if (n := cell[(*c, d)]["newton"] if (*c, d) in cell else None)
-               and n["sampled"] else "-" for d in dts] for c in cases]
-        body = [[label(*c), *nw[i]] if newton else
-                [label(*c), f"{raw['sim']['omega_max'][label(*c)] / (2 * math.pi):.4g}",
-                 *(_mark(cell.get((*c, d))) for d in dts)] for i, c in enumerate(cases)]
+        runs = {(r["k_scale"], r["e_scale"], r["dt"]): r for r in _sel(raw["sim"]["rows"], t_end=T, alpha=a)}
+        dts, body = sorted({d for *_, d in runs}), []
+        for c in dict.fromkeys(k[:2] for k in runs):
+            cells, om = [runs.get((*c, d)) for d in dts], raw["sim"]["omega_max"][label(*c)]
+            body.append([label(*c), *(f"{r['newton']['mean']:.2f} ({r['newton']['max']})" if r and
+                                      r["newton"]["sampled"] else "-" for r in cells)] if newton else
+                        [label(*c), f"{om / (2 * math.pi):.4g}", *map(_mark, cells), _limit(cells, om)])
         head = ["stiffness", *([] if newton else ["f_max (Hz)"]), *(f"{d:g}" for d in dts)]
-        out += [f"**alpha = {_an(a)}**", "", *table(head, body, "l" + ("r" * len(dts) if newton
-                                                                          else "r" + "c" * len(dts))), ""]
+        out += [f"**alpha = {AN[a]}**", "", *(table(head, body, "l" + "r" * len(dts)) if newton else
+                                              table([*head, "every run converges up to dt"], body,
+                                                    "lr" + "c" * len(dts) + "l")), ""]
     return out
-
-
-def _dt_limit(raw: dict, hs: list[float]) -> list[str]:
-    """Per case, alpha and horizon: the largest dt up to which every run converges; (range): element_range."""
-    rows, body = raw["sim"]["rows"], []
-    for c in dict.fromkeys((r["k_scale"], r["e_scale"]) for r in rows):
-        om, cells = raw["sim"]["omega_max"][label(*c)], []
-        for a, T in ((a, T) for a in ALPHAS for T in hs):
-            rr = sorted(_sel(rows, alpha=a, t_end=T, k_scale=c[0], e_scale=c[1]), key=lambda r: r["dt"])
-            n_ok = next((i for i, r in enumerate(rr) if not r["success"]), len(rr))
-            wr = " (range)" if _sel(rr, status="element_range") else ""
-            d = rr[n_ok - 1]["dt"] if n_ok else None
-            cells.append(f"none{wr}" if not n_ok else f"{'all, to ' if n_ok == len(rr) else ''}{d:g} (omega dt "
-                         f"{om * d:.3g}){wr}")
-        body.append([label(*c), f"{om / (2 * math.pi):.4g}", *cells])
-    return table(["stiffness", "f_max (Hz)", *(f"alpha = {_an(a)}, {T:g} s" for a in ALPHAS for T in hs)],
-                 body, "lr" + "l" * 2 * len(hs))
 
 
 def _fail_table(rows: list[dict]) -> list[str]:
@@ -179,7 +167,7 @@ def _fail_table(rows: list[dict]) -> list[str]:
     body = []
     for r in fails:
         f, fs, nw = r["failure"], r.get("failing_step"), r["newton"]
-        body.append([label(r["k_scale"], r["e_scale"]), _an(r["alpha"]), f"{r['dt']:g}", f"{r['t_end']:g}",
+        body.append([label(r["k_scale"], r["e_scale"]), AN[r["alpha"]], f"{r['dt']:g}", f"{r['t_end']:g}",
                      r["status"], fnum(f and f["t"], ".4g"), detail(f) if f else "-", _cross(r), f"{r['omega_dt']:.3g}",
                      f"{r['energy']['max_gain']:.2g}", fnum(r["t_drift_1pct"], ".3g"),
                      f"{r['spring_rel'][0]:.2g}-{r['spring_rel'][1]:.3g}",
@@ -192,32 +180,28 @@ def _fail_table(rows: list[dict]) -> list[str]:
                   "cond at predictor", "two half steps"], body, "llrrlrllrrrlllrl")
 
 
-def _why(rows: list[dict]) -> list[str]:
-    """Per alpha: the failures by status, the study's diagnosis of the Newton failures, whether two half steps
-    converge, and in how many failed runs Newton's count rose before the failure (last 20 steps' max > 2 x mean)."""
+def _lost(g: list[dict]) -> str:
+    """The energy runs lost by the end, min to max, and the nominal stiffness's at dt = 1e-3."""
+    e, nom = [-r["energy"]["end"] for r in g], [-r["energy"]["end"] for r in _sel(g, k_scale=1, e_scale=1, dt=1e-3)]
+    return f"{min(e):.1e} to {max(e):.1e}" + (f"; nominal, dt = 1e-3: {nom[0]:.1e}" if nom else "") if e else "-"
+
+
+def _why(rows: list[dict], hs: list[float]) -> list[str]:
+    """Per alpha: the failures by status and the study's diagnosis of the Newton failures; the energy the converged
+    runs lost by the end, in units of the energy scale (negative: a gain)."""
     body = []
     for a in ALPHAS:
         fails = [r for r in _sel(rows, alpha=a) if not r["success"]]
         nf = _sel(fails, status="newton_failed")
         cls = [_newton_class(r) for r in nf]
-        body.append([_an(a), len(_sel(rows, alpha=a)), len(fails), *(len(_sel(fails, status=s)) for s in STATUSES),
+        body.append([AN[a], len(_sel(rows, alpha=a)), len(fails), *(len(_sel(fails, status=s)) for s in STATUSES),
                      ", ".join(f"{cls.count(c)} {c}" for c in dict.fromkeys(cls)) or "-",
                      f"{sum(r['failing_step']['half_steps_converge'] for r in nf)} of {len(nf)}" if nf else "-",
-                     sum(r["newton"]["max_last20"] > 2 * max(r["newton"]["mean"], 1.0) for r in fails)])
+                     sum(r["newton"]["max_last20"] > 2 * max(r["newton"]["mean"], 1.0) for r in fails),
+                     *(_lost(_sel(rows, alpha=a, t_end=T, success=True, wraps=0)) for T in hs)])
     return table(["alpha", "runs", "failed", *STATUSES, "Newton failures: diagnosis", "two half steps converge",
-                  "Newton's count rose before the failure"], body, "lrrrrrllr")
-
-
-def _dissipation(rows: list[dict], hs: list[float]) -> list[str]:
-    """alpha = -1/3: the energy lost by the end, in units of the energy scale (negative: a gain)."""
-    body = []
-    for T in hs:
-        if g := [r for r in _sel(rows, t_end=T, alpha=ALPHAS[1], success=True) if not r["wraps"]]:
-            nom = _sel(g, k_scale=1.0, e_scale=1.0, dt=1e-3)
-            body.append([f"{T:g}", len(g), f"{min(-r['energy']['end'] for r in g):.1e} to "
-                         f"{max(-r['energy']['end'] for r in g):.1e}", f"{-nom[0]['energy']['end']:.1e}" if nom else "-"])
-    return table(["horizon (s)", "converged runs", "lost by the end (min to max)", "nominal stiffness, dt = 1e-3"],
-                 body, "rrll")
+                  "Newton's count rose before the failure", *(f"energy lost by the end, {T:g} s" for T in hs)],
+                 body, "lrrrrrllr" + "l" * len(hs))
 
 
 def page(raw: dict, check_lines: list[str]) -> str:
@@ -229,11 +213,10 @@ def page(raw: dict, check_lines: list[str]) -> str:
              f"x {len({(r['k_scale'], r['e_scale']) for r in rows})} stiffness cases x horizon; {len(rows)} runs.", ""]
     for T in hs:
         lines += [f"## Stability map, {T:g} s", "", *_map_tables(raw, T)]
-    return "\n".join([*lines, "## Where and why runs fail", "", *_why(rows), "", "### Largest step every run converges "
-                      "with", "", *_dt_limit(raw, hs), "", "### Every failure", "", *_fail_table(rows), "",
-                      "## Energy drift", "", "alpha = 0, nominal stiffness: the order of the drift in the self-checks; "
-                      "alpha = -1/3, the energy lost, in units of the energy scale (negative: a gain):", "",
-                      *_dissipation(rows, hs), "", "## Newton iterations per step (3 s runs)", "",
+    return "\n".join([*lines, "## Where and why runs fail", "", *_why(rows, hs), "",
+                      "### Every failure", "",
+                      *_fail_table(rows), "",
+                      "## Newton iterations per step (3 s runs)", "",
                       *_map_tables(raw, 3.0, newton=True), *check_lines])
 
 

@@ -23,9 +23,8 @@ NOMINAL = {"k1": 700.0, "kt1": 0.5, "k3": 400.0, "kt3": 0.5}
 
 
 def one_run(*, kt_factor: float | None = None, **kw) -> dict:
-    """``identification_run``; with ``kt_factor`` on twobar with kt1 = kt3 = kt_factor x nominal, the scene
-    written once per worker to a file named by the hash of its text (its model and data cached like a built-in
-    scene's)."""
+    """``identification_run``; with ``kt_factor``, on twobar with kt1 = kt3 = kt_factor x nominal, its scene written
+    once per worker to a file named by its text's hash (its model and data cached like a built-in scene's)."""
     import dataclasses
     import hashlib
     import tempfile
@@ -84,7 +83,8 @@ def summarise(run: dict, rec: dict) -> dict:
     f = run.get("kt_factor")
     out = {"key": _key(run), "method": run["method"], "start": run["start"], "noise": run["noise"], "kt_factor": f}
     if "error" in rec:
-        return {**out, "error": rec["error"], "success": False, "converged": False, "bad": []}
+        return {**out, "error": rec["error"], "success": False, "converged": False, "bad": [], "cell": "error",
+                "kt_cell": "error"}
     nominal = {**NOMINAL, **({"kt1": NOMINAL["kt1"] * f, "kt3": NOMINAL["kt3"] * f} if f is not None else {})}
     par, weak = {k: float(v) for k, v in rec["parameters"].items()}, rec.get("weak", [])
     rel = {k: abs(par[k] / nominal[k] - 1.0) for k in nominal}
@@ -95,33 +95,20 @@ def summarise(run: dict, rec: dict) -> dict:
     inf_se = [k for k in nominal if isinstance(se.get(k), float) and se[k] == math.inf]
     err_k = max(rel["k1"], rel["k3"])
     err = err_k if run["method"] == "adapted-direct" else max(rel.values())  # the cells' error
-    return {**out, "success": bool(rec["success"]), "status": rec["status"], "wall_s": rec["wall_s"], "weak": weak,
-            "err": err, "err_k": err_k, "err_kt": max(rel["kt1"], rel["kt3"]), "inf_se": inf_se,
-            "converged": bool(rec["success"] and err <= (TOL_ADAPTED if run["method"] == "adapted-direct" else TOL_P)),
-            "covered_4se": num == set(nominal) and all(abs(par[k] - nominal[k]) <= 4 * se[k] for k in nominal),
-            "bad": [b for b in _bad_numbers(rec) if not (b.startswith("std_errors.") and b[11:] in inf_se
-                                                         and b[11:] in weak)],
+    converged = bool(rec["success"] and err <= (TOL_ADAPTED if run["method"] == "adapted-direct" else TOL_P))
+    covered = num == set(nominal) and all(abs(par[k] - nominal[k]) <= 4 * se[k] for k in nominal)
+    bad = [b for b in _bad_numbers(rec) if not (b.startswith("std_errors.") and b[11:] in inf_se and b[11:] in weak)]
+    mark = ("✗" if not rec["success"] else ("✓" if converged else "✗!") if run["noise"] == 0 else  # docs: Cells
+            "✗!" if not covered else "✓" if err <= 0.1 else "~")
+    return {**out, "success": bool(rec["success"]), "wall_s": rec["wall_s"], "weak": weak, "err_k": err_k,
+            "converged": converged, "bad": bad, "inf_se_not_weak": [k for k in inf_se if k not in weak],
+            "cell": f"{mark} {err:.0e}", "kt_cell": f"{'ok' if rec['success'] else 'FAIL'} ({rec['status'][:18]}): "
+            f"k {err_k:.0e}, kt {max(rel['kt1'], rel['kt3']):.0e}" + (" NaN!" if bad else ""),
             "below_lower": [k for k in nominal if par[k] < 0.0],
             "zero_se": [k for k in nominal if k in num and se[k] == 0.0],
             # success, yet a parameter off by > 10 % and by > 4 reported SE, and not in the weak list
             "overconfident": [k for k in nominal if rec["success"] and rel[k] > 0.1 and k not in weak and k in num
                               and math.isfinite(se[k]) and abs(par[k] - nominal[k]) > 4 * se[k]]}
-
-
-def _cell(r: dict | None) -> str:
-    """Mark and error (the marks: docs/studies/extremes.md, Identification)."""
-    if r is None or "error" in r:
-        return "" if r is None else "error"
-    mark = ("✗" if not r["success"] else ("✓" if r["converged"] else "✗!") if r["noise"] == 0 else
-            "✗!" if not r["covered_4se"] else "✓" if r["err"] <= 0.1 else "~")
-    return f"{mark} {r['err']:.0e}"
-
-
-def _kt_cell(r: dict | None) -> str:
-    if r is None or "error" in r:
-        return "" if r is None else "error"
-    return (f"{'ok' if r['success'] else 'FAIL'} ({r['status'][:18]}): k {r['err_k']:.0e}, kt {r['err_kt']:.0e}"
-            + (" NaN!" if r["bad"] else ""))
 
 
 def page(rows: list[dict], quick: bool, banner: str, check_lines: list[str]) -> str:
@@ -135,7 +122,7 @@ def page(rows: list[dict], quick: bool, banner: str, check_lines: list[str]) -> 
     starts = sorted({r["start"] for r in main_rows})
     for m in METHODS:
         g = {(r["noise"], r["start"]): r for r in main_rows if r["method"] == m}
-        body = [[f"{nz:g}", *(_cell(g.get((nz, s))) for s in starts), ", ".join(sorted(
+        body = [[f"{nz:g}", *(g[(nz, s)]["cell"] if (nz, s) in g else "" for s in starts), ", ".join(sorted(
             {k for (n, _), r in g.items() if n == nz and "error" not in r for k in r["weak"]})) or "-"]
             for nz in sorted({r["noise"] for r in main_rows})]
         lines += [f"**{m}**", "", *table(["noise (m)", *(f"{s:g} x p*" for s in starts), "weak (any start)"], body,
@@ -146,7 +133,8 @@ def page(rows: list[dict], quick: bool, banner: str, check_lines: list[str]) -> 
             for nz in sorted({r["noise"] for r in kt}):
                 if g := {r["start"]: r for r in kt if (r["kt_factor"], r["method"], r["noise"]) == (f, m, nz)}:
                     weak = sum("error" not in r and {"kt1", "kt3"} <= set(r["weak"]) for r in g.values())
-                    body.append([f"{f:g}", m, f"{nz:g}", *(_kt_cell(g.get(s)) for s in starts), f"{weak}/{len(g)}"])
+                    body.append([f"{f:g}", m, f"{nz:g}", *(g[s]["kt_cell"] if s in g else "" for s in starts),
+                                 f"{weak}/{len(g)}"])
     lines += ["## Torsional stiffness near zero", "", *table(
         ["kt / nominal", "method", "noise (m)", *(f"{s:g} x p*" for s in starts), "kt weak in"], body,
         "rlr" + "l" * (len(starts) + 1)), ""]
@@ -158,21 +146,16 @@ def self_checks(rows: list[dict]) -> list[tuple]:
     errs = [f"{r['key']}: {r['error']}" for r in rows if "error" in r]
     direct0 = [r for r in rows if r["method"] == "direct" and r["noise"] == 0 and r["kt_factor"] is None]
     ktr = [r for r in rows if r["kt_factor"] is not None and "error" not in r]
-
-    def hits(field: str) -> str:
-        return "; ".join(f"{r['key']} ({', '.join(r[field])})" for r in rows if r.get(field)) or "none"
-
-    notweak = [r["key"] for r in rows if set(r.get("inf_se", [])) - set(r.get("weak", []))]
+    hits = {k: "; ".join(f"{r['key']} ({', '.join(r[k])})" for r in rows if r.get(k)) for k in
+            ("bad", "zero_se", "inf_se_not_weak", "overconfident", "below_lower")}
     return [("no identification run raised", "; ".join(errs) or f"none of {len(rows)}", not errs),
             ("no NaN/inf (but the infinite standard error of a weak parameter) in a record that reports success; "
-             "records with NaN/inf", hits("bad"), not any(r["bad"] and r["success"] for r in rows)),
+             "records with NaN/inf", hits.pop("bad") or "none", not any(r["bad"] and r["success"] for r in rows)),
             ("direct identification on noise-free data converges from every start",
              f"{sum(r['converged'] for r in direct0)} of {len(direct0)}", all(r["converged"] for r in direct0)),
-            ("no standard error exactly 0", hits("zero_se"), hits("zero_se") == "none", False),
-            ("no infinite standard error outside the weak list", ", ".join(notweak) or "none", not notweak, False),
-            ("no overconfident success (off by > 10 % and > 4 SE, not weak)", hits("overconfident"),
-             hits("overconfident") == "none", False),
-            ("no stiffness below its lower bound 0", hits("below_lower"), hits("below_lower") == "none", False),
+            ("no standard error exactly 0 or infinite outside the weak list, no overconfident success (off by > 10 % "
+             "and > 4 SE, not weak), no stiffness below its lower bound 0",
+             "; ".join(f"{k}: {v}" for k, v in hits.items() if v) or "none", not any(hits.values()), False),
             ("kt near zero: kt1 and kt3 reported weak (and k1, k3 within 1e-4 in)",
              f"{sum({'kt1', 'kt3'} <= set(r['weak']) for r in ktr)} of {len(ktr)} "
              f"({sum(r['err_k'] <= 1e-4 for r in ktr)} of {len(ktr)})",
