@@ -73,7 +73,7 @@ def self_checks(rows: list[dict]) -> list[tuple]:
     fails, rng = [r for r in rows if not r["success"]], _sel(rows, status="element_range")
     same = [r["interpreted_same"] for r in rows if "interpreted_same" in r]
     mism = max(r["newton"]["replay_mismatch"] for r in rows)
-    unsound = [r for r in rows if r["wraps"] or _suspect(r)]
+    unsound, flagged = [r for r in rows if r["wraps"] or _suspect(r)], [r for r in rows if "flagged" in r]
     named = sum(any(k == f"{r['failure']['element']}.{r['failure']['end']}" for k, *_ in r["flagged"]["wrap"])
                 for r in rng)
     out = [("no NaN/inf in a returned trajectory", f"{len(rows)} runs", all(r["finite"] for r in rows)),
@@ -86,7 +86,10 @@ def self_checks(rows: list[dict]) -> list[tuple]:
            (f"every failure detected: no success with a wrap (the study's atan2) or, at alpha = 0, a drift above "
             f"{SUSPECT_DRIFT:g}; no failed run returns a wrap", f"{len(unsound)} of {len(rows)} runs", not unsound),
            ("each element_range failure: the study's wrap check of the rejected step at the element end named",
-            f"{named} of {len(rng)}", named == len(rng))]
+            f"{named} of {len(rng)}", named == len(rng)),
+           ("the rejected step of each element_range and energy_growth failure: Newton converged in it",
+            f"{sum(r['flagged']['converged'] for r in flagged)} of {len(flagged)}",
+            all(r["flagged"]["converged"] for r in flagged), False)]
     for T, tol in DRIFT_TOL.items():
         if small := [r["energy"]["drift"] for r in _sel(rows, alpha=0.0, success=True, wraps=0, t_end=T)
                      if r["dt"] <= 1e-3]:
@@ -213,10 +216,8 @@ def page(raw: dict, check_lines: list[str]) -> str:
              f"x {len({(r['k_scale'], r['e_scale']) for r in rows})} stiffness cases x horizon; {len(rows)} runs.", ""]
     for T in hs:
         lines += [f"## Stability map, {T:g} s", "", *_map_tables(raw, T)]
-    return "\n".join([*lines, "## Where and why runs fail", "", *_why(rows, hs), "",
-                      "### Every failure", "",
-                      *_fail_table(rows), "",
-                      "## Newton iterations per step (3 s runs)", "",
+    return "\n".join([*lines, "## Where and why runs fail", "", *_why(rows, hs), "", "### Every failure", "",
+                      *_fail_table(rows), "", "## Newton iterations per step (3 s runs)", "",
                       *_map_tables(raw, 3.0, newton=True), *check_lines])
 
 
