@@ -1,8 +1,6 @@
-"""The measurements of one simulation at the extremes, shared by studies/extremes.py (the stability map) and
-studies/extremes_rotations.py (full turns, a finer mesh): the run's status and its parsed failure message,
-the energy drift, the co-rotational local rotations computed independently of ``simulate``, Newton
-iterations of sampled steps, and replays of the step that failed or that ``simulate`` rejected.
-"""
+"""One simulation at the extremes measured, for studies/extremes.py and studies/extremes_rotations.py: its
+status and parsed failure message, the energy drift, the local rotations computed independently of ``simulate``,
+Newton iterations of sampled steps, replays of the failing or rejected step (docs/studies/extremes.md)."""
 
 from __future__ import annotations
 
@@ -39,9 +37,17 @@ def parse_failure(msg: str, dt: float) -> dict | None:
     return None
 
 
+def detail(f: dict) -> str:
+    """What a failure message says beyond the time."""
+    return {"newton_failed": lambda: f"{f['iterations']} it., residual {f['residual']:.2g} (tol {f['tol']:.2g})",
+            "element_range": lambda: f"{f['element']} end {f['end']}: {f['theta0']:+.3f} -> {f['theta1']:+.3f} rad",
+            "energy_growth": lambda: f"+{f['grew_J']:.3g} J, {f['percent']:.0f} % of {f['in_motion_J']:.3g} J in "
+                                     "motion"}[f["kind"]]()
+
+
 def local_rotations(model, q: np.ndarray) -> dict[str, np.ndarray]:
-    """Co-rotational local rotations at both ends of every beam element, computed here as the element
-    does (atan2, wrapped to (-pi, pi]): the study's own view, independent of simulate's check."""
+    """Co-rotational local rotations at both ends of every beam element, computed as the element does
+    (atan2, in (-pi, pi])."""
     out, q0 = {}, model.q0
     for kind, name, ia, ib in model.segments:
         if kind == "beam":
@@ -55,41 +61,23 @@ def local_rotations(model, q: np.ndarray) -> dict[str, np.ndarray]:
     return out
 
 
-def wraps(model, q: np.ndarray) -> tuple[int, float, int | None]:
-    """(local-rotation jumps through +-pi, max |local rotation|, index of the first jump)."""
-    rots = local_rotations(model, q).values()
-    jumps = [np.flatnonzero(np.abs(np.diff(th)) > math.pi) for th in rots]
-    firsts = [int(j[0]) for j in jumps if j.size]
-    mx = max(float(np.abs(th).max()) for th in rots)
-    return sum(j.size for j in jumps), mx, min(firsts) if firsts else None
-
-
 def finite(tr) -> bool:
     return all(np.isfinite(a).all() for a in (tr.t, tr.q, tr.qd, tr.qdd, tr.lam, tr.outputs, *tr.energies.values()))
 
 
 def energy(tr, scale: float | None = None) -> dict:
-    """Drift max|E - E(0)| and the end / max gain / max loss, in units of ``scale`` (default the run's own
-    max (T + V_el)); the grid passes its case's finest converged alpha = 0 run's, so a blow-up shows as >> 1."""
+    """Drift max|E - E(0)|, the end and the max gain, in units of ``scale`` (default the run's own max T + V_el;
+    the grid passes its case's finest converged alpha = 0 run's, so that a blow-up shows as >> 1)."""
     E, moving = tr.energies["total"], tr.energies["kinetic"] + tr.energies["elastic"]
     own = float(moving.max()) if moving.size and moving.max() > 0 else 1.0
-    s = own if scale is None else scale
-    dE = E - E[0]
+    s, dE = own if scale is None else scale, E - E[0]
     return {"scale_J": s, "own_scale_J": own, "drift": float(np.abs(dE).max() / s), "end": float(dE[-1] / s),
-            "max_gain": float(dE.max() / s), "max_loss": float(-dE.min() / s)}
+            "max_gain": float(dE.max() / s)}
 
 
-def _states(integ, tr, p, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """The run's stacked states and its Newton scaling d, for replaying its steps."""
-    n = integ.model.n_dof
-    X = np.hstack([tr.q, tr.qd, tr.qdd, tr.lam])
-    return X, np.array(integ.scale(X[0, :n], X[0, n:2 * n], p, dt)).ravel()
-
-
-def _newton_sample(integ, tr, p, dt: float, n_samples: int) -> dict:
-    """Newton iterations of evenly spaced steps and of the last 20, re-run from the run's own states with
-    the interpreted step; the largest relative difference from the compiled states."""
-    X, d = _states(integ, tr, p, dt)
+def _newton_sample(integ, X, d, p, dt: float, n_samples: int) -> dict:
+    """Newton iterations of evenly spaced steps and of the last 20, re-run from the run's states ``X`` with the
+    interpreted step; the largest relative difference from the compiled states."""
     done = X.shape[0] - 1
     last = set(range(max(done - 20, 0), done))
     idx = sorted(last | (set(np.linspace(0, done - 1, min(done, n_samples)).astype(int).tolist()) if done else set()))
@@ -106,51 +94,47 @@ def _newton_sample(integ, tr, p, dt: float, n_samples: int) -> dict:
 _GJ: dict = {}  # residual and Jacobian Function of each integrator's Newton problem
 
 
-def _failing_step(integ, tr, p, dt: float, tol: float) -> dict:
-    """A Newton failure's step replayed with a plain Newton iteration (CasADi's fast_newton update, no line
-    search): the residual after each iteration, the condition number at the predictor, and whether two
-    half steps from the same state converge. ``tol``: the message's tolerance."""
+def _failing_step(integ, X, d, p, dt: float, tol: float) -> dict:
+    """A Newton failure's step replayed with a plain Newton iteration (fast_newton's update, no line search):
+    its kind, min residual and condition number at the predictor; and as two half steps from the same state."""
     import casadi as ca
 
-    X, d = _states(integ, tr, p, dt)
     k, n = X.shape[0] - 1, integ.model.n_dof
     if integ not in _GJ:
         z, prm = ca.SX.sym("z", integ.residual.nnz_in(0)), ca.SX.sym("prm", integ.residual.nnz_in(1))
         g = integ.residual(z, prm)
         _GJ[integ] = ca.Function("gj", [z, prm], [g, ca.jacobian(g, z)])
-    z0, prm = integ.prepare(X[k], k * dt, p, dt, d)
-    z, trace, cond0 = np.array(z0).ravel(), [], math.nan
+    z, prm = integ.prepare(X[k], k * dt, p, dt, d)
+    z, trace, cond0 = np.array(z).ravel(), [], math.nan
     for i in range(integ.max_iter + 1):
         g, J = (np.array(v) for v in _GJ[integ](z, prm))
-        g = g.ravel()
+        ok = np.isfinite(g).all() and np.isfinite(J).all()
         trace.append(float(np.abs(g).max()) if np.isfinite(g).all() else math.nan)
         cond0 = (float(np.linalg.cond(J)) if np.isfinite(J).all() else math.nan) if i == 0 else cond0
-        if not (np.isfinite(g).all() and np.isfinite(J).all()) or i == integ.max_iter:
+        if not ok or i == integ.max_iter:
             break
         try:
-            z = z - np.linalg.solve(J, g)
+            z = z - np.linalg.solve(J, g.ravel())
         except np.linalg.LinAlgError:
             break
-    x, half_ok = X[k], True
-    dh = np.array(integ.scale(X[0, :n], X[0, n:2 * n], p, dt / 2)).ravel()
+    x, half_ok, dh = X[k], True, np.array(integ.scale(X[0, :n], X[0, n:2 * n], p, dt / 2)).ravel()
     for j in range(2):
         x, r, _ = integ.step_interpreted(x, k * dt + j * dt / 2, p, dt / 2, dh)
         if not (np.isfinite(x).all() and float(r) <= float(integ.tolerance(x[:n]))):
             half_ok = False
             break
-    tr_, tol = np.array(trace), tol if math.isfinite(tol) else integ.tol
-    fin = tr_[np.isfinite(tr_)]
-    kind = ("NaN/inf in the residual" if not np.isfinite(tr_).all() else "stalls at the round-off floor"
+    tr, tol = np.array(trace), tol if math.isfinite(tol) else integ.tol
+    fin = tr[np.isfinite(tr)]
+    kind = ("NaN/inf in the residual" if not np.isfinite(tr).all() else "stalls at the round-off floor"
             if fin.min() <= 100 * tol else "oscillates, no convergence" if fin[1:].min(initial=np.inf) < fin[0]
             else "diverges from the predictor")
     return {"cond_predictor": cond0, "min_residual": float(fin.min()) if fin.size else math.nan, "kind": kind,
             "half_steps_converge": half_ok}
 
 
-def _cross_check(integ, tr, p, dt: float) -> dict:
+def _cross_check(integ, tr, X, d, p, dt: float) -> dict:
     """The step simulate rejected, replayed (the interpreted step is the compiled one bitwise): did Newton
     converge, which local rotations jump through +-pi, how much energy does it hold above E(0)?"""
-    X, d = _states(integ, tr, p, dt)
     n = integ.model.n_dof
     x1, res, _ = integ.step_interpreted(X[-1], (X.shape[0] - 1) * dt, p, dt, d)
     out = {"finite": bool(np.isfinite(x1).all()), "wrap": [], "dE_J": math.nan, "moving_max_J": math.nan}
@@ -170,20 +154,24 @@ def run_case(model, *, k_scale: float, e_scale: float, alpha: float, dt: float, 
              interpreted_check: bool = False, ref_scale: float | None = None) -> tuple[dict, object]:
     """One simulation with every measurement of the study: (row, trajectory)."""
     p = model.p_nominal * k_scale if p is None else p
-    row = {"k_scale": k_scale, "e_scale": e_scale, "alpha": alpha, "dt": dt, "t_end": t_end, "omega_dt": omega_max * dt}
     tr = simulate(model, t_end, dt=dt, alpha=alpha, p=p, qd0=qd0, compiled=True, raise_on_failure=False)
-    row.update({"success": bool(tr.success), "status": tr.status, "message": tr.message,
-                "steps": int(tr.stats["steps"]),
-                "t_reached": float(tr.t[-1]), "finite": finite(tr), "energy": energy(tr, ref_scale),
-                "failure": None if tr.success else parse_failure(tr.message, dt)})
-    row["wraps"], row["max_local_rot"], first = wraps(model, tr.q)
-    row["t_first_wrap"] = None if first is None else float(tr.t[first + 1])
-    integ = integrator_for(model, alpha=alpha)
-    row["newton"] = _newton_sample(integ, tr, p, dt, n_samples)
+    row = {"k_scale": k_scale, "e_scale": e_scale, "alpha": alpha, "dt": dt, "t_end": t_end, "omega_dt": omega_max * dt,
+           "success": bool(tr.success), "status": tr.status, "message": tr.message, "steps": int(tr.stats["steps"]),
+           "t_reached": float(tr.t[-1]), "finite": finite(tr), "energy": energy(tr, ref_scale),
+           "failure": None if tr.success else parse_failure(tr.message, dt)}
+    rots = local_rotations(model, tr.q).values()  # the study's own wrap check: a jump of more than pi
+    jumps = [np.flatnonzero(np.abs(np.diff(th)) > math.pi) for th in rots]
+    first = min((int(j[0]) for j in jumps if j.size), default=None)
+    row.update(wraps=sum(j.size for j in jumps), max_local_rot=max(float(np.abs(th).max()) for th in rots),
+               t_first_wrap=None if first is None else float(tr.t[first + 1]))
+    integ, n = integrator_for(model, alpha=alpha), model.n_dof
+    X = np.hstack([tr.q, tr.qd, tr.qdd, tr.lam])  # the run's states and Newton scaling, to replay its steps
+    d = np.array(integ.scale(X[0, :n], X[0, n:2 * n], p, dt)).ravel()
+    row["newton"] = _newton_sample(integ, X, d, p, dt, n_samples)
     if tr.status == "newton_failed":
-        row["failing_step"] = _failing_step(integ, tr, p, dt, row["failure"]["tol"] if row["failure"] else math.nan)
+        row["failing_step"] = _failing_step(integ, X, d, p, dt, row["failure"]["tol"] if row["failure"] else math.nan)
     if tr.status in ("element_range", "energy_growth"):
-        row["flagged"] = _cross_check(integ, tr, p, dt)
+        row["flagged"] = _cross_check(integ, tr, X, d, p, dt)
     lengths = [tr.output(f"{s.name}.length") for s in model.scene.springs]
     row["spring_rel"] = [float(min(L.min() / L[0] for L in lengths)), float(max(L.max() / L[0] for L in lengths))]
     big = np.flatnonzero(np.abs(tr.energies["total"] - tr.energies["total"][0]) > 0.01 * row["energy"]["scale_J"])
@@ -196,22 +184,8 @@ def run_case(model, *, k_scale: float, e_scale: float, alpha: float, dt: float, 
 
 
 def omega_max_of(model, p) -> float:
-    """The highest circular frequency about the initial configuration. The start is not an equilibrium
-    (modes warn); the stiff axial modes that set omega_max do not feel the missing preload."""
+    """The highest circular frequency about the initial configuration (not an equilibrium, so modes warn; the
+    stiff axial modes that set omega_max do not feel the missing preload)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", StabilityWarning)
         return float(np.max(modes(model, p=p).omega))
-
-
-def label(ks: float, es: float) -> str:
-    return f"springs x{ks:g}, E x{es:g}"
-
-
-def detail(f: dict) -> str:
-    """What a failure message says beyond the time."""
-    return {"newton_failed": lambda: f"{f['iterations']} it., residual {f['residual']:.2g} (tol {f['tol']:.2g})",
-            "element_range": lambda: f"{f['element']} end {f['end']}: {f['theta0']:+.3f} -> {f['theta1']:+.3f} rad",
-            "energy_growth": lambda: f"+{f['grew_J']:.3g} J, {f['percent']:.0f} % of {f['in_motion_J']:.3g} J in "
-                                     "motion"}[f["kind"]]()
-
-
