@@ -57,8 +57,7 @@ def combine(cells: list[dict]) -> str:
 def hybrid_set(sim: MeasurementSet, meas: MeasurementSet) -> MeasurementSet:
     """Simulated positions and accelerations with the measured (central-difference) velocities, on meas's times."""
     rows = np.array([sim.index(t) for t in meas.t])
-    return MeasurementSet(meas.t, sim.channels, sim.q[rows], meas.qd, sim.qdd[rows], source="hybrid",
-                          meta={"from": "simulated q, qdd; measured qd"})
+    return MeasurementSet(meas.t, sim.channels, sim.q[rows], meas.qd, sim.qdd[rows], source="hybrid")
 
 
 def fd_error(model, sim: MeasurementSet, meas: MeasurementSet, t: float) -> dict:
@@ -97,8 +96,7 @@ def run_one(model, key: str, data: MeasurementSet, t: float, start: float, horiz
         lin = res.extra.get("linear_solution")
         out["linear"] = None if lin is None else list(lin.values())
         out["linear_err"] = None if lin is None else rel_err(list(lin.values()), ps)
-    print(f"row {key} t = {t} s start {start} {out['transcription'] or ''}: err {err:.2e}, {res.status}, "
-          f"{res.iterations} it, {out['wall_s']:.1f} s -> {out['kind']}", flush=True)
+    print(f"row {key} t = {t} s start {start} {transcription}: {kind} ({err:.1e}, {res.status})", flush=True)
     return out
 
 
