@@ -67,12 +67,12 @@ def fd_error(model, sim: MeasurementSet, meas: MeasurementSet, t: float) -> dict
     def imbalance(qd, qdd) -> float:
         return float(np.abs(np.array(model.equilibrium(sim.q[i], qd, qdd, sim.meta["lam"][i], t, ps)[0])).max())
 
-    force_scale = float(np.abs(np.array(model.mass(sim.q[i], ps)) @ sim.qdd[i]).max()
-                        + np.abs(np.array(model.forces(sim.q[i], sim.qd[i], ps)[2])).max())
     return {"t": t, "qd_err": float(np.abs(meas.qd[j] - sim.qd[i]).max()), "qd_max": float(np.abs(sim.qd[i]).max()),
             "qdd_err": float(np.abs(meas.qdd[j] - sim.qdd[i]).max()), "qdd_max": float(np.abs(sim.qdd[i]).max()),
             "imb_sim": imbalance(sim.qd[i], sim.qdd[i]), "imb_hyb": imbalance(meas.qd[j], sim.qdd[i]),
-            "imb_meas": imbalance(meas.qd[j], meas.qdd[j]), "force_scale": force_scale}
+            "imb_meas": imbalance(meas.qd[j], meas.qdd[j]),
+            "force_scale": float(np.abs(np.array(model.mass(sim.q[i], ps)) @ sim.qdd[i]).max()
+                                 + np.abs(np.array(model.forces(sim.q[i], sim.qd[i], ps)[2])).max())}
 
 
 def run_one(model, key: str, data: MeasurementSet, t: float, start: float, horizon: float, transcription: str) -> dict:
@@ -101,21 +101,19 @@ def run_one(model, key: str, data: MeasurementSet, t: float, start: float, horiz
 
 
 def spacing_runs(model, sim: MeasurementSet, instants: list[float]) -> list[dict]:
-    """The direct method on measured sets of coarser sample spacing (offset against spacing)."""
+    """The direct method on measured sets of coarser sample spacing h (offset against spacing)."""
     out, h0, ps = [], float(sim.t[1] - sim.t[0]), model.p_nominal
     for t in instants:
-        for step in (1, 2, 3, 5, 10, 30):
-            n_t = t / (step * h0)
-            if abs(n_t - round(n_t)) > 1e-6 or (t + step * h0) > sim.t[-1] + 1e-9:
+        for h in (k * h0 for k in (1, 2, 3, 5, 10, 30)):  # spacings with a sample at t and one after it
+            if abs(t / h - round(t / h)) > 1e-6 or t + h > sim.t[-1] + 1e-9:
                 continue
-            coarse = MeasurementSet(sim.t[::step], sim.channels, sim.q[::step], sim.qd[::step], sim.qdd[::step],
-                                    source="simulated", meta={"step": step})
+            step = round(h / h0)
+            ms = measured_set(MeasurementSet(sim.t[::step], sim.channels, sim.q[::step], sim.qd[::step],
+                                             sim.qdd[::step], source="simulated"))
             for vel_only in (True, False):
-                ms = measured_set(coarse)
                 res = identify_direct(model, hybrid_set(sim, ms) if vel_only else ms, [t], start=1.0)
-                out.append({"t": t, "h": step * h0, "velocities_only": vel_only, "p": res.p.tolist(),
-                            "err": rel_err(res.p, ps), "err_k": rel_err(res.p[[0, 2]], ps[[0, 2]]),
-                            "success": res.success})
+                out.append({"t": t, "h": h, "velocities_only": vel_only, "p": res.p.tolist(), "err": rel_err(res.p, ps),
+                            "err_k": rel_err(res.p[[0, 2]], ps[[0, 2]]), "success": res.success})
     return out
 
 
