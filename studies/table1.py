@@ -1,18 +1,19 @@
 """Table 1 of the seed paper: do the direct and indirect identifications at t1 = 0.69 s and
 t2 = 2.83 s reach p*, and do they agree with the paper's verdicts?
 
-Set-up and how to read the page: docs/studies/table1.md. Run: ``python studies/table1.py`` (about 2.3 h; ``--quick``:
-t1 only, 0.05 s single shooting, one start; ``--raw FILE``, ``--render FILE``).
+Run: ``python studies/table1.py`` (about 2.3 h; ``--quick``: t1 only, 0.05 s single shooting, one start; ``--raw FILE``,
+``--render FILE``). Set-up and why the numbers are what they are: docs/studies/table1.md.
 """
 
 from __future__ import annotations
 
 import time
+from itertools import product
 from pathlib import Path
 
 import numpy as np
 from _shared import PAPER_NLP, capped_ipopt
-from _study import Banner, cli, fmt_p, save_raw, table, write_outputs
+from _study import Banner, assert_checks, checks, cli, fmt_p, save_raw, table, write_outputs
 
 from casflex.data import MeasurementSet, measured_set, simulated_set
 from casflex.identification import identify_direct, identify_indirect
@@ -26,59 +27,25 @@ T1, T2 = 0.69, 2.83
 WALL_CAP = {T1: 240.0, T2: 600.0}
 QUICK_HORIZON = 0.05
 
-# (key, procedure, reference data, method, residue, data key)
-ROWS = [
-    ("1", "direct", "simulated set", "direct", None, "sim"),
-    ("2", "direct", "simulated set, velocities from measured set", "direct", None, "hyb"),
-    ("3", "direct", "measured set", "direct", None, "meas"),
-    ("4", "indirect, Eq. 17", "simulated set", "indirect", "full", "sim"),
-    ("5", "indirect, Eq. 17", "simulated positions and accelerations, measured velocities", "indirect", "full", "hyb"),
-    ("6", "indirect, Eq. 17", "measured set", "indirect", "full", "meas"),
-    ("7", "indirect, Eq. 16", "simulated set", "indirect", "positions", "sim"),
-]
-REF = {r[0]: r[2] for r in ROWS}
-
-# The paper's Table 1 (method.md): outcome kind ("p*", "elsewhere", "bad") and the cell's text.
-P1 = np.array([663.0, 0.49, 379.0, 0.49])
-P2 = np.array([757.0, 0.50, 465.0, 0.53])
-PAPER = {
-    ("1", T1): ("p*", "converges to p*"), ("1", T2): ("p*", "converges to p*"),
-    ("2", T1): ("elsewhere", "converges to p1 = [663 0.49 379 0.49]"),
-    ("2", T2): ("elsewhere", "converges to p2 = [757 0.50 465 0.53] (reading)"),
-    ("3", T1): ("bad", "bad convergence even from p*"), ("3", T2): ("bad", "bad convergence even from p*"),
-    ("4", T1): ("p*", "p* from (0.93-1.10) p*"), ("4", T2): ("p*", "p* from (0.90-1.02) p*"),
-    ("5", T1): ("p*", "p* from (0.93-1.10) p*"), ("5", T2): ("p*", "p* from (0.90-1.02) p*"),
-    ("6", T1): ("bad", "bad convergence even from p*"), ("6", T2): ("bad", "bad convergence even from p*"),
-    ("7", T1): ("p*", "p* from (0.90-1.18) p*"), ("7", T2): ("p*", "p* from (0.98-1.02) p* (reading)"),
+P_STAR, BAD = "converges to p*", "bad convergence even from p*"
+EQ17 = ("p* from (0.93-1.10) p*", "p* from (0.90-1.02) p*")
+# key: (reference data, data key, residue (None: the direct method), the paper's verdict at t1, at t2)
+ROWS = {
+    "1": ("simulated set", "sim", None, P_STAR, P_STAR),
+    "2": ("simulated set, velocities from measured set", "hyb", None, "converges to p1 = [663 0.49 379 0.49]",
+          "converges to p2 = [757 0.50 465 0.53] (reading)"),
+    "3": ("measured set", "meas", None, BAD, BAD),
+    "4": ("simulated set", "sim", "full", *EQ17),
+    "5": ("simulated positions and accelerations, measured velocities", "hyb", "full", *EQ17),
+    "6": ("measured set", "meas", "full", BAD, BAD),
+    "7": ("simulated set", "sim", "positions", "p* from (0.90-1.18) p*", "p* from (0.98-1.02) p* (reading)"),
 }
-PAPER_RANGE = {("4", T1): (0.93, 1.10), ("4", T2): (0.90, 1.02), ("5", T1): (0.93, 1.10), ("5", T2): (0.90, 1.02),
-               ("7", T1): (0.90, 1.18), ("7", T2): (0.98, 1.02)}
+PROCEDURE = {None: "direct", "full": "indirect, Eq. 17", "positions": "indirect, Eq. 16"}
 WORDS = {"p*": "p*", "elsewhere": "elsewhere", "bad": "no mechanical meaning", "fails": "fails", "mixed": "mixed"}
 
 
-def _rel_err(p, ps) -> float:
+def rel_err(p, ps) -> float:
     return float(np.max(np.abs(np.asarray(p) / ps - 1.0)))
-
-
-def classify(success: bool, err: float, p: np.ndarray, ps: np.ndarray) -> str:
-    """'p*', 'elsewhere' (success, but not p* to TOL), 'bad' (success at a p without mechanical
-    meaning: a stiffness negative or collapsed onto its bound 0, below 1e-3 p*) or 'fails' (the
-    solver reports failure)."""
-    if not success:
-        return "fails"
-    if err <= TOL:
-        return "p*"
-    return "bad" if not np.all(np.isfinite(p)) or np.any(np.asarray(p) <= 1e-3 * ps) else "elsewhere"
-
-
-def verdict(c: dict) -> str:
-    """One run's outcome in words."""
-    p, err = c["p"], c["err"]
-    v = {"p*": f"converges to p* (<= {TOL:g})",
-         "elsewhere": f"converges elsewhere: p = {fmt_p(p)} (max rel. error {err:.2e})",
-         "bad": f"converges to p = {fmt_p(p)}: a stiffness <= 0 or collapsed to ~0, no mechanical meaning",
-         "fails": f"fails ({c['status']}; stops at p = {fmt_p(p)}, max rel. error {err:.1e})"}[c["kind"]]
-    return v + (f" [wall-time cap {c['cap_s']:.0f} s]" if c["status"] == "Maximum_WallTime_Exceeded" else "")
 
 
 def combine(cells: list[dict]) -> str:
@@ -88,11 +55,9 @@ def combine(cells: list[dict]) -> str:
 
 
 def hybrid_set(sim: MeasurementSet, meas: MeasurementSet) -> MeasurementSet:
-    """Simulated positions and accelerations with the measured (central-difference) velocities,
-    on the measured set's times."""
+    """Simulated positions and accelerations with the measured (central-difference) velocities, on meas's times."""
     rows = np.array([sim.index(t) for t in meas.t])
-    return MeasurementSet(meas.t, sim.channels, sim.q[rows], meas.qd, sim.qdd[rows], source="hybrid",
-                          meta={"from": "simulated q, qdd; measured qd"})
+    return MeasurementSet(meas.t, sim.channels, sim.q[rows], meas.qd, sim.qdd[rows], source="hybrid")
 
 
 def fd_error(model, sim: MeasurementSet, meas: MeasurementSet, t: float) -> dict:
@@ -102,56 +67,53 @@ def fd_error(model, sim: MeasurementSet, meas: MeasurementSet, t: float) -> dict
     def imbalance(qd, qdd) -> float:
         return float(np.abs(np.array(model.equilibrium(sim.q[i], qd, qdd, sim.meta["lam"][i], t, ps)[0])).max())
 
-    force_scale = float(np.abs(np.array(model.mass(sim.q[i], ps)) @ sim.qdd[i]).max()
-                        + np.abs(np.array(model.forces(sim.q[i], sim.qd[i], ps)[2])).max())
     return {"t": t, "qd_err": float(np.abs(meas.qd[j] - sim.qd[i]).max()), "qd_max": float(np.abs(sim.qd[i]).max()),
             "qdd_err": float(np.abs(meas.qdd[j] - sim.qdd[i]).max()), "qdd_max": float(np.abs(sim.qdd[i]).max()),
             "imb_sim": imbalance(sim.qd[i], sim.qdd[i]), "imb_hyb": imbalance(meas.qd[j], sim.qdd[i]),
-            "imb_meas": imbalance(meas.qd[j], meas.qdd[j]), "force_scale": force_scale}
+            "imb_meas": imbalance(meas.qd[j], meas.qdd[j]),
+            "force_scale": float(np.abs(np.array(model.mass(sim.q[i], ps)) @ sim.qdd[i]).max()
+                                 + np.abs(np.array(model.forces(sim.q[i], sim.qd[i], ps)[2])).max())}
 
 
-def run_one(model, row, data: MeasurementSet, t: float, start: float, horizon: float, transcription: str) -> dict:
+def run_one(model, key: str, data: MeasurementSet, t: float, start: float, horizon: float, transcription: str) -> dict:
     """One cell of the table: an identification and its verdict."""
-    key, _proc, _ref, method, residue, _dk = row
-    ps = model.p_nominal
-    t0 = time.perf_counter()
-    if method == "direct":
+    residue, ps, t0 = ROWS[key][2], model.p_nominal, time.perf_counter()
+    indirect = residue is not None
+    if not indirect:
         res = identify_direct(model, data, [t], start=start)
     else:
         res = identify_indirect(model, data, horizon, transcription=transcription, residue=residue, start=start,
                                 solver_options=capped_ipopt(WALL_CAP[t]), **PAPER_NLP)
-    err = _rel_err(res.p, ps)
-    out = {"row": key, "t": t, "horizon": horizon if method == "indirect" else None, "start": start,
-           "transcription": transcription if method == "indirect" else None, "cap_s": WALL_CAP[t],
-           "p": res.p.tolist(), "err": err, "success": res.success, "status": res.status,
-           "iterations": res.iterations, "wall_s": time.perf_counter() - t0,
-           "kind": classify(res.success, err, res.p, ps), "weak": list(res.identifiability.get("weak", [])),
-           "message": res.message}
-    if method == "direct":
+    err = rel_err(res.p, ps)
+    # 'bad': a stiffness <= 0 or collapsed onto its bound 0 (below 1e-3 p*), no mechanical meaning
+    kind = ("fails" if not res.success else "p*" if err <= TOL
+            else "bad" if not np.all(np.isfinite(res.p)) or np.any(res.p <= 1e-3 * ps) else "elsewhere")
+    out = {"row": key, "t": t, "horizon": horizon if indirect else None, "start": start,
+           "transcription": transcription if indirect else None, "cap_s": WALL_CAP[t], "p": res.p.tolist(),
+           "err": err, "success": res.success, "status": res.status, "iterations": res.iterations,
+           "wall_s": time.perf_counter() - t0, "kind": kind}
+    if not indirect:  # Eq. 11 is linear in (p, lambda): its exact least-squares solution
         lin = res.extra.get("linear_solution")
         out["linear"] = None if lin is None else list(lin.values())
-        out["linear_err"] = None if lin is None else _rel_err(list(lin.values()), ps)
-    print(f"row {key} t = {t} s start {start} {out['transcription'] or ''}: err {err:.2e}, {res.status}, "
-          f"{res.iterations} it, {out['wall_s']:.1f} s -> {out['kind']}", flush=True)
+        out["linear_err"] = None if lin is None else rel_err(list(lin.values()), ps)
+    print(f"row {key} t = {t} s start {start} {transcription}: {kind} ({err:.1e}, {res.status})", flush=True)
     return out
 
 
 def spacing_runs(model, sim: MeasurementSet, instants: list[float]) -> list[dict]:
-    """The direct method on measured sets of coarser sample spacing (offset against spacing)."""
+    """The direct method on measured sets of coarser sample spacing h (offset against spacing)."""
     out, h0, ps = [], float(sim.t[1] - sim.t[0]), model.p_nominal
     for t in instants:
-        for step in (1, 2, 3, 5, 10, 30):
-            n_t = t / (step * h0)
-            if abs(n_t - round(n_t)) > 1e-6 or (t + step * h0) > sim.t[-1] + 1e-9:
+        for h in (k * h0 for k in (1, 2, 3, 5, 10, 30)):  # spacings with a sample at t and one after it
+            if abs(t / h - round(t / h)) > 1e-6 or t + h > sim.t[-1] + 1e-9:
                 continue
-            coarse = MeasurementSet(sim.t[::step], sim.channels, sim.q[::step], sim.qd[::step], sim.qdd[::step],
-                                    source="simulated", meta={"step": step})
+            step = round(h / h0)
+            ms = measured_set(MeasurementSet(sim.t[::step], sim.channels, sim.q[::step], sim.qd[::step],
+                                             sim.qdd[::step], source="simulated"))
             for vel_only in (True, False):
-                ms = measured_set(coarse)
                 res = identify_direct(model, hybrid_set(sim, ms) if vel_only else ms, [t], start=1.0)
-                out.append({"t": t, "h": step * h0, "velocities_only": vel_only, "p": res.p.tolist(),
-                            "err": _rel_err(res.p, ps), "err_k": _rel_err(res.p[[0, 2]], ps[[0, 2]]),
-                            "success": res.success})
+                out.append({"t": t, "h": h, "velocities_only": vel_only, "p": res.p.tolist(), "err": rel_err(res.p, ps),
+                            "err_k": rel_err(res.p[[0, 2]], ps[[0, 2]]), "success": res.success})
     return out
 
 
@@ -164,122 +126,100 @@ def main(quick: bool = False, out_dir: Path | None = None, raw_path: Path | None
     meas = measured_set(sim)
     data = {"sim": sim, "meas": meas, "hyb": hybrid_set(sim, meas)}
     results, cross = [], []
-    for row in ROWS:
-        for t in instants:
-            for s in starts:
-                args = (model, row, data[row[5]], t, s, QUICK_HORIZON if quick else t)
-                results.append(run_one(*args, transcription))
-                if not quick and row[3] == "indirect" and results[-1]["kind"] != "p*":
-                    cross.append(run_one(*args, "single-shooting"))  # the same problem by single shooting
+    for key, t, s in product(ROWS, instants, starts):
+        args = (model, key, data[ROWS[key][1]], t, s, QUICK_HORIZON if quick else t)
+        results.append(run_one(*args, transcription))
+        if not quick and ROWS[key][2] and results[-1]["kind"] != "p*":
+            cross.append(run_one(*args, "single-shooting"))  # the same problem by single shooting
     raw = {"quick": quick, "instants": instants, "starts": starts, "transcription": transcription,
            "quick_horizon": QUICK_HORIZON, "p_nominal": model.p_nominal.tolist(), "results": results,
            "cross_check": cross, "fd": [fd_error(model, sim, meas, t) for t in instants],
-           "spacing": spacing_runs(model, sim, instants), "total_s": banner.wall}
-    raw["banner"] = banner.line()
+           "spacing": spacing_runs(model, sim, instants), "total_s": banner.wall, "banner": banner.line()}
     save_raw(raw, raw_path)
-    render(raw, out_dir)
-    # self-checks: what the page claims about the exact data
-    direct_sim = [r for r in results if r["row"] == "1"]
-    assert all(r["kind"] == "p*" for r in direct_sim), "direct identification on the simulated set must give p*"
-    assert all(r["linear_err"] is not None and r["linear_err"] <= TOL for r in direct_sim)
+    assert_checks(render(raw, out_dir))
     return raw
 
 
-def render(raw: dict, out_dir: Path | None) -> None:
-    """The page from the raw numbers of a run (``main`` or a ``--raw`` file)."""
-    write_outputs("table1", out_dir, raw["quick"], "\n".join(page(raw)))
-
-
-def page(raw: dict) -> list[str]:
-    """The summary beside the paper, every run, the data's errors and the measured findings."""
-    quick, instants, starts, results = raw["quick"], raw["instants"], raw["starts"], raw["results"]
-    cross, fd, spacing, ps = raw.get("cross_check") or [], raw["fd"], raw["spacing"], np.array(raw["p_nominal"])
-    by: dict[tuple, list[dict]] = {}
-    for r in results:
-        by.setdefault((r["row"], r["t"]), []).append(r)
-    banner = raw.get("banner") or (f"Generated by `python studies/table1.py{' --quick' if quick else ''}` in "
-                                   f"{raw['total_s']:.0f} s.")
-    tr_text = ("single shooting on the horizon 0..0.05 s (quick mode: the CI check, not the paper's horizon)" if quick
-               else "multiple shooting (intervals of 20 steps), horizon 0..t")
-    L = ["# Table 1 of the seed paper: direct and indirect identification" + (" (quick mode)" if quick else ""), "",
-         f"{banner} Indirect rows: {tr_text}. Starts: {', '.join(f'{s:g}' for s in starts)} x p*. Convergence: "
-         f"max_j |p_j/p*_j - 1| <= {TOL:g} and the solver reports success"
-         + ("" if quick else f"; each indirect run is capped at {WALL_CAP[T1]:.0f} s (t1) / {WALL_CAP[T2]:.0f} s (t2) "
-            "of solver wall time, a capped run counts as a failure") + ". Set-up and why the numbers are what they "
-         "are: [studies/table1.md](../studies/table1.md).", "", "## Summary beside the paper", ""]
-    body = []
-    for key, proc, ref, *_ in ROWS:
-        cells, agrees = [], []
-        for t in instants:
-            cs, ss = by[(key, t)], [c for c in cross if c["row"] == key and c["t"] == t]
-            extra = f"; single shooting: {WORDS[combine(ss)]} ({_errs(ss)})" if ss else ""
-            cells += [PAPER[(key, t)][1], f"{WORDS[combine(cs)]} (max rel. error from start {_errs(cs)}){extra}"]
-            agrees.append(combine(cs) == PAPER[(key, t)][0])
-        mark = "yes" if all(agrees) else ("no" if not any(agrees) else "partly")
-        mark += " (qualitatively: off p*, by much less than p1/p2)" if key == "2" and any(agrees) else ""
-        body.append([key, proc, ref, *cells, mark])
-    L += table(["#", "procedure", "reference data", *(f"{w}, t = {t} s" for t in instants for w in ("paper", "ours")),
-                "agrees?"], body)
-    L += ["", "## Every run", "", *_runs_table(results, "identified p = [k1 kt1 k3 kt3]", ".2f")]
-    if cross:
-        L += ["", "Cross-check: every indirect run that did not reach p* by multiple shooting, repeated by single "
-              "shooting (same data, horizon, start and solver settings):", "",
-              *_runs_table(cross, "identified p (single shooting)", ".1f")]
-    L += ["", "Exact linear least-squares solution of the direct rows (the unique minimiser, whatever the start):", "",
-          *table(["#", "t (s)", "linear LS solution", "max rel. error", "IPOPT result equal to it (max rel. diff.)"],
-                 [[key, t, fmt_p(by[(key, t)][0]["linear"]), f"{by[(key, t)][0]['linear_err']:.2e}",
-                   f"{max(_rel_err(cc['p'], np.array(cc['linear'])) for cc in by[(key, t)]):.1e}"]
-                  for key in ("1", "2", "3") for t in instants], "lrlrr"),
-          "", "## Error of the measured set (central differences, h = 1e-3 s)", "",
-          "Compared with the simulated set's own values:", "",
-          *table(["t (s)", "max abs error qd (m/s or rad/s)", "relative to max abs qd", "max abs error qdd",
-                  "relative to max abs qdd", "Eq. 1 imbalance at p*: simulated set (N)", "measured qd",
-                  "measured set", "force scale (N)"],
-                 [[f["t"], f"{f['qd_err']:.3e}", f"{f['qd_err'] / f['qd_max']:.1e}", f"{f['qdd_err']:.3e}",
-                   f"{f['qdd_err'] / f['qdd_max']:.1e}", f"{f['imb_sim']:.1e}", f"{f['imb_hyb']:.1e}",
-                   f"{f['imb_meas']:.1e}", f"{f['force_scale']:.3g}"] for f in fd], "r" * 9)]
-    if spacing:
-        L += ["", "Direct identification (start p*) with the measured quantities taken from positions sampled "
-              "at a coarser spacing h (same simulation, every k-th sample):", "",
-              *table(["t (s)", "h (s)", "measured", "identified p", "max rel. error", "error of k1, k3"],
-                     [[s["t"], f"{s['h']:.0e}", "velocities only (row 2)" if s["velocities_only"] else "set (row 3)",
-                       fmt_p(s["p"]), f"{s['err']:.2e}", f"{s['err_k']:.2e}"] for s in spacing], "rrllrr")]
-    return L + ["", "## What the numbers say", "", *findings(by, instants, spacing, ps), ""]
-
-
-def _errs(cells: list[dict]) -> str:
-    return ", ".join(f"{c['start']:g}: {c['err']:.1e}" for c in cells)
-
-
-def _runs_table(cells: list[dict], p_head: str, wall: str) -> list[str]:
+def runs_table(cells: list[dict], p_head: str, wall: str) -> list[str]:
     """Every run of ``cells``, one a line."""
     return table(["#", "reference data", "t (s)", "start", p_head, "max rel. error", "success", "iterations",
                   "wall (s)", "verdict"],
-                 [[c["row"], REF[c["row"]], c["t"], f"{c['start']:g}", fmt_p(c["p"]), f"{c['err']:.2e}",
+                 [[c["row"], ROWS[c["row"]][0], c["t"], f"{c['start']:g}", fmt_p(c["p"]), f"{c['err']:.2e}",
                    f"{'yes' if c['success'] else 'no'} ({c['status']})", c["iterations"], f"{c['wall_s']:{wall}}",
-                   verdict(c)] for c in sorted(cells, key=lambda c: (int(c["row"]), c["t"]))], "llrrlrlrrl")
+                   WORDS[c["kind"]] + (" (wall-time cap)" if c["status"] == "Maximum_WallTime_Exceeded" else "")]
+                  for c in sorted(cells, key=lambda c: (int(c["row"]), c["t"]))], "llrrlrlrrl")
 
 
-def _slope(spacing: list[dict], t: float, vel_only: bool) -> float | None:
+def growth(spacing: list[dict], t: float, vel_only: bool) -> float:
+    """The exponent e of offset ~ h^e (a least-squares line through log offset against log h)."""
     s = [x for x in spacing if x["t"] == t and x["velocities_only"] == vel_only and x["err"] > 0]
-    return float(np.polyfit(np.log([x["h"] for x in s]), np.log([x["err"] for x in s]), 1)[0]) if len(s) >= 3 else None
+    if len(s) < 3:
+        return np.nan
+    return float(np.polyfit(np.log([x["h"] for x in s]), np.log([x["err"] for x in s]), 1)[0])
 
 
-def findings(by, instants, spacing, ps) -> list[str]:
-    """The direct offsets beside the paper's and their growth with the spacing (the verdicts per row, the
-    agreement with the paper and the single-shooting cross-check are in the tables)."""
-    paper_k = {T1: _rel_err(P1[[0, 2]], ps[[0, 2]]), T2: _rel_err(P2[[0, 2]], ps[[0, 2]])}
-    out = []
-    for t in instants:
-        pts = [x for x in spacing if x["t"] == t and x["velocities_only"]]
-        if pts:  # a coarser spacing fits this instant
-            out.append(f"- At t = {t} s measured velocities (row 2) move k1, k3 by "
-                       f"{max(_rel_err(np.array(c['p'])[[0, 2]], ps[[0, 2]]) for c in by[('2', t)]):.1e} (the paper's "
-                       f"{'p1' if t == T1 else 'p2'}: {paper_k[t]:.1e}), {max(x['err_k'] for x in pts):.1e} at "
-                       f"h = {max(x['h'] for x in pts):.0e} s; the offsets grow like "
-                       f"h^{_slope(spacing, t, True) or np.nan:.1f} (row 2) and "
-                       f"h^{_slope(spacing, t, False) or np.nan:.1f} (row 3).")
-    return out or ["- No coarser spacing fits the instants of this run."]
+def render(raw: dict, out_dir: Path | None) -> list[str]:
+    """The page from the raw numbers of a run (``main`` or a ``--raw`` file); the failed self-checks."""
+    instants, starts, results, spacing = raw["instants"], raw["starts"], raw["results"], raw["spacing"]
+    cross = raw.get("cross_check") or []
+    by: dict[tuple, list[dict]] = {}
+    for r in results:
+        by.setdefault((r["row"], r["t"]), []).append(r)
+
+    def errs(cells: list[dict]) -> str:
+        return ", ".join(f"{c['start']:g}: {c['err']:.1e}" for c in cells)
+
+    summary = []
+    for key, (ref, _data, residue, *papers) in ROWS.items():
+        cells, agrees = [], []
+        for t, paper in zip(instants, papers, strict=False):  # quick: t1 only
+            cs, ss = by[(key, t)], [c for c in cross if c["row"] == key and c["t"] == t]
+            cells += [paper, f"{WORDS[combine(cs)]} (max rel. error from start {errs(cs)})"
+                      + (f"; single shooting: {WORDS[combine(ss)]} ({errs(ss)})" if ss else "")]
+            # the paper's verdict as a kind: 'bad ...', '... p* ...' or elsewhere (p1, p2)
+            agrees.append(combine(cs) == ("bad" if paper.startswith("bad") else "p*" if "p*" in paper else "elsewhere"))
+        summary.append([key, PROCEDURE[residue], ref, *cells,
+                        "yes" if all(agrees) else "no" if not any(agrees) else "partly"])
+    direct = [c for c in results if c["row"] == "1"]
+    check_lines, failed = checks([
+        ("direct identification on the simulated set gives p*", errs(direct), all(c["kind"] == "p*" for c in direct)),
+        ("its exact linear least-squares solution is p*", ", ".join(f"{c['linear_err']:.1e}" for c in direct),
+         all(c["linear_err"] is not None and c["linear_err"] <= TOL for c in direct)),
+        *((f"direct offsets grow like h^2 (exponent 1.5-2.5), t = {t} s: rows 2 / 3", f"{e2:.1f} / {e3:.1f}",
+           1.5 <= e2 <= 2.5 and 1.5 <= e3 <= 2.5, False)
+          for t in instants for e2, e3 in [(growth(spacing, t, True), growth(spacing, t, False))] if np.isfinite(e2))])
+    transcription, horizon = raw["transcription"].replace("-", " "), raw["quick_horizon"] if raw["quick"] else "t"
+    page = [
+        "# Table 1 of the seed paper: direct and indirect identification" + (" (quick mode)" if raw["quick"] else ""),
+        "", f"{raw['banner']} Indirect rows: {transcription}, horizon 0..{horizon} s. Starts: "
+        f"{', '.join(f'{s:g}' for s in starts)} x p*. Set-up, criteria and why the numbers are what they are: "
+        "[studies/table1.md](../studies/table1.md).", "", "## Summary beside the paper", "",
+        *table(["#", "procedure", "reference data", *(f"{w}, t = {t} s" for t in instants for w in ("paper", "ours")),
+                "agrees?"], summary),
+        "", "## Every run", "", *runs_table(results, "identified p = [k1 kt1 k3 kt3]", ".2f")]
+    if cross:
+        page += ["", "## Cross-check by single shooting", "",
+                 *runs_table(cross, "identified p (single shooting)", ".1f")]
+    page += [
+        "", "## Exact linear least-squares solution of the direct rows", "",
+        *table(["#", "t (s)", "linear LS solution", "max rel. error", "IPOPT result equal to it (max rel. diff.)"],
+               [[key, t, fmt_p(by[(key, t)][0]["linear"]), f"{by[(key, t)][0]['linear_err']:.2e}",
+                 f"{max(rel_err(c['p'], np.array(c['linear'])) for c in by[(key, t)]):.1e}"]
+                for key in ("1", "2", "3") for t in instants], "lrlrr"),
+        "", "## Error of the measured set (central differences, h = 1e-3 s)", "",
+        *table(["t (s)", "max abs error qd (m/s or rad/s)", "relative to max abs qd", "max abs error qdd",
+                "relative to max abs qdd", "Eq. 1 imbalance at p*: simulated set (N)", "measured qd",
+                "measured set", "force scale (N)"],
+               [[f["t"], f"{f['qd_err']:.3e}", f"{f['qd_err'] / f['qd_max']:.1e}", f"{f['qdd_err']:.3e}",
+                 f"{f['qdd_err'] / f['qdd_max']:.1e}", f"{f['imb_sim']:.1e}", f"{f['imb_hyb']:.1e}",
+                 f"{f['imb_meas']:.1e}", f"{f['force_scale']:.3g}"] for f in raw["fd"]], "r" * 9),
+        "", "## Direct identification (start p*) from positions sampled at a coarser spacing h", "",
+        *table(["t (s)", "h (s)", "measured", "identified p", "max rel. error", "error of k1, k3"],
+               [[s["t"], f"{s['h']:.0e}", "velocities only (row 2)" if s["velocities_only"] else "set (row 3)",
+                 fmt_p(s["p"]), f"{s['err']:.2e}", f"{s['err_k']:.2e}"] for s in spacing], "rrllrr"),
+        "", *check_lines]
+    write_outputs("table1", out_dir, raw["quick"], "\n".join(page))
+    return failed
 
 
 if __name__ == "__main__":
