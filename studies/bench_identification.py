@@ -1,7 +1,6 @@
 """Benchmark: what does an identification cost the first time (cold cache), and every later time?
-
-Set-up and how to read the page: docs/studies/bench_identification.md. Run: ``python studies/bench_identification.py``
-(about 10 min; ``--quick``: two short cases).
+Run: ``python studies/bench_identification.py [--quick]`` (about 10 min); data, cases and what is timed:
+docs/studies/bench_identification.md.
 """
 
 from __future__ import annotations
@@ -12,19 +11,16 @@ from pathlib import Path
 
 import numpy as np
 from _shared import cold_and_cached, exudyn_recording
-from _study import Banner, cli, png, table, write_outputs
+from _study import Banner, assert_checks, checks, cli, png, table, write_outputs
 
 NOISE, SEED, START = 5e-4, 0, 0.8
-_IPOPT = {"solver": "ipopt", "compiled": True}  # the seed paper's NLP transcriptions
-CASES = {  # name: (method, horizon (s), options)
-    "default, 0.69 s": ("indirect", 0.69, {}),
-    "default, 3 s": ("indirect", 3.0, {}),
-    "default without model-error refit, 0.69 s": ("indirect", 0.69, {"model_error": "none"}),
-    "default without model-error refit, 3 s": ("indirect", 3.0, {"model_error": "none"}),
-    "IPOPT single shooting (compiled NLP), 0.69 s": ("indirect", 0.69, dict(_IPOPT, transcription="single-shooting")),
-    "IPOPT multiple shooting (compiled NLP), 0.69 s": ("indirect", 0.69,
-                                                       dict(_IPOPT, transcription="multiple-shooting")),
-    "direct, simulated set, t = 0.69 s (compiled)": ("direct", 0.69, {"compiled": True}),
+CASES = {  # name: (method, horizon (s), options); the default fit with and without its model-error refit, ...
+    **{f"default{' without model-error refit' * bool(o)}, {h:g} s": ("indirect", h, o)
+       for o in ({}, {"model_error": "none"}) for h in (0.69, 3.0)},
+    **{f"IPOPT {tr} shooting (compiled NLP), 0.69 s": (  # ... the seed paper's NLP transcriptions, ...
+        "indirect", 0.69, {"solver": "ipopt", "compiled": True, "transcription": f"{tr}-shooting"})
+       for tr in ("single", "multiple")},
+    "direct, simulated set, t = 0.69 s (compiled)": ("direct", 0.69, {"compiled": True}),  # ... the direct method
 }
 QUICK = ("default without model-error refit, 0.69 s", "direct, simulated set, t = 0.69 s (compiled)")
 
@@ -47,27 +43,19 @@ def worker(case: str) -> dict:
             "success": bool(r.success), "k_err": float(err[~kt].max()), "kt_err": float(err[kt].max())}
 
 
-def page(rows: list[dict], banner: str, quick: bool) -> str:
-    """Cold and cached times per case, and the answers."""
-    return "\n".join(["# Identification benchmark: first and later runs", "",
-                      f"{banner} Data, cases and what is timed: "
-                      "[studies/bench_identification.md](../studies/bench_identification.md).", "",
-                      f"![build + solve per case](../figures/bench_identification{'_quick' * quick}.png)", "",
-                      *table(["case", "first process: build + solve (s)", "later process: build (s)",
-                              "later: solve (s)", "later: total (s)", "iterations", "k error", "kt error", "success"],
-                             [[r["case"], f"{c['build_s'] + c['solve_s']:.1f}", f"{w['build_s']:.2f}",
-                               f"**{w['solve_s']:.2f}**", f"{w['build_s'] + w['solve_s']:.2f}", w["iterations"],
-                               f"{w['k_err']:.1e}", f"{w['kt_err']:.1e}", w["success"]]
-                              for r in rows for c, w in [(r["cold"], r["warm"])]], "lrrrrrrrl"), ""])
-
-
-def figure(rows: list[dict]) -> bytes:
-    """Build + solve of the first and a later process, per case."""
+def main(quick: bool = False, out_dir: Path | None = None) -> dict:
     from casflex.plotting._figure import _new_figure
 
+    banner, rows = Banner("bench_identification", quick), []
+    for case in QUICK if quick else CASES:
+        cold, warm = cold_and_cached(__file__, ["--worker", case], ["--worker", case])
+        rows.append({"case": case, "cold": cold, "warm": warm})
+    lines, failed = checks([(f"{r['case']}: the cache changes neither the outcome nor the k error",
+                             f"{r['warm']['k_err'] - r['cold']['k_err']:.0e}", r["warm"]["success"] ==
+                             r["cold"]["success"] and abs(r["warm"]["k_err"] - r["cold"]["k_err"]) <= 1e-12)
+                            for r in rows])
     fig = _new_figure((9, 1.2 + 0.6 * len(rows)))
-    ax = fig.subplots()
-    y = np.arange(len(rows))
+    ax, y = fig.subplots(), np.arange(len(rows))
     for dy, which, label in ((-0.2, "cold", "first process (code generation, gcc)"), (0.2, "warm", "later process")):
         ax.barh(y + dy, [r[which]["build_s"] + r[which]["solve_s"] for r in rows], 0.4, label=label)
     ax.set_yticks(y, [r["case"] for r in rows], fontsize="small")
@@ -75,20 +63,17 @@ def figure(rows: list[dict]) -> bytes:
     ax.set(xscale="log", xlabel="build + solve wall time (s)", title="twobar identification: first and later runs")
     ax.legend(fontsize="small")
     ax.grid(True, axis="x", which="both", alpha=0.3)
-    return png(fig)
-
-
-def main(quick: bool = False, out_dir: Path | None = None) -> dict:
-    banner = Banner("bench_identification", quick)
-    rows = []
-    for case in QUICK if quick else CASES:
-        cold, warm = cold_and_cached(__file__, ["--worker", case], ["--worker", case])
-        rows.append({"case": case, "cold": cold, "warm": warm})
-    write_outputs("bench_identification", out_dir, quick, page(rows, banner.line(), quick), figure(rows))
-    # self-checks: the answers do not depend on the cache
-    for r in rows:
-        assert r["warm"]["success"] == r["cold"]["success"], f"{r['case']}: the cache changed the outcome"
-        assert abs(r["warm"]["k_err"] - r["cold"]["k_err"]) <= 1e-12, f"{r['case']}: the cache changed the answer"
+    write_outputs("bench_identification", out_dir, quick, "\n".join([
+        "# Identification benchmark: first and later runs", "", f"{banner.line()} Data, cases and what is timed: "
+        "[studies/bench_identification.md](../studies/bench_identification.md).", "",
+        f"![build + solve per case](../figures/bench_identification{'_quick' * quick}.png)", "",
+        *table(["case", "first process: build + solve (s)", "later process: build (s)", "later: solve (s)",
+                "later: total (s)", "iterations", "k error", "kt error", "success"],
+               [[r["case"], f"{c['build_s'] + c['solve_s']:.1f}", f"{w['build_s']:.2f}", f"**{w['solve_s']:.2f}**",
+                 f"{w['build_s'] + w['solve_s']:.2f}", w["iterations"], f"{w['k_err']:.1e}", f"{w['kt_err']:.1e}",
+                 w["success"]] for r in rows for c, w in [(r["cold"], r["warm"])]], "lrrrrrrrl"), "", *lines]),
+                  png(fig))
+    assert_checks(failed)
     return {"rows": rows}
 
 

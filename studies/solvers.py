@@ -1,9 +1,8 @@
 """NLP solver comparison: which CasADi nlpsol plugin, with which Hessian, solves each identification NLP
 (direct, adapted, indirect by single and multiple shooting) from the most starts, and fastest?
-
-Set-up, measures, the tolerance each plugin gets and notes on the plugins: docs/studies/solvers.md.
 Run: ``python studies/solvers.py [--quick] [--record DIR] [--scheduler ADDRESS] [--raw FILE | --render FILE]``
-(about 40 min on a shared 2-core machine; ``--quick``: IPOPT and sqpmethod on direct, 2 starts).
+(about 40 min; ``--quick``: IPOPT and sqpmethod on direct, 2 starts). Set-up, measures, tolerances, notes on the
+plugins and the rule for the library default: docs/studies/solvers.md.
 """
 
 from __future__ import annotations
@@ -16,71 +15,56 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from _study import Banner, cli, fnum, med_range, png, save_raw, sweep, table, write_outputs
+from _study import Banner, assert_checks, checks, cli, fnum, med_range, png, save_raw, sweep, table, write_outputs
 
-TOL = 1e-8  # the one optimality tolerance, mapped onto every solver
-MAX_ITER = 200  # iteration cap (solvers that take one)
+TOL, MAX_ITER = 1e-8, 200  # the one optimality tolerance, mapped onto every solver, and the iteration cap
 CAP = 120.0  # wall-time cap per run (s): the solver's own option where it has one, else the process is killed
 HARD_MARGIN = 30.0  # ... at CAP + HARD_MARGIN s (build, start-up, a solver without a cap)
 QP_TOL = 1e-10  # QP subproblem tolerance of the iterative QP solvers (osqp, proxqp, piqp, ipqp, superscs)
 P_TOL = 1e-6  # p is right: max_j |p_j / p*_j - 1| <= P_TOL ...
 P_TOL_ADAPTED = 1e-4  # ... adapted direct: k1, k3 within this (kt1, kt3 are weakly identifiable by design)
 P_STAR = [700.0, 0.5, 400.0, 0.5]  # twobar's nominal parameters (checked against the model in main)
-HORIZON = 0.1
-T_DATA = 2.4  # simulated set 0..T_DATA s (covers the adapted instants and their t + dt)
-STARTS = [0.8, 1.2, 0.5, 2.0]  # nearest first: after a start hits the cap, the farther ones are skipped
-QUICK_STARTS = [0.8, 2.0]
-#: the seed paper's NLP formulation, as this page was measured (model Newton tolerance 1e-14)
-_IND = {"residue": "positions", "newton_tol": 1e-14, "model_error": "none"}
-#: key: (label, casflex.identification function, its instants or horizon, keyword arguments)
-PROBLEMS = {
+HORIZON, T_DATA = 0.1, 2.4  # indirect horizon; the simulated set's 0..T_DATA s covers the adapted instants + dt
+STARTS, QUICK_STARTS = [0.8, 1.2, 0.5, 2.0], [0.8, 2.0]  # nearest first: after a capped start, farther ones skip
+_IND = {"residue": "positions", "newton_tol": 1e-14, "model_error": "none"}  # the seed paper's NLP formulation
+PROBLEMS = {  # key: (label, casflex.identification function, its instants or horizon, keyword arguments)
     "direct": ("direct, t = 0.69 s", "identify_direct", [0.69], {}),
     "adapted": ("adapted direct, [0.4 1.1 1.6 1.9 2.3] s", "identify_adapted_direct", [0.4, 1.1, 1.6, 1.9, 2.3], {}),
-    "ss": (f"indirect Eq. 16, single shooting, 0..{HORIZON:g} s", "identify_indirect", HORIZON,
-           dict(_IND, transcription="single-shooting")),
-    "ms": (f"indirect Eq. 16, multiple shooting, 0..{HORIZON:g} s", "identify_indirect", HORIZON,
-           dict(_IND, transcription="multiple-shooting")),
+    **{k: (f"indirect Eq. 16, {tr} shooting, 0..{HORIZON:g} s", "identify_indirect", HORIZON,
+           dict(_IND, transcription=f"{tr}-shooting")) for k, tr in (("ss", "single"), ("ms", "multiple"))},
 }
 QUICK_CONFIGS = ["ipopt", "sqp-qpoases"]
 NOT_DEFAULT = {"bonmin"}  # not candidates for the library default (why: docs/studies/solvers.md)
 #: the library's current default per problem (identify_*'s solver and hessian arguments)
 CURRENT = {"direct": "ipopt", "adapted": "ipopt", "ss": "ipopt-gn", "ms": "ipopt-gn"}
 SPEEDUP, SAVING = 1.5, 0.1  # a faster solver must be this many times and this many seconds faster per run
+_Q = {"print_time": False}
 _QUIET_QP = {"print_iter": False, "print_header": False, "print_info": False}
-#: sqpmethod's QP solvers and their options
-QP = {
-    "qpoases": {"printLevel": "none"}, "qrqp": _QUIET_QP,
+QP = {  # sqpmethod's QP solvers and their options
+    "qpoases": {"printLevel": "none"}, "qrqp": _QUIET_QP, "daqp": {}, "hpipm": {},
     "osqp": {"osqp": {"verbose": False, "eps_abs": QP_TOL, "eps_rel": QP_TOL, "max_iter": 100000, "polish": True}},
     "proxqp": {"proxqp": {"eps_abs": QP_TOL, "max_iter": 100000, "verbose": False}},
-    "daqp": {}, "highs": {"highs": {"output_flag": False}},
+    "highs": {"highs": {"output_flag": False}}, "superscs": {"superscs": {"eps": QP_TOL, "verbose": 0}},
     "piqp": {"piqp": {"eps_abs": QP_TOL, "eps_rel": QP_TOL, "verbose": False}},
     "ipqp": dict(_QUIET_QP, constr_viol_tol=QP_TOL, dual_inf_tol=QP_TOL),
-    "superscs": {"superscs": {"eps": QP_TOL, "verbose": 0}},
-    "nlpsol": {"nlpsol": "ipopt", "nlpsol_options": {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
-                                                     "ipopt.tol": QP_TOL}},
-    "hpipm": {},
+    "nlpsol": {"nlpsol": "ipopt", "nlpsol_options": dict(_Q, **{"ipopt.print_level": 0, "ipopt.sb": "yes",
+                                                                "ipopt.tol": QP_TOL})},
 }
-
-
-_IPOPT = {"print_time": False, "ipopt": {"print_level": 0, "sb": "yes", "tol": TOL, "acceptable_iter": 0,
-                                         "mu_strategy": "adaptive", "max_iter": MAX_ITER, "max_wall_time": CAP}}
-
-
-def _sqp(qp: str, **extra) -> dict:
-    # error_on_fail False: a failed QP is sqpmethod's to handle
-    return {"print_time": False, "print_header": False, "print_iteration": False, "print_status": False,
-            "tol_pr": TOL, "tol_du": TOL, "max_iter": MAX_ITER, "qpsol": qp,
-            "qpsol_options": dict(QP[qp], error_on_fail=False), **extra}
-
-
-_Q = {"print_time": False}
+_IPOPT = dict(_Q, ipopt={"print_level": 0, "sb": "yes", "tol": TOL, "acceptable_iter": 0, "mu_strategy": "adaptive",
+                         "max_iter": MAX_ITER, "max_wall_time": CAP})
+_SQP = dict(_Q, print_header=False, print_iteration=False, tol_pr=TOL, tol_du=TOL, max_iter=MAX_ITER)
 _FATROP = dict(_Q, fatrop={"tol": TOL, "max_iter": MAX_ITER, "print_level": 0})
 _BLOCKSQP = dict(_Q, print_header=False, print_iteration=False, print_maxit_reached=False, opttol=TOL,
                  nlinfeastol=TOL, max_iter=MAX_ITER)
+
+
+def _sqp(qp: str, **extra) -> dict:  # error_on_fail False: a failed QP is sqpmethod's to handle
+    return dict(_SQP, print_status=False, qpsol=qp, qpsol_options=dict(QP[qp], error_on_fail=False), **extra)
+
+
 #: key: (nlpsol plugin, the API's hessian argument, solver_options); what each is: docs/studies/solvers.md
 CONFIGS = {
-    "ipopt": ("ipopt", "exact", _IPOPT),
-    "ipopt-gn": ("ipopt", "gauss-newton", _IPOPT),
+    "ipopt": ("ipopt", "exact", _IPOPT), "ipopt-gn": ("ipopt", "gauss-newton", _IPOPT),
     "ipopt-lbfgs": ("ipopt", "exact", dict(_IPOPT, ipopt=dict(_IPOPT["ipopt"],
                                                              hessian_approximation="limited-memory"))),
     "sqp-qpoases": ("sqpmethod", "gauss-newton", _sqp("qpoases")),
@@ -89,8 +73,7 @@ CONFIGS = {
     **{f"sqp-{k}": ("sqpmethod", "gauss-newton", _sqp(k))
        for k in ("qrqp", "osqp", "proxqp", "daqp", "highs", "piqp", "ipqp", "superscs", "nlpsol", "hpipm")},
     "feasiblesqp": ("feasiblesqpmethod", "gauss-newton", _sqp("qpoases", optim_tol=TOL, feas_tol=TOL)),
-    "qrsqp": ("qrsqp", "exact", dict(_Q, print_header=False, print_iteration=False, tol_pr=TOL, tol_du=TOL,
-                                     max_iter=MAX_ITER)),
+    "qrsqp": ("qrsqp", "exact", _SQP),
     "fatrop": ("fatrop", "exact", _FATROP),
     "fatrop-auto": ("fatrop", "exact", dict(_FATROP, structure_detection="auto")),
     **{f"uno-{k}": ("uno", "exact", dict(_Q, uno={"preset": k})) for k in ("filtersqp", "ipopt")},
@@ -99,32 +82,28 @@ CONFIGS = {
     "alpaqa": ("alpaqa", "exact", _Q),
     "bonmin": ("bonmin", "gauss-newton", dict(_Q, bonmin={"tol": TOL, "acceptable_iter": 0, "max_iter": MAX_ITER,
                                                           "print_level": 0, "time_limit": CAP})),
-    "blocksqp": ("blocksqp", "exact", dict(_BLOCKSQP, linsol="ldl")),
-    "blocksqp-ma27": ("blocksqp", "exact", _BLOCKSQP),
+    "blocksqp": ("blocksqp", "exact", dict(_BLOCKSQP, linsol="ldl")), "blocksqp-ma27": ("blocksqp", "exact", _BLOCKSQP),
 }
 
 
 def _worker(data: str, start: float, config: str, problem: str) -> dict:
-    """One identification in this (fresh) process: its outcome, times, p and the solver's own p (before the
-    library's Gauss-Newton polish)."""
+    """One identification in this (fresh) process: outcome, times, p and the solver's own p (before the polish)."""
+    import casflex
     import casflex.identification as ident
     from casflex.data import load_measurements
-    from casflex.model import assemble
-    from casflex.scene_io import load_scene
 
-    model, ms = assemble(load_scene("twobar")), load_measurements(data)
     fn, arg, kw = PROBLEMS[problem][1:]
     plugin, hessian, opts = CONFIGS[config]
-    r = getattr(ident, fn)(model, ms, arg, start=start, solver=plugin, hessian=hessian, solver_options=opts, **kw)
+    r = getattr(ident, fn)(casflex.assemble(casflex.load_scene("twobar")), load_measurements(data), arg, start=start,
+                           solver=plugin, hessian=hessian, solver_options=opts, **kw)
     own = r.extra.get("nlp", r.extra)["solver_parameters"]  # the indirect method keeps its NLP's under "nlp"
     return {"success": bool(r.success), "status": str(r.status), "iterations": int(r.iterations),
             "build_s": r.wall_build_s, "solve_s": r.wall_solve_s, "p": r.p.tolist(), "p_solver": list(own.values())}
 
 
 def run_pair(*, problem: str, config: str, starts: list[float], data: str) -> dict:
-    """One sweep run: ``config`` on ``problem`` from each start, each in a fresh Python process (this file's
-    ``--worker`` switch), so that a solver that crashes the process (a segmentation fault) or stalls is recorded,
-    not fatal. The process is killed at CAP + HARD_MARGIN s; a start after one that hit the cap is skipped."""
+    """One sweep run: ``config`` on ``problem`` from each start in a fresh process (``--worker``), so that a crash
+    or a stall is recorded, not fatal; killed at CAP + HARD_MARGIN s; the starts after a capped one skipped."""
     runs, capped = [], None
     for st in starts:
         if capped is not None:
@@ -139,15 +118,12 @@ def run_pair(*, problem: str, config: str, starts: list[float], data: str) -> di
                     "status": f"crashed ({f'signal {-rc}' if rc < 0 else f'exit status {rc}'})"}
             except subprocess.TimeoutExpired:
                 res = {"killed": True, "status": f"killed at the cap ({CAP + HARD_MARGIN:g} s of wall time)"}
-        res = {"success": False, **res, "start": st}
+        runs.append(res := {"success": False, **res, "start": st})
         s = str(res.get("status", "")).lower()
         if res.get("killed") or ("time" in s and ("exceed" in s or "limit" in s)) or res.get("solve_s", 0.0) >= CAP:
             capped = st
-        runs.append(res)
     return {"runs": runs}
 
-
-# -- the study ----------------------------------------------------------------------------------
 
 def _err(pb: str, p) -> float:
     """The largest relative error of p (adapted direct: of k1 and k3); nan where there is no p."""
@@ -158,68 +134,49 @@ def _err(pb: str, p) -> float:
 
 
 def _right(pb: str, p) -> bool:
-    """p is right: within P_TOL of p* (adapted direct: k1 and k3 within P_TOL_ADAPTED)."""
     return _err(pb, p) <= (P_TOL_ADAPTED if pb == "adapted" else P_TOL)
 
 
 def _flag(config: str, r: dict) -> bool:
-    """The solver's success flag. SLEQP's CasADi interface sets success = true whatever its status
-    (e.g. 'iteration limit'), so for SLEQP the flag is its status 'optimal'."""
+    # SLEQP's CasADi interface reports success whatever its status: for SLEQP only 'optimal' counts
     return r.get("status") == "optimal" if config == "sleqp" else bool(r.get("success"))
-
-
-def _stage(pairs: list[tuple[str, str]], starts: list[float], data: Path, record: Path | None,
-           scheduler: str | None, quick: bool) -> dict:
-    """{(problem, config): runs} of one sweep over (problem, config) pairs (a pair whose function itself raised,
-    not a solver, failed from every start)."""
-    plan = [{"problem": pb, "config": cf, "starts": list(starts), "data": str(data)} for pb, cf in pairs]
-    done = sweep("solvers", plan, lambda r: f"{r['problem']}--{r['config']}", run_pair, record=record, quick=quick,
-                 scheduler=scheduler)
-    return {(run["problem"], run["config"]): v.get("runs") or [
-        {"start": s, "success": False, "status": f"sweep error: {v['error']}"} for s in starts] for run, v in done}
 
 
 def main(quick: bool = False, out_dir: Path | None = None, record: Path | None = None,
          scheduler: str | None = None, raw_path: Path | None = None) -> dict:
-    """Run both stages, write the page and the performance profile, check the key numbers."""
+    import casflex
     from casflex.data import save_measurements, simulated_set
-    from casflex.model import assemble
-    from casflex.scene_io import load_scene
 
     banner = Banner("solvers", quick)
     starts, configs = (QUICK_STARTS, QUICK_CONFIGS) if quick else (STARTS, list(CONFIGS))
     problems = ["direct"] if quick else ["direct", "adapted", "ss", "ms"]
+
+    def stage(pairs: list[tuple[str, str]]) -> dict:  # {(problem, config): runs}; a run that raised failed all starts
+        plan = [{"problem": pb, "config": cf, "starts": list(starts), "data": str(data)} for pb, cf in pairs]
+        done = sweep("solvers", plan, lambda r: f"{r['problem']}--{r['config']}", run_pair, record=record,
+                     quick=quick, scheduler=scheduler)
+        return {(run["problem"], run["config"]): v.get("runs") or [
+            {"start": s, "success": False, "status": f"sweep error: {v['error']}"} for s in starts] for run, v in done}
+
     with tempfile.TemporaryDirectory(prefix="casflex-solvers-") as tmp:
-        data = Path(tmp) / "simulated_set.npz"
-        model = assemble(load_scene("twobar"))
+        data, model = Path(tmp) / "simulated_set.npz", casflex.assemble(casflex.load_scene("twobar"))
         assert np.allclose(model.p_nominal, P_STAR), "twobar's nominal parameters changed: update P_STAR"
         save_measurements(simulated_set(model, T_DATA), data)
-        results = _stage([(pb, cf) for pb in problems[:2] for cf in configs], starts, data, record, scheduler, quick)
-        screened = [cf for cf in configs if any(_flag(cf, r) and _right("direct", r.get("p"))
-                                                for r in results[("direct", cf)])]
+        results = stage([(pb, cf) for pb in problems[:2] for cf in configs])
         if not quick:  # stage 2: the configurations that solved the direct problem from at least one start
-            results.update(_stage([(pb, cf) for pb in ("ss", "ms") for cf in screened], starts, data, record,
-                                  scheduler, quick))
+            results |= stage([(pb, cf) for pb in ("ss", "ms") for cf in configs
+                              if any(_flag(cf, r) and _right("direct", r.get("p")) for r in results[("direct", cf)])])
     raw = {"banner": banner.line(), "quick": quick, "starts": starts, "configs": configs, "problems": problems,
            "results": {f"{pb}--{cf}": runs for (pb, cf), runs in results.items()}}
     save_raw(raw, raw_path)
     an = render(raw, out_dir)
-
-    for st in starts:
-        r = next(x for x in results[("direct", "ipopt")] if x["start"] == st)
-        assert r.get("success") and _right("direct", r.get("p")), f"IPOPT must solve the direct problem from {st:g}"
-    for pb, sp in an["spread"].items():
-        if pb != "adapted":  # the consensus of the runs that report success is p*
-            dev = float(np.abs(np.asarray(sp["median_p"]) / np.asarray(P_STAR) - 1.0).max())
-            assert dev <= P_TOL, f"{pb}: the median p of the runs that report success is {dev:.1e} off p*"
+    assert_checks(an["failed"])
     return {"raw": raw, "summary": an}
 
 
-# -- analysis, page and figure ------------------------------------------------------------------
-
 def _analyse(raw: dict) -> dict:
-    """Per (problem, config) counts and measures; per problem the configurations ranked and the default the
-    rule recommends; the cross-solver spread of p among flagged runs."""
+    """Per (problem, config) counts and measures; per problem the configurations ranked (most starts solved,
+    fewest successes at a wrong p, the smallest median build + solve); the spread of p among flagged runs."""
     rows = {}
     for k, runs in raw["results"].items():
         pb, cf = k.split("--")
@@ -236,25 +193,22 @@ def _analyse(raw: dict) -> dict:
             "err": [_err(pb, r["p"]) for r in m], "err_solver": [_err(pb, r.get("p_solver")) for r in m],
             "statuses": sorted({str(r.get("status") or r.get("skipped") or r.get("error", "?"))[:60] for r in runs}),
             "runs": runs, "ok": ok}
-    # the ranking: most starts solved, fewest successes at a wrong p, then the smallest median build + solve
-    ranked = {pb: sorted((row for (p2, _), row in rows.items() if p2 == pb),
-                         key=lambda x: (-x["solved"], x["wrong"], x["total"])) for pb in raw["problems"]}
-    spread = {}
+    an = {"rows": rows, "ranked": {}, "recommend": {}, "spread": {}}
     for pb in raw["problems"]:
+        an["ranked"][pb] = sorted((row for (p2, _), row in rows.items() if p2 == pb),
+                                  key=lambda x: (-x["solved"], x["wrong"], x["total"]))
+        an["recommend"][pb] = _recommend(an["ranked"][pb], pb)
         flagged = [r for (p2, cf), row in rows.items() if p2 == pb for r in row["runs"] if _flag(cf, r) and "p" in r]
         if len(flagged) >= 2:
             P, Ps = (np.array([r[k] for r in flagged], dtype=float) for k in ("p", "p_solver"))
             ref = np.median(P, axis=0)
-            spread[pb] = {"n": len(P), "median_p": ref.tolist(), "final": np.abs(P / ref - 1.0).max(axis=0),
-                          "solver": np.abs(Ps / ref - 1.0).max(axis=0)}
-    recommend = {pb: _recommend(x, pb) for pb, x in ranked.items()}
-    return {"rows": rows, "ranked": ranked, "recommend": recommend, "spread": spread}
+            an["spread"][pb] = {"n": len(P), "median_p": ref.tolist(), "final": np.abs(P / ref - 1.0).max(axis=0),
+                                "solver": np.abs(Ps / ref - 1.0).max(axis=0)}
+    return an
 
 
 def _recommend(ranked: list[dict], pb: str) -> str:
-    """The library default on one problem by the rule of docs/studies/solvers.md#default-solver: the best-ranked
-    candidate replaces the current one if that solved no start, or if it solves more starts (or as many with
-    fewer successes at a wrong p), or if it is SPEEDUP times and SAVING s per run faster."""
+    """The library default on one problem by the rule of docs/studies/solvers.md#default-solver."""
     cands = [x for x in ranked if x["solved"] and x["cf"] not in NOT_DEFAULT]
     cur = next((x for x in cands if x["cf"] == CURRENT[pb]), None)
     if cur is None:
@@ -277,8 +231,7 @@ def _profile(raw: dict, rows: dict, key: str) -> np.ndarray:
 
 def _page(raw: dict, an: dict) -> list[str]:
     L = ["# NLP solver comparison" + (" (quick mode)" if raw["quick"] else ""), "", raw["banner"], "",
-         f"Starts {', '.join(f'{s:g}' for s in raw['starts'])} x p*, run in this order. The set-up, the "
-         "configurations, the measures, the tolerance given to each plugin, notes on the plugins and the rule for "
+         f"Starts {', '.join(f'{s:g}' for s in raw['starts'])} x p*. Set-up, measures, tolerances and the rule for "
          "the library default: [studies/solvers.md](../studies/solvers.md).", ""]
     for pb in raw["problems"]:
         rec, cur = an["recommend"][pb], CURRENT[pb]
@@ -292,46 +245,38 @@ def _page(raw: dict, an: dict) -> list[str]:
               x["rescued"] or "", x["solver_off"] or "", med_range(x["it"], "g", "–"),
               *(med_range(x[k], ".3g", "–") for k in ("build", "solve")), fnum(x["total"], ".3g", "–"),
               *(med_range(x[k], ".1e", "–") for k in ("err", "err_solver")), "; ".join(x["statuses"])[:160],
-              role.get(x["cf"], "")]
-             for i, x in enumerate(an["ranked"][pb])], "rlcccccrrrrrrll"),
-              "", "Cells: median (min-max) over the starts that ran to the end"
-              + ("; errors of p: of k1 and k3." if pb == "adapted" else ".") + " Build + solve: the median over the "
-              "solved starts. Rank: by starts solved, then fewest ✗!, then that time.", ""]
-    L += ["## Cross-solver consistency", "", *table(
+              role.get(x["cf"], "")] for i, x in enumerate(an["ranked"][pb])], "rlcccccrrrrrrll"), ""]
+    R, Rt = _profile(raw, an["rows"], "solve"), _profile(raw, an["rows"], "total")
+    return L + ["## Cross-solver consistency", "", *table(
         ["problem", "runs reporting success", "their median p = [k1 kt1 k3 kt3]",
          "max deviation, final p (per parameter)", "max deviation, solvers' own p (per parameter)"],
         [[f"`{pb}`", sp["n"], f"[{' '.join(f'{v:.7g}' for v in sp['median_p'])}]",
           *(f"{fnum(d.max(), '.1e', '–')} ({' / '.join(f'{v:.1e}' for v in d)})" for d in (sp["final"], sp["solver"]))]
-         for pb, sp in an["spread"].items()], "lrlll")]
-    R, Rt = _profile(raw, an["rows"], "solve"), _profile(raw, an["rows"], "total")
-    by_solved = sorted(range(len(R)), key=lambda i: (-np.isfinite(R[i]).sum(), -(R[i] <= 2).sum()))
-    L += ["", "## Performance profile", "", f"![profile](../figures/solvers{'_quick' * raw['quick']}.png)", ""]
-    return L + table(
-        ["configuration", "solved", "fastest (solve)", "within 2x", "within 10x", "fastest (build + solve)"],
-        [[f"`{raw['configs'][i]}`", f"{np.isfinite(R[i]).sum()}/{R.shape[1]}", (R[i] <= 1.0).sum(), (R[i] <= 2).sum(),
-          (R[i] <= 10).sum(), (Rt[i] <= 1.0).sum()] for i in by_solved], "lrrrrr") + [""]
+         for pb, sp in an["spread"].items()], "lrlll"),
+        "", "## Performance profile", "", f"![profile](../figures/solvers{'_quick' * raw['quick']}.png)", "", *table(
+            ["configuration", "solved", "fastest (solve)", "within 2x", "within 10x", "fastest (build + solve)"],
+            [[f"`{raw['configs'][i]}`", f"{np.isfinite(R[i]).sum()}/{R.shape[1]}", (R[i] <= 1.0).sum(),
+              (R[i] <= 2).sum(), (R[i] <= 10).sum(), (Rt[i] <= 1.0).sum()]
+             for i in sorted(range(len(R)), key=lambda i: (-np.isfinite(R[i]).sum(), -(R[i] <= 2).sum()))], "lrrrrr"),
+        ""]
 
 
 def _figure(raw: dict, rows: dict) -> bytes:
     """Dolan-More performance profiles of the solve time and of build + solve time."""
-    import matplotlib
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(13, 6.5))
     axes = fig.subplots(1, 2, sharey=True)
-    c10, c20 = matplotlib.colormaps["tab10"], matplotlib.colormaps["tab20b"]
     for ax, key, title in ((axes[0], "solve", "solve time"), (axes[1], "total", "build + solve time")):
         R = _profile(raw, rows, key)
-        finite = R[np.isfinite(R)]
-        taus = np.logspace(0, math.log10(max(2.0, float(finite.max()) * 1.5) if finite.size else 10.0), 400)
-        # legend order: most instances solved, then the most often within 4x of the best
+        taus = np.logspace(0, math.log10(max(2.0, 1.5 * np.max(R[np.isfinite(R)], initial=1.0))), 400)
+        # legend order: most instances solved, then the most often within 4x of the best; 10 colours a line style
         order = sorted((i for i in range(len(R)) if np.isfinite(R[i]).any()),
                        key=lambda i: (-np.isfinite(R[i]).sum(), -(R[i] <= 4).sum()))
         for rank, i in enumerate(order):
-            main = rank < 8 or raw["configs"][i] in ("ipopt", "ipopt-gn")
-            ax.step(taus, [(R[i] <= t).sum() / R.shape[1] for t in taus], where="post", label=raw["configs"][i],
-                    color=c10(rank) if rank < 10 else c20((rank - 10) % 20), ls="-" if rank < 10 else "--",
-                    lw=2.4 if main else 1.0, alpha=1.0 if main else 0.6)
+            ax.step(taus, [(R[i] <= t).mean() for t in taus], where="post", label=raw["configs"][i],
+                    color=f"C{rank % 10}", ls=("-", "--", ":")[rank // 10 % 3],
+                    lw=2.4 if rank < 8 or raw["configs"][i] in ("ipopt", "ipopt-gn") else 1.0)
         ax.set(xscale="log", xlabel="tau (time / best time on the instance)", ylim=(-0.02, 1.02))
         ax.set_title(f"Dolan-More profile: {title}\n{R.shape[1]} instances = {len(raw['problems'])} problems x "
                      f"{len(raw['starts'])} starts", fontsize=10)
@@ -343,14 +288,21 @@ def _figure(raw: dict, rows: dict) -> bytes:
 
 
 def render(raw: dict, out_dir: Path | None) -> dict:
-    """The page and the figure from the raw numbers (of this run, or of a ``--raw`` file)."""
+    """The page (with its self-checks) and the figure from the raw numbers (of this run, or of a ``--raw`` file)."""
     an = _analyse(raw)
-    write_outputs("solvers", out_dir, raw["quick"], "\n".join(_page(raw, an)), _figure(raw, an["rows"]))
+    ipopt = {r["start"]: r for r in an["rows"][("direct", "ipopt")]["runs"]}
+    dev = {pb: float(np.abs(np.asarray(sp["median_p"]) / P_STAR - 1.0).max()) for pb, sp in an["spread"].items()}
+    lines, an["failed"] = checks(
+        [(f"IPOPT solves the direct problem from {st:g} x p*", ipopt[st].get("status", "-"),
+          bool(ipopt[st].get("success")) and _right("direct", ipopt[st].get("p"))) for st in raw["starts"]]
+        + [(f"{pb}: the median p of the runs that report success is p* (to {P_TOL:g})", f"{d:.1e}", d <= P_TOL)
+           for pb, d in dev.items() if pb != "adapted"])  # adapted: kt1, kt3 weakly identifiable by design
+    write_outputs("solvers", out_dir, raw["quick"], "\n".join(_page(raw, an) + lines), _figure(raw, an["rows"]))
     return an
 
 
 if __name__ == "__main__":
-    if sys.argv[1:2] == ["--worker"]:  # hidden: run_isolated's fresh process; the result or the error as JSON
+    if sys.argv[1:2] == ["--worker"]:  # hidden: run_pair's fresh process; the result or the error as JSON
         try:
             res = _worker(**json.loads(sys.argv[2]))
         except Exception as exc:  # noqa: BLE001 - the failure is the measurement
