@@ -113,7 +113,7 @@ def main(quick: bool = False, out_dir: Path | None = None, record: Path | None =
     ind = [r for r in rows if r["method"] == "indirect" and "kt_err" in r]  # the checks are on the default method
     bar = [r for r in ind if r["scene"] == "twobar" and r["noise"] <= 5e-4]  # the accuracy the docs claim
     check_lines, failed = checks([
-        ("default method: dishonest successes, at most 1 in 10 runs (most in a row)", max(r["dishonest"] for r in ind),
+        ("default method: dishonest successes, at most 1 in 10 runs (most per row)", max(r["dishonest"] for r in ind),
          all(r["dishonest"] <= max(1, round(0.1 * r["runs"])) for r in ind)),
         *([] if quick else [  # the quick mode's 1 s window pins kt down to ~12 % only
             ("default method: 3-SE coverage >= 90 % (lowest)", f"{100 * min(r['cover3'] for r in ind):.0f} %",
