@@ -11,7 +11,9 @@ from typing import NamedTuple
 import numpy as np
 from _shared import twobar
 from _study import Banner, assert_checks, best_of, checks, cli, fnum, png, table, write_outputs
+from matplotlib.lines import Line2D
 
+from casflex.plotting._figure import _new_figure
 from casflex.simulate import compiled_library, integrator_for, simulate
 
 ALPHAS = (0.0, -0.05, -0.1, -0.3, -1.0 / 3.0)
@@ -21,7 +23,6 @@ LEVELS = ((1e-3, 5.0), (1e-4, 1.0), (1e-5, 0.1))  # stated accuracies: (node pos
 HEADLINE, MARGIN = (1e-4, 1.0), (8e-5, 0.8)  # MARGIN: the headline with a 20 % margin
 TIE = 0.15  # recommended: among settings within 15 % of the cheapest (timing noise), lagrange first
 NAN = {"pos": np.nan, "force_rel": np.nan}
-ORDERS = ("pos", "force", "pos_small", "force_small")
 PATHS = (("compiled_s", "compiled"), ("interp_s", "interpreted"))
 
 
@@ -49,12 +50,12 @@ def ms(s: float | None) -> str:
 def plan_for(quick: bool) -> dict:
     if quick:
         return {"t_end": 0.5, "dts": [1e-2, 5e-3, 2e-3, 1e-3, 5e-4], "dt_fine": 5e-5, "alphas": (0.0, -1.0 / 3.0),
-                "meshes": (1, 2), "mesh_dts": [1e-2, 1e-3], "alt_alpha": None, "seed_alphas": (0.0,),
-                "seed_meshes": (1,), "window": 300, "fit": (5e-4, 2e-3), "fit_small": None, "validate_dt": 5e-4}
+                "meshes": (1, 2), "mesh_dts": [1e-2, 1e-3], "alt_alphas": (), "seed_alphas": (0.0,),
+                "seed_meshes": (1,), "window": 300, "fit": (5e-4, 2e-3), "validate_dt": 5e-4}
     return {"t_end": 3.0, "dts": [1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4, 5e-5, 2e-5], "dt_fine": 1e-5,
             "alphas": ALPHAS, "meshes": (1, 2, 4, 8), "mesh_dts": [1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4],
-            "alt_alpha": -0.05, "seed_alphas": ALPHAS, "seed_meshes": (1, 2, 4, 8), "window": 3000,
-            "fit": (1e-4, 2e-3), "fit_small": (5e-5, 2e-4), "validate_dt": 1e-4}
+            "alt_alphas": (-0.05,), "seed_alphas": ALPHAS, "seed_meshes": (1, 2, 4, 8), "window": 3000,
+            "fit": (1e-4, 2e-3), "validate_dt": 1e-4}
 
 
 def tasks_for(plan: dict) -> list[tuple[Config, float, bool]]:
@@ -66,18 +67,10 @@ def tasks_for(plan: dict) -> list[tuple[Config, float, bool]]:
                   for dt in [*plan["dts"], fine]]
     for ne in plan["meshes"][1:]:  # (the reference at its dt is already the first)
         tasks += [(Config(ne, "lagrange", 0.0), dt, True) for dt in plan["mesh_dts"] + [fine] * (ne != ref.elements)]
-        if plan["alt_alpha"] is not None:
-            tasks += [(Config(ne, "lagrange", plan["alt_alpha"]), dt, False) for dt in plan["mesh_dts"]]
+        tasks += [(Config(ne, "lagrange", a), dt, False) for a in plan["alt_alphas"] for dt in plan["mesh_dts"]]
         if ne in plan["seed_meshes"]:
             tasks.append((Config(ne, "seed", 0.0), fine, False))
     return tasks
-
-
-def build(m, alpha: float) -> dict:
-    """The one-off build of a setting's integrator and C library (then cached for simulate), timed."""
-    t_i, integ = best_of(lambda: integrator_for(m, alpha=alpha), 1)
-    t_l, lib = best_of(lambda: compiled_library(integ), 1)
-    return {"integrator_s": t_i, "library_s": t_l, "cached": lib.cached, "n_dof": m.n_dof}
 
 
 def diff(s: dict, ref: dict) -> dict:
@@ -147,7 +140,7 @@ def pick(rows: list[dict], key: str, pos_tol: float, force_tol: float) -> tuple[
 
 def analyse(plan: dict, rows: list[dict], samples: dict) -> dict:
     """Errors (set in the rows), orders in dt, the reference's own error, recommended settings, Pareto fronts."""
-    fine, meshes, (lo, hi), small = plan["dt_fine"], plan["meshes"], plan["fit"], plan["fit_small"]
+    fine, meshes, (lo, hi) = plan["dt_fine"], plan["meshes"], plan["fit"]
     lag_fine = {ne: samples.get((Config(ne, "lagrange", 0.0), fine)) for ne in meshes}
     ref = lag_fine[meshes[-1]]
     for r in rows:
@@ -160,9 +153,7 @@ def analyse(plan: dict, rows: list[dict], samples: dict) -> dict:
         rs = [r for r in rows if r["cfg"] == cfg and r["dt"] != fine]
         dts, ep, ef = [r["dt"] for r in rs], [r["err_dt"]["pos"] for r in rs], [r["err_dt"]["force_rel"] for r in rs]
         orders[cfg] = {"pos": fit_order(dts, ep, lo, hi), "force": fit_order(dts, ef, lo, hi),
-                       "n": sum(lo * (1 - 1e-9) <= d <= hi * (1 + 1e-9) for d in dts),
-                       "pos_small": fit_order(dts, ep, *small) if small else np.nan,
-                       "force_small": fit_order(dts, ef, *small) if small else np.nan}
+                       "n": sum(lo * (1 - 1e-9) <= d <= hi * (1 + 1e-9) for d in dts)}
     # the reference's own error: time (same mesh at 2 dt, order 2: e = d / (2^2 - 1)) and mesh (geometric)
     d_time = diff(samples[(Config(meshes[-1], "lagrange", 0.0), 2 * fine)], ref)
     ref_time = {k: d_time[k] / 3.0 for k in NAN}
@@ -174,8 +165,7 @@ def analyse(plan: dict, rows: list[dict], samples: dict) -> dict:
             mesh_ratio[k] = d_ab[k] / mesh_d[meshes[-2]][k]
             ref_mesh[k] = mesh_d[meshes[-2]][k] / (mesh_ratio[k] - 1.0) if mesh_ratio[k] > 1.0 else np.inf
     ref_err = {k: ref_time[k] + (ref_mesh[k] if np.isfinite(ref_mesh[k]) else 0.0) for k in NAN}
-    seed_cmp = [{"ne": ne, "diff": diff(s, lag_fine[ne]), "seed_err": diff(s, ref),
-                 "lag_err": diff(lag_fine[ne], ref) if ne != meshes[-1] else None}
+    seed_cmp = [{"ne": ne, "diff": diff(s, lag_fine[ne]), "seed_err": diff(s, ref)}
                 for ne in meshes if (s := samples.get((Config(ne, "seed", 0.0), fine))) is not None]
     cand = [r for r in rows if r["ok"] and not r["is_ref"]]
     recs = []  # a `seed` pick (not energy consistent) is followed by the `lagrange` one
@@ -226,17 +216,15 @@ def self_checks(rows: list[dict], an: dict) -> list[tuple]:
 def main(quick: bool = False, out_dir: Path | None = None) -> dict:
     """Run every setting, write the page and the Pareto plot, assert the self-checks."""
     banner, plan = Banner("tradeoff", quick), plan_for(quick)
-    models, builds, rows, samples = {}, {}, [], {}
+    models, rows, samples = {}, [], {}
     for cfg, dt, interp in tasks_for(plan):
         if cfg[:2] not in models:
             models[cfg[:2]] = twobar(cfg.elements, inertia=cfg.inertia)
-        if cfg not in builds:
-            builds[cfg] = build(models[cfg[:2]], cfg.alpha)
+        compiled_library(integrator_for(models[cfg[:2]], alpha=cfg.alpha))  # the one-off build: cached, untimed
         rows.append(run(cfg, dt, interp, plan, models[cfg[:2]], samples))
-    # projection check: the interpreted centre run over the whole horizon at one dt
-    vrow = next(r for r in rows if r["cfg"] == CENTRE and r["dt"] == plan["validate_dt"])
+    vrow = next(r for r in rows if r["cfg"] == CENTRE and r["dt"] == plan["validate_dt"])  # checks the projection
     v_full, _ = best_of(lambda: simulate(models[CENTRE[:2]], plan["t_end"], dt=plan["validate_dt"], alpha=0.0), 3)
-    an = dict(analyse(plan, rows, samples), vcheck=(v_full, vrow), builds=builds)
+    an = dict(analyse(plan, rows, samples), vcheck=(v_full, vrow))
     check_lines, failed = checks(self_checks(rows, an))
     write_outputs("tradeoff", out_dir, quick, "\n".join(_page(quick, plan, rows, an, banner) + check_lines),
                   png(_figure(an, plan)))
@@ -253,9 +241,6 @@ GRIDS = (("Position error against the reference (m)", lambda r: f"{r['err']['pos
          ("Time-discretisation error of the positions: against the same model at the last row's dt, alpha = 0 (m)",
           lambda r: fnum(r["err_dt"]["pos"], ".2e", "")),
          ("Compiled wall time", lambda r: ms(r["compiled_s"])),
-         ("Interpreted wall time (* projected from the first steps; in brackets the ratio to compiled)",
-          lambda r: "" if r["interp_s"] is None else
-          f"{ms(r['interp_s'])}{star(r, 'interp_s')} (x{r['interp_s'] / r['compiled_s']:.0f})"),
          ("Newton iterations per step (interpreted)", lambda r: fnum(r["newton_per_step"], ".2f", "")),
          ("Energy drift, max |E(t) - E(0)| over the grid (J)", lambda r: fnum(r["drift"], ".2e", "")))
 
@@ -295,7 +280,7 @@ def _page(quick: bool, plan: dict, rows: list[dict], an: dict, banner: Banner) -
     rowmap = {(r["cfg"], r["dt"]): r for r in rows}
     for title, cols in (("dt x alpha x inertia form (1 element per bar)", [Config(1, form, a) for form, k in (
             ("lagrange", "alphas"), ("seed", "seed_alphas")) for a in plan[k]]), ("elements per bar (`lagrange`)", [
-            Config(ne, "lagrange", a) for a in (0.0, plan["alt_alpha"]) if a is not None for ne in meshes])):
+            Config(ne, "lagrange", a) for a in (0.0, *plan["alt_alphas"]) for ne in meshes])):
         dts = sorted({r["dt"] for r in rows if r["cfg"] in cols}, reverse=True)
         L += [f"## Factor: {title}", ""]
         for grid_title, fmt in GRIDS:
@@ -303,28 +288,15 @@ def _page(quick: bool, plan: dict, rows: list[dict], an: dict, banner: Banner) -
                 [f"{dt:g}", int(round(t_end / dt)), *("" if (r := rowmap.get((c, dt))) is None else "failed"
                                                       if not r["ok"] else "reference" if r["is_ref"] else fmt(r)
                                                       for c in cols)] for dt in dts], "r" * (2 + len(cols))), ""]
-    L += ["## Convergence order in dt", "", "**Fitted over " + "; small dt: ".join(
-        f"{lo:g} <= dt <= {hi:g} s" for lo, hi in filter(None, (plan["fit"], plan["fit_small"]))) + "**", "",
-          *table(["setting", "points", "order, node positions", "order, joint forces", "order, positions, small dt",
-                  "order, forces, small dt"], [[cfg.label, o["n"], *(fnum(o[k], ".3f", "") for k in ORDERS)]
-                                               for cfg, o in an["orders"].items() if o["n"] >= 2], "lrrrrr"), "",
+    L += ["## Convergence order in dt", "", "**Fitted over {:g} <= dt <= {:g} s**".format(*plan["fit"]), "",
+          *table(["setting", "points", "order, node positions", "order, joint forces"],
+                 [[cfg.label, o["n"], *(fnum(o[k], ".3f", "") for k in ("pos", "force"))]
+                  for cfg, o in an["orders"].items() if o["n"] >= 2], "lrrr"), "",
           "## Factor: inertia form (`seed` vs `lagrange`)", "", f"**Both forms at dt = {fine:g} s, alpha = 0**", "",
           *table(["elements/bar", "seed - lagrange, positions (m)", "seed - lagrange, forces (%)",
-                  "seed vs reference (m)", "lagrange vs reference (m)"],
-                 [[c["ne"], f"{c['diff']['pos']:.2e}", f"{c['diff']['force_rel']:.2e}", f"{c['seed_err']['pos']:.2e}",
-                   "0 (reference)" if c["lag_err"] is None else f"{c['lag_err']['pos']:.2e}"] for c in an["seed_cmp"]],
-                 "rrrrr"),
-          "", "## Pareto fronts", "", f"![Pareto plot](../figures/tradeoff{'_quick' * quick}.png)", "",
-          "**Non-dominated settings, node positions**", "",
-          *table(["path", "setting", "dt (s)", "wall time", "position error (m)", "force error (%)"],
-                 [[path, r["cfg"].label, f"{r['dt']:g}", ms(r[key]) + star(r, key),
-                   *(f"{r['err'][k]:.2e}" for k in NAN)]
-                  for key, path in PATHS for r in an["fronts"][(key, "pos")]], "llrrrr"),
-          "", "## One-off builds (not in the times above)", "",
-          *table(["setting", "dofs", "integrator build (s)", "C library (s)"],
-                 [[cfg.label, b["n_dof"], f"{b['integrator_s']:.2f}",
-                   f"{b['library_s']:.2f} ({'cached' if b['cached'] else 'compiled'})"]
-                  for cfg, b in an["builds"].items()], "lrrr"), ""]
+                  "seed vs reference (m)"], [[c["ne"], *(f"{c['diff'][k]:.2e}" for k in NAN),
+                                              f"{c['seed_err']['pos']:.2e}"] for c in an["seed_cmp"]], "rrrr"),
+          "", "## Pareto fronts", "", f"![Pareto plot](../figures/tradeoff{'_quick' * quick}.png)", ""]
     if failed := [r for r in rows if not r["ok"]]:
         L += ["Runs that failed: " + "; ".join(f"{r['cfg'].label} dt {r['dt']:g}: {r['message']}" for r in failed), ""]
     return L
@@ -332,10 +304,6 @@ def _page(quick: bool, plan: dict, rows: list[dict], an: dict, banner: Banner) -
 
 def _figure(an: dict, plan: dict):
     """Error against wall time, compiled and interpreted, positions and forces, with the Pareto fronts."""
-    from matplotlib.lines import Line2D
-
-    from casflex.plotting._figure import _new_figure
-
     cand, fig, handles = an["cand"], _new_figure((13, 10.5)), {}
     axes, meshes = fig.subplots(2, 2), sorted({r["cfg"].elements for r in cand})
     alphas = list(dict.fromkeys(r["cfg"].alpha for r in cand if r["cfg"].elements == 1))
@@ -345,8 +313,6 @@ def _figure(an: dict, plan: dict):
             ax = axes[row, col]
             for c in cfgs:
                 pts = sorted((r for r in cand if r["cfg"] == c and r[key] is not None), key=lambda r: r["dt"])
-                if not pts:
-                    continue
                 ls = "-" if c.inertia == "lagrange" else ":"
                 color, marker = ((f"C{alphas.index(c.alpha)}", "o" if ls == "-" else "s") if c.elements == 1 else
                                  (f"C{5 + meshes.index(c.elements)}", ("^" if c.alpha == 0 else "v") if ls == "-"
