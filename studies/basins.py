@@ -21,7 +21,6 @@ TOL = 1e-6  # max relative error of p (indirect, direct)
 TOL_ADAPTED = 1e-4  # max relative error of k1, k3 (adapted direct)
 T1 = 0.69
 FACTORS = [0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.1, 1.2, 1.5, 2.0, 2.5, 3.0]
-EDGE_FACTORS = [0.1, 0.2, 5.0, 10.0]  # full mode, for methods that converge from every factor above
 # IPOPT wall-time cap per indirect run (s): a stalled run would otherwise go on for IPOPT's 500
 # iterations (~40 min); converging runs take well under it. A capped run counts as not converged.
 WALL_CAP = 180.0
@@ -82,19 +81,8 @@ def look_at(c: dict) -> str:
     return "failure within the criterion" if metric <= tol else ""
 
 
-def grid(pairs: list[tuple[str, float]], horizon: float, t_end: float, p_star: np.ndarray, **kw) -> dict:
-    """Run the (method, factor) pairs through the sweep; cells per method, in the pairs' order."""
-    plan = [{"method": k, "factor": f, "horizon": horizon, "t_end": t_end} for k, f in pairs]
-    cells: dict[str, list[dict]] = {}
-    for run, out in sweep("basins", plan, lambda r: f"{r['method']}_f{r['factor']:g}_h{horizon:g}_T{t_end:g}",
-                          one_run, **kw):
-        cells.setdefault(run["method"], []).append(cell(run["method"], run["factor"], out, p_star))
-    return cells
-
-
 def range_text(cells: list[dict]) -> str:
-    """Converging factors as runs of consecutive tested factors, e.g. '0.3-0.9, 1.2-3'."""
-    cells = sorted(cells, key=lambda c: c["factor"])
+    """Converging factors (``cells`` in the order of the factors) as runs of consecutive ones, e.g. '0.3-0.9, 1.2-3'."""
     if all(c["converged"] for c in cells):
         return f"all tested ({cells[0]['factor']:g}-{cells[-1]['factor']:g})"
     runs = [[c["factor"] for c in g] for ok, g in groupby(cells, key=lambda c: c["converged"]) if ok]
@@ -107,11 +95,12 @@ def main(quick: bool = False, out_dir: Path | None = None, raw_path: Path | None
     p_star = assemble(load_scene("twobar")).p_nominal
     t_end, factors, horizon = (2.4, [0.5, 2.0], 0.05) if quick else (3.0, FACTORS, T1)
     keys = ["direct", "adapted", "ss-pos"] if quick else list(METHODS)
-    kw = {"record": record, "quick": quick, "scheduler": scheduler}
-    results = grid([(k, f) for k in keys for f in factors], horizon, t_end, p_star, **kw)
-    wide = [] if quick else [k for k in keys if all(c["converged"] for c in results[k])]
-    edge = grid([(k, f) for k in wide for f in EDGE_FACTORS], horizon, t_end, p_star, **kw) if wide else {}
-    raw = {"quick": quick, "factors": factors, "horizon": horizon, "keys": keys, "results": results, "edge": edge,
+    plan = [{"method": k, "factor": f, "horizon": horizon, "t_end": t_end} for k in keys for f in factors]
+    results: dict[str, list[dict]] = {}
+    for run, out in sweep("basins", plan, lambda r: f"{r['method']}_f{r['factor']:g}_h{horizon:g}_T{t_end:g}", one_run,
+                          record=record, quick=quick, scheduler=scheduler):
+        results.setdefault(run["method"], []).append(cell(run["method"], run["factor"], out, p_star))
+    raw = {"quick": quick, "factors": factors, "horizon": horizon, "keys": keys, "results": results,
            "total_s": banner.wall, "banner": banner.line()}
     save_raw(raw, raw_path)
     assert_checks(render(raw, out_dir))
@@ -120,7 +109,7 @@ def main(quick: bool = False, out_dir: Path | None = None, raw_path: Path | None
 
 def render(raw: dict, out_dir: Path | None) -> list[str]:
     """The page from the raw numbers of a run (``main`` or a ``--raw`` file); the failed self-checks."""
-    factors, horizon, keys, results, edge = raw["factors"], raw["horizon"], raw["keys"], raw["results"], raw["edge"]
+    factors, horizon, keys, results = raw["factors"], raw["horizon"], raw["keys"], raw["results"]
     must = [c for c in results.get("ms-pos", []) if MUST_SHOW[0] <= c["factor"] <= MUST_SHOW[1]]
     rows = [("direct (linear in p) converges from every start", range_text(results["direct"]),
              all(c["converged"] for c in results["direct"]))]
@@ -140,19 +129,14 @@ def render(raw: dict, out_dir: Path | None) -> list[str]:
         "what the outcomes mean: [studies/basins.md](../studies/basins.md).", "", "## Converged starts", "",
         *table(["method", *(f"{f:g}" for f in factors), "converged range", "paper's range"],
                [[METHODS[k][0], *map(mark, results[k]), range_text(results[k]), METHODS[k][1]] for k in keys],
-               "l" + "c" * len(factors) + "ll"), ""]
-    if edge:
-        page += ["## Further out", "", *table(
-            ["method", *(f"{f:g}" for f in EDGE_FACTORS)],
-            [[METHODS[k][0], *(f"{mark(c)} ({c['err']:.0e})" for c in cells)] for k, cells in edge.items()],
-            "l" + "c" * len(EDGE_FACTORS)), ""]
-    page += ["## Every run", "", *table(
+               "l" + "c" * len(factors) + "ll"),
+        "", "## Every run", "", *table(
         ["method", "start", "identified p = [k1 kt1 k3 kt3]", "max rel. error", "k1, k3 error", "kt1, kt3 error",
          "success (status)", "iterations", "wall (s)", "converged", "look at"],
         [[k, f"{c['factor']:g}", fmt_p(c["p"]), f"{c['err']:.2e}", f"{c['err_k']:.1e}", f"{c['err_kt']:.1e}",
           f"{'yes' if c['success'] else 'no'} ({c['status']})", c["iterations"], f"{c['wall_s']:.1f}",
           "✓" if c["converged"] else "✗", look_at(c)]
-         for k in keys for c in sorted(results[k] + edge.get(k, []), key=lambda c: c["factor"])], "lrlrrrlrrcl"),
+         for k in keys for c in results[k]], "lrlrrrlrrcl"),
         "", *check_lines]
     write_outputs("basins", out_dir, raw["quick"], "\n".join(page))
     return failed

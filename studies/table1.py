@@ -54,12 +54,6 @@ def combine(cells: list[dict]) -> str:
     return kinds.pop() if len(kinds) == 1 else "mixed"
 
 
-def hybrid_set(sim: MeasurementSet, meas: MeasurementSet) -> MeasurementSet:
-    """Simulated positions and accelerations with the measured (central-difference) velocities, on meas's times."""
-    rows = np.array([sim.index(t) for t in meas.t])
-    return MeasurementSet(meas.t, sim.channels, sim.q[rows], meas.qd, sim.qdd[rows], source="hybrid")
-
-
 def fd_error(model, sim: MeasurementSet, meas: MeasurementSet, t: float) -> dict:
     """Central-difference error of the measured set at t and the Eq. 1 imbalance it causes at p*."""
     i, j, ps = sim.index(t), meas.index(t), model.p_nominal
@@ -100,23 +94,6 @@ def run_one(model, key: str, data: MeasurementSet, t: float, start: float, horiz
     return out
 
 
-def spacing_runs(model, sim: MeasurementSet, instants: list[float]) -> list[dict]:
-    """The direct method on measured sets of coarser sample spacing h (offset against spacing)."""
-    out, h0, ps = [], float(sim.t[1] - sim.t[0]), model.p_nominal
-    for t in instants:
-        for h in (k * h0 for k in (1, 2, 3, 5, 10, 30)):  # spacings with a sample at t and one after it
-            if abs(t / h - round(t / h)) > 1e-6 or t + h > sim.t[-1] + 1e-9:
-                continue
-            step = round(h / h0)
-            ms = measured_set(MeasurementSet(sim.t[::step], sim.channels, sim.q[::step], sim.qd[::step],
-                                             sim.qdd[::step], source="simulated"))
-            for vel_only in (True, False):
-                res = identify_direct(model, hybrid_set(sim, ms) if vel_only else ms, [t], start=1.0)
-                out.append({"t": t, "h": h, "velocities_only": vel_only, "p": res.p.tolist(), "err": rel_err(res.p, ps),
-                            "err_k": rel_err(res.p[[0, 2]], ps[[0, 2]]), "success": res.success})
-    return out
-
-
 def main(quick: bool = False, out_dir: Path | None = None, raw_path: Path | None = None) -> dict:
     banner = Banner("table1", quick)
     model = assemble(load_scene("twobar"))
@@ -124,7 +101,9 @@ def main(quick: bool = False, out_dir: Path | None = None, raw_path: Path | None
     transcription = "single-shooting" if quick else "multiple-shooting"
     sim = simulated_set(model, 0.75 if quick else 3.0)
     meas = measured_set(sim)
-    data = {"sim": sim, "meas": meas, "hyb": hybrid_set(sim, meas)}
+    rows = np.array([sim.index(t) for t in meas.t])  # hybrid: simulated q, qdd with measured (central-difference) qd
+    data = {"sim": sim, "meas": meas,
+            "hyb": MeasurementSet(meas.t, sim.channels, sim.q[rows], meas.qd, sim.qdd[rows], source="hybrid")}
     results, cross = [], []
     for key, t, s in product(ROWS, instants, starts):
         args = (model, key, data[ROWS[key][1]], t, s, QUICK_HORIZON if quick else t)
@@ -133,8 +112,8 @@ def main(quick: bool = False, out_dir: Path | None = None, raw_path: Path | None
             cross.append(run_one(*args, "single-shooting"))  # the same problem by single shooting
     raw = {"quick": quick, "instants": instants, "starts": starts, "transcription": transcription,
            "quick_horizon": QUICK_HORIZON, "p_nominal": model.p_nominal.tolist(), "results": results,
-           "cross_check": cross, "fd": [fd_error(model, sim, meas, t) for t in instants],
-           "spacing": spacing_runs(model, sim, instants), "total_s": banner.wall, "banner": banner.line()}
+           "cross_check": cross, "fd": [fd_error(model, sim, meas, t) for t in instants], "total_s": banner.wall,
+           "banner": banner.line()}
     save_raw(raw, raw_path)
     assert_checks(render(raw, out_dir))
     return raw
@@ -150,17 +129,9 @@ def runs_table(cells: list[dict], p_head: str, wall: str) -> list[str]:
                   for c in sorted(cells, key=lambda c: (int(c["row"]), c["t"]))], "llrrlrlrrl")
 
 
-def growth(spacing: list[dict], t: float, vel_only: bool) -> float:
-    """The exponent e of offset ~ h^e (a least-squares line through log offset against log h)."""
-    s = [x for x in spacing if x["t"] == t and x["velocities_only"] == vel_only and x["err"] > 0]
-    if len(s) < 3:
-        return np.nan
-    return float(np.polyfit(np.log([x["h"] for x in s]), np.log([x["err"] for x in s]), 1)[0])
-
-
 def render(raw: dict, out_dir: Path | None) -> list[str]:
     """The page from the raw numbers of a run (``main`` or a ``--raw`` file); the failed self-checks."""
-    instants, starts, results, spacing = raw["instants"], raw["starts"], raw["results"], raw["spacing"]
+    instants, starts, results = raw["instants"], raw["starts"], raw["results"]
     cross = raw.get("cross_check") or []
     by: dict[tuple, list[dict]] = {}
     for r in results:
@@ -184,10 +155,7 @@ def render(raw: dict, out_dir: Path | None) -> list[str]:
     check_lines, failed = checks([
         ("direct identification on the simulated set gives p*", errs(direct), all(c["kind"] == "p*" for c in direct)),
         ("its exact linear least-squares solution is p*", ", ".join(f"{c['linear_err']:.1e}" for c in direct),
-         all(c["linear_err"] is not None and c["linear_err"] <= TOL for c in direct)),
-        *((f"direct offsets grow like h^2 (exponent 1.5-2.5), t = {t} s: rows 2 / 3", f"{e2:.1f} / {e3:.1f}",
-           1.5 <= e2 <= 2.5 and 1.5 <= e3 <= 2.5, False)
-          for t in instants for e2, e3 in [(growth(spacing, t, True), growth(spacing, t, False))] if np.isfinite(e2))])
+         all(c["linear_err"] is not None and c["linear_err"] <= TOL for c in direct))])
     transcription, horizon = raw["transcription"].replace("-", " "), raw["quick_horizon"] if raw["quick"] else "t"
     page = [
         "# Table 1 of the seed paper: direct and indirect identification" + (" (quick mode)" if raw["quick"] else ""),
@@ -196,11 +164,9 @@ def render(raw: dict, out_dir: Path | None) -> list[str]:
         "[studies/table1.md](../studies/table1.md).", "", "## Summary beside the paper", "",
         *table(["#", "procedure", "reference data", *(f"{w}, t = {t} s" for t in instants for w in ("paper", "ours")),
                 "agrees?"], summary),
-        "", "## Every run", "", *runs_table(results, "identified p = [k1 kt1 k3 kt3]", ".2f")]
-    if cross:
-        page += ["", "## Cross-check by single shooting", "",
-                 *runs_table(cross, "identified p (single shooting)", ".1f")]
-    page += [
+        "", "## Every run", "", *runs_table(results, "identified p = [k1 kt1 k3 kt3]", ".2f"),
+        *(["", "## Cross-check by single shooting", "", *runs_table(cross, "identified p (single shooting)", ".1f")]
+          if cross else []),
         "", "## Exact linear least-squares solution of the direct rows", "",
         *table(["#", "t (s)", "linear LS solution", "max rel. error", "IPOPT result equal to it (max rel. diff.)"],
                [[key, t, fmt_p(by[(key, t)][0]["linear"]), f"{by[(key, t)][0]['linear_err']:.2e}",
@@ -213,10 +179,6 @@ def render(raw: dict, out_dir: Path | None) -> list[str]:
                [[f["t"], f"{f['qd_err']:.3e}", f"{f['qd_err'] / f['qd_max']:.1e}", f"{f['qdd_err']:.3e}",
                  f"{f['qdd_err'] / f['qdd_max']:.1e}", f"{f['imb_sim']:.1e}", f"{f['imb_hyb']:.1e}",
                  f"{f['imb_meas']:.1e}", f"{f['force_scale']:.3g}"] for f in raw["fd"]], "r" * 9),
-        "", "## Direct identification (start p*) from positions sampled at a coarser spacing h", "",
-        *table(["t (s)", "h (s)", "measured", "identified p", "max rel. error", "error of k1, k3"],
-               [[s["t"], f"{s['h']:.0e}", "velocities only (row 2)" if s["velocities_only"] else "set (row 3)",
-                 fmt_p(s["p"]), f"{s['err']:.2e}", f"{s['err_k']:.2e}"] for s in spacing], "rrllrr"),
         "", *check_lines]
     write_outputs("table1", out_dir, raw["quick"], "\n".join(page))
     return failed

@@ -35,7 +35,6 @@ def run(model, data, instants, start, transform="linear", solver_options=None, *
     """One identification and its identifiability report."""
     r = identify_adapted_direct(model, data, instants, start=start, transform=transform, solver_options=solver_options)
     idf = r.identifiability
-    print({k: v for k, v in tags.items() if k != "paper"}, f"start {start} {transform}: {fmt_p(r.p)} {r.status}")
     return {"p": r.p, "rel_err": r.p / model.p_nominal - 1.0, "success": r.success, "status": r.status,
             "iterations": r.iterations, "wall_s": r.wall_s, "objective": r.objective,
             "se": np.array(list(r.std_errors.values())), "weak": ", ".join(idf["weak"]) or "-",
@@ -43,55 +42,6 @@ def run(model, data, instants, start, transform="linear", solver_options=None, *
             "rel_se": np.array(list(idf["relative_std_errors"].values())),
             "collinearity": idf["collinearity_index"], "pcond": idf["parameter_condition"],
             "polish": r.extra["gauss_newton_polish"], "start": start, "transform": transform, **tags}
-
-
-def chord_error(model, q: np.ndarray) -> float:
-    """Largest distance of the bars' chord rotations since t = 0 (rows of q: samples) from theta2..theta5."""
-    names, err = model.dof_names, 0.0
-    for a, b in ((2, 3), (4, 5)):
-        ia, ib = names.index(f"x{a}"), names.index(f"x{b}")
-        r, r0 = q[:, ib:ib + 2] - q[:, ia:ia + 2], model.q0[ib:ib + 2] - model.q0[ia:ia + 2]
-        chord = np.arctan2(r0[0] * r[:, 1] - r0[1] * r[:, 0], r @ r0)
-        err = max(err, *(float(np.abs(chord - q[:, names.index(f"theta{n}")]).max()) for n in (a, b)))
-    return err
-
-
-def study(quick: bool) -> dict:
-    """Every run of the page, and the scales that explain them."""
-    model = assemble(load_scene("twobar"))
-    t_end, sets, starts = (1.2, SETS[:1], [0.3, 1.0]) if quick else (3.0, SETS, [0.3, 1.0, 3.0])
-    sim = simulated_set(model, t_end=t_end)
-    meas = measured_set(sim)
-    fits = [run(model, sim, inst, st, transform, label=label, paper=np.array(paper, dtype=float))
-            for label, inst, paper in sets for st in starts for transform in ("linear", "log")]
-    d = {"model": model, "t_end": t_end, "main": [r for r in fits if r["transform"] == "linear"],
-         "log": [r for r in fits if r["transform"] == "log"],
-         "best": {label: min(r["objective"] for r in fits if r["label"] == label) for label, *_ in sets},
-         "measured": [run(model, meas, inst, 1.0, label=label, paper=np.array(paper, dtype=float))
-                      for label, inst, paper in sets]}
-    idx = [meas.index(t) for _, inst, _ in sets for t in inst]
-    idx_sim = [sim.index(float(meas.t[i])) for i in idx]
-    trans = ~model.is_rotation
-    for what in ("qd", "qdd"):  # the difference quotients' error at the instants, and the scale it compares with
-        exact = getattr(sim, what)[idx_sim][:, trans]
-        d[f"fd_{what}"] = (float(np.abs(getattr(meas, what)[idx][:, trans] - exact).max()), float(np.abs(exact).max()))
-    d["noise_label"], n_inst = sets[-1][:2]
-    d["acc_rms"] = float(np.sqrt(np.mean(meas.qdd[[meas.index(t) for t in n_inst]][:, trans] ** 2)))
-    d["noise"] = [run(model, noisy, n_inst, 1.0, sigma=sigma, seed=seed,
-                      acc_noise=float(np.std(noisy.qdd[:, trans] - meas.qdd[:, trans])))
-                  for sigma in ([1e-6] if quick else [1e-6, 1e-5, 1e-4]) for seed in ([0] if quick else range(5))
-                  for noisy in [measured_set(sim, noise=sigma, seed=seed)]]
-    d["early"] = [run(model, sim, EARLY, st, transform, TIGHT if tight else None, tight=tight)
-                  for transform in ("linear", "log") for st in ([1.0] if quick else starts)
-                  for tight in ((False,) if quick else (False, True))]
-    beam = load_scene("twobar").beams[0]
-    ia, ib = model.dof_names.index("x2"), model.dof_names.index("x3")
-    d["k_bend"] = 4 * beam.E * beam.I / float(np.linalg.norm(model.q0[ib:ib + 2] - model.q0[ia:ia + 2]))
-    col = [model.dof_names.index(f"theta{n}") for n in range(1, 6)]
-    d["rel_rot"] = {t: (sim.q[i, col[1]] - sim.q[i, col[0]], sim.q[i, col[3]] - sim.q[i, col[2]])
-                    for t in sorted({t for _, inst, _ in sets for t in inst} | set(EARLY)) for i in [sim.index(t)]}
-    d["chord_err"] = chord_error(model, sim.q[[sim.index(t) for _, inst, _ in sets for t in inst]])
-    return d
 
 
 def cells(v, spec: str = ".1e") -> str:
@@ -103,10 +53,41 @@ def pct(v) -> str:
     return cells(100 * v, "+.2g")
 
 
-def tables(d: dict) -> list[str]:
-    """The measured tables (how to read each: docs/studies/table2.md)."""
-    p_star, best = d["model"].p_nominal, d["best"]
-    return [
+def main(quick: bool = False, out_dir: Path | None = None) -> dict:
+    banner = Banner("table2", quick)
+    model = assemble(load_scene("twobar"))
+    p_star = model.p_nominal
+    t_end, sets, starts = (1.2, SETS[:1], [0.3, 1.0]) if quick else (3.0, SETS, [0.3, 1.0, 3.0])
+    sim = simulated_set(model, t_end=t_end)
+    meas = measured_set(sim)
+    fits = [run(model, sim, inst, st, transform, label=label, paper=np.array(paper, dtype=float))
+            for label, inst, paper in sets for st in starts for transform in ("linear", "log")]
+    d = {"main": [r for r in fits if r["transform"] == "linear"], "log": [r for r in fits if r["transform"] == "log"],
+         "measured": [run(model, meas, inst, 1.0, label=label, paper=np.array(paper, dtype=float))
+                      for label, inst, paper in sets]}
+    best = {label: min(r["objective"] for r in fits if r["label"] == label) for label, *_ in sets}
+    noise_label, noise_instants = sets[-1][:2]
+    trans = ~model.is_rotation
+    d["noise"] = [run(model, noisy, noise_instants, 1.0, sigma=sigma, seed=seed,
+                      acc_noise=float(np.std(noisy.qdd[:, trans] - meas.qdd[:, trans])))
+                  for sigma in ([1e-6] if quick else [1e-6, 1e-5, 1e-4]) for seed in ([0] if quick else range(5))
+                  for noisy in [measured_set(sim, noise=sigma, seed=seed)]]
+    d["early"] = [run(model, sim, EARLY, st, transform, TIGHT if tight else None, tight=tight)
+                  for transform in ("linear", "log") for st in ([1.0] if quick else starts)
+                  for tight in ((False,) if quick else (False, True))]
+    kt_sens = max(float(r["rel_sens"][KT].max()) for r in d["main"] if r["start"] == 1.0)
+    check_lines, failed = checks([
+        ("linear stiffnesses exact (rel. error < 1e-6), every instant set and start",
+         f"{max(float(np.abs(r['rel_err'][K]).max()) for r in d['main']):.1e}",
+         all(np.abs(r["rel_err"][K]).max() < 1e-6 for r in d["main"])),
+        ("kt1, kt3 flagged weak, every instant set and start and the early instants", "",
+         all("kt1" in r["weak"] and "kt3" in r["weak"] for r in d["main"] + d["early"])),
+        ("relative sensitivity of kt1, kt3 < 1e-4 (start 1.0 p*)", f"{kt_sens:.1e}", kt_sens < 1e-4)])
+    page = [
+        "# Table 2: adapted direct identification", "",
+        f"{banner.line()} p* = {fmt_p(p_star)} ({', '.join(model.parameter_names)}); simulated set over 0..{t_end} s. "
+        "Set-up, how to read the tables and why the numbers differ from the paper's: "
+        "[studies/table2.md](../studies/table2.md).", "",
         "## Identified parameters (linear transform)", "",
         *table(["instant set (s)", "start", "paper [k1 kt1 k3 kt3]", "paper rel. err. (%)", "ours",
                 "ours rel. err. (%)", "success (status)", "iter.", "time (ms)", "objective"],
@@ -130,7 +111,7 @@ def tables(d: dict) -> list[str]:
                 "weak"],
                [[r["label"], fmt_p(r["paper"]), pct(r["paper"] / p_star - 1), fmt_p(r["p"]), pct(r["rel_err"]),
                  r["status"], r["weak"]] for r in d["measured"]]),
-        "", f"## Noise experiment: instant set {d['noise_label']}", "",
+        "", f"## Noise experiment: instant set {noise_label}", "",
         *table(["sigma (m)", "seed", "accel. noise (m/s^2)", "identified [k1 kt1 k3 kt3]", "SE",
                 "covered k1 kt1 k3 kt3", "status", "iter.", "weak"],
                [[f"{r['sigma']:.0e}", r["seed"], f"{r['acc_noise']:.3g}", fmt_p(r["p"]), cells(r["se"]),
@@ -143,47 +124,10 @@ def tables(d: dict) -> list[str]:
                [[r["transform"], f"{r['start']:g} p*", "tight" if r["tight"] else "default", fmt_p(r["p"]),
                  r["status"], r["iterations"], f"{r['objective']:.2e}", r["weak"], cells(r["rel_sens"][KT]),
                  cells(r["rel_se"][KT]), f"{r['collinearity']:.3g}", r["polish"]] for r in d["early"]], "lrlllrrlllrr"),
-        ""]
-
-
-def scales(d: dict) -> list[list[str]]:
-    """The measured numbers behind the reasons of docs/studies/table2.md that the tables above do not hold."""
-    p_star, noise, (fd_v, v_max), (fd_a, a_max) = d["model"].p_nominal, d["noise"], d["fd_qd"], d["fd_qdd"]
-    rel_se_k = [r["se"][j] / max(abs(r["p"][j]), 1e-300) for r in noise for j in K if abs(r["p"][j]) > 1e-3 * p_star[j]]
-    return [
-        ["measured set", "largest difference-quotient error at the instants: velocity (m/s), of the largest",
-         f"{fd_v:.2e} of {v_max:.3g}"],
-        ["measured set", "the same, acceleration (m/s^2), of the largest", f"{fd_a:.2e} of {a_max:.3g}"],
-        ["noise", "RMS translational acceleration at the instants (m/s^2)", f"{d['acc_rms']:.3g}"],
-        ["(6)", "median relative SE of k1, k3 (noisy runs)", f"{float(np.median(rel_se_k or [np.nan])):.2g}"],
-        ["(2)", "largest torsion moment kt1 (theta2 - theta1) at the instants (N m)",
-         f"{max(abs(a) for a, _ in d['rel_rot'].values()) * p_star[1]:.2f}"],
-        ["(2)", "bar's end stiffness 4EI/L (N m/rad); kt/(4EI/L)", f"{d['k_bend']:.3g}; {p_star[1] / d['k_bend']:.1e}"],
-        ["(4)", "largest distance of the chord angles from theta2..theta5 (rad)", f"{d['chord_err']:.1e}"],
-        *(["early", f"relative joint rotations theta2 - theta1 / theta4 - theta3 at {t:g} s (rad)",
-           f"{a:+.2e} / {b:+.2e}"] for t, (a, b) in d["rel_rot"].items())]
-
-
-def main(quick: bool = False, out_dir: Path | None = None) -> dict:
-    banner = Banner("table2", quick)
-    d = study(quick)
-    p_star = d["model"].p_nominal
-    kt_sens = max(float(r["rel_sens"][KT].max()) for r in d["main"] if r["start"] == 1.0)
-    check_lines, failed = checks([
-        ("linear stiffnesses exact (rel. error < 1e-6), every instant set and start",
-         f"{max(float(np.abs(r['rel_err'][K]).max()) for r in d['main']):.1e}",
-         all(np.abs(r["rel_err"][K]).max() < 1e-6 for r in d["main"])),
-        ("kt1, kt3 flagged weak, every instant set and start and the early instants", "",
-         all("kt1" in r["weak"] and "kt3" in r["weak"] for r in d["main"] + d["early"])),
-        ("relative sensitivity of kt1, kt3 < 1e-4 (start 1.0 p*)", f"{kt_sens:.1e}", kt_sens < 1e-4)])
-    page = ["# Table 2: adapted direct identification", "",
-            f"{banner.line()} p* = {fmt_p(p_star)} ({', '.join(d['model'].parameter_names)}); simulated set over "
-            f"0..{d['t_end']} s. Set-up, how to read the tables and why the numbers differ from the paper's: "
-            "[studies/table2.md](../studies/table2.md).", "", *tables(d), "## Scales behind the reasons", "",
-            *table(["item", "measured", "value"], scales(d), "llr"), "", *check_lines]
+        "", *check_lines]
     write_outputs("table2", out_dir, quick, "\n".join(page))
     assert_checks(failed)
-    return {k: d[k] for k in ("main", "log", "measured", "noise", "early")} | {"wall_s": banner.wall}
+    return d | {"wall_s": banner.wall}
 
 
 if __name__ == "__main__":
