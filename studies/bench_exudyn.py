@@ -5,13 +5,14 @@ step, and which is cheaper for a required accuracy of node 5? Run: ``python stud
 
 from __future__ import annotations
 
+import importlib.util
 import math
 import time
 from pathlib import Path
 
 import numpy as np
 from _shared import twobar
-from _study import Banner, assert_checks, best_of, checks, cli, png, table, write_outputs
+from _study import Banner, assert_checks, best_of, checks, cli, fnum, png, table, write_outputs
 
 import casflex
 from casflex.simulate import compiled_library, integrator_for, simulate
@@ -21,24 +22,16 @@ TOL_PHYSICS = {"ancf": 2e-6, "ge": 5e-6}  # converged Exudyn from casflex's conv
 CODES = ("casflex", "ancf", "casflex-rot", "ge")
 PAIRS = (("ancf", "casflex"), ("ge", "casflex-rot"))  # each Exudyn beam against casflex on its continuum
 LEVELS = (1e-3, 3e-4, 1e-4, 3e-5, 1e-5, 3e-6, 1e-6)  # accuracy levels of the fronts (m)
-
-
-def _plan(quick: bool) -> dict:
-    if quick:
-        return {"t_end": 0.3, "meshes": (1, 2), "ref": (4, 1e-4), "checks": ((4, 2e-4), (2, 1e-4)),
-                "converged": {"ancf": ((4, 1e-4), (2, 1e-4)), "ge": ((16, 1e-4), (8, 1e-4))},
-                "front_meshes": {c: (1, 2) for c in CODES}, "front_hs": (1e-3, 5e-4), "repeat": 2}
-    return {"t_end": 3.0, "meshes": (1, 2, 4, 8, 16, 32), "ref": (16, 2.5e-5), "checks": ((8, 2.5e-5), (16, 5e-5)),
-            "converged": {"ancf": ((8, 5e-5), (4, 5e-5)), "ge": ((64, 2.5e-5), (32, 5e-5))},
-            "front_meshes": {"casflex": (1, 2, 4, 8), "ancf": (1, 2, 4, 8), "casflex-rot": (1, 2, 4, 8),
-                             "ge": (4, 8, 16, 32)},
-            "front_hs": (2e-3, 1e-3, 5e-4, 2.5e-4, 1e-4), "repeat": 5}
+PLAN = {"t_end": 3.0, "meshes": (1, 2, 4, 8, 16, 32), "ref": (16, 2.5e-5), "converged": {"ancf": (8, 5e-5),
+        "ge": (64, 2.5e-5)}, "front_meshes": {c: (1, 2, 4, 8) for c in CODES} | {"ge": (4, 8, 16, 32)},
+        "front_hs": (2e-3, 1e-3, 5e-4, 2.5e-4, 1e-4), "repeat": 5}
+QUICK_PLAN = {"t_end": 0.3, "meshes": (1, 2), "ref": (4, 1e-4), "converged": {"ancf": (4, 1e-4), "ge": (16, 1e-4)},
+              "front_meshes": {c: (1, 2) for c in CODES}, "front_hs": (1e-3, 5e-4), "repeat": 2}
 
 
 def run(code: str, elements: int, h: float, t_end: float, repeat: int = 1) -> tuple[float, np.ndarray]:
     """(best time of ``repeat`` runs, node 5 on the error grid) of casflex's whole simulate() calls (``casflex-rot``:
-    with rotary inertia) or of Exudyn's SolveDynamic, the model's set-up apart (its beam ``code`` in
-    casflex.peers.exudyn's translation of the scene; inf if Exudyn stops; one run is enough past 2 s)."""
+    rotary inertia) or of Exudyn's SolveDynamic (beam ``code``; inf if Exudyn stops; one run is enough past 2 s)."""
     n = int(round(t_end / h))
     if code.startswith("casflex"):
         model = twobar(elements, code == "casflex-rot")
@@ -67,36 +60,22 @@ def run(code: str, elements: int, h: float, t_end: float, repeat: int = 1) -> tu
     return t, p5[np.round(np.arange(0.0, t_end + 1e-12, GRID) / h).astype(int)]
 
 
-def _err(p5: np.ndarray, ref: np.ndarray) -> float:
-    e = np.linalg.norm(p5 - ref, axis=1)
-    return float(e.max()) if np.isfinite(e).all() else math.inf
-
-
-def _ms(t: float) -> str:
-    return f"{t * 1e3:.1f}" if math.isfinite(t) else "failed"
+def _err(p5: np.ndarray, ref: np.ndarray) -> float:  # the largest distance of node 5; inf where a run failed
+    return float(np.nan_to_num(np.linalg.norm(p5 - ref, axis=1).max(), nan=math.inf))
 
 
 def main(quick: bool = False, out_dir: Path | None = None) -> dict:
-    banner, plan = Banner("bench_exudyn", quick), _plan(quick)
+    from casflex.plotting._figure import _new_figure
+
+    banner, plan = Banner("bench_exudyn", quick), QUICK_PLAN if quick else PLAN
     T, (ne, h) = plan["t_end"], plan["ref"]
-    try:
-        import exudyn
-    except ImportError:
-        exudyn = None
+    exudyn = importlib.import_module("exudyn") if importlib.util.find_spec("exudyn") else None
     codes = CODES if exudyn else ("casflex",)
-    # the same problem: each continuum's converged casflex motion and its own error against coarser settings ...
-    refs, same, physics = {}, [], {}
-    for c in ("casflex", "casflex-rot"):
-        refs[c] = run(c, ne, h, T)[1]
-        own = max(_err(run(c, n2, h2, T)[1], refs[c]) for n2, h2 in plan["checks"])
-        same.append([f"{c} (reference)", f"{ne}, {h:g}", f"{own:.1e} (against "
-                     + ", ".join(f"{n2} el. at {h2:g} s" for n2, h2 in plan["checks"]) + ")", "-"])
-    ref_of = {c: refs["casflex-rot" if c in ("ge", "casflex-rot") else "casflex"] for c in CODES}
-    for kind, ((n2, h2), (n3, h3)) in plan["converged"].items() if exudyn else ():  # ... and each Exudyn beam's
-        (_, fine), (_, coarse) = run(kind, n2, h2, T), run(kind, n3, h3, T)
-        physics[kind] = _err(fine, ref_of[kind])
-        same.append([f"Exudyn {kind}", f"{n2}, {h2:g}", f"{_err(fine, coarse):.1e} (against {n3} el.)",
-                     f"**{physics[kind]:.2e}**"])
+    # the same problem: each continuum's converged casflex motion, and each Exudyn beam's converged run from it
+    refs = {c: run(c, ne, h, T)[1] for c in ("casflex", "casflex-rot")}
+    ref_of, physics = {c: refs["casflex-rot" if c in ("ge", "casflex-rot") else "casflex"] for c in CODES}, {}
+    for kind, (n2, h2) in plan["converged"].items() if exudyn else ():
+        physics[kind] = (n2, h2, _err(fine := run(kind, n2, h2, T)[1], ref_of[kind]))
         if kind == "ge":  # its own continuum's converged motion (shear included) is ge's reference
             ref_of[kind] = fine
 
@@ -105,68 +84,48 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
         return t, _err(p5, ref_of[c])
 
     rows = [{"elements": n, **{c: measured(c, n, 1e-3) for c in codes}} for n in plan["meshes"]]  # h = 1e-3
-    pts = {c: [(*measured(c, n, hh), n, hh) for n in plan["front_meshes"][c] for hh in plan["front_hs"]] for c in codes}
+    pts = {c: [measured(c, n, hh) for n in plan["front_meshes"][c] for hh in plan["front_hs"]] for c in codes}
     # per accuracy level and code: the least time among the settings that reach it
-    fronts = [{c: min((t for t, e, *_ in pts[c] if e <= lv), default=math.inf) for c in codes} for lv in LEVELS]
+    fronts = [{c: min((t for t, e in pts[c] if e <= lv), default=math.inf) for c in codes} for lv in LEVELS]
     pairs = [(x, c) for x, c in PAIRS if x in codes]
 
     def ratios(t: dict) -> list[str]:
         return [f"**{t[x] / t[c]:.1f}**" if math.isfinite(t[x]) and math.isfinite(t[c]) else "-" for x, c in pairs]
 
     worst = max(r["casflex"][1] for r in rows)  # casflex's largest error at h = 1e-3 s
-    lines, failed = checks([("every casflex run at h = 1e-3 s finite", f"max error {worst:.1e} m",
-                             math.isfinite(worst))]
-                           + [(f"Exudyn {k} within {TOL_PHYSICS[k]:g} m of casflex's reference of its continuum",
-                               f"{e:.2e} m", e <= TOL_PHYSICS[k]) for k, e in physics.items()])
+    lines, failed = checks([("every casflex run at h = 1e-3 s finite", f"max error {worst:.1e} m", worst < math.inf)]
+                           + [(f"Exudyn {k} ({n2} el., h {h2:g} s) within {TOL_PHYSICS[k]:g} m of casflex's reference "
+                               f"of its continuum ({ne} el., h {h:g} s)", f"{e:.2e} m", e <= TOL_PHYSICS[k])
+                              for k, (n2, h2, e) in physics.items()])
     page = [
         "# casflex vs Exudyn: twobar", "", f"{banner.line(Exudyn=exudyn.__version__ if exudyn else 'not installed')} "
         f"Horizon {T:g} s. The models, the codes' names and the measurement: "
         "[studies/bench_exudyn.md](../studies/bench_exudyn.md).", "",
-        f"![time against the mesh, error against time](../figures/bench_exudyn{'_quick' * quick}.png)", "",
-        "## The same problem", "", *table(["motion of node 5", "el./bar, h (s)", "its own error (m)",
-                                           "from casflex's reference of its continuum (m)"], same, "llll"),
-        "", "## Same mesh, same step (h = 1e-3 s): time of the whole run", "", *table(
+        f"![every setting's error against time, each code's front](../figures/bench_exudyn{'_quick' * quick}.png)", "",
+        "## Same mesh, same step (h = 1e-3 s): time of the whole run", "", *table(
             ["el./bar", *(f"{c}{u}" for c in codes for u in (" (ms)", " error (m)")),
              *(f"{x} / {c}" for x, c in pairs)],
-            [[r["elements"], *(v for c in codes for v in (_ms(r[c][0]), f"{r[c][1]:.1e}")),
+            [[r["elements"], *(v for c in codes for v in (fnum(r[c][0] * 1e3, ".1f", "failed"), f"{r[c][1]:.1e}")),
               *ratios({c: r[c][0] for c in codes})] for r in rows], "r" * (1 + 2 * len(codes) + len(pairs))),
         "", "## Accuracy against time", "", *table(
             ["error of node 5 at most (m)", *(f"{c} (ms)" for c in codes), *(f"{x} / {c}" for x, c in pairs)],
-            [[f"{lv:.0e}", *(_ms(t[c]) if math.isfinite(t[c]) else "-" for c in codes), *ratios(t)]
+            [[f"{lv:.0e}", *(fnum(t[c] * 1e3, ".1f") for c in codes), *ratios(t)]
              for lv, t in zip(LEVELS, fronts, strict=True)], "r" * (1 + len(codes) + len(pairs))),
-        "", "Every setting measured (time in ms, error in m):", "",
-        *(f"- {c}: " + "; ".join(f"{n} el. h {hh:g}: {t * 1e3:.1f} ms, {e:.1e}" for t, e, n, hh in pts[c])
-          for c in codes),
         "", *lines]
-    write_outputs("bench_exudyn", out_dir, quick, "\n".join(page), figure(plan, rows, pts, codes))
-    assert_checks(failed)
-    return {"rows": rows, "points": pts, "fronts": fronts, "physics": physics}
-
-
-def figure(plan, rows, pts, codes) -> bytes:
-    """Time against the mesh at h = 1e-3; every setting's error against time, and each code's Pareto front."""
-    from casflex.plotting._figure import _new_figure
-
-    fig = _new_figure((11, 4.2))
-    ax1, ax2 = fig.subplots(1, 2)
+    ax = _new_figure((6.5, 4.2)).subplots()  # every setting's error against its time (faint), each code's front
     for i, c in enumerate(codes):
         style = {"color": f"C{i}", "marker": "osD^"[i], "ls": "-" if c.startswith("casflex") else "--"}
-        ax1.loglog([r["elements"] for r in rows], [r[c][0] for r in rows], label=c, **style)
-        p = sorted((t, e) for t, e, _, _ in pts[c] if math.isfinite(t) and math.isfinite(e))
-        ax2.loglog([t for t, _ in p], [e for _, e in p], style["marker"], color=style["color"], alpha=0.35)
+        p = sorted((t, e) for t, e in pts[c] if math.isfinite(t) and math.isfinite(e))
+        ax.loglog([t for t, _ in p], [e for _, e in p], style["marker"], color=style["color"], alpha=0.35)
         fr = [(t, e) for j, (t, e) in enumerate(p) if all(e < e2 for _, e2 in p[:j])]  # faster ones are less accurate
-        ax2.loglog([t for t, _ in fr], [e for _, e in fr], label=f"{c}: front", **style)
-    ax1.set_xticks(plan["meshes"], [str(n) for n in plan["meshes"]])
-    ax1.tick_params(axis="x", which="minor", labelbottom=False)  # the meshes themselves are the ticks
-    ax1.set(xlabel="elements per bar", ylabel=f"wall time of {plan['t_end']:g} s at h = 1e-3 s (s)",
-            title="same mesh, same step")
-    ax2.set(xlabel="wall time (s)", ylabel="max error of node 5 (m)",
-            title="accuracy against time (faint: every setting)")
-    ax2.tick_params(which="minor", labelsize="x-small")  # a narrow log range labels its minor ticks
-    for ax in (ax1, ax2):
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize="small")
-    return png(fig)
+        ax.loglog([t for t, _ in fr], [e for _, e in fr], label=f"{c}: front", **style)
+    ax.set(xlabel=f"wall time of {T:g} s (s)", ylabel="max error of node 5 (m)", title="faint: every setting")
+    ax.tick_params(which="minor", labelsize="x-small")  # a narrow log range labels its minor ticks
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize="small")
+    write_outputs("bench_exudyn", out_dir, quick, "\n".join(page), png(ax.figure))
+    assert_checks(failed)
+    return {"rows": rows, "points": pts, "fronts": fronts, "physics": physics}
 
 
 if __name__ == "__main__":

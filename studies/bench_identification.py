@@ -46,19 +46,16 @@ def worker(case: str) -> dict:
 def main(quick: bool = False, out_dir: Path | None = None) -> dict:
     from casflex.plotting._figure import _new_figure
 
-    banner, rows = Banner("bench_identification", quick), []
-    for case in QUICK if quick else CASES:
-        cold, warm = cold_and_cached(__file__, ["--worker", case], ["--worker", case])
-        rows.append({"case": case, "cold": cold, "warm": warm})
-    lines, failed = checks([(f"{r['case']}: the cache changes neither the outcome nor the k error",
-                             f"{r['warm']['k_err'] - r['cold']['k_err']:.0e}", r["warm"]["success"] ==
-                             r["cold"]["success"] and abs(r["warm"]["k_err"] - r["cold"]["k_err"]) <= 1e-12)
-                            for r in rows])
-    fig = _new_figure((9, 1.2 + 0.6 * len(rows)))
-    ax, y = fig.subplots(), np.arange(len(rows))
-    for dy, which, label in ((-0.2, "cold", "first process (code generation, gcc)"), (0.2, "warm", "later process")):
+    banner = Banner("bench_identification", quick)
+    rows = [(case, *cold_and_cached(__file__, ["--worker", case], ["--worker", case]))  # (case, cold, warm)
+            for case in (QUICK if quick else CASES)]
+    lines, failed = checks([(f"{case}: the cache changes neither the outcome nor the k error",
+                             f"{w['k_err'] - c['k_err']:.0e}", w["success"] == c["success"]
+                             and abs(w["k_err"] - c["k_err"]) <= 1e-12) for case, c, w in rows])
+    ax, y = _new_figure((9, 1.2 + 0.6 * len(rows))).subplots(), np.arange(len(rows))
+    for which, dy, label in ((1, -0.2, "first process (code generation, gcc)"), (2, 0.2, "later process")):
         ax.barh(y + dy, [r[which]["build_s"] + r[which]["solve_s"] for r in rows], 0.4, label=label)
-    ax.set_yticks(y, [r["case"] for r in rows], fontsize="small")
+    ax.set_yticks(y, [r[0] for r in rows], fontsize="small")
     ax.invert_yaxis()  # the table's order, top down
     ax.set(xscale="log", xlabel="build + solve wall time (s)", title="twobar identification: first and later runs")
     ax.legend(fontsize="small")
@@ -69,10 +66,10 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
         f"![build + solve per case](../figures/bench_identification{'_quick' * quick}.png)", "",
         *table(["case", "first process: build + solve (s)", "later process: build (s)", "later: solve (s)",
                 "later: total (s)", "iterations", "k error", "kt error", "success"],
-               [[r["case"], f"{c['build_s'] + c['solve_s']:.1f}", f"{w['build_s']:.2f}", f"**{w['solve_s']:.2f}**",
+               [[case, f"{c['build_s'] + c['solve_s']:.1f}", f"{w['build_s']:.2f}", f"**{w['solve_s']:.2f}**",
                  f"{w['build_s'] + w['solve_s']:.2f}", w["iterations"], f"{w['k_err']:.1e}", f"{w['kt_err']:.1e}",
-                 w["success"]] for r in rows for c, w in [(r["cold"], r["warm"])]], "lrrrrrrrl"), "", *lines]),
-                  png(fig))
+                 w["success"]] for case, c, w in rows], "lrrrrrrrl"), "", *lines]),
+                  png(ax.figure))
     assert_checks(failed)
     return {"rows": rows}
 

@@ -18,8 +18,7 @@ from _study import Banner, assert_checks, best_of, checks, cli, png, table, writ
 
 from casflex.simulate import simulate
 
-#: the page's tables: (title, {column: format over a row's numbers})
-TABLES = (
+TABLES = (  # the page's tables: (title, {column: format over a row's numbers})
     ("Cost against the mesh ({t_end:g} s, dt = 1e-3, compiled)",
      {"el./bar": "{elements}", "dofs": "{dofs}", "cold build (s)": "{cold_build_s:.1f}",
       "cached build (s)": "{build_s:.2f}", "library (kB)": "{code_kb}", "simulate (ms)": "{simulate_ms:.1f}",
@@ -50,44 +49,8 @@ def mesh_worker(elements: int, t_end: float, repeat: int) -> dict:
             "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
 
 
-def slope(x, y) -> float:
-    """Of the least-squares line through the log-log points."""
+def slope(x, y) -> float:  # of the least-squares line through the log-log points
     return float(np.polyfit(np.log(x), np.log(y), 1)[0])
-
-
-def accuracy(t_end: float, dts: list[float]) -> list[dict]:
-    """Per dt (1 element per bar): both paths' times, Newton iterations, node 5's error against a 10x finer dt."""
-    model, grid = twobar(1), np.arange(0, t_end + 1e-12, dts[0])  # the error on the coarsest step's instants
-    ref = simulate(model, t_end, dt=dts[-1] / 10, alpha=0.0, compiled=True).q[np.round(grid / (dts[-1] / 10))
-                                                                                .astype(int)][:, 12:14]
-    rows = []
-    for dt in dts:
-        t_c, tc = best_of(lambda dt=dt: simulate(model, t_end, dt=dt, alpha=0.0, compiled=True), 5, float("inf"))
-        t_i, ti = best_of(lambda dt=dt: simulate(model, t_end, dt=dt, alpha=0.0), 1 if dt < 1e-3 else 2, float("inf"))
-        err = np.linalg.norm(ti.q[np.round(grid / dt).astype(int)][:, 12:14] - ref, axis=1).max()
-        rows.append({"dt": dt, "steps": ti.stats["steps"], "interpreted_ms": 1e3 * t_i, "compiled_ms": 1e3 * t_c,
-                     "speedup": t_i / t_c, "compiled_run_ms": 1e3 * tc.stats["run_s"], "err_node5_m": float(err),
-                     "newton_per_step": ti.stats["newton_iterations"] / ti.stats["steps"],
-                     "max_diff_paths": float(np.abs(tc.q - ti.q).max())})
-    return rows
-
-
-def newton_kinds(meshes: tuple[int, ...], dts: tuple[float, ...], t_end: float) -> list[dict]:
-    """Exact and modified Newton side by side, compiled, per mesh and step."""
-    rows = []
-    for ne in meshes:
-        model = twobar(ne)
-        for dt in dts:
-            t, tr = {}, {}
-            for kind in ("exact", "modified"):
-                simulate(model, t_end, dt=dt, newton=kind, compiled=True)  # build, not timed
-                t[kind], tr[kind] = best_of(lambda k=kind, m=model, dt=dt: simulate(m, t_end, dt=dt, newton=k,
-                                                                                    compiled=True), 3, float("inf"))
-            rows.append({"elements": ne, "dt": dt, "exact_ms": 1e3 * t["exact"], "modified_ms": 1e3 * t["modified"],
-                         "ratio": t["modified"] / t["exact"],
-                         "refresh": 100 * tr["modified"].stats["jacobian_refreshes"] / tr["modified"].stats["steps"],
-                         "deviation_m": float(np.abs(tr["modified"].q - tr["exact"].q).max())})
-    return rows
 
 
 def figure(scale: list[dict], acc: list[dict]) -> bytes:
@@ -124,10 +87,33 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
         scale.append({**warm, "cold_build_s": cold["build_s"], "cold_cached": cold["cached"],
                       "per_step_us": 1e3 * warm["run_ms"] / warm["steps"]})
     expo = {k: slope([r[k] for r in scale], [r["per_step_us"] for r in scale]) for k in ("elements", "dofs")}
-    acc = accuracy(0.5 if quick else 3.0, [1e-2, 5e-3, 2e-3, 1e-3] + ([] if quick else [5e-4, 2e-4, 1e-4]))
+    # per dt, 1 element per bar: both paths; node 5's error against a 10x finer dt, on the coarsest step's grid
+    acc_t, dts, acc = 0.5 if quick else 3.0, [1e-2, 5e-3, 2e-3, 1e-3] + ([] if quick else [5e-4, 2e-4, 1e-4]), []
+    model, grid, fine = twobar(1), np.arange(0, acc_t + 1e-12, dts[0]), dts[-1] / 10
+    ref = simulate(model, acc_t, dt=fine, alpha=0.0, compiled=True).q[np.round(grid / fine).astype(int)][:, 12:14]
+    for dt in dts:
+        t_c, tc = best_of(lambda dt=dt: simulate(model, acc_t, dt=dt, alpha=0.0, compiled=True), 5, float("inf"))
+        t_i, ti = best_of(lambda dt=dt: simulate(model, acc_t, dt=dt, alpha=0.0), 1 if dt < 1e-3 else 2, float("inf"))
+        err = np.linalg.norm(ti.q[np.round(grid / dt).astype(int)][:, 12:14] - ref, axis=1).max()
+        acc.append({"dt": dt, "steps": ti.stats["steps"], "interpreted_ms": 1e3 * t_i, "compiled_ms": 1e3 * t_c,
+                    "speedup": t_i / t_c, "compiled_run_ms": 1e3 * tc.stats["run_s"], "err_node5_m": float(err),
+                    "newton_per_step": ti.stats["newton_iterations"] / ti.stats["steps"],
+                    "max_diff_paths": float(np.abs(tc.q - ti.q).max())})
     fit = [r for r in acc if r["dt"] <= 2e-3]  # the asymptotic range: coarser steps are pre-asymptotic here
     order = slope([r["dt"] for r in fit], [r["err_node5_m"] for r in fit])
-    kinds = newton_kinds((1,) if quick else (1, 8, 32), (1e-3,) if quick else (1e-3, 2e-4), kinds_t)
+    kinds = []  # exact and modified Newton side by side, compiled, per mesh and step
+    for ne in (1,) if quick else (1, 8, 32):
+        model = twobar(ne)
+        for dt in (1e-3,) if quick else (1e-3, 2e-4):
+            t, tr = {}, {}
+            for kind in ("exact", "modified"):
+                simulate(model, kinds_t, dt=dt, newton=kind, compiled=True)  # build, not timed
+                t[kind], tr[kind] = best_of(lambda k=kind, m=model, dt=dt: simulate(m, kinds_t, dt=dt, newton=k,
+                                                                                    compiled=True), 3, float("inf"))
+            kinds.append({"elements": ne, "dt": dt, "exact_ms": 1e3 * t["exact"], "modified_ms": 1e3 * t["modified"],
+                          "ratio": t["modified"] / t["exact"],
+                          "refresh": 100 * tr["modified"].stats["jacobian_refreshes"] / tr["modified"].stats["steps"],
+                          "deviation_m": float(np.abs(tr["modified"].q - tr["exact"].q).max())})
     same = 0.0 if platform.machine() in ("x86_64", "AMD64") else 1e-10  # bitwise where claimed (codegen.CFLAGS)
     y5 = np.ptp([r["y5"] for r in scale])  # the mesh error of 1 element per bar is 6e-5 m
     lines, failed = checks([
