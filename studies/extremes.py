@@ -1,6 +1,6 @@
 """Stability at the extremes: where does HHT-alpha on twobar stop converging, and is every failure
 detected and reported with its time? Set-up and how to read the page: docs/studies/extremes.md.
-Run: ``python studies/extremes.py [--quick] [--raw FILE | --render FILE]`` (about 4 min; ``--quick``: seconds).
+Run: ``python studies/extremes.py [--quick] [--raw FILE | --render FILE]`` (about 2 min; ``--quick``: seconds).
 """
 
 from __future__ import annotations
