@@ -1,14 +1,13 @@
 """Identification at the extremes: does each method find twobar's parameters from far starts, what
-does noise do to the estimates and their standard errors, and is any NaN ever reported?
-
-Set-up, how to read the page and what it shows: docs/studies/extremes.md.
-Run: ``python studies/extremes_identification.py [--quick] [--record DIR] [--scheduler ADDRESS]``
-(about 8 min on 2 cores; ``--quick``: 9 cheap runs).
+does noise do to the estimates and their standard errors, and is any NaN ever reported? Set-up and how to
+read the page: docs/studies/extremes.md. Run: ``python studies/extremes_identification.py [--quick]
+[--record DIR] [--scheduler ADDRESS]`` (about 8 min on 2 cores; ``--quick``: 9 cheap runs).
 """
 
 from __future__ import annotations
 
 import math
+from itertools import product
 from pathlib import Path
 
 from _study import Banner, assert_checks, checks, cli, sweep, table, write_outputs
@@ -53,13 +52,10 @@ def plan(quick: bool) -> list[dict]:
     else:
         specs = [(None, m, s, nz) for m in METHODS for nz in NOISES for s in STARTS] + \
             [(f, m, s, nz) for f in KT_FACTORS for m in METHODS for nz in KT_NOISES for s in KT_STARTS]
-    out = []
-    for f, m, s, nz in specs:
-        kw = {"method": m, "start": s, "noise": nz, "seed": 1 if nz > 0 else None, "t_end": t_end,
-              **{"direct": {"instants": (0.69,)}, "adapted-direct": {"instants": ADAPTED_INSTANTS[quick]},
-                 "indirect": {"horizon": horizon}}[m]}
-        out.append({**kw, "kt_factor": f} if f is not None else kw)
-    return out
+    by_method = {"direct": {"instants": (0.69,)}, "adapted-direct": {"instants": ADAPTED_INSTANTS[quick]},
+                 "indirect": {"horizon": horizon}}
+    return [{"method": m, "start": s, "noise": nz, "seed": 1 if nz > 0 else None, "t_end": t_end, **by_method[m],
+             **({} if f is None else {"kt_factor": f})} for f, m, s, nz in specs]
 
 
 def _key(r: dict) -> str:
@@ -115,10 +111,8 @@ def page(rows: list[dict], quick: bool, banner: str, check_lines: list[str]) -> 
     main_rows, kt = [r for r in rows if r["kt_factor"] is None], [r for r in rows if r["kt_factor"] is not None]
     lines = ["# Identification at the extremes" + (" (quick mode)" if quick else ""), "", banner, "",
              "What is run, how to read it and what it shows: [docs/studies/extremes.md](../studies/extremes.md).", "",
-             f"Adapted direct at {ADAPTED_INSTANTS[quick]} s; indirect (single shooting) over "
-             f"0..{0.05 if quick else 0.3:g} s, data over {1.2 if quick else 3.0:g} s. Wall time per run: " + "; ".join(
-                 f"{m} {min(w):.2g}-{max(w):.2g} s" for m in METHODS
-                 if (w := [r["wall_s"] for r in main_rows if r["method"] == m and "error" not in r])) + ".", ""]
+             "Wall time per run: " + "; ".join(f"{m} {min(w):.2g}-{max(w):.2g} s" for m in METHODS if (w := [
+                 r["wall_s"] for r in main_rows if r["method"] == m and "error" not in r])) + ".", ""]
     starts = sorted({r["start"] for r in main_rows})
     for m in METHODS:
         g = {(r["noise"], r["start"]): r for r in main_rows if r["method"] == m}
@@ -127,14 +121,12 @@ def page(rows: list[dict], quick: bool, banner: str, check_lines: list[str]) -> 
             for nz in sorted({r["noise"] for r in main_rows})]
         lines += [f"**{m}**", "", *table(["noise (m)", *(f"{s:g} x p*" for s in starts), "weak (any start)"], body,
                                          "r" + "c" * len(starts) + "l"), ""]
-    starts, body = sorted({r["start"] for r in kt}), []
-    for f in sorted({r["kt_factor"] for r in kt}, reverse=True):
-        for m in METHODS:
-            for nz in sorted({r["noise"] for r in kt}):
-                if g := {r["start"]: r for r in kt if (r["kt_factor"], r["method"], r["noise"]) == (f, m, nz)}:
-                    weak = sum("error" not in r and {"kt1", "kt3"} <= set(r["weak"]) for r in g.values())
-                    body.append([f"{f:g}", m, f"{nz:g}", *(g[s]["kt_cell"] if s in g else "" for s in starts),
-                                 f"{weak}/{len(g)}"])
+    starts, factors, body = sorted({r["start"] for r in kt}), sorted({r["kt_factor"] for r in kt}, reverse=True), []
+    for f, m, nz in product(factors, METHODS, sorted({r["noise"] for r in kt})):
+        if g := {r["start"]: r for r in kt if (r["kt_factor"], r["method"], r["noise"]) == (f, m, nz)}:
+            weak = sum("error" not in r and {"kt1", "kt3"} <= set(r["weak"]) for r in g.values())
+            body.append([f"{f:g}", m, f"{nz:g}", *(g[s]["kt_cell"] if s in g else "" for s in starts),
+                         f"{weak}/{len(g)}"])
     lines += ["## Torsional stiffness near zero", "", *table(
         ["kt / nominal", "method", "noise (m)", *(f"{s:g} x p*" for s in starts), "kt weak in"], body,
         "rlr" + "l" * (len(starts) + 1)), ""]
