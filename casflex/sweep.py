@@ -9,7 +9,10 @@ not retried unless ``retry_failed=True``.
 
 By default the runs go to a ``LocalCluster`` of ``n_workers`` single-threaded processes;
 ``scheduler="tcp://host:8786"`` sends them to an existing cluster (the workers must have
-casflex installed).
+casflex installed). A cluster that has lost every worker for :data:`NO_WORKERS_S` seconds (a
+worker gone with its nanny, as happens under heavy load) is started anew, up to
+:data:`REVIVALS` times, for the runs still pending; an existing cluster is not, and those runs
+are recorded as failed. A sweep never waits for workers that will not come.
 
 ``identification_run`` is the run function for identification sweeps: the model and the
 simulated data are built once per worker process and cached.
@@ -35,6 +38,12 @@ from casflex.results import atomic_write_json
 __all__ = ["Run", "SweepResult", "run_sweep", "identification_run"]
 
 _KEY = re.compile(r"^[A-Za-z0-9_.=+-]{1,200}$")
+#: s with no worker at all on the scheduler before the pending runs are given up on this cluster (a
+#: nanny restarting a worker that a run killed takes seconds, more on a loaded machine)
+NO_WORKERS_S = 60.0
+#: how many times a sweep's own LocalCluster is started anew after it lost every worker
+REVIVALS = 3
+_POLL_S = 2.0  # s between checks of the workers while no run finishes
 
 
 @dataclass(frozen=True)
@@ -133,11 +142,12 @@ def run_sweep(runs: Iterable[Run], record: str | os.PathLike[str], *, scheduler:
     executed: list[str] = []
     interrupted = False
     if todo:
-        cluster = None
-        if scheduler is None:
-            cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, silence_logs=40)
-        client = Client(scheduler if scheduler is not None else cluster)
+        def connect() -> tuple[Any, Any]:
+            cluster = None if scheduler is not None else LocalCluster(
+                n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=40)
+            return cluster, Client(scheduler if scheduler is not None else cluster)
+
+        cluster, client = connect()
         blobs = _ship_by_value({r.fn for r in todo})
 
         def finished(key: str, out: dict) -> None:
@@ -148,13 +158,29 @@ def run_sweep(runs: Iterable[Run], record: str | os.PathLike[str], *, scheduler:
                 report(len(reused) + len(executed), len(runs), key)
 
         try:
-            killed = _execute(client, todo, blobs, finished, batch=len(todo))
-            # A worker that dies takes every run assigned to it along (a single-threaded worker
-            # holds up to two), and dask gives up on a run after its third such death: an
-            # innocent neighbour of a crashing run may be declared killed, depending on timing.
-            # Runs that died with their worker are run again one at a time, so only a run that
-            # kills a worker on its own is recorded as crashed.
-            _execute(client, [r for r in todo if r.key in killed], blobs, finished, batch=1, last=True)
+            for revival in range(REVIVALS + 1):
+                try:
+                    killed = _execute(client, todo, blobs, finished, batch=len(todo))
+                    # A worker that dies takes every run assigned to it along (a single-threaded
+                    # worker holds up to two), and dask gives up on a run after its third such
+                    # death: an innocent neighbour of a crashing run may be declared killed,
+                    # depending on timing. Runs that died with their worker are run again one at a
+                    # time, so only a run that kills a worker on its own is recorded as crashed.
+                    _execute(client, [r for r in todo if r.key in killed], blobs, finished, batch=1, last=True)
+                    break
+                except _NoWorkers as lost:
+                    todo = [r for r in todo if r.key in lost.keys]
+                    if cluster is None or revival == REVIVALS:
+                        why = (f"NoWorkers: no worker on the scheduler for {NO_WORKERS_S:g} s"
+                               + (f" ({scheduler}): start workers, then run again with retry_failed=True"
+                                  if cluster is None else f", {REVIVALS} new local clusters lost theirs too: "
+                                  "run this run alone to see whether it kills its worker"))
+                        for r in todo:
+                            finished(r.key, {"error": why})
+                        break
+                    client.close()
+                    cluster.close()
+                    cluster, client = connect()
         except KeyboardInterrupt:
             interrupted = True
         finally:
@@ -165,31 +191,55 @@ def run_sweep(runs: Iterable[Run], record: str | os.PathLike[str], *, scheduler:
                        time.perf_counter() - t0)
 
 
+class _NoWorkers(Exception):
+    """The scheduler had no worker for NO_WORKERS_S: ``keys``, the runs not finished."""
+
+    def __init__(self, keys: set[str]) -> None:
+        super().__init__(f"{len(keys)} runs pending without workers")
+        self.keys = keys
+
+
 def _execute(client: Any, runs: list[Run], blobs: dict, finished: Callable[[str, dict], None], *, batch: int,
              last: bool = False) -> set[str]:
     """Run ``runs`` on ``client``, ``batch`` at a time, calling ``finished(key, record)`` as each
     completes; returns the keys of runs whose worker died (recorded as failed only when
-    ``last``). Ctrl-C cancels what is pending and propagates."""
-    from distributed import as_completed
+    ``last``). Raises _NoWorkers when the scheduler has had no worker for NO_WORKERS_S while
+    runs were pending. Ctrl-C cancels what is pending and propagates."""
+    from distributed import wait
     from distributed.scheduler import KilledWorker
 
     killed: set[str] = set()
     for i in range(0, len(runs), batch):
         futures = {client.submit(_call, blobs[r.fn], r.kwargs, key=f"casflex-{r.key}-{os.getpid()}-{last}",
                                  pure=False): r.key for r in runs[i:i + batch]}
+        pending, alone_since = set(futures), None
         try:
-            for fut in as_completed(futures):
-                key = futures[fut]
+            while pending:
                 try:
-                    out = fut.result()
-                except KilledWorker as exc:
-                    if not last:
-                        killed.add(key)
-                        continue
-                    out = {"error": f"KilledWorker: {exc}"}
-                except Exception as exc:  # noqa: BLE001 - any other failure of the run is its result
-                    out = {"error": f"{type(exc).__name__}: {exc}"}
-                finished(key, out)
+                    done = wait(pending, timeout=_POLL_S, return_when="FIRST_COMPLETED").done
+                except TimeoutError:
+                    done = set()
+                for fut in done:
+                    pending.discard(fut)
+                    key = futures[fut]
+                    try:
+                        out = fut.result()
+                    except KilledWorker as exc:
+                        if not last:
+                            killed.add(key)
+                            continue
+                        out = {"error": f"KilledWorker: {exc}"}
+                    except Exception as exc:  # noqa: BLE001 - any other failure of the run is its result
+                        out = {"error": f"{type(exc).__name__}: {exc}"}
+                    finished(key, out)
+                # dask waits for workers forever: a cluster that lost them all would hang the sweep
+                if done or client.nthreads():
+                    alone_since = None
+                elif alone_since is None:
+                    alone_since = time.monotonic()
+                elif time.monotonic() - alone_since > NO_WORKERS_S:
+                    client.cancel(list(pending))
+                    raise _NoWorkers({futures[f] for f in pending} | {r.key for r in runs[i + batch:]} | killed)
         except KeyboardInterrupt:
             client.cancel(list(futures))
             raise

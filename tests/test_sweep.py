@@ -62,23 +62,82 @@ def test_failed_runs_are_recorded_not_raised(tmp_path):
 def test_run_functions_from_an_unimportable_module_and_crashing_runs(tmp_path):
     """A study loaded from its file path (not importable by the workers) still runs, and a run
     that kills its worker process is recorded as failed instead of stopping the sweep."""
-    import importlib.util
     import sys
 
-    src = tmp_path / "my_study_not_on_path.py"
-    src.write_text("import os\n\ndef square(x):\n    return {'y': x * x}\n\n"
-                   "def crash(x):\n    os._exit(3)\n")
-    spec = importlib.util.spec_from_file_location("my_study_not_on_path", src)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = mod
-    spec.loader.exec_module(mod)
+    mod = _module(tmp_path, "import os\n\ndef square(x):\n    return {'y': x * x}\n\n"
+                            "def crash(x):\n    os._exit(3)\n")
     try:
         runs = [Run(f"sq{i}", mod.square, {"x": i}) for i in range(4)] + [Run("boom", mod.crash, {"x": 0})]
         # dask retries a task whose worker died (3 times by default), then gives up on it: the
         # innocent runs that shared the dead worker are retried, the crashing one is recorded
         res = run_sweep(runs, tmp_path / "rec", n_workers=2, progress=False)
     finally:
-        del sys.modules[spec.name]
+        del sys.modules[mod.__name__]
     assert [res.results[f"sq{i}"]["y"] for i in range(4)] == [0, 1, 4, 9]
     assert "error" in res.results["boom"] and "KilledWorker" in res.results["boom"]["error"]
     assert json.loads((tmp_path / "rec" / "boom.json").read_text())["error"]
+
+
+def _within(seconds: float, fn):
+    """fn() in a daemon thread: its value, or a test failure (not a hung suite) after ``seconds``."""
+    import threading
+
+    box = {}
+    t = threading.Thread(target=lambda: box.setdefault("out", fn()), daemon=True)
+    t.start()
+    t.join(seconds)
+    assert not t.is_alive(), f"the sweep still waits after {seconds:g} s"
+    return box["out"]
+
+
+def _module(tmp_path, src: str):
+    """A module loaded from a file the workers cannot import (so its functions travel by value)."""
+    import importlib.util
+    import sys
+
+    path = tmp_path / "sweep_probe_not_on_path.py"
+    path.write_text(src)
+    spec = importlib.util.spec_from_file_location(path.stem, path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_a_cluster_that_lost_every_worker_is_started_anew(tmp_path, monkeypatch):
+    """A worker closed together with its nanny is not restarted by dask, which then waits forever
+    (seen in a fresh suite under load): the sweep starts a new local cluster for the pending runs."""
+    import sys
+
+    import casflex.sweep as sweep
+
+    monkeypatch.setattr(sweep, "NO_WORKERS_S", 3.0)
+    flag = tmp_path / "lost_once"
+    mod = _module(tmp_path, "import time\nfrom pathlib import Path\n\n"
+                            "def lose_once(x, flag):\n"
+                            "    if not Path(flag).exists():\n"
+                            "        Path(flag).write_text('lost')\n"
+                            "        from distributed import get_worker\n"
+                            "        w = get_worker()\n"
+                            "        w.loop.add_callback(w.close, nanny=True)\n"
+                            "        time.sleep(60)\n"
+                            "    return {'y': x * x}\n")
+    try:
+        runs = [Run(f"r{i}", mod.lose_once, {"x": i, "flag": str(flag)}) for i in range(3)]
+        res = _within(120, lambda: run_sweep(runs, tmp_path / "rec", n_workers=1, progress=False))
+    finally:
+        del sys.modules[mod.__name__]
+    assert flag.exists(), "the worker was lost"
+    assert [res.results[f"r{i}"].get("y") for i in range(3)] == [0, 1, 4]
+
+
+def test_a_scheduler_without_workers_fails_the_runs_with_the_reason(tmp_path, monkeypatch):
+    from distributed import LocalCluster
+
+    import casflex.sweep as sweep
+
+    monkeypatch.setattr(sweep, "NO_WORKERS_S", 2.0)
+    with LocalCluster(n_workers=0, dashboard_address=None, silence_logs=40) as cluster:
+        runs = [Run("a", identification_run, {"method": "direct", "start": 1.0, "t_end": 0.75})]
+        res = _within(60, lambda: run_sweep(runs, tmp_path, scheduler=cluster.scheduler_address, progress=False))
+    assert "NoWorkers" in res.results["a"]["error"] and cluster.scheduler_address in res.results["a"]["error"]
