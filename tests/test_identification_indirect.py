@@ -112,7 +112,8 @@ def test_bad_horizons_and_data(twobar, sim):
 
 
 def test_compiled_matches_interpreted(twobar, sim):
-    # generated C for every function IPOPT calls: same iterates, same answer
+    # generated C for every function IPOPT calls: same iterates, same answer (multiple shooting's
+    # compiled NLP takes 6 min to build: test_the_slow_manifold_compiles_to_c checks its one difference)
     kw = {"transcription": "single-shooting", "start": 0.8, "solver": "ipopt", "model_error": "none"}
     ref = identify_indirect(twobar, sim, 0.05, **kw)
     r = identify_indirect(twobar, sim, 0.05, compiled=True, **kw)

@@ -58,6 +58,23 @@ def test_the_slow_manifold_keeps_steel_bars_at_their_length(twobar):
         np.testing.assert_allclose(dqd[:, k], (qdp - qdm) / 2e-6, atol=1e-6)
 
 
+def test_the_slow_manifold_compiles_to_c(twobar):
+    """A compiled NLP (multiple shooting, estimated states) holds the slow manifold's Newton solve:
+    CasADi's plain 'newton' cannot be generated as C (gcc: '#error Code generation not supported
+    for Newton'); the codegen variant compiles and gives the same state and Jacobian."""
+    from casflex.codegen import compiled
+    from casflex.identification.initial_state import slow_manifold
+
+    exp = Experiment(MeasurementSet(np.array([0.0, 0.01]), ("x5",), np.array([[1.0], [1.0]]), None, None),
+                     initial_state="estimate")
+    st = initial_state_of(twobar, exp, twobar.p_nominal, (twobar.q0, twobar.qd0))
+    args = st._args(np.concatenate([[0.3, -0.2, 0.1, 0.05, 0.1, -0.1], np.ones(6)]))
+    for ref, c in zip(slow_manifold(twobar, st.k), slow_manifold(twobar, st.k, codegen=True), strict=True):
+        # 1e-12 m: both Newton solves stop at |KKT| <= 1e-13 (scaled rows), from the same start
+        for a, b in zip(ref(*args), compiled(c)(*args), strict=True):
+            np.testing.assert_allclose(np.array(b), np.array(a), rtol=0, atol=1e-12)
+
+
 def test_the_kinematic_guess_of_a_recording_mid_motion(twobar):
     # exact positions of nodes 3 and 5 from 0.5 s on: node 2 and the rotations follow from the bars
     tr = simulate(twobar, 0.6, dt=1e-3)

@@ -258,13 +258,16 @@ def slow_modes(model: Model, q: np.ndarray, p: np.ndarray, omega_cut: float) -> 
     return V[:, np.abs(w2) < omega_cut**2]
 
 
-def slow_manifold(model: Model, k: int) -> tuple[ca.Function, ca.Function]:
+def slow_manifold(model: Model, k: int, codegen: bool = False) -> tuple[ca.Function, ca.Function]:
     """The slow-manifold map and its Jacobian for k slow modes (module docstring):
     ``slow_state(a, v, q_g, C, B, p, d) -> (q0, qd0)`` on all dofs and
-    ``slow_state_jac(...) -> (dq0/da, dqd0/da, dqd0/dv)``. d scales the force rows (stiffness)."""
+    ``slow_state_jac(...) -> (dq0/da, dqd0/da, dqd0/dv)``. d scales the force rows (stiffness).
+    ``codegen``: for a graph that is compiled to C (a compiled NLP): the Newton solve is CasADi's
+    ``fast_newton``, the only rootfinder its code generator supports; where it does not converge
+    it gives NaN, not an exception (an NLP solver then shortens its step)."""
     cache = _MANIFOLDS.setdefault(model, {})
-    if k in cache:
-        return cache[k]
+    if (k, codegen) in cache:
+        return cache[(k, codegen)]
     n = model.n_dof
     free, keep, put = _placement(model)
     nf = free.size
@@ -277,8 +280,9 @@ def slow_manifold(model: Model, k: int) -> tuple[ca.Function, ca.Function]:
     G = ca.Function("slow_manifold_kkt", [ca.vertcat(qf, mu), ca.vertcat(a, qg, ca.vec(C), p, d)], [kkt])
     # plain Newton steps: CasADi's line search on |kkt| stalls near the solution where the KKT matrix
     # is ill-conditioned (threelink mid-motion: cond 6e9, a residual of 2e-8 never decreased)
-    rf = ca.rootfinder("slow_manifold", "newton", G, {"abstol": 1e-13, "abstolStep": 1e-14, "max_iter": 50,
-                                                      "line_search": False, "error_on_fail": True})
+    tols = {"abstol": 1e-13, "abstolStep": 1e-14, "max_iter": 50}
+    rf = (ca.rootfinder("slow_manifold", "fast_newton", G, tols) if codegen else
+          ca.rootfinder("slow_manifold", "newton", G, {**tols, "line_search": False, "error_on_fail": True}))
     A, Vv, QG, CM, BM, P, D = (ca.MX.sym(s, *shape) for s, shape in (
         ("a", (k,)), ("v", (k,)), ("q_g", (n,)), ("C", (k, nf)), ("B", (nf, k)), ("p", (model.n_p,)), ("d", (nf,))))
     z = rf(ca.vertcat(QG[free] + ca.mtimes(BM, A), ca.DM.zeros(k)), ca.vertcat(A, QG, ca.vec(CM), P, D))
@@ -286,10 +290,11 @@ def slow_manifold(model: Model, k: int) -> tuple[ca.Function, ca.Function]:
     qd0 = ca.mtimes(ca.DM(put), ca.mtimes(ca.jacobian(z[:nf], A), Vv))
     args = [A, Vv, QG, CM, BM, P, D]
     names = ["a", "v", "q_g", "C", "B", "p", "d"]
-    cache[k] = (ca.Function("slow_state", args, [q0, qd0], names, ["q0", "qd0"]),
-                ca.Function("slow_state_jac", args, [ca.jacobian(q0, A), ca.jacobian(qd0, A), ca.jacobian(qd0, Vv)],
-                            names, ["dq0_da", "dqd0_da", "dqd0_dv"]))
-    return cache[k]
+    cache[(k, codegen)] = (
+        ca.Function("slow_state", args, [q0, qd0], names, ["q0", "qd0"]),
+        ca.Function("slow_state_jac", args, [ca.jacobian(q0, A), ca.jacobian(qd0, A), ca.jacobian(qd0, Vv)],
+                    names, ["dq0_da", "dqd0_da", "dqd0_dv"]))
+    return cache[(k, codegen)]
 
 
 @dataclass(frozen=True, eq=False)
