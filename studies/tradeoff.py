@@ -93,8 +93,8 @@ def run(cfg: Config, dt: float, interp: bool, plan: dict, m, samples: dict) -> d
     energy, q, y = tr.energies["total"][idx], tr.q[:w + 1].copy(), tr.outputs[:w + 1].copy()
     samples[(cfg, dt)] = {  # node positions (k, 2, 2), joint forces (k, 4), energy drift
         "pos": np.stack([np.stack([tr.dof(f"x{n}")[idx], tr.dof(f"y{n}")[idx]], axis=1) for n in NODES], axis=1),
-           "forces": np.stack([tr.output(k)[idx] for k in FORCES], axis=1),
-           "drift": float(np.abs(energy - energy[0]).max())}
+        "forces": np.stack([tr.output(k)[idx] for k in FORCES], axis=1),
+        "drift": float(np.abs(energy - energy[0]).max())}
     del tr  # a fine-dt trajectory is large
     if interp:
         t_i, ti = best_of(lambda: simulate(m, w * dt, dt=dt, alpha=cfg.alpha, raise_on_failure=False), 3)
