@@ -155,7 +155,7 @@ class _SlowStart:
     """
 
     def __init__(self, model: Model, integ, q_g: np.ndarray, qd_g: np.ndarray, t: float, p0: np.ndarray,
-                 omega_cut: float, ell: np.ndarray, T: float, codegen: bool) -> None:
+                 omega_cut: float, ell: np.ndarray, T: float, in_c: bool) -> None:
         from casflex.identification.initial_state import free_dofs, relaxed_projection, slow_manifold
 
         self.free = free_dofs(model)
@@ -164,7 +164,7 @@ class _SlowStart:
         q_g, self.B, self.C, self.d = relaxed_projection(model, q_g, p0, omega_cut)
         self.model, self.integ, self.q_g, self.t = model, integ, q_g, t
         self.k = self.B.shape[1]
-        self.fn = slow_manifold(model, self.k, codegen)[0]  # codegen: the NLP is compiled to C
+        self.fn = slow_manifold(model, self.k, codegen=in_c)[0]  # in_c: the NLP is compiled to C
         s_a = np.abs(self.C) @ ell[self.free]
         self.s_a = np.where(s_a > 0, s_a, 1.0)
         self.s_v = self.s_a / T
@@ -322,10 +322,11 @@ def identify_nlp(
     # the recording's states at the interval starts (and at t0 for an estimated initial state): one
     # pass of kinematic fits over the samples serves them all
     est = initial_state == "estimate"
+    in_c = bool(opts.compiled)  # the slow manifold's Newton solve then one C code generation takes
     guesses = _data_states(model, data, names, [t0] * est + [t0 + first[j] * h for j in range(1, M)])
     if est:  # the first state on the slow manifold through the first samples
         q_g, qd_g = guesses.pop(0)
-        first_start = [_SlowStart(model, integ, q_g, qd_g, t0, p0, omega_cut, ell, T, bool(opts.compiled))]
+        first_start = [_SlowStart(model, integ, q_g, qd_g, t0, p0, omega_cut, ell, T, in_c)]
         xi_init = ca.MX.sym("xi_init", first_start[0].size)
         x0 = first_start[0].state(xi_init, p)
     else:
@@ -350,7 +351,7 @@ def identify_nlp(
         return ca.horzcat(*out_x), ca.horzcat(*out_r)
 
     # the interval starts 1..M-1 on the slow manifold through the recording's states there
-    starts = [_SlowStart(model, integ, q_g, qd_g, t0 + first[j] * h, p0, omega_cut, ell, T, bool(opts.compiled))
+    starts = [_SlowStart(model, integ, q_g, qd_g, t0 + first[j] * h, p0, omega_cut, ell, T, in_c)
               for j, (q_g, qd_g) in enumerate(guesses, 1)]
     xi = [ca.MX.sym(f"xi{j}", s.size) for j, s in enumerate(starts, 1)]  # scaled (a, v) of each start
     nodes = [x0] + [s.state(x, p) for s, x in zip(starts, xi, strict=True)]
