@@ -9,6 +9,7 @@ library. Not a study itself (no ``main``).
   extremes);
 - :func:`in_fresh_process`, :func:`cold_and_cached`: a study's hidden worker switch run in a new Python
   process (twice, sharing a new cache), its JSON answer (bench_simulate, bench_identification);
+- :func:`fit_errors`: a fit's errors and z-scores against the truth (dampers, leg, realdata);
 - :func:`honesty`: success, coverage and "dishonest" successes of repeated fits (dampers, leg,
   realdata).
 """
@@ -79,12 +80,24 @@ def cold_and_cached(script: str, cold: list[str], cached: list[str], timeout: fl
         return in_fresh_process(script, cold, env, timeout), in_fresh_process(script, cached, env, timeout)
 
 
+def fit_errors(model, r) -> dict:
+    """A fit ``r`` of ``model`` against the scene's nominal parameters (the truth): names, truth, standard
+    errors, relative errors, z = (estimate - truth) / SE, success and message. z is 0 where the SE is
+    infinite (it claims nothing) and infinite where an SE of 0 misses (it claims everything)."""
+    se, err = np.array([r.std_errors[k] for k in model.parameter_names]), r.p - model.p_nominal
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.where(np.isinf(se) | (err == 0), 0.0, err / se)
+    return {"names": list(model.parameter_names), "truth": model.p_nominal.tolist(), "se": se.tolist(),
+            "rel_error": (err / model.p_nominal).tolist(), "z": z.tolist(), "se_finite": np.isfinite(se).tolist(),
+            "success": bool(r.success), "message": r.message}
+
+
 def honesty(recs: list[dict], finite: np.ndarray | None = None) -> dict:
     """Over fits (dicts with "z" (estimate - truth) / SE per parameter and "success"): the success
     rate, the coverage of the truth by the 2- and 3-SE intervals per parameter, and the "dishonest"
     successes (a parameter more than 3 SE from the truth). ``finite``: where the SE is finite (an
     infinite SE claims nothing and covers the truth)."""
-    z = np.abs(np.array([r["z"] for r in recs]))
+    z = np.abs(np.array([r["z"] for r in recs], dtype=float))  # a resumed record spells inf 'inf' (strict JSON)
     ok = np.ones_like(z, dtype=bool) if finite is None else np.asarray(finite)
     succ = np.array([r["success"] for r in recs])
     return {"z": z, "success": succ, "cover2": (z <= 2) | ~ok, "cover3": (z <= 3) | ~ok,

@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _shared import DATA, exudyn_recording, honesty
+from _shared import DATA, exudyn_recording, fit_errors, honesty
 from _study import Banner, assert_checks, checks, cli, sweep, table, write_outputs
 
 SEEDS = 10
@@ -26,10 +26,7 @@ def one_run(*, window: str, seed: int, quick: bool) -> dict:
     data = exudyn_recording("twobar_damped_exudyn", ("x3", "y3", "x5", "y5"), a, a + 1.0 if quick else b, 1e-3, seed)
     t0 = time.perf_counter()
     r = identify_indirect(model, data, dt=1e-3, initial_state=state, start=0.8)
-    err = r.p - model.p_nominal
-    return {"names": list(model.parameter_names), "rel_error": (err / model.p_nominal).tolist(),
-            "z": (err / np.array([r.std_errors[k] for k in model.parameter_names])).tolist(),
-            "success": bool(r.success), "message": r.message, "wall_s": time.perf_counter() - t0}
+    return fit_errors(model, r) | {"wall_s": time.perf_counter() - t0}
 
 
 def figure(rows: list[dict], path: Path) -> None:

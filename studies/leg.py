@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _shared import honesty
+from _shared import fit_errors, honesty
 from _study import Banner, assert_checks, checks, cli, sweep, table, write_outputs
 
 MARKERS = ("THI", "KNE", "TIB", "ANK", "TOE")
@@ -59,7 +59,8 @@ def one_run(*, seed: int, quick: bool, scene: str) -> dict:
     t0 = time.perf_counter()
     r = identify_indirect(model, data, dt=1e-3, start=0.7, model_error="none" if quick else "refine")
     wall = time.perf_counter() - t0
-    se = np.array([r.std_errors[k] for k in model.parameter_names])
+    fit = fit_errors(model, r)
+    se = np.array(fit.pop("se"))
     est, f_est = _force(model, t_end, p=r.p)
     draws = np.random.default_rng(1000 + seed).multivariate_normal(r.p, np.asarray(r.correlation) * np.outer(se, se),
                                                                    size=10 if quick else DRAWS)
@@ -69,12 +70,9 @@ def one_run(*, seed: int, quick: bool, scene: str) -> dict:
     f_model = maximum_filter1d(RICHARDSON * np.abs(_force(refined(model), t_end, dt=5e-4, p=r.p)[1][::2] - f_est),
                                size=49, mode="nearest")
     f_true = f_true[::4]  # the truth at the model's 1 ms steps
-    err = r.p - model.p_nominal
     residual = np.concatenate([np.asarray(smp["measured"]) - np.asarray(smp["model"]) for smp in r.samples])
-    return {"names": list(model.parameter_names), "truth": model.p_nominal.tolist(), "z": (err / se).tolist(),
-            "rel_error": (err / model.p_nominal).tolist(), "success": bool(r.success), "message": r.message,
-            "wall_s": wall, "residual_rms": float(np.sqrt(np.mean(residual**2))), "t": est.t.tolist(), "seed": seed,
-            "f_true": f_true.tolist(), "f_est": f_est.tolist(), "lo": lo.tolist(), "hi": hi.tolist(),
+    return fit | {"wall_s": wall, "residual_rms": float(np.sqrt(np.mean(residual**2))), "t": est.t.tolist(),
+            "seed": seed, "f_true": f_true.tolist(), "f_est": f_est.tolist(), "lo": lo.tolist(), "hi": hi.tolist(),
             "model_error": f_model.tolist(), "force_rms": float(np.sqrt(np.mean((f_est - f_true) ** 2))),
             "band_width": float(np.median(hi - lo)), "inside": float(np.mean((f_true >= lo) & (f_true <= hi))),
             "inside_all": float(np.mean((f_true >= lo - f_model) & (f_true <= hi + f_model)))}

@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _shared import exudyn_recording, honesty
+from _shared import exudyn_recording, fit_errors, honesty
 from _study import Banner, assert_checks, checks, cli, sweep, table, write_outputs
 
 NOISES = (0.0, 1e-4, 5e-4, 1e-3)
@@ -46,11 +46,7 @@ def one_run(*, scene: str, method: str, window: str, noise: float, seed: int, qu
         data = exudyn_recording(f"{scene}_exudyn", names, a, b, noise, seed)
         instants = [float(data.t[np.argmin(np.abs(data.t - (a + t)))]) for t in INSTANTS if a + t < b - 0.05]
         r = (identify_adapted_direct if method == "adapted" else identify_direct)(model, data, instants, start=0.8)
-    se, err = np.array([r.std_errors[k] for k in model.parameter_names]), r.p - model.p_nominal
-    z = np.divide(err, se, out=np.zeros_like(se), where=np.isfinite(se) & (se != 0))  # 0 where it claims nothing
-    return {"success": bool(r.success), "message": r.message[:300], "rel_error": (err / model.p_nominal).tolist(),
-            "z": z.tolist(), "se_finite": np.isfinite(se).tolist(), "names": list(model.parameter_names),
-            "wall_s": time.perf_counter() - t0}
+    return fit_errors(model, r) | {"message": r.message[:300], "wall_s": time.perf_counter() - t0}
 
 
 def summarise(records: list[tuple[dict, dict]]) -> list[dict]:
