@@ -1,15 +1,27 @@
 """C code generation: export CasADi Functions to C, compile with the system C compiler, load.
 
-Compiled libraries are cached by the SHA-256 of the generated source and the compiler
-command, in ``$CASFLEX_CACHE`` (default ``~/.cache/casflex``); a library is built in a
-temporary directory and renamed into the cache, so concurrent or interrupted builds never
-leave a broken file behind.
+Compiled libraries are cached by the SHA-256 of the generated source, the compiler, its flags and
+the target they compile for, in ``$CASFLEX_CACHE`` (default ``~/.cache/casflex``); a library is
+built in a temporary directory and renamed into the cache, so concurrent or interrupted builds
+never leave a broken file behind.
 
-``-ffp-contract=off`` (and ``-mno-fma`` beside ``-march=native``) keep the compiler from fusing
-multiply-adds, so compiled results are bitwise identical to CasADi's interpreted evaluation on
-x86-64. ``-march=native`` (where the compiler accepts it) makes twobar's compiled simulation ~15 %
-faster; as the library is then tied to the processor, the processor's description is part of the
-cache key.
+The reproducibility contract (README, "Compiled and interpreted runs"):
+
+- Every build gets ``-ffp-contract=off`` (no fused multiply-adds) and, by default, the compiler's
+  generic target (no ``-march``): the compiled code then performs the same IEEE-754 operations in
+  the same order as CasADi's interpreter, and a compiled run is bitwise the interpreted one on any
+  x86-64 processor (:func:`bitwise_expected`). ``-march=native`` is not the default: gcc 12's
+  vectoriser fuses multiply-adds for AVX2 and AVX-512 targets even under ``-ffp-contract=off``
+  (and for AVX-512 even with ``-mno-fma``), which made compiled twobar runs differ from
+  interpreted ones in the last bit on an AVX-512 Xeon.
+- ``$CASFLEX_CFLAGS`` adds flags after casflex's own (a later ``-O`` or ``-march`` wins), e.g.
+  ``-march=native`` for speed or ``-O0 -march=x86-64``. With flags beyond the optimisation level,
+  tuning and FMA-free x86-64 targets, bitwise equality is not promised; what holds for any flags
+  is that every compiled step solves the interpreted HHT equations to the Newton tolerance
+  (tested in tests/test_codegen.py).
+- The cache key holds what the library was compiled for (gcc's resolved target: ``-march`` and
+  every instruction-set switch), so a cache shared by machines (a network home) never loads code
+  built for another processor, while builds for the generic target are shared.
 
 Everything casflex compiles goes through :func:`compile_functions`: simulation steps,
 sensitivities, and the functions of identification NLPs (:func:`compiled`,
@@ -25,6 +37,8 @@ import hashlib
 import logging
 import os
 import platform
+import re
+import shlex
 import shutil
 import subprocess
 import tempfile
@@ -36,12 +50,17 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from casflex.results import atomic_write_text
-
 __all__ = ["BufferedCall", "CompiledLibrary", "compile_functions", "compiled", "compiled_nlpsol", "generate_c",
-           "cache_dir", "cache_entries", "clear_cache", "CodegenError", "CFLAGS"]
+           "cache_dir", "cache_entries", "clear_cache", "CodegenError", "CFLAGS", "FLAGS_ENV", "user_flags",
+           "build_flags", "bitwise_expected"]
 
+#: Flags of every build: no fused multiply-adds (the interpreter has none), a shared library.
 CFLAGS = ("-ffp-contract=off", "-fPIC", "-shared")
+#: The environment variable whose flags (split like a shell) follow casflex's own in every build.
+FLAGS_ENV = "CASFLEX_CFLAGS"
+#: Flags that keep the bitwise promise: optimisation level, tuning, debug information, and x86-64
+#: targets without FMA instructions (x86-64, x86-64-v2).
+_BITWISE_SAFE = re.compile(r"-O[0-3sg]?|-g[0-3]?|-pipe|-mtune=[\w.-]+|-march=x86-64(-v2)?|-mno-fma")
 
 #: Progress of the long phases (code generation, compilation), at level INFO; the command line shows it.
 log = logging.getLogger("casflex")
@@ -112,34 +131,56 @@ def _compiler() -> str:
     return cc
 
 
-@functools.lru_cache(maxsize=4)
-def _native_flags(cc: str) -> tuple[str, ...]:
-    """The first of ("-march=native", "-mno-fma"), ("-march=native",), () that ``cc`` accepts; probed
-    once per compiler and processor (a compile of ~35 ms), the answer kept in the cache directory.
+def user_flags() -> tuple[str, ...]:
+    """The flags of ``$CASFLEX_CFLAGS``, split like a shell would (empty when unset)."""
+    try:
+        return tuple(shlex.split(os.environ.get(FLAGS_ENV, "")))
+    except ValueError as exc:
+        raise CodegenError(f"{FLAGS_ENV}: cannot split {os.environ.get(FLAGS_ENV)!r} into flags ({exc})") from None
 
-    -mno-fma: gcc's SLP vectoriser fuses multiply-adds into FMA instructions even under
-    -ffp-contract=off (gcc 12, x86-64 with FMA: one Jacobian entry of twobar's HHT step differed
-    from CasADi's interpreted value in the last bit, and compiled runs drifted from interpreted ones).
-    """
-    note = cache_dir() / f"native2-{hashlib.sha256((cc + _processor()).encode()).hexdigest()[:16]}.txt"
-    if note.is_file():
-        return tuple(note.read_text().split())
-    flags: tuple[str, ...] = ()
+
+def bitwise_expected() -> bool:
+    """Whether compiled code is promised bitwise equal to CasADi's interpreted evaluation: on x86-64,
+    with no flag in ``$CASFLEX_CFLAGS`` beyond :data:`_BITWISE_SAFE` (the default build)."""
+    return platform.machine() in ("x86_64", "AMD64") and all(_BITWISE_SAFE.fullmatch(f) for f in user_flags())
+
+
+def build_flags(optimise: str, cc: str | None = None) -> tuple[str, ...]:
+    """The flags of a build at ``optimise`` (e.g. "-O3"): casflex's, then ``$CASFLEX_CFLAGS``'s.
+    The first call per compiler and flag set compiles an empty file with them (~30 ms): flags the
+    compiler rejects raise :class:`CodegenError` naming ``$CASFLEX_CFLAGS``, before any work."""
+    flags = (optimise, *CFLAGS, *user_flags())
+    _target(cc or _compiler(), flags)
+    return flags
+
+
+@functools.lru_cache(maxsize=16)
+def _target(cc: str, flags: tuple[str, ...]) -> str:
+    """What ``cc`` with ``flags`` compiles for, part of every cache key: gcc's ``-Q --help=target``
+    (the resolved -march, e.g. "rocketlake" for native, and every instruction-set switch), or, for a
+    compiler without it, the processor's description when a flag names the native target."""
     with tempfile.TemporaryDirectory(prefix="casflex-cc-") as tmp:
         src = Path(tmp) / "t.c"
         src.write_text("int f(void) { return 0; }\n")
-        for candidate in (("-march=native", "-mno-fma"), ("-march=native",)):
-            proc = subprocess.run([cc, *candidate, "-c", str(src), "-o", str(Path(tmp) / "t.o")], capture_output=True)
-            if proc.returncode == 0:
-                flags = candidate
-                break
-    atomic_write_text(note, " ".join(flags))
-    return flags
+        proc = subprocess.run([cc, *flags, "-c", str(src), "-o", str(Path(tmp) / "t.o")], capture_output=True,
+                              text=True)
+    if proc.returncode != 0:
+        why = (proc.stderr.strip().splitlines() or ["no message"])[0]
+        raise CodegenError(f"{FLAGS_ENV}={os.environ.get(FLAGS_ENV, '')!r}: the C compiler {cc!r} rejects the "
+                           f"flags {' '.join(flags)!r}: {why}")
+    try:
+        q = subprocess.run([cc, *flags, "-Q", "--help=target"], capture_output=True, text=True, timeout=60)
+        described = q.stdout if q.returncode == 0 and "-march=" in q.stdout else ""
+    except (OSError, subprocess.SubprocessError):
+        described = ""
+    if not described and any("native" in f for f in flags):
+        described = _processor()
+    return described or platform.machine()
 
 
 @functools.lru_cache(maxsize=1)
 def _processor() -> str:
-    """What -march=native compiles for: the model and feature flags of the first processor."""
+    """The model and feature flags of the first processor (for compilers that cannot describe -march=native)."""
     try:
         info = Path("/proc/cpuinfo").read_text(errors="replace").split("\n\n")[0]
     except OSError:
@@ -193,8 +234,8 @@ def compile_functions(functions: list[ca.Function], *, stem: str = "casflex", op
         log.info("generating C for %s (%s)", stem, ", ".join(f.name() for f in functions))
         c_file, _ = generate_c(functions, tmp, stem)
         source = c_file.read_bytes()
-        flags = (optimise, *CFLAGS, *_native_flags(cc))
-        build = " ".join((cc, _compiler_identity(cc), *flags, _processor()))
+        flags = build_flags(optimise, cc)
+        build = " ".join((cc, _compiler_identity(cc), *flags, _target(cc, flags)))
         digest = key or hashlib.sha256(source + build.encode()).hexdigest()[:24]
         target = cache_dir() / f"{stem}-{digest}.so"
         cached = target.is_file()
@@ -246,8 +287,8 @@ def compiled_nlpsol(name: str, plugin: str, nlp: dict, opts: dict) -> ca.Functio
     cc = _compiler()
     key = hashlib.sha256("\n".join([
         problem.serialize(), opts["hess_lag"].serialize() if "hess_lag" in opts else "", plugin, repr(sorted(
-            lib_opts.items(), key=str)), ca.__version__, cc, _compiler_identity(cc), *CFLAGS, *_native_flags(cc),
-        _processor()]).encode()).hexdigest()[:24]
+            lib_opts.items(), key=str)), ca.__version__, cc, _compiler_identity(cc), *(flags := build_flags("-O1", cc)),
+        _target(cc, flags)]).encode()).hexdigest()[:24]
     target = cache_dir() / f"{name}_nlp-{key}.so"
     if target.is_file():
         log.info("using the compiled %s NLP from the cache (%s)", name, target)

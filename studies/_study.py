@@ -106,6 +106,18 @@ def checks(rows: list[tuple]) -> tuple[list[str], list[str]]:
     return lines, [f"{n} ({v})" for n, v, ok, a in rows if a and not ok]
 
 
+def paths_check(worst: float, what: str) -> tuple:
+    """The self-check row of compiled against interpreted runs (``worst``: their largest difference):
+    bitwise, asserted, where casflex promises it (:func:`casflex.codegen.bitwise_expected`); under other
+    ``$CASFLEX_CFLAGS`` the promise is per step (tests/test_codegen.py): reported to 1e-8, not asserted."""
+    from casflex import codegen
+
+    exact = codegen.bitwise_expected()
+    how = "bitwise (the default build flags)" if exact else f"to 1e-8 ({codegen.FLAGS_ENV} in force: reported)"
+    bound = 0.0 if exact else 1e-8
+    return f"compiled and interpreted runs agree {how}, {what}", f"{worst:.1e}", bool(worst <= bound), exact
+
+
 def assert_checks(failed: list[str]) -> None:
     """Stop the study when an asserted self-check failed (after its page was written)."""
     assert not failed, "self-checks failed: " + "; ".join(failed)

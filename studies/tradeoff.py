@@ -10,7 +10,7 @@ from typing import NamedTuple
 
 import numpy as np
 from _shared import twobar
-from _study import Banner, assert_checks, best_of, checks, cli, fnum, png, table, write_outputs
+from _study import Banner, assert_checks, best_of, checks, cli, fnum, paths_check, png, table, write_outputs
 from matplotlib.lines import Line2D
 
 from casflex.plotting._figure import _new_figure
@@ -196,8 +196,8 @@ def self_checks(rows: list[dict], an: dict) -> list[tuple]:
            for cfg, o in sorted(an["orders"].items(), key=lambda co: co[0] != CENTRE) if cfg == CENTRE or o["n"] >= 2]
     diffs = [r["paths_diff"] for r in rows if r["paths_diff"] is not None]
     worst, centre = max(diffs, default=np.nan), [r["ok"] for r in rows if r["cfg"] == CENTRE]
-    out += [("compiled and interpreted runs agree to 1e-8 (max abs on q, relative on the joint outputs) over every "
-             f"interpreted window ({len(diffs)} runs)", f"{worst:.1e}", bool(worst <= 1e-8)),
+    out += [paths_check(worst, f"max abs on q, relative on the joint outputs, over every interpreted window "
+                               f"({len(diffs)} runs)"),
             ("every run of the centre setting converges", f"{sum(centre)} / {len(centre)}", all(centre))]
     if np.isfinite(an["ref_mesh"]["pos"]):
         out += [(f"the reference's estimated error is below 1/10 of the tightest stated accuracy ({tight[0]:g} m, "

@@ -42,6 +42,15 @@ CASES = [
 ]
 
 
+def test_compiler_flags_the_compiler_rejects_are_one_line_before_any_work(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("CASFLEX_CFLAGS", "-march=no-such-cpu")
+    assert main("simulate twobar --compiled --out run.npz".split()) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and re.match(r"casflex: error: CASFLEX_CFLAGS='-march=no-such-cpu': .* rejects", err[0]), err
+    assert not list(tmp_path.iterdir())
+
+
 @pytest.mark.parametrize("argv, match", CASES, ids=[c[0] for c in CASES])
 def test_a_wrong_option_is_one_line_exit_2_and_writes_nothing(argv, match, tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)

@@ -17,29 +17,82 @@ from casflex.simulate import simulate
 pytestmark = pytest.mark.skipif(shutil.which(os.environ.get("CC", "gcc")) is None, reason="needs a C compiler")
 
 
-def test_the_native_flag_probe_is_remembered_per_compiler_and_processor(tmp_path, monkeypatch):
+def _same_function(tmp_path, monkeypatch, flags: str):
+    import casadi as ca
+
     monkeypatch.setenv("CASFLEX_CACHE", str(tmp_path))
-    codegen._native_flags.cache_clear()
-    flags = codegen._native_flags("gcc")
-    assert flags in ((), ("-march=native",), ("-march=native", "-mno-fma"))
-    (note,) = tmp_path.glob("native2-*.txt")
-    assert note.read_text().split() == list(flags)
-    note.write_text("-O0")  # a later process reads the note instead of probing again
-    codegen._native_flags.cache_clear()
-    assert codegen._native_flags("gcc") == ("-O0",)
-    codegen._native_flags.cache_clear()
+    monkeypatch.setenv(codegen.FLAGS_ENV, flags)
+    x = ca.SX.sym("x", 2)
+    return codegen.compile_functions([ca.Function("flags_probe", [x], [x[0] * x[1]])], stem="flags_probe")
 
 
-@pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"), reason="bitwise equality is claimed on x86-64")
+def test_casflex_cflags_follow_casflex_flags_and_the_target_is_in_the_cache_key(tmp_path, monkeypatch):
+    lib = _same_function(tmp_path, monkeypatch, "-O0 -march=x86-64")
+    assert codegen.build_flags("-O3")[-2:] == ("-O0", "-march=x86-64")  # after casflex's own: they win
+    assert codegen.bitwise_expected() == (platform.machine() in ("x86_64", "AMD64"))
+    again = _same_function(tmp_path, monkeypatch, "-O0 -march=x86-64")
+    assert again.cached and again.path == lib.path
+    native = _same_function(tmp_path, monkeypatch, "-O0 -march=native")  # what it was built for is in the key
+    assert not native.cached and native.path != lib.path and not codegen.bitwise_expected()
+    assert float(native["flags_probe"]([3.0, 4.0])) == 12.0
+
+
+def test_flags_the_compiler_rejects_are_named_before_any_work(monkeypatch):
+    monkeypatch.setenv(codegen.FLAGS_ENV, "-march=no-such-cpu")
+    with pytest.raises(codegen.CodegenError, match="CASFLEX_CFLAGS='-march=no-such-cpu'.*rejects"):
+        codegen.build_flags("-O1")
+    monkeypatch.setenv(codegen.FLAGS_ENV, "-O2 'unclosed")
+    with pytest.raises(codegen.CodegenError, match="CASFLEX_CFLAGS: cannot split"):
+        codegen.user_flags()
+
+
+@pytest.mark.skipif(not codegen.bitwise_expected(), reason="bitwise equality is promised on x86-64 with the default "
+                    "flags (or CASFLEX_CFLAGS of optimisation level, tuning and FMA-free targets only)")
 @pytest.mark.parametrize("alpha, elements", [(0.0, 1), (-0.05, 1), (0.0, 16)])
 def test_compiled_steps_are_bitwise_the_interpreted_ones(alpha, elements):
-    # alpha = -0.05 differed in the last bit at step 14 when gcc's vectoriser fused multiply-adds
-    # (-march=native without -mno-fma); 16 elements per bar run the mapped element kernels
+    # alpha = -0.05 differed in the last bit from step 7 when gcc's vectoriser fused multiply-adds
+    # (-march=native, with or without -mno-fma on AVX-512); 16 elements per bar run the mapped kernels
     model = casflex.assemble(twobar_meshed(elements))
     a = simulate(model, 0.3, dt=1e-3, alpha=alpha)
     b = simulate(model, 0.3, dt=1e-3, alpha=alpha, compiled=True)
     for x, y in ((a.q, b.q), (a.qd, b.qd), (a.qdd, b.qdd), (a.lam, b.lam), (a.outputs, b.outputs)):
         assert np.array_equal(x, y)
+
+
+def _compiled_steps_solve_the_interpreted_equations(model, alpha: float, t_end: float = 0.3, dt: float = 1e-3):
+    """Every step of a compiled run, its start and end fed to the interpreted residual: at most the
+    tolerance it was accepted at, plus the residual's own round-off floor (ROUNDOFF_FLOOR eps max|q/l|,
+    the accuracy to which two evaluations of the scaled residual can agree)."""
+    from casflex.integrators.hht import ROUNDOFF_FLOOR
+    from casflex.simulate import integrator_for
+
+    b = simulate(model, t_end, dt=dt, alpha=alpha, compiled=True)
+    hht = integrator_for(model, alpha=alpha)
+    X = np.hstack([b.q, b.qd, b.qdd, b.lam])
+    d = np.array(hht.scale(b.q[0], b.qd[0], b.p, dt)).ravel()
+    ell = np.where(model.is_rotation, 1.0, model.length_scale)
+    worst = 0.0
+    for k in range(len(b.t) - 1):
+        r = hht.step_residual(X[k], X[k + 1], b.t[k], b.p, dt, d)
+        bound = float(hht.tolerance(b.q[k + 1])) + ROUNDOFF_FLOOR * np.finfo(float).eps * max(
+            1.0, np.abs(b.q[k + 1] / ell).max())
+        worst = max(worst, r / bound)
+    assert worst <= 1.0, f"a compiled step leaves {worst:.2f} x the accepted residual in the interpreted equations"
+    return b, worst
+
+
+@pytest.mark.parametrize("alpha, elements", [(-0.05, 1), (0.0, 16)])
+def test_compiled_steps_solve_the_interpreted_equations_with_the_flags_in_force(alpha, elements):
+    """The promise for any CASFLEX_CFLAGS and processor: a compiled run is an HHT run of this model."""
+    _compiled_steps_solve_the_interpreted_equations(casflex.assemble(twobar_meshed(elements)), alpha)
+
+
+@pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"), reason="-march=native's FMA is an x86-64 case")
+def test_a_native_build_keeps_the_promise_where_it_is_not_bitwise(tmp_path, monkeypatch):
+    monkeypatch.setenv("CASFLEX_CACHE", str(tmp_path))
+    monkeypatch.setenv(codegen.FLAGS_ENV, "-march=native")
+    b, _ = _compiled_steps_solve_the_interpreted_equations(casflex.assemble(twobar_meshed(1)), -0.05)
+    assert b.meta.get("compiled") and any(tmp_path.glob("casflex_hht-*.so"))
 
 
 _BUILD_ONE = """

@@ -78,6 +78,32 @@ def test_run_functions_from_an_unimportable_module_and_crashing_runs(tmp_path):
     assert json.loads((tmp_path / "rec" / "boom.json").read_text())["error"]
 
 
+def test_an_error_of_dask_s_teardown_keeps_every_result(tmp_path, monkeypatch, capsys):
+    """Seen on a busy machine: closing the cluster while a nanny restarts the worker a crashing run
+    killed raised "can only join a started process" out of the sweep. Made deterministic here: the
+    cluster's close fails after closing."""
+    import distributed
+
+    close = distributed.LocalCluster.close
+
+    def failing_close(self, *args, **kwargs):
+        close(self, *args, **kwargs)
+        raise AssertionError("can only join a started process")
+
+    monkeypatch.setattr(distributed.LocalCluster, "close", failing_close)
+    mod = _module(tmp_path, "def square(x):\n    return {'y': x * x}\n")
+    try:
+        res = run_sweep([Run(f"sq{i}", mod.square, {"x": i}) for i in range(3)], tmp_path / "rec", n_workers=1,
+                        progress=False)
+    finally:
+        import sys
+
+        del sys.modules[mod.__name__]
+    assert [res.results[f"sq{i}"]["y"] for i in range(3)] == [0, 1, 4] and not res.interrupted
+    err = capsys.readouterr().err
+    assert "closing the LocalCluster failed (AssertionError: can only join a started process)" in err
+
+
 def _within(seconds: float, fn):
     """fn() in a daemon thread: its value, or a test failure (not a hung suite) after ``seconds``."""
     import threading

@@ -40,6 +40,17 @@ def _known_errors() -> tuple[type[BaseException], ...]:
     return (OptionError, SimulationError, CodegenError, StaticsError, ValueError, KeyError, OSError)
 
 
+def _check_compiler_flags() -> None:
+    """``$CASFLEX_CFLAGS``, when set and a compiler is there: CodegenError naming it if rejected."""
+    import os
+    import shutil
+
+    from casflex import codegen
+
+    if os.environ.get(codegen.FLAGS_ENV) and shutil.which(os.environ.get("CC", "gcc")):
+        codegen.build_flags("-O1")
+
+
 def main(argv: list[str] | None = None) -> int:
     try:
         args = _parser().parse_args(argv)  # one line on a bad option, before any work
@@ -48,6 +59,8 @@ def main(argv: list[str] | None = None) -> int:
     outputs = Outputs()
     with interrupt.guard() as interrupts, progress_messages(not getattr(args, "quiet", False)):
         try:
+            if args.command != "cache":  # flags the compiler rejects: one line before any work
+                _check_compiler_flags()
             code = int(args.func(args, outputs) or 0)
             if interrupts.count:  # a Ctrl-C that a library swallowed
                 raise KeyboardInterrupt

@@ -266,6 +266,18 @@ class HHT:
             x1, res, _ = self._fn["finish"](z, prm)
         return np.array(x1).ravel(), float(res), updates
 
+    def step_residual(self, x0: np.ndarray, x1: np.ndarray, t0: float, p: np.ndarray, h: float,
+                      d: np.ndarray) -> float:
+        """The scaled residual (max norm, Eq. 4 on the free dofs) that the step x0 -> x1 from t0 leaves
+        in the equations as this process evaluates them: how well a state x1 computed elsewhere
+        (compiled code, another machine) solves this step; a step is accepted at :meth:`tolerance`."""
+        n, ell = self.model.n_dof, self._ell
+        free = _Layout.of(self.model, ell).free
+        _, prm = self._fn["prepare"](x0, t0, p, h, d)
+        q_pred = np.array(prm[:n]).ravel()  # the unknowns are z = (q_{n+1} - q_pred) / l on the free dofs
+        z = ((np.asarray(x1[:n]) - q_pred) / ell)[free]
+        return float(np.max(np.abs(np.array(self._fn["residual"](z, prm)).ravel()), initial=0.0))
+
     def sensitivity(self, n_steps: int) -> ca.Function:
         """``hht_sensitivity_<N>(x0, S0, t0, p, h, d) -> (X, S, res)``: N steps that also carry the
         forward sensitivities S = dx/dw of the state to w = (x_0, p), w of size nx + n_p.
