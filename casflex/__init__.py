@@ -13,7 +13,8 @@ __version__ = "0.1.0"
 
 _EXPORTS = {
     "Model": "casflex.model", "assemble": "casflex.model",
-    "Beam": "casflex.scene", "Load": "casflex.scene", "Node": "casflex.scene", "Parameter": "casflex.scene",
+    "Beam": "casflex.scene", "Joint": "casflex.scene", "Load": "casflex.scene", "Node": "casflex.scene",
+    "Parameter": "casflex.scene",
     "RigidBody": "casflex.scene", "RunSettings": "casflex.scene", "Scene": "casflex.scene",
     "SceneError": "casflex.scene",
     "Spring": "casflex.scene", "Support": "casflex.scene", "TorsionSpring": "casflex.scene",

@@ -18,9 +18,10 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from casflex.elements.joints import JOINT_KINDS
 from casflex.elements.kernels import KINDS, Kind
 
-__all__ = ["ElementGroup", "MatrixAssembly", "gather", "scatter"]
+__all__ = ["ElementGroup", "MatrixAssembly", "gather", "scatter", "scatter_at"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -42,7 +43,7 @@ class ElementGroup:
 
     @property
     def spec(self) -> Kind:
-        return KINDS[self.kind]
+        return KINDS[self.kind] if self.kind in KINDS else JOINT_KINDS[self.kind]
 
     @property
     def n(self) -> int:
@@ -74,6 +75,11 @@ def gather(v: ca.MX | ca.SX, group: ElementGroup) -> ca.MX | ca.SX:
 def scatter(values: ca.MX | ca.SX, group: ElementGroup, n: int) -> ca.MX | ca.SX:
     """Element vectors (n_dof of the kind, n_el) summed into a global vector (n,)."""
     return summed(ca.vec(values), group.scatter_lists(n))
+
+
+def scatter_at(values: ca.MX | ca.SX, at: np.ndarray, n: int) -> ca.MX | ca.SX:
+    """Vectors (k, n_el) summed into a global vector (n,) at the indices ``at`` (n_el, k)."""
+    return summed(ca.vec(values), sum_lists(_targets(at.ravel(), n), at.size))
 
 
 def _targets(where: np.ndarray, size: int) -> list[list[int]]:

@@ -129,7 +129,11 @@ def _c_array(name: str, v: np.ndarray) -> str:
 
 
 def _main_c(model: Model, p: np.ndarray, alpha: float, dt: float, n_steps: int) -> str:
+    from casflex.simulate import initial_state, integrator_for
+
     n, nc = model.n_dof, model.n_con
+    # the start simulate() takes: moving supports on their paths, the joints closed (casflex.consistent)
+    x0 = initial_state(integrator_for(model, alpha=alpha), p)
     header = "t," + ",".join(model.dof_names)
     return f"""/* Example: simulate scene '{model.scene.name}' with HHT-alpha (alpha = {alpha:g}), dt = {dt:g} s,
    {n_steps} steps; writes trajectory.csv (t, then the dofs {', '.join(model.dof_names[:3])}, ...).
@@ -142,8 +146,8 @@ def _main_c(model: Model, p: np.ndarray, alpha: float, dt: float, n_steps: int) 
 #define N_CON {nc}
 #define NX (3 * N_DOF + N_CON)
 #define N_STEPS {n_steps}
-{_c_array("Q0", model.q0)}
-{_c_array("QD0", model.qd0)}
+{_c_array("Q0", x0[:n])}
+{_c_array("QD0", x0[n:2 * n])}
 {_c_array("P", p)}
 static const casadi_real DT = {dt:.17g};
 

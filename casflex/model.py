@@ -31,8 +31,19 @@ import casadi as ca
 import numpy as np
 
 from casflex.assembly import ElementGroup, MatrixAssembly, gather, scatter
-from casflex.constraints import FixedDof, constraint_vector, prescribed, support_constraints
+from casflex.constraints import (
+    FixedDof,
+    constraint_vector,
+    gather_at,
+    joint_groups,
+    joint_phi,
+    mapped_joint,
+    prescribed,
+    split,
+    support_constraints,
+)
 from casflex.elements import BeamElement
+from casflex.elements.joints import OUTPUTS as JOINT_OUTPUTS
 from casflex.elements.kernels import AT_POINTS, DAMPERS, KINDS, NONCONSERVATIVE, kernel
 from casflex.scene import Parameter, Scene, SceneError
 from casflex.scene_items import INERTIA_FORMS
@@ -50,10 +61,12 @@ class Model:
         ``x<node>``, ``y<node>``, ``theta<node>`` per node; user nodes first, in scene order,
         then nodes added by meshing (named ``<beam>.<k>``).
     constraint_names : tuple of str, length n_con
-        ``<support>.<x|y|theta>``.
+        ``<support>.<x|y|theta>`` (the supports' rows, ``n_fixed``), then the joints' rows
+        ``<joint>.<x|y|across|theta>`` (``joint_row_names``).
     output_names : tuple of str
         Joint outputs: ``<spring>.force|length|fx|fy``, ``<torsion>.moment``,
-        ``<support>.<dof>`` (reaction exerted by the support), ``<beam>.<element>.N|V|Ma|Mb``.
+        ``<support>.<dof>`` (reaction exerted by the support), ``<beam>.<element>.N|V|Ma|Mb``,
+        ``<joint>.<output>`` (:class:`casflex.scene.Joint`).
     q0, qd0 : ndarray, shape (n_dof,)
         Initial configuration and velocity from the scene.
     p_nominal : ndarray, shape (n_p,)
@@ -97,6 +110,8 @@ class Model:
     local_rotations: ca.Function
     local_rotation_names: tuple[str, ...]
     segments: tuple[tuple[str, str, int, int], ...] = field(default=())
+    joint_groups: tuple[ElementGroup, ...] = ()
+    joint_row_names: tuple[str, ...] = ()
 
     @property
     def moving(self) -> bool:
@@ -121,6 +136,12 @@ class Model:
 
     @property
     def n_con(self) -> int:
+        """Multipliers: the supports' rows (``n_fixed``), then the joints'."""
+        return len(self.constraints) + len(self.joint_row_names)
+
+    @property
+    def n_fixed(self) -> int:
+        """The supports' rows: dofs held at values (the first multipliers)."""
         return len(self.constraints)
 
     @property
@@ -129,7 +150,7 @@ class Model:
 
     @property
     def constraint_names(self) -> tuple[str, ...]:
-        return tuple(c.name for c in self.constraints)
+        return tuple(c.name for c in self.constraints) + self.joint_row_names
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
@@ -294,6 +315,17 @@ def _groups(scene: Scene, order, nodes, beam_elems, idx) -> tuple[ElementGroup, 
     return tuple(out)
 
 
+def _joint_outputs(groups: tuple[ElementGroup, ...], q: ca.MX, mu: ca.MX, n: int) -> tuple[ca.MX, tuple[str, ...]]:
+    """The joints' outputs (``casflex.elements.joints.OUTPUTS``) at (q, mu), by kind, and their names."""
+    y, names = ca.MX(0, 1), ()
+    for grp in groups:
+        at, mu_at = split(grp)
+        y = ca.vertcat(y, ca.vec(mapped_joint(grp, "outputs", gather_at(q, at), gather_at(mu, mu_at - n),
+                                              ca.DM(grp.base))))
+        names += tuple(f"{nm}.{o}" for nm in grp.names for o in JOINT_OUTPUTS[grp.kind.removesuffix("_g")])
+    return y, names
+
+
 def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
     """Build the symbolic model of ``scene`` (see the module docstring).
 
@@ -316,14 +348,17 @@ def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
     groups = _groups(scene, order, nodes, beam_elems, idx)
 
     cons = support_constraints(scene, {d: i for i, d in enumerate(dof_names)}, q0)
+    jgroups, jrows = joint_groups(scene, nodes, idx, n)
     used = np.zeros(n, dtype=bool)
     for grp in groups:
         used[grp.dofs.ravel()] = True
+    for grp in jgroups:
+        used[split(grp)[0].ravel()] = True
     for c in cons:
         used[c.dof] = True
     if not used.all():
         free = [dof_names[i] for i in np.flatnonzero(~used)]
-        raise SceneError(f"dofs {free} are acted on by nothing (no beam, spring or support): "
+        raise SceneError(f"dofs {free} are acted on by nothing (no beam, spring, joint or support): "
                          "the equations of motion would be singular; add a support for them")
 
     # -- small SX pieces: gravity, loads, constraints ------------------------------------------
@@ -348,12 +383,12 @@ def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
                 f_ext[i] += ca.pw_lin(tc, tt, vv)
     load = ca.Function("load", [ts, ps], [f_ext], ["t", "p"], ["f_ext"])
     qs = ca.SX.sym("q", n)
-    phi = constraint_vector(cons, qs)
+    phi = ca.vertcat(constraint_vector(cons, qs), joint_phi(jgroups, qs))
     constraint = ca.Function("constraint", [qs], [phi, ca.jacobian(phi, qs)], ["q"], ["phi", "B"])
 
     # -- structured Functions: element kernels mapped over the groups ---------------------------
     q, qd, qdd = ca.MX.sym("q", n), ca.MX.sym("qd", n), ca.MX.sym("qdd", n)
-    lam, t, p = ca.MX.sym("lam", len(cons)), ca.MX.sym("t"), ca.MX.sym("p", len(scene.parameters))
+    lam, t, p = ca.MX.sym("lam", len(cons) + len(jrows)), ca.MX.sym("t"), ca.MX.sym("p", len(scene.parameters))
     g = gravity(p)
     props = [grp.props(p) for grp in groups]
 
@@ -395,8 +430,10 @@ def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
             + [f"{s.name}.{o}" for s in (*scene.springs, *scene.torsion_springs) for o in damper_outputs
                if f"{s.name}.{o}" in out_names])
     y = ca.vertcat(*out_vals)[[out_names.index(w) for w in want]] if want else ca.MX(0, 1)
-    y = ca.vertcat(y, -lam)
+    y = ca.vertcat(y, -lam[:len(cons)])
     names = tuple(want) + tuple(c.name for c in cons)
+    y_j, names_j = _joint_outputs(jgroups, q, lam[len(cons):], n)
+    y, names = ca.vertcat(y, y_j), names + names_j
     beams = [grp for grp in groups if grp.kind == "beam"]  # local rotations: geometry only, never parameters
     th_l = ca.vec(mapped(beams[0], "rotations", gather(q, beams[0]), ca.DM(beams[0].base))) if beams else ca.MX(0, 1)
     return Model(
@@ -427,4 +464,6 @@ def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
         local_rotation_names=tuple(f"{b.name}.{k}.{e}" for b, k, _, _ in beam_elems for e in "ab"),
         segments=tuple(("beam", f"{b.name}.{k}", idx[na] // 3, idx[nb] // 3) for b, k, na, nb in beam_elems)
         + tuple(("spring", s.name, idx[s.nodes[0]] // 3, idx[s.nodes[1]] // 3) for s in scene.springs),
+        joint_groups=jgroups,
+        joint_row_names=jrows,
     )

@@ -19,6 +19,7 @@ from casflex.scene_items import (
     _NON_NUMERIC,
     SUPPORT_DOFS,
     Beam,
+    Joint,
     Load,
     Node,
     Parameter,
@@ -38,6 +39,7 @@ __all__ = [
     "Spring",
     "TorsionSpring",
     "RigidBody",
+    "Joint",
     "Support",
     "Load",
     "Parameter",
@@ -61,6 +63,7 @@ class Scene:
     torsion_springs: tuple[TorsionSpring, ...] = ()
     bodies: tuple[RigidBody, ...] = ()
     supports: tuple[Support, ...] = ()
+    joints: tuple[Joint, ...] = ()
     loads: tuple[Load, ...] = ()
     parameters: tuple[Parameter, ...] = ()
     gravity: tuple[float, float] = (0.0, -9.81)
@@ -70,8 +73,8 @@ class Scene:
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.strip():
             raise SceneError(f"name: expected a non-empty string (the scene's name), got {self.name!r}")
-        for f in ("nodes", "beams", "springs", "torsion_springs", "bodies", "supports", "loads", "parameters",
-                  "markers"):
+        for f in ("nodes", "beams", "springs", "torsion_springs", "bodies", "supports", "joints", "loads",
+                  "parameters", "markers"):
             value = getattr(self, f)
             if isinstance(value, str) or not isinstance(value, (list, tuple)):
                 raise SceneError(f"{f}: expected a list, got {type(value).__name__}")
@@ -96,7 +99,8 @@ class Scene:
         from casflex.markers import Marker
 
         kinds = {"nodes": Node, "beams": Beam, "springs": Spring, "torsion_springs": TorsionSpring,
-                 "bodies": RigidBody, "supports": Support, "loads": Load, "parameters": Parameter, "markers": Marker}
+                 "bodies": RigidBody, "supports": Support, "joints": Joint, "loads": Load, "parameters": Parameter,
+                 "markers": Marker}
         for f, cls in kinds.items():
             for i, item in enumerate(getattr(self, f)):
                 if not isinstance(item, cls):
@@ -109,15 +113,15 @@ class Scene:
                 raise SceneError(f"nodes[{i}].name: duplicate node {n.name!r}")
             seen[n.name] = "node"
         names: dict[str, str] = {}
-        for f in ("beams", "springs", "torsion_springs", "bodies", "supports", "loads"):
+        for f in ("beams", "springs", "torsion_springs", "bodies", "supports", "joints", "loads"):
             for i, item in enumerate(getattr(self, f)):
                 if item.name == "gravity":
                     raise SceneError(f"{f}[{i}].name: 'gravity' is reserved "
                                      "(parameter targets 'gravity.x', 'gravity.y')")
                 if item.name in names:
                     raise SceneError(f"{f}[{i}].name: duplicate name {item.name!r}, already used in {names[item.name]} "
-                                     "(names are unique across beams, springs, torsion springs, bodies, supports "
-                                     "and loads)")
+                                     "(names are unique across beams, springs, torsion springs, bodies, supports, "
+                                     "joints and loads)")
                 names[item.name] = f
                 refs = ([(f"nodes[{j}]", r) for j, r in enumerate(item.nodes)] if hasattr(item, "nodes")
                         else [("node", item.node)])
@@ -185,9 +189,16 @@ class Scene:
         (xa, ya), (xb, yb) = self.spring_ends(spring)
         return math.hypot(xb - xa, yb - ya)
 
+    def joint_point(self, joint: Joint) -> tuple[float, float]:
+        """The joint's point in the initial configuration (m): its ``point``, or node b's position."""
+        if joint.point is not None:
+            return joint.point
+        nb = self.node(joint.nodes[-1])
+        return nb.x, nb.y
+
     def item(self, name: str) -> Any:
-        """The element, support or load called ``name``."""
-        for f in ("beams", "springs", "torsion_springs", "bodies", "supports", "loads"):
+        """The element, support, joint or load called ``name``."""
+        for f in ("beams", "springs", "torsion_springs", "bodies", "supports", "joints", "loads"):
             for it in getattr(self, f):
                 if it.name == name:
                     return it
@@ -207,8 +218,9 @@ class Scene:
                      for it in getattr(self, f)]
             raise SceneError(f"{where}: unknown element or load {owner!r} in {target!r}; "
                              f"known: {known + ['gravity']}") from None
-        if isinstance(it, Support):
-            raise SceneError(f"{where}: {owner!r} is a support; supports have no numeric properties to identify")
+        if isinstance(it, (Support, Joint)):
+            what = "a support; supports" if isinstance(it, Support) else "a joint; joints"
+            raise SceneError(f"{where}: {owner!r} is {what} have no numeric properties to identify")
         numeric = [f.name for f in fields(it) if f.name not in _NON_NUMERIC]
         if isinstance(it, RigidBody):
             numeric = ["mass", "inertia"]  # where the centre of mass sits is geometry, not a parameter

@@ -17,6 +17,7 @@ from typing import Any
 from casflex.markers import Marker
 from casflex.scene import (
     Beam,
+    Joint,
     Load,
     Node,
     Parameter,
@@ -39,6 +40,7 @@ _LISTS: dict[str, type] = {
     "torsion_springs": TorsionSpring,
     "bodies": RigidBody,
     "supports": Support,
+    "joints": Joint,
     "loads": Load,
     "parameters": Parameter,
     "markers": Marker,
@@ -95,7 +97,7 @@ def _build(cls: type, where: str, table: Any) -> Any:
         if f.default is MISSING and f.default_factory is MISSING and name not in table:
             raise SceneError(f"{label}: missing required field {name!r}")
     kwargs = dict(table)
-    for key in ("nodes", "table"):
+    for key in ("nodes", "table", "point", "axis"):
         if key in kwargs and isinstance(kwargs[key], list):
             kwargs[key] = tuple(tuple(r) if isinstance(r, list) else r for r in kwargs[key])
     for key in ("lower", "upper"):

@@ -44,7 +44,7 @@ SUPPORT_DOFS: dict[str, tuple[str, ...]] = {
 #: Forms of the velocity-dependent inertia term (see casflex.model).
 INERTIA_FORMS = ("lagrange", "seed")
 _NON_NUMERIC = ("name", "nodes", "node", "elements", "table", "kind", "rotary_inertia", "follower", "motion",
-                "point_a", "point_b")
+                "point_a", "point_b", "point", "axis")
 
 
 def _number(owner: str, field: str, value: Any) -> float:
@@ -240,6 +240,75 @@ class RigidBody:
         for f in ("com_x", "com_y"):
             if getattr(self, f) is not None:
                 object.__setattr__(self, f, _number(where, f, getattr(self, f)))
+
+
+#: Ideal joint kinds and the constraint rows each adds (casflex.elements.joints).
+JOINT_KINDS = {"hinge": 2, "slider": 2, "weld": 3}
+
+
+def _point(owner: str, field: str, value: Any) -> tuple[float, float]:
+    if isinstance(value, str) or not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise SceneError.at(owner, field, f"expected [x, y] in m (two numbers), got {value!r}")
+    return tuple(_number(owner, f"{field}[{i}]", x) for i, x in enumerate(value))  # type: ignore[return-value]
+
+
+@dataclass(frozen=True)
+class Joint:
+    """An ideal joint: constraints Phi(q) = 0 between the frames of node a and node b, held by
+    Lagrange multipliers (no stiffness to choose, no fast mode). ``nodes = [a, b]``, or ``[b]``
+    for a joint to the ground (a is then the ground, fixed where the scene starts).
+
+    ``point`` (x, y in m, in the initial configuration; default: node b's position) is fixed in
+    both frames (and the ground's):
+
+    - ``hinge`` (revolute, 2 rows): the point of a and the point of b coincide; the relative
+      rotation is free (a torsion spring between the nodes makes it compliant). Outputs ``fx``,
+      ``fy`` (N, global) and ``f_along``, ``f_across`` (N, along and across ``axis`` turned with
+      node b): the force that a exerts on b at the point; ``angle`` (rad): the relative rotation
+      theta_b - theta_a from the initial configuration.
+    - ``slider`` (prismatic, 2 rows): b's point moves along the line through a's point in the
+      direction ``axis`` (fixed in a's frame), the relative rotation locked. Outputs ``travel``
+      (m, along the axis from the start), ``force`` (N, on b, across the axis, to its left) and
+      ``moment`` (N m, on b: the couple that locks the rotation).
+    - ``weld`` (3 rows): the two frames locked together at the point. Outputs ``fx``, ``fy``
+      (N, global, on b) and ``moment`` (N m, on b).
+
+    ``axis`` (a direction, normalised; initial configuration) defaults to the x axis for a slider;
+    for a hinge to the direction from the point to node b, or from node a to the point where b
+    sits at it, or the x axis.
+    """
+
+    name: str
+    kind: str
+    nodes: tuple[str, ...]
+    point: tuple[float, float] | None = None
+    axis: tuple[float, float] | None = None
+
+    def __post_init__(self) -> None:
+        where = _owner("joint", self.name)
+        object.__setattr__(self, "name", _name(where, "name", self.name))
+        if self.kind not in JOINT_KINDS:
+            raise SceneError.at(where, "kind", f"expected one of {list(JOINT_KINDS)}, got {self.kind!r}")
+        nodes = self.nodes
+        if isinstance(nodes, str) or not isinstance(nodes, (list, tuple)) or len(nodes) not in (1, 2):
+            raise SceneError.at(where, "nodes", f"expected [a, b] or [b] (to the ground): node names, got {nodes!r}")
+        nodes = tuple(_name(where, f"nodes[{i}]", v) for i, v in enumerate(nodes))
+        if len(nodes) == 2 and nodes[0] == nodes[1]:
+            raise SceneError.at(where, "nodes", f"the two nodes must differ, got {nodes[0]!r} twice")
+        object.__setattr__(self, "nodes", nodes)
+        if self.point is not None:
+            object.__setattr__(self, "point", _point(where, "point", self.point))
+        if self.axis is not None:
+            ax = _point(where, "axis", self.axis)
+            norm = math.hypot(*ax)
+            if norm == 0.0:
+                raise SceneError.at(where, "axis", "must be a direction, got [0, 0]")
+            object.__setattr__(self, "axis", (ax[0] / norm, ax[1] / norm))
+
+    @property
+    def rows(self) -> int:
+        """How many constraint equations (and multipliers) the joint adds."""
+        return JOINT_KINDS[self.kind]
 
 
 def _time_rows(where: str, field: str, rows: Any, header: str) -> tuple[tuple[float, ...], ...]:

@@ -1,6 +1,7 @@
 """simulate(...) -> Trajectory: run the HHT-alpha integrator over a horizon.
 
-Two execution paths give the same numbers (bitwise on x86-64, see :mod:`casflex.codegen`):
+Two execution paths give the same numbers (bitwise at the default build flags on x86-64; under any
+flags each compiled step solves the interpreted equations to the tolerance: :mod:`casflex.codegen`):
 
 - interpreted (default): a Python loop calls CasADi's virtual machine step by step and
   records Newton's iteration count for every step;
@@ -30,6 +31,7 @@ import numpy as np
 
 from casflex import interrupt
 from casflex.codegen import BufferedCall, CompiledLibrary, compile_functions
+from casflex.consistent import project_positions, project_velocities
 from casflex.integrators.hht import HHT
 from casflex.model import Model, assemble
 from casflex.results import Trajectory
@@ -314,18 +316,20 @@ def initial_state(integ: HHT, p: np.ndarray, *, q0: np.ndarray | None = None, qd
         if v.shape != (n,) or not np.isfinite(v).all():
             raise ValueError(f"{name}: expected {n} finite values ({', '.join(model.dof_names[:6])}, ...), "
                              f"got shape {v.shape}")
-    vd = np.zeros(model.n_con)
+    vd = np.zeros(model.n_fixed)
     if model.moving:  # the supports' dofs follow their paths: values and rates at t0, whatever state was given
         v, vd = model.supports_at(t0)
         fixed = [c.dof for c in model.constraints]
         q[fixed] = v
         qd[fixed] = vd
+    q = project_positions(model, q)  # the joints closed and their velocities consistent (casflex.consistent)
+    qd = project_velocities(model, q, qd, p)
     phi, B = model.constraint(q)
-    phi, B = np.array(phi).ravel(), np.array(B)
+    phi, B = np.array(phi).ravel()[:model.n_fixed], np.array(B)[:model.n_fixed]
     if model.moving:
         phi = phi - (v - np.array([c.value for c in model.constraints]))
     scale = np.where(model.is_rotation, 1.0, model.length_scale)
-    if model.n_con:
+    if model.n_fixed:
         cs = scale[[c.dof for c in model.constraints]]
         if np.abs(phi / cs).max() > 1e-9:
             j = int(np.argmax(np.abs(phi / cs)))

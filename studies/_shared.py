@@ -72,11 +72,12 @@ def in_fresh_process(script: str, args: list[str], env: dict, timeout: float = 3
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def cold_and_cached(script: str, cold: list[str], cached: list[str], timeout: float = 3600) -> tuple[dict, dict]:
-    """``in_fresh_process`` twice with one new, empty ``CASFLEX_CACHE``: the first process builds every
-    compiled function (cold), the second finds them on disk (cached). Their JSON answers."""
+def cold_and_cached(script: str, cold: list[str], cached: list[str], timeout: float = 3600,
+                    env: dict | None = None) -> tuple[dict, dict]:
+    """``in_fresh_process`` twice with one new, empty ``CASFLEX_CACHE`` (and the variables ``env``): the first
+    process builds every compiled function (cold), the second finds them on disk (cached). Their JSON answers."""
     with tempfile.TemporaryDirectory(prefix="casflex-bench-cache-") as cache:
-        env = dict(os.environ, CASFLEX_CACHE=cache)
+        env = dict(os.environ, **(env or {}), CASFLEX_CACHE=cache)
         return in_fresh_process(script, cold, env, timeout), in_fresh_process(script, cached, env, timeout)
 
 

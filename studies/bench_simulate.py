@@ -17,11 +17,15 @@ from _study import Banner, assert_checks, best_of, checks, cli, paths_check, png
 
 from casflex.simulate import simulate
 
+#: the environment of the runs built for this processor instead of the generic target (casflex.codegen)
+NATIVE = {"CASFLEX_CFLAGS": "-march=native"}
 TABLES = (  # the page's tables: (title, {column: format over a row's numbers})
     ("Cost against the mesh ({t_end:g} s, dt = 1e-3, compiled)",
      {"el./bar": "{elements}", "dofs": "{dofs}", "cold build (s)": "{cold_build_s:.1f}",
       "cached build (s)": "{build_s:.2f}", "library (kB)": "{code_kb}", "simulate (ms)": "{simulate_ms:.1f}",
-      "integration (ms)": "{run_ms:.1f}", "per step (us)": "{per_step_us:.1f}", "peak memory (MB)": "{peak_mb:.0f}"}),
+      "integration (ms)": "{run_ms:.1f}", "per step (us)": "{per_step_us:.1f}",
+      "per step, -march=native (us)": "{native_per_step_us:.1f}", "default / native": "{native_gain:.2f}",
+      "peak memory (MB)": "{peak_mb:.0f}"}),
     ("Accuracy and the two paths (1 element per bar; error against a dt = {dt_ref:g} s reference)",
      {"dt (s)": "{dt:.0e}", "steps": "{steps}", "interpreted (ms)": "{interpreted_ms:.1f}",
       "compiled (ms)": "{compiled_ms:.2f}", "compiled, integration only (ms)": "{compiled_run_ms:.2f}",
@@ -83,8 +87,14 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
     for ne in (1, 2) if quick else (1, 2, 4, 8, 16, 32):  # a cold build, then a cached one and the timed runs
         cold, warm = cold_and_cached(__file__, *(["--mesh-worker", str(ne), repr(t_end), str(n)]
                                                  for n in (1, 2 if quick else 7)), timeout=1800)
+        # the same, built for this processor (CASFLEX_CFLAGS=-march=native): the speed the default's
+        # bitwise promise costs, measured right after it
+        _, native = cold_and_cached(__file__, *(["--mesh-worker", str(ne), repr(t_end), str(n)]
+                                                for n in (1, 2 if quick else 7)), timeout=1800, env=NATIVE)
         scale.append({**warm, "cold_build_s": cold["build_s"], "cold_cached": cold["cached"],
-                      "per_step_us": 1e3 * warm["run_ms"] / warm["steps"]})
+                      "per_step_us": 1e3 * warm["run_ms"] / warm["steps"],
+                      "native_per_step_us": 1e3 * native["run_ms"] / native["steps"],
+                      "native_gain": warm["run_ms"] / native["run_ms"]})
     expo = {k: slope([r[k] for r in scale], [r["per_step_us"] for r in scale]) for k in ("elements", "dofs")}
     # per dt, 1 element per bar: both paths; node 5's error against a dt 10x below the smallest (coarsest grid)
     acc_t, dts, acc = 0.5 if quick else 3.0, [1e-2, 5e-3, 2e-3, 1e-3] + ([] if quick else [5e-4, 2e-4, 1e-4]), []

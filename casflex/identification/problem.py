@@ -100,6 +100,15 @@ def require_fixed_supports(model: Model, method: str) -> None:
                          "method's default (single shooting by Gauss-Newton), which follows their paths")
 
 
+def require_no_joints(model: Model, method: str) -> None:
+    """ValueError naming the joints when ``model`` has ideal joints, which ``method`` does not take yet."""
+    if model.joint_row_names:
+        joints = [jt.name for jt in model.scene.joints]
+        raise ValueError(f"ideal joints {joints}: {method} does not take them yet (issue 25); use the indirect "
+                         "method's default (single shooting by Gauss-Newton) from the scene's initial state, or "
+                         "the direct method on the nodes' dofs")
+
+
 def start_values(model: Model, start: float | dict[str, float] | np.ndarray | None) -> np.ndarray:
     """Starting parameters: None (nominal), a factor times nominal, a dict, or an array."""
     if start is None:

@@ -29,16 +29,34 @@ __all__ = ["BandLU", "band_lu", "BLOCK"]
 BLOCK = 16
 
 
-def _order(sp: ca.Sparsity) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """(permutation, its inverse, nonzero (row, col) in the new order, bandwidth)."""
+def _order(sp: ca.Sparsity, late: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """(permutation, its inverse, nonzero (row, col) in the new order, bandwidth).
+
+    ``late``: the last ``late`` unknowns (Lagrange multipliers, whose diagonal is zero) are each put
+    right after the last of the other unknowns they couple to, so that their pivot is the Schur
+    complement -B S^-1 B^T of the unknowns eliminated before them, not the zero of the matrix."""
     from scipy.sparse import csc_matrix
     from scipy.sparse.csgraph import reverse_cuthill_mckee
 
     n = sp.size1()
     rows, colind = np.array(sp.row()), np.array(sp.colind())
     cols = np.repeat(np.arange(sp.size2()), np.diff(colind))
-    perm = np.asarray(reverse_cuthill_mckee(csc_matrix((np.ones(rows.size), rows, colind), shape=(n, n)),
-                                            symmetric_mode=True), dtype=int)
+    lead = n - late
+    keep = (rows < lead) & (cols < lead)
+    perm = np.asarray(reverse_cuthill_mckee(csc_matrix((np.ones(keep.sum()), (rows[keep], cols[keep])),
+                                                       shape=(lead, lead)), symmetric_mode=True), dtype=int)
+    if late:
+        pos = np.empty(lead, dtype=int)
+        pos[perm] = np.arange(lead)
+        anchor = np.full(late, -1)  # the position of the last unknown each couples to (-1: none, at the end)
+        for r, c in zip(rows, cols, strict=True):
+            if r >= lead > c:
+                anchor[r - lead] = max(anchor[r - lead], pos[c])
+        order = []
+        for k in range(lead):
+            order += [perm[k], *(lead + j for j in np.flatnonzero(anchor == k))]
+        order += [lead + j for j in np.flatnonzero(anchor < 0)]
+        perm = np.array(order, dtype=int)
     inv = np.empty(n, dtype=int)
     inv[perm] = np.arange(n)
     rc = np.stack([inv[rows], inv[cols]], axis=1)
@@ -99,10 +117,11 @@ class BandLU:
         return self.factor.nnz_out(0)
 
 
-def band_lu(sp: ca.Sparsity, name: str = "band") -> BandLU:
-    """The :class:`BandLU` of matrices with sparsity ``sp`` (square, structurally symmetric)."""
+def band_lu(sp: ca.Sparsity, name: str = "band", late: int = 0) -> BandLU:
+    """The :class:`BandLU` of matrices with sparsity ``sp`` (square, structurally symmetric); ``late``:
+    the number of trailing unknowns with a zero diagonal block (multipliers, see :func:`_order`)."""
     n = sp.size1()
-    perm, inv, rc, b = _order(sp)
+    perm, inv, rc, b = _order(sp, late)
     w, K = b + 1, BLOCK
     blocks = -(-n // K)
     N = blocks * K  # padded with the identity, so that every block has K steps

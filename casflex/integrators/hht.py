@@ -54,33 +54,23 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from casflex.assembly import MatrixAssembly, gather, scatter
-from casflex.elements.kernels import hht_kernel, kernel
 from casflex.integrators.band import band_lu
+from casflex.integrators.hht_pieces import (
+    ROUNDOFF_FLOOR,
+    Layout,
+    hht_coefficients,
+    initial_function,
+    newton_functions,
+    post_function,
+    prepare_function,
+    roundoff_tolerance,
+    scale_function,
+    step_blocks,
+)
 from casflex.integrators.modified import ModifiedNewton
 from casflex.model import Model
 
 __all__ = ["HHT", "hht_coefficients", "roundoff_tolerance", "ROUNDOFF_FLOOR", "NEWTON"]
-
-#: A scaled residual is accepted down to ROUNDOFF_FLOOR * eps * max|q / l| (see roundoff_tolerance).
-ROUNDOFF_FLOOR = 10.0
-
-
-def roundoff_tolerance(tol: float, q: np.ndarray, ell: np.ndarray) -> np.ndarray:
-    """``tol``, raised to the round-off floor of the coordinates q (shape (n,) or (k, n); l the
-    characteristic length of each dof, 1 for rotations): a residual scaled by l cannot be
-    computed below ~eps max|q / l| (elastic forces are differences of nearly equal
-    coordinates), so a scene 10 km from the origin would otherwise fail at tol = 1e-12."""
-    q = np.asarray(q, dtype=float)
-    return np.maximum(tol, ROUNDOFF_FLOOR * np.finfo(float).eps * np.abs(q / ell).max(axis=-1, initial=0.0))
-
-
-def hht_coefficients(alpha: float) -> tuple[float, float]:
-    """(gamma, beta) = (1/2 - alpha, (1 - alpha)^2 / 4) for alpha in [-1/3, 0]."""
-    if not -1.0 / 3.0 - 1e-12 <= alpha <= 0.0:
-        raise ValueError(f"alpha: must lie in [-1/3, 0], got {alpha!r}")
-    return 0.5 - alpha, (1.0 - alpha) ** 2 / 4.0
-
 
 #: The Newton variants of simulate (HHT.newton).
 NEWTON = ("exact", "modified")
@@ -154,10 +144,10 @@ class HHT:
         m = self.model
         ell = np.where(m.is_rotation, 1.0, m.length_scale)
         object.__setattr__(self, "_ell", ell)
-        lay = _Layout.of(m, ell)
+        lay = Layout.of(m, ell)
         expand = self.expand if self.expand is not None else expand_by_default(m)
-        prepare = _prepare(m, lay, self.alpha)
-        resid, jac, finish = _newton_functions(m, lay, self.alpha, self.tol, prepare.nnz_out(1), expand)
+        prepare = prepare_function(m, lay, self.alpha)
+        resid, jac, finish = newton_functions(m, lay, self.alpha, self.tol, prepare.nnz_out(1), expand)
 
         # The first Newton update solves with the banded LU (band.py); when the residual after it is
         # above tol, CasADi's Newton (sparse QR) goes on, from that point or, if the update made things
@@ -165,7 +155,7 @@ class HHT:
         # d ~ M / (beta h^2), so at a small step such a guess carries acceleration errors up to
         # tol l / (beta h^2): 0.05 m/s^2 at h = 1.25e-5 s, which accumulate in the velocities (7.6e-6 m
         # over 0.4 s).
-        band = band_lu(jac.sparsity_out(0), "hht_band")
+        band = band_lu(jac.sparsity_out(0), "hht_band", late=lay.n_mu)
         factor, apply = (band.factor.expand(), band.apply.expand()) if expand else (band.factor, band.apply)
         z0, P = ca.MX.sym("z0", resid.nnz_in(0)), ca.MX.sym("prm", resid.nnz_in(1))
         J0, G0 = jac(z0, P)
@@ -178,16 +168,18 @@ class HHT:
         xa, ra = ca.MX.sym("x1", self.nx), ca.MX.sym("res")
         keep = ca.Function("hht_done", [z0, P, xa, ra], [xa, ra])
         more = ca.Function("hht_more", [z0, P, xa, ra], finish(newton(z0, P), P)[:2] if self.max_iter > 1 else [xa, ra])
-        post = _post(m).expand() if expand else _post(m)  # per state, and for a few elements flat code is 3x faster
-        self._fn.update(prepare=prepare, residual=resid, jacobian=jac, finish=finish, scale=_scale(m, self.alpha),
-                        initial=_initial(m, lay), post=post, update=update, newton=newton, band_apply=apply,
+        post = post_function(m)
+        post = post.expand() if expand else post  # per state, and for a few elements flat code is 3x faster
+        self._fn.update(prepare=prepare, residual=resid, jacobian=jac, finish=finish,
+                        scale=scale_function(m, self.alpha), initial=initial_function(m, lay), post=post,
+                        update=update, newton=newton, band_apply=apply,
                         more=ca.Function.conditional("hht_converge", [keep], more))
-        self._fn["sensitivity"] = _step_blocks(m, lay, self.alpha, prepare, resid, finish, expand)
+        self._fn["sensitivity"] = step_blocks(m, lay, self.alpha, prepare, resid, finish, expand)
         self._fn["step"] = self._step_with_derivative()
 
     def _step_with_derivative(self) -> ca.Function:
         """prepare -> newton -> finish as one Function, whose Jacobian is the implicit-function
-        derivative written out (:func:`_step_blocks`): dx1/dw = X_w - X_z G_z^-1 G_w."""
+        derivative written out (:func:`step_blocks`): dx1/dw = X_w - X_z G_z^-1 G_w."""
         m = self.model
         n, nx, npar = m.n_dof, self.nx, m.n_p
         x0, t0, p, h, d = self._fn["prepare"].mx_in()
@@ -272,10 +264,13 @@ class HHT:
         in the equations as this process evaluates them: how well a state x1 computed elsewhere
         (compiled code, another machine) solves this step; a step is accepted at :meth:`tolerance`."""
         n, ell = self.model.n_dof, self._ell
-        free = _Layout.of(self.model, ell).free
+        lay = Layout.of(self.model, ell)
         _, prm = self._fn["prepare"](x0, t0, p, h, d)
         q_pred = np.array(prm[:n]).ravel()  # the unknowns are z = (q_{n+1} - q_pred) / l on the free dofs
-        z = ((np.asarray(x1[:n]) - q_pred) / ell)[free]
+        z = ((np.asarray(x1[:n]) - q_pred) / ell)[lay.free]
+        if lay.n_mu:  # and nu = mu / s for the joints' multipliers
+            s = np.array(lay.mu_scale(ca.DM(d))).ravel()
+            z = np.concatenate([z, np.asarray(x1[len(x1) - lay.n_mu:]) / s])
         return float(np.max(np.abs(np.array(self._fn["residual"](z, prm)).ravel()), initial=0.0))
 
     def sensitivity(self, n_steps: int) -> ca.Function:
@@ -331,227 +326,3 @@ def _updates(newton: ca.Function) -> int:
     update when it stopped on the update's size (counted before the iteration ends)."""
     st = newton.stats()
     return int(st["iter_count"]) + (st["return_status"] == "converged_abstol_step")
-
-
-# -- the pieces of a step ----------------------------------------------------------------------
-@dataclass(frozen=True)
-class _Layout:
-    """Free and fixed dofs: the unknowns of Newton and the dofs the supports hold."""
-
-    n: int
-    free: list[int]
-    fixed: list[int]
-    fixed_to: np.ndarray  # (n,): the supports' values on the fixed dofs, 0 elsewhere
-    ell: np.ndarray  # (n,): characteristic length (m) of translations, 1 for rotations
-
-    @classmethod
-    def of(cls, m: Model, ell: np.ndarray) -> _Layout:
-        fixed = [c.dof for c in m.constraints]
-        if len(set(fixed)) != len(fixed):
-            dup = sorted({m.dof_names[i] for i in fixed if fixed.count(i) > 1})
-            raise ValueError(f"dofs {dup} are fixed by more than one support: their reactions are not determined")
-        to = np.zeros(m.n_dof)
-        to[fixed] = [c.value for c in m.constraints]
-        return cls(m.n_dof, [i for i in range(m.n_dof) if i not in set(fixed)], fixed, to, ell)
-
-    def spread(self, z: ca.MX) -> ca.MX:
-        """The free dofs' values z (n_free,) in a vector of all dofs (zeros at the fixed ones)."""
-        slot = np.full(self.n, len(self.free))  # the 0 appended to z
-        slot[self.free] = np.arange(len(self.free))
-        return ca.vertcat(z, 0)[slot.tolist()]
-
-    def reactions(self) -> ca.DM:
-        """B^T (n, n_con): the multipliers act on the fixed dofs' rows."""
-        B_T = ca.DM.zeros(self.n, len(self.fixed))
-        for j, i in enumerate(self.fixed):
-            B_T[i, j] = 1.0
-        return B_T
-
-
-def _prm_layout(m: Model) -> list[tuple[str, int]]:
-    """The known quantities a step's Newton solve takes (``prm``), in this order, with their sizes."""
-    n = m.n_dof
-    # moving supports: values at t_n and t_{n+1}, rates and accelerations at t_{n+1}
-    moving = [("to0", n), ("to1", n), ("vd1", n), ("vdd1", n)] if m.moving else []
-    return [("q_pred", n), ("qd_pred", n), ("f_n", n), ("f_ext", n), ("p", m.n_p), ("h", 1), ("d", n), ("q0", n),
-            *moving]
-
-
-def _prepare(m: Model, lay: _Layout, alpha: float) -> ca.Function:
-    """``hht_prepare(x0, t0, p, h, d) -> (z0, prm)``: the Newton guess and everything known at the
-    start of the step (the Newmark predictors, F_n, the loads at t_alpha)."""
-    n = m.n_dof
-    gamma, beta = hht_coefficients(alpha)
-    x0, t0, h, p, d = (ca.MX.sym(k, s) for k, s in (("x0", 3 * n + m.n_con), ("t0", 1), ("h", 1), ("p", m.n_p),
-                                                    ("d", n)))
-    q0, qd0, qdd0, lam0 = x0[:n], x0[n:2 * n], x0[2 * n:3 * n], x0[3 * n:]
-    f_n = ca.MX.zeros(n)  # F_n has the weight -alpha
-    if alpha != 0.0:
-        hh, f_int, g = m.forces(q0, qd0, p)
-        f_n = hh + f_int - g + ca.mtimes(lay.reactions(), lam0)
-    prm = ca.vertcat(q0 + h * qd0 + (0.5 - beta) * h**2 * qdd0, qd0 + (1 - gamma) * h * qdd0, f_n,
-                     m.load(t0 + (1 + alpha) * h, p), p, h, d, q0)
-    if m.moving:
-        v1 = m.prescribed(t0 + h)
-        prm = ca.vertcat(prm, *(ca.mtimes(lay.reactions(), v) for v in (m.prescribed(t0)[0], *v1)))
-    z_guess = (beta * h**2 * qdd0 / lay.ell)[lay.free]
-    return ca.Function("hht_prepare", [x0, t0, p, h, d], [ca.densify(z_guess), ca.densify(prm)],
-                       ["x0", "t0", "p", "h", "d"], ["z0", "prm"])
-
-
-def _newton_functions(m: Model, lay: _Layout, alpha: float, tol: float, n_prm: int, expand: bool):
-    """(residual, jacobian, finish) of the free dofs' unknowns z and the known ``prm``.
-
-    ``hht_residual(z, prm) -> G``, the scaled residual of the free rows; ``hht_jacobian(z, prm) ->
-    (dG/dz, G)``, sparse; ``hht_finish(z, prm) -> (x1, res, done)``, the state after the step (the
-    multipliers from the fixed rows), the final max |G|, and whether that converges the step: res at
-    most tol, or the round-off floor of the coordinates (:func:`roundoff_tolerance`).
-    """
-    n, free, ell = m.n_dof, lay.free, lay.ell
-    gamma, beta = hht_coefficients(alpha)
-    z, P = ca.MX.sym("z", len(free)), ca.MX.sym("prm", n_prm)
-    parts, o = {}, 0
-    for key, size in _prm_layout(m):
-        parts[key], o = P[o:o + size], o + size
-    hp, dp, pp, qp, q0 = parts["h"], parts["d"], parts["p"], parts["q_pred"], parts["q0"]
-    # HHT on Phi = q_c - v: (1 + alpha) Phi(q_{n+1}) = alpha Phi(q_n)
-    # a moving support: Phi = q_c - v(t), HHT on it as on a fixed one. With alpha < 0 its rates and
-    # accelerations follow from Newmark's relations like every dof's (the path's own, taken at t_{n+1},
-    # are only first order there: the balance is struck at t_{n+1+alpha}); at alpha = 0 they are the
-    # path's, since Newmark's accelerations of a prescribed path oscillate undamped (a pendulum on a
-    # shaking pivot, dt = 1 ms: its reaction 223 N off instead of 57 N, the rest being the stress-free
-    # rod's own undamped axial vibration; the energy balance of order 2 instead of 1.2)
-    to0, to1 = (parts["to0"], parts["to1"]) if m.moving else (ca.DM(lay.fixed_to), ca.DM(lay.fixed_to))
-    q_fix = to1 + alpha / (1 + alpha) * (q0 - to0)
-    is_fixed = np.zeros(n)
-    is_fixed[lay.fixed] = 1.0
-    du = ell * lay.spread(z) + ca.DM(is_fixed) * (q_fix - qp)  # q_{n+1} - q_pred: never formed as a difference
-    q1 = qp + du
-    qdd1 = du / (beta * hp**2)
-    qd1 = parts["qd_pred"] + gamma * hp * qdd1
-    if m.moving and alpha == 0.0:
-        free_mask = ca.DM(1.0 - is_fixed)
-        qdd1 = free_mask * qdd1 + parts["vdd1"]
-        qd1 = free_mask * qd1 + parts["vd1"]
-    q_alpha = (1 + alpha) * q1 - alpha * q0  # where q''_{n+1} and the weighted forces act
-    coef = ca.vertcat(gamma / (beta * hp), 1 / (beta * hp**2))
-    g = m.gravity(pp)
-    R = R_t = -alpha * parts["f_n"] - parts["f_ext"]
-    blocks = []
-    for grp in m.groups:
-        args = [gather(v, grp) for v in (q1, qd1, qdd1)] + ([gather(q_alpha, grp)] if alpha != 0.0 else [])
-        args += [grp.props(pp), g, coef]
-        fr, fk = (hht_kernel(grp.kind, alpha, m.inertia, tangent) for tangent in (False, True))
-        rep = [fr.n_in() - 2, fr.n_in() - 1]  # g and c: the same for every element
-        R = R + scatter(fr.map(f"{fr.name()}_{grp.n}", "serial", grp.n, rep, [])(*args), grp, n)
-        r_e, K_e = fk.map(f"{fk.name()}_{grp.n}", "serial", grp.n, rep, [])(*args)
-        R_t = R_t + scatter(r_e, grp, n)  # the same residual, from the kernel that also gives K
-        blocks.append(K_e)
-    row = -np.ones(n, dtype=int)
-    row[free] = np.arange(len(free))
-    asm = MatrixAssembly(m.groups, row, row)
-    fr_idx = np.array(free, dtype=int)
-    jnz = asm.nonzeros(blocks) * ca.DM(ell[fr_idx[asm.nz_cols]]) / (dp * ell)[fr_idx[asm.nz_rows].tolist()]
-    scale_f = (dp * ell)[free]
-    cse = {"cse": True}
-    resid = ca.Function("hht_residual", [z, P], [R[free] / scale_f], ["z", "prm"], ["G"], cse)
-    jac = ca.Function("hht_jacobian", [z, P], [ca.MX(asm.sparsity, jnz), R_t[free] / scale_f], ["z", "prm"],
-                      ["jac_G_z", "G"], cse)
-    # the residual once more at the solution, with the fixed rows that give the multipliers
-    resid_all = ca.Function("hht_residual_all", [z, P], [R[free] / scale_f, R[lay.fixed]], ["z", "prm"],
-                            ["G", "r_fixed"], cse)
-    if expand:
-        resid, jac, resid_all = resid.expand(), jac.expand(), resid_all.expand()
-    G1, r_fixed = resid_all(z, P)
-    lam1 = -r_fixed / (1 + alpha) if lay.fixed else ca.MX(0, 1)
-    x1 = ca.densify(ca.vertcat(q1, qd1, qdd1, lam1))  # dense: the C interface is plain arrays
-    res = ca.norm_inf(G1) if free else ca.MX(0)
-    floor = ROUNDOFF_FLOOR * np.finfo(float).eps * ca.mmax(ca.fabs(q1 / ell))
-    done = res <= ca.fmax(tol, floor)
-    finish = ca.Function("hht_finish", [z, P], [x1, res, done], ["z", "prm"], ["x1", "res", "done"])
-    return resid, jac, finish
-
-
-def _mapped(grp, f: ca.Function, *args):
-    """``f`` of every element of ``grp``; its inputs named g (gravity) are the same for all."""
-    rep = [i for i in range(f.n_in()) if f.name_in(i) == "g"]
-    return f.map(f"{f.name()}_{grp.n}", "serial", grp.n, rep, [])(*args)
-
-
-def _scale(m: Model, alpha: float) -> ca.Function:
-    """``hht_scale(q, qd, p, h) -> d``: the rotation-invariant diagonal of S (Eq. 9) at a state."""
-    n = m.n_dof
-    gamma, beta = hht_coefficients(alpha)
-    q, qd, p, h = ca.MX.sym("q", n), ca.MX.sym("qd", n), ca.MX.sym("p", m.n_p), ca.MX.sym("h")
-    diag = [ca.MX.zeros(n) for _ in range(3)]
-    for grp in m.groups:
-        out = _mapped(grp, kernel(grp.kind, "scale", m.inertia), gather(q, grp), gather(qd, grp), grp.props(p),
-                      m.gravity(p))
-        diag = [dg + scatter(v, grp, n) for dg, v in zip(diag, out, strict=True)]
-    dm, dc, dk = diag
-    dS = dm / (beta * h**2) + gamma / (beta * h) * ca.fabs(dc) + ca.fabs(dk)
-    # Average x and y per node: the trace of a 2x2 block does not change under rotation.
-    avg = ca.vertcat(*[(dS[3 * k] + dS[3 * k + 1]) / 2 if i < 2 else dS[3 * k + 2]
-                       for k in range(n // 3) for i in range(3)])
-    floor = 1e-12 * ca.mmax(avg) + 1e-300
-    return ca.Function("hht_scale", [q, qd, p, h], [ca.densify(ca.fmax(avg, floor))], ["q", "qd", "p", "h"], ["d"])
-
-
-def _initial(m: Model, lay: _Layout) -> ca.Function:
-    """``hht_initial(q, qd, t, p) -> (qdd, lam)``: consistent accelerations and multipliers (index-1
-    form of Eq. 1): the fixed dofs accelerate as their supports do (not at all unless they move),
-    M_ff qdd_f = -(h + f_int - g - f_ext + M qdd_c)_f, and the multipliers balance the fixed rows."""
-    n = m.n_dof
-    q, qd, t, p = ca.MX.sym("q", n), ca.MX.sym("qd", n), ca.MX.sym("t"), ca.MX.sym("p", m.n_p)
-    hh, f_int, g = m.forces(q, qd, p)
-    rhs = hh + f_int - g - m.load(t, p)
-    M = m.mass(q, p)
-    qdd_c = ca.mtimes(lay.reactions(), m.prescribed(t)[2]) if m.moving else ca.MX.zeros(n)
-    shifted = rhs + ca.mtimes(M, qdd_c) if m.moving else rhs
-    qdd = qdd_c + lay.spread(-ca.solve(M[lay.free, lay.free], shifted[lay.free], "qr") if lay.free else ca.MX(0, 1))
-    lam = -(ca.mtimes(M, qdd) + rhs)[lay.fixed] if lay.fixed else ca.MX(0, 1)
-    return ca.Function("hht_initial", [q, qd, t, p], [ca.densify(qdd), ca.densify(lam)], ["q", "qd", "t", "p"],
-                       ["qdd", "lam"])
-
-
-def _post(m: Model) -> ca.Function:
-    """``hht_post(x, t, p) -> y``: what a result reports per state (see :attr:`HHT.post`)."""
-    n = m.n_dof
-    x, t, p = ca.MX.sym("x", 3 * n + m.n_con), ca.MX.sym("t"), ca.MX.sym("p", m.n_p)
-    q, qd, lam = x[:n], x[n:2 * n], x[3 * n:]
-    T, Ve, Vg = m.energy(q, qd, p)
-    power = ca.dot(m.load(t, p), qd) + m.follower_power(q, qd, p)
-    if m.moving:  # a moving support works on the structure: -lambda (its force) times its velocity
-        power -= ca.dot(lam, qd[[c.dof for c in m.constraints]])
-    y = ca.vertcat(T, Ve, Vg, power, m.dissipation(q, qd, p),
-                   m.outputs(q, qd, lam, p), m.local_rotations(q))
-    return ca.Function("hht_post", [x, t, p], [ca.densify(y)], ["x", "t", "p"], ["y"])
-
-
-def _step_blocks(m: Model, lay: _Layout, alpha: float, prepare: ca.Function, resid: ca.Function,
-                 finish: ca.Function, expand: bool) -> ca.Function:
-    """``hht_step_sensitivity(x0, t0, p, h, d, x1) -> (G_z, G_w, X_z, X_w)``: the blocks of the step's
-    exact derivative by the implicit-function theorem. With G(z, prm(w)) = 0 and x1 = X(z, prm(w)),
-    w = (x0, t0, p, h): dx1/dw = X_w - X_z G_z^-1 G_w, one sparse QR of G_z per step. CasADi's
-    generic rootfinder derivative gives the same numbers but differentiates through the Newton
-    solve in every direction: about twice the run time, and for the sensitivities' 50-odd
-    directions 3x the code to compile."""
-    n, nx = m.n_dof, 3 * m.n_dof + m.n_con
-    _, beta = hht_coefficients(alpha)
-    z = ca.MX.sym("z", len(lay.free))
-    w = ca.MX.sym("w", nx + 1 + m.n_p + 1)  # the blocks are differentiated in w, then called on the inputs
-    o = np.cumsum([0, nx, 1, m.n_p, 1])
-    d = ca.MX.sym("d", n)
-    _, prm = prepare(*(w[o[i]:o[i + 1]] for i in range(4)), d)
-    G, X = resid(z, prm), finish(z, prm)[0]
-    blocks = ca.Function("hht_step_blocks", [z, w, d], [ca.jacobian(e, v) for e in (G, X) for v in (z, w)],
-                         ["z", "w", "d"], ["G_z", "G_w", "X_z", "X_w"])
-    if expand:
-        blocks = blocks.expand()
-    x0, t0, p, h = ca.MX.sym("x0", nx), ca.MX.sym("t0"), ca.MX.sym("p", m.n_p), ca.MX.sym("h")
-    x1 = ca.MX.sym("x1", nx)
-    q_pred = x0[:n] + h * x0[n:2 * n] + (0.5 - beta) * h**2 * x0[2 * n:3 * n]
-    z_of_x1 = ((x1[:n] - q_pred) / lay.ell)[lay.free]  # the unknowns that give x1
-    return ca.Function("hht_step_sensitivity", [x0, t0, p, h, d, x1],
-                       list(blocks(z_of_x1, ca.vertcat(x0, t0, p, h), d)),
-                       ["x0", "t0", "p", "h", "d", "x1"], ["G_z", "G_w", "X_z", "X_w"])

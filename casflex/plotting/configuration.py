@@ -19,6 +19,8 @@ _BODY_COLOR = "#e67e22"
 _MARKER_COLOR = "#16a085"
 _SUPPORT_MARKERS = {"clamp": "s", "pin": "^", "x": ">", "y": "v", "theta": "D"}
 _SUPPORT_LABELS = {"clamp": "clamp", "pin": "pin", "x": "x support", "y": "y support", "theta": "rotation support"}
+#: Ideal joints at their points: marker, face colour, label
+_JOINT_STYLE = {"hinge": ("o", "white", "hinge"), "slider": ("s", "white", "slider"), "weld": ("s", "0.3", "weld")}
 
 
 class _Drawer:
@@ -72,6 +74,11 @@ class _Drawer:
         for s in model.scene.supports:
             self.supports.setdefault(s.kind, []).append(idx[s.node])
         self.n_user = len(model.scene.nodes)
+        # ideal joints: drawn at their point seen from node b; the point's offsets from every node of
+        # the joint (node a's too) are rigid links where the point is off the node
+        self.joint_kinds = [j.kind for j in model.scene.joints]
+        self.joint_ends = [(idx[n], np.subtract(model.scene.joint_point(j), xy0[idx[n], :2]))
+                           for j in model.scene.joints for n in reversed(j.nodes)]  # node b first
 
     def bodies(self, q: np.ndarray) -> np.ndarray:
         """(k, 2) centres of mass of the rigid bodies."""
@@ -114,6 +121,18 @@ class _Drawer:
         d = self.end_offsets
         return xy[n, :2] + np.column_stack([c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1]])
 
+    def joints(self, q: np.ndarray) -> np.ndarray:
+        """(k, 2) the joints' points, carried by node b (its end of each joint)."""
+        firsts = np.cumsum([0] + [len(j.nodes) for j in self.model.scene.joints])[:-1]
+        return np.array([self._turned(q, *self.joint_ends[i]) for i in firsts]).reshape(-1, 2)
+
+    def _turned(self, q: np.ndarray, node: int, offset: np.ndarray) -> np.ndarray:
+        """node + R(theta - theta0) offset (m)."""
+        xy = q.reshape(-1, 3)
+        turn = xy[node, 2] - self.model.q0[3 * node + 2]
+        c, s = np.cos(turn), np.sin(turn)
+        return xy[node, :2] + np.array([c * offset[0] - s * offset[1], s * offset[0] + c * offset[1]])
+
     def links(self, q: np.ndarray) -> np.ndarray:
         """(k, 2) polyline of the rigid links, NaN-separated: each body's node to its centre of mass,
         and each spring end off its node to that node."""
@@ -121,6 +140,8 @@ class _Drawer:
         pieces = [(xy[n, :2], c) for n, c in zip(self.link_nodes, self.bodies(q), strict=True)]
         pieces += [(xy[self.end_nodes[k], :2], p)
                    for k, p in zip(self.link_ends, self.ends(q)[self.link_ends], strict=True)]
+        pieces += [(xy[nd, :2], self._turned(q, nd, off)) for nd, off in self.joint_ends
+                   if np.hypot(*off) > 1e-12 * self.extent]
         if not pieces:
             return np.empty((0, 2))
         return np.vstack([np.vstack([a, b, [np.nan, np.nan]]) for a, b in pieces])
@@ -196,6 +217,12 @@ class _Drawer:
         for kind, nodes in self.supports.items():
             art[f"support:{kind}"], = ax.plot(xy[nodes, 0], xy[nodes, 1], ls="none", marker=_SUPPORT_MARKERS[kind],
                                               ms=12, color="0.45", mec="black", label=_SUPPORT_LABELS[kind], zorder=5)
+        jp = self.joints(q)
+        for kind, (marker, face, label) in _JOINT_STYLE.items():
+            sel = [i for i, k in enumerate(self.joint_kinds) if k == kind]
+            if sel:
+                art[f"joint:{kind}"], = ax.plot(jp[sel, 0], jp[sel, 1], ls="none", marker=marker, ms=9, mfc=face,
+                                                mec="black", mew=1.4, label=label, zorder=8)
         if labels:
             for i, name in enumerate(self.model.node_names[:self.n_user]):
                 ax.annotate(name, (xy[i, 0], xy[i, 1]), xytext=(6, 4), textcoords="offset points",
@@ -213,6 +240,11 @@ class _Drawer:
             art[key].set_data(pts[:, 0], pts[:, 1])  # type: ignore[attr-defined]
         for kind, nodes in self.supports.items():
             art[f"support:{kind}"].set_data(xy[nodes, 0], xy[nodes, 1])  # type: ignore[attr-defined]
+        jp = self.joints(q)
+        for kind in _JOINT_STYLE:
+            sel = [i for i, k in enumerate(self.joint_kinds) if k == kind]
+            if sel:
+                art[f"joint:{kind}"].set_data(jp[sel, 0], jp[sel, 1])  # type: ignore[attr-defined]
 
 
 def _check_q(model: Model, q: np.ndarray | None) -> np.ndarray:
@@ -232,8 +264,9 @@ def plot_configuration(model: Model, q: np.ndarray | None = None, ax: Axes | Non
     (at the ends of a linear spring between the same nodes, else the middle of their node pair),
     rigid bodies diamonds at their centres of mass joined to their node (with the spring ends fixed
     off a node: rigid links), markers crosses, nodes dots (user nodes labelled), supports grey
-    markers (square clamp, triangle pin). Axes in m with equal aspect. Draws into ``ax`` if given, else a new figure;
-    returns the figure.
+    markers (square clamp, triangle pin), ideal joints at their points (open circle hinge, open
+    square slider, grey square weld; rigid links from their nodes where the point is off them).
+    Axes in m with equal aspect. Draws into ``ax`` if given, else a new figure; returns the figure.
     """
     q = _check_q(model, q)
     if ax is None:

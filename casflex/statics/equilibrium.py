@@ -24,6 +24,7 @@ from casflex.statics.problem import (
     StaticOptions,
     StaticsError,
     problem_for,
+    refuse_joints,
     resolve_options,
     spell,
     stability_of,
@@ -182,6 +183,7 @@ def equilibrium(
         that depend on q).
     """
     opts = resolve_options(options, settings)
+    refuse_joints(model, "static equilibrium")
     prob = problem_for(model)
     if not prob.conservative and opts.seek == "stable":
         raise StaticsError(f"the scene has follower loads: they have no potential to minimise; solve with "

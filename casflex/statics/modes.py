@@ -6,7 +6,11 @@ The equations of motion linearised about q (the initial configuration or a stati
 
 are restricted to the free dofs (the supports fix dofs, so B dq = 0 leaves exactly the free
 ones) and solved as the symmetric generalised eigenproblem K v = omega^2 M v by
-``scipy.linalg.eigh``. The eigenvalues are then recomputed as Rayleigh quotients of K and M:
+``scipy.linalg.eigh``. Ideal joints restrict the motions further, to the null space N of their
+B_J on the free dofs: the eigenproblem is then N^T K_L N v = omega^2 N^T M N v, with K_L = K +
+sum_j mu_j d2Phi_j/dq2 the tangent of the Lagrangian (the joints' reactions' own stiffness, mu their
+multipliers at q: given as ``lam``, else the least-squares static balance of the free rows).
+The eigenvalues are then recomputed as Rayleigh quotients of K and M:
 ``eigh`` gives them to eps * max|omega^2| only, which loses digits in proportion to omega_max^2 /
 omega^2 (7e-9 relative on the first mode of a 64-element cantilever; the Rayleigh quotient
 ~1e-11). K is the exact tangent at q and contains the geometric stiffness of the preload (e.g.
@@ -135,20 +139,26 @@ def modes(
     if isinstance(k, bool) or not isinstance(k, int | np.integer) or not 1 <= k <= nf:
         raise ValueError(f"count: expected 1 <= count <= {nf} (free motions), got {count!r}")
 
-    residual, is_eq = _equilibrium_check(prob, pv, t, qv, tol)
-
     K = prob.hessian(qv, 1.0, float(t), pv)
     M = np.asarray(prob.mass(qv, pv).full(), dtype=float)
-    Kr = K[np.ix_(free, free)]
-    Mr = M[np.ix_(free, free)]
+    Kr, Mr = K[np.ix_(free, free)], M[np.ix_(free, free)]
+    basis = np.eye(nf)  # the motions: the free dofs, or the joints' null space in them
+    if model.joint_row_names:
+        Kr, Mr, basis, residual, is_eq = _joints(model, prob, qv, pv, float(t), lv, Kr, Mr, tol)
+        k = basis.shape[1] if count is None else k
+        if k > basis.shape[1]:
+            raise ValueError(f"count: expected 1 <= count <= {basis.shape[1]} (motions the joints leave), "
+                             f"got {count!r}")
+    else:
+        residual, is_eq = _equilibrium_check(prob, pv, t, qv, tol)
     Mr = 0.5 * (Mr + Mr.T)
 
     # Massless free motions: eigenvectors of the reduced mass with ~zero eigenvalue.
     mu, W = scipy.linalg.eigh(Mr)
     scale = float(np.max(np.abs(mu)))
-    small = mu <= 1e-12 * scale if scale > 0.0 else np.ones(nf, dtype=bool)
+    small = mu <= 1e-12 * scale if scale > 0.0 else np.ones(Mr.shape[0], dtype=bool)
     if np.any(small):
-        weight = np.max(np.abs(W[:, small]), axis=1)
+        weight = np.max(np.abs(basis @ W[:, small]), axis=1)
         names = [model.dof_names[free[i]] for i in np.flatnonzero(weight > 1e-6 * weight.max())]
         raise ModesError(
             f"the reduced mass matrix is singular: {int(small.sum())} free motion(s) carry no mass, involving "
@@ -156,7 +166,7 @@ def modes(
             "or remove the node."
         )
     if not prob.conservative:
-        return _nonsymmetric(model, Kr, Mr, free, k, residual, is_eq)
+        return _nonsymmetric(model, Kr, Mr, free, k, residual, is_eq, basis)
     _, V = scipy.linalg.eigh(Kr, Mr, subset_by_index=None)
     # eigh gives eigenvalues to eps * max|omega^2|: the low modes of a fine mesh (omega^2 range
     # ~1e9) lose digits. The Rayleigh quotient of the original K, M with these vectors is
@@ -167,14 +177,14 @@ def modes(
     order = np.argsort(w2)[:k]
     w2 = w2[order]
     shapes = np.zeros((n, k))
-    shapes[free] = V[:, order]
+    shapes[free] = basis @ V[:, order]
     omega = np.sign(w2) * np.sqrt(np.abs(w2))
     return ModesResult(freq_hz=omega / (2.0 * np.pi), omega=omega, shapes=shapes, dof_names=model.dof_names,
                        residual=residual, equilibrium=is_eq, omega2=w2.astype(complex), flutter=False)
 
 
 def _nonsymmetric(model: Model, Kr: np.ndarray, Mr: np.ndarray, free: np.ndarray, k: int, residual: float,
-                  is_eq: bool) -> ModesResult:
+                  is_eq: bool, basis: np.ndarray) -> ModesResult:
     """Modes of a non-symmetric tangent (follower loads): K v = omega^2 M v by ``scipy.linalg.eig``."""
     w2, V = scipy.linalg.eig(Kr, Mr)
     top = float(np.max(np.abs(w2)))
@@ -188,9 +198,41 @@ def _nonsymmetric(model: Model, Kr: np.ndarray, Mr: np.ndarray, free: np.ndarray
     root = np.sqrt(w2.astype(complex))
     omega = np.where(pair, root.real, np.sign(w2.real) * np.sqrt(np.abs(w2.real)))
     shapes = np.zeros((model.n_dof, k), dtype=complex)
-    shapes[free] = V
+    shapes[free] = basis @ V
     return ModesResult(freq_hz=omega / (2.0 * np.pi), omega=omega, shapes=shapes if flutter else shapes.real,
                        dof_names=model.dof_names, residual=residual, equilibrium=is_eq, omega2=w2, flutter=flutter)
+
+
+def _joints(model: Model, prob, q: np.ndarray, p: np.ndarray, t: float, lam: np.ndarray, Kr: np.ndarray,
+            Mr: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, bool]:
+    """(N^T K_L N, N^T M N, N, static residual, equilibrium?) with the ideal joints' rows: N an
+    orthonormal basis of the free motions that keep the joints closed, K_L the Lagrangian's tangent; the
+    residual is the free rows' imbalance relative to the largest force in them."""
+    import casadi as ca
+
+    free, nf = prob.free, model.n_fixed
+    phi, B = (np.array(v) for v in model.constraint(q))
+    Bj = B[nf:][:, free]
+    sp = Scaled(prob, p, t, q)
+    _, _, g = sp.gradient(sp.u(q), 1.0)  # the free rows' dPi/dq, scaled by their lengths
+    react = (Bj * sp.ell[None, :]).T  # B_J^T in the scaled rows of g
+    mu = lam[nf:] if np.any(lam[nf:]) else np.linalg.lstsq(react, -g, rcond=None)[0]
+    # the balance relative to the forces in it: the statics scaling d (the diagonal of K) says nothing
+    # of dofs that only the joints hold (a rigid body's translations: d at its 1e-12 floor)
+    res = float(np.abs(g + react @ mu).max() / max(np.abs(g).max(), np.abs(react @ mu).max(), 1e-300))
+    closed = np.abs(phi.ravel()[nf:]).max() <= 1e-9 * model.length_scale
+    qs, ms = ca.SX.sym("q", model.n_dof), ca.SX.sym("mu", mu.size)
+    lag = ca.Function("joint_lagrangian_hessian", [qs, ms],
+                      [ca.hessian(ca.dot(ms, model.constraint(qs)[0][nf:]), qs)[0]])
+    H = np.array(lag(q, mu))[np.ix_(free, free)]
+    N = scipy.linalg.null_space(Bj)
+    is_eq = bool(res <= tol and closed)
+    if not is_eq:
+        why = f"the free rows' imbalance is {res:.1e} of the forces" + ("" if closed else ", a joint is open")
+        warnings.warn(f"modes about a configuration that is not a static equilibrium of the jointed system ({why}): "
+                      "the frequencies are not those of small vibrations about a rest state", StabilityWarning,
+                      stacklevel=3)
+    return N.T @ (Kr + H) @ N, N.T @ Mr @ N, N, float(res), is_eq
 
 
 def _equilibrium_check(prob, pv: np.ndarray, t: float, q: np.ndarray, tol: float) -> tuple[float, bool]:

@@ -40,6 +40,7 @@ from casflex.statics.problem import (
     StaticsError,
     neutral_band,
     problem_for,
+    refuse_joints,
     resolve_options,
     spell,
 )
@@ -310,6 +311,7 @@ def equilibrium_path(
     """
     opts = resolve_options(options, settings)
     _validate(to_factor, max_points, arc_length, names)
+    refuse_joints(model, "equilibrium path following")
     prob = problem_for(model)
     if not prob.conservative:  # the path's stability tests read the symmetric tangent of a potential
         raise StaticsError("the scene has follower loads: equilibrium paths are traced for conservative loads only; "

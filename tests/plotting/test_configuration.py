@@ -83,3 +83,20 @@ def test_rigid_links_drawn_to_the_joints_they_carry():
     rings = np.column_stack([ring.get_xdata(), ring.get_ydata()])
     kn = q[model.dof("xknee_s"):model.dof("xknee_s") + 2]
     np.testing.assert_allclose(rings[1], 0.5 * (at_knee + kn), atol=1e-12)  # the middle of the bushing's ends
+
+
+def test_ideal_joints_drawn_at_their_points_with_links_to_them():
+    # the slider-crank turned by 1 rad at the crank: the crank pin (carried by node a) and the crank's
+    # link from o to it; the piston's slider at node b
+    model = casflex.assemble(casflex.load_scene("slidercrank"))
+    q = model.q0.copy()
+    q[model.dof("thetao")] += 1.0
+    ax = plotting.plot_configuration(model, q).axes[0]
+    hinge = next(line for line in ax.lines if line.get_label() == "hinge")
+    np.testing.assert_allclose([hinge.get_xdata()[0], hinge.get_ydata()[0]], q[model.dof("xa"):model.dof("xa") + 2])
+    pin = np.array(model.scene.joint_point(model.scene.joints[0]))  # on the crank, turned with node o
+    c, s = np.cos(1.0), np.sin(1.0)
+    link = next(line for line in ax.lines if line.get_label() == "rigid link")
+    pts = np.column_stack([link.get_xdata(), link.get_ydata()])
+    assert np.isclose(pts, np.array([[c, -s], [s, c]]) @ pin, atol=1e-12).all(axis=1).any()
+    assert any(line.get_label() == "slider" for line in ax.lines)
