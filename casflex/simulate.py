@@ -22,6 +22,7 @@ from __future__ import annotations
 import os
 import sys
 import time
+import warnings
 import weakref
 from collections.abc import Callable
 from pathlib import Path
@@ -195,6 +196,11 @@ def simulate(
     alpha = float(run.alpha if alpha is None else alpha)
     n_steps = step_count(t_end, dt)
     check_memory(model, n_steps, dt)
+    if alpha == 0.0 and model.joint_row_names and model.moving:
+        warnings.warn("alpha = 0 with ideal joints driven by a moving support: their forces (index-3 multipliers) "
+                      "start with an O(dt) error that nothing damps at alpha = 0 (the slider-crank's, the hinged "
+                      "leg's: tens of N); the positions are right. Use alpha < 0, e.g. -0.05", RuntimeWarning,
+                      stacklevel=2)
     integ = integrator_for(model, alpha=alpha, tol=tol, max_iter=max_iter, newton=newton)
     pv = model.params(p)
     report = _text_progress if progress is True else (progress or None)

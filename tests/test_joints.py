@@ -373,3 +373,9 @@ def test_the_direct_method_takes_the_joints_multipliers_as_unknowns():
     assert r.success and np.allclose(r.p, [kt, ct], rtol=1e-8), (r.p, r.message)  # measured 1e-12
     with pytest.raises(ValueError, match=r"ideal joints \['pin', 'elbow'\]: the adapted direct method does not"):
         identify_adapted_direct(model, data, [0.3, 0.6], start=0.7)
+
+
+def test_alpha_0_on_a_driven_mechanism_warns_that_its_joint_forces_ring():
+    model = casflex.assemble(casflex.load_scene("slidercrank"))
+    with pytest.warns(RuntimeWarning, match="alpha = 0 with ideal joints driven by a moving support"):
+        simulate(model, 0.01, dt=1e-3, alpha=0.0)
