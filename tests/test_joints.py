@@ -374,6 +374,22 @@ def test_the_direct_method_takes_the_joints_multipliers_as_unknowns():
     with pytest.raises(ValueError, match=r"ideal joints \['pin', 'elbow'\]: the adapted direct method does not"):
         identify_adapted_direct(model, data, [0.3, 0.6], start=0.7)
 
+    # from two markers at 1 mm: the kinematic fit closes the hinges (the inverse kinematics), the markers
+    # alone deciding the joint angles; the rates by the default smoothing
+    from casflex.markers import Marker
+
+    y = np.column_stack([0.5 * np.cos(p1), 0.5 * np.sin(p1), elbow[0] + 0.6 * np.cos(p2), elbow[1] + 0.6 * np.sin(p2)])
+    y += 1e-3 * np.random.default_rng(1).normal(size=y.shape)
+    e = (L1 * math.cos(PHI0[0]), L1 * math.sin(PHI0[0]))
+    marked = casflex.assemble(dataclasses.replace(scene, markers=(
+        Marker("m1", "link1", 0.5 * math.cos(PHI0[0]), 0.5 * math.sin(PHI0[0])),
+        Marker("m2", "link2", e[0] + 0.6 * math.cos(PHI0[1]), e[1] + 0.6 * math.sin(PHI0[1])))))
+    r = identify_direct(marked, MeasurementSet(t, ("xm1", "ym1", "xm2", "ym2"), y, None, None),
+                        list(np.round(np.arange(0.2, 1.21, 0.1), 3)), start=0.7)
+    assert r.success, r.message
+    for name, truth in (("kt", kt), ("ct", ct)):  # measured z = 1.7 and 0.6
+        assert abs(r.parameters[name] - truth) < 3 * r.std_errors[name], (name, r.parameters[name], r.std_errors)
+
 
 def test_alpha_0_on_a_driven_mechanism_warns_that_its_joint_forces_ring():
     model = casflex.assemble(casflex.load_scene("slidercrank"))

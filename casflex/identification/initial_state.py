@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
-from scipy.linalg import LinAlgError, eigh
+from scipy.linalg import LinAlgError, eigh, null_space
 
 from casflex.identification.measurement import Experiment, free_dofs, nyquist
 from casflex.model import Model
@@ -64,9 +64,9 @@ def _placement(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def _kinematic_fit(model: Model, measured: tuple[int, ...], markers: tuple[int, ...] = ()) -> ca.Function:
     """``kinematic_fit(q_known, q_start, y_known) -> q``: the configuration of least elastic energy
-    whose measured and supported dofs take their values in ``q_known`` and whose markers
-    ``markers`` (indices into :func:`casflex.markers.marker_channels`) are nearest ``y_known``, by
-    IPOPT with the exact Hessian; built once per model, dofs and markers.
+    whose measured and supported dofs take their values in ``q_known``, whose ideal joints are closed
+    and whose markers ``markers`` (indices into :func:`casflex.markers.marker_channels`) are nearest
+    ``y_known``, by IPOPT with the exact Hessian; built once per model, dofs and markers.
 
     The markers are fitted in the least-squares sense, with the elastic energy weighted so that the
     scene's stiffest motion costs as much as the markers' misfit (1 / max diag of its Hessian
@@ -109,10 +109,17 @@ def _kinematic_fit(model: Model, measured: tuple[int, ...], markers: tuple[int, 
         # their least-energy values and chooses among those the markers do not see.
         J = np.array(ca.Function("dg", [u, qk], [ca.jacobian(g, u)])(model.q0[unknown], model.q0))
         H = np.array(ca.Function("h", [u, qk], [ca.hessian(V_el, u)[0]])(model.q0[unknown], model.q0))
-        stiff = float(np.abs(np.diag(H)).max())
+        # the stiffest translation: a beam's stretch, a bushing's; a torsion spring (a soft joint, the
+        # kind of property identified) is no structural motion to hold and sets no weight: on rigid
+        # links between hinges the markers alone decide (a pull toward the springs' nominal rest
+        # angles would bias the joint angles that the direct method then fits)
+        trans = ~model.is_rotation[unknown]
+        stiff = float(np.abs(np.diag(H))[trans].max(initial=0.0))
         mu = float((J**2).sum(axis=0).max()) / stiff if stiff > 0 else 0.0
         f = 0.5 * ca.sumsqr(g) + mu * f
         g = ca.SX(0, 1)
+    if model.joint_row_names:  # the ideal joints closed: equalities (the inverse kinematics of a jointed chain)
+        g = model.constraint(q)[0][model.n_fixed:] / model.length_scale
     solver = ca.nlpsol("kinematic_fit_nlp", "ipopt", {"x": u, "p": ca.vertcat(qk, u_ref, yk), "f": f, "g": g},
                        {"print_time": False, "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-12, "max_iter": 200}})
     U = solver(x0=Q0[unknown], p=ca.vertcat(QK, Q0[unknown], YK), lbg=0.0, ubg=0.0)["x"]
@@ -242,20 +249,24 @@ def kinematic_fits(model: Model, data, names: list[str], limit: int | None = Non
 
 def slow_modes(model: Model, q: np.ndarray, p: np.ndarray, omega_cut: float) -> np.ndarray:
     """Mode shapes (n_free, k) over the free dofs of the model linearised at q whose
-    |omega| < ``omega_cut`` (rad/s), M-orthonormal. Modes of negative stiffness (a pendulum
-    away from its rest) count as slow. Where the reduced mass is singular (free dofs without
-    mass), every free dof is kept (the identity)."""
+    |omega| < ``omega_cut`` (rad/s), M-orthonormal; with ideal joints, among the motions that keep
+    them closed (the null space of their B). Modes of negative stiffness (a pendulum away from its
+    rest) count as slow. Where the reduced mass is singular (free dofs without mass), every free
+    motion is kept."""
     if model not in _LINEAR:
         qs, ps = ca.SX.sym("q", model.n_dof), ca.SX.sym("p", model.n_p)
         _, f_int, g = model.forces(qs, ca.DM.zeros(model.n_dof), ps)
         _LINEAR[model] = ca.Function("linearise", [qs, ps], [ca.jacobian(f_int - g, qs), model.mass(qs, ps)])
     free = free_dofs(model)
     K, M = (np.asarray(v, dtype=float)[np.ix_(free, free)] for v in _LINEAR[model](q, p))
+    N = np.eye(free.size)  # the motions: the free dofs, or those that keep the ideal joints closed
+    if model.joint_row_names:
+        N = null_space(np.array(model.constraint(q)[1])[model.n_fixed:][:, free])
     try:
-        w2, V = eigh(0.5 * (K + K.T), 0.5 * (M + M.T))
+        w2, V = eigh(N.T @ (0.5 * (K + K.T)) @ N, N.T @ (0.5 * (M + M.T)) @ N)
     except LinAlgError:  # singular mass: no modal reduction
-        return np.eye(free.size)
-    return V[:, np.abs(w2) < omega_cut**2]
+        return N
+    return N @ V[:, np.abs(w2) < omega_cut**2]
 
 
 def slow_manifold(model: Model, k: int, codegen: bool = False) -> tuple[ca.Function, ca.Function]:

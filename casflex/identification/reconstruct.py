@@ -27,7 +27,6 @@ import numpy as np
 from casflex.data import MeasurementSet
 from casflex.identification.initial_state import kinematic_fits, slow_modes
 from casflex.identification.measurement import free_dofs
-from casflex.identification.problem import require_no_joints
 from casflex.markers import channel_index, marker_channels, marker_states
 from casflex.model import Model
 
@@ -71,8 +70,6 @@ def dofs_from_markers(model: Model, data: MeasurementSet, method: str, rotations
     markers = [c for c in data.channels if c in marker_channels(model)]
     if not markers:
         return data, None
-    if model.joint_row_names:
-        require_no_joints(model, f"the kinematic fit of markers' channels {markers} for {method}")
     beams = {b.name for b in model.scene.beams}
     on_beams = [par.name for par in model.parameters if par.target.split(".")[0] in beams]
     if on_beams:
