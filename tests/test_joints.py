@@ -105,7 +105,11 @@ def test_the_hinges_hold_to_round_off_and_alpha_0_keeps_the_energy(runs):
     assert drift[1e-3] < 2e-5 * scale and drift[2e-3] / drift[1e-3] > 3.5, drift
 
 
-def test_a_hinge_s_torsion_spring_damper_identified_from_two_markers_of_the_ode_s_motion():
+@pytest.mark.parametrize("start_at, options", [
+    (0.0, {}),  # the default: single shooting by Gauss-Newton from the scene's initial state
+    (0.5, {"initial_state": "estimate"}),  # mid-motion: the state on the slow manifold, the hinges closed
+    (0.0, {"solver": "ipopt", "transcription": "multiple-shooting"})])
+def test_a_hinge_s_torsion_spring_damper_identified_from_two_markers_of_the_ode_s_motion(start_at, options):
     """Data casflex did not make: the minimal-coordinate ODE with a spring-damper at the elbow (DOP853),
     two markers (mid link 1, 0.6 m along link 2) at 100 Hz with 1 mm of noise; the fit starts at 0.7 x."""
     import dataclasses
@@ -128,12 +132,13 @@ def test_a_hinge_s_torsion_spring_damper_identified_from_two_markers_of_the_ode_
         markers=(Marker("m1", "link1", 0.5 * math.cos(PHI0[0]), 0.5 * math.sin(PHI0[0])),
                  Marker("m2", "link2", e[0] + 0.6 * math.cos(PHI0[1]), e[1] + 0.6 * math.sin(PHI0[1]))),
         parameters=(Parameter("kt", "elbow_spring.kt"), Parameter("ct", "elbow_spring.ct")))
-    r = identify_indirect(casflex.assemble(scene), MeasurementSet(t, ("xm1", "ym1", "xm2", "ym2"), y, None, None),
-                          start=0.7, noise=1e-3)
+    window = t >= start_at
+    data = MeasurementSet(t[window], ("xm1", "ym1", "xm2", "ym2"), y[window], None, None)
+    r = identify_indirect(casflex.assemble(scene), data, start=0.7, noise=1e-3, **options)
     assert r.success, r.message
-    for name, truth in (("kt", kt), ("ct", ct)):  # measured z = -0.8 and 0.8, SE 0.14 % and 0.5 %
+    for name, truth in (("kt", kt), ("ct", ct)):  # measured |z| <= 1.1, SE 0.1-1.2 % (1 s mid-motion: the largest)
         se = r.std_errors[name]
-        assert abs(r.parameters[name] - truth) < 3 * se < 0.02 * truth, (name, r.parameters[name], se)
+        assert abs(r.parameters[name] - truth) < 3 * se < 0.05 * truth, (name, r.parameters[name], se)
 
 
 def test_compiled_runs_with_joints_keep_the_contract(runs):
@@ -371,7 +376,7 @@ def test_the_direct_method_takes_the_joints_multipliers_as_unknowns():
     data = MeasurementSet(t, ("xa", "ya", "thetaa", "xb", "yb", "thetab"), q, qd, qdd)
     r = identify_direct(model, data, [0.3, 0.6, 0.9, 1.2], start=0.7)
     assert r.success and np.allclose(r.p, [kt, ct], rtol=1e-8), (r.p, r.message)  # measured 1e-12
-    with pytest.raises(ValueError, match=r"ideal joints \['pin', 'elbow'\]: the adapted direct method does not"):
+    with pytest.raises(ValueError, match=r"ideal joints \['pin', 'elbow'\]: the adapted direct method .* does not"):
         identify_adapted_direct(model, data, [0.3, 0.6], start=0.7)
 
     # from two markers at 1 mm: the kinematic fit closes the hinges (the inverse kinematics), the markers

@@ -25,7 +25,7 @@ from casflex.data import MeasurementSet
 from casflex.identification.estimate import MODEL_ERRORS, estimate
 from casflex.identification.measurement import INITIAL_STATES, Experiment
 from casflex.identification.output_error import Budget
-from casflex.identification.problem import GAUSS_NEWTON, NLPKeywords, NLPOptions, merge_options, require_no_joints
+from casflex.identification.problem import GAUSS_NEWTON, NLPKeywords, NLPOptions, merge_options
 from casflex.identification.result import IdentificationResult
 from casflex.identification.shooting_nlp import RESIDUES, TRANSCRIPTIONS, identify_nlp
 from casflex.model import Model
@@ -143,8 +143,6 @@ def identify_indirect(
         raise ValueError(f"weights: expected three numbers >= 0 (xi, psi, phi), got {weights!r}")
     if initial_state not in INITIAL_STATES:
         raise ValueError(f"initial_state: expected one of {INITIAL_STATES}, got {initial_state!r}")
-    if initial_state != "scene":
-        require_no_joints(model, f"initial_state={initial_state!r}")
     run = model.scene.run
     alpha = float(run.alpha if alpha is None else alpha)
     dt = float(run.dt if dt is None else dt)

@@ -287,8 +287,13 @@ def slow_manifold(model: Model, k: int, codegen: bool = False) -> tuple[ca.Funct
                                                             ("p", (model.n_p,)), ("d", (nf,))))
     q = ca.DM(keep) * qg + ca.mtimes(ca.DM(put), qf)
     _, V_el, _ = model.energy(q, ca.DM.zeros(n), p)
-    kkt = ca.vertcat((ca.gradient(V_el, qf) + ca.mtimes(C.T, mu)) / d, ca.mtimes(C, qf - qg[free]) - a)
-    G = ca.Function("slow_manifold_kkt", [ca.vertcat(qf, mu), ca.vertcat(a, qg, ca.vec(C), p, d)], [kkt])
+    # ideal joints: closed on the manifold (their multipliers nu join the unknowns), so that the state
+    # and its velocities dq0/da v satisfy them for every a
+    phi_j = model.constraint(q)[0][model.n_fixed:] / model.length_scale
+    nu = ca.SX.sym("nu", phi_j.numel())
+    force = ca.gradient(V_el, qf) + ca.mtimes(C.T, mu) + ca.mtimes(ca.jacobian(phi_j, qf).T, nu)
+    kkt = ca.vertcat(force / d, ca.mtimes(C, qf - qg[free]) - a, phi_j)
+    G = ca.Function("slow_manifold_kkt", [ca.vertcat(qf, mu, nu), ca.vertcat(a, qg, ca.vec(C), p, d)], [kkt])
     # plain Newton steps: CasADi's line search on |kkt| stalls near the solution where the KKT matrix
     # is ill-conditioned (threelink mid-motion: cond 6e9, a residual of 2e-8 never decreased)
     tols = {"abstol": 1e-13, "abstolStep": 1e-14, "max_iter": 50}
@@ -296,7 +301,7 @@ def slow_manifold(model: Model, k: int, codegen: bool = False) -> tuple[ca.Funct
           ca.rootfinder("slow_manifold", "newton", G, {**tols, "line_search": False, "error_on_fail": True}))
     A, Vv, QG, CM, BM, P, D = (ca.MX.sym(s, *shape) for s, shape in (
         ("a", (k,)), ("v", (k,)), ("q_g", (n,)), ("C", (k, nf)), ("B", (nf, k)), ("p", (model.n_p,)), ("d", (nf,))))
-    z = rf(ca.vertcat(QG[free] + ca.mtimes(BM, A), ca.DM.zeros(k)), ca.vertcat(A, QG, ca.vec(CM), P, D))
+    z = rf(ca.vertcat(QG[free] + ca.mtimes(BM, A), ca.DM.zeros(k + nu.numel())), ca.vertcat(A, QG, ca.vec(CM), P, D))
     q0 = ca.DM(keep) * QG + ca.mtimes(ca.DM(put), z[:nf])
     qd0 = ca.mtimes(ca.DM(put), ca.mtimes(ca.jacobian(z[:nf], A), Vv))
     args = [A, Vv, QG, CM, BM, P, D]

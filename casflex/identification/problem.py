@@ -104,9 +104,9 @@ def require_no_joints(model: Model, method: str) -> None:
     """ValueError naming the joints when ``model`` has ideal joints, which ``method`` does not take yet."""
     if model.joint_row_names:
         joints = [jt.name for jt in model.scene.joints]
-        raise ValueError(f"ideal joints {joints}: {method} does not take them yet (issue 25); use the indirect "
-                         "method's default (single shooting by Gauss-Newton) from the scene's initial state, or "
-                         "the direct method on the nodes' dofs")
+        raise ValueError(f"ideal joints {joints}: {method} does not take them: a rigid body's rotation between "
+                         "joints is not in its nodes' translations; use the direct method (nodes' dofs or markers) "
+                         "or the indirect method")
 
 
 def start_values(model: Model, start: float | dict[str, float] | np.ndarray | None) -> np.ndarray:

@@ -280,7 +280,6 @@ def identify_nlp(
     pmap = pb.ParameterMap.of(model, opts.transform)
     scale = pmap.scale
     pb.require_fixed_supports(model, "the NLP transcription (solver other than gauss-newton)")
-    pb.require_no_joints(model, "the NLP transcription (solver other than gauss-newton)")
     p0 = pb.start_values(model, start)
     ell = np.where(model.is_rotation, 1.0, model.length_scale)
     T = N * h
