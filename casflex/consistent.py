@@ -52,8 +52,10 @@ def _step(B: np.ndarray, free: np.ndarray, ell: np.ndarray, r: np.ndarray, W: np
     return WiBt @ np.linalg.lstsq(Bf @ WiBt, -r, rcond=None)[0]
 
 
-def project_positions(model: Model, q: np.ndarray, *, what: str = "q0", max_iter: int = 30) -> np.ndarray:
-    """q with the joints closed (a copy; q itself when already closed to round-off)."""
+def project_positions(model: Model, q: np.ndarray, *, what: str = "q0", max_iter: int = 30,
+                      report: bool = True) -> np.ndarray:
+    """q with the joints closed (a copy; q itself when already closed to round-off); ``report``: say so
+    on the casflex log (INFO) when it moved."""
     if not model.joint_row_names:
         return q
     phi, B, scale = _rows(model, q)
@@ -65,7 +67,8 @@ def project_positions(model: Model, q: np.ndarray, *, what: str = "q0", max_iter
         out[free] += _step(B, free, ell, phi)
         phi, B, _ = _rows(model, out)
         if np.all(np.abs(phi) <= CLOSED * scale):
-            log.info("%s: moved onto the joints' constraints (largest change %.3g)", what, np.abs(out - q).max())
+            if report:
+                log.info("%s: moved onto the joints' constraints (largest change %.3g)", what, np.abs(out - q).max())
             return out
     j = int(np.argmax(np.abs(phi) / scale))
     raise ValueError(f"{what}: the joints cannot be closed: {model.joint_row_names[j]} stays {phi[j]:.3g} off "

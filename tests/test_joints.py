@@ -400,3 +400,50 @@ def test_alpha_0_on_a_driven_mechanism_warns_that_its_joint_forces_ring():
     model = casflex.assemble(casflex.load_scene("slidercrank"))
     with pytest.warns(RuntimeWarning, match="alpha = 0 with ideal joints driven by a moving support"):
         simulate(model, 0.01, dt=1e-3, alpha=0.0)
+
+
+def test_static_equilibrium_with_joints_against_the_minimal_coordinates():
+    """The double pendulum on hinges with torsion springs at the pivot (from a clamped ground node) and
+    at the elbow, its rest angles those of the horizontal start: the equilibrium under gravity against
+    the stationarity of its potential in the two angles (scipy fsolve), and the pivot's reactions."""
+    from scipy.optimize import fsolve
+
+    from casflex import Support, TorsionSpring
+    from casflex.statics import equilibrium
+
+    k1, k2 = 8.0, 3.0  # N m/rad
+    base = double_pendulum()
+    ground = Node("g", 0.0, 0.0, theta=PHI0[0])
+    scene = Scene(name="sprung", nodes=(ground, *base.nodes), bodies=base.bodies, supports=(Support("base", "g"),),
+                  joints=(Joint("pin", "hinge", ("g", "a")), base.joints[1]),
+                  torsion_springs=(TorsionSpring("s1", ("g", "a"), k1), TorsionSpring("s2", ("a", "b"), k2)))
+    model = casflex.assemble(scene)
+    res = equilibrium(model)
+
+    def stationary(phi):  # dV/dphi of V = k1/2 (p1 - p1_0)^2 + k2/2 (p2 - p1 - rest)^2 + gravity
+        p1, p2 = phi
+        rest = PHI0[1] - PHI0[0]
+        return [k1 * (p1 - PHI0[0]) - k2 * (p2 - p1 - rest) + (M1 * C1 + M2 * L1) * G * math.cos(p1),
+                k2 * (p2 - p1 - rest) + M2 * C2 * G * math.cos(p2)]
+
+    truth = fsolve(stationary, [-0.5, -0.5], xtol=1e-14)
+    assert res.stable
+    np.testing.assert_allclose([res.q[model.dof("thetaa")], res.q[model.dof("thetab")]], truth, atol=1e-9)
+    lam = dict(zip(model.constraint_names, res.lam, strict=True))
+    assert lam["base.y"] == pytest.approx(-(M1 + M2) * G, rel=1e-9)  # the support carries the weight
+    assert np.abs(np.array(model.constraint(res.q)[0])).max() < 1e-10  # the hinges closed
+
+
+def test_a_hinged_pendulum_started_upright_comes_to_rest_hanging():
+    from casflex.statics import StabilityWarning, equilibrium
+
+    up = math.pi / 2
+    scene = Scene(name="up", nodes=(Node("a", 0.0, 0.0, theta=up),),
+                  bodies=(RigidBody("link", "a", M1, J1, com_x=0.0, com_y=C1),), joints=(Joint("pin", "hinge", ("a",)),))
+    model = casflex.assemble(scene)
+    with pytest.warns(StabilityWarning, match="UNSTABLE"):  # upright: the nearest stationary point
+        nearest = equilibrium(model, seek="nearest")
+    assert nearest.q[model.dof("thetaa")] == pytest.approx(up, abs=1e-9)
+    down = equilibrium(model)  # seek = "stable": left along its unstable mode
+    assert down.stable and len(down.left) == 1
+    assert abs(math.remainder(down.q[model.dof("thetaa")] + math.pi / 2, 2 * math.pi)) < 1e-9

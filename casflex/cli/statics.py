@@ -154,10 +154,11 @@ def cmd_modes(args: argparse.Namespace, outputs: Outputs) -> int:
         _check_combinations(args, _STATIC_OPTIONS, "--about equilibrium")
     out = outputs.file("--out", args.out, (".npz",), "modes") if args.out else None
     model = load_model(args.scene)
-    free = model.n_dof - len({c.dof for c in model.constraints})
-    if args.count > free:
+    free = model.n_dof - len({c.dof for c in model.constraints}) - len(model.joint_row_names)
+    count = min(6, free) if args.count is None else args.count
+    if count > free:
         raise OptionError(f"--count: {model.scene.name} has {free} free motions, so at most {free} modes; "
-                          f"got {args.count}")
+                          f"got {count}")
     q = None
     if args.about == "equilibrium":
         with _warnings_as_lines():
@@ -166,7 +167,7 @@ def cmd_modes(args: argparse.Namespace, outputs: Outputs) -> int:
         print(f"static equilibrium of {model.scene.name}: {st.iterations} iterations; {st.stability.describe()}")
     where = "the static equilibrium" if q is not None else "the initial configuration"
     with _warnings_as_lines("" if q is not None else " (--about equilibrium)"):
-        res = modes(model, q=q, count=args.count)
+        res = modes(model, q=q, count=count)
     print(f"natural frequencies of {model.scene.name} linearised about {where}:")
     growth = np.abs(np.sqrt(res.omega2.astype(complex)).imag)
     for k, (f, g) in enumerate(zip(res.freq_hz, growth, strict=True), 1):
@@ -215,7 +216,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
     s = sub.add_parser("modes", help="natural frequencies and mode shapes")
     s.add_argument("scene", help="built-in scene name (twobar) or a TOML file")
-    s.add_argument("--count", type=integer(1, "a number of modes"), default=6, help="number of modes (default 6)")
+    s.add_argument("--count", type=integer(1, "a number of modes"),
+                   help="number of modes (default 6, or as many as the scene's free motions)")
     s.add_argument("--about", choices=("initial", "equilibrium"), default="initial",
                    help="linearise about the initial configuration (default) or the static equilibrium")
     _add_static_options(s, " (with --about equilibrium)")

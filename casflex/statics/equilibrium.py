@@ -24,7 +24,6 @@ from casflex.statics.problem import (
     StaticOptions,
     StaticsError,
     problem_for,
-    refuse_joints,
     resolve_options,
     spell,
     stability_of,
@@ -135,6 +134,28 @@ def _failure(out: Outcome, s_try: float, s_done: float, inc: float, cuts: int, t
         "equilibrium.")
 
 
+def _jointed(model: Model, prob, p, t: float, q_start, opts: StaticOptions, names) -> StaticResult:
+    """:func:`equilibrium` of a model with ideal joints (:mod:`casflex.statics.jointed`)."""
+    from casflex.statics.jointed import solve_jointed
+
+    if not prob.conservative:
+        raise StaticsError("follower loads and ideal joints together are not solved by the statics")
+    pv = model.p_nominal.copy() if p is None else model.params(p)
+    sp = Scaled(prob, pv, t, _start(model, q_start))
+    q, lam, total, factors, cuts, stab, left = solve_jointed(model, sp, opts)
+    unstable = tuple(UnstableEquilibrium(f, ev, qq) for f, ev, qq in left)
+    msg = (f"converged: {total} Newton iterations on the joints' Lagrangian over {len(factors)} load increment(s)"
+           f"{f' ({cuts} cut)' if cuts else ''}; {stab.describe()}")
+    if unstable:
+        msg += "; left an unstable equilibrium along its unstable mode"
+    if stab.assessed and not stab.stable:
+        warnings.warn(f"the static equilibrium is {stab.describe()}"
+                      + (f"; {spell(names, 'seek', 'stable')} looks for a stable one" if opts.seek == "nearest"
+                         else ""), StabilityWarning, stacklevel=3)
+    return StaticResult(q=q, lam=lam, success=True, message=msg, iterations=total, load_factors=factors,
+                        stability=stab, left=unstable, cuts=cuts)
+
+
 def equilibrium(
     model: Model,
     *,
@@ -183,8 +204,9 @@ def equilibrium(
         that depend on q).
     """
     opts = resolve_options(options, settings)
-    refuse_joints(model, "static equilibrium")
     prob = problem_for(model)
+    if model.joint_row_names:
+        return _jointed(model, prob, p, t, q_start, opts, names)
     if not prob.conservative and opts.seek == "stable":
         raise StaticsError(f"the scene has follower loads: they have no potential to minimise; solve with "
                            f"{spell(names, 'seek', 'nearest')} (Newton on the residual)")
