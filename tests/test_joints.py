@@ -439,7 +439,8 @@ def test_a_hinged_pendulum_started_upright_comes_to_rest_hanging():
 
     up = math.pi / 2
     scene = Scene(name="up", nodes=(Node("a", 0.0, 0.0, theta=up),),
-                  bodies=(RigidBody("link", "a", M1, J1, com_x=0.0, com_y=C1),), joints=(Joint("pin", "hinge", ("a",)),))
+                  bodies=(RigidBody("link", "a", M1, J1, com_x=0.0, com_y=C1),),
+                  joints=(Joint("pin", "hinge", ("a",)),))
     model = casflex.assemble(scene)
     with pytest.warns(StabilityWarning, match="UNSTABLE"):  # upright: the nearest stationary point
         nearest = equilibrium(model, seek="nearest")
@@ -447,3 +448,24 @@ def test_a_hinged_pendulum_started_upright_comes_to_rest_hanging():
     down = equilibrium(model)  # seek = "stable": left along its unstable mode
     assert down.stable and len(down.left) == 1
     assert abs(math.remainder(down.q[model.dof("thetaa")] + math.pi / 2, 2 * math.pi)) < 1e-9
+
+
+def test_an_equilibrium_path_with_joints_follows_the_closed_form():
+    """A rigid link hinged to a clamped ground node, held by a torsion spring kt, under gravity scaled
+    by the load factor s: every point of the path satisfies kt phi + s m g c cos(phi) = 0, the last
+    is the equilibrium's, and the pivot's reactions carry the weight."""
+    from casflex import Support, TorsionSpring
+    from casflex.statics import equilibrium, equilibrium_path
+
+    kt = 3.0
+    scene = Scene(name="sprung_link", nodes=(Node("g", 0.0, 0.0), Node("a", 0.0, 0.0)),
+                  bodies=(RigidBody("link", "a", M1, J1, com_x=C1, com_y=0.0),), supports=(Support("base", "g"),),
+                  joints=(Joint("pin", "hinge", ("g", "a")),), torsion_springs=(TorsionSpring("ts", ("g", "a"), kt),))
+    model = casflex.assemble(scene)
+    path = equilibrium_path(model)
+    phi, s = path.q[:, model.dof("thetaa")], path.load_factors
+    assert path.status == "reached" and path.stable.all() and len(s) > 3
+    assert np.abs(kt * phi + s * M1 * G * C1 * np.cos(phi)).max() < 1e-9  # N m (measured 4e-16)
+    assert phi[-1] == pytest.approx(equilibrium(model).q[model.dof("thetaa")], abs=1e-9)
+    lam = dict(zip(model.constraint_names, path.lam[-1], strict=True))
+    assert lam["base.y"] == pytest.approx(-M1 * G, rel=1e-9) and lam["base.theta"] == pytest.approx(kt * phi[-1])

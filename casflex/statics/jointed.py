@@ -167,3 +167,73 @@ def solve_jointed(model: Model, sp: Scaled, opts: StaticOptions):
     fixed = sp.problem.fixed
     lam = np.concatenate([-(grad + B_all.T @ mu)[fixed], mu])
     return q, lam, total, tuple(factors), cuts, stab, left
+
+
+class JointedPath:
+    """A model with ideal joints presented to the path tracer (:mod:`casflex.statics.path`) as
+    :class:`~casflex.statics.problem.Scaled` presents one without: unknowns x = (u, nu), the joints'
+    multipliers mu = (f / l) nu with f the loads' scale (J per scaled unit), so that the bordered
+    Jacobian [[H + d2(mu^T Phi)/du2, (f / l) B^T], [(f / l) B, 0]] is symmetric and its rows alike; the
+    "gradient" is F = (dPi/du + B^T mu, (f / l) Phi); stability from the reduced tangent on the joints'
+    null space (:meth:`tangent_eigenvalues`)."""
+
+    def __init__(self, model: Model, sp: Scaled):
+        self.model, self.sp, self.rows = model, sp, _Lagrangian(model, sp)
+        self.nu, self.nm = sp.n, len(model.joint_row_names)
+        self.n = self.nu + self.nm
+        self.base = sp.base
+        self.f = max(float(np.abs(sp.load(sp.u(sp.base))).max(initial=0.0)), 1e-300)
+
+    def _split(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return x[:self.nu], x[self.nu:] * self.f
+
+    def q(self, x: np.ndarray) -> np.ndarray:
+        return self.sp.q(x[:self.nu])
+
+    def u(self, q: np.ndarray) -> np.ndarray:
+        return np.concatenate([self.sp.u(q), np.zeros(self.nm)])
+
+    def gradient(self, x: np.ndarray, s: float) -> tuple[float, float, np.ndarray]:
+        u, mu = self._split(x)
+        pi, err, g = self.sp.gradient(u, s)
+        phi, B, _ = self.rows(u, mu)
+        return pi, err, np.concatenate([g + B.T @ mu, self.f * phi])
+
+    def hessian(self, x: np.ndarray, s: float) -> np.ndarray:
+        u, mu = self._split(x)
+        _, B, Hphi = self.rows(u, mu)
+        return np.block([[self.sp.hessian(u, s) + Hphi, self.f * B.T], [self.f * B, np.zeros((self.nm, self.nm))]])
+
+    def tangent_eigenvalues(self, x: np.ndarray, s: float) -> np.ndarray:
+        u, mu = self._split(x)
+        _, B, Hphi = self.rows(u, mu)
+        N = scipy.linalg.null_space(B)
+        return scipy.linalg.eigvalsh(N.T @ (self.sp.hessian(u, s) + Hphi) @ N) if N.size else np.zeros(0)
+
+    def load(self, x: np.ndarray) -> np.ndarray:
+        return np.concatenate([self.sp.load(x[:self.nu]), np.zeros(self.nm)])
+
+    def residual(self, F: np.ndarray) -> float:
+        """The largest entry of F relative to the loads' scale (the rows of rigid links' translations have no
+        stiffness of their own to scale them by)."""
+        return float(np.abs(F).max(initial=0.0) / self.f)
+
+    def tol(self, tol: float, x: np.ndarray) -> float:
+        return self.sp.tol(tol, x[:self.nu])
+
+    def turn(self, x: np.ndarray, y: np.ndarray) -> float:
+        return self.sp.turn(x[:self.nu], y[:self.nu])
+
+    def reactions(self, x: np.ndarray, s: float, dx: np.ndarray | None = None) -> np.ndarray:
+        """(the supports' multipliers, the joints') at x + dx (N, N m)."""
+        u, mu = self._split(x if dx is None else x + dx)
+        q = self.sp.q(u)
+        _, grad, _, _ = self.sp.problem.evaluate(q, s, self.sp.t, self.sp.p)
+        B_all = np.array(self.model.constraint(q)[1])[self.model.n_fixed:]
+        return np.concatenate([-(grad + B_all.T @ mu)[self.sp.problem.fixed], mu])
+
+    def start(self, opts: StaticOptions):
+        """The unloaded equilibrium the path starts from: (converged, x, iterations)."""
+        u0 = self.sp.u(project_positions(self.model, self.sp.base, what="q_start"))
+        ok, u, mu, its = _newton(self.sp, self.rows, u0, np.zeros(self.nm), 0.0, opts)
+        return ok, np.concatenate([u, mu / self.f]), its

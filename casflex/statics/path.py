@@ -29,18 +29,19 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numpy as np
 import scipy.linalg
 
 from casflex.model import Model
+from casflex.statics.jointed import JointedPath
 from casflex.statics.problem import (
     Scaled,
     StaticOptions,
     StaticsError,
     neutral_band,
     problem_for,
-    refuse_joints,
     resolve_options,
     spell,
 )
@@ -198,7 +199,7 @@ class _Tracer:
             u_prev, s_prev = u, s
             u, s = u + d[:n], s + d[n]
             if res <= tol_k and upd <= step_tol:
-                eig = scipy.linalg.eigvalsh(sp.hessian(u, s)) if n else np.zeros(0)
+                eig = _eigenvalues(sp, u, s) if n else np.zeros(0)
                 lam = sp.reactions(u_prev, s_prev, u - u_prev)
                 return _Point(u, s, lam, eig, neutral_band(eig), it)
         return None
@@ -244,6 +245,13 @@ class _Tracer:
                 fa *= 0.5
             b, fb = c, fc
         return best
+
+
+def _eigenvalues(sp, u: np.ndarray, s: float) -> np.ndarray:
+    """The reduced tangent's eigenvalues (ascending): of the Hessian, or on the joints' null space."""
+    if hasattr(sp, "tangent_eigenvalues"):
+        return sp.tangent_eigenvalues(u, s)
+    return scipy.linalg.eigvalsh(sp.hessian(u, s))
 
 
 def _validate(to_factor: float, max_points: int, arc_length: float | None, names: Mapping[str, str] | None) -> None:
@@ -311,7 +319,6 @@ def equilibrium_path(
     """
     opts = resolve_options(options, settings)
     _validate(to_factor, max_points, arc_length, names)
-    refuse_joints(model, "equilibrium path following")
     prob = problem_for(model)
     if not prob.conservative:  # the path's stability tests read the symmetric tangent of a potential
         raise StaticsError("the scene has follower loads: equilibrium paths are traced for conservative loads only; "
@@ -321,11 +328,17 @@ def equilibrium_path(
     if q0.shape != (model.n_dof,):
         raise ValueError(f"q_start: expected shape ({model.n_dof},), got {q0.shape}")
     sp = Scaled(prob, pv, t, q0)
-    sp.check_supported()
+    if model.joint_row_names:  # the joints' multipliers join the unknowns (casflex.statics.jointed)
+        sp = JointedPath(model, sp)
+        ok, x0, its = sp.start(opts)
+        start = SimpleNamespace(converged=ok, u=x0, previous=x0, iterations=its, reason="Newton on the joints' "
+                                "Lagrangian did not converge")
+    else:
+        sp.check_supported()
+        start = solve_at(sp, sp.u(sp.base), 0.0, opts)
     n = sp.n
     if n == 0:
         raise StaticsError("the supports fix every dof: there is no path to trace")
-    start = solve_at(sp, sp.u(sp.base), 0.0, opts)
     if not start.converged:
         raise StaticsError(f"no equilibrium of the unloaded structure from the start ({start.reason}); the path "
                            "begins there")
@@ -334,7 +347,9 @@ def equilibrium_path(
         du = np.linalg.solve(H0, -b0)
     except np.linalg.LinAlgError:
         du = np.full(n, np.inf)
-    eig0 = scipy.linalg.eigvalsh(H0)
+    eig0 = _eigenvalues(sp, start.u, 0.0)
+    if eig0.size == 0:
+        raise StaticsError("the supports and joints leave no motion: there is no path to trace")
     if not np.all(np.isfinite(du)) or eig0[0] <= neutral_band(eig0) * 10:
         raise StaticsError(
             "the tangent of the unloaded structure is singular or not positive definite (smallest eigenvalue "

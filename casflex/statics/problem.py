@@ -287,14 +287,6 @@ class StaticProblem:
 _PROBLEMS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
-def refuse_joints(model: Model, what: str) -> None:
-    """StaticsError naming the joints when ``model`` has ideal joints, which ``what`` does not take yet."""
-    if model.joint_row_names:
-        joints = [jt.name for jt in model.scene.joints]
-        raise StaticsError(f"{what} does not take ideal joints yet (joints {joints}; issue 25): simulate with "
-                           "damping to reach a rest state, or model the joint with a stiff zero-length spring")
-
-
 def problem_for(model: Model) -> StaticProblem:
     """The :class:`StaticProblem` of ``model``, built on first use and kept as long as the model lives."""
     prob = _PROBLEMS.get(model)
