@@ -3,11 +3,13 @@
 A scene's own initial configuration closes every joint by construction (a joint's point is fixed
 in both nodes' frames where the scene has it); a state given by the caller (an estimated or
 measured one, or node velocities that ignore the joints) may not. Both are projected onto the
-constraints with the least change of the free dofs, measured in their own scale (translations
-divided by the scene's length scale, rotations in radians), the supports' dofs left alone:
+constraints, the supports' dofs left alone:
 
-- positions: Gauss-Newton on Phi_J(q) = 0 (the minimum-norm update each iteration);
-- velocities: the one linear projection onto B_J qd = 0.
+- positions: Gauss-Newton on Phi_J(q) = 0, each update the least change of the free dofs in their
+  own scale (translations divided by the scene's length scale, rotations in radians);
+- velocities: the least change in kinetic energy, qd+ = qd - M^-1 B^T (B M^-1 B^T)^-1 B qd on the
+  free dofs: the velocities an impulse through the joints gives (what a stiff bushing's snap tends
+  to), with a 1e-9 regularisation in the dofs' own scale for dofs without mass.
 
 A projection that cannot close the joints raises ValueError naming the joint row.
 """

@@ -34,21 +34,25 @@ _CENTRES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 @dataclass(frozen=True)
 class Marker:
     """A point fixed on the beam or rigid body ``on``, at (x, y) (m) in the scene's initial
-    configuration."""
+    configuration; ``label``: the lab's label of the marker it stands for in a trial's TRC file
+    (default: its name; :mod:`casflex.lab`)."""
 
     name: str
     on: str
     x: float
     y: float
+    label: str | None = None
 
     def __post_init__(self) -> None:
-        from casflex.scene_items import _name, _number, _owner
+        from casflex.scene_items import SceneError, _name, _number, _owner
 
         where = _owner("marker", self.name)
         object.__setattr__(self, "name", _name(where, "name", self.name))
         object.__setattr__(self, "on", _name(where, "on", self.on))
         for f in ("x", "y"):
             object.__setattr__(self, f, _number(where, f, getattr(self, f)))
+        if self.label is not None and (not isinstance(self.label, str) or not self.label.strip()):
+            raise SceneError.at(where, "label", f"expected the lab's marker label (a string), got {self.label!r}")
 
 
 def check_markers(scene) -> None:

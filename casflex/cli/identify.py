@@ -109,6 +109,16 @@ def _default_instants(t: np.ndarray, method: str) -> list[float]:
     return [float(t[i]) for i in np.unique(idx)]
 
 
+def _plane(text: str):
+    """argparse type of --plane: a casflex.lab.Plane, or the one-line error."""
+    from casflex.lab import Plane
+
+    try:
+        return Plane.parse(text, option="--plane")
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("--plane: ")) from None
+
+
 def _data(model: Model, args: argparse.Namespace) -> tuple[list[MeasurementSet], list[dict[str, Any]]]:
     """The recordings and a description of each for --data simulated | measured | FILE [FILE ...]."""
     from casflex.data import add_position_noise, load_measurements, measured_set, simulated_set
@@ -119,7 +129,12 @@ def _data(model: Model, args: argparse.Namespace) -> tuple[list[MeasurementSet],
     if args.data[0] not in ("simulated", "measured"):
         sets, infos = [], []
         for i, path in enumerate(args.data):
-            data = load_measurements(path)
+            if str(path).lower().endswith(".trc"):  # a lab trial: the scene's markers by their labels
+                from casflex.lab import trial_markers
+
+                data = trial_markers(model, path, args.plane)
+            else:
+                data = load_measurements(path)
             info = {"kind": "file", "path": str(path), "samples": int(data.t.size), "channels": list(data.channels)}
             if args.noise:
                 data = add_position_noise(data, args.noise, seed + i)
@@ -317,9 +332,13 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--method", required=True, choices=IDENTIFY_METHODS)
     s.add_argument("--transcription", choices=TRANSCRIPTIONS,
                    help="indirect only (default single-shooting)")
+    s.add_argument("--plane", type=_plane, default="X,Y", metavar="AXES",
+                   help="for a .trc trial: the lab axes that become the model's x and y, e.g. X,Y (default: "
+                        "OpenSim's X forward, Y up: seen from +Z) or -Z,Y")
     s.add_argument("--data", action="append", metavar="simulated|measured|FILE",
                    help="the exact simulated set (default), the measured set (positions, central differences), "
-                        "or a .npz/.csv file; repeat --data FILE for several recordings (indirect)")
+                        "or a .npz/.csv file, or a lab trial's .trc (the scene's markers by their label, see "
+                        "--plane); repeat --data FILE for several recordings (indirect)")
     s.add_argument("--initial-state", choices=INITIAL_STATES,
                    help="indirect: the state at the first sample: the scene's (default), the scene's positions with "
                         "estimated velocities, or estimated")

@@ -1,0 +1,233 @@
+"""Motion-lab files: markers from TRC files, named columns from OpenSim's .mot / .sto, and the plane
+that takes the lab's 3-D axes to a scene's x and y (issue 26, in part).
+
+- :func:`read_trc`: marker labels and positions, in metres from the header's ``Units`` (mm, cm, m).
+  A marker missing at a frame (empty cells, or the exact (0, 0, 0) that several lab exports write
+  for a dropped marker: a real marker at the lab's origin to 1e-6 mm is implausible) is NaN.
+- :func:`read_sto`: a .mot / .sto table (header up to ``endheader``, then named columns), with
+  the header's ``inDegrees`` kept as it says (nothing is converted: the caller knows which columns
+  are angles).
+- :class:`Plane` (``"X,Y"``, ``"-Z,Y"``): which lab axes become the model's x and y, with their
+  signs; the model's plane is seen from the lab axis x cross y (``view``), which it reports, so that
+  a mirrored plane (a left side seen from the right) is said, not silently taken.
+- :func:`markers_in_plane`: a :class:`~casflex.data.MeasurementSet` of the scene's markers
+  (``x<marker>``, ``y<marker>``) from the lab labels they stand for (``label`` of ``[[markers]]``).
+
+Every malformed file gives one ValueError line naming the file and what is wrong: missing or
+unknown units, duplicated labels, rows of the wrong length, times that do not increase.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["LabMarkers", "LabTable", "Plane", "read_trc", "read_sto", "markers_in_plane", "trial_markers"]
+
+#: Length units of TRC headers, in metres.
+UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
+_AXES = {"X": 0, "Y": 1, "Z": 2}
+
+
+@dataclass(frozen=True)
+class LabMarkers:
+    """Markers of a lab trial: t (n,) s; labels (k,); xyz (n, k, 3) m in the lab's axes, NaN where a
+    marker is missing; ``rate`` (Hz) and ``units`` as the header gives them."""
+
+    t: np.ndarray
+    labels: tuple[str, ...]
+    xyz: np.ndarray
+    rate: float
+    units: str
+    source: str = ""
+
+    def marker(self, label: str) -> np.ndarray:
+        """(n, 3) positions (m) of the marker ``label``; ValueError naming the known labels."""
+        if label not in self.labels:
+            raise ValueError(f"{self.source}: no marker labelled {label!r}; the trial has {list(self.labels)}")
+        return self.xyz[:, self.labels.index(label)]
+
+
+@dataclass(frozen=True)
+class LabTable:
+    """A .mot / .sto table: t (n,) s, names (m,) of the other columns, values (n, m) as written."""
+
+    t: np.ndarray
+    names: tuple[str, ...]
+    values: np.ndarray
+    in_degrees: bool | None = None
+    header: dict = field(default_factory=dict)
+    source: str = ""
+
+    def column(self, name: str) -> np.ndarray:
+        if name not in self.names:
+            raise ValueError(f"{self.source}: no column {name!r}; the table has {list(self.names)}")
+        return self.values[:, self.names.index(name)]
+
+
+def _times(t: np.ndarray, where: str) -> np.ndarray:
+    if t.size and not np.isfinite(t).all():
+        raise ValueError(f"{where}: a time is not a number (row {int(np.argmax(~np.isfinite(t))) + 1})")
+    bad = np.flatnonzero(np.diff(t) <= 0)
+    if bad.size:
+        i = int(bad[0]) + 1
+        kind = "repeats" if t[i] == t[i - 1] else "goes back to"
+        raise ValueError(f"{where}: times must increase: row {i + 1} {kind} t = {t[i]:g} s after {t[i - 1]:g} s")
+    return t
+
+
+def _numbers(cells: list[str], where: str, row: int) -> list[float]:
+    out = []
+    for c in cells:
+        c = c.strip()
+        try:
+            out.append(float(c) if c else math.nan)
+        except ValueError:
+            raise ValueError(f"{where}: row {row}: {c!r} is not a number") from None
+    return out
+
+
+def read_trc(path: str | os.PathLike[str]) -> LabMarkers:
+    """The markers of a TRC file, in metres (module docstring)."""
+    where = str(path)
+    try:
+        lines = Path(path).read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError as exc:
+        raise ValueError(f"{where}: cannot read ({exc.strerror})") from None
+    if len(lines) < 5 or not lines[0].startswith("PathFileType"):
+        raise ValueError(f"{where}: not a TRC file (its first line should start with 'PathFileType')")
+    keys, vals = lines[1].split("\t"), lines[2].split("\t")
+    header = {k.strip(): v.strip() for k, v in zip(keys, vals, strict=False) if k.strip()}
+    units = header.get("Units", "")
+    if units not in UNITS:
+        raise ValueError(f"{where}: header Units {units!r} is " + ("missing" if not units else "not a length unit")
+                         + f"; expected one of {list(UNITS)}")
+    names = lines[3].split("\t")
+    if len(names) < 3 or names[0].strip() != "Frame#" or names[1].strip() != "Time":
+        raise ValueError(f"{where}: line 4 should start with 'Frame#' and 'Time', then the marker labels")
+    labels = [n.strip() for n in names[2:] if n.strip()]
+    seen = {lb for lb in labels if labels.count(lb) > 1}
+    if seen:
+        raise ValueError(f"{where}: marker labels {sorted(seen)} appear more than once")
+    rows = []
+    for i, line in enumerate(lines[5:], start=6):
+        if not line.strip():
+            continue
+        cells = line.rstrip("\r").split("\t")
+        values, want = _numbers(cells[1:], where, i), 1 + 3 * len(labels)
+        if len(values) > want and all(math.isnan(v) for v in values[want:]):  # trailing tabs
+            values = values[:want]
+        if len(values) != want:
+            raise ValueError(f"{where}: row {i} has {len(values) - 1} coordinates for {len(labels)} markers "
+                             f"({3 * len(labels)} expected)")
+        rows.append(values)
+    if not rows:
+        raise ValueError(f"{where}: no frames")
+    data = np.array(rows)
+    t = _times(data[:, 0], where)
+    xyz = data[:, 1:].reshape(len(t), len(labels), 3) * UNITS[units]
+    xyz[np.all(xyz == 0.0, axis=2)] = np.nan  # a dropped marker written as (0, 0, 0)
+    rate = float(header.get("DataRate", "nan") or "nan")
+    return LabMarkers(t, tuple(labels), xyz, rate, units, where)
+
+
+def read_sto(path: str | os.PathLike[str]) -> LabTable:
+    """A .mot / .sto table of named columns (module docstring)."""
+    where = str(path)
+    try:
+        lines = Path(path).read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError as exc:
+        raise ValueError(f"{where}: cannot read ({exc.strerror})") from None
+    end = next((i for i, ln in enumerate(lines) if ln.strip().lower() == "endheader"), None)
+    if end is None:
+        raise ValueError(f"{where}: no 'endheader' line: not an OpenSim .mot / .sto file")
+    header = {}
+    for ln in lines[:end]:
+        key, _, value = ln.strip().partition("=") if "=" in ln else ln.strip().partition(" ")
+        if key:
+            header[key.strip()] = value.strip()
+    names = [n.strip() for n in lines[end + 1].split("\t") if n.strip()] if end + 1 < len(lines) else []
+    if not names or names[0].lower() != "time":
+        raise ValueError(f"{where}: the line after 'endheader' should name the columns, 'time' first")
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise ValueError(f"{where}: columns {dup} appear more than once")
+    rows = []
+    for i, line in enumerate(lines[end + 2:], start=end + 3):
+        if not line.strip():
+            continue
+        values = _numbers([c for c in line.split("\t") if c.strip() != ""] or line.split(), where, i)
+        if len(values) != len(names):
+            raise ValueError(f"{where}: row {i} has {len(values)} values for {len(names)} columns")
+        rows.append(values)
+    if not rows:
+        raise ValueError(f"{where}: no rows")
+    data = np.array(rows)
+    deg = header.get("inDegrees")
+    in_degrees = None if deg is None else deg.lower() == "yes"
+    return LabTable(_times(data[:, 0], where), tuple(names[1:]), data[:, 1:], in_degrees, header, where)
+
+
+@dataclass(frozen=True)
+class Plane:
+    """Which lab axes become the model's x and y, e.g. ``Plane.parse("X,Y")`` (OpenSim's lab: X forward,
+    Y up, the sagittal plane seen from +Z, the subject's right) or ``"-Z,Y"``. ``view``: the lab axis the
+    plane is seen from, x cross y (e.g. "+Z")."""
+
+    x: str
+    y: str
+
+    @classmethod
+    def parse(cls, text: str, *, option: str = "plane") -> Plane:
+        parts = [p.strip().upper() for p in str(text).split(",")]
+        ok = len(parts) == 2 and all(p.lstrip("+-") in _AXES for p in parts)
+        if not ok or parts[0].lstrip("+-") == parts[1].lstrip("+-"):
+            raise ValueError(f"{option}: expected two different lab axes for the model's x and y, e.g. 'X,Y' or "
+                             f"'-Z,Y', got {text!r}")
+        return cls(*parts)
+
+    def _vector(self, axis: str) -> np.ndarray:
+        v = np.zeros(3)
+        v[_AXES[axis.lstrip("+-")]] = -1.0 if axis.startswith("-") else 1.0
+        return v
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """(2, 3): model (x, y) = matrix @ lab (X, Y, Z)."""
+        return np.vstack([self._vector(self.x), self._vector(self.y)])
+
+    @property
+    def view(self) -> str:
+        n = np.cross(*self.matrix)
+        k = int(np.argmax(np.abs(n)))
+        return ("+" if n[k] > 0 else "-") + "XYZ"[k]
+
+
+def markers_in_plane(lab: LabMarkers, labels: dict[str, str], plane: Plane):
+    """A MeasurementSet of channels x<marker>, y<marker> (m) for the scene markers ``labels`` maps to
+    their lab labels, projected on ``plane``; NaN where the lab marker is missing."""
+    from casflex.data import MeasurementSet
+
+    P = plane.matrix
+    channels, cols = [], []
+    for name, label in labels.items():
+        xy = lab.marker(label) @ P.T
+        channels += [f"x{name}", f"y{name}"]
+        cols += [xy[:, 0], xy[:, 1]]
+    return MeasurementSet(lab.t.copy(), tuple(channels), np.column_stack(cols), None, None, source=lab.source,
+                          meta={"plane": f"{plane.x},{plane.y}", "view": plane.view, "labels": dict(labels)})
+
+
+def trial_markers(model, path: str | os.PathLike[str], plane: Plane | str = "X,Y"):
+    """The scene's markers (each by its ``label``, or its name) in the TRC file ``path``, projected on
+    ``plane``: a MeasurementSet for identification (module docstring). ValueError naming a label the
+    trial lacks, or a scene without markers."""
+    markers = model.scene.markers
+    if not markers:
+        raise ValueError(f"{path}: the scene has no [[markers]] to take from the trial")
+    plane = Plane.parse(plane) if isinstance(plane, str) else plane
+    return markers_in_plane(read_trc(path), {m.name: m.label or m.name for m in markers}, plane)
