@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+import casflex
 from casflex.identification.problem import gauss_newton_polish, gauss_newton_statistics
 
 NAMES = ("a", "b", "c")
@@ -98,3 +99,18 @@ def test_nlp_options_given_to_gauss_newton_are_refused():
     for key, value in (("solver_options", {"ipopt": {"max_wall_time": 60}}), ("hessian", "exact")):
         with pytest.raises(ValueError, match=rf"{key}: an NLP solver's option, and the solver is 'gauss-newton'"):
             identify_indirect(None, None, **{key: value})
+
+
+def test_a_rest_angle_is_scaled_by_a_radian_at_least():
+    """An offset near zero is no typical magnitude: a rest angle of 0.06 rad scaled by 0.06 made the fit
+    crawl (issue 26); its decision variable is the angle in radians then, the stiffness's its nominal."""
+    import dataclasses
+
+    from casflex.identification.problem import parameter_scale
+
+    scene = casflex.load_scene("twobar")
+    ts = [dataclasses.replace(t, rest_angle=0.06) if t.name == "torsion1" else t for t in scene.torsion_springs]
+    scene = dataclasses.replace(scene, torsion_springs=tuple(ts), parameters=(
+        *scene.parameters, casflex.Parameter("rest1", "torsion1.rest_angle")))
+    scale = parameter_scale(casflex.assemble(scene))
+    assert scale[-1] == 1.0 and np.array_equal(scale[:-1], casflex.assemble(casflex.load_scene("twobar")).p_nominal)

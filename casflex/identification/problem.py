@@ -23,11 +23,14 @@ __all__ = ["IdentificationResult", "parameter_scale", "start_values", "bound_fla
 
 
 def parameter_scale(model: Model) -> np.ndarray:
-    """Typical magnitude of each parameter: its declared ``scale``, else |nominal|, else 1.
-    Decision variables are p / scale, so they are O(1)."""
+    """Typical magnitude of each parameter: its declared ``scale``, else |nominal|, else 1; a rest
+    angle's at least 1 rad (an offset, not a magnitude: a joint recorded near its rest has a nominal of
+    a few hundredths of a radian, and the fit crawled at that scale, issue 26). Decision variables are
+    p / scale, so they are O(1)."""
     out = []
     for par, nom in zip(model.parameters, model.p_nominal, strict=True):
-        out.append(par.scale if par.scale else (abs(nom) if nom != 0 else 1.0))
+        floor = 1.0 if par.target.endswith(".rest_angle") else 0.0
+        out.append(par.scale if par.scale else max(abs(nom), floor) if nom != 0 else 1.0)
     return np.array(out, dtype=float)
 
 
