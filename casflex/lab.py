@@ -91,13 +91,17 @@ def _numbers(cells: list[str], where: str, row: int) -> list[float]:
     return out
 
 
+def _lines(path: str | os.PathLike[str]) -> tuple[str, list[str]]:
+    """(the path as text, the file's lines); ValueError naming the file when it cannot be read."""
+    try:
+        return str(path), Path(path).read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read ({exc.strerror})") from None
+
+
 def read_trc(path: str | os.PathLike[str]) -> LabMarkers:
     """The markers of a TRC file, in metres (module docstring)."""
-    where = str(path)
-    try:
-        lines = Path(path).read_text(encoding="utf-8", errors="replace").splitlines()
-    except OSError as exc:
-        raise ValueError(f"{where}: cannot read ({exc.strerror})") from None
+    where, lines = _lines(path)
     if len(lines) < 5 or not lines[0].startswith("PathFileType"):
         raise ValueError(f"{where}: not a TRC file (its first line should start with 'PathFileType')")
     keys, vals = lines[1].split("\t"), lines[2].split("\t")
@@ -137,11 +141,7 @@ def read_trc(path: str | os.PathLike[str]) -> LabMarkers:
 
 def read_sto(path: str | os.PathLike[str]) -> LabTable:
     """A .mot / .sto table of named columns (module docstring)."""
-    where = str(path)
-    try:
-        lines = Path(path).read_text(encoding="utf-8", errors="replace").splitlines()
-    except OSError as exc:
-        raise ValueError(f"{where}: cannot read ({exc.strerror})") from None
+    where, lines = _lines(path)
     end = next((i for i, ln in enumerate(lines) if ln.strip().lower() == "endheader"), None)
     if end is None:
         raise ValueError(f"{where}: no 'endheader' line: not an OpenSim .mot / .sto file")
