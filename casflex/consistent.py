@@ -31,10 +31,8 @@ CLOSED = 1e-12
 
 def _rows(model: Model, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(Phi_J (n_mu,), B_J (n_mu, n), the rows' scales (n_mu,)) at q."""
-    phi, B = model.constraint(q)
-    nf = model.n_fixed
-    scale = np.array([1.0 if r.endswith(".theta") else model.length_scale for r in model.joint_row_names])
-    return np.array(phi).ravel()[nf:], np.array(B)[nf:], scale
+    phi, B, _ = model.joint_rows(q, np.zeros(len(model.joint_row_names)))
+    return np.array(phi).ravel(), np.array(B), model.joint_scales
 
 
 def _free_and_weights(model: Model) -> tuple[np.ndarray, np.ndarray]:

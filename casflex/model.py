@@ -134,6 +134,21 @@ class Model:
     def n_dof(self) -> int:
         return len(self.dof_names)
 
+    @functools.cached_property
+    def joint_scales(self) -> np.ndarray:
+        """(n_mu,): the scale of each joint row, the length scale (m) for a row in metres (hinge x, y,
+        a slider's across) and 1 for a row in radians."""
+        return np.array([1.0 if r.endswith(".theta") else self.length_scale for r in self.joint_row_names])
+
+    @functools.cached_property
+    def joint_rows(self) -> ca.Function:
+        """``joint_rows(q, mu) -> (phi, B, H)``: the joints' Phi (n_mu,), B = dPhi/dq (n_mu, n) and
+        H = d2(mu^T Phi)/dq2 (n, n), the joints' part of a Lagrangian's tangent; built once per model."""
+        q, mu = ca.SX.sym("q", self.n_dof), ca.SX.sym("mu", len(self.joint_row_names))
+        phi = self.constraint(q)[0][self.n_fixed:]
+        return ca.Function("joint_rows", [q, mu], [phi, ca.jacobian(phi, q), ca.hessian(ca.dot(mu, phi), q)[0]],
+                           ["q", "mu"], ["phi", "B", "H"])
+
     @property
     def n_con(self) -> int:
         """Multipliers: the supports' rows (``n_fixed``), then the joints'."""

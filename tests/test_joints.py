@@ -142,14 +142,12 @@ def test_a_hinge_s_torsion_spring_damper_identified_from_two_markers_of_the_ode_
 
 
 def test_compiled_runs_with_joints_keep_the_contract(runs):
-    from casflex import codegen
+    from conftest import assert_same_numbers
 
     model, out = runs
     b = simulate(model, 1.0, dt=1e-3, alpha=0.0, compiled=True)
-    if codegen.bitwise_expected():
-        assert np.array_equal(b.q, out[1e-3].q) and np.array_equal(b.lam, out[1e-3].lam)
-    else:
-        np.testing.assert_allclose(b.q, out[1e-3].q, rtol=0, atol=1e-9)  # as tests/conftest.assert_same_numbers
+    assert_same_numbers(out[1e-3].q, b.q)
+    assert_same_numbers(out[1e-3].lam, b.lam)
 
 
 def test_velocities_that_ignore_the_joints_are_projected_onto_them():

@@ -69,7 +69,7 @@ class Layout:
         to = np.zeros(m.n_dof)
         to[fixed] = [c.value for c in m.constraints]
         n_mu = len(m.joint_row_names)
-        ell_mu = np.array([1.0 if r.endswith(".theta") else m.length_scale for r in m.joint_row_names])
+        ell_mu = m.joint_scales
         trans: list[tuple[int, ...]] = [()] * n_mu
         for grp in m.joint_groups:
             at, mu_at = split(grp)

@@ -19,7 +19,6 @@ found from there is returned, the unstable one listed in ``left``.
 
 from __future__ import annotations
 
-import casadi as ca
 import numpy as np
 import scipy.linalg
 
@@ -37,10 +36,7 @@ class _Lagrangian:
     """The joints' rows at a scaled state: Phi / l, B (scaled columns), d2(mu^T Phi)/du2 (scaled)."""
 
     def __init__(self, model: Model, sp: Scaled):
-        self.model, self.sp, nf = model, sp, model.n_fixed
-        q, mu = ca.SX.sym("q", model.n_dof), ca.SX.sym("mu", len(model.joint_row_names))
-        phi = model.constraint(q)[0][nf:]
-        self.f = ca.Function("joint_rows", [q, mu], [phi, ca.jacobian(phi, q), ca.hessian(ca.dot(mu, phi), q)[0]])
+        self.model, self.sp, self.f = model, sp, model.joint_rows
 
     def __call__(self, u: np.ndarray, mu: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         sp, ell = self.sp, self.sp.ell
@@ -161,12 +157,14 @@ def solve_jointed(model: Model, sp: Scaled, opts: StaticOptions):
                 left.append((1.0, stab.min_eigenvalue, sp.q(u)))
                 u, mu, stab = u2, mu2, st2
                 break
-    q = sp.q(u)
-    _, grad, _, _ = sp.problem.evaluate(q, 1.0, sp.t, sp.p)
-    B_all = np.array(model.constraint(q)[1])[model.n_fixed:]
-    fixed = sp.problem.fixed
-    lam = np.concatenate([-(grad + B_all.T @ mu)[fixed], mu])
-    return q, lam, total, tuple(factors), cuts, stab, left
+    return sp.q(u), _multipliers(model, sp, sp.q(u), mu, 1.0), total, tuple(factors), cuts, stab, left
+
+
+def _multipliers(model: Model, sp: Scaled, q: np.ndarray, mu: np.ndarray, s: float) -> np.ndarray:
+    """(the supports' multipliers, the joints' mu) at q: the fixed rows balanced, -(dPi/dq + B^T mu) (N, N m)."""
+    _, grad, _, _ = sp.problem.evaluate(q, s, sp.t, sp.p)
+    B = np.array(model.joint_rows(q, mu)[1])
+    return np.concatenate([-(grad + B.T @ mu)[sp.problem.fixed], mu])
 
 
 class JointedPath:
@@ -227,10 +225,7 @@ class JointedPath:
     def reactions(self, x: np.ndarray, s: float, dx: np.ndarray | None = None) -> np.ndarray:
         """(the supports' multipliers, the joints') at x + dx (N, N m)."""
         u, mu = self._split(x if dx is None else x + dx)
-        q = self.sp.q(u)
-        _, grad, _, _ = self.sp.problem.evaluate(q, s, self.sp.t, self.sp.p)
-        B_all = np.array(self.model.constraint(q)[1])[self.model.n_fixed:]
-        return np.concatenate([-(grad + B_all.T @ mu)[self.sp.problem.fixed], mu])
+        return _multipliers(self.model, self.sp, self.sp.q(u), mu, s)
 
     def start(self, opts: StaticOptions):
         """The unloaded equilibrium the path starts from: (converged, x, iterations)."""

@@ -208,8 +208,6 @@ def _joints(model: Model, prob, q: np.ndarray, p: np.ndarray, t: float, lam: np.
     """(N^T K_L N, N^T M N, N, static residual, equilibrium?) with the ideal joints' rows: N an
     orthonormal basis of the free motions that keep the joints closed, K_L the Lagrangian's tangent; the
     residual is the free rows' imbalance relative to the largest force in them."""
-    import casadi as ca
-
     free, nf = prob.free, model.n_fixed
     phi, B = (np.array(v) for v in model.constraint(q))
     Bj = B[nf:][:, free]
@@ -221,10 +219,7 @@ def _joints(model: Model, prob, q: np.ndarray, p: np.ndarray, t: float, lam: np.
     # of dofs that only the joints hold (a rigid body's translations: d at its 1e-12 floor)
     res = float(np.abs(g + react @ mu).max() / max(np.abs(g).max(), np.abs(react @ mu).max(), 1e-300))
     closed = np.abs(phi.ravel()[nf:]).max() <= 1e-9 * model.length_scale
-    qs, ms = ca.SX.sym("q", model.n_dof), ca.SX.sym("mu", mu.size)
-    lag = ca.Function("joint_lagrangian_hessian", [qs, ms],
-                      [ca.hessian(ca.dot(ms, model.constraint(qs)[0][nf:]), qs)[0]])
-    H = np.array(lag(q, mu))[np.ix_(free, free)]
+    H = np.array(model.joint_rows(q, mu)[2])[np.ix_(free, free)]
     N = scipy.linalg.null_space(Bj)
     is_eq = bool(res <= tol and closed)
     if not is_eq:

@@ -32,7 +32,6 @@ from dataclasses import dataclass
 from types import SimpleNamespace
 
 import numpy as np
-import scipy.linalg
 
 from casflex.model import Model
 from casflex.statics.jointed import JointedPath
@@ -199,7 +198,7 @@ class _Tracer:
             u_prev, s_prev = u, s
             u, s = u + d[:n], s + d[n]
             if res <= tol_k and upd <= step_tol:
-                eig = _eigenvalues(sp, u, s) if n else np.zeros(0)
+                eig = sp.tangent_eigenvalues(u, s) if n else np.zeros(0)
                 lam = sp.reactions(u_prev, s_prev, u - u_prev)
                 return _Point(u, s, lam, eig, neutral_band(eig), it)
         return None
@@ -245,13 +244,6 @@ class _Tracer:
                 fa *= 0.5
             b, fb = c, fc
         return best
-
-
-def _eigenvalues(sp, u: np.ndarray, s: float) -> np.ndarray:
-    """The reduced tangent's eigenvalues (ascending): of the Hessian, or on the joints' null space."""
-    if hasattr(sp, "tangent_eigenvalues"):
-        return sp.tangent_eigenvalues(u, s)
-    return scipy.linalg.eigvalsh(sp.hessian(u, s))
 
 
 def _validate(to_factor: float, max_points: int, arc_length: float | None, names: Mapping[str, str] | None) -> None:
@@ -347,7 +339,7 @@ def equilibrium_path(
         du = np.linalg.solve(H0, -b0)
     except np.linalg.LinAlgError:
         du = np.full(n, np.inf)
-    eig0 = _eigenvalues(sp, start.u, 0.0)
+    eig0 = sp.tangent_eigenvalues(start.u, 0.0)
     if eig0.size == 0:
         raise StaticsError("the supports and joints leave no motion: there is no path to trace")
     if not np.all(np.isfinite(du)) or eig0[0] <= neutral_band(eig0) * 10:

@@ -345,6 +345,10 @@ class Scaled:
         K = self.problem.hessian(self.q(u), s, self.t, self.p)
         return K[np.ix_(self.free, self.free)] * np.outer(self.ell, self.ell)
 
+    def tangent_eigenvalues(self, u: np.ndarray, s: float) -> np.ndarray:
+        """The eigenvalues (ascending) of the scaled reduced tangent: the stability of u at load factor s."""
+        return scipy.linalg.eigvalsh(self.hessian(u, s))
+
     def load(self, u: np.ndarray) -> np.ndarray:
         """d(dPi/du)/ds = -(f_ext + g) l on the free dofs (J), shape (n,)."""
         _, _, load, _ = self.problem.evaluate(self.q(u), 0.0, self.t, self.p)
