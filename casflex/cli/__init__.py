@@ -13,7 +13,7 @@ from __future__ import annotations
 import sys
 
 from casflex import interrupt
-from casflex.cli import cache, export, identify, simulate, statics
+from casflex.cli import cache, export, identify, inverse, simulate, statics
 from casflex.cli._base import CliParser, OptionError, Outputs, progress_messages
 
 __all__ = ["main"]
@@ -26,7 +26,7 @@ def _parser() -> CliParser:
                    description="Planar flexible multibody dynamics and parameter identification on CasADi.")
     ap.add_argument("--version", action="version", version=f"casflex {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
-    for module in (simulate, statics, identify, export, cache):
+    for module in (simulate, statics, identify, inverse, export, cache):
         module.add_parsers(sub)
     return ap
 

@@ -321,8 +321,15 @@ def cmd_identify(args: argparse.Namespace, outputs: Outputs) -> int:
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
     """The ``identify`` subcommand's options (method-specific ones default to None = not given)."""
-    from casflex.identification import HESSIANS, INITIAL_STATES, MODEL_ERRORS, RESIDUES, TRANSCRIPTIONS, TRANSFORMS
-    from casflex.identification.problem import BEAM_FORCES
+    from casflex.identification.choices import (
+        BEAM_FORCES,
+        HESSIANS,
+        INITIAL_STATES,
+        MODEL_ERRORS,
+        RESIDUES,
+        TRANSCRIPTIONS,
+        TRANSFORMS,
+    )
     from casflex.smoothing import SMOOTHERS
 
     s = sub.add_parser("identify", help="identify the scene's parameters from simulated, measured or file data",

@@ -1,13 +1,33 @@
-"""Identification of scene parameters from measured motion (Eqs. 11-17 of the seed paper)."""
+"""Identification of scene parameters from measured motion (Eqs. 11-17 of the seed paper).
 
-from casflex.identification.adapted import identify_adapted_direct
-from casflex.identification.direct import identify_direct
-from casflex.identification.indirect import INITIAL_STATES, MODEL_ERRORS, RESIDUES, TRANSCRIPTIONS, identify_indirect
-from casflex.identification.measurement import Experiment
-from casflex.identification.output_error import Budget
-from casflex.identification.problem import HESSIANS, TRANSFORMS, ParameterMap
-from casflex.identification.result import IdentificationResult
+The public names are imported on first use (PEP 562), as casflex's own: the command line's parser
+takes the option values from :mod:`casflex.identification.choices` without loading the methods."""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+_EXPORTS = {
+    "identify_adapted_direct": "adapted", "identify_direct": "direct", "identify_indirect": "indirect",
+    "Experiment": "measurement", "Budget": "output_error", "ParameterMap": "problem",
+    "IdentificationResult": "result",
+    "INITIAL_STATES": "choices", "MODEL_ERRORS": "choices", "RESIDUES": "choices", "TRANSCRIPTIONS": "choices",
+    "HESSIANS": "choices", "TRANSFORMS": "choices",
+}
 
 __all__ = ["identify_direct", "identify_adapted_direct", "identify_indirect", "IdentificationResult", "ParameterMap",
            "Experiment", "Budget", "RESIDUES", "TRANSCRIPTIONS", "TRANSFORMS", "HESSIANS", "INITIAL_STATES",
            "MODEL_ERRORS"]
+
+
+def __getattr__(name: str) -> Any:
+    if name in _EXPORTS:
+        value = getattr(importlib.import_module(f"casflex.identification.{_EXPORTS[name]}"), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'casflex.identification' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))

@@ -36,6 +36,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from casflex.codegen import log
+from casflex.identification.choices import MODEL_ERRORS  # noqa: F401 (re-exported)
 from casflex.identification.initial_state import initial_state_of
 from casflex.identification.measurement import Experiment, check_against_scene
 from casflex.identification.output_error import Budget, Fit, OutputError, StartDoesNotRun, fit
@@ -51,7 +52,6 @@ from casflex.model import Model, assemble
 
 __all__ = ["estimate", "MODEL_ERRORS", "FIT_THRESHOLD"]
 
-MODEL_ERRORS = ("refine", "none")
 #: A channel fitted below this fraction of its measured motion makes the result implausible.
 FIT_THRESHOLD = 0.95
 #: Richardson's factor for a second-order method refined by 2: error(h) = 4/3 (p(h) - p(h/2)).

@@ -24,12 +24,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from casflex.data import MeasurementSet
+from casflex.identification.choices import INITIAL_STATES  # noqa: F401 (re-exported)
 from casflex.markers import channel_index, channel_values, marker_channels
 from casflex.model import Model
 
 __all__ = ["Experiment", "SampleMap", "INITIAL_STATES", "check_against_scene", "free_dofs", "nyquist"]
 
-INITIAL_STATES = ("scene", "velocities", "estimate")
 
 
 @dataclass(frozen=True, eq=False)

@@ -13,6 +13,7 @@ import casadi as ca
 import numpy as np
 
 from casflex.codegen import compiled_nlpsol, log
+from casflex.identification.choices import BEAM_FORCES, HESSIANS, TRANSFORMS  # noqa: F401 (re-exported)
 from casflex.identification.result import IdentificationResult
 from casflex.model import Model
 
@@ -34,7 +35,6 @@ def parameter_scale(model: Model) -> np.ndarray:
     return np.array(out, dtype=float)
 
 
-TRANSFORMS = ("linear", "log")
 
 
 @dataclass(frozen=True, eq=False)
@@ -251,7 +251,6 @@ def solver_options_for(solver: str, verbose: bool, extra: dict | None, tol: floa
     return opts
 
 
-HESSIANS = ("exact", "gauss-newton")
 
 #: casflex's own solver: single shooting by Gauss-Newton on forward sensitivities (the indirect method).
 GAUSS_NEWTON = "gauss-newton"
@@ -465,7 +464,6 @@ def gauss_newton_polish(zJ: Any, w: np.ndarray, lb: np.ndarray, ub: np.ndarray,
     return w, taken
 
 
-BEAM_FORCES = ("unknown", "model")
 
 
 def beam_forces_mode(model: Model, beam_forces: str | None, smoothed: bool) -> str:

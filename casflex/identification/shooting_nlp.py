@@ -60,14 +60,13 @@ import numpy as np
 from casflex import codegen
 from casflex.data import MeasurementSet
 from casflex.identification import problem as pb
+from casflex.identification.choices import RESIDUES, TRANSCRIPTIONS  # noqa: F401 (re-exported)
 from casflex.identification.measurement import Experiment
 from casflex.identification.problem import IdentificationResult, NLPKeywords
 from casflex.model import Model
 
 __all__ = ["identify_nlp", "RESIDUES", "TRANSCRIPTIONS"]
 
-RESIDUES = ("positions", "full")
-TRANSCRIPTIONS = ("multiple-shooting", "single-shooting")
 
 
 def _grid(data: MeasurementSet, horizon: float, dt: float) -> tuple[float, int, np.ndarray]:

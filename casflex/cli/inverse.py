@@ -1,0 +1,74 @@
+"""``casflex inverse``: net joint moments, intersegmental forces and root loads from a lab trial."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from casflex.cli._base import OptionError, Outputs, non_negative, positive
+
+
+def _plate(text: str) -> tuple[str, str]:
+    node, sep, prefix = text.partition("=")
+    if not sep or not node.strip() or not prefix.strip():
+        raise argparse.ArgumentTypeError(f"expected NODE=PREFIX (e.g. ankle=ground_), got {text!r}")
+    return node.strip(), prefix.strip()
+
+
+def _progress(done: int, total: int) -> None:
+    if done == total or done % max(total // 20, 1) == 0:
+        sys.stderr.write(f"\rcasflex: marker fit {done}/{total} frames")
+        if done == total:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+
+
+def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
+    from casflex.inverse import inverse_dynamics
+    from casflex.lab import Plane
+
+    Plane.parse(args.plane, option="--plane")
+    plates = dict(args.plate or [])
+    if len(plates) != len(args.plate or []):
+        raise OptionError("--plate: a node is given twice")
+    if plates and not args.loads:
+        raise OptionError("--plate: needs --loads (the ground reaction file)")
+    if args.loads and not plates:
+        raise OptionError("--loads: say which node each plate acts on with --plate NODE=PREFIX (e.g. ankle=ground_)")
+    if args.t_start is not None and args.t_end is not None and args.t_end <= args.t_start:
+        raise OptionError(f"--t-end: must be after --t-start ({args.t_start:g} s), got {args.t_end:g}")
+    out = outputs.file("--out", args.out, (".npz", ".csv"), "inverse dynamics") if args.out else None
+    plots = outputs.directory("--plots", args.plots) if args.plots else None
+    res = inverse_dynamics(args.scene, args.data, plane=args.plane, grf=args.loads, plates=plates,
+                           cutoff=None if args.no_filter else args.cutoff, root=args.root,
+                           t_start=args.t_start, t_end=args.t_end,
+                           progress=None if args.quiet else _progress)
+    print(res.summary())
+    if out is not None:
+        res.save(out, fmt=args.out.rsplit(".", 1)[-1].lower())
+    if plots is not None:
+        from casflex.plotting.inverse import save_inverse_figures
+
+        save_inverse_figures(res, plots)
+    return 0
+
+
+def add_parsers(sub: argparse._SubParsersAction) -> None:
+    s = sub.add_parser("inverse", help="net joint moments and intersegmental forces from a lab trial")
+    s.add_argument("scene", help="built-in scene name (hamner_leg) or a TOML file: segments on hinges, labelled "
+                                 "markers")
+    s.add_argument("--data", required=True, metavar="TRIAL.trc", help="the trial's markers (TRC)")
+    s.add_argument("--plane", default="X,Y", help="the lab axes that become the model's x and y (default X,Y)")
+    s.add_argument("--loads", metavar="GRF.mot", help="ground reactions (OpenSim .mot/.sto)")
+    s.add_argument("--plate", action="append", type=_plate, metavar="NODE=PREFIX",
+                   help="a plate's columns (PREFIXforce_vx ...) act on NODE's segment; repeat per plate")
+    s.add_argument("--cutoff", type=positive("a frequency in Hz"), default=6.0,
+                   help="zero-lag Butterworth cut-off for the kinematics and the plates alike, Hz (default 6)")
+    s.add_argument("--no-filter", action="store_true", help="use the data unfiltered")
+    s.add_argument("--root", metavar="NODE", help="the node the data drive (default: the scene's first)")
+    s.add_argument("--t-start", type=non_negative("a time in s"), help="use the trial from this time, s")
+    s.add_argument("--t-end", type=positive("a time in s"), help="use the trial up to this time, s")
+    s.add_argument("--out", metavar="FILE", help="write the loads to FILE.npz (everything) or FILE.csv (a table)")
+    s.add_argument("--plots", metavar="DIR", help="write figures into this directory")
+    s.add_argument("--quiet", action="store_true", help="no progress messages")
+    s.set_defaults(func=cmd_inverse)

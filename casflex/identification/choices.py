@@ -1,0 +1,17 @@
+"""The identification's option values, in a module light enough for the command line's parser
+(importing the methods costs 0.7 s, paid by every ``casflex`` command that builds the parser)."""
+
+#: Parameter transforms (problem.ParameterMap).
+TRANSFORMS = ("linear", "log")
+#: Hessians of the NLPs.
+HESSIANS = ("exact", "gauss-newton")
+#: The direct methods' beam forces: unknowns at each instant, or the model's.
+BEAM_FORCES = ("unknown", "model")
+#: Residues of the shooting NLPs.
+RESIDUES = ("positions", "full")
+#: Transcriptions of the indirect method.
+TRANSCRIPTIONS = ("multiple-shooting", "single-shooting")
+#: Initial states of an experiment.
+INITIAL_STATES = ("scene", "velocities", "estimate")
+#: What the indirect method does about the model's form.
+MODEL_ERRORS = ("refine", "none")

@@ -1,0 +1,235 @@
+"""The coordinates of a trial: a marker fit per frame, gaps, zero-lag filtering and rates.
+
+Per frame, the coordinates z of the kinematic tree (:mod:`casflex.inverse.tree`) that bring the
+scene's markers nearest the measured ones (least squares over the markers seen in that frame;
+Levenberg-Marquardt on exact Jacobians, each frame started at the one before, the first one at
+every segment's pose by a rigid (Kabsch) fit of its own markers). A frame whose markers do not
+decide every coordinate is a gap; gaps up to ``max_gap`` s are filled by a cubic spline through the
+frames around them and reported, longer ones refused in one line.
+
+Then the lab's filter: a 2nd-order Butterworth low-pass run forward and backward
+(``scipy.signal.filtfilt``'s algorithm: 4th order, no lag) at ``cutoff`` Hz on every coordinate,
+and z', z'' by second-order central differences of the filtered frames. The same filter serves the force plates
+(:mod:`casflex.inverse.plates`), as labs do, so that the moments are not made of kinematics and
+forces filtered differently (Kristianslund et al. 2012, J Biomech 45:666).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from casflex.inverse.tree import KinematicTree
+
+__all__ = ["FittedMotion", "butterworth2", "coordinate_rates", "even_times", "filtfilt2", "fit_markers", "lowpass"]
+
+
+@dataclass(frozen=True)
+class FittedMotion:
+    """t (n,) s; z (n, n_z) the fitted coordinates (m, rad), NaN in gaps filled later; rms (n,) m: the
+    markers' root-mean-square misfit per frame; seen (n,) markers used per frame; report: lines."""
+
+    t: np.ndarray
+    z: np.ndarray
+    rms: np.ndarray
+    seen: np.ndarray
+    report: list[str] = field(default_factory=list)
+
+
+def _marker_clusters(tree: KinematicTree) -> list[int]:
+    """The cluster (:class:`KinematicTree`) of each scene marker."""
+    m = tree.model
+    bodies = {b.name: b.node for b in m.scene.bodies}
+    beams = {b.name: b.nodes[0] for b in m.scene.beams}
+    return [tree.cluster[m.node_names.index(bodies.get(mk.on) or beams[mk.on])] for mk in m.scene.markers]
+
+
+def _residual(tree: KinematicTree) -> ca.Function:
+    from casflex.markers import marker_kinematics
+
+    z = ca.SX.sym("z", tree.n)
+    q = tree.forward(z)
+    y = marker_kinematics(tree.model)(q, ca.DM.zeros(tree.model.n_dof))[0]
+    return ca.Function("marker_fit", [z], [y, ca.jacobian(y, z)], ["z"], ["y", "J"])
+
+
+def _kabsch_start(tree: KinematicTree, y: np.ndarray, y0: np.ndarray) -> np.ndarray:
+    """z of every segment's rigid fit to its own seen markers (a start for the first frame)."""
+    m, idx = tree.model, tree.model.node_names.index
+    cl = np.array(_marker_clusters(tree))
+    meas, ref = y.reshape(-1, 2), y0.reshape(-1, 2)
+    turn = {}
+    for c in set(cl.tolist()):
+        sel = (cl == c) & np.isfinite(meas).all(axis=1)
+        if sel.sum() < 2:
+            continue
+        a, b = ref[sel] - ref[sel].mean(0), meas[sel] - meas[sel].mean(0)
+        phi = float(np.arctan2((a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).sum(), (a * b).sum()))
+        turn[c] = (phi, ref[sel].mean(0), meas[sel].mean(0))
+    r = idx(tree.root)
+    z = np.zeros(tree.n)
+    z[:3] = m.q0[3 * r:3 * r + 3]
+    if tree.cluster[r] in turn:
+        phi, c0, c1 = turn[tree.cluster[r]]
+        R = np.array([[np.cos(phi), -np.sin(phi)], [np.sin(phi), np.cos(phi)]])
+        z[:2] = c1 + R @ (m.q0[3 * r:3 * r + 2] - c0)
+        z[2] += phi
+    for k, h in enumerate(tree.hinges):
+        a, b = (tree.cluster[idx(n)] for n in m.scene.item(h).nodes)
+        if a in turn and b in turn:
+            z[3 + k] = turn[b][0] - turn[a][0]
+    return z
+
+
+def _solve_frame(f: ca.Function, z: np.ndarray, y: np.ndarray, max_iter: int = 50) -> tuple[np.ndarray, float, bool]:
+    """Levenberg-Marquardt from z on the seen entries of y: (z, rms misfit (m), decided)."""
+    seen = np.isfinite(y)
+    lam = 1e-3
+    ym, J = (np.array(v) for v in f(z))
+    r = ym.ravel()[seen] - y[seen]
+    J = J[seen]
+    for _ in range(max_iter):
+        A = J.T @ J
+        step = np.linalg.solve(A + lam * np.diag(np.diag(A) + 1e-12), -J.T @ r)
+        ym2, J2 = (np.array(v) for v in f(z + step))
+        r2 = ym2.ravel()[seen] - y[seen]
+        if r2 @ r2 <= r @ r:
+            z, r, J, lam = z + step, r2, J2[seen], max(lam / 10, 1e-12)
+            if np.max(np.abs(step)) < 1e-11:
+                break
+        else:
+            lam *= 10
+            if lam > 1e8:
+                break
+    s = np.linalg.svd(J, compute_uv=False) if J.size else np.zeros(1)
+    decided = J.shape[0] >= J.shape[1] and s[-1] > 1e-8 * max(s[0], 1e-300)
+    return z, float(np.sqrt(np.mean(r.reshape(-1, 2) ** 2, axis=0).sum())) if r.size else np.nan, bool(decided)
+
+
+def fit_markers(tree: KinematicTree, t: np.ndarray, y: np.ndarray, *, max_gap: float = 0.1,
+                progress=None) -> FittedMotion:
+    """The coordinates of the markers y (n, 2 m) at times t (n,) (module docstring); y's columns are
+    the scene markers' x, y in scene order (:func:`casflex.markers.marker_channels`), NaN where missing."""
+    f = _residual(tree)
+    y0 = np.array(f(tree.coordinates(tree.model.q0))[0]).ravel()
+    n = t.size
+    Z, rms, seen = np.full((n, tree.n), np.nan), np.full(n, np.nan), np.isfinite(y).reshape(n, -1, 2).all(2).sum(1)
+    z_prev = None
+    for i in range(n):
+        start = _kabsch_start(tree, y[i], y0) if z_prev is None else z_prev
+        z, e, ok = _solve_frame(f, start, y[i])
+        if ok:
+            Z[i], rms[i], z_prev = z, e, z
+        if progress is not None:
+            progress(i + 1, n)
+    report = [f"marker fit: {n} frames, misfit RMS median {1e3 * np.nanmedian(rms):.1f} mm, "
+              f"max {1e3 * np.nanmax(rms):.1f} mm"] if np.isfinite(rms).any() else []
+    Z = _fill(t, Z, max_gap, report)
+    return FittedMotion(t, Z, rms, seen, report)
+
+
+def _fill(t: np.ndarray, Z: np.ndarray, max_gap: float, report: list[str]) -> np.ndarray:
+    """Z with its gaps (frames whose markers did not decide the coordinates) filled by a cubic spline."""
+    from scipy.interpolate import CubicSpline
+
+    bad = ~np.isfinite(Z).all(axis=1)
+    if not bad.any():
+        return Z
+    if bad[0] or bad[-1]:
+        k = np.flatnonzero(~bad)
+        where = "start" if bad[0] else "end"
+        raise ValueError(f"data: the markers do not decide the coordinates at the trial's {where}"
+                         f" (t = {t[0] if bad[0] else t[-1]:g} s); trim the trial to "
+                         f"{t[k[0]]:g}..{t[k[-1]]:g} s (--t-start, --t-end) or fill the markers' gaps")
+    edges = np.flatnonzero(np.diff(bad.astype(int)))
+    for s, e in zip(edges[::2], edges[1::2], strict=True):
+        span = t[e + 1] - t[s]
+        if span > max_gap:
+            raise ValueError(f"data: the markers do not decide the coordinates from t = {t[s + 1]:g} to {t[e]:g} s, "
+                             f"a gap longer than {max_gap:g} s; fill the markers' gaps first")
+    report.append(f"gaps: {int(bad.sum())} frames without enough markers, filled by a cubic spline")
+    good = ~bad
+    return np.where(bad[:, None], CubicSpline(t[good], Z[good], axis=0)(t), Z)
+
+
+def even_times(t: np.ndarray) -> np.ndarray:
+    """The evenly spaced times t_0 + k h that ``t`` (n,) s writes rounded (lab files print 1/60 s as
+    0.017, 0.033: steps 6 % uneven, which would add as much jitter to the rates), if every time lies
+    within a tenth of a step of them; otherwise ``t`` unchanged."""
+    t = np.asarray(t, dtype=float)
+    if t.size < 2:
+        return t
+    grid = t[0] + (t[-1] - t[0]) / (t.size - 1) * np.arange(t.size)
+    return grid if np.max(np.abs(t - grid)) <= 0.1 * (grid[1] - grid[0]) else t
+
+
+def butterworth2(cutoff: float, fs: float) -> tuple[np.ndarray, np.ndarray]:
+    """(b, a): the 2nd-order digital Butterworth low-pass at ``cutoff`` Hz for ``fs`` Hz by the bilinear
+    transform with prewarping, as ``scipy.signal.butter(2, cutoff / (fs / 2))`` designs it (tested equal)."""
+    k = np.tan(np.pi * cutoff / fs)
+    norm = 1.0 / (1.0 + np.sqrt(2.0) * k + k * k)
+    b0 = k * k * norm
+    a2 = (1.0 - np.sqrt(2.0) * k + k * k) * norm
+    return np.array([b0, 2.0 * b0, b0]), np.array([1.0, 2.0 * (k * k - 1.0) * norm, a2])
+
+
+def _lfilter(b: np.ndarray, a: np.ndarray, x: np.ndarray, zi: np.ndarray) -> np.ndarray:
+    """Direct form II transposed, 2nd order, along axis 0 of x (n, k), from the state zi (2, k)."""
+    y = np.empty_like(x)
+    z0, z1 = zi[0].copy(), zi[1].copy()
+    for i in range(x.shape[0]):
+        y[i] = b[0] * x[i] + z0
+        z0 = b[1] * x[i] - a[1] * y[i] + z1
+        z1 = b[2] * x[i] - a[2] * y[i]
+    return y
+
+
+def filtfilt2(b: np.ndarray, a: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``scipy.signal.filtfilt(b, a, x, axis=0)`` for a 2nd-order filter, its defaults kept (odd
+    extension by 3 max(len(a), len(b)) = 9 samples, the steady-state initial conditions of
+    ``lfilter_zi``); numpy only, because importing scipy.signal costs 0.8 s, more than a whole
+    inverse dynamics run (tested equal to scipy's to round-off)."""
+    n_pad = 9
+    x = np.asarray(x, dtype=float)
+    ext = np.concatenate([2 * x[:1] - x[n_pad:0:-1], x, 2 * x[-1:] - x[-2:-n_pad - 2:-1]], axis=0)
+    # lfilter_zi: the state of a unit step's steady response, solved from the 2x2 companion system
+    A = np.array([[1.0 + a[1], -1.0], [a[2], 1.0]])
+    zi = np.linalg.solve(A, np.array([b[1] - a[1] * b[0], b[2] - a[2] * b[0]]))
+    y = _lfilter(b, a, ext, zi[:, None] * ext[:1])
+    y = _lfilter(b, a, y[::-1], zi[:, None] * y[-1:])[::-1]
+    return y[n_pad:-n_pad]
+
+
+def lowpass(t: np.ndarray, x: np.ndarray, cutoff: float | None, what: str = "data") -> np.ndarray:
+    """x (n, k) filtered along its rows by the zero-lag 4th-order Butterworth at ``cutoff`` Hz (None:
+    unfiltered; a 2nd-order filter run forward and backward); evenly spaced t (s) needed (to the
+    rounding :func:`even_times` allows)."""
+    if cutoff is None:
+        return np.array(x, dtype=float)
+    t = even_times(t)
+    h = np.diff(t)
+    if np.ptp(h) > 1e-6 * h.mean():
+        raise ValueError(f"{what}: filtering needs evenly spaced samples (times {h.min():g} to {h.max():g} s apart)")
+    fs = 1.0 / h.mean()
+    if not 0 < cutoff < fs / 2:
+        raise ValueError(f"cutoff: must lie between 0 and the Nyquist frequency {fs / 2:g} Hz of the {what}, "
+                         f"got {cutoff:g}")
+    if t.size <= 10:
+        raise ValueError(f"{what}: filtering needs more than 10 samples, got {t.size}")
+    x = np.asarray(x, dtype=float)
+    return filtfilt2(*butterworth2(cutoff, fs), x.reshape(t.size, -1)).reshape(x.shape)
+
+
+def coordinate_rates(t: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(z', z''), each (n, k), of the evenly spaced frames z (n, k) at t (n,): second-order central
+    differences, one-sided second-order at the ends (the labs' differentiation of filtered data,
+    Winter 2009, ch. 3)."""
+    h = float(t[1] - t[0])
+    zd = np.gradient(z, h, axis=0, edge_order=2)
+    zdd = np.empty_like(z)
+    zdd[1:-1] = (z[2:] - 2.0 * z[1:-1] + z[:-2]) / h**2
+    zdd[0] = (2.0 * z[0] - 5.0 * z[1] + 4.0 * z[2] - z[3]) / h**2
+    zdd[-1] = (2.0 * z[-1] - 5.0 * z[-2] + 4.0 * z[-3] - z[-4]) / h**2
+    return zd, zdd
