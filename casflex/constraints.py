@@ -112,11 +112,15 @@ def joint_groups(scene: Scene, nodes: dict[str, tuple[float, ...]], idx: dict[st
     names, row = [], 0
     for jt in scene.joints:
         kind = joint_kind(jt.kind, len(jt.nodes) == 1)
-        P = scene.joint_point(jt)
-        b = nodes[jt.nodes[-1]]
-        a = None if len(jt.nodes) == 1 else nodes[jt.nodes[0]]
-        props = [*(P if a is None else _offset(a, P)), *_offset(b, P), 0.0 if a is None else a[2], b[2],
-                 *_axis(scene, jt, P)]
+        if kind == "drive":  # theta_c0 in ax's slot (casflex.elements.joints)
+            a, b, c = (nodes[nd] for nd in jt.nodes)
+            props = [c[2], 0.0, 0.0, 0.0, a[2], b[2], 1.0, 0.0]
+        else:
+            P = scene.joint_point(jt)
+            b = nodes[jt.nodes[-1]]
+            a = None if len(jt.nodes) == 1 else nodes[jt.nodes[0]]
+            props = [*(P if a is None else _offset(a, P)), *_offset(b, P), 0.0 if a is None else a[2], b[2],
+                     *_axis(scene, jt, P)]
         k = len(ROWS[jt.kind])
         dofs = [idx[nd] + j for nd in jt.nodes for j in range(3)] + [n + row + i for i in range(k)]
         kinds.setdefault(kind, []).append((jt.name, dofs, props))

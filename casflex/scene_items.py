@@ -243,7 +243,7 @@ class RigidBody:
 
 
 #: Ideal joint kinds and the constraint rows each adds (casflex.elements.joints).
-JOINT_KINDS = {"hinge": 2, "slider": 2, "weld": 3}
+JOINT_KINDS = {"hinge": 2, "slider": 2, "weld": 3, "drive": 1}
 
 
 def _point(owner: str, field: str, value: Any) -> tuple[float, float]:
@@ -272,6 +272,11 @@ class Joint:
       ``moment`` (N m, on b: the couple that locks the rotation).
     - ``weld`` (3 rows): the two frames locked together at the point. Outputs ``fx``, ``fy``
       (N, global, on b) and ``moment`` (N m, on b).
+    - ``drive`` (1 row; ``nodes = [a, b, c]``): the relative rotation theta_b - theta_a (from the
+      initial configuration) follows node c's rotation (from its initial one), c a driver node that
+      a support moves along a path: an actuated joint driven at a measured angle (inverse dynamics
+      adds one across each hinge). Outputs ``moment`` (N m, on b; a gets its opposite: the actuator's
+      moment) and ``angle`` (rad). ``point`` and ``axis`` do not apply.
 
     ``axis`` (a direction, normalised; initial configuration) defaults to the x axis for a slider;
     for a hinge to the direction from the point to node b, or from node a to the point where b
@@ -290,11 +295,12 @@ class Joint:
         if self.kind not in JOINT_KINDS:
             raise SceneError.at(where, "kind", f"expected one of {list(JOINT_KINDS)}, got {self.kind!r}")
         nodes = self.nodes
-        if isinstance(nodes, str) or not isinstance(nodes, (list, tuple)) or len(nodes) not in (1, 2):
-            raise SceneError.at(where, "nodes", f"expected [a, b] or [b] (to the ground): node names, got {nodes!r}")
+        sizes, form = ((3,), "[a, b, driver]") if self.kind == "drive" else ((1, 2), "[a, b] or [b] (to the ground)")
+        if isinstance(nodes, str) or not isinstance(nodes, (list, tuple)) or len(nodes) not in sizes:
+            raise SceneError.at(where, "nodes", f"expected {form}: node names, got {nodes!r}")
         nodes = tuple(_name(where, f"nodes[{i}]", v) for i, v in enumerate(nodes))
-        if len(nodes) == 2 and nodes[0] == nodes[1]:
-            raise SceneError.at(where, "nodes", f"the two nodes must differ, got {nodes[0]!r} twice")
+        if len(set(nodes)) < len(nodes):
+            raise SceneError.at(where, "nodes", f"the nodes must differ, got {list(nodes)}")
         object.__setattr__(self, "nodes", nodes)
         if self.point is not None:
             object.__setattr__(self, "point", _point(where, "point", self.point))

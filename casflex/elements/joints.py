@@ -13,7 +13,11 @@ p_b = x_b + R(theta_b) r_b and psi = (theta_b - theta_b0) - (theta_a - theta_a0)
 - ``hinge``: Phi = p_b - p_a (m, 2 rows);
 - ``slider``: Phi = (n_a . (p_b - p_a), psi) with e_a = R(theta_a - theta_a0) e, n_a = e_a turned by
   +90 degrees (m, rad);
-- ``weld``: Phi = (p_b - p_a, psi) (m, m, rad).
+- ``weld``: Phi = (p_b - p_a, psi) (m, m, rad);
+- ``drive`` (three nodes a, b, c; dofs (a, b, c), nine): Phi = psi - (theta_c - theta_c0) (rad): the
+  relative rotation of a and b follows the rotation of a driver node c, which a support moves along
+  a path (inverse dynamics drives its hinges so). Its properties: theta_a0, theta_b0 as above, and
+  theta_c0 in the slot of ax (the others unused).
 
 The multipliers mu enter the equations of motion as B^T mu (B = dPhi/dq), so the joint exerts
 -B^T mu: on b's point the force -mu (hinge, weld), -mu_1 n_a across a slider.
@@ -41,14 +45,15 @@ from casflex.elements.kernels import Kind
 __all__ = ["JOINT_KINDS", "OUTPUTS", "PROPS", "ROWS", "joint_kernel", "joint_kind"]
 
 #: Constraint rows of each kind, with the suffixes that name them (``<joint>.<suffix>``).
-ROWS = {"hinge": ("x", "y"), "slider": ("across", "theta"), "weld": ("x", "y", "theta")}
+ROWS = {"hinge": ("x", "y"), "slider": ("across", "theta"), "weld": ("x", "y", "theta"), "drive": ("angle",)}
 #: Outputs of each kind (``<joint>.<output>``); see :class:`casflex.scene_items.Joint`.
 OUTPUTS = {"hinge": ("fx", "fy", "f_along", "f_across", "angle"), "slider": ("travel", "force", "moment"),
-           "weld": ("fx", "fy", "moment")}
+           "weld": ("fx", "fy", "moment"), "drive": ("moment", "angle")}
 PROPS = ("ax", "ay", "rbx", "rby", "tha0", "thb0", "ex", "ey")
 #: The kernel kinds: ``<kind>`` (two nodes) and ``<kind>_g`` (node b to the ground).
 JOINT_KINDS = {f"{k}{g}": Kind(f"{k}{g}", n + len(rows), PROPS, OUTPUTS[k], False)
-               for k, rows in ROWS.items() for g, n in (("", 6), ("_g", 3))}
+               for k, rows in ROWS.items() if k != "drive" for g, n in (("", 6), ("_g", 3))}
+JOINT_KINDS["drive"] = Kind("drive", 9 + 1, PROPS, OUTPUTS["drive"], False)
 
 
 def joint_kind(kind: str, grounded: bool) -> str:
@@ -70,6 +75,10 @@ class _Joint:
 
     def __init__(self, kind: str, q: ca.SX, pr: ca.SX):
         self.base, grounded = kind.removesuffix("_g"), kind.endswith("_g")
+        if kind == "drive":  # a, b, then the driver c
+            self.psi = (q[5] - pr[5]) - (q[2] - pr[4])
+            self.drive = self.psi - (q[8] - pr[0])
+            return
         b = q[-3:]
         self.p_b = b[:2] + _rot(b[2], pr[2:4])
         self.turn_b = b[2] - pr[5]
@@ -81,6 +90,8 @@ class _Joint:
         self.e = pr[6:8]
 
     def phi(self) -> ca.SX:
+        if self.base == "drive":
+            return self.drive
         d = self.p_b - self.p_a
         if self.base == "hinge":
             return d
@@ -89,6 +100,8 @@ class _Joint:
         return ca.vertcat(d, self.psi)
 
     def outputs(self, mu: ca.SX) -> ca.SX:
+        if self.base == "drive":  # the moment on b (a gets its opposite), the relative rotation
+            return ca.vertcat(-mu, self.psi)
         if self.base == "hinge":
             f, e_b = -mu, _rot(self.turn_b, self.e)
             return ca.vertcat(f, ca.dot(f, e_b), ca.dot(f, _perp(e_b)), self.psi)

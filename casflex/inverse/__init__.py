@@ -8,7 +8,8 @@ The data flow (docs/lab.md, "Inverse dynamics"):
    them best (:mod:`casflex.inverse.fit`), gaps filled and reported;
 3. the coordinates and the force plates filtered by the same zero-lag Butterworth (``cutoff``);
 4. the loads that make the scene follow that motion under the plates' forces: exact per frame for
-   rigid segments (:mod:`casflex.inverse.rigid`).
+   rigid segments (:mod:`casflex.inverse.rigid`); with flexible ones (beams), the scene driven along
+   the motion by HHT, the bones' deflections from its dynamics (:mod:`casflex.inverse.flexible`).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from collections.abc import Callable
 import numpy as np
 
 from casflex.inverse.fit import coordinate_rates, even_times, fit_markers, lowpass
+from casflex.inverse.flexible import driven_loads
 from casflex.inverse.plates import Plate, plate_from_table, plate_loads
 from casflex.inverse.result import InverseResult
 from casflex.inverse.rigid import rigid_loads
@@ -53,6 +55,7 @@ def _window(t: np.ndarray, t_start: float | None, t_end: float | None) -> np.nda
 def inverse_dynamics(scene, markers, *, plane: str = "X,Y", grf=None, plates: dict[str, str] | None = None,
                      cutoff: float | None = 6.0, root: str | None = None,
                      t_start: float | None = None, t_end: float | None = None, max_gap: float = 0.1,
+                     dt: float | None = None, alpha: float | None = None, compiled: bool = False,
                      progress: Callable[[int, int], None] | None = None) -> InverseResult:
     """Net joint moments, intersegmental forces and root loads of ``scene`` over a trial.
 
@@ -72,6 +75,9 @@ def inverse_dynamics(scene, markers, *, plane: str = "X,Y", grf=None, plates: di
         The node the data drive (default: the scene's first node).
     t_start, t_end : float, s, optional
         The part of the trial to use.
+    dt, alpha, compiled
+        Flexible segments only: the largest HHT time step (s; default the scene's, made to divide the
+        frames' interval), HHT's alpha (default the scene's) and whether to run compiled C.
     """
     from casflex.lab import LabMarkers, LabTable, Plane, markers_in_plane, read_sto, read_trc
 
@@ -90,7 +96,7 @@ def inverse_dynamics(scene, markers, *, plane: str = "X,Y", grf=None, plates: di
     table = None if grf is None else grf if isinstance(grf, LabTable) else read_sto(grf)
     ms = markers_in_plane(lab, {m.name: m.label or m.name for m in model.scene.markers}, pl)
     keep = _window(ms.t, t_start, t_end)
-    t_frames, y = even_times(ms.t[keep]), ms.q[keep]
+    t_frames, y = even_times(ms.t[keep], lab.rate), ms.q[keep]
     fit = fit_markers(tree, t_frames, y, max_gap=max_gap, progress=progress)
     report = list(fit.report)
     zf = lowpass(t_frames, fit.z, cutoff, what="markers")
@@ -102,11 +108,19 @@ def inverse_dynamics(scene, markers, *, plane: str = "X,Y", grf=None, plates: di
     if plate_list:
         report.append(f"plates {', '.join(f'{p.name!r} on {p.node}' for p in plate_list)}: force and moment about "
                       f"the lab origin filtered {f'at {cutoff:g} Hz' if cutoff else 'not at all'}")
-    external = (lambda tt, q: plate_loads(model, plate_list, tt, q)) if plate_list else None
-    sol = rigid_loads(tree, t, z, zd, zdd, model.p_nominal, external)
+    if model.n_con == model.n_dof - tree.n:  # the coordinates decide every dof: rigid segments
+        external = (lambda tt, q: plate_loads(model, plate_list, tt, q)) if plate_list else None
+        sol = rigid_loads(tree, t, z, zd, zdd, model.p_nominal, external)
+    else:
+        run = model.scene.run
+        q_fit = np.array(tree.forward.map(t.size)(z.T)).T
+        sol = driven_loads(tree, t, z, zd, plate_list, q_fit, dt=run.dt if dt is None else dt,
+                           alpha=run.alpha if alpha is None else alpha, compiled=compiled)
+        report.append(f"flexible segments: driven by HHT (alpha {run.alpha if alpha is None else alpha:g}), the "
+                      f"bones' largest deflection {1e3 * sol['deflection'].max():.2f} mm")
     settings = {"plane": f"{pl.x},{pl.y}", "cutoff_hz": cutoff, "root": tree.root,
                 "plates": plates, "moments": [f"{h}.moment" for h in tree.hinges],
                 "source": getattr(lab, "source", ""), "scene": model.scene.name}
-    loads = {k: v for k, v in sol.items() if k not in ("q", "qd", "qdd", "lam")}
+    loads = {k: v for k, v in sol.items() if k not in ("q", "qd", "qdd", "lam", "deflection")}
     return InverseResult(t, tree.names, z, zd, zdd, model.dof_names, sol["q"], sol["qd"], sol["qdd"], loads,
                          t_frames, fit.rms, report, settings)

@@ -154,15 +154,20 @@ def _fill(t: np.ndarray, Z: np.ndarray, max_gap: float, report: list[str]) -> np
     return np.where(bad[:, None], CubicSpline(t[good], Z[good], axis=0)(t), Z)
 
 
-def even_times(t: np.ndarray) -> np.ndarray:
+def even_times(t: np.ndarray, rate: float | None = None) -> np.ndarray:
     """The evenly spaced times t_0 + k h that ``t`` (n,) s writes rounded (lab files print 1/60 s as
     0.017, 0.033: steps 6 % uneven, which would add as much jitter to the rates), if every time lies
-    within a tenth of a step of them; otherwise ``t`` unchanged."""
+    within a tenth of a step of them; otherwise ``t`` unchanged. h is 1 / ``rate`` (Hz, a file's
+    header) when given and consistent, else the least-squares slope of t against k."""
     t = np.asarray(t, dtype=float)
-    if t.size < 2:
+    if t.size < 3:
         return t
-    grid = t[0] + (t[-1] - t[0]) / (t.size - 1) * np.arange(t.size)
-    return grid if np.max(np.abs(t - grid)) <= 0.1 * (grid[1] - grid[0]) else t
+    k = np.arange(t.size)
+    h = np.polyfit(k, t, 1)[0]
+    if rate is not None and abs(1.0 / rate - h) < 0.01 * h:
+        h = 1.0 / rate
+    grid = np.mean(t - h * k) + h * k
+    return grid if np.max(np.abs(t - grid)) <= 0.1 * h else t
 
 
 def butterworth2(cutoff: float, fs: float) -> tuple[np.ndarray, np.ndarray]:

@@ -76,9 +76,10 @@ class _Drawer:
         self.n_user = len(model.scene.nodes)
         # ideal joints: drawn at their point seen from node b; the point's offsets from every node of
         # the joint (node a's too) are rigid links where the point is off the node
-        self.joint_kinds = [j.kind for j in model.scene.joints]
+        self.drawn_joints = [j for j in model.scene.joints if j.kind != "drive"]  # a drive has no place of its own
+        self.joint_kinds = [j.kind for j in self.drawn_joints]
         self.joint_ends = [(idx[n], np.subtract(model.scene.joint_point(j), xy0[idx[n], :2]))
-                           for j in model.scene.joints for n in reversed(j.nodes)]  # node b first
+                           for j in self.drawn_joints for n in reversed(j.nodes)]  # node b first
 
     def bodies(self, q: np.ndarray) -> np.ndarray:
         """(k, 2) centres of mass of the rigid bodies."""
@@ -123,7 +124,7 @@ class _Drawer:
 
     def joints(self, q: np.ndarray) -> np.ndarray:
         """(k, 2) the joints' points, carried by node b (its end of each joint)."""
-        firsts = np.cumsum([0] + [len(j.nodes) for j in self.model.scene.joints])[:-1]
+        firsts = np.cumsum([0] + [len(j.nodes) for j in self.drawn_joints])[:-1]
         return np.array([self._turned(q, *self.joint_ends[i]) for i in firsts]).reshape(-1, 2)
 
     def _turned(self, q: np.ndarray, node: int, offset: np.ndarray) -> np.ndarray:

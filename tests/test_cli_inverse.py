@@ -1,0 +1,71 @@
+"""``casflex inverse`` on the Hamner stride: files written, options refused in one line before any work."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from casflex.cli import main
+
+LAB = Path(__file__).parent / "data" / "lab"
+TRC, GRF = str(LAB / "hamner_running_stride.trc"), str(LAB / "hamner_running_stride_grf.mot")
+BASE = ["inverse", "hamner_leg", "--data", TRC, "--root", "pelvis", "--quiet"]
+
+
+def _run(argv: list[str], capsys) -> tuple[int, str, str]:
+    code = main(argv)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_writes_the_loads_as_csv_npz_and_figures(tmp_path, capsys):
+    csv, npz, figs = tmp_path / "loads.csv", tmp_path / "loads.npz", tmp_path / "figs"
+    for out in (csv, npz):
+        code, text, err = _run([*BASE, "--loads", GRF, "--plate", "ankle=ground_", "--cutoff", "10", "--out", str(out)]
+                               + (["--plots", str(figs)] if out == csv else []), capsys)
+        assert code == 0, err
+        assert "hip.moment" in text and "plates 'ground_' on ankle" in text
+    header = csv.read_text().splitlines()[0].split(",")
+    assert header[0] == "t [s]" and "pelvis.x [m]" in header and "knee.angle [rad]" in header
+    assert "knee.moment" in header and "root.fy" in header
+    table = np.loadtxt(csv, delimiter=",", skiprows=1)
+    with np.load(npz) as z:
+        names = [str(s) for s in z["load_names"]]
+        k = names.index("knee.moment")
+        assert np.allclose(table[:, header.index("knee.moment")], z["loads"][:, k], rtol=1e-9)
+        assert z["q"].shape == (table.shape[0], 12)
+    assert sorted(p.name for p in figs.iterdir()) == ["inverse_loads.png", "marker_fit.png"]
+
+
+@pytest.mark.parametrize(("extra", "match"), [
+    (["--plate", "ankle"], "--plate: expected NODE=PREFIX"),
+    (["--plate", "ankle=ground_"], "--plate: needs --loads"),
+    (["--loads", GRF], "--loads: say which node"),
+    (["--loads", GRF, "--plate", "heel=ground_"], "plates: no node 'heel'"),
+    (["--loads", GRF, "--plate", "ankle=2_ground_"], "no column '2_ground_force_vx'"),
+    (["--plane", "X,X"], "--plane: expected two different lab axes"),
+    (["--cutoff", "0"], "--cutoff: must be a frequency in Hz > 0"),
+    (["--cutoff", "40"], "cutoff: must lie between 0 and the Nyquist frequency 30 Hz"),
+    (["--t-start", "0.5", "--t-end", "0.45"], "--t-end: must be after --t-start"),
+    (["--t-start", "0.9", "--t-end", "0.95"], "t_start, t_end: the window"),
+    (["--root", "hip"], "support|root|run away"),
+])
+def test_bad_options_exit_2_with_one_line_and_write_nothing(extra, match, tmp_path, capsys):
+    out = tmp_path / "x.csv"
+    code, text, err = _run([*BASE, "--out", str(out), *extra], capsys)
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("casflex: error:")
+    import re
+
+    assert re.search(match, lines[0]), lines[0]
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_label_the_trial_lacks_is_named(tmp_path, capsys):
+    trc = tmp_path / "t.trc"
+    trc.write_text(Path(TRC).read_text().replace("R.Heel", "R.Heal"))
+    code, _, err = _run(["inverse", "hamner_leg", "--data", str(trc), "--root", "pelvis", "--quiet"], capsys)
+    assert code == 2 and "no marker labelled 'R.Heel'" in err

@@ -1,0 +1,191 @@
+"""Inverse dynamics (casflex.inverse): closed forms, Newton's law for the whole system, the lab's
+filter against scipy's, the driven (HHT) path against the exact one, and the refusals."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+from inverse_scenes import INERTIA, M_BASE, C, M, pendulum
+
+from casflex.inverse import inverse_dynamics, inverse_model, kinematic_tree
+from casflex.inverse.fit import butterworth2, coordinate_rates, even_times, filtfilt2, lowpass
+from casflex.inverse.flexible import driven_loads
+from casflex.inverse.plates import Plate, plate_loads
+from casflex.inverse.rigid import rigid_loads
+from casflex.lab import LabMarkers
+from casflex.markers import marker_positions
+from casflex.scene_io import loads_scene
+
+G = 9.81
+A, W = 0.7, 2 * np.pi * 1.3  # the pendulum's swing: A sin(W t), rad
+
+
+def _tree(extra: str = ""):
+    model = inverse_model(loads_scene(pendulum(extra)))
+    return model, kinematic_tree(model)
+
+
+def _swing(t: np.ndarray, moving_root: bool = False):
+    """z, z', z'' (k, 4) of the pendulum: analytic, the root still or moving."""
+    th, thd, thdd = A * np.sin(W * t), A * W * np.cos(W * t), -A * W * W * np.sin(W * t)
+    z = np.zeros((t.size, 4))
+    zd, zdd = np.zeros_like(z), np.zeros_like(z)
+    z[:, 1] = 1.0
+    z[:, 3], zd[:, 3], zdd[:, 3] = th, thd, thdd
+    if moving_root:  # x = a sin(3t), y = 1 + b cos(5t), theta = c sin(2t)
+        for col, (amp, w, fn) in enumerate(((0.05, 3.0, np.sin), (0.02, 5.0, np.cos), (0.1, 2.0, np.sin))):
+            d = np.cos if fn is np.sin else lambda x: -np.sin(x)
+            z[:, col] += amp * fn(w * t)
+            zd[:, col] = amp * w * d(w * t)
+            zdd[:, col] = -amp * w * w * fn(w * t)
+    return z, zd, zdd
+
+
+def test_pendulum_moment_is_the_closed_form():
+    model, tree = _tree()
+    t = np.linspace(0.0, 1.0, 101)
+    sol = rigid_loads(tree, t, *_swing(t), model.p_nominal)
+    th, thdd = A * np.sin(W * t), -A * W * W * np.sin(W * t)
+    tau = (INERTIA + M * C * C) * thdd + M * G * C * np.sin(th)  # about the pivot, the arm hanging at theta = 0
+    # exact per frame: only round-off (1e-12 of the peak, ~10^4 eps)
+    assert np.abs(sol["pivot.moment"] - tau).max() < 1e-12 * np.abs(tau).max()
+    assert np.abs(sol["root.mz"] - tau).max() < 1e-12 * np.abs(tau).max()  # the base still: it passes it on
+
+
+def test_root_loads_are_newtons_law_for_the_whole_system():
+    model, tree = _tree()
+    t = np.linspace(0.0, 1.0, 51)
+    z, zd, zdd = _swing(t, moving_root=True)
+    F = np.column_stack([30.0 * np.sin(4 * t), 5.0 + 10.0 * t])  # a plate's force on the arm, N
+    P = np.column_stack([0.1 + 0.0 * t, 0.4 + 0.1 * t])  # where it acts, m
+    plate = Plate("p", "link", t, F, P[:, 0] * F[:, 1] - P[:, 1] * F[:, 0])
+
+    sol = rigid_loads(tree, t, z, zd, zdd, model.p_nominal, lambda tt, q: plate_loads(model, [plate], tt, q))
+    # the bodies' centres' accelerations by AD along the coordinates' motion
+    from casflex.markers import body_centres
+
+    body_centres(model, model.q0)  # builds the Function
+    from casflex import markers as mk
+
+    zs, zds, zdds = (ca.SX.sym(s, 4) for s in ("z", "zd", "zdd"))
+    c = mk._CENTRES[model](tree.forward(zs))
+    cd = ca.jtimes(c, zs, zds)
+    cdd = ca.jtimes(c, zs, zdds) + ca.jtimes(cd, zs, zds)
+    acc = ca.Function("acc", [zs, zds, zdds], [cdd])
+    a = np.array([np.array(acc(z[i], zd[i], zdd[i])).reshape(-1, 2) for i in range(t.size)])  # (k, bodies, 2)
+    masses = np.array([b.mass for b in model.scene.bodies])
+    need = (masses[None, :, None] * a).sum(axis=1) - masses.sum() * np.array([0.0, -G]) - F
+    drive = np.column_stack([sol["root.fx"], sol["root.fy"]])
+    assert np.abs(drive - need).max() < 1e-10 * np.abs(need).max()  # exact: round-off only
+
+
+def test_pipeline_from_exact_markers_is_second_order():
+    """Markers of a known motion, unfiltered: the loads' error is the central differences' (h^2/12 f'''')."""
+    model, tree = _tree()
+    h = 0.01
+    t = np.arange(0.0, 1.0 + h / 2, h)
+    z, _, _ = _swing(t)
+    q = np.array(tree.forward.map(t.size)(z.T)).T
+    y = marker_positions(model, q).reshape(t.size, -1, 2)
+    lab = LabMarkers(t, ("BASE.1", "BASE.2", "ARM.1", "ARM.2"), np.concatenate([y, np.zeros_like(y[..., :1])], 2),
+                     100.0, "m", "synthetic")
+    res = inverse_dynamics(loads_scene(pendulum()), lab, cutoff=None)
+    assert res.marker_rms.max() < 1e-9  # the markers fit exactly
+    th, thdd = A * np.sin(W * t), -A * W * W * np.sin(W * t)
+    tau = (INERTIA + M * C * C) * thdd + M * G * C * np.sin(th)
+    err = np.abs(res.load("pivot.moment") - tau)
+    inner = (INERTIA + M * C * C) * h**2 / 12 * A * W**4  # the central second difference's truncation error
+    ends = (INERTIA + M * C * C) * 11 / 12 * h**2 * A * W**4 * 1.2  # the one-sided one's (11/12 h^2 f''''), +20 %
+    assert err[1:-1].max() < 1.05 * inner  # to the truncation error's next term (h^4)
+    assert err[[0, -1]].max() < ends
+
+
+def test_plate_under_the_centre_of_mass_leaves_no_joint_moment():
+    model, tree = _tree()
+    t = np.linspace(0.0, 0.5, 11)
+    z = np.zeros((t.size, 4))
+    z[:, 1] = 1.0
+    for dx, want in ((0.0, 0.0), (0.05, M * G * 0.05)):  # the arm's weight carried at x = dx
+        F = np.tile([0.0, M * G], (t.size, 1))
+        plate = Plate("p", "link", t, F, np.full(t.size, dx * M * G))
+        sol = rigid_loads(tree, t, z, 0 * z, 0 * z, model.p_nominal,
+                          lambda tt, q, pl=plate: plate_loads(model, [pl], tt, q))
+        # the plate's moment about the pivot, dx M g, is what the joint holds back: -dx M g on the arm
+        assert np.allclose(sol["pivot.moment"], -want, atol=1e-12)
+        assert np.allclose(sol["root.fy"], M_BASE * G, atol=1e-12)
+
+
+@pytest.mark.parametrize(("cutoff", "fs"), [(6.0, 60.0), (10.0, 100.0), (15.0, 1000.0)])
+def test_lab_filter_is_scipys(cutoff, fs):
+    from scipy.signal import butter, filtfilt
+
+    b, a = butter(2, cutoff / (fs / 2))
+    b2, a2 = butterworth2(cutoff, fs)
+    assert np.allclose(b, b2, rtol=1e-14, atol=0) and np.allclose(a, a2, rtol=1e-14, atol=1e-16)
+    x = np.random.default_rng(1).standard_normal((200, 3)).cumsum(0)
+    # the same recursion in another order of operations: round-off, amplified by the filter's gain (~1e2)
+    assert np.abs(filtfilt(b, a, x, axis=0) - filtfilt2(b2, a2, x)).max() < 1e-12 * np.abs(x).max()
+
+
+def test_filter_keeps_slow_motion_and_removes_fast():
+    t = np.arange(0, 2, 0.01)
+    slow, fast = np.sin(2 * np.pi * 1.0 * t), np.sin(2 * np.pi * 30.0 * t)
+    out = lowpass(t, np.column_stack([slow, fast]), 6.0)
+    mid = slice(50, 150)
+    # |H|^2 of the 2nd-order Butterworth run twice: 1 / (1 + (f/fc)^4); at 1 Hz 0.9992, at 30 Hz 1.6e-3 (prewarped)
+    assert np.abs(out[mid, 0] - slow[mid]).max() < 2e-3
+    assert np.abs(out[mid, 1]).max() < 5e-3
+
+
+def test_even_times_snap_rounded_frames_only():
+    t = np.round(np.arange(20) / 60, 3)  # a lab file's 0.017, 0.033, ...
+    assert np.allclose(np.diff(even_times(t, 60.0)), 1 / 60, rtol=1e-12)  # the header's rate
+    assert np.allclose(np.diff(even_times(t)), 1 / 60, rtol=1e-3)  # the slope: rounding's 0.5 ms over 20 frames
+    uneven = np.cumsum(np.r_[0, np.full(9, 0.01), np.full(10, 0.02)])
+    assert even_times(uneven) is not None and np.array_equal(even_times(uneven), uneven)
+    with pytest.raises(ValueError, match="evenly spaced"):
+        lowpass(uneven, uneven[:, None], 6.0)
+    zd, zdd = coordinate_rates(np.arange(10) * 0.1, (np.arange(10) * 0.1)[:, None] ** 2)
+    assert np.allclose(zd[:, 0], 2 * np.arange(10) * 0.1) and np.allclose(zdd, 2.0)  # exact on quadratics
+
+
+def test_driven_run_converges_to_the_exact_rigid_inverse():
+    """The flexible inverse's path (drive joints, HHT) on rigid segments against the exact solve, with
+    the same kinematics (the supports' splines)."""
+    from scipy.interpolate import CubicSpline
+
+    model, tree = _tree()
+    t = np.arange(0.0, 0.6 + 1e-9, 0.01)
+    z, _, _ = _swing(t, moving_root=True)
+    s = CubicSpline(t, z, axis=0)
+    exact = rigid_loads(tree, t, s(t), s(t, 1), s(t, 2), model.p_nominal)
+    run = driven_loads(tree, t, z, s(t, 1), [], exact["q"], dt=2.5e-4, alpha=-0.1)
+    late = t > 0.2  # past the start's O(dt) transient of index-3 multipliers
+    for k in ("pivot.moment", "root.fx", "root.fy", "root.mz"):
+        # measured 2e-6 of the peak at dt = h / 40 (HHT's error; 7e-4 of it at h / 20): bound 5x that
+        assert np.abs(run[k] - exact[k])[late].max() < 1e-5 * np.abs(exact[k]).max() + 1e-9, k
+    assert run["deflection"].max() < 1e-9  # rigid: nothing deflects
+
+
+@pytest.mark.parametrize(("extra", "message"), [
+    ('[[joints]]\nname = "s"\nkind = "slider"\nnodes = ["base", "extra"]\n', "sliders are not in inverse"),
+    ('[[springs]]\nname = "s"\nnodes = ["base", "extra"]\nk = 10.0\n', "spring 's'"),
+    ('[[joints]]\nname = "s"\nkind = "hinge"\nnodes = ["extra", "base"]\n', "run away from the root"),
+    ('[[joints]]\nname = "s"\nkind = "hinge"\nnodes = ["extra"]\n', "joint to the ground"),
+])
+def test_scenes_inverse_dynamics_refuses(extra, message):
+    node = '[[nodes]]\nname = "extra"\nx = 0.5\ny = 1.0\n[[bodies]]\nname = "e"\nnode = "extra"\nmass = 1.0\n'
+    with pytest.raises(ValueError, match=message):
+        _tree(node + extra)
+
+
+def test_missing_label_and_short_window_are_one_line():
+    model, tree = _tree()
+    t = np.arange(0, 0.3, 0.01)
+    xyz = np.zeros((t.size, 2, 3))
+    lab = LabMarkers(t, ("BASE.1", "OTHER"), xyz, 100.0, "m", "trial.trc")
+    with pytest.raises(ValueError, match="no marker labelled 'BASE.2'"):
+        inverse_dynamics(loads_scene(pendulum()), lab)
+    with pytest.raises(ValueError, match="plates: no node 'foot'"):
+        inverse_dynamics(loads_scene(pendulum()), lab, grf="x.mot", plates={"foot": "ground_"})
