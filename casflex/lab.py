@@ -12,6 +12,11 @@ that takes the lab's 3-D axes to a scene's x and y (issue 26, in part).
   a mirrored plane (a left side seen from the right) is said, not silently taken.
 - :func:`markers_in_plane`: a :class:`~casflex.data.MeasurementSet` of the scene's markers
   (``x<marker>``, ``y<marker>``) from the lab labels they stand for (``label`` of ``[[markers]]``).
+- :func:`read_c3d` (:mod:`casflex.lab_c3d`, through the optional ezc3d): a C3D file's markers and its
+  force plates as a table of OpenSim's ground-reaction columns.
+- :func:`filtered`, :func:`plate_moment_about_origin`, :func:`centre_of_pressure`
+  (:mod:`casflex.lab_filter`): the labs' zero-lag Butterworth on markers and tables, and force plates
+  filtered through their force and moment, not their centre of pressure.
 
 Every malformed file gives one ValueError line naming the file and what is wrong: missing or
 unknown units, duplicated labels, rows of the wrong length, times that do not increase.
@@ -26,7 +31,11 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["LabMarkers", "LabTable", "Plane", "read_trc", "read_sto", "markers_in_plane", "trial_markers"]
+from casflex.lab_c3d import read_c3d
+from casflex.lab_filter import centre_of_pressure, filtered, plate_moment_about_origin
+
+__all__ = ["LabMarkers", "LabTable", "Plane", "read_trc", "read_sto", "read_c3d", "markers_in_plane", "trial_markers",
+           "filtered", "plate_moment_about_origin", "centre_of_pressure"]
 
 #: Length units of TRC headers, in metres.
 UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
@@ -54,7 +63,8 @@ class LabMarkers:
 
 @dataclass(frozen=True)
 class LabTable:
-    """A .mot / .sto table: t (n,) s, names (m,) of the other columns, values (n, m) as written."""
+    """Named columns: t (n,) s, names (m,) of the other columns, values (n, m) as written (a .mot / .sto
+    file), or in N, m, N m (a C3D file's force plates, :func:`read_c3d`)."""
 
     t: np.ndarray
     names: tuple[str, ...]

@@ -136,8 +136,8 @@ def _from_mass_matrix(model, nodes: list[str]) -> tuple[float, np.ndarray, float
 
 SEGMENT_NODES = {"hamner_leg": {"pelvis": ["pelvis"], "thigh": ["hip"], "shank": ["knee"], "foot": ["ankle"]},
                  "hamner_leg_flexible": {"pelvis": ["pelvis"], "foot": ["ankle"],
-                                         "thigh": ["hip", "knee_t"] + [f"thigh_bone.{k}" for k in (1, 2, 3)],
-                                         "shank": ["knee", "ankle_s"] + [f"shank_bone.{k}" for k in (1, 2, 3)]}}
+                                         "thigh": ["hip", "thigh_1", "thigh_2", "thigh_3", "knee_t"],
+                                         "shank": ["knee", "shank_1", "shank_2", "shank_3", "ankle_s"]}}
 
 
 def test_both_scenes_load_and_assemble_as_a_floating_leg_on_three_hinges(models):
@@ -147,7 +147,8 @@ def test_both_scenes_load_and_assemble_as_a_floating_leg_on_three_hinges(models)
     for m in models.values():
         phi, _ = m.constraint(m.q0)
         assert np.abs(np.array(phi)).max() < 1e-15  # the hinges closed in the default pose
-    assert {b.name: b.elements for b in flexible.scene.beams} == {"thigh_bone": 4, "shank_bone": 4}
+    assert {b.name: b.elements for b in flexible.scene.beams} == {f"{s}_bone_{k}": 1 for s in ("thigh", "shank")
+                                                                  for k in (1, 2, 3, 4)}
 
 
 def test_masses_centres_joints_and_markers_are_the_osim_s(osim, models):
@@ -181,7 +182,11 @@ def test_masses_centres_joints_and_markers_are_the_osim_s(osim, models):
 
 
 def test_the_flexible_segments_are_the_rigid_ones_undeformed(models):
+    """Per segment, beams and bodies together have the rigid body's mass, centre and Izz (from the
+    assembled mass matrices); the markers sit where the rigid scene has them."""
     from hamner_leg import flexible_scene
+
+    from casflex.markers import marker_positions
 
     rigid, flexible = models["hamner_leg"], models["hamner_leg_flexible"]
     assert flexible.scene == flexible_scene(rigid.scene)  # what tests/hamner_leg.py writes
@@ -191,14 +196,33 @@ def test_the_flexible_segments_are_the_rigid_ones_undeformed(models):
         b = next(b for b in rigid.scene.bodies if b.name == seg)
         np.testing.assert_allclose([m0, *c0, i0], [b.mass, b.com_x, b.com_y, b.inertia], rtol=1e-12)
         np.testing.assert_allclose([m1, *c1, i1], [m0, *c0, i0], rtol=1e-9)
-    for b in flexible.scene.bodies:  # the two point masses of each bone's remainder
-        assert b.inertia >= 0.0 and b.mass > 0.0
-    bones = {bm.name: bm for bm in flexible.scene.beams}
-    assert bones["thigh_bone"].E == bones["shank_bone"].E == 17e9 and bones["thigh_bone"].rho == 1900.0
+    for seg in ("thigh", "shank"):  # a point mass on each of the bone's five nodes, all positive
+        on = {b.node: b for b in flexible.scene.bodies if b.name.startswith(f"{seg}_mass_")}
+        assert list(on) == SEGMENT_NODES["hamner_leg_flexible"][seg]
+        assert all(b.mass > 0.0 and b.inertia == 0.0 for b in on.values())
+    bones = flexible.scene.beams
+    assert len(bones) == 8 and {(bm.E, bm.rho, bm.beta) for bm in bones} == {(17e9, 1900.0, 0.025)}
+    # the markers: where the rigid scene has them in the default pose, each thigh or shank one on the beam
+    # of the four that holds its projection on the bone
+    np.testing.assert_allclose(marker_positions(flexible, flexible.q0), marker_positions(rigid, rigid.q0),
+                               rtol=0, atol=1e-9)
     on = {mk.name: mk.on for mk in flexible.scene.markers}
+    assert {n: on[n] for n in on if "Thigh" in n or "Shank" in n} == {
+        "R_Thigh_Upper": "thigh_bone_2", "R_Thigh_Front": "thigh_bone_3", "R_Thigh_Rear": "thigh_bone_3",
+        "R_Shank_Upper": "shank_bone_1", "R_Shank_Front": "shank_bone_2", "R_Shank_Rear": "shank_bone_2"}
     assert [(mk.x, mk.y, mk.label) for mk in flexible.scene.markers] == [(mk.x, mk.y, mk.label)
                                                                          for mk in rigid.scene.markers]
-    assert {on[mk.name] for mk in rigid.scene.markers if mk.on == "thigh"} == {"thigh_bone"}
+
+
+def test_the_held_flexible_leg_s_lowest_mode_is_damped_as_the_soft_tissue():
+    """Pelvis clamped and hinges locked (what the flexible inverse's drives hold): the lowest bending mode
+    at 3.8 Hz with the damping ratio 0.3 the header chooses, the next ones overdamped."""
+    from hamner_leg import held_modes
+
+    md = held_modes(casflex.load_scene("hamner_leg_flexible"))
+    np.testing.assert_allclose(md["hz"], [3.817, 18.37, 45.94, 84.65], rtol=1e-3)
+    assert md["zeta_1"] == pytest.approx(0.3, abs=1e-3) and md["zeta"][0] == pytest.approx(md["zeta_1"], abs=1e-3)
+    assert (md["zeta"][1:] > 1.0).all()
 
 
 # -- the running stride ------------------------------------------------------------------------------------

@@ -3,13 +3,26 @@ tests/data/lab with their source), the lab-to-model plane, and malformed files (
 
 from __future__ import annotations
 
+import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 import casflex
-from casflex.lab import Plane, read_sto, read_trc, trial_markers
+from casflex.lab import (
+    LabTable,
+    Plane,
+    centre_of_pressure,
+    filtered,
+    plate_moment_about_origin,
+    read_c3d,
+    read_sto,
+    read_trc,
+    trial_markers,
+)
+from casflex.lab_filter import zero_lag_minus_3db
 
 LAB = Path(__file__).resolve().parent / "data" / "lab"
 TRC, GRF = LAB / "hamner_running_excerpt.trc", LAB / "hamner_running_grf_excerpt.mot"
@@ -106,3 +119,220 @@ def test_the_command_line_refuses_a_bad_plane_before_any_work(tmp_path, capsys):
     assert main(["identify", "twobar", "--method", "indirect", "--data", str(TRC), "--plane", "X,W"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--plane" in err[0] and "two different lab axes" in err[0], err
+
+
+# --- C3D (casflex.lab_c3d, through ezc3d) -----------------------------------------------------------------
+
+C3D = LAB / "walking2_excerpt.c3d"
+
+
+def test_without_ezc3d_one_line_says_how_to_install(monkeypatch):
+    monkeypatch.setitem(sys.modules, "ezc3d", None)  # import ezc3d then raises ImportError
+    with pytest.raises(ModuleNotFoundError, match=r"^read_c3d needs the ezc3d package: pip install 'casflex\[lab\]'$"):
+        read_c3d(C3D)
+
+
+def test_a_real_c3d_in_metres_with_markers_that_leave_the_view():
+    pytest.importorskip("ezc3d")
+    m, _ = read_c3d(C3D)
+    assert m.xyz.shape == (210, 44, 3) and m.labels[:3] == ("RTH1", "RFHD", "RTH3") and m.labels[-1] == "RKJC"
+    assert m.units == "mm" and m.rate == 250.0
+    # the trial's clock: frames 641-850 of 1249 (1-based), so t from 640 / 250 s
+    assert m.t[0] == pytest.approx(2.56) and m.t[-1] == pytest.approx(3.396) and np.allclose(np.diff(m.t), 0.004)
+    assert m.marker("RASI")[0] == pytest.approx([0.27832245, 0.42292786, 1.04312146], rel=1e-7)  # mm to m
+    # C7 and the 14 joint-centre points leave the cameras' view for the last 13 frames (residual -1)
+    gone = [lb for i, lb in enumerate(m.labels) if np.isnan(m.xyz[:, i]).any()]
+    assert gone[0] == "C7" and len(gone) == 15 and all(lb.endswith(("FC", "MAL", "JC")) for lb in gone[1:])
+    c7 = m.marker("C7")
+    assert np.isnan(c7[-13:]).all() and np.isfinite(c7[:-13]).all()
+    assert np.isfinite(np.delete(m.xyz, [m.labels.index(lb) for lb in gone], axis=1)).all()
+    # lab Z up: the pelvis about 1 m high, a heel at the floor
+    assert 0.9 < np.mean(m.marker("RASI")[:, 2]) < 1.1 and np.min(m.marker("RCAL")[:, 2]) < 0.06
+
+
+def test_a_real_c3d_s_force_plates_as_opensim_s_ground_reaction_columns():
+    pytest.importorskip("ezc3d")
+    m, g = read_c3d(C3D)
+    kinds = ("force_v", "force_p", "torque_", "moment_")
+    assert g.names == tuple(f"{p}{k}{a}" for p in ("ground_", "1_ground_") for k in kinds for a in "xyz")
+    assert g.values.shape == (1680, 24) and g.header["rate"] == 2000.0 and g.header["up"] == "+Z"
+    assert g.t[0] == m.t[0] and np.allclose(np.diff(g.t), 0.0005)  # 8 analog samples a frame
+    corners = {"ground_": ((0.6646, 1.1726), (0.3793, 0.8429)), "1_ground_": ((0.0, 0.6096), (0.0, 1.2192))}
+    for p, (xs, ys) in corners.items():
+        F, P, T, M = (np.column_stack([g.column(f"{p}{k}{a}") for a in "xyz"]) for k in kinds)
+        # walking: each plate's vertical reaction peaks at about a body weight (750-950 N); an unloaded plate
+        # reads its offset (-14 and -20 N in this file: not zeroed)
+        assert 700.0 < F[:, 2].max() < 1000.0 and -30.0 < F[:, 2].min() < 0.0
+        assert np.array_equal(np.isnan(P[:, 0]), F[:, 2] < 20.0) and np.array_equal(np.isnan(T[:, 2]), F[:, 2] < 20.0)
+        on = F[:, 2] > 200.0  # the centre of pressure on the plate, its free moment vertical
+        assert (xs[0] < P[on, 0]).all() and (P[on, 0] < xs[1]).all() and (ys[0] < P[on, 1]).all()
+        assert (P[on, 1] < ys[1]).all() and np.allclose(P[on, 2], 0.0) and np.allclose(T[on, :2], 0.0, atol=1e-9)
+        ok = np.isfinite(P[:, 0])  # the moment about the origin is p x F + T where p is defined
+        np.testing.assert_allclose(M[ok], np.cross(P[ok], F[ok]) + T[ok], atol=1e-9 * np.abs(M).max())
+    # at each plate's peak, its centre of pressure lies under the foot on it (right on plate 1, left on 2)
+    for p, foot in (("ground_", "R"), ("1_ground_", "L")):
+        k = int(np.argmax(g.column(f"{p}force_vz")))
+        mid = (m.marker(f"{foot}CAL") + m.marker(f"{foot}MT1"))[k // 8, :2] / 2
+        assert np.hypot(*(np.array([g.column(f"{p}force_px")[k], g.column(f"{p}force_py")[k]]) - mid)) < 0.15
+    assert read_c3d(C3D, plates=False)[1] is None
+
+
+def _type_5_plates(tmp_path):
+    raw = bytearray(C3D.read_bytes())
+    i = raw.index(b"TYPE\n\x00\x02\x01\x02")  # FORCE_PLATFORM:TYPE: int16, one dimension of 2
+    raw[i + 9:i + 13] = b"\x05\x00\x05\x00"
+    path = tmp_path / "type5.c3d"
+    path.write_bytes(bytes(raw))
+    return path
+
+
+def test_a_corrupted_or_unsupported_c3d_is_one_line_naming_the_file(tmp_path):
+    pytest.importorskip("ezc3d")
+    raw = C3D.read_bytes()
+    cases = [(raw[:len(raw) // 2], r"truncated: its header announces 210 frames, the file holds 101"),
+             (raw[:3000], r"truncated in its parameter section"),
+             (raw[:100], r"not a C3D file: 100 bytes, shorter than a C3D header \(512\)"),
+             (TRC.read_bytes(), r"not a C3D file \(its second byte is not the C3D key 0x50\)")]
+    path = tmp_path / "bad.c3d"
+    for data, match in cases:
+        path.write_bytes(data)
+        with pytest.raises(ValueError, match=match) as err:
+            read_c3d(path)
+        assert str(err.value).startswith(str(path)) and "\n" not in str(err.value)
+    for where, match in ((tmp_path / "none.c3d", "no such file"), (tmp_path, "not a file")):
+        with pytest.raises(ValueError, match=f"{match}$"):
+            read_c3d(where)
+    five = _type_5_plates(tmp_path)
+    with pytest.raises(ValueError, match=r"type5.c3d: ezc3d cannot read its force plates: Type 5 is not supported"
+                                         r".*; read_c3d\(\.\.\., plates=False\) reads the markers alone$"):
+        read_c3d(five)
+    assert read_c3d(five, plates=False)[0].xyz.shape == (210, 44, 3)
+
+
+# --- filtering (casflex.lab_filter) -----------------------------------------------------------------------
+
+def _gain(f: float, fc: float, fs: float) -> float:
+    """The zero-lag filter's gain: the 2nd-order digital Butterworth's |H|, squared by the double pass."""
+    return 1.0 / (1.0 + (np.tan(np.pi * f / fs) / np.tan(np.pi * fc / fs)) ** 4)
+
+
+def test_filtfilt_of_sines_keeps_the_4th_order_butterworth_gain():
+    fs, fc = 100.0, 6.0
+    t = np.round(np.arange(500) / fs, 3)
+    freqs = (1.0, 3.0, 4.8, 6.0, 9.0)
+    table = LabTable(t, tuple(f"s{f:g}" for f in freqs), np.column_stack([np.sin(2 * np.pi * f * t) for f in freqs]))
+    out, report = filtered(table, fc)
+    mid = slice(100, 400)  # away from the ends' transients
+    for j, f in enumerate(freqs):
+        amp = np.max(np.abs(out.values[mid, j]))
+        assert amp == pytest.approx(_gain(f, fc, fs), rel=2e-3, abs=2e-3), f
+    # the cut-off is each pass's (-6 dB zero-lag); -3 dB at 0.80 of it, said in the report
+    f3 = zero_lag_minus_3db(fc, fs)
+    assert _gain(f3, fc, fs) == pytest.approx(2 ** -0.5) and 4.8 < f3 < 4.9
+    assert report.splitlines()[0] == ("zero-lag Butterworth low-pass, order 4 (2nd order forward and backward), "
+                                      "cut-off 6 Hz per pass, not corrected for the double pass (-3 dB at 4.83 Hz), "
+                                      "100 Hz sampling; 5 of 5 columns filtered")
+    np.testing.assert_array_equal(table.values[:, 0], np.sin(2 * np.pi * t))  # the input is left alone
+
+
+def test_filtering_refuses_in_one_line_what_it_cannot_do():
+    t = np.arange(50) / 100.0
+    table = LabTable(t, ("a",), np.ones((50, 1)), source="tbl")
+    jitter = t.copy()
+    jitter[20] += 0.002
+    cases = [(lambda: filtered(table, 50.0), r"cutoff: must lie between 0 and the Nyquist frequency 50 Hz, got 50"),
+             (lambda: filtered(table, 6.0, order=2), r"order: only 4"),
+             (lambda: filtered(table, 6.0, names=["b"]), r"tbl: no column 'b'; there are \['a'\]"),
+             (lambda: filtered(replace(table, t=jitter), 6.0), r"tbl: filtering needs evenly spaced samples: "
+                                                                r"t = 0.202 s is 0.002 s off the grid of 0.01 s steps"),
+             (lambda: filtered(replace(table, t=t[:5], values=table.values[:5]), 1.0), "at least 10 samples, got 5")]
+    for call, match in cases:
+        with pytest.raises(ValueError, match=match) as err:
+            call()
+        assert "\n" not in str(err.value)
+
+
+def test_marker_gaps_are_filled_up_to_max_gap_refused_beyond_and_ends_left_missing():
+    m = read_trc(TRC)  # 60 Hz; L.Bicep never recorded
+    out, report = filtered(m, 6.0)
+    assert np.isnan(out.marker("L.Bicep")).all() and np.isfinite(out.xyz[:, :7]).all()
+    assert "L.Bicep: no samples, left missing" in report.splitlines()
+    assert np.abs(out.marker("V.Sacral") - m.marker("V.Sacral")).max() < 0.005  # m: the pelvis barely moves at 6 Hz
+    xyz = m.xyz.copy()
+    xyz[20:25, m.labels.index("R.Heel")] = np.nan  # a 5-frame gap (t = 0.333 to 0.4 s)
+    gap, report = filtered(replace(m, xyz=xyz), 6.0)
+    assert "R.Heel: 5 samples filled by a cubic spline (t = 0.333 to 0.4 s)" in report.splitlines()
+    assert np.abs(gap.marker("R.Heel") - out.marker("R.Heel")).max() < 0.01  # m, against the unbroken marker's
+    xyz[10:25, m.labels.index("R.Heel")] = np.nan
+    with pytest.raises(ValueError, match=r"hamner_running_excerpt.trc: R.Heel: a gap of 15 samples \(t = 0.167 to "
+                                         r"0.4 s\) is longer than max_gap = 10 samples"):
+        filtered(replace(m, xyz=xyz), 6.0)
+    assert np.isfinite(filtered(replace(m, xyz=xyz), 6.0, max_gap=15)[0].marker("R.Heel")).all()
+
+
+def test_c3d_markers_leaving_the_view_are_filtered_up_to_where_they_leave():
+    pytest.importorskip("ezc3d")
+    m, _ = read_c3d(C3D)
+    out, report = filtered(m, 6.0, names=["C7", "RCAL"])
+    assert ("C7: missing at the ends (0 + 13 samples), left missing; filtered from t = 2.56 to 3.344 s"
+            in report.splitlines())
+    assert np.isnan(out.marker("C7")[-13:]).all() and np.isfinite(out.marker("C7")[:-13]).all()
+    # m: C7 moves forward at 1.3 m/s; 6 Hz smooths its sway by a few millimetres, 12 mm at the stretch's end
+    assert np.abs(out.marker("C7")[:-13] - m.marker("C7")[:-13]).max() < 0.015
+    assert np.abs(out.marker("C7")[25:-38] - m.marker("C7")[25:-38]).max() < 0.004
+    np.testing.assert_array_equal(out.marker("RTH1"), m.marker("RTH1"))  # not asked for: as read
+
+
+def _wrench_table(g: LabTable, prefix: str) -> LabTable:
+    F, M = plate_moment_about_origin(g, prefix)
+    return LabTable(g.t, ("fx", "fy", "fz", "mx", "my", "mz"), np.hstack([F, M]), source=g.source)
+
+
+def test_a_plate_filtered_through_its_force_and_moment_about_the_origin():
+    g = read_sto(GRF)  # Y up, the belts' surface at y = -7.5 mm, 60 Hz
+    for p in ("ground_", "1_ground_"):
+        F, M = plate_moment_about_origin(g, p)
+        P0, T0 = (np.column_stack([g.column(f"{p}{k}{a}") for a in "xyz"]) for k in ("force_p", "torque_"))
+        P, T = centre_of_pressure(F, M, -0.0075, up="Y")
+        # unfiltered, exact back where the file's free moment is vertical, as a free moment at p must be
+        vertical = (F[:, 1] > 20.0) & (T0[:, 0] == 0) & (T0[:, 2] == 0)
+        assert vertical.sum() > 10
+        np.testing.assert_allclose(P[vertical], P0[vertical], atol=1e-12)
+        np.testing.assert_allclose(T[vertical], T0[vertical], atol=1e-12)
+        assert np.isnan(P[F[:, 1] < 20.0]).all()
+        # filtered at 25 Hz (of 30 Hz Nyquist): within 2.5 cm where Fy > 50 N, 1 cm where Fy > 100 N (the
+        # first and last samples of a stance rise or fall by 500 N in one 60 Hz step)
+        w, _ = filtered(_wrench_table(g, p), 25.0)
+        Pf, _ = centre_of_pressure(w.values[:, :3], w.values[:, 3:], -0.0075)
+        for over, tol in ((50.0, 0.025), (100.0, 0.01)):
+            on = F[:, 1] > over
+            assert np.abs(Pf[on] - P0[on]).max() < tol, (p, over)
+
+
+def test_a_c3d_plate_filtered_through_its_force_and_moment():
+    pytest.importorskip("ezc3d")
+    _, g = read_c3d(C3D)
+    for p in ("ground_", "1_ground_"):
+        cols = [f"{p}{k}{a}" for k in ("force_v", "moment_") for a in "xyz"]
+        out, report = filtered(g, 50.0, names=cols)
+        assert "2000 Hz sampling; 6 of 24 columns filtered" in report
+        F, M = plate_moment_about_origin(out, p)
+        P, _ = centre_of_pressure(F, M, 0.0, up=g.header["up"])
+        P0, Fz = np.column_stack([g.column(f"{p}force_p{a}") for a in "xyz"]), g.column(f"{p}force_vz")
+        for over, tol in ((50.0, 0.03), (200.0, 0.01)):  # m; the raw CoP's own noise: ~0.2 N m / Fz
+            on = Fz > over
+            assert np.abs(P[on] - P0[on]).max() < tol, (p, over)
+
+
+def test_plate_helpers_refuse_in_one_line():
+    g = read_sto(GRF)
+    with pytest.raises(ValueError, match=r"no plate '2_' \(columns 2_force_vx ...\); the plates there are "
+                                         r"\['1_ground_', 'ground_'\]"):
+        plate_moment_about_origin(g, "2_")
+    assert plate_moment_about_origin(g, "1_")[0].shape == (61, 3)  # "1_" stands for "1_ground_"
+    values = g.values.copy()
+    values[30, g.names.index("ground_force_px")] = np.nan
+    with pytest.raises(ValueError, match=r"plate 'ground_' has a force but no centre of pressure at t = 0.5 s"):
+        plate_moment_about_origin(replace(g, values=values), "ground_")
+    with pytest.raises(ValueError, match=r"up: expected a lab axis such as 'Y', '\+Z' or '-Z', got 'W'"):
+        centre_of_pressure(np.zeros((2, 3)), np.zeros((2, 3)), up="W")

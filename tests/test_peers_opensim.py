@@ -241,3 +241,31 @@ def test_what_is_not_translated_is_named(scene, root, match):
     with pytest.raises(ValueError, match=match) as err:
         mechanism(scene(), root)
     assert "\n" not in str(err.value)
+
+
+@needs_opensim
+def test_casflex_inverse_of_the_hamner_stride_is_opensims():
+    """``casflex inverse`` on a real running stride (Hamner's subject 02, its right leg, the first plate)
+    against OpenSim's InverseDynamicsSolver on the same model, motion and plate: the same equations of
+    motion solved by two codes, so they agree to round-off (measured 4e-16 of the peak RMS)."""
+    from pathlib import Path
+
+    from casflex.inverse import inverse_dynamics, inverse_model
+    from casflex.inverse.plates import plate_from_table
+    from casflex.lab import Plane, read_sto
+    from casflex.peers import opensim as osp
+
+    lab = Path(__file__).parent / "data" / "lab"
+    grf = lab / "hamner_running_stride_grf.mot"
+    res = inverse_dynamics("hamner_leg", lab / "hamner_running_stride.trc", grf=grf, plates={"ankle": "ground_"},
+                           root="pelvis", cutoff=10.0)
+    plate = plate_from_table(read_sto(grf), "ground_", "ankle", Plane.parse("X,Y"), 10.0)
+    F, Mo = plate.at(res.t)
+    peer = osp.inverse_dynamics(inverse_model("hamner_leg").scene, "pelvis", res.t, res.q, res.qd, res.qdd,
+                                plates=[("ankle", F, np.zeros_like(F), Mo)])
+    for name in ("hip.moment", "knee.moment", "ankle.moment", "root.fx", "root.fy", "root.mz"):
+        ours, theirs = res.load(name), peer[name]
+        # the issue asks for 5 % of the peak (RMS over the stride); the same model leaves round-off, 1e-12 is
+        # ~10^4 eps of margin for another machine's summation order
+        assert np.sqrt(np.mean((ours - theirs) ** 2)) < 1e-12 * np.abs(theirs).max(), name
+    assert 100.0 < np.abs(res.load("knee.moment")).max() < 400.0  # a runner's knee: N m, not a unit slip

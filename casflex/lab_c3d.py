@@ -1,0 +1,260 @@
+"""C3D files: markers and force plates, through ezc3d (an optional dependency: ``pip install 'casflex[lab]'``).
+
+:func:`read_c3d` gives the markers as :func:`casflex.lab.read_trc` does (a :class:`~casflex.lab.LabMarkers`,
+metres from ``POINT:UNITS``, NaN where a marker is missing: a negative residual, or the exact (0, 0, 0)
+that some exports write) and, when the file has force plates, a :class:`~casflex.lab.LabTable` with the
+columns of OpenSim's ground-reaction .mot files at the analog rate, in the file's lab axes (its vertical is
+usually Z; OpenSim's .mot files have Y up). Per plate, with the prefix ``ground_`` for the first,
+``1_ground_`` for the second, ``2_ground_`` ...:
+
+- ``<prefix>force_v{x,y,z}`` (N): the reaction on the subject (upward during stance);
+- ``<prefix>force_p{x,y,z}`` (m): the centre of pressure on the plate's surface, NaN where the force
+  along the plate's upward normal is below ``min_force`` (default :data:`MIN_PLATE_FORCE`, 20 N);
+- ``<prefix>torque_{x,y,z}`` (N m): the free moment about the centre of pressure (along the normal),
+  NaN where the centre of pressure is;
+- ``<prefix>moment_{x,y,z}`` (N m): the moment of the plate's reaction about the lab's origin, p x F + T,
+  defined at every sample (not in OpenSim's files; what :func:`casflex.lab_filter.filtered` should filter,
+  see :func:`casflex.lab_filter.plate_moment_about_origin`).
+
+Why 20 N: the centre of pressure is a moment divided by the vertical force, so a moment error dM moves
+it by dM / F. On the two plates of OpenSim's walking2.c3d (tests/data/lab) the unloaded plates read
+0.5 to 1.5 N m of moment (offsets the file does not zero; 0.1 to 0.25 N m of noise) and -14 and -20 N
+of force: at 20 N the centre of pressure is good to about 5 cm, at 150 N to 1 cm, and an unloaded plate
+(negative here) gives none. Raise ``min_force`` for noisier plates. The force itself is kept as read
+(no offset removed, no threshold).
+
+Points that are not markers (model outputs the file lists in ``POINT:ANGLES``, ``FORCES``, ``MOMENTS``,
+``POWERS``, ``SCALARS``, ``REACTIONS``) are left out. Times keep the trial's clock: the first frame's
+number (1-based in C3D) gives t[0] = (first - 1) / rate, so an excerpt keeps its trial's times.
+
+A file ezc3d cannot read, or that is not whole, gives one ValueError line naming the file and the
+problem. The header and the parameter section are walked first, bounds checked, before ezc3d reads the
+file: ezc3d 1.7 can crash or hang on a corrupted parameter section, and silently reads fewer frames from
+a truncated data section (checked after). Plates of the types ezc3d does not handle (5, 6, 7, 11, 12, 21)
+are refused in one line; ``plates=False`` then reads the markers alone.
+"""
+
+from __future__ import annotations
+
+import math
+import mmap
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from casflex.lab import LabMarkers, LabTable
+
+__all__ = ["read_c3d", "MIN_PLATE_FORCE", "NOT_MARKERS"]
+
+#: N: below this force along a plate's upward normal its centre of pressure is NaN (module docstring).
+MIN_PLATE_FORCE = 20.0
+#: POINT parameters that list model outputs, not markers.
+NOT_MARKERS = ("ANGLES", "FORCES", "MOMENTS", "POWERS", "SCALARS", "REACTIONS")
+_INSTALL = "read_c3d needs the ezc3d package: pip install 'casflex[lab]'"
+
+
+def _ezc3d():
+    try:
+        import ezc3d
+    except ImportError:
+        raise ModuleNotFoundError(_INSTALL) from None
+    return ezc3d
+
+
+def _int8(b: int) -> int:
+    return b - 256 if b > 127 else b
+
+
+def _check_structure(where: str, raw: bytes | mmap.mmap) -> int:
+    """The number of frames the header announces, after its key and its pointer to the parameter section
+    are checked and that section's chain of records is walked as ezc3d walks it (each record ending where
+    the previous one points), every length inside the file: ezc3d itself may crash or hang on a corrupted
+    one."""
+    if len(raw) < 512:
+        raise ValueError(f"{where}: not a C3D file: {len(raw)} bytes, shorter than a C3D header (512)")
+    if raw[1] != 0x50:
+        raise ValueError(f"{where}: not a C3D file (its second byte is not the C3D key 0x50)")
+    start = 512 * (raw[0] - 1)
+    if raw[0] < 2 or start + 4 > len(raw):
+        raise ValueError(f"{where}: truncated or corrupted: its header puts the parameters at block {raw[0]}, "
+                         f"beyond the file's {len(raw)} bytes")
+    proc = raw[start + 3]
+    if proc not in (84, 85):  # Intel, DEC
+        what = "MIPS (big-endian), which ezc3d does not read" if proc == 86 else f"unknown ({proc})"
+        raise ValueError(f"{where}: the parameter section's processor type is {what}")
+    _walk_parameters(where, raw, start + 4)
+    first, last = (int.from_bytes(raw[i:i + 2], "little") for i in (6, 8))  # Intel and DEC integers
+    return last - first + 1
+
+
+def _walk_parameters(where: str, raw: bytes | mmap.mmap, pos: int) -> None:
+    n = len(raw)
+    while True:
+        if pos + 2 > n:
+            raise ValueError(f"{where}: truncated in its parameter section (byte {pos} of {n})")
+        nchar, gid = _int8(raw[pos]), _int8(raw[pos + 1])
+        if nchar == 0:
+            return
+        name_end = pos + 2 + abs(nchar)
+        name = raw[pos + 2:name_end].decode("ascii", errors="replace")
+        end = name_end + 2
+        if gid > 0:  # a parameter: type (-1 char, 1 byte, 2 int16, 4 float), dimensions, values
+            if end + 2 > n:
+                raise ValueError(f"{where}: truncated in its parameter section ({name!r} at byte {pos})")
+            kind, ndims = _int8(raw[end]), raw[end + 1]
+            if kind not in (-1, 1, 2, 4):
+                raise ValueError(f"{where}: corrupted parameter section: parameter {name!r} at byte {pos} "
+                                 f"has the unknown type {kind}")
+            end += 2 + ndims + abs(kind) * math.prod(raw[end + 2:end + 2 + ndims])
+        end += 1 + (raw[end] if end < n else 0)  # the description
+        if end > n:
+            raise ValueError(f"{where}: truncated in its parameter section ({name!r} at byte {pos})")
+        offset = int.from_bytes(raw[name_end:name_end + 2], "little")
+        if offset == 0:
+            return
+        if name_end + offset != end:
+            raise ValueError(f"{where}: corrupted parameter section: {name!r} at byte {pos} ends at byte "
+                             f"{end} but points to byte {name_end + offset}")
+        pos = end
+
+
+def _open(where: str, path: str | os.PathLike[str], plates: bool):
+    """The ezc3d object, checked whole; ValueError in one line otherwise."""
+    ezc3d = _ezc3d()
+    if not Path(path).is_file():  # ezc3d hangs on a directory
+        raise ValueError(f"{where}: " + ("not a file" if Path(path).exists() else "no such file"))
+    try:
+        with open(path, "rb") as f:
+            if os.fstat(f.fileno()).st_size < 512:
+                _check_structure(where, f.read())
+            with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as raw:
+                frames = _check_structure(where, raw)
+    except OSError as exc:
+        raise ValueError(f"{where}: cannot read ({exc.strerror})") from None
+    try:
+        c = ezc3d.c3d(str(path), extract_forceplat_data=plates)
+    except Exception as exc:  # ezc3d raises RuntimeError, OSError ...: all are the file's problem
+        msg = " ".join(str(exc).replace(": iostream error", "").split())
+        if plates:
+            try:
+                ezc3d.c3d(str(path))
+            except Exception:
+                pass
+            else:
+                raise ValueError(f"{where}: ezc3d cannot read its force plates: {msg}; read_c3d(..., plates=False) "
+                                 "reads the markers alone") from None
+        raise ValueError(f"{where}: ezc3d cannot read it: {msg}") from None
+    got = c["data"]["points"].shape[2]  # ezc3d reads what there is and sets its header to it
+    if (c["data"]["points"].shape[1] or c["data"]["analogs"].shape[1]) and got < frames:
+        raise ValueError(f"{where}: truncated: its header announces {frames} frames, the file holds {got}")
+    return c
+
+
+def _param(c, group: str, name: str, default=None):
+    p = c["parameters"]
+    if group in p and name in p[group]:
+        return p[group][name]["value"]
+    return default
+
+
+def _labels(c, where: str, k: int) -> list[str]:
+    labels: list[str] = []
+    for key in ["LABELS"] + [f"LABELS{i}" for i in range(2, 100)]:
+        more = _param(c, "POINT", key)
+        if more is None:
+            break
+        labels += [str(s).strip() for s in more]
+    if len(labels) < k:
+        raise ValueError(f"{where}: POINT:LABELS names {len(labels)} of its {k} points")
+    return labels[:k]
+
+
+def _markers(c, where: str) -> LabMarkers:
+    from casflex.lab import UNITS, LabMarkers
+
+    pts, res = c["data"]["points"], c["data"]["meta_points"]["residuals"][0]
+    labels = _labels(c, where, pts.shape[1])
+    units = [str(u).strip() for u in _param(c, "POINT", "UNITS", [])][:1]
+    if pts.shape[1] and (not units or units[0] not in UNITS):
+        raise ValueError(f"{where}: POINT:UNITS {units[0] if units else ''!r} is " + ("missing" if not units else
+                         "not a length unit") + f"; expected one of {list(UNITS)}")
+    skip = {str(s).strip() for g in NOT_MARKERS for s in _param(c, "POINT", g, [])}
+    keep = [i for i, lb in enumerate(labels) if lb not in skip]
+    names = [labels[i] for i in keep]
+    dup = sorted({lb for lb in names if names.count(lb) > 1})
+    if dup:
+        raise ValueError(f"{where}: marker labels {dup} appear more than once")
+    xyz = np.transpose(pts[:3, keep, :], (2, 1, 0)) * (UNITS[units[0]] if units else 1.0)
+    xyz[(res[keep].T < 0) | np.all(xyz == 0.0, axis=2)] = np.nan
+    rate = float(c["header"]["points"]["frame_rate"])
+    t = _t0(c) + np.arange(xyz.shape[0]) / rate
+    return LabMarkers(t, tuple(names), xyz, rate, units[0] if units else "", where)
+
+
+def _t0(c) -> float:
+    """s: the time of the first frame, (first - 1) / rate with C3D's 1-based frame numbers."""
+    h = c["header"]["points"]
+    return h["first_frame"] / h["frame_rate"] if h["frame_rate"] > 0 else 0.0
+
+
+def _up(corners: np.ndarray) -> np.ndarray:
+    """The unit upward normal of a plate from its corners (3, 4), numbered as C3D numbers them."""
+    n = np.cross(corners[:, 3] - corners[:, 0], corners[:, 1] - corners[:, 0])
+    return n / np.linalg.norm(n)
+
+
+def _plate_columns(pf, where: str, i: int, min_force: float) -> tuple[list[str], list[np.ndarray], str]:
+    from casflex.lab import UNITS
+
+    if str(pf["unit_force"]).strip().upper() != "N" or pf["unit_position"] not in UNITS:
+        raise ValueError(f"{where}: plate {i + 1} gives forces in {pf['unit_force']!r} and positions in "
+                         f"{pf['unit_position']!r}; expected N and one of {list(UNITS)}")
+    s = UNITS[pf["unit_position"]]
+    F = pf["force"].T
+    centre = pf["corners"].mean(axis=1) * s
+    M = np.cross(centre, F) + pf["moment"].T * s  # ezc3d's moment is about the plate's centre
+    up = _up(pf["corners"])
+    off = F @ up < min_force
+    P, T = pf["center_of_pressure"].T * s, pf["Tz"].T * s
+    P[off], T[off] = np.nan, np.nan
+    prefix = "ground_" if i == 0 else f"{i}_ground_"
+    names = [f"{prefix}{kind}{a}" for kind in ("force_v", "force_p", "torque_", "moment_") for a in "xyz"]
+    axis = int(np.argmax(np.abs(up)))
+    return names, [F, P, T, M], ("+" if up[axis] > 0 else "-") + "XYZ"[axis]
+
+
+def _plates(c, where: str, min_force: float) -> LabTable | None:
+    from casflex.lab import LabTable
+
+    platforms = c["data"]["platform"] if "platform" in c["data"].keys() else []
+    if not platforms:
+        return None
+    names, blocks, ups = [], [], []
+    for i, pf in enumerate(platforms):
+        n, b, up = _plate_columns(pf, where, i, min_force)
+        names += n
+        blocks += b
+        ups.append(up)
+    values = np.hstack(blocks)
+    rate = float(c["header"]["analogs"]["frame_rate"])
+    t = _t0(c) + np.arange(values.shape[0]) / rate
+    header = {"rate": rate, "plates": len(platforms), "up": ups[0] if len(set(ups)) == 1 else ",".join(ups),
+              "min_force": min_force}
+    return LabTable(t, tuple(names), values, None, header, where)
+
+
+def read_c3d(path: str | os.PathLike[str], *, plates: bool = True,
+             min_force: float = MIN_PLATE_FORCE) -> tuple[LabMarkers, LabTable | None]:
+    """(markers, plates) of the C3D file ``path``: the markers (n frames, k markers, m, NaN where missing)
+    and, if the file has force plates and ``plates``, their table at the analog rate (N, m, N m; columns
+    in the module docstring; header: ``rate`` Hz, ``plates``, ``up`` (the lab axis of the plates' upward
+    normal, e.g. "+Z"), ``min_force`` N), else None. ValueError in one line for a file that cannot be
+    read; ModuleNotFoundError naming the install when ezc3d is missing."""
+    where = str(path)
+    c = _open(where, path, plates)
+    markers = _markers(c, where)
+    table = _plates(c, where, min_force) if plates else None
+    return markers, table
