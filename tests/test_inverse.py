@@ -9,7 +9,6 @@ import pytest
 from inverse_scenes import INERTIA, M_BASE, C, M, pendulum
 
 from casflex.inverse import inverse_dynamics, inverse_model, kinematic_tree
-from casflex.inverse.fit import butterworth2, coordinate_rates, even_times, filtfilt2, lowpass
 from casflex.inverse.flexible import driven_loads
 from casflex.inverse.plates import Plate, plate_loads
 from casflex.inverse.rigid import rigid_loads
@@ -116,40 +115,6 @@ def test_plate_under_the_centre_of_mass_leaves_no_joint_moment():
         assert np.allclose(sol["root.fy"], M_BASE * G, atol=1e-12)
 
 
-@pytest.mark.parametrize(("cutoff", "fs"), [(6.0, 60.0), (10.0, 100.0), (15.0, 1000.0)])
-def test_lab_filter_is_scipys(cutoff, fs):
-    from scipy.signal import butter, filtfilt
-
-    b, a = butter(2, cutoff / (fs / 2))
-    b2, a2 = butterworth2(cutoff, fs)
-    assert np.allclose(b, b2, rtol=1e-14, atol=0) and np.allclose(a, a2, rtol=1e-14, atol=1e-16)
-    x = np.random.default_rng(1).standard_normal((200, 3)).cumsum(0)
-    # the same recursion in another order of operations: round-off, amplified by the filter's gain (~1e2)
-    assert np.abs(filtfilt(b, a, x, axis=0) - filtfilt2(b2, a2, x)).max() < 1e-12 * np.abs(x).max()
-
-
-def test_filter_keeps_slow_motion_and_removes_fast():
-    t = np.arange(0, 2, 0.01)
-    slow, fast = np.sin(2 * np.pi * 1.0 * t), np.sin(2 * np.pi * 30.0 * t)
-    out = lowpass(t, np.column_stack([slow, fast]), 6.0)
-    mid = slice(50, 150)
-    # |H|^2 of the 2nd-order Butterworth run twice: 1 / (1 + (f/fc)^4); at 1 Hz 0.9992, at 30 Hz 1.6e-3 (prewarped)
-    assert np.abs(out[mid, 0] - slow[mid]).max() < 2e-3
-    assert np.abs(out[mid, 1]).max() < 5e-3
-
-
-def test_even_times_snap_rounded_frames_only():
-    t = np.round(np.arange(20) / 60, 3)  # a lab file's 0.017, 0.033, ...
-    assert np.allclose(np.diff(even_times(t, 60.0)), 1 / 60, rtol=1e-12)  # the header's rate
-    assert np.allclose(np.diff(even_times(t)), 1 / 60, rtol=1e-3)  # the slope: rounding's 0.5 ms over 20 frames
-    uneven = np.cumsum(np.r_[0, np.full(9, 0.01), np.full(10, 0.02)])
-    assert even_times(uneven) is not None and np.array_equal(even_times(uneven), uneven)
-    with pytest.raises(ValueError, match="evenly spaced"):
-        lowpass(uneven, uneven[:, None], 6.0)
-    zd, zdd = coordinate_rates(np.arange(10) * 0.1, (np.arange(10) * 0.1)[:, None] ** 2)
-    assert np.allclose(zd[:, 0], 2 * np.arange(10) * 0.1) and np.allclose(zdd, 2.0)  # exact on quadratics
-
-
 def test_driven_run_converges_to_the_exact_rigid_inverse():
     """The flexible inverse's path (drive joints, HHT) on rigid segments against the exact solve, with
     the same kinematics (the supports' splines)."""
@@ -160,7 +125,7 @@ def test_driven_run_converges_to_the_exact_rigid_inverse():
     z, _, _ = _swing(t, moving_root=True)
     s = CubicSpline(t, z, axis=0)
     exact = rigid_loads(tree, t, s(t), s(t, 1), s(t, 2), model.p_nominal)
-    run = driven_loads(tree, t, z, s(t, 1), [], exact["q"], dt=2.5e-4, alpha=-0.1)
+    run = driven_loads(tree, t, z, [], exact["q"], dt=2.5e-4, alpha=-0.1)
     late = t > 0.2  # past the start's O(dt) transient of index-3 multipliers
     for k in ("pivot.moment", "root.fx", "root.fy", "root.mz"):
         # measured 2e-6 of the peak at dt = h / 40 (HHT's error; 7e-4 of it at h / 20): bound 5x that
@@ -189,3 +154,26 @@ def test_missing_label_and_short_window_are_one_line():
         inverse_dynamics(loads_scene(pendulum()), lab)
     with pytest.raises(ValueError, match="plates: no node 'foot'"):
         inverse_dynamics(loads_scene(pendulum()), lab, grf="x.mot", plates={"foot": "ground_"})
+
+
+def test_c3d_plate_is_the_same_load_from_its_moment_or_its_centre_of_pressure():
+    """A C3D's plate (its moment about the lab origin at every sample) against the same plate from its
+    centre of pressure and free moment where both exist (the vertical force over 200 N)."""
+    pytest.importorskip("ezc3d")
+    from pathlib import Path
+
+    from casflex.inverse.plates import plate_from_table
+    from casflex.lab import LabTable, Plane, read_c3d
+
+    _, table = read_c3d(Path(__file__).parent / "data" / "lab" / "walking2_excerpt.c3d")
+    plane = Plane.parse("X,Z")  # the file's lab: Z up
+    via_moment = plate_from_table(table, "ground_", "foot", plane, None)
+    keep = [i for i, n in enumerate(table.names) if "moment_" not in n]
+    cop_only = LabTable(table.t, tuple(table.names[i] for i in keep), table.values[:, keep], source="c3d")
+    loaded = table.column("ground_force_vz") > 200.0
+    rows = np.flatnonzero(loaded)
+    sub = LabTable(table.t[rows], cop_only.names, cop_only.values[rows], source="c3d")
+    via_cop = plate_from_table(sub, "ground_", "foot", plane, None)
+    assert np.allclose(via_cop.force, via_moment.force[rows], rtol=0, atol=1e-9)
+    # the same numbers through p x F + T: round-off of moments of ~1e3 N m
+    assert np.abs(via_cop.moment - via_moment.moment[rows]).max() < 1e-9 * np.abs(via_moment.moment).max()

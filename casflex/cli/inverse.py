@@ -57,9 +57,10 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s = sub.add_parser("inverse", help="net joint moments and intersegmental forces from a lab trial")
     s.add_argument("scene", help="built-in scene name (hamner_leg) or a TOML file: segments on hinges, labelled "
                                  "markers")
-    s.add_argument("--data", required=True, metavar="TRIAL.trc", help="the trial's markers (TRC)")
+    s.add_argument("--data", required=True, metavar="TRIAL", help="the trial's markers (.trc or .c3d)")
     s.add_argument("--plane", default="X,Y", help="the lab axes that become the model's x and y (default X,Y)")
-    s.add_argument("--loads", metavar="GRF.mot", help="ground reactions (OpenSim .mot/.sto)")
+    s.add_argument("--loads", metavar="GRF", help="ground reactions (OpenSim .mot/.sto, or a .c3d's plates: the "
+                                                  "trial's own C3D file again for its plates)")
     s.add_argument("--plate", action="append", type=_plate, metavar="NODE=PREFIX",
                    help="a plate's columns (PREFIXforce_vx ...) act on NODE's segment; repeat per plate")
     s.add_argument("--cutoff", type=positive("a frequency in Hz"), default=6.0,

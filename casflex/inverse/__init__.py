@@ -15,11 +15,13 @@ The data flow (docs/lab.md, "Inverse dynamics"):
 from __future__ import annotations
 
 import dataclasses
+import os
 from collections.abc import Callable
 
 import numpy as np
 
-from casflex.inverse.fit import coordinate_rates, even_times, fit_markers, lowpass
+from casflex.filters import even_times, lowpass
+from casflex.inverse.fit import coordinate_rates, fit_markers
 from casflex.inverse.flexible import driven_loads
 from casflex.inverse.plates import Plate, plate_from_table, plate_loads
 from casflex.inverse.result import InverseResult
@@ -40,6 +42,15 @@ def inverse_model(scene):
 
         scene = load_scene(scene)
     return assemble(dataclasses.replace(scene, supports=()))
+
+
+def _read_markers(path):
+    """(markers, plates or None) of a .trc or .c3d file."""
+    from casflex.lab import read_c3d, read_trc
+
+    if os.fspath(path).lower().endswith(".c3d"):
+        return read_c3d(path)
+    return read_trc(path), None
 
 
 def _window(t: np.ndarray, t_start: float | None, t_end: float | None) -> np.ndarray:
@@ -63,10 +74,10 @@ def inverse_dynamics(scene, markers, *, plane: str = "X,Y", grf=None, plates: di
     ----------
     scene : Scene, scene name or path
         Rigid segments (bodies on nodes) joined by hinges in a tree, ``[[markers]]`` labelled as the trial's.
-    markers : LabMarkers or path of a .trc file
+    markers : LabMarkers or path of a .trc or .c3d file
     plane : str
         The lab axes that become the model's x and y (:class:`casflex.lab.Plane`), e.g. "X,Y".
-    grf : LabTable or path of a .mot/.sto file, optional
+    grf : LabTable or path of a .mot/.sto or .c3d file (the markers' own C3D: its plates), optional
         Ground reactions; ``plates`` maps each contacting node to its plate's column prefix (e.g.
         ``{"ankle": "ground_"}``: :mod:`casflex.inverse.plates`).
     cutoff : float or None, Hz
@@ -79,7 +90,7 @@ def inverse_dynamics(scene, markers, *, plane: str = "X,Y", grf=None, plates: di
         Flexible segments only: the largest HHT time step (s; default the scene's, made to divide the
         frames' interval), HHT's alpha (default the scene's) and whether to run compiled C.
     """
-    from casflex.lab import LabMarkers, LabTable, Plane, markers_in_plane, read_sto, read_trc
+    from casflex.lab import LabMarkers, LabTable, Plane, markers_in_plane, read_sto
 
     pl = Plane.parse(plane) if isinstance(plane, str) else plane
     model = inverse_model(scene)
@@ -92,8 +103,13 @@ def inverse_dynamics(scene, markers, *, plane: str = "X,Y", grf=None, plates: di
     if plates and grf is None:
         raise ValueError("plates: given without the ground reactions (grf)")
     tree = kinematic_tree(model, root)
-    lab = markers if isinstance(markers, LabMarkers) else read_trc(markers)
-    table = None if grf is None else grf if isinstance(grf, LabTable) else read_sto(grf)
+    lab, c3d_plates = (markers, None) if isinstance(markers, LabMarkers) else _read_markers(markers)
+    if isinstance(grf, LabTable) or grf is None:
+        table = grf
+    elif c3d_plates is not None and os.fspath(grf) == os.fspath(markers):
+        table = c3d_plates  # the C3D's own plates
+    else:
+        table = _read_markers(grf)[1] if os.fspath(grf).lower().endswith(".c3d") else read_sto(grf)
     ms = markers_in_plane(lab, {m.name: m.label or m.name for m in model.scene.markers}, pl)
     keep = _window(ms.t, t_start, t_end)
     t_frames, y = even_times(ms.t[keep], lab.rate), ms.q[keep]
@@ -114,7 +130,7 @@ def inverse_dynamics(scene, markers, *, plane: str = "X,Y", grf=None, plates: di
     else:
         run = model.scene.run
         q_fit = np.array(tree.forward.map(t.size)(z.T)).T
-        sol = driven_loads(tree, t, z, zd, plate_list, q_fit, dt=run.dt if dt is None else dt,
+        sol = driven_loads(tree, t, z, plate_list, q_fit, dt=run.dt if dt is None else dt,
                            alpha=run.alpha if alpha is None else alpha, compiled=compiled)
         report.append(f"flexible segments: driven by HHT (alpha {run.alpha if alpha is None else alpha:g}), the "
                       f"bones' largest deflection {1e3 * sol['deflection'].max():.2f} mm")

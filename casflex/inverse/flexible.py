@@ -7,8 +7,8 @@ every dof: the bones' deflections follow from the dynamics. The scene is then dr
 - every hinge [a, b] by an actuated joint (``<hinge>_drive``, kind ``drive``): its relative
   rotation follows a driver node (``<hinge>_driver``) that a support turns along the hinge's angle;
 
-and integrated by HHT-alpha (:func:`casflex.simulate.simulate`) from the rigid pose of the first
-frame. The drives' multipliers are the net joint moments, the supports' the root's loads (the
+and integrated by HHT-alpha (:func:`casflex.simulate.simulate`) from the first frame's rigid motion
+(the supports' splines' rates), the bones deflected there under its loads (quasi-statically). The drives' multipliers are the net joint moments, the supports' the root's loads (the
 same names as the rigid inverse, :mod:`casflex.inverse.rigid`). The paths are the supports'
 not-a-knot cubic splines through the filtered frames; the time step divides the frames' so that
 every frame is a step. The plates act on their nodes as load tables (force, and moment about the
@@ -66,23 +66,53 @@ def driven_scene(tree: KinematicTree, t: np.ndarray, z: np.ndarray, plates: list
                                loads=tuple(loads))
 
 
-def _start(tree: KinematicTree, model, z0: np.ndarray, zd0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The driven model's (q0, qd0): the rigid pose and velocity of the first frame, the drivers on their paths."""
-    q, qd, _ = (np.array(v).ravel() for v in tree.rates(z0, zd0, np.zeros_like(z0)))
-    q0, qd0 = np.zeros(model.n_dof), np.zeros(model.n_dof)
+def _start(tree: KinematicTree, model, t0: float, z0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The driven model's (q0, qd0) at t0: the rigid motion that the supports' splines give there
+    (positions z0, the splines' rates), the bones deflected quasi-statically (:func:`_deflected`)."""
+    names = [model.dof_names[c.dof] for c in model.constraints]
+    _, vd, vdd = (np.array(a, dtype=float).ravel() for a in model.prescribed(t0))
+    at = [names.index(n) for n in (f"x{tree.root}", f"y{tree.root}", f"theta{tree.root}")]
+    at += [names.index(f"theta{h}_driver") for h in tree.hinges]
+    q, qd, qdd = (np.array(v).ravel() for v in tree.rates(z0, vd[at], vdd[at]))
     src = {n: i for i, n in enumerate(tree.model.dof_names)}
+    state = np.zeros((3, model.n_dof))
     for i, name in enumerate(model.dof_names):
         if name in src:
-            q0[i], qd0[i] = q[src[name]], qd[src[name]]
+            state[:, i] = q[src[name]], qd[src[name]], qdd[src[name]]
     for k, h in enumerate(tree.hinges):
         j = model.dof(f"theta{h}_driver")
-        q0[j], qd0[j] = z0[3 + k], zd0[3 + k]
+        state[:, j] = z0[3 + k], vd[at[3 + k]], vdd[at[3 + k]]
         for c in "xy":
-            q0[model.dof(f"{c}{h}_driver")] = model.q0[model.dof(f"{c}{h}_driver")]
-    return q0, qd0
+            state[0, model.dof(f"{c}{h}_driver")] = model.q0[model.dof(f"{c}{h}_driver")]
+    return _deflected(model, t0, *state), state[1]
 
 
-def driven_loads(tree: KinematicTree, t: np.ndarray, z: np.ndarray, zd: np.ndarray, plates: list, q_fit: np.ndarray,
+def _deflected(model, t0: float, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+    """q with the bones deflected under the loads of the rigid motion at t0 (its accelerations qdd,
+    velocities qd, gravity, the plates): Eq. 1 and the constraints at t0 solved for (q, lambda) by
+    Newton from the rigid pose. An undeformed start would ring at the bones' modes for the first
+    tenths of a second (the held leg's lowest: 3.8 Hz, damping ratio 0.3)."""
+    import casadi as ca
+
+    n, m = model.n_dof, model.n_con
+    w = ca.SX.sym("w", n + m)
+    v, _, _ = (np.array(a, dtype=float).ravel() for a in model.prescribed(t0))
+    target = np.r_[v - np.array([c.value for c in model.constraints]), np.zeros(m - model.n_fixed)]
+    r, phi = model.equilibrium(w[:n], qd, qdd, w[n:], t0, model.p_nominal)
+    g = ca.vertcat(r, phi - target)
+    f = ca.Function("deflected", [w], [g, ca.jacobian(g, w)])
+    x = np.r_[q, np.zeros(m)]
+    for _ in range(30):
+        res, J = (np.array(a) for a in f(x))
+        dx = np.linalg.lstsq(J, -res.ravel(), rcond=None)[0]
+        x += dx
+        if np.max(np.abs(dx[:n])) < 1e-12 * model.length_scale:
+            return x[:n]
+    raise ValueError("flexible inverse: the bones' deflection at the first frame did not converge; the "
+                     "segments may be too soft for the loads")
+
+
+def driven_loads(tree: KinematicTree, t: np.ndarray, z: np.ndarray, plates: list, q_fit: np.ndarray,
                  *, dt: float, alpha: float = -0.1, compiled: bool = False) -> dict[str, np.ndarray]:
     """The loads of the driven scene at the frames t (k,) (module docstring): q, qd, qdd (k, n_dof of
     ``tree.model``), the loads by name (k,), and ``deflection`` (k,) m: the largest distance of a node
@@ -93,7 +123,7 @@ def driven_loads(tree: KinematicTree, t: np.ndarray, z: np.ndarray, zd: np.ndarr
     h = float(t[1] - t[0])
     sub = max(1, int(np.ceil(h / dt - 1e-9)))
     model = assemble(driven_scene(tree, t, z, plates, q_fit))
-    q0, qd0 = _start(tree, model, z[0], zd[0])
+    q0, qd0 = _start(tree, model, float(t[0]), z[0])
     traj = simulate(model, (t.size - 1) * h, dt=h / sub, alpha=alpha, q0=q0, qd0=qd0, t0=float(t[0]),
                     compiled=compiled)
     keep = np.arange(0, (t.size - 1) * sub + 1, sub)

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from casflex.inverse.fit import even_times, lowpass
+from casflex.filters import even_times, lowpass
 from casflex.lab import LabTable, Plane
 
 __all__ = ["Plate", "plate_from_table", "plate_loads"]
@@ -43,24 +43,31 @@ class Plate:
 
 def plate_from_table(table: LabTable, prefix: str, node: str, plane: Plane, cutoff: float | None) -> Plate:
     """The plate ``prefix`` of ``table`` on ``node``, in ``plane``, filtered at ``cutoff`` Hz (None: as
-    recorded). Rows without force (NaN) are no contact: zero force and moment. A force without a
-    centre of pressure is refused in one line."""
-    cols = {k: [f"{prefix}{k}{c}" for c in "xyz"] for k in ("force_v", "force_p", "torque_")}
-    missing = [c for cs in cols.values() for c in cs if c not in table.names]
+    recorded). The moment about the lab's origin from the table's ``<prefix>moment_{x,y,z}`` where it has
+    them (C3D plates, :func:`casflex.lab.read_c3d`), else p x F + T. Rows without force (NaN) are no
+    contact: zero force and moment. A force without a centre of pressure is refused in one line."""
+    cols = {k: [f"{prefix}{k}{c}" for c in "xyz"] for k in ("force_v", "force_p", "torque_", "moment_")}
+    about_origin = all(c in table.names for c in cols["moment_"])  # casflex.lab.read_c3d writes them
+    need = ("force_v", "moment_") if about_origin else ("force_v", "force_p", "torque_")
+    missing = [c for k in need for c in cols[k] if c not in table.names]
     if missing:
         have = sorted({n[:-len("force_vx")] for n in table.names if n.endswith("force_vx")})
         raise ValueError(f"{table.source}: no column {missing[0]!r} for plate {prefix!r}; the plates there are "
                          f"{have or 'none (columns <prefix>force_vx ...)'}")
-    F, P, T = (np.column_stack([table.column(c) for c in cols[k]]) for k in ("force_v", "force_p", "torque_"))
+    F = np.column_stack([table.column(c) for c in cols["force_v"]])
     off = ~np.isfinite(F).all(axis=1)
-    F[off], T[~np.isfinite(T)] = 0.0, 0.0
-    loaded = np.linalg.norm(F, axis=1) > 0
-    bad = loaded & ~np.isfinite(P).all(axis=1)
-    if bad.any():
-        raise ValueError(f"{table.source}: plate {prefix!r} has a force but no centre of pressure at "
-                         f"t = {table.t[np.argmax(bad)]:g} s")
-    P = np.where(np.isfinite(P), P, 0.0)
-    M3 = np.cross(P, F) + T
+    F[off] = 0.0
+    if about_origin:
+        M3 = np.column_stack([table.column(c) for c in cols["moment_"]])
+    else:
+        P, T = (np.column_stack([table.column(c) for c in cols[k]]) for k in ("force_p", "torque_"))
+        T[~np.isfinite(T)] = 0.0
+        bad = (np.linalg.norm(F, axis=1) > 0) & ~np.isfinite(P).all(axis=1)
+        if bad.any():
+            raise ValueError(f"{table.source}: plate {prefix!r} has a force but no centre of pressure at "
+                             f"t = {table.t[np.argmax(bad)]:g} s")
+        M3 = np.cross(np.where(np.isfinite(P), P, 0.0), F) + T
+    M3[off | ~np.isfinite(M3).all(axis=1)] = 0.0
     E = plane.matrix
     n = np.cross(E[0], E[1])
     force, moment = F @ E.T, M3 @ n
