@@ -302,6 +302,9 @@ class Joint:
         if len(set(nodes)) < len(nodes):
             raise SceneError.at(where, "nodes", f"the nodes must differ, got {list(nodes)}")
         object.__setattr__(self, "nodes", nodes)
+        for f in ("point", "axis"):
+            if self.kind == "drive" and getattr(self, f) is not None:
+                raise SceneError.at(where, f, "does not apply to a drive (it holds a relative rotation only)")
         if self.point is not None:
             object.__setattr__(self, "point", _point(where, "point", self.point))
         if self.axis is not None:

@@ -57,3 +57,6 @@ def test_drive_needs_three_different_nodes():
         loads_scene(pendulum('[[joints]]\nname = "act"\nkind = "drive"\nnodes = ["base", "link"]\n'))
     with pytest.raises(SceneError, match="the nodes must differ"):
         loads_scene(pendulum('[[joints]]\nname = "act"\nkind = "drive"\nnodes = ["base", "link", "base"]\n'))
+    with pytest.raises(SceneError, match="point: does not apply to a drive"):
+        loads_scene(pendulum('[[nodes]]\nname = "d"\nx = 0.0\ny = 0.0\n[[joints]]\nname = "act"\nkind = "drive"\n'
+                             'nodes = ["base", "link", "d"]\npoint = [0.0, 0.0]\n'))
