@@ -25,8 +25,10 @@ def even_times(t: np.ndarray, rate: float | None = None) -> np.ndarray:
     h = np.polyfit(k, t, 1)[0]
     if rate is not None and abs(1.0 / rate - h) < 0.01 * h:
         h = 1.0 / rate
-    grid = np.mean(t - h * k) + h * k
-    return grid if np.max(np.abs(t - grid)) <= 0.1 * h else t
+    for grid in (t[0] + h * k, np.mean(t - h * k) + h * k):  # from the first time as written, else centred
+        if np.max(np.abs(t - grid)) <= 0.1 * h:
+            return grid
+    return t
 
 
 def butterworth2(cutoff: float, fs: float) -> tuple[np.ndarray, np.ndarray]:

@@ -15,6 +15,19 @@ def _plate(text: str) -> tuple[str, str]:
     return node.strip(), prefix.strip()
 
 
+def _passive(text: str) -> tuple[str, float | None, float | None]:
+    hinge, *window = text.split(":")
+    if not hinge or len(window) not in (0, 2):
+        raise argparse.ArgumentTypeError(f"expected HINGE or HINGE:T0:T1 (a window in s), got {text!r}")
+    try:
+        t0, t1 = (float(w) for w in window) if window else (None, None)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected HINGE:T0:T1 with times in s, got {text!r}") from None
+    if t0 is not None and not t1 > t0:
+        raise argparse.ArgumentTypeError(f"the window's end must follow its start, got {text!r}")
+    return hinge, t0, t1
+
+
 def _progress(done: int, total: int) -> None:
     if done == total or done % max(total // 20, 1) == 0:
         sys.stderr.write(f"\rcasflex: marker fit {done}/{total} frames")
@@ -37,6 +50,12 @@ def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
         raise OptionError("--loads: say which node each plate acts on with --plate NODE=PREFIX (e.g. ankle=ground_)")
     if args.t_start is not None and args.t_end is not None and args.t_end <= args.t_start:
         raise OptionError(f"--t-end: must be after --t-start ({args.t_start:g} s), got {args.t_end:g}")
+    from casflex.scene_io import load_scene
+
+    hinges = {j.name for j in load_scene(args.scene).joints if j.kind == "hinge"}
+    for hinge, _, _ in args.passive or []:
+        if hinge not in hinges:
+            raise OptionError(f"--passive: no hinge {hinge!r} in the scene; its hinges are {sorted(hinges)}")
     out = outputs.file("--out", args.out, (".npz", ".csv"), "inverse dynamics") if args.out else None
     plots = outputs.directory("--plots", args.plots) if args.plots else None
     res = inverse_dynamics(args.scene, args.data, plane=args.plane, grf=args.loads, plates=plates,
@@ -44,6 +63,10 @@ def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
                            t_start=args.t_start, t_end=args.t_end,
                            progress=None if args.quiet else _progress)
     print(res.summary())
+    for hinge, t0, t1 in args.passive or []:
+        from casflex.inverse.passive import fit_passive
+
+        print(fit_passive(res, hinge, t0, t1).summary())
     if out is not None:
         res.save(out, fmt=args.out.rsplit(".", 1)[-1].lower())
     if plots is not None:
@@ -69,6 +92,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--root", metavar="NODE", help="the node the data drive (default: the scene's first)")
     s.add_argument("--t-start", type=non_negative("a time in s"), help="use the trial from this time, s")
     s.add_argument("--t-end", type=positive("a time in s"), help="use the trial up to this time, s")
+    s.add_argument("--passive", action="append", type=_passive, metavar="HINGE[:T0:T1]",
+                   help="fit a torsion spring-damper to HINGE's net moment (over T0..T1 s) and say how much of it "
+                        "it explains; repeat per hinge")
     s.add_argument("--out", metavar="FILE", help="write the loads to FILE.npz (everything) or FILE.csv (a table)")
     s.add_argument("--plots", metavar="DIR", help="write figures into this directory")
     s.add_argument("--quiet", action="store_true", help="no progress messages")

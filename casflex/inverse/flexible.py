@@ -8,8 +8,9 @@ every dof: the bones' deflections follow from the dynamics. The scene is then dr
   rotation follows a driver node (``<hinge>_driver``) that a support turns along the hinge's angle;
 
 and integrated by HHT-alpha (:func:`casflex.simulate.simulate`) from the first frame's rigid motion
-(the supports' splines' rates), the bones deflected there under its loads (quasi-statically). The drives' multipliers are the net joint moments, the supports' the root's loads (the
-same names as the rigid inverse, :mod:`casflex.inverse.rigid`). The paths are the supports'
+(the supports' splines' rates), the bones deflected there under its loads (quasi-statically). The
+drives' multipliers are the net joint moments, the supports' the root's loads (the same names as the
+rigid inverse, :mod:`casflex.inverse.rigid`). The paths are the supports'
 not-a-knot cubic splines through the filtered frames; the time step divides the frames' so that
 every frame is a step. The plates act on their nodes as load tables (force, and moment about the
 node where the rigid fit has it: the bones' deflection at that node, reported, times the force
