@@ -89,7 +89,10 @@ def step_count(t_end: float, dt: float, *, names: tuple[str, str] = ("t_end", "d
         raise ValueError(f"{names[0]}: must be a positive number of seconds, got {t_end!r}")
     n_steps = int(round(t_end / dt))
     if n_steps < 1 or abs(n_steps * dt - t_end) > 1e-9 * max(t_end, 1.0):
-        raise ValueError(f"{names[0]}: {t_end:g} s is not a whole number of steps {names[1]} = {dt:g} s")
+        # HHT takes fixed steps and the run must end at t_end; casflex does not change a given step silently
+        k = max(int(np.ceil(t_end / dt)), 1)
+        raise ValueError(f"{names[0]}: {t_end:g} s is not a whole number of steps {names[1]} = {dt:g} s; use "
+                         f"{names[1]} = {t_end / k:.8g} s ({k} steps) or {names[0]} = {max(n_steps, 1) * dt:g} s")
     return n_steps
 
 
