@@ -76,6 +76,21 @@ def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
     return 0
 
 
+def cmd_calibrate(args: argparse.Namespace, outputs: Outputs) -> int:
+    from casflex.inverse.calibrate import calibrate
+    from casflex.lab import Plane
+    from casflex.scene_io import dumps_scene
+
+    Plane.parse(args.plane, option="--plane")
+    if args.mass is not None and not args.scale:
+        raise OptionError("--mass: scales the bodies with the segments; give --scale too")
+    out = outputs.file("--out", args.out, (".toml",), "calibrated scene")
+    scene, report = calibrate(args.scene, args.static, args.plane, root=args.root, scale=args.scale, mass=args.mass)
+    print("\n".join(report))
+    out.write_text(dumps_scene(scene))
+    return 0
+
+
 def add_parsers(sub: argparse._SubParsersAction) -> None:
     s = sub.add_parser("inverse", help="net joint moments and intersegmental forces from a lab trial")
     s.add_argument("scene", help="built-in scene name (hamner_leg) or a TOML file: segments on hinges, labelled "
@@ -99,3 +114,16 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--plots", metavar="DIR", help="write figures into this directory")
     s.add_argument("--quiet", action="store_true", help="no progress messages")
     s.set_defaults(func=cmd_inverse)
+
+    s = sub.add_parser("calibrate", help="place a scene's markers (and scale its segments) from a static trial")
+    s.add_argument("scene", help="built-in scene name (hamner_leg) or a TOML file: segments on hinges, labelled "
+                                 "markers")
+    s.add_argument("--static", required=True, metavar="STATIC", help="the static trial's markers (.trc or .c3d)")
+    s.add_argument("--out", required=True, metavar="SUBJECT.toml", help="write the calibrated scene here")
+    s.add_argument("--plane", default="X,Y", help="the lab axes that become the model's x and y (default X,Y)")
+    s.add_argument("--root", metavar="NODE", help="the tree's root node (default: the scene's first)")
+    s.add_argument("--scale", action="store_true",
+                   help="scale each segment by its markers' distances first (needs markers along the segment)")
+    s.add_argument("--mass", type=positive("a mass in kg"), help="with --scale: the bodies' total mass, kg")
+    s.add_argument("--quiet", action="store_true", help="no progress messages")
+    s.set_defaults(func=cmd_calibrate)

@@ -23,7 +23,7 @@ import numpy as np
 
 from casflex.inverse.tree import KinematicTree
 
-__all__ = ["FittedMotion", "coordinate_rates", "fit_markers"]
+__all__ = ["FittedMotion", "coordinate_rates", "fit_markers", "fit_pose"]
 
 
 @dataclass(frozen=True)
@@ -47,12 +47,8 @@ def _marker_clusters(tree: KinematicTree) -> list[int]:
 
 
 def _residual(tree: KinematicTree) -> ca.Function:
-    from casflex.markers import marker_kinematics
-
-    z = ca.SX.sym("z", tree.n)
-    q = tree.forward(z)
-    y = marker_kinematics(tree.model)(q, ca.DM.zeros(tree.model.n_dof))[0]
-    return ca.Function("marker_fit", [z], [y, ca.jacobian(y, z)], ["z"], ["y", "J"])
+    """``marker_fit(z) -> (y, J)``: the scene's markers (2 m,) at the coordinates z and dy/dz."""
+    return tree.marker_fit
 
 
 def _kabsch_start(tree: KinematicTree, y: np.ndarray, y0: np.ndarray) -> np.ndarray:
@@ -106,6 +102,15 @@ def _solve_frame(f: ca.Function, z: np.ndarray, y: np.ndarray, max_iter: int = 5
     s = np.linalg.svd(J, compute_uv=False) if J.size else np.zeros(1)
     decided = J.shape[0] >= J.shape[1] and s[-1] > 1e-8 * max(s[0], 1e-300)
     return z, float(np.sqrt(np.mean(r.reshape(-1, 2) ** 2, axis=0).sum())) if r.size else np.nan, bool(decided)
+
+
+def fit_pose(tree: KinematicTree, y: np.ndarray, start: np.ndarray | None = None) -> tuple[np.ndarray, float, bool]:
+    """One frame's fit: (z, the markers' RMS misfit (m), whether they decide every coordinate) for the
+    markers y (2 m,) (NaN where missing), from ``start`` or each segment's rigid fit of its own markers."""
+    f = _residual(tree)
+    if start is None:
+        start = _kabsch_start(tree, y, np.array(f(tree.coordinates(tree.model.q0))[0]).ravel())
+    return _solve_frame(f, start, y)
 
 
 def fit_markers(tree: KinematicTree, t: np.ndarray, y: np.ndarray, *, max_gap: float = 0.1,

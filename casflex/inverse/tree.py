@@ -97,6 +97,16 @@ class KinematicTree:
         qdd = ca.jtimes(q, z, zdd) + ca.jtimes(qd, z, zd)
         return ca.Function("tree_rates", [z, zd, zdd], [q, qd, qdd], ["z", "zd", "zdd"], ["q", "qd", "qdd"])
 
+    @functools.cached_property
+    def marker_fit(self) -> ca.Function:
+        """``marker_fit(z) -> (y, J)``: the scene's markers (2 m,: x, y each, scene order; m) at the
+        coordinates z and their Jacobian dy/dz (2 m, n_z)."""
+        from casflex.markers import marker_kinematics
+
+        z = ca.SX.sym("z", self.n)
+        y = marker_kinematics(self.model)(self.forward(z), ca.DM.zeros(self.model.n_dof))[0]
+        return ca.Function("marker_fit", [z], [y, ca.jacobian(y, z)], ["z"], ["y", "J"])
+
     def coordinates(self, q: np.ndarray) -> np.ndarray:
         """z (n_z,) of a configuration q (n_dof,) the tree can reach (the inverse of ``forward``)."""
         m, idx = self.model, self.model.node_names.index
