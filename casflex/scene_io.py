@@ -67,17 +67,20 @@ def load_scene(source: str | os.PathLike[str]) -> Scene:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise SceneError(f"scene file {path}: cannot be read ({exc})") from None
-    return loads_scene(text, source=str(path))
+    return loads_scene(text, source=str(path), base=path.parent)
 
 
-def loads_scene(text: str, *, source: str = "<string>") -> Scene:
-    """Parse a scene from TOML text."""
+def loads_scene(text: str, *, source: str = "<string>", base: str | os.PathLike[str] | None = None) -> Scene:
+    """Parse a scene from TOML text; ``base``: the folder that data files it names are relative to
+    (default: the working folder; :mod:`casflex.scene_files`)."""
+    from casflex.scene_files import resolve_file_inputs
+
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{source}: not valid TOML: {exc}") from None
     try:
-        return scene_from_dict(data)
+        return scene_from_dict(resolve_file_inputs(data, Path.cwd() if base is None else Path(base)))
     except SceneError as exc:
         raise SceneError(f"{source}: {exc}") from None
 
