@@ -388,14 +388,16 @@ def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
         for comp, key in enumerate(("fx", "fy", "mz")):
             if ld.follower and key != "mz":  # an element of kind follower (_groups)
                 continue
-            i = idx[ld.node] + comp
             if len(rows) == 1:
-                f_ext[i] += symbol.get(f"{ld.name}.{key}", rows[0][comp + 1])
+                value = symbol.get(f"{ld.name}.{key}", rows[0][comp + 1])
             else:
                 tt = ca.DM([r[0] for r in rows])
                 vv = ca.DM([r[comp + 1] for r in rows])
                 tc = ca.fmin(ca.fmax(ts, tt[0]), tt[-1])  # hold the end values outside the table
-                f_ext[i] += ca.pw_lin(tc, tt, vv)
+                value = ca.pw_lin(tc, tt, vv)
+            f_ext[idx[ld.node] + comp] += value
+            if ld.against is not None:  # an actuator between two nodes: the opposite load on the other
+                f_ext[idx[ld.against] + comp] -= value
     load = ca.Function("load", [ts, ps], [f_ext], ["t", "p"], ["f_ext"])
     qs = ca.SX.sym("q", n)
     phi = ca.vertcat(constraint_vector(cons, qs), joint_phi(jgroups, qs))

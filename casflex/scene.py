@@ -125,6 +125,8 @@ class Scene:
                 names[item.name] = f
                 refs = ([(f"nodes[{j}]", r) for j, r in enumerate(item.nodes)] if hasattr(item, "nodes")
                         else [("node", item.node)])
+                if getattr(item, "against", None) is not None:
+                    refs.append(("against", item.against))
                 for key, r in refs:
                     if r not in seen:
                         raise SceneError(f"{f}[{i}] ({item.name}).{key}: unknown node {r!r}; known nodes: {list(seen)}")

@@ -382,6 +382,10 @@ class Load:
     rotation (fx, fy are its components while theta = 0), as a muscle or a thruster acts; not
     conservative, so statics solves it by Newton (``seek = "nearest"``) and modes may flutter.
     Constant components only; mz is the same moment in any frame.
+
+    ``against``: another node that takes the opposite load, an actuator between two nodes: a joint
+    torque across a hinge is ``mz`` on the hinge's node b with ``against`` its node a (the moment a's
+    segment exerts on b's, as inverse dynamics reports ``<hinge>.moment``).
     """
 
     name: str
@@ -391,11 +395,18 @@ class Load:
     mz: float = 0.0
     table: tuple[tuple[float, float, float, float], ...] | None = None
     follower: bool = False
+    against: str | None = None
 
     def __post_init__(self) -> None:
         where = _owner("load", self.name)
         object.__setattr__(self, "name", _name(where, "name", self.name))
         object.__setattr__(self, "node", _name(where, "node", self.node))
+        if self.against is not None:
+            object.__setattr__(self, "against", _name(where, "against", self.against))
+            if self.against == self.node:
+                raise SceneError.at(where, "against", f"must be another node than 'node' ({self.node!r})")
+            if self.follower:
+                raise SceneError.at(where, "against", "a follower load has no opposite on another node")
         for f in ("fx", "fy", "mz"):
             object.__setattr__(self, f, _number(where, f, getattr(self, f)))
         if not isinstance(self.follower, bool):
