@@ -336,3 +336,25 @@ def test_plate_helpers_refuse_in_one_line():
         plate_moment_about_origin(replace(g, values=values), "ground_")
     with pytest.raises(ValueError, match=r"up: expected a lab axis such as 'Y', '\+Z' or '-Z', got 'W'"):
         centre_of_pressure(np.zeros((2, 3)), np.zeros((2, 3)), up="W")
+
+
+def test_a_c3d_trial_gives_the_scenes_markers():
+    pytest.importorskip("ezc3d")
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from inverse_scenes import pendulum
+
+    from casflex.lab import read_c3d, trial_markers
+    from casflex.model import assemble
+    from casflex.scene_io import loads_scene
+
+    path = Path(__file__).parent / "data" / "lab" / "walking2_excerpt.c3d"
+    lab, _ = read_c3d(path, plates=False)
+    labels = lab.labels[:4]
+    text = pendulum()
+    for old, new in zip(("BASE.1", "BASE.2", "ARM.1", "ARM.2"), labels, strict=True):
+        text = text.replace(f'"{old}"', f'"{new}"')
+    data = trial_markers(assemble(loads_scene(text)), path, "X,Z")
+    assert np.allclose(data.q[:, 0], lab.xyz[:, 0, 0], equal_nan=True)  # x of the first marker: the lab's X, m
+    assert np.allclose(data.q[:, 1], lab.xyz[:, 0, 2], equal_nan=True)  # y: the lab's Z (up in this file)

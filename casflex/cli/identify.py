@@ -129,7 +129,7 @@ def _data(model: Model, args: argparse.Namespace) -> tuple[list[MeasurementSet],
     if args.data[0] not in ("simulated", "measured"):
         sets, infos = [], []
         for i, path in enumerate(args.data):
-            if str(path).lower().endswith(".trc"):  # a lab trial: the scene's markers by their labels
+            if str(path).lower().endswith((".trc", ".c3d")):  # a lab trial: the scene's markers by their labels
                 from casflex.lab import trial_markers
 
                 data = trial_markers(model, path, args.plane)
@@ -340,11 +340,11 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--transcription", choices=TRANSCRIPTIONS,
                    help="indirect only (default single-shooting)")
     s.add_argument("--plane", type=_plane, default="X,Y", metavar="AXES",
-                   help="for a .trc trial: the lab axes that become the model's x and y, e.g. X,Y (default: "
+                   help="for a .trc or .c3d trial: the lab axes that become the model's x and y, e.g. X,Y (default: "
                         "OpenSim's X forward, Y up: seen from +Z) or -Z,Y")
     s.add_argument("--data", action="append", metavar="simulated|measured|FILE",
                    help="the exact simulated set (default), the measured set (positions, central differences), "
-                        "or a .npz/.csv file, or a lab trial's .trc (the scene's markers by their label, see "
+                        "or a .npz/.csv file, or a lab trial's .trc or .c3d (the scene's markers by their label, see "
                         "--plane); repeat --data FILE for several recordings (indirect)")
     s.add_argument("--initial-state", choices=INITIAL_STATES,
                    help="indirect: the state at the first sample: the scene's (default), the scene's positions with "
