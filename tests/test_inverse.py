@@ -138,6 +138,8 @@ def test_driven_run_converges_to_the_exact_rigid_inverse():
     ('[[springs]]\nname = "s"\nnodes = ["base", "extra"]\nk = 10.0\n', "spring 's'"),
     ('[[joints]]\nname = "s"\nkind = "hinge"\nnodes = ["extra", "base"]\n', "run away from the root"),
     ('[[joints]]\nname = "s"\nkind = "hinge"\nnodes = ["extra"]\n', "joint to the ground"),
+    ('[[joints]]\nname = "h"\nkind = "hinge"\nnodes = ["link", "extra"]\n[[supports]]\nname = "s"\nnode = "extra"\n',
+     "support 's': inverse dynamics drives the scene from its root 'base' only"),
 ])
 def test_scenes_inverse_dynamics_refuses(extra, message):
     node = '[[nodes]]\nname = "extra"\nx = 0.5\ny = 1.0\n[[bodies]]\nname = "e"\nnode = "extra"\nmass = 1.0\n'

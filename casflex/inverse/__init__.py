@@ -31,9 +31,10 @@ from casflex.inverse.tree import KinematicTree, kinematic_tree
 __all__ = ["InverseResult", "KinematicTree", "Plate", "inverse_dynamics", "inverse_model", "kinematic_tree"]
 
 
-def inverse_model(scene):
-    """The model inverse dynamics drives: the scene without its supports (the root's driver replaces
-    them: they would fix what the data moves)."""
+def inverse_model(scene, root: str | None = None):
+    """The model inverse dynamics drives: the scene without the supports of its root (default: its
+    first node), which the root's driver replaces (they would fix what the data moves). A support on
+    another node is refused in one line: the data, not the scene, say where the segments go."""
     from casflex.model import assemble
     from casflex.scene import Scene
 
@@ -41,6 +42,11 @@ def inverse_model(scene):
         from casflex.scene_io import load_scene
 
         scene = load_scene(scene)
+    root = scene.nodes[0].name if root is None else root
+    for s in scene.supports:
+        if s.node != root:
+            raise ValueError(f"support {s.name!r}: inverse dynamics drives the scene from its root {root!r} only; "
+                             "remove the support or make its node the root (--root)")
     return assemble(dataclasses.replace(scene, supports=()))
 
 
@@ -93,7 +99,7 @@ def inverse_dynamics(scene, markers, *, plane: str = "X,Y", grf=None, plates: di
     from casflex.lab import LabMarkers, LabTable, Plane, markers_in_plane, read_sto
 
     pl = Plane.parse(plane) if isinstance(plane, str) else plane
-    model = inverse_model(scene)
+    model = inverse_model(scene, root)
     if not model.scene.markers:
         raise ValueError("scene: it has no [[markers]] to fit to the trial")
     plates = dict(plates or {})

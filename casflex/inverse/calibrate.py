@@ -115,7 +115,7 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
     if mass is not None and not mass > 0:
         raise ValueError(f"mass: must be > 0 kg, got {mass}")
     pl = Plane.parse(plane) if isinstance(plane, str) else plane
-    model = inverse_model(scene)
+    model = inverse_model(scene, root)
     tree = kinematic_tree(model, root)
     lab = static if isinstance(static, LabMarkers) else _read_markers(static)[0]
     sc = model.scene
@@ -134,7 +134,7 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
                       + ", ".join(f"{names[c]} {v:.3f}" for c, v in s.items()))
     elif mass is not None:
         raise ValueError("mass: scales the bodies with the segments (scale=True)")
-    model = inverse_model(sc)
+    model = inverse_model(sc, root)
     tree = kinematic_tree(model, root)
     z, before, decided = fit_pose(tree, ym.ravel())
     if not decided:
@@ -154,7 +154,7 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
         moved.append(float(np.hypot(p[0] - m.x, p[1] - m.y)))
         markers.append(dataclasses.replace(m, x=float(p[0]), y=float(p[1])))
     out = dataclasses.replace(sc, markers=tuple(markers))
-    after_model = inverse_model(out)
+    after_model = inverse_model(out, root)
     y_after = np.array(_residual(kinematic_tree(after_model, root))(z)[0]).reshape(-1, 2)
     ok = np.isfinite(ym).all(axis=1)
     after = float(np.sqrt(np.mean(np.sum((y_after[ok] - ym[ok]) ** 2, axis=1))))

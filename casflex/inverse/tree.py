@@ -53,10 +53,9 @@ def _check(model: Model, root: str) -> None:
     sc = model.scene
     if root not in model.node_names:
         raise ValueError(f"root: no node {root!r}; the scene's nodes are {[n.name for n in sc.nodes]}")
-    for s in sc.supports:
-        if s.node != root:
-            raise ValueError(f"support {s.name!r}: inverse dynamics drives the scene from its root {root!r} only; "
-                             "remove the support or make its node the root (--root)")
+    if sc.supports:
+        raise ValueError(f"support {sc.supports[0].name!r}: the kinematic tree's scene has no supports "
+                         "(casflex.inverse.inverse_model takes them off the root)")
     for j in sc.joints:
         if len(j.nodes) == 1:
             raise ValueError(f"joint {j.name!r}: a joint to the ground is not taken by inverse dynamics (the root "
