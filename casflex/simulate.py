@@ -282,6 +282,11 @@ class _Stepper:
         """Steps from X[done], written into X[done + 1 ...]: (steps that converged, failure message)."""
         integ, n, t = self.integ, self.integ.model.n_dof, self.t0 + done * self.dt
         if self.lib is None:
+            # the step's time as the compiled run computes it (a chunk's start, then k dt within it: 0.25 + 0.038
+            # is not 288 x 0.001 to the last bit), so that time-dependent scenes stay bitwise the same
+            base = done - done % CHUNK
+            if done + left - base >= CHUNK:
+                t = (self.t0 + base * self.dt) + (done - base) * self.dt
             if self.modified:
                 x1, r, self.F, it, refreshed = integ.modified.step_interpreted(X[done], t, self.p, self.dt, self.d,
                                                                              self.F)

@@ -8,6 +8,8 @@ import numpy as np
 M, C, INERTIA = 2.0, 0.3, 0.05
 #: the base's mass and inertia
 M_BASE, I_BASE = 1.0, 0.01
+#: a driven swing: A sin(W t) (rad)
+A, W = 0.7, 2 * np.pi * 1.3
 
 
 def pendulum(extra: str = "") -> str:
@@ -65,3 +67,30 @@ x = 0.05
 y = 0.6
 label = "ARM.2"
 {extra}"""
+
+
+def driven_pendulum(dt_table: float = 0.01) -> str:
+    """The pendulum driven through a ``drive`` joint at the angle A sin(W t) (a driver node turned by a
+    moving clamp), its base clamped."""
+    ts = np.arange(0.0, 1.2 + 1e-9, dt_table)
+    motion = ", ".join(f"[{t:.6f}, 0.0, 0.0, {float(A * np.sin(W * t))!r}]" for t in ts)
+    return pendulum(f"""
+[[nodes]]
+name = "drv"
+x = 0.0
+y = 0.0
+omega = {A * W!r}
+[[supports]]
+name = "ground"
+node = "base"
+kind = "clamp"
+[[supports]]
+name = "drv"
+node = "drv"
+kind = "clamp"
+motion = [{motion}]
+[[joints]]
+name = "act"
+kind = "drive"
+nodes = ["base", "link", "drv"]
+""").replace('name = "link"\nx = 0.0\ny = 1.0\n', f'name = "link"\nx = 0.0\ny = 1.0\nomega = {A * W!r}\n')

@@ -5,42 +5,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from inverse_scenes import INERTIA, C, M, pendulum
+from inverse_scenes import INERTIA, A, C, M, W, driven_pendulum, pendulum
 
 from casflex.scene import SceneError
 from casflex.scene_io import loads_scene
 from casflex.simulate import simulate
 
-A, W = 0.7, 2 * np.pi * 1.3
-
-
-def _driven(dt_table: float = 0.01) -> str:
-    ts = np.arange(0.0, 1.2 + 1e-9, dt_table)
-    motion = ", ".join(f"[{t:.6f}, 0.0, 0.0, {float(A * np.sin(W * t))!r}]" for t in ts)
-    return pendulum(f"""
-[[nodes]]
-name = "drv"
-x = 0.0
-y = 0.0
-omega = {A * W!r}
-[[supports]]
-name = "ground"
-node = "base"
-kind = "clamp"
-[[supports]]
-name = "drv"
-node = "drv"
-kind = "clamp"
-motion = [{motion}]
-[[joints]]
-name = "act"
-kind = "drive"
-nodes = ["base", "link", "drv"]
-""").replace('name = "link"\nx = 0.0\ny = 1.0\n', f'name = "link"\nx = 0.0\ny = 1.0\nomega = {A * W!r}\n')
-
 
 def test_drive_moment_is_the_closed_form():
-    tr = simulate(loads_scene(_driven()), 1.0, dt=1e-3, alpha=-0.1)
+    tr = simulate(loads_scene(driven_pendulum()), 1.0, dt=1e-3, alpha=-0.1)
     th, thdd = A * np.sin(W * tr.t), -A * W * W * np.sin(W * tr.t)
     tau = (INERTIA + M * C * C) * thdd + M * 9.81 * C * np.sin(th)
     assert np.abs(tr.output("act.angle") - th).max() < 1e-6  # the path's spline through 100 Hz rows
