@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from casflex import interrupt
 from casflex.inverse.tree import KinematicTree
 
 __all__ = ["FittedMotion", "coordinate_rates", "fit_markers", "fit_pose"]
@@ -129,6 +130,7 @@ def fit_markers(tree: KinematicTree, t: np.ndarray, y: np.ndarray, *, max_gap: f
             Z[i], rms[i], z_prev = z, e, z
         if progress is not None:
             progress(i + 1, n)
+        interrupt.check()  # a Ctrl-C that a CasADi call swallowed
     report = [f"marker fit: {n} frames, misfit RMS median {1e3 * np.nanmedian(rms):.1f} mm, "
               f"max {1e3 * np.nanmax(rms):.1f} mm"] if np.isfinite(rms).any() else []
     Z = _fill(t, Z, max_gap, report)
