@@ -59,6 +59,19 @@ def _read_markers(path):
     return read_trc(path), None
 
 
+def _trial(markers, grf):
+    """(LabMarkers, plates' LabTable or None) from what the caller gave: objects, or .trc/.c3d and
+    .mot/.sto/.c3d paths (the markers' own C3D again for its plates)."""
+    from casflex.lab import LabMarkers, LabTable, read_sto
+
+    lab, c3d_plates = (markers, None) if isinstance(markers, LabMarkers) else _read_markers(markers)
+    if isinstance(grf, LabTable) or grf is None:
+        return lab, grf
+    if c3d_plates is not None and os.fspath(grf) == os.fspath(markers):
+        return lab, c3d_plates
+    return lab, _read_markers(grf)[1] if os.fspath(grf).lower().endswith(".c3d") else read_sto(grf)
+
+
 def _window(t: np.ndarray, t_start: float | None, t_end: float | None) -> np.ndarray:
     lo = t[0] if t_start is None else t_start
     hi = t[-1] if t_end is None else t_end
@@ -96,7 +109,7 @@ def inverse_dynamics(scene, markers, *, plane: str = "X,Y", grf=None, plates: di
         Flexible segments only: the largest HHT time step (s; default the scene's, made to divide the
         frames' interval), HHT's alpha (default the scene's) and whether to run compiled C.
     """
-    from casflex.lab import LabMarkers, LabTable, Plane, markers_in_plane, read_sto
+    from casflex.lab import Plane, markers_in_plane
 
     pl = Plane.parse(plane) if isinstance(plane, str) else plane
     model = inverse_model(scene, root)
@@ -109,13 +122,7 @@ def inverse_dynamics(scene, markers, *, plane: str = "X,Y", grf=None, plates: di
     if plates and grf is None:
         raise ValueError("plates: given without the ground reactions (grf)")
     tree = kinematic_tree(model, root)
-    lab, c3d_plates = (markers, None) if isinstance(markers, LabMarkers) else _read_markers(markers)
-    if isinstance(grf, LabTable) or grf is None:
-        table = grf
-    elif c3d_plates is not None and os.fspath(grf) == os.fspath(markers):
-        table = c3d_plates  # the C3D's own plates
-    else:
-        table = _read_markers(grf)[1] if os.fspath(grf).lower().endswith(".c3d") else read_sto(grf)
+    lab, table = _trial(markers, grf)
     ms = markers_in_plane(lab, {m.name: m.label or m.name for m in model.scene.markers}, pl)
     keep = _window(ms.t, t_start, t_end)
     t_frames, y = even_times(ms.t[keep], lab.rate), ms.q[keep]
