@@ -16,8 +16,10 @@
    is estimated as 4/3 of the change, Richardson's factor for a method of second order in element
    size and step: measured on twobar against data from Exudyn, the error of the fitted kt3 fell
    from 0.45 % (1 element, 1 ms) to 0.053 % (2, 0.5 ms) and 0.005 % (4, 0.25 ms).
-5. Uncertainty: the HAC covariance of the fit (:func:`.statistics.sandwich_covariance`) and the
-   model error, added in quadrature: ``std_errors``. The plain Gauss-Newton standard errors are
+5. Uncertainty: the noise part, the larger of the HAC standard error of the fit
+   (:func:`.statistics.sandwich_covariance`: residuals correlated in time) and the plain Gauss-Newton
+   one (a HAC below the plain error would rest on a bandwidth estimated from the same record, with no
+   evidence of its own), and the model error, added in quadrature: ``std_errors``. Both parts are
    reported beside them. ``weak``: parameters whose total relative standard error exceeds 10 %.
 6. Residual analysis per experiment and channel, and the success rule: the solver converged,
    no parameter ends on a bound, every channel's fit (100 (1 - |y - y_model| / |y - mean y|)
@@ -309,7 +311,10 @@ def estimate(model: Model, experiments: Sequence[Experiment], *, dt: float | Non
     C, hac = sandwich_covariance(f.J, f.r, problem.groups())
     se_gn = np.array([gn["std_errors"][k] for k in names])
     se_hac = np.where(np.isinf(se_gn), np.inf, np.sqrt(np.maximum(np.diag(C)[:n_p], 0.0)) * np.abs(dp))
-    total = np.sqrt(se_hac**2 + np.nan_to_num(me, nan=0.0) ** 2)
+    # the noise part: HAC where it is the larger; never below the plain errors, since a HAC under them rests on a
+    # bandwidth estimated from the same short record (a gait swing's 26 samples gave 15 against 51, issue 27)
+    se_noise = np.fmax(se_hac, se_gn)
+    total = np.sqrt(se_noise**2 + np.nan_to_num(me, nan=0.0) ** 2)
     rel = total / np.maximum(np.abs(p_hat), np.finfo(float).tiny)
     gn["weak"] = [k for k, v in zip(names, rel, strict=True) if not v <= 0.1]
 
