@@ -353,8 +353,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="indirect: the model's time step, s (default: the scene's, never the samples' spacing)")
     s.add_argument("--alpha", type=alpha_value, help="indirect: the model's HHT alpha (default: the scene's)")
     s.add_argument("--sigma", type=positive("a standard deviation (m, rad)"), metavar="SIGMA",
-                   help="indirect: the measurement noise of the data, if known (weights the channels; a fit whose "
-                        "residuals exceed 3 SIGMA does not succeed)")
+                   help="indirect: the data's noise, if known: a fit whose residual RMS on a channel exceeds 3 SIGMA "
+                        "does not succeed. One value for every channel, so it changes neither the estimates nor the "
+                        "standard errors (both come from the residuals)")
     s.add_argument("--max-iter", type=integer(1, "a number of iterations"), default=100,
                    help="indirect: Gauss-Newton iterations per stage of the growing horizon (default 100)")
     s.add_argument("--max-time", type=positive("a time in s"), default=600.0,
