@@ -1,10 +1,10 @@
 """Lab data filtered the way motion labs filter it, and force plates' loads in a form that may be filtered.
 
-:func:`filtered`: the zero-lag low-pass Butterworth of :mod:`casflex.smoothing` (a 2nd-order Butterworth
-run forward and backward by ``scipy.signal.filtfilt``: 4th order, no phase lag), per marker coordinate of a
+:func:`filtered`: the lab's zero-lag low-pass Butterworth (:mod:`casflex.filters`: a 2nd-order Butterworth
+run forward and backward, scipy's ``filtfilt`` algorithm: 4th order, no phase lag), per marker coordinate of a
 :class:`~casflex.lab.LabMarkers` or per column of a :class:`~casflex.lab.LabTable`, at ``cutoff_hz``.
 
-- The cut-off is each pass's -3 dB frequency, as in :mod:`casflex.smoothing`, *not* corrected for the
+- The cut-off is each pass's -3 dB frequency, as everywhere in casflex, *not* corrected for the
   double pass as Winter (2009, sec. 3.4.4.3) corrects it: the zero-lag filter is at -6 dB there and at
   -3 dB at about 0.802 x the cut-off (:func:`zero_lag_minus_3db` gives the exact digital value). For
   Winter's convention pass ``cutoff_hz / 0.802``.
@@ -53,17 +53,20 @@ def zero_lag_minus_3db(cutoff_hz: float, rate_hz: float) -> float:
 
 
 def _rate(t: np.ndarray, where: str) -> tuple[float, np.ndarray]:
-    """(rate Hz, the even grid of t); ValueError unless every time lies within a tenth of a step of it."""
+    """(rate Hz, the even grid of t: :func:`casflex.filters.even_times`); ValueError unless every time lies
+    within a tenth of a step of it."""
+    from casflex.filters import even_times
+
     if t.size < _MIN_SAMPLES:
         raise ValueError(f"{where}: filtering needs at least {_MIN_SAMPLES} samples, got {t.size}")
     h = (t[-1] - t[0]) / (t.size - 1)
-    grid = t[0] + h * np.arange(t.size)
-    off = np.abs(t - grid)
-    if not h > 0 or off.max() > 0.1 * h:
+    grid = even_times(t)
+    off = np.abs(t - (t[0] + h * np.arange(t.size)))
+    if not h > 0 or np.ptp(np.diff(grid)) > 1e-9 * h:
         k = int(np.argmax(off))
         raise ValueError(f"{where}: filtering needs evenly spaced samples: t = {t[k]:g} s is {off[k]:g} s off the "
                          f"grid of {h:g} s steps")
-    return 1.0 / h, grid
+    return 1.0 / (grid[1] - grid[0]), grid
 
 
 def _runs(missing: np.ndarray) -> list[tuple[int, int]]:
@@ -78,7 +81,7 @@ def _filter_channel(t: np.ndarray, grid: np.ndarray, y: np.ndarray, cutoff: floa
     max_gap samples), the ends missing kept missing; (result, notes for the report)."""
     from scipy.interpolate import CubicSpline
 
-    from casflex.smoothing import _butterworth
+    from casflex.filters import butterworth2, filtfilt2
 
     ok = np.isfinite(y).all(axis=1)
     out = np.full_like(y, np.nan, dtype=float)
@@ -101,8 +104,7 @@ def _filter_channel(t: np.ndarray, grid: np.ndarray, y: np.ndarray, cutoff: floa
         seg[s:e] = CubicSpline(grid[a:b][ok[a:b]], seg[ok[a:b]])(grid[a + s:a + e])
         notes.append(f"{name}: {e - s} samples filled by a cubic spline (t = {t[a + s]:g} to "
                      f"{t[a + e - 1]:g} s)")
-    for j in range(y.shape[1]):
-        out[a:b, j] = _butterworth(grid[a:b], seg[:, j], cutoff)[0]
+    out[a:b] = filtfilt2(*butterworth2(cutoff, 1.0 / (grid[1] - grid[0])), seg)
     return out, notes
 
 
@@ -110,7 +112,7 @@ def filtered(data: LabMarkers | LabTable, cutoff_hz: float, order: int = 4, *, m
              names: Sequence[str] | None = None) -> tuple[LabMarkers | LabTable, str]:
     """(a copy of ``data`` low-pass filtered, a short report): markers (n, k, 3) m per coordinate, a table's
     columns (n, m) per column, at ``cutoff_hz`` (Hz, below half the rate), by the zero-lag Butterworth of
-    ``order`` 4 (the only order: casflex.smoothing's filter); ``names``: the markers or columns to filter
+    ``order`` 4 (the only order: casflex.filters'); ``names``: the markers or columns to filter
     (default all; the others are copied as they are). Gaps as the module docstring says."""
     from casflex.lab import LabMarkers
 

@@ -39,15 +39,9 @@ def _rot(th: float) -> np.ndarray:
     return np.array([[c, -s], [s, c]])
 
 
-def _owner_node(scene, marker) -> str:
-    bodies = {b.name: b.node for b in scene.bodies}
-    return bodies.get(marker.on) or next(b.nodes[0] for b in scene.beams if b.name == marker.on)
-
-
 def _scales(tree: KinematicTree, y0: np.ndarray, ym: np.ndarray) -> dict[int, float]:
     """Per cluster: the median measured over scene distance of its seen markers' pairs (1 with fewer than 2)."""
-    sc, idx = tree.model.scene, tree.model.node_names.index
-    cl = np.array([tree.cluster[idx(_owner_node(sc, m))] for m in sc.markers])
+    cl = np.array([tree.cluster[i] for i in tree.marker_nodes])
     seen = np.isfinite(ym).all(axis=1)
     out = {}
     for c in set(tree.cluster):
@@ -89,7 +83,7 @@ def _scaled_scene(tree: KinematicTree, s: dict[int, float], mass: float | None):
     joints = tuple(dataclasses.replace(j, point=tuple(float(v) for v in new(sc.joint_point(j), of(j.nodes[0]))))
                    if j.point is not None else j for j in sc.joints)
     markers = tuple(dataclasses.replace(m, **dict(zip(("x", "y"), (float(v) for v in new(
-        (m.x, m.y), of(_owner_node(sc, m)))), strict=True))) for m in sc.markers)
+        (m.x, m.y), tree.cluster[i])), strict=True))) for m, i in zip(sc.markers, tree.marker_nodes, strict=True))
     return dataclasses.replace(sc, nodes=nodes, bodies=tuple(bodies), joints=joints, markers=markers)
 
 
@@ -109,7 +103,7 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
     """(the calibrated scene, report lines) from the static trial ``static`` (LabMarkers or a .trc/.c3d
     path), module docstring."""
     from casflex.inverse import _read_markers, inverse_model
-    from casflex.inverse.fit import _residual, fit_pose
+    from casflex.inverse.fit import fit_pose
     from casflex.lab import LabMarkers, Plane, markers_in_plane
 
     if mass is not None and not mass > 0:
@@ -142,12 +136,11 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
                          "and no other way to place it)")
     q = np.array(tree.forward(z)).ravel()
     markers, moved = [], []
-    for k, m in enumerate(sc.markers):
+    for k, (m, i) in enumerate(zip(sc.markers, tree.marker_nodes, strict=True)):
         if not np.isfinite(ym[k]).all():
             markers.append(m)
             report.append(f"marker {m.name!r} ({m.label or m.name}): not in the static trial, left where it was")
             continue
-        i = model.node_names.index(_owner_node(sc, m))
         x_fit, th_fit = q[3 * i:3 * i + 2], q[3 * i + 2]
         x0, th0 = model.q0[3 * i:3 * i + 2], model.q0[3 * i + 2]
         p = x0 + _rot(th0 - th_fit) @ (ym[k] - x_fit)
@@ -155,7 +148,7 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
         markers.append(dataclasses.replace(m, x=float(p[0]), y=float(p[1])))
     out = dataclasses.replace(sc, markers=tuple(markers))
     after_model = inverse_model(out, root)
-    y_after = np.array(_residual(kinematic_tree(after_model, root))(z)[0]).reshape(-1, 2)
+    y_after = np.array(kinematic_tree(after_model, root).marker_fit(z)[0]).reshape(-1, 2)
     ok = np.isfinite(ym).all(axis=1)
     after = float(np.sqrt(np.mean(np.sum((y_after[ok] - ym[ok]) ** 2, axis=1))))
     if scale:

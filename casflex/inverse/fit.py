@@ -39,23 +39,10 @@ class FittedMotion:
     report: list[str] = field(default_factory=list)
 
 
-def _marker_clusters(tree: KinematicTree) -> list[int]:
-    """The cluster (:class:`KinematicTree`) of each scene marker."""
-    m = tree.model
-    bodies = {b.name: b.node for b in m.scene.bodies}
-    beams = {b.name: b.nodes[0] for b in m.scene.beams}
-    return [tree.cluster[m.node_names.index(bodies.get(mk.on) or beams[mk.on])] for mk in m.scene.markers]
-
-
-def _residual(tree: KinematicTree) -> ca.Function:
-    """``marker_fit(z) -> (y, J)``: the scene's markers (2 m,) at the coordinates z and dy/dz."""
-    return tree.marker_fit
-
-
 def _kabsch_start(tree: KinematicTree, y: np.ndarray, y0: np.ndarray) -> np.ndarray:
     """z of every segment's rigid fit to its own seen markers (a start for the first frame)."""
     m, idx = tree.model, tree.model.node_names.index
-    cl = np.array(_marker_clusters(tree))
+    cl = np.array([tree.cluster[i] for i in tree.marker_nodes])
     meas, ref = y.reshape(-1, 2), y0.reshape(-1, 2)
     turn = {}
     for c in set(cl.tolist()):
@@ -108,7 +95,7 @@ def _solve_frame(f: ca.Function, z: np.ndarray, y: np.ndarray, max_iter: int = 5
 def fit_pose(tree: KinematicTree, y: np.ndarray, start: np.ndarray | None = None) -> tuple[np.ndarray, float, bool]:
     """One frame's fit: (z, the markers' RMS misfit (m), whether they decide every coordinate) for the
     markers y (2 m,) (NaN where missing), from ``start`` or each segment's rigid fit of its own markers."""
-    f = _residual(tree)
+    f = tree.marker_fit
     if start is None:
         start = _kabsch_start(tree, y, np.array(f(tree.coordinates(tree.model.q0))[0]).ravel())
     return _solve_frame(f, start, y)
@@ -118,7 +105,7 @@ def fit_markers(tree: KinematicTree, t: np.ndarray, y: np.ndarray, *, max_gap: f
                 progress=None) -> FittedMotion:
     """The coordinates of the markers y (n, 2 m) at times t (n,) (module docstring); y's columns are
     the scene markers' x, y in scene order (:func:`casflex.markers.marker_channels`), NaN where missing."""
-    f = _residual(tree)
+    f = tree.marker_fit
     y0 = np.array(f(tree.coordinates(tree.model.q0))[0]).ravel()
     n = t.size
     Z, rms, seen = np.full((n, tree.n), np.nan), np.full(n, np.nan), np.isfinite(y).reshape(n, -1, 2).all(2).sum(1)

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from casflex.filters import even_times, lowpass
-from casflex.lab import LabTable, Plane
+from casflex.lab import LabTable, Plane, plate_moment_about_origin
 
 __all__ = ["Plate", "plate_from_table", "plate_loads"]
 
@@ -46,28 +46,9 @@ def plate_from_table(table: LabTable, prefix: str, node: str, plane: Plane, cuto
     recorded). The moment about the lab's origin from the table's ``<prefix>moment_{x,y,z}`` where it has
     them (C3D plates, :func:`casflex.lab.read_c3d`), else p x F + T. Rows without force (NaN) are no
     contact: zero force and moment. A force without a centre of pressure is refused in one line."""
-    cols = {k: [f"{prefix}{k}{c}" for c in "xyz"] for k in ("force_v", "force_p", "torque_", "moment_")}
-    about_origin = all(c in table.names for c in cols["moment_"])  # casflex.lab.read_c3d writes them
-    need = ("force_v", "moment_") if about_origin else ("force_v", "force_p", "torque_")
-    missing = [c for k in need for c in cols[k] if c not in table.names]
-    if missing:
-        have = sorted({n[:-len("force_vx")] for n in table.names if n.endswith("force_vx")})
-        raise ValueError(f"{table.source}: no column {missing[0]!r} for plate {prefix!r}; the plates there are "
-                         f"{have or 'none (columns <prefix>force_vx ...)'}")
-    F = np.column_stack([table.column(c) for c in cols["force_v"]])
-    off = ~np.isfinite(F).all(axis=1)
-    F[off] = 0.0
-    if about_origin:
-        M3 = np.column_stack([table.column(c) for c in cols["moment_"]])
-    else:
-        P, T = (np.column_stack([table.column(c) for c in cols[k]]) for k in ("force_p", "torque_"))
-        T[~np.isfinite(T)] = 0.0
-        bad = (np.linalg.norm(F, axis=1) > 0) & ~np.isfinite(P).all(axis=1)
-        if bad.any():
-            raise ValueError(f"{table.source}: plate {prefix!r} has a force but no centre of pressure at "
-                             f"t = {table.t[np.argmax(bad)]:g} s")
-        M3 = np.cross(np.where(np.isfinite(P), P, 0.0), F) + T
-    M3[off | ~np.isfinite(M3).all(axis=1)] = 0.0
+    F, M3 = plate_moment_about_origin(table, prefix)
+    off = ~np.isfinite(F).all(axis=1) | ~np.isfinite(M3).all(axis=1)  # no force recorded: no contact
+    F, M3 = np.where(off[:, None], 0.0, F), np.where(off[:, None], 0.0, M3)
     E = plane.matrix
     n = np.cross(E[0], E[1])
     force, moment = F @ E.T, M3 @ n

@@ -48,11 +48,6 @@ class InverseResult:
             raise KeyError(f"unknown load {name!r}; loads are {sorted(self.loads)}")
         return self.loads[name]
 
-    @property
-    def joint_moments(self) -> dict[str, np.ndarray]:
-        """The net joint moments (N m), ``<hinge>.moment``, in the tree's order."""
-        return {k: v for k, v in self.loads.items() if k.endswith(".moment") and k in self.settings.get("moments", ())}
-
     def summary(self) -> str:
         lines = [*self.report, f"{self.t.size} instants, t = {self.t[0]:g}..{self.t[-1]:g} s"]
         for name in (*self.settings.get("moments", ()), "root.fx", "root.fy", "root.mz"):

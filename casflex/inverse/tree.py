@@ -97,6 +97,14 @@ class KinematicTree:
         return ca.Function("tree_rates", [z, zd, zdd], [q, qd, qdd], ["z", "zd", "zdd"], ["q", "qd", "qdd"])
 
     @functools.cached_property
+    def marker_nodes(self) -> tuple[int, ...]:
+        """The model node (index) that carries each scene marker: its body's node, or its beam's first node
+        (a segment's cluster moves with either)."""
+        sc = self.model.scene
+        owner = {b.name: b.node for b in sc.bodies} | {b.name: b.nodes[0] for b in sc.beams}
+        return tuple(self.model.node_names.index(owner[m.on]) for m in sc.markers)
+
+    @functools.cached_property
     def marker_fit(self) -> ca.Function:
         """``marker_fit(z) -> (y, J)``: the scene's markers (2 m,: x, y each, scene order; m) at the
         coordinates z and their Jacobian dy/dz (2 m, n_z)."""
