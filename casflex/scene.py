@@ -248,23 +248,26 @@ class Scene:
         """A copy with the named parameters set to new nominal values (bounds still checked)."""
         scene = self
         for name, v in values.items():
-            target = self.parameter(name).target
-            owner, _, prop = target.partition(".")
-            if owner == "gravity":
-                g = list(scene.gravity)
-                g[0 if prop == "x" else 1] = v
-                scene = replace(scene, gravity=tuple(g))
-                continue
-            for f in ("beams", "springs", "torsion_springs", "bodies", "loads"):
-                items = list(getattr(scene, f))
-                for i, it in enumerate(items):
-                    if it.name == owner:
-                        try:
-                            items[i] = replace(it, **{prop: v})
-                        except SceneError as exc:
-                            raise SceneError(f"with_values({name}={v!r}): {exc}") from None
-                        scene = replace(scene, **{f: tuple(items)})
+            try:
+                scene = scene.with_property(self.parameter(name).target, v)
+            except SceneError as exc:
+                raise SceneError(f"with_values({name}={v!r}): {exc}") from None
         return scene
+
+    def with_property(self, target: str, value: Any) -> Scene:
+        """A copy with the property ``"<name>.<field>"`` (or ``"gravity.<x|y>"``) set to ``value``."""
+        owner, _, prop = target.partition(".")
+        if owner == "gravity":
+            g = list(self.gravity)
+            g[0 if prop == "x" else 1] = value
+            return replace(self, gravity=tuple(g))
+        for f in ("beams", "springs", "torsion_springs", "bodies", "loads"):
+            items = list(getattr(self, f))
+            for i, it in enumerate(items):
+                if it.name == owner:
+                    items[i] = replace(it, **{prop: value})
+                    return replace(self, **{f: tuple(items)})
+        raise SceneError(f"unknown element or load {owner!r} in {target!r}")
 
     @property
     def length_scale(self) -> float:

@@ -16,6 +16,17 @@ CASES = [
     ("identify twobar --method indirect --initial-state velocities --transcription multiple-shooting",
      r"--initial-state velocities: estimated velocities need single shooting"),
     ("identify twobar --method indirect --hessian exact", r"--hessian: the NLP solver's Hessian; .*--solver ipopt"),
+    ("identify twobar --method indirect --vary bar2.Q=1:2", r"--vary bar2.Q: 'bar2' has no numeric property 'Q'"),
+    ("identify twobar --method indirect --vary bar2.E=3e11:2e11", r"--vary bar2.E: expected finite lower < upper"),
+    ("identify twobar --method indirect --vary torsion3.kt=1:2", r"--vary torsion3.kt: it is parameter 'kt3', fitted"),
+    ("identify twobar --method indirect --vary bar2.E", r"argument --vary: expected TARGET=LOWER:UPPER"),
+    ("identify twobar --method indirect --alternatives leg", r"--alternatives: scene 'leg' does not declare the "
+                                                            r"parameter\(s\) k1, kt1, k3, kt3"),
+    ("identify twobar --method direct --form none", r"--form: applies to the indirect method only"),
+    ("identify twobar --method indirect --sigma x3=1e-3,y3", r"argument --sigma: expected SIGMA or CHANNEL=SIGMA"),
+    ("identify twobar --method indirect --sigma x3=-1", r"argument --sigma: x3: expected a standard deviation > 0"),
+    ("identify twobar --method indirect --dofs x3,y3 --sigma x3=1e-3", r"--sigma: 'y3' has no value; give one per "
+                                                                        r"compared channel \(x3, y3\)"),
     ("simulate twobar --t-end 1e9", r"--t-end: 1e\+09 s at --dt = 0.001 s is 1,000,000,000,000 steps .* needs about "
                                     r".*PiB of memory .* available; shorten --t-end or raise --dt"),
     ("simulate twobar --dt 1e-9", r"--t-end: .* TiB of memory"),

@@ -24,7 +24,8 @@ DEFAULT_INSTANT_COUNT = 5
 _INDIRECT_ONLY = {"transcription": "--transcription", "horizon": "--horizon", "residue": "--residue",
                   "dofs": "--dofs", "interval": "--interval", "initial_state": "--initial-state", "dt": "--dt",
                   "alpha": "--alpha", "sigma": "--sigma", "max_iter": "--max-iter", "max_time": "--max-time",
-                  "model_error": "--model-error", "plots": "--plots"}
+                  "model_error": "--model-error", "plots": "--plots", "form": "--form", "vary": "--vary",
+                  "alternatives": "--alternatives"}
 _DIRECT_ONLY = {"instants": "--instants", "smoothing": "--smoothing", "cutoff": "--cutoff", "window": "--window",
                 "beam_forces": "--beam-forces"}
 
@@ -75,6 +76,51 @@ def _check_options(args: argparse.Namespace) -> None:
                           "the gauss-newton solver")
     if args.initial_state == "estimate" and args.residue == "full":
         raise OptionError("--initial-state estimate: an estimated state needs --residue positions")
+
+
+def _sigma(text: str) -> float | dict[str, float]:
+    """--sigma SIGMA or CH=SIGMA,... (argparse type): a standard deviation > 0, or one per channel."""
+    def value(v: str, where: str) -> float:
+        try:
+            x = float(v)
+        except ValueError:
+            x = math.nan
+        if not (math.isfinite(x) and x > 0):
+            raise argparse.ArgumentTypeError(f"{where}expected a standard deviation > 0 (m, rad), got {v!r}")
+        return x
+
+    if "=" not in text:
+        return value(text, "")
+    out = {}
+    for item in text.split(","):
+        name, eq, v = item.partition("=")
+        if not (eq and name.strip()):
+            raise argparse.ArgumentTypeError(f"expected SIGMA or CHANNEL=SIGMA,..., e.g. x3=2e-4,y3=2e-4, got {text!r}")
+        out[name.strip()] = value(v, f"{name.strip()}: ")
+    return out
+
+
+def _vary(text: str) -> tuple[str, tuple[float, float]]:
+    """--vary TARGET=LOWER:UPPER (argparse type)."""
+    target, eq, bounds = text.partition("=")
+    lo, colon, hi = bounds.partition(":")
+    try:
+        if not (eq and colon and target):
+            raise ValueError
+        return target.strip(), (float(lo), float(hi))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected TARGET=LOWER:UPPER, e.g. bar2.E=1.5e11:2.5e11, got {text!r}") \
+            from None
+
+
+def _check_forms(model: Model, args: argparse.Namespace) -> None:
+    """--vary and --alternatives checked against the scene before any work (one line naming the option)."""
+    from casflex.identification.form import alternatives_of
+
+    try:
+        alternatives_of(model, [], form="none", vary=dict(args.vary or ()), alternatives=args.alternatives or ())
+    except ValueError as exc:  # the library's message names "vary <target>" or "alternatives"
+        raise OptionError(f"--{exc}") from None
 
 
 def _start(model: Model, args: argparse.Namespace) -> float | np.ndarray:
@@ -209,7 +255,8 @@ def _identify(model: Model, sets: list[MeasurementSet], args: argparse.Namespace
     return identify_indirect(model, experiments, args.horizon, transcription=args.transcription,
                              residue=args.residue, alpha=args.alpha, dt=args.dt, interval=args.interval,
                              solver=args.solver, compiled=args.compiled or None,
-                             budget=Budget(args.max_iter, args.max_time), model_error=args.model_error, **common)
+                             budget=Budget(args.max_iter, args.max_time), model_error=args.model_error,
+                             form=args.form, vary=dict(args.vary or ()), alternatives=args.alternatives or (), **common)
 
 
 def run_start(*, scene: str, sets: list[MeasurementSet], options: dict[str, Any], start: list[float],
@@ -289,7 +336,16 @@ def cmd_identify(args: argparse.Namespace, outputs: Outputs) -> int:
         args.residue = args.residue or "positions"
         args.initial_state = args.initial_state or "scene"
         args.model_error = args.model_error or "refine"
+        args.form = args.form or "auto"
+        _check_forms(model, args)
     sets, infos = _data(model, args)
+    if isinstance(args.sigma, dict):  # one value per compared channel, checked before any fit
+        for d in sets:
+            names = dofs or d.channels
+            bad = [c for c in args.sigma if c not in names] or [c for c in names if c not in args.sigma]
+            if bad:
+                what = "is not a compared channel" if bad[0] in args.sigma else "has no value"
+                raise OptionError(f"--sigma: {bad[0]!r} {what}; give one per compared channel ({', '.join(names)})")
     if args.method != "indirect" and args.instants is None:
         args.instants = _default_instants(sets[0].t, args.method)
     print(_heading(model, args, start))
@@ -323,6 +379,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     """The ``identify`` subcommand's options (method-specific ones default to None = not given)."""
     from casflex.identification.choices import (
         BEAM_FORCES,
+        FORMS,
         HESSIANS,
         INITIAL_STATES,
         MODEL_ERRORS,
@@ -352,10 +409,11 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--dt", type=positive("a time step in s"),
                    help="indirect: the model's time step, s (default: the scene's, never the samples' spacing)")
     s.add_argument("--alpha", type=alpha_value, help="indirect: the model's HHT alpha (default: the scene's)")
-    s.add_argument("--sigma", type=positive("a standard deviation (m, rad)"), metavar="SIGMA",
-                   help="indirect: the data's noise, if known: a fit whose residual RMS on a channel exceeds 3 SIGMA "
-                        "does not succeed. One value for every channel, so it changes neither the estimates nor the "
-                        "standard errors (both come from the residuals)")
+    s.add_argument("--sigma", type=_sigma, metavar="SIGMA|CH=SIGMA,...",
+                   help="indirect: the data's noise, if known: one value for every channel (m) or one per channel "
+                        "(x3=2e-4,y3=2e-4,...; m or rad). It weights the channels, and a fit whose residual RMS on "
+                        "a channel exceeds 3 SIGMA does not succeed. Default: each channel's noise estimated from "
+                        "the residuals, the channels weighted by it when they differ by more than 20 %%")
     s.add_argument("--max-iter", type=integer(1, "a number of iterations"), default=100,
                    help="indirect: Gauss-Newton iterations per stage of the growing horizon (default 100)")
     s.add_argument("--max-time", type=positive("a time in s"), default=600.0,
@@ -363,6 +421,16 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--model-error", choices=MODEL_ERRORS,
                    help="indirect: estimate the discretisation error by a refit on a refined model (refine, "
                         "default) or not (none)")
+    s.add_argument("--form", choices=FORMS,
+                   help="indirect: auto (default): refit with the other beam theory too (beams with or without the "
+                        "section's rotary inertia) and report how far the parameters move; none: only --vary and "
+                        "--alternatives")
+    s.add_argument("--vary", type=_vary, action="append", metavar="TARGET=LO:HI",
+                   help="indirect: a scene property known within a range, e.g. bar2.E=1.5e11:2.5e11: refit at both "
+                        "ends; the parameters' move joins their standard errors (repeatable)")
+    s.add_argument("--alternatives", nargs="+", metavar="SCENE",
+                   help="indirect: other forms of the model (scene files declaring the same parameters), each "
+                        "refitted and compared with the scene by AIC")
     s.add_argument("--plots", metavar="DIR", help="indirect: write measured-vs-fitted figures with the residuals")
     s.add_argument("--instants", type=non_negative("a time in s"), nargs="+", metavar="T",
                    help=f"direct methods: times, s (default: {DEFAULT_INSTANT_COUNT} samples evenly spread over the "

@@ -13,12 +13,12 @@ _EXPORTS = {
     "Experiment": "measurement", "Budget": "output_error", "ParameterMap": "problem",
     "IdentificationResult": "result",
     "INITIAL_STATES": "choices", "MODEL_ERRORS": "choices", "RESIDUES": "choices", "TRANSCRIPTIONS": "choices",
-    "HESSIANS": "choices", "TRANSFORMS": "choices",
+    "HESSIANS": "choices", "TRANSFORMS": "choices", "FORMS": "choices", "output_band": "bands",
 }
 
 __all__ = ["identify_direct", "identify_adapted_direct", "identify_indirect", "IdentificationResult", "ParameterMap",
            "Experiment", "Budget", "RESIDUES", "TRANSCRIPTIONS", "TRANSFORMS", "HESSIANS", "INITIAL_STATES",
-           "MODEL_ERRORS"]
+           "MODEL_ERRORS", "FORMS", "output_band"]
 
 
 def __getattr__(name: str) -> Any:

@@ -13,5 +13,7 @@ RESIDUES = ("positions", "full")
 TRANSCRIPTIONS = ("multiple-shooting", "single-shooting")
 #: Initial states of an experiment.
 INITIAL_STATES = ("scene", "velocities", "estimate")
-#: What the indirect method does about the model's form.
+#: What the indirect method does about the model's discretisation error.
 MODEL_ERRORS = ("refine", "none")
+#: Which alternative forms the indirect method compares: casflex's own too ("auto") or only the user's.
+FORMS = ("auto", "none")

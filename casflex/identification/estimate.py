@@ -10,35 +10,45 @@
    fit of the whole recording from a guessed initial state ends in a local minimum (twobar,
    0.5-2.5 s at 0.5 mm noise: 72 % fit without the stages; see the study realdata). The stages
    before the last only bring a start: they take at most STAGE_RUNS model runs and hold what
-   their window cannot tell near the start (:class:`_Anchored`).
+   their window cannot tell near the start (:class:`_Anchored`). Then, where an experiment's
+   noise is not declared, each channel's noise is estimated by its residual RMS; when the channels
+   (in the fit's weights) differ by more than REWEIGHT, the fit is repeated from its answer with
+   each channel weighted by its own noise (feasible weighted least squares), and every later step
+   uses those weights.
 4. Model error (``model_error="refine"``): the same fit on a refined model (every beam in twice
    the elements, half the step) from the first fit's answer. The model's error in the parameters
    is estimated as 4/3 of the change, Richardson's factor for a method of second order in element
    size and step: measured on twobar against data from Exudyn, the error of the fitted kt3 fell
    from 0.45 % (1 element, 1 ms) to 0.053 % (2, 0.5 ms) and 0.005 % (4, 0.25 ms).
-5. Uncertainty: the noise part, the larger of the HAC standard error of the fit
+5. Model form (:mod:`.form`): every alternative form (the other beam theory, the ends of declared
+   ranges, scenes given) fitted from the first fit's answer and compared with it by AIC; the
+   Akaike-weighted RMS of a parameter's moves is its model-form error.
+6. Uncertainty: the noise part, the larger of the HAC standard error of the fit
    (:func:`.statistics.sandwich_covariance`: residuals correlated in time) and the plain Gauss-Newton
    one (a HAC below the plain error would rest on a bandwidth estimated from the same record, with no
-   evidence of its own), and the model error, added in quadrature: ``std_errors``. Both parts are
-   reported beside them. ``weak``: parameters whose total relative standard error exceeds 10 %.
-6. Residual analysis per experiment and channel, and the success rule: the solver converged,
-   no parameter ends on a bound, every channel's fit (100 (1 - |y - y_model| / |y - mean y|)
-   percent, the measure system identification toolboxes report) is at least 95 % or its residual
-   is white (a channel that hardly moves beyond its noise), the residual RMS is at most 3 times
-   the declared noise (when declared), and the identified model runs through every recording.
-   Otherwise ``success`` is False and ``message`` says why.
+   evidence of its own), the model error and the model-form error, added in quadrature: ``std_errors``.
+   Every part is reported beside them. ``weak``: parameters whose total relative standard error exceeds 10 %.
+7. Residual analysis per experiment and channel, and the success rule: the solver converged,
+   no parameter ends on a bound, each experiment's fit (100 (1 - |y - y_model| / |y - mean y|)
+   percent, the measure system identification toolboxes report, pooled over its channels in noise
+   units, :func:`pooled_fit`) is at least 95 % or its residuals are white, the residual RMS is at most 3 times
+   the declared noise (when declared), the identified model runs through every recording, no
+   alternative form fits the data decisively better, and no model-form error exceeds its parameter's
+   noise standard error. Otherwise ``success`` is False and ``message`` says why.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
 from casflex.codegen import log
 from casflex.identification.choices import MODEL_ERRORS  # noqa: F401 (re-exported)
+from casflex.identification.form import alternatives_of, compare_forms, form_part, form_reasons
 from casflex.identification.initial_state import initial_state_of
 from casflex.identification.measurement import Experiment, check_against_scene
 from casflex.identification.output_error import Budget, Fit, OutputError, StartDoesNotRun, fit
@@ -66,6 +76,11 @@ MAX_CUTS = 4
 ANCHOR = 1e-6
 #: Model runs a stage before the last may take: it only has to bring a start for the next.
 STAGE_RUNS = 20
+#: Channels of undeclared noise whose residual RMS (in the fit's weights) differ by more than this factor are
+#: refitted weighted by it: below, weights that far off cost under 1 % of the estimates' variance
+REWEIGHT = 1.2
+#: Model runs the refit with the channels' estimated noise may take (it starts at the fit's answer)
+REWEIGHT_RUNS = 30
 
 
 def _cut(experiments: list[Experiment], window: float) -> list[Experiment]:
@@ -224,20 +239,77 @@ def _model_error(model: Model, experiments: list[Experiment], first: Fit, proble
                  "status": f.status, "iterations": f.iterations, "solve_s": f.solve_s}
 
 
-def _channels(problem: OutputError, fitted: Fit, e: int, rows: np.ndarray) -> dict:
-    """Residual analysis (data units) and fit of every channel of experiment e."""
-    sm, exp = problem.maps[e], problem.experiments[e]
+def channel_noise(problem: OutputError, fitted: Fit) -> list[dict[str, float]]:
+    """Per experiment, each channel's residual RMS at the fit (data units): the noise the fit implies."""
+    out: list[dict[str, float]] = [{} for _ in problem.experiments]
+    for (e, name), x in problem.channel_residuals(fitted.r).items():
+        out[e][name] = float(np.sqrt(np.mean(x**2)))
+    return out
+
+
+def _reweighted(problem: OutputError, fitted: Fit) -> list[Experiment] | None:
+    """The experiments with each channel's noise estimated from the fit (those of undeclared noise whose
+    channels' weighted RMS differ by more than REWEIGHT), or None when no experiment needs it. Exact data
+    (a channel's RMS below 1e-9 of the scene's size) is left alone."""
+    noise, out, changed = channel_noise(problem, fitted), [], False
+    floor = 1e-9 * problem.model.length_scale
+    for e, exp in enumerate(problem.experiments):
+        sm, rms = problem.maps[e], noise[e]
+        weighted = [rms[c] / problem.sigma[e][sm.channel == k][0] for k, c in enumerate(sm.channels) if c in rms]
+        if exp.noise is None and rms and min(rms.values()) > floor and max(weighted) > REWEIGHT * min(weighted):
+            out.append(dataclasses.replace(exp, noise=dict(rms)))
+            changed = True
+        else:
+            out.append(exp)
+    return out if changed else None
+
+
+def _refit_weighted(model: Model, experiments: list[Experiment], f: Fit, setup: dict, budget: Budget,
+                    t_solve: float, verbose: bool) -> tuple[OutputError, Fit]:
+    """The fit repeated from its answer with the channels weighted by their estimated noise (step 3)."""
+    left = budget.max_time - (time.perf_counter() - t_solve)
+    problem = OutputError(model, experiments, **setup)
+    g = fit(problem, f.w, Budget(min(REWEIGHT_RUNS, budget.max_iterations), max(left, 1e-3)), verbose=verbose)
+    return problem, dataclasses.replace(g, iterations=f.iterations + g.iterations, solve_s=f.solve_s + g.solve_s)
+
+
+def _channels(problem: OutputError, fitted: Fit, e: int, rows: np.ndarray, declared) -> dict:
+    """Residual analysis (data units) and fit of every channel of experiment e (``declared``: its declared noise)."""
+    sm = problem.maps[e]
     r = fitted.r[rows] * problem.sigma[e]
     order = np.argsort(sm.time, kind="stable")
-    res = residual_analysis(r[order], sm.channel[order], sm.channels, [np.arange(r.size)], exp.noise)
+    res = residual_analysis(r[order], sm.channel[order], sm.channels, [np.arange(r.size)], declared)
     for c, name in enumerate(sm.channels):
         if name in res:
-            y = sm.y[sm.channel == c]
+            sel = sm.channel == c
+            y = sm.y[sel]
             spread = np.linalg.norm(y - y.mean())
             # a channel that does not move (a supported dof) has no motion to reproduce: no fit measure
             still = spread <= 1e-9 * np.sqrt(y.size) * max(problem.model.length_scale, float(np.abs(y).max()))
-            res[name]["fit"] = None if still else float(1 - np.linalg.norm(r[sm.channel == c]) / spread)
+            res[name]["fit"] = None if still else float(1 - np.linalg.norm(r[sel]) / spread)
+            # motion and residual in the fit's weights (noise units): what the pooled fit of step 7 adds up
+            yw = y / problem.sigma[e][sel]
+            res[name]["motion_w"] = 0.0 if still else float(np.linalg.norm(yw - yw.mean()))
+            res[name]["residual_w"] = float(np.linalg.norm(fitted.r[rows][sel]))
     return res
+
+
+def _noise_record(declared, used, residuals: dict) -> dict:
+    """What the channels' noise was taken to be (data units) and where it came from."""
+    if declared is not None:
+        values = declared if isinstance(declared, Mapping) else dict.fromkeys(residuals, declared)
+        return {"source": "declared", "channels": dict(values)}
+    source = ("estimated from the residuals, the channels weighted by it" if used is not None else
+              f"estimated from the residuals; one weight (the channels agree within a factor {REWEIGHT:g})")
+    return {"source": source, "channels": {c: ch["rms"] for c, ch in residuals.items()}}
+
+
+def pooled_fit(residuals: dict) -> float | None:
+    """An experiment's fit over all its moving channels in the fit's weights (noise units):
+    1 - |r| / |y - mean y| with each channel's mean removed (None: no channel moves)."""
+    moving = [ch for ch in residuals.values() if ch["fit"] is not None]
+    motion = math.sqrt(sum(ch["motion_w"] ** 2 for ch in moving))
+    return 1 - math.sqrt(sum(ch["residual_w"] ** 2 for ch in moving)) / motion if motion > 0 else None
 
 
 def _plausibility(problem: OutputError, fitted: Fit, channels: list[dict], at_bound: dict[str, bool]) -> list[str]:
@@ -251,29 +323,88 @@ def _plausibility(problem: OutputError, fitted: Fit, channels: list[dict], at_bo
     for e, res in enumerate(channels):
         exp = problem.experiments[e]
         label = exp.name or f"experiment {e + 1}"
+        pooled, structured = pooled_fit(res), [n for n, ch in res.items() if ch["fit"] is not None and not ch["white"]]
+        # pooled over the channels in noise units: a channel that barely moves adds a sliver of motion and a residual
+        # at its noise, and cannot decide; white residuals everywhere are noise, however low the fit
+        if pooled is not None and pooled < FIT_THRESHOLD and structured:
+            worst = max(structured, key=lambda n: res[n]["residual_w"])
+            reasons.append(f"{label}: the model reproduces only {100 * pooled:.0f} % of the measured motion (all "
+                           f"channels, in noise units) and leaves a structured residual, the largest on {worst} "
+                           f"({100 * res[worst]['fit']:.0f} % of its motion): a local minimum, a wrong scene or a "
+                           "model that misses the physics")
         for name, ch in res.items():
-            # a low fit with white residuals is a channel that hardly moves beyond its noise
-            if ch["fit"] is not None and ch["fit"] < FIT_THRESHOLD and not ch["white"]:
-                reasons.append(f"{label}: the model reproduces only {100 * ch['fit']:.0f} % of the measured motion "
-                               f"of {name} and leaves a structured residual (a local minimum, a wrong scene or a "
-                               "model that misses the physics)")
-            if exp.noise is not None and ch["rms"] > 3 * exp.noise:
-                reasons.append(f"{label}: the residual RMS of {name} is {ch['rms'] / exp.noise:.1f} x the declared "
+            ratio = ch.get("noise_ratio")
+            if ratio is not None and ratio > 3:
+                reasons.append(f"{label}: the residual RMS of {name} is {ratio:.1f} x the declared "
                                "noise: the model does not explain the data to the noise level")
     return reasons
+
+
+def _uncertainty(problem: OutputError, f: Fit, dp: np.ndarray, p_hat: np.ndarray, me: np.ndarray,
+                 compared: list[dict]) -> tuple[dict, np.ndarray, dict, dict[str, np.ndarray]]:
+    """Step 6 of the module docstring: the Gauss-Newton statistics (``weak`` by the total), the HAC
+    covariance of all unknowns and its record, and the parts of the standard errors {"gauss_newton",
+    "hac", "noise", "model_form", "total"} (the model error ``me`` is given)."""
+    names, n_p = problem.model.parameter_names, problem.model.n_p
+    gn = gauss_newton_statistics(f.J, f.r, n_p, names, dp, p_hat)
+    C, hac = sandwich_covariance(f.J, f.r, problem.groups())
+    se_gn = np.array([gn["std_errors"][k] for k in names])
+    se_hac = np.where(np.isinf(se_gn), np.inf, np.sqrt(np.maximum(np.diag(C)[:n_p], 0.0)) * np.abs(dp))
+    # the noise part: HAC where it is the larger; never below the plain errors, since a HAC under them rests on a
+    # bandwidth estimated from the same short record (a gait swing's 26 samples gave 15 against 51, issue 27)
+    se_noise = np.fmax(se_hac, se_gn)
+    se_form = form_part(compared, names)
+    total = np.sqrt(se_noise**2 + np.nan_to_num(me, nan=0.0) ** 2 + se_form**2)
+    rel = total / np.maximum(np.abs(p_hat), np.finfo(float).tiny)
+    gn["weak"] = [k for k, v in zip(names, rel, strict=True) if not v <= 0.1]
+    return gn, C, hac, {"gauss_newton": se_gn, "hac": se_hac, "noise": se_noise, "model_form": se_form,
+                        "total": total}
+
+
+def _experiment_records(problem: OutputError, f: Fit, C: np.ndarray, declared: list, p_hat: np.ndarray, *,
+                        dt: float, alpha: float, compiled: bool, newton_tol: float) -> tuple[list, dict, list, list]:
+    """Per experiment: the residual analysis, the record (states, noise, residuals), the identified
+    model's trajectory and the samples for plots: (channels, records, trajectories, samples)."""
+    from casflex.simulate import simulate
+
+    model = problem.model
+    rows, start_row, channels, records = [], 0, [], {}
+    trajectories, samples = [], []
+    for e, exp in enumerate(problem.experiments):
+        sm = problem.maps[e]
+        rows.append(np.arange(start_row, start_row + sm.y.size))
+        start_row += sm.y.size
+        channels.append(_channels(problem, f, e, rows[-1], declared[e]))
+        samples.append({"name": exp.name, "channels": sm.channels, "t": sm.time, "channel": sm.channel,
+                        "measured": sm.y, "model": sm.y + f.r[rows[-1]] * problem.sigma[e]})
+        q0, qd0 = problem.state(f.w, e)
+        tr = simulate(model, sm.n_steps * dt, dt=dt, alpha=alpha, p=p_hat, q0=q0, qd0=qd0, t0=sm.t0,
+                      compiled=compiled, tol=newton_tol, raise_on_failure=False)
+        trajectories.append(tr)
+        rec = {"initial_state": exp.initial_state, "samples": int(sm.y.size), "t0": sm.t0,
+               "t_end": sm.t0 + sm.n_steps * dt, "channels": list(sm.channels), "residuals": channels[-1],
+               "noise": _noise_record(declared[e], exp.noise, channels[-1])}
+        if exp.initial_state != "scene":
+            se_q, se_qd = problem.state_errors(f.w, C, e)
+            keys = ("q0", "qd0") if exp.initial_state == "estimate" else ("qd0",)
+            for key, value, se in zip(("q0", "qd0"), (q0, qd0), (se_q, se_qd), strict=True):
+                if key in keys:
+                    rec[key] = {model.dof_names[i]: [float(value[i]), float(se[i])] for i in problem.free}
+        records[exp.name] = rec
+    return channels, records, trajectories, samples
 
 
 def estimate(model: Model, experiments: Sequence[Experiment], *, dt: float | None = None, alpha: float | None = None,
              start: float | dict[str, float] | np.ndarray | None = None, transform: str = "linear",
              budget: Budget | None = None, compiled: bool = True, newton_tol: float = 1e-12,
-             model_error: str = "refine", check_data: bool = True, verbose: bool = False) -> IdentificationResult:
+             model_error: str = "refine", form: str = "auto", vary: Mapping[str, tuple[float, float]] | None = None,
+             alternatives: Sequence = (), check_data: bool = True, verbose: bool = False) -> IdentificationResult:
     """Identify the model's parameters (and the unknown initial states) from ``experiments``.
 
     dt, alpha: the model's step (s) and HHT alpha (default: the scene's run settings, never the
-    samples' spacing); the other options as in :func:`casflex.identification.identify_indirect`.
+    samples' spacing); form, vary, alternatives: the alternative forms (:mod:`.form`); the other
+    options as in :func:`casflex.identification.identify_indirect`.
     """
-    from casflex.simulate import simulate
-
     if model_error not in MODEL_ERRORS:
         raise ValueError(f"model_error: expected one of {MODEL_ERRORS}, got {model_error!r}")
     if model.n_p == 0:
@@ -289,6 +420,7 @@ def estimate(model: Model, experiments: Sequence[Experiment], *, dt: float | Non
             experiments[i] = e = dataclasses.replace(e, name=f"experiment {i + 1}" if len(experiments) > 1 else "data")
         if check_data:
             check_against_scene(model, e)
+    forms = alternatives_of(model, experiments, form=form, vary=vary, alternatives=alternatives)
     pmap = ParameterMap.of(model, transform)
     p0 = start_values(model, start)
     setup = {"dt": dt, "alpha": alpha, "pmap": pmap, "compiled": compiled, "newton_tol": newton_tol,
@@ -299,52 +431,31 @@ def estimate(model: Model, experiments: Sequence[Experiment], *, dt: float | Non
 
     t_solve = time.perf_counter()
     problem, f = _fit_growing(model, experiments, w0, budget, verbose=verbose, **setup)
+    declared = [e.noise for e in experiments]
+    if f.converged and (reweighted := _reweighted(problem, f)) is not None:  # step 3: each channel by its noise
+        experiments, problem, f = reweighted, *_refit_weighted(model, reweighted, f, setup, budget, t_solve, verbose)
     n_p, names = model.n_p, model.parameter_names
     p_hat = pmap.p(f.w[:n_p])
     dp = pmap.dp_dtheta(f.w[:n_p])
     me, refit = (_model_error(model, experiments, f, problem, dt=dt, alpha=alpha, transform=transform, budget=budget,
                               compiled=compiled, newton_tol=newton_tol, verbose=verbose)
                  if model_error == "refine" and f.converged else (np.zeros(n_p), {}))
+    compared = (compare_forms(problem, f, forms, setup={"transform": transform, "alpha": alpha,
+                                                        "newton_tol": newton_tol}, budget=budget, verbose=verbose)
+                if forms and f.converged else [])
     solve_s = time.perf_counter() - t_solve
 
-    gn = gauss_newton_statistics(f.J, f.r, n_p, names, dp, p_hat)
-    C, hac = sandwich_covariance(f.J, f.r, problem.groups())
-    se_gn = np.array([gn["std_errors"][k] for k in names])
-    se_hac = np.where(np.isinf(se_gn), np.inf, np.sqrt(np.maximum(np.diag(C)[:n_p], 0.0)) * np.abs(dp))
-    # the noise part: HAC where it is the larger; never below the plain errors, since a HAC under them rests on a
-    # bandwidth estimated from the same short record (a gait swing's 26 samples gave 15 against 51, issue 27)
-    se_noise = np.fmax(se_hac, se_gn)
-    total = np.sqrt(se_noise**2 + np.nan_to_num(me, nan=0.0) ** 2)
-    rel = total / np.maximum(np.abs(p_hat), np.finfo(float).tiny)
-    gn["weak"] = [k for k, v in zip(names, rel, strict=True) if not v <= 0.1]
+    gn, C, hac, parts = _uncertainty(problem, f, dp, p_hat, me, compared)
+    se_noise, total = parts["noise"], parts["total"]
 
-    rows, start_row, channels, records = [], 0, [], {}
-    trajectories, samples = [], []
-    for e, exp in enumerate(experiments):
-        sm = problem.maps[e]
-        rows.append(np.arange(start_row, start_row + sm.y.size))
-        start_row += sm.y.size
-        channels.append(_channels(problem, f, e, rows[-1]))
-        samples.append({"name": exp.name, "channels": sm.channels, "t": sm.time, "channel": sm.channel,
-                        "measured": sm.y, "model": sm.y + f.r[rows[-1]] * problem.sigma[e]})
-        q0, qd0 = problem.state(f.w, e)
-        tr = simulate(model, sm.n_steps * dt, dt=dt, alpha=alpha, p=p_hat, q0=q0, qd0=qd0, t0=sm.t0,
-                      compiled=compiled, tol=newton_tol, raise_on_failure=False)
-        trajectories.append(tr)
-        rec = {"initial_state": exp.initial_state, "samples": int(sm.y.size), "t0": sm.t0,
-               "t_end": sm.t0 + sm.n_steps * dt, "channels": list(sm.channels), "residuals": channels[-1]}
-        if exp.initial_state != "scene":
-            se_q, se_qd = problem.state_errors(f.w, C, e)
-            keys = ("q0", "qd0") if exp.initial_state == "estimate" else ("qd0",)
-            for key, value, se in zip(("q0", "qd0"), (q0, qd0), (se_q, se_qd), strict=True):
-                if key in keys:
-                    rec[key] = {model.dof_names[i]: [float(value[i]), float(se[i])] for i in problem.free}
-        records[exp.name] = rec
+    channels, records, trajectories, samples = _experiment_records(
+        problem, f, C, declared, p_hat, dt=dt, alpha=alpha, compiled=compiled, newton_tol=newton_tol)
     at_bound = bound_flags(model, p_hat, pmap.scale)
     reasons = _plausibility(problem, f, channels, at_bound)
     reasons += [f"{exp.name}: the identified model does not run through the recording ({tr.message})"
                 for exp, tr in zip(experiments, trajectories, strict=True) if not tr.success]
-    notes = []
+    form_why, notes = form_reasons(compared, names, se_noise)
+    reasons += form_why
     if model_error == "refine" and f.converged and not np.isfinite(me).all():
         notes.append("the model error could not be estimated (the refined model's fit did not converge): the "
                      "standard errors hold the HAC part only")
@@ -361,10 +472,11 @@ def estimate(model: Model, experiments: Sequence[Experiment], *, dt: float | Non
                "transform": transform, "dt": dt,
                "alpha": alpha, "steps": int(sum(sm.n_steps for sm in problem.maps)), "compiled": compiled,
                "budget": dataclasses.asdict(budget), "model_runs": problem.evaluations, "offset_se": f.offset,
-               "uncertainty": {"gauss_newton": dict(zip(names, se_gn.tolist(), strict=True)),
-                               "hac": dict(zip(names, se_hac.tolist(), strict=True)),
+               "uncertainty": {**{k: dict(zip(names, parts[k].tolist(), strict=True))
+                                  for k in ("gauss_newton", "hac", "noise", "model_form")},
                                "model_error": dict(zip(names, me.tolist(), strict=True)),
                                "hac_bandwidth": hac["bandwidth"], "model_error_refit": refit},
+               "forms": compared,
                "experiments": records, "solver_s": f.solve_s},
         trajectories=tuple(trajectories), samples=tuple(samples),
     )

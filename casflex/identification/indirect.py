@@ -16,7 +16,8 @@ Two transcriptions (``docs/identification.md`` compares them on data from anothe
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+import os
+from collections.abc import Mapping, Sequence
 from typing import Unpack
 
 import numpy as np
@@ -29,6 +30,7 @@ from casflex.identification.problem import GAUSS_NEWTON, NLPKeywords, NLPOptions
 from casflex.identification.result import IdentificationResult
 from casflex.identification.shooting_nlp import RESIDUES, TRANSCRIPTIONS, identify_nlp
 from casflex.model import Model
+from casflex.scene import Scene
 
 __all__ = ["identify_indirect", "RESIDUES", "TRANSCRIPTIONS", "INITIAL_STATES", "MODEL_ERRORS", "Budget"]
 
@@ -82,6 +84,9 @@ def identify_indirect(
     polish: int = 3,
     budget: Budget | None = None,
     model_error: str = "refine",
+    form: str = "auto",
+    vary: Mapping[str, tuple[float, float]] | None = None,
+    alternatives: Sequence[Scene | str | os.PathLike[str]] = (),
     check_data: bool = True,
     **options: Unpack[NLPKeywords],
 ) -> IdentificationResult:
@@ -119,6 +124,15 @@ def identify_indirect(
         the wall time is IPOPT's ``max_wall_time`` too, unless ``solver_options`` set it.
     model_error : {"refine", "none"}
         Estimate the model's discretisation error in the parameters by a refit on a refined model.
+    form : {"auto", "none"}
+        "auto": refit with casflex's own alternative form too, the other beam theory (:mod:`.form`).
+    vary : {target: (lower, upper)}, optional
+        Scene properties (``"<element>.<field>"``) known only within a range: refit at each end.
+    alternatives : scenes (or their files), optional
+        Other forms of the model, each declaring the same parameters. Every alternative that fits
+        the data as well adds its move of the parameters to their standard errors (the model-form
+        part); one that fits better, or as well but moves a parameter by more than its noise
+        standard error, withholds success.
     check_data : bool
         Stop when the data cannot belong to the scene (units, times, initial state).
     **options : solver, solver_options, transform, hessian, compiled, verbose (:class:`.problem.NLPOptions`)
@@ -153,7 +167,8 @@ def identify_indirect(
                              "(e.g. ipopt) for multiple shooting or residue 'full'")
         return estimate(model, experiments, dt=dt, alpha=alpha, start=start, transform=transform, budget=budget,
                         compiled=True if opts.compiled is None else opts.compiled, newton_tol=newton_tol,
-                        model_error=model_error, check_data=check_data, verbose=verbose)
+                        model_error=model_error, form=form, vary=vary, alternatives=alternatives,
+                        check_data=check_data, verbose=verbose)
     if len(experiments) > 1 or experiments[0].initial_state == "velocities" or (
             experiments[0].initial_state == "estimate" and residue != "positions"):
         raise ValueError(f"solver {solver!r} ({transcription}): one recording, from the scene's initial state or an "
@@ -172,8 +187,8 @@ def identify_indirect(
         return r
     # Eq. 16: the default procedure polishes the NLP's answer and reports it as every result is
     final = estimate(model, experiments, dt=dt, alpha=alpha, start=r.extra["solver_parameters"], transform=transform,
-                     budget=budget, compiled=True, newton_tol=newton_tol, model_error=model_error,
-                     check_data=check_data, verbose=verbose)
+                     budget=budget, compiled=True, newton_tol=newton_tol, model_error=model_error, form=form,
+                     vary=vary, alternatives=alternatives, check_data=check_data, verbose=verbose)
     reasons = [m for m in (f"the NLP solver did not succeed ({r.status})" if not r.success else "", final.message)
                if m]
     extra = {**final.extra, "transcription": transcription, "intervals": r.extra["intervals"],

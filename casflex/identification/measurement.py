@@ -19,6 +19,7 @@ scene starts), with one line that says what to do.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,10 +45,11 @@ class Experiment:
         What is known of the state at the first sample (module docstring).
     channels : tuple of str, optional
         The compared channels (model dof names, markers' channels); default every channel of the data.
-    noise : float, optional
-        Standard deviation of the measurement noise (m for translations, rad for rotations), if
-        known: weights the channels and is checked against the residuals. Default: estimated
-        from the residuals.
+    noise : float or {channel: float}, optional
+        Standard deviation of the measurement noise, if known: one value for every channel (m;
+        rotations compared as arc lengths at the scene's size) or one per compared channel (in the
+        channel's unit, m or rad). It weights the channels and is checked against the residuals.
+        Default: each channel's noise estimated from the residuals (:mod:`.estimate`).
     name : str
         Reported with the experiment's results.
     """
@@ -55,16 +57,27 @@ class Experiment:
     data: MeasurementSet
     initial_state: str = "scene"
     channels: tuple[str, ...] | None = None
-    noise: float | None = None
+    noise: float | Mapping[str, float] | None = None
     name: str = ""
 
     def __post_init__(self) -> None:
         if self.initial_state not in INITIAL_STATES:
             raise ValueError(f"initial_state: expected one of {INITIAL_STATES}, got {self.initial_state!r}")
-        if self.noise is not None and not (np.isfinite(self.noise) and self.noise > 0):
-            raise ValueError(f"noise: expected a standard deviation > 0 (m, rad), got {self.noise!r}")
+        values = self.noise.items() if isinstance(self.noise, Mapping) else [("", self.noise)]
+        for c, v in values:
+            if v is not None and not (isinstance(v, (int, float, np.floating)) and np.isfinite(v) and v > 0):
+                where = f"noise[{c!r}]" if c else "noise"
+                raise ValueError(f"{where}: expected a standard deviation > 0 (m, rad), got {v!r}")
         if self.data.t.size < 2:
             raise ValueError("data: output-error identification needs a time series (at least 2 samples)")
+
+    def noise_of(self, channel: str) -> float | None:
+        """The declared noise of ``channel`` (None: not declared)."""
+        return self.noise.get(channel) if isinstance(self.noise, Mapping) else self.noise
+
+    def noise_level(self) -> float | None:
+        """The largest declared noise (None: not declared)."""
+        return max(self.noise.values()) if isinstance(self.noise, Mapping) else self.noise
 
     def compared(self, model: Model) -> tuple[str, ...]:
         """The compared channels, checked against the model and the data."""
@@ -79,6 +92,13 @@ class Experiment:
                 raise ValueError(f"dofs: {c!r} is not in the data (channels: {list(self.data.channels)})")
         if not names:
             raise ValueError("dofs: no channel to compare")
+        if isinstance(self.noise, Mapping):
+            extra = [c for c in self.noise if c not in names]
+            missing = [c for c in names if c not in self.noise]
+            if extra or missing:
+                what = f"{extra[0]!r} is not a compared channel" if extra else f"no value for {missing[0]!r}"
+                raise ValueError(f"noise: {what}; give one standard deviation per compared channel "
+                                 f"({', '.join(names)})")
         return names
 
 
@@ -209,7 +229,7 @@ def check_against_scene(model: Model, experiment: Experiment) -> None:
                          f"milliseconds (the scene's run lasts {scene.run.t_end:g} s); give t in seconds")
     if experiment.initial_state == "estimate":
         return
-    noise = experiment.noise if experiment.noise is not None else 1e-3 * span
+    noise = experiment.noise_level() or 1e-3 * span
     tol = 0.01 * span + 5 * noise
     cols_all = [data.channels.index(c) for c in names]
     first = np.array([data.q[np.flatnonzero(np.isfinite(data.q[:, c]))[0], c] for c in cols_all])

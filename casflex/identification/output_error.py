@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import time
 import weakref
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import casadi as ca
@@ -107,7 +108,10 @@ class OutputError:
         for e, sm in zip(experiments, self.maps, strict=True):
             rot = np.append(model.is_rotation, np.zeros(2 * len(model.scene.markers), bool))[sm.dof]
             base = np.where(rot, 1.0 / ell, 1.0)  # rotations compared as arc lengths at the scene's size
-            self.sigma.append(base * (e.noise if e.noise is not None else 1.0))
+            if isinstance(e.noise, Mapping):  # one value per channel, in the channel's unit
+                self.sigma.append(np.array([e.noise[c] for c in sm.channels])[sm.channel])
+            else:
+                self.sigma.append(base * (e.noise if e.noise is not None else 1.0))
         self.evaluations = 0
 
     # -- unknowns ----------------------------------------------------------------------------
@@ -125,6 +129,19 @@ class OutputError:
         Ce = C[lo:hi, lo:hi]
         return tuple(np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", D, Ce, D), 0.0))
                      for D in self.initial[e].jacobian(w[lo:hi]))
+
+    def channel_residuals(self, r: np.ndarray) -> dict[tuple[int, str], np.ndarray]:
+        """The residuals r (weighted, as :meth:`evaluate` returns them) in data units, per (experiment,
+        channel name), in time order."""
+        out, start = {}, 0
+        for e, sm in enumerate(self.maps):
+            rr = r[start:start + sm.y.size] * self.sigma[e]
+            start += sm.y.size
+            for c, name in enumerate(sm.channels):
+                sel = sm.channel == c
+                if sel.any():
+                    out[(e, name)] = rr[sel][np.argsort(sm.time[sel], kind="stable")]
+        return out
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         lb, ub = self.pmap.bounds()

@@ -20,9 +20,10 @@ class IdentificationResult:
     """The outcome of an identification (any method).
 
     parameters: identified values {name: value} (units of the scene's parameters);
-    std_errors: the standard errors the method stands by (output-error fits: the total of the
-    autocorrelation-consistent (HAC) and the model-error parts, ``extra["uncertainty"]`` holds
-    each part and the plain Gauss-Newton one; other methods: Gauss-Newton); correlation,
+    std_errors: the standard errors the method stands by (output-error fits: the noise part, the
+    larger of the autocorrelation-consistent (HAC) and plain Gauss-Newton ones, and the model's
+    parts, its discretisation error and its form's, in quadrature; ``extra["uncertainty"]`` holds
+    each part, ``extra["forms"]`` the alternative forms compared; other methods: Gauss-Newton); correlation,
     identifiability: the report at the solution (rank, condition, collinearity, ``weak``);
     success: the solver converged *and* the fit is plausible (``message`` says why not);
     multipliers: lambda at each instant; wall_build_s / wall_solve_s: problem construction and
@@ -86,8 +87,8 @@ class IdentificationResult:
             flag = "  (at a bound)" if self.at_bound.get(k) else ""
             parts = ""
             if unc:  # the parts of the standard error, as each method reports them
-                labels = {"hac": "HAC", "model_error": "model error", "instant_robust": "instant-clustered",
-                          "gauss_newton": "plain Gauss-Newton"}
+                labels = {"hac": "HAC", "model_error": "model error", "model_form": "model form",
+                          "instant_robust": "instant-clustered", "gauss_newton": "plain Gauss-Newton"}
                 parts = "  [" + ", ".join(f"{lab} {unc[key][k]:.2g}" for key, lab in labels.items() if key in unc) + "]"
             lines.append(f"  {k:<8s} = {v:14.6g}  +- {se:.2g}{parts} (start {self.start[k]:.6g}){flag}")
         idf = self.identifiability
@@ -102,10 +103,15 @@ class IdentificationResult:
             text = ", ".join(f"{c} {100 * ch['fit']:.2f} % fit, RMS {ch['rms']:.3g}"
                              + ("" if ch["white"] else " (not white)") for c, ch in moving.items())
             lines.append(f"  {name}: {text}")
+            if exp.get("noise"):
+                lines.append(f"    noise: {exp['noise']['source']}")
         rebuilt = self.extra.get("from_markers")
         if rebuilt:
             lines.append(f"  dofs from markers {', '.join(rebuilt['markers'])} at {rebuilt['samples']} samples: "
                          f"{rebuilt['note']}")
+        for f in self.extra.get("forms", []):
+            d = f.get("delta_aic")
+            lines.append(f"  form {f['name']}: {f['verdict']}" + ("" if d is None else f" (delta AIC {d:+.1f})"))
         if self.message:
             lines.append(f"  note: {self.message}")
         return "\n".join(lines)

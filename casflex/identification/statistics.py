@@ -26,6 +26,7 @@ autocorrelation and the Ljung-Box whiteness test.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -107,10 +108,11 @@ def instant_robust_std_errors(J: np.ndarray, r: np.ndarray, n_instants: int, se_
 
 
 def residual_analysis(r: np.ndarray, channel: np.ndarray, names: tuple[str, ...], groups: list[np.ndarray],
-                      noise: float | None = None, lags: int = 20) -> dict[str, Any]:
+                      noise: float | Mapping[str, float] | None = None, lags: int = 20) -> dict[str, Any]:
     """Per channel: RMS (the noise level the fit implies, in the data's units), its ratio to the
-    declared ``noise`` (if any), the autocorrelation at lags 1..``lags`` and the Ljung-Box test of
-    whiteness (Q statistic, p-value; white at the 1 % level when p > 0.01).
+    declared ``noise`` (if any: one value, or one per channel name), the autocorrelation at lags
+    1..``lags`` and the Ljung-Box test of whiteness (Q statistic, p-value; white at the 1 % level
+    when p > 0.01).
 
     r : (m,) residuals in the data's units; channel : (m,) index into ``names`` of each residual;
     groups : the rows of each experiment in time order (one array per experiment).
@@ -132,7 +134,8 @@ def residual_analysis(r: np.ndarray, channel: np.ndarray, names: tuple[str, ...]
                 / den if den > 0 else 0.0
         q = n * (n + 2) * float(np.sum(acf**2 / (n - np.arange(1, h + 1))))
         p = float(stats.chi2.sf(q, h))
-        out[name] = {"rms": rms, "samples": n, "noise_ratio": rms / noise if noise else None,
+        declared = noise.get(name) if isinstance(noise, Mapping) else noise
+        out[name] = {"rms": rms, "samples": n, "noise_ratio": rms / declared if declared else None,
                      "acf": acf.tolist(), "ljung_box_q": q, "ljung_box_lags": h, "ljung_box_p": p,
                      "white": bool(p > 0.01)}
     return out

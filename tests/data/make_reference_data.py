@@ -11,7 +11,8 @@ elements per beam and h = 5e-5 s and recorded in ``meta`` (``error_xy``, m, and 
 max over samples and channels). These are the "measurements" the identification tests and
 ``studies/realdata.py`` fit with casflex's own, different, discretisation. Without arguments it also
 writes ``cantilever_damped_exudyn.npz`` (:func:`make_cantilever`), the check of beam damping, and
-``twobar_markers_exudyn.npz`` (:func:`make_markers`), the check of markers on beams.
+``twobar_markers_exudyn.npz`` (:func:`make_markers`), the check of markers on beams, and
+``forms_exudyn.npz`` (:func:`make_forms`), recordings of other model forms than the scenes'.
 """
 
 from __future__ import annotations
@@ -79,9 +80,45 @@ def make_markers() -> Path:
     return _positions("twobar_markers.toml", 1.0)
 
 
+#: Model forms other than the built-in scene's (studies/modelform.py): Exudyn's beam and a factor on every beam's E.
+#: "ge": Exudyn's geometrically exact beam, with shear and the section's rotary inertia (casflex's beams without).
+FORMS = {"twobar_rotary": ("twobar", "ge", 1.0), "twobar_rotary_stiff": ("twobar", "ge", 10.0),
+         "twobar_soft": ("twobar", "ancf", 0.01), "twobar_rigid": ("twobar", "ancf", 1000.0),
+         "threelink_rotary": ("threelink", "ge", 1.0)}
+FORM_NODES = {"twobar": ("3", "5"), "threelink": ("3", "5", "7")}
+
+
+def make_forms() -> Path:
+    """forms_exudyn.npz: for every form of :data:`FORMS`, the positions of the markers' nodes
+    (``<form>``: shape (301, 2 n), columns x, y per node of FORM_NODES) over 0-3 s at 100 Hz, 8 elements
+    per beam, h = 1e-4 s; ``t`` and per form ``<form>_channels``."""
+    import dataclasses
+
+    import casflex
+    from casflex.peers import exudyn
+    from casflex.results import atomic_write_bytes
+
+    arrays, meta = {}, {}
+    for form, (name, beam, e_factor) in FORMS.items():
+        scene = casflex.load_scene(name)
+        scene = dataclasses.replace(scene, beams=tuple(dataclasses.replace(b, E=b.E * e_factor) for b in scene.beams))
+        data = exudyn.simulate(scene, 3.0, elements=8, h=1e-4, sample_dt=1e-2, beam=beam)
+        names = [f"{c}{n}" for n in FORM_NODES[name] for c in ("x", "y")]
+        arrays["t"] = data.t
+        arrays[form] = data.q[:, [data.channels.index(c) for c in names]]
+        arrays[f"{form}_channels"] = np.array(names)
+        meta[form] = {**data.meta, "scene": name, "beam": beam, "E_factor": e_factor}
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **arrays, meta=np.array(json.dumps(meta)))
+    path = atomic_write_bytes(HERE / "forms_exudyn.npz", buf.getvalue())
+    print(f"{path.name}: {', '.join(FORMS)}")
+    return path
+
+
 if __name__ == "__main__":
     for name in sys.argv[1:] or SCENES:
         make(name)
     if not sys.argv[1:]:
         make_cantilever()
         make_markers()
+        make_forms()
