@@ -74,7 +74,10 @@ def one_run(*, seed: int, quick: bool, scene: str) -> dict:
                                size=49, mode="nearest")
     f_true = f_true[::4]  # the truth at the model's 1 ms steps
     residual = np.concatenate([np.asarray(smp["measured"]) - np.asarray(smp["model"]) for smp in r.samples])
-    return fit | {"wall_s": wall, "residual_rms": float(np.sqrt(np.mean(residual**2))), "t": est.t.tolist(),
+    # refused for the model's form alone (another form fits as well and moves the parameters beyond their noise)
+    form_only = not r.success and not r.extra["refusal"]["other"]
+    return fit | {"wall_s": wall, "form_only": form_only, "residual_rms": float(np.sqrt(np.mean(residual**2))),
+            "t": est.t.tolist(),
             "seed": seed, "f_true": f_true.tolist(), "f_est": f_est.tolist(), "lo": lo.tolist(), "hi": hi.tolist(),
             "model_error": f_model.tolist(), "force_rms": float(np.sqrt(np.mean((f_est - f_true) ** 2))),
             "band_width": float(np.median(hi - lo)), "inside": float(np.mean((f_true >= lo) & (f_true <= hi))),
@@ -125,11 +128,16 @@ def main(quick: bool = False, out_dir: Path | None = None, record: Path | None =
                    f"{r['residual_rms'] / NOISE:.2f}", f"{r['wall_s']:.1f}"] for r in recs]
     # the checks: honesty on the flexible model (the truth's form); residuals and force with either model
     flex, rigid, every = honesty(runs["leg"]), honesty(runs["leg_rigid"]), [r for recs in runs.values() for r in recs]
-    failures, limit = int((~flex["success"]).sum()), round(0.1 * len(runs["leg"]))
+    limit = round(0.1 * len(runs["leg"]))
+    failures = sum(not r["success"] and not r["form_only"] for r in runs["leg"])
+    form_only = sum(r["form_only"] for r in runs["leg"])
     residual = max(abs(r["residual_rms"] / NOISE - 1) for r in every)
     force, peak = max(r["force_rms"] / max(r["f_true"]) for r in every), max(max(r["f_true"]) for r in every)
     check_lines, failed = checks([
-        ("flexible bones: unsuccessful fits, at most 1 in 10", failures, failures <= limit),
+        ("flexible bones: fits refused for anything but the model's form, at most 1 in 10", failures,
+         failures <= limit),
+        ("flexible bones: fits refused for the model's form alone (another form fits as well)", form_only, True,
+         False),
         ("flexible bones: dishonest successes, at most 1 in 10", flex["dishonest"], flex["dishonest"] <= max(1, limit)),
         ("flexible bones: largest abs(z) < 5 (a 5-SE miss: 6e-7)", f"{flex['z'].max():.1f}", flex["z"].max() < 5),
         ("rigid links: successes with the truth beyond 3 total SE, at most 1 in 10", rigid["dishonest"],

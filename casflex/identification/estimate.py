@@ -455,7 +455,8 @@ def estimate(model: Model, experiments: Sequence[Experiment], *, dt: float | Non
     reasons += [f"{exp.name}: the identified model does not run through the recording ({tr.message})"
                 for exp, tr in zip(experiments, trajectories, strict=True) if not tr.success]
     form_why, notes = form_reasons(compared, names, se_noise)
-    reasons += form_why
+    refusal = {"form": form_why, "other": reasons}  # why success is withheld: the model's form, or anything else
+    reasons = reasons + form_why
     if model_error == "refine" and f.converged and not np.isfinite(me).all():
         notes.append("the model error could not be estimated (the refined model's fit did not converge): the "
                      "standard errors hold the HAC part only")
@@ -476,7 +477,7 @@ def estimate(model: Model, experiments: Sequence[Experiment], *, dt: float | Non
                                   for k in ("gauss_newton", "hac", "noise", "model_form")},
                                "model_error": dict(zip(names, me.tolist(), strict=True)),
                                "hac_bandwidth": hac["bandwidth"], "model_error_refit": refit},
-               "forms": compared,
+               "forms": compared, "refusal": refusal,
                "experiments": records, "solver_s": f.solve_s},
         trajectories=tuple(trajectories), samples=tuple(samples),
     )
