@@ -23,6 +23,8 @@ CASES = [
     ("identify twobar --method indirect --alternatives leg", r"--alternatives: scene 'leg' does not declare the "
                                                             r"parameter\(s\) k1, kt1, k3, kt3"),
     ("identify twobar --method direct --form none", r"--form: applies to the indirect method only"),
+    ("identify twobar --method direct --loss huber", r"--loss: applies to the indirect method only"),
+    ("identify twobar --method indirect --loss cauchy", r"argument --loss: invalid choice: 'cauchy'"),
     ("identify twobar --method indirect --sigma x3=1e-3,y3", r"argument --sigma: expected SIGMA or CHANNEL=SIGMA"),
     ("identify twobar --method indirect --sigma x3=-1", r"argument --sigma: x3: expected a standard deviation > 0"),
     ("identify twobar --method indirect --dofs x3,y3 --sigma x3=1e-3", r"--sigma: 'y3' has no value; give one per "

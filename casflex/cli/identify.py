@@ -25,7 +25,7 @@ _INDIRECT_ONLY = {"transcription": "--transcription", "horizon": "--horizon", "r
                   "dofs": "--dofs", "interval": "--interval", "initial_state": "--initial-state", "dt": "--dt",
                   "alpha": "--alpha", "sigma": "--sigma", "max_iter": "--max-iter", "max_time": "--max-time",
                   "model_error": "--model-error", "plots": "--plots", "form": "--form", "vary": "--vary",
-                  "alternatives": "--alternatives"}
+                  "alternatives": "--alternatives", "loss": "--loss"}
 _DIRECT_ONLY = {"instants": "--instants", "smoothing": "--smoothing", "cutoff": "--cutoff", "window": "--window",
                 "beam_forces": "--beam-forces"}
 
@@ -256,7 +256,8 @@ def _identify(model: Model, sets: list[MeasurementSet], args: argparse.Namespace
                              residue=args.residue, alpha=args.alpha, dt=args.dt, interval=args.interval,
                              solver=args.solver, compiled=args.compiled or None,
                              budget=Budget(args.max_iter, args.max_time), model_error=args.model_error,
-                             form=args.form, vary=dict(args.vary or ()), alternatives=args.alternatives or (), **common)
+                             form=args.form, vary=dict(args.vary or ()), alternatives=args.alternatives or (),
+                             loss=args.loss or "linear", **common)
 
 
 def run_start(*, scene: str, sets: list[MeasurementSet], options: dict[str, Any], start: list[float],
@@ -382,6 +383,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         FORMS,
         HESSIANS,
         INITIAL_STATES,
+        LOSSES,
         MODEL_ERRORS,
         RESIDUES,
         TRANSCRIPTIONS,
@@ -431,6 +433,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--alternatives", nargs="+", metavar="SCENE",
                    help="indirect: other forms of the model (scene files declaring the same parameters), each "
                         "refitted and compared with the scene by AIC")
+    s.add_argument("--loss", choices=LOSSES,
+                   help="indirect: linear (least squares, default) or huber: robust to marker artefacts, the "
+                        "samples far from the model weighted down (reported)")
     s.add_argument("--plots", metavar="DIR", help="indirect: write measured-vs-fitted figures with the residuals")
     s.add_argument("--instants", type=non_negative("a time in s"), nargs="+", metavar="T",
                    help=f"direct methods: times, s (default: {DEFAULT_INSTANT_COUNT} samples evenly spread over the "

@@ -17,3 +17,5 @@ INITIAL_STATES = ("scene", "velocities", "estimate")
 MODEL_ERRORS = ("refine", "none")
 #: Which alternative forms the indirect method compares: casflex's own too ("auto") or only the user's.
 FORMS = ("auto", "none")
+#: Losses of the indirect method's fit: least squares, or Huber's, robust to marker artefacts (by reweighting).
+LOSSES = ("linear", "huber")

@@ -47,7 +47,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from casflex.codegen import log
-from casflex.identification.choices import MODEL_ERRORS  # noqa: F401 (re-exported)
+from casflex.identification.choices import LOSSES, MODEL_ERRORS  # noqa: F401 (re-exported)
 from casflex.identification.form import alternatives_of, compare_forms, form_part, form_reasons
 from casflex.identification.initial_state import initial_state_of
 from casflex.identification.measurement import Experiment, check_against_scene
@@ -81,6 +81,20 @@ STAGE_RUNS = 20
 REWEIGHT = 1.2
 #: Model runs the refit with the channels' estimated noise may take (it starts at the fit's answer)
 REWEIGHT_RUNS = 30
+#: Huber's tuning constant in robust standard deviations (1.4826 x the channel's median absolute residual): 95 %
+#: of least squares' efficiency on Gaussian noise (Huber 1981)
+HUBER_C = 1.345
+#: Reweighting rounds of a robust loss at most, and the change of every weight below which they stop
+ROBUST_ROUNDS, ROBUST_TOL = 6, 0.01
+
+
+def _named(model: Model, experiments: Sequence[Experiment], check_data: bool) -> list[Experiment]:
+    """The experiments, each with a name ("data", or "experiment k" of several), checked against the scene."""
+    out = [e if e.name else dataclasses.replace(e, name=f"experiment {i + 1}" if len(experiments) > 1 else "data")
+           for i, e in enumerate(experiments)]
+    for e in out if check_data else ():
+        check_against_scene(model, e)
+    return out
 
 
 def _cut(experiments: list[Experiment], window: float) -> list[Experiment]:
@@ -273,6 +287,57 @@ def _refit_weighted(model: Model, experiments: list[Experiment], f: Fit, setup: 
     return problem, dataclasses.replace(g, iterations=f.iterations + g.iterations, solve_s=f.solve_s + g.solve_s)
 
 
+def _loss_weights(problem: OutputError, f: Fit) -> list[np.ndarray]:
+    """Per experiment, Huber's weight of every (sample, compared channel) at the fit: the residual u in
+    robust standard deviations of its channel, w = min(1, HUBER_C / |u|), the weights that make reweighted
+    least squares minimise Huber's loss."""
+    out = []
+    for e, sm in enumerate(problem.maps):
+        rows = slice(problem.row_offsets[e], problem.row_offsets[e + 1])
+        r = f.r[rows] * problem.sigma[e]  # data units, as measured
+        W = np.ones((problem.experiments[e].data.t.size, len(sm.channels)))
+        for c in range(len(sm.channels)):
+            sel = sm.channel == c
+            scale = 1.4826 * float(np.median(np.abs(r[sel])))
+            u = np.abs(r[sel]) / scale if scale > 0 else np.zeros(int(sel.sum()))
+            W[sm.sample[sel], c] = np.minimum(1.0, HUBER_C / np.maximum(u, 1e-300))
+        out.append(W)
+    return out
+
+
+def _huber_bread(problem: OutputError) -> np.ndarray | None:
+    """The rows' bread factors psi'(u) / w(u) of Huber's loss (1 inside, 0 where a sample is weighted
+    down), or None without a robust loss."""
+    if all(e.loss_weights is None for e in problem.experiments):
+        return None
+    return np.concatenate([(e.loss_weights[sm.sample, sm.channel] >= 1.0).astype(float)
+                           for e, sm in zip(problem.experiments, problem.maps, strict=True)])
+
+
+def _robust_fit(model: Model, problem: OutputError, f: Fit, setup: dict, budget: Budget, t_solve: float,
+                loss: str, verbose: bool) -> tuple[list[Experiment], OutputError, Fit, dict]:
+    """Iteratively reweighted least squares for a robust loss, each round from the last answer, until no
+    weight changes by ROBUST_TOL (at most ROBUST_ROUNDS); the record of the weights."""
+    experiments, rounds, change = problem.experiments, 0, np.inf
+    while rounds < ROBUST_ROUNDS and change > ROBUST_TOL and f.converged:
+        W = _loss_weights(problem, f)
+        change = max(float(np.abs(w - (e.loss_weights if e.loss_weights is not None else 1.0)).max())
+                     for w, e in zip(W, experiments, strict=True))
+        experiments = [dataclasses.replace(e, loss_weights=w) for e, w in zip(experiments, W, strict=True)]
+        problem, f = _refit_weighted(model, experiments, f, setup, budget, t_solve, verbose)
+        rounds += 1
+    low = []
+    for e, sm in enumerate(problem.maps):
+        w = experiments[e].loss_weights[sm.sample, sm.channel]
+        low += [(float(w[j]), experiments[e].name, sm.channels[sm.channel[j]], float(sm.time[j]))
+                for j in np.flatnonzero(w < 0.5)]
+    n = sum(sm.y.size for sm in problem.maps)
+    return experiments, problem, f, {
+        "loss": loss, "c": HUBER_C, "rounds": rounds, "converged": change <= ROBUST_TOL,
+        "below_half": len(low), "samples": n,
+        "lowest": [{"weight": w, "experiment": x, "channel": c, "t": t} for w, x, c, t in sorted(low)[:1000]]}
+
+
 def _channels(problem: OutputError, fitted: Fit, e: int, rows: np.ndarray, declared) -> dict:
     """Residual analysis (data units) and fit of every channel of experiment e (``declared``: its declared noise)."""
     sm = problem.maps[e]
@@ -347,8 +412,12 @@ def _uncertainty(problem: OutputError, f: Fit, dp: np.ndarray, p_hat: np.ndarray
     "hac", "noise", "model_form", "total"} (the model error ``me`` is given)."""
     names, n_p = problem.model.parameter_names, problem.model.n_p
     gn = gauss_newton_statistics(f.J, f.r, n_p, names, dp, p_hat)
-    C, hac = sandwich_covariance(f.J, f.r, problem.groups())
+    bread = _huber_bread(problem)
+    C, hac = sandwich_covariance(f.J, f.r, problem.groups(), bread=bread)
     se_gn = np.array([gn["std_errors"][k] for k in names])
+    if bread is not None:  # Huber's loss: the plain part is the M-estimator's sandwich without lags (Huber 1981)
+        C0, _ = sandwich_covariance(f.J, f.r, problem.groups(), bandwidth=0, bread=bread)
+        se_gn = np.where(np.isinf(se_gn), np.inf, np.sqrt(np.maximum(np.diag(C0)[:n_p], 0.0)) * np.abs(dp))
     se_hac = np.where(np.isinf(se_gn), np.inf, np.sqrt(np.maximum(np.diag(C)[:n_p], 0.0)) * np.abs(dp))
     # the noise part: HAC where it is the larger; never below the plain errors, since a HAC under them rests on a
     # bandwidth estimated from the same short record (a gait swing's 26 samples gave 15 against 51, issue 27)
@@ -398,28 +467,24 @@ def estimate(model: Model, experiments: Sequence[Experiment], *, dt: float | Non
              start: float | dict[str, float] | np.ndarray | None = None, transform: str = "linear",
              budget: Budget | None = None, compiled: bool = True, newton_tol: float = 1e-12,
              model_error: str = "refine", form: str = "auto", vary: Mapping[str, tuple[float, float]] | None = None,
-             alternatives: Sequence = (), check_data: bool = True, verbose: bool = False) -> IdentificationResult:
+             alternatives: Sequence = (), loss: str = "linear", check_data: bool = True,
+             verbose: bool = False) -> IdentificationResult:
     """Identify the model's parameters (and the unknown initial states) from ``experiments``.
 
     dt, alpha: the model's step (s) and HHT alpha (default: the scene's run settings, never the
     samples' spacing); form, vary, alternatives: the alternative forms (:mod:`.form`); the other
     options as in :func:`casflex.identification.identify_indirect`.
     """
-    if model_error not in MODEL_ERRORS:
-        raise ValueError(f"model_error: expected one of {MODEL_ERRORS}, got {model_error!r}")
+    for name, value, choices in (("model_error", model_error, MODEL_ERRORS), ("loss", loss, LOSSES)):
+        if value not in choices:
+            raise ValueError(f"{name}: expected one of {choices}, got {value!r}")
     if model.n_p == 0:
         raise ValueError("the scene declares no parameters to identify ([[parameters]] in the scene file)")
-    run = model.scene.run
-    dt = float(run.dt if dt is None else dt)
-    alpha = float(run.alpha if alpha is None else alpha)
+    dt = float(model.scene.run.dt if dt is None else dt)
+    alpha = float(model.scene.run.alpha if alpha is None else alpha)
     budget = budget or Budget()
-    experiments = list(experiments)
     t_build = time.perf_counter()
-    for i, e in enumerate(experiments):
-        if not e.name:
-            experiments[i] = e = dataclasses.replace(e, name=f"experiment {i + 1}" if len(experiments) > 1 else "data")
-        if check_data:
-            check_against_scene(model, e)
+    experiments = _named(model, experiments, check_data)
     forms = alternatives_of(model, experiments, form=form, vary=vary, alternatives=alternatives)
     pmap = ParameterMap.of(model, transform)
     p0 = start_values(model, start)
@@ -434,6 +499,9 @@ def estimate(model: Model, experiments: Sequence[Experiment], *, dt: float | Non
     declared = [e.noise for e in experiments]
     if f.converged and (reweighted := _reweighted(problem, f)) is not None:  # step 3: each channel by its noise
         experiments, problem, f = reweighted, *_refit_weighted(model, reweighted, f, setup, budget, t_solve, verbose)
+    robust = {}
+    if loss != "linear":
+        experiments, problem, f, robust = _robust_fit(model, problem, f, setup, budget, t_solve, loss, verbose)
     n_p, names = model.n_p, model.parameter_names
     p_hat = pmap.p(f.w[:n_p])
     dp = pmap.dp_dtheta(f.w[:n_p])
@@ -477,7 +545,7 @@ def estimate(model: Model, experiments: Sequence[Experiment], *, dt: float | Non
                                   for k in ("gauss_newton", "hac", "noise", "model_form")},
                                "model_error": dict(zip(names, me.tolist(), strict=True)),
                                "hac_bandwidth": hac["bandwidth"], "model_error_refit": refit},
-               "forms": compared, "refusal": refusal,
+               "forms": compared, "refusal": refusal, "robust": robust,
                "experiments": records, "solver_s": f.solve_s},
         trajectories=tuple(trajectories), samples=tuple(samples),
     )

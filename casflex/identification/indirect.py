@@ -87,6 +87,7 @@ def identify_indirect(
     form: str = "auto",
     vary: Mapping[str, tuple[float, float]] | None = None,
     alternatives: Sequence[Scene | str | os.PathLike[str]] = (),
+    loss: str = "linear",
     check_data: bool = True,
     **options: Unpack[NLPKeywords],
 ) -> IdentificationResult:
@@ -133,6 +134,9 @@ def identify_indirect(
         the data as well adds its move of the parameters to their standard errors (the model-form
         part); one that fits better, or as well but moves a parameter by more than its noise
         standard error, withholds success.
+    loss : {"linear", "huber"}
+        Least squares, or Huber's loss, robust to marker artefacts (iteratively reweighted from
+        the least-squares answer; single shooting by Gauss-Newton).
     check_data : bool
         Stop when the data cannot belong to the scene (units, times, initial state).
     **options : solver, solver_options, transform, hessian, compiled, verbose (:class:`.problem.NLPOptions`)
@@ -167,7 +171,7 @@ def identify_indirect(
                              "(e.g. ipopt) for multiple shooting or residue 'full'")
         return estimate(model, experiments, dt=dt, alpha=alpha, start=start, transform=transform, budget=budget,
                         compiled=True if opts.compiled is None else opts.compiled, newton_tol=newton_tol,
-                        model_error=model_error, form=form, vary=vary, alternatives=alternatives,
+                        model_error=model_error, form=form, vary=vary, alternatives=alternatives, loss=loss,
                         check_data=check_data, verbose=verbose)
     if len(experiments) > 1 or experiments[0].initial_state == "velocities" or (
             experiments[0].initial_state == "estimate" and residue != "positions"):
@@ -188,7 +192,7 @@ def identify_indirect(
     # Eq. 16: the default procedure polishes the NLP's answer and reports it as every result is
     final = estimate(model, experiments, dt=dt, alpha=alpha, start=r.extra["solver_parameters"], transform=transform,
                      budget=budget, compiled=True, newton_tol=newton_tol, model_error=model_error, form=form,
-                     vary=vary, alternatives=alternatives, check_data=check_data, verbose=verbose)
+                     vary=vary, alternatives=alternatives, loss=loss, check_data=check_data, verbose=verbose)
     reasons = [m for m in (f"the NLP solver did not succeed ({r.status})" if not r.success else "", final.message)
                if m]
     extra = {**final.extra, "transcription": transcription, "intervals": r.extra["intervals"],

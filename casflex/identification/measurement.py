@@ -52,6 +52,9 @@ class Experiment:
         Default: each channel's noise estimated from the residuals (:mod:`.estimate`).
     name : str
         Reported with the experiment's results.
+    loss_weights : (n_samples, n_compared_channels) array in (0, 1], optional
+        Each sample's weight from a robust loss (:mod:`.estimate`, ``loss``): its noise counts as
+        noise / sqrt(weight). Set by the fit; default every sample at full weight.
     """
 
     data: MeasurementSet
@@ -59,6 +62,7 @@ class Experiment:
     channels: tuple[str, ...] | None = None
     noise: float | Mapping[str, float] | None = None
     name: str = ""
+    loss_weights: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.initial_state not in INITIAL_STATES:
@@ -135,6 +139,7 @@ class SampleMap:
     y: np.ndarray
     step: np.ndarray
     weights: np.ndarray
+    sample: np.ndarray  # observation j is sample ``sample[j]`` of the data (its row in data.t)
 
     @classmethod
     def of(cls, model: Model, experiment: Experiment, dt: float) -> SampleMap:
@@ -157,7 +162,7 @@ class SampleMap:
         weights = np.column_stack([2 * s**3 - 3 * s**2 + 1, dt * (s**3 - 2 * s**2 + s),
                                    -2 * s**3 + 3 * s**2, dt * (s**3 - s**2)])
         dof = np.array([channel_index(model, names[c]) for c in ch], dtype=int)  # >= n_dof: a marker's
-        return cls(t0, float(dt), n_steps, names, ch, dof, time, Y[rows, ch], step, weights)
+        return cls(t0, float(dt), n_steps, names, ch, dof, time, Y[rows, ch], step, weights, rows)
 
     @property
     def needed_steps(self) -> np.ndarray:

@@ -95,6 +95,7 @@ class OutputError:
         self.model, self.experiments, self.dt, self.pmap, self.compiled = model, experiments, dt, pmap, compiled
         self.integ = integrator_for(model, alpha=alpha, tol=newton_tol)
         self.maps = [SampleMap.of(model, e, dt) for e in experiments]
+        self.row_offsets = np.concatenate([[0], np.cumsum([sm.y.size for sm in self.maps])]).astype(int)
         self.free = free_dofs(model)
         npar = model.n_p
         if initial is None:
@@ -109,9 +110,12 @@ class OutputError:
             rot = np.append(model.is_rotation, np.zeros(2 * len(model.scene.markers), bool))[sm.dof]
             base = np.where(rot, 1.0 / ell, 1.0)  # rotations compared as arc lengths at the scene's size
             if isinstance(e.noise, Mapping):  # one value per channel, in the channel's unit
-                self.sigma.append(np.array([e.noise[c] for c in sm.channels])[sm.channel])
+                sigma = np.array([e.noise[c] for c in sm.channels])[sm.channel]
             else:
-                self.sigma.append(base * (e.noise if e.noise is not None else 1.0))
+                sigma = base * (e.noise if e.noise is not None else 1.0)
+            if e.loss_weights is not None:  # a robust loss's weights: a sample's noise counts as noise / sqrt(w)
+                sigma = sigma / np.sqrt(e.loss_weights[sm.sample, sm.channel])
+            self.sigma.append(sigma)
         self.evaluations = 0
 
     # -- unknowns ----------------------------------------------------------------------------

@@ -53,18 +53,21 @@ def bartlett_bandwidth(scores: np.ndarray) -> int:
     return int(min(n - 1, max(1, math.ceil(1.1447 * (a * n) ** (1 / 3)))))
 
 
-def sandwich_covariance(J: np.ndarray, r: np.ndarray, groups: list[np.ndarray],
-                        bandwidth: int | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+def sandwich_covariance(J: np.ndarray, r: np.ndarray, groups: list[np.ndarray], bandwidth: int | None = None,
+                        bread: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, Any]]:
     """HAC covariance of all unknowns of a least-squares fit.
 
     J : (m, n) Jacobian of the residuals r (m,) at the optimum. groups : for every experiment,
     the rows of each of its sample times in time order (a list of index arrays per experiment,
-    flattened as ``groups[e][t]``); experiments are independent. Returns the (n, n) covariance
-    (pseudo-inverse where J^T J is singular: such directions are reported by the Gauss-Newton
-    statistics) and {"bandwidth": per experiment, "scores_lag1": lag-1 autocorrelation}.
+    flattened as ``groups[e][t]``); experiments are independent. ``bread`` : (m,) factors of the
+    rows in the sandwich's bread J^T diag(bread) J, for an M-estimator fitted by reweighting (J, r
+    reweighted): psi'(u) / w(u) per row, 1 for least squares (Huber's loss: 0 where a sample is
+    weighted down). Returns the (n, n) covariance (pseudo-inverse where the bread is singular: such
+    directions are reported by the Gauss-Newton statistics) and {"bandwidth": per experiment,
+    "scores_lag1": lag-1 autocorrelation}.
     """
     n = J.shape[1]
-    U, s, Vt = np.linalg.svd(J, full_matrices=False)
+    U, s, Vt = np.linalg.svd(J if bread is None else np.sqrt(bread)[:, None] * J, full_matrices=False)
     keep = s > max(J.shape) * np.finfo(float).eps * (s[0] if s.size else 0.0)
     Hinv = (Vt[keep].T / s[keep] ** 2) @ Vt[keep]
     omega = np.zeros((n, n))
