@@ -242,7 +242,7 @@ def _model_error(model: Model, experiments: list[Experiment], first: Fit, proble
     w0 = prob.pack(first.w[:model.n_p])
     sub = Budget(max_iterations=min(30, budget.max_iterations), max_time=budget.max_time)
     try:
-        f = fit(prob, w0, sub, verbose=verbose)
+        f = fit(prob, w0, sub, verbose=verbose, near=True)
     except ValueError as exc:  # the refined model does not run from there
         return np.full(model.n_p, np.nan), {"error": str(exc)}
     p_coarse = problem.pmap.p(first.w[:model.n_p])
@@ -283,7 +283,8 @@ def _refit_weighted(model: Model, experiments: list[Experiment], f: Fit, setup: 
     """The fit repeated from its answer with the channels weighted by their estimated noise (step 3)."""
     left = budget.max_time - (time.perf_counter() - t_solve)
     problem = OutputError(model, experiments, **setup)
-    g = fit(problem, f.w, Budget(min(REWEIGHT_RUNS, budget.max_iterations), max(left, 1e-3)), verbose=verbose)
+    g = fit(problem, f.w, Budget(min(REWEIGHT_RUNS, budget.max_iterations), max(left, 1e-3)), verbose=verbose,
+            near=True)
     return problem, dataclasses.replace(g, iterations=f.iterations + g.iterations, solve_s=f.solve_s + g.solve_s)
 
 

@@ -183,7 +183,7 @@ def _refit(alt_model: Model, problem: OutputError, first: Fit, p_hat: dict[str, 
     prob = OutputError(alt_model, problem.experiments, dt=problem.dt, alpha=setup["alpha"], pmap=pmap,
                        compiled=problem.compiled, newton_tol=setup["newton_tol"],
                        initial=initial_states(alt_model, problem.experiments, p0, states))
-    return prob, fit(prob, prob.pack(pmap.theta(p0)), budget, verbose=verbose)
+    return prob, fit(prob, prob.pack(pmap.theta(p0)), budget, verbose=verbose, near=True)
 
 
 def compare_forms(problem: OutputError, first: Fit, alternatives: list[tuple[Alternative, Model]], *, setup: dict,
