@@ -115,10 +115,10 @@ def _vary(text: str) -> tuple[str, tuple[float, float]]:
 
 def _check_forms(model: Model, args: argparse.Namespace) -> None:
     """--vary and --alternatives checked against the scene before any work (one line naming the option)."""
-    from casflex.identification.form import alternatives_of
+    from casflex.identification.form import declared_alternatives
 
-    try:
-        alternatives_of(model, [], form="none", vary=dict(args.vary or ()), alternatives=args.alternatives or ())
+    try:  # the scenes only: the models are assembled once, by the fit
+        declared_alternatives(model, form="none", vary=dict(args.vary or ()), alternatives=args.alternatives or ())
     except ValueError as exc:  # the library's message names "vary <target>" or "alternatives"
         raise OptionError(f"--{exc}") from None
 

@@ -53,7 +53,8 @@ from casflex.identification.statistics import bartlett_bandwidth
 from casflex.model import Model, assemble
 from casflex.scene import Scene, SceneError
 
-__all__ = ["FORMS", "DECISIVE", "Alternative", "alternatives_of", "compare_forms", "form_part", "form_reasons"]
+__all__ = ["FORMS", "DECISIVE", "Alternative", "declared_alternatives", "alternatives_of", "compare_forms",
+           "form_part", "form_reasons"]
 
 #: AIC units: a model this far behind has essentially no support (Burnham and Anderson 2002, Sec. 2.6)
 DECISIVE = 10.0
@@ -117,17 +118,22 @@ def _given(model: Model, scenes: Sequence[Scene | str | os.PathLike[str]]) -> li
     return out
 
 
+def declared_alternatives(model: Model, *, form: str = "auto", vary: Mapping[str, tuple[float, float]] | None = None,
+                          alternatives: Sequence[Scene | str | os.PathLike[str]] = ()) -> list[Alternative]:
+    """The alternative forms (module docstring), their scenes checked (a ValueError names the offending
+    option, target, value or scene); nothing assembled."""
+    if form not in FORMS:
+        raise ValueError(f"form: expected one of {FORMS}, got {form!r}")
+    return (_beam_theory(model.scene) if form == "auto" else []) + _varied(model.scene, vary or {}) \
+        + _given(model, alternatives)
+
+
 def alternatives_of(model: Model, experiments: Sequence[Experiment], *, form: str = "auto",
                     vary: Mapping[str, tuple[float, float]] | None = None,
                     alternatives: Sequence[Scene | str | os.PathLike[str]] = ()) -> list[tuple[Alternative, Model]]:
-    """The alternative forms (module docstring) with their models, every one checked against the data
-    before any fit (a ValueError names the offending alternative, target or value)."""
-    if form not in FORMS:
-        raise ValueError(f"form: expected one of {FORMS}, got {form!r}")
-    alts = (_beam_theory(model.scene) if form == "auto" else []) + _varied(model.scene, vary or {}) \
-        + _given(model, alternatives)
+    """The alternative forms with their models, every one checked against the data before any fit."""
     out = []
-    for alt in alts:
+    for alt in declared_alternatives(model, form=form, vary=vary, alternatives=alternatives):
         m = assemble(alt.scene, inertia=model.inertia)
         for e in experiments:
             try:
