@@ -33,7 +33,7 @@ MODEL = SimpleNamespace(n_p=1)
 def _fit_that_fails(bad, windows: list[float], status: str = "cost_tolerance"):
     """A stand-in for fit: fails to start where ``bad(window)``; records the windows tried; stages
     before the last end with ``status``."""
-    def fake_fit(problem, w, budget, verbose=False):
+    def fake_fit(problem, w, budget, verbose=False, near=False, tol_se=None):
         windows.append(round(problem.window, 3))
         if bad(problem.window):
             raise StartDoesNotRun("the model does not run at the start: stand-in")

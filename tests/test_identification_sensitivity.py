@@ -53,3 +53,32 @@ def test_compiled_and_interpreted_agree(setup):
     b = run_sensitivities(integ, x0, model.p_nominal, 0.0, 1e-3, 260, keep, compiled=False)
     np.testing.assert_allclose(a.X, b.X, rtol=0, atol=1e-12)
     np.testing.assert_allclose(a.S, b.S, rtol=1e-9, atol=1e-9 * np.abs(b.S).max())
+
+
+def test_seeded_directions_are_the_full_sensitivities_times_the_seed(setup):
+    """A fit carries only its unknowns' directions E = (dx0/dw, dp/dw): by linearity, S E of the full run."""
+    model, integ, x0 = setup
+    rng = np.random.default_rng(1)
+    E = rng.normal(size=(integ.nx + model.n_p, 3))
+    keep = np.array([0, 40, 80])
+    full = run_sensitivities(integ, x0, model.p_nominal, 0.0, 1e-3, 80, keep)
+    seeded = run_sensitivities(integ, x0, model.p_nominal, 0.0, 1e-3, 80, keep, seed=(E[:integ.nx], E[integ.nx:]))
+    want = np.einsum("kin,ij->kjn", full.S, E)
+    # the same factorisations and sweeps in another order: round-off of the largest entry
+    np.testing.assert_allclose(seeded.S, want, rtol=0, atol=1e-10 * np.abs(want).max())
+    with pytest.raises(ValueError, match="seed"):
+        run_sensitivities(integ, x0, model.p_nominal, 0.0, 1e-3, 3, keep[:1], seed=(E[:5], E[integ.nx:]))
+
+
+def test_the_mapped_kernels_directions_agree_with_the_flat_ones(setup, monkeypatch):
+    """Above EXPAND_DIRECTIONS elements the directional derivatives run through the mapped kernels' MX:
+    the same numbers as the flat code (interpreted, 30 steps)."""
+    from casflex.integrators import directions
+    from casflex.integrators.hht import HHT
+
+    model, integ, x0 = setup
+    keep = np.array([30])
+    flat = run_sensitivities(HHT(model, alpha=0.0), x0, model.p_nominal, 0.0, 1e-3, 30, keep, compiled=False)
+    monkeypatch.setattr(directions, "EXPAND_DIRECTIONS", 0)
+    mapped = run_sensitivities(HHT(model, alpha=0.0), x0, model.p_nominal, 0.0, 1e-3, 30, keep, compiled=False)
+    np.testing.assert_allclose(mapped.S, flat.S, rtol=0, atol=1e-10 * np.abs(flat.S).max())

@@ -50,7 +50,7 @@ from casflex.identification.measurement import Experiment, check_against_scene
 from casflex.identification.output_error import Budget, Fit, OutputError, fit
 from casflex.identification.problem import ParameterMap
 from casflex.identification.statistics import bartlett_bandwidth
-from casflex.model import Model, assemble
+from casflex.model import Model, assembled
 from casflex.scene import Scene, SceneError
 
 __all__ = ["FORMS", "DECISIVE", "Alternative", "declared_alternatives", "alternatives_of", "compare_forms",
@@ -134,7 +134,7 @@ def alternatives_of(model: Model, experiments: Sequence[Experiment], *, form: st
     """The alternative forms with their models, every one checked against the data before any fit."""
     out = []
     for alt in declared_alternatives(model, form=form, vary=vary, alternatives=alternatives):
-        m = assemble(alt.scene, inertia=model.inertia)
+        m = assembled(alt.scene, inertia=model.inertia)
         for e in experiments:
             try:
                 check_against_scene(m, e)

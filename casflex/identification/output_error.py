@@ -64,6 +64,14 @@ class _OverBudget(Exception):
     """The time budget ran out."""
 
 
+class _CloseEnough(Exception):
+    """A point within the requested standard errors of the least-squares solution (``fit(tol_se=)``)."""
+
+    def __init__(self, w: np.ndarray, offset: float):
+        super().__init__()
+        self.w, self.offset = w, offset
+
+
 _X0: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
@@ -156,7 +164,6 @@ class OutputError:
     def evaluate(self, w: np.ndarray, jacobian: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
         """Residuals r (m,) (dimensionless: data units over noise) and, if asked, J = dr/dw (m, n)."""
         n, npar = self.model.n_dof, self.model.n_p
-        nx = self.integ.nx
         theta = w[:npar]
         p = self.pmap.p(theta)
         dp = self.pmap.dp_dtheta(theta)
@@ -169,8 +176,11 @@ class OutputError:
                 raise _Diverged(f"experiment {e + 1}: no initial state on the slow manifold at these unknowns") \
                     from None
             x0, Jq, Jqd, Jp = (np.array(v) for v in _x0_map(self.integ)(q0, qd0, sm.t0, p))
+            # carry the directions of the local unknowns (p, xi_e) only: d x0 / d(p, xi_e), (nx, npar + n_xi)
+            dq, dqd = self.initial[e].jacobian(w[self.offsets[e]:self.offsets[e + 1]])
+            M0 = np.hstack([Jp, Jq @ dq + Jqd @ dqd])
             run = run_sensitivities(self.integ, x0.ravel(), p, sm.t0, sm.dt, sm.n_steps, sm.needed_steps,
-                                    compiled=self.compiled)
+                                    seed=(M0, np.eye(npar, M0.shape[1])), compiled=self.compiled)
             if not run.converged:
                 raise _Diverged(f"experiment {e + 1}: the model's Newton failed at t = "
                                 f"{sm.t0 + run.failed_step * sm.dt:.6g} s")
@@ -188,13 +198,8 @@ class OutputError:
             rs.append((y - sm.y) / self.sigma[e])
             if not jacobian:
                 continue
-            # d x0 / d(p, xi_e): columns of the local unknowns
-            dq, dqd = self.initial[e].jacobian(w[self.offsets[e]:self.offsets[e + 1]])
-            M0 = np.hstack([Jp, Jq @ dq + Jqd @ dqd])  # (nx, npar + n_xi)
             sel = np.arange(2 * n) if marked else np.unique(np.concatenate([sm.dof, n + sm.dof]))
-            S = run.S[:, :, sel]  # (k, nw, nsel)
-            G = np.einsum("kws,wc->ksc", S[:, :nx, :], M0)
-            G[:, :, :npar] += np.transpose(S[:, nx:, :], (0, 2, 1))
+            G = np.transpose(run.S[:, :, sel], (0, 2, 1))  # (k, nsel, npar + n_xi): d x_k / d(p, xi_e)
             if marked:  # a marker's sensitivities by the chain rule: y = y(q), yd = (dy/dq) qd
                 GP = np.concatenate([G[:, :n], np.einsum("kmn,knc->kmc", Jy, G[:, :n])], axis=1)
                 GV = np.concatenate([G[:, n:], np.einsum("kmn,knc->kmc", Jyd, G[:, :n])
@@ -313,17 +318,25 @@ _STATUS = {-1: "improper_input", 0: "iteration_limit", 1: "gradient_tolerance", 
            3: "step_tolerance", 4: "cost_and_step_tolerance"}
 
 
-def fit(problem: OutputError, w0: np.ndarray, budget: Budget, *, verbose: bool = False, near: bool = False) -> Fit:
+def fit(problem: OutputError, w0: np.ndarray, budget: Budget, *, verbose: bool = False, near: bool = False,
+        tol_se: float | None = None) -> Fit:
     """Minimise 1/2 |r(w)|^2 from w0 within ``budget`` (trust-region reflective Gauss-Newton).
+
+    ``tol_se``: stop at the first model run within that many standard errors of the least-squares
+    solution (:func:`offset_in_se`), as converged (status "within_se"): for a fit whose answer is only
+    a start, such as a growing horizon's early stage. Default: to OFFSET_TOL and scipy's tolerances.
 
     ``near``: w0 is another fit's answer to a nearby problem (a refined model, other weights, another
     form): Gauss-Newton steps from it first (:func:`_polish`, one model run a step when the full step
     descends), scipy's trust region from w0 where they do not reach the solution or run onto a bound.
     On twobar's model-error refit they took 2 model runs where the trust region took 7, to the same
     0.01 SE."""
-    t0 = time.perf_counter()
+    t0, runs0 = time.perf_counter(), problem.evaluations
     memo: dict[str, object] = {}
     best = {"cost": np.inf, "w": np.array(w0, dtype=float)}
+    lb, ub = problem.bounds()
+    w_start = np.clip(np.asarray(w0, dtype=float), lb, ub)
+    start_bound = _on_bound(w_start, lb, ub)
 
     def evaluate(w: np.ndarray, limited: bool = True) -> tuple[np.ndarray, np.ndarray]:
         if memo.get("w") is not None and np.array_equal(memo["w"], w):
@@ -336,10 +349,17 @@ def fit(problem: OutputError, w0: np.ndarray, budget: Budget, *, verbose: bool =
         cost = 0.5 * float(r @ r)
         if cost < best["cost"]:
             best.update(cost=cost, w=w.copy())
+        bound = _on_bound(w, lb, ub)
+        if tol_se is not None and not np.any(bound & ~start_bound):  # a bound run onto: the trust region decides
+            offset = offset_in_se(r, J, np.flatnonzero(~bound))[0]
+            if offset <= tol_se:
+                raise _CloseEnough(w.copy(), offset)
         return r, J
 
     try:
         r0, _ = evaluate(np.asarray(w0, dtype=float))
+    except _CloseEnough as close:
+        return Fit(close.w, memo["r"], memo["J"], "within_se", True, 1, time.perf_counter() - t0, "", close.offset)
     except _Diverged as exc:
         raise StartDoesNotRun(f"the model does not run at the start: {exc}; try a start closer to the expected "
                               "parameters, a smaller dt or a more negative alpha") from None
@@ -354,14 +374,12 @@ def fit(problem: OutputError, w0: np.ndarray, budget: Budget, *, verbose: bool =
     def jac(w: np.ndarray) -> np.ndarray:
         return evaluate(w)[1]
 
-    lb, ub = problem.bounds()
-    w_start = np.clip(np.asarray(w0, dtype=float), lb, ub)
     offset, spent = float("nan"), 0
     try:
         if near:
             w, spent, offset, _ = _polish(evaluate, w_start, lb, ub, budget.max_iterations, 0)
             # a bound reached on the way is a clipped step's doing, not a minimum: the trust region decides
-            if offset <= OFFSET_TOL and not np.any(_on_bound(w, lb, ub) & ~_on_bound(w_start, lb, ub)):
+            if offset <= OFFSET_TOL and not np.any(_on_bound(w, lb, ub) & ~start_bound):
                 r, J = evaluate(w, limited=False)
                 return Fit(w, r, J, "gauss_newton", True, spent, time.perf_counter() - t0, "", offset)
         # no gtol: scipy's gradient test is absolute, and a weakly felt parameter of a zero-residual
@@ -381,5 +399,8 @@ def fit(problem: OutputError, w0: np.ndarray, budget: Budget, *, verbose: bool =
     except _OverBudget:
         w, status, iters, converged = best["w"], "time_limit", problem.evaluations, False
         message = f"stopped at the time limit ({budget.max_time:g} s); the best point so far is reported"
+    except _CloseEnough as close:
+        return Fit(close.w, memo["r"], memo["J"], "within_se", True, problem.evaluations - runs0,
+                   time.perf_counter() - t0, "", close.offset)
     r, J = evaluate(w, limited=False)
     return Fit(w, r, J, status, converged, iters, time.perf_counter() - t0, message, offset)

@@ -2,14 +2,16 @@
 with respect to the initial state and the parameters, for output-error identification.
 
 :meth:`HHT.sensitivity <casflex.integrators.hht.HHT.sensitivity>` carries, through every step,
-the state x_k and S_k = dx_k/d(x_0, p), shape (nx, nx + n_p), by the implicit-function
+the state x_k and S_k = dx_k/dw in the directions of the unknowns w (a fit's parameters and
+initial state; by default every direction of (x_0, p)), shape (nx, D), by the implicit-function
 derivative of each Newton solve: exact to the Newton tolerance, not finite differences. Chunks
-of :data:`CHUNK` steps run as one compiled C function (generated once per integrator and cached
-on disk by :func:`casflex.codegen.compile_functions`), the remainder step by step; without a C
-compiler the same Functions run in CasADi's virtual machine, some tens of times slower.
+of :data:`CHUNK` steps run as one compiled C function (generated once per integrator and number of
+directions, cached on disk by :func:`casflex.codegen.compile_functions`), the remainder step by
+step; without a C compiler the same Functions run in CasADi's virtual machine, some tens of times
+slower.
 
-The cost is linear in the number of steps: twobar (15 dofs, 4 parameters), 3000 steps with all
-52 directions take about 0.3 s compiled (gcc -O1: 7 s to compile, once).
+The cost is linear in the number of steps and grows with D: twobar (15 dofs, 4 parameters, D = 4),
+3000 steps take about 3 simulations' time compiled (docs/tables/bench_identification.md).
 """
 
 from __future__ import annotations
@@ -48,12 +50,13 @@ class SensitivityRun:
     failed_step: int | None
 
 
-def _functions(integ: HHT, compiled: bool) -> tuple:
-    """(chunk call, one-step call): BufferedCalls of compiled code, or the CasADi Functions."""
-    key = bool(compiled)
+def _functions(integ: HHT, compiled: bool, n_dir: int) -> tuple:
+    """(chunk call, one-step call) in ``n_dir`` directions: BufferedCalls of compiled code, or the
+    CasADi Functions."""
+    key = (bool(compiled), n_dir)
     cache = _LIBS.setdefault(integ, {})
     if key not in cache:
-        funcs = [integ.sensitivity(CHUNK), integ.sensitivity(1)]
+        funcs = [integ.sensitivity(CHUNK, n_dir), integ.sensitivity(1, n_dir)]
         if compiled and shutil.which("gcc") is None:
             log.warning("no C compiler (gcc): the sensitivities run interpreted, some tens of times slower")
             compiled = False
@@ -66,19 +69,29 @@ def _functions(integ: HHT, compiled: bool) -> tuple:
 
 
 def run_sensitivities(integ: HHT, x0: np.ndarray, p: np.ndarray, t0: float, dt: float, n_steps: int,
-                      keep: np.ndarray, *, compiled: bool = True) -> SensitivityRun:
+                      keep: np.ndarray, *, seed: tuple[np.ndarray, np.ndarray] | None = None,
+                      compiled: bool = True) -> SensitivityRun:
     """Step from x0 at t0 (s) ``n_steps`` steps of ``dt`` (s) with parameters p; keep the states
-    and sensitivities at the step ends in ``keep`` (sorted indices in 0..n_steps)."""
+    and sensitivities at the step ends in ``keep`` (sorted indices in 0..n_steps).
+
+    ``seed``: (dx0/dw (nx, D), dp/dw (n_p, D)), the directions w to carry; default every direction
+    of w = (x_0, p). A fit carries its unknowns' directions only: the cost per step grows with D."""
     model = integ.model
-    n, nx, nw = model.n_dof, integ.nx, integ.nx + model.n_p
-    chunk_fn, step_fn = _functions(integ, compiled)
+    n, nx = model.n_dof, integ.nx
+    if seed is None:
+        seed = (np.eye(nx, nx + model.n_p), np.eye(model.n_p, nx + model.n_p, nx))
+    S0, P = (np.asarray(a, dtype=float) for a in seed)
+    nw = S0.shape[1]
+    if S0.shape != (nx, nw) or P.shape != (model.n_p, nw):
+        raise ValueError(f"seed: expected shapes ({nx}, D) and ({model.n_p}, D), got {S0.shape} and {P.shape}")
+    chunk_fn, step_fn = _functions(integ, compiled, nw)
     d = np.array(integ.scale(x0[:n], x0[n:2 * n], p, dt)).ravel()
     keep = np.asarray(keep, dtype=int)
     Xk = np.empty((keep.size, nx))
     Sk = np.empty((keep.size, nw, nx))
     x = np.ascontiguousarray(x0, dtype=float)
-    S = np.zeros((nw, nx))  # S^T: row j = dx/dw_j (a column-major nx x nw matrix)
-    S[:nx, :nx] = np.eye(nx)
+    S = np.ascontiguousarray(S0.T)  # S^T: row j = dx/dw_j (a column-major nx x nw matrix)
+    Pv = np.ascontiguousarray(P.T)
     pv = np.ascontiguousarray(p, dtype=float)
     hv = np.array([float(dt)])
     j = 0
@@ -93,9 +106,9 @@ def run_sensitivities(integ: HHT, x0: np.ndarray, p: np.ndarray, t0: float, dt: 
         fn = chunk_fn if m == CHUNK else step_fn
         t_in = np.array([t0 + done * dt])
         if isinstance(fn, BufferedCall):
-            fn([x, S, t_in, pv, hv, d], [X[:m], SS[:m * nw], R[:m]])
+            fn([x, S, Pv, t_in, pv, hv, d], [X[:m], SS[:m * nw], R[:m]])
         else:
-            out = fn(x, S.T, t_in, pv, hv, d)
+            out = fn(x, S.T, Pv.T, t_in, pv, hv, d)
             X[:m] = np.array(out[0]).T
             SS[:m * nw] = np.array(out[1]).T
             R[:m] = np.array(out[2]).ravel()

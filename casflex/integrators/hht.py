@@ -55,6 +55,7 @@ import casadi as ca
 import numpy as np
 
 from casflex.integrators.band import band_lu
+from casflex.integrators.directions import step_directions
 from casflex.integrators.hht_pieces import (
     ROUNDOFF_FLOOR,
     Layout,
@@ -172,7 +173,7 @@ class HHT:
         post = post.expand() if expand else post  # per state, and for a few elements flat code is 3x faster
         self._fn.update(prepare=prepare, residual=resid, jacobian=jac, finish=finish,
                         scale=scale_function(m, self.alpha), initial=initial_function(m, lay), post=post,
-                        update=update, newton=newton, band_apply=apply,
+                        update=update, newton=newton, band_factor=factor, band_apply=apply,
                         more=ca.Function.conditional("hht_converge", [keep], more))
         self._fn["sensitivity"] = step_blocks(m, lay, self.alpha, prepare, resid, finish, expand)
         self._fn["step"] = self._step_with_derivative()
@@ -273,34 +274,34 @@ class HHT:
             z = np.concatenate([z, np.asarray(x1[len(x1) - lay.n_mu:]) / s])
         return float(np.max(np.abs(np.array(self._fn["residual"](z, prm)).ravel()), initial=0.0))
 
-    def sensitivity(self, n_steps: int) -> ca.Function:
-        """``hht_sensitivity_<N>(x0, S0, t0, p, h, d) -> (X, S, res)``: N steps that also carry the
-        forward sensitivities S = dx/dw of the state to w = (x_0, p), w of size nx + n_p.
+    def sensitivity(self, n_steps: int, n_dir: int | None = None) -> ca.Function:
+        """``hht_sensitivity_<N>_<D>(x0, S0, P, t0, p, h, d) -> (X, S, res)``: N steps that also carry
+        D forward sensitivities S = dx/dw of the state in D directions of the unknowns w.
 
-        S0 (nx, nx + n_p) is dx0/dw (the identity beside zeros for a fixed start); S (nx, N (nx + n_p))
-        holds dx_k/dw after each step, side by side; X and res as in :meth:`trajectory`. Each step
-        propagates S_{k+1} = X_w E - X_z G_z^-1 G_w E with E = d(x_k, t_k, p, h)/dw: the implicit-
-        function derivative of the Newton solve, one small QR per step.
+        S0 (nx, D) is dx0/dw and P (n_p, D) is dp/dw, both constant along the run; the default
+        D = nx + n_p with S0 = [I 0] and P = [0 I] gives every derivative in (x_0, p), while a fit
+        seeds only its own unknowns' directions (four parameters: D = 4, a thirteenth of twobar's 52).
+        S (nx, N D) holds dx_k/dw after each step, side by side; X and res as in :meth:`trajectory`.
+        Each step carries them by the implicit-function derivative of its Newton solve
+        (:func:`~casflex.integrators.directions.step_directions`).
         """
-        key = f"sens{n_steps}"
+        nx, npar = self.nx, self.model.n_p
+        nd = nx + npar if n_dir is None else int(n_dir)
+        key = f"sens{n_steps}_{nd}"
         if key not in self._fn:
-            m = self.model
-            nx, npar = self.nx, m.n_p
-            nw = nx + npar
             X0, T0, Pm, H, D = self.step.mx_in()
-            S0 = ca.MX.sym("S0", nx, nw)
+            S0, P0 = ca.MX.sym("S0", nx, nd), ca.MX.sym("P", npar, nd)
+            carry = step_directions(self.model, Layout.of(self.model, self._ell), self.alpha, self._fn, nd)
             X1, res = self.step(X0, T0, Pm, H, D)
-            G_z, G_w, X_z, X_w = self._fn["sensitivity"](X0, T0, Pm, H, D, X1)
-            E = ca.vertcat(S0, ca.MX(1, nw), ca.horzcat(ca.MX(npar, nx), ca.MX.eye(npar)), ca.MX(1, nw))
-            S1 = ca.mtimes(X_w, E) - ca.mtimes(X_z, ca.solve(G_z, ca.mtimes(G_w, E), "qr"))
-            one = ca.Function("hht_sensitivity_step", [X0, S0, T0, Pm, H, D], [X1, S1, res],
-                              ["x0", "S0", "t0", "p", "h", "d"], ["x1", "S1", "res"])
-            acc = one.mapaccum(f"hht_sensitivity_steps_{n_steps}", n_steps, 2)
+            one = ca.Function("hht_sensitivity_step", [X0, S0, P0, T0, Pm, H, D],
+                              [X1, carry(X0, S0, P0, T0, Pm, H, D, X1), res],
+                              ["x0", "S0", "P", "t0", "p", "h", "d"], ["x1", "S1", "res"])
+            acc = one.mapaccum(f"hht_sensitivity_steps_{n_steps}_{nd}", n_steps, [0, 1], [0, 1])
             grid = T0 + H * ca.DM(np.arange(n_steps)).T
-            X, S, R = acc(X0, S0, grid, ca.repmat(Pm, 1, n_steps), ca.repmat(H, 1, n_steps),
-                          ca.repmat(D, 1, n_steps))
-            self._fn[key] = ca.Function(f"hht_sensitivity_{n_steps}", [X0, S0, T0, Pm, H, D], [X, S, R],
-                                        ["x0", "S0", "t0", "p", "h", "d"], ["X", "S", "res"])
+            X, S, R = acc(X0, S0, ca.repmat(P0, 1, n_steps), grid, ca.repmat(Pm, 1, n_steps),
+                          ca.repmat(H, 1, n_steps), ca.repmat(D, 1, n_steps))
+            self._fn[key] = ca.Function(f"hht_sensitivity_{n_steps}_{nd}", [X0, S0, P0, T0, Pm, H, D], [X, S, R],
+                                        ["x0", "S0", "P", "t0", "p", "h", "d"], ["X", "S", "res"])
         return self._fn[key]
 
     def trajectory(self, n_steps: int) -> ca.Function:
