@@ -111,15 +111,21 @@ def test_bad_horizons_and_data(twobar, sim):
         identify_indirect(twobar, part, 0.01, dofs=["x3"])
 
 
-def test_compiled_matches_interpreted(twobar, sim):
+@pytest.mark.parametrize("transcription", ["single-shooting", "multiple-shooting"])
+def test_compiled_matches_interpreted(twobar, sim, transcription):
     # generated C for every function IPOPT calls: same iterates, same answer (multiple shooting's
-    # compiled NLP takes 6 min to build: test_the_slow_manifold_compiles_to_c checks its one difference)
-    kw = {"transcription": "single-shooting", "start": 0.8, "solver": "ipopt", "model_error": "none"}
+    # compiled NLP: one interval Function mapped over the intervals, ~5 s to build; its slow
+    # manifold's Newton solve is fast_newton in C, newton interpreted)
+    kw = {"transcription": transcription, "start": 0.8, "solver": "ipopt", "model_error": "none"}
     ref = identify_indirect(twobar, sim, 0.05, **kw)
     r = identify_indirect(twobar, sim, 0.05, compiled=True, **kw)
     assert r.success and r.extra["compiled"]
     assert r.iterations == ref.iterations
     np.testing.assert_allclose(r.p, ref.p, rtol=1e-10)
+    if transcription == "multiple-shooting":
+        assert r.extra["intervals"] == 2
+        np.testing.assert_allclose(list(r.extra["nlp"]["solver_parameters"].values()),
+                                   list(ref.extra["nlp"]["solver_parameters"].values()), rtol=1e-8)
 
 
 def test_exact_hessian_option(twobar, sim):

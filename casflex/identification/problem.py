@@ -330,6 +330,19 @@ class NLPOptions:
         return {"transform": self.transform, "hessian": self.hessian, "compiled": bool(self.compiled)}
 
 
+def hessian_refused(msg: str, triu: bool | None, solver: str) -> str | None:
+    """What ``solver``'s refusal ``msg`` of a ``hess_lag`` given as upper triangle (``triu``) or whole
+    means: "symmetric" (try the other form), "none" (it takes no Hessian: warned, its own is used) or
+    None (another error)."""
+    if triu is True and "symmetric" in msg:
+        return "symmetric"
+    if triu is not None and "hess_lag" in msg:
+        warnings.warn(f"solver {solver!r} takes no Hessian function: hessian='gauss-newton' is not used, the "
+                      "solver runs with its own Hessian (approximation)", stacklevel=4)
+        return "none"
+    return None
+
+
 def least_squares_nlp(name: str, solver: str, w: Any, r: Any, g: Any = None, *, f_scale: float = 1.0,
                       hessian: str = "exact", compiled: bool = False, verbose: bool = False,
                       solver_options: dict | None = None, tol: float = 1e-14) -> ca.Function:
@@ -375,14 +388,11 @@ def least_squares_nlp(name: str, solver: str, w: Any, r: Any, g: Any = None, *, 
             S = ca.nlpsol(name, solver, nlp, opts)
         except RuntimeError as exc:
             msg = _casadi_reason(exc)
-            if triu is True and "symmetric" in msg:
-                continue
-            if triu is not None and "hess_lag" in msg:
-                no_hessian = True
-                warnings.warn(f"solver {solver!r} takes no Hessian function: hessian='gauss-newton' is not used, the "
-                              "solver runs with its own Hessian (approximation)", stacklevel=3)
-                continue
-            raise ValueError(f"solver {solver!r}: cannot be created ({msg})") from None
+            refused = hessian_refused(msg, triu, solver)
+            if refused is None:
+                raise ValueError(f"solver {solver!r}: cannot be created ({msg})") from None
+            no_hessian = no_hessian or refused == "none"
+            continue
         if compiled:  # the same solver on its functions compiled (cached on disk: a later process pays nothing)
             log.info("compiling the %s NLP's functions", name)
             S = compiled_nlpsol(name, solver, nlp, opts)

@@ -42,17 +42,31 @@ Transcriptions:
   single-shooting optimum: the Gauss-Newton polish (``polish``) and the statistics are single
   shooting's.
 
-Both hand the NLP solver the Gauss-Newton Hessian J_r^T J_r (r the residue, exact first
-derivatives). For Eq. 17, Gauss-Newton steps on the single-shooting problem polish p after the
-solver and the standard errors come from the same Jacobian.
+Both are built from ONE interval Function (the HHT steps of an interval chained by ``mapaccum``,
+with its forward sensitivities in a second one) mapped over the intervals, single shooting being
+one interval over the whole horizon (:mod:`.shooting_intervals`; the starts and their Jacobians:
+:mod:`.shooting_starts`). The NLP solver gets the Gauss-Newton Hessian J_r^T J_r (r the residue,
+exact first derivatives), the gradient and the constraint Jacobian assembled from the mapped
+interval blocks (:mod:`.shooting_solver`), so the compiled NLP's code does not grow with the
+number of intervals or the horizon: twobar's multiple shooting over 0.69 s (34 intervals) is a
+51k-line C file, built in 4 s in a first process (gcc 3.3 s), where CasADi differentiating the
+whole NLP made 709k lines and 146 s. For Eq. 17, Gauss-Newton steps on the single-shooting
+problem polish p after the solver and the standard errors come from the same Jacobian.
+
+:func:`identify_nlp` runs in stages: the checks and the set-up (:func:`_set_up`: grid, compared
+quantities, integrator, starting simulation), the interval starts (:func:`_interval_starts`), the
+transcription and its solver (:func:`_transcribe`), the solve and polish (:func:`_solve`), and the
+statistics and result (:func:`_result`).
 """
+
 
 from __future__ import annotations
 
 import time
 import warnings
 from collections.abc import Sequence
-from typing import Unpack
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Unpack
 
 import casadi as ca
 import numpy as np
@@ -63,15 +77,20 @@ from casflex.identification import problem as pb
 from casflex.identification.choices import RESIDUES, TRANSCRIPTIONS  # noqa: F401 (re-exported)
 from casflex.identification.measurement import Experiment
 from casflex.identification.problem import IdentificationResult, NLPKeywords
+from casflex.identification.shooting_intervals import SingleShooting, StepData, Transcription
+from casflex.identification.shooting_solver import gauss_newton_nlpsol
+from casflex.identification.shooting_starts import SlowStart, data_states
 from casflex.model import Model
+
+if TYPE_CHECKING:
+    from casflex.integrators.hht import HHT
 
 __all__ = ["identify_nlp", "RESIDUES", "TRANSCRIPTIONS"]
 
 
-
 def _grid(data: MeasurementSet, horizon: float, dt: float) -> tuple[float, int, np.ndarray]:
-    """HHT step h, number of steps N, and the data row of each step 1..N from the first sample
-    (-1: no sample)."""
+    """HHT step h (s), number of steps N, and the data row of each step 1..N from the first sample
+    (-1: no sample), shape (N,)."""
     if data.t.size < 2:
         raise ValueError("data: the indirect method needs a time series (at least 2 samples)")
     h = float(dt)
@@ -96,7 +115,7 @@ def _grid(data: MeasurementSet, horizon: float, dt: float) -> tuple[float, int, 
 
 
 def _intervals(N: int, interval: int | None, transcription: str) -> list[int]:
-    """Step counts of the shooting intervals (as equal as possible)."""
+    """Step counts of the shooting intervals (as equal as possible; the longer ones first)."""
     if transcription == "single-shooting":
         return [N]
     K = 20 if interval is None else interval
@@ -124,68 +143,221 @@ def _channel_kinematics(model: Model, names: list[str], orders: int) -> ca.Funct
     return ca.Function("channels", [q, qd, qdd], out[:orders])
 
 
-def _data_states(model: Model, data: MeasurementSet, names: list[str], times: list[float]
-                 ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(q, qd) at each of ``times`` (s) from the recording: the kinematic fits at the samples
-    (:func:`.initial_state.kinematic_fits`), a quadratic in time through the 5 nearest."""
-    from casflex.identification.initial_state import kinematic_fits
-
-    if not times:
-        return []
-    tk, Q = kinematic_fits(model, data, names)
-    out = []
-    for t in times:
-        near = np.sort(np.argsort(np.abs(tk - t))[:5])
-        deg = min(2, near.size - 1)
-        c = np.polynomial.polynomial.polyfit(tk[near] - t, Q[near], deg)
-        out.append((c[0], c[1] if deg >= 1 else np.zeros(model.n_dof)))
-    return out
+def _state_channels(model: Model, nx: int, names: list[str], orders: int) -> ca.Function:
+    """``channels_of_state(x) -> (y, dy/dx)``: the compared quantities (n_o = len(names) orders,) of
+    an HHT state x = [q, qd, qdd, lam] (positions, then velocities, then accelerations) and their
+    Jacobian (n_o, nx)."""
+    n = model.n_dof
+    x = ca.SX.sym("x", nx)
+    y = ca.vertcat(*_channel_kinematics(model, names, orders).call([x[:n], x[n:2 * n], x[2 * n:3 * n]]))
+    return ca.Function("channels_of_state", [x], [y, ca.jacobian(y, x)], ["x"], ["y", "dy_dx"])
 
 
-class _SlowStart:
-    """The start of a multiple-shooting interval on the slow manifold (module docstring).
+def _step_data(model: Model, data: MeasurementSet, names: list[str], rows: np.ndarray, weights: Sequence[float],
+               residue: str, T: float) -> StepData:
+    """The measured quantities and weights per step (:class:`.shooting_intervals.StepData`): each
+    residue dimensionless, a length by the scene's length scale l (rotations by 1 rad), a velocity
+    by l / T, an acceleration by l / T^2 (T: the horizon, s), times sqrt of its weight."""
+    steps = np.flatnonzero(rows >= 0)
+    dcols = [data.channels.index(c) for c in names]
+    sq = np.sqrt(np.asarray(weights, dtype=float))
+    inv_l = 1.0 / np.array([1.0 if c in model.dof_names and model.is_rotation[model.dof(c)] else model.length_scale
+                            for c in names])
+    blocks = [(sq[0] * inv_l, data.q)]
+    if residue == "full":
+        blocks += [(sq[1] * T * inv_l, data.qd), (sq[2] * T**2 * inv_l, data.qdd)]
+    nch, N = len(names), rows.size
+    Y, W = np.zeros((nch * len(blocks), N)), np.zeros((nch * len(blocks), N))
+    for b, (wgt, values) in enumerate(blocks):
+        Y[b * nch:(b + 1) * nch, steps] = values[np.ix_(rows[steps], dcols)].T
+        W[b * nch:(b + 1) * nch, steps] = wgt[:, None]
+    order = np.array([(b * nch + c, k) for b in range(len(blocks)) for k in steps for c in range(nch)])
+    return StepData(Y, W, order)
 
-    At the recording's state (q_g, qd_g) there (:func:`_data_states`), relaxed onto the slow
-    manifold (its fast components quasi-static), the modes below ``omega_cut`` (rad/s) are the
-    slow ones (:func:`.initial_state.slow_projection`). The unknowns
-    are their amplitudes a and rates v, scaled: xi = (a / s_a, v / s_v), s_a the modal size of one length scale per dof,
-    s_v = s_a / T. The state is the slow manifold's point (q, qd)(a, v; p), its accelerations and
-    multipliers consistent (Eq. 1). The fast components take their quasi-static values.
-    """
 
-    def __init__(self, model: Model, integ, q_g: np.ndarray, qd_g: np.ndarray, t: float, p0: np.ndarray,
-                 omega_cut: float, ell: np.ndarray, T: float, in_c: bool) -> None:
-        from casflex.identification.initial_state import free_dofs, relaxed_projection, slow_manifold
+@dataclass
+class _SetUp:
+    """What the stages share: the step h (s), the number of steps N, the first sample t0 (s), the
+    horizon T (s), the compared channels, the per-step data, the integrator and its Newton scaling
+    d and accepted residual tol_acc, the parameters' map and start p0, the samples' Nyquist
+    omega_cut (rad/s) and the length per dof ell."""
 
-        self.free = free_dofs(model)
-        # relaxed first: from a fit that stretches a bar by the noise, IPOPT stopped 'acceptable'
-        # with k3 55-92 % off (twobar, node 3 and two markers)
-        q_g, self.B, self.C, self.d = relaxed_projection(model, q_g, p0, omega_cut)
-        self.model, self.integ, self.q_g, self.t = model, integ, q_g, t
-        self.k = self.B.shape[1]
-        self.fn = slow_manifold(model, self.k, codegen=in_c)[0]  # in_c: the NLP is compiled to C
-        s_a = np.abs(self.C) @ ell[self.free]
-        self.s_a = np.where(s_a > 0, s_a, 1.0)
-        self.s_v = self.s_a / T
-        self.xi0 = np.concatenate([np.zeros(self.k), self.C @ qd_g[self.free] / self.s_v])
+    model: Model
+    data: MeasurementSet
+    h: float
+    N: int
+    t0: float
+    T: float
+    names: list[str]
+    step_data: StepData
+    integ: HHT
+    d: np.ndarray
+    tol_acc: float
+    pmap: pb.ParameterMap
+    p0: np.ndarray
+    omega_cut: float
+    ell: np.ndarray
+    channels: ca.Function
+    samples: int
 
-    @property
-    def size(self) -> int:
-        return 2 * self.k
 
-    def state(self, xi: ca.MX, p: ca.MX) -> ca.MX:
-        """The HHT state [q, qd, qdd, lambda] at the start of the interval."""
-        a, v = xi[:self.k] * ca.DM(self.s_a), xi[self.k:] * ca.DM(self.s_v)
-        q, qd = self.fn(a, v, self.q_g, self.C, self.B, p, self.d)
-        qdd, lam = self.integ.initial(q, qd, self.t, p)
-        return ca.vertcat(q, qd, qdd, lam)
+def _check_arguments(model: Model, data: MeasurementSet, transcription: str, residue: str,
+                     weights: Sequence[float], initial_state: str, opts: pb.NLPOptions) -> None:
+    """ValueError for an option out of its choices, before any work."""
+    opts.nlp_solver("the NLP transcription")
+    if transcription not in TRANSCRIPTIONS:
+        raise ValueError(f"transcription: expected one of {TRANSCRIPTIONS}, got {transcription!r}")
+    if residue not in RESIDUES:
+        raise ValueError(f"residue: expected one of {RESIDUES}, got {residue!r}")
+    if model.n_p == 0:
+        raise ValueError("the scene declares no parameters to identify ([[parameters]] in the scene file)")
+    if len(weights) != 3 or not all(np.isfinite(w) and w >= 0 for w in weights):
+        raise ValueError(f"weights: expected three numbers >= 0 (xi, psi, phi), got {weights!r}")
+    if initial_state not in ("scene", "estimate"):
+        raise ValueError(f"initial_state: expected 'scene' or 'estimate' for the NLP transcription, got "
+                         f"{initial_state!r}")
+    if initial_state == "estimate" and residue != "positions":
+        raise ValueError("initial_state 'estimate': with residue 'positions' (Eq. 16) only")
+    if residue == "full" and (data.qd is None or data.qdd is None):
+        raise ValueError("residue 'full' (Eq. 17) needs velocities and accelerations in the data")
+    if transcription == "multiple-shooting" and residue == "full":
+        warnings.warn("multiple shooting with residue 'full' (Eq. 17) is slow: on twobar 45 s for 0.69 s of data, "
+                      "not done in 200 s for 3 s (docs/identification.md, Known limits); single shooting is "
+                      "recommended for Eq. 17", stacklevel=3)
 
-    def defect(self, x_end: ca.MX, xi: ca.MX) -> ca.MX:
-        """The previous interval's end projected on the slow modes, minus this start's (a, v), scaled."""
-        n = self.model.n_dof
-        a = ca.mtimes(ca.DM(self.C), x_end[self.free.tolist()] - ca.DM(self.q_g[self.free])) / ca.DM(self.s_a)
-        v = ca.mtimes(ca.DM(self.C), x_end[(n + self.free).tolist()]) / ca.DM(self.s_v)
-        return ca.vertcat(a - xi[:self.k], v - xi[self.k:])
+
+def _set_up(model: Model, data: MeasurementSet, horizon: float, dofs: Sequence[str] | None,
+            weights: Sequence[float], residue: str, alpha: float, dt: float, start: Any, newton_tol: float,
+            opts: pb.NLPOptions) -> _SetUp:
+    """The grid, compared channels and per-step data, the integrator, and a simulation at the start
+    (its states' magnitudes set the accepted Newton residual)."""
+    from casflex.simulate import integrator_for, simulate
+
+    h, N, rows = _grid(data, horizon, dt)
+    if not (rows >= 0).any():
+        raise ValueError(f"data: no sample lies on the step grid k * {h:g} s within the horizon")
+    # the compared channels, nodes' dofs and markers' coordinates, checked against model and data
+    names = list(Experiment(data, channels=None if dofs is None else tuple(dofs)).compared(model))
+    integ = integrator_for(model, alpha=alpha, tol=newton_tol)
+    pmap = pb.ParameterMap.of(model, opts.transform)
+    pb.require_fixed_supports(model, "the NLP transcription (solver other than gauss-newton)")
+    p0 = pb.start_values(model, start)
+    T, t0 = N * h, float(data.t[0])
+    guess = simulate(model, T, dt=h, alpha=alpha, p=p0, tol=newton_tol, t0=t0, raise_on_failure=False)
+    # a step converged when its residual is within newton_tol, or the round-off floor of the
+    # scene's coordinates where that is higher (see HHT.tolerance)
+    tol_acc = float(np.max(integ.tolerance(guess.q)))
+    return _SetUp(model=model, data=data, h=h, N=N, t0=t0, T=T, names=names,
+                  step_data=_step_data(model, data, names, rows, weights, residue, T), integ=integ,
+                  d=np.array(integ.scale(model.q0, model.qd0, p0, h)).ravel(), tol_acc=tol_acc, pmap=pmap, p0=p0,
+                  omega_cut=float(np.pi / np.median(np.diff(data.t))),  # the samples' Nyquist: faster modes alias
+                  ell=np.where(model.is_rotation, 1.0, model.length_scale),
+                  channels=_state_channels(model, integ.nx, names, 3 if residue == "full" else 1),
+                  samples=int((rows >= 0).sum()))
+
+
+def _interval_starts(s: _SetUp, interval: int | None, transcription: str, initial_state: str
+                     ) -> tuple[list[int], list[SlowStart | None]]:
+    """The intervals' step counts and starts: the scene's state (None) or, for the first with an
+    estimated initial state and every later one, the slow manifold through the recording there."""
+    lengths = _intervals(s.N, interval, transcription)
+    first = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(int)
+    est = initial_state == "estimate"
+    # one pass of kinematic fits over the samples serves every start
+    times = [s.t0] * est + [s.t0 + first[j] * s.h for j in range(1, len(lengths))]
+    starts = [SlowStart(s.model, q_g, qd_g, t, s.p0, s.omega_cut, s.ell, s.T)
+              for (q_g, qd_g), t in zip(data_states(s.model, s.data, s.names, times), times, strict=True)]
+    return lengths, ([] if est else [None]) + starts
+
+
+@dataclass
+class _NLP:
+    """The transcription and its solver: ``solver`` (nlpsol), ``ss`` the single-shooting residue,
+    the start ``w0`` and bounds of the unknowns w = (theta, xi_0, ..., xi_(M-1)), ``n_u`` the
+    single-shooting unknowns' count (theta, xi_0)."""
+
+    tr: Transcription
+    solver: ca.Function
+    ss: SingleShooting
+    w0: np.ndarray
+    lbw: np.ndarray
+    ubw: np.ndarray
+    n_u: int
+
+
+def _transcribe(s: _SetUp, lengths: list[int], starts: list[SlowStart | None], opts: pb.NLPOptions) -> _NLP:
+    """The NLP on the interval Functions, its objective scaled to ~1 at the start (solver tolerances
+    then mean the same on any data), its solver (compiled if asked) and the single-shooting residue."""
+    tr = Transcription(s.model, s.integ, s.channels, s.step_data, lengths, s.h, s.t0, s.d, starts, s.pmap,
+                       bool(opts.compiled))  # compiled: the slow manifold's Newton solve then one C code takes
+    w0 = np.concatenate([s.pmap.theta(s.p0), *[x.xi0 for x in starts if x is not None]])
+    lb_th, ub_th = s.pmap.bounds()
+    n_xi = w0.size - s.model.n_p
+    lbw, ubw = np.concatenate([lb_th, np.full(n_xi, -np.inf)]), np.concatenate([ub_th, np.full(n_xi, np.inf)])
+    w = ca.MX.sym("w", tr.n_w)
+    r, g = tr.value(w)
+    r_start = np.array(ca.Function("residue", [w], [r])(w0)).ravel()
+    f_scale = 1.0 / max(float(r_start @ r_start), 1e-30) if float(r_start @ r_start) > 0 else 1.0
+    ss = tr.single_shooting()
+    # IPOPT's dual infeasibility has a floor of ~1e-8 of its start from the HHT Newton tolerance
+    # inside the model: it stops there and the Gauss-Newton polish finishes the job
+    if opts.hessian == "exact":
+        solver = opts.nlp("indirect", w, ca.vec(r), g, f_scale=f_scale, tol=1e-8)
+        ss = codegen.compiled(ss) if opts.compiled else ss
+    else:
+        nlp = {"x": w, "f": 0.5 * f_scale * ca.sumsqr(r), "g": g}
+        solver, extra = gauss_newton_nlpsol("indirect", opts.nlp_solver("indirect"), nlp,
+                                            lambda triu: tr.gauss_newton(f_scale, triu), compiled=bool(opts.compiled),
+                                            verbose=opts.verbose, solver_options=opts.solver_options, tol=1e-8,
+                                            extra=[ss])
+        ss = extra[ss.name()]
+    return _NLP(tr, solver, SingleShooting(ss, tr, s.tol_acc), w0, lbw, ubw, tr.n_u)
+
+
+def _solve(nlp: _NLP, polish: int) -> dict[str, Any]:
+    """The NLP solver from the start, then ``polish`` Gauss-Newton steps on single shooting: the
+    solver's answer ``w``, the polished single-shooting unknowns ``u``, the steps taken, the
+    solver's stats, the largest constraint violation and the times (s)."""
+    t_solve = time.perf_counter()
+    sol = nlp.solver(x0=nlp.w0, lbx=nlp.lbw, ubx=nlp.ubw, lbg=0.0, ubg=0.0)
+    solver_s = time.perf_counter() - t_solve
+    w = np.array(sol["x"]).ravel()
+    n = nlp.n_u
+    u, polished = pb.gauss_newton_polish(nlp.ss, w[:n], nlp.lbw[:n], nlp.ubw[:n], polish)
+    g = np.array(sol["g"]).ravel()
+    return {"w": w, "u": u, "polished": polished, "stats": nlp.solver.stats(), "solver_s": solver_s,
+            "solve_s": time.perf_counter() - t_solve,
+            "constraint_violation": float(np.abs(g).max()) if nlp.tr.M > 1 else 0.0}
+
+
+def _result(s: _SetUp, nlp: _NLP, out: dict[str, Any], build_s: float, record: dict[str, Any]
+            ) -> IdentificationResult:
+    """The identified parameters with the Gauss-Newton statistics of the single-shooting residue (as
+    computed, also where a step missed the Newton tolerance, then said in the message) and the
+    multipliers (joint reactions) over the window."""
+    model, pmap, n, n_p = s.model, s.pmap, s.model.n_dof, s.model.n_p
+    u = out["u"]
+    p_hat = pmap.p(u[:n_p])
+    z, J, X, newton_res = nlp.ss.evaluate(u)
+    stats = pb.gauss_newton_statistics(J, z, n_p, model.parameter_names, pmap.dp_dtheta(u[:n_p]), p_hat)
+    converged = bool(newton_res <= s.tol_acc and np.isfinite(X).all())
+    st, pn = out["stats"], model.parameter_names
+    message = "" if converged else (f"HHT Newton did not converge within the horizon at the identified parameters "
+                                    f"(largest scaled residual {newton_res:.3g} > tol {s.tol_acc:g})")
+    return IdentificationResult(
+        method="indirect", solver=record.pop("solver"), parameters=dict(zip(pn, p_hat.tolist(), strict=True)),
+        start=dict(zip(pn, s.p0.tolist(), strict=True)), success=bool(st.get("success", False)) and converged,
+        status=str(st.get("return_status", "unknown")), message=message, iterations=int(st.get("iter_count", -1)),
+        wall_build_s=build_s, wall_solve_s=out["solve_s"], objective=0.5 * float(z @ z),
+        std_errors=stats.pop("std_errors"), correlation=stats.pop("correlation"),
+        at_bound=pb.bound_flags(model, p_hat, pmap.scale), identifiability=stats,
+        instants=(s.t0 + s.h * np.arange(1, s.N + 1)).tolist(), multipliers=X[3 * n:, :].T.tolist(),
+        extra={**record, "steps": s.N, "dt": s.h, "intervals": nlp.tr.M,
+               "samples": s.samples,
+               "constraint_violation": out["constraint_violation"], "gauss_newton_polish": out["polished"],
+               "solver_s": out["solver_s"],
+               "solver_parameters": dict(zip(pn, pmap.p(out["w"][:n_p]).tolist(), strict=True))},
+    )
 
 
 def identify_nlp(
@@ -242,186 +414,21 @@ def identify_nlp(
         How the NLP is solved (:class:`.problem.NLPOptions`; here IPOPT, the Gauss-Newton Hessian,
         not compiled by default). ``hessian="exact"`` means second derivatives through every HHT
         Newton solve, several times slower.
+
+    Returns
+    -------
+    IdentificationResult
+        ``parameters`` after the polish, standard errors from the single-shooting Jacobian,
+        ``multipliers`` (N, n_con) after each step; ``extra`` holds the solver's own answer
+        (``solver_parameters``), the intervals, the largest constraint violation and the times.
     """
-    from casflex.simulate import integrator_for, simulate
-
     opts = pb.NLPOptions.of("identify_nlp", options)
-    opts.nlp_solver("the NLP transcription")
-    if transcription not in TRANSCRIPTIONS:
-        raise ValueError(f"transcription: expected one of {TRANSCRIPTIONS}, got {transcription!r}")
-    if residue not in RESIDUES:
-        raise ValueError(f"residue: expected one of {RESIDUES}, got {residue!r}")
-    if model.n_p == 0:
-        raise ValueError("the scene declares no parameters to identify ([[parameters]] in the scene file)")
-    if len(weights) != 3 or not all(np.isfinite(w) and w >= 0 for w in weights):
-        raise ValueError(f"weights: expected three numbers >= 0 (xi, psi, phi), got {weights!r}")
-    if initial_state not in ("scene", "estimate"):
-        raise ValueError(f"initial_state: expected 'scene' or 'estimate' for the NLP transcription, got "
-                         f"{initial_state!r}")
-    if initial_state == "estimate" and residue != "positions":
-        raise ValueError("initial_state 'estimate': with residue 'positions' (Eq. 16) only")
-    if residue == "full" and (data.qd is None or data.qdd is None):
-        raise ValueError("residue 'full' (Eq. 17) needs velocities and accelerations in the data")
-    if transcription == "multiple-shooting" and residue == "full":
-        warnings.warn("multiple shooting with residue 'full' (Eq. 17) is slow: on twobar 45 s for 0.69 s of data, "
-                      "not done in 200 s for 3 s (docs/identification.md, Known limits); single shooting is "
-                      "recommended for Eq. 17", stacklevel=2)
+    _check_arguments(model, data, transcription, residue, weights, initial_state, opts)
     t_build = time.perf_counter()
-    h, N, rows = _grid(data, horizon, dt)
-    steps = np.flatnonzero(rows >= 0)  # steps (0-based: state after step k+1) with a sample
-    if steps.size == 0:
-        raise ValueError(f"data: no sample lies on the step grid k * {h:g} s within the horizon")
-    # the compared channels, nodes' dofs and markers' coordinates, checked against model and data
-    names = list(Experiment(data, channels=None if dofs is None else tuple(dofs)).compared(model))
-    dcols = [data.channels.index(c) for c in names]
-    n, n_p = model.n_dof, model.n_p
-    integ = integrator_for(model, alpha=alpha, tol=newton_tol)
-    pmap = pb.ParameterMap.of(model, opts.transform)
-    scale = pmap.scale
-    pb.require_fixed_supports(model, "the NLP transcription (solver other than gauss-newton)")
-    p0 = pb.start_values(model, start)
-    ell = np.where(model.is_rotation, 1.0, model.length_scale)
-    T = N * h
-
-    # residue r(X): dimensionless, (n_samples * len(names) * (1 or 3),)
-    sq = np.sqrt(np.asarray(weights, dtype=float))
-    drows = rows[steps]
-    inv_l = 1.0 / np.array([1.0 if c in model.dof_names and model.is_rotation[model.dof(c)] else model.length_scale
-                            for c in names])
-    obs = [(sq[0], inv_l, data.q[np.ix_(drows, dcols)])]
-    if residue == "full":
-        obs += [(sq[1], T * inv_l, data.qd[np.ix_(drows, dcols)]),
-                (sq[2], T**2 * inv_l, data.qdd[np.ix_(drows, dcols)])]
-    channels = _channel_kinematics(model, names, len(obs)).map(steps.size)
-
-    def residue_of(X: ca.MX) -> ca.MX:
-        """X: (nx, N) states after steps 1..N."""
-        Xs = X[:, steps.tolist()]
-        sims = channels.call([Xs[:n, :], Xs[n:2 * n, :], Xs[2 * n:3 * n, :]])
-        return ca.vertcat(*[ca.vec(wgt * (sim - Y.T) * ca.repmat(ca.DM(inv_s), 1, steps.size))
-                            for sim, (wgt, inv_s, Y) in zip(sims, obs, strict=True)])
-
-    # typical magnitudes of the state components, from a simulation at the start
-    t0 = float(data.t[0])
-    guess = simulate(model, T, dt=h, alpha=alpha, p=p0, tol=newton_tol, t0=t0, raise_on_failure=False)
-    G = np.hstack([guess.q, guess.qd, guess.qdd, guess.lam])
-    if G.shape[0] < N + 1:  # the start diverged: hold its last state
-        G = np.vstack([G, np.repeat(G[-1:], N + 1 - G.shape[0], axis=0)])
-    omega_cut = float(np.pi / np.median(np.diff(data.t)))  # the samples' Nyquist: faster modes only alias
-    d = np.array(integ.scale(model.q0, model.qd0, p0, h)).ravel()
-    # a step converged when its residual is within newton_tol, or the round-off floor of the
-    # scene's coordinates where that is higher (see HHT.tolerance)
-    tol_acc = float(np.max(integ.tolerance(G[:, :n])))
-
-    th = ca.MX.sym("theta", n_p)
-    p = pmap.p(th)
-    lengths = _intervals(N, interval, transcription)
-    first = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(int).tolist()
-    M = len(lengths)
-    # the recording's states at the interval starts (and at t0 for an estimated initial state): one
-    # pass of kinematic fits over the samples serves them all
-    est = initial_state == "estimate"
-    in_c = bool(opts.compiled)  # the slow manifold's Newton solve then one C code generation takes
-    guesses = _data_states(model, data, names, [t0] * est + [t0 + first[j] * h for j in range(1, M)])
-    if est:  # the first state on the slow manifold through the first samples
-        q_g, qd_g = guesses.pop(0)
-        first_start = [_SlowStart(model, integ, q_g, qd_g, t0, p0, omega_cut, ell, T, in_c)]
-        xi_init = ca.MX.sym("xi_init", first_start[0].size)
-        x0 = first_start[0].state(xi_init, p)
-    else:
-        first_start, xi_init = [], ca.MX.sym("xi_init", 0)
-        qdd0, lam0 = integ.initial(model.q0, model.qd0, t0, p)
-        x0 = ca.vertcat(ca.DM(model.q0), ca.DM(model.qd0), qdd0, lam0)
-    u = ca.vertcat(th, xi_init)  # the single-shooting problem's unknowns
-    n_u = u.numel()
-
-    def simulate_from(nodes: list[ca.MX], lengths: list[int], first: list[int]) -> tuple[ca.MX, ca.MX]:
-        """States after every step (nx, N) and Newton residuals (1, N), intervals mapped by length."""
-        out_x, out_r = [None] * len(lengths), [None] * len(lengths)
-        for K in sorted(set(lengths)):
-            idx = [j for j, k in enumerate(lengths) if k == K]
-            F = integ.trajectory(K)
-            if len(idx) > 1:
-                F = F.map(len(idx), "serial")
-            Xk, Rk = F(ca.horzcat(*[nodes[j] for j in idx]), ca.DM([t0 + first[j] * h for j in idx]).T, p, h, d)
-            for i, j in enumerate(idx):
-                out_x[j] = Xk[:, i * K:(i + 1) * K]
-                out_r[j] = Rk[:, i * K:(i + 1) * K]
-        return ca.horzcat(*out_x), ca.horzcat(*out_r)
-
-    # the interval starts 1..M-1 on the slow manifold through the recording's states there
-    starts = [_SlowStart(model, integ, q_g, qd_g, t0 + first[j] * h, p0, omega_cut, ell, T, in_c)
-              for j, (q_g, qd_g) in enumerate(guesses, 1)]
-    xi = [ca.MX.sym(f"xi{j}", s.size) for j, s in enumerate(starts, 1)]  # scaled (a, v) of each start
-    nodes = [x0] + [s.state(x, p) for s, x in zip(starts, xi, strict=True)]
-    X, R = simulate_from(nodes, lengths, first)
-    r = residue_of(X)
-    ends = [X[:, first[j] + lengths[j] - 1] for j in range(M - 1)]
-    g = ca.vertcat(*[s.defect(e, x) for s, e, x in zip(starts, ends, xi, strict=True)]) if M > 1 else ca.MX(0, 1)
-    w = ca.vertcat(u, *xi)
-
-    w0 = np.concatenate([pmap.theta(p0), *[s.xi0 for s in first_start + starts]])
-    lb_th, ub_th = pmap.bounds()
-    n_xi = w0.size - n_p
-    lbw = np.concatenate([lb_th, np.full(n_xi, -np.inf)])
-    ubw = np.concatenate([ub_th, np.full(n_xi, np.inf)])
-
-    # the objective scaled to ~1 at the start: solver tolerances then mean the same on any data
-    fr = ca.Function("residue", [w], [r])
-    r_start = np.array(fr(w0)).ravel()
-    f_scale = 1.0 / max(float(r_start @ r_start), 1e-30) if float(r_start @ r_start) > 0 else 1.0
-    # IPOPT's dual infeasibility has a floor of ~1e-8 of its start from the HHT Newton tolerance
-    # inside the model: it stops there and the Gauss-Newton polish finishes the job
-    nlp = opts.nlp("indirect", w, r, g, f_scale=f_scale, tol=1e-8)
-    # single-shooting residue of p alone: polish and statistics
-    Xf, Rf = (X, R) if transcription == "single-shooting" else simulate_from([x0], [N], [0])
-    ss_r = residue_of(Xf)
-    # NaN where a step's Newton did not converge, so that the polish rejects such a step
-    ss_ok = ca.if_else(ca.mmax(Rf) <= tol_acc, ss_r, np.nan * ss_r)
-    ss_all = ca.Function("ss_residue", [u], [ss_ok, ca.jacobian(ss_r, u), ss_r])
-    ss_all = codegen.compiled(ss_all) if opts.compiled else ss_all
-
-    def ss(t: np.ndarray) -> list:
-        return ss_all(t)[:2]
-
+    s = _set_up(model, data, horizon, dofs, weights, residue, alpha, dt, start, newton_tol, opts)
+    nlp = _transcribe(s, *_interval_starts(s, interval, transcription, initial_state), opts)
     build_s = time.perf_counter() - t_build
-
-    t_solve = time.perf_counter()
-    sol = nlp(x0=w0, lbx=lbw, ubx=ubw, lbg=0.0, ubg=0.0)
-    solver_s = time.perf_counter() - t_solve
-    st = nlp.stats()
-    wv = np.array(sol["x"]).ravel()
-    u_v, polished = pb.gauss_newton_polish(ss, wv[:n_u], lbw[:n_u], ubw[:n_u], polish)
-    th_v = u_v[:n_p]
-    solve_s = time.perf_counter() - t_solve
-    p_hat = pmap.p(th_v)
-    # statistics from the residue as computed, also where a step missed the Newton tolerance
-    # (then reported in the message below) rather than from its NaN-guarded form
-    _, Jv, rv = (np.array(v) for v in ss_all(u_v))
-    stats = pb.gauss_newton_statistics(Jv, rv.ravel(), n_p, model.parameter_names, pmap.dp_dtheta(th_v), p_hat)
-
-    # states over the window at the identified parameters: multipliers (joint reactions)
-    xr = ca.Function("states", [u], [Xf, ca.mmax(Rf)])
-    Xv, newton_res = np.array(xr(u_v)[0]), float(xr(u_v)[1])
-    converged = bool(newton_res <= tol_acc and np.isfinite(Xv).all())
-    pn = model.parameter_names
-    success = bool(st.get("success", False)) and converged
-    message = "" if converged else (f"HHT Newton did not converge within the horizon at the identified parameters "
-                                    f"(largest scaled residual {newton_res:.3g} > tol {tol_acc:g})")
-    return IdentificationResult(
-        method="indirect", solver=opts.solver, parameters=dict(zip(pn, p_hat.tolist(), strict=True)),
-        start=dict(zip(pn, p0.tolist(), strict=True)), success=success,
-        status=str(st.get("return_status", "unknown")), message=message, iterations=int(st.get("iter_count", -1)),
-        wall_build_s=build_s, wall_solve_s=solve_s, objective=0.5 * float(rv.ravel() @ rv.ravel()),
-        std_errors=stats.pop("std_errors"), correlation=stats.pop("correlation"),
-        at_bound=pb.bound_flags(model, p_hat, scale), identifiability=stats,
-        instants=(t0 + h * np.arange(1, N + 1)).tolist(), multipliers=Xv[3 * n:, :].T.tolist(),
-        extra={**opts.record(),
-               "transcription": transcription, "residue": residue, "dofs": names,
-               "weights": list(weights), "initial_state": initial_state,
-               "steps": N, "dt": h, "intervals": M, "samples": int(steps.size),
-               "constraint_violation": float(np.abs(np.array(sol["g"])).max()) if M > 1 else 0.0,
-               "gauss_newton_polish": polished, "solver_s": solver_s,
-               "solver_parameters": dict(zip(pn, pmap.p(wv[:n_p]).tolist(), strict=True))},
-    )
-
+    out = _solve(nlp, polish)
+    record = {"solver": opts.solver, **opts.record(), "transcription": transcription, "residue": residue,
+              "dofs": s.names, "weights": list(weights), "initial_state": initial_state}
+    return _result(s, nlp, out, build_s, record)
