@@ -9,8 +9,10 @@
    linearly on the initial state and the parameters; over seconds a pendulum's does not, and a
    fit of the whole recording from a guessed initial state ends in a local minimum (twobar,
    0.5-2.5 s at 0.5 mm noise: 72 % fit without the stages; see the study realdata). The stages
-   before the last only bring a start: they take at most STAGE_RUNS model runs and hold what
-   their window cannot tell near the start (:class:`_Anchored`). Then, where an experiment's
+   before the last only bring a start: they stop within STAGE_SE of their own standard errors of
+   their least-squares solution, take at most STAGE_RUNS model runs and hold what their window
+   cannot tell near the start (:class:`_Anchored`); every stage after the first starts with
+   Gauss-Newton steps from the last one's answer (``fit(near=True)``). Then, where an experiment's
    noise is not declared, each channel's noise is estimated by its residual RMS; when the channels
    (in the fit's weights) differ by more than REWEIGHT, the fit is repeated from its answer with
    each channel weighted by its own noise (feasible weighted least squares), and every later step

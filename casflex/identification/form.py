@@ -58,8 +58,12 @@ __all__ = ["FORMS", "DECISIVE", "Alternative", "declared_alternatives", "alterna
 
 #: AIC units: a model this far behind has essentially no support (Burnham and Anderson 2002, Sec. 2.6)
 DECISIVE = 10.0
-#: model runs an alternative's refit may take (it starts at the fit's answer; twobar's beam theory: 6-12)
+#: model runs an alternative's refit may take (it starts at the fit's answer; twobar's beam theory: 2-4)
 REFIT_RUNS = 30
+#: An alternative's refit stops once it is within REJECT_SE standard errors of its solution and behind by
+#: more than REJECT_AIC even after the fall its Gauss-Newton step promises: an Akaike weight below
+#: exp(-20), whose sqrt (4.5e-5) leaves nothing of a move of even 1000 SE in the model-form part.
+REJECT_SE, REJECT_AIC = 2.0, 40.0
 
 
 @dataclass(frozen=True)
@@ -189,13 +193,21 @@ def _refit(alt_model: Model, problem: OutputError, first: Fit, p_hat: dict[str, 
     prob = OutputError(alt_model, problem.experiments, dt=problem.dt, alpha=setup["alpha"], pmap=pmap,
                        compiled=problem.compiled, newton_tol=setup["newton_tol"],
                        initial=initial_states(alt_model, problem.experiments, p0, states))
-    return prob, fit(prob, prob.pack(pmap.theta(p0)), budget, verbose=verbose, near=True)
+
+    def rejected(r: np.ndarray, offset: float) -> bool:
+        """Ruled out for good (REJECT_SE, REJECT_AIC): at its solution chi^2 is lower by about offset^2,
+        allowed four times over."""
+        return offset <= REJECT_SE and delta_aic((problem, first.r), (prob, r))[0] - 4 * offset**2 > REJECT_AIC
+
+    return prob, fit(prob, prob.pack(pmap.theta(p0)), budget, verbose=verbose, near=True, enough=rejected)
 
 
 def compare_forms(problem: OutputError, first: Fit, alternatives: list[tuple[Alternative, Model]], *, setup: dict,
                   budget: Budget, verbose: bool = False) -> list[dict]:
     """Refit every alternative and compare it with the fit (module docstring): one record each, with
-    ``name``, ``verdict``, ``delta_aic``, ``kappa``, ``parameters`` and ``moves`` {name: p_alt - p}."""
+    ``name``, ``verdict``, ``delta_aic``, ``kappa``, ``parameters``, ``moves`` {name: p_alt - p}, ``runs``
+    and ``offset_se``, the refit's distance to its own solution in standard errors (up to REJECT_SE for
+    an alternative ruled out for good)."""
     model, t0 = problem.model, time.perf_counter()
     p_hat = dict(zip(model.parameter_names, problem.pmap.p(first.w[:model.n_p]).tolist(), strict=True))
     records = []
@@ -210,7 +222,7 @@ def compare_forms(problem: OutputError, first: Fit, alternatives: list[tuple[Alt
             continue
         p_alt = dict(zip(alt_model.parameter_names, prob.pmap.p(f.w[:alt_model.n_p]).tolist(), strict=True))
         d, kappa = delta_aic((problem, first.r), (prob, f.r))
-        rec |= {"delta_aic": d, "kappa": kappa, "parameters": p_alt, "runs": f.iterations,
+        rec |= {"delta_aic": d, "kappa": kappa, "parameters": p_alt, "runs": f.iterations, "offset_se": f.offset,
                 "moves": {n: p_alt[n] - v for n, v in p_hat.items()}}
         if d > DECISIVE:
             rec["verdict"] = "rejected"

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import time
 import weakref
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import casadi as ca
@@ -319,12 +319,13 @@ _STATUS = {-1: "improper_input", 0: "iteration_limit", 1: "gradient_tolerance", 
 
 
 def fit(problem: OutputError, w0: np.ndarray, budget: Budget, *, verbose: bool = False, near: bool = False,
-        tol_se: float | None = None) -> Fit:
+        tol_se: float | None = None, enough: Callable[[np.ndarray, float], bool] | None = None) -> Fit:
     """Minimise 1/2 |r(w)|^2 from w0 within ``budget`` (trust-region reflective Gauss-Newton).
 
     ``tol_se``: stop at the first model run within that many standard errors of the least-squares
     solution (:func:`offset_in_se`), as converged (status "within_se"): for a fit whose answer is only
     a start, such as a growing horizon's early stage. Default: to OFFSET_TOL and scipy's tolerances.
+    ``enough(r, offset)``: a further test of that kind, on the residuals and offset of each model run.
 
     ``near``: w0 is another fit's answer to a nearby problem (a refined model, other weights, another
     form): Gauss-Newton steps from it first (:func:`_polish`, one model run a step when the full step
@@ -350,9 +351,9 @@ def fit(problem: OutputError, w0: np.ndarray, budget: Budget, *, verbose: bool =
         if cost < best["cost"]:
             best.update(cost=cost, w=w.copy())
         bound = _on_bound(w, lb, ub)
-        if tol_se is not None and not np.any(bound & ~start_bound):  # a bound run onto: the trust region decides
+        if (tol_se, enough) != (None, None) and not np.any(bound & ~start_bound):  # a bound run onto: go on
             offset = offset_in_se(r, J, np.flatnonzero(~bound))[0]
-            if offset <= tol_se:
+            if (tol_se is not None and offset <= tol_se) or (enough is not None and enough(r, offset)):
                 raise _CloseEnough(w.copy(), offset)
         return r, J
 

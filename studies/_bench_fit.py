@@ -1,0 +1,202 @@
+"""Identification against simulation, measured side by side in one process (bench_identification's second part).
+
+Every operation is timed in one warm process (compiled code on disk, in-process caches filled by a first
+call), best of ``REPEAT`` calls, interleaved so that a drifting host slows all alike; a fit's cost is also
+given in simulations of the same scene over the same span (its wall time over the simulation's). Instruction
+counts come from valgrind's callgrind: a process that does the set-up and the operation once, and one that
+does it twice; their difference is one operation's instructions, whatever the host's load.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from _shared import exudyn_recording
+
+REPEAT = 5
+NOISE, SEED, START, SPAN, DT = 5e-4, 0, 0.8, 3.0, 1e-3
+MARKERS = {"twobar": ("x3", "y3", "x5", "y5"), "threelink": ("x3", "y3", "x5", "y5", "x7", "y7")}
+#: name: (scene, elements per bar or None, identify_indirect options or None for a simulation)
+OPS = {
+    "simulation, 3 s": ("twobar", None, None),
+    "model run with sensitivities (4 directions), 3 s": ("twobar", None, "sensitivities"),
+    "default fit": ("twobar", None, {}),
+    "without model-error refit": ("twobar", None, {"model_error": "none"}),
+    "without model-error refit or form comparison": ("twobar", None, {"model_error": "none", "form": "none"}),
+}
+#: the reference for the estimates: every stage of the growing horizon to the full tolerance (the way before)
+REFERENCE = {"model_error": "none", "form": "none"}
+MESH = (1, 2, 4, 8)
+CALLGRIND = ("simulation, 3 s", "model run with sensitivities (4 directions), 3 s", "default fit",
+             "without model-error refit or form comparison")
+
+
+def _model(scene: str, elements: int | None):
+    import dataclasses
+
+    import casflex
+
+    sc = casflex.load_scene(scene)
+    if elements is not None:
+        sc = dataclasses.replace(sc, beams=tuple(dataclasses.replace(b, elements=elements) for b in sc.beams))
+    return casflex.assemble(sc)
+
+
+def _leg_data():
+    import leg
+
+    from casflex.data import MeasurementSet
+
+    t, q, _ = leg._truth(2.2)
+    return MeasurementSet(t, tuple(f"{c}{m}" for m in leg.MARKERS for c in "xy"),
+                          q + np.random.default_rng(SEED).normal(0, leg.NOISE, q.shape), None, None)
+
+
+def operation(scene: str, elements: int | None, what):
+    """A zero-argument callable doing the operation once, and the scene's 3 s simulation as another."""
+    from casflex.identification import identify_indirect
+    from casflex.identification.sensitivity import run_sensitivities
+    from casflex.simulate import initial_state, integrator_for, simulate
+
+    model = _model(scene, elements)
+    span = 2.2 if scene == "leg" else SPAN
+
+    def sim():
+        return simulate(model, span, dt=DT, compiled=True)
+
+    if what is None:
+        return sim, sim
+    if what == "sensitivities":
+        integ = integrator_for(model, alpha=model.scene.run.alpha)
+        x0, n = initial_state(integ, model.p_nominal), int(round(span / DT))
+        seed = (np.zeros((integ.nx, model.n_p)), np.eye(model.n_p))
+        return (lambda: run_sensitivities(integ, x0, model.p_nominal, 0.0, DT, n, np.arange(0, n + 1, 10),
+                                          seed=seed)), sim
+    data = (_leg_data() if scene == "leg"
+            else exudyn_recording(f"{scene}_exudyn", MARKERS[scene], 0.0, span, NOISE, SEED))
+    kw = {"start": 0.7} if scene == "leg" else {"start": START, "noise": NOISE}
+    return (lambda: identify_indirect(model, data, dt=DT, **kw, **what)), sim
+
+
+def best(fns: dict, repeat: int = REPEAT) -> dict:
+    """{name: (best wall s, last result)} of zero-argument callables, each called once to warm up, then
+    ``repeat`` times in turn."""
+    import time
+
+    out = {k: (np.inf, f()) for k, f in fns.items()}
+    for _ in range(repeat):
+        for k, f in fns.items():
+            t0 = time.perf_counter()
+            res = f()
+            out[k] = (min(out[k][0], time.perf_counter() - t0), res)
+    return out
+
+
+def _fit_record(r, wall: float, sim: float) -> dict:
+    names = list(r.parameters)
+    return {"wall_s": wall, "sims": wall / sim, "runs": int(r.iterations), "success": bool(r.success),
+            "p": [r.parameters[k] for k in names], "se": [r.std_errors[k] for k in names],
+            "se_noise": [r.extra["uncertainty"]["noise"][k] for k in names], "names": names}
+
+
+def twobar_side_by_side() -> dict:
+    """The twobar operations of OPS and the reference fit, in one process."""
+    import casflex.identification.estimate as est
+
+    ops = {k: operation(*v)[0] for k, v in OPS.items()}
+    res = best(ops)
+    sim = res["simulation, 3 s"][0]
+    out = {"simulation_s": sim}
+    for k, (wall, r) in res.items():
+        out[k] = {"wall_s": wall, "sims": wall / sim} if not hasattr(r, "parameters") else _fit_record(r, wall, sim)
+    saved = est.STAGE_SE
+    est.STAGE_SE = None  # every stage to the full tolerance
+    try:
+        wall, r = best({"ref": operation("twobar", None, REFERENCE)[0]}, 1)["ref"]
+    finally:
+        est.STAGE_SE = saved
+    out["reference"] = _fit_record(r, wall, sim)
+    return out
+
+
+def mesh_rows() -> list[dict]:
+    """Simulation, a model run with sensitivities and the fit without refit at MESH elements per bar."""
+    rows = []
+    for ne in MESH:
+        fit, sim = operation("twobar", ne, {"model_error": "none"})
+        sens, _ = operation("twobar", ne, "sensitivities")
+        res = best({"sim": sim, "sens": sens, "fit": fit}, 3)
+        s = res["sim"][0]
+        rows.append({"elements": ne, "sim_s": s, "sens_s": res["sens"][0], "sens_sims": res["sens"][0] / s,
+                     **{f"fit_{k}": v for k, v in _fit_record(res["fit"][1], res["fit"][0], s).items()}})
+    return rows
+
+
+def scene_rows() -> list[dict]:
+    """The default fit of threelink (Exudyn's recording, 3 s) and of the leg (its study's 2.2 s, seed 0)."""
+    rows = []
+    for scene in ("twobar", "threelink", "leg"):
+        fit, sim = operation(scene, None, {})
+        res = best({"sim": sim, "fit": fit}, 2)
+        rows.append({"scene": scene, "sim_s": res["sim"][0],
+                     **_fit_record(res["fit"][1], res["fit"][0], res["sim"][0])})
+    return rows
+
+
+def instructions(script: str, case: str) -> float | None:
+    """Instructions of one ``case`` (OPS) by callgrind: a process doing it once minus one doing it twice, both
+    after the same set-up and warm-up call; None without valgrind."""
+    if shutil.which("valgrind") is None:
+        return None
+    counts = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for k in (1, 2):
+            out = Path(tmp) / f"cg{k}"
+            env = dict(os.environ, PYTHONHASHSEED="0")
+            subprocess.run(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}", sys.executable, script,
+                            "--count", case, str(k)], env=env, check=True, capture_output=True, timeout=3600)
+            summary = next(ln for ln in out.read_text().splitlines() if ln.startswith(("summary:", "totals:")))
+            counts.append(int(summary.split()[1]))
+    return float(counts[1] - counts[0])
+
+
+def count_worker(case: str, k: int) -> None:
+    """The callgrind worker: set-up, one warm-up call, then ``k`` calls."""
+    fn, _ = operation(*OPS[case])
+    fn()
+    for _ in range(k):
+        fn()
+
+
+def expand_rows() -> list[dict]:
+    """Per simulated step (us) and build (s) of 250 compiled steps, flat SX code against the mapped kernels' MX,
+    at 4 and 8 elements per bar: what the expand threshold (8 beam elements, ``HHT.expand``) trades."""
+    import time
+
+    from casflex.codegen import BufferedCall, compile_functions
+    from casflex.integrators.hht import HHT
+    from casflex.simulate import initial_state
+
+    rows = []
+    for ne in (4, 8):
+        model = _model("twobar", ne)
+        for flat in (True, False):
+            integ = HHT(model, alpha=model.scene.run.alpha, expand=flat)
+            x0, f = initial_state(integ, model.p_nominal), integ.trajectory(250)
+            t0 = time.perf_counter()
+            call = BufferedCall(compile_functions([f], stem="casflex_bench_expand")[f.name()])
+            build = time.perf_counter() - t0
+            n = model.n_dof
+            args = [x0, np.zeros(1), model.p_nominal.copy(), np.array([DT]),
+                    np.array(integ.scale(x0[:n], x0[n:2 * n], model.p_nominal, DT)).ravel()]
+            outs = [np.empty(integ.nx * 250), np.empty(250)]
+            wall, _ = best({"run": lambda call=call, args=args, outs=outs: call(args, outs)}, 20)["run"]
+            rows.append({"elements": ne, "code": "flat SX" if flat else "mapped kernels (MX)",
+                         "step_us": 1e6 * wall / 250, "build_s": build})
+    return rows
