@@ -4,7 +4,7 @@ Every operation is timed in one warm process (compiled code on disk, in-process 
 call), best of ``REPEAT`` calls, interleaved so that a drifting host slows all alike; a fit's cost is also
 given in simulations of the same scene over the same span (its wall time over the simulation's). Instruction
 counts come from valgrind's callgrind: a process that does the set-up and the operation once, and one that
-does it twice; their difference is one operation's instructions, whatever the host's load.
+does it 1 + CALLS times; their difference over CALLS is one operation's instructions, whatever the host's load.
 """
 
 from __future__ import annotations
@@ -33,8 +33,7 @@ OPS = {
 #: the reference for the estimates: every stage of the growing horizon to the full tolerance (the way before)
 REFERENCE = {"model_error": "none", "form": "none"}
 MESH = (1, 2, 4, 8)
-CALLGRIND = ("simulation, 3 s", "model run with sensitivities (4 directions), 3 s", "default fit",
-             "without model-error refit or form comparison")
+CALLGRIND = tuple(OPS)
 
 
 def _model(scene: str, elements: int | None):
@@ -149,21 +148,26 @@ def scene_rows() -> list[dict]:
     return rows
 
 
+#: calls in callgrind's second process beyond its first's: processes differ by some 1e7 instructions
+#: (allocation, collection), a 3 s simulation takes 5e7
+CALLS = 10
+
+
 def instructions(script: str, case: str) -> float | None:
-    """Instructions of one ``case`` (OPS) by callgrind: a process doing it once minus one doing it twice, both
-    after the same set-up and warm-up call; None without valgrind."""
+    """Instructions of one ``case`` (OPS) by callgrind: (a process doing it 1 + CALLS times minus one doing it
+    once) / CALLS, both after the same set-up and warm-up call; None without valgrind."""
     if shutil.which("valgrind") is None:
         return None
     counts = []
     with tempfile.TemporaryDirectory() as tmp:
-        for k in (1, 2):
+        for k in (1, 1 + CALLS):
             out = Path(tmp) / f"cg{k}"
             env = dict(os.environ, PYTHONHASHSEED="0")
             subprocess.run(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}", sys.executable, script,
                             "--count", case, str(k)], env=env, check=True, capture_output=True, timeout=3600)
             summary = next(ln for ln in out.read_text().splitlines() if ln.startswith(("summary:", "totals:")))
             counts.append(int(summary.split()[1]))
-    return float(counts[1] - counts[0])
+    return (counts[1] - counts[0]) / CALLS
 
 
 def count_worker(case: str, k: int) -> None:
@@ -189,9 +193,14 @@ def expand_rows() -> list[dict]:
         for flat in (True, False):
             integ = HHT(model, alpha=model.scene.run.alpha, expand=flat)
             x0, f = initial_state(integ, model.p_nominal), integ.trajectory(250)
-            t0 = time.perf_counter()
-            call = BufferedCall(compile_functions([f], stem="casflex_bench_expand")[f.name()])
-            build = time.perf_counter() - t0
+            with tempfile.TemporaryDirectory() as cache:  # a build, not a load from the cache
+                saved, os.environ["CASFLEX_CACHE"] = os.environ.get("CASFLEX_CACHE"), cache
+                try:
+                    t0 = time.perf_counter()
+                    call = BufferedCall(compile_functions([f], stem="casflex_bench_expand")[f.name()])
+                    build = time.perf_counter() - t0
+                finally:
+                    os.environ.pop("CASFLEX_CACHE") if saved is None else os.environ.update(CASFLEX_CACHE=saved)
             n = model.n_dof
             args = [x0, np.zeros(1), model.p_nominal.copy(), np.array([DT]),
                     np.array(integ.scale(x0[:n], x0[n:2 * n], model.p_nominal, DT)).ravel()]

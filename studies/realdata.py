@@ -21,7 +21,7 @@ SCENES = {  # markers for the indirect method, windows (start, end, initial stat
     "threelink": {"markers": ("x3", "y3", "x5", "y5", "x7", "y7"), "rest": (0.0, 3.0, "scene"),
                   "mid": (1.0, 3.0, "estimate")},
 }
-MS_WALL = 300.0  # s: twobar converges within half of it; threelink cycles until it (Known limits)
+MS_WALL = 300.0  # s: twobar converges in 40 s; threelink in 190-280 s, or not before it (Known limits)
 #: (method, window) of the full runs; multiple shooting on threelink with one seed only (it takes its wall-time cap)
 METHODS = (("indirect", "rest"), ("indirect", "mid"), ("adapted", "rest"), ("direct", "rest"), ("indirect-ms", "rest"))
 

@@ -314,6 +314,45 @@ def _polish(evaluate, w: np.ndarray, lb: np.ndarray, ub: np.ndarray, runs_left: 
             return w, iters, offset, True
 
 
+class _Runs:
+    """The model runs of one :func:`fit`: ``self(w)`` is (r, J) at w, remembered for the next call at the
+    same point, with the best point so far (``best``), the time budget (:class:`_OverBudget`) and the early
+    stops ``tol_se`` and ``enough`` (:class:`_CloseEnough`, not where a bound was run onto: there the trust
+    region decides)."""
+
+    def __init__(self, problem: OutputError, budget: Budget, lb: np.ndarray, ub: np.ndarray, start_bound: np.ndarray,
+                 tol_se: float | None, enough: Callable[[np.ndarray, float], bool] | None) -> None:
+        self.problem, self.budget, self.lb, self.ub, self.start_bound = problem, budget, lb, ub, start_bound
+        self.tol_se, self.enough = tol_se, enough
+        self.t0, self.runs0 = time.perf_counter(), problem.evaluations
+        self.memo: dict[str, object] = {}
+        self.best = {"cost": np.inf, "w": None}
+
+    def __call__(self, w: np.ndarray, limited: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        memo = self.memo
+        if memo.get("w") is not None and np.array_equal(memo["w"], w):
+            return memo["r"], memo["J"]
+        if limited and time.perf_counter() - self.t0 > self.budget.max_time:
+            raise _OverBudget
+        interrupt.check()
+        r, J = self.problem.evaluate(w)
+        memo.update(w=w.copy(), r=r, J=J)
+        if (cost := 0.5 * float(r @ r)) < self.best["cost"]:
+            self.best.update(cost=cost, w=w.copy())
+        bound = _on_bound(w, self.lb, self.ub)
+        if (self.tol_se, self.enough) != (None, None) and not np.any(bound & ~self.start_bound):
+            offset = offset_in_se(r, J, np.flatnonzero(~bound))[0]
+            if (self.tol_se is not None and offset <= self.tol_se) or (self.enough is not None
+                                                                          and self.enough(r, offset)):
+                raise _CloseEnough(w.copy(), offset)
+        return r, J
+
+    def close_fit(self, close: _CloseEnough) -> Fit:
+        """The fit that stopped early at ``close``."""
+        return Fit(close.w, self.memo["r"], self.memo["J"], "within_se", True, self.problem.evaluations - self.runs0,
+                   time.perf_counter() - self.t0, "", close.offset)
+
+
 _STATUS = {-1: "improper_input", 0: "iteration_limit", 1: "gradient_tolerance", 2: "cost_tolerance",
            3: "step_tolerance", 4: "cost_and_step_tolerance"}
 
@@ -332,35 +371,15 @@ def fit(problem: OutputError, w0: np.ndarray, budget: Budget, *, verbose: bool =
     descends), scipy's trust region from w0 where they do not reach the solution or run onto a bound.
     On twobar's model-error refit they took 2 model runs where the trust region took 7, to the same
     0.01 SE."""
-    t0, runs0 = time.perf_counter(), problem.evaluations
-    memo: dict[str, object] = {}
-    best = {"cost": np.inf, "w": np.array(w0, dtype=float)}
     lb, ub = problem.bounds()
     w_start = np.clip(np.asarray(w0, dtype=float), lb, ub)
-    start_bound = _on_bound(w_start, lb, ub)
-
-    def evaluate(w: np.ndarray, limited: bool = True) -> tuple[np.ndarray, np.ndarray]:
-        if memo.get("w") is not None and np.array_equal(memo["w"], w):
-            return memo["r"], memo["J"]
-        if limited and time.perf_counter() - t0 > budget.max_time:
-            raise _OverBudget
-        interrupt.check()
-        r, J = problem.evaluate(w)
-        memo.update(w=w.copy(), r=r, J=J)
-        cost = 0.5 * float(r @ r)
-        if cost < best["cost"]:
-            best.update(cost=cost, w=w.copy())
-        bound = _on_bound(w, lb, ub)
-        if (tol_se, enough) != (None, None) and not np.any(bound & ~start_bound):  # a bound run onto: go on
-            offset = offset_in_se(r, J, np.flatnonzero(~bound))[0]
-            if (tol_se is not None and offset <= tol_se) or (enough is not None and enough(r, offset)):
-                raise _CloseEnough(w.copy(), offset)
-        return r, J
-
+    evaluate = _Runs(problem, budget, lb, ub, _on_bound(w_start, lb, ub), tol_se, enough)
+    t0, best = evaluate.t0, evaluate.best
+    best["w"] = w_start
     try:
         r0, _ = evaluate(np.asarray(w0, dtype=float))
     except _CloseEnough as close:
-        return Fit(close.w, memo["r"], memo["J"], "within_se", True, 1, time.perf_counter() - t0, "", close.offset)
+        return evaluate.close_fit(close)
     except _Diverged as exc:
         raise StartDoesNotRun(f"the model does not run at the start: {exc}; try a start closer to the expected "
                               "parameters, a smaller dt or a more negative alpha") from None
@@ -380,7 +399,7 @@ def fit(problem: OutputError, w0: np.ndarray, budget: Budget, *, verbose: bool =
         if near:
             w, spent, offset, _ = _polish(evaluate, w_start, lb, ub, budget.max_iterations, 0)
             # a bound reached on the way is a clipped step's doing, not a minimum: the trust region decides
-            if offset <= OFFSET_TOL and not np.any(_on_bound(w, lb, ub) & ~start_bound):
+            if offset <= OFFSET_TOL and not np.any(_on_bound(w, lb, ub) & ~evaluate.start_bound):
                 r, J = evaluate(w, limited=False)
                 return Fit(w, r, J, "gauss_newton", True, spent, time.perf_counter() - t0, "", offset)
         # no gtol: scipy's gradient test is absolute, and a weakly felt parameter of a zero-residual
@@ -401,7 +420,6 @@ def fit(problem: OutputError, w0: np.ndarray, budget: Budget, *, verbose: bool =
         w, status, iters, converged = best["w"], "time_limit", problem.evaluations, False
         message = f"stopped at the time limit ({budget.max_time:g} s); the best point so far is reported"
     except _CloseEnough as close:
-        return Fit(close.w, memo["r"], memo["J"], "within_se", True, problem.evaluations - runs0,
-                   time.perf_counter() - t0, "", close.offset)
+        return evaluate.close_fit(close)
     r, J = evaluate(w, limited=False)
     return Fit(w, r, J, status, converged, iters, time.perf_counter() - t0, message, offset)
