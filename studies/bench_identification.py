@@ -1,6 +1,6 @@
 """Benchmark: what does an identification cost the first time (cold cache), every later time, and in
 simulations of the same scene (measured side by side, with callgrind's instruction counts)?
-Run: ``python studies/bench_identification.py [--quick]`` (about 20 min); data, cases and what is timed:
+Run: ``python studies/bench_identification.py [--quick]`` (about 15 min); data, cases and what is timed:
 docs/studies/bench_identification.md.
 """
 
@@ -109,7 +109,7 @@ def _mesh(mesh: list[dict]) -> tuple[list[str], list[tuple], bytes]:
     first = mesh[0]
     worst = max(r["fit_sims"] / first["fit_sims"] for r in mesh)
     checks_ = [("fit without refit, 1-8 elements per bar: its cost in simulations grows by at most 1.3 x "
-                "(the mesh's own effect on the iterations and timing noise: measured 0.9-1.2 x)", f"{worst:.2f} x",
+                "(the mesh's own effect on the iterations and timing noise; measured 0.91-1.0 x)", f"{worst:.2f} x",
                 worst <= 1.3)]
     ax = _new_figure((6, 4)).subplots()
     ne = [r["elements"] for r in mesh]
