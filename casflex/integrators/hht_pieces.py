@@ -327,10 +327,11 @@ def step_blocks(m: Model, lay: Layout, alpha: float, prepare: ca.Function, resid
                  finish: ca.Function, expand: bool) -> ca.Function:
     """``hht_step_sensitivity(x0, t0, p, h, d, x1) -> (G_z, G_w, X_z, X_w)``: the blocks of the step's
     exact derivative by the implicit-function theorem. With G(z, prm(w)) = 0 and x1 = X(z, prm(w)),
-    w = (x0, t0, p, h): dx1/dw = X_w - X_z G_z^-1 G_w, one sparse QR of G_z per step. CasADi's
-    generic rootfinder derivative gives the same numbers but differentiates through the Newton
-    solve in every direction: about twice the run time, and for the sensitivities' 50-odd
-    directions 3x the code to compile."""
+    w = (x0, t0, p, h): dx1/dw = X_w - X_z G_z^-1 G_w, one sparse QR of G_z per step: the step's
+    custom Jacobian (``jac_hht_step``, for CasADi's derivatives of trajectories, as in the NLP
+    transcriptions). CasADi's generic rootfinder derivative gives the same numbers but differentiates
+    through the Newton solve in every direction: about twice the run time. A fit's own sensitivities
+    take directional derivatives instead (:mod:`casflex.integrators.directions`)."""
     n, nx = m.n_dof, 3 * m.n_dof + m.n_con
     _, beta = hht_coefficients(alpha)
     z = ca.MX.sym("z", len(lay.free) + lay.n_mu)
