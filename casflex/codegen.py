@@ -43,7 +43,7 @@ import shutil
 import subprocess
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -270,39 +270,54 @@ def compiled(f: ca.Function, *, optimise: str = "-O1") -> ca.Function:
     return compile_functions([f], stem=f.name(), optimise=optimise)[f.name()]
 
 
-def compiled_nlpsol(name: str, plugin: str, nlp: dict, opts: dict) -> ca.Function:
+def compiled_nlpsol(name: str, plugin: str, nlp: dict, opts: dict, *, interpreted: ca.Function | None = None,
+                    extra: Sequence[ca.Function] = (),
+                    replace: Callable[[str, ca.Function], ca.Function] | None = None,
+                    ) -> ca.Function | tuple[ca.Function, dict[str, ca.Function]]:
     """``ca.nlpsol(name, plugin, nlp, opts)`` with every function the solver evaluates compiled
     (gcc -O1) and cached on disk: the solver is set up interpreted, its functions (the NLP and the
-    derivatives it asked for, a ``hess_lag`` option included) are generated as one C library, and
-    the solver is made anew on that library (CasADi's documented route for compiled NLPs).
+    derivatives it asked for, those given as options such as ``hess_lag`` included) are generated as
+    one C library, and the solver is made anew on that library (CasADi's documented route for
+    compiled NLPs).
 
-    A later process finds the library by the NLP itself (its serialised expressions, the options,
-    CasADi's version), before any set-up: for twobar's multiple shooting over 0.69 s the set-up
-    alone takes 7 s.
+    A later process finds the library by the NLP itself (its serialised expressions, the options and
+    the Functions given as options, CasADi's version), before any set-up: for twobar's multiple
+    shooting over 0.69 s the set-up alone took 7 s. ``interpreted``: the solver already set up;
+    ``replace(name, f)``: the Function to compile in the solver's ``f`` of that name (its own, or one
+    that derives less); ``extra``: further Functions in the same library, returned beside the solver
+    as {name: compiled Function} (then the result is that pair).
     """
     sym = ca.MX if isinstance(nlp["x"], ca.MX) else ca.SX
     p = nlp.get("p", sym(0, 1))
     problem = ca.Function("nlp", [nlp["x"], p], [nlp.get("f", 0), nlp.get("g", sym(0, 1))])
-    lib_opts = {k: v for k, v in opts.items() if k != "hess_lag"}
+    fn_opts = {k: v for k, v in opts.items() if isinstance(v, ca.Function)}
+    lib_opts = {k: v for k, v in opts.items() if k not in fn_opts}
     cc = _compiler()
+    flags = build_flags("-O1", cc)
     key = hashlib.sha256("\n".join([
-        problem.serialize(), opts["hess_lag"].serialize() if "hess_lag" in opts else "", plugin, repr(sorted(
-            lib_opts.items(), key=str)), ca.__version__, cc, _compiler_identity(cc), *(flags := build_flags("-O1", cc)),
+        problem.serialize(), *(f"{k}: {fn_opts[k].serialize()}" for k in sorted(fn_opts)),
+        *(f.serialize() for f in extra), "" if replace is None else "replaced",
+        plugin, repr(sorted(lib_opts.items(), key=str)), ca.__version__, cc, _compiler_identity(cc), *flags,
         _target(cc, flags)]).encode()).hexdigest()[:24]
     target = cache_dir() / f"{name}_nlp-{key}.so"
     if target.is_file():
         log.info("using the compiled %s NLP from the cache (%s)", name, target)
     else:
-        interpreted = ca.nlpsol(name, plugin, nlp, opts)
+        interpreted = interpreted if interpreted is not None else ca.nlpsol(name, plugin, nlp, opts)
         funcs = [interpreted.oracle()]
         for fname in interpreted.get_function():
             f = interpreted.get_function(fname)
+            if replace is not None:
+                f = replace(fname, f)
             if f.name() != fname:  # a Function given as an option: the library must hold it under the name sought
                 args = f.mx_in()
                 f = ca.Function(fname, args, f.call(args), f.name_in(), f.name_out())
             funcs.append(f)
-        target = compile_functions(funcs, stem=f"{name}_nlp", optimise="-O1", key=key).path
-    return ca.nlpsol(name, plugin, str(target), lib_opts)
+        target = compile_functions(funcs + list(extra), stem=f"{name}_nlp", optimise="-O1", key=key).path
+    solver = ca.nlpsol(name, plugin, str(target), lib_opts)
+    if not extra:
+        return solver
+    return solver, {f.name(): ca.external(f.name(), str(target)) for f in extra}
 
 
 def cache_entries() -> list[Path]:

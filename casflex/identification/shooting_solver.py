@@ -6,14 +6,12 @@ mapped interval blocks (:meth:`.Transcription.gauss_newton`): ``grad_f``, ``jac_
 Lagrangian's gradient CasADi asks for after the solve). ``compiled``: the solver's functions and
 the single-shooting residue are generated as ONE C library, compiled (gcc -O1) and cached on disk;
 a later process finds it by the NLP's serialised Functions after the interpreted set-up (cheap:
-CasADi derives nothing). :func:`casflex.codegen.compiled_nlpsol` does the same for NLPs whose
-derivatives CasADi makes; it keys and strips ``hess_lag`` only, not ``grad_f``/``jac_g``, hence
-:func:`_compiled` here.
+CasADi derives nothing), by :func:`casflex.codegen.compiled_nlpsol` with ``nlp_grad`` replaced.
 """
 
 from __future__ import annotations
 
-import hashlib
+import functools
 from collections.abc import Callable
 
 import casadi as ca
@@ -44,6 +42,12 @@ def _lagrangian_gradient(template: ca.Function, gn: ca.Function) -> ca.Function:
     return ca.Function("nlp_grad", [x, p, lam_f, lam_g],
                        [f, g, lam_f * gf + ca.mtimes(jg.T, lam_g), ca.MX(template.sparsity_out(3))],
                        template.name_in(), template.name_out())
+
+
+def _own_gradient(gn: ca.Function, fname: str, f: ca.Function) -> ca.Function:
+    """The solver's Function ``fname`` to compile: ``nlp_grad`` from ``gn`` (CasADi's would differentiate
+    the whole NLP), any other as it is."""
+    return _lagrangian_gradient(f, gn) if fname == "nlp_grad" and f.n_in() == 4 and f.n_out() == 4 else f
 
 
 def gauss_newton_nlpsol(name: str, solver: str, nlp: dict, gn_of: Callable[[bool], ca.Function], *,
@@ -87,39 +91,8 @@ def gauss_newton_nlpsol(name: str, solver: str, nlp: dict, gn_of: Callable[[bool
             continue
         if compiled:
             codegen.log.info("compiling the %s NLP's functions", name)
-            return _compiled(name, solver, nlp, opts, S, gn, extra)
+            out = codegen.compiled_nlpsol(name, solver, nlp, opts, interpreted=S, extra=extra,
+                                          replace=functools.partial(_own_gradient, gn))
+            return out if extra else (out, {})
         return S, {f.name(): f for f in extra}
     raise AssertionError("unreachable")
-
-
-def _compiled(name: str, plugin: str, nlp: dict, opts: dict, interpreted: ca.Function, gn: ca.Function,
-              extra: list[ca.Function]) -> tuple[ca.Function, dict[str, ca.Function]]:
-    """The solver ``interpreted`` made anew on ONE compiled library of its functions and ``extra``,
-    found in the cache by the NLP, its option Functions and ``extra`` (serialised), the options,
-    CasADi's version and the compiler."""
-    fn_opts = {k: v for k, v in opts.items() if isinstance(v, ca.Function)}
-    lib_opts = {k: v for k, v in opts.items() if k not in fn_opts}
-    problem = ca.Function("nlp", [nlp["x"], ca.MX(0, 1)], [nlp["f"], nlp["g"]])
-    cc = codegen._compiler()
-    flags = codegen.build_flags("-O1", cc)
-    key = hashlib.sha256("\n".join([
-        problem.serialize(), *(f"{k}: {fn_opts[k].serialize()}" for k in sorted(fn_opts)),
-        "nlp_grad: lam_f grad_f + jac_g^T lam_g", *(f.serialize() for f in extra), plugin,
-        repr(sorted(lib_opts.items(), key=str)), ca.__version__, cc, codegen._compiler_identity(cc), *flags,
-        codegen._target(cc, flags)]).encode()).hexdigest()[:24]
-    target = codegen.cache_dir() / f"{name}_nlp-{key}.so"
-    if target.is_file():
-        codegen.log.info("using the compiled %s NLP from the cache (%s)", name, target)
-    else:
-        funcs = [interpreted.oracle()]
-        for fname in interpreted.get_function():
-            f = interpreted.get_function(fname)
-            if fname == "nlp_grad" and f.n_in() == 4 and f.n_out() == 4:  # CasADi's would differentiate it all
-                f = _lagrangian_gradient(f, gn)
-            elif f.name() != fname:  # a Function given as an option: the library must hold it under the name sought
-                args = f.mx_in()
-                f = ca.Function(fname, args, f.call(args), f.name_in(), f.name_out())
-            funcs.append(f)
-        target = codegen.compile_functions(funcs + extra, stem=f"{name}_nlp", optimise="-O1", key=key).path
-    return ca.nlpsol(name, plugin, str(target), lib_opts), {f.name(): ca.external(f.name(), str(target))
-                                                            for f in extra}
