@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["butterworth2", "even_times", "filtfilt2", "lowpass"]
+__all__ = ["butterworth2", "check_cutoff", "even_times", "filtfilt2", "lowpass"]
 
 
 def even_times(t: np.ndarray, rate: float | None = None) -> np.ndarray:
@@ -29,6 +29,23 @@ def even_times(t: np.ndarray, rate: float | None = None) -> np.ndarray:
         if np.max(np.abs(t - grid)) <= 0.1 * h:
             return grid
     return t
+
+
+def check_cutoff(cutoff: float | None, t: np.ndarray, what: str, option: str = "cutoff") -> None:
+    """ValueError naming ``option`` unless the cut-off (Hz) lies below the Nyquist frequency of samples at times
+    t (s; ``what`` names them) and above half the inverse of the record's length: a period of more than twice
+    the record keeps nothing of its motion but the trend (and at 1e-9 Hz the filter's recursion is singular)."""
+    if cutoff is None:
+        return
+    t = np.asarray(t, dtype=float)
+    fs = (t.size - 1) / (t[-1] - t[0])
+    span = float(t[-1] - t[0])
+    if not cutoff < fs / 2:
+        raise ValueError(f"{option}: must lie between 0 and the Nyquist frequency {fs / 2:g} Hz of the {what}, got "
+                         f"{cutoff:g}")
+    if not cutoff > 0.5 / span:
+        raise ValueError(f"{option}: {cutoff:g} Hz is a period over twice the {what}' span of {span:g} s (the lowest "
+                         f"cut-off is {0.5 / span:.3g} Hz): it would keep nothing of the motion but its trend")
 
 
 def butterworth2(cutoff: float, fs: float) -> tuple[np.ndarray, np.ndarray]:

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 import os
+from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -34,8 +35,8 @@ import numpy as np
 from casflex.lab_c3d import read_c3d
 from casflex.lab_filter import centre_of_pressure, filtered, plate_moment_about_origin
 
-__all__ = ["LabMarkers", "LabTable", "Plane", "read_trc", "read_sto", "read_c3d", "markers_in_plane", "trial_markers",
-           "filtered", "plate_moment_about_origin", "centre_of_pressure"]
+__all__ = ["LabMarkers", "LabTable", "Plane", "read_trc", "read_sto", "increasing_times", "read_c3d",
+           "markers_in_plane", "trial_markers", "filtered", "plate_moment_about_origin", "centre_of_pressure"]
 
 #: Length units of TRC headers, in metres.
 UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
@@ -79,7 +80,8 @@ class LabTable:
         return self.values[:, self.names.index(name)]
 
 
-def _times(t: np.ndarray, where: str) -> np.ndarray:
+def increasing_times(t: np.ndarray, where: str) -> np.ndarray:
+    """t (n,) s, checked: every time a number, each after the one before; ValueError naming ``where`` and the row."""
     if t.size and not np.isfinite(t).all():
         raise ValueError(f"{where}: a time is not a number (row {int(np.argmax(~np.isfinite(t))) + 1})")
     bad = np.flatnonzero(np.diff(t) <= 0)
@@ -127,26 +129,55 @@ def read_trc(path: str | os.PathLike[str]) -> LabMarkers:
     seen = {lb for lb in labels if labels.count(lb) > 1}
     if seen:
         raise ValueError(f"{where}: marker labels {sorted(seen)} appear more than once")
-    rows = []
+    rate = _header_rate(header.get("DataRate", ""), where)
+    want = 1 + 3 * len(labels)
+    flat, rows = array("d"), array("l")  # 8 bytes a value: a Python list of floats takes four times as much
     for i, line in enumerate(lines[5:], start=6):
         if not line.strip():
             continue
         cells = line.rstrip("\r").split("\t")
-        values, want = _numbers(cells[1:], where, i), 1 + 3 * len(labels)
+        values = _numbers(cells[1:], where, i)
         if len(values) > want and all(math.isnan(v) for v in values[want:]):  # trailing tabs
             values = values[:want]
         if len(values) != want:
             raise ValueError(f"{where}: row {i} has {len(values) - 1} coordinates for {len(labels)} markers "
                              f"({3 * len(labels)} expected)")
-        rows.append(values)
-    if not rows:
+        flat.extend(values)
+        rows.append(i)
+    if not flat:
         raise ValueError(f"{where}: no frames")
-    data = np.array(rows)
-    t = _times(data[:, 0], where)
+    data = np.frombuffer(flat, dtype=float).reshape(-1, want)
+    _finite_or_missing(data, rows, ["Time"] + [lb for lb in labels for _ in "XYZ"], where)
+    t = increasing_times(data[:, 0].copy(), where)
     xyz = data[:, 1:].reshape(len(t), len(labels), 3) * UNITS[units]
     xyz[np.all(xyz == 0.0, axis=2)] = np.nan  # a dropped marker written as (0, 0, 0)
-    rate = float(header.get("DataRate", "nan") or "nan")
     return LabMarkers(t, tuple(labels), xyz, rate, units, where)
+
+
+def _finite_or_missing(data: np.ndarray, rows, columns: list[str], where: str) -> None:
+    """ValueError naming the row and the column of an infinite cell: a missing value is empty or NaN; an
+    infinite one is no measurement."""
+    bad = np.isinf(data)
+    if bad.any():
+        r, c = (int(v) for v in np.argwhere(bad)[0])
+        raise ValueError(f"{where}: row {rows[r]}: {columns[c]} is infinite (a missing value is an empty cell or NaN)")
+
+
+def _header_rate(text: str, where: str) -> float:
+    """Hz: a TRC header's ``DataRate`` (NaN when it is empty: the times then decide)."""
+    if not text:
+        return math.nan
+    try:
+        rate = float(text)
+    except ValueError:
+        raise ValueError(f"{where}: header DataRate {text!r} is not a number (the frames per second)") from None
+    if not (math.isfinite(rate) and rate > 0):
+        raise ValueError(f"{where}: header DataRate {text!r} must be a rate > 0 (frames per second)")
+    return rate
+
+
+#: How .mot / .sto headers write ``inDegrees`` (OpenSim writes yes/no; other tools true/false).
+_DEGREES = {"yes": True, "true": True, "no": False, "false": False}
 
 
 def read_sto(path: str | os.PathLike[str]) -> LabTable:
@@ -166,20 +197,24 @@ def read_sto(path: str | os.PathLike[str]) -> LabTable:
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
         raise ValueError(f"{where}: columns {dup} appear more than once")
-    rows = []
+    flat, rows = array("d"), array("l")
     for i, line in enumerate(lines[end + 2:], start=end + 3):
         if not line.strip():
             continue
         values = _numbers([c for c in line.split("\t") if c.strip() != ""] or line.split(), where, i)
         if len(values) != len(names):
             raise ValueError(f"{where}: row {i} has {len(values)} values for {len(names)} columns")
-        rows.append(values)
-    if not rows:
+        flat.extend(values)
+        rows.append(i)
+    if not flat:
         raise ValueError(f"{where}: no rows")
-    data = np.array(rows)
+    data = np.frombuffer(flat, dtype=float).reshape(-1, len(names)).copy()
+    _finite_or_missing(data, rows, names, where)
     deg = header.get("inDegrees")
-    in_degrees = None if deg is None else deg.lower() == "yes"
-    return LabTable(_times(data[:, 0], where), tuple(names[1:]), data[:, 1:], in_degrees, header, where)
+    if deg is not None and deg.lower() not in _DEGREES:
+        raise ValueError(f"{where}: header inDegrees={deg!r}; expected yes or no (true or false)")
+    in_degrees = None if deg is None else _DEGREES[deg.lower()]
+    return LabTable(increasing_times(data[:, 0], where), tuple(names[1:]), data[:, 1:], in_degrees, header, where)
 
 
 @dataclass(frozen=True)

@@ -189,7 +189,13 @@ def _markers(c, where: str) -> LabMarkers:
         raise ValueError(f"{where}: marker labels {dup} appear more than once")
     xyz = np.transpose(pts[:3, keep, :], (2, 1, 0)) * (UNITS[units[0]] if units else 1.0)
     xyz[(res[keep].T < 0) | np.all(xyz == 0.0, axis=2)] = np.nan
+    if np.isinf(xyz).any():
+        f, k, _ = (int(v) for v in np.argwhere(np.isinf(xyz))[0])
+        raise ValueError(f"{where}: marker {names[k]!r} is infinite at frame {f + 1} (a missing marker has a negative "
+                         "residual)")
     rate = float(c["header"]["points"]["frame_rate"])
+    if not (math.isfinite(rate) and rate > 0):
+        raise ValueError(f"{where}: POINT:RATE is {rate:g}: the markers' frame rate must be > 0 Hz")
     t = _t0(c) + np.arange(xyz.shape[0]) / rate
     return LabMarkers(t, tuple(names), xyz, rate, units[0] if units else "", where)
 
@@ -215,9 +221,10 @@ def _plate_columns(pf, where: str, i: int, min_force: float) -> tuple[list[str],
     s = UNITS[pf["unit_position"]]
     F = pf["force"].T
     centre = pf["corners"].mean(axis=1) * s
-    M = np.cross(centre, F) + pf["moment"].T * s  # ezc3d's moment is about the plate's centre
     up = _up(pf["corners"])
-    off = F @ up < min_force
+    with np.errstate(invalid="ignore", over="ignore"):  # samples that are not numbers: the caller's to refuse
+        M = np.cross(centre, F) + pf["moment"].T * s  # ezc3d's moment is about the plate's centre
+        off = ~(F @ up >= min_force)
     P, T = pf["center_of_pressure"].T * s, pf["Tz"].T * s
     P[off], T[off] = np.nan, np.nan
     prefix = "ground_" if i == 0 else f"{i}_ground_"
@@ -240,6 +247,9 @@ def _plates(c, where: str, min_force: float) -> LabTable | None:
         ups.append(up)
     values = np.hstack(blocks)
     rate = float(c["header"]["analogs"]["frame_rate"])
+    if not (math.isfinite(rate) and rate > 0) or not values.shape[0]:
+        raise ValueError(f"{where}: ANALOG:RATE is {rate:g} Hz and the plates have {values.shape[0]} samples: the "
+                         "force plates cannot be read (read_c3d(..., plates=False) reads the markers alone)")
     t = _t0(c) + np.arange(values.shape[0]) / rate
     header = {"rate": rate, "plates": len(platforms), "up": ups[0] if len(set(ups)) == 1 else ",".join(ups),
               "min_force": min_force}

@@ -39,7 +39,8 @@ from casflex.lab_c3d import MIN_PLATE_FORCE
 if TYPE_CHECKING:
     from casflex.lab import LabMarkers, LabTable
 
-__all__ = ["filtered", "plate_moment_about_origin", "centre_of_pressure", "zero_lag_minus_3db", "MAX_GAP"]
+__all__ = ["filtered", "plate_moment_about_origin", "plate_wrench", "centre_of_pressure", "zero_lag_minus_3db",
+           "MAX_GAP"]
 
 #: samples: the longest gap inside a channel that :func:`filtered` fills by a cubic spline.
 MAX_GAP = 10
@@ -157,28 +158,59 @@ def _plate_columns(table: LabTable, prefix: str) -> str:
                      f"{have or 'none'}")
 
 
-def plate_moment_about_origin(table: LabTable, prefix: str) -> tuple[np.ndarray, np.ndarray]:
-    """(force (n, 3) N, moment about the lab's origin (n, 3) N m) of the plate ``prefix`` of an OpenSim-style
-    ground-reaction table ("ground_" the first plate, "1_ground_" the second): the columns
-    ``<prefix>moment_{x,y,z}`` where :func:`casflex.lab_c3d.read_c3d` gave them, else p x F + T from the
-    centre of pressure and the free moment. A sample with a force but no centre of pressure (NaN) is
-    refused in one line; where the force is zero, so is the moment."""
+def plate_wrench(table: LabTable, prefix: str, *, min_force: float = MIN_PLATE_FORCE
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(force F (n, 3) N, moment about the lab's origin M (n, 3) N m, unloaded (n,) bool) of the plate ``prefix``
+    of an OpenSim-style ground-reaction table ("ground_" the first plate, "1_ground_" the second), with the
+    samples the table does not give as NaN rows (to be filled or refused by the caller).
+
+    M is the table's ``<prefix>moment_{x,y,z}`` where :func:`casflex.lab_c3d.read_c3d` gave them, else p x F + T
+    from the centre of pressure p and the free moment T. A sample is missing where a force component or the
+    moment is not a number. A force below ``min_force`` (N, in magnitude) whose point of application the
+    table leaves undefined (NaN centre of pressure: the convention of exports that write none where the plate
+    is unloaded) is taken as no load, F = M = 0, and flagged in ``unloaded``; a larger force without a centre
+    of pressure is missing. Centres of pressure and forces no lab records (beyond :data:`casflex.lab_checks.
+    LAB_EXTENT` from the origin, above :data:`casflex.lab_checks.MAX_PLATE_FORCE`) are refused in one line
+    naming the plate and the time."""
+    from casflex.lab_checks import check_plate_values
+
     p = _plate_columns(table, prefix)
 
     def cols(kind: str) -> np.ndarray:
-        return np.column_stack([table.column(f"{p}{kind}{a}") for a in "xyz"])
+        return np.column_stack([table.column(f"{p}{kind}{a}") for a in "xyz"]).astype(float)
 
     F = cols("force_v")
+    with np.errstate(invalid="ignore", over="ignore"):
+        size = np.linalg.norm(F, axis=1)
     if f"{p}moment_x" in table.names:
-        return F, cols("moment_")
-    P, T = cols("force_p"), cols("torque_")
-    unknown = ~np.isfinite(P).all(axis=1) & (F != 0).any(axis=1)
-    if unknown.any():
-        raise ValueError(f"{table.source}: plate {p!r} has a force but no centre of pressure at t = "
-                         f"{table.t[np.argmax(unknown)]:g} s: its moment about the origin is unknown")
-    zero = ~(F != 0).any(axis=1)
-    P[zero], T[zero & ~np.isfinite(T).all(axis=1)] = 0.0, 0.0
-    return F, np.cross(P, F) + T
+        M, P = cols("moment_"), None
+    else:
+        P, T = cols("force_p"), cols("torque_")
+        T[~np.isfinite(T).all(axis=1) & np.isfinite(P).all(axis=1) & (size == 0)] = 0.0
+        with np.errstate(invalid="ignore", over="ignore"):
+            M = np.cross(P, F) + T
+    check_plate_values(table, p, F, P)
+    unloaded = np.isfinite(F).all(axis=1) & ~np.isfinite(M).all(axis=1) & (size < min_force)
+    F[unloaded], M[unloaded] = 0.0, 0.0
+    missing = ~(np.isfinite(F).all(axis=1) & np.isfinite(M).all(axis=1))
+    F[missing], M[missing] = np.nan, np.nan
+    return F, M, unloaded
+
+
+def plate_moment_about_origin(table: LabTable, prefix: str) -> tuple[np.ndarray, np.ndarray]:
+    """(force (n, 3) N, moment about the lab's origin (n, 3) N m) of the plate ``prefix`` of an OpenSim-style
+    ground-reaction table (:func:`plate_wrench`), every sample defined: a sample the table does not give (a
+    force that is not a number, a force of ``MIN_PLATE_FORCE`` or more without a centre of pressure) is
+    refused in one line naming its time. Where the force is zero, so is the moment."""
+    F, M, _ = plate_wrench(table, prefix)
+    missing = ~np.isfinite(F).all(axis=1)
+    if missing.any():
+        i, p = int(np.argmax(missing)), _plate_columns(table, prefix)
+        forced = np.isfinite(np.column_stack([table.column(f"{p}force_v{a}") for a in "xyz"])[i]).all()
+        what = "a force but no centre of pressure" if forced else "a force that is not a number"
+        raise ValueError(f"{table.source}: plate {p!r} has {what} at t = {table.t[i]:g} s: its moment about the "
+                         "origin is unknown")
+    return F, M
 
 
 def _axis(up: str) -> np.ndarray:

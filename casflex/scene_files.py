@@ -42,17 +42,36 @@ def _read(path: Path, where: str):
         return tab.t, tab.names, tab.values, bool(tab.in_degrees)
     if path.suffix.lower() != ".csv":
         raise SceneError(f"{where}.file: {str(path)!r} must be a .mot, .sto or .csv file")
-    with path.open(newline="") as f:
-        rows = list(csv.reader(f))
+    return _read_csv(path, where)
+
+
+def _read_csv(path: Path, where: str):
+    """(t, names, values, False) of a CSV file: a header line of names, then rows of numbers (blank lines
+    skipped), times increasing, every cell a finite number; SceneError naming the file and the row."""
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise SceneError(f"{where}.file: {str(path)!r} is not a UTF-8 text file (byte {exc.start})") from None
+    except OSError as exc:
+        raise SceneError(f"{where}.file: {str(path)!r} cannot be read ({exc.strerror})") from None
+    rows = [(i, r) for i, r in enumerate(csv.reader(text.splitlines()), start=1) if any(c.strip() for c in r)]
     if len(rows) < 2:
         raise SceneError(f"{where}.file: {str(path)!r} has no data rows under its header")
-    names = [c.strip() for c in rows[0]]
+    names = [c.strip() for c in rows[0][1]]
+    data = np.empty((len(rows) - 1, len(names)))
+    for k, (line, r) in enumerate(rows[1:]):
+        if len(r) != len(names):
+            raise SceneError(f"{where}.file: {str(path)!r}: line {line} has {len(r)} cells under {len(names)} names")
+        try:
+            data[k] = [float(c) for c in r]
+        except ValueError:
+            raise SceneError(f"{where}.file: {str(path)!r}: line {line}: a cell is not a number") from None
+    from casflex.lab import increasing_times
+
     try:
-        data = np.array([[float(c) for c in r] for r in rows[1:] if r], dtype=float)
-    except ValueError:
-        raise SceneError(f"{where}.file: {str(path)!r}: a cell is not a number") from None
-    if data.shape[1] != len(names):
-        raise SceneError(f"{where}.file: {str(path)!r}: rows of {data.shape[1]} cells under {len(names)} names")
+        increasing_times(data[:, 0], str(path))
+    except ValueError as exc:
+        raise SceneError(f"{where}.file: {exc}") from None
     return data[:, 0], tuple(names[1:]), data[:, 1:], False
 
 
@@ -81,6 +100,11 @@ def _rows(spec: Any, keys: tuple[str, ...], base: Path, where: str, motion: bool
         raise SceneError(f"{where}: {what}; a table from a file takes {list(_OPTIONS + keys)}")
     t, names, values, degrees = _read(base / str(spec["file"]), where)
     cols = _columns(spec, keys, names, values, where)
+    bad = ~np.isfinite(cols)
+    if bad.any():
+        i, k = (int(v) for v in np.argwhere(bad)[0])
+        raise SceneError(f"{where}.{keys[k]}: column {spec[keys[k]]!r} is not a number at t = {t[i]:g} s (row {i + 1} "
+                         "of the data): a support's motion and a load are needed at every time")
     offset, cutoff = spec.get("offset", 0.0), spec.get("cutoff")
     for key, v in (("offset", offset), ("cutoff", cutoff)):
         if v is not None and (not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v)):

@@ -79,18 +79,15 @@ def _stages(trc: Path, mot: Path) -> dict:
     return {"model": t1 - t0, "read": t2 - t1, "fit": t3 - t2, "all": t4 - t3, "res": res}
 
 
-def _opensim(res, mot: Path) -> float | None:
+def _opensim(res) -> float | None:
     import importlib.util
 
     if importlib.util.find_spec("opensim") is None:
         return None
     from casflex.inverse import inverse_model
-    from casflex.inverse.plates import plate_from_table
-    from casflex.lab import Plane, read_sto
     from casflex.peers import opensim as osp
 
-    plate = plate_from_table(read_sto(mot), "ground_", "ankle", Plane.parse("X,Y"), 10.0)
-    F, Mo = plate.at(res.t)
+    F, Mo = res.plates[0].at(res.t)  # the plate as the inverse applied it
     scene = inverse_model("hamner_leg").scene
     k = 20  # frames repeated so that the worker's start is measured apart
     args = (res.t, res.q, res.qd, res.qdd)
@@ -117,7 +114,7 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
                           float("inf"))
         bare, _ = best_of(lambda: subprocess.run([sys.executable, "-c", "pass"], check=True), 3, float("inf"))
         st = _stages(trc, mot)
-        os_frame = _opensim(st["res"], mot)
+        os_frame = _opensim(st["res"])
     n = st["res"].t.size
     per_frame = st["all"] / n
     rows = [["`casflex inverse` command, a later process (best)", f"{1e3 * wall:.0f}", f"{1e3 * wall / n:.2f}"],

@@ -71,12 +71,9 @@ def _peer(res) -> dict[str, np.ndarray] | None:
     if importlib.util.find_spec("opensim") is None:
         return None
     from casflex.inverse import inverse_model
-    from casflex.inverse.plates import plate_from_table
-    from casflex.lab import Plane, read_sto
     from casflex.peers import opensim as osp
 
-    plate = plate_from_table(read_sto(GRF), "ground_", "ankle", Plane.parse("X,Y"), CUTOFF)
-    F, Mo = plate.at(res.t)
+    F, Mo = res.plates[0].at(res.t)  # the plate as the inverse applied it
     out = osp.inverse_dynamics(inverse_model("hamner_leg").scene, ROOT, res.t, res.q, res.qd, res.qdd,
                                plates=[("ankle", F, np.zeros_like(F), Mo)])
     return {f"{j} moment": out[f"{j}.moment"] for j in JOINTS}

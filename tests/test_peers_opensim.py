@@ -251,16 +251,13 @@ def test_casflex_inverse_of_the_hamner_stride_is_opensims():
     from pathlib import Path
 
     from casflex.inverse import inverse_dynamics, inverse_model
-    from casflex.inverse.plates import plate_from_table
-    from casflex.lab import Plane, read_sto
     from casflex.peers import opensim as osp
 
     lab = Path(__file__).parent / "data" / "lab"
     grf = lab / "hamner_running_stride_grf.mot"
     res = inverse_dynamics("hamner_leg", lab / "hamner_running_stride.trc", grf=grf, plates={"ankle": "ground_"},
                            root="pelvis", cutoff=10.0)
-    plate = plate_from_table(read_sto(grf), "ground_", "ankle", Plane.parse("X,Y"), 10.0)
-    F, Mo = plate.at(res.t)
+    F, Mo = res.plates[0].at(res.t)  # the plate as the inverse applied it
     peer = osp.inverse_dynamics(inverse_model("hamner_leg").scene, "pelvis", res.t, res.q, res.qd, res.qdd,
                                 plates=[("ankle", F, np.zeros_like(F), Mo)])
     for name in ("hip.moment", "knee.moment", "ankle.moment", "root.fx", "root.fy", "root.mz"):

@@ -37,7 +37,7 @@ def _progress(done: int, total: int) -> None:
 
 
 def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
-    from casflex.inverse import inverse_dynamics
+    from casflex.inverse import prepare, solve
     from casflex.lab import Plane
 
     Plane.parse(args.plane, option="--plane")
@@ -50,18 +50,15 @@ def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
         raise OptionError("--loads: say which node each plate acts on with --plate NODE=PREFIX (e.g. ankle=ground_)")
     if args.t_start is not None and args.t_end is not None and args.t_end <= args.t_start:
         raise OptionError(f"--t-end: must be after --t-start ({args.t_start:g} s), got {args.t_end:g}")
-    from casflex.scene_io import load_scene
-
-    hinges = {j.name for j in load_scene(args.scene).joints if j.kind == "hinge"}
-    for hinge, _, _ in args.passive or []:
-        if hinge not in hinges:
-            raise OptionError(f"--passive: no hinge {hinge!r} in the scene; its hinges are {sorted(hinges)}")
-    out = outputs.file("--out", args.out, (".npz", ".csv"), "inverse dynamics") if args.out else None
-    plots = outputs.directory("--plots", args.plots) if args.plots else None
-    res = inverse_dynamics(args.scene, args.data, plane=args.plane, grf=args.loads, plates=plates,
-                           cutoff=None if args.no_filter else args.cutoff, root=args.root,
-                           t_start=args.t_start, t_end=args.t_end,
-                           progress=None if args.quiet else _progress)
+    out = outputs.file("--out", args.out, (".npz", ".csv"), "inverse dynamics") if args.out is not None else None
+    plots = outputs.directory("--plots", args.plots) if args.plots is not None else None
+    inputs = prepare(args.scene, args.data, plane=args.plane, grf=args.loads, plates=plates,
+                     cutoff=None if args.no_filter else args.cutoff, root=args.root, t_start=args.t_start,
+                     t_end=args.t_end, max_misfit=args.max_misfit)
+    _check_passive(args.passive or [], inputs)
+    for line in inputs.warnings:
+        print(f"casflex: warning: {line}", file=sys.stderr)
+    res = solve(inputs, progress=None if args.quiet else _progress)
     print(res.summary())
     for hinge, t0, t1 in args.passive or []:
         from casflex.inverse.passive import fit_passive
@@ -74,6 +71,18 @@ def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
 
         save_inverse_figures(res, plots)
     return 0
+
+
+def _check_passive(passive: list, inputs) -> None:
+    """--passive: each hinge in the scene, each window inside the trial's, before the marker fit."""
+    hinges = inputs.tree.hinges
+    t0, t1 = float(inputs.t[0]), float(inputs.t[-1])
+    for hinge, a, b in passive:
+        if hinge not in hinges:
+            raise OptionError(f"--passive: no hinge {hinge!r} in the scene; its hinges are {sorted(hinges)}")
+        if a is not None and (a < t0 - 1e-9 or b > t1 + 1e-9):
+            raise OptionError(f"--passive: the window {a:g}..{b:g} s of {hinge!r} is not inside the trial's "
+                              f"{t0:g}..{t1:g} s")
 
 
 def cmd_calibrate(args: argparse.Namespace, outputs: Outputs) -> int:
@@ -107,6 +116,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--root", metavar="NODE", help="the node the data drive (default: the scene's first)")
     s.add_argument("--t-start", type=non_negative("a time in s"), help="use the trial from this time, s")
     s.add_argument("--t-end", type=positive("a time in s"), help="use the trial up to this time, s")
+    s.add_argument("--max-misfit", type=positive("a distance in m"), metavar="M",
+                   help="refuse a marker farther than this from the fitted pose, m (default 0.1: no soft-tissue "
+                        "artefact is that large)")
     s.add_argument("--passive", action="append", type=_passive, metavar="HINGE[:T0:T1]",
                    help="fit a torsion spring-damper to HINGE's net moment (over T0..T1 s) and say how much of it "
                         "it explains; repeat per hinge")

@@ -102,20 +102,28 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
               mass: float | None = None):
     """(the calibrated scene, report lines) from the static trial ``static`` (LabMarkers or a .trc/.c3d
     path), module docstring."""
-    from casflex.inverse import _read_markers, inverse_model
     from casflex.inverse.fit import fit_pose
+    from casflex.inverse.inputs import inverse_model, read_markers
     from casflex.lab import LabMarkers, Plane, markers_in_plane
+    from casflex.lab_checks import check_markers, check_scale, check_static
 
     if mass is not None and not mass > 0:
         raise ValueError(f"mass: must be > 0 kg, got {mass}")
     pl = Plane.parse(plane) if isinstance(plane, str) else plane
     model = inverse_model(scene, root)
     tree = kinematic_tree(model, root)
-    lab = static if isinstance(static, LabMarkers) else _read_markers(static)[0]
+    lab = static if isinstance(static, LabMarkers) else read_markers(static)[0]
     sc = model.scene
-    ms = markers_in_plane(lab, {m.name: m.label or m.name for m in sc.markers}, pl)
+    labels = {m.name: m.label or m.name for m in sc.markers}
+    ms = markers_in_plane(lab, labels, pl)
+    check_markers(lab, tuple(labels.values()))
+    check_static(lab, tuple(labels.values()))
+    if not np.isfinite(ms.q).any():
+        raise ValueError(f"{lab.source}: none of the scene's markers {list(labels.values())} is seen in the trial")
     with np.errstate(all="ignore"):
         ym = np.nanmean(ms.q, axis=0).reshape(-1, 2)  # the static trial's mean
+    check_scale(lab.source, lab.units, np.array([[m.x, m.y] for m in sc.markers]), ym[None],
+                [tree.cluster[i] for i in tree.marker_nodes])
     report = [f"static trial: {lab.t.size} frames averaged, {int(np.isfinite(ym).all(1).sum())} of "
               f"{len(sc.markers)} markers seen"]
     unscaled = fit_pose(tree, ym.ravel())[1]

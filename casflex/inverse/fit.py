@@ -30,13 +30,16 @@ __all__ = ["FittedMotion", "coordinate_rates", "fit_markers", "fit_pose"]
 @dataclass(frozen=True)
 class FittedMotion:
     """t (n,) s; z (n, n_z) the fitted coordinates (m, rad), NaN in gaps filled later; rms (n,) m: the
-    markers' root-mean-square misfit per frame; seen (n,) markers used per frame; report: lines."""
+    markers' root-mean-square misfit per frame; seen (n,) markers used per frame; misfit (n, m) m: each
+    marker's distance from where the fitted pose puts it (NaN where it is missing or the frame a gap);
+    report: lines."""
 
     t: np.ndarray
     z: np.ndarray
     rms: np.ndarray
     seen: np.ndarray
     report: list[str] = field(default_factory=list)
+    misfit: np.ndarray | None = None
 
 
 def _kabsch_start(tree: KinematicTree, y: np.ndarray, y0: np.ndarray) -> np.ndarray:
@@ -69,6 +72,13 @@ def _kabsch_start(tree: KinematicTree, y: np.ndarray, y0: np.ndarray) -> np.ndar
 
 def _solve_frame(f: ca.Function, z: np.ndarray, y: np.ndarray, max_iter: int = 50) -> tuple[np.ndarray, float, bool]:
     """Levenberg-Marquardt from z on the seen entries of y: (z, rms misfit (m), decided)."""
+    z, r, decided = _levenberg_marquardt(f, z, y, max_iter)
+    return z, float(np.sqrt(np.mean(r.reshape(-1, 2) ** 2, axis=0).sum())) if r.size else np.nan, decided
+
+
+def _levenberg_marquardt(f: ca.Function, z: np.ndarray, y: np.ndarray, max_iter: int
+                         ) -> tuple[np.ndarray, np.ndarray, bool]:
+    """(z, the residuals of the seen entries of y, decided) from the start z (:func:`_solve_frame`)."""
     seen = np.isfinite(y)
     lam = 1e-3
     ym, J = (np.array(v) for v in f(z))
@@ -89,7 +99,7 @@ def _solve_frame(f: ca.Function, z: np.ndarray, y: np.ndarray, max_iter: int = 5
                 break
     s = np.linalg.svd(J, compute_uv=False) if J.size else np.zeros(1)
     decided = J.shape[0] >= J.shape[1] and s[-1] > 1e-8 * max(s[0], 1e-300)
-    return z, float(np.sqrt(np.mean(r.reshape(-1, 2) ** 2, axis=0).sum())) if r.size else np.nan, bool(decided)
+    return z, r, bool(decided)
 
 
 def fit_pose(tree: KinematicTree, y: np.ndarray, start: np.ndarray | None = None) -> tuple[np.ndarray, float, bool]:
@@ -102,26 +112,45 @@ def fit_pose(tree: KinematicTree, y: np.ndarray, start: np.ndarray | None = None
 
 
 def fit_markers(tree: KinematicTree, t: np.ndarray, y: np.ndarray, *, max_gap: float = 0.1,
+                max_misfit: float | None = None, labels: tuple[str, ...] | None = None, source: str = "data",
                 progress=None) -> FittedMotion:
     """The coordinates of the markers y (n, 2 m) at times t (n,) (module docstring); y's columns are
-    the scene markers' x, y in scene order (:func:`casflex.markers.marker_channels`), NaN where missing."""
+    the scene markers' x, y in scene order (:func:`casflex.markers.marker_channels`), NaN where missing.
+    ``max_misfit`` (m): a marker farther than that from the fitted pose is refused in one line naming the
+    frame and the marker (``labels``, the trial's names for the scene's markers; ``source``, the trial):
+    :data:`casflex.lab_checks.MAX_MISFIT`."""
     f = tree.marker_fit
     y0 = np.array(f(tree.coordinates(tree.model.q0))[0]).ravel()
-    n = t.size
+    n, m = t.size, y.shape[1] // 2
     Z, rms, seen = np.full((n, tree.n), np.nan), np.full(n, np.nan), np.isfinite(y).reshape(n, -1, 2).all(2).sum(1)
+    misfit = np.full((n, m), np.nan)
     z_prev = None
     for i in range(n):
         start = _kabsch_start(tree, y[i], y0) if z_prev is None else z_prev
-        z, e, ok = _solve_frame(f, start, y[i])
+        z, r, ok = _levenberg_marquardt(f, start, y[i], 50)
         if ok:
-            Z[i], rms[i], z_prev = z, e, z
+            Z[i], z_prev = z, z
+            rms[i] = float(np.sqrt(np.mean(r.reshape(-1, 2) ** 2, axis=0).sum()))
+            misfit[i, np.isfinite(y[i]).reshape(m, 2).all(axis=1)] = np.hypot(*r.reshape(-1, 2).T)
+            _check_misfit(misfit[i], t[i], max_misfit, labels, source)
         if progress is not None:
             progress(i + 1, n)
         interrupt.check()  # a Ctrl-C that a CasADi call swallowed
     report = [f"marker fit: {n} frames, misfit RMS median {1e3 * np.nanmedian(rms):.1f} mm, "
               f"max {1e3 * np.nanmax(rms):.1f} mm"] if np.isfinite(rms).any() else []
     Z = _fill(t, Z, max_gap, report)
-    return FittedMotion(t, Z, rms, seen, report)
+    return FittedMotion(t, Z, rms, seen, report, misfit)
+
+
+def _check_misfit(misfit: np.ndarray, t: float, limit: float | None, labels, source: str) -> None:
+    """ValueError naming the frame and the marker when a marker lies farther than ``limit`` (m) from the pose."""
+    if limit is None or not (misfit > limit).any():
+        return
+    k = int(np.nanargmax(misfit))
+    name = labels[k] if labels is not None else f"#{k}"
+    raise ValueError(f"{source}: at t = {t:g} s marker {name!r} lies {1e3 * misfit[k]:.0f} mm from where the best pose "
+                     f"of the scene puts it (max_misfit {1e3 * limit:g} mm): a marker lost or mislabelled, the wrong "
+                     "plane or units, or a scene not calibrated to this subject (casflex calibrate)")
 
 
 def _fill(t: np.ndarray, Z: np.ndarray, max_gap: float, report: list[str]) -> np.ndarray:

@@ -10,6 +10,12 @@ origin M_o = n . (p x F + T), both linear in the data: they, not the centre of p
 undefined where the force vanishes and wild where it is small), are what is filtered. On the node
 ``node`` that carries the contacting segment, the equivalent load is F_plane at the node and the
 moment M_o - (x_node x F_plane) about it: exact for a rigid segment whatever the point of contact.
+
+What the table does not give is never taken as zero force (:func:`plate_from_table`): a sample that is
+not a number is missing; a gap of at most :data:`MAX_PLATE_GAP` samples and :data:`MAX_PLATE_GAP_S`
+seconds is filled by a cubic spline through the force and the moment and reported, a longer one refused
+in one line; a table that does not cover the trial's window is refused (another trial's file, a clock
+offset), and the plate is never evaluated outside its samples (:meth:`Plate.at`).
 """
 
 from __future__ import annotations
@@ -18,42 +24,131 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from casflex.filters import even_times, lowpass
-from casflex.lab import LabTable, Plane, plate_moment_about_origin
+from casflex.filters import check_cutoff, even_times, lowpass
+from casflex.lab import LabTable, Plane
+from casflex.lab_c3d import MIN_PLATE_FORCE
+from casflex.lab_filter import plate_wrench
 
-__all__ = ["Plate", "plate_from_table", "plate_loads"]
+__all__ = ["Plate", "plate_from_table", "plate_loads", "MAX_PLATE_GAP", "MAX_PLATE_GAP_S"]
+
+#: samples: the longest run of missing plate samples filled (the markers' :data:`casflex.lab_filter.MAX_GAP`).
+MAX_PLATE_GAP = 10
+#: s: and at most this long: a heel strike's impact peak rises in 20-30 ms, which a spline over a longer
+#: gap would not know (at 60 Hz this fills one missing sample, at 1000 Hz ten).
+MAX_PLATE_GAP_S = 0.02
 
 
 @dataclass(frozen=True)
 class Plate:
     """One plate acting on ``node``: t (n,) s, force (n, 2) N in the plane, moment (n,) N m about the
-    lab's origin (module docstring); ``name``: the columns' prefix."""
+    lab's origin (module docstring); ``name``: the columns' prefix; ``notes``: what was done to its samples
+    (gaps filled, unloaded samples), a line each."""
 
     name: str
     node: str
     t: np.ndarray
     force: np.ndarray
     moment: np.ndarray
+    notes: tuple[str, ...] = ()
 
     def at(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(force (k, 2), moment (k,)) at times t (s), linear between samples, zero outside the table."""
-        f = np.column_stack([np.interp(t, self.t, self.force[:, i], left=0.0, right=0.0) for i in range(2)])
-        return f, np.interp(t, self.t, self.moment, left=0.0, right=0.0)
+        """(force (k, 2), moment (k,)) at times t (s), linear between samples. ValueError for a time more than
+        half a sample outside the table: the plate's force there is unknown, not zero."""
+        t = np.asarray(t, dtype=float)
+        half = 0.5 * (self.t[-1] - self.t[0]) / max(self.t.size - 1, 1)
+        if t.size and (t.min() < self.t[0] - half or t.max() > self.t[-1] + half):
+            bad = t.min() if t.min() < self.t[0] - half else t.max()
+            raise ValueError(f"plate {self.name!r}: no samples at t = {bad:g} s (its table covers {self.t[0]:g}.."
+                             f"{self.t[-1]:g} s)")
+        f = np.column_stack([np.interp(t, self.t, self.force[:, i]) for i in range(2)])
+        return f, np.interp(t, self.t, self.moment)
 
 
-def plate_from_table(table: LabTable, prefix: str, node: str, plane: Plane, cutoff: float | None) -> Plate:
+def _runs(missing: np.ndarray) -> list[tuple[int, int]]:
+    """[(start, stop)) of the runs of True in ``missing``."""
+    d = np.diff(np.r_[0, missing.astype(np.int8), 0])
+    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist(), strict=True))
+
+
+def _covered(t: np.ndarray, ok: np.ndarray, window: tuple[float, float], where: str, written: np.ndarray,
+             trial: str) -> slice:
+    """The rows of the plate's samples (at the even times t, ``written`` so in the file) to use: the stretch
+    between its first and last defined samples (``ok``), which must cover ``window`` (s) to within half a
+    sample. ValueError naming the plate otherwise."""
+    half = 0.5 * (t[-1] - t[0]) / max(t.size - 1, 1)
+    lo, hi = window
+    if t[0] > hi or t[-1] < lo:
+        raise ValueError(f"{where}: its samples span t = {written[0]:g}..{written[-1]:g} s, the window of {trial} "
+                         f"{lo:g}..{hi:g} s: they do not overlap (another trial's file, or a clock offset?)")
+    if not ok.any():
+        raise ValueError(f"{where}: no sample of its force is a number")
+    a, b = int(np.argmax(ok)), int(t.size - np.argmax(ok[::-1]))
+    if t[a] - half > lo or t[b - 1] + half < hi:
+        raise ValueError(f"{where}: its force is recorded over t = {written[a]:g}..{written[b - 1]:g} s only, not the "
+                         f"whole window {lo:g}..{hi:g} s of {trial}; set --t-start/--t-end (t_start, t_end) within it")
+    return slice(a, b)
+
+
+def _fill(t: np.ndarray, F: np.ndarray, M: np.ndarray, where: str, written: np.ndarray
+          ) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """F (n, 3), M (n, 3) at the even times t (n,) with their interior gaps (NaN rows) filled by a cubic spline
+    through the samples around them (module docstring); ValueError naming the plate and the gap's times (as
+    ``written`` in the file) for a longer gap."""
+    missing = ~np.isfinite(F).all(axis=1)
+    notes: list[str] = []
+    if not missing.any():
+        return F, M, notes
+    from scipy.interpolate import CubicSpline  # here: its import alone costs 0.5 s
+
+    runs, h = _runs(missing), (t[-1] - t[0]) / (t.size - 1)
+    for s, e in runs:
+        if e - s > MAX_PLATE_GAP or (e - s) * h > MAX_PLATE_GAP_S * (1 + 1e-6):
+            raise ValueError(f"{where}: {e - s} samples are not numbers from t = {written[s]:g} to "
+                             f"{written[e - 1]:g} s, a gap longer than a spline may fill (at most {MAX_PLATE_GAP} "
+                             f"samples and {1e3 * MAX_PLATE_GAP_S:g} ms); fill or cut it in the file")
+    wrench = np.hstack([F, M])
+    ok = ~missing
+    wrench[missing] = CubicSpline(t[ok], wrench[ok], axis=0)(t[missing])
+    for s, e in runs:
+        f = np.linalg.norm(wrench[s:e, :3], axis=1).max()
+        when = f"1 sample at t = {written[s]:g} s" if e - s == 1 else \
+            f"{e - s} samples at t = {written[s]:g}..{written[e - 1]:g} s"
+        notes.append(f"{where}: {when} not a number, filled by a cubic spline (a force up to {f:.0f} N there)")
+    return wrench[:, :3], wrench[:, 3:], notes
+
+
+def plate_from_table(table: LabTable, prefix: str, node: str, plane: Plane, cutoff: float | None, *,
+                     window: tuple[float, float] | None = None, rate: float | None = None, trial: str = "the trial"
+                     ) -> Plate:
     """The plate ``prefix`` of ``table`` on ``node``, in ``plane``, filtered at ``cutoff`` Hz (None: as
     recorded). The moment about the lab's origin from the table's ``<prefix>moment_{x,y,z}`` where it has
-    them (C3D plates, :func:`casflex.lab.read_c3d`), else p x F + T. Rows without force (NaN) are no
-    contact: zero force and moment. A force without a centre of pressure is refused in one line."""
-    F, M3 = plate_moment_about_origin(table, prefix)
-    off = ~np.isfinite(F).all(axis=1) | ~np.isfinite(M3).all(axis=1)  # no force recorded: no contact
-    F, M3 = np.where(off[:, None], 0.0, F), np.where(off[:, None], 0.0, M3)
+    them (C3D plates, :func:`casflex.lab.read_c3d`), else p x F + T (:func:`casflex.lab_filter.plate_wrench`:
+    forces and centres of pressure no body produces refused). ``window`` (s): the trial's times, which the
+    table must cover. ``rate`` (Hz): the samples' rate where the table's times round it (a .mot at the markers'
+    rate, its times written to the ms: their own slope is off by some 1e-4 and the samples would be taken
+    between the frames); the table's header ``rate`` (C3D) otherwise. Missing samples as the module docstring
+    says; the plate's ``notes`` say what was done."""
+    from casflex.lab_filter import _plate_columns
+
+    where = f"{table.source}: plate {_plate_columns(table, prefix)!r}"
+    F, M3, unloaded = plate_wrench(table, prefix)
+    hint = rate if rate is not None and np.isfinite(rate) else table.header.get("rate")
+    t = even_times(table.t, float(hint) if hint else None)
+    ok = np.isfinite(F).all(axis=1)
+    rows = _covered(t, ok, window, where, table.t, trial) if window is not None else slice(None)
+    t, F, M3, unloaded, written = t[rows], F[rows], M3[rows], unloaded[rows], table.t[rows]
+    if window is None and not np.isfinite(F[[0, -1]]).all():
+        raise ValueError(f"{where}: its first or last sample is not a number")
+    F, M3, notes = _fill(t, F, M3, where, written)
+    if unloaded.any():
+        notes.append(f"{where}: {int(unloaded.sum())} samples of a force under {MIN_PLATE_FORCE:g} N without a "
+                     "centre of pressure, taken as no load")
     E = plane.matrix
     n = np.cross(E[0], E[1])
     force, moment = F @ E.T, M3 @ n
-    both = lowpass(table.t, np.column_stack([force, moment]), cutoff, what=f"plate {prefix!r}")
-    return Plate(prefix, node, even_times(table.t), both[:, :2], both[:, 2])
+    check_cutoff(cutoff, t, f"{where}'s samples")
+    both = lowpass(t, np.column_stack([force, moment]), cutoff, what=where)
+    return Plate(prefix, node, t, both[:, :2], both[:, 2], tuple(notes))
 
 
 def plate_loads(model, plates: list[Plate], t: np.ndarray, q: np.ndarray) -> np.ndarray:

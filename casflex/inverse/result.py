@@ -24,7 +24,10 @@ class InverseResult:
     (N, N m; :mod:`casflex.inverse.rigid` names them: ``<hinge>.moment``, ``<hinge>.fx`` ...,
     ``root.fx|fy|mz``, and every element output of simulate); ``marker_rms`` (n_frames,) m at the
     trial's frames ``frame_t``; ``report``: what was done to the data (fit, gaps, filters), one line
-    each; ``settings``: the options.
+    each; ``settings``: the options; ``warnings``: the report's lines that say what changed the data
+    (samples filled, taken as no load); ``marker_misfit`` (n_frames, m) m: each marker's (``marker_labels``,
+    the trial's names) distance from the fitted pose, NaN where it is missing; ``plates``: the
+    :class:`~casflex.inverse.plates.Plate` s applied, as filtered (``plate.at(t)``: force and moment).
     """
 
     t: np.ndarray
@@ -41,6 +44,10 @@ class InverseResult:
     marker_rms: np.ndarray
     report: list[str] = field(default_factory=list)
     settings: dict = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+    marker_labels: tuple[str, ...] = ()
+    marker_misfit: np.ndarray | None = None
+    plates: tuple = ()
 
     def load(self, name: str) -> np.ndarray:
         """(k,) the load called ``name``; KeyError naming the known ones."""

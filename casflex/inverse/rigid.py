@@ -58,20 +58,38 @@ def _frame_function(tree: KinematicTree) -> ca.Function:
                        ["z", "zd", "zdd", "t", "p"], ["q", "qd", "qdd", "r", "B"])
 
 
+#: Frames solved at once: the mapped frame Function and the per-frame matrices of a block stay small (1e6
+#: frames at once took 6 GB), and the map is built once for all blocks.
+BLOCK = 4096
+
+
 def rigid_loads(tree: KinematicTree, t: np.ndarray, z: np.ndarray, zd: np.ndarray, zdd: np.ndarray,
                 p: np.ndarray, external=None) -> dict[str, np.ndarray]:
     """The inverse dynamics of rigid segments at the frames t (k,) with coordinates z, z', z'' (k, n_z)
-    (module docstring). ``external(t, q) -> (k, n_dof)``: further generalised forces (force plates).
-    Returns q, qd, qdd (k, n_dof), lam (k, rows) and the loads by name (k,)."""
+    (module docstring), in blocks of :data:`BLOCK` frames. ``external(t, q) -> (k, n_dof)``: further
+    generalised forces (force plates). Returns q, qd, qdd (k, n_dof), lam (k, rows) and the loads by name (k,)."""
     m = tree.model
-    k = t.size
     if m.n_con != m.n_dof - tree.n:
         raise ValueError(f"the scene has {m.n_dof} dofs and {m.n_con} joint rows: with the {tree.n} coordinates they "
                          "do not decide its motion; flexible segments need the flexible inverse")
-    f = _frame_function(tree).map(k)
-    q, qd, qdd, r, B = (np.array(v) for v in f(z.T, zd.T, zdd.T, t[None, :], np.tile(p[:, None], (1, k))))
-    q, qd, qdd, r = q.T, qd.T, qdd.T, r.T
-    B = B.reshape(m.n_con, k, m.n_dof).transpose(1, 0, 2) if m.n_con else np.zeros((k, 0, m.n_dof))
+    size = min(BLOCK, t.size)
+    f = _frame_function(tree).map(size)
+    parts = [_block(tree, f, size, t[s:s + size], z[s:s + size], zd[s:s + size], zdd[s:s + size], p, external)
+             for s in range(0, t.size, size)]
+    q, qd, qdd, lam = (np.concatenate([pt[i] for pt in parts]) for i in range(4))
+    out = loads_by_name(tree, q, qd, lam, p)
+    return {"q": q, "qd": qd, "qdd": qdd, "lam": lam, **out}
+
+
+def _block(tree: KinematicTree, f: ca.Function, size: int, t, z, zd, zdd, p, external):
+    """(q, qd, qdd, lam) of up to ``size`` frames by the mapped frame Function ``f`` (the last block padded
+    with its last frame)."""
+    m, k = tree.model, t.size
+    pad = np.r_[np.arange(k), np.full(size - k, k - 1)]
+    q, qd, qdd, r, B = (np.array(v) for v in f(z[pad].T, zd[pad].T, zdd[pad].T, t[pad][None, :],
+                                                 np.tile(p[:, None], (1, size))))
+    q, qd, qdd, r = q.T[:k], qd.T[:k], qdd.T[:k], r.T[:k]
+    B = B.reshape(m.n_con, size, m.n_dof).transpose(1, 0, 2)[:k] if m.n_con else np.zeros((k, 0, m.n_dof))
     if external is not None:
         r = r - external(t, q)
     A = np.concatenate([B, np.broadcast_to(driver_rows(tree), (k, tree.n, m.n_dof))], axis=1)
@@ -80,8 +98,7 @@ def rigid_loads(tree: KinematicTree, t: np.ndarray, z: np.ndarray, zd: np.ndarra
         i = int(np.argmax(~(cond < 1e12)))
         raise ValueError(f"the coordinates do not decide the scene's motion at t = {t[i]:g} s (singular joints)")
     lam = np.linalg.solve(A.transpose(0, 2, 1), -r[:, :, None])[:, :, 0]
-    out = loads_by_name(tree, q, qd, lam, p)
-    return {"q": q, "qd": qd, "qdd": qdd, "lam": lam, **out}
+    return q, qd, qdd, lam
 
 
 def loads_by_name(tree: KinematicTree, q: np.ndarray, qd: np.ndarray, lam: np.ndarray,

@@ -140,21 +140,20 @@ def kinematic_tree(model: Model, root: str | None = None) -> KinematicTree:
                              "inverse dynamics takes hinges (with torsion springs) and welds between segments")
     hinges = [j for j in sc.joints if j.kind == "hinge"]
     entry, order, todo = {cl[idx(root)]: idx(root)}, [], list(hinges)
-    while todo:
-        step = [j for j in todo if (cl[idx(j.nodes[0])] in entry) != (cl[idx(j.nodes[1])] in entry)]
+    while todo:  # one hinge at a time: two hinges reaching the same segment at once close a loop too
         closed = [j for j in todo if cl[idx(j.nodes[0])] in entry and cl[idx(j.nodes[1])] in entry]
         if closed:
             raise ValueError(f"joint {closed[0].name!r}: closes a loop; inverse dynamics takes open chains and trees")
-        if not step:
+        j = next((j for j in todo if (cl[idx(j.nodes[0])] in entry) != (cl[idx(j.nodes[1])] in entry)), None)
+        if j is None:
             break
-        for j in step:
-            a, b = j.nodes if cl[idx(j.nodes[0])] in entry else j.nodes[::-1]
-            if a != j.nodes[0]:
-                raise ValueError(f"joint {j.name!r}: its nodes run away from the root; write them as [parent, child] "
-                                 f"(nodes = [{j.nodes[1]!r}, {j.nodes[0]!r}])")
-            entry[cl[idx(b)]] = idx(b)
-            order.append(j)
-            todo.remove(j)
+        a, b = j.nodes if cl[idx(j.nodes[0])] in entry else j.nodes[::-1]
+        if a != j.nodes[0]:
+            raise ValueError(f"joint {j.name!r}: its nodes run away from the root; write them as [parent, child] "
+                             f"(nodes = [{j.nodes[1]!r}, {j.nodes[0]!r}])")
+        entry[cl[idx(b)]] = idx(b)
+        order.append(j)
+        todo.remove(j)
     lost = sorted({model.node_names[i] for i, c in enumerate(cl) if c not in entry})
     if lost:
         raise ValueError(f"nodes {lost[:5]}: no hinge or weld joins them to the root {root!r}")

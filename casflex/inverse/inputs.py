@@ -1,0 +1,196 @@
+"""Everything inverse dynamics takes from the user, read and checked before the marker fit.
+
+:func:`prepare` reads the trial (markers, force plates) and decides every refusal that the inputs alone
+decide, so that a wrong option or a corrupted file costs a second, not a marker fit over the whole trial
+(a minute on 100k frames): the scene's markers and plates, the window, evenly spaced frames (filtered or
+not: the rates are differences on an even grid), markers a body can produce (:mod:`casflex.lab_checks`:
+no jumps of a metre in a frame, no header whose units lie), the cut-off against both the markers' and the
+plates' sampling, each plate's table covering the window, its missing samples (short gaps filled and
+reported, long ones refused), and the memory the run needs. What it changed in the data is in
+``warnings`` (also in the report): the result says it, and the command prints it on stderr.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from casflex.filters import check_cutoff, even_times
+from casflex.inverse.plates import Plate, plate_from_table
+from casflex.inverse.tree import KinematicTree, kinematic_tree
+from casflex.model import Model
+
+__all__ = ["InverseInputs", "prepare", "inverse_model", "read_markers"]
+
+#: The fewest frames an inverse takes (the filter's padding and the end differences need them).
+MIN_FRAMES = 10
+#: Bytes a frame of the inverse needs per value of its result (:func:`_memory` counts the values), with the
+#: copies made while the result is assembled and written: ``casflex inverse hamner_leg --out loads.csv`` on
+#: 2e4 and 1e5 frames peaked at 122 and 362 MB (/usr/bin/time -v), 3.0 kB a frame of 136 values, 22.6 bytes
+#: a value (the reading of the text included); 32 gives that a 40 % margin.
+BYTES_PER_VALUE = 32
+
+
+@dataclass(frozen=True)
+class InverseInputs:
+    """The checked inputs of one inverse run: ``model`` and its ``tree``, the frames ``t`` (n,) s on an even
+    grid, the scene's markers ``y`` (n, 2 m) m in the plane (NaN where missing), the ``plates``, the
+    ``cutoff`` (Hz, None: unfiltered), the options ``max_gap`` (s), ``max_misfit`` (m), ``settings`` (what was
+    asked), ``report`` (what was done to the data, a line each) and ``warnings`` (what changed the data)."""
+
+    model: Model
+    tree: KinematicTree
+    t: np.ndarray
+    y: np.ndarray
+    labels: tuple[str, ...]
+    plates: tuple[Plate, ...]
+    cutoff: float | None
+    max_gap: float
+    max_misfit: float
+    settings: dict
+    report: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = field(default=())
+
+
+def inverse_model(scene, root: str | None = None) -> Model:
+    """The model inverse dynamics drives: the scene without the supports of its root (default: its
+    first node), which the root's driver replaces (they would fix what the data moves). A support on
+    another node is refused in one line: the data, not the scene, say where the segments go."""
+    from casflex.model import assemble
+    from casflex.scene import Scene
+
+    if not isinstance(scene, Scene):
+        from casflex.scene_io import load_scene
+
+        scene = load_scene(scene)
+    root = scene.nodes[0].name if root is None else root
+    for s in scene.supports:
+        if s.node != root:
+            raise ValueError(f"support {s.name!r}: inverse dynamics drives the scene from its root {root!r} only; "
+                             "remove the support or make its node the root (--root)")
+    return assemble(dataclasses.replace(scene, supports=()))
+
+
+def read_markers(path, *, plates: bool = False):
+    """(markers, plates or None) of a .trc or .c3d file (a C3D's plates read only when ``plates``)."""
+    from casflex.lab import read_c3d, read_trc
+
+    if os.fspath(path).lower().endswith(".c3d"):
+        return read_c3d(path, plates=plates)
+    return read_trc(path), None
+
+
+def _trial(markers, grf, need_plates: bool):
+    """(LabMarkers, plates' LabTable or None) from what the caller gave: objects, or .trc/.c3d and
+    .mot/.sto/.c3d paths (the markers' own C3D again for its plates). ValueError when plates are needed and
+    the file has none."""
+    from casflex.lab import LabMarkers, LabTable, read_sto
+
+    same = grf is not None and not isinstance(grf, LabTable) and not isinstance(markers, LabMarkers) and (
+        os.fspath(grf) == os.fspath(markers))
+    lab, table = (markers, None) if isinstance(markers, LabMarkers) else read_markers(markers, plates=same)
+    if isinstance(grf, LabTable):
+        table = grf
+    elif grf is not None and not same:
+        table = read_markers(grf, plates=True)[1] if os.fspath(grf).lower().endswith(".c3d") else read_sto(grf)
+    if need_plates and table is None:
+        raise ValueError(f"{grf}: the file has no force plates")
+    return lab, table
+
+
+def _window(t: np.ndarray, t_start: float | None, t_end: float | None, source: str) -> np.ndarray:
+    lo = t[0] if t_start is None else t_start
+    hi = t[-1] if t_end is None else t_end
+    keep = (t >= lo - 1e-9) & (t <= hi + 1e-9)
+    if keep.sum() < MIN_FRAMES:
+        raise ValueError(f"t_start, t_end: the window {lo:g}..{hi:g} s holds {int(keep.sum())} frames of the trial "
+                         f"{source} ({t[0]:g}..{t[-1]:g} s); at least {MIN_FRAMES} are needed")
+    return keep
+
+
+def _even_frames(t: np.ndarray, rate: float, source: str) -> np.ndarray:
+    """The frames' times on their even grid (:func:`casflex.filters.even_times`); ValueError when they are
+    not evenly spaced: the rates are differences on an even grid, filtered or not."""
+    grid = even_times(t, rate if np.isfinite(rate) else None)
+    h = np.diff(grid)
+    if np.ptp(h) > 1e-6 * h.mean():
+        step = np.median(h)
+        k = int(np.argmax(np.abs(h - step) > 0.1 * step)) + 1
+        raise ValueError(f"{source}: frames must be evenly spaced (the velocities and accelerations are differences "
+                         f"on an even grid): t = {t[k]:g} s follows {t[k - 1]:g} s, the frames are {step:.3g} s apart "
+                         "elsewhere; resample the trial")
+    return grid
+
+
+def _scene_markers(model: Model, tree: KinematicTree, lab, plane, keep_frames=None):
+    """(scene markers' channels y (n, 2 m) in the plane, their lab labels), checked (:mod:`casflex.lab_checks`)."""
+    from casflex.lab import markers_in_plane
+    from casflex.lab_checks import check_markers, check_scale
+
+    names = {m.name: m.label or m.name for m in model.scene.markers}
+    ms = markers_in_plane(lab, names, plane)
+    labels = tuple(names.values())
+    xy = ms.q[keep_frames].reshape(int(np.sum(keep_frames)), -1, 2)
+    if not np.isfinite(xy).all(axis=2).any():
+        raise ValueError(f"{lab.source}: none of the scene's markers {list(labels)} is seen in the window")
+    scene_xy = np.array([[m.x, m.y] for m in model.scene.markers])
+    check_scale(lab.source, lab.units, scene_xy, xy, [tree.cluster[i] for i in tree.marker_nodes])
+    check_markers(lab, labels, keep_frames)
+    return ms, labels
+
+
+def _memory(model: Model, tree: KinematicTree, n: int, n_markers: int) -> None:
+    """ValueError when the run's result would not fit in the memory available (the bound of
+    :data:`BYTES_PER_VALUE`); the flexible inverse's integration checks its own steps."""
+    from casflex.simulate import _bytes, memory_available
+
+    values = 3 * n_markers + 4 * tree.n + 4 * model.n_dof + model.n_con + len(model.output_names) + 4
+    need, avail = BYTES_PER_VALUE * n * values, memory_available()
+    if avail is not None and need > avail:
+        raise ValueError(f"t_start, t_end: {n:,} frames of {values} values each need about {_bytes(need)} of memory "
+                         f"and {_bytes(avail)} are available; take a shorter window")
+
+
+def prepare(scene, markers, *, plane="X,Y", grf=None, plates: dict[str, str] | None = None,
+            cutoff: float | None = 6.0, root: str | None = None, t_start: float | None = None,
+            t_end: float | None = None, max_gap: float = 0.1, max_misfit: float | None = None) -> InverseInputs:
+    """The inputs of :func:`casflex.inverse.inverse_dynamics` (its parameters), read and checked (module
+    docstring). ValueError in one line naming the option, file, marker or plate otherwise."""
+    from casflex.lab import Plane
+    from casflex.lab_checks import MAX_MISFIT
+
+    pl = Plane.parse(plane) if isinstance(plane, str) else plane
+    max_misfit = MAX_MISFIT if max_misfit is None else float(max_misfit)
+    if not max_misfit > 0:
+        raise ValueError(f"max_misfit: must be a distance > 0 m, got {max_misfit:g}")
+    model = inverse_model(scene, root)
+    if not model.scene.markers:
+        raise ValueError("scene: it has no [[markers]] to fit to the trial")
+    plates = dict(plates or {})
+    for node in plates:
+        if node not in model.node_names:
+            raise ValueError(f"plates: no node {node!r} in the scene; nodes are {list(model.node_names)}")
+    if plates and grf is None:
+        raise ValueError("plates: given without the ground reactions (grf)")
+    tree = kinematic_tree(model, root)
+    lab, table = _trial(markers, grf, bool(plates))
+    keep = _window(lab.t, t_start, t_end, lab.source)
+    ms, labels = _scene_markers(model, tree, lab, pl, keep)
+    t = _even_frames(ms.t[keep], lab.rate, lab.source)
+    check_cutoff(cutoff, t, "markers")
+    report, warnings = [], []
+    plate_list = []
+    for node, prefix in plates.items():
+        plate = plate_from_table(table, prefix, node, pl, cutoff, window=(float(t[0]), float(t[-1])), rate=lab.rate,
+                                 trial=lab.source)
+        plate_list.append(plate)
+        warnings += plate.notes
+    _memory(model, tree, t.size, len(labels))
+    settings = {"plane": f"{pl.x},{pl.y}", "cutoff_hz": cutoff, "root": tree.root, "plates": plates,
+                "moments": [f"{h}.moment" for h in tree.hinges], "source": getattr(lab, "source", ""),
+                "scene": model.scene.name, "max_misfit_m": max_misfit}
+    return InverseInputs(model, tree, t, ms.q[keep], labels, tuple(plate_list), cutoff, max_gap, max_misfit,
+                         settings, tuple(report + warnings), tuple(warnings))

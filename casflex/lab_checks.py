@@ -1,0 +1,151 @@
+"""What no human body in a motion lab produces: the limits that tell corrupted lab data from a measurement.
+
+A lab file can be wrong in ways that look like data: a header whose units lie, a marker that jumps a
+metre for one frame, a sample of 1e300, a plate force of ten tonnes. Passed on, each becomes a confident
+joint moment of 1e8 N m. The checks here refuse such data in one line that names the file, the marker or
+the plate, and the frame, before any fit; each limit is far beyond what a body does, so that a real
+measurement never meets it:
+
+- :data:`LAB_EXTENT` (m): no capture volume reaches 100 m from its origin (a large gait lab spans 10-20 m).
+- :data:`MAX_MARKER_SPEED` (m/s): a marker moving faster than 50 m/s between two frames. The fastest body
+  parts reach about 40 m/s (a pitcher's fingertips at release); a kicking foot 20-25 m/s, a sprinter's
+  foot 20 m/s. A mislabelled or corrupted sample makes a jump of the distance between two markers or more
+  in one frame: 1 m at 60 Hz is 60 m/s.
+- :data:`MAX_PLATE_FORCE` (N): 20 kN is 25 body weights of an 80 kg subject; the hardest landings measured
+  reach 10-15.
+- :data:`MAX_MISFIT` (m): a marker 0.1 m from where the fitted model puts it is no soft-tissue artefact
+  (1-3 cm): a marker that fell off or was mislabelled, a wrong plane or units, or a scene not scaled to the
+  subject (:mod:`casflex.inverse.fit` refuses it, naming the frame and the marker; ``max_misfit`` changes it).
+- :data:`STATIC_SPREAD` (m): a static trial's marker farther than 5 cm from its mean position: a subject
+  standing still sways by 1-2 cm (:mod:`casflex.inverse.calibrate`).
+- :func:`check_scale`: the trial's markers as far apart as the scene's to within a factor
+  :data:`SCALE_FACTOR` (3): subjects differ by 20-30 %, units by 10 or 1000.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from casflex.lab import LabMarkers, LabTable
+
+__all__ = ["LAB_EXTENT", "MAX_MARKER_SPEED", "MAX_PLATE_FORCE", "MAX_MISFIT", "STATIC_SPREAD", "SCALE_FACTOR",
+           "check_markers", "check_plate_values", "check_static", "check_scale"]
+
+LAB_EXTENT = 100.0
+MAX_MARKER_SPEED = 50.0
+MAX_PLATE_FORCE = 2.0e4
+MAX_MISFIT = 0.1
+STATIC_SPREAD = 0.05
+SCALE_FACTOR = 3.0
+
+
+def check_markers(lab: LabMarkers, labels: Sequence[str], frames: np.ndarray | None = None) -> None:
+    """ValueError in one line naming the file, the marker and the frame where a marker among ``labels`` lies
+    beyond :data:`LAB_EXTENT` (or is infinite) or moves faster than :data:`MAX_MARKER_SPEED` between two
+    frames it is seen in; ``frames`` (bool (n,)): the frames to check (default all)."""
+    sel = np.ones(lab.t.size, bool) if frames is None else np.asarray(frames, bool)
+    t = lab.t[sel]
+    for label in labels:
+        xyz = lab.marker(label)[sel]
+        with np.errstate(invalid="ignore"):
+            far = np.abs(xyz).max(axis=1) > LAB_EXTENT
+        far |= np.isinf(xyz).any(axis=1)
+        if far.any():
+            i = int(np.argmax(far))
+            raise ValueError(f"{lab.source}: marker {label!r} at t = {t[i]:g} s lies at {_point(xyz[i])} m, beyond "
+                             f"any capture volume ({LAB_EXTENT:g} m): a corrupted sample, or units that are not the "
+                             f"header's {lab.units!r}")
+        seen = np.flatnonzero(np.isfinite(xyz).all(axis=1))
+        if seen.size < 2:
+            continue
+        step = np.linalg.norm(np.diff(xyz[seen], axis=0), axis=1)
+        speed = step / np.diff(t[seen])
+        if (speed > MAX_MARKER_SPEED).any():
+            k = int(np.argmax(speed > MAX_MARKER_SPEED))
+            a, b = seen[k], seen[k + 1]
+            raise ValueError(f"{lab.source}: marker {label!r} jumps {step[k]:.3g} m from t = {t[a]:g} to {t[b]:g} s "
+                             f"({speed[k]:.3g} m/s; no body moves a marker faster than {MAX_MARKER_SPEED:g} m/s): a "
+                             "corrupted or mislabelled sample; delete it (an empty cell is a gap, filled) or fix "
+                             "the labels")
+
+
+def _point(p: np.ndarray) -> str:
+    return "(" + ", ".join(f"{v:.3g}" for v in p) + ")"
+
+
+def check_plate_values(table: LabTable, prefix: str, force: np.ndarray, cop: np.ndarray | None) -> None:
+    """ValueError in one line naming the file, the plate and the time of a force that is infinite or above
+    :data:`MAX_PLATE_FORCE`, or a centre of pressure ``cop`` (None: the table gives moments) that is infinite
+    or beyond :data:`LAB_EXTENT`. Forces that are not numbers (NaN) are missing samples: the caller's."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        size = np.linalg.norm(force, axis=1)
+        bad = np.isinf(force).any(axis=1) | (size > MAX_PLATE_FORCE)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ValueError(f"{table.source}: plate {prefix!r} at t = {table.t[i]:g} s: a force of {size[i]:.3g} N, "
+                         f"beyond what a body exerts on a plate ({MAX_PLATE_FORCE:g} N): a corrupted sample or a "
+                         "calibration in other units")
+    if cop is None:
+        return
+    with np.errstate(invalid="ignore"):
+        bad = np.isinf(cop).any(axis=1) | (np.abs(cop).max(axis=1) > LAB_EXTENT)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ValueError(f"{table.source}: plate {prefix!r} at t = {table.t[i]:g} s: its centre of pressure lies at "
+                         f"{_point(cop[i])} m, beyond any lab ({LAB_EXTENT:g} m): a corrupted sample or another unit")
+
+
+def check_static(lab: LabMarkers, labels: Sequence[str]) -> None:
+    """ValueError in one line when a marker among ``labels`` of a static trial moves farther than
+    :data:`STATIC_SPREAD` from its mean position: a trial of motion given as the static one."""
+    worst, which = 0.0, None
+    for label in labels:
+        xyz = lab.marker(label)
+        seen = np.isfinite(xyz).all(axis=1)
+        if seen.sum() < 2:
+            continue
+        d = np.linalg.norm(xyz[seen] - xyz[seen].mean(axis=0), axis=1)
+        if d.max() > worst:
+            worst, which = float(d.max()), (label, float(lab.t[seen][np.argmax(d)]))
+    if worst > STATIC_SPREAD:
+        raise ValueError(f"{lab.source}: not a static trial: marker {which[0]!r} lies {1e3 * worst:.0f} mm from its "
+                         f"mean position at t = {which[1]:g} s (a subject standing still sways by 1-2 cm; the "
+                         f"limit is {1e3 * STATIC_SPREAD:.0f} mm)")
+
+
+def _median_ratio(seg: np.ndarray, scene_xy: np.ndarray, trial_xy: np.ndarray) -> float:
+    """The median, over pairs of markers on one segment and the frames, of trial over scene distance (1: none)."""
+    ratios = []
+    for a in range(seg.size):
+        for b in range(a + 1, seg.size):
+            d0 = np.linalg.norm(scene_xy[a] - scene_xy[b])
+            if seg[a] != seg[b] or d0 < 1e-3:  # markers on one segment, 1 mm apart at least
+                continue
+            d = np.linalg.norm(trial_xy[:, a] - trial_xy[:, b], axis=1)
+            ratios.append(d[np.isfinite(d)] / d0)
+    every = np.concatenate(ratios) if ratios else np.zeros(0)
+    return float(np.median(every)) if every.size else 1.0
+
+
+def check_scale(source: str, units: str, scene_xy: np.ndarray, trial_xy: np.ndarray, segment: Sequence[int]) -> None:
+    """ValueError in one line when the trial's markers lie :data:`SCALE_FACTOR` times farther apart than the
+    scene's, or closer, over the pairs of markers on one segment (median over pairs and frames): units that are
+    not the header's, or a scene of another body. ``scene_xy`` (m, 2) the scene's markers in the plane,
+    ``trial_xy`` (n, m, 2) the trial's (NaN where missing), ``segment`` (m,) each marker's segment."""
+    seg = np.asarray(segment)
+    with np.errstate(over="ignore", invalid="ignore"):  # absurd samples are check_markers' to name
+        ratio = _median_ratio(seg, scene_xy, trial_xy)
+    if not 1.0 / SCALE_FACTOR < ratio < SCALE_FACTOR:
+        from casflex.lab import UNITS
+
+        hint = ""
+        if units in UNITS and ratio > 0:  # the unit the numbers are in: the header's unit over the ratio
+            true = min(UNITS, key=lambda u: abs(np.log10(UNITS[units] / ratio / UNITS[u])))
+            if abs(np.log10(UNITS[units] / ratio / UNITS[true])) < 0.3:
+                hint = f" (the numbers look like {true})"
+        raise ValueError(f"{source}: the trial's markers lie {ratio:.3g} times as far apart as the scene's on the same "
+                         f"segments: the header's units {units!r} are wrong{hint}, or the scene is not this subject's")

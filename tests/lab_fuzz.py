@@ -1,0 +1,165 @@
+"""Corrupted copies of the lab excerpts, and a worker that runs ``casflex inverse`` on each (tests/test_lab_fuzz.py).
+
+:func:`corrupt_text` and :func:`corrupt_c3d` make a seeded corrupted copy of a TRC / .mot or a C3D file with one
+to three of the faults a lab file meets: cells that are not numbers, are empty, infinite or absurd; lines lost,
+repeated or swapped; a file cut short; bytes that are not text; header fields that lie or are missing; labels
+renamed; tabs turned into spaces; in a C3D, bytes of its header, parameters or data overwritten, samples made
+NaN, infinite or huge, the file cut.
+
+Run as a script, this module is the worker: it reads one case a line on stdin (JSON: the command's arguments
+and where its output goes), runs ``casflex.cli.main`` on it in this one process (CasADi and numpy loaded once)
+and writes one result a line on stdout (JSON: the exit status, what stderr said, whether every load written is
+finite, or the traceback of an exception that escaped).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import struct
+import sys
+import traceback
+
+import numpy as np
+
+BAD_CELLS = ("NaN", "nan", "", "inf", "-inf", "1e300", "-1e300", "abc", "0", "1e9", "-0", "1,5", "0x10", " ")
+
+
+def _cell_lines(lines: list[str]) -> list[int]:
+    """Indices of the data lines (after the header) that hold tab-separated cells."""
+    start = next((i + 2 for i, ln in enumerate(lines) if ln.strip().lower() == "endheader"), 5)
+    return [i for i in range(start, len(lines)) if "\t" in lines[i]]
+
+
+def _text_fault(lines: list[str], rng: np.random.Generator) -> list[str]:
+    if not lines:
+        return lines
+    data = _cell_lines(lines)
+    kind = int(rng.integers(10))
+    if kind <= 2 and data:  # a cell
+        i = int(rng.choice(data))
+        cells = lines[i].split("\t")
+        cells[int(rng.integers(len(cells)))] = str(rng.choice(BAD_CELLS))
+        lines[i] = "\t".join(cells)
+    elif kind == 3 and data:  # a line lost
+        del lines[int(rng.choice(data))]
+    elif kind == 4 and data:  # a line repeated, or two swapped
+        i, j = (int(v) for v in rng.choice(data, 2))
+        lines.insert(i, lines[i]) if rng.random() < 0.5 else lines.__setitem__(slice(None), _swap(lines, i, j))
+    elif kind == 5:  # a header line: a field changed or lost
+        i = int(rng.integers(min(6, len(lines))))
+        cells = lines[i].split("\t")
+        cells[int(rng.integers(len(cells)))] = str(rng.choice(("", "0", "m", "cm", "-1", "sixty", "yes", "true", "x")))
+        lines[i] = "\t".join(cells) if rng.random() < 0.8 else ""
+    elif kind == 6 and data:  # tabs become spaces on one line
+        i = int(rng.choice(data))
+        lines[i] = lines[i].replace("\t", " ")
+    elif kind == 7 and data:  # a column lost on one line
+        i = int(rng.choice(data))
+        cells = lines[i].split("\t")
+        del cells[int(rng.integers(len(cells)))]
+        lines[i] = "\t".join(cells)
+    elif kind == 8:  # the times shifted or scaled, or one time changed
+        data = data or [len(lines) - 1]
+        col = 1 if len(lines[data[0]].split("\t")) > 20 else 0
+        scale = float(rng.choice((1.0, 1.0, 2.0, -1.0)))
+        shift = float(rng.choice((0.0, 0.05, 5.0, -1.0)))
+        for i in data if rng.random() < 0.5 else [int(rng.choice(data))]:
+            cells = lines[i].split("\t")
+            try:
+                cells[col] = f"{float(cells[col]) * scale + shift:.6f}"
+            except (ValueError, IndexError):
+                continue
+            lines[i] = "\t".join(cells)
+    elif data:  # many cells of one column: a marker or a channel gone for a while
+        col = int(rng.integers(1, len(lines[data[0]].split("\t"))))
+        start = int(rng.integers(len(data)))
+        for i in data[start:start + int(rng.integers(1, 12))]:
+            cells = lines[i].split("\t")
+            if col < len(cells):
+                cells[col] = str(rng.choice(("", "NaN", "0")))
+                lines[i] = "\t".join(cells)
+    return lines
+
+
+def _swap(lines: list[str], i: int, j: int) -> list[str]:
+    out = list(lines)
+    out[i], out[j] = out[j], out[i]
+    return out
+
+
+def corrupt_text(text: str, seed: int) -> bytes:
+    """A corrupted copy of a TRC or .mot file's text (module docstring), as bytes."""
+    rng = np.random.default_rng(seed)
+    lines = text.splitlines()
+    for _ in range(int(rng.integers(1, 4))):
+        lines = _text_fault(lines, rng)
+    raw = ("\n".join(lines) + "\n").encode("utf-8")
+    if rng.random() < 0.08 and raw:  # cut short
+        raw = raw[:int(rng.integers(len(raw)))]
+    if rng.random() < 0.05:  # bytes that are not text
+        k = int(rng.integers(len(raw) + 1))
+        raw = raw[:k] + bytes(rng.integers(128, 256, 4).tolist()) + raw[k:]
+    return raw
+
+
+def corrupt_c3d(raw: bytes, seed: int, parameters_end: int = 6656) -> bytes:
+    """A corrupted copy of a C3D file (module docstring); ``parameters_end``: where its data section starts."""
+    rng = np.random.default_rng(seed)
+    b = bytearray(raw)
+    for _ in range(int(rng.integers(1, 4))):
+        kind = int(rng.integers(6))
+        if kind == 0 and len(b) >= 512:  # bytes of the header
+            i = int(rng.integers(512))
+            b[i] = int(rng.integers(256))
+        elif kind == 1 and len(b) >= parameters_end:  # bytes of the parameter section
+            i = int(rng.integers(512, parameters_end))
+            b[i:i + 2] = bytes(rng.integers(256, size=2).tolist())
+        elif kind == 2 and len(b) > parameters_end + 4:  # a float sample of the data section: NaN, infinite, huge, zero
+            i = parameters_end + 4 * int(rng.integers((len(b) - parameters_end) // 4))
+            b[i:i + 4] = struct.pack("<f", float(rng.choice((np.nan, np.inf, -np.inf, 3e38, 0.0, 1e6))))
+        elif kind == 3 and len(b) > parameters_end + 4:  # a run of samples of the data section
+            i = parameters_end + 4 * int(rng.integers((len(b) - parameters_end) // 4))
+            b[i:i + 4 * 32] = struct.pack("<f", np.nan) * 32
+        elif kind == 4 and b:  # cut short
+            b = b[:int(rng.integers(len(b)))]
+        elif b:  # random bytes anywhere
+            i = int(rng.integers(len(b)))
+            b[i:i + 8] = bytes(rng.integers(256, size=8).tolist())
+    return bytes(b)
+
+
+def _finite_loads(path: str) -> bool | None:
+    """Whether every load in the npz written at ``path`` is finite (None: no file)."""
+    try:
+        with np.load(path) as z:
+            return bool(np.isfinite(z["loads"]).all() and np.isfinite(z["z"]).all())
+    except FileNotFoundError:
+        return None
+
+
+def run_case(argv: list[str], out: str) -> dict:
+    """``casflex.cli.main(argv)`` in this process: its exit status, stderr's lines, and the loads' finiteness."""
+    from casflex.cli import main
+
+    err = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+            code = main(argv)
+    except BaseException:  # noqa: BLE001 - a traceback is what the fuzz test looks for
+        return {"code": None, "traceback": traceback.format_exc(limit=-4)}
+    lines = [ln for ln in err.getvalue().splitlines() if ln.strip()]
+    return {"code": code, "stderr": lines, "finite": _finite_loads(out) if code == 0 else None}
+
+
+def _worker() -> None:
+    for line in sys.stdin:
+        case = json.loads(line)
+        result = run_case(case["argv"], case["out"])
+        sys.stdout.write(json.dumps({"case": case["name"], **result}) + "\n")
+        sys.stdout.flush()
+
+
+if __name__ == "__main__":
+    _worker()

@@ -1,0 +1,114 @@
+"""Corrupted copies of the TRC, .mot and C3D excerpts through ``casflex inverse``: every one refused in one
+line (exit 2) or accepted with a finite answer (exit 0), no traceback, no hang.
+
+The copies (tests/lab_fuzz.py) carry one to three faults each, seeded: cells not numbers, empty, infinite or
+absurd, lines lost, repeated or swapped, files cut short, bytes that are not text, header fields that lie,
+times shifted; in the C3D, bytes of its header, parameters and data overwritten. One worker process runs them
+all (casflex imported once); a case that takes longer than :data:`HANG` seconds is a hang. A refusal must name
+the file it read (or an option): a line that names nothing is not "one clear line". ``CASFLEX_FUZZ`` sets the
+number of cases per file (default :data:`CASES`; thousands were run while fixing, see CHANGELOG).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+from lab_fuzz import corrupt_c3d, corrupt_text  # noqa: E402
+
+LAB = Path(__file__).parent / "data" / "lab"
+TRC, GRF, C3D = LAB / "hamner_running_stride.trc", LAB / "hamner_running_stride_grf.mot", LAB / "walking2_excerpt.c3d"
+#: cases per file: 40 x 3 run in about 30 s on 2 cores
+CASES = int(os.environ.get("CASFLEX_FUZZ", "40"))
+#: s: a case's bound. A clean run takes 0.1-0.5 s; a busy 2-core machine, 10x that; a hang, forever.
+HANG = 60.0
+
+
+def _cases(tmp_path: Path) -> list[dict]:
+    from lab_scenes import walking2_leg
+
+    scene = tmp_path / "walking2_leg.toml"
+    scene.write_text(walking2_leg())
+    leg = ["inverse", "hamner_leg", "--root", "pelvis", "--plate", "ankle=ground_", "--cutoff", "10", "--quiet"]
+    cases = []
+    for k in range(CASES):
+        for kind in ("trc", "mot", "c3d"):
+            name = f"{kind}{k}"
+            path = tmp_path / f"{name}.{kind}"
+            out = str(tmp_path / f"{name}.npz")
+            if kind == "trc":
+                path.write_bytes(corrupt_text(TRC.read_text(), 1000 + k))
+                argv = [*leg, "--data", str(path), "--loads", str(GRF)]
+            elif kind == "mot":
+                path.write_bytes(corrupt_text(GRF.read_text(), 2000 + k))
+                argv = [*leg, "--data", str(TRC), "--loads", str(path)]
+            else:
+                path.write_bytes(corrupt_c3d(C3D.read_bytes(), 3000 + k))
+                argv = ["inverse", str(scene), "--data", str(path), "--loads", str(path), "--plate", "ankle=ground_",
+                        "--plane", "X,Z", "--root", "pelvis", "--cutoff", "10", "--quiet"]
+            cases.append({"name": name, "file": path.name, "argv": [*argv, "--out", out], "out": out})
+    return cases
+
+
+def _run_all(cases: list[dict]) -> list[dict]:
+    """Each case's result from one worker; pytest.fail naming the case that hangs."""
+    worker = subprocess.Popen([sys.executable, str(Path(__file__).parent / "lab_fuzz.py")], stdin=subprocess.PIPE,
+                              stdout=subprocess.PIPE, text=True, cwd=Path(__file__).parent)
+    results: list[dict] = []
+    got = threading.Event()
+
+    def read() -> None:
+        for line in worker.stdout:
+            results.append(json.loads(line))
+            got.set()
+
+    threading.Thread(target=read, daemon=True).start()
+    try:
+        for case in cases:
+            got.clear()
+            worker.stdin.write(json.dumps(case) + "\n")
+            worker.stdin.flush()
+            if not got.wait(HANG):
+                pytest.fail(f"case {case['name']} ({' '.join(case['argv'])}) did not finish in {HANG:g} s")
+    finally:
+        worker.kill()
+        worker.wait()
+    return results
+
+
+@pytest.mark.slow
+def test_corrupted_lab_files_are_refused_in_one_line_or_give_finite_loads(tmp_path):
+    pytest.importorskip("ezc3d")
+    cases = _cases(tmp_path)
+    results = _run_all(cases)
+    assert len(results) == len(cases)
+    by_name = {c["name"]: c for c in cases}
+    problems, accepted = [], 0
+    for r in results:
+        case = by_name[r["case"]]
+        if r["code"] is None:
+            problems.append(f"{r['case']}: traceback\n{r['traceback']}")
+            continue
+        errors = [ln for ln in r["stderr"] if not ln.startswith("casflex: warning: ")]
+        if r["code"] == 0:
+            accepted += 1
+            if r["finite"] is not True or errors:
+                problems.append(f"{r['case']}: exit 0 with loads finite={r['finite']}, stderr {errors}")
+        elif r["code"] == 2:
+            if len(errors) != 1 or not errors[0].startswith("casflex: error: "):
+                problems.append(f"{r['case']}: exit 2 without one error line: {errors}")
+            elif case["file"] not in errors[0] and "--" not in errors[0]:
+                problems.append(f"{r['case']}: the refusal names neither the file nor an option: {errors[0]}")
+        else:
+            problems.append(f"{r['case']}: exit {r['code']}: {errors}")
+    assert not problems, "\n".join(problems)
+    # the corruptions are not all fatal: some copies must still be accepted (a harmless header field, a
+    # marker gap filled), and most refused
+    assert 0 < accepted < len(cases)
