@@ -156,3 +156,29 @@ def assert_same_numbers(a, b) -> None:
         np.testing.assert_array_equal(a, b)
     else:
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-9 * max(np.abs(a).max(), 1e-300))
+
+
+def assert_scenes_close(a, b, rel: float, *, path: str = "scene") -> None:
+    """``a == b`` for scenes or their items (frozen dataclasses, tuples of them), with floats equal to
+    ``rel`` relative instead of bit for bit; strings, ints, bools, None and the structure (types, lengths)
+    exactly. For a built-in scene file written on one machine against the same scene recomputed here
+    (tests/hamner_leg.py, leg_rigid.py, slidercrank.py): another CPU's libm and BLAS differ in the last
+    digits. Each caller states where its ``rel`` comes from. Raises at the first difference, naming it."""
+    import dataclasses
+
+    if isinstance(a, float) or isinstance(b, float):
+        numbers = all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in (a, b))
+        assert numbers and math.isclose(a, b, rel_tol=rel, abs_tol=0.0), f"{path}: {a!r} != {b!r} (relative {rel:g})"
+    elif dataclasses.is_dataclass(a) and not isinstance(a, type):
+        assert type(a) is type(b), f"{path}: {type(a).__name__} != {type(b).__name__}"
+        name = getattr(a, "name", None)
+        where = f"{path}({name})" if isinstance(name, str) and path != "scene" else path
+        for f in dataclasses.fields(a):
+            assert_scenes_close(getattr(a, f.name), getattr(b, f.name), rel, path=f"{where}.{f.name}")
+    elif isinstance(a, (tuple, list)):
+        assert type(a) is type(b), f"{path}: {type(a).__name__} != {type(b).__name__}"
+        assert len(a) == len(b), f"{path}: {len(a)} items != {len(b)}"
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
+            assert_scenes_close(x, y, rel, path=f"{path}[{i}]")
+    else:
+        assert a == b, f"{path}: {a!r} != {b!r}"
