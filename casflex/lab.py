@@ -270,10 +270,15 @@ def markers_in_plane(lab: LabMarkers, labels: dict[str, str], plane: Plane):
 def trial_markers(model, path: str | os.PathLike[str], plane: Plane | str = "X,Y"):
     """The scene's markers (each by its ``label``, or its name) in the TRC or C3D file ``path``, projected on
     ``plane``: a MeasurementSet for identification (module docstring). ValueError naming a label the
-    trial lacks, or a scene without markers."""
+    trial lacks, a scene without markers, or a marker no body moves so (:func:`casflex.lab_checks.check_markers`)."""
     markers = model.scene.markers
     if not markers:
         raise ValueError(f"{path}: the scene has no [[markers]] to take from the trial")
+    from casflex.lab_checks import check_markers
+
     plane = Plane.parse(plane) if isinstance(plane, str) else plane
     lab = read_c3d(path, plates=False)[0] if os.fspath(path).lower().endswith(".c3d") else read_trc(path)
-    return markers_in_plane(lab, {m.name: m.label or m.name for m in markers}, plane)
+    labels = {m.name: m.label or m.name for m in markers}
+    out = markers_in_plane(lab, labels, plane)
+    check_markers(lab, tuple(labels.values()))
+    return out

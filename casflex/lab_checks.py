@@ -86,6 +86,8 @@ def check_plate_values(table: LabTable, prefix: str, force: np.ndarray, cop: np.
         bad = np.isinf(force).any(axis=1) | (size > MAX_PLATE_FORCE)
     if bad.any():
         i = int(np.argmax(bad))
+        if not np.isfinite(size[i]):  # an infinite component beside one that is not a number
+            size[i] = np.inf
         raise ValueError(f"{table.source}: plate {prefix!r} at t = {table.t[i]:g} s: a force of {size[i]:.3g} N, "
                          f"beyond what a body exerts on a plate ({MAX_PLATE_FORCE:g} N): a corrupted sample or a "
                          "calibration in other units")

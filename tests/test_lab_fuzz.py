@@ -25,8 +25,9 @@ from lab_fuzz import corrupt_c3d, corrupt_text  # noqa: E402
 
 LAB = Path(__file__).parent / "data" / "lab"
 TRC, GRF, C3D = LAB / "hamner_running_stride.trc", LAB / "hamner_running_stride_grf.mot", LAB / "walking2_excerpt.c3d"
-#: cases per file: 40 x 3 run in about 30 s on 2 cores
+#: cases per file: 40 x 3 run in about 30 s on 2 cores; ``CASFLEX_FUZZ_SEED`` shifts the seeds (other copies)
 CASES = int(os.environ.get("CASFLEX_FUZZ", "40"))
+SEED = int(os.environ.get("CASFLEX_FUZZ_SEED", "0"))
 #: s: a case's bound. A clean run takes 0.1-0.5 s; a busy 2-core machine, 10x that; a hang, forever.
 HANG = 60.0
 
@@ -44,13 +45,13 @@ def _cases(tmp_path: Path) -> list[dict]:
             path = tmp_path / f"{name}.{kind}"
             out = str(tmp_path / f"{name}.npz")
             if kind == "trc":
-                path.write_bytes(corrupt_text(TRC.read_text(), 1000 + k))
+                path.write_bytes(corrupt_text(TRC.read_text(), SEED + 1000 + k))
                 argv = [*leg, "--data", str(path), "--loads", str(GRF)]
             elif kind == "mot":
-                path.write_bytes(corrupt_text(GRF.read_text(), 2000 + k))
+                path.write_bytes(corrupt_text(GRF.read_text(), SEED + 2000 + k))
                 argv = [*leg, "--data", str(TRC), "--loads", str(path)]
             else:
-                path.write_bytes(corrupt_c3d(C3D.read_bytes(), 3000 + k))
+                path.write_bytes(corrupt_c3d(C3D.read_bytes(), SEED + 3000 + k))
                 argv = ["inverse", str(scene), "--data", str(path), "--loads", str(path), "--plate", "ankle=ground_",
                         "--plane", "X,Z", "--root", "pelvis", "--cutoff", "10", "--quiet"]
             cases.append({"name": name, "file": path.name, "argv": [*argv, "--out", out], "out": out})

@@ -59,6 +59,8 @@ def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
     for line in inputs.warnings:
         print(f"casflex: warning: {line}", file=sys.stderr)
     res = solve(inputs, progress=None if args.quiet else _progress)
+    for line in res.warnings[len(inputs.warnings):]:
+        print(f"casflex: warning: {line}", file=sys.stderr)
     print(res.summary())
     for hinge, t0, t1 in args.passive or []:
         from casflex.inverse.passive import fit_passive

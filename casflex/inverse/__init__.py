@@ -69,7 +69,7 @@ def inverse_dynamics(scene, markers, *, plane: str = "X,Y", grf=None, plates: di
     the option, file, marker or plate otherwise.
     """
     inputs = prepare(scene, markers, plane=plane, grf=grf, plates=plates, cutoff=cutoff, root=root,
-                     t_start=t_start, t_end=t_end, max_gap=max_gap, max_misfit=max_misfit)
+                     t_start=t_start, t_end=t_end, max_gap=max_gap, max_misfit=max_misfit, dt=dt)
     return solve(inputs, dt=dt, alpha=alpha, compiled=compiled, progress=progress)
 
 
@@ -81,6 +81,7 @@ def solve(inputs: InverseInputs, *, dt: float | None = None, alpha: float | None
     fit = fit_markers(tree, t, inputs.y, max_gap=inputs.max_gap, max_misfit=inputs.max_misfit,
                       labels=inputs.labels, source=inputs.settings["source"], progress=progress)
     report = [*inputs.report, *fit.report]
+    warnings = [*inputs.warnings, *(line for line in fit.report if line.startswith("gaps:"))]
     z = lowpass(t, fit.z, cutoff, what="markers")
     report.append(f"coordinates filtered: Butterworth 4th order zero-lag at {cutoff:g} Hz" if cutoff
                   else "coordinates not filtered")
@@ -101,5 +102,4 @@ def solve(inputs: InverseInputs, *, dt: float | None = None, alpha: float | None
                       f"bones' largest deflection {1e3 * sol['deflection'].max():.2f} mm")
     loads = {k: v for k, v in sol.items() if k not in ("q", "qd", "qdd", "lam", "deflection")}
     return InverseResult(t, tree.names, z, zd, zdd, model.dof_names, sol["q"], sol["qd"], sol["qdd"], loads,
-                         t, fit.rms, report, dict(inputs.settings), list(inputs.warnings), inputs.labels, fit.misfit,
-                         inputs.plates)
+                         t, fit.rms, report, dict(inputs.settings), warnings, inputs.labels, fit.misfit, inputs.plates)

@@ -32,7 +32,7 @@ class FittedMotion:
     """t (n,) s; z (n, n_z) the fitted coordinates (m, rad), NaN in gaps filled later; rms (n,) m: the
     markers' root-mean-square misfit per frame; seen (n,) markers used per frame; misfit (n, m) m: each
     marker's distance from where the fitted pose puts it (NaN where it is missing or the frame a gap);
-    report: lines."""
+    report: lines, the last one saying what was filled where frames were gaps."""
 
     t: np.ndarray
     z: np.ndarray
@@ -171,7 +171,9 @@ def _fill(t: np.ndarray, Z: np.ndarray, max_gap: float, report: list[str]) -> np
         if span > max_gap:
             raise ValueError(f"data: the markers do not decide the coordinates from t = {t[s + 1]:g} to {t[e]:g} s, "
                              f"a gap longer than {max_gap:g} s; fill the markers' gaps first")
-    report.append(f"gaps: {int(bad.sum())} frames without enough markers, filled by a cubic spline")
+    runs = ", ".join(f"{t[s + 1]:g}..{t[e]:g} s" for s, e in zip(edges[::2], edges[1::2], strict=True))
+    report.append(f"gaps: {int(bad.sum())} frames whose markers do not decide the pose ({runs}), the coordinates "
+                  "filled by a cubic spline")
     good = ~bad
     return np.where(bad[:, None], CubicSpline(t[good], Z[good], axis=0)(t), Z)
 

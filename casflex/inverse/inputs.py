@@ -142,11 +142,17 @@ def _scene_markers(model: Model, tree: KinematicTree, lab, plane, keep_frames=No
     return ms, labels
 
 
-def _memory(model: Model, tree: KinematicTree, n: int, n_markers: int) -> None:
+def _memory(model: Model, tree: KinematicTree, t: np.ndarray, n_markers: int, dt: float | None) -> None:
     """ValueError when the run's result would not fit in the memory available (the bound of
-    :data:`BYTES_PER_VALUE`); the flexible inverse's integration checks its own steps."""
-    from casflex.simulate import _bytes, memory_available
+    :data:`BYTES_PER_VALUE`); with flexible segments, also the HHT steps' (``dt`` s, default the scene's:
+    :func:`casflex.simulate.check_memory`)."""
+    from casflex.simulate import _bytes, check_memory, memory_available
 
+    n = t.size
+    if model.n_con != model.n_dof - tree.n and n > 1:
+        h = float(t[1] - t[0])
+        sub = max(1, int(np.ceil(h / (model.scene.run.dt if dt is None else dt) - 1e-9)))
+        check_memory(model, (n - 1) * sub, h / sub, names=("t_start, t_end", "dt"))
     values = 3 * n_markers + 4 * tree.n + 4 * model.n_dof + model.n_con + len(model.output_names) + 4
     need, avail = BYTES_PER_VALUE * n * values, memory_available()
     if avail is not None and need > avail:
@@ -156,7 +162,8 @@ def _memory(model: Model, tree: KinematicTree, n: int, n_markers: int) -> None:
 
 def prepare(scene, markers, *, plane="X,Y", grf=None, plates: dict[str, str] | None = None,
             cutoff: float | None = 6.0, root: str | None = None, t_start: float | None = None,
-            t_end: float | None = None, max_gap: float = 0.1, max_misfit: float | None = None) -> InverseInputs:
+            t_end: float | None = None, max_gap: float = 0.1, max_misfit: float | None = None,
+            dt: float | None = None) -> InverseInputs:
     """The inputs of :func:`casflex.inverse.inverse_dynamics` (its parameters), read and checked (module
     docstring). ValueError in one line naming the option, file, marker or plate otherwise."""
     from casflex.lab import Plane
@@ -182,13 +189,17 @@ def prepare(scene, markers, *, plane="X,Y", grf=None, plates: dict[str, str] | N
     t = _even_frames(ms.t[keep], lab.rate, lab.source)
     check_cutoff(cutoff, t, "markers")
     report, warnings = [], []
+    unseen = [lb for lb, xy in zip(labels, np.moveaxis(ms.q[keep].reshape(t.size, -1, 2), 1, 0), strict=True)
+              if not np.isfinite(xy).all(axis=1).any()]
+    if unseen:
+        warnings.append(f"{lab.source}: markers {unseen} are not seen in the window; the pose is fitted without them")
     plate_list = []
     for node, prefix in plates.items():
         plate = plate_from_table(table, prefix, node, pl, cutoff, window=(float(t[0]), float(t[-1])), rate=lab.rate,
                                  trial=lab.source)
         plate_list.append(plate)
         warnings += plate.notes
-    _memory(model, tree, t.size, len(labels))
+    _memory(model, tree, t, len(labels), dt)
     settings = {"plane": f"{pl.x},{pl.y}", "cutoff_hz": cutoff, "root": tree.root, "plates": plates,
                 "moments": [f"{h}.moment" for h in tree.hinges], "source": getattr(lab, "source", ""),
                 "scene": model.scene.name, "max_misfit_m": max_misfit}
