@@ -4,10 +4,13 @@ and writes nothing (the working directory is left as it was)."""
 from __future__ import annotations
 
 import re
+from pathlib import Path
 
 import pytest
 
 from casflex.cli import main
+
+TRIAL = str(Path(__file__).parent / "data" / "lab" / "hamner_running_stride.trc")
 
 CASES = [
     # (arguments, the one line must match this)
@@ -77,3 +80,29 @@ def test_a_wrong_option_is_one_line_exit_2_and_writes_nothing(argv, match, tmp_p
     assert re.search(match, err[0]), err[0]
     assert sorted(p.name for p in tmp_path.rglob("*")) == before  # no file, no staging left behind
     assert (tmp_path / "afile.txt").read_text() == "mine\n"
+
+
+#: An empty output path: each command that takes --out or --plots (the commands skipped one not given).
+EMPTY = [
+    (["simulate", "twobar", "--out", ""], "--out"),
+    (["simulate", "twobar", "--t-end", "0.01", "--plots", " "], "--plots"),
+    (["demo", "--out", ""], "--out"),
+    (["static", "twobar", "--out", ""], "--out"),
+    (["modes", "twobar", "--out", ""], "--out"),
+    (["identify", "twobar", "--method", "direct", "--out", ""], "--out"),
+    (["identify", "twobar", "--method", "indirect", "--plots", ""], "--plots"),
+    (["inverse", "hamner_leg", "--data", TRIAL, "--out", ""], "--out"),
+    (["inverse", "hamner_leg", "--data", TRIAL, "--plots", ""], "--plots"),
+    (["calibrate", "hamner_leg", "--static", TRIAL, "--out", ""], "--out"),
+    (["export", "twobar", "--out", ""], "--out"),
+]
+
+
+@pytest.mark.parametrize("argv, option", EMPTY, ids=[" ".join(a[:1] + a[-2:]) for a, _ in EMPTY])
+def test_an_empty_output_path_is_one_line_exit_2(argv, option, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    code = main(argv)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert err == [f"casflex: error: argument {option}: expected a path, got {argv[-1]!r}"], err
+    assert not list(tmp_path.iterdir())

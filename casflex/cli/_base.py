@@ -92,6 +92,14 @@ class OptionError(ValueError):
     """A command-line option is wrong; the message starts with the option's name."""
 
 
+def output_path(text: str) -> str:
+    """Option type: where an output goes (--out, --plots). An empty name would write nothing
+    without a word (the commands skip an output not given), so it is refused."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"expected a path, got {text!r}")
+    return text
+
+
 def _umask() -> int:
     """The process's umask (read by setting it: called before the work, while no thread writes)."""
     mask = os.umask(0)
