@@ -2,14 +2,17 @@
 
 Every option is checked before any work starts. Errors print one line, ``casflex: error: ...``
 naming the option, field or time step, and exit with status 2. Every file a command writes is
-reserved before the work (its directory must exist and be writable), written to a staging
-place and moved into place when the command has finished: Ctrl-C at any moment before that
-exits with 130 and leaves nothing behind (:class:`~casflex.cli._base.Outputs`). ``casflex
+reserved before the work (its directory must exist and be writable, it may not be one of the
+command's input files), written to a staging place and moved into place when the command has
+finished, all outputs together or none: Ctrl-C at any moment before that exits with 130 and
+leaves nothing behind, a command that fails leaves the earlier outputs as they were
+(:class:`~casflex.cli._base.Outputs`). ``casflex
 identify`` exits with 1 when the identification does not succeed (its record is still written).
 """
 
 from __future__ import annotations
 
+import argparse
 import sys
 
 from casflex import interrupt
@@ -51,6 +54,19 @@ def _check_compiler_flags() -> None:
         codegen.build_flags("-O1")
 
 
+#: The arguments (argparse destinations) that name files a command reads, and how an error names them:
+#: no output may replace one of them.
+_INPUTS = {"scene": "the scene", "data": "--data", "loads": "--loads", "static": "--static",
+           "alternatives": "--alternatives"}
+
+
+def _protect_inputs(args: argparse.Namespace, outputs: Outputs) -> None:
+    """Tell ``outputs`` the command's input files (a built-in scene name or ``simulated`` is none)."""
+    for dest, what in _INPUTS.items():
+        value = getattr(args, dest, None)
+        outputs.protect(what, [value] if isinstance(value, str) else value or [])
+
+
 def main(argv: list[str] | None = None) -> int:
     try:
         args = _parser().parse_args(argv)  # one line on a bad option, before any work
@@ -61,6 +77,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             if args.command != "cache":  # flags the compiler rejects: one line before any work
                 _check_compiler_flags()
+            _protect_inputs(args, outputs)
             code = int(args.func(args, outputs) or 0)
             if interrupts.count:  # a Ctrl-C that a library swallowed
                 raise KeyboardInterrupt

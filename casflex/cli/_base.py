@@ -14,7 +14,7 @@ import secrets
 import shutil
 import sys
 import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
@@ -111,15 +111,33 @@ class Outputs:
     """Everything one command writes: all of it, or none.
 
     Each target is checked when the command registers it, before any work: its suffix, its
-    directory (which must exist: nothing is created silently) and that a file can be created
-    there, by creating the staging file (or directory) the command then writes to. :meth:`commit`
-    moves every staged output to its target at the end as one transaction; :meth:`discard` removes
-    them (Ctrl-C, errors), so an interrupted or failed command leaves nothing behind and the
-    earlier outputs as they were.
+    directory (which must exist: nothing is created silently), that it is none of the command's
+    input files (:meth:`protect`) and that a file can be created there, by creating the staging
+    file (or directory) the command then writes to. :meth:`commit` moves every staged output to
+    its target at the end as one transaction; :meth:`discard` removes them (Ctrl-C, errors), so an
+    interrupted or failed command leaves nothing behind and the earlier outputs as they were.
     """
 
     def __init__(self) -> None:
         self._staged: list[tuple[str, Path, Path]] = []  # (option, staging, target)
+        self._inputs: list[tuple[str, Path]] = []  # (what, path): the files the command reads
+
+    def protect(self, what: str, paths: Iterable[str | os.PathLike[str]]) -> None:
+        """Refuse any output that is one of ``paths``, files the command reads (``what`` names them
+        in the error: "the scene", "--data"): writing it would replace the input. A name that is
+        no file (a built-in scene, ``simulated``) is skipped."""
+        for p in paths:
+            if p and os.path.isfile(p):
+                self._inputs.append((what, Path(p)))
+        for option, _, target in self._staged:  # reserved before
+            self._refuse_input(option, target)
+
+    def _refuse_input(self, option: str, target: Path) -> None:
+        for what, path in self._inputs:
+            with contextlib.suppress(OSError):  # a target that does not exist is no input
+                if os.path.samefile(path, target):
+                    raise OptionError(f"{option}: {str(target)!r} is an input of the command ({what}); give another "
+                                      "name (it would be replaced)")
 
     @staticmethod
     def _parent(option: str, target: Path) -> Path:
@@ -141,6 +159,7 @@ class Outputs:
             raise OptionError(f"{option}: {path!r} is a directory; give a file name ending in {suffixes[0]}")
         if self._taken(target):
             raise OptionError(f"{option}: {path!r} is already the target of another option")
+        self._refuse_input(option, target)
         parent = self._parent(option, target)
         try:
             fd, staging = tempfile.mkstemp(dir=parent, prefix=f".{target.name}.", suffix=".casflex-tmp")
@@ -197,6 +216,7 @@ class Outputs:
             if target.resolve() in seen:
                 raise OptionError(f"{option}: {str(target)!r} would be written twice; nothing was written")
             seen.add(target.resolve())
+            self._refuse_input(option, target)
         return moves
 
     def commit(self) -> list[Path]:
