@@ -4,9 +4,9 @@ Every option is checked before any work starts. Errors print one line, ``casflex
 naming the option, field or time step, and exit with status 2. Every file a command writes is
 reserved before the work (its directory must exist and be writable, it may not be one of the
 command's input files), written to a staging place and moved into place when the command has
-finished, all outputs together or none: Ctrl-C at any moment before that exits with 130 and
-leaves nothing behind, a command that fails leaves the earlier outputs as they were
-(:class:`~casflex.cli._base.Outputs`). ``casflex
+finished, all outputs together or none (:class:`~casflex.cli._base.Outputs`): a command that fails
+leaves the earlier outputs as they were. Ctrl-C at any moment before that exits with 130, SIGTERM
+with 143 and SIGHUP with 129 (:mod:`casflex.interrupt`), and leaves nothing behind. ``casflex
 identify`` exits with 1 when the identification does not succeed (its record is still written).
 """
 
@@ -79,17 +79,18 @@ def main(argv: list[str] | None = None) -> int:
                 _check_compiler_flags()
             _protect_inputs(args, outputs)
             code = int(args.func(args, outputs) or 0)
-            if interrupts.count:  # a Ctrl-C that a library swallowed
-                raise KeyboardInterrupt
-            interrupts.armed = False  # the work is done: from here a Ctrl-C no longer stops the command
+            interrupt.check()  # a signal that a library swallowed
+            interrupts.armed = False  # the work is done: from here a signal no longer stops the command
             for path in outputs.commit():
                 print(f"  wrote {path}")
             return code
         except BaseException as exc:
+            interrupts.armed = False  # a second signal does not cut the clean-up short
             outputs.discard()
-            if interrupts.count or isinstance(exc, KeyboardInterrupt):
-                print("\ncasflex: interrupted; nothing was written", file=sys.stderr)
-                return 130
+            if interrupts.count or isinstance(exc, KeyboardInterrupt):  # Terminated too (SIGTERM, SIGHUP)
+                signum = interrupts.stopped_by(exc)
+                interrupt.tell(f"\ncasflex: {interrupt.describe(signum)}")
+                return interrupt.exit_status(signum)
             if isinstance(exc, _known_errors()):
                 msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
                 print(f"casflex: error: {msg}", file=sys.stderr)

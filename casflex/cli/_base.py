@@ -1,6 +1,6 @@
 """What every ``casflex`` command shares: one-line option errors, option types, the outputs of a
 command (checked and reserved before any work, moved into place together at the end, all or
-none) and progress messages on stderr (Ctrl-C: :mod:`casflex.interrupt`)."""
+none) and progress messages on stderr (Ctrl-C, SIGTERM, SIGHUP: :mod:`casflex.interrupt`)."""
 
 from __future__ import annotations
 
