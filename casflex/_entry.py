@@ -1,42 +1,43 @@
-"""The ``casflex`` command's entry point: nothing heavy is imported before Ctrl-C is caught, so an
-interrupt while CasADi, numpy and matplotlib load exits with 130 and one line, as any other."""
+"""The ``casflex`` command's entry point: nothing heavy is imported before the signals are caught, so
+Ctrl-C, SIGTERM or SIGHUP while CasADi, numpy and matplotlib load exits with 130, 143 or 129 and one
+line, as at any other moment."""
 
 import atexit
 import os
 import sys
 
-INTERRUPTED = 130
 
-
-def _exit_interrupted() -> None:
-    """Exit with 130 for certain. A KeyboardInterrupt that crossed code an extension module ran at
-    import (CPython's run_eval_code_obj) is recorded by CPython as unhandled, and at exit CPython
-    then kills itself with SIGINT although casflex caught it: run the exit handlers, flush, and
-    end here instead."""
+def _exit_interrupted(code: int) -> None:
+    """Exit with ``code`` for certain. A KeyboardInterrupt (Terminated is one) that crossed code an
+    extension module ran at import (CPython's run_eval_code_obj) is recorded by CPython as
+    unhandled, and at exit CPython then kills itself with SIGINT although casflex caught it: run
+    the exit handlers, flush, and end here instead."""
     atexit._run_exitfuncs()
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()
         except (OSError, ValueError):
             pass
-    os._exit(INTERRUPTED)
+    os._exit(code)
 
 
 def main() -> int:
     from casflex import interrupt  # light: signal and contextlib only (casflex/__init__ is lazy)
 
-    # One guard for the whole process, opened before any heavy import: an interrupt that an
-    # extension swallows while numpy, CasADi or matplotlib load is counted, and the command's
-    # own guard (the same object) honours it.
-    with interrupt.guard():
+    # One guard for the whole process, opened before any heavy import: a signal that an extension
+    # swallows while numpy, CasADi or matplotlib load is counted, and the command's own guard (the
+    # same object) honours it.
+    with interrupt.guard() as signals:
         try:
             from casflex.cli import main as cli_main
 
             interrupt.check()
             code = cli_main()
-        except KeyboardInterrupt:  # before the command's own handler runs (it catches every later one)
-            sys.stderr.write("\ncasflex: interrupted; nothing was written\n")
-            code = INTERRUPTED
-        if code == INTERRUPTED:  # inside the guard: its hook keeps finalizer noise off stderr to the end
-            _exit_interrupted()
+        except KeyboardInterrupt as exc:  # Terminated too: before the command's handler runs (it catches later ones)
+            signals.armed = False  # a second signal does not cut the one line short
+            signum = signals.stopped_by(exc)
+            interrupt.tell(f"\ncasflex: {interrupt.describe(signum)}")
+            code = interrupt.exit_status(signum)
+        if code in interrupt.EXIT_STATUSES:  # inside the guard: its hook keeps finalizer noise off stderr to the end
+            _exit_interrupted(code)
     return code

@@ -3,11 +3,15 @@ and writes nothing (the working directory is left as it was)."""
 
 from __future__ import annotations
 
+import os
 import re
+from pathlib import Path
 
 import pytest
 
 from casflex.cli import main
+
+TRIAL = str(Path(__file__).parent / "data" / "lab" / "hamner_running_stride.trc")
 
 CASES = [
     # (arguments, the one line must match this)
@@ -77,3 +81,68 @@ def test_a_wrong_option_is_one_line_exit_2_and_writes_nothing(argv, match, tmp_p
     assert re.search(match, err[0]), err[0]
     assert sorted(p.name for p in tmp_path.rglob("*")) == before  # no file, no staging left behind
     assert (tmp_path / "afile.txt").read_text() == "mine\n"
+
+
+#: An empty output path: each command that takes --out or --plots (the commands skipped one not given).
+EMPTY = [
+    (["simulate", "twobar", "--out", ""], "--out"),
+    (["simulate", "twobar", "--t-end", "0.01", "--plots", " "], "--plots"),
+    (["demo", "--out", ""], "--out"),
+    (["static", "twobar", "--out", ""], "--out"),
+    (["modes", "twobar", "--out", ""], "--out"),
+    (["identify", "twobar", "--method", "direct", "--out", ""], "--out"),
+    (["identify", "twobar", "--method", "indirect", "--plots", ""], "--plots"),
+    (["inverse", "hamner_leg", "--data", TRIAL, "--out", ""], "--out"),
+    (["inverse", "hamner_leg", "--data", TRIAL, "--plots", ""], "--plots"),
+    (["calibrate", "hamner_leg", "--static", TRIAL, "--out", ""], "--out"),
+    (["export", "twobar", "--out", ""], "--out"),
+]
+
+
+@pytest.mark.parametrize("argv, option", EMPTY, ids=[" ".join(a[:1] + a[-2:]) for a, _ in EMPTY])
+def test_an_empty_output_path_is_one_line_exit_2(argv, option, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    code = main(argv)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert err == [f"casflex: error: argument {option}: expected a path, got {argv[-1]!r}"], err
+    assert not list(tmp_path.iterdir())
+
+
+def _scene_file(tmp_path: Path) -> Path:
+    from casflex import dumps_scene, load_scene
+
+    path = tmp_path / "leg.toml"
+    path.write_text(dumps_scene(load_scene("hamner_leg")))
+    return path
+
+
+@pytest.mark.parametrize("out", ["leg.toml", "sub/../leg.toml", "hard.toml", "link.toml"])
+def test_an_output_that_is_an_input_of_the_command_is_one_line_exit_2(out, tmp_path, monkeypatch, capsys):
+    # calibrate SCENE --out SCENE replaced its own scene without a word
+    monkeypatch.chdir(tmp_path)
+    scene = _scene_file(tmp_path)
+    (tmp_path / "sub").mkdir()
+    os.link(scene, tmp_path / "hard.toml")
+    (tmp_path / "link.toml").symlink_to("leg.toml")
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()}
+    code = main(["calibrate", "leg.toml", "--static", TRIAL, "--out", out])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert err == [f"casflex: error: --out: {out!r} is an input of the command (the scene); give another name (it "
+                   "would be replaced)"], err
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["hard.toml", "leg.toml", "link.toml", "sub"]
+
+
+def test_an_input_is_protected_in_every_command_not_only_calibrate(tmp_path, monkeypatch, capsys):
+    # one rule for every command's inputs: here a scene file named as simulate's --out may be (.npz)
+    from casflex import dumps_scene, load_scene
+
+    monkeypatch.chdir(tmp_path)
+    Path("scene.npz").write_text(dumps_scene(load_scene("twobar")))
+    assert main(["simulate", "scene.npz", "--t-end", "0.01", "--quiet", "--out", "scene.npz"]) == 2
+    assert capsys.readouterr().err.strip() == ("casflex: error: --out: 'scene.npz' is an input of the command (the "
+                                               "scene); give another name (it would be replaced)")
+    assert Path("scene.npz").read_text() == dumps_scene(load_scene("twobar"))
+    assert sorted(os.listdir()) == ["scene.npz"]

@@ -1,4 +1,5 @@
-"""Ctrl-C at any moment of a command: exit status 130 and no file left behind.
+"""Ctrl-C at any moment of a command: exit status 130 and no file left behind; SIGTERM and SIGHUP
+alike (143 and 129), the outputs of an earlier run left as they were.
 
 The command is interrupted by SIGINT at MOMENTS random moments spread over its whole run: start-up,
 model assembly, the HHT steps, post-processing, every figure and the animation. A moment is
@@ -9,6 +10,7 @@ place the command has finished and a later Ctrl-C no longer undoes it (casflex.c
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -28,6 +30,8 @@ INTERRUPTED = (130, -signal.SIGINT, 1)
 #: uniform over the run: a phase of a tenth of it is hit with probability 0.77 per run (0.88 with 20);
 #: the seed is fixed, the run's timing is not, so successive CI runs hit different moments.
 MOMENTS = 14
+#: SIGTERM and SIGHUP take Ctrl-C's path through casflex: fewer moments each (the suite's budget).
+TERM_MOMENTS = 4
 
 
 def _start_up() -> float:
@@ -59,26 +63,32 @@ def _wrote(lines: list[tuple[float, str]]) -> float | None:
     return next((t for t, line in lines if "wrote" in line), None)
 
 
-@pytest.mark.slow
-def test_sigint_at_random_moments_exits_130_and_writes_nothing(tmp_path):
-    # calibration: how long until the outputs are written (the fastest of two runs)
+@pytest.fixture(scope="module")
+def calibration(tmp_path_factory) -> tuple[float, Path]:
+    """Seconds until the outputs are written (the fastest of two runs), and a directory with the
+    outputs of a finished run."""
     until = []
     for k in range(2):
-        cwd = tmp_path / f"calibrate{k}"
-        cwd.mkdir()
+        cwd = tmp_path_factory.mktemp(f"calibrate{k}")
         t0 = time.monotonic()
         proc, lines = _start(cwd)
         assert proc.wait(timeout=300) == 0, proc.stderr.read()
         time.sleep(0.1)  # the reader thread takes the last lines
         until.append(_wrote(lines) - t0)
         assert (cwd / "run.npz").is_file() and len(list((cwd / "figs").iterdir())) == 8
+    return min(until), cwd
+
+
+@pytest.mark.slow
+def test_sigint_at_random_moments_exits_130_and_writes_nothing(calibration, tmp_path):
+    until = calibration[0]
     rng = np.random.default_rng(20261123)
     codes = []
     early = 1.5 * _start_up()  # Python's own start-up (see INTERRUPTED), with a margin for the load
     for attempt in range(100):
         if len(codes) == MOMENTS:
             break
-        moment = rng.uniform(early, 0.95 * min(until))
+        moment = rng.uniform(early, 0.95 * until)
         cwd = tmp_path / f"run{attempt}"
         cwd.mkdir()
         t0 = time.monotonic()
@@ -96,3 +106,47 @@ def test_sigint_at_random_moments_exits_130_and_writes_nothing(tmp_path):
         codes.append(code)
     assert len(codes) == MOMENTS, f"only {len(codes)} moments fell inside the run"
     assert codes.count(130) == MOMENTS, codes
+
+
+def _tree(root: Path) -> dict[str, tuple[bytes | None, int]]:
+    """Every file (its bytes) and directory (None) under ``root``, hidden ones included, with its inode:
+    a file replaced by one of the same bytes is seen too."""
+    found = {}
+    for where, dirs, files in os.walk(root):
+        for name in dirs + files:
+            path = Path(where, name)
+            found[str(path.relative_to(root))] = (None if path.is_dir() else path.read_bytes(), path.stat().st_ino)
+    return found
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
+def test_sigterm_and_sighup_at_random_moments_exit_128_plus_n_and_keep_earlier_outputs(signum, calibration,
+                                                                                      tmp_path):
+    until, finished = calibration
+    rng = np.random.default_rng(20261124 + signum)
+    codes = []
+    early = 1.5 * _start_up()  # before the entry point the signal's default action kills Python: -signum
+    for attempt in range(30):
+        if len(codes) == TERM_MOMENTS:
+            break
+        moment = rng.uniform(early, 0.95 * until)
+        cwd = tmp_path / f"run{attempt}"
+        shutil.copytree(finished, cwd)  # the outputs of an earlier run: run.npz and figs/ with its figures
+        before = _tree(cwd)
+        t0 = time.monotonic()
+        proc, lines = _start(cwd)
+        time.sleep(max(0.0, t0 + moment - time.monotonic()))
+        if proc.poll() is not None or _wrote(lines) is not None:  # finished already: not a moment inside the run
+            proc.wait(timeout=300)
+            continue
+        proc.send_signal(signum)
+        code = proc.wait(timeout=60)
+        err = proc.stderr.read()
+        name = signal.Signals(signum).name
+        assert code in (128 + signum, -signum), f"{name} at {moment:.2f} s: exit {code}\n{err}"
+        assert _tree(cwd) == before, f"{name} at {moment:.2f} s changed {sorted(os.listdir(cwd))}"
+        if code > 0:
+            assert err.strip().splitlines() == [f"casflex: terminated ({name}); nothing was written"], err
+        codes.append(code)
+    assert codes == [128 + signum] * TERM_MOMENTS, codes

@@ -66,3 +66,25 @@ def test_finalizer_failures_are_reported_until_an_interrupt_and_silent_after(mon
         assert seen == [AttributeError]
     _HalfBuilt()  # the guard restored the hook it found
     assert seen == [AttributeError, AttributeError]
+
+
+def test_sigterm_raises_terminated_a_keyboardinterrupt_and_an_ignored_sighup_stays_ignored():
+    term = signal.getsignal(signal.SIGTERM)
+    hup = signal.signal(signal.SIGHUP, signal.SIG_IGN)  # as nohup starts a command
+    try:
+        with interrupt.guard() as g:
+            assert signal.getsignal(signal.SIGTERM) == g.handler
+            assert signal.getsignal(signal.SIGHUP) is signal.SIG_IGN  # the run outlives its terminal, as asked
+            with pytest.raises(interrupt.Terminated) as exc:
+                os.kill(os.getpid(), signal.SIGTERM)
+                for _ in range(1000):  # the handler runs between bytecodes of this frame
+                    pass
+            # a KeyboardInterrupt: whatever stops cleanly on Ctrl-C stops on SIGTERM alike
+            assert isinstance(exc.value, KeyboardInterrupt) and exc.value.signum == signal.SIGTERM
+            with pytest.raises(interrupt.Terminated):  # swallowed, it is raised again
+                interrupt.check()
+            assert interrupt.exit_status(g.stopped_by()) == 143
+            assert interrupt.describe(g.stopped_by()) == "terminated (SIGTERM); nothing was written"
+        assert signal.getsignal(signal.SIGTERM) == term  # the guard restores what it found
+    finally:
+        signal.signal(signal.SIGHUP, hup)

@@ -2,14 +2,17 @@
 
 Every option is checked before any work starts. Errors print one line, ``casflex: error: ...``
 naming the option, field or time step, and exit with status 2. Every file a command writes is
-reserved before the work (its directory must exist and be writable), written to a staging
-place and moved into place when the command has finished: Ctrl-C at any moment before that
-exits with 130 and leaves nothing behind (:class:`~casflex.cli._base.Outputs`). ``casflex
+reserved before the work (its directory must exist and be writable, it may not be one of the
+command's input files), written to a staging place and moved into place when the command has
+finished, all outputs together or none (:class:`~casflex.cli._base.Outputs`): a command that fails
+leaves the earlier outputs as they were. Ctrl-C at any moment before that exits with 130, SIGTERM
+with 143 and SIGHUP with 129 (:mod:`casflex.interrupt`), and leaves nothing behind. ``casflex
 identify`` exits with 1 when the identification does not succeed (its record is still written).
 """
 
 from __future__ import annotations
 
+import argparse
 import sys
 
 from casflex import interrupt
@@ -51,6 +54,19 @@ def _check_compiler_flags() -> None:
         codegen.build_flags("-O1")
 
 
+#: The arguments (argparse destinations) that name files a command reads, and how an error names them:
+#: no output may replace one of them.
+_INPUTS = {"scene": "the scene", "data": "--data", "loads": "--loads", "static": "--static",
+           "alternatives": "--alternatives"}
+
+
+def _protect_inputs(args: argparse.Namespace, outputs: Outputs) -> None:
+    """Tell ``outputs`` the command's input files (a built-in scene name or ``simulated`` is none)."""
+    for dest, what in _INPUTS.items():
+        value = getattr(args, dest, None)
+        outputs.protect(what, [value] if isinstance(value, str) else value or [])
+
+
 def main(argv: list[str] | None = None) -> int:
     try:
         args = _parser().parse_args(argv)  # one line on a bad option, before any work
@@ -61,18 +77,20 @@ def main(argv: list[str] | None = None) -> int:
         try:
             if args.command != "cache":  # flags the compiler rejects: one line before any work
                 _check_compiler_flags()
+            _protect_inputs(args, outputs)
             code = int(args.func(args, outputs) or 0)
-            if interrupts.count:  # a Ctrl-C that a library swallowed
-                raise KeyboardInterrupt
-            interrupts.armed = False  # the work is done: from here a Ctrl-C no longer stops the command
+            interrupt.check()  # a signal that a library swallowed
+            interrupts.armed = False  # the work is done: from here a signal no longer stops the command
             for path in outputs.commit():
                 print(f"  wrote {path}")
             return code
         except BaseException as exc:
+            interrupts.armed = False  # a second signal does not cut the clean-up short
             outputs.discard()
-            if interrupts.count or isinstance(exc, KeyboardInterrupt):
-                print("\ncasflex: interrupted; nothing was written", file=sys.stderr)
-                return 130
+            if interrupts.count or isinstance(exc, KeyboardInterrupt):  # Terminated too (SIGTERM, SIGHUP)
+                signum = interrupts.stopped_by(exc)
+                interrupt.tell(f"\ncasflex: {interrupt.describe(signum)}")
+                return interrupt.exit_status(signum)
             if isinstance(exc, _known_errors()):
                 msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
                 print(f"casflex: error: {msg}", file=sys.stderr)

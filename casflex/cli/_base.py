@@ -1,6 +1,6 @@
 """What every ``casflex`` command shares: one-line option errors, option types, the outputs of a
-command (checked and reserved before any work, moved into place together at the end) and
-progress messages on stderr (Ctrl-C: :mod:`casflex.interrupt`)."""
+command (checked and reserved before any work, moved into place together at the end, all or
+none) and progress messages on stderr (Ctrl-C, SIGTERM, SIGHUP: :mod:`casflex.interrupt`)."""
 
 from __future__ import annotations
 
@@ -10,10 +10,11 @@ import logging
 import math
 import os
 import re
+import secrets
 import shutil
 import sys
 import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
@@ -91,18 +92,52 @@ class OptionError(ValueError):
     """A command-line option is wrong; the message starts with the option's name."""
 
 
+def output_path(text: str) -> str:
+    """Option type: where an output goes (--out, --plots). An empty name would write nothing
+    without a word (the commands skip an output not given), so it is refused."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"expected a path, got {text!r}")
+    return text
+
+
+def _umask() -> int:
+    """The process's umask (read by setting it: called before the work, while no thread writes)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 class Outputs:
-    """Everything one command writes.
+    """Everything one command writes: all of it, or none.
 
     Each target is checked when the command registers it, before any work: its suffix, its
-    directory (which must exist: nothing is created silently) and that a file can be created
-    there, by creating the staging file (or directory) the command then writes to. :meth:`commit`
-    moves every staged output to its target at the end; :meth:`discard` removes them (Ctrl-C,
-    errors), so an interrupted or failed command leaves nothing behind.
+    directory (which must exist: nothing is created silently), that it is none of the command's
+    input files (:meth:`protect`) and that a file can be created there, by creating the staging
+    file (or directory) the command then writes to. :meth:`commit` moves every staged output to
+    its target at the end as one transaction; :meth:`discard` removes them (Ctrl-C, errors), so an
+    interrupted or failed command leaves nothing behind and the earlier outputs as they were.
     """
 
     def __init__(self) -> None:
-        self._staged: list[tuple[Path, Path]] = []  # (staging, target)
+        self._staged: list[tuple[str, Path, Path]] = []  # (option, staging, target)
+        self._inputs: list[tuple[str, Path]] = []  # (what, path): the files the command reads
+
+    def protect(self, what: str, paths: Iterable[str | os.PathLike[str]]) -> None:
+        """Refuse any output that is one of ``paths``, files the command reads (``what`` names them
+        in the error: "the scene", "--data"): writing it would replace the input. A name that is
+        no file (a built-in scene, ``simulated``) is skipped."""
+        for p in paths:
+            if p and os.path.isfile(p):
+                self._inputs.append((what, Path(p)))
+        for option, _, target in self._staged:  # reserved before
+            self._refuse_input(option, target)
+
+    def _refuse_input(self, option: str, target: Path) -> None:
+        for what, path in self._inputs:
+            with contextlib.suppress(OSError):  # a target that does not exist is no input
+                if os.path.samefile(path, target):
+                    raise OptionError(f"{option}: {str(target)!r} is an input of the command ({what}); give another "
+                                      "name (it would be replaced)")
 
     @staticmethod
     def _parent(option: str, target: Path) -> Path:
@@ -124,13 +159,15 @@ class Outputs:
             raise OptionError(f"{option}: {path!r} is a directory; give a file name ending in {suffixes[0]}")
         if self._taken(target):
             raise OptionError(f"{option}: {path!r} is already the target of another option")
+        self._refuse_input(option, target)
         parent = self._parent(option, target)
         try:
             fd, staging = tempfile.mkstemp(dir=parent, prefix=f".{target.name}.", suffix=".casflex-tmp")
         except OSError as exc:
             raise OptionError(f"{option}: cannot write into {str(parent)!r} ({exc.strerror})") from None
         os.close(fd)
-        self._staged.append((Path(staging), target))
+        os.chmod(staging, 0o666 & ~_umask())  # mkstemp's 0600 would reach the target: ordinary permissions
+        self._staged.append((option, Path(staging), target))
         return Path(staging)
 
     def directory(self, option: str, path: str) -> Path:
@@ -146,36 +183,96 @@ class Outputs:
             staging = tempfile.mkdtemp(dir=where, prefix=f".{target.name}.", suffix=".casflex-tmp")
         except OSError as exc:
             raise OptionError(f"{option}: cannot write into {str(where)!r} ({exc.strerror})") from None
-        self._staged.append((Path(staging), target))
+        os.chmod(staging, 0o777 & ~_umask())  # mkdtemp's 0700 would reach a new target: ordinary permissions
+        self._staged.append((option, Path(staging), target))
         return Path(staging)
 
     def _taken(self, target: Path) -> bool:
-        return any(t.resolve() == target.resolve() for _, t in self._staged)
+        return any(t.resolve() == target.resolve() for _, _, t in self._staged)
+
+    def _moves(self) -> list[tuple[str, Path, Path]]:
+        """(option, staged, target) of every move :meth:`commit` makes, each checked first: an
+        OptionError naming the option and the path if one cannot be made, before anything moves."""
+        moves = []
+        for option, staging, target in self._staged:
+            if not staging.exists():
+                raise OptionError(f"{option}: its staging place {str(staging)!r} was removed during the run; nothing "
+                                  "was written")
+            if staging.is_dir() and not os.path.lexists(target):  # a new directory: moved as a whole
+                moves.append((option, staging, target))
+            elif staging.is_dir():
+                if not target.is_dir():
+                    raise OptionError(f"{option}: {str(target)!r} is no longer a directory; nothing was written")
+                moves += [(option, f, target / f.name) for f in sorted(staging.iterdir())]
+            elif staging.stat().st_size > 0:  # an empty staging file was reserved but not written
+                moves.append((option, staging, target))
+        seen: set[Path] = set()
+        for option, _, target in moves:
+            if target.is_dir() and not target.is_symlink():  # only files are replaced, never a directory
+                raise OptionError(f"{option}: {str(target)!r} is a directory; nothing was written")
+            if not os.access(target.parent, os.W_OK | os.X_OK):
+                raise OptionError(f"{option}: cannot write into {str(target.parent)!r} (permission denied); "
+                                  "nothing was written")
+            if target.resolve() in seen:
+                raise OptionError(f"{option}: {str(target)!r} would be written twice; nothing was written")
+            seen.add(target.resolve())
+            self._refuse_input(option, target)
+        return moves
 
     def commit(self) -> list[Path]:
-        """Move every staged output into place; returns the files written."""
-        written: list[Path] = []
-        for staging, target in self._staged:
-            if staging.is_dir():
-                if not target.exists():
-                    os.replace(staging, target)
-                    written += sorted(target / f.name for f in target.iterdir())
-                    continue
-                for f in sorted(staging.iterdir()):
-                    os.replace(f, target / f.name)
-                    written.append(target / f.name)
-                staging.rmdir()
-            elif staging.stat().st_size > 0:  # an empty staging file was reserved but not written
-                os.replace(staging, target)
-                written.append(target)
-            else:
-                staging.unlink()
-        self._staged.clear()
+        """Move every staged output into place, all or nothing; returns the files written.
+
+        Every move is checked first (:meth:`_moves`). The targets that exist are then renamed
+        aside (hidden backups next to them) and every output moved in. If a rename fails, those
+        made are undone and the backups restored, so the earlier outputs are as they were, and the
+        failure is an OptionError naming the option and the path (the staged outputs stay for
+        :meth:`discard`). The backups are removed once every output is in place."""
+        moves = self._moves()
+        backups: list[tuple[Path, Path]] = []  # (backup, target)
+        done: list[tuple[Path, Path]] = []  # (staging, target)
+        failing = ("", Path())  # the option and the path of the rename under way, for the error
+        try:
+            for option, _, path in moves:
+                failing = option, path
+                if os.path.lexists(path):
+                    aside = path.with_name(f".{path.name}.{secrets.token_hex(4)}.casflex-bak")
+                    os.replace(path, aside)
+                    backups.append((aside, path))
+            for option, staging, path in moves:
+                failing = option, path
+                os.replace(staging, path)
+                done.append((staging, path))
+        except BaseException as exc:
+            kept = self._undo(done, backups)
+            if not isinstance(exc, OSError):
+                raise
+            why = exc.strerror or type(exc).__name__  # the reason, without errno's number and Python's repr
+            msg = f"{failing[0]}: cannot write {str(failing[1])!r} ({why}); nothing was written{kept}"
+            raise OptionError(msg) from None
+        for aside, _ in backups:
+            with contextlib.suppress(OSError):  # every output is in place: a backup left is no failure
+                aside.unlink()
+        written = [f for _, target in done for f in (sorted(target.iterdir()) if target.is_dir() else [target])]
+        self.discard()  # what is left: emptied staging directories, staging files reserved but not written
         return written
+
+    @staticmethod
+    def _undo(done: list[tuple[Path, Path]], backups: list[tuple[Path, Path]]) -> str:
+        """Take back the moves made and restore the backups; returns what could not be restored."""
+        for staging, target in reversed(done):
+            with contextlib.suppress(OSError):  # then the backup, if any, is renamed over it
+                os.replace(target, staging)
+        kept = []
+        for aside, target in reversed(backups):
+            try:
+                os.replace(aside, target)
+            except OSError:
+                kept.append(f"; the earlier {str(target)!r} is kept as {str(aside)!r}")
+        return "".join(kept)
 
     def discard(self) -> None:
         """Remove every staged output (nothing reaches its target)."""
-        for staging, _ in self._staged:
+        for _, staging, _ in self._staged:
             if staging.is_dir():
                 shutil.rmtree(staging, ignore_errors=True)
             else:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from casflex.cli._base import Outputs, alpha_value, load_model, positive
+from casflex.cli._base import Outputs, alpha_value, load_model, output_path, positive
 
 
 def cmd_export(args: argparse.Namespace, outputs: Outputs) -> int:
@@ -28,7 +28,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
     s = sub.add_parser("export", help="write standalone C (sources, header, Makefile, example main.c)")
     s.add_argument("scene", help="built-in scene name (twobar) or a TOML file")
-    s.add_argument("--out", required=True, metavar="DIR", help="output directory")
+    s.add_argument("--out", type=output_path, required=True, metavar="DIR", help="output directory")
     s.add_argument("--what", choices=EXPORTS, default="simulate",
                    help="step | simulate (default: step functions plus an example program) | direct | indirect")
     s.add_argument("--dt", type=positive("a time step in s"), help="example's time step, s (default: the scene's)")

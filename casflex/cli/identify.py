@@ -10,7 +10,16 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from casflex.cli._base import OptionError, Outputs, alpha_value, integer, load_model, non_negative, positive
+from casflex.cli._base import (
+    OptionError,
+    Outputs,
+    alpha_value,
+    integer,
+    load_model,
+    non_negative,
+    output_path,
+    positive,
+)
 
 if TYPE_CHECKING:
     from casflex.data import MeasurementSet
@@ -436,7 +445,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--loss", choices=LOSSES,
                    help="indirect: linear (least squares, default) or huber: robust to marker artefacts, the "
                         "samples far from the model weighted down (reported)")
-    s.add_argument("--plots", metavar="DIR", help="indirect: write measured-vs-fitted figures with the residuals")
+    s.add_argument("--plots", type=output_path, metavar="DIR",
+                   help="indirect: write measured-vs-fitted figures with the residuals")
     s.add_argument("--instants", type=non_negative("a time in s"), nargs="+", metavar="T",
                    help=f"direct methods: times, s (default: {DEFAULT_INSTANT_COUNT} samples evenly spread over the "
                         "data)")
@@ -477,6 +487,6 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--beam-forces", choices=BEAM_FORCES,
                    help="direct methods: beam deformation forces solved for (unknown; default for positions-only "
                         "data) or computed from the positions (model; the paper)")
-    s.add_argument("--out", metavar="FILE.json", help="write the result as JSON")
+    s.add_argument("--out", type=output_path, metavar="FILE.json", help="write the result as JSON")
     s.add_argument("--quiet", action="store_true", help="no solver iteration log or progress messages")
     s.set_defaults(func=cmd_identify, data=None)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from casflex.cli._base import OptionError, Outputs, non_negative, positive
+from casflex.cli._base import OptionError, Outputs, non_negative, output_path, positive
 
 
 def _plate(text: str) -> tuple[str, str]:
@@ -124,8 +124,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--passive", action="append", type=_passive, metavar="HINGE[:T0:T1]",
                    help="fit a torsion spring-damper to HINGE's net moment (over T0..T1 s) and say how much of it "
                         "it explains; repeat per hinge")
-    s.add_argument("--out", metavar="FILE", help="write the loads to FILE.npz (everything) or FILE.csv (a table)")
-    s.add_argument("--plots", metavar="DIR", help="write figures into this directory")
+    s.add_argument("--out", type=output_path, metavar="FILE",
+                   help="write the loads to FILE.npz (everything) or FILE.csv (a table)")
+    s.add_argument("--plots", type=output_path, metavar="DIR", help="write figures into this directory")
     s.add_argument("--quiet", action="store_true", help="no progress messages")
     s.set_defaults(func=cmd_inverse)
 
@@ -133,7 +134,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("scene", help="built-in scene name (hamner_leg) or a TOML file: segments on hinges, labelled "
                                  "markers")
     s.add_argument("--static", required=True, metavar="STATIC", help="the static trial's markers (.trc or .c3d)")
-    s.add_argument("--out", required=True, metavar="SUBJECT.toml", help="write the calibrated scene here")
+    s.add_argument("--out", type=output_path, required=True, metavar="SUBJECT.toml",
+                   help="write the calibrated scene here")
     s.add_argument("--plane", default="X,Y", help="the lab axes that become the model's x and y (default X,Y)")
     s.add_argument("--root", metavar="NODE", help="the tree's root node (default: the scene's first)")
     s.add_argument("--scale", action="store_true",

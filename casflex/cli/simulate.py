@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from casflex.cli._base import Outputs, alpha_value, load_model, positive
+from casflex.cli._base import Outputs, alpha_value, load_model, output_path, positive
 
 #: the seed paper's instants (s), printed by the demo (its Table 3 and Fig. 2)
 PAPER_INSTANTS = (0.69, 2.83)
@@ -107,14 +107,15 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--newton", choices=("exact", "modified"), default="exact",
                    help="exact: a Jacobian per step (default); modified: the factorised Jacobian kept while it "
                         "converges the steps (faster at small steps of some scenes, docs/tables/bench_simulate.md)")
-    s.add_argument("--out", metavar="FILE.npz", help="write the trajectory to this .npz file")
-    s.add_argument("--plots", metavar="DIR", help="write figures and an animation into this directory")
+    s.add_argument("--out", type=output_path, metavar="FILE.npz", help="write the trajectory to this .npz file")
+    s.add_argument("--plots", type=output_path, metavar="DIR",
+                   help="write figures and an animation into this directory")
     s.add_argument("--no-animation", action="store_true", help="with --plots: skip the GIF")
     s.add_argument("--quiet", action="store_true", help="no progress bar or progress messages")
     s.set_defaults(func=cmd_simulate)
 
     s = sub.add_parser("demo", help="simulate the built-in two-bar scene, print a summary, write figures")
-    s.add_argument("--out", default="casflex-demo", metavar="DIR",
+    s.add_argument("--out", type=output_path, default="casflex-demo", metavar="DIR",
                    help="output directory (default ./casflex-demo)")
     s.add_argument("--no-animation", action="store_true", help="skip the GIF")
     s.set_defaults(func=cmd_demo)

@@ -16,7 +16,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from casflex.cli._base import OptionError, Outputs, integer, load_model, positive
+from casflex.cli._base import OptionError, Outputs, integer, load_model, output_path, positive
 
 #: How the command line spells the statics options (error messages name these, not Python's).
 NAMES = {"steps": "--steps", "max_iter": "--max-iter", "tol": "--tol", "min_increment": "--min-increment",
@@ -210,7 +210,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                         "factor rises by 1/20 of --to-factor in the first step)")
     g.add_argument("--monitor", metavar="DOF", help="dof shown in the path table (default the translation that "
                                                     "moves most)")
-    s.add_argument("--out", metavar="FILE.npz",
+    s.add_argument("--out", type=output_path, metavar="FILE.npz",
                    help="write q, lam, dof_names, stability (with --path: the whole path) to this .npz file")
     s.set_defaults(func=cmd_static)
 
@@ -221,5 +221,6 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--about", choices=("initial", "equilibrium"), default="initial",
                    help="linearise about the initial configuration (default) or the static equilibrium")
     _add_static_options(s, " (with --about equilibrium)")
-    s.add_argument("--out", metavar="FILE.npz", help="write freq_hz, shapes, dof_names to this .npz file")
+    s.add_argument("--out", type=output_path, metavar="FILE.npz",
+                   help="write freq_hz, shapes, dof_names to this .npz file")
     s.set_defaults(func=cmd_modes)

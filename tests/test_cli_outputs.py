@@ -1,0 +1,153 @@
+"""A command's outputs are one transaction: all of them reach their targets, or none does and the
+earlier outputs stay byte for byte as they were, with no staging file or backup left behind."""
+
+from __future__ import annotations
+
+import errno
+import os
+import re
+from pathlib import Path
+
+import pytest
+
+from casflex.cli import main
+from casflex.cli._base import OptionError, Outputs
+
+TRIAL = Path(__file__).parent / "data" / "lab" / "hamner_running_stride.trc"
+#: A command with a file and a directory of figures (2) as outputs, in about a second
+INVERSE = [
+    "inverse",
+    "hamner_leg",
+    "--data",
+    str(TRIAL),
+    "--root",
+    "pelvis",
+    "--out",
+    "loads.csv",
+    "--plots",
+    "figs",
+    "--quiet",
+]
+
+
+def _tree(root: Path) -> dict[str, bytes | None]:
+    """Every file (its bytes) and directory (None) under ``root``, hidden ones included."""
+    found: dict[str, bytes | None] = {}
+    for where, dirs, files in os.walk(root):
+        for d in dirs:
+            found[os.path.relpath(os.path.join(where, d), root)] = None
+        for f in files:
+            found[os.path.relpath(os.path.join(where, f), root)] = Path(where, f).read_bytes()
+    return found
+
+
+def _one_line(err: str) -> str:
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("casflex: error: "), lines
+    return lines[0]
+
+
+def test_a_directory_where_a_figure_goes_moves_nothing(tmp_path, monkeypatch, capsys):
+    # the reported case: loads.csv was replaced, then the figure's move failed with a raw errno line
+    monkeypatch.chdir(tmp_path)
+    assert main([*INVERSE, "--t-end", "0.8"]) == 0
+    (tmp_path / "figs" / "marker_fit.png").unlink()
+    (tmp_path / "figs" / "marker_fit.png").mkdir()
+    (tmp_path / "figs" / "marker_fit.png" / "mine.txt").write_text("mine\n")
+    before = _tree(tmp_path)
+    capsys.readouterr()
+    assert main(INVERSE) == 2  # the whole stride: other loads than before
+    line = _one_line(capsys.readouterr().err)
+    assert re.fullmatch(r"casflex: error: --plots: 'figs/marker_fit.png' is a directory; nothing was written", line)
+    assert _tree(tmp_path) == before
+
+
+@pytest.mark.parametrize("fail_at", [None, 1, 2, 3, 4, 5])
+def test_a_rename_failing_at_commit_puts_everything_back(fail_at, tmp_path, monkeypatch):
+    # 5 renames: the 2 earlier outputs aside, then the file and the 2 figures in
+    monkeypatch.chdir(tmp_path)
+    Path("run.npz").write_bytes(b"earlier run")
+    Path("figs").mkdir()
+    Path("figs/a.png").write_bytes(b"earlier a")
+    Path("figs/notes.txt").write_text("not casflex's\n")
+    before = _tree(tmp_path)
+    outputs = Outputs()
+    outputs.file("--out", "run.npz", (".npz",), "trajectory").write_bytes(b"new run")
+    plots = outputs.directory("--plots", "figs")
+    (plots / "a.png").write_bytes(b"new a")
+    (plots / "b.png").write_bytes(b"new b")
+    real, calls = os.replace, []
+
+    def replace(src, dst):
+        calls.append(dst)
+        if len(calls) == fail_at:
+            raise OSError(errno.EIO, os.strerror(errno.EIO), str(src), None, str(dst))
+        real(src, dst)
+
+    with monkeypatch.context() as m:
+        m.setattr(os, "replace", replace)
+        if fail_at is None:
+            written = outputs.commit()
+        else:
+            with pytest.raises(OptionError) as exc:
+                outputs.commit()
+    assert len(calls) >= (fail_at or 5)  # every rename up to the failing one was made: a backup too
+    if fail_at is None:
+        assert sorted(map(str, written)) == ["figs/a.png", "figs/b.png", "run.npz"]
+        assert _tree(tmp_path) == {
+            "run.npz": b"new run",
+            "figs": None,
+            "figs/a.png": b"new a",
+            "figs/b.png": b"new b",
+            "figs/notes.txt": b"not casflex's\n",
+        }
+        return
+    assert re.fullmatch(
+        r"--(out|plots): cannot write '[^']+' \(Input/output error\); nothing was written", str(exc.value)
+    ), str(exc.value)
+    outputs.discard()  # what the command does after an error
+    assert _tree(tmp_path) == before
+
+
+def test_a_failure_in_the_middle_of_the_moves_is_one_line_and_keeps_the_earlier_outputs(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert main([*INVERSE, "--t-end", "0.8"]) == 0
+    before = _tree(tmp_path)
+    real, calls = os.replace, []
+
+    def commit(self):
+        def replace(src, dst):
+            calls.append(dst)
+            if len(calls) == 5:  # the 3 earlier outputs aside, loads.csv in, then the first figure
+                raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(dst))
+            real(src, dst)
+
+        with monkeypatch.context() as m:
+            m.setattr(os, "replace", replace)
+            return real_commit(self)
+
+    real_commit = Outputs.commit
+    monkeypatch.setattr(Outputs, "commit", commit)
+    capsys.readouterr()
+    assert main(INVERSE) == 2  # the whole stride: other loads than before
+    line = _one_line(capsys.readouterr().err)
+    assert (
+        line == "casflex: error: --plots: cannot write 'figs/inverse_loads.png' (Permission denied); nothing was "
+        "written"
+    ), line
+    assert _tree(tmp_path) == before
+
+
+def test_outputs_get_ordinary_permissions(tmp_path, monkeypatch):
+    # mkstemp and mkdtemp create 0600 and 0700: a new --plots directory was drwx------
+    monkeypatch.chdir(tmp_path)
+    umask = os.umask(0o027)
+    try:
+        outputs = Outputs()
+        outputs.file("--out", "run.npz", (".npz",), "trajectory").write_bytes(b"run")
+        (outputs.directory("--plots", "figs") / "a.png").write_bytes(b"a")
+        outputs.commit()
+    finally:
+        os.umask(umask)
+    assert oct(Path("run.npz").stat().st_mode & 0o777) == oct(0o640)
+    assert oct(Path("figs").stat().st_mode & 0o777) == oct(0o750)
