@@ -21,13 +21,14 @@ from typing import TYPE_CHECKING, NoReturn
 if TYPE_CHECKING:
     from casflex.model import Model
 
-#: A number as a user types it, sign and exponent included ("-1e-3", "-.5", "2E+3").
-_NUMBER = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
+#: A value that starts with a minus sign and is no option: a number as a user types it, sign and exponent
+#: included ("-1e-3", "-.5", "2E+3"), or a plane of two lab axes ("-Z,Y", docs/lab.md).
+_NUMBER = re.compile(r"^([-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|[-+]?[XYZxyz]\s*,\s*[-+]?[XYZxyz])$")
 
 
 class CliParser(argparse.ArgumentParser):
     """argparse with one-line errors (``casflex: error: argument --dt: ...``, exit 2) and
-    negative numbers read as values: argparse's own test takes ``-1e-3`` for an option."""
+    negative numbers and planes read as values: argparse's own test takes ``-1e-3`` and ``-Z,Y`` for options."""
 
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
