@@ -12,7 +12,9 @@ measurement never meets it:
   foot 20 m/s. A mislabelled or corrupted sample makes a jump of the distance between two markers or more
   in one frame: 1 m at 60 Hz is 60 m/s.
 - :data:`MAX_PLATE_FORCE` (N): 20 kN is 25 body weights of an 80 kg subject; the hardest landings measured
-  reach 10-15.
+  reach 10-15. :data:`MAX_FREE_MOMENT` (N m): a foot's free moment about the vertical is 5-10 N m in gait,
+  some 50 N m in a pivoting sport: 1 kN m is none. A plate's moment about the lab's origin is bounded by
+  both over the capture volume.
 - :data:`MAX_MISFIT` (m): a marker 0.1 m from where the fitted model puts it is no soft-tissue artefact
   (1-3 cm): a marker that fell off or was mislabelled, a wrong plane or units, or a scene not scaled to the
   subject (:mod:`casflex.inverse.fit` refuses it, naming the frame and the marker; ``max_misfit`` changes it).
@@ -32,12 +34,13 @@ import numpy as np
 if TYPE_CHECKING:
     from casflex.lab import LabMarkers, LabTable
 
-__all__ = ["LAB_EXTENT", "MAX_MARKER_SPEED", "MAX_PLATE_FORCE", "MAX_MISFIT", "STATIC_SPREAD", "SCALE_FACTOR",
-           "check_markers", "check_plate_values", "check_static", "check_scale"]
+__all__ = ["LAB_EXTENT", "MAX_MARKER_SPEED", "MAX_PLATE_FORCE", "MAX_FREE_MOMENT", "MAX_MISFIT", "STATIC_SPREAD",
+           "SCALE_FACTOR", "check_markers", "check_plate_values", "check_static", "check_scale"]
 
 LAB_EXTENT = 100.0
 MAX_MARKER_SPEED = 50.0
 MAX_PLATE_FORCE = 2.0e4
+MAX_FREE_MOMENT = 1.0e3
 MAX_MISFIT = 0.1
 STATIC_SPREAD = 0.05
 SCALE_FACTOR = 3.0
@@ -77,28 +80,37 @@ def _point(p: np.ndarray) -> str:
     return "(" + ", ".join(f"{v:.3g}" for v in p) + ")"
 
 
-def check_plate_values(table: LabTable, prefix: str, force: np.ndarray, cop: np.ndarray | None) -> None:
+def check_plate_values(table: LabTable, prefix: str, force: np.ndarray, cop: np.ndarray | None,
+                       moment: np.ndarray) -> None:
     """ValueError in one line naming the file, the plate and the time of a force that is infinite or above
-    :data:`MAX_PLATE_FORCE`, or a centre of pressure ``cop`` (None: the table gives moments) that is infinite
-    or beyond :data:`LAB_EXTENT`. Forces that are not numbers (NaN) are missing samples: the caller's."""
+    :data:`MAX_PLATE_FORCE`, a centre of pressure ``cop`` (None: the table gives moments about the origin) that
+    is infinite or beyond :data:`LAB_EXTENT`, or a ``moment`` (the free moment where ``cop`` is given, else the
+    moment about the origin) beyond what such forces and :data:`MAX_FREE_MOMENT` make. Values that are not
+    numbers (NaN) are missing samples: the caller's."""
+    where = f"{table.source}: plate {prefix!r}"
     with np.errstate(invalid="ignore", over="ignore"):
         size = np.linalg.norm(force, axis=1)
         bad = np.isinf(force).any(axis=1) | (size > MAX_PLATE_FORCE)
     if bad.any():
         i = int(np.argmax(bad))
-        if not np.isfinite(size[i]):  # an infinite component beside one that is not a number
-            size[i] = np.inf
-        raise ValueError(f"{table.source}: plate {prefix!r} at t = {table.t[i]:g} s: a force of {size[i]:.3g} N, "
-                         f"beyond what a body exerts on a plate ({MAX_PLATE_FORCE:g} N): a corrupted sample or a "
-                         "calibration in other units")
-    if cop is None:
-        return
+        raise ValueError(f"{where} at t = {table.t[i]:g} s: a force of {np.abs(force[i]).max():.3g} N, beyond what a "
+                         f"body exerts on a plate ({MAX_PLATE_FORCE:g} N): a corrupted sample or a calibration in "
+                         "other units")
+    if cop is not None:
+        with np.errstate(invalid="ignore"):
+            bad = np.isinf(cop).any(axis=1) | (np.abs(cop).max(axis=1) > LAB_EXTENT)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise ValueError(f"{where} at t = {table.t[i]:g} s: its centre of pressure lies at {_point(cop[i])} m, "
+                             f"beyond any lab ({LAB_EXTENT:g} m): a corrupted sample or another unit")
+    limit = MAX_FREE_MOMENT + (0.0 if cop is not None else LAB_EXTENT * MAX_PLATE_FORCE)
     with np.errstate(invalid="ignore"):
-        bad = np.isinf(cop).any(axis=1) | (np.abs(cop).max(axis=1) > LAB_EXTENT)
+        bad = np.isinf(moment).any(axis=1) | (np.abs(moment).max(axis=1) > limit)
     if bad.any():
         i = int(np.argmax(bad))
-        raise ValueError(f"{table.source}: plate {prefix!r} at t = {table.t[i]:g} s: its centre of pressure lies at "
-                         f"{_point(cop[i])} m, beyond any lab ({LAB_EXTENT:g} m): a corrupted sample or another unit")
+        what = "free moment" if cop is not None else "moment about the lab's origin"
+        raise ValueError(f"{where} at t = {table.t[i]:g} s: a {what} of {np.abs(moment[i]).max():.3g} N m, beyond "
+                         f"what a body exerts on a plate ({limit:g} N m): a corrupted sample")
 
 
 def check_static(lab: LabMarkers, labels: Sequence[str]) -> None:

@@ -169,9 +169,8 @@ def plate_wrench(table: LabTable, prefix: str, *, min_force: float = MIN_PLATE_F
     moment is not a number. A force below ``min_force`` (N, in magnitude) whose point of application the
     table leaves undefined (NaN centre of pressure: the convention of exports that write none where the plate
     is unloaded) is taken as no load, F = M = 0, and flagged in ``unloaded``; a larger force without a centre
-    of pressure is missing. Centres of pressure and forces no lab records (beyond :data:`casflex.lab_checks.
-    LAB_EXTENT` from the origin, above :data:`casflex.lab_checks.MAX_PLATE_FORCE`) are refused in one line
-    naming the plate and the time."""
+    of pressure is missing. Forces, centres of pressure and moments no lab records
+    (:func:`casflex.lab_checks.check_plate_values`) are refused in one line naming the plate and the time."""
     from casflex.lab_checks import check_plate_values
 
     p = _plate_columns(table, prefix)
@@ -184,12 +183,13 @@ def plate_wrench(table: LabTable, prefix: str, *, min_force: float = MIN_PLATE_F
         size = np.linalg.norm(F, axis=1)
     if f"{p}moment_x" in table.names:
         M, P = cols("moment_"), None
+        check_plate_values(table, p, F, None, M)
     else:
         P, T = cols("force_p"), cols("torque_")
         T[~np.isfinite(T).all(axis=1) & np.isfinite(P).all(axis=1) & (size == 0)] = 0.0
+        check_plate_values(table, p, F, P, T)
         with np.errstate(invalid="ignore", over="ignore"):
             M = np.cross(P, F) + T
-    check_plate_values(table, p, F, P)
     unloaded = np.isfinite(F).all(axis=1) & ~np.isfinite(M).all(axis=1) & (size < min_force)
     F[unloaded], M[unloaded] = 0.0, 0.0
     missing = ~(np.isfinite(F).all(axis=1) & np.isfinite(M).all(axis=1))

@@ -97,12 +97,14 @@ def test_one_plate_sample_not_a_number_at_the_peak_is_filled_and_said(tmp_path, 
         assert np.abs(bad[f"{joint}.moment"] - good[f"{joint}.moment"]).max() < 0.06 * peak, joint
 
 
-@pytest.mark.parametrize(("value", "match"), [
-    ("inf", r"grf.mot: row 14: ground_force_vy is infinite \(a missing value is an empty cell or NaN\)"),
-    ("2.5e5", r"plate 'ground_' at t = 0.517 s: a force of 2.5e\+05 N, beyond what a body exerts"),
+@pytest.mark.parametrize(("column", "value", "match"), [
+    (2, "inf", r"grf.mot: row 14: ground_force_vy is infinite \(a missing value is an empty cell or NaN\)"),
+    (2, "2.5e5", r"plate 'ground_' at t = 0.517 s: a force of 2.5e\+05 N, beyond what a body exerts"),
+    (4, "1e4", r"plate 'ground_' at t = 0.517 s: its centre of pressure lies at \(1e\+04, -0.0075, -0.\d+\) m, beyond"),
+    (8, "1e300", r"plate 'ground_' at t = 0.517 s: a free moment of 1e\+300 N m, beyond what a body exerts"),
 ])
-def test_a_plate_force_no_body_exerts_is_refused_naming_the_time(value, match, tmp_path, capsys):
-    bad = _mot(tmp_path, lambda rows: _set(rows, 0.517, 2, value))
+def test_a_plate_value_no_body_produces_is_refused_naming_the_time(column, value, match, tmp_path, capsys):
+    bad = _mot(tmp_path, lambda rows: _set(rows, 0.517, column, value))
     _refused([*BASE, "--data", TRC, "--loads", bad, *PLATE], capsys, match)
 
 
