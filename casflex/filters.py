@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["butterworth2", "check_cutoff", "even_times", "filtfilt2", "lowpass"]
+__all__ = ["butterworth2", "check_cutoff", "even_times", "filtfilt2", "lowpass", "runs"]
 
 
 def even_times(t: np.ndarray, rate: float | None = None) -> np.ndarray:
@@ -46,6 +46,12 @@ def check_cutoff(cutoff: float | None, t: np.ndarray, what: str, option: str = "
     if not cutoff > 0.5 / span:
         raise ValueError(f"{option}: {cutoff:g} Hz is a period over twice the {what}' span of {span:g} s (the lowest "
                          f"cut-off is {0.5 / span:.3g} Hz): it would keep nothing of the motion but its trend")
+
+
+def runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """[(start, stop)) of the runs of True in ``mask`` (n,): the gaps of a channel, where mask is "missing"."""
+    d = np.diff(np.r_[0, np.asarray(mask).astype(np.int8), 0])
+    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist(), strict=True))
 
 
 def butterworth2(cutoff: float, fs: float) -> tuple[np.ndarray, np.ndarray]:

@@ -70,19 +70,13 @@ def _rate(t: np.ndarray, where: str) -> tuple[float, np.ndarray]:
     return 1.0 / (grid[1] - grid[0]), grid
 
 
-def _runs(missing: np.ndarray) -> list[tuple[int, int]]:
-    """[(start, stop)) of the runs of True in ``missing``."""
-    d = np.diff(np.r_[0, missing.astype(np.int8), 0])
-    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist(), strict=True))
-
-
 def _filter_channel(t: np.ndarray, grid: np.ndarray, y: np.ndarray, cutoff: float, name: str, where: str,
                     max_gap: int) -> tuple[np.ndarray, list[str]]:
     """y (n, c) of one marker or column at times t (their even grid: grid) filtered: gaps filled (at most
     max_gap samples), the ends missing kept missing; (result, notes for the report)."""
     from scipy.interpolate import CubicSpline
 
-    from casflex.filters import butterworth2, filtfilt2
+    from casflex.filters import butterworth2, filtfilt2, runs
 
     ok = np.isfinite(y).all(axis=1)
     out = np.full_like(y, np.nan, dtype=float)
@@ -97,7 +91,7 @@ def _filter_channel(t: np.ndarray, grid: np.ndarray, y: np.ndarray, cutoff: floa
         raise ValueError(f"{where}: {name}: only {b - a} samples in a row (t = {t[a]:g} to {t[b - 1]:g} s); "
                          f"filtering needs {_MIN_SAMPLES}")
     seg = y[a:b].astype(float)
-    for s, e in _runs(~ok[a:b]):
+    for s, e in runs(~ok[a:b]):
         if e - s > max_gap:
             raise ValueError(f"{where}: {name}: a gap of {e - s} samples (t = {t[a + s]:g} to "
                              f"{t[a + e - 1]:g} s) is longer than max_gap = {max_gap} samples, the longest a "

@@ -118,7 +118,8 @@ def _even_frames(t: np.ndarray, rate: float, source: str) -> np.ndarray:
     h = np.diff(grid)
     if np.ptp(h) > 1e-6 * h.mean():
         step = np.median(h)
-        k = int(np.argmax(np.abs(h - step) > 0.1 * step)) + 1
+        dev = np.abs(h - step)
+        k = int(np.argmax(dev > 0.1 * step) if (dev > 0.1 * step).any() else np.argmax(dev)) + 1
         raise ValueError(f"{source}: frames must be evenly spaced (the velocities and accelerations are differences "
                          f"on an even grid): t = {t[k]:g} s follows {t[k - 1]:g} s, the frames are {step:.3g} s apart "
                          "elsewhere; resample the trial")

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from casflex.filters import check_cutoff, even_times, lowpass
+from casflex.filters import check_cutoff, even_times, lowpass, runs
 from casflex.lab import LabTable, Plane
 from casflex.lab_c3d import MIN_PLATE_FORCE
 from casflex.lab_filter import plate_wrench
@@ -64,12 +64,6 @@ class Plate:
         return f, np.interp(t, self.t, self.moment)
 
 
-def _runs(missing: np.ndarray) -> list[tuple[int, int]]:
-    """[(start, stop)) of the runs of True in ``missing``."""
-    d = np.diff(np.r_[0, missing.astype(np.int8), 0])
-    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist(), strict=True))
-
-
 def _covered(t: np.ndarray, ok: np.ndarray, window: tuple[float, float], where: str, written: np.ndarray,
              trial: str) -> slice:
     """The rows of the plate's samples (at the even times t, ``written`` so in the file) to use: the stretch
@@ -100,8 +94,8 @@ def _fill(t: np.ndarray, F: np.ndarray, M: np.ndarray, where: str, written: np.n
         return F, M, notes
     from scipy.interpolate import CubicSpline  # here: its import alone costs 0.5 s
 
-    runs, h = _runs(missing), (t[-1] - t[0]) / (t.size - 1)
-    for s, e in runs:
+    gaps, h = runs(missing), (t[-1] - t[0]) / (t.size - 1)
+    for s, e in gaps:
         if e - s > MAX_PLATE_GAP or (e - s) * h > MAX_PLATE_GAP_S * (1 + 1e-6):
             raise ValueError(f"{where}: {e - s} samples are not numbers from t = {written[s]:g} to "
                              f"{written[e - 1]:g} s, a gap longer than a spline may fill (at most {MAX_PLATE_GAP} "
@@ -109,7 +103,7 @@ def _fill(t: np.ndarray, F: np.ndarray, M: np.ndarray, where: str, written: np.n
     wrench = np.hstack([F, M])
     ok = ~missing
     wrench[missing] = CubicSpline(t[ok], wrench[ok], axis=0)(t[missing])
-    for s, e in runs:
+    for s, e in gaps:
         f = np.linalg.norm(wrench[s:e, :3], axis=1).max()
         when = f"1 sample at t = {written[s]:g} s" if e - s == 1 else \
             f"{e - s} samples at t = {written[s]:g}..{written[e - 1]:g} s"
