@@ -18,9 +18,9 @@ _EXPORTS = {
     "RigidBody": "casflex.scene", "RunSettings": "casflex.scene", "Scene": "casflex.scene",
     "SceneError": "casflex.scene",
     "Spring": "casflex.scene", "Support": "casflex.scene", "TorsionSpring": "casflex.scene",
-    "Marker": "casflex.markers",
-    "builtin_scenes": "casflex.scene_io", "dumps_scene": "casflex.scene_io", "load_scene": "casflex.scene_io",
-    "loads_scene": "casflex.scene_io", "save_scene": "casflex.scene_io",
+    "Marker": "casflex.scene",
+    "builtin_scenes": "casflex.scene", "dumps_scene": "casflex.scene", "load_scene": "casflex.scene",
+    "loads_scene": "casflex.scene", "save_scene": "casflex.scene",
 }
 
 __all__ = [*sorted(_EXPORTS), "__version__"]

@@ -87,7 +87,7 @@ class MeasurementSet:
     def select(self, model: Model) -> np.ndarray:
         """Column of each model dof in the data (-1 where the dof is not measured). Channels of the
         scene's markers (``x<marker>``, ``y<marker>``) are known channels, but no dof's."""
-        from casflex.markers import marker_channels
+        from casflex.model.markers import marker_channels
 
         markers = marker_channels(model)
         unknown = [c for c in self.channels if c not in model.dof_names and c not in markers]

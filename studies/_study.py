@@ -2,7 +2,7 @@
 table and figure, and the assertions on its key numbers. Not a study itself (no ``main``).
 
 :func:`cli` (the shared switches), :class:`Banner` (the page's provenance line), :func:`best_of` (timing),
-:func:`sweep` (runs through casflex.sweep, resumable), :func:`write_outputs` and :func:`save_raw` (pages,
+:func:`sweep` (runs through casflex.study.sweep, resumable), :func:`write_outputs` and :func:`save_raw` (pages,
 figures, raw numbers, atomically; ``--quick`` writes ``*_quick.*``), :func:`checks` (the self-checks section)
 and :func:`table` with the pages' number formats.
 """
@@ -74,10 +74,10 @@ def best_of(fn: Callable[[], object], repeat: int, enough: float = 2.0) -> tuple
 
 def sweep(name: str, plan: list[dict], key: Callable[[dict], str], fn: Callable[..., dict], *,
           record: Path | None, quick: bool, scheduler: str | None = None) -> list[tuple[dict, dict]]:
-    """Every run of ``plan`` (``fn(**run)``) through casflex.sweep on 2 local workers (or ``scheduler``),
+    """Every run of ``plan`` (``fn(**run)``) through casflex.study.sweep on 2 local workers (or ``scheduler``),
     recorded under ``record`` (an interrupted study resumes there; default a temporary directory):
     (run, result) pairs in the plan's order."""
-    from casflex.sweep import Run, run_sweep
+    from casflex.study.sweep import Run, run_sweep
 
     runs = [Run(key(r), fn, r) for r in plan]
     with tempfile.TemporaryDirectory(prefix=f"casflex-{name}-") as tmp:

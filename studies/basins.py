@@ -15,7 +15,7 @@ from _shared import PAPER_NLP, capped_ipopt
 from _study import Banner, assert_checks, checks, cli, fmt_p, save_raw, sweep, table, write_outputs
 
 from casflex.model import assemble
-from casflex.scene_io import load_scene
+from casflex.scene.io import load_scene
 
 TOL = 1e-6  # max relative error of p (indirect, direct)
 TOL_ADAPTED = 1e-4  # max relative error of k1, k3 (adapted direct)
@@ -49,7 +49,7 @@ METHODS = {
 
 def one_run(*, method: str, factor: float, horizon: float, t_end: float) -> dict:
     """One identification of the grid (a sweep run, on any worker)."""
-    from casflex.sweep import identification_run
+    from casflex.study.sweep import identification_run
 
     opts = METHODS[method][2]
     if opts["method"] == "indirect":

@@ -29,8 +29,8 @@ def write_trial(folder: Path) -> tuple[Path, Path]:
     """The 1 s, 100 Hz trial (module docstring) as ``trial.trc`` and ``grf.mot`` in ``folder``."""
     from scipy.interpolate import CubicSpline
 
-    from casflex.filters import even_times
     from casflex.lab import read_sto, read_trc
+    from casflex.lab.lowpass import even_times
 
     lab, grf = read_trc(LAB / "hamner_running_stride.trc"), read_sto(LAB / "hamner_running_stride_grf.mot")
     t_old = even_times(lab.t, lab.rate)

@@ -39,7 +39,7 @@ def models() -> dict:
 
 def run(model, force, dt: float, ref, repeat: int) -> dict:
     """One model at one step: best wall time of simulate(), and the errors against ``ref`` on its grid."""
-    from casflex.markers import marker_positions
+    from casflex.model.markers import marker_positions
     from casflex.simulate import SimulationError, simulate
 
     try:
@@ -54,7 +54,7 @@ def run(model, force, dt: float, ref, repeat: int) -> dict:
 
 
 def main(quick: bool = False, out_dir: Path | None = None) -> dict:
-    from casflex.markers import marker_positions
+    from casflex.model.markers import marker_positions
     from casflex.simulate import simulate
 
     banner = Banner("bench_joints", quick)

@@ -28,8 +28,8 @@ def one_run(*, kt_factor: float | None = None, **kw) -> dict:
     import hashlib
     import tempfile
 
-    from casflex.scene_io import dumps_scene, load_scene, save_scene
-    from casflex.sweep import identification_run
+    from casflex.scene.io import dumps_scene, load_scene, save_scene
+    from casflex.study.sweep import identification_run
 
     if kt_factor is not None:
         kt = NOMINAL["kt1"] * kt_factor

@@ -13,7 +13,7 @@ import numpy as np
 from _study import Banner, assert_checks, checks, cli, png, table, write_outputs
 
 from casflex.model import assemble
-from casflex.scene_io import load_scene
+from casflex.scene.io import load_scene
 from casflex.simulate import simulate
 
 PARAMS = {"p*": None, "p1": [663, 0.49, 379, 0.49], "p2": [757, 0.50, 465, 0.53]}

@@ -34,7 +34,7 @@ def _flexible(times: float):
     """hamner_leg_flexible with its bones' E multiplied by ``times``."""
     from dataclasses import replace
 
-    from casflex.scene_io import load_scene
+    from casflex.scene.io import load_scene
 
     sc = load_scene("hamner_leg_flexible")
     return replace(sc, beams=tuple(replace(b, E=b.E * times) for b in sc.beams))

@@ -18,7 +18,7 @@ from _study import Banner, assert_checks, checks, cli, fmt_p, save_raw, table, w
 from casflex.data import MeasurementSet, measured_set, simulated_set
 from casflex.identification import identify_direct, identify_indirect
 from casflex.model import assemble
-from casflex.scene_io import load_scene
+from casflex.scene.io import load_scene
 
 TOL = 1e-6  # convergence: max relative error of p
 T1, T2 = 0.69, 2.83

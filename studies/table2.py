@@ -14,7 +14,7 @@ from _study import Banner, assert_checks, checks, cli, fmt_p, table, write_outpu
 from casflex.data import measured_set, simulated_set
 from casflex.identification import identify_adapted_direct
 from casflex.model import assemble
-from casflex.scene_io import load_scene
+from casflex.scene.io import load_scene
 
 #: (label, instants (s), the paper's identified [k1 kt1 k3 kt3])
 SETS = [

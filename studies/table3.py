@@ -14,7 +14,7 @@ from _study import Banner, assert_checks, checks, cli, table, write_outputs
 from casflex.data import MeasurementSet, measured_set, simulated_set
 from casflex.identification import identify_adapted_direct
 from casflex.model import assemble
-from casflex.scene_io import load_scene
+from casflex.scene.io import load_scene
 
 INSTANTS = [0.4, 1.1, 1.6, 1.9, 2.3]
 ROTS = ("theta2", "theta3", "theta4", "theta5")

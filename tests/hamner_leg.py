@@ -2,7 +2,7 @@
 OpenSim's Hamner running pipeline in the sagittal plane, scaled to that subject, and the lab files
 they are tested against. ``python tests/hamner_leg.py [MODELS]`` writes
 
-- casflex/scenes/hamner_leg.toml and casflex/scenes/hamner_leg_flexible.toml,
+- casflex/scene/builtin/hamner_leg.toml and casflex/scene/builtin/hamner_leg_flexible.toml,
 - tests/data/lab/hamner_subject02_leg.osim: the scaled model's pelvis and right-leg bodies, joints and the
   markers the scenes use, as placed on the subject (subject02_registered.osim: HEADER_RIGID), what
   tests/test_hamner_leg.py recomputes the masses, centres and markers from,
@@ -195,10 +195,10 @@ def write_flexible(rigid) -> Path:
     """hamner_leg_flexible.toml from the rigid scene ``rigid``."""
     import casflex
     from casflex.results import atomic_write_text
-    from casflex.scene_io import dumps_scene
+    from casflex.scene.io import dumps_scene
 
     flexible = flexible_scene(rigid)
-    path = Path(casflex.__file__).parent / "scenes" / "hamner_leg_flexible.toml"
+    path = Path(casflex.__file__).parent / "scene" / "builtin" / "hamner_leg_flexible.toml"
     atomic_write_text(path, HEADER_FLEXIBLE + flexible_numbers(flexible) + dumps_scene(flexible))
     return path
 
@@ -540,7 +540,7 @@ def fit_check(scene, trc: Path) -> dict:
 def main(models: str) -> None:
     import casflex
     from casflex.results import atomic_write_text
-    from casflex.scene_io import dumps_scene
+    from casflex.scene.io import dumps_scene
 
     write_leg_osim(source_text(models, OSIM_PLACED))
     spans = write_stride(source_text(models, TRIAL_TRC), source_text(models, TRIAL_GRF),
@@ -561,7 +561,7 @@ def main(models: str) -> None:
     assert all(np.array_equal(cut["markers"][m], pose["markers"][m]) for m in MARKERS)
 
     rigid = rigid_scene(pose)
-    scenes = Path(casflex.__file__).parent / "scenes"
+    scenes = Path(casflex.__file__).parent / "scene" / "builtin"
     atomic_write_text(scenes / "hamner_leg.toml", HEADER_RIGID + dumps_scene(rigid))
     write_flexible(casflex.load_scene("hamner_leg"))  # from the file, as the test rebuilds it
     flexible = casflex.load_scene("hamner_leg_flexible")

@@ -1,5 +1,5 @@
 """The built-in scene ``leg_hinged`` derived from ``leg_rigid`` and ``leg``: how
-casflex/scenes/leg_hinged.toml is written (``python tests/leg_hinged.py``) and what
+casflex/scene/builtin/leg_hinged.toml is written (``python tests/leg_hinged.py``) and what
 tests/test_joints.py checks it against."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import dataclasses
 from pathlib import Path
 
 HEADER = """\
-# The built-in rigid leg (casflex/scenes/leg_rigid.toml, from leg.toml: subject, sources, pelvis path,
+# The built-in rigid leg (casflex/scene/builtin/leg_rigid.toml, from leg.toml: subject, sources, pelvis path,
 # markers) on ideal hinges instead of stiff bushings (issue 25). Written by tests/leg_hinged.py, which
 # tests/test_joints.py checks:
 # - hip_pin (pelvis-thigh, at the hip) and knee_pin (thigh-shank, at the knee, a point of the rigid
@@ -45,9 +45,9 @@ def hinged_leg(rigid, leg, *, ankle: bool = True):
 if __name__ == "__main__":
     import casflex
     from casflex.results import atomic_write_text
-    from casflex.scene_io import dumps_scene
+    from casflex.scene.io import dumps_scene
 
-    path = Path(casflex.__file__).parent / "scenes" / "leg_hinged.toml"
+    path = Path(casflex.__file__).parent / "scene" / "builtin" / "leg_hinged.toml"
     scene = hinged_leg(casflex.load_scene("leg_rigid"), casflex.load_scene("leg"))
     atomic_write_text(path, HEADER + dumps_scene(scene))
     print(f"wrote {path}")

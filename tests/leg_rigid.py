@@ -1,4 +1,4 @@
-"""The built-in scene ``leg_rigid`` derived from ``leg``: how casflex/scenes/leg_rigid.toml is written
+"""The built-in scene ``leg_rigid`` derived from ``leg``: how casflex/scene/builtin/leg_rigid.toml is written
 (``python tests/leg_rigid.py``) and what tests/test_leg_scene.py checks it against."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import math
 from pathlib import Path
 
 HEADER = """\
-# The built-in leg (casflex/scenes/leg.toml: subject, sources, pelvis path, joints, markers) with
+# The built-in leg (casflex/scene/builtin/leg.toml: subject, sources, pelvis path, joints, markers) with
 # thigh and shank as rigid links instead of flexible beams (issue 13). Written by
 # tests/leg_rigid.py from leg.toml, which tests/test_leg_scene.py checks:
 # - Each segment is a rigid body at the node of its proximal joint (thigh at the hip, shank at the
@@ -53,8 +53,8 @@ def rigid_leg(leg):
 if __name__ == "__main__":
     import casflex
     from casflex.results import atomic_write_text
-    from casflex.scene_io import dumps_scene
+    from casflex.scene.io import dumps_scene
 
-    path = Path(casflex.__file__).parent / "scenes" / "leg_rigid.toml"
+    path = Path(casflex.__file__).parent / "scene" / "builtin" / "leg_rigid.toml"
     atomic_write_text(path, HEADER + dumps_scene(rigid_leg(casflex.load_scene("leg"))))
     print(f"wrote {path}")

@@ -1,4 +1,4 @@
-"""The built-in scene ``slidercrank`` (casflex/scenes/slidercrank.toml), written from these numbers
+"""The built-in scene ``slidercrank`` (casflex/scene/builtin/slidercrank.toml), written from these numbers
 (``python tests/slidercrank.py`` rewrites it; tests/test_joints.py checks the file equals this scene).
 
 A crank (a balanced rigid body, radius R) turns at constant speed OMEGA about the origin, driven by a
@@ -51,6 +51,6 @@ HEADER = """# A slider-crank on ideal joints (issue 25): a balanced crank (R = 0
 if __name__ == "__main__":
     import casflex
 
-    path = Path(__file__).resolve().parents[1] / "casflex" / "scenes" / "slidercrank.toml"
+    path = Path(__file__).resolve().parents[1] / "casflex" / "scene" / "builtin" / "slidercrank.toml"
     path.write_text(HEADER + casflex.dumps_scene(scene()))
     print(f"wrote {path}")

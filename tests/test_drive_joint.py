@@ -8,7 +8,7 @@ import pytest
 from inverse_scenes import INERTIA, A, C, M, W, driven_pendulum, pendulum
 
 from casflex.scene import SceneError
-from casflex.scene_io import loads_scene
+from casflex.scene.io import loads_scene
 from casflex.simulate import simulate
 
 

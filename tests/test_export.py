@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import casflex
-from casflex.export import export_c
 from casflex.simulate import simulate
+from casflex.simulate.export import export_c
 
 needs_cc = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs gcc")
 

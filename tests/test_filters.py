@@ -1,4 +1,4 @@
-"""casflex.filters: the lab's zero-lag Butterworth against scipy's, its response against theory, and
+"""casflex.lab.lowpass: the lab's zero-lag Butterworth against scipy's, its response against theory, and
 rounded lab times."""
 
 from __future__ import annotations
@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from casflex.filters import butterworth2, even_times, filtfilt2, lowpass
 from casflex.inverse.fit import coordinate_rates
+from casflex.lab.lowpass import butterworth2, even_times, filtfilt2, lowpass
 
 
 @pytest.mark.parametrize(("cutoff", "fs"), [(6.0, 60.0), (10.0, 100.0), (15.0, 1000.0)])

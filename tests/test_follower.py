@@ -15,7 +15,7 @@ from scipy.optimize import brentq, fsolve
 
 from casflex import Beam, Load, Node, Parameter, Scene, SceneError, Support, assemble
 from casflex.elements.kernels import kernel
-from casflex.scene_io import dumps_scene, loads_scene
+from casflex.scene.io import dumps_scene, loads_scene
 from casflex.simulate import simulate
 from casflex.statics import StaticsError, critical_load, equilibrium, equilibrium_path, modes
 
@@ -158,7 +158,7 @@ def test_scene_checks_and_round_trip():
 
 def test_cli_reports_flutter_and_asks_for_newton(tmp_path, capsys):
     from casflex.cli import main
-    from casflex.scene_io import save_scene
+    from casflex.scene.io import save_scene
 
     path = save_scene(column(8, fx=-25.0), tmp_path / "beck.toml")  # above the flutter load 20.05
     assert main(["modes", str(path), "--about", "equilibrium", "--count", "2"]) == 2

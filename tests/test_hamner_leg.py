@@ -190,7 +190,7 @@ def test_the_flexible_segments_are_the_rigid_ones_undeformed(models):
     from conftest import assert_scenes_close
     from hamner_leg import flexible_scene
 
-    from casflex.markers import marker_positions
+    from casflex.model.markers import marker_positions
 
     rigid, flexible = models["hamner_leg"], models["hamner_leg_flexible"]
     # what tests/hamner_leg.py writes, to 1e-12 relative: its point masses come from a norm (BLAS) and a 3 x 3

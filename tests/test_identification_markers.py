@@ -14,7 +14,7 @@ import casflex
 from casflex.data import MeasurementSet, simulated_set
 from casflex.identification import identify_adapted_direct, identify_direct
 from casflex.identification.shooting_nlp import _channel_kinematics, identify_nlp
-from casflex.markers import marker_channels, marker_states
+from casflex.model.markers import marker_channels, marker_states
 
 DATA = Path(__file__).resolve().parent / "data"
 NOISE = 1e-4  # m

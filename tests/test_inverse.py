@@ -13,8 +13,8 @@ from casflex.inverse.flexible import driven_loads
 from casflex.inverse.plates import Plate, plate_loads
 from casflex.inverse.rigid import rigid_loads
 from casflex.lab import LabMarkers
-from casflex.markers import marker_positions
-from casflex.scene_io import loads_scene
+from casflex.model.markers import marker_positions
+from casflex.scene.io import loads_scene
 
 G = 9.81
 A, W = 0.7, 2 * np.pi * 1.3  # the pendulum's swing: A sin(W t), rad
@@ -62,10 +62,10 @@ def test_root_loads_are_newtons_law_for_the_whole_system():
 
     sol = rigid_loads(tree, t, z, zd, zdd, model.p_nominal, lambda tt, q: plate_loads(model, [plate], tt, q))
     # the bodies' centres' accelerations by AD along the coordinates' motion
-    from casflex.markers import body_centres
+    from casflex.model.markers import body_centres
 
     body_centres(model, model.q0)  # builds the Function
-    from casflex import markers as mk
+    from casflex.model import markers as mk
 
     zs, zds, zdds = (ca.SX.sym(s, 4) for s in ("z", "zd", "zdd"))
     c = mk._CENTRES[model](tree.forward(zs))

@@ -13,8 +13,8 @@ from casflex.cli import main
 from casflex.inverse import inverse_model, kinematic_tree
 from casflex.inverse.calibrate import calibrate
 from casflex.lab import LabMarkers
-from casflex.markers import body_centres, marker_positions
-from casflex.scene_io import load_scene, loads_scene
+from casflex.model.markers import body_centres, marker_positions
+from casflex.scene.io import load_scene, loads_scene
 
 LAB = Path(__file__).parent / "data" / "lab"
 

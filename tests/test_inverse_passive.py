@@ -11,8 +11,8 @@ from scipy.integrate import solve_ivp
 from casflex.inverse import inverse_dynamics, inverse_model, kinematic_tree
 from casflex.inverse.passive import fit_passive
 from casflex.lab import LabMarkers
-from casflex.markers import marker_positions
-from casflex.scene_io import loads_scene
+from casflex.model.markers import marker_positions
+from casflex.scene.io import loads_scene
 
 KT, CT, REST = 4.0, 0.15, 0.2  # N m/rad, N m s/rad, rad
 

@@ -117,7 +117,7 @@ def test_a_hinge_s_torsion_spring_damper_identified_from_two_markers_of_the_ode_
     from casflex import Parameter, TorsionSpring
     from casflex.data import MeasurementSet
     from casflex.identification import identify_indirect
-    from casflex.markers import Marker
+    from casflex.scene.markers import Marker
 
     kt, ct = 6.0, 0.15  # N m/rad, N m s/rad
     t = np.arange(0.0, 1.5 + 1e-9, 0.01)
@@ -168,7 +168,7 @@ def test_a_state_that_opens_a_joint_is_closed_or_refused():
     q[model.dof("xb")] += 0.01  # 1 cm off the elbow
     tr = simulate(model, 0.01, dt=1e-3, q0=q)
     assert np.abs(np.array(model.constraint(tr.q[0])[0])).max() < 1e-12
-    from casflex.consistent import project_positions
+    from casflex.model.consistent import project_positions
 
     q[model.dof("xb")] += 100.0  # far off: Gauss-Newton still closes a hinge (its rows are linear in x, y)
     assert np.abs(np.array(model.constraint(project_positions(model, q))[0])).max() < 1e-11
@@ -305,7 +305,7 @@ def test_stiffer_bushings_converge_to_the_hinges():
     from leg_hinged import hinged_leg
     from scipy.ndimage import uniform_filter1d
 
-    from casflex.markers import marker_positions
+    from casflex.model.markers import marker_positions
 
     rigid = casflex.load_scene("leg_rigid")
     v = casflex.assemble(rigid).supports_at(0.0)[1]
@@ -383,7 +383,7 @@ def test_the_direct_method_takes_the_joints_multipliers_as_unknowns():
 
     # from two markers at 1 mm: the kinematic fit closes the hinges (the inverse kinematics), the markers
     # alone deciding the joint angles; the rates by the default smoothing
-    from casflex.markers import Marker
+    from casflex.scene.markers import Marker
 
     y = np.column_stack([0.5 * np.cos(p1), 0.5 * np.sin(p1), elbow[0] + 0.6 * np.cos(p2), elbow[1] + 0.6 * np.sin(p2)])
     y += 1e-3 * np.random.default_rng(1).normal(size=y.shape)

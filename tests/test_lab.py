@@ -22,7 +22,7 @@ from casflex.lab import (
     read_trc,
     trial_markers,
 )
-from casflex.lab_filter import zero_lag_minus_3db
+from casflex.lab.filtering import zero_lag_minus_3db
 
 LAB = Path(__file__).resolve().parent / "data" / "lab"
 TRC, GRF = LAB / "hamner_running_excerpt.trc", LAB / "hamner_running_grf_excerpt.mot"
@@ -121,7 +121,7 @@ def test_the_command_line_refuses_a_bad_plane_before_any_work(tmp_path, capsys):
     assert len(err) == 1 and "--plane" in err[0] and "two different lab axes" in err[0], err
 
 
-# --- C3D (casflex.lab_c3d, through ezc3d) -----------------------------------------------------------------
+# --- C3D (casflex.lab.c3d, through ezc3d) -----------------------------------------------------------------
 
 C3D = LAB / "walking2_excerpt.c3d"
 
@@ -209,7 +209,7 @@ def test_a_corrupted_or_unsupported_c3d_is_one_line_naming_the_file(tmp_path):
     assert read_c3d(five, plates=False)[0].xyz.shape == (210, 44, 3)
 
 
-# --- filtering (casflex.lab_filter) -----------------------------------------------------------------------
+# --- filtering (casflex.lab.filtering) -----------------------------------------------------------------------
 
 def _gain(f: float, fc: float, fs: float) -> float:
     """The zero-lag filter's gain: the 2nd-order digital Butterworth's |H|, squared by the double pass."""
@@ -347,7 +347,7 @@ def test_a_c3d_trial_gives_the_scenes_markers():
 
     from casflex.lab import read_c3d, trial_markers
     from casflex.model import assemble
-    from casflex.scene_io import loads_scene
+    from casflex.scene.io import loads_scene
 
     path = Path(__file__).parent / "data" / "lab" / "walking2_excerpt.c3d"
     lab, _ = read_c3d(path, plates=False)

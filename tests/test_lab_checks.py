@@ -1,4 +1,4 @@
-"""Bad lab data never becomes a confident answer (casflex.lab_checks, casflex.inverse.inputs, the readers).
+"""Bad lab data never becomes a confident answer (casflex.lab.checks, casflex.inverse.inputs, the readers).
 
 Each test makes a real-looking bad file from the Hamner stride (tests/data/lab) or the walking2 C3D excerpt
 and runs it through ``casflex inverse`` / ``calibrate`` (in process: ``casflex.cli.main``) or the Python API.
@@ -245,7 +245,7 @@ def test_hinges_that_close_a_loop_are_refused():
     from inverse_scenes import pendulum
 
     from casflex.inverse import inverse_model, kinematic_tree
-    from casflex.scene_io import loads_scene
+    from casflex.scene.io import loads_scene
 
     twice = '[[joints]]\nname = "pivot2"\nkind = "hinge"\nnodes = ["base", "link"]\npoint = [0.0, 0.9]\n'
     with pytest.raises(ValueError, match=r"joint 'pivot2': closes a loop"):
@@ -253,8 +253,8 @@ def test_hinges_that_close_a_loop_are_refused():
 
 
 def test_a_csv_input_with_a_header_and_blank_rows_is_one_line(tmp_path):
-    from casflex.scene_io import load_scene
-    from casflex.scene_items import SceneError
+    from casflex.scene.io import load_scene
+    from casflex.scene.items import SceneError
 
     scene = tmp_path / "s.toml"
     scene.write_text(_csv_scene())

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import casflex
-from casflex.scene_io import dumps_scene, loads_scene
+from casflex.scene.io import dumps_scene, loads_scene
 
 BODY = 75.0  # kg: the subject of the scene's header
 
@@ -40,7 +40,7 @@ def test_state_guessed_from_the_markers_mid_stride_does_not_wind_a_node():
     from casflex.data import MeasurementSet
     from casflex.identification.initial_state import _elastic_energy, initial_guess
     from casflex.identification.measurement import Experiment
-    from casflex.markers import marker_channels, marker_positions
+    from casflex.model.markers import marker_channels, marker_positions
     from casflex.simulate import simulate
 
     model = casflex.assemble(casflex.load_scene("leg"))
@@ -62,7 +62,7 @@ def test_rigid_leg_is_the_leg_derived_and_its_stiffened_bones_limit():
     from conftest import assert_scenes_close
     from leg_rigid import rigid_leg
 
-    from casflex.markers import marker_positions
+    from casflex.model.markers import marker_positions
     from casflex.simulate import simulate
 
     leg, rigid = casflex.load_scene("leg"), casflex.load_scene("leg_rigid")
@@ -97,7 +97,7 @@ def test_leg_identified_from_its_markers_mid_stride():
 
     from casflex.data import MeasurementSet
     from casflex.identification import identify_indirect
-    from casflex.markers import marker_channels, marker_positions
+    from casflex.model.markers import marker_channels, marker_positions
     from casflex.simulate import simulate
 
     leg = casflex.load_scene("leg")

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from casflex import Beam, Load, Marker, Node, RigidBody, Scene, SceneError, Support, assemble
-from casflex.markers import marker_channels, marker_kinematics, marker_positions
-from casflex.scene_io import dumps_scene, loads_scene
+from casflex.model.markers import marker_channels, marker_kinematics, marker_positions
+from casflex.scene.io import dumps_scene, loads_scene
 from casflex.statics import equilibrium
 
 L, E, I, A = 1.0, 2.1e11, 1e-8, 1e-4  # m, Pa, m^4, m^2: a slender steel strip

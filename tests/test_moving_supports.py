@@ -12,10 +12,10 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from casflex import Beam, Node, Parameter, RigidBody, Scene, SceneError, Spring, Support, assemble
-from casflex.constraints import FixedDof, prescribed
 from casflex.data import MeasurementSet, simulated_set
 from casflex.identification import identify_direct, identify_indirect
-from casflex.scene_io import dumps_scene, loads_scene
+from casflex.model.constraints import FixedDof, prescribed
+from casflex.scene.io import dumps_scene, loads_scene
 from casflex.simulate import simulate
 from casflex.statics import equilibrium
 

@@ -20,7 +20,7 @@ from casflex.scene import (
     Support,
     TorsionSpring,
 )
-from casflex.scene_io import load_scene
+from casflex.scene.io import load_scene
 
 
 @pytest.fixture(scope="module")

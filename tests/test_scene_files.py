@@ -1,4 +1,4 @@
-"""casflex.scene_files: supports' motions and loads' tables read from .mot/.sto and CSV files."""
+"""casflex.scene.files: supports' motions and loads' tables read from .mot/.sto and CSV files."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from casflex.scene import SceneError
-from casflex.scene_io import dumps_scene, load_scene, loads_scene
+from casflex.scene.io import dumps_scene, load_scene, loads_scene
 
 LAB = Path(__file__).parent / "data" / "lab"
 

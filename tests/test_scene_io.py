@@ -14,9 +14,9 @@ import pytest
 
 import casflex
 from casflex.scene import Beam, Load, Parameter, Scene, SceneError, Spring, Support, TorsionSpring
-from casflex.scene_io import builtin_scenes, dumps_scene, load_scene, loads_scene, save_scene, scene_from_dict
+from casflex.scene.io import builtin_scenes, dumps_scene, load_scene, loads_scene, save_scene, scene_from_dict
 
-TWOBAR_PATH = Path(casflex.__file__).parent / "scenes" / "twobar.toml"
+TWOBAR_PATH = Path(casflex.__file__).parent / "scene" / "builtin" / "twobar.toml"
 TWOBAR = TWOBAR_PATH.read_text(encoding="utf-8")
 
 

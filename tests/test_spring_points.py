@@ -14,7 +14,7 @@ from scipy.special import ellipk
 
 from casflex import Node, RigidBody, Scene, SceneError, Spring, Support, assemble
 from casflex.elements.kernels import AT_POINTS, KINDS, hht_kernel
-from casflex.scene_io import dumps_scene, loads_scene
+from casflex.scene.io import dumps_scene, loads_scene
 from casflex.simulate import simulate
 
 PLAIN_PROPS = {"spring": [40.0, 0.3], "spring0": [40.0], "damper": [3.0], "damper0": [3.0]}

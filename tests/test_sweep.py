@@ -9,7 +9,7 @@ import pytest
 
 pytest.importorskip("distributed")
 
-from casflex.sweep import Run, identification_run, run_sweep  # noqa: E402
+from casflex.study.sweep import Run, identification_run, run_sweep  # noqa: E402
 
 
 def _runs():
@@ -135,7 +135,7 @@ def test_a_cluster_that_lost_every_worker_is_started_anew(tmp_path, monkeypatch)
     (seen in a fresh suite under load): the sweep starts a new local cluster for the pending runs."""
     import sys
 
-    import casflex.sweep as sweep
+    import casflex.study.sweep as sweep
 
     monkeypatch.setattr(sweep, "NO_WORKERS_S", 3.0)
     flag = tmp_path / "lost_once"
@@ -160,7 +160,7 @@ def test_a_cluster_that_lost_every_worker_is_started_anew(tmp_path, monkeypatch)
 def test_a_scheduler_without_workers_fails_the_runs_with_the_reason(tmp_path, monkeypatch):
     from distributed import LocalCluster
 
-    import casflex.sweep as sweep
+    import casflex.study.sweep as sweep
 
     monkeypatch.setattr(sweep, "NO_WORKERS_S", 2.0)
     with LocalCluster(n_workers=0, dashboard_address=None, silence_logs=40) as cluster:

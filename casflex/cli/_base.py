@@ -304,6 +304,6 @@ def progress_messages(show: bool) -> Iterator[None]:
 def load_model(scene: str, inertia: str | None = None) -> Model:
     """The assembled model of a built-in scene name or a scene file."""
     from casflex.model import assemble
-    from casflex.scene_io import load_scene
+    from casflex.scene.io import load_scene
 
     return assemble(load_scene(scene), inertia=inertia)

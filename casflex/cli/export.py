@@ -8,7 +8,7 @@ from casflex.cli._base import Outputs, alpha_value, load_model, output_path, pos
 
 
 def cmd_export(args: argparse.Namespace, outputs: Outputs) -> int:
-    from casflex.export import export_c
+    from casflex.simulate.export import export_c
 
     staging = outputs.directory("--out", args.out)
     model = load_model(args.scene, args.inertia)
@@ -24,7 +24,7 @@ def cmd_export(args: argparse.Namespace, outputs: Outputs) -> int:
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
-    from casflex.export import EXPORTS
+    from casflex.simulate.export import EXPORTS
 
     s = sub.add_parser("export", help="write standalone C (sources, header, Makefile, example main.c)")
     s.add_argument("scene", help="built-in scene name (twobar) or a TOML file")

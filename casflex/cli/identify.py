@@ -281,12 +281,12 @@ def run_start(*, scene: str, sets: list[MeasurementSet], options: dict[str, Any]
 def _multistart(model: Model, sets: list[MeasurementSet], args: argparse.Namespace, start: float | np.ndarray,
                 dofs: list[str] | None) -> IdentificationResult:
     """--starts N: the given start and N - 1 drawn log-uniformly within a factor 3 of it (seeded by
-    --seed), run as a sweep on a local cluster of 2 workers (casflex.sweep); the best successful
+    --seed), run as a sweep on a local cluster of 2 workers (casflex.study.sweep); the best successful
     start (least objective) is fitted again here for the full result, which lists every start."""
     import tempfile
 
     from casflex.identification.problem import start_values
-    from casflex.sweep import Run, run_sweep
+    from casflex.study.sweep import Run, run_sweep
 
     p0 = start_values(model, start)
     rng = np.random.default_rng(args.seed)
@@ -398,7 +398,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         TRANSCRIPTIONS,
         TRANSFORMS,
     )
-    from casflex.smoothing import SMOOTHERS
+    from casflex.identification.smoothing import SMOOTHERS
 
     s = sub.add_parser("identify", help="identify the scene's parameters from simulated, measured or file data",
                        description="Identify the scene's [[parameters]] from kinematic data. Examples and the data "

@@ -90,7 +90,7 @@ def _check_passive(passive: list, inputs) -> None:
 def cmd_calibrate(args: argparse.Namespace, outputs: Outputs) -> int:
     from casflex.inverse.calibrate import calibrate
     from casflex.lab import Plane
-    from casflex.scene_io import dumps_scene
+    from casflex.scene.io import dumps_scene
 
     Plane.parse(args.plane, option="--plane")
     if args.mass is not None and not args.scale:

@@ -14,7 +14,7 @@ T = 1/2 qd^T M(q) qd.
 The reference configuration enters through three numbers per element: the length L0 and the
 offsets beta0 - theta0_a, beta0 - theta0_b of the nodal rotations at which the element is
 straight and stress-free. They, and E, A, I, rho, may be numbers or CasADi symbols, so one
-symbolic element serves every element of a mesh (:mod:`casflex.assembly`).
+symbolic element serves every element of a mesh (:mod:`casflex.model.assembly`).
 
 Inertia forces and their exact tangents (:meth:`BeamElement.inertia_terms`) are assembled from
 derivatives taken with respect to the chord angle alone: M depends on q only through beta, so

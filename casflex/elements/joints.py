@@ -46,7 +46,7 @@ __all__ = ["JOINT_KINDS", "OUTPUTS", "PROPS", "ROWS", "joint_kernel", "joint_kin
 
 #: Constraint rows of each kind, with the suffixes that name them (``<joint>.<suffix>``).
 ROWS = {"hinge": ("x", "y"), "slider": ("across", "theta"), "weld": ("x", "y", "theta"), "drive": ("angle",)}
-#: Outputs of each kind (``<joint>.<output>``); see :class:`casflex.scene_items.Joint`.
+#: Outputs of each kind (``<joint>.<output>``); see :class:`casflex.scene.items.Joint`.
 OUTPUTS = {"hinge": ("fx", "fy", "f_along", "f_across", "angle"), "slider": ("travel", "force", "moment"),
            "weld": ("fx", "fy", "moment"), "drive": ("moment", "angle")}
 PROPS = ("ax", "ay", "rbx", "rby", "tha0", "thb0", "ex", "ey")

@@ -1,5 +1,5 @@
 """Element kernels: the named CasADi Functions of ONE element of each kind, in its own dofs and
-properties, that :mod:`casflex.assembly` maps over every element of that kind.
+properties, that :mod:`casflex.model.assembly` maps over every element of that kind.
 
 Kinds and their element dofs and properties (a property may be a parameter of the scene):
 

@@ -19,7 +19,7 @@ with exact first and second derivatives (SX), solved by any CasADi nlpsol, then 
 Gauss-Newton steps. Dofs fixed by a support follow the support.
 
 Velocities and accelerations of the measured dofs come from the data when it has them, else from
-:func:`casflex.smoothing.smooth` (``smoothing``: a cross-validated spline by default). The
+:func:`casflex.identification.smoothing.smooth` (``smoothing``: a cross-validated spline by default). The
 starting values of the unknown dofs come from the constrained kinematic fit through the measured
 positions at each sample of the window (:mod:`.initial_state`).
 """

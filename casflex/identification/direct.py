@@ -70,7 +70,7 @@ class DirectKeywords(NLPKeywords, total=False):
       for positions-only data) or from the positions (the paper; default when the data bring
       derivatives), :func:`.problem.beam_forces_mode`;
     - ``smoothing``, ``cutoff``: how velocities and accelerations are obtained when the data lack them
-      (:func:`casflex.smoothing.smooth`; default a GCV smoothing spline).
+      (:func:`casflex.identification.smoothing.smooth`; default a GCV smoothing spline).
     """
 
     start: float | dict[str, float] | np.ndarray | None

@@ -51,7 +51,7 @@ import numpy as np
 from casflex.codegen import log
 from casflex.identification.choices import LOSSES, MODEL_ERRORS  # noqa: F401 (re-exported)
 from casflex.identification.form import alternatives_of, compare_forms, form_part, form_reasons
-from casflex.identification.initial_state import initial_state_of
+from casflex.identification.initial_state import initial_states
 from casflex.identification.measurement import Experiment, check_against_scene
 from casflex.identification.output_error import Budget, Fit, OutputError, StartDoesNotRun, fit
 from casflex.identification.problem import (
@@ -226,12 +226,6 @@ def transfer_state(model: Model, fine: Model, q: np.ndarray, qd: np.ndarray) -> 
         out_q[i] = (1 - u) * q[ja] + u * q[jb]
         out_qd[i] = (1 - u) * qd[ja] + u * qd[jb]
     return out_q, out_qd
-
-
-def initial_states(model: Model, experiments: list[Experiment], p: np.ndarray,
-                   states: list[tuple[np.ndarray, np.ndarray]] | None = None) -> list:
-    """Every experiment's :class:`~.initial_state.InitialState` at its guess (or the given states)."""
-    return [initial_state_of(model, e, p, None if states is None else states[i]) for i, e in enumerate(experiments)]
 
 
 def _model_error(model: Model, experiments: list[Experiment], first: Fit, problem: OutputError, *, dt: float,

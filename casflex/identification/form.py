@@ -46,6 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from casflex.identification.choices import FORMS
+from casflex.identification.initial_state import initial_states
 from casflex.identification.measurement import Experiment, check_against_scene
 from casflex.identification.output_error import Budget, Fit, OutputError, fit
 from casflex.identification.problem import ParameterMap
@@ -106,7 +107,7 @@ def _varied(scene: Scene, vary: Mapping[str, tuple[float, float]]) -> list[Alter
 
 
 def _given(model: Model, scenes: Sequence[Scene | str | os.PathLike[str]]) -> list[Alternative]:
-    from casflex.scene_io import load_scene
+    from casflex.scene.io import load_scene
 
     out = []
     for s in scenes:
@@ -184,7 +185,6 @@ def delta_aic(base: tuple[OutputError, np.ndarray], alt: tuple[OutputError, np.n
 def _refit(alt_model: Model, problem: OutputError, first: Fit, p_hat: dict[str, float], setup: dict,
            budget: Budget, verbose: bool) -> tuple[OutputError, Fit]:
     """The alternative fitted from the fit's answer (its states too, where its dofs are the model's)."""
-    from casflex.identification.estimate import initial_states
 
     pmap = ParameterMap.of(alt_model, setup["transform"])
     p0 = np.array([p_hat.get(n, v) for n, v in zip(alt_model.parameter_names, alt_model.p_nominal, strict=True)])

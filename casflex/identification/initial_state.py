@@ -41,7 +41,7 @@ from casflex.identification.measurement import Experiment, free_dofs, nyquist
 from casflex.model import Model
 
 __all__ = ["InitialState", "initial_guess", "slow_modes", "slow_projection", "relaxed_projection", "initial_state_of",
-           "slow_manifold", "kinematic_fits"]
+           "initial_states", "slow_manifold", "kinematic_fits"]
 
 _FITS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _LINEAR: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -65,7 +65,7 @@ def _placement(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def _kinematic_fit(model: Model, measured: tuple[int, ...], markers: tuple[int, ...] = ()) -> ca.Function:
     """``kinematic_fit(q_known, q_start, y_known) -> q``: the configuration of least elastic energy
     whose measured and supported dofs take their values in ``q_known``, whose ideal joints are closed
-    and whose markers ``markers`` (indices into :func:`casflex.markers.marker_channels`) are nearest
+    and whose markers ``markers`` (indices into :func:`casflex.model.markers.marker_channels`) are nearest
     ``y_known``, by IPOPT with the exact Hessian; built once per model, dofs and markers.
 
     The markers are fitted in the least-squares sense, with the elastic energy weighted so that the
@@ -99,7 +99,7 @@ def _kinematic_fit(model: Model, measured: tuple[int, ...], markers: tuple[int, 
     f = V_el + 0.5 * reg * model.length_scale**2 * ca.sumsqr((u - u_ref) / ell)
     g = ca.SX(0, 1)
     if markers:
-        from casflex.markers import marker_kinematics
+        from casflex.model.markers import marker_kinematics
 
         y = marker_kinematics(model)(q, ca.DM.zeros(n))[0]
         g = (y[list(markers)] - yk) / model.length_scale
@@ -182,7 +182,7 @@ def _marker_values(model: Model, q: np.ndarray, markers: tuple[int, ...]) -> np.
     """Positions (m) of the marker coordinates ``markers`` (indices into the marker channels) at q."""
     if not markers:
         return np.zeros(0)
-    from casflex.markers import marker_positions
+    from casflex.model.markers import marker_positions
 
     return marker_positions(model, q)[0][list(markers)]
 
@@ -214,7 +214,7 @@ def kinematic_fits(model: Model, data, names: list[str], limit: int | None = Non
     """(times (s, m), configurations (m, n_dof)): the kinematic fit at each sample that has every
     channel of ``names`` (node dofs and markers), the first one by :func:`first_fit`, each later
     one started at the one before; the first ``limit`` such samples (default all)."""
-    from casflex.markers import marker_channels
+    from casflex.model.markers import marker_channels
 
     channels = marker_channels(model)
     dof_names = [c for c in names if c in model.dof_names]
@@ -410,3 +410,9 @@ def slow_projection(model: Model, q: np.ndarray, p: np.ndarray, omega_cut: float
         C = B.T
     d = np.abs(np.diag(K))
     return B, C, np.maximum(d, 1e-9 * d.max(initial=0.0) + 1e-300)
+
+
+def initial_states(model: Model, experiments: list[Experiment], p: np.ndarray,
+                   states: list[tuple[np.ndarray, np.ndarray]] | None = None) -> list:
+    """Every experiment's :class:`InitialState` at its guess (or the given states)."""
+    return [initial_state_of(model, e, p, None if states is None else states[i]) for i, e in enumerate(experiments)]

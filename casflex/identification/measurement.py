@@ -26,8 +26,8 @@ import numpy as np
 
 from casflex.data import MeasurementSet
 from casflex.identification.choices import INITIAL_STATES  # noqa: F401 (re-exported)
-from casflex.markers import channel_index, channel_values, marker_channels
 from casflex.model import Model
+from casflex.model.markers import channel_index, channel_values, marker_channels
 
 __all__ = ["Experiment", "SampleMap", "INITIAL_STATES", "check_against_scene", "free_dofs", "nyquist"]
 
@@ -123,7 +123,7 @@ class SampleMap:
 
     The model steps from ``t0`` (the first sample) in ``n_steps`` steps of ``dt`` (s), past the
     last sample. Observation j is channel ``channel[j]`` (model dof ``dof[j]``; from n_dof on a
-    marker's coordinate, :func:`casflex.markers.channel_index`) measured ``y[j]`` at ``time[j]``,
+    marker's coordinate, :func:`casflex.model.markers.channel_index`) measured ``y[j]`` at ``time[j]``,
     in step ``step[j]`` (from t_k = t0 + k dt) at s = (t - t_k)/dt, and the model predicts
     w0 q_k + w1 q'_k + w2 q_k+1 + w3 q'_k+1 with ``weights[j]`` = (h00, dt h10, h01, dt h11), the
     cubic Hermite basis at s.
@@ -171,7 +171,7 @@ class SampleMap:
 
     def predict(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         """Model outputs (m,) from the channels' values and rates at the step ends (n_steps + 1,
-        n_channels; :func:`casflex.markers.channel_values`)."""
+        n_channels; :func:`casflex.model.markers.channel_values`)."""
         k, d, w = self.step, self.dof, self.weights
         return w[:, 0] * q[k, d] + w[:, 1] * qd[k, d] + w[:, 2] * q[k + 1, d] + w[:, 3] * qd[k + 1, d]
 

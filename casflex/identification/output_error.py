@@ -32,8 +32,8 @@ from casflex.identification.initial_state import InitialState, initial_state_of
 from casflex.identification.measurement import Experiment, SampleMap, free_dofs
 from casflex.identification.problem import ParameterMap
 from casflex.identification.sensitivity import run_sensitivities
-from casflex.markers import marker_states
 from casflex.model import Model
+from casflex.model.markers import marker_states
 
 __all__ = ["Budget", "OutputError", "Fit", "fit"]
 
@@ -188,7 +188,7 @@ class OutputError:
             i1 = np.searchsorted(run.steps, sm.step + 1)
             X = run.X
             wts = sm.weights
-            marked = bool(sm.dof.max() >= n)  # some channels are markers' (casflex.markers)
+            marked = bool(sm.dof.max() >= n)  # some channels are markers' (casflex.model.markers)
             Z, ZD = X[:, :n], X[:, n:2 * n]
             if marked:  # the markers' positions, velocities and Jacobians at every recorded step, at once
                 Y, YD, Jy, Jyd = marker_states(self.model, Z, ZD)

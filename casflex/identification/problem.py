@@ -425,11 +425,11 @@ def failure_reasons(stats: dict, at_bound: dict[str, bool]) -> list[str]:
 
 
 def smoothed_if_needed(data: Any, smoothing: str, cutoff: float | None) -> tuple[Any, dict | None]:
-    """``data`` with velocities and accelerations (:func:`casflex.smoothing.smooth` when it has none)
+    """``data`` with velocities and accelerations (:func:`casflex.identification.smoothing.smooth` when it has none)
     and the smoothing's report (None: the data brought their own)."""
     if data.qd is not None and data.qdd is not None:
         return data, None
-    from casflex.smoothing import smooth
+    from casflex.identification.smoothing import smooth
 
     data = smooth(data, smoothing, cutoff)
     return data, data.meta["smoothing"]

@@ -27,8 +27,8 @@ import numpy as np
 from casflex.data import MeasurementSet
 from casflex.identification.initial_state import kinematic_fits, slow_modes
 from casflex.identification.measurement import free_dofs
-from casflex.markers import channel_index, marker_channels, marker_states
 from casflex.model import Model
+from casflex.model.markers import channel_index, marker_channels, marker_states
 
 __all__ = ["dofs_from_markers"]
 

@@ -11,7 +11,7 @@ the step grid t0 + k dt:
     J = xi |q^ - q|^2 + psi |q'^ - q'|^2 + phi |q''^ - q''|^2                      (Eq. 15)
 
 q being the compared channels: nodes' dofs, or markers' coordinates y(q) with their rates
-y' = J q' and y'' = J q'' + (dJ/dq q') q' (J = dy/dq, :func:`casflex.markers.marker_kinematics`).
+y' = J q' and y'' = J q'' + (dJ/dq q') q' (J = dy/dq, :func:`casflex.model.markers.marker_kinematics`).
 
 ``residue="positions"`` is Eq. 16 (xi only), ``"full"`` Eq. 17. Each residue is made
 dimensionless by the scene's length scale l (rotations by 1 rad), velocities by l / T and
@@ -128,9 +128,9 @@ def _intervals(N: int, interval: int | None, transcription: str) -> list[int]:
 
 def _channel_kinematics(model: Model, names: list[str], orders: int) -> ca.Function:
     """``channels(q, qd, qdd) -> (y, y', y'')[:orders]`` of the channels ``names``: a node's dof is
-    its own value; a marker's coordinate its position y(q) (:func:`casflex.markers.marker_kinematics`),
+    its own value; a marker's coordinate its position y(q) (:func:`casflex.model.markers.marker_kinematics`),
     velocity y' = J qd and acceleration y'' = J qdd + (dJ/dq qd) qd, J = dy/dq."""
-    from casflex.markers import channel_index, marker_kinematics
+    from casflex.model.markers import channel_index, marker_kinematics
 
     q, qd, qdd = (ca.SX.sym(s, model.n_dof) for s in ("q", "qd", "qdd"))
     idx = [channel_index(model, c) for c in names]
@@ -394,7 +394,7 @@ def identify_nlp(
         Eq. 16 or Eq. 17.
     dofs : names of the compared channels, nodes' dofs and markers' coordinates (e.g.
         ``["x3", "y3", "xm2", "ym2"]``); default every channel of the data. A marker is compared
-        through its kinematics y(q), y' = J q', y'' = J q'' + (dJ/dq q') q' (:mod:`casflex.markers`).
+        through its kinematics y(q), y' = J q', y'' = J q'' + (dJ/dq q') q' (:mod:`casflex.model.markers`).
     weights : (xi, psi, phi)
         Eq. 15 weights of the dimensionless position, velocity and acceleration residues.
     alpha, dt : HHT parameter and step (s).

@@ -62,6 +62,7 @@ from casflex.integrators.hht_pieces import (
     hht_coefficients,
     initial_function,
     newton_functions,
+    newton_updates,
     post_function,
     prepare_function,
     roundoff_tolerance,
@@ -255,7 +256,7 @@ class HHT:
         updates = 1
         if not bool(done) and self.max_iter > 1:
             z = self._fn["newton"](z1 if float(res) < float(g0) else z0, prm)
-            updates += _updates(self._fn["newton"])
+            updates += newton_updates(self._fn["newton"])
             x1, res, _ = self._fn["finish"](z, prm)
         return np.array(x1).ravel(), float(res), updates
 
@@ -320,10 +321,3 @@ class HHT:
             self._fn[key] = ca.Function(f"hht_trajectory_{n_steps}", [X0, T0, Pm, H, D], [X, res],
                                         ["x0", "t0", "p", "h", "d"], ["X", "res"])
         return self._fn[key]
-
-
-def _updates(newton: ca.Function) -> int:
-    """Newton updates made by a fast_newton rootfinder's last call: its iterations, plus the last
-    update when it stopped on the update's size (counted before the iteration ends)."""
-    st = newton.stats()
-    return int(st["iter_count"]) + (st["return_status"] == "converged_abstol_step")

@@ -12,13 +12,13 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from casflex.assembly import MatrixAssembly, gather, scatter, scatter_at
-from casflex.constraints import gather_at, mapped_joint, split
 from casflex.elements.kernels import hht_kernel, kernel
 from casflex.model import Model
+from casflex.model.assembly import MatrixAssembly, gather, scatter, scatter_at
+from casflex.model.constraints import gather_at, mapped_joint, split
 
-__all__ = ["Layout", "ROUNDOFF_FLOOR", "hht_coefficients", "roundoff_tolerance", "prm_layout", "prepare_function",
-           "newton_functions", "scale_function", "initial_function", "post_function", "step_blocks"]
+__all__ = ["Layout", "ROUNDOFF_FLOOR", "newton_updates", "hht_coefficients", "roundoff_tolerance", "prm_layout",
+           "prepare_function", "newton_functions", "scale_function", "initial_function", "post_function", "step_blocks"]
 
 #: A scaled residual is accepted down to ROUNDOFF_FLOOR * eps * max|q / l| (see roundoff_tolerance).
 ROUNDOFF_FLOOR = 10.0
@@ -353,3 +353,10 @@ def step_blocks(m: Model, lay: Layout, alpha: float, prepare: ca.Function, resid
     return ca.Function("hht_step_sensitivity", [x0, t0, p, h, d, x1],
                        list(blocks(z_of_x1, ca.vertcat(x0, t0, p, h), d)),
                        ["x0", "t0", "p", "h", "d", "x1"], ["G_z", "G_w", "X_z", "X_w"])
+
+
+def newton_updates(newton: ca.Function) -> int:
+    """Newton updates made by a fast_newton rootfinder's last call: its iterations, plus the last
+    update when it stopped on the update's size (counted before the iteration ends)."""
+    st = newton.stats()
+    return int(st["iter_count"]) + (st["return_status"] == "converged_abstol_step")

@@ -28,6 +28,8 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from casflex.integrators.hht_pieces import newton_updates
+
 __all__ = ["ModifiedNewton"]
 
 
@@ -91,7 +93,6 @@ class ModifiedNewton:
     def step_interpreted(self, x0: np.ndarray, t0: float, p: np.ndarray, h: float, d: np.ndarray,
                          F: np.ndarray) -> tuple[np.ndarray, float, np.ndarray, int, bool]:
         """:attr:`step` driven from Python (bitwise the same): (x1, res, F1, Newton updates, refreshed)."""
-        from casflex.integrators.hht import _updates
 
         f = self.fn
         zg, pr = f["prepare"](x0, t0, p, h, d)
@@ -106,6 +107,6 @@ class ModifiedNewton:
         updates = 2
         if not bool(db) and self.max_iter > 1:
             z = f["newton"](z2 if float(rb) < float(g) else zs, pr)
-            updates += _updates(f["newton"])
+            updates += newton_updates(f["newton"])
             xb, rb, _ = f["finish"](z, pr)
         return np.array(xb).ravel(), float(rb), np.array(F2).ravel(), updates, True

@@ -20,7 +20,6 @@ from collections.abc import Callable
 
 import numpy as np
 
-from casflex.filters import lowpass
 from casflex.inverse.fit import coordinate_rates, fit_markers
 from casflex.inverse.flexible import driven_loads
 from casflex.inverse.inputs import InverseInputs, inverse_model, prepare
@@ -28,6 +27,7 @@ from casflex.inverse.plates import Plate, plate_loads
 from casflex.inverse.result import InverseResult
 from casflex.inverse.rigid import rigid_loads
 from casflex.inverse.tree import KinematicTree, kinematic_tree
+from casflex.lab.lowpass import lowpass
 
 __all__ = ["InverseInputs", "InverseResult", "KinematicTree", "Plate", "inverse_dynamics", "inverse_model",
            "kinematic_tree", "prepare", "solve"]
@@ -60,7 +60,7 @@ def inverse_dynamics(scene, markers, *, plane: str = "X,Y", grf=None, plates: di
         The longest stretch of frames whose markers do not decide the pose that a spline fills.
     max_misfit : float, m, optional
         A marker farther than this from the fitted pose is refused (default
-        :data:`casflex.lab_checks.MAX_MISFIT`, 0.1 m).
+        :data:`casflex.lab.checks.MAX_MISFIT`, 0.1 m).
     dt, alpha, compiled
         Flexible segments only: the largest HHT time step (s; default the scene's, made to divide the
         frames' interval), HHT's alpha (default the scene's) and whether to run compiled C.

@@ -105,7 +105,7 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
     from casflex.inverse.fit import fit_pose
     from casflex.inverse.inputs import inverse_model, read_markers
     from casflex.lab import LabMarkers, Plane, markers_in_plane
-    from casflex.lab_checks import check_markers, check_scale, check_static
+    from casflex.lab.checks import check_markers, check_scale, check_static
 
     if mass is not None and not mass > 0:
         raise ValueError(f"mass: must be > 0 kg, got {mass}")

@@ -115,10 +115,10 @@ def fit_markers(tree: KinematicTree, t: np.ndarray, y: np.ndarray, *, max_gap: f
                 max_misfit: float | None = None, labels: tuple[str, ...] | None = None, source: str = "data",
                 progress=None) -> FittedMotion:
     """The coordinates of the markers y (n, 2 m) at times t (n,) (module docstring); y's columns are
-    the scene markers' x, y in scene order (:func:`casflex.markers.marker_channels`), NaN where missing.
+    the scene markers' x, y in scene order (:func:`casflex.model.markers.marker_channels`), NaN where missing.
     ``max_misfit`` (m): a marker farther than that from the fitted pose is refused in one line naming the
     frame and the marker (``labels``, the trial's names for the scene's markers; ``source``, the trial):
-    :data:`casflex.lab_checks.MAX_MISFIT`."""
+    :data:`casflex.lab.checks.MAX_MISFIT`."""
     f = tree.marker_fit
     y0 = np.array(f(tree.coordinates(tree.model.q0))[0]).ravel()
     n, m = t.size, y.shape[1] // 2

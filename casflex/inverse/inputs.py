@@ -3,7 +3,7 @@
 :func:`prepare` reads the trial (markers, force plates) and decides every refusal that the inputs alone
 decide, so that a wrong option or a corrupted file costs a second, not a marker fit over the whole trial
 (a minute on 100k frames): the scene's markers and plates, the window, evenly spaced frames (filtered or
-not: the rates are differences on an even grid), markers a body can produce (:mod:`casflex.lab_checks`:
+not: the rates are differences on an even grid), markers a body can produce (:mod:`casflex.lab.checks`:
 no jumps of a metre in a frame, no header whose units lie), the cut-off against both the markers' and the
 plates' sampling, each plate's table covering the window, its missing samples (short gaps filled and
 reported, long ones refused), and the memory the run needs. What it changed in the data is in
@@ -18,9 +18,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from casflex.filters import check_cutoff, even_times
 from casflex.inverse.plates import Plate, plate_from_table
 from casflex.inverse.tree import KinematicTree, kinematic_tree
+from casflex.lab.lowpass import check_cutoff, even_times
 from casflex.model import Model
 
 __all__ = ["InverseInputs", "prepare", "inverse_model", "read_markers"]
@@ -63,7 +63,7 @@ def inverse_model(scene, root: str | None = None) -> Model:
     from casflex.scene import Scene
 
     if not isinstance(scene, Scene):
-        from casflex.scene_io import load_scene
+        from casflex.scene.io import load_scene
 
         scene = load_scene(scene)
     root = scene.nodes[0].name if root is None else root
@@ -112,7 +112,7 @@ def _window(t: np.ndarray, t_start: float | None, t_end: float | None, source: s
 
 
 def _even_frames(t: np.ndarray, rate: float, source: str) -> np.ndarray:
-    """The frames' times on their even grid (:func:`casflex.filters.even_times`); ValueError when they are
+    """The frames' times on their even grid (:func:`casflex.lab.lowpass.even_times`); ValueError when they are
     not evenly spaced: the rates are differences on an even grid, filtered or not."""
     grid = even_times(t, rate if np.isfinite(rate) else None)
     h = np.diff(grid)
@@ -127,9 +127,9 @@ def _even_frames(t: np.ndarray, rate: float, source: str) -> np.ndarray:
 
 
 def _scene_markers(model: Model, tree: KinematicTree, lab, plane, keep_frames=None):
-    """(scene markers' channels y (n, 2 m) in the plane, their lab labels), checked (:mod:`casflex.lab_checks`)."""
+    """(scene markers' channels y (n, 2 m) in the plane, their lab labels), checked (:mod:`casflex.lab.checks`)."""
     from casflex.lab import markers_in_plane
-    from casflex.lab_checks import check_markers, check_scale
+    from casflex.lab.checks import check_markers, check_scale
 
     names = {m.name: m.label or m.name for m in model.scene.markers}
     ms = markers_in_plane(lab, names, plane)
@@ -147,7 +147,7 @@ def _memory(model: Model, tree: KinematicTree, t: np.ndarray, n_markers: int, dt
     """ValueError when the run's result would not fit in the memory available (the bound of
     :data:`BYTES_PER_VALUE`); with flexible segments, also the HHT steps' (``dt`` s, default the scene's:
     :func:`casflex.simulate.check_memory`)."""
-    from casflex.simulate import _bytes, check_memory, memory_available
+    from casflex.simulate import check_memory, format_bytes, memory_available
 
     n = t.size
     if model.n_con != model.n_dof - tree.n and n > 1:
@@ -157,8 +157,8 @@ def _memory(model: Model, tree: KinematicTree, t: np.ndarray, n_markers: int, dt
     values = 3 * n_markers + 4 * tree.n + 4 * model.n_dof + model.n_con + len(model.output_names) + 4
     need, avail = BYTES_PER_VALUE * n * values, memory_available()
     if avail is not None and need > avail:
-        raise ValueError(f"t_start, t_end: {n:,} frames of {values} values each need about {_bytes(need)} of memory "
-                         f"and {_bytes(avail)} are available; take a shorter window")
+        raise ValueError(f"t_start, t_end: {n:,} frames of {values} values each need about {format_bytes(need)} of "
+                         f"memory and {format_bytes(avail)} are available; take a shorter window")
 
 
 def prepare(scene, markers, *, plane="X,Y", grf=None, plates: dict[str, str] | None = None,
@@ -168,7 +168,7 @@ def prepare(scene, markers, *, plane="X,Y", grf=None, plates: dict[str, str] | N
     """The inputs of :func:`casflex.inverse.inverse_dynamics` (its parameters), read and checked (module
     docstring). ValueError in one line naming the option, file, marker or plate otherwise."""
     from casflex.lab import Plane
-    from casflex.lab_checks import MAX_MISFIT
+    from casflex.lab.checks import MAX_MISFIT
 
     pl = Plane.parse(plane) if isinstance(plane, str) else plane
     max_misfit = MAX_MISFIT if max_misfit is None else float(max_misfit)

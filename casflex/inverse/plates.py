@@ -24,14 +24,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from casflex.filters import check_cutoff, even_times, lowpass, runs
 from casflex.lab import LabTable, Plane
-from casflex.lab_c3d import MIN_PLATE_FORCE
-from casflex.lab_filter import plate_wrench
+from casflex.lab.c3d import MIN_PLATE_FORCE
+from casflex.lab.filtering import plate_wrench
+from casflex.lab.lowpass import check_cutoff, even_times, lowpass, runs
 
 __all__ = ["Plate", "plate_from_table", "plate_loads", "MAX_PLATE_GAP", "MAX_PLATE_GAP_S"]
 
-#: samples: the longest run of missing plate samples filled (the markers' :data:`casflex.lab_filter.MAX_GAP`).
+#: samples: the longest run of missing plate samples filled (the markers' :data:`casflex.lab.filtering.MAX_GAP`).
 MAX_PLATE_GAP = 10
 #: s: and at most this long: a heel strike's impact peak rises in 20-30 ms, which a spline over a longer
 #: gap would not know (at 60 Hz this fills one missing sample, at 1000 Hz ten).
@@ -116,13 +116,13 @@ def plate_from_table(table: LabTable, prefix: str, node: str, plane: Plane, cuto
                      ) -> Plate:
     """The plate ``prefix`` of ``table`` on ``node``, in ``plane``, filtered at ``cutoff`` Hz (None: as
     recorded). The moment about the lab's origin from the table's ``<prefix>moment_{x,y,z}`` where it has
-    them (C3D plates, :func:`casflex.lab.read_c3d`), else p x F + T (:func:`casflex.lab_filter.plate_wrench`:
+    them (C3D plates, :func:`casflex.lab.read_c3d`), else p x F + T (:func:`casflex.lab.filtering.plate_wrench`:
     forces and centres of pressure no body produces refused). ``window`` (s): the trial's times, which the
     table must cover. ``rate`` (Hz): the samples' rate where the table's times round it (a .mot at the markers'
     rate, its times written to the ms: their own slope is off by some 1e-4 and the samples would be taken
     between the frames); the table's header ``rate`` (C3D) otherwise. Missing samples as the module docstring
     says; the plate's ``notes`` say what was done."""
-    from casflex.lab_filter import _plate_columns
+    from casflex.lab.filtering import _plate_columns
 
     where = f"{table.source}: plate {_plate_columns(table, prefix)!r}"
     F, M3, unloaded = plate_wrench(table, prefix)

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from casflex.constraints import _offset
 from casflex.model import Model
+from casflex.model.constraints import _offset
 
 __all__ = ["KinematicTree", "kinematic_tree"]
 
@@ -108,7 +108,7 @@ class KinematicTree:
     def marker_fit(self) -> ca.Function:
         """``marker_fit(z) -> (y, J)``: the scene's markers (2 m,: x, y each, scene order; m) at the
         coordinates z and their Jacobian dy/dz (2 m, n_z)."""
-        from casflex.markers import marker_kinematics
+        from casflex.model.markers import marker_kinematics
 
         z = ca.SX.sym("z", self.n)
         y = marker_kinematics(self.model)(self.forward(z), ca.DM.zeros(self.model.n_dof))[0]

@@ -83,13 +83,13 @@ class _Drawer:
 
     def bodies(self, q: np.ndarray) -> np.ndarray:
         """(k, 2) centres of mass of the rigid bodies."""
-        from casflex.markers import body_centres
+        from casflex.model.markers import body_centres
 
         return body_centres(self.model, q)
 
     def markers(self, q: np.ndarray) -> np.ndarray:
         """(k, 2) positions of the scene's markers."""
-        from casflex.markers import marker_positions
+        from casflex.model.markers import marker_positions
 
         return marker_positions(self.model, q).reshape(-1, 2)
 

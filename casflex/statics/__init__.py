@@ -8,7 +8,7 @@ Every static solve treats the equilibrium equations
 at load factor s as the stationarity of the total potential Pi(q) = V_el + s (V_g - f_ext . q)
 on the supports' constraint set (the loads are conservative and the supports fix dofs, see
 :mod:`casflex.statics.problem`). The reaction a support exerts on a constrained dof is
-``-lambda`` (see :mod:`casflex.constraints`).
+``-lambda`` (see :mod:`casflex.model.constraints`).
 
 - :func:`equilibrium` (:mod:`~casflex.statics.equilibrium`): adaptive load stepping over a
   trust-region minimisation of Pi (:mod:`~casflex.statics.solve`); the result reports its

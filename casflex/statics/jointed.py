@@ -22,8 +22,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from casflex.consistent import project_positions
 from casflex.model import Model
+from casflex.model.consistent import project_positions
 from casflex.statics.problem import Scaled, Stability, StaticOptions, StaticsError, neutral_band
 
 __all__ = ["solve_jointed"]

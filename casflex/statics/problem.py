@@ -39,9 +39,9 @@ import casadi as ca
 import numpy as np
 import scipy.linalg
 
-from casflex.constraints import FixedDof
 from casflex.integrators.hht import roundoff_tolerance
 from casflex.model import Model
+from casflex.model.constraints import FixedDof
 
 __all__ = [
     "StaticsError", "ModesError", "StabilityWarning", "StaticOptions", "StaticProblem", "Stability",

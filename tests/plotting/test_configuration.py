@@ -51,7 +51,7 @@ def test_plot_configuration_draws_markers_and_bodies_where_they_are():
     ax = plotting.plot_configuration(model, q).axes[0]
     assert legend_texts(ax) == ["beam", "rigid link", "spring", "torsion spring", "node",
                                 "rigid body (centre of mass)", "marker", "clamp"]
-    from casflex.markers import marker_positions
+    from casflex.model.markers import marker_positions
 
     markers = next(line for line in ax.lines if line.get_label() == "marker")
     np.testing.assert_allclose(np.column_stack([markers.get_xdata(), markers.get_ydata()]),

@@ -16,9 +16,9 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from casflex.assembly import ElementGroup
 from casflex.elements.joints import JOINT_KINDS, ROWS, joint_kernel, joint_kind
-from casflex.scene import Joint, Scene
+from casflex.model.assembly import ElementGroup
+from casflex.scene.scene import Joint, Scene
 
 
 @dataclass(frozen=True)

@@ -2,8 +2,8 @@
 and backward (4th order, no phase lag; Winter 2009, ch. 3), with scipy's ``filtfilt`` algorithm and
 defaults, in numpy: importing scipy.signal costs 0.8 s, more than a whole ``casflex inverse`` run
 (tests/test_filters.py checks it against scipy's to round-off). Used by the inverse dynamics
-(:mod:`casflex.inverse`), the lab tables (:mod:`casflex.lab_filter`) and the measured sets'
-smoothing (:mod:`casflex.smoothing`).
+(:mod:`casflex.inverse`), the lab tables (:mod:`casflex.lab.filtering`) and the measured sets'
+smoothing (:mod:`casflex.identification.smoothing`).
 """
 
 from __future__ import annotations

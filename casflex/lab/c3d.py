@@ -13,8 +13,8 @@ usually Z; OpenSim's .mot files have Y up). Per plate, with the prefix ``ground_
 - ``<prefix>torque_{x,y,z}`` (N m): the free moment about the centre of pressure (along the normal),
   NaN where the centre of pressure is;
 - ``<prefix>moment_{x,y,z}`` (N m): the moment of the plate's reaction about the lab's origin, p x F + T,
-  defined at every sample (not in OpenSim's files; what :func:`casflex.lab_filter.filtered` should filter,
-  see :func:`casflex.lab_filter.plate_moment_about_origin`).
+  defined at every sample (not in OpenSim's files; what :func:`casflex.lab.filtering.filtered` should filter,
+  see :func:`casflex.lab.filtering.plate_moment_about_origin`).
 
 Why 20 N: the centre of pressure is a moment divided by the vertical force, so a moment error dM moves
 it by dM / F. On the two plates of OpenSim's walking2.c3d (tests/data/lab) the unloaded plates read
@@ -45,7 +45,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from casflex.lab import LabMarkers, LabTable
+    from casflex.lab.tables import LabMarkers, LabTable
 
 __all__ = ["read_c3d", "MIN_PLATE_FORCE", "NOT_MARKERS"]
 
@@ -173,7 +173,7 @@ def _labels(c, where: str, k: int) -> list[str]:
 
 
 def _markers(c, where: str) -> LabMarkers:
-    from casflex.lab import UNITS, LabMarkers
+    from casflex.lab.tables import UNITS, LabMarkers
 
     pts, res = c["data"]["points"], c["data"]["meta_points"]["residuals"][0]
     labels = _labels(c, where, pts.shape[1])
@@ -213,7 +213,7 @@ def _up(corners: np.ndarray) -> np.ndarray:
 
 
 def _plate_columns(pf, where: str, i: int, min_force: float) -> tuple[list[str], list[np.ndarray], str]:
-    from casflex.lab import UNITS
+    from casflex.lab.tables import UNITS
 
     if str(pf["unit_force"]).strip().upper() != "N" or pf["unit_position"] not in UNITS:
         raise ValueError(f"{where}: plate {i + 1} gives forces in {pf['unit_force']!r} and positions in "
@@ -234,7 +234,7 @@ def _plate_columns(pf, where: str, i: int, min_force: float) -> tuple[list[str],
 
 
 def _plates(c, where: str, min_force: float) -> LabTable | None:
-    from casflex.lab import LabTable
+    from casflex.lab.tables import LabTable
 
     platforms = c["data"]["platform"] if "platform" in c["data"].keys() else []
     if not platforms:

@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from casflex.lab import LabMarkers, LabTable
+    from casflex.lab.tables import LabMarkers, LabTable
 
 __all__ = ["LAB_EXTENT", "MAX_MARKER_SPEED", "MAX_PLATE_FORCE", "MAX_FREE_MOMENT", "MAX_MISFIT", "STATIC_SPREAD",
            "SCALE_FACTOR", "check_markers", "check_plate_values", "check_static", "check_scale"]
@@ -154,7 +154,7 @@ def check_scale(source: str, units: str, scene_xy: np.ndarray, trial_xy: np.ndar
     with np.errstate(over="ignore", invalid="ignore"):  # absurd samples are check_markers' to name
         ratio = _median_ratio(seg, scene_xy, trial_xy)
     if not 1.0 / SCALE_FACTOR < ratio < SCALE_FACTOR:
-        from casflex.lab import UNITS
+        from casflex.lab.tables import UNITS
 
         hint = ""
         if units in UNITS and ratio > 0:  # the unit the numbers are in: the header's unit over the ratio

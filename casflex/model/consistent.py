@@ -20,7 +20,7 @@ import logging
 
 import numpy as np
 
-from casflex.model import Model
+from casflex.model.model import Model
 
 __all__ = ["project_positions", "project_velocities"]
 

@@ -14,8 +14,8 @@ from dataclasses import MISSING, fields
 from pathlib import Path
 from typing import Any
 
-from casflex.markers import Marker
-from casflex.scene import (
+from casflex.scene.markers import Marker
+from casflex.scene.scene import (
     Beam,
     Joint,
     Load,
@@ -32,7 +32,7 @@ from casflex.scene import (
 
 __all__ = ["load_scene", "loads_scene", "dumps_scene", "save_scene", "builtin_scenes", "scene_from_dict"]
 
-_BUILTIN_DIR = Path(__file__).parent / "scenes"
+_BUILTIN_DIR = Path(__file__).parent / "builtin"
 _LISTS: dict[str, type] = {
     "nodes": Node,
     "beams": Beam,
@@ -49,7 +49,7 @@ _TOP_KEYS = {"name", "gravity", "run", *_LISTS}
 
 
 def builtin_scenes() -> list[str]:
-    """Names of the scenes shipped with casflex (``casflex/scenes/*.toml``)."""
+    """Names of the scenes shipped with casflex (``casflex/scene/builtin/*.toml``)."""
     return sorted(p.stem for p in _BUILTIN_DIR.glob("*.toml"))
 
 
@@ -72,8 +72,8 @@ def load_scene(source: str | os.PathLike[str]) -> Scene:
 
 def loads_scene(text: str, *, source: str = "<string>", base: str | os.PathLike[str] | None = None) -> Scene:
     """Parse a scene from TOML text; ``base``: the folder that data files it names are relative to
-    (default: the working folder; :mod:`casflex.scene_files`)."""
-    from casflex.scene_files import resolve_file_inputs
+    (default: the working folder; :mod:`casflex.scene.files`)."""
+    from casflex.scene.files import resolve_file_inputs
 
     try:
         data = tomllib.loads(text)

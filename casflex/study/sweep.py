@@ -271,7 +271,7 @@ def _setup(scene: str, t_end: float, noise: float, seed: int | None, data: str, 
     into the motion, would start the model one step behind the data)."""
     from casflex.data import MeasurementSet, measured_set, simulated_set
     from casflex.model import assemble
-    from casflex.scene_io import load_scene
+    from casflex.scene.io import load_scene
 
     model = assemble(load_scene(scene))
     sim = simulated_set(model, t_end=t_end)

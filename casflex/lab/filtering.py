@@ -1,6 +1,6 @@
 """Lab data filtered the way motion labs filter it, and force plates' loads in a form that may be filtered.
 
-:func:`filtered`: the lab's zero-lag low-pass Butterworth (:mod:`casflex.filters`: a 2nd-order Butterworth
+:func:`filtered`: the lab's zero-lag low-pass Butterworth (:mod:`casflex.lab.lowpass`: a 2nd-order Butterworth
 run forward and backward, scipy's ``filtfilt`` algorithm: 4th order, no phase lag), per marker coordinate of a
 :class:`~casflex.lab.LabMarkers` or per column of a :class:`~casflex.lab.LabTable`, at ``cutoff_hz``.
 
@@ -34,10 +34,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from casflex.lab_c3d import MIN_PLATE_FORCE
+from casflex.lab.c3d import MIN_PLATE_FORCE
 
 if TYPE_CHECKING:
-    from casflex.lab import LabMarkers, LabTable
+    from casflex.lab.tables import LabMarkers, LabTable
 
 __all__ = ["filtered", "plate_moment_about_origin", "plate_wrench", "centre_of_pressure", "zero_lag_minus_3db",
            "MAX_GAP"]
@@ -54,9 +54,9 @@ def zero_lag_minus_3db(cutoff_hz: float, rate_hz: float) -> float:
 
 
 def _rate(t: np.ndarray, where: str) -> tuple[float, np.ndarray]:
-    """(rate Hz, the even grid of t: :func:`casflex.filters.even_times`); ValueError unless every time lies
+    """(rate Hz, the even grid of t: :func:`casflex.lab.lowpass.even_times`); ValueError unless every time lies
     within a tenth of a step of it."""
-    from casflex.filters import even_times
+    from casflex.lab.lowpass import even_times
 
     if t.size < _MIN_SAMPLES:
         raise ValueError(f"{where}: filtering needs at least {_MIN_SAMPLES} samples, got {t.size}")
@@ -76,7 +76,7 @@ def _filter_channel(t: np.ndarray, grid: np.ndarray, y: np.ndarray, cutoff: floa
     max_gap samples), the ends missing kept missing; (result, notes for the report)."""
     from scipy.interpolate import CubicSpline
 
-    from casflex.filters import butterworth2, filtfilt2, runs
+    from casflex.lab.lowpass import butterworth2, filtfilt2, runs
 
     ok = np.isfinite(y).all(axis=1)
     out = np.full_like(y, np.nan, dtype=float)
@@ -107,9 +107,9 @@ def filtered(data: LabMarkers | LabTable, cutoff_hz: float, order: int = 4, *, m
              names: Sequence[str] | None = None) -> tuple[LabMarkers | LabTable, str]:
     """(a copy of ``data`` low-pass filtered, a short report): markers (n, k, 3) m per coordinate, a table's
     columns (n, m) per column, at ``cutoff_hz`` (Hz, below half the rate), by the zero-lag Butterworth of
-    ``order`` 4 (the only order: casflex.filters'); ``names``: the markers or columns to filter
+    ``order`` 4 (the only order: casflex.lab.lowpass'); ``names``: the markers or columns to filter
     (default all; the others are copied as they are). Gaps as the module docstring says."""
-    from casflex.lab import LabMarkers
+    from casflex.lab.tables import LabMarkers
 
     where = data.source or type(data).__name__
     if order != 4:
@@ -158,14 +158,14 @@ def plate_wrench(table: LabTable, prefix: str, *, min_force: float = MIN_PLATE_F
     of an OpenSim-style ground-reaction table ("ground_" the first plate, "1_ground_" the second), with the
     samples the table does not give as NaN rows (to be filled or refused by the caller).
 
-    M is the table's ``<prefix>moment_{x,y,z}`` where :func:`casflex.lab_c3d.read_c3d` gave them, else p x F + T
+    M is the table's ``<prefix>moment_{x,y,z}`` where :func:`casflex.lab.c3d.read_c3d` gave them, else p x F + T
     from the centre of pressure p and the free moment T. A sample is missing where a force component or the
     moment is not a number. A force below ``min_force`` (N, in magnitude) whose point of application the
     table leaves undefined (NaN centre of pressure: the convention of exports that write none where the plate
     is unloaded) is taken as no load, F = M = 0, and flagged in ``unloaded``; a larger force without a centre
     of pressure is missing. Forces, centres of pressure and moments no lab records
-    (:func:`casflex.lab_checks.check_plate_values`) are refused in one line naming the plate and the time."""
-    from casflex.lab_checks import check_plate_values
+    (:func:`casflex.lab.checks.check_plate_values`) are refused in one line naming the plate and the time."""
+    from casflex.lab.checks import check_plate_values
 
     p = _plate_columns(table, prefix)
 

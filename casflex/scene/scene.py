@@ -15,7 +15,7 @@ import math
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
-from casflex.scene_items import (
+from casflex.scene.items import (
     _NON_NUMERIC,
     SUPPORT_DOFS,
     Beam,
@@ -68,7 +68,7 @@ class Scene:
     parameters: tuple[Parameter, ...] = ()
     gravity: tuple[float, float] = (0.0, -9.81)
     run: RunSettings = field(default_factory=RunSettings)
-    markers: tuple[Any, ...] = ()  # casflex.markers.Marker
+    markers: tuple[Any, ...] = ()  # casflex.scene.markers.Marker
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.strip():
@@ -90,13 +90,13 @@ class Scene:
         self._check_references()
         self._check_geometry()
         self._check_parameters()
-        from casflex.markers import check_markers
+        from casflex.scene.markers import check_markers
 
         check_markers(self)
 
     # -- validation -------------------------------------------------------------------------
     def _check_types(self) -> None:
-        from casflex.markers import Marker
+        from casflex.scene.markers import Marker
 
         kinds = {"nodes": Node, "beams": Beam, "springs": Spring, "torsion_springs": TorsionSpring,
                  "bodies": RigidBody, "supports": Support, "joints": Joint, "loads": Load, "parameters": Parameter,

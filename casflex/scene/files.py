@@ -5,7 +5,7 @@ Read when the scene is loaded, relative to the scene file's folder (to the worki
 given as text): OpenSim .mot/.sto files (:func:`casflex.lab.read_sto`) or CSV files with a header line
 of column names. Each named column may be negated (``"-pelvis_tz"``); omitted columns are zero. Times
 are the file's plus ``offset`` (s). ``cutoff`` (Hz) filters the columns by the lab's zero-lag
-Butterworth first (:mod:`casflex.filters`). A support's motion is the columns' change from the file's
+Butterworth first (:mod:`casflex.lab.lowpass`). A support's motion is the columns' change from the file's
 first row (the node starts where the scene has it); a file flagged ``inDegrees=yes`` has its angle
 column converted to radians. The scene keeps the rows (a saved scene holds them inline).
 """
@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from casflex.scene_items import SceneError
+from casflex.scene.items import SceneError
 
 __all__ = ["resolve_file_inputs"]
 
@@ -30,7 +30,7 @@ _OPTIONS = ("file", "offset", "cutoff")
 
 def _read(path: Path, where: str):
     """(t (n,), names, values (n, k), in_degrees) of a .mot/.sto or .csv file."""
-    from casflex.lab import read_sto
+    from casflex.lab.tables import read_sto
 
     if not path.is_file():
         raise SceneError(f"{where}.file: no such file {str(path)!r}")
@@ -66,7 +66,7 @@ def _read_csv(path: Path, where: str):
             data[k] = [float(c) for c in r]
         except ValueError:
             raise SceneError(f"{where}.file: {str(path)!r}: line {line}: a cell is not a number") from None
-    from casflex.lab import increasing_times
+    from casflex.lab.tables import increasing_times
 
     try:
         increasing_times(data[:, 0], str(path))
@@ -92,7 +92,7 @@ def _columns(spec: dict, keys: tuple[str, ...], names: tuple[str, ...], values: 
 
 
 def _rows(spec: Any, keys: tuple[str, ...], base: Path, where: str, motion: bool) -> list[list[float]]:
-    from casflex.filters import even_times, lowpass
+    from casflex.lab.lowpass import even_times, lowpass
 
     unknown = [k for k in spec if k not in (*_OPTIONS, *keys)]
     if unknown or "file" not in spec:

@@ -1,5 +1,5 @@
-"""Motion-lab files: markers from TRC files, named columns from OpenSim's .mot / .sto, and the plane
-that takes the lab's 3-D axes to a scene's x and y (issue 26, in part).
+"""Lab tables: markers from TRC files (:class:`LabMarkers`) and named columns from OpenSim's .mot / .sto
+(:class:`LabTable`).
 
 - :func:`read_trc`: marker labels and positions, in metres from the header's ``Units`` (mm, cm, m).
   A marker missing at a frame (empty cells, or the exact (0, 0, 0) that several lab exports write
@@ -7,19 +7,10 @@ that takes the lab's 3-D axes to a scene's x and y (issue 26, in part).
 - :func:`read_sto`: a .mot / .sto table (header up to ``endheader``, then named columns), with
   the header's ``inDegrees`` kept as it says (nothing is converted: the caller knows which columns
   are angles).
-- :class:`Plane` (``"X,Y"``, ``"-Z,Y"``): which lab axes become the model's x and y, with their
-  signs; the model's plane is seen from the lab axis x cross y (``view``), which it reports, so that
-  a mirrored plane (a left side seen from the right) is said, not silently taken.
-- :func:`markers_in_plane`: a :class:`~casflex.data.MeasurementSet` of the scene's markers
-  (``x<marker>``, ``y<marker>``) from the lab labels they stand for (``label`` of ``[[markers]]``).
-- :func:`read_c3d` (:mod:`casflex.lab_c3d`, through the optional ezc3d): a C3D file's markers and its
-  force plates as a table of OpenSim's ground-reaction columns.
-- :func:`filtered`, :func:`plate_moment_about_origin`, :func:`centre_of_pressure`
-  (:mod:`casflex.lab_filter`): the labs' zero-lag Butterworth on markers and tables, and force plates
-  filtered through their force and moment, not their centre of pressure.
 
 Every malformed file gives one ValueError line naming the file and what is wrong: missing or
-unknown units, duplicated labels, rows of the wrong length, times that do not increase.
+unknown units, a DataRate that is no rate, duplicated labels, rows of the wrong length, times that do not
+increase, infinite cells.
 """
 
 from __future__ import annotations
@@ -32,15 +23,10 @@ from pathlib import Path
 
 import numpy as np
 
-from casflex.lab_c3d import read_c3d
-from casflex.lab_filter import centre_of_pressure, filtered, plate_moment_about_origin
-
-__all__ = ["LabMarkers", "LabTable", "Plane", "read_trc", "read_sto", "increasing_times", "read_c3d",
-           "markers_in_plane", "trial_markers", "filtered", "plate_moment_about_origin", "centre_of_pressure"]
+__all__ = ["LabMarkers", "LabTable", "UNITS", "read_trc", "read_sto", "increasing_times"]
 
 #: Length units of TRC headers, in metres.
 UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
-_AXES = {"X": 0, "Y": 1, "Z": 2}
 
 
 @dataclass(frozen=True)
@@ -215,70 +201,3 @@ def read_sto(path: str | os.PathLike[str]) -> LabTable:
         raise ValueError(f"{where}: header inDegrees={deg!r}; expected yes or no (true or false)")
     in_degrees = None if deg is None else _DEGREES[deg.lower()]
     return LabTable(increasing_times(data[:, 0], where), tuple(names[1:]), data[:, 1:], in_degrees, header, where)
-
-
-@dataclass(frozen=True)
-class Plane:
-    """Which lab axes become the model's x and y, e.g. ``Plane.parse("X,Y")`` (OpenSim's lab: X forward,
-    Y up, the sagittal plane seen from +Z, the subject's right) or ``"-Z,Y"``. ``view``: the lab axis the
-    plane is seen from, x cross y (e.g. "+Z")."""
-
-    x: str
-    y: str
-
-    @classmethod
-    def parse(cls, text: str, *, option: str = "plane") -> Plane:
-        parts = [p.strip().upper() for p in str(text).split(",")]
-        ok = len(parts) == 2 and all(p.lstrip("+-") in _AXES for p in parts)
-        if not ok or parts[0].lstrip("+-") == parts[1].lstrip("+-"):
-            raise ValueError(f"{option}: expected two different lab axes for the model's x and y, e.g. 'X,Y' or "
-                             f"'-Z,Y', got {text!r}")
-        return cls(*parts)
-
-    def _vector(self, axis: str) -> np.ndarray:
-        v = np.zeros(3)
-        v[_AXES[axis.lstrip("+-")]] = -1.0 if axis.startswith("-") else 1.0
-        return v
-
-    @property
-    def matrix(self) -> np.ndarray:
-        """(2, 3): model (x, y) = matrix @ lab (X, Y, Z)."""
-        return np.vstack([self._vector(self.x), self._vector(self.y)])
-
-    @property
-    def view(self) -> str:
-        n = np.cross(*self.matrix)
-        k = int(np.argmax(np.abs(n)))
-        return ("+" if n[k] > 0 else "-") + "XYZ"[k]
-
-
-def markers_in_plane(lab: LabMarkers, labels: dict[str, str], plane: Plane):
-    """A MeasurementSet of channels x<marker>, y<marker> (m) for the scene markers ``labels`` maps to
-    their lab labels, projected on ``plane``; NaN where the lab marker is missing."""
-    from casflex.data import MeasurementSet
-
-    P = plane.matrix
-    channels, cols = [], []
-    for name, label in labels.items():
-        xy = lab.marker(label) @ P.T
-        channels += [f"x{name}", f"y{name}"]
-        cols += [xy[:, 0], xy[:, 1]]
-    return MeasurementSet(lab.t.copy(), tuple(channels), np.column_stack(cols), None, None, source=lab.source,
-                          meta={"plane": f"{plane.x},{plane.y}", "view": plane.view, "labels": dict(labels)})
-
-
-def trial_markers(model, path: str | os.PathLike[str], plane: Plane | str = "X,Y"):
-    """The scene's markers (each by its ``label``, or its name) in the TRC or C3D file ``path``, projected on
-    ``plane``: a MeasurementSet for identification (module docstring). ValueError naming a label the
-    trial lacks, a scene without markers, or a marker no body moves so (:func:`casflex.lab_checks.check_markers`)."""
-    markers = model.scene.markers
-    if not markers:
-        raise ValueError(f"{path}: the scene has no [[markers]] to take from the trial")
-    from casflex.lab_checks import check_markers
-
-    plane = Plane.parse(plane) if isinstance(plane, str) else plane
-    lab = read_c3d(path, plates=False)[0] if os.fspath(path).lower().endswith(".c3d") else read_trc(path)
-    labels = {m.name: m.label or m.name for m in markers}
-    out = markers_in_plane(lab, labels, plane)
-    check_markers(lab, tuple(labels.values()))
-    return out

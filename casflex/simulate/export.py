@@ -35,7 +35,7 @@ import numpy as np
 from casflex.codegen import CodegenError, generate_c
 from casflex.model import Model
 from casflex.results import atomic_write_text
-from casflex.simulate import step_count
+from casflex.simulate.run import step_count
 
 __all__ = ["export_c", "ExportedCode", "EXPORTS"]
 
@@ -71,7 +71,7 @@ class ExportedCode:
 
 
 def _functions(model: Model, what: str, alpha: float, tol: float) -> list[ca.Function]:
-    from casflex.simulate import integrator_for
+    from casflex.simulate.run import integrator_for
 
     integ = integrator_for(model, alpha=alpha, tol=tol)
     if what in ("step", "simulate"):
@@ -129,10 +129,10 @@ def _c_array(name: str, v: np.ndarray) -> str:
 
 
 def _main_c(model: Model, p: np.ndarray, alpha: float, dt: float, n_steps: int) -> str:
-    from casflex.simulate import initial_state, integrator_for
+    from casflex.simulate.run import initial_state, integrator_for
 
     n, nc = model.n_dof, model.n_con
-    # the start simulate() takes: moving supports on their paths, the joints closed (casflex.consistent)
+    # the start simulate() takes: moving supports on their paths, the joints closed (casflex.model.consistent)
     x0 = initial_state(integrator_for(model, alpha=alpha), p)
     header = "t," + ",".join(model.dof_names)
     return f"""/* Example: simulate scene '{model.scene.name}' with HHT-alpha (alpha = {alpha:g}), dt = {dt:g} s,

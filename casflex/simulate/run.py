@@ -32,9 +32,9 @@ import numpy as np
 
 from casflex import interrupt
 from casflex.codegen import BufferedCall, CompiledLibrary, compile_functions
-from casflex.consistent import project_positions, project_velocities
 from casflex.integrators.hht import HHT
 from casflex.model import Model, assemble
+from casflex.model.consistent import project_positions, project_velocities
 from casflex.results import Trajectory
 from casflex.scene import Scene
 
@@ -111,7 +111,7 @@ def memory_available() -> int | None:
         return None
 
 
-def _bytes(n: float) -> str:
+def format_bytes(n: float) -> str:
     for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
         if n < 1024 or unit == "PiB":
             return f"{n:.3g} {unit}"
@@ -128,8 +128,8 @@ def check_memory(model: Model, n_steps: int, dt: float, *, names: tuple[str, str
     avail = memory_available()
     if avail is not None and need > avail:
         raise ValueError(f"{names[0]}: {n_steps * dt:g} s at {names[1]} = {dt:g} s is {n_steps:,} steps of {n_values} "
-                         f"values each: the result needs about {_bytes(need)} of memory and {_bytes(avail)} are "
-                         f"available; shorten {names[0]} or raise {names[1]}")
+                         f"values each: the result needs about {format_bytes(need)} of memory and "
+                         f"{format_bytes(avail)} are available; shorten {names[0]} or raise {names[1]}")
 
 
 def _text_progress(done: int, total: int, t: float) -> None:
@@ -336,7 +336,7 @@ def initial_state(integ: HHT, p: np.ndarray, *, q0: np.ndarray | None = None, qd
         fixed = [c.dof for c in model.constraints]
         q[fixed] = v
         qd[fixed] = vd
-    q = project_positions(model, q)  # the joints closed and their velocities consistent (casflex.consistent)
+    q = project_positions(model, q)  # the joints closed and their velocities consistent (casflex.model.consistent)
     qd = project_velocities(model, q, qd, p)
     phi, B = model.constraint(q)
     phi, B = np.array(phi).ravel()[:model.n_fixed], np.array(B)[:model.n_fixed]
@@ -466,7 +466,7 @@ def _trajectory(integ: HHT, X: np.ndarray, Y: np.ndarray, iters: np.ndarray, dt:
     total = T + Ve + Vg
     names = model.output_names
     if model.scene.markers:  # the markers' positions join the outputs as <marker>.x, <marker>.y
-        from casflex.markers import marker_positions
+        from casflex.model.markers import marker_positions
 
         outputs = np.hstack([outputs, marker_positions(model, q)])
         names = names + tuple(f"{m.name}.{c}" for m in model.scene.markers for c in "xy")

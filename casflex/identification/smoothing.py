@@ -9,7 +9,7 @@ becomes ~1 m/s^2 of acceleration noise. Two well-kept smoothers from scipy:
   cross-validation (Craven and Wahba 1979), so no setting is needed; derivatives are the spline's.
   Handles irregular times and gaps (missing samples are skipped and filled by the spline).
 - ``"butterworth"``: the biomechanics laboratories' zero-lag low-pass filter, a 2nd-order
-  Butterworth run forward and backward (:mod:`casflex.filters`, scipy's ``filtfilt``: 4th order, no phase lag) at
+  Butterworth run forward and backward (:mod:`casflex.lab.lowpass`, scipy's ``filtfilt``: 4th order, no phase lag) at
   ``cutoff`` Hz (gait: typically 6 Hz, Winter 2009), then second-order central differences.
   Needs evenly spaced samples without gaps.
 
@@ -42,7 +42,7 @@ def _spline(t: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nd
 
 
 def _butterworth(t: np.ndarray, y: np.ndarray, cutoff: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    from casflex.filters import butterworth2, filtfilt2
+    from casflex.lab.lowpass import butterworth2, filtfilt2
 
     h = np.diff(t)
     if not np.isfinite(y).all():

@@ -15,7 +15,7 @@ Rayleigh dissipation function) to h: they are the other velocity-dependent term.
 Only the scene's elements and supports are modelled; properties declared as parameters are
 entries of the symbol p (in the scene's parameter order), all others are constants.
 
-Structure is kept: the elements of each kind form a group (:mod:`casflex.assembly`) whose kernel
+Structure is kept: the elements of each kind form a group (:mod:`casflex.model.assembly`) whose kernel
 (:mod:`casflex.elements.kernels`, one element's energies, forces, mass and outputs) is mapped
 over the group and summed into the global vectors and sparse matrices through constant index
 maps. The Functions are MX; evaluated on SX symbols they give the flat expressions.
@@ -30,8 +30,11 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from casflex.assembly import ElementGroup, MatrixAssembly, gather, scatter
-from casflex.constraints import (
+from casflex.elements import BeamElement
+from casflex.elements.joints import OUTPUTS as JOINT_OUTPUTS
+from casflex.elements.kernels import AT_POINTS, DAMPERS, KINDS, NONCONSERVATIVE, kernel
+from casflex.model.assembly import ElementGroup, MatrixAssembly, gather, scatter
+from casflex.model.constraints import (
     FixedDof,
     constraint_vector,
     gather_at,
@@ -42,11 +45,8 @@ from casflex.constraints import (
     split,
     support_constraints,
 )
-from casflex.elements import BeamElement
-from casflex.elements.joints import OUTPUTS as JOINT_OUTPUTS
-from casflex.elements.kernels import AT_POINTS, DAMPERS, KINDS, NONCONSERVATIVE, kernel
-from casflex.scene import Parameter, Scene, SceneError
-from casflex.scene_items import INERTIA_FORMS
+from casflex.scene.items import INERTIA_FORMS
+from casflex.scene.scene import Parameter, Scene, SceneError
 
 __all__ = ["Model", "assemble", "INERTIA_FORMS"]
 
@@ -121,7 +121,7 @@ class Model:
     @functools.cached_property
     def prescribed(self) -> ca.Function:
         """``prescribed(t) -> (v, vd, vdd)`` (n_con,): the supports' values at t and their rates
-        (:func:`casflex.constraints.prescribed`); constants and zeros for fixed supports."""
+        (:func:`casflex.model.constraints.prescribed`); constants and zeros for fixed supports."""
         return prescribed(list(self.constraints))
 
     def supports_at(self, t: float) -> tuple[np.ndarray, np.ndarray]:

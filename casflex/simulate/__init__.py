@@ -1,0 +1,20 @@
+"""The forward simulation: ``simulate(model, t_end, ...) -> Trajectory`` by HHT-alpha (:mod:`casflex.simulate.run`),
+run here (interpreted or compiled) or exported as standalone C with an example program
+(:mod:`casflex.simulate.export`, ``casflex export``)."""
+
+from casflex.simulate.run import (
+    CHUNK,
+    ENERGY_GROWTH,
+    SimulationError,
+    check_memory,
+    compiled_library,
+    format_bytes,
+    initial_state,
+    integrator_for,
+    memory_available,
+    simulate,
+    step_count,
+)
+
+__all__ = ["simulate", "SimulationError", "integrator_for", "step_count", "check_memory", "CHUNK", "ENERGY_GROWTH",
+           "compiled_library", "initial_state", "memory_available", "format_bytes"]
