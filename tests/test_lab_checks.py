@@ -98,7 +98,7 @@ def test_one_plate_sample_not_a_number_at_the_peak_is_filled_and_said(tmp_path, 
 
 
 @pytest.mark.parametrize(("column", "value", "match"), [
-    (2, "inf", r"grf.mot: row 14: ground_force_vy is infinite \(a missing value is an empty cell or NaN\)"),
+    (2, "inf", r"plate 'ground_' at t = 0.517 s: a force of inf N, beyond what a body exerts on a plate"),
     (2, "2.5e5", r"plate 'ground_' at t = 0.517 s: a force of 2.5e\+05 N, beyond what a body exerts"),
     (4, "1e4", r"plate 'ground_' at t = 0.517 s: its centre of pressure lies at \(1e\+04, -0.0075, -0.\d+\) m, beyond"),
     (8, "1e300", r"plate 'ground_' at t = 0.517 s: a free moment of 1e\+300 N m, beyond what a body exerts"),
@@ -178,6 +178,27 @@ def test_a_marker_jumping_for_one_frame_is_refused_naming_it(tmp_path, capsys, m
 def test_a_cell_of_1e300_is_refused_not_a_nan_in_every_output(tmp_path, capsys):
     path = _trc(tmp_path, lambda rows: _set(rows, 0.633, 5, "1e300"))
     _refused([*BASE, "--data", path], capsys, r"marker 'L.ASIS' at t = 0.633 s lies at \(1e\+297")
+    path = _trc(tmp_path, lambda rows: _set(rows, 0.633, 5, "inf"))
+    _refused([*BASE, "--data", path], capsys, r"marker 'L.ASIS' at t = 0.633 s lies at \(inf, ")
+
+
+def test_junk_in_a_marker_the_scene_does_not_use_is_no_reason_to_refuse(tmp_path, capsys):
+    """Labs leave junk in channels nobody uses: only the scene's markers are checked. The stride's TRC with a
+    14th marker, 'Junk', at 1e300 and once infinite, is taken."""
+    lines = TRC.read_text().splitlines()
+    k = len(lines[3].split("\t")[2:]) // 3 + 1  # the new marker's number: 14
+    lines[3] += "Junk\t\t\t"
+    lines[4] += f"\tX{k}\tY{k}\tZ{k}"
+    rows = [ln.split("\t") for ln in lines[5:] if ln.strip()]
+    for i, r in enumerate(rows):
+        r[2 + 3 * (k - 1):] = ["inf" if i == 20 else "1e300", "0", "0"]
+    path = tmp_path / "junk.trc"
+    path.write_text("\n".join(lines[:5] + ["\t".join(r) for r in rows]) + "\n")
+    from casflex.lab import read_trc
+
+    assert read_trc(path).labels[-1] == "Junk"
+    code, _, err = _run([*BASE, "--data", path], capsys)
+    assert code == 0, err
 
 
 def test_a_marker_off_by_15_cm_in_one_frame_is_refused_after_the_fit_naming_it(tmp_path, capsys):

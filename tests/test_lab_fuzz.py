@@ -16,6 +16,7 @@ import os
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -76,8 +77,15 @@ def _run_all(cases: list[dict]) -> list[dict]:
             got.clear()
             worker.stdin.write(json.dumps(case) + "\n")
             worker.stdin.flush()
-            if not got.wait(HANG):
-                pytest.fail(f"case {case['name']} ({' '.join(case['argv'])}) did not finish in {HANG:g} s")
+            deadline = time.monotonic() + HANG
+            while not got.wait(0.2):
+                if worker.poll() is not None:
+                    got.wait(1.0)  # the reader may still be taking the last line
+                    if not got.is_set():
+                        pytest.fail(f"case {case['name']} ({' '.join(case['argv'])}) crashed the process (exit "
+                                    f"status {worker.returncode})")
+                if time.monotonic() > deadline:
+                    pytest.fail(f"case {case['name']} ({' '.join(case['argv'])}) did not finish in {HANG:g} s")
     finally:
         worker.kill()
         worker.wait()

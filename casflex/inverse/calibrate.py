@@ -115,9 +115,9 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
     lab = static if isinstance(static, LabMarkers) else read_markers(static)[0]
     sc = model.scene
     labels = {m.name: m.label or m.name for m in sc.markers}
-    ms = markers_in_plane(lab, labels, pl)
     check_markers(lab, tuple(labels.values()))
     check_static(lab, tuple(labels.values()))
+    ms = markers_in_plane(lab, labels, pl)
     if not np.isfinite(ms.q).any():
         raise ValueError(f"{lab.source}: none of the scene's markers {list(labels.values())} is seen in the trial")
     with np.errstate(all="ignore"):

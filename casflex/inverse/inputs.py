@@ -126,21 +126,22 @@ def _even_frames(t: np.ndarray, rate: float, source: str) -> np.ndarray:
     return grid
 
 
-def _scene_markers(model: Model, tree: KinematicTree, lab, plane, keep_frames=None):
-    """(scene markers' channels y (n, 2 m) in the plane, their lab labels), checked (:mod:`casflex.lab.checks`)."""
+def _scene_markers(model: Model, tree: KinematicTree, lab, plane, keep_frames):
+    """(scene markers' channels in the plane (a MeasurementSet), their lab labels), checked first
+    (:mod:`casflex.lab.checks`): seen in the window, as far apart as the scene's, no sample no body makes."""
     from casflex.lab import markers_in_plane
     from casflex.lab.checks import check_markers, check_scale
 
     names = {m.name: m.label or m.name for m in model.scene.markers}
-    ms = markers_in_plane(lab, names, plane)
     labels = tuple(names.values())
-    xy = ms.q[keep_frames].reshape(int(np.sum(keep_frames)), -1, 2)
+    with np.errstate(invalid="ignore", over="ignore"):  # absurd samples are check_markers' to name
+        xy = np.stack([lab.marker(lb)[keep_frames] for lb in labels], axis=1) @ plane.matrix.T
     if not np.isfinite(xy).all(axis=2).any():
         raise ValueError(f"{lab.source}: none of the scene's markers {list(labels)} is seen in the window")
     scene_xy = np.array([[m.x, m.y] for m in model.scene.markers])
     check_scale(lab.source, lab.units, scene_xy, xy, [tree.cluster[i] for i in tree.marker_nodes])
     check_markers(lab, labels, keep_frames)
-    return ms, labels
+    return markers_in_plane(lab, names, plane), labels
 
 
 def _memory(model: Model, tree: KinematicTree, t: np.ndarray, n_markers: int, dt: float | None) -> None:

@@ -39,6 +39,10 @@ from __future__ import annotations
 import math
 import mmap
 import os
+import pickle
+import select
+import signal
+import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -121,9 +125,108 @@ def _walk_parameters(where: str, raw: bytes | mmap.mmap, pos: int) -> None:
         pos = end
 
 
-def _open(where: str, path: str | os.PathLike[str], plates: bool):
-    """The ezc3d object, checked whole; ValueError in one line otherwise."""
+#: s: the longest a C3D file's read may take before it is taken for a hang (the excerpt reads in 0.05 s).
+READ_TIMEOUT = 60.0
+_PLATFORM_KEYS = ("force", "moment", "center_of_pressure", "Tz", "corners", "unit_force", "unit_position")
+
+
+def _plain(c, plates: bool) -> dict:
+    """What casflex reads of an ezc3d object, as plain dicts and arrays (picklable)."""
+    data = c["data"]
+    return {
+        "header": {"points": dict(c["header"]["points"]), "analogs": dict(c["header"]["analogs"])},
+        "parameters": {"POINT": {k: {"value": v["value"]} for k, v in c["parameters"]["POINT"].items()
+                                 if k != "__METADATA__"} if "POINT" in c["parameters"] else {}},
+        "data": {"points": data["points"], "meta_points": {"residuals": data["meta_points"]["residuals"]},
+                 "analogs": np.empty((0, data["analogs"].shape[1] if data["analogs"].ndim > 1 else 0)),
+                 "platform": [{k: pf[k] for k in _PLATFORM_KEYS} for pf in data["platform"]]
+                 if plates and "platform" in data.keys() else []},
+    }
+
+
+def _read(path: str, plates: bool) -> dict:
+    """:func:`_plain` of ezc3d's reading; ValueError naming the problem (ezc3d raises RuntimeError, OSError ...:
+    all are the file's)."""
     ezc3d = _ezc3d()
+    try:
+        return _plain(ezc3d.c3d(path, extract_forceplat_data=plates), plates)
+    except Exception as exc:
+        msg = " ".join(str(exc).replace(": iostream error", "").split())
+        if plates:
+            try:
+                ezc3d.c3d(path)
+            except Exception:
+                pass
+            else:
+                raise ValueError(f"ezc3d cannot read its force plates: {msg}; read_c3d(..., plates=False) reads the "
+                                 "markers alone") from None
+        raise ValueError(f"ezc3d cannot read it: {msg}") from None
+
+
+def _read_apart(path: str, plates: bool) -> dict:
+    """:func:`_read` in a forked child process: ezc3d 1.7 crashes (a segmentation fault) or hangs on some
+    corrupted files that pass :func:`_check_structure` (a parameter renamed by a flipped byte), and that must
+    not take the caller with it. ValueError naming what happened; in the process itself where there is no
+    fork (then a crash is ezc3d's to have)."""
+    if not hasattr(os, "fork"):
+        return _read(path, plates)
+    _ezc3d()  # ModuleNotFoundError here, not in the child
+    rd, wr = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: read, send, and leave without running the parent's exit handlers
+        os.close(rd)
+        try:
+            signal.signal(signal.SIGINT, signal.SIG_DFL)
+            try:
+                out = ("ok", _read(path, plates))
+            except ValueError as exc:
+                out = ("error", str(exc))
+            with os.fdopen(wr, "wb") as f:
+                pickle.dump(out, f, protocol=pickle.HIGHEST_PROTOCOL)
+        finally:
+            os._exit(0)
+    os.close(wr)
+    try:
+        kind, value = _receive(rd, pid)
+    finally:
+        os.close(rd)
+        _reap(pid)
+    if kind == "error":
+        raise ValueError(value)
+    return value
+
+
+def _receive(rd: int, pid: int) -> tuple[str, object]:
+    """The child's pickled answer from the pipe ``rd``; ValueError when it died or took too long."""
+    chunks, deadline = [], time.monotonic() + READ_TIMEOUT
+    while True:
+        left = deadline - time.monotonic()
+        if left <= 0 or not select.select([rd], [], [], left)[0]:
+            os.kill(pid, signal.SIGKILL)
+            raise ValueError(f"ezc3d did not finish reading it in {READ_TIMEOUT:g} s: the file is corrupted")
+        chunk = os.read(rd, 1 << 20)
+        if not chunk:
+            break
+        chunks.append(chunk)
+    try:
+        return pickle.loads(b"".join(chunks))
+    except Exception:  # the child died before it sent its answer: ezc3d crashed
+        status = _reap(pid)
+        why = f"signal {-status}" if status is not None and status < 0 else f"status {status}"
+        raise ValueError(f"ezc3d crashed reading it ({why}): the file is corrupted") from None
+
+
+def _reap(pid: int) -> int | None:
+    """The child's exit status (negative: the signal that ended it), once; None when already reaped."""
+    try:
+        _, status = os.waitpid(pid, 0)
+    except ChildProcessError:
+        return None
+    return -os.WTERMSIG(status) if os.WIFSIGNALED(status) else os.WEXITSTATUS(status)
+
+
+def _open(where: str, path: str | os.PathLike[str], plates: bool) -> dict:
+    """What casflex reads of the file (:func:`_plain`), checked whole; ValueError in one line otherwise."""
     if not Path(path).is_file():  # ezc3d hangs on a directory
         raise ValueError(f"{where}: " + ("not a file" if Path(path).exists() else "no such file"))
     try:
@@ -135,18 +238,9 @@ def _open(where: str, path: str | os.PathLike[str], plates: bool):
     except OSError as exc:
         raise ValueError(f"{where}: cannot read ({exc.strerror})") from None
     try:
-        c = ezc3d.c3d(str(path), extract_forceplat_data=plates)
-    except Exception as exc:  # ezc3d raises RuntimeError, OSError ...: all are the file's problem
-        msg = " ".join(str(exc).replace(": iostream error", "").split())
-        if plates:
-            try:
-                ezc3d.c3d(str(path))
-            except Exception:
-                pass
-            else:
-                raise ValueError(f"{where}: ezc3d cannot read its force plates: {msg}; read_c3d(..., plates=False) "
-                                 "reads the markers alone") from None
-        raise ValueError(f"{where}: ezc3d cannot read it: {msg}") from None
+        c = _read_apart(str(path), plates)
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
     got = c["data"]["points"].shape[2]  # ezc3d reads what there is and sets its header to it
     if (c["data"]["points"].shape[1] or c["data"]["analogs"].shape[1]) and got < frames:
         raise ValueError(f"{where}: truncated: its header announces {frames} frames, the file holds {got}")
@@ -189,10 +283,6 @@ def _markers(c, where: str) -> LabMarkers:
         raise ValueError(f"{where}: marker labels {dup} appear more than once")
     xyz = np.transpose(pts[:3, keep, :], (2, 1, 0)) * (UNITS[units[0]] if units else 1.0)
     xyz[(res[keep].T < 0) | np.all(xyz == 0.0, axis=2)] = np.nan
-    if np.isinf(xyz).any():
-        f, k, _ = (int(v) for v in np.argwhere(np.isinf(xyz))[0])
-        raise ValueError(f"{where}: marker {names[k]!r} is infinite at frame {f + 1} (a missing marker has a negative "
-                         "residual)")
     rate = float(c["header"]["points"]["frame_rate"])
     if not (math.isfinite(rate) and rate > 0):
         raise ValueError(f"{where}: POINT:RATE is {rate:g}: the markers' frame rate must be > 0 Hz")
@@ -236,7 +326,7 @@ def _plate_columns(pf, where: str, i: int, min_force: float) -> tuple[list[str],
 def _plates(c, where: str, min_force: float) -> LabTable | None:
     from casflex.lab.tables import LabTable
 
-    platforms = c["data"]["platform"] if "platform" in c["data"].keys() else []
+    platforms = c["data"]["platform"]
     if not platforms:
         return None
     names, blocks, ups = [], [], []

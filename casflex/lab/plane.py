@@ -85,6 +85,5 @@ def trial_markers(model, path: str | os.PathLike[str], plane: Plane | str = "X,Y
     plane = Plane.parse(plane) if isinstance(plane, str) else plane
     lab = read_c3d(path, plates=False)[0] if os.fspath(path).lower().endswith(".c3d") else read_trc(path)
     labels = {m.name: m.label or m.name for m in markers}
-    out = markers_in_plane(lab, labels, plane)
     check_markers(lab, tuple(labels.values()))
-    return out
+    return markers_in_plane(lab, labels, plane)

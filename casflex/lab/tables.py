@@ -117,7 +117,7 @@ def read_trc(path: str | os.PathLike[str]) -> LabMarkers:
         raise ValueError(f"{where}: marker labels {sorted(seen)} appear more than once")
     rate = _header_rate(header.get("DataRate", ""), where)
     want = 1 + 3 * len(labels)
-    flat, rows = array("d"), array("l")  # 8 bytes a value: a Python list of floats takes four times as much
+    flat = array("d")  # 8 bytes a value: a Python list of floats takes four times as much
     for i, line in enumerate(lines[5:], start=6):
         if not line.strip():
             continue
@@ -129,24 +129,13 @@ def read_trc(path: str | os.PathLike[str]) -> LabMarkers:
             raise ValueError(f"{where}: row {i} has {len(values) - 1} coordinates for {len(labels)} markers "
                              f"({3 * len(labels)} expected)")
         flat.extend(values)
-        rows.append(i)
     if not flat:
         raise ValueError(f"{where}: no frames")
     data = np.frombuffer(flat, dtype=float).reshape(-1, want)
-    _finite_or_missing(data, rows, ["Time"] + [lb for lb in labels for _ in "XYZ"], where)
     t = increasing_times(data[:, 0].copy(), where)
     xyz = data[:, 1:].reshape(len(t), len(labels), 3) * UNITS[units]
     xyz[np.all(xyz == 0.0, axis=2)] = np.nan  # a dropped marker written as (0, 0, 0)
     return LabMarkers(t, tuple(labels), xyz, rate, units, where)
-
-
-def _finite_or_missing(data: np.ndarray, rows, columns: list[str], where: str) -> None:
-    """ValueError naming the row and the column of an infinite cell: a missing value is empty or NaN; an
-    infinite one is no measurement."""
-    bad = np.isinf(data)
-    if bad.any():
-        r, c = (int(v) for v in np.argwhere(bad)[0])
-        raise ValueError(f"{where}: row {rows[r]}: {columns[c]} is infinite (a missing value is an empty cell or NaN)")
 
 
 def _header_rate(text: str, where: str) -> float:
@@ -183,7 +172,7 @@ def read_sto(path: str | os.PathLike[str]) -> LabTable:
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
         raise ValueError(f"{where}: columns {dup} appear more than once")
-    flat, rows = array("d"), array("l")
+    flat = array("d")
     for i, line in enumerate(lines[end + 2:], start=end + 3):
         if not line.strip():
             continue
@@ -191,11 +180,9 @@ def read_sto(path: str | os.PathLike[str]) -> LabTable:
         if len(values) != len(names):
             raise ValueError(f"{where}: row {i} has {len(values)} values for {len(names)} columns")
         flat.extend(values)
-        rows.append(i)
     if not flat:
         raise ValueError(f"{where}: no rows")
     data = np.frombuffer(flat, dtype=float).reshape(-1, len(names)).copy()
-    _finite_or_missing(data, rows, names, where)
     deg = header.get("inDegrees")
     if deg is not None and deg.lower() not in _DEGREES:
         raise ValueError(f"{where}: header inDegrees={deg!r}; expected yes or no (true or false)")
