@@ -144,7 +144,7 @@ def run_sweep(runs: Iterable[Run], record: str | os.PathLike[str], *, scheduler:
     if todo:
         def connect() -> tuple[Any, Any]:
             cluster = None if scheduler is not None else LocalCluster(
-                n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=40)
+                n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=40)
             return cluster, Client(scheduler if scheduler is not None else cluster)
 
         cluster, client = connect()
