@@ -19,6 +19,11 @@ p_b = x_b + R(theta_b) r_b and psi = (theta_b - theta_b0) - (theta_a - theta_a0)
   a path (inverse dynamics drives its hinges so). Its properties: theta_a0, theta_b0 as above, and
   theta_c0 in the slot of ax (the others unused).
 
+A coupled hinge (``hinge_c<key>``, two nodes): a hinge whose point moves on a as the hinge turns, as
+OpenSim's custom joints move a knee's centre with its angle: Phi = p_b - p_a - R(theta_a - theta_a0)
+(s(psi) - s(0)), with s = (s_x, s_y) SIMM splines of psi (:class:`casflex.scene.functions.SimmSpline`,
+m, in a's frame as it is in the initial configuration), registered by :func:`coupled_kind`.
+
 The multipliers mu enter the equations of motion as B^T mu (B = dPhi/dq), so the joint exerts
 -B^T mu: on b's point the force -mu (hinge, weld), -mu_1 n_a across a slider.
 
@@ -42,7 +47,8 @@ import casadi as ca
 
 from casflex.elements.kernels import Kind
 
-__all__ = ["JOINT_KINDS", "OUTPUTS", "PROPS", "ROWS", "joint_kernel", "joint_kind"]
+__all__ = ["JOINT_KINDS", "OUTPUTS", "PROPS", "ROWS", "base_kind", "coupled_kind", "joint_kernel", "joint_kind",
+           "joint_spec"]
 
 #: Constraint rows of each kind, with the suffixes that name them (``<joint>.<suffix>``).
 ROWS = {"hinge": ("x", "y"), "slider": ("across", "theta"), "weld": ("x", "y", "theta"), "drive": ("angle",)}
@@ -56,9 +62,48 @@ JOINT_KINDS = {f"{k}{g}": Kind(f"{k}{g}", n + len(rows), PROPS, OUTPUTS[k], Fals
 JOINT_KINDS["drive"] = Kind("drive", 9 + 1, PROPS, OUTPUTS["drive"], False)
 
 
+#: The shifts of the coupled hinges' kernel kinds: kind -> (s_x, s_y), each a function of psi or None.
+_COUPLED: dict[str, tuple] = {}
+
+
 def joint_kind(kind: str, grounded: bool) -> str:
     """The kernel kind of a scene joint of ``kind`` between two nodes, or to the ground."""
     return f"{kind}_g" if grounded else kind
+
+
+def coupled_kind(shift_x, shift_y) -> str:
+    """The kernel kind of a coupled hinge whose point moves by (shift_x(psi), shift_y(psi)) (module
+    docstring; each a table of (psi, m) knots or None): ``hinge_c<digest of the tables>``, a C name."""
+    import hashlib
+
+    from casflex.scene.functions import SimmSpline
+
+    key = "hinge_c" + hashlib.sha1(repr((shift_x, shift_y)).encode()).hexdigest()[:12]
+    if key not in _COUPLED:
+        _COUPLED[key] = tuple(None if t is None else SimmSpline(tuple(r[0] for r in t), tuple(r[1] for r in t))
+                              for t in (shift_x, shift_y))
+    return key
+
+
+def shift(splines, psi):
+    """The coupled hinge's point's move s(psi) - s(0) (2,) in a's initial frame; ``splines`` its (s_x, s_y)
+    (:func:`coupled_kind`), psi symbolic."""
+    return ca.vertcat(*[0.0 * psi if f is None else f(psi) - f(0.0) for f in splines])
+
+
+def coupled_splines(kind: str):
+    """(s_x, s_y) of a coupled hinge's kernel kind (:func:`coupled_kind`)."""
+    return _COUPLED[kind]
+
+
+def base_kind(kind: str) -> str:
+    """The scene joint kind of a kernel kind (``hinge`` of ``hinge_g`` and ``hinge_c<key>``)."""
+    return "hinge" if kind.startswith("hinge_c") else kind.removesuffix("_g")
+
+
+def joint_spec(kind: str) -> Kind:
+    """The kernel :class:`~casflex.elements.kernels.Kind` of a joint kernel kind."""
+    return JOINT_KINDS["hinge" if kind.startswith("hinge_c") else kind]
 
 
 def _rot(th: ca.SX, v: ca.SX) -> ca.SX:
@@ -74,7 +119,7 @@ class _Joint:
     """One symbolic joint of a kernel kind: its points, relative rotation and constraints."""
 
     def __init__(self, kind: str, q: ca.SX, pr: ca.SX):
-        self.base, grounded = kind.removesuffix("_g"), kind.endswith("_g")
+        self.base, grounded = base_kind(kind), kind.endswith("_g")
         if kind == "drive":  # a, b, then the driver c
             self.psi = (q[5] - pr[5]) - (q[2] - pr[4])
             self.drive = self.psi - (q[8] - pr[0])
@@ -87,6 +132,8 @@ class _Joint:
         else:
             self.p_a, self.turn_a = q[:2] + _rot(q[2], pr[0:2]), q[2] - pr[4]
         self.psi = self.turn_b - self.turn_a
+        if kind in _COUPLED:  # the point on a moves with psi
+            self.p_a = self.p_a + _rot(self.turn_a, shift(_COUPLED[kind], self.psi))
         self.e = pr[6:8]
 
     def phi(self) -> ca.SX:
@@ -114,8 +161,8 @@ class _Joint:
 def joint_kernel(kind: str, what: str, alpha: float = 0.0) -> ca.Function:
     """The kernel ``what`` (phi, velocity, reaction, hht, outputs) of joint kernel kind ``kind``;
     ``alpha``: the HHT alpha of ``hht`` (its weight 1 + alpha)."""
-    spec = JOINT_KINDS[kind]
-    nq, k = spec.n_dof - len(ROWS[kind.removesuffix("_g")]), len(ROWS[kind.removesuffix("_g")])
+    spec = joint_spec(kind)
+    nq, k = spec.n_dof - len(ROWS[base_kind(kind)]), len(ROWS[base_kind(kind)])
     q, qd, mu, pr = ca.SX.sym("q", nq), ca.SX.sym("qd", nq), ca.SX.sym("mu", k), ca.SX.sym("props", len(PROPS))
     j = _Joint(kind, q, pr)
     phi = j.phi()

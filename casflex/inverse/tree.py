@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from casflex.elements.joints import coupled_kind, coupled_splines, shift
 from casflex.model import Model
 from casflex.model.constraints import _offset
 
@@ -182,7 +183,10 @@ def _forward(tree: KinematicTree) -> ca.Function:
             P = tree.model.scene.joint_point(j)
             ra, rb = _offset(tuple(q0[a]), P), _offset(tuple(q0[i]), P)
             thb = tha + (q0[i, 2] - q0[a, 2]) + z[k]
-            pose[i] = (xa + _rot(tha, ra) - _rot(thb, rb), thb)
+            pa = xa + _rot(tha, ra)
+            if j.coupled:  # the point on a rolls with the angle (casflex.elements.joints)
+                pa = pa + _rot(tha - q0[a, 2], shift(coupled_splines(coupled_kind(j.shift_x, j.shift_y)), z[k]))
+            pose[i] = (pa - _rot(thb, rb), thb)
         x_e, th_e = pose[i]
         turn = th_e - q0[i, 2]
         for n in range(len(q0)):

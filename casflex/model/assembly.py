@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from casflex.elements.joints import JOINT_KINDS
+from casflex.elements.joints import joint_spec
 from casflex.elements.kernels import KINDS, Kind
 
 __all__ = ["ElementGroup", "MatrixAssembly", "gather", "scatter", "scatter_at"]
@@ -43,7 +43,7 @@ class ElementGroup:
 
     @property
     def spec(self) -> Kind:
-        return KINDS[self.kind] if self.kind in KINDS else JOINT_KINDS[self.kind]
+        return KINDS[self.kind] if self.kind in KINDS else joint_spec(self.kind)
 
     @property
     def n(self) -> int:

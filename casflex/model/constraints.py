@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from casflex.elements.joints import JOINT_KINDS, ROWS, joint_kernel, joint_kind
+from casflex.elements.joints import ROWS, base_kind, coupled_kind, joint_kernel, joint_kind, joint_spec
 from casflex.model.assembly import ElementGroup
 from casflex.scene.scene import Joint, Scene
 
@@ -112,6 +112,8 @@ def joint_groups(scene: Scene, nodes: dict[str, tuple[float, ...]], idx: dict[st
     names, row = [], 0
     for jt in scene.joints:
         kind = joint_kind(jt.kind, len(jt.nodes) == 1)
+        if jt.coupled:
+            kind = coupled_kind(jt.shift_x, jt.shift_y)
         if kind == "drive":  # theta_c0 in ax's slot (casflex.elements.joints)
             a, b, c = (nodes[nd] for nd in jt.nodes)
             props = [c[2], 0.0, 0.0, 0.0, a[2], b[2], 1.0, 0.0]
@@ -133,7 +135,7 @@ def joint_groups(scene: Scene, nodes: dict[str, tuple[float, ...]], idx: dict[st
 
 def split(group: ElementGroup) -> tuple[np.ndarray, np.ndarray]:
     """A joint group's (node dofs, multiplier positions in (q, mu)), shapes (n_joints, 6 or 3) and (n_joints, rows)."""
-    nq = JOINT_KINDS[group.kind].n_dof - len(ROWS[group.kind.removesuffix("_g")])
+    nq = joint_spec(group.kind).n_dof - len(ROWS[base_kind(group.kind)])
     return group.dofs[:, :nq], group.dofs[:, nq:]
 
 

@@ -32,6 +32,7 @@ import numpy as np
 
 from casflex.elements import BeamElement
 from casflex.elements.joints import OUTPUTS as JOINT_OUTPUTS
+from casflex.elements.joints import base_kind
 from casflex.elements.kernels import AT_POINTS, DAMPERS, KINDS, NONCONSERVATIVE, kernel
 from casflex.model.assembly import ElementGroup, MatrixAssembly, gather, scatter
 from casflex.model.constraints import (
@@ -337,7 +338,7 @@ def _joint_outputs(groups: tuple[ElementGroup, ...], q: ca.MX, mu: ca.MX, n: int
         at, mu_at = split(grp)
         y = ca.vertcat(y, ca.vec(mapped_joint(grp, "outputs", gather_at(q, at), gather_at(mu, mu_at - n),
                                               ca.DM(grp.base))))
-        names += tuple(f"{nm}.{o}" for nm in grp.names for o in JOINT_OUTPUTS[grp.kind.removesuffix("_g")])
+        names += tuple(f"{nm}.{o}" for nm in grp.names for o in JOINT_OUTPUTS[base_kind(grp.kind)])
     return y, names
 
 

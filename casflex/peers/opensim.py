@@ -51,7 +51,7 @@ import numpy as np
 if TYPE_CHECKING:
     from casflex.scene import Scene
 
-__all__ = ["Mechanism", "mechanism", "opensim_model", "inverse_dynamics", "kinematics", "write_osim"]
+__all__ = ["Mechanism", "mechanism", "opensim_model", "inverse_dynamics", "kinematics", "file_kinematics", "write_osim"]
 
 _REFUSED = (("beams", "beam"), ("springs", "spring"), ("torsion_springs", "torsion spring"),
             ("supports", "support"), ("loads", "load"))
@@ -372,7 +372,34 @@ def _write_osim_here(mech: Mechanism, path: str) -> str:
     return path
 
 
-_TASKS = {"inverse_dynamics": _inverse_dynamics_here, "kinematics": _kinematics_here, "write_osim": _write_osim_here}
+def _file_kinematics_here(path: str, values: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The markers' and bodies' origins' positions in the ground (n, 3) of the model file ``path`` at the
+    coordinates ``values`` (name -> (n,), rad or m; the others at their defaults)."""
+    osim = _opensim()
+    model = osim.Model(path)
+    state = model.initSystem()
+    n = len(next(iter(values.values()))) if values else 1
+    cs = model.getCoordinateSet()
+    out = {f"marker:{model.getMarkerSet().get(i).getName()}": np.zeros((n, 3))
+           for i in range(model.getMarkerSet().getSize())}
+    bodies = model.getBodySet()
+    out |= {f"body:{bodies.get(i).getName()}": np.zeros((n, 3)) for i in range(bodies.getSize())}
+    for k in range(n):
+        for name, v in values.items():
+            cs.get(name).setValue(state, float(v[k]), False)
+        model.assemble(state)
+        model.realizePosition(state)
+        for i in range(model.getMarkerSet().getSize()):
+            m = model.getMarkerSet().get(i)
+            out[f"marker:{m.getName()}"][k] = m.getLocationInGround(state).to_numpy()
+        for i in range(model.getBodySet().getSize()):
+            b = model.getBodySet().get(i)
+            out[f"body:{b.getName()}"][k] = b.getPositionInGround(state).to_numpy()
+    return out
+
+
+_TASKS = {"inverse_dynamics": _inverse_dynamics_here, "kinematics": _kinematics_here, "write_osim": _write_osim_here,
+          "file_kinematics": _file_kinematics_here}
 
 
 def _run(task: str, worker: bool | None, *args: Any) -> Any:
@@ -467,6 +494,13 @@ def kinematics(scene: Scene | Mechanism, root: str | None, q, *, worker: bool | 
     taken modulo 2 pi nearest the input's theta) of every body origin, (n,) each; ``mass`` (kg, the
     model's total, a scalar array); ``com_x``, ``com_y`` (m, the model's centre of mass, (n,))."""
     return _run("kinematics", worker, _as_mechanism(scene, root), q)
+
+
+def file_kinematics(path: str | os.PathLike[str], values: dict[str, np.ndarray], *, worker: bool | None = None
+                    ) -> dict[str, np.ndarray]:
+    """OpenSim's positions in the ground (n, 3) of the markers (``marker:<name>``) and bodies' origins
+    (``body:<name>``) of the model file ``path`` at the coordinates ``values`` (name -> (n,) rad or m)."""
+    return _run("file_kinematics", worker, os.fspath(path), {k: np.asarray(v, dtype=float) for k, v in values.items()})
 
 
 def write_osim(scene: Scene | Mechanism, root: str | None, path: str | os.PathLike[str], *,

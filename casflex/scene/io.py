@@ -14,6 +14,7 @@ from dataclasses import MISSING, fields
 from pathlib import Path
 from typing import Any
 
+from casflex.scene.coordinates import Coordinate
 from casflex.scene.markers import Marker
 from casflex.scene.scene import (
     Beam,
@@ -44,6 +45,7 @@ _LISTS: dict[str, type] = {
     "loads": Load,
     "parameters": Parameter,
     "markers": Marker,
+    "coordinates": Coordinate,
 }
 _TOP_KEYS = {"name", "gravity", "run", *_LISTS}
 
@@ -54,8 +56,19 @@ def builtin_scenes() -> list[str]:
 
 
 def load_scene(source: str | os.PathLike[str]) -> Scene:
-    """Load a scene from a TOML file, or a built-in scene by name (e.g. ``"twobar"``)."""
+    """Load a scene from a TOML file, an OpenSim model (``.osim``: :mod:`casflex.scene.from_osim`, its report
+    dropped; :func:`casflex.scene.from_osim.scene_from_osim` keeps it), or a built-in scene by name (e.g.
+    ``"twobar"``)."""
     text_source = str(source)
+    if text_source.lower().endswith(".osim"):
+        from casflex.scene.from_osim import scene_from_osim
+
+        try:
+            return scene_from_osim(source).scene
+        except SceneError:
+            raise
+        except ValueError as exc:
+            raise SceneError(str(exc)) from None
     if text_source in builtin_scenes():
         path = _BUILTIN_DIR / f"{text_source}.toml"
     else:
@@ -100,7 +113,7 @@ def _build(cls: type, where: str, table: Any) -> Any:
         if f.default is MISSING and f.default_factory is MISSING and name not in table:
             raise SceneError(f"{label}: missing required field {name!r}")
     kwargs = dict(table)
-    for key in ("nodes", "table", "point", "axis"):
+    for key in ("nodes", "table", "point", "axis", "shift_x", "shift_y"):
         if key in kwargs and isinstance(kwargs[key], list):
             kwargs[key] = tuple(tuple(r) if isinstance(r, list) else r for r in kwargs[key])
     for key in ("lower", "upper"):

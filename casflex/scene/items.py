@@ -44,7 +44,7 @@ SUPPORT_DOFS: dict[str, tuple[str, ...]] = {
 #: Forms of the velocity-dependent inertia term (see casflex.model).
 INERTIA_FORMS = ("lagrange", "seed")
 _NON_NUMERIC = ("name", "nodes", "node", "elements", "table", "kind", "rotary_inertia", "follower", "motion",
-                "point_a", "point_b", "point", "axis")
+                "point_a", "point_b", "point", "axis", "shift_x", "shift_y")
 
 
 def _number(owner: str, field: str, value: Any) -> float:
@@ -252,6 +252,21 @@ def _point(owner: str, field: str, value: Any) -> tuple[float, float]:
     return tuple(_number(owner, f"{field}[{i}]", x) for i, x in enumerate(value))  # type: ignore[return-value]
 
 
+def _knots(owner: str, field: str, rows: Any) -> tuple[tuple[float, float], ...]:
+    """Rows [psi (rad), s (m)], two or more, psi strictly increasing, as tuples."""
+    if isinstance(rows, str) or not isinstance(rows, (list, tuple)) or len(rows) < 2:
+        raise SceneError.at(owner, field, f"expected two or more rows [angle, shift], got {rows!r}")
+    out = []
+    for i, r in enumerate(rows):
+        if isinstance(r, str) or not isinstance(r, (list, tuple)) or len(r) != 2:
+            raise SceneError.at(owner, f"{field}[{i}]", f"expected [angle (rad), shift (m)], got {r!r}")
+        out.append((_number(owner, f"{field}[{i}][0]", r[0]), _number(owner, f"{field}[{i}][1]", r[1])))
+        if i and out[-1][0] <= out[-2][0]:
+            raise SceneError.at(owner, f"{field}[{i}][0]", f"the angles must increase, got {out[-1][0]:g} after "
+                                f"{out[-2][0]:g}")
+    return tuple(out)
+
+
 @dataclass(frozen=True)
 class Joint:
     """An ideal joint: constraints Phi(q) = 0 between the frames of node a and node b, held by
@@ -281,6 +296,12 @@ class Joint:
     ``axis`` (a direction, normalised; initial configuration) defaults to the x axis for a slider;
     for a hinge to the direction from the point to node b, or from node a to the point where b
     sits at it, or the x axis.
+
+    ``shift_x``, ``shift_y`` (a hinge between two nodes; tables of [psi, s] rows, psi in rad increasing,
+    s in m): a coupled hinge, whose point on a moves as it turns (OpenSim's custom joints: a knee's
+    centre rolling with its angle). The point of a is then the point + (s(psi) - s(0)) in a's frame (its
+    axes as in the initial configuration), s a cubic spline of the knots (SIMM's, as OpenSim's
+    SimmSpline: :mod:`casflex.scene.functions`), psi the hinge's angle.
     """
 
     name: str
@@ -288,6 +309,13 @@ class Joint:
     nodes: tuple[str, ...]
     point: tuple[float, float] | None = None
     axis: tuple[float, float] | None = None
+    shift_x: tuple[tuple[float, float], ...] | None = None
+    shift_y: tuple[tuple[float, float], ...] | None = None
+
+    @property
+    def coupled(self) -> bool:
+        """Whether the hinge's point moves with its angle (``shift_x`` or ``shift_y``)."""
+        return self.shift_x is not None or self.shift_y is not None
 
     def __post_init__(self) -> None:
         where = _owner("joint", self.name)
@@ -313,6 +341,11 @@ class Joint:
             if norm == 0.0:
                 raise SceneError.at(where, "axis", "must be a direction, got [0, 0]")
             object.__setattr__(self, "axis", (ax[0] / norm, ax[1] / norm))
+        for f in ("shift_x", "shift_y"):
+            if getattr(self, f) is not None:
+                if self.kind != "hinge" or len(self.nodes) != 2:
+                    raise SceneError.at(where, f, "applies to a hinge between two nodes only")
+                object.__setattr__(self, f, _knots(where, f, getattr(self, f)))
 
     @property
     def rows(self) -> int:

@@ -15,13 +15,15 @@ __all__ = ["Marker", "check_markers"]
 class Marker:
     """A point fixed on the beam or rigid body ``on``, at (x, y) (m) in the scene's initial
     configuration; ``label``: the lab's label of the marker it stands for in a trial's TRC file
-    (default: its name; :mod:`casflex.lab`)."""
+    (default: its name; :mod:`casflex.lab`); ``weight``: its weight in the marker fit (>= 0, as an OpenSim
+    IK task's: the fit minimises the sum of weight * squared distance; 0 leaves it out)."""
 
     name: str
     on: str
     x: float
     y: float
     label: str | None = None
+    weight: float = 1.0
 
     def __post_init__(self) -> None:
         where = _owner("marker", self.name)
@@ -29,6 +31,10 @@ class Marker:
         object.__setattr__(self, "on", _name(where, "on", self.on))
         for f in ("x", "y"):
             object.__setattr__(self, f, _number(where, f, getattr(self, f)))
+        weight = _number(where, "weight", self.weight)
+        if weight < 0:
+            raise SceneError.at(where, "weight", f"must be >= 0, got {weight:g}")
+        object.__setattr__(self, "weight", weight)
         if self.label is not None and (not isinstance(self.label, str) or not self.label.strip()):
             raise SceneError.at(where, "label", f"expected the lab's marker label (a string), got {self.label!r}")
 

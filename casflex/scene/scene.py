@@ -69,12 +69,13 @@ class Scene:
     gravity: tuple[float, float] = (0.0, -9.81)
     run: RunSettings = field(default_factory=RunSettings)
     markers: tuple[Any, ...] = ()  # casflex.scene.markers.Marker
+    coordinates: tuple[Any, ...] = ()  # casflex.scene.coordinates.Coordinate
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.strip():
             raise SceneError(f"name: expected a non-empty string (the scene's name), got {self.name!r}")
         for f in ("nodes", "beams", "springs", "torsion_springs", "bodies", "supports", "joints", "loads",
-                  "parameters", "markers"):
+                  "parameters", "markers", "coordinates"):
             value = getattr(self, f)
             if isinstance(value, str) or not isinstance(value, (list, tuple)):
                 raise SceneError(f"{f}: expected a list, got {type(value).__name__}")
@@ -90,17 +91,20 @@ class Scene:
         self._check_references()
         self._check_geometry()
         self._check_parameters()
+        from casflex.scene.coordinates import check_coordinates
         from casflex.scene.markers import check_markers
 
         check_markers(self)
+        check_coordinates(self)
 
     # -- validation -------------------------------------------------------------------------
     def _check_types(self) -> None:
+        from casflex.scene.coordinates import Coordinate
         from casflex.scene.markers import Marker
 
         kinds = {"nodes": Node, "beams": Beam, "springs": Spring, "torsion_springs": TorsionSpring,
                  "bodies": RigidBody, "supports": Support, "joints": Joint, "loads": Load, "parameters": Parameter,
-                 "markers": Marker}
+                 "markers": Marker, "coordinates": Coordinate}
         for f, cls in kinds.items():
             for i, item in enumerate(getattr(self, f)):
                 if not isinstance(item, cls):

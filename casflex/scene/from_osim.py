@@ -1,0 +1,301 @@
+"""A planar casflex scene made of an OpenSim model (:mod:`casflex.scene.osim`), with a report of what was
+kept, projected and dropped.
+
+The plane is the model's x-y plane (OpenSim's sagittal plane: x forward, y up, z to the right); the
+scene's initial configuration is the model's default pose. Each body becomes a node at the origin of its
+joint's child frame (the joint centre) and a rigid body (mass, centre of mass in the plane, moment of
+inertia about the plane's normal through the centre of mass); each joint a hinge, a weld or the free root:
+
+- a rotation about the plane's normal with a coordinate (a PinJoint's, a CustomJoint's) is a hinge, its
+  coordinate a ``[[coordinates]]`` entry (``knee_angle_r`` of ``knee_r``, its default value and sign);
+- the joint to the ground gives the scene's root: its rotation about the normal and its translations
+  along x and y are the root's coordinates (``pelvis_tilt``, ``pelvis_tx``, ``pelvis_ty``);
+- a joint with no such rotation is a weld;
+- what cannot move in the plane is projected and reported: a coordinate that turns about another axis
+  or translates out of the plane is locked at its default value, a rotation or translation that follows
+  the hinge's coordinate about or along something else is held at its default value (its reach over the
+  coordinate's range said);
+- a translation along x or y of the plane that follows the hinge's coordinate (a knee's rolling, a SIMM
+  spline or linear function of the knee angle) makes the hinge a coupled one (``shift_x``, ``shift_y``:
+  :class:`casflex.scene.Joint`), the spline's knots carried over exactly;
+- markers are projected on the plane; forces (muscles, actuators), constraints, contact geometry,
+  controllers and probes are listed as ignored.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from casflex.scene.coordinates import Coordinate
+from casflex.scene.functions import Linear, Multiplier, SimmSpline
+from casflex.scene.markers import Marker
+from casflex.scene.osim import OsimJoint, OsimModel, axis_rotation, read_osim
+from casflex.scene.scene import Joint, Node, RigidBody, Scene
+
+__all__ = ["OsimScene", "scene_from_osim"]
+
+#: |cos| of the angle between an axis and the plane's normal above which the axis is the normal (a
+#: thousandth of a degree: OpenSim's files print axes to 1e-16, a hand-written one may round them).
+NORMAL = math.cos(math.radians(1e-3))
+#: The largest angle (deg) between a joint's rotation axis and the plane's normal that still makes a hinge,
+#: the axis projected on the normal and the angle reported: 3D models tilt the ankle's axis 12 degrees
+#: (Inman's talocrural axis, Delp 1990) and the lab's sagittal analysis takes it as the flexion axis; an axis
+#: farther off turns the segment mostly out of the plane.
+PROJECTED = 30.0
+
+
+@dataclass(frozen=True)
+class OsimScene:
+    """The scene of an OpenSim model and the report of what was made of each part (lines)."""
+
+    scene: Scene
+    report: tuple[str, ...]
+    dropped: tuple[str, ...]
+
+
+def _name(s: str) -> str:
+    return re.sub(r"[.:\[\]\s]", "_", s) or "_"
+
+
+class _Builder:
+    def __init__(self, model: OsimModel):
+        self.m = model
+        self.default = {c.name: c.default for j in model.joints for c in j.coordinates}
+        self.range = {c.name: c.range for j in model.joints for c in j.coordinates}
+        self.pose: dict[str, tuple[np.ndarray, np.ndarray]] = {"ground": (np.eye(3), np.zeros(3))}
+        self.nodes: list[Node] = []
+        self.joints: list[Joint] = []
+        self.coords: list[Coordinate] = []
+        self.report: list[str] = []
+        self.dropped: list[str] = []
+
+    # -- geometry -------------------------------------------------------------------------
+    def transform(self, j: OsimJoint, values: dict[str, float]) -> tuple[np.ndarray, np.ndarray]:
+        """X_FM (rotation, translation) of the joint at the coordinates' ``values``."""
+        R, t = np.eye(3), np.zeros(3)
+        for ax in j.axes:
+            v = float(ax.function(values[ax.coordinate] if ax.coordinate else 0.0))
+            if ax.rotation:
+                R = R @ axis_rotation(ax.axis, v)
+            else:
+                t = t + v * np.asarray(ax.axis, dtype=float) / np.linalg.norm(ax.axis)
+        return R, t
+
+    def rotation_axes_in_ground(self, j: OsimJoint, RF: np.ndarray) -> list[np.ndarray]:
+        """Each rotation axis of the joint, in the ground at the default pose (body-fixed sequence)."""
+        out, R = [], RF
+        for ax in j.axes:
+            a = np.asarray(ax.axis, dtype=float) / np.linalg.norm(ax.axis)
+            out.append(R @ a if ax.rotation else RF @ a)
+            if ax.rotation:
+                R = R @ axis_rotation(a, float(ax.function(self.default[ax.coordinate] if ax.coordinate else 0.0)))
+        return out
+
+    def reach(self, ax, coordinate: str) -> float:
+        """How far the axis's function moves over the coordinate's range (m or rad)."""
+        lo, hi = self.range.get(coordinate, (-math.pi, math.pi))
+        lo, hi = max(lo, -2 * math.pi), min(hi, 2 * math.pi)
+        v = np.asarray(ax.function(np.linspace(lo, hi, 201)), dtype=float)
+        return float(np.ptp(v))
+
+    # -- joints ---------------------------------------------------------------------------
+    def joint(self, j: OsimJoint) -> None:
+        RP, pP = self.pose[j.parent]
+        RF, pF = RP @ j.parent_offset[0], pP + RP @ j.parent_offset[1]
+        R, t = self.transform(j, self.default)
+        RM, pM = RF @ R, pF + RF @ t
+        RB = RM @ j.child_offset[0].T
+        self.pose[j.child] = (RB, pM - RB @ j.child_offset[1])
+        theta = math.atan2(RM[1, 0], RM[0, 0])
+        child = _name(j.child)
+        self.nodes.append(Node(child, float(pM[0]), float(pM[1]), theta))
+        axes_g = self.rotation_axes_in_ground(j, RF)
+        hinge = self.hinge(j, axes_g)
+        shifts = self.shifts(j, axes_g, hinge) if hinge and j.parent != "ground" else {}
+        self.classify(j, axes_g, hinge, shifts, root=j.parent == "ground")
+        if j.parent == "ground":
+            return
+        name = _name(j.name)
+        if hinge is None:
+            self.joints.append(Joint(name, "weld", (_name(j.parent), child)))
+            self.report.append(f"joint {j.name!r} ({j.kind}): a weld")
+        else:
+            coord, sign = hinge
+            sx, sy = shifts.get("x"), shifts.get("y")
+            self.joints.append(Joint(name, "hinge", (_name(j.parent), child), shift_x=sx and sx[1],
+                                     shift_y=sy and sy[1]))
+            self.coords.append(Coordinate(coord, name, self.default[coord], sign))
+            kind = "a coupled hinge (its centre moves along " + " and ".join(sorted(shifts)) + ")" if shifts \
+                else "a hinge"
+            self.report.append(f"joint {j.name!r} ({j.kind}): {kind}, coordinate {coord!r}")
+
+    def hinge(self, j: OsimJoint, axes_g):
+        """The joint's rotation about the plane's normal: (coordinate, sign), or None."""
+        hinge, used = None, set()
+        for ax, a in zip(j.axes, axes_g, strict=True):
+            if not ax.rotation or ax.coordinate is None or abs(a[2]) < math.cos(math.radians(PROJECTED)) or \
+                    ax.function.is_constant():
+                continue
+            slope = getattr(ax.function, "slope", None)
+            if ax.coordinate in used or hinge is not None or slope is None or abs(abs(slope) - 1.0) > 1e-12:
+                raise ValueError(f"{self.m.source}: joint {j.name!r}: turns about the plane's normal as "
+                                 f"{type(ax.function).__name__} of {ax.coordinate!r}; casflex takes one rotation "
+                                 "about the normal equal to +-1 times a coordinate")
+            hinge = (ax.coordinate, float(np.sign(slope) * np.sign(a[2])))
+            used.add(ax.coordinate)
+            if abs(a[2]) < NORMAL:
+                tilt = math.degrees(math.acos(min(1.0, abs(a[2]))))
+                self.dropped.append(f"joint {j.name!r}: its axis {np.round(a, 3).tolist()} is {tilt:.1f} deg from the "
+                                    "plane's normal; projected on it (a hinge about the normal)")
+        return hinge
+
+    def shifts(self, j: OsimJoint, axes_g, hinge) -> dict[str, tuple[int, tuple]]:
+        """The hinge's coupled translations: 'x' or 'y' -> (the axis's index, knots [psi, s])."""
+        coord, sign = hinge
+        q0 = self.default[coord]
+        out: dict[str, tuple[int, tuple]] = {}
+        for i, (ax, a) in enumerate(zip(j.axes, axes_g, strict=True)):
+            if ax.rotation or ax.coordinate != coord or ax.function.is_constant():
+                continue
+            k = int(np.argmax(np.abs(a[:2])))
+            f, scale = ax.function, 1.0
+            while isinstance(f, Multiplier):  # a scaled model's function: exact on the knots (linear in y)
+                f, scale = f.inner, scale * f.scale
+            if abs(a[k]) < NORMAL or "xy"[k] in out or not isinstance(f, (SimmSpline, Linear)):
+                continue  # reported by classify as held at its default
+            if isinstance(f, Linear):
+                lo, hi = self.range.get(coord, (-math.pi, math.pi))
+                xs = np.array([max(lo, -2 * math.pi), min(hi, 2 * math.pi)])
+                ys = f(xs)
+            else:
+                xs, ys = np.asarray(f.x, dtype=float), np.asarray(f.y, dtype=float)
+            psi, s = sign * (xs - q0), np.sign(a[k]) * scale * ys
+            order = np.argsort(psi)
+            out["xy"[k]] = (i, tuple((float(p), float(v)) for p, v in zip(psi[order], s[order], strict=True)))
+        return out
+
+    def classify(self, j: OsimJoint, axes_g, hinge, shifts, root: bool) -> None:
+        """The root's coordinates; what is locked, held or dropped (reported)."""
+        free = [c for c in j.coordinates if not c.locked]
+        used = {hinge[0]} if hinge else set()
+        coupled = {i for i, _ in shifts.values()}
+        if root:
+            self.root(j, axes_g, hinge)
+            used |= {c.name for c in self.coords}
+        for i, (ax, a) in enumerate(zip(j.axes, axes_g, strict=True)):
+            own = ax.rotation and abs(a[2]) >= math.cos(math.radians(PROJECTED)) and getattr(ax.function, "slope", 0)
+            if ax.coordinate is None or ax.function.is_constant() or i in coupled or ax.coordinate in used and not (
+                    hinge and ax.coordinate == hinge[0] and not own):
+                continue
+            what = "rotation about" if ax.rotation else "translation along"
+            direction = np.round(a, 3).tolist()
+            if hinge and ax.coordinate == hinge[0]:
+                unit = "deg" if ax.rotation else "mm"
+                size = self.reach(ax, ax.coordinate) * (180 / math.pi if ax.rotation else 1e3)
+                self.dropped.append(f"joint {j.name!r}: its {what} {direction} follows {ax.coordinate!r} "
+                                    f"(reach {size:.1f} {unit} over its range); held at its default value")
+            else:
+                self.dropped.append(f"joint {j.name!r}: coordinate {ax.coordinate!r} ({what} {direction}) locked "
+                                    f"at its default value {self.default[ax.coordinate]:g}")
+        for c in free:
+            if c.name not in used and not any(ax.coordinate == c.name for ax in j.axes):
+                self.dropped.append(f"joint {j.name!r}: coordinate {c.name!r} moves nothing; ignored")
+
+    def root(self, j: OsimJoint, axes_g, hinge) -> None:
+        """The root's coordinates: the rotation about the normal and translations along the ground's x and y."""
+        child = _name(j.child)
+        if hinge is not None:
+            self.coords.append(Coordinate(hinge[0], f"{child}.theta", self.default[hinge[0]], hinge[1]))
+        for ax, a in zip(j.axes, axes_g, strict=True):
+            if ax.rotation or ax.coordinate is None or ax.function.is_constant():
+                continue
+            slope = getattr(ax.function, "slope", 0.0)
+            for k, dof in ((0, "x"), (1, "y")):
+                if abs(a[k]) >= NORMAL and abs(abs(slope) - 1.0) < 1e-12:
+                    self.coords.append(Coordinate(ax.coordinate, f"{child}.{dof}", self.default[ax.coordinate],
+                                                  float(np.sign(a[k]) * np.sign(slope))))
+        self.report.append(f"joint {j.name!r} ({j.kind}): the root {child!r}, driven by the data; coordinates "
+                           f"{[c.name for c in self.coords]}")
+
+    # -- bodies and markers ---------------------------------------------------------------
+    def bodies(self) -> list[RigidBody]:
+        out, joints = [], {j.name for j in self.joints}
+        for b in self.m.bodies.values():
+            if b.name not in self.pose:
+                continue
+            if b.mass <= 0:
+                self.report.append(f"body {b.name!r}: massless, a node only")
+                continue
+            R, p = self.pose[b.name]
+            com = p + R @ b.com
+            Ig = R @ b.inertia @ R.T
+            name = _name(b.name) + ("_body" if _name(b.name) in joints else "")
+            out.append(RigidBody(name, _name(b.name), b.mass, float(Ig[2, 2]), float(com[0]), float(com[1])))
+        return out
+
+    def markers(self, bodies: list[RigidBody]) -> list[Marker]:
+        on = {b.node: b.name for b in bodies}
+        out = []
+        for mk in self.m.markers:
+            node = _name(mk.body)
+            if mk.body not in self.pose or node not in on:
+                why = "massless" if mk.body in self.pose else "no body of the tree"
+                self.dropped.append(f"marker {mk.name!r}: on {mk.body!r}, {why}; left out")
+                continue
+            R, p = self.pose[mk.body]
+            x = p + R @ mk.location
+            out.append(Marker(_name(mk.name), on[node], float(x[0]), float(x[1]), label=mk.name))
+        return out
+
+
+def _tree_order(model: OsimModel) -> list[OsimJoint]:
+    """The joints from the ground outwards; ValueError for a body with two joints, or none from the ground."""
+    by_child: dict[str, OsimJoint] = {}
+    for j in model.joints:
+        if j.child in by_child:
+            raise ValueError(f"{model.source}: body {j.child!r} is the child of joints {by_child[j.child].name!r} and "
+                             f"{j.name!r}: a closed loop; casflex reads trees")
+        by_child[j.child] = j
+    roots = [j for j in model.joints if j.parent == "ground"]
+    if len(roots) != 1:
+        raise ValueError(f"{model.source}: {len(roots)} joints to the ground ({[j.name for j in roots]}); casflex "
+                         "reads a model with one (its root)")
+    order, placed = [], {"ground"}
+    todo = list(model.joints)
+    while todo:
+        nxt = [j for j in todo if j.parent in placed]
+        if not nxt:
+            raise ValueError(f"{model.source}: joints {[j.name for j in todo][:4]} do not reach the ground")
+        for j in nxt:
+            order.append(j)
+            placed.add(j.child)
+            todo.remove(j)
+    return order
+
+
+def scene_from_osim(source: str | os.PathLike[str] | OsimModel, name: str | None = None) -> OsimScene:
+    """The planar scene of an OpenSim model file (or its parts) and the report (module docstring)."""
+    model = source if isinstance(source, OsimModel) else read_osim(source)
+    b = _Builder(model)
+    for j in _tree_order(model):
+        b.joint(j)
+    bodies = b.bodies()
+    markers = b.markers(bodies)
+    others: dict[str, int] = {}
+    for s, kind, _ in model.others:
+        others[f"{s} {kind}"] = others.get(f"{s} {kind}", 0) + 1
+    if others:
+        b.report.append("ignored: " + ", ".join(f"{n} {k}" for k, n in sorted(others.items())))
+    g = model.gravity
+    title = _name(name or os.path.splitext(os.path.basename(model.name))[0])
+    scene = Scene(title, tuple(b.nodes), bodies=tuple(bodies), joints=tuple(b.joints), markers=tuple(markers),
+                  coordinates=tuple(b.coords),
+                  gravity=(float(g[0]), float(g[1])))
+    report = [f"{model.source}: {len(bodies)} bodies, {len(b.joints)} joints, {len(markers)} markers, "
+              f"{len(b.coords)} coordinates in the x-y plane", *b.report, *b.dropped]
+    return OsimScene(scene, tuple(report), tuple(b.dropped))

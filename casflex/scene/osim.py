@@ -1,0 +1,275 @@
+"""OpenSim model files (``.osim``, format 4.x) read into plain data: bodies, joints with their
+coordinates and transforms, markers, and what else the model holds (forces, constraints), for
+:mod:`casflex.scene.from_osim` to make a planar scene of. The XML is read directly: the lab path
+does not need the ``opensim`` package.
+
+Conventions (OpenSim's): lengths in m, angles in rad, a frame's ``orientation`` an X-Y-Z body-fixed
+rotation sequence; a joint places its child frame M in its parent frame F by the SpatialTransform
+X_FM(q): the rotations (body-fixed, in order) then the translations along their axes in F. A PinJoint
+turns about F's z axis; a WeldJoint locks M to F.
+"""
+
+from __future__ import annotations
+
+import os
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from casflex.scene.functions import Constant, Function, Linear, Multiplier, Polynomial, SimmSpline
+
+__all__ = ["OsimBody", "OsimCoordinate", "OsimJoint", "OsimMarker", "OsimModel", "read_osim", "rotation"]
+
+
+@dataclass(frozen=True)
+class OsimCoordinate:
+    name: str
+    default: float
+    range: tuple[float, float]
+    locked: bool
+    rotational: bool
+
+
+@dataclass(frozen=True)
+class Axis:
+    """One TransformAxis of a SpatialTransform: ``rotation`` or not, its axis (3,) in F (rotations: in the
+    frame the earlier rotations left), the coordinate it follows (None: constant) and its function."""
+
+    rotation: bool
+    axis: np.ndarray
+    coordinate: str | None
+    function: Function
+
+
+@dataclass(frozen=True)
+class OsimJoint:
+    """A joint: its kind (``PinJoint``, ``WeldJoint``, ``CustomJoint``, ...), parent and child bodies
+    (``ground`` for the ground), the offset frames (rotation (3, 3), translation (3,)) of F in the parent
+    and M in the child, its coordinates and (CustomJoint, PinJoint) its transform axes."""
+
+    name: str
+    kind: str
+    parent: str
+    child: str
+    parent_offset: tuple[np.ndarray, np.ndarray]
+    child_offset: tuple[np.ndarray, np.ndarray]
+    coordinates: tuple[OsimCoordinate, ...]
+    axes: tuple[Axis, ...]
+
+
+@dataclass(frozen=True)
+class OsimBody:
+    name: str
+    mass: float
+    com: np.ndarray
+    inertia: np.ndarray  # (3, 3) about the centre of mass, in the body's frame
+
+
+@dataclass(frozen=True)
+class OsimMarker:
+    name: str
+    body: str
+    location: np.ndarray
+
+
+@dataclass(frozen=True)
+class OsimModel:
+    """An OpenSim model's parts (module docstring); ``others``: what casflex does not take (forces,
+    constraints, contact geometry, probes, controllers), as ``(set, type, name)``."""
+
+    name: str
+    source: str
+    gravity: np.ndarray
+    bodies: dict[str, OsimBody]
+    joints: tuple[OsimJoint, ...]
+    markers: tuple[OsimMarker, ...]
+    others: tuple[tuple[str, str, str], ...] = field(default=())
+
+
+def rotation(angles) -> np.ndarray:
+    """The rotation matrix (3, 3) of X-Y-Z body-fixed angles (rad): Rx Ry Rz."""
+    R = np.eye(3)
+    for k, a in enumerate(angles):
+        R = R @ axis_rotation(np.eye(3)[k], a)
+    return R
+
+
+def axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """The rotation (3, 3) by ``angle`` (rad) about the unit vector ``axis`` (Rodrigues)."""
+    a = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
+class _Reader:
+    def __init__(self, path: str):
+        self.source = os.fspath(path)
+        try:
+            root = ET.parse(self.source).getroot()
+        except ET.ParseError as exc:
+            raise ValueError(f"{self.source}: not an OpenSim model (XML: {exc})") from None
+        except OSError as exc:
+            raise ValueError(f"{self.source}: cannot read it ({exc.strerror or exc})") from None
+        version = root.get("Version", "")
+        self.model = root.find("Model")
+        if root.tag != "OpenSimDocument" or self.model is None:
+            raise ValueError(f"{self.source}: not an OpenSim model (no <OpenSimDocument><Model>)")
+        if not version.isdigit() or int(version) < 40000:
+            raise ValueError(f"{self.source}: an OpenSim model of format {version or '?'}; casflex reads format 4.x "
+                             "(40000 and later): open and save it once in OpenSim 4 to update it")
+
+    def where(self, kind: str, name: str | None, what: str) -> str:
+        return f"{self.source}: {kind} {name!r}: {what}"
+
+    def vector(self, el, tag: str, n: int, owner: str) -> np.ndarray:
+        node = el.find(tag)
+        text = "" if node is None or node.text is None else node.text
+        try:
+            v = np.array([float(s) for s in text.split()], dtype=float)
+        except ValueError:
+            v = np.zeros(0)
+        if v.size != n or not np.isfinite(v).all():
+            raise ValueError(f"{self.source}: {owner}.{tag}: expected {n} numbers, got {text.strip()!r}")
+        return v
+
+    def number(self, el, tag: str, owner: str, default: float | None = None) -> float:
+        if el.find(tag) is None and default is not None:
+            return default
+        return float(self.vector(el, tag, 1, owner)[0])
+
+    def function(self, el, owner: str) -> Function:
+        """The Function element that ``el`` holds (a TransformAxis's, a MultiplierFunction's)."""
+        for f in el:
+            tag = f.tag
+            if tag == "Constant":
+                return Constant(self.number(f, "value", owner))
+            if tag == "LinearFunction":
+                a, b = self.vector(f, "coefficients", 2, owner)
+                return Linear(float(a), float(b))
+            if tag == "PolynomialFunction":
+                text = (f.findtext("coefficients") or "").split()
+                return Polynomial(tuple(float(s) for s in text))
+            if tag == "SimmSpline":
+                x = [float(s) for s in (f.findtext("x") or "").split()]
+                y = [float(s) for s in (f.findtext("y") or "").split()]
+                try:
+                    return SimmSpline(tuple(x), tuple(y))
+                except ValueError as exc:
+                    raise ValueError(f"{self.source}: {owner}: {exc}") from None
+            if tag == "MultiplierFunction":
+                inner = f.find("function")
+                return Multiplier(self.function(f if inner is None else inner, owner),
+                                  self.number(f, "scale", owner, 1.0))
+            if tag in ("NaturalCubicSpline", "GCVSpline", "PiecewiseLinearFunction", "PiecewiseConstantFunction",
+                       "StepFunction", "Sine", "FunctionAdapter"):
+                raise ValueError(f"{self.source}: {owner}: a {tag} is not read by casflex yet (Constant, "
+                                 "LinearFunction, PolynomialFunction, SimmSpline and MultiplierFunction are)")
+        return Constant(0.0)
+
+    def bodies(self) -> dict[str, OsimBody]:
+        out = {}
+        for b in self.model.findall("BodySet/objects/Body"):
+            name = b.get("name", "")
+            owner = f"body {name!r}"
+            mass = self.number(b, "mass", owner, 0.0)
+            com = self.vector(b, "mass_center", 3, owner) if b.find("mass_center") is not None else np.zeros(3)
+            i6 = self.vector(b, "inertia", 6, owner) if b.find("inertia") is not None else np.zeros(6)
+            xx, yy, zz, xy, xz, yz = i6
+            inertia = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+            if mass < 0:
+                raise ValueError(f"{self.source}: {owner}.mass: must be >= 0, got {mass:g}")
+            out[name] = OsimBody(name, mass, com, inertia)
+        return out
+
+    def frames(self, j, jname: str) -> dict[str, tuple[str, np.ndarray, np.ndarray]]:
+        """The joint's offset frames: name -> (body, rotation, translation)."""
+        out = {}
+        for f in j.findall("frames/PhysicalOffsetFrame"):
+            owner = f"joint {jname!r} frame {f.get('name')!r}"
+            body = (f.findtext("socket_parent") or "").strip().rsplit("/", 1)[-1]
+            out[f.get("name", "")] = (body, rotation(self.vector(f, "orientation", 3, owner)),
+                                      self.vector(f, "translation", 3, owner))
+        return out
+
+    def frame(self, frames, socket: str, jname: str) -> tuple[str, tuple[np.ndarray, np.ndarray]]:
+        """(body, (rotation, translation)) of a joint's socket: an offset frame, a body or the ground."""
+        path = socket.strip()
+        leaf = path.rsplit("/", 1)[-1]
+        if leaf in frames:
+            body, R, p = frames[leaf]
+            return body, (R, p)
+        return leaf, (np.eye(3), np.zeros(3))
+
+    def coordinates(self, j, owner: str) -> tuple[OsimCoordinate, ...]:
+        out = []
+        for c in j.findall("coordinates/Coordinate"):
+            cname = c.get("name", "")
+            rng = self.vector(c, "range", 2, f"{owner} coordinate {cname!r}") if c.find("range") is not None \
+                else np.array([-np.inf, np.inf])
+            locked = (c.findtext("locked") or "false").strip().lower() == "true"
+            rot = (c.findtext("motion_type") or "rotational").strip().lower() != "translational"
+            out.append(OsimCoordinate(cname, self.number(c, "default_value", owner, 0.0), (float(rng[0]),
+                                      float(rng[1])), locked, rot))
+        return tuple(out)
+
+    def axes(self, j, kind: str, coords: tuple[OsimCoordinate, ...], owner: str) -> tuple[Axis, ...]:
+        if kind == "PinJoint":
+            return (Axis(True, np.array([0.0, 0.0, 1.0]), coords[0].name if coords else None, Linear(1.0)),)
+        if kind == "SliderJoint":
+            return (Axis(False, np.array([1.0, 0.0, 0.0]), coords[0].name if coords else None, Linear(1.0)),)
+        if kind == "PlanarJoint":
+            names = [c.name for c in coords]
+            e = np.eye(3)
+            return (Axis(True, e[2], names[0], Linear(1.0)), Axis(False, e[0], names[1], Linear(1.0)),
+                    Axis(False, e[1], names[2], Linear(1.0)))
+        out = []
+        for ta in j.findall("SpatialTransform/TransformAxis"):
+            name = ta.get("name", "")
+            c = (ta.findtext("coordinates") or "").split()
+            if len(c) > 1:
+                raise ValueError(f"{self.source}: {owner} {name}: a function of {len(c)} coordinates; casflex takes "
+                                 "functions of one")
+            axis = self.vector(ta, "axis", 3, f"{owner} {name}")
+            out.append(Axis(name.startswith("rotation"), axis, c[0] if c else None,
+                            self.function(ta, f"{owner} {name}")))
+        return tuple(out)
+
+    def joints(self) -> tuple[OsimJoint, ...]:
+        out = []
+        for j in self.model.find("JointSet/objects") if self.model.find("JointSet/objects") is not None else ():
+            kind, name = j.tag, j.get("name", "")
+            owner = f"joint {name!r}"
+            if kind not in ("PinJoint", "WeldJoint", "CustomJoint", "PlanarJoint", "SliderJoint"):
+                raise ValueError(f"{self.source}: {owner}: a {kind} is not planar, or not read by casflex (PinJoint, "
+                                 "WeldJoint, CustomJoint, PlanarJoint and SliderJoint are)")
+            frames = self.frames(j, name)
+            parent, po = self.frame(frames, j.findtext("socket_parent_frame") or "", name)
+            child, co = self.frame(frames, j.findtext("socket_child_frame") or "", name)
+            coords = self.coordinates(j, owner)
+            out.append(OsimJoint(name, kind, parent, child, po, co, coords, self.axes(j, kind, coords, owner)))
+        return tuple(out)
+
+    def markers(self) -> tuple[OsimMarker, ...]:
+        out = []
+        for m in self.model.findall("MarkerSet/objects/Marker"):
+            name = m.get("name", "")
+            body = (m.findtext("socket_parent_frame") or "").strip().rsplit("/", 1)[-1]
+            out.append(OsimMarker(name, body, self.vector(m, "location", 3, f"marker {name!r}")))
+        return tuple(out)
+
+    def others(self) -> tuple[tuple[str, str, str], ...]:
+        out = []
+        for s in ("ForceSet", "ConstraintSet", "ControllerSet", "ContactGeometrySet", "ProbeSet", "ComponentSet"):
+            objs = self.model.find(f"{s}/objects")
+            out += [(s, o.tag, o.get("name", "")) for o in (objs if objs is not None else ())]
+        return tuple(out)
+
+
+def read_osim(path: str | os.PathLike[str]) -> OsimModel:
+    """The parts of the OpenSim model file ``path`` (module docstring). ValueError in one line naming the
+    file and the element for a file that is no OpenSim 4 model, or a part casflex cannot read."""
+    r = _Reader(path)
+    g = r.vector(r.model, "gravity", 3, "model") if r.model.find("gravity") is not None else np.array([0, -9.80665, 0])
+    return OsimModel(r.model.get("name", os.path.basename(r.source)), r.source, g, r.bodies(), r.joints(),
+                     r.markers(), r.others())

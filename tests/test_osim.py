@@ -1,0 +1,81 @@
+"""casflex.scene.osim, casflex.scene.from_osim, casflex.scene.functions: OpenSim models read into planar
+scenes (OpenSim's own kinematics of them: tests/test_peers_opensim.py), coupled hinges through the model."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from casflex.inverse.inputs import inverse_model
+from casflex.inverse.tree import kinematic_tree
+from casflex.scene import dumps_scene, load_scene, loads_scene
+from casflex.scene.from_osim import scene_from_osim
+from casflex.scene.functions import SimmSpline
+
+LEG = Path(__file__).parent / "data" / "lab" / "hamner_subject02_leg.osim"
+
+
+def test_simm_spline_reproduces_a_cubic_and_continues_linearly():
+    # FMM's end conditions match the third derivative of the cubics through the end knots: exact for a cubic
+    x = np.array([-2.0, -1.3, -0.4, 0.0, 0.5, 1.1, 2.0])
+    cubic = lambda v: 0.3 * v**3 - 0.2 * v**2 + v - 0.7  # noqa: E731
+    f = SimmSpline(tuple(x), tuple(cubic(x)))
+    v = np.linspace(-2, 2, 101)
+    assert np.max(np.abs(f(v) - cubic(v))) < 1e-12  # rounding of O(1) values
+    b = f.coefficients()[0]
+    assert f(3.0) == pytest.approx(cubic(2.0) + b[-1] * 1.0, abs=1e-12)
+    sym = ca.SX.sym("v")
+    g = ca.Function("g", [sym], [f(sym)])
+    w = np.linspace(-3, 3, 61)
+    assert np.array_equal(np.array(g(w[None, :])).ravel(), f(w))
+
+
+def test_the_leg_model_becomes_a_tree_with_a_coupled_knee_and_a_report():
+    r = scene_from_osim(LEG)
+    sc = r.scene
+    assert [(j.name, j.kind, j.coupled) for j in sc.joints] == [
+        ("hip_r", "hinge", False), ("knee_r", "hinge", True), ("ankle_r", "hinge", False),
+        ("subtalar_r", "weld", False), ("mtp_r", "weld", False)]
+    assert {c.name: c.of for c in sc.coordinates} == {
+        "pelvis_tilt": "pelvis.theta", "pelvis_tx": "pelvis.x", "pelvis_ty": "pelvis.y", "hip_flexion_r": "hip_r",
+        "knee_angle_r": "knee_r", "ankle_angle_r": "ankle_r"}
+    assert len(sc.markers) == 13 and all(m.label for m in sc.markers)
+    text = "\n".join(r.report)
+    for said in ("'hip_adduction_r' (rotation about [1.0, 0.0, 0.0]) locked", "'pelvis_tz'",
+                 "11.7 deg from the plane's normal; projected", "a coupled hinge (its centre moves along x and y)"):
+        assert said in text
+    assert loads_scene(dumps_scene(sc)) == sc  # written out for the user to edit, read back the same
+    assert load_scene(LEG) == sc
+
+
+def test_a_coupled_hinge_s_constraints_hold_along_the_tree_and_its_tangent_is_exact():
+    model = inverse_model(scene_from_osim(LEG).scene)
+    tree = kinematic_tree(model)
+    rng = np.random.default_rng(4)
+    z = np.array([0.1, 0.2, 0.9, 0.3, -1.4, 0.2]) + 0.1 * rng.standard_normal(tree.n)
+    q = np.array(tree.forward(z)).ravel()
+    phi, B = (np.array(v) for v in model.constraint(q)[:2])
+    assert np.max(np.abs(phi)) < 1e-14  # the tree places the tibia where the knee's rows put it
+    h = 1e-6
+    fd = np.column_stack([(np.array(model.constraint(q + h * e)[0]).ravel() - np.array(
+        model.constraint(q - h * e)[0]).ravel()) / (2 * h) for e in np.eye(q.size)])
+    assert np.max(np.abs(fd - B)) < 1e-8  # central differences: O(h^2) truncation, O(eps/h) rounding
+
+
+def test_bad_model_files_are_refused_in_one_line(tmp_path):
+    bad = tmp_path / "bad.osim"
+    bad.write_text("<OpenSimDocument Version='30000'><Model name='m'/></OpenSimDocument>")
+    with pytest.raises(ValueError, match=r"format 30000; casflex reads format 4.x"):
+        scene_from_osim(bad)
+    bad.write_text("not xml")
+    with pytest.raises(ValueError, match=r"bad.osim: not an OpenSim model \(XML"):
+        scene_from_osim(bad)
+    ankle = '<CustomJoint name="ankle_r">'
+    ball = LEG.read_text().replace('<CustomJoint name="knee_r">', '<BallJoint name="knee_r">').replace(
+        f"</CustomJoint>\n\t\t\t\t{ankle}", f"</BallJoint>\n\t\t\t\t{ankle}")
+    bad.write_text(ball)
+    with pytest.raises(ValueError, match=r"joint 'knee_r': a BallJoint is not planar"):
+        scene_from_osim(bad)
