@@ -28,6 +28,18 @@ def _passive(text: str) -> tuple[str, float | None, float | None]:
     return hinge, t0, t1
 
 
+def _cutoff_or_none(text: str) -> float | None | str:
+    if text.strip().lower() in ("none", "same"):
+        return None if text.strip().lower() == "none" else "same"
+    try:
+        v = float(text)
+    except ValueError:
+        v = float("nan")
+    if not (v > 0 and v < float("inf")):
+        raise argparse.ArgumentTypeError(f"expected a frequency in Hz (> 0), 'none' or 'same', got {text!r}")
+    return v
+
+
 def _progress(done: int, total: int) -> None:
     if done == total or done % max(total // 20, 1) == 0:
         sys.stderr.write(f"\rcasflex: marker fit {done}/{total} frames")
@@ -50,11 +62,13 @@ def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
         raise OptionError("--loads: say which node each plate acts on with --plate NODE=PREFIX (e.g. ankle=ground_)")
     if args.t_start is not None and args.t_end is not None and args.t_end <= args.t_start:
         raise OptionError(f"--t-end: must be after --t-start ({args.t_start:g} s), got {args.t_end:g}")
-    out = outputs.file("--out", args.out, (".npz", ".csv"), "inverse dynamics") if args.out is not None else None
+    out = outputs.file("--out", args.out, (".npz", ".csv", ".sto"), "inverse dynamics") if args.out is not None \
+        else None
     plots = outputs.directory("--plots", args.plots) if args.plots is not None else None
     inputs = prepare(args.scene, args.data, plane=args.plane, grf=args.loads, plates=plates,
                      cutoff=None if args.no_filter else args.cutoff, root=args.root, t_start=args.t_start,
-                     t_end=args.t_end, max_misfit=args.max_misfit)
+                     t_end=args.t_end, max_misfit=args.max_misfit, tasks=args.tasks,
+                     cutoff_plates=None if args.no_filter else args.cutoff_plates)
     _check_passive(args.passive or [], inputs)
     for line in inputs.warnings:
         print(f"casflex: warning: {line}", file=sys.stderr)
@@ -104,8 +118,8 @@ def cmd_calibrate(args: argparse.Namespace, outputs: Outputs) -> int:
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
     s = sub.add_parser("inverse", help="net joint moments and intersegmental forces from a lab trial")
-    s.add_argument("scene", help="built-in scene name (hamner_leg) or a TOML file: segments on hinges, labelled "
-                                 "markers")
+    s.add_argument("scene", help="built-in scene name (hamner_leg), a TOML file (segments on hinges, labelled "
+                                 "markers) or an OpenSim model (.osim)")
     s.add_argument("--data", required=True, metavar="TRIAL", help="the trial's markers (.trc or .c3d)")
     s.add_argument("--plane", default="X,Y", help="the lab axes that become the model's x and y (default X,Y)")
     s.add_argument("--loads", metavar="GRF", help="ground reactions (OpenSim .mot/.sto, or a .c3d's plates: the "
@@ -114,7 +128,12 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="a plate's columns (PREFIXforce_vx ...) act on NODE's segment; repeat per plate")
     s.add_argument("--cutoff", type=positive("a frequency in Hz"), default=6.0,
                    help="zero-lag Butterworth cut-off for the kinematics and the plates alike, Hz (default 6)")
+    s.add_argument("--cutoff-plates", type=_cutoff_or_none, default="same", metavar="HZ|none",
+                   help="the plates' own cut-off, Hz, 'none' (unfiltered, as OpenSim's ID tool) or 'same' (the "
+                        "default: --cutoff's)")
     s.add_argument("--no-filter", action="store_true", help="use the data unfiltered")
+    s.add_argument("--tasks", metavar="XML", help="marker weights: an OpenSim IK task set or IK setup file (markers "
+                                                  "with no task are not fitted); default the scene's weights")
     s.add_argument("--root", metavar="NODE", help="the node the data drive (default: the scene's first)")
     s.add_argument("--t-start", type=non_negative("a time in s"), help="use the trial from this time, s")
     s.add_argument("--t-end", type=positive("a time in s"), help="use the trial up to this time, s")
@@ -125,7 +144,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="fit a torsion spring-damper to HINGE's net moment (over T0..T1 s) and say how much of it "
                         "it explains; repeat per hinge")
     s.add_argument("--out", type=output_path, metavar="FILE",
-                   help="write the loads to FILE.npz (everything) or FILE.csv (a table)")
+                   help="write the loads to FILE.npz (everything), FILE.csv (a table) or FILE.sto (OpenSim's table, "
+                        "the lab's names)")
     s.add_argument("--plots", type=output_path, metavar="DIR", help="write figures into this directory")
     s.add_argument("--quiet", action="store_true", help="no progress messages")
     s.set_defaults(func=cmd_inverse)

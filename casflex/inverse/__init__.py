@@ -8,7 +8,9 @@ The data flow (docs/lab.md, "Inverse dynamics"):
    ``[[markers]]`` by label;
 2. per frame, the coordinates of the scene's kinematic tree (root pose and hinge angles) that fit
    them best (:mod:`casflex.inverse.fit`), gaps filled and reported;
-3. the coordinates and the force plates filtered by the same zero-lag Butterworth (``cutoff``);
+3. the coordinates and the force plates filtered by a zero-lag Butterworth, at one cut-off (``cutoff``, the
+   default: kinematics and forces filtered alike keep impact artefacts out of the moments, Kristianslund et
+   al. 2012) or each at its own (``cutoff_plates``; None: the plates unfiltered, as OpenSim's ID tool);
 4. the loads that make the scene follow that motion under the plates' forces: exact per frame for
    rigid segments (:mod:`casflex.inverse.rigid`); with flexible ones (beams), the scene driven along
    the motion by HHT, the bones' deflections from its dynamics (:mod:`casflex.inverse.flexible`).
@@ -23,6 +25,7 @@ import numpy as np
 from casflex.inverse.fit import coordinate_rates, fit_markers
 from casflex.inverse.flexible import driven_loads
 from casflex.inverse.inputs import InverseInputs, inverse_model, prepare
+from casflex.inverse.lab_names import lab_loads, lab_name
 from casflex.inverse.plates import Plate, plate_loads
 from casflex.inverse.result import InverseResult
 from casflex.inverse.rigid import rigid_loads
@@ -37,6 +40,7 @@ def inverse_dynamics(scene, markers, *, plane: str = "X,Y", grf=None, plates: di
                      cutoff: float | None = 6.0, root: str | None = None,
                      t_start: float | None = None, t_end: float | None = None, max_gap: float = 0.1,
                      max_misfit: float | None = None, dt: float | None = None, alpha: float | None = None,
+                     tasks=None, cutoff_plates: float | None | str = "same",
                      compiled: bool = False, progress: Callable[[int, int], None] | None = None) -> InverseResult:
     """Net joint moments, intersegmental forces and root loads of ``scene`` over a trial.
 
@@ -51,7 +55,13 @@ def inverse_dynamics(scene, markers, *, plane: str = "X,Y", grf=None, plates: di
         Ground reactions; ``plates`` maps each contacting node to its plate's column prefix (e.g.
         ``{"ankle": "ground_"}``: :mod:`casflex.inverse.plates`).
     cutoff : float or None, Hz
-        The zero-lag Butterworth's cut-off, for the coordinates and the plates alike (None: unfiltered).
+        The zero-lag Butterworth's cut-off for the coordinates (None: unfiltered), and for the plates unless
+        ``cutoff_plates`` says otherwise.
+    cutoff_plates : float, None or "same", Hz
+        The plates' own cut-off (None: unfiltered; "same": ``cutoff``).
+    tasks : path or dict, optional
+        Marker weights: an OpenSim IK task set or setup file, or label -> weight (:func:`weighted`); default
+        the scene's ``[[markers]]`` weights.
     root : str, optional
         The node the data drive (default: the scene's first node).
     t_start, t_end : float, s, optional
@@ -69,7 +79,8 @@ def inverse_dynamics(scene, markers, *, plane: str = "X,Y", grf=None, plates: di
     the option, file, marker or plate otherwise.
     """
     inputs = prepare(scene, markers, plane=plane, grf=grf, plates=plates, cutoff=cutoff, root=root,
-                     t_start=t_start, t_end=t_end, max_gap=max_gap, max_misfit=max_misfit, dt=dt)
+                     t_start=t_start, t_end=t_end, max_gap=max_gap, max_misfit=max_misfit, dt=dt, tasks=tasks,
+                     cutoff_plates=cutoff_plates)
     return solve(inputs, dt=dt, alpha=alpha, compiled=compiled, progress=progress)
 
 
@@ -88,8 +99,9 @@ def solve(inputs: InverseInputs, *, dt: float | None = None, alpha: float | None
     zd, zdd = coordinate_rates(t, z)
     plates = list(inputs.plates)
     if plates:
+        fc = inputs.settings.get("cutoff_plates_hz", cutoff)
         report.append(f"plates {', '.join(f'{p.name!r} on {p.node}' for p in plates)}: force and moment about "
-                      f"the lab origin filtered {f'at {cutoff:g} Hz' if cutoff else 'not at all'}")
+                      f"the lab origin filtered {f'at {fc:g} Hz' if fc else 'not at all'}")
     if model.n_con == model.n_dof - tree.n:  # the coordinates decide every dof: rigid segments
         external = (lambda tt, q: plate_loads(model, plates, tt, q)) if plates else None
         sol = rigid_loads(tree, t, z, zd, zdd, model.p_nominal, external)
@@ -101,5 +113,11 @@ def solve(inputs: InverseInputs, *, dt: float | None = None, alpha: float | None
         report.append(f"flexible segments: driven by HHT (alpha {run.alpha if alpha is None else alpha:g}), the "
                       f"bones' largest deflection {1e3 * sol['deflection'].max():.2f} mm")
     loads = {k: v for k, v in sol.items() if k not in ("q", "qd", "qdd", "lam", "deflection")}
+    lab = lab_loads(model.scene, loads)
+    loads |= lab
+    settings = dict(inputs.settings)
+    if lab:  # the summary speaks the lab's language
+        settings["moments"] = [lab_name(c) for c in model.scene.coordinates
+                               if not c.of.startswith(f"{tree.root}.") and lab_name(c) in lab]
     return InverseResult(t, tree.names, z, zd, zdd, model.dof_names, sol["q"], sol["qd"], sol["qdd"], loads,
-                         t, fit.rms, report, dict(inputs.settings), warnings, inputs.labels, fit.misfit, inputs.plates)
+                         t, fit.rms, report, settings, warnings, inputs.labels, fit.misfit, inputs.plates)

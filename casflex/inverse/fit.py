@@ -70,36 +70,40 @@ def _kabsch_start(tree: KinematicTree, y: np.ndarray, y0: np.ndarray) -> np.ndar
     return z
 
 
-def _solve_frame(f: ca.Function, z: np.ndarray, y: np.ndarray, max_iter: int = 50) -> tuple[np.ndarray, float, bool]:
+def _solve_frame(f: ca.Function, z: np.ndarray, y: np.ndarray, max_iter: int = 50,
+                 w: np.ndarray | None = None) -> tuple[np.ndarray, float, bool]:
     """Levenberg-Marquardt from z on the seen entries of y: (z, rms misfit (m), decided)."""
-    z, r, decided = _levenberg_marquardt(f, z, y, max_iter)
+    z, r, decided = _levenberg_marquardt(f, z, y, max_iter, w)
     return z, float(np.sqrt(np.mean(r.reshape(-1, 2) ** 2, axis=0).sum())) if r.size else np.nan, decided
 
 
-def _levenberg_marquardt(f: ca.Function, z: np.ndarray, y: np.ndarray, max_iter: int
+def _levenberg_marquardt(f: ca.Function, z: np.ndarray, y: np.ndarray, max_iter: int, w: np.ndarray | None = None
                          ) -> tuple[np.ndarray, np.ndarray, bool]:
-    """(z, the residuals of the seen entries of y, decided) from the start z (:func:`_solve_frame`)."""
-    seen = np.isfinite(y)
+    """(z, the residuals (m, unweighted) of the seen entries of y, decided) from the start z, minimising the
+    weighted sum of squares: ``w`` (2 m,) the square roots of the markers' weights per channel (entries of
+    weight 0 are left out, as unseen ones)."""
+    seen = np.isfinite(y) if w is None else np.isfinite(y) & (w > 0)
+    sw = np.ones(int(seen.sum())) if w is None else w[seen]
     lam = 1e-3
     ym, J = (np.array(v) for v in f(z))
-    r = ym.ravel()[seen] - y[seen]
-    J = J[seen]
+    r = sw * (ym.ravel()[seen] - y[seen])
+    J = sw[:, None] * J[seen]
     for _ in range(max_iter):
         A = J.T @ J
         step = np.linalg.solve(A + lam * np.diag(np.diag(A) + 1e-12), -J.T @ r)
         if np.max(np.abs(step)) < 1e-10:  # converged: 0.1 nm, 1e-10 rad
             break
         ym2, J2 = (np.array(v) for v in f(z + step))
-        r2 = ym2.ravel()[seen] - y[seen]
+        r2 = sw * (ym2.ravel()[seen] - y[seen])
         if r2 @ r2 <= r @ r:
-            z, r, J, lam = z + step, r2, J2[seen], max(lam / 10, 1e-12)
+            z, r, J, lam = z + step, r2, sw[:, None] * J2[seen], max(lam / 10, 1e-12)
         else:
             lam *= 10
             if lam > 1e8:
                 break
     s = np.linalg.svd(J, compute_uv=False) if J.size else np.zeros(1)
     decided = J.shape[0] >= J.shape[1] and s[-1] > 1e-8 * max(s[0], 1e-300)
-    return z, r, bool(decided)
+    return z, r / sw, bool(decided)
 
 
 def fit_pose(tree: KinematicTree, y: np.ndarray, start: np.ndarray | None = None) -> tuple[np.ndarray, float, bool]:
@@ -108,7 +112,13 @@ def fit_pose(tree: KinematicTree, y: np.ndarray, start: np.ndarray | None = None
     f = tree.marker_fit
     if start is None:
         start = _kabsch_start(tree, y, np.array(f(tree.coordinates(tree.model.q0))[0]).ravel())
-    return _solve_frame(f, start, y)
+    return _solve_frame(f, start, y, w=marker_weights(tree))
+
+
+def marker_weights(tree: KinematicTree) -> np.ndarray | None:
+    """(2 m,) the square roots of the scene markers' weights, per channel (x, y); None when all are 1."""
+    w = np.array([m.weight for m in tree.model.scene.markers], dtype=float)
+    return None if (w == 1.0).all() else np.repeat(np.sqrt(w), 2)
 
 
 def fit_markers(tree: KinematicTree, t: np.ndarray, y: np.ndarray, *, max_gap: float = 0.1,
@@ -124,22 +134,39 @@ def fit_markers(tree: KinematicTree, t: np.ndarray, y: np.ndarray, *, max_gap: f
     n, m = t.size, y.shape[1] // 2
     Z, rms, seen = np.full((n, tree.n), np.nan), np.full(n, np.nan), np.isfinite(y).reshape(n, -1, 2).all(2).sum(1)
     misfit = np.full((n, m), np.nan)
+    w = marker_weights(tree)
+    used = np.ones(m, dtype=bool) if w is None else w[::2] > 0
     z_prev = None
     for i in range(n):
         start = _kabsch_start(tree, y[i], y0) if z_prev is None else z_prev
-        z, r, ok = _levenberg_marquardt(f, start, y[i], 50)
+        z, r, ok = _levenberg_marquardt(f, start, y[i], 50, w)
         if ok:
             Z[i], z_prev = z, z
             rms[i] = float(np.sqrt(np.mean(r.reshape(-1, 2) ** 2, axis=0).sum()))
-            misfit[i, np.isfinite(y[i]).reshape(m, 2).all(axis=1)] = np.hypot(*r.reshape(-1, 2).T)
+            misfit[i, np.isfinite(y[i]).reshape(m, 2).all(axis=1) & used] = np.hypot(*r.reshape(-1, 2).T)
             _check_misfit(misfit[i], t[i], max_misfit, labels, source)
         if progress is not None:
             progress(i + 1, n)
         interrupt.check()  # a Ctrl-C that a CasADi call swallowed
     report = [f"marker fit: {n} frames, misfit RMS median {1e3 * np.nanmedian(rms):.1f} mm, "
               f"max {1e3 * np.nanmax(rms):.1f} mm"] if np.isfinite(rms).any() else []
+    report += _by_marker(misfit, labels, tree)
     Z = _fill(t, Z, max_gap, report)
     return FittedMotion(t, Z, rms, seen, report, misfit)
+
+
+def _by_marker(misfit: np.ndarray, labels, tree: KinematicTree) -> list[str]:
+    """One report line: each marker's misfit RMS and largest (mm) over the frames, and its weight."""
+    if not np.isfinite(misfit).any():
+        return []
+    names = labels or tuple(m.name for m in tree.model.scene.markers)
+    parts = []
+    for k, mk in enumerate(tree.model.scene.markers):
+        col = misfit[:, k][np.isfinite(misfit[:, k])]
+        if col.size:
+            parts.append(f"{names[k]} {1e3 * np.sqrt(np.mean(col**2)):.1f}/{1e3 * col.max():.1f}"
+                         + (f" (w {mk.weight:g})" if mk.weight != 1.0 else ""))
+    return ["markers' misfit RMS/largest, mm: " + ", ".join(parts)]
 
 
 def _check_misfit(misfit: np.ndarray, t: float, limit: float | None, labels, source: str) -> None:

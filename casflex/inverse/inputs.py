@@ -23,7 +23,7 @@ from casflex.inverse.tree import KinematicTree, kinematic_tree
 from casflex.lab.lowpass import check_cutoff, even_times
 from casflex.model import Model
 
-__all__ = ["InverseInputs", "prepare", "inverse_model", "read_markers"]
+__all__ = ["InverseInputs", "prepare", "inverse_model", "read_markers", "weighted"]
 
 #: The fewest frames an inverse takes (the filter's padding and the end differences need them).
 MIN_FRAMES = 10
@@ -162,10 +162,39 @@ def _memory(model: Model, tree: KinematicTree, t: np.ndarray, n_markers: int, dt
                          f"memory and {format_bytes(avail)} are available; take a shorter window")
 
 
+def weighted(scene, tasks) -> tuple[object, list[str]]:
+    """(the scene with its markers weighted by ``tasks``, warnings): an OpenSim IK task set or setup file
+    (:func:`casflex.lab.setups.read_tasks`) or a dict label -> weight. As OpenSim's IK, a scene marker with no
+    task is not fitted (weight 0); a task naming no scene marker, or a coordinate task, is said."""
+    from casflex.lab.setups import MarkerTasks, read_tasks
+    from casflex.scene import Scene
+    from casflex.scene.io import load_scene
+
+    if not isinstance(scene, Scene):
+        scene = load_scene(scene)
+    t = tasks if isinstance(tasks, MarkerTasks) else (
+        MarkerTasks("tasks", {str(k): float(v) for k, v in tasks.items()}) if isinstance(tasks, dict)
+        else read_tasks(tasks))
+    label = {m.name: m.label or m.name for m in scene.markers}
+    markers = tuple(dataclasses.replace(m, weight=t.weights.get(label[m.name], 0.0)) for m in scene.markers)
+    notes = []
+    left = [label[m.name] for m in scene.markers if label[m.name] not in t.weights]
+    if left:
+        notes.append(f"{t.source}: the scene's markers {left} have no task: not fitted (weight 0)")
+    if not any(m.weight > 0 for m in markers):
+        raise ValueError(f"{t.source}: no task weights any of the scene's markers {list(label.values())}")
+    unknown = sorted(set(t.weights) - set(label.values()))
+    if unknown:
+        notes.append(f"{t.source}: tasks of markers the scene does not have, ignored: {unknown}")
+    if t.coordinate_tasks:
+        notes.append(f"{t.source}: coordinate tasks {list(t.coordinate_tasks)} are not taken (markers only)")
+    return dataclasses.replace(scene, markers=markers), notes
+
+
 def prepare(scene, markers, *, plane="X,Y", grf=None, plates: dict[str, str] | None = None,
             cutoff: float | None = 6.0, root: str | None = None, t_start: float | None = None,
             t_end: float | None = None, max_gap: float = 0.1, max_misfit: float | None = None,
-            dt: float | None = None) -> InverseInputs:
+            dt: float | None = None, tasks=None, cutoff_plates: float | None | str = "same") -> InverseInputs:
     """The inputs of :func:`casflex.inverse.inverse_dynamics` (its parameters), read and checked (module
     docstring). ValueError in one line naming the option, file, marker or plate otherwise."""
     from casflex.lab import Plane
@@ -175,6 +204,9 @@ def prepare(scene, markers, *, plane="X,Y", grf=None, plates: dict[str, str] | N
     max_misfit = MAX_MISFIT if max_misfit is None else float(max_misfit)
     if not max_misfit > 0:
         raise ValueError(f"max_misfit: must be a distance > 0 m, got {max_misfit:g}")
+    task_notes: list[str] = []
+    if tasks is not None:
+        scene, task_notes = weighted(scene, tasks)
     model = inverse_model(scene, root)
     if not model.scene.markers:
         raise ValueError("scene: it has no [[markers]] to fit to the trial")
@@ -190,20 +222,23 @@ def prepare(scene, markers, *, plane="X,Y", grf=None, plates: dict[str, str] | N
     ms, labels = _scene_markers(model, tree, lab, pl, keep)
     t = _even_frames(ms.t[keep], lab.rate, lab.source)
     check_cutoff(cutoff, t, "markers")
-    report, warnings = [], []
+    report, warnings = [], list(task_notes)
     unseen = [lb for lb, xy in zip(labels, np.moveaxis(ms.q[keep].reshape(t.size, -1, 2), 1, 0), strict=True)
               if not np.isfinite(xy).all(axis=1).any()]
     if unseen:
         warnings.append(f"{lab.source}: markers {unseen} are not seen in the window; the pose is fitted without them")
     plate_list = []
+    fc = cutoff if cutoff_plates == "same" else cutoff_plates
     for node, prefix in plates.items():
-        plate = plate_from_table(table, prefix, node, pl, cutoff, window=(float(t[0]), float(t[-1])), rate=lab.rate,
+        plate = plate_from_table(table, prefix, node, pl, fc, window=(float(t[0]), float(t[-1])), rate=lab.rate,
                                  trial=lab.source)
         plate_list.append(plate)
         warnings += plate.notes
     _memory(model, tree, t, len(labels), dt)
-    settings = {"plane": f"{pl.x},{pl.y}", "cutoff_hz": cutoff, "root": tree.root, "plates": plates,
-                "moments": [f"{h}.moment" for h in tree.hinges], "source": getattr(lab, "source", ""),
+    settings = {"plane": f"{pl.x},{pl.y}", "cutoff_hz": cutoff,
+                "cutoff_plates_hz": fc, "root": tree.root, "plates": plates,
+                "moments": [f"{h}.moment" for h in tree.hinges], "weights": {lb: m.weight for lb, m in zip(
+                    labels, model.scene.markers, strict=True)}, "source": getattr(lab, "source", ""),
                 "scene": model.scene.name, "max_misfit_m": max_misfit}
     return InverseInputs(model, tree, t, ms.q[keep], labels, tuple(plate_list), cutoff, max_gap, max_misfit,
                          settings, tuple(report + warnings), tuple(warnings))

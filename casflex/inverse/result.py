@@ -64,11 +64,15 @@ class InverseResult:
         return "\n".join(lines)
 
     def save(self, path: str | os.PathLike[str], fmt: str | None = None) -> Path:
-        """Write ``npz`` (every array, names and the report) or ``csv`` (t, the coordinates and the
-        loads, one column each, a header line of names with units in brackets), atomically; ``fmt``
-        defaults to the path's suffix."""
+        """Write ``npz`` (every array, names and the report), ``csv`` (t, the coordinates and the
+        loads, one column each, a header line of names with units in brackets) or ``sto`` (OpenSim's
+        table: time and the loads, in the lab's names where the scene has ``[[coordinates]]``, every
+        column's unit listed once in the header), atomically; ``fmt`` defaults to the path's suffix."""
         path = Path(path)
         names = sorted(self.loads)
+        if (fmt or path.suffix.lstrip(".").lower()) == "sto":
+            trial = self.settings.get("source") or "a trial"
+            return atomic_write_text(path, self._sto(f"casflex inverse dynamics of {trial}"))
         if (fmt or path.suffix.lstrip(".").lower()) == "csv":
             cols = ["t [s]"] + [f"{c} [{'rad' if c.endswith(('.theta', '.angle')) else 'm'}]"
                                 for c in self.coordinate_names] + names
@@ -85,3 +89,23 @@ class InverseResult:
         buf = io.BytesIO()
         np.savez_compressed(buf, **arrays)
         return atomic_write_bytes(path, buf.getvalue())
+
+    def _sto(self, title: str) -> str:
+        """The loads as an OpenSim .sto table (:meth:`save`)."""
+        lab = [n for n in self.loads if n.endswith(("_moment", "_force"))]
+        names = lab or sorted(self.loads)
+        unit = {n: _unit(n) for n in names}
+        header = [title, "version=1", f"nRows={self.t.size}", f"nColumns={len(names) + 1}", "inDegrees=no",
+                  "Units are S.I. units (second, meters, Newtons, ...)",
+                  "units: time s; " + "; ".join(f"{n} {unit[n]}" for n in names),
+                  "endheader", "\t".join(["time", *names])]
+        buf = io.StringIO()
+        np.savetxt(buf, np.column_stack([self.t, *(self.loads[n] for n in names)]), delimiter="\t", fmt="%.10g")
+        return "\n".join(header) + "\n" + buf.getvalue()
+
+
+def _unit(name: str) -> str:
+    """The unit of a load called ``name`` (N or N m)."""
+    if name.endswith("_force") or name.endswith((".fx", ".fy", ".f_along", ".f_across", ".force")):
+        return "N"
+    return "N m"

@@ -19,7 +19,7 @@ __all__ = ["Function", "Constant", "Linear", "Polynomial", "SimmSpline", "Multip
 
 
 class Function:
-    """f(x) of one coordinate; ``derivative`` its slope."""
+    """f(x) of one coordinate (x a float, an array or a CasADi expression)."""
 
     def __call__(self, x):
         raise NotImplementedError

@@ -1,0 +1,28 @@
+"""The loads in the lab's language: along each of the scene's ``[[coordinates]]``
+(:mod:`casflex.scene.coordinates`), named as OpenSim's inverse dynamics names them: ``<coordinate>_moment``
+(N m) for a rotation, ``<coordinate>_force`` (N) for a translation, signed as the coordinate."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["lab_loads", "lab_name"]
+
+_ROOT = {"x": "root.fx", "y": "root.fy", "theta": "root.mz"}
+
+
+def lab_name(coordinate) -> str:
+    """``<name>_force`` or ``<name>_moment`` of a :class:`~casflex.scene.coordinates.Coordinate`."""
+    return f"{coordinate.name}_{'force' if coordinate.translational else 'moment'}"
+
+
+def lab_loads(scene, loads: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The generalised force along each lab coordinate (k,) from the scene's loads (``<hinge>.moment``,
+    ``root.fx|fy|mz``): the one the coordinate's driver applies, times the coordinate's sign."""
+    out = {}
+    for c in getattr(scene, "coordinates", ()):
+        node, _, dof = c.of.rpartition(".")
+        key = _ROOT[dof] if node and dof in _ROOT else f"{c.of}.moment"
+        if key in loads:
+            out[lab_name(c)] = c.sign * loads[key]
+    return out
