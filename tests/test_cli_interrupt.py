@@ -44,10 +44,17 @@ def _start_up() -> float:
     return max(times)
 
 
+def _default_signals() -> None:
+    """In the child: the signals' default dispositions, as in a terminal, whatever the test runs under
+    (``nohup`` ignores SIGHUP, and casflex keeps an ignored signal ignored, as it should)."""
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, signal.SIG_DFL)  # after exec, Python puts its KeyboardInterrupt on SIGINT again
+
+
 def _start(cwd: Path) -> tuple[subprocess.Popen, list[tuple[float, str]]]:
     """The command in ``cwd``; its stdout lines with their arrival times (monotonic)."""
     proc = subprocess.Popen([sys.executable, "-m", "casflex", *ARGS], cwd=cwd, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True, preexec_fn=_default_signals)
     lines: list[tuple[float, str]] = []
 
     def read() -> None:
@@ -97,12 +104,11 @@ def test_sigint_at_random_moments_exits_130_and_writes_nothing(calibration, tmp_
         if proc.poll() is not None or _wrote(lines) is not None:  # finished already: not a moment inside the run
             proc.wait(timeout=300)
             continue
-        before = _tree(cwd)
         proc.send_signal(signal.SIGINT)
         code = proc.wait(timeout=60)
         err = proc.stderr.read()
         if code == 0:  # after the commit (its 'wrote' line not read yet): a finished run
-            _committed_whole(cwd, calibration[1], before, lines, f"SIGINT at {moment:.2f} s")
+            _committed_whole(cwd, calibration[1], {}, lines, f"SIGINT at {moment:.2f} s")  # cwd began empty
             continue
         assert code in INTERRUPTED, f"SIGINT at {moment:.2f} s: exit {code}\n{err}"
         assert list(cwd.iterdir()) == [], f"SIGINT at {moment:.2f} s left {sorted(os.listdir(cwd))}"

@@ -28,7 +28,6 @@ class OsimCoordinate:
     default: float
     range: tuple[float, float]
     locked: bool
-    rotational: bool
 
 
 @dataclass(frozen=True)
@@ -208,9 +207,8 @@ class _Reader:
             rng = self.vector(c, "range", 2, f"{owner} coordinate {cname!r}") if c.find("range") is not None \
                 else np.array([-np.inf, np.inf])
             locked = (c.findtext("locked") or "false").strip().lower() == "true"
-            rot = (c.findtext("motion_type") or "rotational").strip().lower() != "translational"
             out.append(OsimCoordinate(cname, self.number(c, "default_value", owner, 0.0), (float(rng[0]),
-                                      float(rng[1])), locked, rot))
+                                      float(rng[1])), locked))
         return tuple(out)
 
     def axes(self, j, kind: str, coords: tuple[OsimCoordinate, ...], owner: str) -> tuple[Axis, ...]:
