@@ -11,6 +11,7 @@ beyond the knots with the end slopes.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -95,7 +96,15 @@ class SimmSpline(Function):
         if x.size < 2 or x.size != len(self.y) or not (np.diff(x) > 0).all():
             raise ValueError(f"SimmSpline: needs two or more knots with x increasing, got x = {list(self.x)}")
 
+    @functools.cached_property
+    def _coefficients(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self._solve()
+
     def coefficients(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(b, c, d) (n,) each: computed once per spline (copies)."""
+        return tuple(v.copy() for v in self._coefficients)
+
+    def _solve(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(b, c, d) (n,) each: y_k + b_k s + c_k s^2 + d_k s^3, s = x - x_k, on [x_k, x_k+1]."""
         x, y = np.asarray(self.x, dtype=float), np.asarray(self.y, dtype=float)
         n = x.size
@@ -135,7 +144,7 @@ class SimmSpline(Function):
         return b, c, d
 
     def __call__(self, x):
-        b, c, d = self.coefficients()
+        b, c, d = self._coefficients
         xk, yk = np.asarray(self.x, dtype=float), np.asarray(self.y, dtype=float)
         if not isinstance(x, (float, int, np.ndarray, np.generic)):
             return self._symbolic(x, b, c, d)
