@@ -10,10 +10,10 @@ frames around them and reported, longer ones refused in one line.
 Then the lab's filter: a 2nd-order Butterworth low-pass run forward and backward
 (``scipy.signal.filtfilt``'s algorithm: 4th order, no lag) at ``cutoff`` Hz on every coordinate,
 and z', z'' by second-order central differences of the filtered frames. By default the same filter
-serves the force plates (:mod:`casflex.inverse.plates`), so that the moments are not made of kinematics and forces filtered
-differently (Kristianslund et al. 2012, J Biomech 45:666); ``cutoff_plates`` gives them their own.
-Markers are weighted as the scene's ``weight`` says (an OpenSim IK task file sets them: the fit
-minimises the sum of weight x squared distance).
+serves the force plates (:mod:`casflex.inverse.plates`), so that the moments are not made of
+kinematics and forces filtered differently (Kristianslund et al. 2012, J Biomech 45:666);
+``cutoff_plates`` gives them their own. Markers are weighted as the scene's ``weight`` says (an
+OpenSim IK task file sets them: the fit minimises the sum of weight x squared distance).
 """
 
 from __future__ import annotations
