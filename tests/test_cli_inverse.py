@@ -52,6 +52,7 @@ def test_writes_the_loads_as_csv_npz_and_figures(tmp_path, capsys):
      r"no plate '2_ground_' \(columns 2_ground_force_vx .*the plates there are \['ground_'\]"),
     (["--plane", "X,X"], "--plane: expected two different lab axes"),
     (["--cutoff", "0"], "--cutoff: must be a frequency in Hz > 0"),
+    (["--filter", "spline"], "--filter: invalid choice: 'spline'"),
     (["--cutoff", "40"], "cutoff: must lie between 0 and the Nyquist frequency 30 Hz"),
     (["--t-start", "0.5", "--t-end", "0.45"], "--t-end: must be after --t-start"),
     (["--t-start", "0.9", "--t-end", "0.95"], "t_start, t_end: the window"),

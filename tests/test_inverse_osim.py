@@ -60,11 +60,27 @@ def test_task_weights_are_a_weighted_fit_and_a_task_less_marker_is_left_out(tmp_
     shank = [k[lb] for lb in labels if lb.startswith("R.Shank")]
     rms = lambda r: np.sqrt(np.nanmean(r.marker_misfit[:, shank] ** 2))  # noqa: E731
     assert rms(res) < 0.7 * rms(plain)  # the weighted markers fitted closer (measured: 7.1 -> 3.0 mm)
-    assert np.isnan(res.marker_misfit[:, k["R.Toe.Tip"]]).all()
+    assert "R.Toe.Tip" not in res.marker_labels  # applied false: left out, as OpenSim's IK leaves it
     missing = {lb: 1.0 for lb in labels if lb != "R.Heel"} | {"L.Knee": 2.0}
     res = inverse_dynamics(LEG, TRC, grf=GRF, plates={"calcn_r": "ground_"}, tasks=missing)
-    assert any("['R.Heel'] have no task: not fitted" in w for w in res.warnings)
+    assert any("['R.Heel'] have no task or a weight of 0: left out" in w for w in res.warnings)
     assert any("tasks of markers the scene does not have, ignored: ['L.Knee']" in w for w in res.warnings)
+
+
+def test_a_model_marker_with_no_task_need_not_be_in_the_trial(plain):
+    import dataclasses
+
+    from casflex.scene import Marker
+    from casflex.scene.from_osim import scene_from_osim
+
+    sc = scene_from_osim(LEG).scene
+    m = sc.markers[3]
+    extra = dataclasses.replace(sc, markers=(*sc.markers, Marker("R_Knee_Lat", m.on, m.x + 0.05, m.y, "R.Knee.Lat")))
+    with pytest.raises(ValueError, match="no marker labelled 'R.Knee.Lat'"):
+        inverse_dynamics(extra, TRC, grf=GRF, plates={"calcn_r": "ground_"})
+    res = inverse_dynamics(extra, TRC, grf=GRF, plates={"calcn_r": "ground_"},
+                           tasks={m: 1.0 for m in plain.marker_labels})  # the lab's tasks leave it out
+    assert np.max(np.abs(res.z - plain.z)) < 1e-8 and "R.Knee.Lat" not in res.marker_labels
 
 
 def test_bad_task_files_are_refused_in_one_line(tmp_path):

@@ -65,6 +65,22 @@ def test_a_coupled_hinge_s_constraints_hold_along_the_tree_and_its_tangent_is_ex
     assert np.max(np.abs(fd - B)) < 1e-8  # central differences: O(h^2) truncation, O(eps/h) rounding
 
 
+def test_a_coordinate_the_file_locks_is_held_as_opensim_holds_it(tmp_path):
+    text = LEG.read_text()
+    knee = text.index('<Coordinate name="knee_angle_r">')
+    end = text.index("</Coordinate>", knee)
+    block = text[knee:end]
+    locked = block.replace("<locked>false</locked>", "<locked>true</locked>") if "<locked>" in block \
+        else block + "<locked>true</locked>"
+    path = tmp_path / "locked.osim"
+    path.write_text(text[:knee] + locked + text[end:])
+    r = scene_from_osim(path)
+    assert [(j.name, j.kind) for j in r.scene.joints][:3] == [("hip_r", "hinge"), ("knee_r", "weld"),
+                                                              ("ankle_r", "hinge")]
+    assert "knee_angle_r" not in {c.name for c in r.scene.coordinates}
+    assert any("'knee_angle_r' (rotation about [0.0, 0.0, 1.0]) locked in the model file" in line for line in r.report)
+
+
 def test_bad_model_files_are_refused_in_one_line(tmp_path):
     bad = tmp_path / "bad.osim"
     bad.write_text("<OpenSimDocument Version='30000'><Model name='m'/></OpenSimDocument>")

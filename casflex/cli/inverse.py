@@ -68,7 +68,7 @@ def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
     inputs = prepare(args.scene, args.data, plane=args.plane, grf=args.loads, plates=plates,
                      cutoff=None if args.no_filter else args.cutoff, root=args.root, t_start=args.t_start,
                      t_end=args.t_end, max_misfit=args.max_misfit, tasks=args.tasks,
-                     cutoff_plates=None if args.no_filter else args.cutoff_plates)
+                     cutoff_plates=None if args.no_filter else args.cutoff_plates, filter=args.filter)
     _check_passive(args.passive or [], inputs)
     for line in inputs.warnings:
         print(f"casflex: warning: {line}", file=sys.stderr)
@@ -131,9 +131,13 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--cutoff-plates", type=_cutoff_or_none, default="same", metavar="HZ|none",
                    help="the plates' own cut-off, Hz, 'none' (unfiltered, as OpenSim's ID tool) or 'same' (the "
                         "default: --cutoff's)")
+    s.add_argument("--filter", choices=("butterworth", "opensim"), default="butterworth",
+                   help="the coordinates' filter: butterworth (2nd order forward and back: 4th-order zero-lag, the "
+                        "default) or opensim (as OpenSim's ID tool: the record padded by half its length, 3rd "
+                        "order forward and back); both -6 dB at --cutoff")
     s.add_argument("--no-filter", action="store_true", help="use the data unfiltered")
     s.add_argument("--tasks", metavar="XML", help="marker weights: an OpenSim IK task set or IK setup file (markers "
-                                                  "with no task are not fitted); default the scene's weights")
+                                                  "with no task are left out); default the scene's weights")
     s.add_argument("--root", metavar="NODE", help="the node the data drive (default: the scene's first)")
     s.add_argument("--t-start", type=non_negative("a time in s"), help="use the trial from this time, s")
     s.add_argument("--t-end", type=positive("a time in s"), help="use the trial up to this time, s")

@@ -10,7 +10,9 @@ The data flow (docs/lab.md, "Inverse dynamics"):
    them best (:mod:`casflex.inverse.fit`), gaps filled and reported;
 3. the coordinates and the force plates filtered by a zero-lag Butterworth, at one cut-off (``cutoff``, the
    default: kinematics and forces filtered alike keep impact artefacts out of the moments, Kristianslund et
-   al. 2012) or each at its own (``cutoff_plates``; None: the plates unfiltered, as OpenSim's ID tool);
+   al. 2012) or each at its own (``cutoff_plates``; None: the plates unfiltered, as OpenSim's ID tool); the
+   coordinates by Winter's 4th-order filter or, ``filter="opensim"``, by OpenSim's ID tool's; their rates
+   by 7-point central differences;
 4. the loads that make the scene follow that motion under the plates' forces: exact per frame for
    rigid segments (:mod:`casflex.inverse.rigid`); with flexible ones (beams), the scene driven along
    the motion by HHT, the bones' deflections from its dynamics (:mod:`casflex.inverse.flexible`).
@@ -30,7 +32,7 @@ from casflex.inverse.plates import Plate, plate_loads
 from casflex.inverse.result import InverseResult
 from casflex.inverse.rigid import rigid_loads
 from casflex.inverse.tree import KinematicTree, kinematic_tree
-from casflex.lab.lowpass import lowpass
+from casflex.lab.lowpass import lowpass, opensim_lowpass
 
 __all__ = ["InverseInputs", "InverseResult", "KinematicTree", "Plate", "inverse_dynamics", "inverse_model",
            "kinematic_tree", "prepare", "solve"]
@@ -40,7 +42,7 @@ def inverse_dynamics(scene, markers, *, plane: str = "X,Y", grf=None, plates: di
                      cutoff: float | None = 6.0, root: str | None = None,
                      t_start: float | None = None, t_end: float | None = None, max_gap: float = 0.1,
                      max_misfit: float | None = None, dt: float | None = None, alpha: float | None = None,
-                     tasks=None, cutoff_plates: float | None | str = "same",
+                     tasks=None, cutoff_plates: float | None | str = "same", filter: str = "butterworth",
                      compiled: bool = False, progress: Callable[[int, int], None] | None = None) -> InverseResult:
     """Net joint moments, intersegmental forces and root loads of ``scene`` over a trial.
 
@@ -59,6 +61,11 @@ def inverse_dynamics(scene, markers, *, plane: str = "X,Y", grf=None, plates: di
         ``cutoff_plates`` says otherwise.
     cutoff_plates : float, None or "same", Hz
         The plates' own cut-off (None: unfiltered; "same": ``cutoff``).
+    filter : "butterworth" or "opensim"
+        The coordinates' filter: a 2nd-order Butterworth run forward and back (4th order, zero lag; the
+        default), or the one OpenSim's inverse dynamics tool applies (the record padded by half its length,
+        a 3rd-order Butterworth forward and back: :func:`casflex.lab.lowpass.opensim_lowpass`), to get that
+        tool's answer. Both are -6 dB at ``cutoff``. The plates are filtered by the first in both cases.
     tasks : path or dict, optional
         Marker weights: an OpenSim IK task set or setup file, or label -> weight (:func:`weighted`); default
         the scene's ``[[markers]]`` weights.
@@ -80,8 +87,19 @@ def inverse_dynamics(scene, markers, *, plane: str = "X,Y", grf=None, plates: di
     """
     inputs = prepare(scene, markers, plane=plane, grf=grf, plates=plates, cutoff=cutoff, root=root,
                      t_start=t_start, t_end=t_end, max_gap=max_gap, max_misfit=max_misfit, dt=dt, tasks=tasks,
-                     cutoff_plates=cutoff_plates)
+                     cutoff_plates=cutoff_plates, filter=filter)
     return solve(inputs, dt=dt, alpha=alpha, compiled=compiled, progress=progress)
+
+
+def _filtered(t: np.ndarray, z: np.ndarray, cutoff: float | None, how: str):
+    """(z, z', z'') (n, k) each: the fitted coordinates filtered (``how``: "butterworth" or "opensim") and their
+    rates; OpenSim's filter pads the record, and the rates are taken on the padded record."""
+    if cutoff is None or how != "opensim":
+        z = lowpass(t, z, cutoff, what="markers")
+        return (z, *coordinate_rates(t, z))
+    tp, zp, keep = opensim_lowpass(t, z, cutoff)
+    zd, zdd = coordinate_rates(tp, zp)
+    return zp[keep], zd[keep], zdd[keep]
 
 
 def solve(inputs: InverseInputs, *, dt: float | None = None, alpha: float | None = None, compiled: bool = False,
@@ -93,10 +111,11 @@ def solve(inputs: InverseInputs, *, dt: float | None = None, alpha: float | None
                       labels=inputs.labels, source=inputs.settings["source"], progress=progress)
     report = [*inputs.report, *fit.report]
     warnings = [*inputs.warnings, *(line for line in fit.report if line.startswith("gaps:"))]
-    z = lowpass(t, fit.z, cutoff, what="markers")
-    report.append(f"coordinates filtered: Butterworth 4th order zero-lag at {cutoff:g} Hz" if cutoff
-                  else "coordinates not filtered")
-    zd, zdd = coordinate_rates(t, z)
+    z, zd, zdd = _filtered(t, fit.z, cutoff, inputs.settings.get("filter", "butterworth"))
+    report.append(("coordinates filtered: " + ("as OpenSim's ID tool (padded by half the record, Butterworth 3rd "
+                                              "order forward and back)" if inputs.settings.get("filter") == "opensim"
+                                              else "Butterworth 4th order zero-lag") + f" at {cutoff:g} Hz")
+                  if cutoff else "coordinates not filtered")
     plates = list(inputs.plates)
     if plates:
         fc = inputs.settings.get("cutoff_plates_hz", cutoff)

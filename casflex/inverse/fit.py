@@ -208,13 +208,27 @@ def _fill(t: np.ndarray, Z: np.ndarray, max_gap: float, report: list[str]) -> np
 
 
 def coordinate_rates(t: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(z', z''), each (n, k), of the evenly spaced frames z (n, k) at t (n,): second-order central
-    differences, one-sided second-order at the ends (the labs' differentiation of filtered data,
-    Winter 2009, ch. 3)."""
+    """(z', z''), each (n, k), of the evenly spaced frames z (n, k) at t (n,): 6th-order central differences
+    (7 points), 4th- and 2nd-order ones nearer the ends, one-sided 2nd-order ones at the ends. Central
+    differences of 2nd order, the textbook's (Winter 2009, ch. 3), are themselves a low-pass: at 60 Hz they
+    take 9 % off the acceleration of a 10 Hz component, 2.3 % off a 5 Hz one; the 7-point ones 0.2 % and
+    0.01 % (tests/test_filters.py)."""
     h = float(t[1] - t[0])
+    z = np.asarray(z, dtype=float)
+    n = z.shape[0]
     zd = np.gradient(z, h, axis=0, edge_order=2)
     zdd = np.empty_like(z)
     zdd[1:-1] = (z[2:] - 2.0 * z[1:-1] + z[:-2]) / h**2
     zdd[0] = (2.0 * z[0] - 5.0 * z[1] + 4.0 * z[2] - z[3]) / h**2
     zdd[-1] = (2.0 * z[-1] - 5.0 * z[-2] + 4.0 * z[-3] - z[-4]) / h**2
+    for m, d1, d2 in ((2, _D1_5, _D2_5), (3, _D1_7, _D2_7)):  # the wider stencils where they fit
+        if n > 2 * m:
+            window = np.stack([z[j:n - 2 * m + j] for j in range(2 * m + 1)])
+            zd[m:n - m] = np.tensordot(d1, window, axes=1) / h
+            zdd[m:n - m] = np.tensordot(d2, window, axes=1) / h**2
     return zd, zdd
+
+
+_D1_5, _D2_5 = np.array([1.0, -8.0, 0.0, 8.0, -1.0]) / 12.0, np.array([-1.0, 16.0, -30.0, 16.0, -1.0]) / 12.0
+_D1_7 = np.array([-1.0, 9.0, -45.0, 0.0, 45.0, -9.0, 1.0]) / 60.0
+_D2_7 = np.array([2.0, -27.0, 270.0, -490.0, 270.0, -27.0, 2.0]) / 180.0

@@ -25,6 +25,9 @@ from casflex.model import Model
 
 __all__ = ["InverseInputs", "prepare", "inverse_model", "read_markers", "weighted"]
 
+#: The coordinates' filters: a 2nd-order Butterworth forward and back (Winter's 4th-order zero-lag), or
+#: OpenSim's inverse dynamics tool's (:func:`casflex.lab.lowpass.opensim_lowpass`).
+FILTERS = ("butterworth", "opensim")
 #: The fewest frames an inverse takes (the filter's padding and the end differences need them).
 MIN_FRAMES = 10
 #: Bytes a frame of the inverse needs per value of its result (:func:`_memory` counts the values), with the
@@ -165,7 +168,8 @@ def _memory(model: Model, tree: KinematicTree, t: np.ndarray, n_markers: int, dt
 def weighted(scene, tasks) -> tuple[object, list[str]]:
     """(the scene with its markers weighted by ``tasks``, warnings): an OpenSim IK task set or setup file
     (:func:`casflex.lab.setups.read_tasks`) or a dict label -> weight. As OpenSim's IK, a scene marker with no
-    task is not fitted (weight 0); a task naming no scene marker, or a coordinate task, is said."""
+    task (or weight 0) is left out, and the trial need not have it; a task naming no scene marker, or a
+    coordinate task, is said."""
     from casflex.lab.setups import MarkerTasks, read_tasks
     from casflex.scene import Scene
     from casflex.scene.io import load_scene
@@ -176,12 +180,13 @@ def weighted(scene, tasks) -> tuple[object, list[str]]:
         MarkerTasks("tasks", {str(k): float(v) for k, v in tasks.items()}) if isinstance(tasks, dict)
         else read_tasks(tasks))
     label = {m.name: m.label or m.name for m in scene.markers}
-    markers = tuple(dataclasses.replace(m, weight=t.weights.get(label[m.name], 0.0)) for m in scene.markers)
+    markers = tuple(dataclasses.replace(m, weight=t.weights[label[m.name]]) for m in scene.markers
+                    if t.weights.get(label[m.name], 0.0) > 0)  # as OpenSim's IK: the trial need not have the others
     notes = []
-    left = [label[m.name] for m in scene.markers if label[m.name] not in t.weights]
+    left = [label[m.name] for m in scene.markers if t.weights.get(label[m.name], 0.0) <= 0]
     if left:
-        notes.append(f"{t.source}: the scene's markers {left} have no task: not fitted (weight 0)")
-    if not any(m.weight > 0 for m in markers):
+        notes.append(f"{t.source}: the scene's markers {left} have no task or a weight of 0: left out")
+    if not markers:
         raise ValueError(f"{t.source}: no task weights any of the scene's markers {list(label.values())}")
     unknown = sorted(set(t.weights) - set(label.values()))
     if unknown:
@@ -194,7 +199,8 @@ def weighted(scene, tasks) -> tuple[object, list[str]]:
 def prepare(scene, markers, *, plane="X,Y", grf=None, plates: dict[str, str] | None = None,
             cutoff: float | None = 6.0, root: str | None = None, t_start: float | None = None,
             t_end: float | None = None, max_gap: float = 0.1, max_misfit: float | None = None,
-            dt: float | None = None, tasks=None, cutoff_plates: float | None | str = "same") -> InverseInputs:
+            dt: float | None = None, tasks=None, cutoff_plates: float | None | str = "same",
+            filter: str = "butterworth") -> InverseInputs:
     """The inputs of :func:`casflex.inverse.inverse_dynamics` (its parameters), read and checked (module
     docstring). ValueError in one line naming the option, file, marker or plate otherwise."""
     from casflex.lab import Plane
@@ -202,6 +208,8 @@ def prepare(scene, markers, *, plane="X,Y", grf=None, plates: dict[str, str] | N
 
     pl = Plane.parse(plane) if isinstance(plane, str) else plane
     max_misfit = MAX_MISFIT if max_misfit is None else float(max_misfit)
+    if filter not in FILTERS:
+        raise ValueError(f"filter: one of {', '.join(FILTERS)}, got {filter!r}")
     if not max_misfit > 0:
         raise ValueError(f"max_misfit: must be a distance > 0 m, got {max_misfit:g}")
     task_notes: list[str] = []
@@ -235,7 +243,7 @@ def prepare(scene, markers, *, plane="X,Y", grf=None, plates: dict[str, str] | N
         plate_list.append(plate)
         warnings += plate.notes
     _memory(model, tree, t, len(labels), dt)
-    settings = {"plane": f"{pl.x},{pl.y}", "cutoff_hz": cutoff,
+    settings = {"plane": f"{pl.x},{pl.y}", "cutoff_hz": cutoff, "filter": filter,
                 "cutoff_plates_hz": fc, "root": tree.root, "plates": plates,
                 "moments": [f"{h}.moment" for h in tree.hinges], "weights": {lb: m.weight for lb, m in zip(
                     labels, model.scene.markers, strict=True)}, "source": getattr(lab, "source", ""),

@@ -3,14 +3,15 @@ and backward (4th order, no phase lag; Winter 2009, ch. 3), with scipy's ``filtf
 defaults, in numpy: importing scipy.signal costs 0.8 s, more than a whole ``casflex inverse`` run
 (tests/test_filters.py checks it against scipy's to round-off). Used by the inverse dynamics
 (:mod:`casflex.inverse`), the lab tables (:mod:`casflex.lab.filtering`) and the measured sets'
-smoothing (:mod:`casflex.identification.smoothing`).
+smoothing (:mod:`casflex.identification.smoothing`). Beside it, :func:`opensim_lowpass`: the filter OpenSim's
+inverse dynamics tool applies to the coordinates, for a lab that wants that tool's answer.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["butterworth2", "check_cutoff", "even_times", "filtfilt2", "lowpass", "runs"]
+__all__ = ["butterworth2", "check_cutoff", "even_times", "filtfilt2", "lowpass", "opensim_lowpass", "runs"]
 
 
 def even_times(t: np.ndarray, rate: float | None = None) -> np.ndarray:
@@ -109,3 +110,44 @@ def lowpass(t: np.ndarray, x: np.ndarray, cutoff: float | None, what: str = "dat
         raise ValueError(f"{what}: filtering needs more than 10 samples, got {t.size}")
     x = np.asarray(x, dtype=float)
     return filtfilt2(*butterworth2(cutoff, fs), x.reshape(t.size, -1)).reshape(x.shape)
+
+
+def _butterworth3(cutoff: float, fs: float) -> tuple[np.ndarray, np.ndarray]:
+    """(b, a) of the 3rd-order Butterworth low-pass that OpenSim's ``Signal::LowpassIIR`` builds (bilinear
+    transform with prewarping): numerator b (4,), denominator a (4,) with a[0] = 1."""
+    w = np.tan(np.pi * cutoff / fs)
+    den = (w + 1.0) * (w * w + w + 1.0)
+    b = np.array([1.0, 3.0, 3.0, 1.0]) * w**3 / den
+    a = np.array([1.0, (3 * w**3 + 2 * w * w - 2 * w - 3) / den, (3 * w**3 - 2 * w * w - 2 * w + 3) / den,
+                  (w - 1.0) * (w * w - w + 1.0) / den])
+    return b, a
+
+
+def _iir3(b: np.ndarray, a: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """OpenSim's recursion along axis 0 of x (n, k): its first three samples copied, then the 3rd-order filter."""
+    y = x.copy()
+    for i in range(3, x.shape[0]):
+        y[i] = b[0] * x[i] + b[1] * x[i - 1] + b[2] * x[i - 2] + b[3] * x[i - 3] \
+            - a[1] * y[i - 1] - a[2] * y[i - 2] - a[3] * y[i - 3]
+    return y
+
+
+def opensim_lowpass(t: np.ndarray, x: np.ndarray, cutoff: float) -> tuple[np.ndarray, np.ndarray, slice]:
+    """The coordinates' filter of OpenSim's inverse dynamics tool (``lowpass_cutoff_frequency_for_coordinates``):
+    the record x (n, k) at evenly spaced t (n,) s padded at both ends by n // 2 samples reflected about its end
+    points (value and slope kept: ``Storage::pad``), then ``Signal::LowpassIIR``: a 3rd-order Butterworth at
+    ``cutoff`` Hz run forward and backward (6th order, no lag, -6 dB at the cut-off), each pass starting with
+    its first three samples copied. Returns the padded times, the filtered padded record and the slice of the original
+    samples in it: the rates are taken on the padded record (OpenSim fits its splines to it), away from its
+    ends."""
+    t = even_times(np.asarray(t, dtype=float))
+    x = np.asarray(x, dtype=float).reshape(t.size, -1)
+    n, p = t.size, t.size // 2
+    if n < 8:
+        raise ValueError(f"filtering needs at least 8 samples, got {n}")
+    h = (t[-1] - t[0]) / (n - 1)
+    padded = np.concatenate([2 * x[:1] - x[p:0:-1], x, 2 * x[-1:] - x[-2:-p - 2:-1]], axis=0)
+    b, a = _butterworth3(cutoff, 1.0 / h)
+    y = _iir3(b, a, _iir3(b, a, padded)[::-1])[::-1]
+    tp = t[0] + h * np.arange(-p, n + p)
+    return tp, y, slice(p, p + n)

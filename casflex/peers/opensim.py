@@ -402,11 +402,24 @@ _TASKS = {"inverse_dynamics": _inverse_dynamics_here, "kinematics": _kinematics_
           "file_kinematics": _file_kinematics_here}
 
 
+def _task(name: str) -> Any:
+    """The function a task names: a key of ``_TASKS``, or ``module:function`` of another module of
+    casflex.peers (e.g. :mod:`casflex.peers.opensim_tools`'s)."""
+    if ":" not in name:
+        return _TASKS[name]
+    module, function = name.split(":")
+    if not module.startswith("casflex.peers."):
+        raise ValueError(f"an OpenSim task must be a function of casflex.peers, got {name!r}")
+    import importlib
+
+    return getattr(importlib.import_module(module), function)
+
+
 def _run(task: str, worker: bool | None, *args: Any) -> Any:
-    """``_TASKS[task](*args)`` here (``worker=False``, or None with OpenSim already imported here) or in
+    """:func:`_task` (task)(*args) here (``worker=False``, or None with OpenSim already imported here) or in
     a fresh Python process (``python -c`` calling :func:`_serve`), its exceptions raised here again."""
     if worker is False or (worker is None and "opensim" in sys.modules):
-        return _TASKS[task](*args)
+        return _task(task)(*args)
     import casflex
 
     env = dict(os.environ)
@@ -437,7 +450,8 @@ def _serve() -> None:
     try:
         osim = _opensim()
         osim.Logger.setLevelString("error")
-        result = (True, _TASKS[task](*args))
+        osim.Logger.removeFileSink()  # no opensim.log left in the caller's directory
+        result = (True, _task(task)(*args))
     except Exception as exc:  # noqa: BLE001 - handed back to the caller's process
         result = (False, (type(exc).__name__, str(exc)))
     with open(outp, "wb") as fh:

@@ -10,7 +10,8 @@ inertia about the plane's normal through the centre of mass); each joint a hinge
   coordinate a ``[[coordinates]]`` entry (``knee_angle_r`` of ``knee_r``, its default value and sign);
 - the joint to the ground gives the scene's root: its rotation about the normal and its translations
   along x and y are the root's coordinates (``pelvis_tilt``, ``pelvis_tx``, ``pelvis_ty``);
-- a joint with no such rotation is a weld;
+- a joint with no such rotation is a weld; so is one whose coordinate the model file locks (OpenSim holds a
+  locked coordinate at its default value in its tools);
 - what cannot move in the plane is projected and reported: a coordinate that turns about another axis
   or translates out of the plane is locked at its default value, a rotation or translation that follows
   the hinge's coordinate about or along something else is held at its default value (its reach over the
@@ -67,6 +68,7 @@ class _Builder:
         self.m = model
         self.default = {c.name: c.default for j in model.joints for c in j.coordinates}
         self.range = {c.name: c.range for j in model.joints for c in j.coordinates}
+        self.locked = {c.name for j in model.joints for c in j.coordinates if c.locked}  # OpenSim holds them
         self.pose: dict[str, tuple[np.ndarray, np.ndarray]] = {"ground": (np.eye(3), np.zeros(3))}
         self.nodes: list[Node] = []
         self.joints: list[Joint] = []
@@ -139,7 +141,7 @@ class _Builder:
         hinge, used = None, set()
         for ax, a in zip(j.axes, axes_g, strict=True):
             if not ax.rotation or ax.coordinate is None or abs(a[2]) < math.cos(math.radians(PROJECTED)) or \
-                    ax.function.is_constant():
+                    ax.function.is_constant() or ax.coordinate in self.locked:
                 continue
             slope = getattr(ax.function, "slope", None)
             if ax.coordinate in used or hinge is not None or slope is None or abs(abs(slope) - 1.0) > 1e-12:
@@ -199,6 +201,9 @@ class _Builder:
                 size = self.reach(ax, ax.coordinate) * (180 / math.pi if ax.rotation else 1e3)
                 self.dropped.append(f"joint {j.name!r}: its {what} {direction} follows {ax.coordinate!r} "
                                     f"(reach {size:.1f} {unit} over its range); held at its default value")
+            elif ax.coordinate in self.locked:
+                self.report.append(f"joint {j.name!r}: coordinate {ax.coordinate!r} ({what} {direction}) locked in "
+                                   f"the model file, at {self.default[ax.coordinate]:g}")
             else:
                 self.dropped.append(f"joint {j.name!r}: coordinate {ax.coordinate!r} ({what} {direction}) locked "
                                     f"at its default value {self.default[ax.coordinate]:g}")
@@ -212,7 +217,7 @@ class _Builder:
         if hinge is not None:
             self.coords.append(Coordinate(hinge[0], f"{child}.theta", self.default[hinge[0]], hinge[1]))
         for ax, a in zip(j.axes, axes_g, strict=True):
-            if ax.rotation or ax.coordinate is None or ax.function.is_constant():
+            if ax.rotation or ax.coordinate is None or ax.function.is_constant() or ax.coordinate in self.locked:
                 continue
             slope = getattr(ax.function, "slope", 0.0)
             for k, dof in ((0, "x"), (1, "y")):
