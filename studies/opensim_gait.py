@@ -172,7 +172,8 @@ def _command_times(files: dict, trial: Trial, tmp: Path, repeat: int) -> dict:
           "--loads", str(files["grf"]), *plates, "--tasks", str(files["tasks"]), "--cutoff", f"{CUTOFF:g}",
           "--cutoff-plates", "none", "--t-start", f"{t0:g}", "--t-end", f"{t1:g}", "--max-misfit",
           f"{MAX_MISFIT:g}", "--out", str(tmp / "cf.sto"), "--quiet"]
-    script = (f"import opensim as o\no.Logger.removeFileSink()\nm=o.Model({str(files['model'])!r})\nik=o.InverseKinematicsTool()\n"
+    script = (f"import opensim as o\no.Logger.removeFileSink()\nm=o.Model({str(files['model'])!r})\n"
+              "ik=o.InverseKinematicsTool()\n"
               f"ik.setModel(m)\nik.setMarkerDataFileName({str(files['markers'])!r})\n"
               f"ik.set_IKTaskSet(o.IKTaskSet({str(files['tasks'])!r}))\nik.setStartTime({t0})\nik.setEndTime({t1})\n"
               f"ik.setResultsDir({str(tmp)!r})\nik.setOutputMotionFileName({str(tmp / 'os_ik.mot')!r})\n"
