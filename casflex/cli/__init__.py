@@ -57,7 +57,7 @@ def _check_compiler_flags() -> None:
 #: The arguments (argparse destinations) that name files a command reads, and how an error names them:
 #: no output may replace one of them.
 _INPUTS = {"scene": "the scene", "data": "--data", "loads": "--loads", "static": "--static",
-           "alternatives": "--alternatives"}
+           "alternatives": "--alternatives", "coordinates": "--coordinates", "tasks": "--tasks"}
 
 
 def _protect_inputs(args: argparse.Namespace, outputs: Outputs) -> None:

@@ -53,6 +53,11 @@ def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
     from casflex.lab import Plane
 
     Plane.parse(args.plane, option="--plane")
+    if (args.data is None) == (args.coordinates is None):
+        raise OptionError("--data, --coordinates: give the trial's markers (--data) or its coordinates "
+                          "(--coordinates), one of them")
+    if args.coordinates is not None and args.tasks is not None:
+        raise OptionError("--tasks: weights the marker fit; with --coordinates there is none")
     plates = dict(args.plate or [])
     if len(plates) != len(args.plate or []):
         raise OptionError("--plate: a node is given twice")
@@ -68,7 +73,8 @@ def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
     inputs = prepare(args.scene, args.data, plane=args.plane, grf=args.loads, plates=plates,
                      cutoff=None if args.no_filter else args.cutoff, root=args.root, t_start=args.t_start,
                      t_end=args.t_end, max_misfit=args.max_misfit, tasks=args.tasks,
-                     cutoff_plates=None if args.no_filter else args.cutoff_plates, filter=args.filter)
+                     cutoff_plates=None if args.no_filter else args.cutoff_plates, filter=args.filter,
+                     coordinates=args.coordinates)
     _check_passive(args.passive or [], inputs)
     for line in inputs.warnings:
         print(f"casflex: warning: {line}", file=sys.stderr)
@@ -120,7 +126,10 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s = sub.add_parser("inverse", help="net joint moments and intersegmental forces from a lab trial")
     s.add_argument("scene", help="built-in scene name (hamner_leg), a TOML file (segments on hinges, labelled "
                                  "markers) or an OpenSim model (.osim)")
-    s.add_argument("--data", required=True, metavar="TRIAL", help="the trial's markers (.trc or .c3d)")
+    s.add_argument("--data", metavar="TRIAL", help="the trial's markers (.trc or .c3d)")
+    s.add_argument("--coordinates", metavar="MOT", help="instead of --data: the trial's coordinates (.mot/.sto, "
+                                                        "e.g. OpenSim's IK result; columns named as the model's "
+                                                        "coordinates, degrees where the header says inDegrees=yes)")
     s.add_argument("--plane", default="X,Y", help="the lab axes that become the model's x and y (default X,Y)")
     s.add_argument("--loads", metavar="GRF", help="ground reactions (OpenSim .mot/.sto, or a .c3d's plates: the "
                                                   "trial's own C3D file again for its plates)")

@@ -5,7 +5,8 @@ The data flow (docs/lab.md, "Inverse dynamics"):
 0. the inputs read and checked before any work (:mod:`casflex.inverse.inputs`: corrupted files, markers
    no body produces, plates that do not cover the trial, options that cannot be honoured);
 1. the trial's markers, projected on the model's plane (:mod:`casflex.lab`), matched to the scene's
-   ``[[markers]]`` by label;
+   ``[[markers]]`` by label (or the coordinates given in a table, :mod:`casflex.inverse.given`: steps 1-2
+   skipped);
 2. per frame, the coordinates of the scene's kinematic tree (root pose and hinge angles) that fit
    them best (:mod:`casflex.inverse.fit`), gaps filled and reported;
 3. the coordinates and the force plates filtered by a zero-lag Butterworth, at one cut-off (``cutoff``, the
@@ -24,7 +25,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from casflex.inverse.fit import coordinate_rates, fit_markers
+from casflex.inverse.fit import FittedMotion, coordinate_rates, fit_markers
 from casflex.inverse.flexible import driven_loads
 from casflex.inverse.inputs import InverseInputs, inverse_model, prepare
 from casflex.inverse.lab_names import lab_loads, lab_name
@@ -38,8 +39,8 @@ __all__ = ["InverseInputs", "InverseResult", "KinematicTree", "Plate", "inverse_
            "kinematic_tree", "prepare", "solve"]
 
 
-def inverse_dynamics(scene, markers, *, plane: str = "X,Y", grf=None, plates: dict[str, str] | None = None,
-                     cutoff: float | None = 6.0, root: str | None = None,
+def inverse_dynamics(scene, markers=None, *, coordinates=None, plane: str = "X,Y", grf=None,
+                     plates: dict[str, str] | None = None, cutoff: float | None = 6.0, root: str | None = None,
                      t_start: float | None = None, t_end: float | None = None, max_gap: float = 0.1,
                      max_misfit: float | None = None, dt: float | None = None, alpha: float | None = None,
                      tasks=None, cutoff_plates: float | None | str = "same", filter: str = "butterworth",
@@ -51,6 +52,11 @@ def inverse_dynamics(scene, markers, *, plane: str = "X,Y", grf=None, plates: di
     scene : Scene, scene name or path
         Rigid segments (bodies on nodes) joined by hinges in a tree, ``[[markers]]`` labelled as the trial's.
     markers : LabMarkers or path of a .trc or .c3d file
+        The trial's markers, fitted frame by frame; or, instead:
+    coordinates : LabTable or path of a .mot / .sto file
+        The scene's coordinates over the trial (e.g. OpenSim's IK result), no marker fit
+        (:mod:`casflex.inverse.given`: the columns named by the scene's ``[[coordinates]]``, degrees where the
+        header says ``inDegrees=yes``).
     plane : str
         The lab axes that become the model's x and y (:class:`casflex.lab.Plane`), e.g. "X,Y".
     grf : LabTable or path of a .mot/.sto or .c3d file (the markers' own C3D: its plates), optional
@@ -87,8 +93,14 @@ def inverse_dynamics(scene, markers, *, plane: str = "X,Y", grf=None, plates: di
     """
     inputs = prepare(scene, markers, plane=plane, grf=grf, plates=plates, cutoff=cutoff, root=root,
                      t_start=t_start, t_end=t_end, max_gap=max_gap, max_misfit=max_misfit, dt=dt, tasks=tasks,
-                     cutoff_plates=cutoff_plates, filter=filter)
+                     cutoff_plates=cutoff_plates, filter=filter, coordinates=coordinates)
     return solve(inputs, dt=dt, alpha=alpha, compiled=compiled, progress=progress)
+
+
+def _given(inputs: InverseInputs) -> FittedMotion:
+    """The coordinates given (no marker fit): no misfit to report."""
+    n = inputs.t.size
+    return FittedMotion(inputs.t, inputs.z, np.full(n, np.nan), np.zeros(n, dtype=int), [], np.zeros((n, 0)))
 
 
 def _filtered(t: np.ndarray, z: np.ndarray, cutoff: float | None, how: str):
@@ -107,8 +119,9 @@ def solve(inputs: InverseInputs, *, dt: float | None = None, alpha: float | None
     """The inverse dynamics of checked inputs (:func:`prepare`): the marker fit, the filter, the rates and the
     loads (module docstring); options as :func:`inverse_dynamics`'s."""
     model, tree, t, cutoff = inputs.model, inputs.tree, inputs.t, inputs.cutoff
-    fit = fit_markers(tree, t, inputs.y, max_gap=inputs.max_gap, max_misfit=inputs.max_misfit,
-                      labels=inputs.labels, source=inputs.settings["source"], progress=progress)
+    fit = _given(inputs) if inputs.z is not None else fit_markers(
+        tree, t, inputs.y, max_gap=inputs.max_gap, max_misfit=inputs.max_misfit, labels=inputs.labels,
+        source=inputs.settings["source"], progress=progress)
     report = [*inputs.report, *fit.report]
     warnings = [*inputs.warnings, *(line for line in fit.report if line.startswith("gaps:"))]
     z, zd, zdd = _filtered(t, fit.z, cutoff, inputs.settings.get("filter", "butterworth"))

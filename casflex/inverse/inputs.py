@@ -40,7 +40,8 @@ BYTES_PER_VALUE = 32
 @dataclass(frozen=True)
 class InverseInputs:
     """The checked inputs of one inverse run: ``model`` and its ``tree``, the frames ``t`` (n,) s on an even
-    grid, the scene's markers ``y`` (n, 2 m) m in the plane (NaN where missing), the ``plates``, the
+    grid, the scene's markers ``y`` (n, 2 m) m in the plane (NaN where missing; (n, 0) where the coordinates
+    ``z`` (n, n_z) m, rad were given instead: no marker fit), the ``plates``, the
     ``cutoff`` (Hz, None: unfiltered), the options ``max_gap`` (s), ``max_misfit`` (m), ``settings`` (what was
     asked), ``report`` (what was done to the data, a line each) and ``warnings`` (what changed the data)."""
 
@@ -56,6 +57,7 @@ class InverseInputs:
     settings: dict
     report: tuple[str, ...] = ()
     warnings: tuple[str, ...] = field(default=())
+    z: np.ndarray | None = None  # the tree's coordinates (n, n_z) where they were given instead of markers
 
 
 def inverse_model(scene, root: str | None = None) -> Model:
@@ -87,14 +89,15 @@ def read_markers(path, *, plates: bool = False):
 
 
 def _trial(markers, grf, need_plates: bool):
-    """(LabMarkers, plates' LabTable or None) from what the caller gave: objects, or .trc/.c3d and
-    .mot/.sto/.c3d paths (the markers' own C3D again for its plates). ValueError when plates are needed and
-    the file has none."""
+    """(LabMarkers or None, plates' LabTable or None) from what the caller gave: objects, or .trc/.c3d and
+    .mot/.sto/.c3d paths (the markers' own C3D again for its plates); markers None where coordinates are
+    given. ValueError when plates are needed and the file has none."""
     from casflex.lab import LabMarkers, LabTable, read_sto
 
-    same = grf is not None and not isinstance(grf, LabTable) and not isinstance(markers, LabMarkers) and (
-        os.fspath(grf) == os.fspath(markers))
-    lab, table = (markers, None) if isinstance(markers, LabMarkers) else read_markers(markers, plates=same)
+    same = grf is not None and markers is not None and not isinstance(grf, LabTable) and not isinstance(
+        markers, LabMarkers) and os.fspath(grf) == os.fspath(markers)
+    lab, table = (markers, None) if markers is None or isinstance(markers, LabMarkers) else read_markers(
+        markers, plates=same)
     if isinstance(grf, LabTable):
         table = grf
     elif grf is not None and not same:
@@ -102,6 +105,33 @@ def _trial(markers, grf, need_plates: bool):
     if need_plates and table is None:
         raise ValueError(f"{grf}: the file has no force plates")
     return lab, table
+
+
+def _from_markers(model: Model, tree: KinematicTree, lab, plane, t_start, t_end):
+    """(t, the scene markers' channels y (n, 2 m), their labels, the rate, warnings) of a marker trial."""
+    if not model.scene.markers:
+        raise ValueError("scene: it has no [[markers]] to fit to the trial")
+    keep = _window(lab.t, t_start, t_end, lab.source)
+    ms, labels = _scene_markers(model, tree, lab, plane, keep)
+    t = _even_frames(ms.t[keep], lab.rate, lab.source)
+    unseen = [lb for lb, xy in zip(labels, np.moveaxis(ms.q[keep].reshape(t.size, -1, 2), 1, 0), strict=True)
+              if not np.isfinite(xy).all(axis=1).any()]
+    notes = [f"{lab.source}: markers {unseen} are not seen in the window; the pose is fitted without them"] \
+        if unseen else []
+    return t, ms.q[keep], labels, lab.rate, notes
+
+
+def _from_coordinates(model: Model, tree: KinematicTree, coordinates, t_start, t_end):
+    """(t, the tree's coordinates z (n, n_z), the report's lines, the source) of a coordinates table."""
+    from casflex.inverse.given import coordinates_z, read_coordinates
+
+    table = read_coordinates(coordinates)
+    keep = _window(table.t, t_start, t_end, table.source)
+    z, report = coordinates_z(model.scene, tree, table)
+    # a .mot says no rate, and OpenSim's IK writes the frames' times rounded to the ms: the slope of 44 such
+    # times is 2e-5 off 1/60 s; a whole number of Hz that puts every frame within a tenth of a step is the rate
+    rate = float(table.header.get("DataRate") or round(1.0 / np.polyfit(np.arange(keep.sum()), table.t[keep], 1)[0]))
+    return _even_frames(table.t[keep], rate, table.source), z[keep], report, table.source
 
 
 def _window(t: np.ndarray, t_start: float | None, t_end: float | None, source: str) -> np.ndarray:
@@ -196,11 +226,11 @@ def weighted(scene, tasks) -> tuple[object, list[str]]:
     return dataclasses.replace(scene, markers=markers), notes
 
 
-def prepare(scene, markers, *, plane="X,Y", grf=None, plates: dict[str, str] | None = None,
+def prepare(scene, markers=None, *, plane="X,Y", grf=None, plates: dict[str, str] | None = None,
             cutoff: float | None = 6.0, root: str | None = None, t_start: float | None = None,
             t_end: float | None = None, max_gap: float = 0.1, max_misfit: float | None = None,
             dt: float | None = None, tasks=None, cutoff_plates: float | None | str = "same",
-            filter: str = "butterworth") -> InverseInputs:
+            filter: str = "butterworth", coordinates=None) -> InverseInputs:
     """The inputs of :func:`casflex.inverse.inverse_dynamics` (its parameters), read and checked (module
     docstring). ValueError in one line naming the option, file, marker or plate otherwise."""
     from casflex.lab import Plane
@@ -212,12 +242,14 @@ def prepare(scene, markers, *, plane="X,Y", grf=None, plates: dict[str, str] | N
         raise ValueError(f"filter: one of {', '.join(FILTERS)}, got {filter!r}")
     if not max_misfit > 0:
         raise ValueError(f"max_misfit: must be a distance > 0 m, got {max_misfit:g}")
+    if (markers is None) == (coordinates is None):
+        raise ValueError("markers, coordinates: give the trial's markers or its coordinates (one of them)")
+    if tasks is not None and coordinates is not None:
+        raise ValueError("tasks: they weight the marker fit; with coordinates given there is none")
     task_notes: list[str] = []
     if tasks is not None:
         scene, task_notes = weighted(scene, tasks)
     model = inverse_model(scene, root)
-    if not model.scene.markers:
-        raise ValueError("scene: it has no [[markers]] to fit to the trial")
     plates = dict(plates or {})
     for node in plates:
         if node not in model.node_names:
@@ -226,27 +258,26 @@ def prepare(scene, markers, *, plane="X,Y", grf=None, plates: dict[str, str] | N
         raise ValueError("plates: given without the ground reactions (grf)")
     tree = kinematic_tree(model, root)
     lab, table = _trial(markers, grf, bool(plates))
-    keep = _window(lab.t, t_start, t_end, lab.source)
-    ms, labels = _scene_markers(model, tree, lab, pl, keep)
-    t = _even_frames(ms.t[keep], lab.rate, lab.source)
-    check_cutoff(cutoff, t, "markers")
-    report, warnings = [], list(task_notes)
-    unseen = [lb for lb, xy in zip(labels, np.moveaxis(ms.q[keep].reshape(t.size, -1, 2), 1, 0), strict=True)
-              if not np.isfinite(xy).all(axis=1).any()]
-    if unseen:
-        warnings.append(f"{lab.source}: markers {unseen} are not seen in the window; the pose is fitted without them")
+    if coordinates is None:
+        t, y, labels, rate, notes = _from_markers(model, tree, lab, pl, t_start, t_end)
+        z, report, source = None, [], lab.source
+    else:
+        t, z, report, source = _from_coordinates(model, tree, coordinates, t_start, t_end)
+        y, labels, rate, notes = np.zeros((t.size, 0)), (), 1.0 / float(t[1] - t[0]), []
+    check_cutoff(cutoff, t, "markers" if z is None else "coordinates")
+    warnings = [*task_notes, *notes]
     plate_list = []
     fc = cutoff if cutoff_plates == "same" else cutoff_plates
     for node, prefix in plates.items():
-        plate = plate_from_table(table, prefix, node, pl, fc, window=(float(t[0]), float(t[-1])), rate=lab.rate,
-                                 trial=lab.source)
+        plate = plate_from_table(table, prefix, node, pl, fc, window=(float(t[0]), float(t[-1])), rate=rate,
+                                 trial=source)
         plate_list.append(plate)
         warnings += plate.notes
     _memory(model, tree, t, len(labels), dt)
     settings = {"plane": f"{pl.x},{pl.y}", "cutoff_hz": cutoff, "filter": filter,
                 "cutoff_plates_hz": fc, "root": tree.root, "plates": plates,
                 "moments": [f"{h}.moment" for h in tree.hinges], "weights": {lb: m.weight for lb, m in zip(
-                    labels, model.scene.markers, strict=True)}, "source": getattr(lab, "source", ""),
-                "scene": model.scene.name, "max_misfit_m": max_misfit}
-    return InverseInputs(model, tree, t, ms.q[keep], labels, tuple(plate_list), cutoff, max_gap, max_misfit,
-                         settings, tuple(report + warnings), tuple(warnings))
+                    labels, model.scene.markers, strict=False)}, "source": source or "",
+                "scene": model.scene.name, "max_misfit_m": max_misfit, "given": z is not None}
+    return InverseInputs(model, tree, t, y, labels, tuple(plate_list), cutoff, max_gap, max_misfit,
+                         settings, tuple(report + warnings), tuple(warnings), z)

@@ -61,9 +61,11 @@ def plot_marker_fit(res, path: str | os.PathLike[str] | None = None) -> Figure:
 
 
 def save_inverse_figures(res, directory: str | os.PathLike[str]) -> list[Path]:
-    """``inverse_loads.png`` and ``marker_fit.png`` in ``directory``."""
+    """``inverse_loads.png`` and ``marker_fit.png`` (where markers were fitted) in ``directory``."""
     d = Path(directory)
     paths = [d / "inverse_loads.png", d / "marker_fit.png"]
     plot_inverse(res, paths[0])
+    if not res.marker_labels:  # coordinates given: no marker fit to show
+        return paths[:1]
     plot_marker_fit(res, paths[1])
     return paths
