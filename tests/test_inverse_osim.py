@@ -129,3 +129,41 @@ def test_sto_output_and_import_from_the_command_line(tmp_path):
         assert p.returncode == 2 and said in p.stderr and p.stderr.count("\n") == 1, p.stderr
     p = subprocess.run([*cli, "import", str(TRC), "--out", str(tmp_path / "x.toml")], capture_output=True, text=True)
     assert p.returncode == 2 and "must be an OpenSim model (.osim)" in p.stderr
+
+
+EXTERNAL = """<?xml version="1.0" encoding="UTF-8" ?>
+<OpenSimDocument Version="30516"><ExternalLoads name="loads"><objects>
+<ExternalForce name="right"><applied_to_body>calcn_r</applied_to_body>
+<force_expressed_in_body>{frame}</force_expressed_in_body><point_expressed_in_body>ground</point_expressed_in_body>
+<force_identifier>ground_force_v</force_identifier><point_identifier>ground_force_p</point_identifier>
+<torque_identifier>{torque}</torque_identifier><data_source_name>grf</data_source_name></ExternalForce>
+</objects><datafile>{data}</datafile></ExternalLoads></OpenSimDocument>
+"""
+
+
+def _external(tmp_path, name="loads.xml", frame="ground", torque="ground_torque_", data=None) -> Path:
+    path = tmp_path / name
+    path.write_text(EXTERNAL.format(frame=frame, torque=torque, data=data or GRF.name))
+    return path
+
+
+def test_opensims_external_loads_file_names_the_plates(tmp_path, plain):
+    import shutil
+
+    shutil.copy(GRF, tmp_path / GRF.name)  # the data file, named relative to the loads file
+    loads = _external(tmp_path)
+    res = inverse_dynamics(LEG, TRC, grf=loads)
+    assert np.array_equal(res.loads["ankle_angle_r_moment"], plain.loads["ankle_angle_r_moment"])
+    setup = tmp_path / "id_setup.xml"  # an ID setup naming it
+    setup.write_text("<OpenSimDocument><InverseDynamicsTool><external_loads_file>loads.xml</external_loads_file>"
+                     "</InverseDynamicsTool></OpenSimDocument>")
+    assert np.array_equal(inverse_dynamics(LEG, TRC, grf=setup).loads["hip_flexion_r_moment"],
+                          plain.loads["hip_flexion_r_moment"])
+    for path, match in ((_external(tmp_path, "a.xml", frame="calcn_r"), "force_expressed_in_body is 'calcn_r'"),
+                        (_external(tmp_path, "b.xml", torque="1_ground_torque_"), "torque_identifier '1_ground"),
+                        (setup, "plates: .* says which body")):
+        with pytest.raises(ValueError, match=match):
+            inverse_dynamics(LEG, TRC, grf=path, plates={"calcn_r": "ground_"} if path == setup else None)
+    cli = subprocess.run([sys.executable, "-m", "casflex", "inverse", str(LEG), "--data", str(TRC), "--loads",
+                          str(loads), "--quiet"], capture_output=True, text=True)
+    assert cli.returncode == 0 and "plates 'ground_' on calcn_r" in cli.stdout, cli.stderr

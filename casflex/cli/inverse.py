@@ -63,8 +63,12 @@ def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
         raise OptionError("--plate: a node is given twice")
     if plates and not args.loads:
         raise OptionError("--plate: needs --loads (the ground reaction file)")
-    if args.loads and not plates:
-        raise OptionError("--loads: say which node each plate acts on with --plate NODE=PREFIX (e.g. ankle=ground_)")
+    external = bool(args.loads) and args.loads.lower().endswith(".xml")  # OpenSim's ExternalLoads: it says
+    if external and plates:
+        raise OptionError(f"--plate: {args.loads} says which body each plate acts on; give --plate or that file")
+    if args.loads and not plates and not external:
+        raise OptionError("--loads: say which node each plate acts on with --plate NODE=PREFIX (e.g. ankle=ground_), "
+                          "or give OpenSim's ExternalLoads file")
     if args.t_start is not None and args.t_end is not None and args.t_end <= args.t_start:
         raise OptionError(f"--t-end: must be after --t-start ({args.t_start:g} s), got {args.t_end:g}")
     out = outputs.file("--out", args.out, (".npz", ".csv", ".sto"), "inverse dynamics") if args.out is not None \
@@ -132,7 +136,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                                                         "coordinates, degrees where the header says inDegrees=yes)")
     s.add_argument("--plane", default="X,Y", help="the lab axes that become the model's x and y (default X,Y)")
     s.add_argument("--loads", metavar="GRF", help="ground reactions (OpenSim .mot/.sto, or a .c3d's plates: the "
-                                                  "trial's own C3D file again for its plates)")
+                                                  "trial's own C3D file again for its plates), or OpenSim's "
+                                                  "ExternalLoads .xml (or ID setup) naming the file and the bodies")
     s.add_argument("--plate", action="append", type=_plate, metavar="NODE=PREFIX",
                    help="a plate's columns (PREFIXforce_vx ...) act on NODE's segment; repeat per plate")
     s.add_argument("--cutoff", type=positive("a frequency in Hz"), default=6.0,

@@ -11,7 +11,7 @@ and integrated by HHT-alpha (:func:`casflex.simulate.simulate`) from the first f
 (the supports' splines' rates), the bones deflected there under its loads (quasi-statically). The
 drives' multipliers are the net joint moments, the supports' the root's loads (the same names as the
 rigid inverse, :mod:`casflex.inverse.rigid`). The paths are the supports'
-not-a-knot cubic splines through the filtered frames; the time step divides the frames' so that
+quintic splines through the filtered frames; the time step divides the frames' so that
 every frame is a step. The plates act on their nodes as load tables (force, and moment about the
 node where the rigid fit has it: the bones' deflection at that node, reported, times the force
 bounds the error of that moment arm).

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -105,6 +106,22 @@ def _trial(markers, grf, need_plates: bool):
     if need_plates and table is None:
         raise ValueError(f"{grf}: the file has no force plates")
     return lab, table
+
+
+def _external_loads(grf, plates: dict[str, str] | None) -> tuple[object, dict[str, str]]:
+    """(the ground reactions' file or table, plates node -> prefix): an OpenSim ExternalLoads (or ID setup)
+    file given as ``grf`` names both (:func:`casflex.lab.setups.read_external_loads`; its bodies are the
+    nodes of a model read from .osim)."""
+    from casflex.lab import LabTable
+
+    if grf is None or isinstance(grf, LabTable) or not os.fspath(grf).lower().endswith(".xml"):
+        return grf, dict(plates or {})
+    from casflex.lab.setups import read_external_loads
+
+    ext = read_external_loads(grf)
+    if plates:
+        raise ValueError(f"plates: {ext.source} says which body each plate acts on; give plates or that file")
+    return ext.datafile, {re.sub(r"[.:\[\]\s]", "_", body): prefix for body, prefix in ext.plates.items()}
 
 
 def _from_markers(model: Model, tree: KinematicTree, lab, plane, t_start, t_end):
@@ -250,7 +267,7 @@ def prepare(scene, markers=None, *, plane="X,Y", grf=None, plates: dict[str, str
     if tasks is not None:
         scene, task_notes = weighted(scene, tasks)
     model = inverse_model(scene, root)
-    plates = dict(plates or {})
+    grf, plates = _external_loads(grf, plates)
     for node in plates:
         if node not in model.node_names:
             raise ValueError(f"plates: no node {node!r} in the scene; nodes are {list(model.node_names)}")

@@ -1,6 +1,7 @@
 """OpenSim's setup files, as a lab has them: the marker weights of an inverse kinematics task set
 (``<IKTaskSet>``, in its own file or inside an ``<InverseKinematicsTool>`` setup, or in a file that
-setup names). Read directly from the XML (no ``opensim`` needed)."""
+setup names), and which plate acts on which body (an ``<ExternalLoads>`` file, or an inverse dynamics
+setup naming one). Read directly from the XML (no ``opensim`` needed)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import os
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
-__all__ = ["MarkerTasks", "read_tasks"]
+__all__ = ["ExternalLoads", "MarkerTasks", "read_external_loads", "read_tasks"]
 
 
 @dataclass(frozen=True)
@@ -62,3 +63,61 @@ def read_tasks(path: str | os.PathLike[str]) -> MarkerTasks:
     if not weights:
         raise ValueError(f"{path}: no IKMarkerTask: not an OpenSim IK task set or setup file")
     return MarkerTasks(path, weights, tuple(coords))
+
+
+@dataclass(frozen=True)
+class ExternalLoads:
+    """An ``ExternalLoads`` file's plates: ``datafile`` (the ground reactions' .mot, its path resolved from
+    the file's directory), ``plates`` body -> column prefix (``{"calcn_r": "ground_"}``)."""
+
+    source: str
+    datafile: str
+    plates: dict[str, str]
+
+
+def _prefix(path: str, force: ET.Element) -> tuple[str, str]:
+    """(body, prefix) of an ``ExternalForce``: its force, point and torque identifiers must be
+    ``<prefix>force_v``, ``<prefix>force_p`` and ``<prefix>torque_``, all expressed in the ground."""
+    name = force.get("name", "")
+    body = (force.findtext("applied_to_body") or "").strip()
+    for tag in ("force_expressed_in_body", "point_expressed_in_body"):
+        frame = (force.findtext(tag) or "ground").strip()
+        if frame != "ground":
+            raise ValueError(f"{path}: ExternalForce {name!r}: {tag} is {frame!r}; casflex takes plates in the ground")
+    ident = {tag: (force.findtext(f"{tag}_identifier") or "").strip() for tag in ("force", "point", "torque")}
+    if not body or not ident["force"].endswith("force_v"):
+        raise ValueError(f"{path}: ExternalForce {name!r}: needs applied_to_body and a force_identifier "
+                         f"<prefix>force_v, got {body!r} and {ident['force']!r}")
+    prefix = ident["force"][:-len("force_v")]
+    want = {"point": f"{prefix}force_p", "torque": f"{prefix}torque_"}
+    for tag, text in want.items():
+        if ident[tag] and ident[tag] != text:
+            raise ValueError(f"{path}: ExternalForce {name!r}: {tag}_identifier {ident[tag]!r}; casflex reads a "
+                             f"plate's columns {prefix}force_v*, {text}* (expected {text!r})")
+    return body, prefix
+
+
+def read_external_loads(path: str | os.PathLike[str]) -> ExternalLoads:
+    """The plates of an ``ExternalLoads`` file, or of the one an inverse dynamics setup names in
+    ``external_loads_file`` (module docstring). ValueError in one line for a file with no external force,
+    one that is not in the ground or whose columns casflex cannot name, or no data file."""
+    path = os.fspath(path)
+    root = _parse(path)
+    loads = root if root.tag == "ExternalLoads" else root.find(".//ExternalLoads")
+    if loads is None:
+        inner = (root.findtext(".//external_loads_file") or "").strip()
+        if inner:
+            return read_external_loads(os.path.join(os.path.dirname(path), inner))
+        raise ValueError(f"{path}: no ExternalLoads: not an OpenSim external loads or inverse dynamics setup file")
+    plates: dict[str, str] = {}
+    for force in loads.iter("ExternalForce"):
+        body, prefix = _prefix(path, force)
+        if body in plates:
+            raise ValueError(f"{path}: two external forces act on {body!r}; casflex takes one plate a body")
+        plates[body] = prefix
+    if not plates:
+        raise ValueError(f"{path}: no ExternalForce")
+    data = (loads.findtext("datafile") or "").strip()
+    if not data:
+        raise ValueError(f"{path}: no datafile: the ground reactions' file is not named")
+    return ExternalLoads(path, os.path.join(os.path.dirname(path), data), plates)

@@ -48,23 +48,30 @@ def support_constraints(scene: Scene, dof_index: dict[str, int], q0: np.ndarray)
 
 
 def _spline(path: tuple[tuple[float, float], ...], t: ca.SX) -> ca.SX:
-    """The not-a-knot cubic spline through ``path`` rows (t_k, d_k) at t, held at the ends outside
-    them (scipy's coefficients; the interval chosen by comparisons, so it stays SX and expandable)."""
-    from scipy.interpolate import CubicSpline
+    """The interpolating spline through ``path`` rows (t_k, d_k) at t, held at the ends outside them: quintic
+    (not-a-knot: jerk and snap continuous) where the path has 6 rows or more, cubic (not-a-knot) where it has
+    4 or 5. The jerk a cubic spline breaks at every row made the joint forces of a driven scene converge at
+    first order in the time step; with the quintic, at second order (tests/test_moving_supports.py). scipy's
+    coefficients; the interval chosen by comparisons, so it stays SX and expandable."""
+    from scipy.interpolate import PPoly, make_interp_spline
 
     times = np.array([r[0] for r in path])
-    c = CubicSpline(times, [r[1] for r in path], bc_type="not-a-knot").c  # (4, intervals)
+    pp = PPoly.from_spline(make_interp_spline(times, [r[1] for r in path], k=5 if len(path) >= 6 else 3))
+    piece = np.flatnonzero(np.diff(pp.x) > 0)  # the B-spline's repeated end knots make empty pieces
+    starts, c = pp.x[piece], pp.c[:, piece]  # (degree + 1, pieces), highest power first
     # (if_else, not fmin/fmax: at the table's ends the rates are the spline's, not halved by a tie)
     tc = ca.if_else(t < times[0], times[0], ca.if_else(t > times[-1], times[-1], t))
-    k = ca.fmin(sum(tc >= tk for tk in times[1:-1]), len(times) - 2)  # the interval of tc
-    u = tc - ca.conditional(k, [ca.SX(tk) for tk in times[:-1]], 0)
-    coef = [ca.conditional(k, [ca.SX(x) for x in c[m]], 0) for m in range(4)]
-    return ((coef[0] * u + coef[1]) * u + coef[2]) * u + coef[3]
+    k = ca.fmin(sum(tc >= tk for tk in starts[1:]), len(starts) - 1)  # the piece of tc
+    u = tc - ca.conditional(k, [ca.SX(tk) for tk in starts], 0)
+    value = ca.SX(0)
+    for row in c:  # Horner
+        value = value * u + ca.conditional(k, [ca.SX(x) for x in row], 0)
+    return value
 
 
 def prescribed(constraints: list[FixedDof]) -> ca.Function:
     """``prescribed(t) -> (v, vd, vdd)``, each (m,): the fixed dofs' values at time t (s) and their
-    rates. A path is a not-a-knot cubic spline through its rows (continuous acceleration), held at
+    rates. A path is a quintic spline through its rows (a cubic one under 6 rows: :func:`_spline`), held at
     its end values outside them (zero rates there)."""
     t = ca.SX.sym("t")
     vals = [ca.SX(c.value) if c.path is None else c.value + _spline(c.path, t) for c in constraints]

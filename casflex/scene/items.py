@@ -375,8 +375,9 @@ class Support:
 
     ``motion``: rows (t, dx, dy, dtheta) (s, m, m, rad), at least 4, t strictly increasing: the
     displacement of the fixed dofs from the node's initial position (the components of dofs the
-    support does not fix are ignored), interpolated by a cubic spline (continuous velocity and
-    acceleration: a rheonomic constraint) and held at the end values outside the table. The
+    support does not fix are ignored), interpolated by a quintic spline (a cubic one under 6 rows:
+    continuous velocity, acceleration, jerk and snap; a rheonomic constraint) and held at the end values
+    outside the table. The
     multipliers are then the forces and moments that drive the node along the path.
     """
 
