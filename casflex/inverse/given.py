@@ -52,6 +52,5 @@ def coordinates_z(scene, tree: KinematicTree, table) -> tuple[np.ndarray, list[s
             raise ValueError(f"{where}: column {name!r} has no number at t = {table.t[np.argmax(bad)]:g} s")
         v = v if length[k] or not table.in_degrees else np.radians(v)
         z[:, k] = from_lab(scene, lab[own], v) if own in lab else v
-    used = [name for name, _ in columns]
     unit = "degrees" if table.in_degrees else "radians"
-    return z, [f"coordinates given: {len(used)} columns of {where} ({unit}), no marker fit"]
+    return z, [f"coordinates given: {len(columns)} columns of {where} ({unit}), no marker fit"]

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -117,11 +116,12 @@ def _external_loads(grf, plates: dict[str, str] | None) -> tuple[object, dict[st
     if grf is None or isinstance(grf, LabTable) or not os.fspath(grf).lower().endswith(".xml"):
         return grf, dict(plates or {})
     from casflex.lab.setups import read_external_loads
+    from casflex.scene.from_osim import node_name
 
     ext = read_external_loads(grf)
     if plates:
         raise ValueError(f"plates: {ext.source} says which body each plate acts on; give plates or that file")
-    return ext.datafile, {re.sub(r"[.:\[\]\s]", "_", body): prefix for body, prefix in ext.plates.items()}
+    return ext.datafile, {node_name(body): prefix for body, prefix in ext.plates.items()}
 
 
 def _from_markers(model: Model, tree: KinematicTree, lab, plane, t_start, t_end):

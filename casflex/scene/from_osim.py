@@ -38,7 +38,7 @@ from casflex.scene.markers import Marker
 from casflex.scene.osim import OsimJoint, OsimModel, axis_rotation, read_osim
 from casflex.scene.scene import Joint, Node, RigidBody, Scene
 
-__all__ = ["OsimScene", "scene_from_osim"]
+__all__ = ["OsimScene", "node_name", "scene_from_osim"]
 
 #: |cos| of the angle between an axis and the plane's normal above which the axis is the normal (a
 #: thousandth of a degree: OpenSim's files print axes to 1e-16, a hand-written one may round them).
@@ -59,7 +59,9 @@ class OsimScene:
     dropped: tuple[str, ...]
 
 
-def _name(s: str) -> str:
+def node_name(s: str) -> str:
+    """The scene name of an OpenSim body, joint or marker: its name with '.', ':', '[', ']' and spaces made '_'
+    (casflex's names may not hold them); a body's node is so named."""
     return re.sub(r"[.:\[\]\s]", "_", s) or "_"
 
 
@@ -114,7 +116,7 @@ class _Builder:
         RB = RM @ j.child_offset[0].T
         self.pose[j.child] = (RB, pM - RB @ j.child_offset[1])
         theta = math.atan2(RM[1, 0], RM[0, 0])
-        child = _name(j.child)
+        child = node_name(j.child)
         self.nodes.append(Node(child, float(pM[0]), float(pM[1]), theta))
         axes_g = self.rotation_axes_in_ground(j, RF)
         hinge = self.hinge(j, axes_g)
@@ -122,14 +124,14 @@ class _Builder:
         self.classify(j, axes_g, hinge, shifts, root=j.parent == "ground")
         if j.parent == "ground":
             return
-        name = _name(j.name)
+        name = node_name(j.name)
         if hinge is None:
-            self.joints.append(Joint(name, "weld", (_name(j.parent), child)))
+            self.joints.append(Joint(name, "weld", (node_name(j.parent), child)))
             self.report.append(f"joint {j.name!r} ({j.kind}): a weld")
         else:
             coord, sign = hinge
             sx, sy = shifts.get("x"), shifts.get("y")
-            self.joints.append(Joint(name, "hinge", (_name(j.parent), child), shift_x=sx and sx[1],
+            self.joints.append(Joint(name, "hinge", (node_name(j.parent), child), shift_x=sx and sx[1],
                                      shift_y=sy and sy[1]))
             self.coords.append(Coordinate(coord, name, self.default[coord], sign))
             kind = "a coupled hinge (its centre moves along " + " and ".join(sorted(shifts)) + ")" if shifts \
@@ -213,7 +215,7 @@ class _Builder:
 
     def root(self, j: OsimJoint, axes_g, hinge) -> None:
         """The root's coordinates: the rotation about the normal and translations along the ground's x and y."""
-        child = _name(j.child)
+        child = node_name(j.child)
         if hinge is not None:
             self.coords.append(Coordinate(hinge[0], f"{child}.theta", self.default[hinge[0]], hinge[1]))
         for ax, a in zip(j.axes, axes_g, strict=True):
@@ -239,22 +241,22 @@ class _Builder:
             R, p = self.pose[b.name]
             com = p + R @ b.com
             Ig = R @ b.inertia @ R.T
-            name = _name(b.name) + ("_body" if _name(b.name) in joints else "")
-            out.append(RigidBody(name, _name(b.name), b.mass, float(Ig[2, 2]), float(com[0]), float(com[1])))
+            name = node_name(b.name) + ("_body" if node_name(b.name) in joints else "")
+            out.append(RigidBody(name, node_name(b.name), b.mass, float(Ig[2, 2]), float(com[0]), float(com[1])))
         return out
 
     def markers(self, bodies: list[RigidBody]) -> list[Marker]:
         on = {b.node: b.name for b in bodies}
         out = []
         for mk in self.m.markers:
-            node = _name(mk.body)
+            node = node_name(mk.body)
             if mk.body not in self.pose or node not in on:
                 why = "massless" if mk.body in self.pose else "no body of the tree"
                 self.dropped.append(f"marker {mk.name!r}: on {mk.body!r}, {why}; left out")
                 continue
             R, p = self.pose[mk.body]
             x = p + R @ mk.location
-            out.append(Marker(_name(mk.name), on[node], float(x[0]), float(x[1]), label=mk.name))
+            out.append(Marker(node_name(mk.name), on[node], float(x[0]), float(x[1]), label=mk.name))
         return out
 
 
@@ -297,7 +299,7 @@ def scene_from_osim(source: str | os.PathLike[str] | OsimModel, name: str | None
     if others:
         b.report.append("ignored: " + ", ".join(f"{n} {k}" for k, n in sorted(others.items())))
     g = model.gravity
-    title = _name(name or os.path.splitext(os.path.basename(model.name))[0])
+    title = node_name(name or os.path.splitext(os.path.basename(model.name))[0])
     scene = Scene(title, tuple(b.nodes), bodies=tuple(bodies), joints=tuple(b.joints), markers=tuple(markers),
                   coordinates=tuple(b.coords),
                   gravity=(float(g[0]), float(g[1])))
