@@ -160,10 +160,23 @@ def test_opensims_external_loads_file_names_the_plates(tmp_path, plain):
     assert np.array_equal(inverse_dynamics(LEG, TRC, grf=setup).loads["hip_flexion_r_moment"],
                           plain.loads["hip_flexion_r_moment"])
     for path, match in ((_external(tmp_path, "a.xml", frame="calcn_r"), "force_expressed_in_body is 'calcn_r'"),
-                        (_external(tmp_path, "b.xml", torque="1_ground_torque_"), "torque_identifier '1_ground"),
+                        (_external(tmp_path, "b.xml", torque="1_ground_torque_"), "no column '1_ground_torque_x'"),
                         (setup, "plates: .* says which body")):
         with pytest.raises(ValueError, match=match):
             inverse_dynamics(LEG, TRC, grf=path, plates={"calcn_r": "ground_"} if path == setup else None)
     cli = subprocess.run([sys.executable, "-m", "casflex", "inverse", str(LEG), "--data", str(TRC), "--loads",
                           str(loads), "--quiet"], capture_output=True, text=True)
     assert cli.returncode == 0 and "plates 'ground_' on calcn_r" in cli.stdout, cli.stderr
+
+
+def test_external_forces_whose_columns_carry_the_side_in_their_names(tmp_path, plain):
+    # Rajagopal's grf_walk.xml: ground_force_r_v, ground_force_r_p, ground_torque_r_ (no common prefix)
+    text = GRF.read_text().replace("ground_force_v", "ground_force_r_v").replace("ground_force_p", "ground_force_r_p") \
+        .replace("ground_torque_", "ground_torque_r_")
+    (tmp_path / GRF.name).write_text(text)
+    loads = tmp_path / "side.xml"
+    loads.write_text(EXTERNAL.format(frame="ground", torque="ground_torque_r_", data=GRF.name)
+                     .replace("ground_force_v<", "ground_force_r_v<").replace("ground_force_p<", "ground_force_r_p<"))
+    res = inverse_dynamics(LEG, TRC, grf=loads)
+    assert np.array_equal(res.loads["ankle_angle_r_moment"], plain.loads["ankle_angle_r_moment"])
+    assert any("plates 'calcn_r_' on calcn_r" in line for line in res.report)

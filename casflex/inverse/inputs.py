@@ -110,8 +110,10 @@ def _trial(markers, grf, need_plates: bool):
 def _external_loads(grf, plates: dict[str, str] | None) -> tuple[object, dict[str, str]]:
     """(the ground reactions' file or table, plates node -> prefix): an OpenSim ExternalLoads (or ID setup)
     file given as ``grf`` names both (:func:`casflex.lab.setups.read_external_loads`; its bodies are the
-    nodes of a model read from .osim)."""
-    from casflex.lab import LabTable
+    nodes of a model read from .osim). A plate whose identifiers are not ``<prefix>force_v`` ... (e.g.
+    ``ground_force_r_v``, ``ground_force_r_p``, ``ground_torque_r_``) has its columns copied under the prefix
+    ``<body>_``."""
+    from casflex.lab import LabTable, read_sto
 
     if grf is None or isinstance(grf, LabTable) or not os.fspath(grf).lower().endswith(".xml"):
         return grf, dict(plates or {})
@@ -121,7 +123,20 @@ def _external_loads(grf, plates: dict[str, str] | None) -> tuple[object, dict[st
     ext = read_external_loads(grf)
     if plates:
         raise ValueError(f"plates: {ext.source} says which body each plate acts on; give plates or that file")
-    return ext.datafile, {node_name(body): prefix for body, prefix in ext.plates.items()}
+    prefixes = {body: ext.prefix(body) for body in ext.plates}
+    if all(p is not None for p in prefixes.values()):
+        return ext.datafile, {node_name(body): p for body, p in prefixes.items()}
+    table = read_sto(ext.datafile)
+    names, columns = list(table.names), [table.values]
+    for body, (force, point, torque) in ext.plates.items():
+        if prefixes[body] is None:
+            prefixes[body] = alias = f"{node_name(body)}_"
+            for stem, new in ((force, "force_v"), (point, "force_p"), (torque, "torque_")):
+                for axis in "xyz" if stem else ():
+                    columns.append(table.column(f"{stem}{axis}")[:, None])
+                    names.append(f"{alias}{new}{axis}")
+    table = dataclasses.replace(table, names=tuple(names), values=np.hstack(columns))
+    return table, {node_name(body): p for body, p in prefixes.items()}
 
 
 def _from_markers(model: Model, tree: KinematicTree, lab, plane, t_start, t_end):

@@ -68,39 +68,40 @@ def read_tasks(path: str | os.PathLike[str]) -> MarkerTasks:
 @dataclass(frozen=True)
 class ExternalLoads:
     """An ``ExternalLoads`` file's plates: ``datafile`` (the ground reactions' .mot, its path resolved from
-    the file's directory), ``plates`` body -> column prefix (``{"calcn_r": "ground_"}``)."""
+    the file's directory), ``plates`` body -> (force, point, torque) identifiers, the columns' stems
+    (``("ground_force_v", "ground_force_p", "ground_torque_")``: columns ``ground_force_vx`` ...)."""
 
     source: str
     datafile: str
-    plates: dict[str, str]
+    plates: dict[str, tuple[str, str, str]]
+
+    def prefix(self, body: str) -> str | None:
+        """The column prefix of ``body``'s plate where its identifiers are ``<prefix>force_v``,
+        ``<prefix>force_p``, ``<prefix>torque_`` (OpenSim's examples; casflex's plates), else None."""
+        force, point, torque = self.plates[body]
+        p = force[:-len("force_v")] if force.endswith("force_v") else None
+        return p if p is not None and point == f"{p}force_p" and torque == f"{p}torque_" else None
 
 
-def _prefix(path: str, force: ET.Element) -> tuple[str, str]:
-    """(body, prefix) of an ``ExternalForce``: its force, point and torque identifiers must be
-    ``<prefix>force_v``, ``<prefix>force_p`` and ``<prefix>torque_``, all expressed in the ground."""
+def _identifiers(path: str, force: ET.Element) -> tuple[str, tuple[str, str, str]]:
+    """(body, (force, point, torque) identifiers) of an ``ExternalForce`` expressed in the ground."""
     name = force.get("name", "")
     body = (force.findtext("applied_to_body") or "").strip()
     for tag in ("force_expressed_in_body", "point_expressed_in_body"):
         frame = (force.findtext(tag) or "ground").strip()
         if frame != "ground":
             raise ValueError(f"{path}: ExternalForce {name!r}: {tag} is {frame!r}; casflex takes plates in the ground")
-    ident = {tag: (force.findtext(f"{tag}_identifier") or "").strip() for tag in ("force", "point", "torque")}
-    if not body or not ident["force"].endswith("force_v"):
-        raise ValueError(f"{path}: ExternalForce {name!r}: needs applied_to_body and a force_identifier "
-                         f"<prefix>force_v, got {body!r} and {ident['force']!r}")
-    prefix = ident["force"][:-len("force_v")]
-    want = {"point": f"{prefix}force_p", "torque": f"{prefix}torque_"}
-    for tag, text in want.items():
-        if ident[tag] and ident[tag] != text:
-            raise ValueError(f"{path}: ExternalForce {name!r}: {tag}_identifier {ident[tag]!r}; casflex reads a "
-                             f"plate's columns {prefix}force_v*, {text}* (expected {text!r})")
-    return body, prefix
+    ident = tuple((force.findtext(f"{tag}_identifier") or "").strip() for tag in ("force", "point", "torque"))
+    if not body or not ident[0] or not ident[1]:
+        raise ValueError(f"{path}: ExternalForce {name!r}: needs applied_to_body, force_identifier and "
+                         f"point_identifier, got {body!r}, {ident[0]!r} and {ident[1]!r}")
+    return body, ident
 
 
 def read_external_loads(path: str | os.PathLike[str]) -> ExternalLoads:
     """The plates of an ``ExternalLoads`` file, or of the one an inverse dynamics setup names in
     ``external_loads_file`` (module docstring). ValueError in one line for a file with no external force,
-    one that is not in the ground or whose columns casflex cannot name, or no data file."""
+    one that is not in the ground, or no data file."""
     path = os.fspath(path)
     root = _parse(path)
     loads = root if root.tag == "ExternalLoads" else root.find(".//ExternalLoads")
@@ -109,12 +110,12 @@ def read_external_loads(path: str | os.PathLike[str]) -> ExternalLoads:
         if inner:
             return read_external_loads(os.path.join(os.path.dirname(path), inner))
         raise ValueError(f"{path}: no ExternalLoads: not an OpenSim external loads or inverse dynamics setup file")
-    plates: dict[str, str] = {}
+    plates: dict[str, tuple[str, str, str]] = {}
     for force in loads.iter("ExternalForce"):
-        body, prefix = _prefix(path, force)
+        body, ident = _identifiers(path, force)
         if body in plates:
             raise ValueError(f"{path}: two external forces act on {body!r}; casflex takes one plate a body")
-        plates[body] = prefix
+        plates[body] = ident
     if not plates:
         raise ValueError(f"{path}: no ExternalForce")
     data = (loads.findtext("datafile") or "").strip()
