@@ -75,26 +75,15 @@ def _copy(repo: Path, name: str, dest: Path) -> Path:
     return out
 
 
-def _even_times(src: Path, dest: Path, t0: float, rate: float) -> Path:
-    """OpenSim's IK file with its times set to the frames' exact times t0 + k / rate."""
-    lines = src.read_text().splitlines()
-    head = next(i for i, ln in enumerate(lines) if ln.strip() == "endheader") + 2
-    rows = [ln.split("\t") for ln in lines[head:] if ln.strip()]
-    for k, cells in enumerate(rows):
-        cells[0] = f"{t0 + k / rate:.10f}"
-    dest.write_text("\n".join(lines[:head] + ["\t".join(c) for c in rows]) + "\n")
-    return dest
-
-
 def _opensim(files: dict, trial: Trial, tmp: Path) -> dict:
-    from casflex.peers.opensim_tools import external_loads, inverse_dynamics, inverse_kinematics
+    from casflex.peers.opensim_tools import exact_times, external_loads, inverse_dynamics, inverse_kinematics
 
     t0, t1 = trial.window
     ik = inverse_kinematics(files["model"], files["markers"], files["tasks"], tmp / "ik.mot", t_start=t0, t_end=t1)
     loads = external_loads(tmp / "loads.xml", files["grf"], trial.plates)
     idv = inverse_dynamics(files["model"], ik["path"], tmp / "id.sto", loads=loads, cutoff=CUTOFF, t_start=t0,
                            t_end=t1)
-    even = _even_times(Path(ik["path"]), tmp / "ik_even.mot", t0, 60.0)
+    even = exact_times(ik["path"], tmp / "ik_even.mot", t0, 60.0)
     ide = inverse_dynamics(files["model"], even, tmp / "id_even.sto", loads=loads, cutoff=CUTOFF, t_start=t0,
                            t_end=t1)
     ik8 = inverse_kinematics(files["model"], files["markers"], files["tasks"], tmp / "ik8.mot", t_start=t0, t_end=t1,

@@ -25,17 +25,6 @@ PLATES = {"calcn_r": "ground_", "calcn_l": "1_ground_"}
 T0, T1, CUTOFF = 0.2, 1.2, 10.0
 
 
-def _exact_times(src: Path, dest: Path, rate: float = 60.0) -> Path:
-    """A .mot with the frames' exact times (OpenSim's IK writes the trial's, rounded to the ms, and its ID tool
-    would resample those at the smallest step; its ExternalForce splines the plates through theirs)."""
-    lines = src.read_text().splitlines()
-    head = next(i for i, ln in enumerate(lines) if ln.strip() == "endheader") + 2
-    rows = [ln.split("\t") for ln in lines[head:] if ln.strip()]
-    dest.write_text("\n".join(lines[:head] + ["\t".join([f"{T0 + k / rate:.10f}", *r[1:]])
-                                              for k, r in enumerate(rows)]) + "\n")
-    return dest
-
-
 def _stance(t: np.ndarray, prefix: str) -> np.ndarray:
     """The frames of the complete stance on plate ``prefix`` within t (vertical force above 20 N)."""
     grf = read_sto(GRF)
@@ -47,14 +36,14 @@ def _stance(t: np.ndarray, prefix: str) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def opensim(tmp_path_factory):
-    from casflex.peers.opensim_tools import external_loads, inverse_dynamics, inverse_kinematics
+    from casflex.peers.opensim_tools import exact_times, external_loads, inverse_dynamics, inverse_kinematics
 
     tmp = tmp_path_factory.mktemp("opensim")
     ik = inverse_kinematics(OSIM, TRC, TASKS, tmp / "ik.mot", t_start=T0, t_end=T1, accuracy=1e-8)
     loads = external_loads(tmp / "loads.xml", GRF, PLATES)
-    exact = _exact_times(Path(ik["path"]), tmp / "ik_exact.mot")
+    exact = exact_times(ik["path"], tmp / "ik_exact.mot", T0, 60.0)
     ide = inverse_dynamics(OSIM, exact, tmp / "id.sto", loads=loads, cutoff=CUTOFF, t_start=T0, t_end=T1)
-    grf = _exact_times(GRF, tmp / "grf_exact.mot")
+    grf = exact_times(GRF, tmp / "grf_exact.mot", T0, 60.0)
     both = inverse_dynamics(OSIM, exact, tmp / "id_exact.sto", loads=external_loads(tmp / "exact.xml", grf, PLATES),
                             cutoff=CUTOFF, t_start=T0, t_end=T1)
     return read_sto(ik["path"]), read_sto(ide["path"]), exact, grf, read_sto(both["path"])

@@ -16,7 +16,7 @@ from collections.abc import Mapping
 
 from casflex.peers.opensim import _opensim, _run
 
-__all__ = ["external_loads", "inverse_kinematics", "inverse_dynamics"]
+__all__ = ["exact_times", "external_loads", "inverse_kinematics", "inverse_dynamics"]
 
 _HERE = "casflex.peers.opensim_tools"
 
@@ -39,6 +39,20 @@ def external_loads(path: str | os.PathLike[str], data_file: str | os.PathLike[st
     ET.SubElement(loads, "datafile").text = os.path.abspath(data_file)
     ET.ElementTree(root).write(os.fspath(path), encoding="UTF-8", xml_declaration=True)
     return os.fspath(path)
+
+
+def exact_times(src: str | os.PathLike[str], dest: str | os.PathLike[str], t0: float, rate: float) -> str:
+    """Write ``dest``: the .mot / .sto ``src`` with its rows' times set to the frames' exact times t0 + k / rate
+    (s). OpenSim's IK writes the trial's times rounded to the ms; its ID tool resamples such times at the
+    smallest step and its ExternalForce splines the plates through them. Needs no OpenSim; returns dest."""
+    with open(src) as fh:
+        lines = fh.read().splitlines()
+    head = next(i for i, ln in enumerate(lines) if ln.strip().lower() == "endheader") + 2
+    rows = [ln.split("\t") for ln in lines[head:] if ln.strip()]
+    with open(dest, "w") as fh:
+        fh.write("\n".join(lines[:head] + ["\t".join([f"{t0 + k / rate:.10f}", *r[1:]])
+                                           for k, r in enumerate(rows)]) + "\n")
+    return os.fspath(dest)
 
 
 def _ik_here(model: str, markers: str, tasks: str, out: str, t_start: float, t_end: float, accuracy: float
