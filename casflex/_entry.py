@@ -26,8 +26,9 @@ def main() -> int:
 
     # One guard for the whole process, opened before any heavy import: a signal that an extension
     # swallows while numpy, CasADi or matplotlib load is counted, and the command's own guard (the
-    # same object) honours it.
-    with interrupt.guard() as signals:
+    # same object) honours it. It stays to the process's end: once the command's outcome is decided, a
+    # signal during the shut-down no longer changes the exit status (interrupt.guard's to_exit).
+    with interrupt.guard(to_exit=True) as signals:
         try:
             from casflex.cli import main as cli_main
 

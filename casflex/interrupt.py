@@ -116,9 +116,16 @@ def _install(handler) -> dict[int, object]:
 
 
 @contextlib.contextmanager
-def guard() -> Iterator[Guard]:
+def guard(to_exit: bool = False) -> Iterator[Guard]:
     """Count SIGINT, SIGTERM and SIGHUP and raise for them in the block (main thread only:
     elsewhere the handlers cannot be installed and the block runs with Python's default behaviour).
+
+    ``to_exit``: the block is the whole process (the ``casflex`` entry point). On leaving it the
+    guarded signals are ignored to the process's end instead of the previous handlers restored: a
+    signal during the interpreter's shut-down (up to a few hundred ms, after the outputs were moved
+    into place) no longer kills it, so the exit status says what was done (0 and the outputs
+    written), never "killed by SIGTERM" over files that were replaced. Ignored, not handled:
+    CPython's finalisation puts a Python handler back to the default action, it keeps SIG_IGN.
 
     Re-entrant: inside an active guard the same :class:`Guard` is yielded, so a signal swallowed
     by an import before the command's own block began (the ``casflex`` entry point opens the
@@ -149,4 +156,4 @@ def guard() -> Iterator[Guard]:
         _active.remove(g)
         sys.unraisablehook = hook
         for signum, old in previous.items():
-            signal.signal(signum, old)
+            signal.signal(signum, signal.SIG_IGN if to_exit else old)
