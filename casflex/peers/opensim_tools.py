@@ -1,10 +1,11 @@
 """OpenSim's own tools on a lab's files: the reference answer casflex's ``inverse`` is measured against.
 
-``InverseKinematicsTool`` (a model file, a marker file, an IK task set) and ``InverseDynamicsTool`` (the
-model, the coordinates, the ground reactions as an ``ExternalLoads`` file, the coordinates' cut-off), as
-a gait lab runs them from its setup files, here from Python. They run in OpenSim's worker process (see
-:mod:`casflex.peers.opensim`: OpenSim and CasADi do not share a process); each returns its output file
-and the seconds its ``run()`` took, so that studies/opensim_gait.py can set them beside casflex's.
+``ScaleTool`` (a lab's scale setups), ``InverseKinematicsTool`` (a model file, a marker file, an IK task
+set) and ``InverseDynamicsTool`` (the model, the coordinates, the ground reactions as an ``ExternalLoads``
+file, the coordinates' cut-off), as a gait lab runs them from its setup files, here from Python. They run
+in OpenSim's worker process (see :mod:`casflex.peers.opensim`: OpenSim and CasADi do not share a
+process); each returns its output file and the seconds its ``run()`` took, so that
+studies/opensim_gait.py can set them beside casflex's.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from collections.abc import Mapping
 
 from casflex.peers.opensim import _opensim, _run
 
-__all__ = ["exact_times", "external_loads", "inverse_kinematics", "inverse_dynamics"]
+__all__ = ["exact_times", "external_loads", "inverse_kinematics", "inverse_dynamics", "scale"]
 
 _HERE = "casflex.peers.opensim_tools"
 
@@ -116,3 +117,23 @@ def inverse_dynamics(model, coordinates, out, *, loads=None, cutoff: float | Non
     loads = os.path.abspath(loads) if loads else None
     return _run(f"{_HERE}:_id_here", worker, *map(os.path.abspath, (model, coordinates)), loads, os.path.abspath(out),
                 cutoff, float(t_start), float(t_end))
+
+
+def _scale_here(setups: list[str]) -> dict:
+    osim = _opensim()
+    start, here = time.perf_counter(), os.getcwd()
+    try:
+        for setup in setups:
+            os.chdir(os.path.dirname(setup))  # the setups name their files relative to themselves
+            if not osim.ScaleTool(setup).run():
+                raise RuntimeError(f"{setup}: OpenSim's ScaleTool failed")
+    finally:
+        os.chdir(here)
+    return {"seconds": time.perf_counter() - start}
+
+
+def scale(*setups, worker: bool | None = None) -> dict:
+    """OpenSim's ScaleTool run on each setup file in turn, in that file's directory (a lab's setups name the
+    generic model, the static trial and the outputs relative to themselves; a two-step pipeline scales in the
+    first and places the markers in the second). Returns {"seconds": the tools' run time}."""
+    return _run(f"{_HERE}:_scale_here", worker, [os.path.abspath(s) for s in setups])
