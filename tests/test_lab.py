@@ -100,6 +100,17 @@ def test_a_malformed_trc_is_one_line_naming_what_is_wrong(tmp_path, kwargs, matc
     assert str(err.value).startswith(str(tmp_path)) and "\n" not in str(err.value)
 
 
+def test_header_values_set_apart_by_runs_of_tabs_are_read_as_opensim_reads_them(tmp_path):
+    """The Rajagopal pipeline's walking trial writes ``  100.0\t\t  100.0\t\t    238 ...`` under single-tab keys."""
+    path = _trc(tmp_path, units="cm")
+    lines = path.read_text().splitlines()
+    lines[2] = "\t\t".join(f"  {v}" for v in lines[2].split("\t"))
+    path.write_text("\n".join(lines) + "\n")
+    data = read_trc(path)
+    assert data.units == "cm" and data.rate == 100.0
+    np.testing.assert_allclose(data.xyz, 0.015)  # 1.5 cm
+
+
 def test_a_malformed_sto_is_one_line_naming_what_is_wrong(tmp_path):
     path = tmp_path / "f.mot"
     cases = [("time\tfx\n0\t1\n", "no 'endheader' line"),

@@ -108,6 +108,26 @@ def test_a_plate_value_no_body_produces_is_refused_naming_the_time(column, value
     _refused([*BASE, "--data", TRC, "--loads", bad, *PLATE], capsys, match)
 
 
+def test_an_unloaded_plate_s_centre_of_pressure_is_not_checked(tmp_path, capsys):
+    """Zero force, the point anywhere (the Rajagopal pipeline's walking trial leaves it 346 m off in swing): the
+    same loads as with the point left where it was; a force of 1 N there is refused (the point then moves it)."""
+    def swing(force: str):
+        def edit(rows):
+            for r in rows:
+                if float(r[2]) == 0.0:  # unloaded in the stride's table: its vertical force exactly zero
+                    r[1:4] = ["0", force, "0"]
+                    r[4:7] = ["346.1", "0", "96.4"]
+        return edit
+
+    assert any(float(r[2]) == 0.0 for r in [ln.split("\t") for ln in GRF.read_text().splitlines()[7:] if ln.strip()])
+    good, _ = _loads([*BASE, "--data", TRC, "--loads", GRF, *PLATE], tmp_path, capsys)
+    off, _ = _loads([*BASE, "--data", TRC, "--loads", _mot(tmp_path, swing("0")), *PLATE], tmp_path, capsys)
+    for name, series in good.items():
+        np.testing.assert_array_equal(off[name], series, err_msg=name)  # p x 0 = 0 exactly: no rounding enters
+    _refused([*BASE, "--data", TRC, "--loads", _mot(tmp_path, swing("1")), *PLATE], capsys,
+             r"its centre of pressure lies at \(346, 0, 96.4\) m, beyond any lab")
+
+
 def test_a_long_run_of_missing_plate_samples_is_refused(tmp_path, capsys):
     """Six NaN samples in stance (0.1 s at 60 Hz) moved the knee by 241 N m; no spline may fill them."""
     def edit(rows):

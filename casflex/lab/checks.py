@@ -85,8 +85,10 @@ def check_plate_values(table: LabTable, prefix: str, force: np.ndarray, cop: np.
     """ValueError in one line naming the file, the plate and the time of a force that is infinite or above
     :data:`MAX_PLATE_FORCE`, a centre of pressure ``cop`` (None: the table gives moments about the origin) that
     is infinite or beyond :data:`LAB_EXTENT`, or a ``moment`` (the free moment where ``cop`` is given, else the
-    moment about the origin) beyond what such forces and :data:`MAX_FREE_MOMENT` make. Values that are not
-    numbers (NaN) are missing samples: the caller's."""
+    moment about the origin) beyond what such forces and :data:`MAX_FREE_MOMENT` make. Where the force is zero
+    the centre of pressure is not checked (it moves nothing; an unloaded plate's is often left at any value:
+    metres off in the Rajagopal pipeline's walking trial). Values that are not numbers (NaN) are missing
+    samples: the caller's."""
     where = f"{table.source}: plate {prefix!r}"
     with np.errstate(invalid="ignore", over="ignore"):
         size = np.linalg.norm(force, axis=1)
@@ -96,9 +98,9 @@ def check_plate_values(table: LabTable, prefix: str, force: np.ndarray, cop: np.
         raise ValueError(f"{where} at t = {table.t[i]:g} s: a force of {np.abs(force[i]).max():.3g} N, beyond what a "
                          f"body exerts on a plate ({MAX_PLATE_FORCE:g} N): a corrupted sample or a calibration in "
                          "other units")
-    if cop is not None:
+    if cop is not None:  # where the force is zero the point carries nothing: exports leave any value there
         with np.errstate(invalid="ignore"):
-            bad = np.isinf(cop).any(axis=1) | (np.abs(cop).max(axis=1) > LAB_EXTENT)
+            bad = (np.isinf(cop).any(axis=1) | (np.abs(cop).max(axis=1) > LAB_EXTENT)) & (size != 0)
         if bad.any():
             i = int(np.argmax(bad))
             raise ValueError(f"{where} at t = {table.t[i]:g} s: its centre of pressure lies at {_point(cop[i])} m, "

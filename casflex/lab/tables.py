@@ -102,8 +102,11 @@ def read_trc(path: str | os.PathLike[str]) -> LabMarkers:
     where, lines = _lines(path)
     if len(lines) < 5 or not lines[0].startswith("PathFileType"):
         raise ValueError(f"{where}: not a TRC file (its first line should start with 'PathFileType')")
-    keys, vals = lines[1].split("\t"), lines[2].split("\t")
-    header = {k.strip(): v.strip() for k, v in zip(keys, vals, strict=False) if k.strip()}
+    keys = [k.strip() for k in lines[1].split("\t") if k.strip()]
+    vals = [v.strip() for v in lines[2].split("\t")]
+    if len(vals) != len(keys):  # values set apart by runs of tabs (some exporters): OpenSim skips the empty ones
+        vals = [v for v in vals if v]
+    header = dict(zip(keys, vals, strict=False))
     units = header.get("Units", "")
     if units not in UNITS:
         raise ValueError(f"{where}: header Units {units!r} is " + ("missing" if not units else "not a length unit")
