@@ -6,7 +6,8 @@ does not need the ``opensim`` package.
 Conventions (OpenSim's): lengths in m, angles in rad, a frame's ``orientation`` an X-Y-Z body-fixed
 rotation sequence; a joint places its child frame M in its parent frame F by the SpatialTransform
 X_FM(q): the rotations (body-fixed, in order) then the translations along their axes in F. A PinJoint
-turns about F's z axis; a WeldJoint locks M to F.
+turns about F's z axis; a WeldJoint locks M to F; a UniversalJoint turns about F's x then the new y, a
+GimbalJoint and a BallJoint about x, y, z (body-fixed: OpenSim's coordinates of a BallJoint too).
 """
 
 from __future__ import annotations
@@ -84,6 +85,12 @@ class OsimModel:
     joints: tuple[OsimJoint, ...]
     markers: tuple[OsimMarker, ...]
     others: tuple[tuple[str, str, str], ...] = field(default=())
+
+
+#: The joints that turn F by body-fixed rotations about its x, y (and z) axes, one coordinate each, and how many.
+#: Read as a CustomJoint of those rotations: a rotation about the plane's normal is a hinge, the others are
+#: held at their default values (:mod:`casflex.scene.from_osim`).
+_EULER = {"UniversalJoint": 2, "GimbalJoint": 3, "BallJoint": 3}
 
 
 def rotation(angles) -> np.ndarray:
@@ -216,6 +223,10 @@ class _Reader:
             return (Axis(True, np.array([0.0, 0.0, 1.0]), coords[0].name if coords else None, Linear(1.0)),)
         if kind == "SliderJoint":
             return (Axis(False, np.array([1.0, 0.0, 0.0]), coords[0].name if coords else None, Linear(1.0)),)
+        if kind in _EULER:  # body-fixed X-Y(-Z) rotations of F (OpenSim 4.6, checked in tests/test_peers_opensim.py)
+            names = [c.name for c in coords]
+            return tuple(Axis(True, np.eye(3)[k], names[k] if k < len(names) else None, Linear(1.0))
+                         for k in range(_EULER[kind]))
         if kind == "PlanarJoint":
             names = [c.name for c in coords]
             e = np.eye(3)
@@ -238,9 +249,10 @@ class _Reader:
         for j in self.model.find("JointSet/objects") if self.model.find("JointSet/objects") is not None else ():
             kind, name = j.tag, j.get("name", "")
             owner = f"joint {name!r}"
-            if kind not in ("PinJoint", "WeldJoint", "CustomJoint", "PlanarJoint", "SliderJoint"):
-                raise ValueError(f"{self.source}: {owner}: a {kind} is not planar, or not read by casflex (PinJoint, "
-                                 "WeldJoint, CustomJoint, PlanarJoint and SliderJoint are)")
+            if kind not in ("PinJoint", "WeldJoint", "CustomJoint", "PlanarJoint", "SliderJoint", *_EULER):
+                raise ValueError(f"{self.source}: {owner}: a {kind} is not read by casflex (PinJoint, WeldJoint, "
+                                 "CustomJoint, PlanarJoint, SliderJoint, UniversalJoint, GimbalJoint and BallJoint "
+                                 "are)")
             frames = self.frames(j, name)
             parent, po = self.frame(frames, j.findtext("socket_parent_frame") or "", name)
             child, co = self.frame(frames, j.findtext("socket_child_frame") or "", name)
