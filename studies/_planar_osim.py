@@ -13,7 +13,9 @@ What changes, by XML alone (no OpenSim needed), and nothing else:
 - a rotation that follows a kept coordinate about another axis (the knee's ab-/adduction and rotation coupled
   to its flexion) is held at its value at the coordinate's default (a Constant);
 - translations that follow a kept coordinate (the knee's rolling) become their sums along x and y (SIMM splines
-  on shared knots add exactly), the part along the normal dropped and reported;
+  on shared knots add exactly), the part along the normal held at its value at the coordinate's default: else
+  OpenSim's IK, fitting the markers' distance along the normal too (some 0.3 m for a subject walking off the
+  model's plane), trades the fit in the plane for it (0.1-0.6 deg at Rajagopal's knee);
 - the forces (muscles), the geometry (frames' included) and the controllers are removed: inverse dynamics
   excludes muscles anyway, and the file shrinks from some 700 kB to some 80 kB.
 Bodies (mass, centre of mass, inertia), joint frames' origins and markers are the source's.
@@ -135,7 +137,7 @@ def _hold_coupled_rotations(joint: ET.Element, keep: set[str], default: dict, re
                       f"{_text(np.round(_vec(ta.findtext('axis')), 4))}) held at {value:g} rad")
 
 
-def _planar_translations(joint: ET.Element, keep: set[str], report: list[str]) -> None:
+def _planar_translations(joint: ET.Element, keep: set[str], default: dict, report: list[str]) -> None:
     """Translations following a kept coordinate: summed along x and y on their shared knots (module docstring)."""
     axes = {ta.get("name"): ta for ta in joint.iter("TransformAxis") if ta.get("name") in _TRANSLATIONS}
     coords = {(ta.findtext("coordinates") or "").strip() for ta in axes.values()} - {""}
@@ -150,10 +152,14 @@ def _planar_translations(joint: ET.Element, keep: set[str], report: list[str]) -
         raise ValueError(f"joint {joint.get('name')!r}: its translations' splines have different knots")
     total = sum(np.outer(y * np.ones_like(knots[0]), a / np.linalg.norm(a)) for a, _, y in parts)  # (knots, 3)
     coord = coords.pop()
-    for k, ta in enumerate(axes.values()):  # x and y in the plane; the normal's part kept (casflex holds it)
+    at = np.flatnonzero(np.isclose(knots[0], default[coord], rtol=0, atol=1e-12))
+    if not len(at):
+        raise ValueError(f"joint {joint.get('name')!r}: {coord!r}'s default is not a knot of its translations")
+    for k, ta in enumerate(axes.values()):  # x and y in the plane; the normal's part held (as casflex holds it)
         ta.find("axis").text = _text(np.eye(3)[k])
-        _set_function(ta, coord, knots[0], total[:, k])
-    report.append(f"joint {joint.get('name')!r}: translations following {coord!r} summed along x, y and the normal")
+        _set_function(ta, coord, knots[0], total[:, k]) if k < 2 else _set_function(ta, "", None, total[at[0], 2])
+    report.append(f"joint {joint.get('name')!r}: translations following {coord!r} summed along x and y; along the "
+                  f"normal held at {1e3 * total[at[0], 2]:.2f} mm (its reach {1e3 * np.ptp(total[:, 2]):.2f} mm)")
 
 
 def _planar_rotations(joint: ET.Element, keep: set[str], report: list[str]) -> None:
@@ -204,7 +210,7 @@ def planar_osim(source: str, dest: str, keep: Iterable[str], name: str | None = 
         if joint.tag == "CustomJoint":
             _hold_coupled_rotations(joint, keep, default, report)
             _planar_rotations(joint, keep, report)
-            _planar_translations(joint, keep, report)
+            _planar_translations(joint, keep, default, report)
     for parent in list(model.iter()):
         for child in list(parent):
             if child.tag == "ConstraintSet" and len(child.find("objects") or []):  # on locked coordinates

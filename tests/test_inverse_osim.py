@@ -180,3 +180,59 @@ def test_external_forces_whose_columns_carry_the_side_in_their_names(tmp_path, p
     res = inverse_dynamics(LEG, TRC, grf=loads)
     assert np.array_equal(res.loads["ankle_angle_r_moment"], plain.loads["ankle_angle_r_moment"])
     assert any("plates 'calcn_r_' on calcn_r" in line for line in res.report)
+
+
+def _clamped_knee(tmp_path, upper: float) -> Path:
+    """The leg with its knee's range [-2.0944, upper] rad, clamped (the file's other coordinates as they are)."""
+    text = LEG.read_text()
+    start = text.index('<Coordinate name="knee_angle_r">')
+    end = text.index("</Coordinate>", start)
+    block = text[start:end]
+    new = block.replace(block[block.index("<range>"):block.index("</range>")], f"<range>-2.0944 {upper!r}")
+    new = new.replace("<clamped>false</clamped>", "<clamped>true</clamped>")
+    path = tmp_path / "clamped.osim"
+    path.write_text(text[:start] + new + text[end:])
+    return path
+
+
+def test_a_clamped_coordinate_is_held_in_its_range_at_the_bounded_least_squares(tmp_path):
+    """OpenSim's IK keeps a clamped coordinate in its range; so does casflex's fit. The knee's range cut at the
+    median of the stride's knee angle: the knee stays in it, is held at the limit where the unbounded fit
+    left it, and each such frame is the bounded least-squares minimum that scipy's trust-region reflective
+    solver finds from the same data (an independent algorithm)."""
+    from scipy.optimize import least_squares
+
+    from casflex.inverse.fit import coordinate_bounds
+    from casflex.scene.coordinates import to_lab
+    from casflex.scene.from_osim import scene_from_osim
+
+    scene = scene_from_osim(LEG).scene
+    knee = next(c for c in scene.coordinates if c.name == "knee_angle_r")
+    unfiltered = inverse_dynamics(LEG, TRC, grf=GRF, plates={"calcn_r": "ground_"}, cutoff=None)  # the fit's z
+    free = to_lab(scene, knee, unfiltered.z[:, unfiltered.coordinate_names.index(knee.scene_coordinate())])
+    upper = float(np.median(free))
+    res = inverse_dynamics(_clamped_knee(tmp_path, upper), TRC, grf=GRF, plates={"calcn_r": "ground_"}, cutoff=None)
+    held = to_lab(scene, knee, res.z[:, res.coordinate_names.index(knee.scene_coordinate())])
+    assert held.max() <= upper + 1e-12  # projected on the limit: at it to rounding, never beyond
+    at = held >= upper - 1e-12
+    assert at.sum() > 0.3 * at.size and any(line.startswith("held at a limit of its range (frames): knee_angle_r in")
+                                            for line in res.report)
+    assert np.array_equal(at[np.abs(free - upper) > 0.05], (free > upper)[np.abs(free - upper) > 0.05])
+    # one frame held at the limit: the fit's z against scipy's bounded minimiser on the same residuals
+    from casflex.inverse.inputs import inverse_model
+    from casflex.inverse.tree import kinematic_tree
+    from casflex.lab import read_trc
+    from casflex.scene.from_osim import scene_from_osim as read
+
+    tree = kinematic_tree(inverse_model(read(_clamped_knee(tmp_path, upper)).scene))
+    lo, hi = coordinate_bounds(tree)
+    i = int(np.flatnonzero(at)[len(np.flatnonzero(at)) // 2])
+    trc = read_trc(TRC)
+    y = np.concatenate([trc.marker(m.label)[i, :2] for m in tree.model.scene.markers])
+    seen = np.isfinite(y)
+    z = res.z[i, [res.coordinate_names.index(n) for n in tree.names]]
+    fit = least_squares(lambda v: (np.array(tree.marker_fit(v)[0]).ravel() - y)[seen], np.clip(z + 0.02, lo, hi),
+                        jac=lambda v: np.array(tree.marker_fit(v)[1])[seen], bounds=(lo, hi), xtol=1e-15,
+                        ftol=1e-15, gtol=1e-15)
+    # both converged to ~1e-10 (casflex's step) on a well-conditioned problem: 1e-7 rad or m is a wide margin
+    np.testing.assert_allclose(z, fit.x, rtol=0, atol=1e-7)

@@ -128,3 +128,17 @@ def test_universal_gimbal_and_ball_joints_turn_about_x_y_z_the_normal_s_turn_a_h
         assert [p.name for p in mine] == [p.name for p in theirs]
         # the same sums of products of the same numbers: equal to round-off (metre-sized: 1e-15 is 5 eps)
         np.testing.assert_allclose([(p.x, p.y) for p in mine], [(p.x, p.y) for p in theirs], rtol=0, atol=1e-15)
+
+
+def test_a_clamped_coordinate_s_range_is_its_limits_through_the_scene_file():
+    from casflex.scene.coordinates import Coordinate
+    from casflex.scene.items import SceneError
+
+    sc = scene_from_osim(LEG).scene
+    knee = next(c for c in sc.coordinates if c.name == "knee_angle_r")
+    assert knee.limits == (-2.0943950999999998, 0.17453293)  # the file's clamped range, rad
+    assert loads_scene(dumps_scene(sc)) == sc
+    with pytest.raises(SceneError, match=r"coordinate 'q'\.limits: the lower limit must be below the upper"):
+        Coordinate("q", "hip", limits=(0.5, 0.5))
+    with pytest.raises(SceneError, match=r"limits: expected \[lower, upper\]"):
+        Coordinate("q", "hip", limits=(0.5,))

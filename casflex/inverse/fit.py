@@ -13,7 +13,8 @@ and z', z'' by second-order central differences of the filtered frames. By defau
 serves the force plates (:mod:`casflex.inverse.plates`), so that the moments are not made of
 kinematics and forces filtered differently (Kristianslund et al. 2012, J Biomech 45:666);
 ``cutoff_plates`` gives them their own. Markers are weighted as the scene's ``weight`` says (an
-OpenSim IK task file sets them: the fit minimises the sum of weight x squared distance).
+OpenSim IK task file sets them: the fit minimises the sum of weight x squared distance); coordinates with
+``limits`` (an OpenSim model's clamped ones) are kept within them, as OpenSim's IK keeps them.
 """
 
 from __future__ import annotations
@@ -73,26 +74,35 @@ def _kabsch_start(tree: KinematicTree, y: np.ndarray, y0: np.ndarray) -> np.ndar
 
 
 def _solve_frame(f: ca.Function, z: np.ndarray, y: np.ndarray, max_iter: int = 50,
-                 w: np.ndarray | None = None) -> tuple[np.ndarray, float, bool]:
+                 w: np.ndarray | None = None, bounds: tuple[np.ndarray, np.ndarray] | None = None
+                 ) -> tuple[np.ndarray, float, bool]:
     """Levenberg-Marquardt from z on the seen entries of y: (z, rms misfit (m), decided)."""
-    z, r, decided = _levenberg_marquardt(f, z, y, max_iter, w)
+    z, r, decided = _levenberg_marquardt(f, z, y, max_iter, w, bounds)
     return z, float(np.sqrt(np.mean(r.reshape(-1, 2) ** 2, axis=0).sum())) if r.size else np.nan, decided
 
 
-def _levenberg_marquardt(f: ca.Function, z: np.ndarray, y: np.ndarray, max_iter: int, w: np.ndarray | None = None
-                         ) -> tuple[np.ndarray, np.ndarray, bool]:
+def _levenberg_marquardt(f: ca.Function, z: np.ndarray, y: np.ndarray, max_iter: int, w: np.ndarray | None = None,
+                         bounds: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray, bool]:
     """(z, the residuals (m, unweighted) of the seen entries of y, decided) from the start z, minimising the
     weighted sum of squares: ``w`` (2 m,) the square roots of the markers' weights per channel (entries of
-    weight 0 are left out, as unseen ones)."""
+    weight 0 are left out, as unseen ones); ``bounds`` (lower, upper) (n_z,) the coordinates' limits (-inf,
+    inf: none). Within bounds the steps are projected on them, and a coordinate at a bound that the descent
+    pushes outward is held there for the step (an active set: the fit's KKT point, as OpenSim's IK's)."""
     seen = np.isfinite(y) if w is None else np.isfinite(y) & (w > 0)
     sw = np.ones(int(seen.sum())) if w is None else w[seen]
+    lo, hi = bounds if bounds is not None else (np.full(z.size, -np.inf), np.full(z.size, np.inf))
+    z = np.clip(z, lo, hi)
     lam = 1e-3
     ym, J = (np.array(v) for v in f(z))
     r = sw * (ym.ravel()[seen] - y[seen])
     J = sw[:, None] * J[seen]
     for _ in range(max_iter):
-        A = J.T @ J
-        step = np.linalg.solve(A + lam * np.diag(np.diag(A) + 1e-12), -J.T @ r)
+        A, g = J.T @ J, J.T @ r
+        free = ~(((z <= lo) & (g > 0)) | ((z >= hi) & (g < 0)))
+        step = np.zeros_like(z)
+        Af = A[np.ix_(free, free)]
+        step[free] = np.linalg.solve(Af + lam * np.diag(np.diag(Af) + 1e-12), -g[free])
+        step = np.clip(z + step, lo, hi) - z
         if np.max(np.abs(step)) < 1e-10:  # converged: 0.1 nm, 1e-10 rad
             break
         ym2, J2 = (np.array(v) for v in f(z + step))
@@ -114,7 +124,20 @@ def fit_pose(tree: KinematicTree, y: np.ndarray, start: np.ndarray | None = None
     f = tree.marker_fit
     if start is None:
         start = _kabsch_start(tree, y, np.array(f(tree.coordinates(tree.model.q0))[0]).ravel())
-    return _solve_frame(f, start, y, w=marker_weights(tree))
+    return _solve_frame(f, start, y, w=marker_weights(tree), bounds=coordinate_bounds(tree))
+
+
+def coordinate_bounds(tree: KinematicTree) -> tuple[np.ndarray, np.ndarray] | None:
+    """(lower, upper) (n_z,) of the tree's coordinates: the scene's ``[[coordinates]]`` limits (an OpenSim model's
+    clamped ranges), -inf and inf elsewhere; None when no coordinate has limits."""
+    from casflex.scene.coordinates import scene_limits
+
+    scene = tree.model.scene
+    limited = {c.scene_coordinate(): scene_limits(scene, c) for c in scene.coordinates if c.limits is not None}
+    if not limited:
+        return None
+    lo, hi = (np.array([limited.get(n, (-np.inf, np.inf))[k] for n in tree.names]) for k in (0, 1))
+    return lo, hi
 
 
 def marker_weights(tree: KinematicTree) -> np.ndarray | None:
@@ -136,25 +159,43 @@ def fit_markers(tree: KinematicTree, t: np.ndarray, y: np.ndarray, *, max_gap: f
     n, m = t.size, y.shape[1] // 2
     Z, rms, seen = np.full((n, tree.n), np.nan), np.full(n, np.nan), np.isfinite(y).reshape(n, -1, 2).all(2).sum(1)
     misfit = np.full((n, m), np.nan)
-    w = marker_weights(tree)
+    w, bounds = marker_weights(tree), coordinate_bounds(tree)
     used = np.ones(m, dtype=bool) if w is None else w[::2] > 0
     z_prev = None
     for i in range(n):
         start = _kabsch_start(tree, y[i], y0) if z_prev is None else z_prev
-        z, r, ok = _levenberg_marquardt(f, start, y[i], 50, w)
+        z, r, ok = _levenberg_marquardt(f, start, y[i], 50, w, bounds)
         if ok:
             Z[i], z_prev = z, z
             rms[i] = float(np.sqrt(np.mean(r.reshape(-1, 2) ** 2, axis=0).sum()))
             misfit[i, np.isfinite(y[i]).reshape(m, 2).all(axis=1) & used] = np.hypot(*r.reshape(-1, 2).T)
-            _check_misfit(misfit[i], t[i], max_misfit, labels, source)
+            _check_misfit(misfit[i], t[i], max_misfit, labels, source, _held(z, bounds, tree))
         if progress is not None:
             progress(i + 1, n)
         interrupt.check()  # a Ctrl-C that a CasADi call swallowed
     report = [f"marker fit: {n} frames, misfit RMS median {1e3 * np.nanmedian(rms):.1f} mm, "
               f"max {1e3 * np.nanmax(rms):.1f} mm"] if np.isfinite(rms).any() else []
-    report += _by_marker(misfit, labels, tree)
+    report += _by_marker(misfit, labels, tree) + _at_limits(Z, bounds, tree)
     Z = _fill(t, Z, max_gap, report)
     return FittedMotion(t, Z, rms, seen, report, misfit)
+
+
+def _held(z: np.ndarray, bounds: tuple[np.ndarray, np.ndarray] | None, tree: KinematicTree) -> list[str]:
+    """The lab names of the coordinates at a limit in the pose z."""
+    if bounds is None:
+        return []
+    lab = {c.scene_coordinate(): c.name for c in tree.model.scene.coordinates}
+    return [lab.get(n, n) for n, v, lo, hi in zip(tree.names, z, *bounds, strict=True) if v <= lo or v >= hi]
+
+
+def _at_limits(Z: np.ndarray, bounds: tuple[np.ndarray, np.ndarray] | None, tree: KinematicTree) -> list[str]:
+    """One line naming the coordinates the fit held at a limit, and in how many frames."""
+    if bounds is None:
+        return []
+    at = (Z <= bounds[0]) | (Z >= bounds[1])  # the fit projects on the limits: equal there, not near
+    lab = {c.scene_coordinate(): c.name for c in tree.model.scene.coordinates}
+    held = [f"{lab.get(n, n)} in {int(at[:, k].sum())}" for k, n in enumerate(tree.names) if at[:, k].any()]
+    return [f"held at a limit of its range (frames): {', '.join(held)}"] if held else []
 
 
 def _by_marker(misfit: np.ndarray, labels, tree: KinematicTree) -> list[str]:
@@ -171,16 +212,19 @@ def _by_marker(misfit: np.ndarray, labels, tree: KinematicTree) -> list[str]:
     return ["markers' misfit RMS/largest, mm: " + ", ".join(parts)]
 
 
-def _check_misfit(misfit: np.ndarray, t: float, limit: float | None, labels, source: str) -> None:
-    """ValueError naming the frame and the marker when a marker lies farther than ``limit`` (m) from the pose."""
+def _check_misfit(misfit: np.ndarray, t: float, limit: float | None, labels, source: str, held: list[str]) -> None:
+    """ValueError naming the frame and the marker when a marker lies farther than ``limit`` (m) from the pose;
+    ``held``: the coordinates at a limit in that frame (named first: a range too narrow for the trial)."""
     if limit is None or not (misfit > limit).any():
         return
     k = int(np.nanargmax(misfit))
     name = labels[k] if labels is not None else f"#{k}"
+    why = (f"{', '.join(held)} held at a limit of its range (the model's clamped range: widen it, or unclamp it), "
+           if held else "")
     raise ValueError(f"{source}: at t = {t:g} s marker {name!r} lies {1e3 * misfit[k]:.0f} mm from where the best pose "
-                     f"of the scene puts it (max_misfit {1e3 * limit:g} mm): a marker lost or mislabelled, the wrong "
-                     "plane or units, a scene not calibrated to this subject (casflex calibrate), or motion out of the "
-                     "plane the scene cannot follow (a running trunk's twist: raise --max-misfit)")
+                     f"of the scene puts it (max_misfit {1e3 * limit:g} mm): {why}a marker lost or mislabelled, the "
+                     "wrong plane or units, a scene not calibrated to this subject (casflex calibrate), or motion out "
+                     "of the plane the scene cannot follow (a running trunk's twist: raise --max-misfit)")
 
 
 def _fill(t: np.ndarray, Z: np.ndarray, max_gap: float, report: list[str]) -> np.ndarray:

@@ -25,12 +25,15 @@ _ROOT_DOFS = ("x", "y", "theta")
 class Coordinate:
     """A lab coordinate ``name``: the angle of the hinge ``of`` (rad), or the root's pose ``of =
     "<node>.x"``, ``"<node>.y"`` (m), ``"<node>.theta"`` (rad); ``value0`` its value in the scene's
-    initial configuration (m or rad), ``sign`` +1 or -1 (module docstring)."""
+    initial configuration (m or rad), ``sign`` +1 or -1 (module docstring); ``limits`` (lower, upper) in
+    the coordinate's own units: the range a marker fit keeps it in (an OpenSim model's clamped coordinate,
+    which OpenSim's IK keeps in its range), None: any value."""
 
     name: str
     of: str
     value0: float = 0.0
     sign: float = 1.0
+    limits: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         where = _owner("coordinate", self.name)
@@ -43,6 +46,13 @@ class Coordinate:
         if sign not in (1.0, -1.0):
             raise SceneError.at(where, "sign", f"must be 1 or -1, got {sign:g}")
         object.__setattr__(self, "sign", sign)
+        if self.limits is not None:
+            if not isinstance(self.limits, (list, tuple)) or len(self.limits) != 2:
+                raise SceneError.at(where, "limits", f"expected [lower, upper], got {self.limits!r}")
+            lo, hi = (_number(where, "limits", v) for v in self.limits)
+            if not lo < hi:
+                raise SceneError.at(where, "limits", f"the lower limit must be below the upper, got [{lo:g}, {hi:g}]")
+            object.__setattr__(self, "limits", (lo, hi))
 
     @property
     def translational(self) -> bool:
@@ -97,3 +107,12 @@ def from_lab(scene, coordinate: Coordinate, value):
     return own_value0(scene, coordinate) + coordinate.sign * (value - coordinate.value0)
 
 
+
+
+def scene_limits(scene, coordinate: Coordinate) -> tuple[float, float]:
+    """(lower, upper) of the scene coordinate's values that the lab coordinate's ``limits`` allow
+    (-inf, inf without limits)."""
+    if coordinate.limits is None:
+        return -float("inf"), float("inf")
+    a, b = (from_lab(scene, coordinate, v) for v in coordinate.limits)
+    return min(a, b), max(a, b)

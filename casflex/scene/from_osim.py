@@ -8,6 +8,8 @@ inertia about the plane's normal through the centre of mass); each joint a hinge
 
 - a rotation about the plane's normal with a coordinate (a PinJoint's, a CustomJoint's) is a hinge, its
   coordinate a ``[[coordinates]]`` entry (``knee_angle_r`` of ``knee_r``, its default value and sign);
+- a coordinate the file clamps keeps its range as its ``limits``: the marker fit keeps it there, as
+  OpenSim's IK does (a knee that the markers would hyperextend held at full extension);
 - the joint to the ground gives the scene's root: its rotation about the normal and its translations
   along x and y are the root's coordinates (``pelvis_tilt``, ``pelvis_tx``, ``pelvis_ty``);
 - a joint with no such rotation is a weld; so is one whose coordinate the model file locks (OpenSim holds a
@@ -72,6 +74,7 @@ class _Builder:
         self.default = {c.name: c.default for j in model.joints for c in j.coordinates}
         self.range = {c.name: c.range for j in model.joints for c in j.coordinates}
         self.locked = {c.name for j in model.joints for c in j.coordinates if c.locked}  # OpenSim holds them
+        self.limits = {c.name: c.range for j in model.joints for c in j.coordinates if c.clamped}
         self.pose: dict[str, tuple[np.ndarray, np.ndarray]] = {"ground": (np.eye(3), np.zeros(3))}
         self.nodes: list[Node] = []
         self.joints: list[Joint] = []
@@ -134,7 +137,7 @@ class _Builder:
             sx, sy = shifts.get("x"), shifts.get("y")
             self.joints.append(Joint(name, "hinge", (node_name(j.parent), child), shift_x=sx and sx[1],
                                      shift_y=sy and sy[1]))
-            self.coords.append(Coordinate(coord, name, self.default[coord], sign))
+            self.coords.append(Coordinate(coord, name, self.default[coord], sign, self.limits.get(coord)))
             kind = "a coupled hinge (its centre moves along " + " and ".join(sorted(shifts)) + ")" if shifts \
                 else "a hinge"
             self.report.append(f"joint {j.name!r} ({j.kind}): {kind}, coordinate {coord!r}")
@@ -218,7 +221,8 @@ class _Builder:
         """The root's coordinates: the rotation about the normal and translations along the ground's x and y."""
         child = node_name(j.child)
         if hinge is not None:
-            self.coords.append(Coordinate(hinge[0], f"{child}.theta", self.default[hinge[0]], hinge[1]))
+            self.coords.append(Coordinate(hinge[0], f"{child}.theta", self.default[hinge[0]], hinge[1],
+                                          self.limits.get(hinge[0])))
         for ax, a in zip(j.axes, axes_g, strict=True):
             if ax.rotation or ax.coordinate is None or ax.function.is_constant() or ax.coordinate in self.locked:
                 continue
@@ -226,7 +230,8 @@ class _Builder:
             for k, dof in ((0, "x"), (1, "y")):
                 if abs(a[k]) >= NORMAL and abs(abs(slope) - 1.0) < 1e-12:
                     self.coords.append(Coordinate(ax.coordinate, f"{child}.{dof}", self.default[ax.coordinate],
-                                                  float(np.sign(a[k]) * np.sign(slope))))
+                                                  float(np.sign(a[k]) * np.sign(slope)),
+                                                  self.limits.get(ax.coordinate)))
         self.report.append(f"joint {j.name!r} ({j.kind}): the root {child!r}, driven by the data; coordinates "
                            f"{[c.name for c in self.coords]}")
 

@@ -29,6 +29,7 @@ class OsimCoordinate:
     default: float
     range: tuple[float, float]
     locked: bool
+    clamped: bool = False  # kept in its range (OpenSim's IK bounds it there)
 
 
 @dataclass(frozen=True)
@@ -213,9 +214,9 @@ class _Reader:
             cname = c.get("name", "")
             rng = self.vector(c, "range", 2, f"{owner} coordinate {cname!r}") if c.find("range") is not None \
                 else np.array([-np.inf, np.inf])
-            locked = (c.findtext("locked") or "false").strip().lower() == "true"
+            locked, clamped = ((c.findtext(tag) or "false").strip().lower() == "true" for tag in ("locked", "clamped"))
             out.append(OsimCoordinate(cname, self.number(c, "default_value", owner, 0.0), (float(rng[0]),
-                                      float(rng[1])), locked))
+                                      float(rng[1])), locked, clamped and bool(rng[0] < rng[1])))
         return tuple(out)
 
     def axes(self, j, kind: str, coords: tuple[OsimCoordinate, ...], owner: str) -> tuple[Axis, ...]:
