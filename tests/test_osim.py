@@ -97,39 +97,6 @@ def test_bad_model_files_are_refused_in_one_line(tmp_path):
         scene_from_osim(bad)
 
 
-def euler_ankle(tmp_path: Path, kind: str, defaults: list[float]) -> Path:
-    """The leg model with its ankle made a ``kind`` (UniversalJoint, GimbalJoint, BallJoint) whose coordinates
-    ankle_x, ankle_y (, ankle_z) have the ``defaults`` (rad), on the ankle's own frames."""
-    text = LEG.read_text()
-    start, end = text.index('<CustomJoint name="ankle_r">'), text.index("</CustomJoint>", text.index(
-        '<CustomJoint name="ankle_r">')) + len("</CustomJoint>")
-    old = text[start:end]
-    frames = old[old.index("<frames>"):old.index("</frames>") + len("</frames>")]
-    coords = "".join(f"<Coordinate name='ankle_{a}'><default_value>{v!r}</default_value><range>-3 3</range>"
-                     "</Coordinate>" for a, v in zip("xyz", defaults, strict=False))
-    new = (f"<{kind} name='ankle_r'><socket_parent_frame>tibia_r_offset</socket_parent_frame><socket_child_frame>"
-           f"talus_r_offset</socket_child_frame><coordinates>{coords}</coordinates>{frames}</{kind}>")
-    path = tmp_path / f"{kind}.osim"
-    path.write_text(text[:start] + new + text[end:])
-    return path
-
-
-@pytest.mark.parametrize(("kind", "n"), [("UniversalJoint", 2), ("GimbalJoint", 3), ("BallJoint", 3)])
-def test_universal_gimbal_and_ball_joints_turn_about_x_y_z_the_normal_s_turn_a_hinge(kind, n, tmp_path):
-    """Their rotations about x and y are held at their default values (reported), as a CustomJoint's; a
-    gimbal's or ball's third rotation, about z once the first two are zero, is the plane's: a hinge. At zero
-    the model is the leg's with its ankle at zero (OpenSim's poses at other values: tests/test_peers_opensim.py)."""
-    osc = scene_from_osim(euler_ankle(tmp_path, kind, [0.0] * n))
-    held = [line for line in osc.dropped if line.startswith("joint 'ankle_r': coordinate")]
-    assert [line.split("'")[3] for line in held] == ["ankle_x", "ankle_y"], osc.dropped
-    assert ("ankle_z" in [c.name for c in osc.scene.coordinates]) == (n == 3)
-    ref = scene_from_osim(LEG).scene
-    for mine, theirs in ((osc.scene.nodes, ref.nodes), (osc.scene.markers, ref.markers)):
-        assert [p.name for p in mine] == [p.name for p in theirs]
-        # the same sums of products of the same numbers: equal to round-off (metre-sized: 1e-15 is 5 eps)
-        np.testing.assert_allclose([(p.x, p.y) for p in mine], [(p.x, p.y) for p in theirs], rtol=0, atol=1e-15)
-
-
 def test_a_clamped_coordinate_s_range_is_its_limits_through_the_scene_file():
     from casflex.scene.coordinates import Coordinate
     from casflex.scene.items import SceneError

@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import importlib.util
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -310,18 +311,33 @@ def test_a_model_file_s_markers_are_where_opensim_puts_them_coupled_knee_include
     assert d[~foot].max() < 1e-12 and 1e-4 < d[foot].max() < 0.2 * 0.5 * np.sin(np.radians(11.7))
 
 
+def _euler_ankle(tmp_path: Path, kind: str, defaults: list[float]) -> Path:
+    """The leg model with its ankle made a ``kind`` (UniversalJoint, GimbalJoint, BallJoint) whose coordinates
+    ankle_x, ankle_y (, ankle_z) have the ``defaults`` (rad), on the ankle's own frames."""
+    text = (Path(__file__).parent / "data" / "lab" / "hamner_subject02_leg.osim").read_text()
+    start, end = text.index('<CustomJoint name="ankle_r">'), text.index("</CustomJoint>", text.index(
+        '<CustomJoint name="ankle_r">')) + len("</CustomJoint>")
+    old = text[start:end]
+    frames = old[old.index("<frames>"):old.index("</frames>") + len("</frames>")]
+    coords = "".join(f"<Coordinate name='ankle_{a}'><default_value>{v!r}</default_value><range>-3 3</range>"
+                     "</Coordinate>" for a, v in zip("xyz", defaults, strict=False))
+    new = (f"<{kind} name='ankle_r'><socket_parent_frame>tibia_r_offset</socket_parent_frame><socket_child_frame>"
+           f"talus_r_offset</socket_child_frame><coordinates>{coords}</coordinates>{frames}</{kind}>")
+    path = tmp_path / f"{kind}.osim"
+    path.write_text(text[:start] + new + text[end:])
+    return path
+
+
 def _euler_foot(tmp_path, kind: str, defaults: list[float], values: dict) -> tuple[np.ndarray, np.ndarray]:
     """The foot's markers (poses, markers, 2) by casflex and by OpenSim 4.6 on the leg whose ankle is a ``kind``
     with ``defaults`` (tests/test_osim.py), at the coordinates ``values`` (name -> (k,))."""
-    from test_osim import euler_ankle
-
     from casflex.inverse.inputs import inverse_model
     from casflex.inverse.tree import kinematic_tree
     from casflex.peers.opensim import file_kinematics
     from casflex.scene.coordinates import from_lab
     from casflex.scene.from_osim import scene_from_osim
 
-    path = euler_ankle(tmp_path, kind, defaults)
+    path = _euler_ankle(tmp_path, kind, defaults)
     sc = scene_from_osim(path).scene
     tree = kinematic_tree(inverse_model(sc))
     by = {c.scene_coordinate(): c for c in sc.coordinates}

@@ -14,7 +14,9 @@ inertia about the plane's normal through the centre of mass); each joint a hinge
   along x and y are the root's coordinates (``pelvis_tilt``, ``pelvis_tx``, ``pelvis_ty``);
 - a joint with no such rotation is a weld; so is one whose coordinate the model file locks (OpenSim holds a
   locked coordinate at its default value in its tools); a UniversalJoint, GimbalJoint or BallJoint is read
-  as its body-fixed rotations about x, y (and z), as a CustomJoint's (a wrist's, a shoulder's);
+  as its body-fixed rotations about F's x, y (and z), as a CustomJoint's (a wrist's, a shoulder's): a weld at
+  the pose of its coordinates' default values, each held coordinate reported with its value, unless one of
+  its rotations turns about the normal there (a hinge; the others held);
 - what cannot move in the plane is projected and reported: a coordinate that turns about another axis
   or translates out of the plane is locked at its default value, a rotation or translation that follows
   the hinge's coordinate about or along something else is held at its default value (its reach over the

@@ -7,7 +7,10 @@ Conventions (OpenSim's): lengths in m, angles in rad, a frame's ``orientation`` 
 rotation sequence; a joint places its child frame M in its parent frame F by the SpatialTransform
 X_FM(q): the rotations (body-fixed, in order) then the translations along their axes in F. A PinJoint
 turns about F's z axis; a WeldJoint locks M to F; a UniversalJoint turns about F's x then the new y, a
-GimbalJoint and a BallJoint about x, y, z (body-fixed: OpenSim's coordinates of a BallJoint too).
+GimbalJoint and a BallJoint about x, y, z (body-fixed: R_FM = Rx(q1) Ry(q2) Rz(q3), OpenSim's coordinates of a
+BallJoint too; checked against OpenSim 4.6, the other orders centimetres off it: tests/test_osim_3d_joints.py).
+An EllipsoidJoint is refused: its M's origin moves on an ellipsoid in F as it turns (Seth et al. 2010), a
+translation that follows several coordinates at once, which a transform axis (one coordinate's function) does not.
 """
 
 from __future__ import annotations
@@ -224,7 +227,7 @@ class _Reader:
             return (Axis(True, np.array([0.0, 0.0, 1.0]), coords[0].name if coords else None, Linear(1.0)),)
         if kind == "SliderJoint":
             return (Axis(False, np.array([1.0, 0.0, 0.0]), coords[0].name if coords else None, Linear(1.0)),)
-        if kind in _EULER:  # body-fixed X-Y(-Z) rotations of F (OpenSim 4.6, checked in tests/test_peers_opensim.py)
+        if kind in _EULER:  # body-fixed X-Y(-Z) rotations of F (OpenSim 4.6's: tests/test_osim_3d_joints.py)
             names = [c.name for c in coords]
             return tuple(Axis(True, np.eye(3)[k], names[k] if k < len(names) else None, Linear(1.0))
                          for k in range(_EULER[kind]))
