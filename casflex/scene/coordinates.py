@@ -107,8 +107,6 @@ def from_lab(scene, coordinate: Coordinate, value):
     return own_value0(scene, coordinate) + coordinate.sign * (value - coordinate.value0)
 
 
-
-
 def scene_limits(scene, coordinate: Coordinate) -> tuple[float, float]:
     """(lower, upper) of the scene coordinate's values that the lab coordinate's ``limits`` allow
     (-inf, inf without limits)."""
