@@ -342,15 +342,19 @@ def _result(s: _SetUp, nlp: _NLP, out: dict[str, Any], build_s: float, record: d
     stats = pb.gauss_newton_statistics(J, z, n_p, model.parameter_names, pmap.dp_dtheta(u[:n_p]), p_hat)
     converged = bool(newton_res <= s.tol_acc and np.isfinite(X).all())
     st, pn = out["stats"], model.parameter_names
-    message = "" if converged else (f"HHT Newton did not converge within the horizon at the identified parameters "
-                                    f"(largest scaled residual {newton_res:.3g} > tol {s.tol_acc:g})")
+    at_bound = pb.bound_flags(model, p_hat, pmap.scale)
+    reasons = [] if converged else [f"HHT Newton did not converge within the horizon at the identified parameters "
+                                    f"(largest scaled residual {newton_res:.3g} > tol {s.tol_acc:g})"]
+    if bound := [k for k, v in at_bound.items() if v]:  # as the default path (estimate): no optimum inside the range
+        reasons.append(f"{', '.join(bound)} ended on a bound: the best fit lies outside the parameters' range (a "
+                       "local minimum, a wrong scene or a model that misses the physics)")
     return IdentificationResult(
         method="indirect", solver=record.pop("solver"), parameters=dict(zip(pn, p_hat.tolist(), strict=True)),
-        start=dict(zip(pn, s.p0.tolist(), strict=True)), success=bool(st.get("success", False)) and converged,
-        status=str(st.get("return_status", "unknown")), message=message, iterations=int(st.get("iter_count", -1)),
-        wall_build_s=build_s, wall_solve_s=out["solve_s"], objective=0.5 * float(z @ z),
-        std_errors=stats.pop("std_errors"), correlation=stats.pop("correlation"),
-        at_bound=pb.bound_flags(model, p_hat, pmap.scale), identifiability=stats,
+        start=dict(zip(pn, s.p0.tolist(), strict=True)), success=bool(st.get("success", False)) and not reasons,
+        status=str(st.get("return_status", "unknown")), message="; ".join(reasons),
+        iterations=int(st.get("iter_count", -1)), wall_build_s=build_s, wall_solve_s=out["solve_s"],
+        objective=0.5 * float(z @ z), std_errors=stats.pop("std_errors"), correlation=stats.pop("correlation"),
+        at_bound=at_bound, identifiability=stats,
         instants=(s.t0 + s.h * np.arange(1, s.N + 1)).tolist(), multipliers=X[3 * n:, :].T.tolist(),
         extra={**record, "steps": s.N, "dt": s.h, "intervals": nlp.tr.M,
                "samples": s.samples,
