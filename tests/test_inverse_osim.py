@@ -236,3 +236,11 @@ def test_a_clamped_coordinate_is_held_in_its_range_at_the_bounded_least_squares(
                         ftol=1e-15, gtol=1e-15)
     # both converged to ~1e-10 (casflex's step) on a well-conditioned problem: 1e-7 rad or m is a wide margin
     np.testing.assert_allclose(z, fit.x, rtol=0, atol=1e-7)
+
+
+def test_a_range_too_narrow_for_the_trial_is_named_in_the_misfit_refusal(tmp_path):
+    """The knee clamped below -1.5 rad (the stride's knee is straighter): the fit holds it there, the markers
+    end far off, and the refusal names the held coordinate before the usual causes."""
+    with pytest.raises(ValueError, match=r"knee_angle_r held at a limit of its range \(the model's clamped range: "
+                                         r"widen it, or unclamp it\)"):
+        inverse_dynamics(_clamped_knee(tmp_path, -1.5), TRC, grf=GRF, plates={"calcn_r": "ground_"}, max_misfit=0.03)

@@ -249,7 +249,6 @@ def test_casflex_inverse_of_the_hamner_stride_is_opensims():
     """``casflex inverse`` on a real running stride (Hamner's subject 02, its right leg, the first plate)
     against OpenSim's InverseDynamicsSolver on the same model, motion and plate: the same equations of
     motion solved by two codes, so they agree to round-off (measured 4e-16 of the peak RMS)."""
-    from pathlib import Path
 
     from casflex.inverse import inverse_dynamics, inverse_model
     from casflex.peers import opensim as osp
@@ -272,7 +271,6 @@ def test_casflex_inverse_of_the_hamner_stride_is_opensims():
 # -- (e) an OpenSim model file read by casflex: its markers where OpenSim puts them -------------------------------
 @needs_opensim
 def test_a_model_file_s_markers_are_where_opensim_puts_them_coupled_knee_included():
-    from pathlib import Path
 
     from casflex.inverse.inputs import inverse_model
     from casflex.inverse.tree import kinematic_tree
@@ -309,63 +307,3 @@ def test_a_model_file_s_markers_are_where_opensim_puts_them_coupled_knee_include
     d = np.abs(casflex_markers(z) - opensim_markers(values)).max(axis=(0, 2))
     foot = np.array([m.on in ("calcn_r", "toes_r", "talus_r") for m in sc.markers])
     assert d[~foot].max() < 1e-12 and 1e-4 < d[foot].max() < 0.2 * 0.5 * np.sin(np.radians(11.7))
-
-
-def _euler_ankle(tmp_path: Path, kind: str, defaults: list[float]) -> Path:
-    """The leg model with its ankle made a ``kind`` (UniversalJoint, GimbalJoint, BallJoint) whose coordinates
-    ankle_x, ankle_y (, ankle_z) have the ``defaults`` (rad), on the ankle's own frames."""
-    text = (Path(__file__).parent / "data" / "lab" / "hamner_subject02_leg.osim").read_text()
-    start, end = text.index('<CustomJoint name="ankle_r">'), text.index("</CustomJoint>", text.index(
-        '<CustomJoint name="ankle_r">')) + len("</CustomJoint>")
-    old = text[start:end]
-    frames = old[old.index("<frames>"):old.index("</frames>") + len("</frames>")]
-    coords = "".join(f"<Coordinate name='ankle_{a}'><default_value>{v!r}</default_value><range>-3 3</range>"
-                     "</Coordinate>" for a, v in zip("xyz", defaults, strict=False))
-    new = (f"<{kind} name='ankle_r'><socket_parent_frame>tibia_r_offset</socket_parent_frame><socket_child_frame>"
-           f"talus_r_offset</socket_child_frame><coordinates>{coords}</coordinates>{frames}</{kind}>")
-    path = tmp_path / f"{kind}.osim"
-    path.write_text(text[:start] + new + text[end:])
-    return path
-
-
-def _euler_foot(tmp_path, kind: str, defaults: list[float], values: dict) -> tuple[np.ndarray, np.ndarray]:
-    """The foot's markers (poses, markers, 2) by casflex and by OpenSim 4.6 on the leg whose ankle is a ``kind``
-    with ``defaults`` (tests/test_osim.py), at the coordinates ``values`` (name -> (k,))."""
-    from casflex.inverse.inputs import inverse_model
-    from casflex.inverse.tree import kinematic_tree
-    from casflex.peers.opensim import file_kinematics
-    from casflex.scene.coordinates import from_lab
-    from casflex.scene.from_osim import scene_from_osim
-
-    path = _euler_ankle(tmp_path, kind, defaults)
-    sc = scene_from_osim(path).scene
-    tree = kinematic_tree(inverse_model(sc))
-    by = {c.scene_coordinate(): c for c in sc.coordinates}
-    k = len(values["pelvis_tilt"])
-    z = np.array([[from_lab(sc, by[nm], values[by[nm].name][i]) for nm in tree.names] for i in range(k)])
-    mine = np.array([np.array(tree.marker_fit(zi)[0]).reshape(-1, 2) for zi in z])
-    ref = file_kinematics(path, values)
-    return mine, np.stack([ref[f"marker:{m.label}"][:, :2] for m in sc.markers], axis=1)
-
-
-@needs_opensim
-@pytest.mark.parametrize(("kind", "n"), [("UniversalJoint", 2), ("GimbalJoint", 3), ("BallJoint", 3)])
-def test_universal_gimbal_and_ball_joints_are_opensims_x_y_z_rotations(kind, n, tmp_path):
-    """The leg's ankle made a ``kind``: ab-/adducted and turned out of the plane at its default values (held by
-    casflex), the hip and knee at random values; then (a gimbal, a ball) x and y at zero, its third rotation,
-    about the normal, at random values. The markers where OpenSim 4.6 puts them, to rounding (metre-sized sums
-    of products of unit rotations, as the leg's own test)."""
-    rng = np.random.default_rng(11)
-    k = 8
-    legs = {"pelvis_tilt": rng.uniform(-0.3, 0.3, k), "pelvis_tx": rng.uniform(-1, 1, k),
-            "pelvis_ty": rng.uniform(0.8, 1.1, k), "hip_flexion_r": rng.uniform(-0.5, 1.2, k),
-            "knee_angle_r": rng.uniform(-2.0, 0.0, k)}
-    held = {"ankle_x": 0.25, "ankle_y": -0.2, "ankle_z": 0.0}  # rad: x then y (body-fixed) held there
-    defaults = list(held.values())[:n]
-    mine, theirs = _euler_foot(tmp_path, kind, defaults, {**legs, **{a: np.full(k, v) for a, v in
-                                                                     list(held.items())[:n]}})
-    assert np.abs(mine - theirs).max() < 1e-12
-    if n == 3:  # the third rotation is the hinge (x, y at zero): about the normal
-        mine, theirs = _euler_foot(tmp_path, kind, [0.0] * 3, {**legs, "ankle_x": np.zeros(k), "ankle_y": np.zeros(k),
-                                                              "ankle_z": rng.uniform(-0.5, 0.5, k)})
-        assert np.abs(mine - theirs).max() < 1e-12

@@ -180,21 +180,24 @@ def fit_markers(tree: KinematicTree, t: np.ndarray, y: np.ndarray, *, max_gap: f
     return FittedMotion(t, Z, rms, seen, report, misfit)
 
 
+def _at_limit(Z: np.ndarray, bounds: tuple[np.ndarray, np.ndarray] | None, tree: KinematicTree) -> dict[str, int]:
+    """{lab name: frames} of the coordinates that the poses Z (n, n_z) or z (n_z,) hold at a limit (the fit
+    projects on the limits: equal there, not near)."""
+    if bounds is None:
+        return {}
+    at = np.atleast_2d((Z <= bounds[0]) | (Z >= bounds[1]))
+    lab = {c.scene_coordinate(): c.name for c in tree.model.scene.coordinates}
+    return {lab.get(n, n): int(at[:, k].sum()) for k, n in enumerate(tree.names) if at[:, k].any()}
+
+
 def _held(z: np.ndarray, bounds: tuple[np.ndarray, np.ndarray] | None, tree: KinematicTree) -> list[str]:
     """The lab names of the coordinates at a limit in the pose z."""
-    if bounds is None:
-        return []
-    lab = {c.scene_coordinate(): c.name for c in tree.model.scene.coordinates}
-    return [lab.get(n, n) for n, v, lo, hi in zip(tree.names, z, *bounds, strict=True) if v <= lo or v >= hi]
+    return list(_at_limit(z, bounds, tree))
 
 
 def _at_limits(Z: np.ndarray, bounds: tuple[np.ndarray, np.ndarray] | None, tree: KinematicTree) -> list[str]:
     """One line naming the coordinates the fit held at a limit, and in how many frames."""
-    if bounds is None:
-        return []
-    at = (Z <= bounds[0]) | (Z >= bounds[1])  # the fit projects on the limits: equal there, not near
-    lab = {c.scene_coordinate(): c.name for c in tree.model.scene.coordinates}
-    held = [f"{lab.get(n, n)} in {int(at[:, k].sum())}" for k, n in enumerate(tree.names) if at[:, k].any()]
+    held = [f"{name} in {k}" for name, k in _at_limit(Z, bounds, tree).items()]
     return [f"held at a limit of its range (frames): {', '.join(held)}"] if held else []
 
 
