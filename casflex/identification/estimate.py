@@ -54,6 +54,7 @@ from casflex.identification.form import alternatives_of, compare_forms, form_par
 from casflex.identification.initial_state import initial_states
 from casflex.identification.measurement import Experiment, check_against_scene
 from casflex.identification.output_error import Budget, Fit, OutputError, StartDoesNotRun, fit
+from casflex.identification.priors import declared_uncertain, forms_with_nuisance, map_fit, prior_report
 from casflex.identification.problem import (
     ParameterMap,
     bound_flags,
@@ -63,6 +64,7 @@ from casflex.identification.problem import (
 from casflex.identification.result import IdentificationResult
 from casflex.identification.statistics import residual_analysis, sandwich_covariance
 from casflex.model import Model, assembled
+from casflex.scene.uncertain import Uncertain, nuisance_names
 
 __all__ = ["estimate", "MODEL_ERRORS", "FIT_THRESHOLD"]
 
@@ -311,7 +313,8 @@ def _huber_bread(problem: OutputError) -> np.ndarray | None:
     if all(e.loss_weights is None for e in problem.experiments):
         return None
     return np.concatenate([(e.loss_weights[sm.sample, sm.channel] >= 1.0).astype(float)
-                           for e, sm in zip(problem.experiments, problem.maps, strict=True)])
+                           for e, sm in zip(problem.experiments, problem.maps, strict=True)]
+                          + [np.ones(problem.n_prior)])  # the priors' rows: least squares
 
 
 def _robust_fit(model: Model, problem: OutputError, f: Fit, setup: dict, budget: Budget, t_solve: float,
@@ -412,11 +415,11 @@ def _uncertainty(problem: OutputError, f: Fit, dp: np.ndarray, p_hat: np.ndarray
     "hac", "noise", "model_form", "total"} (the model error ``me`` is given)."""
     names, n_p = problem.model.parameter_names, problem.model.n_p
     gn = gauss_newton_statistics(f.J, f.r, n_p, names, dp, p_hat)
-    bread = _huber_bread(problem)
-    C, hac = sandwich_covariance(f.J, f.r, problem.groups(), bread=bread)
+    bread, prior = _huber_bread(problem), problem.prior_information(f.w)
+    C, hac = sandwich_covariance(f.J, f.r, problem.groups(), bread=bread, information=prior)
     se_gn = np.array([gn["std_errors"][k] for k in names])
     if bread is not None:  # Huber's loss: the plain part is the M-estimator's sandwich without lags (Huber 1981)
-        C0, _ = sandwich_covariance(f.J, f.r, problem.groups(), bandwidth=0, bread=bread)
+        C0, _ = sandwich_covariance(f.J, f.r, problem.groups(), bandwidth=0, bread=bread, information=prior)
         se_gn = np.where(np.isinf(se_gn), np.inf, np.sqrt(np.maximum(np.diag(C0)[:n_p], 0.0)) * np.abs(dp))
     se_hac = np.where(np.isinf(se_gn), np.inf, np.sqrt(np.maximum(np.diag(C)[:n_p], 0.0)) * np.abs(dp))
     # the noise part: HAC where it is the larger; never below the plain errors, since a HAC under them rests on a
@@ -467,13 +470,14 @@ def estimate(model: Model, experiments: Sequence[Experiment], *, dt: float | Non
              start: float | dict[str, float] | np.ndarray | None = None, transform: str = "linear",
              budget: Budget | None = None, compiled: bool = True, newton_tol: float = 1e-12,
              model_error: str = "refine", form: str = "auto", vary: Mapping[str, tuple[float, float]] | None = None,
-             alternatives: Sequence = (), loss: str = "linear", check_data: bool = True,
-             verbose: bool = False) -> IdentificationResult:
+             alternatives: Sequence = (), loss: str = "linear", uncertain: Sequence[Uncertain] | None = None,
+             check_data: bool = True, verbose: bool = False) -> IdentificationResult:
     """Identify the model's parameters (and the unknown initial states) from ``experiments``.
 
     dt, alpha: the model's step (s) and HHT alpha (default: the scene's run settings, never the
-    samples' spacing); form, vary, alternatives: the alternative forms (:mod:`.form`); the other
-    options as in :func:`casflex.identification.identify_indirect`.
+    samples' spacing); form, vary, alternatives: the alternative forms (:mod:`.form`); uncertain: scene
+    properties known within an uncertainty, besides the scene's own ``[[uncertain]]`` (:mod:`.priors`); the
+    other options as in :func:`casflex.identification.identify_indirect`.
     """
     for name, value, choices in (("model_error", model_error, MODEL_ERRORS), ("loss", loss, LOSSES)):
         if value not in choices:
@@ -485,6 +489,10 @@ def estimate(model: Model, experiments: Sequence[Experiment], *, dt: float | Non
     budget = budget or Budget()
     t_build = time.perf_counter()
     experiments = _named(model, experiments, check_data)
+    scene_u = declared_uncertain(model.scene, uncertain)
+    both = sorted(set(vary or {}) & {u.target for u in scene_u.uncertain})
+    if both:
+        raise ValueError(f"vary {both[0]}: it is declared uncertain, estimated with its prior, not a form to vary")
     forms = alternatives_of(model, experiments, form=form, vary=vary, alternatives=alternatives)
     pmap = ParameterMap.of(model, transform)
     p0 = start_values(model, start)
@@ -499,53 +507,82 @@ def estimate(model: Model, experiments: Sequence[Experiment], *, dt: float | Non
     declared = [e.noise for e in experiments]
     if f.converged and (reweighted := _reweighted(problem, f)) is not None:  # step 3: each channel by its noise
         experiments, problem, f = reweighted, *_refit_weighted(model, reweighted, f, setup, budget, t_solve, verbose)
-    robust = {}
+    robust, priors, n_params = {}, {}, model.n_p
     if loss != "linear":
         experiments, problem, f, robust = _robust_fit(model, problem, f, setup, budget, t_solve, loss, verbose)
-    n_p, names = model.n_p, model.parameter_names
-    p_hat = pmap.p(f.w[:n_p])
-    dp = pmap.dp_dtheta(f.w[:n_p])
+    if nuisance_names(scene_u) and f.converged:  # the uncertain properties with their priors (.priors)
+        model, problem, f, priors = map_fit(model, scene_u, problem, f, p0, declared, setup, budget, t_solve,
+                                            verbose)
+        experiments, pmap, forms = problem.experiments, problem.pmap, forms_with_nuisance(forms, scene_u)
+    p_hat = pmap.p(f.w[:model.n_p])
     me, refit = (_model_error(model, experiments, f, problem, dt=dt, alpha=alpha, transform=transform, budget=budget,
                               compiled=compiled, newton_tol=newton_tol, verbose=verbose)
-                 if model_error == "refine" and f.converged else (np.zeros(n_p), {}))
+                 if model_error == "refine" and f.converged else (np.zeros(model.n_p), {}))
     compared = (compare_forms(problem, f, forms, setup={"transform": transform, "alpha": alpha,
                                                         "newton_tol": newton_tol}, budget=budget, verbose=verbose)
                 if forms and f.converged else [])
     solve_s = time.perf_counter() - t_solve
+    if nuisance_names(scene_u) and not priors:
+        priors = {"not estimated": "the fit without the uncertain properties did not converge"}
+    return _result(problem, f, p0, p_hat, me, refit, compared, declared, priors, robust, n_params,
+                   dt=dt, alpha=alpha, compiled=compiled, newton_tol=newton_tol, transform=transform, budget=budget,
+                   model_error=model_error, build_s=build_s, solve_s=solve_s)
 
+
+def _result(problem: OutputError, f: Fit, p0: np.ndarray, p_hat: np.ndarray, me: np.ndarray, refit: dict,
+            compared: list, declared: list, priors: dict, robust: dict, n_params: int, *, dt: float, alpha: float,
+            compiled: bool, newton_tol: float, transform: str, budget: Budget, model_error: str, build_s: float,
+            solve_s: float) -> IdentificationResult:
+    """The result of :func:`estimate` (steps 6-7 of the module docstring): the first ``n_params`` of the model's
+    parameters are reported; those after them are the uncertain properties, reported in ``extra["uncertain"]``."""
+    model, experiments, pmap = problem.model, problem.experiments, problem.pmap
+    names, keep = model.parameter_names, slice(0, n_params)
+    dp = pmap.dp_dtheta(f.w[:model.n_p])
     gn, C, hac, parts = _uncertainty(problem, f, dp, p_hat, me, compared)
     se_noise, total = parts["noise"], parts["total"]
-
+    gn["weak"] = [k for k in gn["weak"] if k in names[keep]]
     channels, records, trajectories, samples = _experiment_records(
         problem, f, C, declared, p_hat, dt=dt, alpha=alpha, compiled=compiled, newton_tol=newton_tol)
     at_bound = bound_flags(model, p_hat, pmap.scale)
-    reasons = _plausibility(problem, f, channels, at_bound)
+    reasons = _plausibility(problem, f, channels, {k: at_bound[k] for k in names[keep]})
     reasons += [f"{exp.name}: the identified model does not run through the recording ({tr.message})"
                 for exp, tr in zip(experiments, trajectories, strict=True) if not tr.success]
+    if model.n_p > n_params:  # the uncertain properties: what the data say of them, and their part of the errors
+        nuisance, conflicts, held = prior_report(problem, f, se_noise, n_params)
+        priors |= {"properties": nuisance, "held_std_errors": held}
+        parts["uncertain_properties"] = np.append(
+            np.sqrt(np.maximum(parts["gauss_newton"][keep] ** 2 - np.array(list(held.values())) ** 2, 0.0)),
+            np.full(model.n_p - n_params, np.nan))
+        reasons += conflicts
     form_why, notes = form_reasons(compared, names, se_noise)
     refusal = {"form": form_why, "other": reasons}  # why success is withheld: the model's form, or anything else
     reasons = reasons + form_why
     if model_error == "refine" and f.converged and not np.isfinite(me).all():
         notes.append("the model error could not be estimated (the refined model's fit did not converge): the "
                      "standard errors hold the HAC part only")
+    if "not estimated" in priors:
+        notes.append(f"the uncertain properties were not estimated: {priors['not estimated']}")
     first = trajectories[0]
+
+    def named(values: np.ndarray) -> dict[str, float]:
+        return dict(zip(names[keep], np.asarray(values)[keep].tolist(), strict=True))
+
     return IdentificationResult(
-        method="indirect", solver="gauss-newton", parameters=dict(zip(names, p_hat.tolist(), strict=True)),
-        start=dict(zip(names, p0.tolist(), strict=True)), success=not reasons, status=f.status,
-        message="; ".join(reasons + notes), iterations=f.iterations, wall_build_s=build_s, wall_solve_s=solve_s,
-        objective=0.5 * float(f.r @ f.r), std_errors=dict(zip(names, total.tolist(), strict=True)),
-        correlation=gn.pop("correlation"), at_bound=at_bound,
+        method="indirect", solver="gauss-newton", parameters=named(p_hat), start=named(p0[:n_params]),
+        success=not reasons, status=f.status, message="; ".join(reasons + notes), iterations=f.iterations,
+        wall_build_s=build_s, wall_solve_s=solve_s, objective=0.5 * float(f.r @ f.r), std_errors=named(total),
+        correlation=np.asarray(gn.pop("correlation"))[keep, keep].tolist(),
+        at_bound={k: at_bound[k] for k in names[keep]},
         identifiability={k: v for k, v in gn.items() if k != "std_errors"},
         instants=first.t.tolist(), multipliers=first.lam.tolist(),
         extra={"transcription": "single-shooting", "residue": "positions", "dofs": list(problem.maps[0].channels),
                "transform": transform, "dt": dt,
                "alpha": alpha, "steps": int(sum(sm.n_steps for sm in problem.maps)), "compiled": compiled,
                "budget": dataclasses.asdict(budget), "model_runs": problem.evaluations, "offset_se": f.offset,
-               "uncertainty": {**{k: dict(zip(names, parts[k].tolist(), strict=True))
-                                  for k in ("gauss_newton", "hac", "noise", "model_form")},
-                               "model_error": dict(zip(names, me.tolist(), strict=True)),
-                               "hac_bandwidth": hac["bandwidth"], "model_error_refit": refit},
-               "forms": compared, "refusal": refusal, "robust": robust,
+               "uncertainty": {**{k: named(parts[k]) for k in parts if k != "total"},
+                               "model_error": named(me), "hac_bandwidth": hac["bandwidth"],
+                               "model_error_refit": refit},
+               "forms": compared, "refusal": refusal, "robust": robust, "uncertain": priors,
                "experiments": records, "solver_s": f.solve_s},
         trajectories=tuple(trajectories), samples=tuple(samples),
     )

@@ -30,7 +30,7 @@ from casflex.identification.problem import GAUSS_NEWTON, NLPKeywords, NLPOptions
 from casflex.identification.result import IdentificationResult
 from casflex.identification.shooting_nlp import RESIDUES, TRANSCRIPTIONS, identify_nlp
 from casflex.model import Model
-from casflex.scene import Scene
+from casflex.scene import Scene, Uncertain
 
 __all__ = ["identify_indirect", "RESIDUES", "TRANSCRIPTIONS", "INITIAL_STATES", "MODEL_ERRORS", "Budget"]
 
@@ -88,6 +88,7 @@ def identify_indirect(
     vary: Mapping[str, tuple[float, float]] | None = None,
     alternatives: Sequence[Scene | str | os.PathLike[str]] = (),
     loss: str = "linear",
+    uncertain: Sequence[Uncertain] | None = None,
     check_data: bool = True,
     **options: Unpack[NLPKeywords],
 ) -> IdentificationResult:
@@ -137,6 +138,10 @@ def identify_indirect(
     loss : {"linear", "huber"}
         Least squares, or Huber's loss, robust to marker artefacts (iteratively reweighted from
         the least-squares answer; single shooting by Gauss-Newton).
+    uncertain : list of :class:`casflex.scene.Uncertain`, optional
+        Scene properties known only within an uncertainty (a mass from an anthropometric table), besides
+        the scene's own ``[[uncertain]]``: estimated with their priors beside the parameters, whose
+        standard errors then carry what they leave open (:mod:`.priors`; single shooting by Gauss-Newton).
     check_data : bool
         Stop when the data cannot belong to the scene (units, times, initial state).
     **options : solver, solver_options, transform, hessian, compiled, verbose (:class:`.problem.NLPOptions`)
@@ -172,7 +177,7 @@ def identify_indirect(
         return estimate(model, experiments, dt=dt, alpha=alpha, start=start, transform=transform, budget=budget,
                         compiled=True if opts.compiled is None else opts.compiled, newton_tol=newton_tol,
                         model_error=model_error, form=form, vary=vary, alternatives=alternatives, loss=loss,
-                        check_data=check_data, verbose=verbose)
+                        uncertain=uncertain, check_data=check_data, verbose=verbose)
     if len(experiments) > 1 or experiments[0].initial_state == "velocities" or (
             experiments[0].initial_state == "estimate" and residue != "positions"):
         raise ValueError(f"solver {solver!r} ({transcription}): one recording, from the scene's initial state or an "
@@ -192,7 +197,8 @@ def identify_indirect(
     # Eq. 16: the default procedure polishes the NLP's answer and reports it as every result is
     final = estimate(model, experiments, dt=dt, alpha=alpha, start=r.extra["solver_parameters"], transform=transform,
                      budget=budget, compiled=True, newton_tol=newton_tol, model_error=model_error, form=form,
-                     vary=vary, alternatives=alternatives, loss=loss, check_data=check_data, verbose=verbose)
+                     vary=vary, alternatives=alternatives, loss=loss, uncertain=uncertain,
+                     check_data=check_data, verbose=verbose)
     reasons = [m for m in (f"the NLP solver did not succeed ({r.status})" if not r.success else "", final.message)
                if m]
     extra = {**final.extra, "transcription": transcription, "intervals": r.extra["intervals"],

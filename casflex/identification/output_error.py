@@ -93,6 +93,10 @@ class OutputError:
 
     ``initial``: per experiment its :class:`~.initial_state.InitialState` (default: the scene's),
     which maps xi_e to (q0, qd0) and gives the derivatives.
+
+    A parameter with a ``prior`` (mean, sd) adds the row (p - mean) / sd after the data's rows (``n_prior`` of
+    them, the parameters ``prior_index``): the maximum a posteriori fit. The row is in standard deviations, so
+    the data's rows must be too: every experiment's noise declared or estimated (:mod:`.priors`).
     """
 
     def __init__(self, model: Model, experiments: list[Experiment], *, dt: float, alpha: float,
@@ -125,6 +129,11 @@ class OutputError:
                 sigma = sigma / np.sqrt(e.loss_weights[sm.sample, sm.channel])
             self.sigma.append(sigma)
         self.evaluations = 0
+        priors = [(j, par.prior) for j, par in enumerate(model.parameters) if par.prior is not None]
+        self.prior_index = np.array([j for j, _ in priors], dtype=int)
+        self.prior_mean = np.array([pr[0] for _, pr in priors], dtype=float)
+        self.prior_sd = np.array([pr[1] for _, pr in priors], dtype=float)
+        self.n_prior = len(priors)
 
     # -- unknowns ----------------------------------------------------------------------------
     def pack(self, theta: np.ndarray) -> np.ndarray:
@@ -214,7 +223,23 @@ class OutputError:
             Je[:, :npar] = D[:, :npar] * dp
             Je[:, self.offsets[e]:self.offsets[e + 1]] = D[:, npar:]
             Js.append(Je)
+        if self.n_prior:  # the priors' rows (p - mean) / sd
+            j = self.prior_index
+            rs.append((p[j] - self.prior_mean) / self.prior_sd)
+            if jacobian:
+                Jp = np.zeros((self.n_prior, self.n_unknowns))
+                Jp[np.arange(self.n_prior), j] = dp[j] / self.prior_sd
+                Js.append(Jp)
         return np.concatenate(rs), (np.vstack(Js) if jacobian else None)
+
+    def prior_information(self, w: np.ndarray) -> np.ndarray:
+        """(n, n) J_prior^T J_prior at unknowns w: the priors' information in the unknowns (zero without priors)."""
+        info = np.zeros((self.n_unknowns, self.n_unknowns))
+        if self.n_prior:
+            j = self.prior_index
+            d = self.pmap.dp_dtheta(w[:self.model.n_p])[j] / self.prior_sd
+            info[j, j] = d**2
+        return info
 
     def groups(self) -> list[list[np.ndarray]]:
         """Rows of the residual vector per experiment and sample time, in time order."""

@@ -54,7 +54,8 @@ def bartlett_bandwidth(scores: np.ndarray) -> int:
 
 
 def sandwich_covariance(J: np.ndarray, r: np.ndarray, groups: list[np.ndarray], bandwidth: int | None = None,
-                        bread: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+                        bread: np.ndarray | None = None,
+                        information: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, Any]]:
     """HAC covariance of all unknowns of a least-squares fit.
 
     J : (m, n) Jacobian of the residuals r (m,) at the optimum. groups : for every experiment,
@@ -62,15 +63,17 @@ def sandwich_covariance(J: np.ndarray, r: np.ndarray, groups: list[np.ndarray], 
     flattened as ``groups[e][t]``); experiments are independent. ``bread`` : (m,) factors of the
     rows in the sandwich's bread J^T diag(bread) J, for an M-estimator fitted by reweighting (J, r
     reweighted): psi'(u) / w(u) per row, 1 for least squares (Huber's loss: 0 where a sample is
-    weighted down). Returns the (n, n) covariance (pseudo-inverse where the bread is singular: such
-    directions are reported by the Gauss-Newton statistics) and {"bandwidth": per experiment,
+    weighted down). ``information`` : (n, n) the priors' information (rows of J that no group holds, e.g. a
+    maximum a posteriori fit's prior rows): its own term of the meat, as they are independent of the data's
+    residuals and of unit variance by construction. Returns the (n, n) covariance (pseudo-inverse where the
+    bread is singular: such directions are reported by the Gauss-Newton statistics) and {"bandwidth": per experiment,
     "scores_lag1": lag-1 autocorrelation}.
     """
     n = J.shape[1]
     U, s, Vt = np.linalg.svd(J if bread is None else np.sqrt(bread)[:, None] * J, full_matrices=False)
     keep = s > max(J.shape) * np.finfo(float).eps * (s[0] if s.size else 0.0)
     Hinv = (Vt[keep].T / s[keep] ** 2) @ Vt[keep]
-    omega = np.zeros((n, n))
+    omega = np.zeros((n, n)) if information is None else np.array(information, dtype=float)
     info: dict[str, Any] = {"bandwidth": [], "scores_lag1": []}
     for exp_groups in groups:
         g = np.array([J[rows].T @ r[rows] for rows in exp_groups])  # (T, n) scores per sample time

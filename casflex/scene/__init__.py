@@ -3,6 +3,7 @@
 - :mod:`casflex.scene.items`: the items (nodes, beams, springs, bodies, joints, supports, loads, parameters,
   run settings), each validated on construction, and :class:`SceneError`;
 - :mod:`casflex.scene.markers`: markers fixed on beams and bodies (``[[markers]]``);
+- :mod:`casflex.scene.uncertain`: properties known within an uncertainty (``[[uncertain]]``);
 - :mod:`casflex.scene.scene`: :class:`Scene`, the whole system, its cross-checks and look-ups;
 - :mod:`casflex.scene.io`: TOML in and out (:func:`load_scene`, :func:`dumps_scene`, the built-in scenes in
   ``casflex/scene/builtin/``);
@@ -28,7 +29,8 @@ from casflex.scene.scene import (
     Support,
     TorsionSpring,
 )
+from casflex.scene.uncertain import Uncertain
 
 __all__ = ["SceneError", "Node", "Beam", "Spring", "TorsionSpring", "RigidBody", "Joint", "Support", "Load",
-           "Parameter", "RunSettings", "Scene", "SUPPORT_DOFS", "Marker", "load_scene", "loads_scene", "dumps_scene",
-           "save_scene", "builtin_scenes", "scene_from_dict"]
+           "Parameter", "RunSettings", "Scene", "SUPPORT_DOFS", "Marker", "Uncertain", "load_scene", "loads_scene",
+           "dumps_scene", "save_scene", "builtin_scenes", "scene_from_dict"]

@@ -30,6 +30,7 @@ from casflex.scene.scene import (
     Support,
     TorsionSpring,
 )
+from casflex.scene.uncertain import Uncertain
 
 __all__ = ["load_scene", "loads_scene", "dumps_scene", "save_scene", "builtin_scenes", "scene_from_dict"]
 
@@ -46,6 +47,7 @@ _LISTS: dict[str, type] = {
     "parameters": Parameter,
     "markers": Marker,
     "coordinates": Coordinate,
+    "uncertain": Uncertain,
 }
 _TOP_KEYS = {"name", "gravity", "run", *_LISTS}
 
@@ -105,6 +107,8 @@ def _build(cls: type, where: str, table: Any) -> Any:
     label = where
     if isinstance(table.get("name"), str) and table["name"]:
         label = f"{where} ({table['name']})"
+    elif isinstance(table.get("target"), str) and table["target"]:  # an [[uncertain]] entry: named by its target
+        label = f"{where} ({table['target']})"
     known = {f.name: f for f in fields(cls)}
     for key in table:
         if key not in known:
@@ -113,7 +117,7 @@ def _build(cls: type, where: str, table: Any) -> Any:
         if f.default is MISSING and f.default_factory is MISSING and name not in table:
             raise SceneError(f"{label}: missing required field {name!r}")
     kwargs = dict(table)
-    for key in ("nodes", "table", "point", "axis", "shift_x", "shift_y"):
+    for key in ("nodes", "table", "point", "axis", "shift_x", "shift_y", "range", "prior"):
         if key in kwargs and isinstance(kwargs[key], list):
             kwargs[key] = tuple(tuple(r) if isinstance(r, list) else r for r in kwargs[key])
     for key in ("lower", "upper"):

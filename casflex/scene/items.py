@@ -478,6 +478,9 @@ class Parameter:
     lower bound is 0 for properties that are non-negative by nature (``NONNEGATIVE_FIELDS``:
     stiffnesses, damping coefficients, section, density, rest length, masses), else -inf; the default
     upper bound is +inf. ``scale`` is the typical magnitude used to scale the NLP (default: the nominal).
+    ``prior`` (mean, standard deviation), in the property's unit: what is known of it before the data
+    (a Gaussian prior); the fit then estimates it by maximum a posteriori (:mod:`casflex.identification.priors`).
+    The scene's ``[[uncertain]]`` properties become such parameters (:class:`casflex.scene.uncertain.Uncertain`).
     """
 
     name: str
@@ -486,6 +489,7 @@ class Parameter:
     lower: float | None = None
     upper: float = math.inf
     scale: float | None = None
+    prior: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         where = _owner("parameter", self.name)
@@ -509,6 +513,11 @@ class Parameter:
             raise SceneError.at(where, "lower", f"must be below upper = {self.upper:g}, got {self.lower:g}")
         if self.scale is not None:
             object.__setattr__(self, "scale", _positive(where, "scale", self.scale))
+        if self.prior is not None:
+            if isinstance(self.prior, str) or not isinstance(self.prior, (list, tuple)) or len(self.prior) != 2:
+                raise SceneError.at(where, "prior", f"expected [mean, standard deviation], got {self.prior!r}")
+            object.__setattr__(self, "prior", (_number(where, "prior[0]", self.prior[0]),
+                                               _positive(where, "prior[1]", self.prior[1])))
 
 
 @dataclass(frozen=True)

@@ -70,12 +70,13 @@ class Scene:
     run: RunSettings = field(default_factory=RunSettings)
     markers: tuple[Any, ...] = ()  # casflex.scene.markers.Marker
     coordinates: tuple[Any, ...] = ()  # casflex.scene.coordinates.Coordinate
+    uncertain: tuple[Any, ...] = ()  # casflex.scene.uncertain.Uncertain
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.strip():
             raise SceneError(f"name: expected a non-empty string (the scene's name), got {self.name!r}")
         for f in ("nodes", "beams", "springs", "torsion_springs", "bodies", "supports", "joints", "loads",
-                  "parameters", "markers", "coordinates"):
+                  "parameters", "markers", "coordinates", "uncertain"):
             value = getattr(self, f)
             if isinstance(value, str) or not isinstance(value, (list, tuple)):
                 raise SceneError(f"{f}: expected a list, got {type(value).__name__}")
@@ -93,9 +94,11 @@ class Scene:
         self._check_parameters()
         from casflex.scene.coordinates import check_coordinates
         from casflex.scene.markers import check_markers
+        from casflex.scene.uncertain import check_uncertain
 
         check_markers(self)
         check_coordinates(self)
+        check_uncertain(self)
 
     # -- validation -------------------------------------------------------------------------
     def _check_types(self) -> None:
