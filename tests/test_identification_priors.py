@@ -113,3 +113,26 @@ def test_vary_and_uncertain_on_one_property_is_refused(twobar):
     with pytest.raises(ValueError, match="vary bar2.rho: it is declared uncertain"):
         identify_indirect(twobar, recording("heavy", 0), dt=1e-3, uncertain=DENSITIES,
                           vary={"bar2.rho": (7000.0, 8000.0)})
+
+
+def test_the_command_line_takes_uncertain_properties(tmp_path, capsys):
+    import json
+
+    from casflex.cli import main
+    from casflex.data import save_measurements
+
+    path = save_measurements(recording("heavy", 0), tmp_path / "heavy.csv")
+    base = ["identify", "twobar", "--method", "indirect", "--data", str(path), "--dt", "1e-3", "--quiet",
+            "--model-error", "none", "--form", "none"]
+    out = tmp_path / "r.json"
+    assert main([*base, "--uncertain", "bar2.rho=5%", "--uncertain", "bar4.rho=390", "--out", str(out)]) == 0
+    res = json.loads(out.read_text())
+    props = res["extra"]["uncertain"]["properties"]
+    assert props["bar2.rho"]["prior_sd"] == pytest.approx(390.0) and props["bar4.rho"]["prior_sd"] == 390.0
+    assert "uncertain bar2.rho: prior 7800" in capsys.readouterr().out
+    for bad, said in (("bar2.rho=-5%", "must be >= 0"), ("bar2.rhox=5%", "no numeric property 'rhox'"),
+                      ("bar2.rho", "expected TARGET=SD"), ("bar2.rho=9000:9500", "lies outside [9000, 9500]")):
+        assert main([*base, "--uncertain", bad, "--out", str(tmp_path / "bad.json")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "--uncertain" in err[0] and said in err[0], err
+        assert not (tmp_path / "bad.json").exists()

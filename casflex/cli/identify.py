@@ -34,7 +34,7 @@ _INDIRECT_ONLY = {"transcription": "--transcription", "horizon": "--horizon", "r
                   "dofs": "--dofs", "interval": "--interval", "initial_state": "--initial-state", "dt": "--dt",
                   "alpha": "--alpha", "sigma": "--sigma", "max_iter": "--max-iter", "max_time": "--max-time",
                   "model_error": "--model-error", "plots": "--plots", "form": "--form", "vary": "--vary",
-                  "alternatives": "--alternatives", "loss": "--loss"}
+                  "alternatives": "--alternatives", "loss": "--loss", "uncertain": "--uncertain"}
 _DIRECT_ONLY = {"instants": "--instants", "smoothing": "--smoothing", "cutoff": "--cutoff", "window": "--window",
                 "beam_forces": "--beam-forces"}
 
@@ -122,14 +122,45 @@ def _vary(text: str) -> tuple[str, tuple[float, float]]:
             from None
 
 
+def _uncertain(text: str):
+    """--uncertain TARGET=SD, TARGET=P% (relative) or TARGET=LOWER:UPPER (argparse type): a casflex.scene.Uncertain."""
+    from casflex.scene import SceneError, Uncertain
+
+    target, eq, value = (x.strip() for x in text.partition("="))
+    try:
+        if not (eq and target and value):
+            raise ValueError
+        if ":" in value:
+            lo, _, hi = value.partition(":")
+            return Uncertain(target, range=(float(lo), float(hi)))
+        if value.endswith("%"):
+            return Uncertain(target, relative=float(value[:-1]) / 100)
+        return Uncertain(target, sd=float(value))
+    except SceneError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: {exc.reason}") from None
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected TARGET=SD, TARGET=PERCENT% or TARGET=LOWER:UPPER, e.g. "
+                                         f"shank.mass=10%, got {text!r}") from None
+
+
 def _check_forms(model: Model, args: argparse.Namespace) -> None:
-    """--vary and --alternatives checked against the scene before any work (one line naming the option)."""
+    """--vary, --alternatives and --uncertain checked against the scene before any work (one line naming the
+    option)."""
     from casflex.identification.form import declared_alternatives
+    from casflex.identification.priors import declared_uncertain
 
     try:  # the scenes only: the models are assembled once, by the fit
         declared_alternatives(model, form="none", vary=dict(args.vary or ()), alternatives=args.alternatives or ())
     except ValueError as exc:  # the library's message names "vary <target>" or "alternatives"
         raise OptionError(f"--{exc}") from None
+    try:
+        scene = declared_uncertain(model.scene, args.uncertain)
+    except ValueError as exc:
+        raise OptionError(f"--uncertain: {exc}") from None
+    both = sorted({t for t, _ in args.vary or ()} & {u.target for u in scene.uncertain})
+    if both:
+        raise OptionError(f"--vary {both[0]}: it is declared uncertain (--uncertain or the scene's [[uncertain]]), "
+                          "estimated with its prior, not a form to vary")
 
 
 def _start(model: Model, args: argparse.Namespace) -> float | np.ndarray:
@@ -266,7 +297,7 @@ def _identify(model: Model, sets: list[MeasurementSet], args: argparse.Namespace
                              solver=args.solver, compiled=args.compiled or None,
                              budget=Budget(args.max_iter, args.max_time), model_error=args.model_error,
                              form=args.form, vary=dict(args.vary or ()), alternatives=args.alternatives or (),
-                             loss=args.loss or "linear", **common)
+                             loss=args.loss or "linear", uncertain=args.uncertain, **common)
 
 
 def run_start(*, scene: str, sets: list[MeasurementSet], options: dict[str, Any], start: list[float],
@@ -439,6 +470,10 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--vary", type=_vary, action="append", metavar="TARGET=LO:HI",
                    help="indirect: a scene property known within a range, e.g. bar2.E=1.5e11:2.5e11: refit at both "
                         "ends; the parameters' move joins their standard errors (repeatable)")
+    s.add_argument("--uncertain", type=_uncertain, action="append", metavar="TARGET=SD|P%|LO:HI",
+                   help="indirect: a scene property known only within an uncertainty (e.g. shank.mass=10%%, "
+                        "bar2.E=5e9, shank.inertia=0.12:0.18), estimated with that prior beside the parameters; "
+                        "repeatable, added to the scene's [[uncertain]]")
     s.add_argument("--alternatives", nargs="+", metavar="SCENE",
                    help="indirect: other forms of the model (scene files declaring the same parameters), each "
                         "refitted and compared with the scene by AIC")

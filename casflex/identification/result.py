@@ -88,7 +88,8 @@ class IdentificationResult:
             parts = ""
             if unc:  # the parts of the standard error, as each method reports them
                 labels = {"hac": "HAC", "model_error": "model error", "model_form": "model form",
-                          "instant_robust": "instant-clustered", "gauss_newton": "plain Gauss-Newton"}
+                          "uncertain_properties": "uncertain properties", "instant_robust": "instant-clustered",
+                          "gauss_newton": "plain Gauss-Newton"}
                 parts = "  [" + ", ".join(f"{lab} {unc[key][k]:.2g}" for key, lab in labels.items() if key in unc) + "]"
             lines.append(f"  {k:<8s} = {v:14.6g}  +- {se:.2g}{parts} (start {self.start[k]:.6g}){flag}")
         idf = self.identifiability
@@ -109,6 +110,10 @@ class IdentificationResult:
         if rebuilt:
             lines.append(f"  dofs from markers {', '.join(rebuilt['markers'])} at {rebuilt['samples']} samples: "
                          f"{rebuilt['note']}")
+        for target, u in self.extra.get("uncertain", {}).get("properties", {}).items():
+            lines.append(f"  uncertain {target}: prior {u['prior_mean']:.6g} +- {u['prior_sd']:.2g}, estimate "
+                         f"{u['estimate']:.6g} +- {u['std_error']:.2g} (moved {u['moved_sd']:+.2f} prior sd; "
+                         f"{100 * u['left_of_prior']:.0f} % of its prior spread left)")
         for f in self.extra.get("forms", []):
             d = f.get("delta_aic")
             lines.append(f"  form {f['name']}: {f['verdict']}" + ("" if d is None else f" (delta AIC {d:+.1f})"))
