@@ -549,7 +549,10 @@ def _result(problem: OutputError, f: Fit, p0: np.ndarray, p_hat: np.ndarray, me:
                 for exp, tr in zip(experiments, trajectories, strict=True) if not tr.success]
     if model.n_p > n_params:  # the uncertain properties: what the data say of them, and their part of the errors
         nuisance, conflicts, held = prior_report(problem, f, se_noise, n_params)
-        priors |= {"properties": nuisance, "held_std_errors": held}
+        # the joint distribution of parameters and properties: what output bands draw from (.bands)
+        joint = {"names": list(names), "values": p_hat.tolist(), "std_errors": total.tolist(),
+                 "correlation": np.asarray(gn["correlation"]).tolist()}
+        priors |= {"properties": nuisance, "held_std_errors": held, "joint": joint}
         parts["uncertain_properties"] = np.append(
             np.sqrt(np.maximum(parts["gauss_newton"][keep] ** 2 - np.array(list(held.values())) ** 2, 0.0)),
             np.full(model.n_p - n_params, np.nan))

@@ -124,7 +124,8 @@ def map_fit(model: Model, scene: Scene, problem: OutputError, f: Fit, p0: np.nda
         rounds.append({"runs": g.iterations, "status": g.status, "noise_change": change})
         if not g.converged or change <= NOISE_TOL:
             break
-    return model_u, prob, g, {"rounds": rounds, "nuisance": list(nuisance_names(scene))}
+    declared = [dataclasses.asdict(u) for u in scene.uncertain if u.name in nuisance_names(scene)]
+    return model_u, prob, g, {"rounds": rounds, "nuisance": list(nuisance_names(scene)), "declared": declared}
 
 
 def prior_report(problem: OutputError, f: Fit, se_noise: np.ndarray, n_params: int) -> tuple[dict, list[str], dict]:
