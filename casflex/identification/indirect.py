@@ -190,7 +190,8 @@ def identify_indirect(
                                        solver_options or {})
     r = identify_nlp(model, exp.data, float(exp.data.t[-1] - exp.data.t[0]), transcription=transcription,
                      residue=residue, dofs=exp.channels, weights=weights, alpha=alpha, dt=dt, interval=interval,
-                     start=start, initial_state=exp.initial_state, newton_tol=newton_tol, polish=polish,
+                     start=start, initial_state=exp.initial_state, noise=exp.noise, newton_tol=newton_tol,
+                     polish=polish,
                      **{**dataclasses.asdict(opts), "solver_options": solver_options})
     if residue == "full":
         return r
@@ -199,13 +200,16 @@ def identify_indirect(
                      budget=budget, compiled=True, newton_tol=newton_tol, model_error=model_error, form=form,
                      vary=vary, alternatives=alternatives, loss=loss, uncertain=uncertain,
                      check_data=check_data, verbose=verbose)
-    reasons = [m for m in (f"the NLP solver did not succeed ({r.status})" if not r.success else "", final.message)
-               if m]
+    # the NLP's own answer is the start of the reported one: its solver's convergence and bounds count; its fit
+    # to the recording is judged again on the reported answer
+    nlp_why = r.extra["refusal"]["other"]
+    reasons = [m for m in (f"the NLP solver did not succeed ({r.status}: {'; '.join(nlp_why)})" if nlp_why else "",
+                           final.message) if m]
     extra = {**final.extra, "transcription": transcription, "intervals": r.extra["intervals"],
              "hessian": opts.hessian, "nlp": {k: r.extra[k] for k in ("solver_s", "solver_parameters",
-                                                                  "constraint_violation")},
+                                                                  "constraint_violation", "refusal")},
              "nlp_status": r.status, "nlp_iterations": r.iterations}
     return dataclasses.replace(final, solver=solver, status=r.status, iterations=r.iterations,
-                               success=r.success and final.success, message="; ".join(reasons),
+                               success=not nlp_why and final.success, message="; ".join(reasons),
                                wall_build_s=r.wall_build_s + final.wall_build_s,
                                wall_solve_s=r.wall_solve_s + final.wall_solve_s, extra=extra)
