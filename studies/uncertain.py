@@ -1,7 +1,7 @@
 """Identification with uncertain properties (issue 37): recordings by another code (Exudyn) whose masses, inertia
 or E differ from the scene's within their declared uncertainty, fitted with and without declaring it.
 
-Prose: docs/studies/uncertain.md. Run: ``python studies/uncertain.py`` (about 10 min on 2 cores, needs Exudyn for
+Prose: docs/studies/uncertain.md. Run: ``python studies/uncertain.py`` (about 3 min on 2 cores, needs Exudyn for
 the truths drawn from the priors: ``pip install -e '.[peers]'``; ``--quick``: one seed of two cases, no draws).
 """
 
