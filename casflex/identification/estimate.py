@@ -42,7 +42,6 @@
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 from collections.abc import Mapping, Sequence
 
@@ -54,6 +53,13 @@ from casflex.identification.form import alternatives_of, compare_forms, form_par
 from casflex.identification.initial_state import initial_states
 from casflex.identification.measurement import Experiment, check_against_scene
 from casflex.identification.output_error import Budget, Fit, OutputError, StartDoesNotRun, fit
+from casflex.identification.plausibility import (  # noqa: F401 (FIT_THRESHOLD, pooled_fit re-exported)
+    FIT_THRESHOLD,
+    REWEIGHT,
+    noise_record,
+    pooled_fit,
+    residual_reasons,
+)
 from casflex.identification.priors import declared_uncertain, forms_with_nuisance, map_fit, prior_report
 from casflex.identification.problem import (
     ParameterMap,
@@ -68,8 +74,6 @@ from casflex.scene.uncertain import Uncertain, nuisance_names
 
 __all__ = ["estimate", "MODEL_ERRORS", "FIT_THRESHOLD"]
 
-#: A channel fitted below this fraction of its measured motion makes the result implausible.
-FIT_THRESHOLD = 0.95
 #: Richardson's factor for a second-order method refined by 2: error(h) = 4/3 (p(h) - p(h/2)).
 RICHARDSON = 4.0 / 3.0
 #: Length (s) of the first window of the growing horizon.
@@ -83,9 +87,6 @@ STAGE_RUNS = 20
 #: A stage before the last stops within this many of its standard errors of its least-squares solution:
 #: its answer is only the next stage's start (twobar from 0.8 x: 33 model runs to the full tolerance).
 STAGE_SE = 1.0
-#: Channels of undeclared noise whose residual RMS (in the fit's weights) differ by more than this factor are
-#: refitted weighted by it: below, weights that far off cost under 1 % of the estimates' variance
-REWEIGHT = 1.2
 #: Model runs the refit with the channels' estimated noise may take (it starts at the fit's answer)
 REWEIGHT_RUNS = 30
 #: Huber's tuning constant in robust standard deviations (1.4826 x the channel's median absolute residual): 95 %
@@ -362,24 +363,6 @@ def _channels(problem: OutputError, fitted: Fit, e: int, rows: np.ndarray, decla
     return res
 
 
-def _noise_record(declared, used, residuals: dict) -> dict:
-    """What the channels' noise was taken to be (data units) and where it came from."""
-    if declared is not None:
-        values = declared if isinstance(declared, Mapping) else dict.fromkeys(residuals, declared)
-        return {"source": "declared", "channels": dict(values)}
-    source = ("estimated from the residuals, the channels weighted by it" if used is not None else
-              f"estimated from the residuals; one weight (the channels agree within a factor {REWEIGHT:g})")
-    return {"source": source, "channels": {c: ch["rms"] for c, ch in residuals.items()}}
-
-
-def pooled_fit(residuals: dict) -> float | None:
-    """An experiment's fit over all its moving channels in the fit's weights (noise units):
-    1 - |r| / |y - mean y| with each channel's mean removed (None: no channel moves)."""
-    moving = [ch for ch in residuals.values() if ch["fit"] is not None]
-    motion = math.sqrt(sum(ch["motion_w"] ** 2 for ch in moving))
-    return 1 - math.sqrt(sum(ch["residual_w"] ** 2 for ch in moving)) / motion if motion > 0 else None
-
-
 def _plausibility(problem: OutputError, fitted: Fit, channels: list[dict], at_bound: dict[str, bool]) -> list[str]:
     """Why the result is not a plausible answer (empty: it is)."""
     reasons = []
@@ -389,22 +372,7 @@ def _plausibility(problem: OutputError, fitted: Fit, channels: list[dict], at_bo
     if bound:
         reasons.append(f"{', '.join(bound)} ended on a bound: the best fit lies outside the parameters' range")
     for e, res in enumerate(channels):
-        exp = problem.experiments[e]
-        label = exp.name or f"experiment {e + 1}"
-        pooled, structured = pooled_fit(res), [n for n, ch in res.items() if ch["fit"] is not None and not ch["white"]]
-        # pooled over the channels in noise units: a channel that barely moves adds a sliver of motion and a residual
-        # at its noise, and cannot decide; white residuals everywhere are noise, however low the fit
-        if pooled is not None and pooled < FIT_THRESHOLD and structured:
-            worst = max(structured, key=lambda n: res[n]["residual_w"])
-            reasons.append(f"{label}: the model reproduces only {100 * pooled:.0f} % of the measured motion (all "
-                           f"channels, in noise units) and leaves a structured residual, the largest on {worst} "
-                           f"({100 * res[worst]['fit']:.0f} % of its motion): a local minimum, a wrong scene or a "
-                           "model that misses the physics")
-        for name, ch in res.items():
-            ratio = ch.get("noise_ratio")
-            if ratio is not None and ratio > 3:
-                reasons.append(f"{label}: the residual RMS of {name} is {ratio:.1f} x the declared "
-                               "noise: the model does not explain the data to the noise level")
+        reasons += residual_reasons(problem.experiments[e].name or f"experiment {e + 1}", res)
     return reasons
 
 
@@ -455,7 +423,7 @@ def _experiment_records(problem: OutputError, f: Fit, C: np.ndarray, declared: l
         trajectories.append(tr)
         rec = {"initial_state": exp.initial_state, "samples": int(sm.y.size), "t0": sm.t0,
                "t_end": sm.t0 + sm.n_steps * dt, "channels": list(sm.channels), "residuals": channels[-1],
-               "noise": _noise_record(declared[e], exp.noise, channels[-1])}
+               "noise": noise_record(declared[e], exp.noise is not None, channels[-1])}
         if exp.initial_state != "scene":
             se_q, se_qd = problem.state_errors(f.w, C, e)
             keys = ("q0", "qd0") if exp.initial_state == "estimate" else ("qd0",)

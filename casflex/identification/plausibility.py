@@ -5,27 +5,43 @@ open, where single shooting of the identified model leaves the data.
 
 Per experiment and compared channel: the residual analysis (:func:`.statistics.residual_analysis`:
 RMS, autocorrelation, Ljung-Box whiteness), the fit 1 - |r| / |y - mean y| and the motion and
-residual in noise units that the pooled fit adds up (:func:`.estimate.pooled_fit`). The rules:
-the pooled fit is at least :data:`.estimate.FIT_THRESHOLD` or every moving channel's residual is
+residual in noise units that the pooled fit adds up (:func:`pooled_fit`). The rules:
+the pooled fit is at least :data:`FIT_THRESHOLD` or every moving channel's residual is
 white; each channel's residual RMS is at most 3 x its declared noise.
 
 The noise units: the declared noise (one value: rotations taken as arc lengths at the scene's
 length scale l, as :class:`.output_error.OutputError` weighs them; or one value per channel),
 or, undeclared, one weight for every channel (rotations again times l) unless the channels'
-residual RMS in those weights differ by more than :data:`.estimate.REWEIGHT`: then each channel's
+residual RMS in those weights differ by more than :data:`REWEIGHT`: then each channel's
 own RMS, as the default path refits with (its step 3).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 
 import numpy as np
 
-from casflex.identification.estimate import FIT_THRESHOLD, REWEIGHT, pooled_fit
 from casflex.identification.statistics import residual_analysis
 
-__all__ = ["channel_residuals", "noise_units", "noise_record", "residual_reasons"]
+__all__ = ["channel_residuals", "noise_units", "noise_record", "residual_reasons", "pooled_fit", "FIT_THRESHOLD",
+           "REWEIGHT"]
+
+#: A recording fitted below this fraction of its measured motion (pooled, :func:`pooled_fit`) makes the result
+#: implausible, unless its residuals are white.
+FIT_THRESHOLD = 0.95
+#: Channels of undeclared noise whose residual RMS (in the fit's weights) differ by more than this factor are
+#: refitted weighted by it: below, weights that far off cost under 1 % of the estimates' variance
+REWEIGHT = 1.2
+
+
+def pooled_fit(residuals: dict) -> float | None:
+    """An experiment's fit over all its moving channels in the fit's weights (noise units):
+    1 - |r| / |y - mean y| with each channel's mean removed (None: no channel moves)."""
+    moving = [ch for ch in residuals.values() if ch["fit"] is not None]
+    motion = math.sqrt(sum(ch["motion_w"] ** 2 for ch in moving))
+    return 1 - math.sqrt(sum(ch["residual_w"] ** 2 for ch in moving)) / motion if motion > 0 else None
 
 
 def noise_units(names: list[str], rms: dict[str, float], rotation: np.ndarray, length_scale: float,
