@@ -31,14 +31,16 @@ class ElementGroup:
     names : tuple of str, length n_el
     dofs : int ndarray, shape (n_el, n_dof of the kind): global dof indices of each element
     base : ndarray, shape (n_props, n_el): property values (those that are parameters: 0)
-    slots : ((prop row, element, parameter index), ...): properties that are entries of p
+    slots : ((prop row, element, parameter index, coefficient), ...): the property is its base value plus
+        coefficient x that entry of p (a property that is a parameter itself: base 0, coefficient 1; a body's
+        centre of mass in its node's frame: the rotated offset of the scene's com_x, com_y)
     """
 
     kind: str
     names: tuple[str, ...]
     dofs: np.ndarray
     base: np.ndarray
-    slots: tuple[tuple[int, int, int], ...] = ()
+    slots: tuple[tuple[int, int, int, float], ...] = ()
     _scatter: dict = field(default_factory=dict, init=False, repr=False)
 
     @property
@@ -55,9 +57,11 @@ class ElementGroup:
         if not self.slots:
             return base
         n_pr = self.base.shape[0]
-        rows = [e * n_pr + r for r, e, _ in self.slots]
-        sel = ca.DM(ca.Sparsity.triplet(n_pr * self.n, p.numel(), rows, [k for _, _, k in self.slots]),
-                    [1.0] * len(self.slots))
+        rows = [e * n_pr + r for r, e, _, _ in self.slots]
+        # DM.triplet places each coefficient at its (row, column): a DM built on the sparsity would take them in
+        # its column-major order instead
+        sel = ca.DM.triplet(rows, [k for _, _, k, _ in self.slots], ca.DM([c for *_, c in self.slots]),
+                            n_pr * self.n, p.numel())
         return base + ca.reshape(ca.mtimes(sel, p), n_pr, self.n)
 
     def scatter_lists(self, n: int) -> list[list[int]]:

@@ -251,17 +251,24 @@ def _groups(scene: Scene, order, nodes, beam_elems, idx) -> tuple[ElementGroup, 
     slot_of = {par.target: i for i, par in enumerate(scene.parameters)}
     out = []
 
-    def group(kind: str, items: list[tuple[str, str, list[int], list[float], tuple[str, ...]]]):
-        # items: (element name, scene owner of the properties, dofs, values, scene field per property)
+    def group(kind: str, items: list[tuple[str, str, list[int], list[float], tuple]]):
+        # items: (element name, scene owner of the properties, dofs, values, per property: the scene field it is
+        # ("" for none), or ((field, coefficient), ...) where it is a combination of fields plus a constant)
         if not items:
             return
         base = np.array([it[3] for it in items], dtype=float).T
-        slots = tuple((r, e, slot_of[f"{it[1]}.{fld}"]) for e, it in enumerate(items)
-                      for r, fld in enumerate(it[4]) if f"{it[1]}.{fld}" in slot_of)
-        for r, e, _ in slots:
-            base[r, e] = 0.0
+        slots = []
+        for e, it in enumerate(items):
+            for r, spec in enumerate(it[4]):
+                for fld, coef in (((spec, 1.0),) if isinstance(spec, str) else spec):
+                    if f"{it[1]}.{fld}" not in slot_of:
+                        continue
+                    slots.append((r, e, slot_of[f"{it[1]}.{fld}"], coef))
+                    # the row is then its constant part plus coef p (a property that is a field itself: 0 + p)
+                    base[r, e] = 0.0 if isinstance(spec, str) else base[r, e] - coef * scene.property_value(
+                        f"{it[1]}.{fld}")
         out.append(ElementGroup(kind, tuple(it[0] for it in items), np.array([it[2] for it in items], dtype=int),
-                                base, slots))
+                                base, tuple(slots)))
 
     beams = []
     for b, k, na, nb in beam_elems:
@@ -324,7 +331,8 @@ def _groups(scene: Scene, order, nodes, beam_elems, idx) -> tuple[ElementGroup, 
         dy = (y0 if bd.com_y is None else bd.com_y) - y0
         c, s_ = math.cos(th0), math.sin(th0)  # the offset in the node's frame: R(theta0)^T (com - node)
         bodies.append((bd.name, bd.name, [idx[bd.node] + j for j in range(3)],
-                       [bd.mass, bd.inertia, c * dx + s_ * dy, -s_ * dx + c * dy], ("mass", "inertia", "", "")))
+                       [bd.mass, bd.inertia, c * dx + s_ * dy, -s_ * dx + c * dy],
+                       ("mass", "inertia", (("com_x", c), ("com_y", s_)), (("com_x", -s_), ("com_y", c)))))
     group("body", bodies)
     group("follower", [(ld.name, ld.name, [idx[ld.node] + j for j in range(3)], [ld.fx, ld.fy], ("fx", "fy"))
                        for ld in scene.loads if ld.follower])

@@ -232,14 +232,16 @@ class Scene:
             raise SceneError(f"{where}: {owner!r} is {what} have no numeric properties to identify")
         numeric = [f.name for f in fields(it) if f.name not in _NON_NUMERIC]
         if isinstance(it, RigidBody):
-            numeric = ["mass", "inertia"]  # where the centre of mass sits is geometry, not a parameter
+            numeric = ["mass", "inertia", "com_x", "com_y"]
         if prop not in numeric:
             raise SceneError(f"{where}: {owner!r} has no numeric property {prop!r}; expected one of {numeric}")
         if isinstance(it, Load) and it.table is not None:
             raise SceneError(f"{where}: load {owner!r} is given as a table; tabulated loads cannot be parameters")
         value = getattr(it, prop)
         if value is None:
-            if isinstance(it, Spring):
+            if isinstance(it, RigidBody):  # the centre of mass defaults to the node
+                value = getattr(self.node(it.node), prop[-1])
+            elif isinstance(it, Spring):
                 value = self.spring_length(it)
             elif isinstance(it, TorsionSpring):
                 value = self.node(it.nodes[1]).theta - self.node(it.nodes[0]).theta
