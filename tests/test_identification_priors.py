@@ -192,3 +192,17 @@ def test_the_knee_force_band_carries_the_segments_mass():
     m = r.extra["uncertain"]["properties"]["shank_foot.mass"]["estimate"]
     width = np.median((band["hi"] - band["lo"])[:, 1] / np.abs(band["value"][:, 1]))
     assert width == pytest.approx(2 * 1.96 * se_m / m, rel=0.4)
+
+
+def test_methods_that_cannot_estimate_uncertain_properties_refuse_them(twobar):
+    import dataclasses
+
+    from casflex.data import simulated_set
+    from casflex.identification import identify_adapted_direct, identify_direct
+
+    model = casflex.assemble(dataclasses.replace(twobar.scene, uncertain=(DENSITIES[0],)))
+    data = simulated_set(twobar, 1.0)
+    for call in (lambda: identify_direct(model, data, [0.69]), lambda: identify_adapted_direct(model, data, [0.5]),
+                 lambda: identify_indirect(twobar, data, 0.3, residue="full", uncertain=DENSITIES)):
+        with pytest.raises(ValueError, match=r"uncertain properties \['bar2.rho'.*cannot estimate them"):
+            call()

@@ -112,6 +112,7 @@ def identify_adapted_direct(model: Model, data: MeasurementSet, instants: Sequen
     own, opts = direct_options("identify_adapted_direct", dict(options))
     start, beam_forces, smoothing, cutoff = (own[k] for k in ("start", "beam_forces", "smoothing", "cutoff"))
     pb.require_fixed_supports(model, "the adapted direct method")
+    pb.require_no_uncertain(model, "the adapted direct method")
     # a rigid body's rotation between hinges is not in its nodes' translations: its cubic would be free,
     # and the fit "succeeds" far off (the double pendulum's elbow spring: kt 10.0 for 6, ct 0.67 for 0.15)
     pb.require_no_joints(model, "the adapted direct method (rotations fitted to the nodes' translations)")

@@ -33,6 +33,7 @@ from casflex.identification.problem import (
     failure_reasons,
     gauss_newton_statistics,
     require_fixed_supports,
+    require_no_uncertain,
     robust_statistics,
     smoothed_if_needed,
     solve_and_polish,
@@ -104,6 +105,7 @@ def identify_direct(model: Model, data: MeasurementSet, instants: Sequence[float
     own, opts = direct_options("identify_direct", dict(options), hessian="exact")
     start, beam_forces, smoothing, cutoff = (own[k] for k in ("start", "beam_forces", "smoothing", "cutoff"))
     require_fixed_supports(model, "the direct method")
+    require_no_uncertain(model, "the direct method")
     t_build = time.perf_counter()
     data, from_markers = dofs_from_markers(model, data, "the direct method")
     data, smoothing_info = smoothed_if_needed(data, smoothing, cutoff)

@@ -26,7 +26,7 @@ from casflex.data import MeasurementSet
 from casflex.identification.estimate import MODEL_ERRORS, estimate
 from casflex.identification.measurement import INITIAL_STATES, Experiment
 from casflex.identification.output_error import Budget
-from casflex.identification.problem import GAUSS_NEWTON, NLPKeywords, NLPOptions, merge_options
+from casflex.identification.problem import GAUSS_NEWTON, NLPKeywords, NLPOptions, merge_options, require_no_uncertain
 from casflex.identification.result import IdentificationResult
 from casflex.identification.shooting_nlp import RESIDUES, TRANSCRIPTIONS, identify_nlp
 from casflex.model import Model
@@ -183,6 +183,8 @@ def identify_indirect(
         raise ValueError(f"solver {solver!r} ({transcription}): one recording, from the scene's initial state or an "
                          f"estimated one (residue 'positions'); use solver {GAUSS_NEWTON!r} (single shooting) for "
                          "several recordings or estimated velocities")
+    if residue == "full":
+        require_no_uncertain(model, "the full residue (Eq. 17)", uncertain)
     exp = experiments[0]
     solver_options = opts.solver_options
     if solver == "ipopt":  # the budget's time holds for IPOPT too: no one waits unboundedly for a failure

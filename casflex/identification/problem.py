@@ -103,6 +103,16 @@ def require_fixed_supports(model: Model, method: str) -> None:
                          "method's default (single shooting by Gauss-Newton), which follows their paths")
 
 
+def require_no_uncertain(model: Model, method: str, uncertain: object = None) -> None:
+    """ValueError naming the properties when the scene (or ``uncertain``) declares uncertain ones: ``method``
+    cannot estimate them, and holding them at the scene's values would claim more than is known."""
+    targets = [u.target for u in (*model.scene.uncertain, *(uncertain or ()))]
+    if targets:
+        raise ValueError(f"uncertain properties {targets}: {method} cannot estimate them (it would hold them at the "
+                         "scene's values and claim the parameters more precisely than they are known); use the "
+                         "indirect method's default (single shooting by Gauss-Newton)")
+
+
 def require_no_joints(model: Model, method: str) -> None:
     """ValueError naming the joints when ``model`` has ideal joints, which ``method`` does not take yet."""
     if model.joint_row_names:
