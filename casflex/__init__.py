@@ -18,7 +18,7 @@ _EXPORTS = {
     "RigidBody": "casflex.scene", "RunSettings": "casflex.scene", "Scene": "casflex.scene",
     "SceneError": "casflex.scene",
     "Spring": "casflex.scene", "Support": "casflex.scene", "TorsionSpring": "casflex.scene",
-    "Marker": "casflex.scene",
+    "Marker": "casflex.scene", "Uncertain": "casflex.scene",
     "builtin_scenes": "casflex.scene", "dumps_scene": "casflex.scene", "load_scene": "casflex.scene",
     "loads_scene": "casflex.scene", "save_scene": "casflex.scene",
 }
