@@ -111,8 +111,9 @@ def map_fit(model: Model, scene: Scene, problem: OutputError, f: Fit, p0: np.nda
     states = [problem.state(f.w, e) for e in range(len(problem.experiments))]
     experiments, change = _noise_taken(problem, f, declared, floor)
     rounds: list[dict] = []
-    prob, g = problem, f
+    prob, g, runs = problem, f, problem.evaluations  # model runs of every stage so far
     for _ in range(NOISE_ROUNDS):
+        runs += prob.evaluations if prob is not problem else 0
         left = budget.max_time - (time.perf_counter() - t_solve)
         prob = OutputError(model_u, experiments, **{**setup, "pmap": pmap,
                                                      "initial": initial_states(model_u, experiments, p, states)})
@@ -124,6 +125,8 @@ def map_fit(model: Model, scene: Scene, problem: OutputError, f: Fit, p0: np.nda
         rounds.append({"runs": g.iterations, "status": g.status, "noise_change": change})
         if not g.converged or change <= NOISE_TOL:
             break
+    prob.evaluations += runs  # the result counts every model run and iteration, the stages' before it too
+    g = dataclasses.replace(g, iterations=f.iterations + sum(r["runs"] for r in rounds), solve_s=f.solve_s + g.solve_s)
     declared = [dataclasses.asdict(u) for u in scene.uncertain if u.name in nuisance_names(scene)]
     return model_u, prob, g, {"rounds": rounds, "nuisance": list(nuisance_names(scene)), "declared": declared}
 
