@@ -23,7 +23,16 @@ import numpy as np
 from casflex.model import Model
 
 __all__ = ["MeasurementSet", "simulated_set", "measured_set", "load_measurements", "save_measurements",
-           "add_position_noise", "FILE_FORMATS"]
+           "add_position_noise", "FILE_FORMATS", "builtin_recordings"]
+
+#: Example recordings shipped with casflex, beside the built-in scenes they belong to
+_BUILTIN_DIR = Path(__file__).parent / "scene" / "builtin"
+
+
+def builtin_recordings() -> list[str]:
+    """Names of the example recordings shipped with casflex (``casflex/scene/builtin/*.csv``), which
+    :func:`load_measurements` (and ``casflex identify --data NAME``) read by name."""
+    return sorted(p.stem for p in _BUILTIN_DIR.glob("*.csv"))
 
 
 @dataclass(frozen=True, eq=False)
@@ -148,7 +157,8 @@ def _format_of(path: Path) -> str:
 
 
 def load_measurements(path: str | os.PathLike[str]) -> MeasurementSet:
-    """Read a measurement file (``.npz`` or ``.csv``, see ``docs/data-format.md``).
+    """Read a measurement file (``.npz`` or ``.csv``, see ``docs/data-format.md``), or an example recording
+    shipped with casflex by its name (:func:`builtin_recordings`, e.g. ``"knee_pendulum_trial"``).
 
     Returns a :class:`MeasurementSet` with t in s, positions q (m, rad) and, when the file has
     them, velocities qd (m/s, rad/s) and accelerations qdd (m/s^2, rad/s^2). Every problem
@@ -156,6 +166,8 @@ def load_measurements(path: str | os.PathLike[str]) -> MeasurementSet:
     Channel names are not checked against a model here: :meth:`MeasurementSet.select` does.
     """
     path = Path(path)
+    if not path.exists() and not path.suffix and str(path) in builtin_recordings():  # an example shipped with casflex
+        path = _BUILTIN_DIR / f"{path}.csv"
     fmt = _format_of(path)
     if not path.exists():
         raise ValueError(f"{path}: no such file")

@@ -107,3 +107,22 @@ def test_identifies_the_knee_from_noisy_markers(model, seed):
     r = identify_indirect(model, data, start={"kt_knee": 1.0, "ct_knee": 0.3})
     assert r.success, r.message
     _within_three_se(r.parameters, r.std_errors)
+
+
+def test_the_example_trial_is_shipped_and_read_by_name(tmp_path, exudyn, capsys):
+    # the recording with a lab's 1 mm of noise, shipped in the package (casflex/scene/builtin/knee_pendulum_trial.csv)
+    from casflex.data import builtin_recordings
+
+    assert "knee_pendulum_trial" in builtin_recordings()
+    trial = load_measurements("knee_pendulum_trial")
+    assert list(trial.channels) == exudyn["channels"]
+    noise = trial.q - exudyn["q"]
+    # 5010 draws of 1 mm, rounded to 0.01 mm: their sd within 4 % (3.5 sampling sds), their mean within 0.1 mm
+    assert abs(noise.std() / 1e-3 - 1) < 0.04 and abs(noise.mean()) < 1e-4
+    out = tmp_path / "r.json"
+    assert main(["identify", "knee_pendulum", "--method", "indirect", "--data", "knee_pendulum_trial", "--quiet",
+                 "--uncertain", "shank_foot.mass=10%", "--uncertain", "shank_foot.inertia=20%",
+                 "--out", str(out)]) == 0
+    res = json.loads(out.read_text())
+    for name, truth in (("kt_knee", 2.0), ("ct_knee", 0.15)):
+        assert abs(res["parameters"][name] - truth) <= 3 * res["std_errors"][name]

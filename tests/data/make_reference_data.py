@@ -274,6 +274,22 @@ def make_knee_pendulum() -> Path:
     return path
 
 
+def make_knee_trial() -> Path:
+    """casflex/scene/builtin/knee_pendulum_trial.csv: the example recording shipped with casflex (read by name,
+    ``casflex identify knee_pendulum --method indirect --data knee_pendulum_trial``): knee_pendulum_exudyn.npz's
+    five markers at 100 Hz over 5 s with the noise of a motion-capture lab, 1 mm Gaussian per coordinate
+    (seed 2026), written at 0.01 mm as a lab's file would be."""
+    from casflex.data import MeasurementSet, save_measurements
+
+    with np.load(HERE / "knee_pendulum_exudyn.npz") as z:
+        t, channels, q = z["t"], tuple(str(c) for c in z["channels"]), z["q"]
+    q = np.round(q + np.random.default_rng(2026).normal(0.0, 1e-3, q.shape), 5)
+    path = save_measurements(MeasurementSet(t, channels, q, None, None, source="Exudyn, 1 mm noise"),
+                             HERE.parents[1] / "casflex" / "scene" / "builtin" / "knee_pendulum_trial.csv")
+    print(f"{path.name}: {t.size} samples of {len(channels)} channels, 1 mm noise")
+    return path
+
+
 if __name__ == "__main__":
     for name in sys.argv[1:] or SCENES:
         make_knee_pendulum() if name == "knee_pendulum" else make(name)
@@ -282,3 +298,4 @@ if __name__ == "__main__":
         make_markers()
         make_forms()
         make_knee_pendulum()
+        make_knee_trial()
