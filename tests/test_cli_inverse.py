@@ -60,6 +60,13 @@ def test_writes_the_loads_as_csv_npz_and_figures(tmp_path, capsys):
     (["--passive", "elbow"], "--passive: no hinge 'elbow'"),
     (["--passive", "knee:0.7"], "--passive: expected HINGE or HINGE:T0:T1"),
     (["--passive", "knee:0.9:0.7"], "the window's end must follow its start"),
+    (["--uncertain", "shank.mass"], "--uncertain: expected TARGET=SD, TARGET=PERCENT% or TARGET=LOWER:UPPER"),
+    (["--uncertain", "shank.mass=-1"], r"--uncertain: 'shank.mass=-1': must be >= 0"),
+    (["--uncertain", "nobody.mass=10%"], r"--uncertain: .*unknown element or load 'nobody'"),
+    (["--uncertain", "knee.kt=1"], r"--uncertain: .*'knee' is a joint"),
+    (["--uncertain", "shank.inertia=0.06:0.08"], r"--uncertain: .*the scene's value 0.0551641 lies outside"),
+    (["--marker-noise", "-1"], "--marker-noise: must be a distance in m >= 0"),
+    (["--no-bands", "--uncertain", "shank.mass=10%"], r"--bands: not asked \(False\), yet uncertain"),
 ])
 def test_bad_options_exit_2_with_one_line_and_write_nothing(extra, match, tmp_path, capsys):
     out = tmp_path / "x.csv"
@@ -78,3 +85,31 @@ def test_a_label_the_trial_lacks_is_named(tmp_path, capsys):
     trc.write_text(Path(TRC).read_text().replace("R.Heel", "R.Heal"))
     code, _, err = _run(["inverse", "hamner_leg", "--data", str(trc), "--root", "pelvis", "--quiet"], capsys)
     assert code == 2 and "no marker labelled 'R.Heel'" in err
+
+
+def test_uncertain_properties_give_each_load_its_band(tmp_path, capsys):
+    out = tmp_path / "loads.sto"
+    code, text, err = _run([*BASE, "--uncertain", "shank.mass=10%", "--uncertain", "thigh.inertia=0.12:0.16",
+                            "--marker-noise", "0.002", "--out", str(out)], capsys)
+    assert code == 0, err
+    assert "anthropometry from shank.mass (sd 0.325), thigh.inertia (sd 0.0115)" in text
+    assert "markers' noise 2.00 mm per axis (declared" in text
+    peak = text.split("bands at each moment's peak")[1].splitlines()
+    assert [line.split()[0] for line in peak[1:4]] == ["hip.moment", "knee.moment", "ankle.moment"]
+    names = out.read_text().split("endheader\n")[1].splitlines()[0].split("\t")
+    assert {"knee.moment_sd", "knee.moment_sd_anthropometry", "knee.moment_sd_markers"} <= set(names)
+
+
+@pytest.mark.parametrize(("argv", "match"), [
+    (["inverse", "hamner_leg_flexible", "--data", TRC, "--root", "pelvis", "--uncertain", "pelvis.mass=10%"],
+     r"--bands: for rigid segments only: the beams \['thigh_bone_1'"),
+    (["inverse", "hamner_leg", "--coordinates", "ik.mot", "--marker-noise", "0.001"],
+     "--marker-noise: the coordinates were given"),
+])
+def test_bands_the_inverse_cannot_give_are_refused_before_any_work(argv, match, tmp_path, capsys):
+    code, _, err = _run([*argv, "--quiet", "--out", str(tmp_path / "x.csv")], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    import re
+
+    assert re.search(match, err), err
+    assert list(tmp_path.iterdir()) == []

@@ -93,6 +93,28 @@ class OptionError(ValueError):
     """A command-line option is wrong; the message starts with the option's name."""
 
 
+def uncertain_option(text: str):
+    """--uncertain TARGET=SD, TARGET=P% (relative) or TARGET=LOWER:UPPER (argparse type): a casflex.scene.Uncertain
+    (``casflex identify --uncertain``, ``casflex inverse --uncertain``)."""
+    from casflex.scene import SceneError, Uncertain
+
+    target, eq, value = (x.strip() for x in text.partition("="))
+    try:
+        if not (eq and target and value):
+            raise ValueError
+        if ":" in value:
+            lo, _, hi = value.partition(":")
+            return Uncertain(target, range=(float(lo), float(hi)))
+        if value.endswith("%"):
+            return Uncertain(target, relative=float(value[:-1]) / 100)
+        return Uncertain(target, sd=float(value))
+    except SceneError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: {exc.reason}") from None
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected TARGET=SD, TARGET=PERCENT% or TARGET=LOWER:UPPER, e.g. "
+                                         f"shank.mass=10%, got {text!r}") from None
+
+
 def output_path(text: str) -> str:
     """Option type: where an output goes (--out, --plots). An empty name would write nothing
     without a word (the commands skip an output not given), so it is refused."""

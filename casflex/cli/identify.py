@@ -20,6 +20,7 @@ from casflex.cli._base import (
     output_path,
     positive,
 )
+from casflex.cli._base import uncertain_option as _uncertain
 
 if TYPE_CHECKING:
     from casflex.data import MeasurementSet
@@ -120,27 +121,6 @@ def _vary(text: str) -> tuple[str, tuple[float, float]]:
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected TARGET=LOWER:UPPER, e.g. bar2.E=1.5e11:2.5e11, got {text!r}") \
             from None
-
-
-def _uncertain(text: str):
-    """--uncertain TARGET=SD, TARGET=P% (relative) or TARGET=LOWER:UPPER (argparse type): a casflex.scene.Uncertain."""
-    from casflex.scene import SceneError, Uncertain
-
-    target, eq, value = (x.strip() for x in text.partition("="))
-    try:
-        if not (eq and target and value):
-            raise ValueError
-        if ":" in value:
-            lo, _, hi = value.partition(":")
-            return Uncertain(target, range=(float(lo), float(hi)))
-        if value.endswith("%"):
-            return Uncertain(target, relative=float(value[:-1]) / 100)
-        return Uncertain(target, sd=float(value))
-    except SceneError as exc:
-        raise argparse.ArgumentTypeError(f"{text!r}: {exc.reason}") from None
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected TARGET=SD, TARGET=PERCENT% or TARGET=LOWER:UPPER, e.g. "
-                                         f"shank.mass=10%, got {text!r}") from None
 
 
 def _check_forms(model: Model, args: argparse.Namespace) -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from casflex.cli._base import OptionError, Outputs, non_negative, output_path, positive
+from casflex.cli._base import OptionError, Outputs, non_negative, output_path, positive, uncertain_option
 
 
 def _plate(text: str) -> tuple[str, str]:
@@ -50,6 +50,7 @@ def _progress(done: int, total: int) -> None:
 
 def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
     from casflex.inverse import prepare, solve
+    from casflex.inverse.bands import BandError
     from casflex.lab import Plane
 
     Plane.parse(args.plane, option="--plane")
@@ -74,11 +75,15 @@ def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
     out = outputs.file("--out", args.out, (".npz", ".csv", ".sto"), "inverse dynamics") if args.out is not None \
         else None
     plots = outputs.directory("--plots", args.plots) if args.plots is not None else None
-    inputs = prepare(args.scene, args.data, plane=args.plane, grf=args.loads, plates=plates,
-                     cutoff=None if args.no_filter else args.cutoff, root=args.root, t_start=args.t_start,
-                     t_end=args.t_end, max_misfit=args.max_misfit, tasks=args.tasks,
-                     cutoff_plates=None if args.no_filter else args.cutoff_plates, filter=args.filter,
-                     coordinates=args.coordinates)
+    try:
+        inputs = prepare(args.scene, args.data, plane=args.plane, grf=args.loads, plates=plates,
+                         cutoff=None if args.no_filter else args.cutoff, root=args.root, t_start=args.t_start,
+                         t_end=args.t_end, max_misfit=args.max_misfit, tasks=args.tasks,
+                         cutoff_plates=None if args.no_filter else args.cutoff_plates, filter=args.filter,
+                         coordinates=args.coordinates, uncertain=args.uncertain, marker_noise=args.marker_noise,
+                         bands=args.bands)
+    except BandError as exc:
+        raise OptionError(f"--{exc.option.replace('_', '-')}: {exc.reason}") from None
     _check_passive(args.passive or [], inputs)
     for line in inputs.warnings:
         print(f"casflex: warning: {line}", file=sys.stderr)
@@ -161,6 +166,17 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--passive", action="append", type=_passive, metavar="HINGE[:T0:T1]",
                    help="fit a torsion spring-damper to HINGE's net moment (over T0..T1 s) and say how much of it "
                         "it explains; repeat per hinge")
+    s.add_argument("--uncertain", type=uncertain_option, action="append", metavar="TARGET=SD|P%|LO:HI",
+                   help="a property known only within an uncertainty (a segment's mass or inertia from an "
+                        "anthropometric table: shank.mass=10%%, shank.inertia=0.04:0.06), added to the scene's "
+                        "[[uncertain]]: each load gets its band (1 SD) from them and from the markers' noise; "
+                        "repeatable")
+    s.add_argument("--marker-noise", type=non_negative("a distance in m"), metavar="M",
+                   help="the markers' noise per axis (SD, m; 0: exact) whose band the loads get (default: the fit's "
+                        "residuals'); asks for the bands")
+    s.add_argument("--bands", action=argparse.BooleanOptionalAction, default=None,
+                   help="the loads' bands (1 SD) from the uncertain properties and the markers' noise (default: when "
+                        "a property is uncertain or --marker-noise is given); written as <load>_sd columns")
     s.add_argument("--out", type=output_path, metavar="FILE",
                    help="write the loads to FILE.npz (everything), FILE.csv (a table) or FILE.sto (OpenSim's table, "
                         "the lab's names)")

@@ -16,16 +16,20 @@ The data flow (docs/lab.md, "Inverse dynamics"):
    by 7-point central differences;
 4. the loads that make the scene follow that motion under the plates' forces: exact per frame for
    rigid segments (:mod:`casflex.inverse.rigid`); with flexible ones (beams), the scene driven along
-   the motion by HHT, the bones' deflections from its dynamics (:mod:`casflex.inverse.flexible`).
+   the motion by HHT, the bones' deflections from its dynamics (:mod:`casflex.inverse.flexible`);
+5. where asked (uncertain properties, ``marker_noise``, ``bands``), each load's band, one standard deviation, from the
+   anthropometry's uncertainty and from the markers' noise (:mod:`casflex.inverse.bands`; rigid segments).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 
 import numpy as np
 
-from casflex.inverse.fit import FittedMotion, coordinate_rates, fit_markers
+from casflex.inverse.bands import band_spec, inverse_bands
+from casflex.inverse.fit import FittedMotion, filtered_rates, fit_markers
 from casflex.inverse.flexible import driven_loads
 from casflex.inverse.inputs import InverseInputs, inverse_model, prepare
 from casflex.inverse.lab_names import lab_loads, lab_name
@@ -33,7 +37,6 @@ from casflex.inverse.plates import Plate, plate_loads
 from casflex.inverse.result import InverseResult
 from casflex.inverse.rigid import rigid_loads
 from casflex.inverse.tree import KinematicTree, kinematic_tree
-from casflex.lab.lowpass import lowpass, opensim_lowpass
 
 __all__ = ["InverseInputs", "InverseResult", "KinematicTree", "Plate", "inverse_dynamics", "inverse_model",
            "kinematic_tree", "prepare", "solve"]
@@ -44,7 +47,8 @@ def inverse_dynamics(scene, markers=None, *, coordinates=None, plane: str = "X,Y
                      t_start: float | None = None, t_end: float | None = None, max_gap: float = 0.1,
                      max_misfit: float | None = None, dt: float | None = None, alpha: float | None = None,
                      tasks=None, cutoff_plates: float | None | str = "same", filter: str = "butterworth",
-                     compiled: bool = False, progress: Callable[[int, int], None] | None = None) -> InverseResult:
+                     compiled: bool = False, progress: Callable[[int, int], None] | None = None, uncertain=None,
+                     marker_noise: float | None = None, bands: bool | None = None) -> InverseResult:
     """Net joint moments, intersegmental forces and root loads of ``scene`` over a trial.
 
     Parameters
@@ -87,13 +91,23 @@ def inverse_dynamics(scene, markers=None, *, coordinates=None, plane: str = "X,Y
     dt, alpha, compiled
         Flexible segments only: the largest HHT time step (s; default the scene's, made to divide the
         frames' interval), HHT's alpha (default the scene's) and whether to run compiled C.
+    uncertain : list of casflex.scene.Uncertain, optional
+        Properties known within an uncertainty (a segment's ``mass`` or ``inertia`` from an anthropometric table),
+        added to the scene's ``[[uncertain]]`` (replacing those of the same target): each load's band from them,
+        ``res.bands`` (:mod:`casflex.inverse.bands`). Rigid segments only.
+    marker_noise : float, m, optional
+        The markers' noise per axis (standard deviation) whose band the loads get (default: the fit's residuals').
+    bands : bool, optional
+        None: bands when an uncertain property or ``marker_noise`` is declared; True: always (the markers' part
+        alone when nothing is uncertain); False: never.
 
     Every input is read and checked before the marker fit (:func:`prepare`); ValueError in one line naming
     the option, file, marker or plate otherwise.
     """
     inputs = prepare(scene, markers, plane=plane, grf=grf, plates=plates, cutoff=cutoff, root=root,
                      t_start=t_start, t_end=t_end, max_gap=max_gap, max_misfit=max_misfit, dt=dt, tasks=tasks,
-                     cutoff_plates=cutoff_plates, filter=filter, coordinates=coordinates)
+                     cutoff_plates=cutoff_plates, filter=filter, coordinates=coordinates, uncertain=uncertain,
+                     marker_noise=marker_noise, bands=bands)
     return solve(inputs, dt=dt, alpha=alpha, compiled=compiled, progress=progress)
 
 
@@ -103,28 +117,23 @@ def _given(inputs: InverseInputs) -> FittedMotion:
     return FittedMotion(inputs.t, inputs.z, np.full(n, np.nan), np.zeros(n, dtype=int), [], np.zeros((n, 0)))
 
 
-def _filtered(t: np.ndarray, z: np.ndarray, cutoff: float | None, how: str):
-    """(z, z', z'') (n, k) each: the fitted coordinates filtered (``how``: "butterworth" or "opensim") and their
-    rates; OpenSim's filter pads the record, and the rates are taken on the padded record."""
-    if cutoff is None or how != "opensim":
-        z = lowpass(t, z, cutoff, what="markers")
-        return (z, *coordinate_rates(t, z))
-    tp, zp, keep = opensim_lowpass(t, z, cutoff)
-    zd, zdd = coordinate_rates(tp, zp)
-    return zp[keep], zd[keep], zdd[keep]
-
-
 def solve(inputs: InverseInputs, *, dt: float | None = None, alpha: float | None = None, compiled: bool = False,
-          progress: Callable[[int, int], None] | None = None) -> InverseResult:
+          progress: Callable[[int, int], None] | None = None, uncertain=None, marker_noise: float | None = None,
+          bands: bool | None = None) -> InverseResult:
     """The inverse dynamics of checked inputs (:func:`prepare`): the marker fit, the filter, the rates and the
-    loads (module docstring); options as :func:`inverse_dynamics`'s."""
+    loads (module docstring), and their bands; options as :func:`inverse_dynamics`'s (``uncertain``,
+    ``marker_noise`` and ``bands``, where given, replace what :func:`prepare` was asked, checked first)."""
+    if uncertain is not None or marker_noise is not None or bands is not None:
+        inputs = dataclasses.replace(inputs, band_spec=band_spec(
+            inputs.model, inputs.tree, uncertain=uncertain, marker_noise=marker_noise, bands=bands,
+            given=inputs.z is not None, n_markers=sum(m.weight > 0 for m in inputs.model.scene.markers)))
     model, tree, t, cutoff = inputs.model, inputs.tree, inputs.t, inputs.cutoff
     fit = _given(inputs) if inputs.z is not None else fit_markers(
         tree, t, inputs.y, max_gap=inputs.max_gap, max_misfit=inputs.max_misfit, labels=inputs.labels,
         source=inputs.settings["source"], progress=progress)
     report = [*inputs.report, *fit.report]
     warnings = [*inputs.warnings, *(line for line in fit.report if line.startswith("gaps:"))]
-    z, zd, zdd = _filtered(t, fit.z, cutoff, inputs.settings.get("filter", "butterworth"))
+    z, zd, zdd = filtered_rates(t, fit.z, cutoff, inputs.settings.get("filter", "butterworth"))
     report.append(("coordinates filtered: " + ("as OpenSim's ID tool (padded by half the record, Butterworth 3rd "
                                               "order forward and back)" if inputs.settings.get("filter") == "opensim"
                                               else "Butterworth 4th order zero-lag") + f" at {cutoff:g} Hz")
@@ -151,5 +160,9 @@ def solve(inputs: InverseInputs, *, dt: float | None = None, alpha: float | None
     if lab:  # the summary speaks the lab's language
         settings["moments"] = [lab_name(c) for c in model.scene.coordinates
                                if not c.of.startswith(f"{tree.root}.") and lab_name(c) in lab]
+    band, parts = {}, {}
+    if inputs.band_spec is not None:
+        band, parts, lines, settings["bands"] = inverse_bands(inputs.band_spec, inputs, fit, z, zd, zdd, sorted(loads))
+        report += lines
     return InverseResult(t, tree.names, z, zd, zdd, model.dof_names, sol["q"], sol["qd"], sol["qdd"], loads,
-                         t, fit.rms, report, settings, warnings, inputs.labels, fit.misfit, inputs.plates)
+                         t, fit.rms, report, settings, warnings, inputs.labels, fit.misfit, inputs.plates, band, parts)

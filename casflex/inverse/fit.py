@@ -27,7 +27,7 @@ import numpy as np
 from casflex import interrupt
 from casflex.inverse.tree import KinematicTree
 
-__all__ = ["FittedMotion", "coordinate_rates", "fit_markers", "fit_pose"]
+__all__ = ["FittedMotion", "coordinate_rates", "filtered_rates", "fit_markers", "fit_pose"]
 
 
 @dataclass(frozen=True)
@@ -275,6 +275,20 @@ def coordinate_rates(t: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarr
             zd[m:n - m] = np.tensordot(d1, window, axes=1) / h
             zdd[m:n - m] = np.tensordot(d2, window, axes=1) / h**2
     return zd, zdd
+
+
+def filtered_rates(t: np.ndarray, z: np.ndarray, cutoff: float | None, how: str):
+    """(z, z', z'') (n, k) each: the coordinates z (n, k) at the evenly spaced t (n,) s filtered at ``cutoff`` Hz
+    (None: not filtered; ``how``: "butterworth" or "opensim") and their rates (:func:`coordinate_rates`); OpenSim's
+    filter pads the record, and the rates are taken on the padded record. Linear in z."""
+    from casflex.lab.lowpass import lowpass, opensim_lowpass
+
+    if cutoff is None or how != "opensim":
+        z = lowpass(t, z, cutoff, what="markers")
+        return (z, *coordinate_rates(t, z))
+    tp, zp, keep = opensim_lowpass(t, z, cutoff)
+    zd, zdd = coordinate_rates(tp, zp)
+    return zp[keep], zd[keep], zdd[keep]
 
 
 _D1_5, _D2_5 = np.array([1.0, -8.0, 0.0, 8.0, -1.0]) / 12.0, np.array([-1.0, 16.0, -30.0, 16.0, -1.0]) / 12.0

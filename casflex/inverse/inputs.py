@@ -58,6 +58,7 @@ class InverseInputs:
     report: tuple[str, ...] = ()
     warnings: tuple[str, ...] = field(default=())
     z: np.ndarray | None = None  # the tree's coordinates (n, n_z) where they were given instead of markers
+    band_spec: object = None  # the bands asked (casflex.inverse.bands.BandSpec), None: none
 
 
 def inverse_model(scene, root: str | None = None) -> Model:
@@ -262,9 +263,12 @@ def prepare(scene, markers=None, *, plane="X,Y", grf=None, plates: dict[str, str
             cutoff: float | None = 6.0, root: str | None = None, t_start: float | None = None,
             t_end: float | None = None, max_gap: float = 0.1, max_misfit: float | None = None,
             dt: float | None = None, tasks=None, cutoff_plates: float | None | str = "same",
-            filter: str = "butterworth", coordinates=None) -> InverseInputs:
+            filter: str = "butterworth", coordinates=None, uncertain=None, marker_noise: float | None = None,
+            bands: bool | None = None) -> InverseInputs:
     """The inputs of :func:`casflex.inverse.inverse_dynamics` (its parameters), read and checked (module
-    docstring). ValueError in one line naming the option, file, marker or plate otherwise."""
+    docstring); the bands asked (``uncertain``, ``marker_noise``, ``bands``: :func:`casflex.inverse.bands.band_spec`)
+    checked before the trial is read. ValueError in one line naming the option, file, marker or plate otherwise."""
+    from casflex.inverse.bands import band_spec
     from casflex.lab import Plane
     from casflex.lab.checks import MAX_MISFIT
 
@@ -289,6 +293,8 @@ def prepare(scene, markers=None, *, plane="X,Y", grf=None, plates: dict[str, str
     if plates and grf is None:
         raise ValueError("plates: given without the ground reactions (grf)")
     tree = kinematic_tree(model, root)
+    spec = band_spec(model, tree, uncertain=uncertain, marker_noise=marker_noise, bands=bands,
+                     given=coordinates is not None, n_markers=sum(m.weight > 0 for m in model.scene.markers))
     lab, table = _trial(markers, grf, bool(plates))
     if coordinates is None:
         t, y, labels, rate, notes = _from_markers(model, tree, lab, pl, t_start, t_end)
@@ -312,4 +318,4 @@ def prepare(scene, markers=None, *, plane="X,Y", grf=None, plates: dict[str, str
                     labels, model.scene.markers, strict=False)}, "source": source or "",
                 "scene": model.scene.name, "max_misfit_m": max_misfit, "given": z is not None}
     return InverseInputs(model, tree, t, y, labels, tuple(plate_list), cutoff, max_gap, max_misfit,
-                         settings, tuple(report + warnings), tuple(warnings), z)
+                         settings, tuple(report + warnings), tuple(warnings), z, spec)

@@ -27,7 +27,11 @@ class InverseResult:
     each; ``settings``: the options; ``warnings``: the report's lines that say what changed the data
     (samples filled, taken as no load); ``marker_misfit`` (n_frames, m) m: each marker's (``marker_labels``,
     the trial's names) distance from the fitted pose, NaN where it is missing; ``plates``: the
-    :class:`~casflex.inverse.plates.Plate` s applied, as filtered (``plate.at(t)``: force and moment).
+    :class:`~casflex.inverse.plates.Plate` s applied, as filtered (``plate.at(t)``: force and moment);
+    ``bands`` (where asked: :mod:`casflex.inverse.bands`): load -> {"anthropometry", "markers", "total"} -> (k,),
+    one standard deviation (N, N m) from the uncertain properties, from the markers' noise and both
+    (root-sum-square); ``band_parts``: uncertain property (its target) -> load -> (k,), the load's change when
+    the property moves by its standard deviation (signed).
     """
 
     t: np.ndarray
@@ -48,6 +52,8 @@ class InverseResult:
     marker_labels: tuple[str, ...] = ()
     marker_misfit: np.ndarray | None = None
     plates: tuple = ()
+    bands: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
+    band_parts: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
 
     def load(self, name: str) -> np.ndarray:
         """(k,) the load called ``name``; KeyError naming the known ones."""
@@ -61,7 +67,22 @@ class InverseResult:
             v = self.loads[name]
             unit = "N" if name.endswith(("fx", "fy")) else "N m"
             lines.append(f"  {name:24s} {v.min():10.2f} .. {v.max():10.2f} {unit}  (RMS {np.sqrt(np.mean(v**2)):.2f})")
-        return "\n".join(lines)
+        return "\n".join(lines + self._band_lines())
+
+    def _band_lines(self) -> list[str]:
+        """Per moment: its peak, the band there and the anthropometry's share of its variance."""
+        if not self.bands:
+            return []
+        lines = ["bands at each moment's peak (1 SD: anthropometry, markers; the anthropometry's share of the "
+                 "variance):"]
+        for name in self.settings.get("moments", ()):
+            v, b = self.loads[name], self.bands[name]
+            i = int(np.argmax(np.abs(v)))
+            a, m, tot = (float(b[k][i]) for k in ("anthropometry", "markers", "total"))
+            share = a * a / (tot * tot) if tot > 0 else 0.0
+            lines.append(f"  {name:24s} {v[i]:10.2f} N m at t = {self.t[i]:g} s: +-{tot:.2f} ({a:.2f}, {m:.2f}; "
+                         f"{100 * share:.0f} %)")
+        return lines
 
     def save(self, path: str | os.PathLike[str], fmt: str | None = None) -> Path:
         """Write ``npz`` (every array, names and the report), ``csv`` (t, the coordinates and the
@@ -76,7 +97,9 @@ class InverseResult:
         if (fmt or path.suffix.lstrip(".").lower()) == "csv":
             cols = ["t [s]"] + [f"{c} [{'rad' if c.endswith(('.theta', '.angle')) else 'm'}]"
                                 for c in self.coordinate_names] + names
-            data = np.column_stack([self.t, self.z, *(self.loads[n] for n in names)])
+            bands = self._band_columns(names)
+            cols += list(bands)
+            data = np.column_stack([self.t, self.z, *(self.loads[n] for n in names), *bands.values()])
             buf = io.StringIO()
             np.savetxt(buf, data, delimiter=",", header=",".join(cols), comments="", fmt="%.10g")
             return atomic_write_text(path, buf.getvalue())
@@ -86,6 +109,13 @@ class InverseResult:
                   "loads": np.column_stack([self.loads[n] for n in names]), "frame_t": self.frame_t,
                   "marker_rms": self.marker_rms,
                   "meta": np.array(json.dumps({"report": self.report, "settings": self.settings}))}
+        if self.bands:
+            for part in ("total", "anthropometry", "markers"):
+                arrays[f"sd_{part}"] = np.column_stack([self.bands[n][part] for n in names])
+            targets = sorted(self.band_parts)
+            arrays["band_targets"] = np.array(targets)
+            arrays["band_parts"] = np.array([np.column_stack([self.band_parts[g][n] for n in names])
+                                             for g in targets]).reshape(len(targets), self.t.size, len(names))
         buf = io.BytesIO()
         np.savez_compressed(buf, **arrays)
         return atomic_write_bytes(path, buf.getvalue())
@@ -94,14 +124,25 @@ class InverseResult:
         """The loads as an OpenSim .sto table (:meth:`save`)."""
         lab = [n for n in self.loads if n.endswith(("_moment", "_force"))]
         names = lab or sorted(self.loads)
-        unit = {n: _unit(n) for n in names}
-        header = [title, "version=1", f"nRows={self.t.size}", f"nColumns={len(names) + 1}", "inDegrees=no",
-                  "Units are S.I. units (second, meters, Newtons, ...)",
-                  "units: time s; " + "; ".join(f"{n} {unit[n]}" for n in names),
-                  "endheader", "\t".join(["time", *names])]
+        bands = self._band_columns(names)
+        unit = {n: _unit(n) for n in names} | {c: _unit(c.rsplit("_sd", 1)[0]) for c in bands}
+        header = [title, "version=1", f"nRows={self.t.size}", f"nColumns={len(names) + len(bands) + 1}",
+                  "inDegrees=no", "Units are S.I. units (second, meters, Newtons, ...)",
+                  "units: time s; " + "; ".join(f"{n} {unit[n]}" for n in [*names, *bands]),
+                  "endheader", "\t".join(["time", *names, *bands])]
         buf = io.StringIO()
-        np.savetxt(buf, np.column_stack([self.t, *(self.loads[n] for n in names)]), delimiter="\t", fmt="%.10g")
+        np.savetxt(buf, np.column_stack([self.t, *(self.loads[n] for n in names), *bands.values()]), delimiter="\t",
+                   fmt="%.10g")
         return "\n".join(header) + "\n" + buf.getvalue()
+
+    def _band_columns(self, names: list[str]) -> dict[str, np.ndarray]:
+        """The bands as columns (none when not asked): ``<load>_sd`` (the total), ``<load>_sd_anthropometry`` and
+        ``<load>_sd_markers`` per load of ``names``, in that order."""
+        out = {}
+        for n in names if self.bands else ():
+            for part, suffix in (("total", ""), ("anthropometry", "_anthropometry"), ("markers", "_markers")):
+                out[f"{n}_sd{suffix}"] = self.bands[n][part]
+        return out
 
 
 def _unit(name: str) -> str:

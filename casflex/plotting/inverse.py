@@ -15,12 +15,17 @@ __all__ = ["plot_inverse", "save_inverse_figures"]
 
 
 def plot_inverse(res, path: str | os.PathLike[str] | None = None) -> Figure:
-    """Three panels over time: the net joint moments (N m), the hinges' intersegmental forces (N, x and
-    y, global) and the root's loads (N; its moment N m on the right axis)."""
+    """Three panels over time: the net joint moments (N m; their bands, one standard deviation, shaded where
+    ``res.bands`` has them), the hinges' intersegmental forces (N, x and y, global) and the root's loads (N; its
+    moment N m on the right axis)."""
     fig = _new_figure((7.5, 8.0))
     ax_m, ax_f, ax_r = fig.subplots(3, 1, sharex=True)
     for k, name in enumerate(res.settings.get("moments", ())):
         ax_m.plot(res.t, res.loads[name], color=f"C{k}", lw=1.4, label=name.removesuffix(".moment"))
+        band = getattr(res, "bands", {}).get(name)
+        if band is not None:  # one standard deviation, anthropometry and markers together
+            v = res.loads[name]
+            ax_m.fill_between(res.t, v - band["total"], v + band["total"], color=f"C{k}", alpha=0.25, lw=0)
         h = name.removesuffix(".moment")
         for comp, ls in (("fx", "--"), ("fy", "-")):
             if f"{h}.{comp}" in res.loads:

@@ -1,0 +1,207 @@
+"""How much of an inverse dynamics load is known: its bands (one standard deviation) from the anthropometry and
+from the markers' noise.
+
+- **Anthropometry.** The scene's ``[[uncertain]]`` properties (and those given as ``uncertain=``, replacing the
+  scene's of the same target: :mod:`casflex.scene.uncertain`), e.g. a segment's mass and inertia from a table
+  (10-20 %), become the last parameters of the inverse's model
+  (:func:`~casflex.scene.uncertain.with_uncertain_estimated`). At the fitted kinematics the rigid inverse's loads
+  are linear in the bodies' masses and inertias (and in a torsion spring's stiffness and damping, a load's size,
+  gravity): each property's part is the change of every load when it moves by its standard deviation,
+  (L(p + sd e_j) - L(p - sd e_j)) / 2, exact for those. The second difference is measured and reported; where it is
+  more than round-off (a property the loads are not linear in: a centre of mass' position, where the scene takes it
+  as a property, is quadratic) the part is that central difference, the first-order change. With independent
+  priors, sd_anthropometry = sqrt(sum_j part_j^2).
+- **Markers.** The markers' white noise (declared ``marker_noise``, m per axis, or the fit's residuals')
+  propagated exactly to first order through the fit, the filter, the rates and the loads
+  (:mod:`casflex.inverse.marker_band`); none where the coordinates were given instead of markers.
+- **Total**: the root-sum-square of the two (the markers' noise and the tables' errors are independent).
+
+Flexible segments (beams) are refused: their loads come from an HHT run, not linear in the properties, two runs a
+property. What is not in a band: the segments' lengths and the joints' positions (geometry, not uncertain
+properties), the plates' errors, soft tissue artefacts (marker errors correlated over frames).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from casflex.inverse.lab_names import lab_loads
+from casflex.inverse.plates import plate_loads
+from casflex.inverse.rigid import rigid_loads
+from casflex.inverse.tree import KinematicTree, kinematic_tree
+from casflex.model import Model
+
+__all__ = ["BandError", "BandSpec", "anthropometry", "band_spec", "inverse_bands"]
+
+#: rigid_loads' outputs that are the motion, not loads
+_MOTION = ("q", "qd", "qdd", "lam")
+#: A property whose second difference exceeds this fraction of its first is reported as not linear.
+LINEAR = 1e-9
+
+
+class BandError(ValueError):
+    """An option of the bands refused: ``option`` (the API's name: uncertain, marker_noise, bands) and ``reason``."""
+
+    def __init__(self, option: str, reason: str) -> None:
+        super().__init__(f"{option}: {reason}")
+        self.option, self.reason = option, reason
+
+
+@dataclass(frozen=True)
+class BandSpec:
+    """The bands an inverse run computes: ``model`` the inverse's model with the uncertain properties as its last
+    parameters (``index`` (n_u,) their places in p, ``targets`` their ``"<element>.<field>"``, ``sd`` (n_u,) their
+    standard deviations in their units) and ``tree`` its kinematic tree; ``marker_noise`` m per axis (None: the
+    fit's residuals'); ``given``: the coordinates were given (no marker fit, no markers' part)."""
+
+    model: Model
+    tree: KinematicTree
+    targets: tuple[str, ...]
+    sd: np.ndarray
+    index: np.ndarray
+    marker_noise: float | None
+    given: bool
+
+    def describe(self) -> dict:
+        """The settings' record (JSON): each property's sd, the markers' noise asked."""
+        return {"uncertain": {t: float(s) for t, s in zip(self.targets, self.sd, strict=True)},
+                "marker_noise_m": self.marker_noise}
+
+
+def _merged(scene, uncertain) -> object:
+    """The scene with ``uncertain`` (Uncertain entries) added to its own, replacing those of the same target."""
+    from casflex.scene import SceneError, Uncertain
+
+    extra = list(uncertain or ())
+    for u in extra:
+        if not isinstance(u, Uncertain):
+            raise BandError("uncertain", f"expected casflex.scene.Uncertain entries, got {u!r}")
+    given = {u.target for u in extra}
+    try:
+        return dataclasses.replace(scene, uncertain=tuple(u for u in scene.uncertain if u.target not in given)
+                                   + tuple(extra))
+    except SceneError as exc:
+        raise BandError("uncertain", str(exc)) from None
+
+
+def band_spec(model: Model, tree: KinematicTree, *, uncertain=None, marker_noise: float | None = None,
+              bands: bool | None = None, given: bool = False, n_markers: int = 0) -> BandSpec | None:
+    """The bands asked (None: none), checked before any work. ``bands`` None: computed when the scene (or
+    ``uncertain``) declares an uncertain property of sd > 0 or ``marker_noise`` (m) is given; True: always; False:
+    never (then neither may be given). ``n_markers``: the scene's markers the fit weighs (their channels must
+    outnumber the coordinates to estimate the noise). :class:`BandError` (a ValueError) in one line otherwise."""
+    from casflex.model import assembled
+    from casflex.scene.uncertain import nuisance_names, with_uncertain_estimated
+
+    if bands is False:
+        if uncertain or marker_noise is not None:
+            raise BandError("bands", "not asked (False), yet uncertain or marker_noise is given: they ask for bands")
+        return None
+    if model.n_con != model.n_dof - tree.n and (bands or uncertain or marker_noise is not None
+                                                or model.scene.uncertain):
+        beams = [b.name for b in model.scene.beams][:3]
+        raise BandError("bands", f"for rigid segments only: the beams {beams} make this a flexible inverse (an HHT "
+                                 "run), whose loads are not linear in the properties; not done yet (bands=False, "
+                                 "--no-bands: the loads alone)")
+    scene = _merged(model.scene, uncertain)
+    names = nuisance_names(scene)
+    if bands is None and not names and marker_noise is None:
+        return None
+    if marker_noise is not None:
+        if given:
+            raise BandError("marker_noise", "the coordinates were given: there is no marker fit for it to enter")
+        if not (np.isfinite(marker_noise) and marker_noise >= 0):
+            raise BandError("marker_noise", f"must be a distance >= 0 m (0: the markers exact), got {marker_noise!r}")
+    elif not given and 2 * n_markers <= tree.n:
+        raise BandError("marker_noise", f"the {n_markers} markers give no more channels than the {tree.n} coordinates: "
+                                        "the fit leaves no residual to estimate their noise; declare it (m; 0: the "
+                                        "markers taken as exact)")
+    model_u = assembled(with_uncertain_estimated(scene), inertia=model.inertia)
+    index = np.array([model_u.parameter_names.index(n) for n in names], dtype=int)
+    targets = tuple(u.target for u in scene.uncertain if u.name in names)
+    sd = np.array([u.prior(scene.property_value(u.target))[1] for u in scene.uncertain if u.name in names])
+    return BandSpec(model_u, kinematic_tree(model_u, tree.root), targets, sd, index,
+                    None if marker_noise is None else float(marker_noise), given)
+
+
+def rigid_load_function(tree: KinematicTree, t: np.ndarray, plates, p: np.ndarray):
+    """``loads(z, zd, zdd, p=p) -> {name: (k,)}``: the rigid inverse's loads (N, N m; :mod:`.rigid`, and the lab's
+    names: :mod:`.lab_names`) at the frames t (k,) with the ``plates`` applied, for coordinates (k, n_z) each."""
+    m = tree.model
+    external = (lambda tt, q: plate_loads(m, list(plates), tt, q)) if plates else None
+
+    def loads(z, zd, zdd, p=p):
+        sol = rigid_loads(tree, t, z, zd, zdd, p, external)
+        out = {k: v for k, v in sol.items() if k not in _MOTION}
+        return out | lab_loads(m.scene, out)
+
+    return loads
+
+
+def anthropometry(spec: BandSpec, t: np.ndarray, z: np.ndarray, zd: np.ndarray, zdd: np.ndarray,
+                  plates=()) -> tuple[dict[str, dict[str, np.ndarray]], dict[str, float]]:
+    """({target: {load: (k,)}}, {target: bend}): the change of every load (N, N m) at the frames t (k,) when each
+    uncertain property moves by its standard deviation, by central differences at the coordinates z, z', z''
+    (k, n_z); ``bend``: the largest second difference over the largest first (round-off, ~1e-15, where the loads
+    are linear in the property)."""
+    p0 = spec.model.p_nominal
+    loads = rigid_load_function(spec.tree, t, plates, p0)
+    base = loads(z, zd, zdd)
+    parts, bend = {}, {}
+    for j, target, sd in zip(spec.index, spec.targets, spec.sd, strict=True):
+        dp = np.zeros_like(p0)
+        dp[j] = sd
+        up, down = loads(z, zd, zdd, p0 + dp), loads(z, zd, zdd, p0 - dp)
+        parts[target] = {k: 0.5 * (up[k] - down[k]) for k in base}
+        first = max(float(np.max(np.abs(up[k] - down[k]))) for k in base)
+        second = max(float(np.max(np.abs(up[k] + down[k] - 2.0 * base[k]))) for k in base)
+        bend[target] = second / first if first > 0 else 0.0
+    return parts, bend
+
+
+def _anthropometry_lines(spec: BandSpec, bend: dict[str, float]) -> list[str]:
+    if not spec.targets:
+        return ["bands (1 SD): no uncertain property declared: the anthropometry's part is 0"]
+    props = ", ".join(f"{t} (sd {s:.3g})" for t, s in zip(spec.targets, spec.sd, strict=True))
+    bent = [t for t, b in bend.items() if b > LINEAR]
+    worst = max(bend.values())
+    lines = [f"bands (1 SD): anthropometry from {props}; the loads linear in "
+             + (f"each (second differences within {worst:.1g} of the first)" if not bent else
+                f"all but {bent}: their parts are central differences (second differences up to {worst:.2g})")]
+    return lines
+
+
+def inverse_bands(spec: BandSpec, inputs, fit, z: np.ndarray, zd: np.ndarray, zdd: np.ndarray,
+                  names: list[str]) -> tuple[dict, dict, list[str], dict]:
+    """The bands of the loads ``names`` of an inverse run (module docstring): (bands {load: {"anthropometry",
+    "markers", "total": (k,)}}, parts {target: {load: (k,)}}, report lines, settings), from its checked
+    ``inputs`` (:class:`~casflex.inverse.inputs.InverseInputs`), its marker ``fit`` and its filtered coordinates
+    z, z', z'' (k, n_z)."""
+    from casflex.inverse.marker_band import fit_covariances, load_jacobians, marker_band, residual_noise
+
+    t, plates = inputs.t, inputs.plates
+    parts, bend = anthropometry(spec, t, z, zd, zdd, plates)
+    lines = _anthropometry_lines(spec, bend)
+    anth = {k: np.sqrt(sum(parts[g][k] ** 2 for g in parts)) if parts else np.zeros(t.size) for k in names}
+    settings = spec.describe()
+    if spec.given or spec.marker_noise == 0:
+        mark = {k: np.zeros(t.size) for k in names}
+        why = "the coordinates were given, their noise is not known" if spec.given else \
+            "the markers declared exact (marker_noise 0)"
+        lines.append(f"bands: {why}: the markers' part is left out (0)")
+    else:
+        declared = spec.marker_noise is not None
+        sigma = spec.marker_noise if declared else residual_noise(inputs.tree, fit)
+        C = fit_covariances(inputs.tree, fit, inputs.y, sigma)
+        D = load_jacobians(rigid_load_function(inputs.tree, t, plates, inputs.model.p_nominal), z, zd, zdd, names)
+        sd = marker_band(t, np.isfinite(fit.rms), C, D, inputs.cutoff, inputs.settings.get("filter", "butterworth"))
+        mark = {k: sd[:, i] for i, k in enumerate(names)}
+        settings |= {"marker_noise_m": sigma, "marker_noise_from": "declared" if declared else "residuals"}
+        source = "declared" if declared else "the fit's residuals"
+        lines.append(f"bands: markers' noise {1e3 * sigma:.2f} mm per axis ({source}; white, independent between "
+                     "markers and frames) through the fit, the filter and the loads, to first order")
+    bands = {k: {"anthropometry": anth[k], "markers": mark[k], "total": np.hypot(anth[k], mark[k])} for k in names}
+    return bands, parts, lines, settings
