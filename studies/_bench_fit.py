@@ -22,6 +22,9 @@ from _shared import exudyn_recording
 REPEAT = 5
 NOISE, SEED, START, SPAN, DT = 5e-4, 0, 0.8, 3.0, 1e-3
 MARKERS = {"twobar": ("x3", "y3", "x5", "y5"), "threelink": ("x3", "y3", "x5", "y5", "x7", "y7")}
+#: the default fit's uncertain properties (issue 37): both bars' densities (5 %) and moduli (3 %), as
+#: studies/uncertain.py declares them: (target, relative standard deviation)
+UNCERTAIN = (("bar2.rho", 0.05), ("bar4.rho", 0.05), ("bar2.E", 0.03), ("bar4.E", 0.03))
 #: name: (scene, elements per bar or None, identify_indirect options or None for a simulation)
 OPS = {
     "simulation, 3 s": ("twobar", None, None),
@@ -29,6 +32,7 @@ OPS = {
     "default fit": ("twobar", None, {}),
     "without model-error refit": ("twobar", None, {"model_error": "none"}),
     "without model-error refit or form comparison": ("twobar", None, {"model_error": "none", "form": "none"}),
+    "default fit, 4 uncertain properties": ("twobar", None, {"uncertain": UNCERTAIN}),
 }
 #: the reference for the estimates: every stage of the growing horizon to the full tolerance (the way before)
 REFERENCE = {"model_error": "none", "form": "none"}
@@ -80,6 +84,10 @@ def operation(scene: str, elements: int | None, what):
     data = (_leg_data() if scene == "leg"
             else exudyn_recording(f"{scene}_exudyn", MARKERS[scene], 0.0, span, NOISE, SEED))
     kw = {"start": 0.7} if scene == "leg" else {"start": START, "noise": NOISE}
+    if "uncertain" in what:
+        from casflex.scene import Uncertain
+
+        what = {**what, "uncertain": [Uncertain(t, relative=r) for t, r in what["uncertain"]]}
     return (lambda: identify_indirect(model, data, dt=DT, **kw, **what)), sim
 
 
