@@ -95,24 +95,13 @@ class OptionError(ValueError):
 
 def uncertain_option(text: str):
     """--uncertain TARGET=SD, TARGET=P% (relative) or TARGET=LOWER:UPPER (argparse type): a casflex.scene.Uncertain
-    (``casflex identify --uncertain``, ``casflex inverse --uncertain``)."""
-    from casflex.scene import SceneError, Uncertain
+    (``casflex identify --uncertain``, ``casflex inverse --uncertain``; :func:`casflex.scene.uncertain.parse`)."""
+    from casflex.scene.uncertain import parse
 
-    target, eq, value = (x.strip() for x in text.partition("="))
     try:
-        if not (eq and target and value):
-            raise ValueError
-        if ":" in value:
-            lo, _, hi = value.partition(":")
-            return Uncertain(target, range=(float(lo), float(hi)))
-        if value.endswith("%"):
-            return Uncertain(target, relative=float(value[:-1]) / 100)
-        return Uncertain(target, sd=float(value))
-    except SceneError as exc:
-        raise argparse.ArgumentTypeError(f"{text!r}: {exc.reason}") from None
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected TARGET=SD, TARGET=PERCENT% or TARGET=LOWER:UPPER, e.g. "
-                                         f"shank.mass=10%, got {text!r}") from None
+        return parse(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def output_path(text: str) -> str:

@@ -18,7 +18,7 @@ from typing import Any
 
 from casflex.scene.items import NONNEGATIVE_FIELDS, Parameter, SceneError, _non_negative, _number
 
-__all__ = ["Uncertain", "check_uncertain", "with_uncertain_estimated"]
+__all__ = ["Uncertain", "check_uncertain", "with_uncertain_estimated", "parse"]
 
 
 @dataclass(frozen=True)
@@ -70,6 +70,26 @@ class Uncertain:
         mean, sd = self.prior(value)
         lo, hi = self.range if self.range is not None else (None, math.inf)
         return Parameter(self.name, self.target, lower=lo, upper=hi, scale=max(abs(mean), sd), prior=(mean, sd))
+
+
+def parse(text: str) -> Uncertain:
+    """The :class:`Uncertain` of ``TARGET=SD``, ``TARGET=P%`` (relative) or ``TARGET=LOWER:UPPER`` (the command
+    line's and a study file's form); ValueError in one line otherwise."""
+    target, eq, value = (x.strip() for x in str(text).partition("="))
+    try:
+        if not (eq and target and value):
+            raise ValueError
+        if ":" in value:
+            lo, _, hi = value.partition(":")
+            return Uncertain(target, range=(float(lo), float(hi)))
+        if value.endswith("%"):
+            return Uncertain(target, relative=float(value[:-1]) / 100)
+        return Uncertain(target, sd=float(value))
+    except SceneError as exc:
+        raise ValueError(f"{text!r}: {exc.reason}") from None
+    except ValueError:
+        raise ValueError(f"expected TARGET=SD, TARGET=PERCENT% or TARGET=LOWER:UPPER, e.g. shank.mass=10%, got "
+                         f"{text!r}") from None
 
 
 def check_uncertain(scene: Any) -> None:
