@@ -1,0 +1,171 @@
+"""Gait events (casflex.study.events): contacts on a force with known crossings, plates assigned to the feet of
+Hamner's running trial as the pipeline's External_Loads.xml assigns them, the refusals, strides from the plates
+and the heel markers, and the cycle normalisation."""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from casflex.lab import LabTable, read_sto, read_trc
+from casflex.study.events import (
+    assign_plates,
+    contacts,
+    cycles,
+    feet,
+    foot_strikes,
+    gait_cycles,
+    marker_strikes,
+    normalise,
+    plate_contacts,
+)
+
+LAB = Path(__file__).parent / "data" / "lab"
+OSIM, TRC, GRF = (LAB / "hamner_subject02_planar.osim", LAB / "hamner_running_whole.trc",
+                  LAB / "hamner_running_whole_grf.mot")
+#: opensim-models 20a888b, Pipelines/Hamner/External_Loads.xml: ExternalForce externalforce_right applied_to_body
+#: calcn_r, force_identifier ground_force_v; externalforce_left calcn_l, 1_ground_force_v.
+EXTERNAL_LOADS = {"calcn_r": "ground_", "calcn_l": "1_ground_"}
+
+
+@pytest.fixture(scope="module")
+def hamner():
+    import casflex
+
+    return casflex.load_scene(OSIM), read_trc(TRC), read_sto(GRF)
+
+
+def test_contacts_are_the_threshold_crossings_exactly():
+    """A piecewise linear force with its corners on the samples: each crossing of 20 N is where the line
+    crosses it; a 30 ms blip dropped; loaded at the start and at the end: strike, off None; NaN left out."""
+    t = np.round(np.arange(0.0, 2.0 + 1e-9, 0.01), 12)
+    corners = ([0.0, 0.1, 0.2, 0.5, 0.6, 0.8, 0.81, 0.83, 0.84, 1.3, 1.4, 2.0],
+               [800.0, 800.0, 0.0, 0.0, 500.0, 500.0, 0.0, 0.0, 0.0, 0.0, 1000.0, 1000.0])
+    fv = np.interp(t, *corners)
+    fv[(t > 0.9) & (t < 0.93)] = 100.0  # a blip above 20 N: 0.91, 0.92 (20 ms between its crossings)
+    fv[t == 0.7] = np.nan
+    got = contacts(t, fv)
+    want = [(None, 0.2 - 0.1 * 20 / 800), (0.5 + 0.1 * 20 / 500, 0.81 - 0.01 * 20 / 500), (1.3 + 0.1 * 20 / 1000, None)]
+    assert [a is None for a, _ in got] == [a is None for a, _ in want]
+    assert [b is None for _, b in got] == [b is None for _, b in want]
+    flat = np.array([x for iv in got for x in iv if x is not None])
+    assert np.abs(flat - [x for iv in want for x in iv if x is not None]).max() < 1e-12
+    assert len(contacts(t, fv, min_duration=0.0)) == 4  # the blip kept when nothing is too short
+    assert contacts(t, np.zeros_like(t)) == []
+    with pytest.raises(ValueError, match="times must increase"):
+        contacts(t[::-1], fv)
+
+
+def test_the_feet_of_the_whole_body_are_the_distal_bodies_with_markers(hamner):
+    scene, _, _ = hamner
+    assert set(feet(scene)) == {"calcn_r", "calcn_l", "radius_r", "radius_l"}  # toes and hands carry none
+    assert "R.Heel" in feet(scene)["calcn_r"]
+
+
+def test_plates_go_to_the_feet_external_loads_names(hamner):
+    """Both plates of Hamner's trial, from the data alone, under the feet OpenSim's pipeline applies them to;
+    the contacts' times and the feet's distances (the other foot, the wrists: far or too high)."""
+    scene, lab, grf = hamner
+    plates, lines = assign_plates(scene, lab, grf, "X,Y")
+    assert plates == EXTERNAL_LOADS
+    assert lines[0].startswith("plate 'ground_' -> calcn_r: 2 contact(s) 0.390-0.665 s, 1.101-[end] s")
+    assert lines[1].startswith("plate '1_ground_' -> calcn_l: 2 contact(s) [start]-0.327 s, 0.751-1.010 s")
+    found = plate_contacts(scene, lab, grf, "X,Y")
+    assert [(c.plate, c.foot) for c in found] == [("ground_", "calcn_r")] * 2 + [("1_ground_", "calcn_l")] * 2
+    assert found[0].strike == pytest.approx(0.3897, abs=1e-4) and found[1].off is None
+    assert found[2].strike is None and found[3].strike == pytest.approx(0.7510, abs=1e-4)
+    for c in found:
+        assert c.distance < 0.06 and c.height < 0.06
+        assert all(o[1] > 0.15 or o[2] > 0.9 for o in c.others)  # the other foot or a wrist
+
+
+def test_a_plate_far_from_every_foot_is_refused(hamner):
+    scene, lab, grf = hamner
+    values = grf.values.copy()
+    values[:, grf.names.index("1_ground_force_px")] += 1.0  # the left plate's centre of pressure 1 m forward
+    with pytest.raises(ValueError, match=r"plate '1_ground_', contact \[start\]-0.327 s: no foot within 0.3 m"):
+        assign_plates(scene, lab, dataclasses.replace(grf, values=values), "X,Y")
+
+
+def test_one_leg_takes_its_own_plate_and_refuses_the_other_foots():
+    """The right leg alone (built-in hamner_leg): the left plate has no foot over it, named in one line; the
+    right plate given alone goes to the leg's foot."""
+    import casflex
+
+    leg, lab, grf = casflex.load_scene("hamner_leg"), read_trc(TRC), read_sto(GRF)
+    with pytest.raises(ValueError, match=r"plate '1_ground_'.*nearest: ankle, 0.17 m and 0.15 m"):
+        assign_plates(leg, lab, grf)
+    plates, _ = assign_plates(leg, TRC, GRF, prefixes=["ground_"])
+    assert plates == {"ankle": "ground_"}
+
+
+def test_a_plate_under_both_feet_in_turn_or_two_plates_under_one_foot_are_refused(hamner):
+    """One plate both feet step on (the two plates' samples merged: the runner's feet never share a moment on
+    the ground), and the right plate copied as a third plate: each refused in one line; plate_contacts still
+    gives the foot of each contact."""
+    scene, lab, grf = hamner
+    kinds = [n[len("ground_"):] for n in grf.names if n.startswith("ground_")]
+    right = grf.column("ground_force_vy") > 0
+    merged = np.column_stack([np.where(right, grf.column("ground_" + k), grf.column("1_ground_" + k)) for k in kinds])
+    one = LabTable(grf.t, tuple("ground_" + k for k in kinds), merged, source="merged")
+    with pytest.raises(ValueError, match=r"plate 'ground_' is stepped on by calcn_l \(\[start\]-0.327 s, 0.751-1.010 "
+                                         r"s\) and calcn_r \(0.390-0.665 s, 1.101-\[end\] s\)"):
+        assign_plates(scene, lab, one)
+    assert [c.foot for c in plate_contacts(scene, lab, one)] == ["calcn_l", "calcn_r", "calcn_l", "calcn_r"]
+    three = LabTable(grf.t, grf.names + tuple("2_ground_" + k for k in kinds),
+                     np.hstack([grf.values, np.column_stack([grf.column("ground_" + k) for k in kinds])]))
+    with pytest.raises(ValueError, match="plates 'ground_' and '2_ground_' are both under calcn_r"):
+        assign_plates(scene, lab, three)
+
+
+def test_a_running_stride_from_the_plates_and_the_heel_markers(hamner):
+    """The right stride 0.390-1.101 s (0.712 s) from the plates; the heels' lowest points -4 to +21 ms from the
+    plates' strikes; the left foot's one plate strike gives no stride in the record, and the report says so."""
+    scene, lab, grf = hamner
+    found = plate_contacts(scene, lab, grf)
+    strikes = foot_strikes(found)
+    assert list(strikes) == ["calcn_r", "calcn_l"] and len(strikes["calcn_r"]) == 2 and len(strikes["calcn_l"]) == 1
+    (t0, t1), = cycles(strikes["calcn_r"])
+    assert t1 - t0 == pytest.approx(0.7118, abs=1e-4)
+    heel = {"calcn_r": marker_strikes(lab.t, lab.marker("R.Heel")[:, 1]),
+            "calcn_l": marker_strikes(lab.t, lab.marker("L.Heel")[:, 1])}
+    assert len(heel["calcn_r"]) == 2 and len(heel["calcn_l"]) == 1
+    lag = np.array(heel["calcn_r"] + heel["calcn_l"]) - np.array(strikes["calcn_r"] + strikes["calcn_l"])
+    assert np.all(np.abs(lag) < 0.025), lag  # 1.5 frames at 60 Hz
+    by, lines = gait_cycles(found, scene, lab, "X,Y")
+    assert by == {"calcn_r": [(t0, t1)], "calcn_l": []}
+    assert lines[1] == "calcn_l: 0 cycle(s) from L.Heel's strikes at 0.747 s (1 plate strike(s): 0.751 s)"
+    assert cycles([1.0, 0.2, 3.4, 2.6], max_duration=1.0) == [(0.2, 1.0), (2.6, 3.4)]  # 1.0-2.6: one missed
+
+
+def test_normalise_is_exact_on_a_linear_signal():
+    t = np.cumsum(np.r_[0.0, np.linspace(0.005, 0.02, 80)])  # uneven samples
+    y = np.stack([3.0 + 2.0 * t, -t], axis=1)[:, :, None] * [1.0, 10.0]  # (n, 2, 2)
+    t0, t1 = 0.1234, 0.9876
+    out = normalise(t, y, t0, t1)
+    s = np.linspace(t0, t1, 101)
+    want = np.stack([3.0 + 2.0 * s, -s], axis=1)[:, :, None] * [1.0, 10.0]
+    assert out.shape == (101, 2, 2) and np.abs(out - want).max() < 1e-12
+    assert normalise(t, t, t[0], t[-1], n=11)[[0, -1]].tolist() == [t[0], t[-1]]
+    with pytest.raises(ValueError, match="not within the signal's times"):
+        normalise(t, y, t0, t[-1] + 0.01)
+
+
+def test_the_c3d_walking_trials_right_plate_goes_to_the_right_foot():
+    """walking2.c3d's excerpt (lab Z up, plane X,Z) with a right leg: plate 1 under its foot, its stance as the
+    README gives it (2.674-3.244 s); plate 2 (the left foot's) refused, the right foot 0.49 m away across."""
+    pytest.importorskip("ezc3d")
+    from casflex.scene.io import loads_scene
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from lab_scenes import C3D, PLANE, walking2_leg
+
+    leg = loads_scene(walking2_leg())
+    (c,) = plate_contacts(leg, C3D, None, PLANE, ["ground_"])
+    assert (c.foot, round(c.strike, 3), round(c.off, 3)) == ("ankle", 2.674, 3.244)
+    with pytest.raises(ValueError, match=r"plate '1_ground_', contact \[start\]-2.751 s.*nearest: ankle, 0.49 m"):
+        assign_plates(leg, C3D, None, PLANE)
