@@ -1,0 +1,99 @@
+"""``casflex study STUDY.toml``: a lab's whole study (subjects, static and walking or running trials) in one
+command, on dask (:mod:`casflex.study.runner`): one tidy table and the figures, resumable."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from casflex.cli._base import OptionError, Outputs, integer, output_path
+
+
+def _progress(done: int, total: int, key: str) -> None:
+    sys.stderr.write(f"casflex: {done}/{total} runs ({key})\n")
+    sys.stderr.flush()
+
+
+def _table(rows: list[tuple]) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["subject", "trial", "load", "foot", "cycle", "percent", "value", "band"])
+    w.writerows([(*r[:5], f"{r[5]:g}", repr(r[6]), "" if r[7] is None else repr(r[7])) for r in rows])
+    return buf.getvalue()
+
+
+def _figures(out: dict, directory: Path, title: str) -> list[str]:
+    """Per subject and for the group (the subjects' means): each load over the gait cycle; the files written."""
+    from casflex.plotting.study import plot_cycles
+    from casflex.study.runner import PERCENT
+
+    per: dict[str, dict[str, list]] = {}  # load -> subject -> cycles
+    for (subject, _), rec in out["trials"].items():
+        for name, ld in rec["loads"].items():
+            per.setdefault(name, {}).setdefault(subject, []).extend(ld["value"])
+    per = {n: {s: np.array(c) for s, c in subs.items() if c} for n, subs in per.items()}
+    per = {n: subs for n, subs in per.items() if subs}
+    if not per:
+        return []
+    written = []
+    for subject in sorted({s for subs in per.values() for s in subs}):
+        curves = {n: {subject: subs[subject]} for n, subs in per.items() if subject in subs}
+        plot_cycles(PERCENT, curves, f"{title}: {subject}", directory / f"{subject}.png")
+        written.append(f"{subject}.png")
+    group = {n: {"group": np.array([c.mean(axis=0) for c in subs.values()])} for n, subs in per.items()}
+    plot_cycles(PERCENT, group, f"{title}: the subjects' means", directory / "group.png")
+    return [*written, "group.png"]
+
+
+def cmd_study(args: argparse.Namespace, outputs: Outputs) -> int:
+    from casflex.study.runner import check_against_models, run_study, tidy_rows
+    from casflex.study.study_file import StudyError, load_study
+
+    try:
+        study = load_study(args.study)
+        check_against_models(study)
+    except StudyError as exc:
+        raise OptionError(f"{args.study}: {exc}") from None
+    staging = outputs.directory("--out", args.out)
+    record = Path(args.record) if args.record else Path(args.out) / "record"
+    n = len(study.trials())
+    print(f"study {study.name!r}: {len(study.subjects)} subject(s), {n} trial(s); records in {record}", flush=True)
+    out = run_study(study, record, scheduler=args.scheduler, n_workers=args.workers,
+                    progress=False if args.quiet else _progress)
+    if out["interrupted"]:
+        raise KeyboardInterrupt
+    rows = tidy_rows(out)
+    (staging / "loads.csv").write_text(_table(rows))
+    figures = _figures(out, staging, study.name)
+    lines = [f"{len(out['trials'])} of {n} trial(s) done, {len(rows)} rows in loads.csv; figures: "
+             f"{', '.join(figures) or 'none'}"]
+    for (subject, trial), rec in out["trials"].items():
+        cycles = {ld["foot"]: len(ld["cycles"]) for ld in rec["loads"].values()}
+        lines.append(f"  {subject} {trial}: plates {rec['plates']}; cycles per foot {cycles}")
+    if out["failed"]:
+        lines.append(f"{len(out['failed'])} failed:")
+        lines += [f"  {what}: {why}" for what, why in out["failed"]]
+    (staging / "summary.txt").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    return 1 if out["failed"] else 0
+
+
+def add_parsers(sub: argparse._SubParsersAction) -> None:
+    s = sub.add_parser("study", help="a lab's whole study (subjects and trials in a study file), on dask")
+    s.add_argument("study", help="the study file (TOML: subjects, their trials, the options; docs/lab.md)")
+    s.add_argument("--out", type=output_path, required=True, metavar="DIR",
+                   help="the results: loads.csv (one row per subject, trial, load, cycle and percent), "
+                        "summary.txt and the figures (per subject, group.png)")
+    s.add_argument("--record", type=output_path, metavar="DIR",
+                   help="the runs' records (default DIR/record): a run recorded there is not done again")
+    s.add_argument("--scheduler", metavar="ADDRESS", help="an existing dask scheduler (tcp://host:8786); default "
+                                                          "a local cluster")
+    s.add_argument("--workers", type=integer(1, "a number of workers"), default=2,
+                   help="the local cluster's worker processes (default 2)")
+    s.add_argument("--quiet", action="store_true", help="no progress messages")
+    s.set_defaults(func=cmd_study)

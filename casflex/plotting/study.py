@@ -1,0 +1,39 @@
+"""A study's figures (``casflex study``): each load over the gait cycle, per subject the mean and spread of its
+cycles, and the group's mean and spread over the subjects' means, as labs report gait."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+
+import numpy as np
+
+from casflex.plotting._figure import _new_figure, _save
+
+__all__ = ["plot_cycles"]
+
+
+def plot_cycles(percent: np.ndarray, curves: dict[str, dict[str, np.ndarray]], title: str,
+                path: str | os.PathLike[str], loads: Sequence[str] | None = None) -> None:
+    """One panel per load: for every label (a subject, or the group), the mean (line) and +- one standard
+    deviation (shaded) of its curves (m, 101) over ``percent`` (0-100 % of the gait cycle). ``curves``:
+    load -> label -> (m, 101) in the load's unit (N m, N)."""
+    names = list(loads or curves)
+    cols = min(3, len(names))
+    rows = -(-len(names) // cols)
+    fig = _new_figure((4.2 * cols, 3.0 * rows))
+    axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).ravel()
+    for ax, name in zip(axes, names, strict=False):
+        for label, c in curves[name].items():
+            c = np.atleast_2d(c)
+            mean, sd = c.mean(axis=0), c.std(axis=0, ddof=1) if c.shape[0] > 1 else np.zeros(c.shape[1])
+            line, = ax.plot(percent, mean, label=f"{label} ({c.shape[0]})")
+            ax.fill_between(percent, mean - sd, mean + sd, color=line.get_color(), alpha=0.2, lw=0)
+        ax.set(title=name, xlabel="gait cycle (%)", ylabel="N" if name.endswith(("_force", "fx", "fy")) else "N m")
+        ax.axhline(0.0, color="0.6", lw=0.6)
+        ax.grid(True, alpha=0.3)
+    for ax in axes[len(names):]:
+        ax.set_visible(False)
+    axes[0].legend(fontsize="x-small")
+    fig.suptitle(title)
+    _save(fig, path)

@@ -1,0 +1,215 @@
+"""A lab's whole study in one call (``casflex study STUDY.toml``, issue 38): each subject calibrated on its
+static trial, every trial's inverse dynamics, on dask.distributed (:mod:`casflex.study.sweep`: a local cluster,
+or a scheduler's address), resumable, a trial that fails reported with its reason while the others go on;
+then one tidy table and the figures.
+
+The runs: ``calibrate-<subject>`` (the subject's scene placed on its static trial, :func:`casflex.inverse.
+calibrate.calibrate`, the masses scaled to its mass) and ``trial-<subject>-<trial>`` (:func:`trial_run`: the
+plates assigned to the feet from the data where the study file does not say, :func:`.events.assign_plates`;
+inverse dynamics; each load cut into gait cycles, foot strike to foot strike of the foot below the load's joint,
+and resampled on 0-100 % of the cycle, :func:`.events.normalise`). Each run's record is a JSON file in the
+record directory: a run with a record is not done again.
+
+The table (``loads.csv``): one row per subject, trial, load, cycle and percent of the cycle, with the load's
+value and its band (one standard deviation, where the study asks for bands; else empty). Loads are the lab's
+(``<coordinate>_moment``) where the scene names its coordinates, else ``<hinge>.moment``, in N m (forces N).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from casflex.study.study_file import Study
+
+__all__ = ["run_study", "trial_run", "calibrate_run", "check_against_models", "tidy_rows", "PERCENT"]
+
+#: the points of a gait cycle in the table: 0, 1, ..., 100 % (as labs report it)
+PERCENT = np.linspace(0.0, 100.0, 101)
+
+
+def calibrate_run(*, model: str, static: str | None, plane: str, root: str | None, calibrate: bool, scale: bool,
+                  mass: float | None) -> dict:
+    """The subject's scene (TOML text) on its static trial (``calibrate``) or as given, and the report."""
+    from casflex import load_scene
+    from casflex.inverse.calibrate import calibrate as place
+    from casflex.scene import dumps_scene
+
+    scene = load_scene(model)
+    report: list[str] = []
+    if static is not None and calibrate:
+        scene, report = place(scene, static, plane, root=root, scale=scale, mass=mass)
+    elif mass is not None:
+        report = ["no static trial: the model's masses as given (mass not applied)"]
+    return {"scene": dumps_scene(scene), "report": list(report)}
+
+
+def _descendants(scene, node: str) -> set[str]:
+    """``node`` and the nodes its joints carry (the scene's joints, node a to node b)."""
+    children: dict[str, list[str]] = {}
+    for j in scene.joints:
+        if len(j.nodes) == 2:
+            children.setdefault(j.nodes[0], []).append(j.nodes[1])
+    out, todo = set(), [node]
+    while todo:
+        n = todo.pop()
+        if n not in out:
+            out.add(n)
+            todo += children.get(n, [])
+    return out
+
+
+def _load_feet(scene, names: list[str], feet: list[str]) -> dict[str, str | None]:
+    """For each load, the foot (a node bearing a plate) below its joint: that foot's strikes cut it into cycles;
+    None where no foot is (a root load, the trunk, the arms: the first foot's cycles are used)."""
+    from casflex.scene import SceneError
+
+    hinge_of = {f"{c.name}_moment": c.of for c in scene.coordinates} | {f"{c.name}_force": c.of
+                                                                          for c in scene.coordinates}
+    out = {}
+    for name in names:
+        hinge = hinge_of.get(name, name.rpartition(".")[0])
+        try:
+            below = _descendants(scene, scene.item(hinge).nodes[-1])
+        except SceneError:  # a root load ("root.fx", "<node>.x"): the whole body's
+            below = set()
+        out[name] = next((f for f in feet if f in below), None)
+    return out
+
+
+def _cycles(sc, trial: dict, plane: str, t: np.ndarray) -> tuple[dict[str, list[tuple[float, float]]], list[str]]:
+    """Per foot (a node over a plate's contact), its complete gait cycles within the times t the loads cover
+    (:func:`.events.gait_cycles`: the plates' strikes, else the heel marker's), and report lines."""
+    from casflex.study.events import gait_cycles, plate_contacts
+
+    if trial["grf"] is None or trial["grf"].lower().endswith(".xml"):
+        return {}, ["no plates read for the gait cycles (the trial names none, or an ExternalLoads file): loads "
+                    "over time only"]
+    found = plate_contacts(sc, trial["markers"], trial["grf"], plane)
+    feet, report = gait_cycles(found, sc, trial["markers"], plane)
+    return {f: [c for c in cs if t[0] <= c[0] and c[1] <= t[-1]] for f, cs in feet.items()}, report
+
+
+def _loads_of(res) -> list[str]:
+    """The loads the table holds: the lab's moments where the scene names them, else every hinge's moment."""
+    names = list(res.settings.get("moments", ()))
+    return names or sorted(k for k in res.loads if k.endswith(".moment") and not k.startswith("root."))
+
+
+def trial_run(*, scene: str, trial: dict, options: dict, uncertain: list[str]) -> dict:
+    """One trial's inverse dynamics and its loads over gait cycles (module docstring): a JSON-ready record."""
+    from casflex.inverse import inverse_dynamics
+    from casflex.scene import loads_scene
+    from casflex.scene.uncertain import parse
+    from casflex.study.events import assign_plates, normalise
+
+    sc = loads_scene(scene)
+    plates, plate_report = trial["plates"], []
+    if trial["grf"] is not None and plates is None and not trial["grf"].lower().endswith(".xml"):
+        plates, plate_report = assign_plates(sc, trial["markers"], trial["grf"], options["plane"])
+    t0, t1 = trial["window"] or (None, None)
+    res = inverse_dynamics(sc, trial["markers"], grf=trial["grf"], plates=plates, plane=options["plane"],
+                           cutoff=options["cutoff"], cutoff_plates=options["cutoff_plates"],
+                           filter=options["filter"], root=options["root"], tasks=options["tasks"], t_start=t0,
+                           t_end=t1, uncertain=[parse(u) for u in uncertain] or None,
+                           bands=True if options["bands"] else None)
+    feet, cycle_report = _cycles(sc, trial, options["plane"], res.t)
+    names = _loads_of(res)
+    first = next(iter(feet), None)
+    loads = {}
+    for name, foot in _load_feet(sc, names, list(feet)).items():
+        spans = feet.get(foot or first, [])
+        band = res.bands.get(name, {}).get("total") if res.bands else None
+        loads[name] = {"foot": foot or first, "cycles": [list(c) for c in spans],
+                       "value": [normalise(res.t, res.loads[name], *c).tolist() for c in spans],
+                       "band": [normalise(res.t, band, *c).tolist() for c in spans] if band is not None else None}
+    return {"plates": plates, "report": [*plate_report, *cycle_report, *res.report], "warnings": res.warnings,
+            "loads": loads, "t": [float(res.t[0]), float(res.t[-1])]}
+
+
+def _plan(study: Study, calibrated: dict[str, dict]) -> list:
+    from casflex.study.sweep import Run
+
+    o = study.options
+    options = {k: getattr(o, k) for k in ("plane", "cutoff", "cutoff_plates", "filter", "root", "tasks", "bands")}
+    return [Run(f"trial-{s.name}-{t.name}", trial_run,
+                {"scene": calibrated[s.name]["scene"], "trial": dataclasses.asdict(t), "options": options,
+                 "uncertain": list(s.uncertain)})
+            for s, t in study.trials() if "scene" in calibrated.get(s.name, {})]
+
+
+def check_against_models(study: Study) -> None:
+    """Every subject's model read, and the study's names checked against it before any run: its uncertain
+    properties' targets, the plates' nodes, the root. StudyError naming the field otherwise."""
+    import dataclasses as dc
+
+    from casflex import load_scene
+    from casflex.scene import SceneError
+    from casflex.scene.uncertain import parse
+    from casflex.study.study_file import StudyError
+
+    for i, s in enumerate(study.subjects):
+        try:
+            scene = load_scene(s.model)
+        except (SceneError, ValueError, OSError) as exc:
+            raise StudyError(f"subjects[{i}].model: {exc}") from None
+        try:
+            dc.replace(scene, uncertain=tuple(parse(u) for u in s.uncertain))
+        except (SceneError, ValueError) as exc:
+            raise StudyError(f"subjects[{i}].uncertain: {exc}") from None
+        nodes = {n.name for n in scene.nodes}
+        if study.options.root is not None and study.options.root not in nodes:
+            raise StudyError(f"options.root: {study.options.root!r} is not a node of subject {s.name}'s model")
+        for k, t in enumerate(s.trials):
+            bad = sorted(set(t.plates or {}) - nodes)
+            if bad:
+                raise StudyError(f"subjects[{i}].trials[{k}].plates: {bad[0]!r} is not a node of the model "
+                                 f"(nodes: {sorted(nodes)[:12]}...)")
+
+
+def run_study(study: Study, record: str | Path, *, scheduler: str | None = None, n_workers: int = 2,
+              progress: Callable[[int, int, str], None] | bool = True) -> dict:
+    """Calibrate every subject and run every trial (module docstring), resuming from ``record``; returns
+    {"subjects": {name: calibration record}, "trials": {(subject, trial): record}, "failed": [(what, why)],
+    "interrupted": bool}. A failed calibration fails its subject's trials, reported; the others go on."""
+    from casflex.study.sweep import Run, run_sweep
+
+    o = study.options
+    cal_runs = [Run(f"calibrate-{s.name}", calibrate_run,
+                    {"model": s.model, "static": s.static, "plane": o.plane, "root": o.root, "calibrate": o.calibrate,
+                     "scale": o.scale, "mass": s.mass}) for s in study.subjects]
+    cal = run_sweep(cal_runs, record, scheduler=scheduler, n_workers=n_workers, progress=progress)
+    calibrated = {s.name: cal.results.get(f"calibrate-{s.name}", {}) for s in study.subjects}
+    failed = [(f"subject {s.name} (calibration)", calibrated[s.name].get("error", "not run"))
+              for s in study.subjects if "scene" not in calibrated[s.name]]
+    trials: dict = {}
+    interrupted = cal.interrupted
+    if not interrupted:
+        done = run_sweep(_plan(study, calibrated), record, scheduler=scheduler, n_workers=n_workers,
+                         progress=progress)
+        interrupted = done.interrupted
+        for s, t in study.trials():
+            rec = done.results.get(f"trial-{s.name}-{t.name}")
+            if rec is None:
+                why = "its subject's calibration failed" if "scene" not in calibrated[s.name] else "not run"
+                failed.append((f"{s.name} {t.name}", why))
+            elif "error" in rec:
+                failed.append((f"{s.name} {t.name}", rec["error"]))
+            else:
+                trials[(s.name, t.name)] = rec
+    return {"subjects": calibrated, "trials": trials, "failed": failed, "interrupted": interrupted}
+
+
+def tidy_rows(out: dict) -> list[tuple]:
+    """(subject, trial, load, foot, cycle, percent, value, band) rows of :func:`run_study`'s trials."""
+    rows = []
+    for (subject, trial), rec in out["trials"].items():
+        for name, ld in rec["loads"].items():
+            for k, values in enumerate(ld["value"]):
+                band = ld["band"][k] if ld["band"] is not None else [None] * len(values)
+                rows += [(subject, trial, name, ld["foot"], k + 1, float(p), v, b)
+                         for p, v, b in zip(PERCENT, values, band, strict=True)]
+    return rows

@@ -1,0 +1,238 @@
+"""A lab's study as a file (``casflex study STUDY.toml``, issue 38): its subjects, their trials, the options,
+read and checked before any work. Paths are relative to the study file.
+
+```toml
+name = "running speeds"
+
+[options]                      # every key optional; these are the defaults
+plane = "X,Y"                  # the lab axes that become the model's x and y
+cutoff = 6.0                   # Hz, the kinematics' (and the plates') zero-lag Butterworth; "none": unfiltered
+cutoff_plates = "same"         # Hz, "none" or "same"
+filter = "butterworth"         # or "opensim" (as OpenSim's ID tool)
+root = ""                      # the node the data drive (default: the scene's first)
+tasks = ""                     # an OpenSim IK task or setup file: the markers' weights
+calibrate = true               # place the model's markers from each subject's static trial (when given)
+scale = false                  # scale the segments too (casflex.inverse.calibrate)
+bands = false                  # each load's band (anthropometry and marker noise, casflex.inverse.bands)
+
+[[subjects]]
+name = "s02"
+model = "subject02.osim"       # an OpenSim model, a scene TOML or a built-in scene
+mass = 72.8                    # kg (optional: the model's masses scaled to it)
+static = "s02_static.trc"      # optional: the calibration trial
+uncertain = ["pelvis.mass=10%"]   # optional: the anthropometry's uncertainty (TARGET=SD|P%|LO:HI)
+
+[[subjects.trials]]
+name = "run3"
+markers = "s02_run3.trc"       # .trc or .c3d
+grf = "s02_run3_grf.mot"       # .mot/.sto, the .c3d's plates, or an ExternalLoads .xml (optional)
+plates = { calcn_r = "ground_force_", calcn_l = "1_ground_force_" }   # optional: else from the data
+window = [0.5, 2.0]            # s, optional
+```
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+__all__ = ["Study", "Subject", "Trial", "Options", "load_study"]
+
+_OPTIONS = {"plane": str, "cutoff": (float, str), "cutoff_plates": (float, str), "filter": str, "root": str,
+            "tasks": str, "calibrate": bool, "scale": bool, "bands": bool}
+_FILTERS = ("butterworth", "opensim")
+
+
+@dataclass(frozen=True)
+class Options:
+    """The study's inverse-dynamics options (module docstring); ``tasks`` a resolved path or None."""
+
+    plane: str = "X,Y"
+    cutoff: float | None = 6.0
+    cutoff_plates: float | None | str = "same"
+    filter: str = "butterworth"
+    root: str | None = None
+    tasks: str | None = None
+    calibrate: bool = True
+    scale: bool = False
+    bands: bool = False
+
+
+@dataclass(frozen=True)
+class Trial:
+    name: str
+    markers: str
+    grf: str | None = None
+    plates: dict[str, str] | None = None
+    window: tuple[float, float] | None = None
+
+
+@dataclass(frozen=True)
+class Subject:
+    name: str
+    model: str
+    trials: tuple[Trial, ...]
+    mass: float | None = None
+    static: str | None = None
+    uncertain: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Study:
+    name: str
+    path: str
+    options: Options
+    subjects: tuple[Subject, ...] = field(default_factory=tuple)
+
+    def trials(self) -> list[tuple[Subject, Trial]]:
+        """Every (subject, trial) in the file's order."""
+        return [(s, t) for s in self.subjects for t in s.trials]
+
+
+class StudyError(ValueError):
+    """A study file that cannot be run: the message names the field (``subjects[1].trials[0].markers``)."""
+
+
+def _check_keys(where: str, table: Any, known: set[str], required: set[str]) -> dict:
+    if not isinstance(table, dict):
+        raise StudyError(f"{where}: expected a table, got {type(table).__name__}")
+    for k in table:
+        if k not in known:
+            raise StudyError(f"{where}.{k}: unknown field; expected some of {sorted(known)}")
+    for k in sorted(required - set(table)):
+        raise StudyError(f"{where}: missing required field {k!r}")
+    return table
+
+
+def _name(where: str, value: Any) -> str:
+    if not isinstance(value, str) or not value.strip() or any(c in value for c in "/\\ \t\n:*?\"<>|"):
+        raise StudyError(f"{where}: expected a name without spaces or path characters, got {value!r}")
+    return value
+
+
+def _file(base: Path, where: str, value: Any, suffixes: tuple[str, ...], builtin: bool = False) -> str:
+    """The path (resolved against the study file's folder) of an existing input file, or a built-in scene."""
+    if not isinstance(value, str) or not value:
+        raise StudyError(f"{where}: expected a file name, got {value!r}")
+    if builtin:
+        from casflex.scene import builtin_scenes
+
+        if value in builtin_scenes():
+            return value
+    path = Path(value) if Path(value).is_absolute() else base / value
+    if not path.is_file():
+        raise StudyError(f"{where}: {value}: no such file (relative to {base})")
+    if not str(path).lower().endswith(suffixes):
+        raise StudyError(f"{where}: {value}: expected {' or '.join(suffixes)}")
+    return str(path)
+
+
+def _frequency(where: str, value: Any, allowed: tuple[str, ...]) -> float | None | str:
+    if isinstance(value, str) and value.lower() in allowed:
+        return None if value.lower() == "none" else value.lower()
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (0 < value < math.inf):
+        raise StudyError(f"{where}: expected a frequency in Hz (> 0) or one of {list(allowed)}, got {value!r}")
+    return float(value)
+
+
+def _options(base: Path, table: Any) -> Options:
+    t = _check_keys("options", table, set(_OPTIONS), set())
+    for k, typ in _OPTIONS.items():
+        if k in t and not isinstance(t[k], typ) or (k in t and typ is not bool and isinstance(t[k], bool)):
+            raise StudyError(f"options.{k}: expected {'true or false' if typ is bool else 'a value'}, got {t[k]!r}")
+    if t.get("filter", "butterworth") not in _FILTERS:
+        raise StudyError(f"options.filter: expected one of {list(_FILTERS)}, got {t['filter']!r}")
+    from casflex.lab import Plane
+
+    try:
+        Plane.parse(t.get("plane", "X,Y"))
+    except ValueError as exc:
+        raise StudyError(f"options.plane: {exc}") from None
+    return Options(plane=t.get("plane", "X,Y"), cutoff=_frequency("options.cutoff", t.get("cutoff", 6.0), ("none",)),
+                   cutoff_plates=_frequency("options.cutoff_plates", t.get("cutoff_plates", "same"), ("none", "same")),
+                   filter=t.get("filter", "butterworth"), root=t.get("root") or None,
+                   tasks=_file(base, "options.tasks", t["tasks"], (".xml",)) if t.get("tasks") else None,
+                   calibrate=t.get("calibrate", True), scale=t.get("scale", False), bands=t.get("bands", False))
+
+
+def _trial(base: Path, where: str, table: Any) -> Trial:
+    t = _check_keys(where, table, {"name", "markers", "grf", "plates", "window"}, {"name", "markers"})
+    plates = t.get("plates")
+    if plates is not None and (not isinstance(plates, dict) or not plates
+                               or not all(isinstance(v, str) and v for v in plates.values())):
+        raise StudyError(f"{where}.plates: expected a table node = \"column prefix\", got {plates!r}")
+    window = t.get("window")
+    if window is not None:
+        ok = (isinstance(window, list) and len(window) == 2 and all(isinstance(w, (int, float))
+                                                                    and not isinstance(w, bool) for w in window))
+        if not ok or not 0 <= window[0] < window[1]:
+            raise StudyError(f"{where}.window: expected [start, end] in s, 0 <= start < end, got {window!r}")
+    if plates is not None and "grf" not in t:
+        raise StudyError(f"{where}.plates: needs grf (the ground reaction file)")
+    return Trial(_name(f"{where}.name", t["name"]), _file(base, f"{where}.markers", t["markers"], (".trc", ".c3d")),
+                 _file(base, f"{where}.grf", t["grf"], (".mot", ".sto", ".c3d", ".xml")) if "grf" in t else None,
+                 dict(plates) if plates else None, tuple(float(w) for w in window) if window else None)
+
+
+def _subject(base: Path, i: int, table: Any) -> Subject:
+    where = f"subjects[{i}]"
+    s = _check_keys(where, table, {"name", "model", "mass", "static", "uncertain", "trials"}, {"name", "model",
+                                                                                              "trials"})
+    name = _name(f"{where}.name", s["name"])
+    mass = s.get("mass")
+    if mass is not None and (isinstance(mass, bool) or not isinstance(mass, (int, float)) or not 0 < mass < 1000):
+        raise StudyError(f"{where}.mass: expected the subject's mass in kg, got {mass!r}")
+    unc = s.get("uncertain", [])
+    if not isinstance(unc, list) or not all(isinstance(u, str) for u in unc):
+        raise StudyError(f"{where}.uncertain: expected a list of \"TARGET=SD|P%|LO:HI\", got {unc!r}")
+    for u in unc:
+        _uncertain(f"{where}.uncertain", u)
+    trials = s["trials"]
+    if not isinstance(trials, list) or not trials:
+        raise StudyError(f"{where}.trials: expected one or more [[subjects.trials]] tables")
+    out = tuple(_trial(base, f"{where}.trials[{k}]", t) for k, t in enumerate(trials))
+    names = [t.name for t in out]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise StudyError(f"{where}.trials: trial {dup[0]!r} is named twice")
+    return Subject(name, _file(base, f"{where}.model", s["model"], (".osim", ".toml"), builtin=True), out,
+                   float(mass) if mass is not None else None,
+                   _file(base, f"{where}.static", s["static"], (".trc", ".c3d")) if "static" in s else None,
+                   tuple(unc))
+
+
+def _uncertain(where: str, text: str):
+    """The casflex.scene.Uncertain of ``TARGET=SD|P%|LO:HI``; StudyError naming ``where`` otherwise."""
+    from casflex.scene.uncertain import parse
+
+    try:
+        return parse(text)
+    except ValueError as exc:
+        raise StudyError(f"{where}: {exc}") from None
+
+
+def load_study(path: str) -> Study:
+    """The study file at ``path``, every field and file checked (StudyError naming the field otherwise)."""
+    p = Path(path)
+    if not p.is_file():
+        raise StudyError(f"{path}: no such study file")
+    try:
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise StudyError(f"{path}: not valid TOML: {exc}") from None
+    data = _check_keys("study", data, {"name", "options", "subjects"}, {"name", "subjects"})
+    base = p.resolve().parent
+    subjects = data["subjects"]
+    if not isinstance(subjects, list) or not subjects:
+        raise StudyError("subjects: expected one or more [[subjects]] tables")
+    subs = tuple(_subject(base, i, s) for i, s in enumerate(subjects))
+    names = [s.name for s in subs]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise StudyError(f"subjects: subject {dup[0]!r} is named twice")
+    if not isinstance(data["name"], str) or not data["name"].strip():
+        raise StudyError(f"name: expected the study's name, got {data['name']!r}")
+    return Study(data["name"], str(p.resolve()), _options(base, data.get("options", {})), subs)

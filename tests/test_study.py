@@ -1,0 +1,128 @@
+"""``casflex study`` (issue 38): a study file read and checked before any work, its subjects calibrated and its
+trials run on dask, one tidy table, a failing trial reported while the others go on, a resumed run redoing
+nothing. The data: Hamner's subject 02 running (tests/data/lab, 1 s, both plates) on the planar whole-body
+model, as two "subjects" (the same model and data twice: the mechanics of a study, not a second subject's answer)."""
+
+from __future__ import annotations
+
+import csv
+import shutil
+from pathlib import Path
+
+import pytest
+
+from casflex.cli import main
+from casflex.study.runner import check_against_models
+from casflex.study.study_file import StudyError, load_study
+
+LAB = Path(__file__).resolve().parent / "data" / "lab"
+FILES = ("hamner_subject02_planar.osim", "hamner_running_whole.trc", "hamner_running_whole_grf.mot",
+         "hamner_tasks_ik.xml")
+
+STUDY = """name = "hamner running"
+
+[options]
+plane = "X,Y"
+cutoff = 6.0
+tasks = "hamner_tasks_ik.xml"
+
+[[subjects]]
+name = "s02"
+model = "hamner_subject02_planar.osim"
+
+[[subjects.trials]]
+name = "run"
+markers = "hamner_running_whole.trc"
+grf = "hamner_running_whole_grf.mot"
+
+[[subjects.trials]]
+name = "run_late"
+markers = "hamner_running_whole.trc"
+grf = "hamner_running_whole_grf.mot"
+window = [0.25, 1.15]
+
+[[subjects]]
+name = "s02_again"
+model = "hamner_subject02_planar.osim"
+mass = 80.0
+
+[[subjects.trials]]
+name = "run"
+markers = "hamner_running_whole.trc"
+grf = "hamner_running_whole_grf.mot"
+{extra}
+"""
+
+
+@pytest.fixture()
+def folder(tmp_path: Path) -> Path:
+    for f in FILES:
+        shutil.copy(LAB / f, tmp_path / f)
+    return tmp_path
+
+
+def write(folder: Path, extra: str = "") -> Path:
+    path = folder / "study.toml"
+    path.write_text(STUDY.replace("{extra}", extra))
+    return path
+
+
+@pytest.mark.parametrize("edit, said", [
+    (('model = "hamner_subject02_planar.osim"', 'model = "nowhere.osim"', 1),
+     "subjects[0].model: nowhere.osim: no such file"),
+    (('name = "run_late"', 'name = "run"', 1), "subjects[0].trials: trial 'run' is named twice"),
+    (("window = [0.25, 1.15]", "window = [1.15, 0.25]", 1), "subjects[0].trials[1].window"),
+    (("cutoff = 6.0", "cutoff = -1", 1), "options.cutoff"),
+    (("mass = 80.0", 'mass = "heavy"', 1), "subjects[1].mass"),
+    (("mass = 80.0", 'mass = 80.0\nuncertain = ["pelvis.mass=-3%"]', 1), "subjects[1].uncertain"),
+    (('plane = "X,Y"', 'plane = "X,Q"', 1), "options.plane"),
+    (('plane = "X,Y"', 'plane = "X,Y"\nspeed = 3', 1), "options.speed: unknown field"),
+    (("mass = 80.0", 'mass = 80.0\nuncertain = ["pelvis.massx=3%"]', 1), "subjects[1].uncertain"),
+    (('window = [0.25, 1.15]', 'window = [0.25, 1.15]\nplates = { calcn_x = "ground_force_" }', 1),
+     "subjects[0].trials[1].plates"),
+])
+def test_a_bad_study_file_is_refused_in_one_line_before_any_work(folder, capsys, edit, said):
+    path = write(folder)
+    path.write_text(path.read_text().replace(*edit))
+    with pytest.raises(StudyError, match=said.replace("[", r"\[").replace("]", r"\]")):
+        check_against_models(load_study(str(path)))
+    assert main(["study", str(path), "--out", str(folder / "out"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and said.split(":")[0] in err[0], err
+    assert not (folder / "out").exists()
+
+
+def _table(path: Path) -> list[dict]:
+    with path.open() as f:
+        return list(csv.DictReader(f))
+
+
+def test_a_study_runs_resumes_and_reports_a_failed_trial(folder, capsys):
+    # a third subject whose trial's markers file is the plates' (no marker the model has): it fails, reported,
+    # while the others run; the run again from the records redoes nothing and writes the same table
+    broken = '\n[[subjects]]\nname = "broken"\nmodel = "hamner_subject02_planar.osim"\n\n[[subjects.trials]]\n' \
+             'name = "run"\nmarkers = "bad.trc"\ngrf = "hamner_running_whole_grf.mot"\n'
+    (folder / "bad.trc").write_text((folder / "hamner_running_whole.trc").read_text().replace("R.ASIS", "Q.ASIS")
+                                    .replace("L.ASIS", "Q2.ASIS").replace("V.Sacral", "Q3"))
+    path = write(folder, broken)
+    out = folder / "out"
+    assert main(["study", str(path), "--out", str(out), "--quiet"]) == 1
+    printed = capsys.readouterr().out
+    assert "1 failed" in printed and "broken run" in printed
+    rows = _table(out / "loads.csv")
+    assert {r["subject"] for r in rows} == {"s02", "s02_again"}
+    assert {r["trial"] for r in rows if r["subject"] == "s02"} == {"run", "run_late"}
+    assert "hip_flexion_r_moment" in {r["load"] for r in rows}
+    assert all(0.0 <= float(r["percent"]) <= 100.0 for r in rows)
+    assert (out / "group.png").is_file() and (out / "s02.png").is_file()
+    summary = (out / "summary.txt").read_text()
+    assert "broken run:" in summary
+    # plates assigned from the data: the right foot's plate to calcn_r
+    assert "'calcn_r'" in summary and "'calcn_l'" in summary
+    first = (out / "loads.csv").read_text()
+    records = sorted(p.name for p in (out / "record").glob("*.json"))
+    assert main(["study", str(path), "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "runs (" not in err  # nothing run again: every record reused
+    assert (out / "loads.csv").read_text() == first
+    assert sorted(p.name for p in (out / "record").glob("*.json")) == records
