@@ -22,6 +22,7 @@ and is repeated while the residuals' standard deviation in those units moves by 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 from collections.abc import Mapping, Sequence
@@ -63,6 +64,22 @@ def declared_uncertain(scene: Scene, uncertain: Sequence[Uncertain] | None) -> S
         raise ValueError(str(exc)) from None
 
 
+@functools.lru_cache(maxsize=16)
+def _assembled(text: str, inertia: str) -> Model:
+    """The model of a scene's TOML text, kept: a sweep's fits of one scene with its uncertain properties share its
+    compiled functions (casflex's caches hold a model's for as long as the model lives)."""
+    from casflex.scene import loads_scene
+
+    return assembled(loads_scene(text), inertia=inertia)
+
+
+def nuisance_model(scene: Scene, inertia: str) -> Model:
+    """The model of ``scene`` with its uncertain properties as its last parameters (with their priors)."""
+    from casflex.scene import dumps_scene
+
+    return _assembled(dumps_scene(with_uncertain_estimated(scene)), inertia)
+
+
 def forms_with_nuisance(forms: list[tuple[Alternative, Model]], scene: Scene) -> list[tuple[Alternative, Model]]:
     """The alternative forms (:mod:`.form`) with the uncertain properties of ``scene`` estimated in each too,
     with the same priors: forms are compared at their maximum a posteriori fits."""
@@ -70,7 +87,7 @@ def forms_with_nuisance(forms: list[tuple[Alternative, Model]], scene: Scene) ->
     for alt, m in forms:
         alt_scene = with_uncertain_estimated(declared_uncertain(dataclasses.replace(alt.scene, uncertain=()),
                                                                 scene.uncertain))
-        out.append((dataclasses.replace(alt, scene=alt_scene), assembled(alt_scene, inertia=m.inertia)))
+        out.append((dataclasses.replace(alt, scene=alt_scene), nuisance_model(alt_scene, m.inertia)))
     return out
 
 
@@ -102,7 +119,7 @@ def map_fit(model: Model, scene: Scene, problem: OutputError, f: Fit, p0: np.nda
     starts again (the properties' freedom may explain what drove it there: twobar with bar 2 5 % denser sent kt1
     and kt3 to 0 with the densities held, and the fit with them stayed there from that answer);
     ``declared``: each experiment's declared noise (None: estimated)."""
-    model_u = assembled(with_uncertain_estimated(scene), inertia=model.inertia)
+    model_u = nuisance_model(scene, model.inertia)
     pmap = ParameterMap.of(model_u, setup["pmap"].transform)
     floor = 1e-9 * model.length_scale
     p_hat = problem.pmap.p(f.w[:model.n_p])
