@@ -6,17 +6,11 @@ from __future__ import annotations
 import argparse
 import csv
 import io
-import sys
 from pathlib import Path
 
 import numpy as np
 
 from casflex.cli._base import OptionError, Outputs, integer, output_path
-
-
-def _progress(done: int, total: int, key: str) -> None:
-    sys.stderr.write(f"casflex: {done}/{total} runs ({key})\n")
-    sys.stderr.flush()
 
 
 def _table(rows: list[tuple]) -> str:
@@ -64,7 +58,7 @@ def cmd_study(args: argparse.Namespace, outputs: Outputs) -> int:
     n = len(study.trials())
     print(f"study {study.name!r}: {len(study.subjects)} subject(s), {n} trial(s); records in {record}", flush=True)
     out = run_study(study, record, scheduler=args.scheduler, n_workers=args.workers,
-                    progress=False if args.quiet else _progress)
+                    progress=not args.quiet)
     if out["interrupted"]:
         raise KeyboardInterrupt
     rows = tidy_rows(out)

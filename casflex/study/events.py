@@ -36,7 +36,8 @@ from casflex.lab.filtering import _plate_columns
 from casflex.lab.plane import Plane
 from casflex.lab.tables import LabMarkers, LabTable, increasing_times
 
-__all__ = ["Contact", "contacts", "vertical_force", "feet", "plate_contacts", "assign_plates", "foot_strikes",
+__all__ = ["Contact", "contacts", "vertical_force", "feet", "plate_contacts", "assign_plates", "plates_of",
+           "read_trial", "plate_prefixes", "foot_strikes",
            "marker_strikes", "cycles", "gait_cycles", "normalise"]
 
 
@@ -66,7 +67,7 @@ def _plane(plane: Plane | str) -> Plane:
     return Plane.parse(plane) if isinstance(plane, str) else plane
 
 
-def _plates(table: LabTable) -> list[str]:
+def plate_prefixes(table: LabTable) -> list[str]:
     return [n[:-len("force_vx")] for n in table.names if n.endswith("force_vx")]
 
 
@@ -124,7 +125,7 @@ class Contact:
     others: tuple[tuple[str, float, float], ...] = ()
 
 
-def _read(markers, grf, plates: bool = True) -> tuple[LabMarkers, LabTable | None]:
+def read_trial(markers, grf, plates: bool = True) -> tuple[LabMarkers, LabTable | None]:
     """(markers, plates) from objects or files (.trc / .c3d; .mot / .sto / .c3d; grf None: the markers' C3D);
     ``plates`` False: the markers alone."""
     from casflex.lab import read_c3d, read_sto, read_trc
@@ -164,7 +165,7 @@ def plate_contacts(scene, markers, grf=None, plane: Plane | str = "X,Y", prefixe
     foot over it (module docstring), in plate order then time. ``markers``: a LabMarkers or a .trc / .c3d
     file; ``grf``: a LabTable or a .mot / .sto / .c3d file (None: the markers' C3D). ValueError in one line:
     a scene without feet in the trial, a plate unknown, no foot over a contact."""
-    lab, table = _read(markers, grf)
+    lab, table = read_trial(markers, grf)
     pl = _plane(plane)
     axes = np.vstack([pl.matrix[0], np.cross(*pl.matrix), pl.matrix[1]])  # the floor's two axes, then up
     cands = {n: [lb for lb in labels if lb in lab.labels] for n, labels in feet(scene).items()}
@@ -172,7 +173,7 @@ def plate_contacts(scene, markers, grf=None, plane: Plane | str = "X,Y", prefixe
     if not cands:
         raise ValueError(f"{lab.source}: no marker of the scene's feet {sorted(feet(scene))} is in the trial")
     found = []
-    for prefix in prefixes or _plates(table):
+    for prefix in prefixes or plate_prefixes(table):
         p = _plate_columns(table, prefix)
         fv = vertical_force(table, p, pl)
         P = np.column_stack([table.column(f"{p}force_p{a}") for a in "xyz"])
@@ -198,18 +199,24 @@ def plate_contacts(scene, markers, grf=None, plane: Plane | str = "X,Y", prefixe
 def assign_plates(scene, markers, grf=None, plane: Plane | str = "X,Y", prefixes=None, **options
                   ) -> tuple[dict[str, str], list[str]]:
     """({node: prefix} for :func:`casflex.inverse.inverse_dynamics`' ``plates``, report lines): each plate
-    under the foot over all its contacts (:func:`plate_contacts`, whose ``options`` these are); a plate
-    without contacts is left out and said. ValueError in one line for a plate stepped on by two feet and for
-    two plates under one foot (module docstring)."""
-    lab, table = _read(markers, grf)
-    prefixes = [_plate_columns(table, p) for p in prefixes] if prefixes else _plates(table)
+    under the foot over all its contacts (:func:`plate_contacts`, whose ``options`` these are; :func:`plates_of`)."""
+    lab, table = read_trial(markers, grf)
+    prefixes = [_plate_columns(table, p) for p in prefixes] if prefixes else plate_prefixes(table)
     found = plate_contacts(scene, lab, table, plane, prefixes, **options)
+    return plates_of(found, prefixes, options.get("threshold", MIN_PLATE_FORCE))
+
+
+def plates_of(found: list[Contact], prefixes: list[str], threshold: float = MIN_PLATE_FORCE
+              ) -> tuple[dict[str, str], list[str]]:
+    """({node: prefix}, report lines) from :func:`plate_contacts`' contacts ``found`` of the plates ``prefixes``
+    (above ``threshold`` N); a plate without contacts is left out and said. ValueError in one line for a plate
+    stepped on by two feet and for two plates under one foot (module docstring)."""
     plates: dict[str, str] = {}
     lines = []
     for p in prefixes:
         mine = [c for c in found if c.plate == p]
         if not mine:
-            lines.append(f"plate {p!r}: no contact above {options.get('threshold', MIN_PLATE_FORCE):g} N: left out")
+            lines.append(f"plate {p!r}: no contact above {threshold:g} N: left out")
             continue
         by = {c.foot: [_span(d.strike, d.off) for d in mine if d.foot == c.foot] for c in mine}
         if len(by) > 1:
@@ -269,7 +276,7 @@ def gait_cycles(found: list[Contact], scene, markers, plane: Plane | str = "X,Y"
     """({node: cycles}, report lines) for the feet of :func:`plate_contacts`' contacts ``found``: from the
     plates' strikes where a foot has two, else from its heel marker (``heel[node]``, default the foot's
     first marker labelled like heel or cal) by :func:`marker_strikes`; ``markers`` a LabMarkers or a file."""
-    lab = _read(markers, None, plates=False)[0]
+    lab = read_trial(markers, None, plates=False)[0]
     up = _plane(plane).matrix[1]
     out, lines = {}, []
     for node, plate in foot_strikes(found).items():

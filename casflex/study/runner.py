@@ -5,7 +5,7 @@ then one tidy table and the figures.
 
 The runs: ``calibrate-<subject>`` (the subject's scene placed on its static trial, :func:`casflex.inverse.
 calibrate.calibrate`, the masses scaled to its mass) and ``trial-<subject>-<trial>`` (:func:`trial_run`: the
-plates assigned to the feet from the data where the study file does not say, :func:`.events.assign_plates`;
+plates assigned to the feet from the data where the study file does not say, :func:`.events.plates_of`;
 inverse dynamics; each load cut into gait cycles, foot strike to foot strike of the foot below the load's joint,
 and resampled on 0-100 % of the cycle, :func:`.events.normalise`). Each run's record is a JSON file in the
 record directory: a run with a record is not done again.
@@ -80,17 +80,21 @@ def _load_feet(scene, names: list[str], feet: list[str]) -> dict[str, str | None
     return out
 
 
-def _cycles(sc, trial: dict, plane: str, t: np.ndarray) -> tuple[dict[str, list[tuple[float, float]]], list[str]]:
-    """Per foot (a node over a plate's contact), its complete gait cycles within the times t the loads cover
-    (:func:`.events.gait_cycles`: the plates' strikes, else the heel marker's), and report lines."""
-    from casflex.study.events import gait_cycles, plate_contacts
+def _events(sc, trial: dict, plane: str) -> tuple[dict[str, str] | None, dict, list[str]]:
+    """The trial's plates' feet (the study file's, else from the data: :func:`.events.plates_of`), each foot's gait
+    cycles (:func:`.events.gait_cycles`: the plates' strikes, else the heel marker's) and report lines, from one
+    reading of the trial and one pass over its plates' contacts."""
+    from casflex.study.events import gait_cycles, plate_contacts, plate_prefixes, plates_of, read_trial
 
     if trial["grf"] is None or trial["grf"].lower().endswith(".xml"):
-        return {}, ["no plates read for the gait cycles (the trial names none, or an ExternalLoads file): loads "
-                    "over time only"]
-    found = plate_contacts(sc, trial["markers"], trial["grf"], plane)
-    feet, report = gait_cycles(found, sc, trial["markers"], plane)
-    return {f: [c for c in cs if t[0] <= c[0] and c[1] <= t[-1]] for f, cs in feet.items()}, report
+        return trial["plates"], {}, ["no plates read for the gait cycles (the trial names none, or an ExternalLoads "
+                                     "file): loads over time only"]
+    lab, table = read_trial(trial["markers"], trial["grf"])
+    prefixes = plate_prefixes(table)
+    found = plate_contacts(sc, lab, table, plane, prefixes)
+    plates, report = (trial["plates"], []) if trial["plates"] is not None else plates_of(found, prefixes)
+    feet, cycle_report = gait_cycles(found, sc, lab, plane)
+    return plates, feet, report + cycle_report
 
 
 def _loads_of(res) -> list[str]:
@@ -104,19 +108,17 @@ def trial_run(*, scene: str, trial: dict, options: dict, uncertain: list[str]) -
     from casflex.inverse import inverse_dynamics
     from casflex.scene import loads_scene
     from casflex.scene.uncertain import parse
-    from casflex.study.events import assign_plates, normalise
+    from casflex.study.events import normalise
 
     sc = loads_scene(scene)
-    plates, plate_report = trial["plates"], []
-    if trial["grf"] is not None and plates is None and not trial["grf"].lower().endswith(".xml"):
-        plates, plate_report = assign_plates(sc, trial["markers"], trial["grf"], options["plane"])
+    plates, feet, event_report = _events(sc, trial, options["plane"])
     t0, t1 = trial["window"] or (None, None)
     res = inverse_dynamics(sc, trial["markers"], grf=trial["grf"], plates=plates, plane=options["plane"],
                            cutoff=options["cutoff"], cutoff_plates=options["cutoff_plates"],
                            filter=options["filter"], root=options["root"], tasks=options["tasks"], t_start=t0,
                            t_end=t1, uncertain=[parse(u) for u in uncertain] or None,
                            bands=True if options["bands"] else None)
-    feet, cycle_report = _cycles(sc, trial, options["plane"], res.t)
+    feet = {f: [c for c in cs if res.t[0] <= c[0] and c[1] <= res.t[-1]] for f, cs in feet.items()}  # the window's
     names = _loads_of(res)
     first = next(iter(feet), None)
     loads = {}
@@ -126,7 +128,7 @@ def trial_run(*, scene: str, trial: dict, options: dict, uncertain: list[str]) -
         loads[name] = {"foot": foot or first, "cycles": [list(c) for c in spans],
                        "value": [normalise(res.t, res.loads[name], *c).tolist() for c in spans],
                        "band": [normalise(res.t, band, *c).tolist() for c in spans] if band is not None else None}
-    return {"plates": plates, "report": [*plate_report, *cycle_report, *res.report], "warnings": res.warnings,
+    return {"plates": plates, "report": [*event_report, *res.report], "warnings": res.warnings,
             "loads": loads, "t": [float(res.t[0]), float(res.t[-1])]}
 
 
