@@ -127,7 +127,7 @@ def _check_forms(model: Model, args: argparse.Namespace) -> None:
     """--vary, --alternatives and --uncertain checked against the scene before any work (one line naming the
     option)."""
     from casflex.identification.form import declared_alternatives
-    from casflex.identification.priors import declared_uncertain
+    from casflex.scene.uncertain import declared_uncertain
 
     try:  # the scenes only: the models are assembled once, by the fit
         declared_alternatives(model, form="none", vary=dict(args.vary or ()), alternatives=args.alternatives or ())

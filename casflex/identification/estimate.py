@@ -60,7 +60,7 @@ from casflex.identification.plausibility import (  # noqa: F401 (FIT_THRESHOLD, 
     pooled_fit,
     residual_reasons,
 )
-from casflex.identification.priors import declared_uncertain, forms_with_nuisance, map_fit, prior_report
+from casflex.identification.priors import forms_with_nuisance, map_fit, prior_report
 from casflex.identification.problem import (
     ParameterMap,
     bound_flags,
@@ -70,7 +70,7 @@ from casflex.identification.problem import (
 from casflex.identification.result import IdentificationResult
 from casflex.identification.statistics import residual_analysis, sandwich_covariance
 from casflex.model import Model, assembled
-from casflex.scene.uncertain import Uncertain, nuisance_names
+from casflex.scene.uncertain import Uncertain, declared_uncertain, nuisance_names
 
 __all__ = ["estimate", "MODEL_ERRORS", "FIT_THRESHOLD"]
 

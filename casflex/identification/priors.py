@@ -22,10 +22,9 @@ and is repeated while the residuals' standard deviation in those units moves by 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -35,10 +34,10 @@ from casflex.identification.measurement import Experiment
 from casflex.identification.output_error import Budget, Fit, OutputError, fit
 from casflex.identification.problem import ParameterMap, bound_flags, gauss_newton_statistics
 from casflex.model import Model, assembled
-from casflex.scene import Scene, SceneError
-from casflex.scene.uncertain import Uncertain, nuisance_names, with_uncertain_estimated
+from casflex.scene import Scene
+from casflex.scene.uncertain import declared_uncertain, nuisance_names, with_uncertain_estimated
 
-__all__ = ["declared_uncertain", "map_fit", "prior_report", "forms_with_nuisance", "NOISE_TOL", "CONFLICT_SD"]
+__all__ = ["map_fit", "prior_report", "forms_with_nuisance", "NOISE_TOL", "CONFLICT_SD"]
 
 #: The fit with the priors is repeated while the data's residual standard deviation (in the noise taken) is
 #: further than this from 1: the priors' weight against the data is then off by less than 10 %
@@ -49,37 +48,6 @@ NOISE_ROUNDS, MAP_RUNS = 3, 30
 CONFLICT_SD = 3.0
 
 
-def declared_uncertain(scene: Scene, uncertain: Sequence[Uncertain] | None) -> Scene:
-    """The scene with the caller's uncertain properties (``uncertain``, each replacing the scene's of the same
-    target) added to its own; a ValueError names the offending entry."""
-    extra = list(uncertain or ())
-    for u in extra:
-        if not isinstance(u, Uncertain):
-            raise ValueError(f"uncertain: expected casflex.scene.Uncertain entries, got {u!r}")
-    given = {u.target for u in extra}
-    merged = tuple(u for u in scene.uncertain if u.target not in given) + tuple(extra)
-    try:
-        return dataclasses.replace(scene, uncertain=merged)
-    except SceneError as exc:
-        raise ValueError(str(exc)) from None
-
-
-@functools.lru_cache(maxsize=16)
-def _assembled(text: str, inertia: str) -> Model:
-    """The model of a scene's TOML text, kept: a sweep's fits of one scene with its uncertain properties share its
-    compiled functions (casflex's caches hold a model's for as long as the model lives)."""
-    from casflex.scene import loads_scene
-
-    return assembled(loads_scene(text), inertia=inertia)
-
-
-def nuisance_model(scene: Scene, inertia: str) -> Model:
-    """The model of ``scene`` with its uncertain properties as its last parameters (with their priors)."""
-    from casflex.scene import dumps_scene
-
-    return _assembled(dumps_scene(with_uncertain_estimated(scene)), inertia)
-
-
 def forms_with_nuisance(forms: list[tuple[Alternative, Model]], scene: Scene) -> list[tuple[Alternative, Model]]:
     """The alternative forms (:mod:`.form`) with the uncertain properties of ``scene`` estimated in each too,
     with the same priors: forms are compared at their maximum a posteriori fits."""
@@ -87,7 +55,7 @@ def forms_with_nuisance(forms: list[tuple[Alternative, Model]], scene: Scene) ->
     for alt, m in forms:
         alt_scene = with_uncertain_estimated(declared_uncertain(dataclasses.replace(alt.scene, uncertain=()),
                                                                 scene.uncertain))
-        out.append((dataclasses.replace(alt, scene=alt_scene), nuisance_model(alt_scene, m.inertia)))
+        out.append((dataclasses.replace(alt, scene=alt_scene), assembled(alt_scene, inertia=m.inertia)))
     return out
 
 
@@ -119,7 +87,7 @@ def map_fit(model: Model, scene: Scene, problem: OutputError, f: Fit, p0: np.nda
     starts again (the properties' freedom may explain what drove it there: twobar with bar 2 5 % denser sent kt1
     and kt3 to 0 with the densities held, and the fit with them stayed there from that answer);
     ``declared``: each experiment's declared noise (None: estimated)."""
-    model_u = nuisance_model(scene, model.inertia)
+    model_u = assembled(with_uncertain_estimated(scene), inertia=model.inertia)
     pmap = ParameterMap.of(model_u, setup["pmap"].transform)
     floor = 1e-9 * model.length_scale
     p_hat = problem.pmap.p(f.w[:model.n_p])

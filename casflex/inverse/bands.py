@@ -23,7 +23,6 @@ properties), the plates' errors, soft tissue artefacts (marker errors correlated
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -72,18 +71,12 @@ class BandSpec:
 
 
 def _merged(scene, uncertain) -> object:
-    """The scene with ``uncertain`` (Uncertain entries) added to its own, replacing those of the same target."""
-    from casflex.scene import SceneError, Uncertain
+    """The scene with ``uncertain`` added to its own (:func:`casflex.scene.uncertain.declared_uncertain`)."""
+    from casflex.scene.uncertain import declared_uncertain
 
-    extra = list(uncertain or ())
-    for u in extra:
-        if not isinstance(u, Uncertain):
-            raise BandError("uncertain", f"expected casflex.scene.Uncertain entries, got {u!r}")
-    given = {u.target for u in extra}
     try:
-        return dataclasses.replace(scene, uncertain=tuple(u for u in scene.uncertain if u.target not in given)
-                                   + tuple(extra))
-    except SceneError as exc:
+        return declared_uncertain(scene, uncertain)
+    except ValueError as exc:
         raise BandError("uncertain", str(exc)) from None
 
 

@@ -18,7 +18,7 @@ from typing import Any
 
 from casflex.scene.items import NONNEGATIVE_FIELDS, Parameter, SceneError, _non_negative, _number
 
-__all__ = ["Uncertain", "check_uncertain", "with_uncertain_estimated", "parse"]
+__all__ = ["Uncertain", "check_uncertain", "with_uncertain_estimated", "declared_uncertain", "parse"]
 
 
 @dataclass(frozen=True)
@@ -119,6 +119,21 @@ def check_uncertain(scene: Any) -> None:
                 raise SceneError(f"{where}.range: the scene's value {value:g} lies outside [{lo:g}, {hi:g}]")
             if lo < 0 and u.target.partition(".")[2] in NONNEGATIVE_FIELDS:
                 raise SceneError(f"{where}.range: {u.target} is never negative, got lower {lo:g}")
+
+
+def declared_uncertain(scene: Any, uncertain: Any = None) -> Any:
+    """The scene with the caller's uncertain properties (``uncertain``: Uncertain entries, each replacing the
+    scene's of the same target) added to its own; a ValueError in one line names the offending entry."""
+    extra = list(uncertain or ())
+    for u in extra:
+        if not isinstance(u, Uncertain):
+            raise ValueError(f"uncertain: expected casflex.scene.Uncertain entries, got {u!r}")
+    given = {u.target for u in extra}
+    merged = tuple(u for u in scene.uncertain if u.target not in given) + tuple(extra)
+    try:
+        return dataclasses.replace(scene, uncertain=merged)
+    except SceneError as exc:
+        raise ValueError(str(exc)) from None
 
 
 def with_uncertain_estimated(scene: Any) -> Any:
