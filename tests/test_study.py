@@ -76,6 +76,7 @@ def write(folder: Path, extra: str = "") -> Path:
     (("mass = 80.0", 'mass = "heavy"', 1), "subjects[1].mass"),
     (("mass = 80.0", 'mass = 80.0\nuncertain = ["pelvis.mass=-3%"]', 1), "subjects[1].uncertain"),
     (('plane = "X,Y"', 'plane = "X,Q"', 1), "options.plane"),
+    (('plane = "X,Y"', 'plane = "auto"\nvertical = "W"', 1), "options.vertical"),
     (('plane = "X,Y"', 'plane = "X,Y"\nspeed = 3', 1), "options.speed: unknown field"),
     (("mass = 80.0", 'mass = 80.0\nuncertain = ["pelvis.massx=3%"]', 1), "subjects[1].uncertain"),
     (('window = [0.25, 1.15]', 'window = [0.25, 1.15]\nplates = { calcn_x = "ground_force_" }', 1),
@@ -126,3 +127,20 @@ def test_a_study_runs_resumes_and_reports_a_failed_trial(folder, capsys):
     assert "sweep:" not in err  # nothing run again: every record reused (the sweep reports each run it does)
     assert (out / "loads.csv").read_text() == first
     assert sorted(p.name for p in (out / "record").glob("*.json")) == records
+
+
+def test_plane_auto_finds_the_plane_opensim_s_lab_sets(folder):
+    # Hamner's lab: X forward, Y up (OpenSim's); "auto" with Y vertical finds X,Y from the subject's travel or
+    # facing, the same table as the plane given
+    path = folder / "auto.toml"
+    one = 'name = "auto"\n[options]\nplane = "{plane}"\nvertical = "Y"\ntasks = "hamner_tasks_ik.xml"\n' \
+          '[[subjects]]\nname = "s02"\nmodel = "hamner_subject02_planar.osim"\n[[subjects.trials]]\nname = "run"\n' \
+          'markers = "hamner_running_whole.trc"\ngrf = "hamner_running_whole_grf.mot"\n'
+    tables = {}
+    for plane in ("auto", "X,Y"):
+        path.write_text(one.replace("{plane}", plane))
+        assert main(["study", str(path), "--out", str(folder / plane.replace(",", "")), "--quiet"]) == 0
+        tables[plane] = (folder / plane.replace(",", "") / "loads.csv").read_text()
+        record = (folder / plane.replace(",", "") / "record" / "trial-s02-run.json").read_text()
+        assert '"plane": "X,Y"' in record
+    assert tables["auto"] == tables["X,Y"]

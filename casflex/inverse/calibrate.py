@@ -13,7 +13,7 @@ projected on the plane:
    about its proximal joint's centre (the root's segment about the root node). Everything fixed in
    it scales (its nodes, bodies' centres of mass, markers, the points of the hinges to its children,
    which carry the distal segments along); a body's inertia scales with the square of the length.
-   A segment with fewer than two seen markers keeps its size (reported). ``mass`` (kg): the bodies'
+   A segment without two seen markers :data:`MIN_PAIR` apart keeps its size (reported). ``mass`` (kg): the bodies'
    masses scaled together to that total (their inertias with them).
 2. **Marker placement**: the static pose is fitted (the tree's coordinates, least squares over the
    markers, :mod:`casflex.inverse.fit`), and every seen marker is moved onto its measured position,
@@ -39,15 +39,21 @@ def _rot(th: float) -> np.ndarray:
     return np.array([[c, -s], [s, c]])
 
 
+#: m: a pair of markers closer than this in the scene's plane measures their placement, not the segment's size (a
+#: few mm of placement is 10 % of it; two markers across a limb, a wrist's two, project within it)
+MIN_PAIR = 0.05
+
+
 def _scales(tree: KinematicTree, y0: np.ndarray, ym: np.ndarray) -> dict[int, float]:
-    """Per cluster: the median measured over scene distance of its seen markers' pairs (1 with fewer than 2)."""
+    """Per cluster: the median measured over scene distance of its seen markers' pairs at least :data:`MIN_PAIR`
+    apart in the scene (1 without such a pair)."""
     cl = np.array([tree.cluster[i] for i in tree.marker_nodes])
     seen = np.isfinite(ym).all(axis=1)
     out = {}
     for c in set(tree.cluster):
         k = np.flatnonzero((cl == c) & seen)
         ratios = [np.linalg.norm(ym[i] - ym[j]) / np.linalg.norm(y0[i] - y0[j]) for a, i in enumerate(k)
-                  for j in k[a + 1:] if np.linalg.norm(y0[i] - y0[j]) > 1e-6]
+                  for j in k[a + 1:] if np.linalg.norm(y0[i] - y0[j]) >= MIN_PAIR]
         out[c] = float(np.median(ratios)) if ratios else 1.0
     return out
 

@@ -275,13 +275,14 @@ def gait_cycles(found: list[Contact], scene, markers, plane: Plane | str = "X,Y"
                 ) -> tuple[dict[str, list[tuple[float, float]]], list[str]]:
     """({node: cycles}, report lines) for the feet of :func:`plate_contacts`' contacts ``found``: from the
     plates' strikes where a foot has two, else from its heel marker (``heel[node]``, default the foot's
-    first marker labelled like heel or cal) by :func:`marker_strikes`; ``markers`` a LabMarkers or a file."""
+    first marker labelled like heel (hee: Plug-in Gait's RHEE) or cal) by :func:`marker_strikes`; ``markers`` a
+    LabMarkers or a file."""
     lab = read_trial(markers, None, plates=False)[0]
     up = _plane(plane).matrix[1]
     out, lines = {}, []
     for node, plate in foot_strikes(found).items():
         label = None if len(plate) >= 2 else (heel or {}).get(node) or next((lb for lb in feet(scene).get(
-            node, ()) if lb in lab.labels and ("heel" in lb.lower() or "cal" in lb.lower())), None)
+            node, ()) if lb in lab.labels and ("hee" in lb.lower() or "cal" in lb.lower())), None)
         s = plate if len(plate) >= 2 else marker_strikes(lab.t, lab.marker(label) @ up, lift) if label else []
         out[node] = cycles(s, max_duration)
         how = "the plates'" if len(plate) >= 2 else f"{label}'s" if label else "no heel marker's (heel=)"

@@ -32,19 +32,39 @@ PERCENT = np.linspace(0.0, 100.0, 101)
 
 
 def calibrate_run(*, model: str, static: str | None, plane: str, root: str | None, calibrate: bool, scale: bool,
-                  mass: float | None) -> dict:
-    """The subject's scene (TOML text) on its static trial (``calibrate``) or as given, and the report."""
+                  mass: float | None, vertical: str = "Y") -> dict:
+    """The subject's scene (TOML text) on its static trial (``calibrate``) or as given, and the report; ``plane``
+    "auto": the static trial's own (:mod:`.direction`)."""
     from casflex import load_scene
     from casflex.inverse.calibrate import calibrate as place
+    from casflex.inverse.inputs import read_markers
     from casflex.scene import dumps_scene
 
     scene = load_scene(model)
     report: list[str] = []
     if static is not None and calibrate:
-        scene, report = place(scene, static, plane, root=root, scale=scale, mass=mass)
+        lab = read_markers(static)[0]
+        plane, report = _trial_plane(scene, lab, plane, vertical, static=True)
+        scene, placed = place(scene, lab, plane, root=root, scale=scale, mass=mass)
+        report += placed
     elif mass is not None:
         report = ["no static trial: the model's masses as given (mass not applied)"]
     return {"scene": dumps_scene(scene), "report": list(report)}
+
+
+def _trial_plane(sc, lab, plane: str, vertical: str, static: bool = False) -> tuple[str, list[str]]:
+    """(the trial's plane, report lines): ``plane``, or where "auto" the one the subject travels or faces in
+    (:mod:`.direction`: a static trial by its markers, another by the scene's fit); the subject's heading checked
+    against it (ValueError where it turns)."""
+    from casflex.study.direction import check_straight, facing_plane, fitted_plane, walking_plane
+
+    labels = [lb for lb in (m.label or m.name for m in sc.markers) if lb in lab.labels]
+    report = []
+    if plane == "auto":
+        plane, line = walking_plane(lab, labels, vertical) or (facing_plane if static else fitted_plane)(
+            sc, lab, vertical)
+        report.append(line)
+    return plane, [*report, check_straight(lab, labels, plane)]
 
 
 def _descendants(scene, node: str) -> set[str]:
@@ -80,19 +100,32 @@ def _load_feet(scene, names: list[str], feet: list[str]) -> dict[str, str | None
     return out
 
 
-def _events(sc, trial: dict, plane: str) -> tuple[dict[str, str] | None, dict, list[str]]:
+def _read(trial: dict):
+    """(markers, plates' table or None): the trial's files, read once (a C3D's own plates where no grf is named)."""
+    from casflex.inverse.inputs import read_markers
+    from casflex.lab import read_c3d, read_sto
+
+    grf = trial["grf"]
+    if grf is None and trial["markers"].lower().endswith(".c3d"):
+        return read_c3d(trial["markers"], plates=True)
+    lab = read_markers(trial["markers"])[0]
+    if grf is None or grf.lower().endswith(".xml"):
+        return lab, None
+    return lab, read_c3d(grf)[1] if grf.lower().endswith(".c3d") else read_sto(grf)
+
+
+def _events(sc, lab, table, plates, plane: str) -> tuple[dict[str, str] | None, dict, list[str]]:
     """The trial's plates' feet (the study file's, else from the data: :func:`.events.plates_of`), each foot's gait
     cycles (:func:`.events.gait_cycles`: the plates' strikes, else the heel marker's) and report lines, from one
-    reading of the trial and one pass over its plates' contacts."""
-    from casflex.study.events import gait_cycles, plate_contacts, plate_prefixes, plates_of, read_trial
+    pass over its plates' contacts."""
+    from casflex.study.events import gait_cycles, plate_contacts, plate_prefixes, plates_of
 
-    if trial["grf"] is None or trial["grf"].lower().endswith(".xml"):
-        return trial["plates"], {}, ["no plates read for the gait cycles (the trial names none, or an ExternalLoads "
-                                     "file): loads over time only"]
-    lab, table = read_trial(trial["markers"], trial["grf"])
+    if table is None:
+        return plates, {}, ["no plates read for the gait cycles (the trial names none, or an ExternalLoads "
+                            "file): loads over time only"]
     prefixes = plate_prefixes(table)
     found = plate_contacts(sc, lab, table, plane, prefixes)
-    plates, report = (trial["plates"], []) if trial["plates"] is not None else plates_of(found, prefixes)
+    plates, report = (plates, []) if plates is not None else plates_of(found, prefixes)
     feet, cycle_report = gait_cycles(found, sc, lab, plane)
     return plates, feet, report + cycle_report
 
@@ -111,9 +144,14 @@ def trial_run(*, scene: str, trial: dict, options: dict, uncertain: list[str]) -
     from casflex.study.events import normalise
 
     sc = loads_scene(scene)
-    plates, feet, event_report = _events(sc, trial, options["plane"])
+    lab, table = _read(trial)
     t0, t1 = trial["window"] or (None, None)
-    res = inverse_dynamics(sc, trial["markers"], grf=trial["grf"], plates=plates, plane=options["plane"],
+    inside = (lab.t >= (t0 or -np.inf)) & (lab.t <= (t1 or np.inf))
+    plane, plane_report = _trial_plane(sc, dataclasses.replace(lab, t=lab.t[inside], xyz=lab.xyz[inside]),
+                                       options["plane"], options["vertical"])
+    plates, feet, event_report = _events(sc, lab, table, trial["plates"], plane)
+    grf = trial["grf"] if trial["grf"] is not None and trial["grf"].lower().endswith(".xml") else table
+    res = inverse_dynamics(sc, lab, grf=grf, plates=plates, plane=plane,
                            cutoff=options["cutoff"], cutoff_plates=options["cutoff_plates"],
                            filter=options["filter"], root=options["root"], tasks=options["tasks"], t_start=t0,
                            t_end=t1, uncertain=[parse(u) for u in uncertain] or None,
@@ -128,15 +166,16 @@ def trial_run(*, scene: str, trial: dict, options: dict, uncertain: list[str]) -
         loads[name] = {"foot": foot or first, "cycles": [list(c) for c in spans],
                        "value": [normalise(res.t, res.loads[name], *c).tolist() for c in spans],
                        "band": [normalise(res.t, band, *c).tolist() for c in spans] if band is not None else None}
-    return {"plates": plates, "report": [*event_report, *res.report], "warnings": res.warnings,
-            "loads": loads, "t": [float(res.t[0]), float(res.t[-1])]}
+    return {"plates": plates, "plane": plane, "report": [*plane_report, *event_report, *res.report],
+            "warnings": res.warnings, "loads": loads, "t": [float(res.t[0]), float(res.t[-1])]}
 
 
 def _plan(study: Study, calibrated: dict[str, dict]) -> list:
     from casflex.study.sweep import Run
 
     o = study.options
-    options = {k: getattr(o, k) for k in ("plane", "cutoff", "cutoff_plates", "filter", "root", "tasks", "bands")}
+    options = {k: getattr(o, k) for k in ("plane", "vertical", "cutoff", "cutoff_plates", "filter", "root", "tasks",
+                                          "bands")}
     return [Run(f"trial-{s.name}-{t.name}", trial_run,
                 {"scene": calibrated[s.name]["scene"], "trial": dataclasses.asdict(t), "options": options,
                  "uncertain": list(s.uncertain)})
@@ -182,7 +221,7 @@ def run_study(study: Study, record: str | Path, *, scheduler: str | None = None,
     o = study.options
     cal_runs = [Run(f"calibrate-{s.name}", calibrate_run,
                     {"model": s.model, "static": s.static, "plane": o.plane, "root": o.root, "calibrate": o.calibrate,
-                     "scale": o.scale, "mass": s.mass}) for s in study.subjects]
+                     "scale": o.scale, "mass": s.mass, "vertical": o.vertical}) for s in study.subjects]
     cal = run_sweep(cal_runs, record, scheduler=scheduler, n_workers=n_workers, progress=progress)
     calibrated = {s.name: cal.results.get(f"calibrate-{s.name}", {}) for s in study.subjects}
     failed = [(f"subject {s.name} (calibration)", calibrated[s.name].get("error", "not run"))

@@ -5,7 +5,8 @@ read and checked before any work. Paths are relative to the study file.
 name = "running speeds"
 
 [options]                      # every key optional; these are the defaults
-plane = "X,Y"                  # the lab axes that become the model's x and y
+plane = "X,Y"                  # the lab axes that become the model's x and y, or "auto": each trial's own
+vertical = "Y"                 # the lab's vertical axis (for plane = "auto": casflex.study.direction)
 cutoff = 6.0                   # Hz, the kinematics' (and the plates') zero-lag Butterworth; "none": unfiltered
 cutoff_plates = "same"         # Hz, "none" or "same"
 filter = "butterworth"         # or "opensim" (as OpenSim's ID tool)
@@ -41,8 +42,8 @@ from typing import Any
 
 __all__ = ["Study", "Subject", "Trial", "Options", "load_study"]
 
-_OPTIONS = {"plane": str, "cutoff": (float, str), "cutoff_plates": (float, str), "filter": str, "root": str,
-            "tasks": str, "calibrate": bool, "scale": bool, "bands": bool}
+_OPTIONS = {"plane": str, "vertical": str, "cutoff": (float, str), "cutoff_plates": (float, str), "filter": str,
+            "root": str, "tasks": str, "calibrate": bool, "scale": bool, "bands": bool}
 _FILTERS = ("butterworth", "opensim")
 
 
@@ -51,6 +52,7 @@ class Options:
     """The study's inverse-dynamics options (module docstring); ``tasks`` a resolved path or None."""
 
     plane: str = "X,Y"
+    vertical: str = "Y"
     cutoff: float | None = 6.0
     cutoff_plates: float | None | str = "same"
     filter: str = "butterworth"
@@ -147,11 +149,16 @@ def _options(base: Path, table: Any) -> Options:
         raise StudyError(f"options.filter: expected one of {list(_FILTERS)}, got {t['filter']!r}")
     from casflex.lab import Plane
 
+    vertical = t.get("vertical", "Y")
+    if vertical.upper() not in ("X", "Y", "Z"):
+        raise StudyError(f"options.vertical: expected the lab's vertical axis X, Y or Z, got {vertical!r}")
     try:
-        Plane.parse(t.get("plane", "X,Y"))
+        if t.get("plane", "X,Y") != "auto":
+            Plane.parse(t.get("plane", "X,Y"))
     except ValueError as exc:
-        raise StudyError(f"options.plane: {exc}") from None
-    return Options(plane=t.get("plane", "X,Y"), cutoff=_frequency("options.cutoff", t.get("cutoff", 6.0), ("none",)),
+        raise StudyError(f"options.plane: {exc} (or \"auto\")") from None
+    return Options(plane=t.get("plane", "X,Y"), vertical=vertical.upper(),
+                   cutoff=_frequency("options.cutoff", t.get("cutoff", 6.0), ("none",)),
                    cutoff_plates=_frequency("options.cutoff_plates", t.get("cutoff_plates", "same"), ("none", "same")),
                    filter=t.get("filter", "butterworth"), root=t.get("root") or None,
                    tasks=_file(base, "options.tasks", t["tasks"], (".xml",)) if t.get("tasks") else None,

@@ -1,0 +1,165 @@
+"""Which way a subject walks or faces, for a study whose plane is ``"auto"`` (the lab's vertical axis given), and
+whether a trial is straight enough for a planar model.
+
+A lab's walkway does not fix the direction: children walk it both ways, and stand facing either end in a static
+trial. Each trial's plane is then the sagittal one of that trial, seen from the subject's right as the study's
+scenes are (OpenSim's convention: x forward, y up):
+
+- a trial in which the subject travels (the markers' median displacement over the horizontal >=
+  :data:`MIN_TRAVEL`): x along that displacement's larger horizontal lab axis, with its sign
+  (:func:`walking_plane`);
+- a static trial (before the scene is calibrated to the subject): of the four horizontal directions, the one
+  along which the markers lie as the scene's lie along its x (:func:`facing_plane`);
+- a trial in which the subject stays (a treadmill; the scene calibrated): the direction in whose plane the scene
+  fits the trial's frames best (:func:`fitted_plane`).
+
+:func:`check_straight` refuses a trial in which the subject turns: a planar model sees a turn's steps foreshortened
+and its joints' moments about the wrong axis, without a word. It compares the heading of the markers' median
+horizontal velocity, while the subject moves faster than :data:`WALKING_SPEED`, with the plane's x.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from casflex.lab import LabMarkers, Plane
+
+__all__ = ["walking_plane", "facing_plane", "fitted_plane", "check_straight", "MIN_TRAVEL", "WALKING_SPEED", "MAX_TURN",
+           "MIN_CORRELATION"]
+
+#: m: less travel than this over a trial is standing (a static trial, a treadmill)
+MIN_TRAVEL = 0.5
+#: m/s: the heading is judged only while the subject moves at least this fast (slow gait is some 0.5 m/s)
+WALKING_SPEED = 0.3
+#: degrees: a straight walk's heading sways a few degrees per step (the sample study's: within 12); a turn's is
+#: tens of degrees
+MAX_TURN = 25.0
+
+#: a facing needs the markers to lie along it as the scene's do at least this well (biomechZoo's sample study's
+#: statics on a Plug-in Gait model: 0.78-0.91 facing, 0.02-0.07 across)
+MIN_CORRELATION = 0.3
+
+_AXES = "XYZ"
+
+
+def _horizontal(vertical: str) -> list[int]:
+    return [k for k in range(3) if _AXES[k] != vertical.lstrip("+-").upper()]
+
+
+def _median_steps(lab: LabMarkers, labels: list[str]) -> np.ndarray:
+    """(n - 1, 3) m: each frame-to-frame step of the markers' median displacement (over the markers seen in both
+    frames; NaN where fewer than half of them are: a record's ends, where markers enter the cameras' view one by
+    one). Steps, not positions: a marker seen late joins without a jump."""
+    X = np.stack([lab.marker(lb) for lb in labels], axis=1)  # (n, k, 3)
+    d = X[1:] - X[:-1]
+    enough = np.isfinite(d).all(axis=2).sum(axis=1) >= max(1, len(labels) // 2)
+    out = np.full((lab.t.size - 1, 3), np.nan)
+    if enough.any():
+        out[enough] = np.nanmedian(d[enough], axis=1)
+    return out
+
+
+def walking_plane(lab: LabMarkers, labels: list[str], vertical: str) -> tuple[str, str] | None:
+    """(plane, report line): the plane whose x is the subject's travel over the trial (module docstring); None
+    where it travels less than :data:`MIN_TRAVEL`."""
+    if lab.t.size < 2 or not labels:
+        return None
+    d = np.nansum(_median_steps(lab, labels), axis=0)
+    h = _horizontal(vertical)
+    if np.hypot(*d[h]) < MIN_TRAVEL:
+        return None
+    k = h[int(np.argmax(np.abs(d[h])))]
+    plane = f"{'-' if d[k] < 0 else ''}{_AXES[k]},{vertical}"
+    return plane, f"plane {plane}: the subject travels {np.hypot(*d[h]):.2f} m along {'-' if d[k] < 0 else '+'}" \
+                  f"{_AXES[k]}"
+
+
+def facing_plane(scene, lab: LabMarkers, vertical: str) -> tuple[str, str]:
+    """(plane, report line): of the four horizontal directions, the one along which the trial's markers (their
+    mean over its frames) lie as the scene's lie along its x (the largest slope of their lab coordinate on the
+    scene's x: the subject's toes ahead of its heels, its pelvis's front ahead of its back, whatever its size;
+    refused where their correlation is below :data:`MIN_CORRELATION`; module docstring)."""
+    markers = [m for m in scene.markers if (m.label or m.name) in lab.labels]
+    x0 = np.array([m.x for m in markers])
+    with np.errstate(all="ignore"):
+        mean = np.array([np.nanmean(lab.marker(m.label or m.name), axis=0) for m in markers]).reshape(-1, 3)
+    seen = np.isfinite(mean).all(axis=1)
+    if seen.sum() < 3:
+        raise ValueError(f"{lab.source}: fewer than 3 of the scene's markers seen: cannot tell which way the "
+                         f"subject faces; give the plane")
+    r, slope = {}, {}
+    x = x0[seen] - x0[seen].mean()
+    for k in _horizontal(vertical):
+        lab_k = mean[seen, k] - mean[seen, k].mean()
+        b = float(x @ lab_k / (x @ x))  # the lab axis's metres per metre of the scene's x: a subject's size
+        with np.errstate(all="ignore"):  # a lab axis the markers do not spread along: no correlation (0)
+            c = float(np.nan_to_num(np.corrcoef(x, lab_k)[0, 1]))
+        for sign, axis in ((1.0, f"{_AXES[k]},{vertical}"), (-1.0, f"-{_AXES[k]},{vertical}")):
+            r[axis], slope[axis] = sign * c, sign * b
+    best = max(slope, key=slope.get)
+    if r[best] < MIN_CORRELATION:
+        raise ValueError(f"{lab.source}: cannot tell which way the subject faces (the markers' correlation with the "
+                         f"scene's x at most {r[best]:+.2f} along {best}): give the plane")
+    others = ", ".join(f"{p} {v:+.2f}" for p, v in r.items() if p != best)
+    return best, f"plane {best}: the subject faces {best.split(',')[0]} (the markers' correlation with the " \
+                 f"scene's x {r[best]:+.2f}, {slope[best]:.2f} m per m; {others} in the others)"
+
+
+def fitted_plane(scene, lab: LabMarkers, vertical: str, root: str | None = None, frames: int = 5) -> tuple[str, str]:
+    """(plane, report line): of the four horizontal directions, the one in whose plane the scene (calibrated to the
+    subject) fits ``frames`` frames of the trial best (their summed misfit; frames spread over those with half the
+    markers seen): a running or walking trial on a treadmill, whose mean is no pose the scene's x can be read from."""
+    from casflex.inverse.fit import fit_pose
+    from casflex.inverse.inputs import inverse_model
+    from casflex.inverse.tree import kinematic_tree
+
+    tree = kinematic_tree(inverse_model(scene, root), root)
+    labels = {m.name: m.label or m.name for m in tree.model.scene.markers if (m.label or m.name) in lab.labels}
+    seen = np.flatnonzero(np.isfinite(np.stack([lab.marker(lb) for lb in labels.values()], axis=1)).all(axis=2)
+                          .sum(axis=1) >= max(1, len(labels) // 2))
+    if not seen.size:
+        raise ValueError(f"{lab.source}: no frame with half the scene's markers seen: give the plane")
+    pick = seen[np.linspace(0, seen.size - 1, min(frames, seen.size)).round().astype(int)]
+    nan = np.full((pick.size, 3), np.nan)
+    X = np.stack([lab.marker(m.label or m.name)[pick] if (m.label or m.name) in lab.labels else nan
+                  for m in tree.model.scene.markers], axis=1)  # (frames, the scene's markers, 3), NaN: not in it
+    misfit = {}
+    for k in _horizontal(vertical):
+        for sign in ("", "-"):
+            plane = f"{sign}{_AXES[k]},{vertical}"
+            y = (X @ Plane.parse(plane).matrix.T).reshape(pick.size, -1)
+            misfit[plane] = float(sum(fit_pose(tree, yi)[1] for yi in y))
+    best = min(misfit, key=misfit.get)
+    others = ", ".join(f"{p} {1e3 * v / pick.size:.0f}" for p, v in misfit.items() if p != best)
+    return best, f"plane {best}: the subject faces {best.split(',')[0]} (the scene's misfit over {pick.size} frames " \
+                 f"{1e3 * misfit[best] / pick.size:.0f} mm; {others} mm in the others)"
+
+
+def check_straight(lab: LabMarkers, labels: list[str], plane: str) -> str:
+    """A report line on the trial's heading against the plane's x; ValueError where the subject turns more than
+    :data:`MAX_TURN` or walks backwards in the plane (module docstring)."""
+    pl = Plane.parse(plane)
+    if lab.t.size < 2 or not labels:
+        return "heading not checked: too few frames or markers"
+    steps = _median_steps(lab, labels)
+    x_axis, up = pl.matrix[0], np.cross(*pl.matrix)
+    w = max(1, int(round(0.1 * lab.rate)))  # 0.1 s of steps: a stride's sway, not the markers' noise
+    if steps.shape[0] < w:
+        return "heading not checked: a record shorter than 0.1 s"
+    kernel = np.ones(w)
+    v = np.column_stack([np.convolve(steps[:, k], kernel, "valid") for k in range(3)]) / (
+        lab.t[w:] - lab.t[:-w])[:, None]  # NaN wherever a step in the window is
+    forward, side = v @ x_axis, v @ up
+    moving = np.hypot(forward, side) >= WALKING_SPEED
+    if not moving.any():
+        return "heading not checked: the subject does not move (a static trial or a treadmill)"
+    heading = np.degrees(np.arctan2(side[moving], forward[moving]))
+    lo, hi = float(np.min(heading)), float(np.max(heading))
+    where = f"the heading from {lo:+.0f} to {hi:+.0f} degrees off the plane's x ({pl.x}) while moving"
+    if np.median(np.abs(heading)) > 90.0:
+        raise ValueError(f"the subject walks backwards in the plane {plane} ({where}): give the plane along its "
+                         f"travel, or plane = \"auto\"")
+    if max(-lo, hi) > MAX_TURN:
+        raise ValueError(f"the subject turns ({where}, more than {MAX_TURN:g}): a planar model needs straight "
+                         f"walking; give a window in which it walks straight")
+    return f"straight: {where}"
