@@ -13,13 +13,14 @@ tests/data/lab with Plug-in Gait's markers and joint centres, the arms locked to
 on its static trial (segments by the joint centres' and markers' distances, masses to the child's), an IK task
 file weighing the skin markers alike and leaving the joint centres out, ``plane = "auto"`` (the children walk
 the walkway both ways and stand facing its end), each trial's window the span of its marked gait events
-widened by WINDOW_MARGIN, the cut-off 6 Hz. The turns are expected to be refused (a planar model cannot follow
-them: casflex.study.direction); the straight walks run.
+widened by WINDOW_MARGIN (the cycles from those events), the cut-off 6 Hz, the table and figures per kg. The
+turns are expected to be refused (a planar model cannot follow them: casflex.study.direction); the straight walks
+run.
 
 Compared, per straight walk, foot and joint: casflex's sagittal moment and Plug-in Gait's (its X component, signs
 mapped to OpenSim's: PiG's hip and ankle X are extensor and plantarflexor positive, its knee X flexor
-positive), per kg, over each gait cycle casflex cut (foot strike to foot strike): their correlation and their
-peaks' ratio. Not a test of casflex's mechanics (tests/test_peers_opensim_tools.py is): the two differ in model
+positive), per kg, over each gait cycle (foot strike to foot strike, as the lab marked them): their correlation and
+their peaks' ratio. Not a test of casflex's mechanics (tests/test_peers_opensim_tools.py is): the two differ in model
 (planar gait2392 scaled from an adult, against Plug-in Gait's 3-D segments and Dempster's anthropometry) and in
 filtering; the study shows what a lab gets from casflex on its own files, and how near its usual software.
 """
@@ -87,7 +88,7 @@ def write_study(data: Path, work: Path) -> Path:
     (work / "pig_tasks_ik.xml").write_text(f'<?xml version="1.0"?>\n<IKTaskSet name="pig"><objects>{tasks}</objects>'
                                            "</IKTaskSet>\n")
     lines = ['name = "biomechZoo sample study"', "", "[options]", 'plane = "auto"', 'vertical = "Z"',
-             'tasks = "pig_tasks_ik.xml"', "scale = true", "cutoff = 6.0", ""]
+             'tasks = "pig_tasks_ik.xml"', "scale = true", "cutoff = 6.0", 'normalise = "mass"', ""]
     for folder in sorted(p for p in data.iterdir() if p.is_dir()):
         static = next((folder / "Static").glob("*.c3d"))
         mass = float(_c3d(static)["PROCESSING"]["Bodymass"]["value"][0])

@@ -77,6 +77,8 @@ def write(folder: Path, extra: str = "") -> Path:
     (("mass = 80.0", 'mass = 80.0\nuncertain = ["pelvis.mass=-3%"]', 1), "subjects[1].uncertain"),
     (('plane = "X,Y"', 'plane = "X,Q"', 1), "options.plane"),
     (('plane = "X,Y"', 'plane = "auto"\nvertical = "W"', 1), "options.vertical"),
+    (('plane = "X,Y"', 'plane = "X,Y"\nnormalise = "height"', 1), "options.normalise"),
+    (('plane = "X,Y"', 'plane = "X,Y"\nnormalise = "mass"', 1), "subjects[0].mass: needed by options.normalise"),
     (('plane = "X,Y"', 'plane = "X,Y"\nspeed = 3', 1), "options.speed: unknown field"),
     (("mass = 80.0", 'mass = 80.0\nuncertain = ["pelvis.massx=3%"]', 1), "subjects[1].uncertain"),
     (('window = [0.25, 1.15]', 'window = [0.25, 1.15]\nplates = { calcn_x = "ground_force_" }', 1),
@@ -144,3 +146,23 @@ def test_plane_auto_finds_the_plane_opensim_s_lab_sets(folder):
         record = (folder / plane.replace(",", "") / "record" / "trial-s02-run.json").read_text()
         assert '"plane": "X,Y"' in record
     assert tables["auto"] == tables["X,Y"]
+
+
+def test_normalise_mass_gives_the_table_per_kg_from_the_same_records(folder):
+    # the records hold N m; normalise = "mass" divides at the table (a rerun from the same records computes nothing)
+    one = 'name = "kg"\n[options]\nplane = "X,Y"\ntasks = "hamner_tasks_ik.xml"\n{norm}\n[[subjects]]\n' \
+          'name = "s02"\nmass = 80.0\nmodel = "hamner_subject02_planar.osim"\n[[subjects.trials]]\nname = "run"\n' \
+          'markers = "hamner_running_whole.trc"\ngrf = "hamner_running_whole_grf.mot"\n'
+    path, record = folder / "kg.toml", folder / "record"
+    tables = {}
+    for norm in ("", 'normalise = "mass"'):
+        path.write_text(one.replace("{norm}", norm))
+        assert main(["study", str(path), "--out", str(folder / f"out{len(norm)}"), "--record", str(record),
+                     "--quiet"]) == 0
+        tables[norm] = _table(folder / f"out{len(norm)}" / "loads.csv")
+    plain, kg = tables[""], tables['normalise = "mass"']
+    assert len(plain) == len(kg) > 0
+    assert {r["unit"] for r in plain if r["load"].endswith("_moment")} == {"N m"}
+    assert {r["unit"] for r in kg if r["load"].endswith("_moment")} == {"N m/kg"}
+    worst = max(abs(float(a["value"]) / 80.0 - float(b["value"])) for a, b in zip(plain, kg, strict=True))
+    assert worst <= 1e-12 * max(abs(float(a["value"])) for a in plain)  # one division: to the last digits

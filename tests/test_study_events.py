@@ -13,12 +13,14 @@ import pytest
 
 from casflex.lab import LabTable, read_sto, read_trc
 from casflex.study.events import (
+    _side,
     assign_plates,
     contacts,
     cycles,
     feet,
     foot_strikes,
     gait_cycles,
+    marked_strikes,
     marker_strikes,
     normalise,
     plate_contacts,
@@ -140,6 +142,43 @@ def test_a_running_stride_from_the_plates_and_the_heel_markers(hamner):
     assert by == {"calcn_r": [(t0, t1)], "calcn_l": []}
     assert lines[1] == "calcn_l: 0 cycle(s) from L.Heel's strikes at 0.747 s (1 plate strike(s): 0.751 s)"
     assert cycles([1.0, 0.2, 3.4, 2.6], max_duration=1.0) == [(0.2, 1.0), (2.6, 3.4)]  # 1.0-2.6: one missed
+
+
+def test_the_strikes_the_lab_marked_come_first(hamner):
+    """Events marked in the file (a C3D's, LabMarkers.events) decide the cycles where a foot has two: the left
+    foot's one plate strike gave none; marked strikes give its stride, and the right foot's marked ones replace
+    its plates'. Sides from the feet's names (calcn_l) or, where the names say none, their markers' (LHEE)."""
+    scene, lab, grf = hamner
+    found = plate_contacts(scene, lab, grf)
+    marked = dataclasses.replace(lab, events=(("Left", "Foot Strike", 0.30), ("Right", "Foot Strike", 0.40),
+                                              ("Left", "Foot Off", 0.55), ("Left", "Foot Strike", 0.75),
+                                              ("Right", "Foot Strike", 1.10), ("General", "Foot Strike", 0.9)))
+    got = marked_strikes(marked, scene)  # every foot-like node's (the wrists too: no plate is under them)
+    assert (got["calcn_r"], got["calcn_l"]) == ([0.40, 1.10], [0.30, 0.75])
+    by, lines = gait_cycles(found, scene, marked, "X,Y")
+    assert by == {"calcn_r": [(0.40, 1.10)], "calcn_l": [(0.30, 0.75)]}
+    assert lines[1].startswith("calcn_l: 1 cycle(s) from the marked events' strikes at 0.300, 0.750 s")
+    assert _side("foot", ("LHEE", "LTOE")) == "Left" and _side("foot", ("RHEE", "LTOE")) is None
+    assert _side("r_foot", ()) == "Right" and _side("LeftFoot", ()) == "Left"
+
+
+def test_a_c3d_s_events_are_read_on_its_markers_times(tmp_path):
+    ezc3d = pytest.importorskip("ezc3d")
+    c = ezc3d.c3d()
+    c["parameters"]["POINT"]["RATE"]["value"] = [100.0]
+    c["parameters"]["POINT"]["LABELS"]["value"] = ("RHEE",)
+    c["parameters"]["POINT"]["UNITS"]["value"] = ["mm"]
+    c["data"]["points"] = np.ones((4, 1, 50))
+    c.add_parameter("EVENT", "USED", [2])
+    c.add_parameter("EVENT", "LABELS", ["Foot Strike", "Foot Off"])
+    c.add_parameter("EVENT", "CONTEXTS", ["Right", "Right"])
+    c.add_parameter("EVENT", "TIMES", np.array([[0.0, 1.0], [0.12, 0.05]]))  # (minutes, seconds)
+    c.write(str(tmp_path / "events.c3d"))
+    from casflex.lab import read_c3d
+
+    lab = read_c3d(tmp_path / "events.c3d", plates=False)[0]
+    assert lab.events == (("Right", "Foot Strike", pytest.approx(0.12)), ("Right", "Foot Off", pytest.approx(60.05)))
+    assert lab.t[0] == 0.0
 
 
 def test_normalise_is_exact_on_a_linear_signal():

@@ -16,15 +16,15 @@ from casflex.cli._base import OptionError, Outputs, integer, output_path
 def _table(rows: list[tuple]) -> str:
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["subject", "trial", "load", "foot", "cycle", "percent", "value", "band"])
-    w.writerows([(*r[:5], f"{r[5]:g}", repr(r[6]), "" if r[7] is None else repr(r[7])) for r in rows])
+    w.writerow(["subject", "trial", "load", "foot", "cycle", "percent", "value", "band", "unit"])
+    w.writerows([(*r[:5], f"{r[5]:g}", repr(r[6]), "" if r[7] is None else repr(r[7]), r[8]) for r in rows])
     return buf.getvalue()
 
 
-def _figures(out: dict, directory: Path, title: str) -> list[str]:
+def _figures(out: dict, directory: Path, title: str, per_kg: bool = False) -> list[str]:
     """Per subject and for the group (the subjects' means): each load over the gait cycle; the files written."""
     from casflex.plotting.study import plot_cycles
-    from casflex.study.runner import PERCENT
+    from casflex.study.runner import PERCENT, unit_of
 
     per: dict[str, dict[str, list]] = {}  # load -> subject -> cycles
     for (subject, _), rec in out["trials"].items():
@@ -34,18 +34,19 @@ def _figures(out: dict, directory: Path, title: str) -> list[str]:
     per = {n: subs for n, subs in per.items() if subs}
     if not per:
         return []
+    units = {n: unit_of(n, per_kg) for n in per}
     written = []
     for subject in sorted({s for subs in per.values() for s in subs}):
         curves = {n: {subject: subs[subject]} for n, subs in per.items() if subject in subs}
-        plot_cycles(PERCENT, curves, f"{title}: {subject}", directory / f"{subject}.png")
+        plot_cycles(PERCENT, curves, f"{title}: {subject}", directory / f"{subject}.png", units=units)
         written.append(f"{subject}.png")
     group = {n: {"group": np.array([c.mean(axis=0) for c in subs.values()])} for n, subs in per.items()}
-    plot_cycles(PERCENT, group, f"{title}: the subjects' means", directory / "group.png")
+    plot_cycles(PERCENT, group, f"{title}: the subjects' means", directory / "group.png", units=units)
     return [*written, "group.png"]
 
 
 def cmd_study(args: argparse.Namespace, outputs: Outputs) -> int:
-    from casflex.study.runner import check_against_models, run_study, tidy_rows
+    from casflex.study.runner import check_against_models, per_kg, run_study, tidy_rows
     from casflex.study.study_file import StudyError, load_study
 
     try:
@@ -61,9 +62,10 @@ def cmd_study(args: argparse.Namespace, outputs: Outputs) -> int:
                     progress=not args.quiet)
     if out["interrupted"]:
         raise KeyboardInterrupt
-    rows = tidy_rows(out)
+    kg = study.options.normalise == "mass"
+    rows = tidy_rows(per_kg(out, study), per_kg=kg)
     (staging / "loads.csv").write_text(_table(rows))
-    figures = _figures(out, staging, study.name)
+    figures = _figures(per_kg(out, study), staging, study.name, per_kg=kg)
     lines = [f"{len(out['trials'])} of {n} trial(s) done, {len(rows)} rows in loads.csv; figures: "
              f"{', '.join(figures) or 'none'}"]
     for (subject, trial), rec in out["trials"].items():

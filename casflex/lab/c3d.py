@@ -135,8 +135,8 @@ def _plain(c, plates: bool) -> dict:
     data = c["data"]
     return {
         "header": {"points": dict(c["header"]["points"]), "analogs": dict(c["header"]["analogs"])},
-        "parameters": {"POINT": {k: {"value": v["value"]} for k, v in c["parameters"]["POINT"].items()
-                                 if k != "__METADATA__"} if "POINT" in c["parameters"] else {}},
+        "parameters": {g: {k: {"value": v["value"]} for k, v in c["parameters"][g].items() if k != "__METADATA__"}
+                       for g in ("POINT", "EVENT") if g in c["parameters"]},
         "data": {"points": data["points"], "meta_points": {"residuals": data["meta_points"]["residuals"]},
                  "analogs": np.empty((0, data["analogs"].shape[1] if data["analogs"].ndim > 1 else 0)),
                  "platform": [{k: pf[k] for k in _PLATFORM_KEYS} for pf in data["platform"]]
@@ -287,7 +287,21 @@ def _markers(c, where: str) -> LabMarkers:
     if not (math.isfinite(rate) and rate > 0):
         raise ValueError(f"{where}: POINT:RATE is {rate:g}: the markers' frame rate must be > 0 Hz")
     t = _t0(c) + np.arange(xyz.shape[0]) / rate
-    return LabMarkers(t, tuple(names), xyz, rate, units[0] if units else "", where)
+    return LabMarkers(t, tuple(names), xyz, rate, units[0] if units else "", where, _events(c))
+
+
+def _events(c) -> tuple[tuple[str, str, float], ...]:
+    """The EVENT section's (context, label, time s), by time: the C3D standard's TIMES are (minutes, seconds) from
+    the recording's start, the first frame's time being (first - 1) / rate, as :func:`_t0`'s (Vicon Nexus writes
+    minutes 0). Empty where the file marks none or its section is inconsistent."""
+    labels, contexts = _param(c, "EVENT", "LABELS", []), _param(c, "EVENT", "CONTEXTS", [])
+    times = np.asarray(_param(c, "EVENT", "TIMES", np.zeros((2, 0))), dtype=float)
+    if times.ndim != 2 or times.shape[0] != 2 or not len(labels) == len(contexts) == times.shape[1]:
+        return ()
+    secs = 60.0 * times[0] + times[1]
+    return tuple(sorted(((str(cx).strip(), str(lb).strip(), float(s)) for cx, lb, s in zip(contexts, labels, secs,
+                                                                                             strict=True)),
+                        key=lambda e: e[2]))
 
 
 def _t0(c) -> float:

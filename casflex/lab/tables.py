@@ -32,7 +32,9 @@ UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
 @dataclass(frozen=True)
 class LabMarkers:
     """Markers of a lab trial: t (n,) s; labels (k,); xyz (n, k, 3) m in the lab's axes, NaN where a
-    marker is missing; ``rate`` (Hz) and ``units`` as the header gives them."""
+    marker is missing; ``rate`` (Hz) and ``units`` as the header gives them; ``events``: the gait events the
+    lab marked in the file (a C3D's EVENT section), (context, label, time s) such as ("Right", "Foot Strike",
+    3.02), on the times ``t`` are on."""
 
     t: np.ndarray
     labels: tuple[str, ...]
@@ -40,6 +42,7 @@ class LabMarkers:
     rate: float
     units: str
     source: str = ""
+    events: tuple[tuple[str, str, float], ...] = ()
 
     def marker(self, label: str) -> np.ndarray:
         """(n, 3) positions (m) of the marker ``label``; ValueError naming the known labels."""

@@ -20,8 +20,9 @@ and signals normalised to 0..100 % of a cycle. numpy only: no model is assembled
   :func:`assign_plates` refuses a plate stepped on by two feet (over-ground walking on one plate) and two
   plates under one foot: casflex's inverse takes ``plates={node: prefix}``, one node per plate and one plate
   per node; :func:`plate_contacts` gives the foot of each contact.
-- Cycles (:func:`gait_cycles`): a foot's strike to its next, from the plates where the foot has two plate
-  strikes, else from its heel marker (:func:`marker_strikes`), said in the report.
+- Cycles (:func:`gait_cycles`): a foot's strike to its next, from the strikes the lab marked in the file (a C3D's
+  events: :func:`marked_strikes`) where the foot has two, else from the plates where it has two plate strikes,
+  else from its heel marker (:func:`marker_strikes`), said in the report.
 """
 
 from __future__ import annotations
@@ -37,8 +38,8 @@ from casflex.lab.plane import Plane
 from casflex.lab.tables import LabMarkers, LabTable, increasing_times
 
 __all__ = ["Contact", "contacts", "vertical_force", "feet", "plate_contacts", "assign_plates", "plates_of",
-           "read_trial", "plate_prefixes", "foot_strikes",
-           "marker_strikes", "cycles", "gait_cycles", "normalise"]
+           "marked_strikes", "read_trial", "plate_prefixes", "foot_strikes", "marker_strikes", "cycles", "gait_cycles",
+           "normalise"]
 
 
 def contacts(t, fv, threshold: float = MIN_PLATE_FORCE, min_duration: float = 0.05
@@ -263,6 +264,25 @@ def marker_strikes(t, height, lift: float = 0.1) -> list[float]:
     return out
 
 
+def _side(node: str, labels: tuple[str, ...]) -> str | None:
+    """"Left", "Right" or None: the side of the foot ``node`` by its name (calcn_l, r_foot, LeftFoot) or else by
+    its markers' labels (Plug-in Gait's LHEE, LTOE: every one starting with L or R)."""
+    n = node.lower()
+    for side, short in (("Left", "l"), ("Right", "r")):
+        if n.endswith("_" + short) or n.startswith(short + "_") or side.lower() in n:
+            return side
+    first = {lb[:1].upper() for lb in labels}
+    return {"L": "Left", "R": "Right"}.get(first.pop()) if len(first) == 1 else None
+
+
+def marked_strikes(lab: LabMarkers, scene) -> dict[str, list[float]]:
+    """node -> the foot strikes the lab marked in the file (``lab.events``: "Foot Strike" in the foot's side's
+    context) for each foot of the scene whose side :func:`_side` tells; empty where the file marks none."""
+    strikes = {side: [t for cx, lb, t in lab.events if cx == side and lb.lower() == "foot strike"]
+               for side in ("Left", "Right")}
+    return {node: strikes[side] for node, labels in feet(scene).items() if (side := _side(node, labels))}
+
+
 def cycles(strike_times, max_duration: float | None = None) -> list[tuple[float, float]]:
     """Gait cycles [(t0, t1)] (s) of one foot: each strike to its next (``strike_times`` in any order); a
     cycle longer than ``max_duration`` s (a strike missed between, e.g. off the plates) left out."""
@@ -273,20 +293,26 @@ def cycles(strike_times, max_duration: float | None = None) -> list[tuple[float,
 def gait_cycles(found: list[Contact], scene, markers, plane: Plane | str = "X,Y", heel: dict[str, str] | None = None,
                 max_duration: float | None = None, lift: float = 0.1
                 ) -> tuple[dict[str, list[tuple[float, float]]], list[str]]:
-    """({node: cycles}, report lines) for the feet of :func:`plate_contacts`' contacts ``found``: from the
-    plates' strikes where a foot has two, else from its heel marker (``heel[node]``, default the foot's
-    first marker labelled like heel (hee: Plug-in Gait's RHEE) or cal) by :func:`marker_strikes`; ``markers`` a
-    LabMarkers or a file."""
+    """({node: cycles}, report lines) for the feet of :func:`plate_contacts`' contacts ``found``: from the foot
+    strikes the lab marked in the file (:func:`marked_strikes`) where a foot has two, else the plates' where it
+    has two, else its heel marker's (``heel[node]``, default the foot's first marker labelled like heel (hee:
+    Plug-in Gait's RHEE) or cal) by :func:`marker_strikes`; ``markers`` a LabMarkers or a file."""
     lab = read_trial(markers, None, plates=False)[0]
     up = _plane(plane).matrix[1]
+    marked = marked_strikes(lab, scene)
     out, lines = {}, []
     for node, plate in foot_strikes(found).items():
-        label = None if len(plate) >= 2 else (heel or {}).get(node) or next((lb for lb in feet(scene).get(
-            node, ()) if lb in lab.labels and ("hee" in lb.lower() or "cal" in lb.lower())), None)
-        s = plate if len(plate) >= 2 else marker_strikes(lab.t, lab.marker(label) @ up, lift) if label else []
+        label = (heel or {}).get(node) or next((lb for lb in feet(scene).get(node, ()) if lb in lab.labels and (
+            "hee" in lb.lower() or "cal" in lb.lower())), None)
+        if len(marked.get(node, [])) >= 2:
+            s, how = marked[node], "the marked events'"
+        elif len(plate) >= 2:
+            s, how = plate, "the plates'"
+        else:
+            s = marker_strikes(lab.t, lab.marker(label) @ up, lift) if label else []
+            how = f"{label}'s" if label else "no heel marker's (heel=)"
         out[node] = cycles(s, max_duration)
-        how = "the plates'" if len(plate) >= 2 else f"{label}'s" if label else "no heel marker's (heel=)"
-        said = "" if len(plate) >= 2 else f" ({len(plate)} plate strike(s): {_times(plate)} s)"
+        said = "" if s is plate else f" ({len(plate)} plate strike(s): {_times(plate)} s)"
         lines.append(f"{node}: {len(out[node])} cycle(s) from {how} strikes at {_times(s)} s{said}")
     return out, lines
 

@@ -25,7 +25,8 @@ import numpy as np
 
 from casflex.study.study_file import Study
 
-__all__ = ["run_study", "trial_run", "calibrate_run", "check_against_models", "tidy_rows", "PERCENT"]
+__all__ = ["run_study", "trial_run", "calibrate_run", "check_against_models", "tidy_rows", "per_kg", "unit_of",
+           "PERCENT"]
 
 #: the points of a gait cycle in the table: 0, 1, ..., 100 % (as labs report it)
 PERCENT = np.linspace(0.0, 100.0, 101)
@@ -244,13 +245,36 @@ def run_study(study: Study, record: str | Path, *, scheduler: str | None = None,
     return {"subjects": calibrated, "trials": trials, "failed": failed, "interrupted": interrupted}
 
 
-def tidy_rows(out: dict) -> list[tuple]:
-    """(subject, trial, load, foot, cycle, percent, value, band) rows of :func:`run_study`'s trials."""
+def unit_of(load: str, per_kg: bool = False) -> str:
+    """A load's unit: N for a force (``<coordinate>_force``, ``.fx``, ``.fy``), else N m; per kg where asked."""
+    return ("N" if load.endswith(("_force", ".fx", ".fy")) else "N m") + ("/kg" if per_kg else "")
+
+
+def per_kg(out: dict, study: Study) -> dict:
+    """:func:`run_study`'s output with every value and band divided by its subject's mass where the study says
+    ``normalise = "mass"`` (as labs report gait), else as it is."""
+    if study.options.normalise != "mass":
+        return out
+    mass = {s.name: s.mass for s in study.subjects}
+    trials = {}
+    for (subject, trial), rec in out["trials"].items():
+        m = mass[subject]
+        loads = {name: ld | {"value": [[v / m for v in c] for c in ld["value"]],
+                             "band": None if ld["band"] is None else [[b / m for b in c] for c in ld["band"]]}
+                 for name, ld in rec["loads"].items()}
+        trials[(subject, trial)] = rec | {"loads": loads}
+    return out | {"trials": trials}
+
+
+def tidy_rows(out: dict, per_kg: bool = False) -> list[tuple]:
+    """(subject, trial, load, foot, cycle, percent, value, band, unit) rows of :func:`run_study`'s trials
+    (``per_kg``: their values are per kg, :func:`per_kg`)."""
     rows = []
     for (subject, trial), rec in out["trials"].items():
         for name, ld in rec["loads"].items():
+            unit = unit_of(name, per_kg)
             for k, values in enumerate(ld["value"]):
                 band = ld["band"][k] if ld["band"] is not None else [None] * len(values)
-                rows += [(subject, trial, name, ld["foot"], k + 1, float(p), v, b)
+                rows += [(subject, trial, name, ld["foot"], k + 1, float(p), v, b, unit)
                          for p, v, b in zip(PERCENT, values, band, strict=True)]
     return rows

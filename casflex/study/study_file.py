@@ -15,6 +15,7 @@ tasks = ""                     # an OpenSim IK task or setup file: the markers' 
 calibrate = true               # place the model's markers from each subject's static trial (when given)
 scale = false                  # scale the segments too (casflex.inverse.calibrate)
 bands = false                  # each load's band (anthropometry and marker noise, casflex.inverse.bands)
+normalise = "none"             # or "mass": the table and figures per kg of each subject's mass (N m/kg, N/kg)
 
 [[subjects]]
 name = "s02"
@@ -43,8 +44,9 @@ from typing import Any
 __all__ = ["Study", "Subject", "Trial", "Options", "load_study"]
 
 _OPTIONS = {"plane": str, "vertical": str, "cutoff": (float, str), "cutoff_plates": (float, str), "filter": str,
-            "root": str, "tasks": str, "calibrate": bool, "scale": bool, "bands": bool}
+            "root": str, "tasks": str, "normalise": str, "calibrate": bool, "scale": bool, "bands": bool}
 _FILTERS = ("butterworth", "opensim")
+_NORMALISE = ("none", "mass")
 
 
 @dataclass(frozen=True)
@@ -61,6 +63,7 @@ class Options:
     calibrate: bool = True
     scale: bool = False
     bands: bool = False
+    normalise: str = "none"
 
 
 @dataclass(frozen=True)
@@ -149,6 +152,8 @@ def _options(base: Path, table: Any) -> Options:
         raise StudyError(f"options.filter: expected one of {list(_FILTERS)}, got {t['filter']!r}")
     from casflex.lab import Plane
 
+    if t.get("normalise", "none") not in _NORMALISE:
+        raise StudyError(f"options.normalise: expected one of {list(_NORMALISE)}, got {t['normalise']!r}")
     vertical = t.get("vertical", "Y")
     if vertical.upper() not in ("X", "Y", "Z"):
         raise StudyError(f"options.vertical: expected the lab's vertical axis X, Y or Z, got {vertical!r}")
@@ -162,7 +167,8 @@ def _options(base: Path, table: Any) -> Options:
                    cutoff_plates=_frequency("options.cutoff_plates", t.get("cutoff_plates", "same"), ("none", "same")),
                    filter=t.get("filter", "butterworth"), root=t.get("root") or None,
                    tasks=_file(base, "options.tasks", t["tasks"], (".xml",)) if t.get("tasks") else None,
-                   calibrate=t.get("calibrate", True), scale=t.get("scale", False), bands=t.get("bands", False))
+                   calibrate=t.get("calibrate", True), scale=t.get("scale", False), bands=t.get("bands", False),
+                   normalise=t.get("normalise", "none"))
 
 
 def _trial(base: Path, where: str, table: Any) -> Trial:
@@ -242,4 +248,9 @@ def load_study(path: str) -> Study:
         raise StudyError(f"subjects: subject {dup[0]!r} is named twice")
     if not isinstance(data["name"], str) or not data["name"].strip():
         raise StudyError(f"name: expected the study's name, got {data['name']!r}")
-    return Study(data["name"], str(p.resolve()), _options(base, data.get("options", {})), subs)
+    options = _options(base, data.get("options", {}))
+    if options.normalise == "mass":
+        for i, s in enumerate(subs):
+            if s.mass is None:
+                raise StudyError(f"subjects[{i}].mass: needed by options.normalise = \"mass\" (kg)")
+    return Study(data["name"], str(p.resolve()), options, subs)
