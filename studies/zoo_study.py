@@ -124,8 +124,8 @@ def compare(study_file: Path, record: Path) -> list[dict]:
     study = load_study(str(study_file))
     rows = []
     for s, t in study.trials():
-        rec_path = record / f"trial-{s.name}-{t.name}.json"
-        rec = json.loads(rec_path.read_text()) if rec_path.is_file() else {}
+        found = sorted(record.glob(f"trial-{s.name}-{t.name}-*.json"), key=lambda p: p.stat().st_mtime)
+        rec = json.loads(found[-1].read_text()) if found else {}  # the newest: this run's (a fresh record dir)
         if "loads" not in rec:
             continue
         time_axis = read_c3d(t.markers, plates=False)[0].t

@@ -143,7 +143,8 @@ def test_plane_auto_finds_the_plane_opensim_s_lab_sets(folder):
         path.write_text(one.replace("{plane}", plane))
         assert main(["study", str(path), "--out", str(folder / plane.replace(",", "")), "--quiet"]) == 0
         tables[plane] = (folder / plane.replace(",", "") / "loads.csv").read_text()
-        record = (folder / plane.replace(",", "") / "record" / "trial-s02-run.json").read_text()
+        record, = (folder / plane.replace(",", "") / "record").glob("trial-s02-run-*.json")
+        record = record.read_text()
         assert '"plane": "X,Y"' in record
     assert tables["auto"] == tables["X,Y"]
 
@@ -166,3 +167,19 @@ def test_normalise_mass_gives_the_table_per_kg_from_the_same_records(folder):
     assert {r["unit"] for r in kg if r["load"].endswith("_moment")} == {"N m/kg"}
     worst = max(abs(float(a["value"]) / 80.0 - float(b["value"])) for a, b in zip(plain, kg, strict=True))
     assert worst <= 1e-12 * max(abs(float(a["value"])) for a in plain)  # one division: to the last digits
+
+
+def test_a_changed_option_redoes_the_runs_it_changes_and_only_those(folder, capsys):
+    # records are keyed by their inputs' fingerprint: a new window redoes that trial (a failed one too), the
+    # others and the calibration are reused
+    path = write(folder)
+    out, record = folder / "out", folder / "record"
+    assert main(["study", str(path), "--out", str(out), "--record", str(record)]) == 0
+    first = {p.name for p in record.glob("*.json")}
+    capsys.readouterr()
+    path.write_text(path.read_text().replace("window = [0.25, 1.15]", "window = [0.3, 1.15]"))
+    assert main(["study", str(path), "--out", str(out), "--record", str(record)]) == 0
+    err = capsys.readouterr().err
+    new = {p.name for p in record.glob("*.json")} - first
+    assert len(new) == 1 and next(iter(new)).startswith("trial-s02-run_late-"), new
+    assert err.count("sweep:") == 1 and "(last: trial-s02-run_late-" in err  # one run done: one progress line

@@ -3,8 +3,9 @@ static trial, every trial's inverse dynamics, on dask.distributed (:mod:`casflex
 or a scheduler's address), resumable, a trial that fails reported with its reason while the others go on;
 then one tidy table and the figures.
 
-The runs: ``calibrate-<subject>`` (the subject's scene placed on its static trial, :func:`casflex.inverse.
-calibrate.calibrate`, the masses scaled to its mass) and ``trial-<subject>-<trial>`` (:func:`trial_run`: the
+The runs: ``calibrate-<subject>-<inputs>`` (the subject's scene placed on its static trial, :func:`casflex.inverse.
+calibrate.calibrate`, the masses scaled to its mass) and ``trial-<subject>-<trial>-<inputs>`` (``<inputs>``: a
+fingerprint of the run's inputs, :func:`_run`; :func:`trial_run`: the
 plates assigned to the feet from the data where the study file does not say, :func:`.events.plates_of`;
 inverse dynamics; each load cut into gait cycles, foot strike to foot strike of the foot below the load's joint,
 and resampled on 0-100 % of the cycle, :func:`.events.normalise`). Each run's record is a JSON file in the
@@ -171,16 +172,30 @@ def trial_run(*, scene: str, trial: dict, options: dict, uncertain: list[str]) -
             "warnings": res.warnings, "loads": loads, "t": [float(res.t[0]), float(res.t[-1])]}
 
 
-def _plan(study: Study, calibrated: dict[str, dict]) -> list:
+def _run(name: str, fn: Callable[..., dict], kwargs: dict):
+    """The sweep's run ``name-<fingerprint>``: the fingerprint (8 hex digits) of its inputs (every option, file
+    path, the calibrated scene's text) and casflex's version, so that a record is reused only for the same inputs:
+    a study run again after a changed option, window or model redoes what it changes (a failed trial too), and
+    nothing else."""
+    import hashlib
+    import json
+
+    from casflex import __version__
     from casflex.study.sweep import Run
 
+    text = json.dumps({"fn": fn.__name__, "kwargs": kwargs, "casflex": __version__}, sort_keys=True, default=str)
+    return Run(f"{name}-{hashlib.sha1(text.encode()).hexdigest()[:8]}", fn, kwargs)
+
+
+def _plan(study: Study, calibrated: dict[str, dict]) -> dict:
+    """(subject, trial) -> its run."""
     o = study.options
     options = {k: getattr(o, k) for k in ("plane", "vertical", "cutoff", "cutoff_plates", "filter", "root", "tasks",
                                           "bands")}
-    return [Run(f"trial-{s.name}-{t.name}", trial_run,
-                {"scene": calibrated[s.name]["scene"], "trial": dataclasses.asdict(t), "options": options,
-                 "uncertain": list(s.uncertain)})
-            for s, t in study.trials() if "scene" in calibrated.get(s.name, {})]
+    return {(s.name, t.name): _run(f"trial-{s.name}-{t.name}", trial_run,
+                                   {"scene": calibrated[s.name]["scene"], "trial": dataclasses.asdict(t),
+                                    "options": options, "uncertain": list(s.uncertain)})
+            for s, t in study.trials() if "scene" in calibrated.get(s.name, {})}
 
 
 def check_against_models(study: Study) -> None:
@@ -216,25 +231,28 @@ def run_study(study: Study, record: str | Path, *, scheduler: str | None = None,
               progress: Callable[[int, int, str], None] | bool = True) -> dict:
     """Calibrate every subject and run every trial (module docstring), resuming from ``record``; returns
     {"subjects": {name: calibration record}, "trials": {(subject, trial): record}, "failed": [(what, why)],
-    "interrupted": bool}. A failed calibration fails its subject's trials, reported; the others go on."""
-    from casflex.study.sweep import Run, run_sweep
+    "interrupted": bool, "records": {(subject, trial): its record's path}}. A failed calibration fails its
+    subject's trials, reported; the others go on."""
+    from casflex.study.sweep import run_sweep
 
     o = study.options
-    cal_runs = [Run(f"calibrate-{s.name}", calibrate_run,
-                    {"model": s.model, "static": s.static, "plane": o.plane, "root": o.root, "calibrate": o.calibrate,
-                     "scale": o.scale, "mass": s.mass, "vertical": o.vertical}) for s in study.subjects]
-    cal = run_sweep(cal_runs, record, scheduler=scheduler, n_workers=n_workers, progress=progress)
-    calibrated = {s.name: cal.results.get(f"calibrate-{s.name}", {}) for s in study.subjects}
+    cal_runs = {s.name: _run(f"calibrate-{s.name}", calibrate_run,
+                             {"model": s.model, "static": s.static, "plane": o.plane, "root": o.root,
+                              "calibrate": o.calibrate, "scale": o.scale, "mass": s.mass, "vertical": o.vertical})
+                for s in study.subjects}
+    cal = run_sweep(list(cal_runs.values()), record, scheduler=scheduler, n_workers=n_workers, progress=progress)
+    calibrated = {s.name: cal.results.get(cal_runs[s.name].key, {}) for s in study.subjects}
     failed = [(f"subject {s.name} (calibration)", calibrated[s.name].get("error", "not run"))
               for s in study.subjects if "scene" not in calibrated[s.name]]
     trials: dict = {}
+    plan: dict = {}
     interrupted = cal.interrupted
     if not interrupted:
-        done = run_sweep(_plan(study, calibrated), record, scheduler=scheduler, n_workers=n_workers,
-                         progress=progress)
+        plan = _plan(study, calibrated)
+        done = run_sweep(list(plan.values()), record, scheduler=scheduler, n_workers=n_workers, progress=progress)
         interrupted = done.interrupted
         for s, t in study.trials():
-            rec = done.results.get(f"trial-{s.name}-{t.name}")
+            rec = done.results.get(plan[(s.name, t.name)].key) if (s.name, t.name) in plan else None
             if rec is None:
                 why = "its subject's calibration failed" if "scene" not in calibrated[s.name] else "not run"
                 failed.append((f"{s.name} {t.name}", why))
@@ -242,7 +260,8 @@ def run_study(study: Study, record: str | Path, *, scheduler: str | None = None,
                 failed.append((f"{s.name} {t.name}", rec["error"]))
             else:
                 trials[(s.name, t.name)] = rec
-    return {"subjects": calibrated, "trials": trials, "failed": failed, "interrupted": interrupted}
+    return {"subjects": calibrated, "trials": trials, "failed": failed, "interrupted": interrupted,
+            "records": {k: str(Path(record) / f"{r.key}.json") for k, r in plan.items()}}
 
 
 def unit_of(load: str, per_kg: bool = False) -> str:
