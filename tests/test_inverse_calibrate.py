@@ -93,3 +93,17 @@ def test_command_on_hamners_static_trial(tmp_path, capsys):
     code = main(["calibrate", "hamner_leg", "--static", str(LAB / "hamner_static_excerpt.trc"), "--mass", "30",
                  "--out", str(tmp_path / "x.toml")])
     assert code == 2 and "--mass: scales the bodies with the segments" in capsys.readouterr().err
+
+
+def test_a_marker_the_static_trial_never_recorded_stays_where_it_is():
+    # a scene marker whose label the static trial does not have (a marker set with one more than the session's):
+    # calibrated like one it lost, left where it was and said, the others placed as without it
+    scene = load_scene("hamner_leg")
+    extra = dataclasses.replace(scene.markers[0], name="EXTRA", label="NOT.IN.TRIAL")
+    with_extra = dataclasses.replace(scene, markers=(*scene.markers, extra))
+    cal, report = calibrate(with_extra, str(LAB / "hamner_static_excerpt.trc"), root="pelvis")
+    plain, _ = calibrate(scene, str(LAB / "hamner_static_excerpt.trc"), root="pelvis")
+    assert any("'EXTRA' (NOT.IN.TRIAL): not in the static trial, left where it was" in r for r in report)
+    assert (cal.markers[-1].x, cal.markers[-1].y) == (extra.x, extra.y)
+    worst = max(abs(a.x - b.x) + abs(a.y - b.y) for a, b in zip(cal.markers[:-1], plain.markers, strict=True))
+    assert worst < 1e-9  # the same least squares (the absent marker weighs nothing): to the solver's tolerance

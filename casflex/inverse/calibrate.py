@@ -18,7 +18,7 @@ projected on the plane:
 2. **Marker placement**: the static pose is fitted (the tree's coordinates, least squares over the
    markers, :mod:`casflex.inverse.fit`), and every seen marker is moved onto its measured position,
    expressed on its segment and carried back to the scene's configuration. The misfit before and
-   after is reported; a marker the trial lacks stays where it is (reported).
+   after is reported; a marker the trial lacks (lost, or never recorded) stays where it is (reported).
 
 The result is a new scene (write it with :func:`casflex.save_scene`) and the report's lines.
 """
@@ -26,6 +26,7 @@ The result is a new scene (write it with :func:`casflex.save_scene`) and the rep
 from __future__ import annotations
 
 import dataclasses
+import warnings
 
 import numpy as np
 
@@ -121,12 +122,17 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
     lab = static if isinstance(static, LabMarkers) else read_markers(static)[0]
     sc = model.scene
     labels = {m.name: m.label or m.name for m in sc.markers}
+    absent = tuple(dict.fromkeys(lb for lb in labels.values() if lb not in lab.labels))
+    if absent:  # a marker the static trial never recorded: like one it lost, left where it is (reported below)
+        lab = dataclasses.replace(lab, labels=lab.labels + absent, xyz=np.concatenate(
+            [lab.xyz, np.full((lab.t.size, len(absent), 3), np.nan)], axis=1))
     check_markers(lab, tuple(labels.values()))
     check_static(lab, tuple(labels.values()))
     ms = markers_in_plane(lab, labels, pl)
     if not np.isfinite(ms.q).any():
         raise ValueError(f"{lab.source}: none of the scene's markers {list(labels.values())} is seen in the trial")
-    with np.errstate(all="ignore"):
+    with warnings.catch_warnings():  # a marker never seen: its mean NaN, said below
+        warnings.simplefilter("ignore", RuntimeWarning)
         ym = np.nanmean(ms.q, axis=0).reshape(-1, 2)  # the static trial's mean
     check_scale(lab.source, lab.units, np.array([[m.x, m.y] for m in sc.markers]), ym[None],
                 [tree.cluster[i] for i in tree.marker_nodes])

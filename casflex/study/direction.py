@@ -20,6 +20,8 @@ horizontal velocity, while the subject moves faster than :data:`WALKING_SPEED`, 
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from casflex.lab import LabMarkers, Plane
@@ -81,7 +83,8 @@ def facing_plane(scene, lab: LabMarkers, vertical: str) -> tuple[str, str]:
     refused where their correlation is below :data:`MIN_CORRELATION`; module docstring)."""
     markers = [m for m in scene.markers if (m.label or m.name) in lab.labels]
     x0 = np.array([m.x for m in markers])
-    with np.errstate(all="ignore"):
+    with warnings.catch_warnings():  # a marker never seen: its mean NaN, left out below
+        warnings.simplefilter("ignore", RuntimeWarning)
         mean = np.array([np.nanmean(lab.marker(m.label or m.name), axis=0) for m in markers]).reshape(-1, 3)
     seen = np.isfinite(mean).all(axis=1)
     if seen.sum() < 3:
