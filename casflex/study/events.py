@@ -37,9 +37,9 @@ from casflex.lab.filtering import _plate_columns
 from casflex.lab.plane import Plane
 from casflex.lab.tables import LabMarkers, LabTable, increasing_times
 
-__all__ = ["Contact", "contacts", "vertical_force", "feet", "plate_contacts", "assign_plates", "plates_of",
-           "marked_strikes", "read_trial", "plate_prefixes", "foot_strikes", "marker_strikes", "cycles", "gait_cycles",
-           "normalise"]
+__all__ = ["Contact", "contacts", "vertical_force", "tree_walk", "below", "feet", "plate_contacts", "assign_plates",
+           "plates_of", "marked_strikes", "read_trial", "plate_prefixes", "foot_strikes", "marker_strikes", "cycles",
+           "gait_cycles", "normalise"]
 
 
 def contacts(t, fv, threshold: float = MIN_PLATE_FORCE, min_duration: float = 0.05
@@ -86,12 +86,13 @@ def vertical_force(table: LabTable, prefix: str, plane: Plane | str = "X,Y") -> 
     return np.column_stack([table.column(f"{p}force_v{a}") for a in "xyz"]) @ up
 
 
-def feet(scene) -> dict[str, tuple[str, ...]]:
-    """The scene's feet (module docstring): node -> the lab labels of its markers (``label``, or the name)."""
+def tree_walk(scene) -> tuple[dict[str, str | None], list[str]]:
+    """(parent of each node, the nodes in walk order): the scene's nodes breadth first along its joints and beams
+    from its first node (then from any node that does not reach), each node's parent the one it was reached from."""
     links = [pair for j in [*scene.joints, *scene.beams] for pair in zip(j.nodes[:-1], j.nodes[1:], strict=True)]
     nbr = {n.name: [b for a, b in links if a == n.name] + [a for a, b in links if b == n.name] for n in scene.nodes}
     parent: dict[str, str | None] = {}
-    order: list[str] = []  # breadth first from the first node, then from any node it does not reach
+    order: list[str] = []
     for root in (r for r in nbr if r not in parent):
         parent[root] = None
         order.append(root)
@@ -100,6 +101,26 @@ def feet(scene) -> dict[str, tuple[str, ...]]:
                 if m not in parent:
                     parent[m] = n
                     order.append(m)
+    return parent, order
+
+
+def below(scene, node: str) -> set[str]:
+    """``node`` and the nodes beyond it from the scene's first node (:func:`tree_walk`): what a joint at ``node``
+    carries."""
+    parent, _ = tree_walk(scene)
+    out = set()
+    for n in parent:
+        m: str | None = n
+        while m is not None and m != node:
+            m = parent[m]
+        if m == node:
+            out.add(n)
+    return out
+
+
+def feet(scene) -> dict[str, tuple[str, ...]]:
+    """The scene's feet (module docstring): node -> the lab labels of its markers (``label``, or the name)."""
+    parent, order = tree_walk(scene)
     on = {b.name: b.node for b in scene.bodies} | {b.name: max(b.nodes, key=order.index) for b in scene.beams}
     carry: dict[str, list[str]] = {}
     for m in scene.markers:

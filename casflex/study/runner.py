@@ -69,25 +69,11 @@ def _trial_plane(sc, lab, plane: str, vertical: str, static: bool = False) -> tu
     return plane, [*report, check_straight(lab, labels, plane)]
 
 
-def _descendants(scene, node: str) -> set[str]:
-    """``node`` and the nodes its joints carry (the scene's joints, node a to node b)."""
-    children: dict[str, list[str]] = {}
-    for j in scene.joints:
-        if len(j.nodes) == 2:
-            children.setdefault(j.nodes[0], []).append(j.nodes[1])
-    out, todo = set(), [node]
-    while todo:
-        n = todo.pop()
-        if n not in out:
-            out.add(n)
-            todo += children.get(n, [])
-    return out
-
-
 def _load_feet(scene, names: list[str], feet: list[str]) -> dict[str, str | None]:
     """For each load, the foot (a node bearing a plate) below its joint: that foot's strikes cut it into cycles;
     None where no foot is (a root load, the trunk, the arms: the first foot's cycles are used)."""
     from casflex.scene import SceneError
+    from casflex.study.events import below
 
     hinge_of = {f"{c.name}_moment": c.of for c in scene.coordinates} | {f"{c.name}_force": c.of
                                                                           for c in scene.coordinates}
@@ -95,10 +81,10 @@ def _load_feet(scene, names: list[str], feet: list[str]) -> dict[str, str | None
     for name in names:
         hinge = hinge_of.get(name, name.rpartition(".")[0])
         try:
-            below = _descendants(scene, scene.item(hinge).nodes[-1])
+            carried = below(scene, scene.item(hinge).nodes[-1])
         except SceneError:  # a root load ("root.fx", "<node>.x"): the whole body's
-            below = set()
-        out[name] = next((f for f in feet if f in below), None)
+            carried = set()
+        out[name] = next((f for f in feet if f in carried), None)
     return out
 
 
