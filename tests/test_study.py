@@ -129,6 +129,10 @@ def test_a_study_runs_resumes_and_reports_a_failed_trial(folder, capsys):
     assert "sweep:" not in err  # nothing run again: every record reused (the sweep reports each run it does)
     assert (out / "loads.csv").read_text() == first
     assert sorted(p.name for p in (out / "record").glob("*.json")) == records
+    # --retry-failed runs the failed trial again, and it alone
+    assert main(["study", str(path), "--out", str(out), "--retry-failed"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("sweep:") == 1 and "(last: trial-broken-run-" in err
 
 
 def test_plane_auto_finds_the_plane_opensim_s_lab_sets(folder):
@@ -183,3 +187,16 @@ def test_a_changed_option_redoes_the_runs_it_changes_and_only_those(folder, caps
     new = {p.name for p in record.glob("*.json")} - first
     assert len(new) == 1 and next(iter(new)).startswith("trial-s02-run_late-"), new
     assert err.count("sweep:") == 1 and "(last: trial-s02-run_late-" in err  # one run done: one progress line
+
+
+def test_a_changed_data_file_at_the_same_path_is_run_again(folder, capsys):
+    # the fingerprint holds the files' contents, not only their paths: a trial re-exported in place is redone
+    path = write(folder)
+    out, record = folder / "out", folder / "record"
+    assert main(["study", str(path), "--out", str(out), "--record", str(record), "--quiet"]) == 0
+    first = {p.name for p in record.glob("*.json")}
+    trc = folder / "hamner_running_whole.trc"
+    trc.write_text(trc.read_text().replace("\t", " \t", 1))  # the same numbers, other bytes
+    assert main(["study", str(path), "--out", str(out), "--record", str(record), "--quiet"]) == 0
+    new = sorted(p.name.rsplit("-", 1)[0] for p in record.glob("*.json") if p.name not in first)
+    assert new == ["trial-s02-run", "trial-s02-run_late", "trial-s02_again-run"], new  # every trial reads it

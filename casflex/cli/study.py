@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import csv
 import io
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -59,8 +60,10 @@ def cmd_study(args: argparse.Namespace, outputs: Outputs) -> int:
     n = len(study.trials())
     print(f"study {study.name!r}: {len(study.subjects)} subject(s), {n} trial(s); records in {record}", flush=True)
     out = run_study(study, record, scheduler=args.scheduler, n_workers=args.workers,
-                    progress=not args.quiet)
+                    progress=not args.quiet, retry_failed=args.retry_failed)
     if out["interrupted"]:
+        kept = len(list(record.glob("*.json")))
+        print(f"casflex: {kept} finished run(s) kept in {record}: the same command again resumes", file=sys.stderr)
         raise KeyboardInterrupt
     kg = study.options.normalise == "mass"
     rows = tidy_rows(per_kg(out, study), per_kg=kg)
@@ -91,5 +94,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                                                           "a local cluster")
     s.add_argument("--workers", type=integer(1, "a number of workers"), default=2,
                    help="the local cluster's worker processes (default 2)")
+    s.add_argument("--retry-failed", action="store_true",
+                   help="run again the runs recorded as failed (a lost worker, a mended file); by default a failed "
+                        "run's record stands until its inputs change")
     s.add_argument("--quiet", action="store_true", help="no progress messages")
     s.set_defaults(func=cmd_study)

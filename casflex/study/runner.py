@@ -143,7 +143,7 @@ def trial_run(*, scene: str, trial: dict, options: dict, uncertain: list[str]) -
                            cutoff=options["cutoff"], cutoff_plates=options["cutoff_plates"],
                            filter=options["filter"], root=options["root"], tasks=options["tasks"], t_start=t0,
                            t_end=t1, uncertain=[parse(u) for u in uncertain] or None,
-                           bands=True if options["bands"] else None)
+                           bands=bool(options["bands"]))  # false: none, even where the subject declares uncertainty
     feet = {f: [c for c in cs if res.t[0] <= c[0] and c[1] <= res.t[-1]] for f, cs in feet.items()}  # the window's
     names = _loads_of(res)
     first = next(iter(feet), None)
@@ -158,18 +158,28 @@ def trial_run(*, scene: str, trial: dict, options: dict, uncertain: list[str]) -
             "warnings": res.warnings, "loads": loads, "t": [float(res.t[0]), float(res.t[-1])]}
 
 
-def _run(name: str, fn: Callable[..., dict], kwargs: dict):
-    """The sweep's run ``name-<fingerprint>``: the fingerprint (8 hex digits) of its inputs (every option, file
-    path, the calibrated scene's text) and casflex's version, so that a record is reused only for the same inputs:
-    a study run again after a changed option, window or model redoes what it changes (a failed trial too), and
-    nothing else."""
+def _digest(path: str | None) -> str | None:
+    """sha1 of a file's bytes (None for no file, or a built-in scene's name)."""
+    import hashlib
+
+    if path is None or not Path(path).is_file():
+        return None
+    return hashlib.sha1(Path(path).read_bytes()).hexdigest()
+
+
+def _run(name: str, fn: Callable[..., dict], kwargs: dict, files: tuple[str | None, ...]):
+    """The sweep's run ``name-<fingerprint>``: the fingerprint (8 hex digits) of its inputs (every option, the
+    calibrated scene's text, the ``files``' contents) and casflex's version, so that a record is reused only for
+    the same inputs: a study run again after a changed option, window, model or data file redoes what it changes
+    (a failed trial too), and nothing else."""
     import hashlib
     import json
 
     from casflex import __version__
     from casflex.study.sweep import Run
 
-    text = json.dumps({"fn": fn.__name__, "kwargs": kwargs, "casflex": __version__}, sort_keys=True, default=str)
+    text = json.dumps({"fn": fn.__name__, "kwargs": kwargs, "files": [_digest(f) for f in files],
+                       "casflex": __version__}, sort_keys=True, default=str)
     return Run(f"{name}-{hashlib.sha1(text.encode()).hexdigest()[:8]}", fn, kwargs)
 
 
@@ -180,7 +190,7 @@ def _plan(study: Study, calibrated: dict[str, dict]) -> dict:
                                           "bands")}
     return {(s.name, t.name): _run(f"trial-{s.name}-{t.name}", trial_run,
                                    {"scene": calibrated[s.name]["scene"], "trial": dataclasses.asdict(t),
-                                    "options": options, "uncertain": list(s.uncertain)})
+                                    "options": options, "uncertain": list(s.uncertain)}, (t.markers, t.grf, o.tasks))
             for s, t in study.trials() if "scene" in calibrated.get(s.name, {})}
 
 
@@ -214,19 +224,21 @@ def check_against_models(study: Study) -> None:
 
 
 def run_study(study: Study, record: str | Path, *, scheduler: str | None = None, n_workers: int = 2,
-              progress: Callable[[int, int, str], None] | bool = True) -> dict:
+              progress: Callable[[int, int, str], None] | bool = True, retry_failed: bool = False) -> dict:
     """Calibrate every subject and run every trial (module docstring), resuming from ``record``; returns
     {"subjects": {name: calibration record}, "trials": {(subject, trial): record}, "failed": [(what, why)],
     "interrupted": bool, "records": {(subject, trial): its record's path}}. A failed calibration fails its
-    subject's trials, reported; the others go on."""
+    subject's trials, reported; the others go on. ``retry_failed``: a run recorded as failed is run again (a
+    worker lost, a file since mended), where by default its record stands until its inputs change."""
     from casflex.study.sweep import run_sweep
 
     o = study.options
     cal_runs = {s.name: _run(f"calibrate-{s.name}", calibrate_run,
                              {"model": s.model, "static": s.static, "plane": o.plane, "root": o.root,
-                              "calibrate": o.calibrate, "scale": o.scale, "mass": s.mass, "vertical": o.vertical})
-                for s in study.subjects}
-    cal = run_sweep(list(cal_runs.values()), record, scheduler=scheduler, n_workers=n_workers, progress=progress)
+                              "calibrate": o.calibrate, "scale": o.scale, "mass": s.mass, "vertical": o.vertical},
+                             (s.model, s.static)) for s in study.subjects}
+    cal = run_sweep(list(cal_runs.values()), record, scheduler=scheduler, n_workers=n_workers, progress=progress,
+                    retry_failed=retry_failed)
     calibrated = {s.name: cal.results.get(cal_runs[s.name].key, {}) for s in study.subjects}
     failed = [(f"subject {s.name} (calibration)", calibrated[s.name].get("error", "not run"))
               for s in study.subjects if "scene" not in calibrated[s.name]]
@@ -235,7 +247,8 @@ def run_study(study: Study, record: str | Path, *, scheduler: str | None = None,
     interrupted = cal.interrupted
     if not interrupted:
         plan = _plan(study, calibrated)
-        done = run_sweep(list(plan.values()), record, scheduler=scheduler, n_workers=n_workers, progress=progress)
+        done = run_sweep(list(plan.values()), record, scheduler=scheduler, n_workers=n_workers, progress=progress,
+                         retry_failed=retry_failed)
         interrupted = done.interrupted
         for s, t in study.trials():
             rec = done.results.get(plan[(s.name, t.name)].key) if (s.name, t.name) in plan else None

@@ -78,19 +78,23 @@ def _read(path: Path) -> dict | None:
         return None  # missing or unreadable: the run is redone
 
 
+def _importable(name: str) -> bool:
+    """Whether a worker started from this environment finds the top-level module ``name``: asked of the import
+    system's finders themselves (an editable install's finder as well as sys.path's), not of sys.modules, which
+    also holds a study script loaded from its file."""
+    return any(f.find_spec(name, None) is not None for f in sys.meta_path if hasattr(f, "find_spec"))
+
+
 def _ship_by_value(fns: Iterable[Callable[..., Any]]) -> dict[Callable[..., Any], bytes]:
     """Each run function pickled by cloudpickle, by value when its module cannot be imported
     from sys.path (a study script run as a file, or loaded from its path): a worker that cannot
     import a function by reference fails to unpickle it, and the sweep would wait forever."""
-    import importlib.machinery
-
     import cloudpickle
 
     out = {}
     for fn in fns:
         mod = sys.modules.get(getattr(fn, "__module__", "") or "")
-        if mod is not None and mod.__name__ != "__main__" and \
-                importlib.machinery.PathFinder.find_spec(mod.__name__.split(".")[0]) is None:
+        if mod is not None and mod.__name__ != "__main__" and not _importable(mod.__name__.split(".")[0]):
             cloudpickle.register_pickle_by_value(mod)
         out[fn] = cloudpickle.dumps(fn)
     return out
