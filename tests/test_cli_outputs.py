@@ -151,3 +151,23 @@ def test_outputs_get_ordinary_permissions(tmp_path, monkeypatch):
         os.umask(umask)
     assert oct(Path("run.npz").stat().st_mode & 0o777) == oct(0o640)
     assert oct(Path("figs").stat().st_mode & 0o777) == oct(0o750)
+
+
+def test_a_killed_command_s_staging_is_cleared_by_the_next_and_a_running_one_s_kept(tmp_path):
+    # staging named after its process: a dead process's (SIGKILL) goes, a live one's stays
+    import subprocess
+    import sys
+
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead_pid = int(gone.stdout)
+    (tmp_path / f".figs.{dead_pid}.abc.casflex-tmp").mkdir()
+    (tmp_path / f".loads.csv.{dead_pid}.abc.casflex-tmp").write_text("half")
+    live = tmp_path / f".figs.{os.getppid()}.abc.casflex-tmp"  # pytest's parent runs
+    live.mkdir()
+    outputs = Outputs()
+    outputs.file("--out", str(tmp_path / "loads.csv"), (".csv",), "loads")
+    outputs.directory("--plots", str(tmp_path / "figs"))
+    left = sorted(p.name for p in tmp_path.iterdir() if p.name.endswith(".casflex-tmp"))
+    assert f".figs.{dead_pid}.abc.casflex-tmp" not in left and f".loads.csv.{dead_pid}.abc.casflex-tmp" not in left
+    assert live.exists()
+    outputs.discard()

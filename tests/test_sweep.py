@@ -167,3 +167,18 @@ def test_a_scheduler_without_workers_fails_the_runs_with_the_reason(tmp_path, mo
         runs = [Run("a", identification_run, {"method": "direct", "start": 1.0, "t_end": 0.75})]
         res = _within(60, lambda: run_sweep(runs, tmp_path, scheduler=cluster.scheduler_address, progress=False))
     assert "NoWorkers" in res.results["a"]["error"] and cluster.scheduler_address in res.results["a"]["error"]
+
+
+def test_a_killed_writer_s_temporary_files_are_cleared_and_a_fresh_one_kept(tmp_path):
+    import os
+    import time
+
+    from casflex.study.sweep import ABANDONED_S
+
+    old, fresh = tmp_path / ".a.json.x1.tmp", tmp_path / ".b.json.x2.tmp"
+    for p in (old, fresh):
+        p.write_text('{"half')
+    past = time.time() - 2 * ABANDONED_S
+    os.utime(old, (past, past))
+    run_sweep([], tmp_path, progress=False)
+    assert not old.exists() and fresh.exists()  # a write in progress elsewhere is left alone

@@ -119,6 +119,30 @@ def _umask() -> int:
     return mask
 
 
+def _prefix(target: Path) -> str:
+    """A staging path's name start: the target's name and this process's id (:func:`_clear_abandoned`)."""
+    return f".{target.name}.{os.getpid()}."
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # another user's process: alive
+        return True
+    return True
+
+
+def _clear_abandoned(where: Path, name: str) -> None:
+    """Remove the staging files and folders of ``name`` that a command killed outright (SIGKILL, a lost machine)
+    left in ``where``: those whose process (its id in the name, :func:`_prefix`) no longer runs."""
+    for p in where.glob(f".{name}.*.casflex-tmp"):
+        pid = p.name[len(name) + 2:].split(".", 1)[0]
+        if pid.isdigit() and not _alive(int(pid)):
+            shutil.rmtree(p, ignore_errors=True) if p.is_dir() else p.unlink(missing_ok=True)
+
+
 class Outputs:
     """Everything one command writes: all of it, or none.
 
@@ -173,8 +197,9 @@ class Outputs:
             raise OptionError(f"{option}: {path!r} is already the target of another option")
         self._refuse_input(option, target)
         parent = self._parent(option, target)
+        _clear_abandoned(parent, target.name)
         try:
-            fd, staging = tempfile.mkstemp(dir=parent, prefix=f".{target.name}.", suffix=".casflex-tmp")
+            fd, staging = tempfile.mkstemp(dir=parent, prefix=_prefix(target), suffix=".casflex-tmp")
         except OSError as exc:
             raise OptionError(f"{option}: cannot write into {str(parent)!r} ({exc.strerror})") from None
         os.close(fd)
@@ -191,8 +216,9 @@ class Outputs:
         if self._taken(target):
             raise OptionError(f"{option}: {path!r} is already the target of another option")
         where = target if target.is_dir() else self._parent(option, target)
+        _clear_abandoned(where, target.name)
         try:
-            staging = tempfile.mkdtemp(dir=where, prefix=f".{target.name}.", suffix=".casflex-tmp")
+            staging = tempfile.mkdtemp(dir=where, prefix=_prefix(target), suffix=".casflex-tmp")
         except OSError as exc:
             raise OptionError(f"{option}: cannot write into {str(where)!r} ({exc.strerror})") from None
         os.chmod(staging, 0o777 & ~_umask())  # mkdtemp's 0700 would reach a new target: ordinary permissions

@@ -78,6 +78,22 @@ def _read(path: Path) -> dict | None:
         return None  # missing or unreadable: the run is redone
 
 
+#: s: a record's temporary file this old was left by a writer killed mid-write (a write takes milliseconds)
+ABANDONED_S = 60.0
+
+
+def _clear_abandoned(rec: Path) -> None:
+    """Remove the temporary files of records whose writer was killed (casflex.results.atomic_write_bytes's
+    ``.<key>.json.*.tmp``) older than :data:`ABANDONED_S`: never a record, and never one being written."""
+    now = time.time()
+    for tmp in rec.glob(".*.json.*.tmp"):
+        try:
+            if now - tmp.stat().st_mtime > ABANDONED_S:
+                tmp.unlink()
+        except OSError:  # gone meanwhile, or not ours to remove: harmless either way
+            pass
+
+
 def _importable(name: str) -> bool:
     """Whether a worker started from this environment finds the top-level module ``name``: asked of the import
     system's finders themselves (an editable install's finder as well as sys.path's), not of sys.modules, which
@@ -134,6 +150,7 @@ def run_sweep(runs: Iterable[Run], record: str | os.PathLike[str], *, scheduler:
         raise ValueError(f"n_workers: expected an integer >= 1, got {n_workers!r}")
     rec = Path(record)
     rec.mkdir(parents=True, exist_ok=True)
+    _clear_abandoned(rec)
     results, reused, todo = {}, [], []
     for r in runs:
         old = _read(rec / f"{r.key}.json")
