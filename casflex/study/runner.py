@@ -104,8 +104,8 @@ def _read(trial: dict):
 
 def _events(sc, lab, table, plates, plane: str) -> tuple[dict[str, str] | None, dict, list[str]]:
     """The trial's plates' feet (the study file's, else from the data: :func:`.events.plates_of`), each foot's gait
-    cycles (:func:`.events.gait_cycles`: the plates' strikes, else the heel marker's) and report lines, from one
-    pass over its plates' contacts."""
+    cycles (:func:`.events.gait_cycles`: the strikes the lab marked in the file, else the plates', else the heel
+    marker's) and report lines, from one pass over its plates' contacts."""
     from casflex.study.events import gait_cycles, plate_contacts, plate_prefixes, plates_of
 
     if table is None:
