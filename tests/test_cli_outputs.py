@@ -171,3 +171,22 @@ def test_a_killed_command_s_staging_is_cleared_by_the_next_and_a_running_one_s_k
     assert f".figs.{dead_pid}.abc.casflex-tmp" not in left and f".loads.csv.{dead_pid}.abc.casflex-tmp" not in left
     assert live.exists()
     outputs.discard()
+
+
+def test_a_staging_a_signal_left_unrecorded_is_discarded(tmp_path, monkeypatch):
+    # a signal between mkdtemp and the staging's entry: the staging exists, Outputs does not list it
+    import tempfile as tf
+
+    real = tf.mkdtemp
+
+    def interrupted(*args, **kwargs):
+        real(*args, **kwargs)
+        raise KeyboardInterrupt
+
+    outputs = Outputs()
+    monkeypatch.setattr(tf, "mkdtemp", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        outputs.directory("--plots", str(tmp_path / "figs"))
+    assert any(p.name.endswith(".casflex-tmp") for p in tmp_path.iterdir())
+    outputs.discard()
+    assert not any(p.name.endswith(".casflex-tmp") for p in tmp_path.iterdir())

@@ -156,6 +156,7 @@ class Outputs:
 
     def __init__(self) -> None:
         self._staged: list[tuple[str, Path, Path]] = []  # (option, staging, target)
+        self._places: list[tuple[Path, str]] = []  # (folder, target name): where this process stages (discard)
         self._inputs: list[tuple[str, Path]] = []  # (what, path): the files the command reads
 
     def protect(self, what: str, paths: Iterable[str | os.PathLike[str]]) -> None:
@@ -198,6 +199,7 @@ class Outputs:
         self._refuse_input(option, target)
         parent = self._parent(option, target)
         _clear_abandoned(parent, target.name)
+        self._places.append((parent, target.name))
         try:
             fd, staging = tempfile.mkstemp(dir=parent, prefix=_prefix(target), suffix=".casflex-tmp")
         except OSError as exc:
@@ -217,6 +219,7 @@ class Outputs:
             raise OptionError(f"{option}: {path!r} is already the target of another option")
         where = target if target.is_dir() else self._parent(option, target)
         _clear_abandoned(where, target.name)
+        self._places.append((where, target.name))
         try:
             staging = tempfile.mkdtemp(dir=where, prefix=_prefix(target), suffix=".casflex-tmp")
         except OSError as exc:
@@ -309,8 +312,10 @@ class Outputs:
         return "".join(kept)
 
     def discard(self) -> None:
-        """Remove every staged output (nothing reaches its target)."""
-        for _, staging, _ in self._staged:
+        """Remove every staged output (nothing reaches its target), also one a signal left unrecorded (it came
+        between the staging's creation and its entry here: found by this process's id in its name)."""
+        leaked = [p for where, name in self._places for p in where.glob(f"{_prefix(Path(name))}*.casflex-tmp")]
+        for staging in [s for _, s, _ in self._staged] + leaked:
             if staging.is_dir():
                 shutil.rmtree(staging, ignore_errors=True)
             else:
