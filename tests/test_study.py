@@ -200,3 +200,16 @@ def test_a_changed_data_file_at_the_same_path_is_run_again(folder, capsys):
     assert main(["study", str(path), "--out", str(out), "--record", str(record), "--quiet"]) == 0
     new = sorted(p.name.rsplit("-", 1)[0] for p in record.glob("*.json") if p.name not in first)
     assert new == ["trial-s02-run", "trial-s02-run_late", "trial-s02_again-run"], new  # every trial reads it
+
+
+@pytest.mark.parametrize("static", [True, False])
+def test_a_subject_s_mass_is_applied_with_or_without_a_static_trial_or_scaling(static):
+    # mass with scale = false (the default) refused the calibration before; now the masses are scaled to it, the
+    # segments as they are
+    from casflex.scene import loads_scene
+    from casflex.study.runner import calibrate_run
+
+    out = calibrate_run(model="hamner_leg", static=str(LAB / "hamner_static_excerpt.trc") if static else None,
+                        plane="X,Y", root="pelvis", calibrate=True, scale=False, mass=50.0)
+    assert abs(sum(b.mass for b in loads_scene(out["scene"]).bodies) - 50.0) < 1e-9
+    assert "scaled from" in out["report"][-1]

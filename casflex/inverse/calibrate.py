@@ -32,7 +32,7 @@ import numpy as np
 
 from casflex.inverse.tree import KinematicTree, kinematic_tree
 
-__all__ = ["calibrate"]
+__all__ = ["calibrate", "with_mass"]
 
 
 def _rot(th: float) -> np.ndarray:
@@ -92,6 +92,16 @@ def _scaled_scene(tree: KinematicTree, s: dict[int, float], mass: float | None):
     markers = tuple(dataclasses.replace(m, **dict(zip(("x", "y"), (float(v) for v in new(
         (m.x, m.y), tree.cluster[i])), strict=True))) for m, i in zip(sc.markers, tree.marker_nodes, strict=True))
     return dataclasses.replace(sc, nodes=nodes, bodies=tuple(bodies), joints=joints, markers=markers)
+
+
+def with_mass(scene, mass: float):
+    """The scene with its bodies' masses scaled together to ``mass`` (kg), their inertias with them (the segments'
+    sizes as they are): a subject weighed but not measured."""
+    if not mass > 0:
+        raise ValueError(f"mass: must be > 0 kg, got {mass}")
+    f = mass / sum(b.mass for b in scene.bodies)
+    return dataclasses.replace(scene, bodies=tuple(dataclasses.replace(b, mass=b.mass * f, inertia=b.inertia * f)
+                                                   for b in scene.bodies))
 
 
 def _parents_first(tree: KinematicTree) -> list[str]:

@@ -35,22 +35,28 @@ PERCENT = np.linspace(0.0, 100.0, 101)
 
 def calibrate_run(*, model: str, static: str | None, plane: str, root: str | None, calibrate: bool, scale: bool,
                   mass: float | None, vertical: str = "Y") -> dict:
-    """The subject's scene (TOML text) on its static trial (``calibrate``) or as given, and the report; ``plane``
-    "auto": the static trial's own (:mod:`.direction`)."""
+    """The subject's scene (TOML text) on its static trial (``calibrate``) or as given, its masses scaled to
+    ``mass`` (with the segments where ``scale``), and the report; ``plane`` "auto": the static trial's own
+    (:mod:`.direction`)."""
     from casflex import load_scene
     from casflex.inverse.calibrate import calibrate as place
+    from casflex.inverse.calibrate import with_mass
     from casflex.inverse.inputs import read_markers
     from casflex.scene import dumps_scene
 
     scene = load_scene(model)
     report: list[str] = []
+    placed_mass = static is not None and calibrate and scale
     if static is not None and calibrate:
         lab = read_markers(static)[0]
         plane, report = _trial_plane(scene, lab, plane, vertical, static=True)
-        scene, placed = place(scene, lab, plane, root=root, scale=scale, mass=mass)
+        scene, placed = place(scene, lab, plane, root=root, scale=scale, mass=mass if scale else None)
         report += placed
-    elif mass is not None:
-        report = ["no static trial: the model's masses as given (mass not applied)"]
+    if mass is not None and not placed_mass:  # weighed, not measured: the masses to it, the sizes as they are
+        total = sum(b.mass for b in scene.bodies)
+        scene = with_mass(scene, mass)
+        report.append(f"the model's masses scaled from {total:.1f} kg to the subject's {mass:g} kg (inertias with "
+                      "them; the segments' sizes as they are)")
     return {"scene": dumps_scene(scene), "report": list(report)}
 
 
