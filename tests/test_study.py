@@ -78,6 +78,8 @@ def write(folder: Path, extra: str = "") -> Path:
     (('plane = "X,Y"', 'plane = "X,Q"', 1), "options.plane"),
     (('plane = "X,Y"', 'plane = "auto"\nvertical = "W"', 1), "options.vertical"),
     (('plane = "X,Y"', 'plane = "X,Y"\nnormalise = "height"', 1), "options.normalise"),
+    (('plane = "X,Y"', 'plane = "X,Y"\npassive = ["knee_r:stance"]', 1), "options.passive"),
+    (('plane = "X,Y"', 'plane = "X,Y"\npassive = ["knee_q"]', 1), "options.passive: 'knee_q' is not a joint"),
     (('plane = "X,Y"', 'plane = "X,Y"\nnormalise = "mass"', 1), "subjects[0].mass: needed by options.normalise"),
     (('plane = "X,Y"', 'plane = "X,Y"\nspeed = 3', 1), "options.speed: unknown field"),
     (("mass = 80.0", 'mass = 80.0\nuncertain = ["pelvis.massx=3%"]', 1), "subjects[1].uncertain"),
@@ -213,3 +215,21 @@ def test_a_subject_s_mass_is_applied_with_or_without_a_static_trial_or_scaling(s
                         plane="X,Y", root="pelvis", calibrate=True, scale=False, mass=50.0)
     assert abs(sum(b.mass for b in loads_scene(out["scene"]).bodies) - 50.0) < 1e-9
     assert "scaled from" in out["report"][-1]
+
+
+def test_passive_fits_per_trial_and_per_swing_phase(folder):
+    # the right knee over the trial and over the right foot's swing (its plate's off to its next strike)
+    one = 'name = "passive"\n[options]\nplane = "X,Y"\ntasks = "hamner_tasks_ik.xml"\n' \
+          'passive = ["knee_r", "knee_r:swing"]\n[[subjects]]\nname = "s02"\n' \
+          'model = "hamner_subject02_planar.osim"\n[[subjects.trials]]\nname = "run"\n' \
+          'markers = "hamner_running_whole.trc"\ngrf = "hamner_running_whole_grf.mot"\n'
+    path = folder / "passive.toml"
+    path.write_text(one)
+    assert main(["study", str(path), "--out", str(folder / "out"), "--quiet"]) == 0
+    rows = _table(folder / "out" / "passive.csv")
+    assert [(r["hinge"], r["phase"]) for r in rows] == [("knee_r", "trial"), ("knee_r", "swing")]
+    trial, swing = rows
+    assert float(trial["t0"]) == pytest.approx(0.2) and float(trial["t1"]) == pytest.approx(1.2)
+    # the right stance's plate off (0.65-0.667 s, tests/data/lab/README.md) to the next strike (1.10 s)
+    assert 0.64 <= float(swing["t0"]) <= 0.68 and 1.08 <= float(swing["t1"]) <= 1.12
+    assert all(r["passive"] in ("yes", "no") and float(r["kt_se"]) > 0 for r in rows)

@@ -22,6 +22,26 @@ def _table(rows: list[tuple]) -> str:
     return buf.getvalue()
 
 
+def _passive_table(out: dict) -> str | None:
+    """passive.csv: one row per subject, trial, hinge and window of the study's passive fits (None: none asked)."""
+    rows = [(subject, trial, f) for (subject, trial), rec in out["trials"].items() for f in rec.get("passive", ())]
+    if not rows:
+        return None
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["subject", "trial", "hinge", "phase", "t0", "t1", "kt", "kt_se", "ct", "ct_se", "rest_angle",
+                "rest_angle_se", "r2", "passive", "why"])
+    for subject, trial, f in rows:
+        window = f["window"] or ["", ""]
+        if "error" in f:
+            w.writerow([subject, trial, f["hinge"], f["phase"], *window, *[""] * 8, f["error"]])
+            continue
+        w.writerow([subject, trial, f["hinge"], f["phase"], *window, repr(f["kt"]), repr(f["se"]["kt"]),
+                    repr(f["ct"]), repr(f["se"]["ct"]), repr(f["rest_angle"]), repr(f["se"]["rest_angle"]),
+                    repr(f["r2"]), "yes" if f["passive"] else "no", "; ".join(f["why"])])
+    return buf.getvalue()
+
+
 def _figures(out: dict, directory: Path, title: str, per_kg: bool = False) -> list[str]:
     """Per subject and for the group (the subjects' means): each load over the gait cycle; the files written."""
     from casflex.plotting.study import plot_cycles
@@ -68,9 +88,13 @@ def cmd_study(args: argparse.Namespace, outputs: Outputs) -> int:
     kg = study.options.normalise == "mass"
     rows = tidy_rows(per_kg(out, study), per_kg=kg)
     (staging / "loads.csv").write_text(_table(rows))
+    passive = _passive_table(out)
+    if passive is not None:
+        (staging / "passive.csv").write_text(passive)
     figures = _figures(per_kg(out, study), staging, study.name, per_kg=kg)
-    lines = [f"{len(out['trials'])} of {n} trial(s) done, {len(rows)} rows in loads.csv; figures: "
-             f"{', '.join(figures) or 'none'}"]
+    lines = [f"{len(out['trials'])} of {n} trial(s) done, {len(rows)} rows in loads.csv"
+             + (f", {passive.count(chr(10)) - 1} passive fit(s) in passive.csv" if passive else "")
+             + f"; figures: {', '.join(figures) or 'none'}"]
     for (subject, trial), rec in out["trials"].items():
         cycles = {ld["foot"]: len(ld["cycles"]) for ld in rec["loads"].values()}
         lines.append(f"  {subject} {trial}: plates {rec['plates']}; cycles per foot {cycles}")
@@ -87,7 +111,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("study", help="the study file (TOML: subjects, their trials, the options; docs/lab.md)")
     s.add_argument("--out", type=output_path, required=True, metavar="DIR",
                    help="the results: loads.csv (one row per subject, trial, load, cycle and percent), "
-                        "summary.txt and the figures (per subject, group.png)")
+                        "passive.csv (the passive fits asked), summary.txt and the figures (per subject, group.png)")
     s.add_argument("--record", type=output_path, metavar="DIR",
                    help="the runs' records (default DIR/record): a run recorded there is not done again")
     s.add_argument("--scheduler", metavar="ADDRESS", help="an existing dask scheduler (tcp://host:8786); default "

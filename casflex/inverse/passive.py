@@ -65,9 +65,9 @@ def fit_passive(res, hinge: str, t_start: float | None = None, t_end: float | No
                 explained: float = 0.8) -> PassiveFit:
     """The torsion spring-damper that best explains ``<hinge>.moment`` of ``res`` over the window (module
     docstring). ValueError naming the hinge or the window when they are not in the run."""
-    if f"{hinge}.moment" not in res.settings.get("moments", ()):
-        raise ValueError(f"passive: no hinge {hinge!r} in the run; its hinges are "
-                         f"{[m.removesuffix('.moment') for m in res.settings.get('moments', ())]}")
+    if f"{hinge}.moment" not in res.loads or f"{hinge}.angle" not in res.coordinate_names:
+        hinges = [n.removesuffix(".angle") for n in res.coordinate_names if n.endswith(".angle")]
+        raise ValueError(f"passive: no hinge {hinge!r} in the run; its hinges are {hinges}")
     lo = res.t[0] if t_start is None else t_start
     hi = res.t[-1] if t_end is None else t_end
     w = (res.t >= lo - 1e-9) & (res.t <= hi + 1e-9)

@@ -38,8 +38,8 @@ from casflex.lab.plane import Plane
 from casflex.lab.tables import LabMarkers, LabTable, increasing_times
 
 __all__ = ["Contact", "contacts", "vertical_force", "tree_walk", "below", "feet", "plate_contacts", "assign_plates",
-           "plates_of", "marked_strikes", "read_trial", "plate_prefixes", "foot_strikes", "marker_strikes", "cycles",
-           "gait_cycles", "normalise"]
+           "plates_of", "marked_strikes", "swing_phases", "read_trial", "plate_prefixes", "foot_strikes",
+           "marker_strikes", "cycles", "gait_cycles", "normalise"]
 
 
 def contacts(t, fv, threshold: float = MIN_PLATE_FORCE, min_duration: float = 0.05
@@ -256,6 +256,16 @@ def plates_of(found: list[Contact], prefixes: list[str], threshold: float = MIN_
                      f"{max(c.height for c in mine):.3f} m above it" + (
                          f"; next: {nxt[0]}, {nxt[1]:.2f} m and {nxt[2]:.2f} m" if nxt else ""))
     return plates, lines
+
+
+def swing_phases(found: list[Contact], scene, lab: LabMarkers, node: str, spans: list[tuple[float, float]]
+                 ) -> list[tuple[float, float]]:
+    """The swing phases (s) of the foot ``node`` within its gait cycles ``spans``: each foot off (the lab's marked
+    "Foot Off" on the foot's side, else its plates' offs) to the cycle's end, the next strike."""
+    side = _side(node, feet(scene).get(node, ()))
+    offs = [t for cx, lb, t in lab.events if cx == side and lb.lower() == "foot off"] if side else []
+    offs = offs or [c.off for c in found if c.foot == node and c.off is not None]
+    return [(off, c1) for c0, c1 in spans for off in sorted(offs) if c0 < off < c1]
 
 
 def foot_strikes(found: list[Contact]) -> dict[str, list[float]]:

@@ -108,20 +108,20 @@ def _read(trial: dict):
     return lab, read_c3d(grf)[1] if grf.lower().endswith(".c3d") else read_sto(grf)
 
 
-def _events(sc, lab, table, plates, plane: str) -> tuple[dict[str, str] | None, dict, list[str]]:
+def _events(sc, lab, table, plates, plane: str) -> tuple[dict[str, str] | None, dict, list[str], list]:
     """The trial's plates' feet (the study file's, else from the data: :func:`.events.plates_of`), each foot's gait
     cycles (:func:`.events.gait_cycles`: the strikes the lab marked in the file, else the plates', else the heel
-    marker's) and report lines, from one pass over its plates' contacts."""
+    marker's), report lines and the contacts, from one pass over its plates' contacts."""
     from casflex.study.events import gait_cycles, plate_contacts, plate_prefixes, plates_of
 
     if table is None:
         return plates, {}, ["no plates read for the gait cycles (the trial names none, or an ExternalLoads "
-                            "file): loads over time only"]
+                            "file): loads over time only"], []
     prefixes = plate_prefixes(table)
     found = plate_contacts(sc, lab, table, plane, prefixes)
     plates, report = (plates, []) if plates is not None else plates_of(found, prefixes)
     feet, cycle_report = gait_cycles(found, sc, lab, plane)
-    return plates, feet, report + cycle_report
+    return plates, feet, report + cycle_report, found
 
 
 def _loads_of(res) -> list[str]:
@@ -143,7 +143,7 @@ def trial_run(*, scene: str, trial: dict, options: dict, uncertain: list[str]) -
     inside = (lab.t >= (t0 or -np.inf)) & (lab.t <= (t1 or np.inf))
     plane, plane_report = _trial_plane(sc, dataclasses.replace(lab, t=lab.t[inside], xyz=lab.xyz[inside]),
                                        options["plane"], options["vertical"])
-    plates, feet, event_report = _events(sc, lab, table, trial["plates"], plane)
+    plates, feet, event_report, found = _events(sc, lab, table, trial["plates"], plane)
     grf = trial["grf"] if trial["grf"] is not None and trial["grf"].lower().endswith(".xml") else table
     res = inverse_dynamics(sc, lab, grf=grf, plates=plates, plane=plane,
                            cutoff=options["cutoff"], cutoff_plates=options["cutoff_plates"],
@@ -161,7 +161,36 @@ def trial_run(*, scene: str, trial: dict, options: dict, uncertain: list[str]) -
                        "value": [normalise(res.t, res.loads[name], *c).tolist() for c in spans],
                        "band": [normalise(res.t, band, *c).tolist() for c in spans] if band is not None else None}
     return {"plates": plates, "plane": plane, "report": [*plane_report, *event_report, *res.report],
-            "warnings": res.warnings, "loads": loads, "t": [float(res.t[0]), float(res.t[-1])]}
+            "warnings": res.warnings, "loads": loads, "t": [float(res.t[0]), float(res.t[-1])],
+            "passive": _passive(res, sc, lab, found, feet, options.get("passive", ()))}
+
+
+def _passive(res, sc, lab, found, feet: dict, specs) -> list[dict]:
+    """Each (hinge, "trial" or "swing") of the study's ``passive``: the spring-damper fitted to the hinge's net
+    moment (:func:`casflex.inverse.passive.fit_passive`) over the trial, or over each swing phase of the foot
+    below the hinge (:func:`.events.swing_phases`); a window it cannot fit recorded with the reason."""
+    from casflex.inverse.passive import fit_passive
+    from casflex.study.events import below, swing_phases
+
+    out = []
+    for hinge, phase in specs:
+        windows = [(float(res.t[0]), float(res.t[-1]))]
+        if phase == "swing":
+            foot = next((f for f in feet if f in below(sc, sc.item(hinge).nodes[-1])), None)
+            windows = swing_phases(found, sc, lab, foot, feet[foot]) if foot else []
+            if not windows:
+                out.append({"hinge": hinge, "phase": phase, "window": None,
+                            "error": "no swing phase in the trial (no foot below the hinge with a cycle)"})
+        for t0, t1 in windows:
+            try:
+                f = fit_passive(res, hinge, t0, t1)
+            except ValueError as exc:
+                out.append({"hinge": hinge, "phase": phase, "window": [t0, t1], "error": str(exc)})
+                continue
+            out.append({"hinge": hinge, "phase": phase, "window": list(f.window), "kt": f.kt, "ct": f.ct,
+                        "rest_angle": f.rest_angle, "se": f.se, "r2": f.r2, "n_effective": f.n_effective,
+                        "passive": f.passive, "why": list(f.why)})
+    return out
 
 
 def _digest(path: str | None) -> str | None:
@@ -193,7 +222,7 @@ def _plan(study: Study, calibrated: dict[str, dict]) -> dict:
     """(subject, trial) -> its run."""
     o = study.options
     options = {k: getattr(o, k) for k in ("plane", "vertical", "cutoff", "cutoff_plates", "filter", "root", "tasks",
-                                          "bands")}
+                                          "bands", "passive")}
     return {(s.name, t.name): _run(f"trial-{s.name}-{t.name}", trial_run,
                                    {"scene": calibrated[s.name]["scene"], "trial": dataclasses.asdict(t),
                                     "options": options, "uncertain": list(s.uncertain)}, (t.markers, t.grf, o.tasks))
@@ -220,6 +249,11 @@ def check_against_models(study: Study) -> None:
         except (SceneError, ValueError) as exc:
             raise StudyError(f"subjects[{i}].uncertain: {exc}") from None
         nodes = {n.name for n in scene.nodes}
+        hinges = {j.name for j in scene.joints}
+        for hinge, _ in study.options.passive:
+            if hinge not in hinges:
+                raise StudyError(f"options.passive: {hinge!r} is not a joint of subject {s.name}'s model (joints: "
+                                 f"{sorted(hinges)[:12]}...)")
         if study.options.root is not None and study.options.root not in nodes:
             raise StudyError(f"options.root: {study.options.root!r} is not a node of subject {s.name}'s model")
         for k, t in enumerate(s.trials):

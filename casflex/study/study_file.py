@@ -16,6 +16,8 @@ calibrate = true               # place the model's markers from each subject's s
 scale = false                  # scale the segments too (casflex.inverse.calibrate)
 bands = false                  # each load's band (anthropometry and marker noise, casflex.inverse.bands)
 normalise = "none"             # or "mass": the table and figures per kg of each subject's mass (N m/kg, N/kg)
+passive = []                   # hinges whose net moment a spring-damper is fitted to, per trial ("knee_r") or
+                               # per swing phase ("knee_r:swing"): casflex.inverse.passive; passive.csv
 
 [[subjects]]
 name = "s02"
@@ -36,6 +38,7 @@ window = [0.5, 2.0]            # s, optional
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,7 +47,8 @@ from typing import Any
 __all__ = ["Study", "Subject", "Trial", "Options", "load_study"]
 
 _OPTIONS = {"plane": str, "vertical": str, "cutoff": (float, str), "cutoff_plates": (float, str), "filter": str,
-            "root": str, "tasks": str, "normalise": str, "calibrate": bool, "scale": bool, "bands": bool}
+            "root": str, "tasks": str, "normalise": str, "passive": list, "calibrate": bool, "scale": bool,
+            "bands": bool}
 _FILTERS = ("butterworth", "opensim")
 _NORMALISE = ("none", "mass")
 
@@ -64,6 +68,7 @@ class Options:
     scale: bool = False
     bands: bool = False
     normalise: str = "none"
+    passive: tuple[tuple[str, str], ...] = ()  # (hinge, "trial" or "swing")
 
 
 @dataclass(frozen=True)
@@ -154,6 +159,9 @@ def _options(base: Path, table: Any) -> Options:
 
     if t.get("normalise", "none") not in _NORMALISE:
         raise StudyError(f"options.normalise: expected one of {list(_NORMALISE)}, got {t['normalise']!r}")
+    passive = t.get("passive", [])
+    if not all(isinstance(p, str) and re.fullmatch(r"[^:\s]+(:(swing|trial))?", p) for p in passive):
+        raise StudyError(f"options.passive: expected hinge names, each alone or with :swing or :trial, got {passive!r}")
     vertical = t.get("vertical", "Y")
     if vertical.upper() not in ("X", "Y", "Z"):
         raise StudyError(f"options.vertical: expected the lab's vertical axis X, Y or Z, got {vertical!r}")
@@ -168,7 +176,8 @@ def _options(base: Path, table: Any) -> Options:
                    filter=t.get("filter", "butterworth"), root=t.get("root") or None,
                    tasks=_file(base, "options.tasks", t["tasks"], (".xml",)) if t.get("tasks") else None,
                    calibrate=t.get("calibrate", True), scale=t.get("scale", False), bands=t.get("bands", False),
-                   normalise=t.get("normalise", "none"))
+                   normalise=t.get("normalise", "none"),
+                   passive=tuple((p.partition(":")[0], p.partition(":")[2] or "trial") for p in passive))
 
 
 def _trial(base: Path, where: str, table: Any) -> Trial:
