@@ -27,6 +27,7 @@ filtering; the study shows what a lab gets from casflex on its own files, and ho
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import subprocess
@@ -110,14 +111,20 @@ def write_study(data: Path, work: Path, subjects: tuple[str, ...] | None = None)
     return work / "study.toml"
 
 
-def _pig_moment(path: str, point: str) -> np.ndarray:
-    """(n,) N m/kg: Plug-in Gait's ``point`` X component (N mm/kg in the file), NaN where it wrote none."""
+@functools.lru_cache(maxsize=8)
+def _pig_points(path: str) -> tuple[list[str], np.ndarray]:
+    """A C3D's point labels (both LABELS and LABELS2) and its points' X components (k, n), read once per file."""
     import ezc3d
 
     c = ezc3d.c3d(path)
     p = c["parameters"]["POINT"]
-    labels = list(p["LABELS"]["value"]) + list(p.get("LABELS2", {}).get("value", []))
-    x = c["data"]["points"][0, labels.index(point)] / 1e3
+    return list(p["LABELS"]["value"]) + list(p.get("LABELS2", {}).get("value", [])), c["data"]["points"][0]
+
+
+def _pig_moment(path: str, point: str) -> np.ndarray:
+    """(n,) N m/kg: Plug-in Gait's ``point`` X component (N mm/kg in the file), NaN where it wrote none."""
+    labels, x = _pig_points(path)
+    x = x[labels.index(point)] / 1e3
     return np.where(x == 0.0, np.nan, x)
 
 

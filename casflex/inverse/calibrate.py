@@ -59,7 +59,7 @@ def _scales(tree: KinematicTree, y0: np.ndarray, ym: np.ndarray) -> dict[int, fl
     return out
 
 
-def _scaled_scene(tree: KinematicTree, s: dict[int, float], mass: float | None):
+def _scaled_scene(tree: KinematicTree, s: dict[int, float]):
     """The scene with every segment scaled about its proximal joint (module docstring, step 1)."""
     sc, idx = tree.model.scene, tree.model.node_names.index
     pos = {n.name: np.array([n.x, n.y]) for n in sc.nodes}
@@ -79,13 +79,11 @@ def _scaled_scene(tree: KinematicTree, s: dict[int, float], mass: float | None):
     of = lambda node: tree.cluster[idx(node)]  # noqa: E731
     nodes = tuple(dataclasses.replace(n, x=float(new(pos[n.name], of(n.name))[0]),
                                       y=float(new(pos[n.name], of(n.name))[1])) for n in sc.nodes)
-    total = sum(b.mass for b in sc.bodies)
-    f = 1.0 if mass is None else mass / total
     bodies = []
     for b in sc.bodies:
         c, p = of(b.node), pos[b.node]
         com = new((p[0] if b.com_x is None else b.com_x, p[1] if b.com_y is None else b.com_y), c)
-        bodies.append(dataclasses.replace(b, mass=b.mass * f, inertia=b.inertia * f * s[c] ** 2,
+        bodies.append(dataclasses.replace(b, inertia=b.inertia * s[c] ** 2,
                                           com_x=float(com[0]), com_y=float(com[1])))
     joints = tuple(dataclasses.replace(j, point=tuple(float(v) for v in new(sc.joint_point(j), of(j.nodes[0]))))
                    if j.point is not None else j for j in sc.joints)
@@ -152,7 +150,8 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
     if scale:
         y0 = np.array([[m.x, m.y] for m in sc.markers])
         s = _scales(tree, y0, ym)
-        sc = _scaled_scene(tree, s, mass)
+        sc = _scaled_scene(tree, s)
+        sc = sc if mass is None else with_mass(sc, mass)
         names = {c: next(n for i, n in enumerate(model.node_names) if tree.cluster[i] == c) for c in s}
         report.append("segments scaled (by the node that carries each): "
                       + ", ".join(f"{names[c]} {v:.3f}" for c, v in s.items()))

@@ -147,9 +147,9 @@ class Contact:
     others: tuple[tuple[str, float, float], ...] = ()
 
 
-def read_trial(markers, grf, plates: bool = True) -> tuple[LabMarkers, LabTable | None]:
+def read_trial(markers, grf, plates: bool = True, required: bool = True) -> tuple[LabMarkers, LabTable | None]:
     """(markers, plates) from objects or files (.trc / .c3d; .mot / .sto / .c3d; grf None: the markers' C3D);
-    ``plates`` False: the markers alone."""
+    ``plates`` False: the markers alone; ``required`` False: None where there are no plates, else ValueError."""
     from casflex.lab import read_c3d, read_sto, read_trc
 
     if not isinstance(markers, LabMarkers):
@@ -160,7 +160,7 @@ def read_trial(markers, grf, plates: bool = True) -> tuple[LabMarkers, LabTable 
         grf = table if same else grf
     if plates and grf is not None and not isinstance(grf, LabTable):
         grf = read_c3d(grf)[1] if os.fspath(grf).lower().endswith(".c3d") else read_sto(grf)
-    if plates and grf is None:
+    if plates and grf is None and required:
         raise ValueError("grf: no force plates (give a .mot / .sto or .c3d file with plates, or a LabTable)")
     return markers, grf if plates else None
 

@@ -95,17 +95,14 @@ def _load_feet(scene, names: list[str], feet: list[str]) -> dict[str, str | None
 
 
 def _read(trial: dict):
-    """(markers, plates' table or None): the trial's files, read once (a C3D's own plates where no grf is named)."""
-    from casflex.inverse.inputs import read_markers
-    from casflex.lab import read_c3d, read_sto
+    """(markers, plates' table or None): the trial's files, read once (a C3D's own plates where no grf is named;
+    none with an ExternalLoads file, which inverse dynamics reads itself)."""
+    from casflex.study.events import read_trial
 
     grf = trial["grf"]
-    if grf is None and trial["markers"].lower().endswith(".c3d"):
-        return read_c3d(trial["markers"], plates=True)
-    lab = read_markers(trial["markers"])[0]
-    if grf is None or grf.lower().endswith(".xml"):
-        return lab, None
-    return lab, read_c3d(grf)[1] if grf.lower().endswith(".c3d") else read_sto(grf)
+    if grf is not None and grf.lower().endswith(".xml"):
+        return read_trial(trial["markers"], None, plates=False)
+    return read_trial(trial["markers"], grf, required=False)
 
 
 def _events(sc, lab, table, plates, plane: str) -> tuple[dict[str, str] | None, dict, list[str], list]:
