@@ -4,6 +4,7 @@ recordings made by another code (Exudyn) of twobar with property values other th
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +13,7 @@ import pytest
 import casflex
 from casflex.data import MeasurementSet
 from casflex.identification import identify_indirect
+from casflex.identification.pinned import siblings
 from casflex.scene import SceneError, Uncertain, dumps_scene, loads_scene
 
 DATA = Path(__file__).parent / "data"
@@ -68,7 +70,7 @@ def test_denser_bars_fall_back_on_the_densities_priors(twobar):
         props = r.extra["uncertain"]["properties"]
         assert set(props) == {"bar2.rho", "bar4.rho"}
         # the data cannot see the scale: each density's spread stays most of its prior's (measured 0.71)
-        assert all(0.5 < v["left_of_prior"] < 1.0 for v in props.values())
+        assert all(0.5 < v["left_of_prior"] < 1.0 and "pinned_by" not in v for v in props.values())
         # the stiffness's error is mostly the densities' part (measured 23.5 of 23.7 N/m for k1)
         part, total = r.extra["uncertainty"]["uncertain_properties"]["k1"], r.std_errors["k1"]
         assert part > 0.9 * total
@@ -84,6 +86,28 @@ def test_one_denser_bar_is_told_apart_within_the_priors(twobar):
     props = r.extra["uncertain"]["properties"]
     ratio = props["bar2.rho"]["estimate"] / props["bar4.rho"]["estimate"]
     assert ratio == pytest.approx(1.05, abs=0.01)  # measured 1.050; the ratio's own spread is 0.2 %
+
+
+def test_a_property_pinned_by_a_held_one_is_said_so(twobar):
+    # bar 2's density declared alone: the data fix its ratio to bar 4's, held at the scene's value, and the fit
+    # reports bar2.rho to 0.2 % of its prior; it must say that the held density pins it, not that the data do
+    r = identify_indirect(twobar, recording("heavy_bar2", 0), dt=1e-3, uncertain=DENSITIES[:1], model_error="none",
+                          form="none")
+    prop = r.extra["uncertain"]["properties"]["bar2.rho"]
+    assert prop["left_of_prior"] < 0.05  # measured 0.0018: pinned
+    assert prop["pinned_by"] == ["bar4.rho"]
+    # freed with the same 5 %, the pair falls back on the priors as when both are declared (measured 0.72; 0.73
+    # for bar2.rho with both declared, test_one_denser_bar...)
+    assert 0.5 < prop["left_if_free"] < 1.0
+    assert "bar2.rho is pinned only against bar4.rho" in r.message and "declare bar4.rho uncertain too" in r.message
+    assert "pinned by bar4.rho" in r.summary()
+
+
+def test_siblings_are_the_same_property_of_elements_of_its_kind(twobar):
+    scene = twobar.scene
+    one = dataclasses.replace(scene, uncertain=(DENSITIES[0],))
+    assert siblings(one) == {"bar2.rho": ["bar4.rho"]}
+    assert siblings(dataclasses.replace(scene, uncertain=tuple(DENSITIES))) == {}  # both declared: none held
 
 
 def test_a_property_the_data_contradict_is_said(twobar):

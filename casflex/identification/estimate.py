@@ -53,6 +53,7 @@ from casflex.identification.form import alternatives_of, compare_forms, form_par
 from casflex.identification.initial_state import initial_states
 from casflex.identification.measurement import Experiment, check_against_scene
 from casflex.identification.output_error import Budget, Fit, OutputError, StartDoesNotRun, fit
+from casflex.identification.pinned import pinned
 from casflex.identification.plausibility import (  # noqa: F401 (FIT_THRESHOLD, pooled_fit re-exported)
     FIT_THRESHOLD,
     REWEIGHT,
@@ -481,6 +482,7 @@ def estimate(model: Model, experiments: Sequence[Experiment], *, dt: float | Non
     if nuisance_names(scene_u) and f.converged:  # the uncertain properties with their priors (.priors)
         model, problem, f, priors = map_fit(model, scene_u, problem, f, p0, declared, setup, budget, t_solve,
                                             verbose)
+        priors["pinned"] = pinned(problem, f, scene_u) if f.converged else {}
         experiments, pmap, forms = problem.experiments, problem.pmap, forms_with_nuisance(forms, scene_u)
     p_hat = pmap.p(f.w[:model.n_p])
     me, refit = (_model_error(model, experiments, f, problem, dt=dt, alpha=alpha, transform=transform, budget=budget,
@@ -515,8 +517,16 @@ def _result(problem: OutputError, f: Fit, p0: np.ndarray, p_hat: np.ndarray, me:
     reasons = _plausibility(problem, f, channels, {k: at_bound[k] for k in names[keep]})
     reasons += [f"{exp.name}: the identified model does not run through the recording ({tr.message})"
                 for exp, tr in zip(experiments, trajectories, strict=True) if not tr.success]
+    notes: list[str] = []
     if model.n_p > n_params:  # the uncertain properties: what the data say of them, and their part of the errors
         nuisance, conflicts, held = prior_report(problem, f, se_noise, n_params)
+        for target, pin in priors.get("pinned", {}).items():
+            nuisance[target]["pinned_by"] = pin["by"]
+            nuisance[target]["left_if_free"] = pin["left_if_free"]
+            notes.append(f"{target} is pinned only against {', '.join(pin['by'])}, held at the scene's value: the "
+                         f"data fix their ratio, not {target} itself, and the fit cannot separate them (as uncertain "
+                         f"as it, {100 * pin['left_if_free']:.0f} % of its prior spread would be left); declare "
+                         f"{' and '.join(pin['by'])} uncertain too")
         # the joint distribution of parameters and properties: what output bands draw from (.bands)
         joint = {"names": list(names), "values": p_hat.tolist(), "std_errors": total.tolist(),
                  "correlation": np.asarray(gn["correlation"]).tolist()}
@@ -525,7 +535,8 @@ def _result(problem: OutputError, f: Fit, p0: np.ndarray, p_hat: np.ndarray, me:
             np.sqrt(np.maximum(parts["gauss_newton"][keep] ** 2 - np.array(list(held.values())) ** 2, 0.0)),
             np.full(model.n_p - n_params, np.nan))
         reasons += conflicts
-    form_why, notes = form_reasons(compared, names, se_noise)
+    form_why, form_notes = form_reasons(compared, names, se_noise)
+    notes += form_notes
     refusal = {"form": form_why, "other": reasons}  # why success is withheld: the model's form, or anything else
     reasons = reasons + form_why
     if model_error == "refine" and f.converged and not np.isfinite(me).all():

@@ -113,7 +113,8 @@ class IdentificationResult:
         for target, u in self.extra.get("uncertain", {}).get("properties", {}).items():
             lines.append(f"  uncertain {target}: prior {u['prior_mean']:.6g} +- {u['prior_sd']:.2g}, estimate "
                          f"{u['estimate']:.6g} +- {u['std_error']:.2g} (moved {u['moved_sd']:+.2f} prior sd; "
-                         f"{100 * u['left_of_prior']:.0f} % of its prior spread left)")
+                         + (f"pinned by {', '.join(u['pinned_by'])}, held: the fit cannot separate them)"
+                            if u.get("pinned_by") else f"{100 * u['left_of_prior']:.0f} % of its prior spread left)"))
         for f in self.extra.get("forms", []):
             d = f.get("delta_aic")
             lines.append(f"  form {f['name']}: {f['verdict']}" + ("" if d is None else f" (delta AIC {d:+.1f})"))
