@@ -228,6 +228,29 @@ def _memory(model: Model, tree: KinematicTree, t: np.ndarray, n_markers: int, dt
                          f"memory and {format_bytes(avail)} are available; take a shorter window")
 
 
+def model_weight(model: Model) -> np.ndarray:
+    """N, (2,): the model's weight in its plane, its total mass (bodies and beams) times its gravity."""
+    sc = model.scene
+    mass = sum(b.mass for b in sc.bodies)
+    for b in sc.beams:
+        a, c = (sc.node(n) for n in b.nodes)
+        mass += b.rho * b.A * float(np.hypot(c.x - a.x, c.y - a.y))
+    return mass * np.asarray(sc.gravity, dtype=float)
+
+
+def _one_node_a_plate(table, plates: dict[str, str]) -> None:
+    """ValueError naming the plate given to two nodes: its load would be counted twice."""
+    from casflex.lab.filtering import _plate_columns
+
+    seen: dict[str, str] = {}
+    for node, prefix in plates.items():
+        p = _plate_columns(table, prefix)
+        if p in seen:
+            raise ValueError(f"plates: {table.source}: plate {p!r} is given to both {seen[p]!r} and {node!r}: its "
+                             "load would be counted twice; give each plate to the one foot that stands on it")
+        seen[p] = node
+
+
 def weighted(scene, tasks) -> tuple[object, list[str]]:
     """(the scene with its markers weighted by ``tasks``, warnings): an OpenSim IK task set or setup file
     (:func:`casflex.lab.setups.read_tasks`) or a dict label -> weight. As OpenSim's IK, a scene marker with no
@@ -306,9 +329,10 @@ def prepare(scene, markers=None, *, plane="X,Y", grf=None, plates: dict[str, str
     warnings = [*task_notes, *notes]
     plate_list = []
     fc = cutoff if cutoff_plates == "same" else cutoff_plates
+    _one_node_a_plate(table, plates)
     for node, prefix in plates.items():
         plate = plate_from_table(table, prefix, node, pl, fc, window=(float(t[0]), float(t[-1])), rate=rate,
-                                 trial=source)
+                                 trial=source, weight=model_weight(model))
         plate_list.append(plate)
         warnings += plate.notes
     _memory(model, tree, t, len(labels), dt)

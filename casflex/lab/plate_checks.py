@@ -1,0 +1,149 @@
+"""What a force plate under a foot records: it pushes, it carries about the body's weight over a stance, it lies
+under its foot. A plate that contradicts it is refused in one line that names the file, the plate and what was
+seen, before the loads it would make wrong are computed.
+
+:mod:`casflex.lab.checks` refuses values no lab records (a force of 20 kN, a centre of pressure 100 m away);
+the checks here take the body into account: the model's weight W (its total mass x g, N, in the model's plane;
+for a model of part of the body, e.g. a pelvis and one leg, a third of the subject's, which makes the checks
+that use it lenient, never strict) and, once the pose is known, the node the plate acts on. The vertical is
+the model's up, against its gravity. Each limit is far from what a body does, so that a real trial never
+meets it (OpenSim's Hamner running trial, whose stance peaks at 2.25 body weights, and its walking2.c3d pass):
+
+- :data:`MAX_PULL` (N): a foot pushes on a plate and cannot pull it; a vertical force below -100 N is a sign
+  flipped (the vertical column negated; a C3D plate whose corners are numbered in mirrored order, so that its
+  normal points down) or an offset not zeroed. Plates that labs leave unzeroed read tens of newtons
+  (walking2.c3d's: -14 and -20 N unloaded), their noise some newtons.
+- :data:`MIN_PEAK` (x W): a plate given to a foot whose vertical force never reaches a fifth of the model's
+  weight over its whole record carries no stance (a stance peaks at 1-1.3 body weights walking, 2-3 running):
+  forces in kN where N are read (the loads would be 1000 times too small), or a plate no foot steps on. A
+  record that carries a stance but none inside the trial's window is said, not refused (:func:`window_load`:
+  a window may end before the foot reaches the plate; its load there is zero, as computed).
+- :data:`SPIKE` (x): a single sample standing above both its neighbours by more than twice the larger of W and
+  the record's median loaded force (its stance's typical level) is a corrupted sample: a body's force rises
+  over the 20-30 ms of an impact and falls again over a stance, never up by several body weights and back in
+  one sample (Hamner's impact peak at 60 Hz stands 3 N above its neighbours).
+- :data:`MAX_COP_DISTANCE` (m): the centre of pressure lies under the foot; the line of the plate's force
+  passes within a foot's length (0.25-0.30 m) of any point of the foot (the node the plate acts on), plus the
+  node's height above the sole and the fitted pose's error: 0.4 m. Farther, over the stance (the median over
+  its samples loaded above a quarter of its peak), the plate is under the other foot, or its origin (a C3D
+  plate's corners, a centre of pressure in another frame) is wrong. On Hamner's running stride the ankle lies
+  0.03-0.13 m from the line; the other foot (its plate given to the wrong leg) 0.5 m and more.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["MAX_PULL", "MIN_PEAK", "SPIKE", "MAX_COP_DISTANCE", "check_plate_record", "window_load",
+           "check_plate_foot"]
+
+MAX_PULL = 100.0
+MIN_PEAK = 0.2
+SPIKE = 2.0
+MAX_COP_DISTANCE = 0.4
+#: N: the vertical force below which a plate carries no load (the readers' limit for a centre of pressure)
+_LOADED = 20.0
+
+
+def _up(weight: np.ndarray) -> np.ndarray | None:
+    """The model's up in its plane (2,), against the weight (N, (2,)); None where it has none."""
+    w = np.asarray(weight, dtype=float)
+    size = float(np.linalg.norm(w))
+    return None if not size > 0 else -w / size
+
+
+def check_plate_record(where: str, t: np.ndarray, force3: np.ndarray, force: np.ndarray, weight: np.ndarray | None,
+                       up_hint: str | None = None) -> None:
+    """ValueError in one line (``where`` names the file and the plate) for a plate's record at times ``t`` (n,) s
+    as written, its force ``force3`` (n, 3) N in the lab and ``force`` (n, 2) N in the model's plane, unfiltered,
+    that pulls (:data:`MAX_PULL`), carries no stance (:data:`MIN_PEAK`) or holds a single-sample spike
+    (:data:`SPIKE`), module docstring. ``weight``: the model's weight in its plane (N, (2,): mass x g; None or
+    zero: the checks that need it skipped); ``up_hint``: the plate's upward normal as its file gives it (a C3D
+    plate's corners, e.g. "-Z"), said where the force pulls."""
+    _spike(where, t, force3, weight)
+    up = _up(weight) if weight is not None else None
+    if up is None:
+        return
+    fv = force @ up
+    W = float(np.linalg.norm(weight))
+    i = int(np.argmin(fv))
+    if fv[i] < -MAX_PULL:
+        k = int(np.argmax(fv))
+        share = 100.0 * np.mean(fv < -MAX_PULL)
+        hint = f"; its corners give it the upward normal {up_hint}: numbered in mirrored order?" if up_hint else ""
+        raise ValueError(f"{where}: its vertical force pulls the foot down: {fv[i]:.0f} N at t = {t[i]:g} s, below "
+                         f"-{MAX_PULL:g} N at {share:.0f} % of its samples, its largest upward force {fv[k]:.0f} N "
+                         f"at t = {t[k]:g} s (a foot pushes on a plate and cannot pull it): a sign flipped (the "
+                         f"vertical column negated) or an offset not zeroed{hint}")
+    k = int(np.argmax(fv))
+    if fv[k] < MIN_PEAK * W:
+        raise ValueError(f"{where}: its vertical force peaks at {fv[k]:.3g} N (t = {t[k]:g} s) over its whole "
+                         f"record, {100 * fv[k] / W:.2g} % of the model's weight ({W:.0f} N; a stance peaks at 1-3 "
+                         "times the body's): forces in kN read as N (the loads would be 1000 times too small), or "
+                         "a plate no foot steps on; convert its forces to N or give the foot's plate")
+
+
+def _spike(where: str, t: np.ndarray, force3: np.ndarray, weight: np.ndarray | None) -> None:
+    """ValueError for a sample whose force stands above (or below) both its neighbours' by :data:`SPIKE` times
+    the larger of the weight and the record's median loaded force (module docstring)."""
+    f = np.linalg.norm(force3, axis=1)
+    if f.size < 3:
+        return
+    loaded = f[f > _LOADED]
+    level = max(float(np.linalg.norm(weight)) if weight is not None else 0.0,
+                float(np.median(loaded)) if loaded.size else 0.0)
+    if not level > 0:
+        return
+    above = f[1:-1] - np.maximum(f[:-2], f[2:])
+    below = np.minimum(f[:-2], f[2:]) - f[1:-1]
+    jump = np.maximum(above, below)
+    k = int(np.argmax(jump))
+    if jump[k] > SPIKE * level:
+        i = k + 1
+        way = "above" if above[k] >= below[k] else "below"
+        raise ValueError(f"{where}: a single sample of {f[i]:.4g} N at t = {t[i]:g} s stands {jump[k]:.4g} N {way} "
+                         f"both its neighbours' ({f[i - 1]:.4g} and {f[i + 1]:.4g} N, {t[i + 1] - t[i]:.3g} s "
+                         f"apart), {jump[k] / level:.3g} times the stance's level ({level:.0f} N): no foot loads "
+                         "and unloads a plate so in one sample; a corrupted sample: delete it (an empty cell is a "
+                         "gap, filled by a spline)")
+
+
+def window_load(where: str, t: np.ndarray, force: np.ndarray, weight: np.ndarray | None,
+                window: tuple[float, float]) -> str | None:
+    """A line saying that the plate (its force (n, 2) N in the plane at times t (n,) s) carries no load
+    (its vertical force under 20 N) inside ``window`` (s), else None: its load there is zero, as computed
+    (module docstring)."""
+    up = _up(weight) if weight is not None else None
+    if up is None:
+        return None
+    inside = (t >= window[0] - 1e-9) & (t <= window[1] + 1e-9)
+    fv = force[inside] @ up
+    if fv.size and fv.max() < _LOADED:
+        return (f"{where}: no load in the window {window[0]:g}..{window[1]:g} s (its vertical force at most "
+                f"{fv.max():.3g} N): no foot steps on it there; it adds nothing")
+    return None
+
+
+def check_plate_foot(where: str, node: str, t: np.ndarray, force: np.ndarray, moment: np.ndarray,
+                     node_xy: np.ndarray, weight: np.ndarray | None) -> None:
+    """ValueError in one line when the line of a plate's force passes farther than :data:`MAX_COP_DISTANCE`
+    from the node it acts on over its stance: force (k, 2) N and moment about the lab's origin (k,) N m in the
+    plane, the node's position ``node_xy`` (k, 2) m, at times t (k,) s; the stance: the samples whose vertical
+    force exceeds a quarter of its peak and 20 N (module docstring)."""
+    up = _up(weight) if weight is not None else None
+    if up is None:
+        return
+    fv = force @ up
+    stance = fv > max(_LOADED, 0.25 * float(fv.max(initial=0.0)))
+    if not stance.any():
+        return
+    F, x = force[stance], node_xy[stance]
+    about = moment[stance] - (x[:, 0] * F[:, 1] - x[:, 1] * F[:, 0])
+    d = np.abs(about) / np.linalg.norm(F, axis=1)
+    mid = float(np.median(d))
+    if mid > MAX_COP_DISTANCE:
+        ts = t[stance]
+        raise ValueError(f"{where}: its force passes {mid:.2f} m from {node!r} over its stance (median of "
+                         f"{int(stance.sum())} samples at t = {ts[0]:g}..{ts[-1]:g} s; {d.min():.2f}..{d.max():.2f} "
+                         f"m): a centre of pressure lies under its foot, within a foot's length of it (the limit "
+                         f"is {MAX_COP_DISTANCE:g} m); the plate is under another foot, or its origin is wrong")
