@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from casflex.inverse.plates import Plate, plate_from_table
+from casflex.inverse.plates import Plate, model_weight, plate_from_table
 from casflex.inverse.tree import KinematicTree, kinematic_tree
 from casflex.lab.lowpass import check_cutoff, even_times
 from casflex.model import Model
@@ -226,16 +226,6 @@ def _memory(model: Model, tree: KinematicTree, t: np.ndarray, n_markers: int, dt
     if avail is not None and need > avail:
         raise ValueError(f"t_start, t_end: {n:,} frames of {values} values each need about {format_bytes(need)} of "
                          f"memory and {format_bytes(avail)} are available; take a shorter window")
-
-
-def model_weight(model: Model) -> np.ndarray:
-    """N, (2,): the model's weight in its plane, its total mass (bodies and beams) times its gravity."""
-    sc = model.scene
-    mass = sum(b.mass for b in sc.bodies)
-    for b in sc.beams:
-        a, c = (sc.node(n) for n in b.nodes)
-        mass += b.rho * b.A * float(np.hypot(c.x - a.x, c.y - a.y))
-    return mass * np.asarray(sc.gravity, dtype=float)
 
 
 def _one_node_a_plate(table, plates: dict[str, str]) -> None:

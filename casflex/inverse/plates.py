@@ -30,7 +30,8 @@ from casflex.lab.filtering import plate_wrench
 from casflex.lab.lowpass import check_cutoff, even_times, lowpass, runs
 from casflex.lab.plate_checks import check_plate_record, window_load
 
-__all__ = ["Plate", "plate_from_table", "plate_loads", "plates_under_feet", "MAX_PLATE_GAP", "MAX_PLATE_GAP_S"]
+__all__ = ["Plate", "plate_from_table", "plate_loads", "plates_under_feet", "model_weight", "MAX_PLATE_GAP",
+           "MAX_PLATE_GAP_S"]
 
 #: samples: the longest run of missing plate samples filled (the markers' :data:`casflex.lab.filtering.MAX_GAP`).
 MAX_PLATE_GAP = 10
@@ -183,11 +184,20 @@ def plate_loads(model, plates: list[Plate], t: np.ndarray, q: np.ndarray) -> np.
     return f
 
 
+def model_weight(model) -> np.ndarray:
+    """N, (2,): the model's weight in its plane, its total mass (bodies and beams) times its gravity."""
+    sc = model.scene
+    mass = sum(b.mass for b in sc.bodies)
+    for b in sc.beams:
+        a, c = (sc.node(n) for n in b.nodes)
+        mass += b.rho * b.A * float(np.hypot(c.x - a.x, c.y - a.y))
+    return mass * np.asarray(sc.gravity, dtype=float)
+
+
 def plates_under_feet(model, plates: list[Plate], t: np.ndarray, q: np.ndarray) -> None:
     """ValueError in one line for a plate whose force passes farther from its node than a centre of pressure
     under the foot can (:func:`casflex.lab.plate_checks.check_plate_foot`) over its stance, with the fitted
     configurations q (k, n_dof) at times t (k,) s: the plate under another foot, or its origin wrong."""
-    from casflex.inverse.inputs import model_weight
     from casflex.lab.plate_checks import check_plate_foot
 
     weight = model_weight(model)

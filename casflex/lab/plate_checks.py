@@ -34,8 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["MAX_PULL", "MIN_PEAK", "SPIKE", "MAX_COP_DISTANCE", "check_plate_record", "window_load",
-           "check_plate_foot"]
+__all__ = ["MAX_PULL", "MIN_PEAK", "SPIKE", "MAX_COP_DISTANCE", "check_plate_record", "window_load", "check_plate_foot"]
 
 MAX_PULL = 100.0
 MIN_PEAK = 0.2
@@ -52,8 +51,14 @@ def _up(weight: np.ndarray) -> np.ndarray | None:
     return None if not size > 0 else -w / size
 
 
-def check_plate_record(where: str, t: np.ndarray, force3: np.ndarray, force: np.ndarray, weight: np.ndarray | None,
-                       up_hint: str | None = None) -> None:
+def check_plate_record(
+    where: str,
+    t: np.ndarray,
+    force3: np.ndarray,
+    force: np.ndarray,
+    weight: np.ndarray | None,
+    up_hint: str | None = None,
+) -> None:
     """ValueError in one line (``where`` names the file and the plate) for a plate's record at times ``t`` (n,) s
     as written, its force ``force3`` (n, 3) N in the lab and ``force`` (n, 2) N in the model's plane, unfiltered,
     that pulls (:data:`MAX_PULL`), carries no stance (:data:`MIN_PEAK`) or holds a single-sample spike
@@ -71,16 +76,20 @@ def check_plate_record(where: str, t: np.ndarray, force3: np.ndarray, force: np.
         k = int(np.argmax(fv))
         share = 100.0 * np.mean(fv < -MAX_PULL)
         hint = f"; its corners give it the upward normal {up_hint}: numbered in mirrored order?" if up_hint else ""
-        raise ValueError(f"{where}: its vertical force pulls the foot down: {fv[i]:.0f} N at t = {t[i]:g} s, below "
-                         f"-{MAX_PULL:g} N at {share:.0f} % of its samples, its largest upward force {fv[k]:.0f} N "
-                         f"at t = {t[k]:g} s (a foot pushes on a plate and cannot pull it): a sign flipped (the "
-                         f"vertical column negated) or an offset not zeroed{hint}")
+        raise ValueError(
+            f"{where}: its vertical force pulls the foot down: {fv[i]:.0f} N at t = {t[i]:g} s, below "
+            f"-{MAX_PULL:g} N at {share:.0f} % of its samples, its largest upward force {fv[k]:.0f} N "
+            f"at t = {t[k]:g} s (a foot pushes on a plate and cannot pull it): a sign flipped (the "
+            f"vertical column negated) or an offset not zeroed{hint}"
+        )
     k = int(np.argmax(fv))
     if fv[k] < MIN_PEAK * W:
-        raise ValueError(f"{where}: its vertical force peaks at {fv[k]:.3g} N (t = {t[k]:g} s) over its whole "
-                         f"record, {100 * fv[k] / W:.2g} % of the model's weight ({W:.0f} N; a stance peaks at 1-3 "
-                         "times the body's): forces in kN read as N (the loads would be 1000 times too small), or "
-                         "a plate no foot steps on; convert its forces to N or give the foot's plate")
+        raise ValueError(
+            f"{where}: its vertical force peaks at {fv[k]:.3g} N (t = {t[k]:g} s) over its whole "
+            f"record, {100 * fv[k] / W:.2g} % of the model's weight ({W:.0f} N; a stance peaks at 1-3 "
+            "times the body's): forces in kN read as N (the loads would be 1000 times too small), or "
+            "a plate no foot steps on; convert its forces to N or give the foot's plate"
+        )
 
 
 def _spike(where: str, t: np.ndarray, force3: np.ndarray, weight: np.ndarray | None) -> None:
@@ -90,8 +99,9 @@ def _spike(where: str, t: np.ndarray, force3: np.ndarray, weight: np.ndarray | N
     if f.size < 3:
         return
     loaded = f[f > _LOADED]
-    level = max(float(np.linalg.norm(weight)) if weight is not None else 0.0,
-                float(np.median(loaded)) if loaded.size else 0.0)
+    level = max(
+        float(np.linalg.norm(weight)) if weight is not None else 0.0, float(np.median(loaded)) if loaded.size else 0.0
+    )
     if not level > 0:
         return
     above = f[1:-1] - np.maximum(f[:-2], f[2:])
@@ -101,15 +111,18 @@ def _spike(where: str, t: np.ndarray, force3: np.ndarray, weight: np.ndarray | N
     if jump[k] > SPIKE * level:
         i = k + 1
         way = "above" if above[k] >= below[k] else "below"
-        raise ValueError(f"{where}: a single sample of {f[i]:.4g} N at t = {t[i]:g} s stands {jump[k]:.4g} N {way} "
-                         f"both its neighbours' ({f[i - 1]:.4g} and {f[i + 1]:.4g} N, {t[i + 1] - t[i]:.3g} s "
-                         f"apart), {jump[k] / level:.3g} times the stance's level ({level:.0f} N): no foot loads "
-                         "and unloads a plate so in one sample; a corrupted sample: delete it (an empty cell is a "
-                         "gap, filled by a spline)")
+        raise ValueError(
+            f"{where}: a single sample of {f[i]:.4g} N at t = {t[i]:g} s stands {jump[k]:.4g} N {way} "
+            f"both its neighbours' ({f[i - 1]:.4g} and {f[i + 1]:.4g} N, {t[i + 1] - t[i]:.3g} s "
+            f"apart), {jump[k] / level:.3g} times the stance's level ({level:.0f} N): no foot loads "
+            "and unloads a plate so in one sample; a corrupted sample: delete it (an empty cell is a "
+            "gap, filled by a spline)"
+        )
 
 
-def window_load(where: str, t: np.ndarray, force: np.ndarray, weight: np.ndarray | None,
-                window: tuple[float, float]) -> str | None:
+def window_load(
+    where: str, t: np.ndarray, force: np.ndarray, weight: np.ndarray | None, window: tuple[float, float]
+) -> str | None:
     """A line saying that the plate (its force (n, 2) N in the plane at times t (n,) s) carries no load
     (its vertical force under 20 N) inside ``window`` (s), else None: its load there is zero, as computed
     (module docstring)."""
@@ -119,13 +132,22 @@ def window_load(where: str, t: np.ndarray, force: np.ndarray, weight: np.ndarray
     inside = (t >= window[0] - 1e-9) & (t <= window[1] + 1e-9)
     fv = force[inside] @ up
     if fv.size and fv.max() < _LOADED:
-        return (f"{where}: no load in the window {window[0]:g}..{window[1]:g} s (its vertical force at most "
-                f"{fv.max():.3g} N): no foot steps on it there; it adds nothing")
+        return (
+            f"{where}: no load in the window {window[0]:g}..{window[1]:g} s (its vertical force at most "
+            f"{fv.max():.3g} N): no foot steps on it there; it adds nothing"
+        )
     return None
 
 
-def check_plate_foot(where: str, node: str, t: np.ndarray, force: np.ndarray, moment: np.ndarray,
-                     node_xy: np.ndarray, weight: np.ndarray | None) -> None:
+def check_plate_foot(
+    where: str,
+    node: str,
+    t: np.ndarray,
+    force: np.ndarray,
+    moment: np.ndarray,
+    node_xy: np.ndarray,
+    weight: np.ndarray | None,
+) -> None:
     """ValueError in one line when the line of a plate's force passes farther than :data:`MAX_COP_DISTANCE`
     from the node it acts on over its stance: force (k, 2) N and moment about the lab's origin (k,) N m in the
     plane, the node's position ``node_xy`` (k, 2) m, at times t (k,) s; the stance: the samples whose vertical
@@ -143,7 +165,9 @@ def check_plate_foot(where: str, node: str, t: np.ndarray, force: np.ndarray, mo
     mid = float(np.median(d))
     if mid > MAX_COP_DISTANCE:
         ts = t[stance]
-        raise ValueError(f"{where}: its force passes {mid:.2f} m from {node!r} over its stance (median of "
-                         f"{int(stance.sum())} samples at t = {ts[0]:g}..{ts[-1]:g} s; {d.min():.2f}..{d.max():.2f} "
-                         f"m): a centre of pressure lies under its foot, within a foot's length of it (the limit "
-                         f"is {MAX_COP_DISTANCE:g} m); the plate is under another foot, or its origin is wrong")
+        raise ValueError(
+            f"{where}: its force passes {mid:.2f} m from {node!r} over its stance (median of "
+            f"{int(stance.sum())} samples at t = {ts[0]:g}..{ts[-1]:g} s; {d.min():.2f}..{d.max():.2f} "
+            f"m): a centre of pressure lies under its foot, within a foot's length of it (the limit "
+            f"is {MAX_COP_DISTANCE:g} m); the plate is under another foot, or its origin is wrong"
+        )
