@@ -145,7 +145,11 @@ def plate_from_table(table: LabTable, prefix: str, node: str, plane: Plane, cuto
     E = plane.matrix
     n = np.cross(E[0], E[1])
     force, moment = F @ E.T, M3 @ n
-    check_plate_record(where, written, F, force, weight, _normal(table, prefix, E, weight))
+    if weight is not None and np.linalg.norm(weight) > 0:  # the vertical: against the model's gravity
+        fv, W = force @ (-np.asarray(weight) / np.linalg.norm(weight)), float(np.linalg.norm(weight))
+    else:
+        fv, W = None, 0.0
+    check_plate_record(where, written, F, fv, W, _normal(table, prefix, E, weight))
     empty = window_load(where, t, force, weight, window) if window is not None else None
     notes += [empty] if empty else []
     check_cutoff(cutoff, t, f"{where}'s samples")
@@ -186,12 +190,9 @@ def plate_loads(model, plates: list[Plate], t: np.ndarray, q: np.ndarray) -> np.
 
 def model_weight(model) -> np.ndarray:
     """N, (2,): the model's weight in its plane, its total mass (bodies and beams) times its gravity."""
-    sc = model.scene
-    mass = sum(b.mass for b in sc.bodies)
-    for b in sc.beams:
-        a, c = (sc.node(n) for n in b.nodes)
-        mass += b.rho * b.A * float(np.hypot(c.x - a.x, c.y - a.y))
-    return mass * np.asarray(sc.gravity, dtype=float)
+    from casflex.lab.plate_checks import scene_mass
+
+    return scene_mass(model.scene) * np.asarray(model.scene.gravity, dtype=float)
 
 
 def plates_under_feet(model, plates: list[Plate], t: np.ndarray, q: np.ndarray) -> None:

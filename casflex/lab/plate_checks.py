@@ -34,7 +34,16 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["MAX_PULL", "MIN_PEAK", "SPIKE", "MAX_COP_DISTANCE", "check_plate_record", "window_load", "check_plate_foot"]
+__all__ = [
+    "scene_mass",
+    "MAX_PULL",
+    "MIN_PEAK",
+    "SPIKE",
+    "MAX_COP_DISTANCE",
+    "check_plate_record",
+    "window_load",
+    "check_plate_foot",
+]
 
 MAX_PULL = 100.0
 MIN_PEAK = 0.2
@@ -51,29 +60,36 @@ def _up(weight: np.ndarray) -> np.ndarray | None:
     return None if not size > 0 else -w / size
 
 
+def scene_mass(scene) -> float:
+    """kg: a scene's total mass, its bodies' and its beams' (rho A L)."""
+    mass = sum(b.mass for b in scene.bodies)
+    for b in scene.beams:
+        a, c = (scene.node(n) for n in b.nodes)
+        mass += b.rho * b.A * float(np.hypot(c.x - a.x, c.y - a.y))
+    return float(mass)
+
+
 def check_plate_record(
     where: str,
     t: np.ndarray,
     force3: np.ndarray,
-    force: np.ndarray,
-    weight: np.ndarray | None,
+    fv: np.ndarray | None,
+    weight: float = 0.0,
     up_hint: str | None = None,
+    stance: bool = True,
 ) -> None:
     """ValueError in one line (``where`` names the file and the plate) for a plate's record at times ``t`` (n,) s
-    as written, its force ``force3`` (n, 3) N in the lab and ``force`` (n, 2) N in the model's plane, unfiltered,
-    that pulls (:data:`MAX_PULL`), carries no stance (:data:`MIN_PEAK`) or holds a single-sample spike
-    (:data:`SPIKE`), module docstring. ``weight``: the model's weight in its plane (N, (2,): mass x g; None or
-    zero: the checks that need it skipped); ``up_hint``: the plate's upward normal as its file gives it (a C3D
-    plate's corners, e.g. "-Z"), said where the force pulls."""
+    as written, its force ``force3`` (n, 3) N in the lab and ``fv`` (n,) N its vertical force (None: not known),
+    unfiltered, that holds a single-sample spike (:data:`SPIKE`), pulls (:data:`MAX_PULL`) or, with ``stance``,
+    carries no stance (:data:`MIN_PEAK`), module docstring; samples that are not numbers are passed over.
+    ``weight`` (N): the model's (mass x g; 0: the checks that need it skipped); ``up_hint``: the plate's upward
+    normal as its file gives it (a C3D plate's corners, e.g. "-Z"), said where the force pulls."""
     _spike(where, t, force3, weight)
-    up = _up(weight) if weight is not None else None
-    if up is None:
+    if fv is None or not np.isfinite(fv).any():
         return
-    fv = force @ up
-    W = float(np.linalg.norm(weight))
-    i = int(np.argmin(fv))
+    fv = np.where(np.isfinite(fv), fv, 0.0)
+    i, k = int(np.argmin(fv)), int(np.argmax(fv))
     if fv[i] < -MAX_PULL:
-        k = int(np.argmax(fv))
         share = 100.0 * np.mean(fv < -MAX_PULL)
         hint = f"; its corners give it the upward normal {up_hint}: numbered in mirrored order?" if up_hint else ""
         raise ValueError(
@@ -82,31 +98,30 @@ def check_plate_record(
             f"at t = {t[k]:g} s (a foot pushes on a plate and cannot pull it): a sign flipped (the "
             f"vertical column negated) or an offset not zeroed{hint}"
         )
-    k = int(np.argmax(fv))
-    if fv[k] < MIN_PEAK * W:
+    if stance and fv[k] < MIN_PEAK * weight:
         raise ValueError(
             f"{where}: its vertical force peaks at {fv[k]:.3g} N (t = {t[k]:g} s) over its whole "
-            f"record, {100 * fv[k] / W:.2g} % of the model's weight ({W:.0f} N; a stance peaks at 1-3 "
-            "times the body's): forces in kN read as N (the loads would be 1000 times too small), or "
-            "a plate no foot steps on; convert its forces to N or give the foot's plate"
+            f"record, {100 * fv[k] / weight:.2g} % of the model's weight ({weight:.0f} N, its mass x g; a stance "
+            "peaks at 1-3 times the body's): forces in kN read as N (the loads would be 1000 times too small), "
+            "or a plate no foot steps on; convert its forces to N or give the foot's plate"
         )
 
 
-def _spike(where: str, t: np.ndarray, force3: np.ndarray, weight: np.ndarray | None) -> None:
+def _spike(where: str, t: np.ndarray, force3: np.ndarray, weight: float) -> None:
     """ValueError for a sample whose force stands above (or below) both its neighbours' by :data:`SPIKE` times
-    the larger of the weight and the record's median loaded force (module docstring)."""
-    f = np.linalg.norm(force3, axis=1)
-    if f.size < 3:
-        return
-    loaded = f[f > _LOADED]
-    level = max(
-        float(np.linalg.norm(weight)) if weight is not None else 0.0, float(np.median(loaded)) if loaded.size else 0.0
-    )
-    if not level > 0:
-        return
-    above = f[1:-1] - np.maximum(f[:-2], f[2:])
-    below = np.minimum(f[:-2], f[2:]) - f[1:-1]
-    jump = np.maximum(above, below)
+    the larger of the weight (N) and the record's median loaded force (module docstring)."""
+    with np.errstate(invalid="ignore"):
+        f = np.linalg.norm(force3, axis=1)
+        if f.size < 3:
+            return
+        loaded = f[f > _LOADED]
+        level = max(weight, float(np.median(loaded)) if loaded.size else 0.0)
+        if not level > 0:
+            return
+        above = f[1:-1] - np.maximum(f[:-2], f[2:])
+        below = np.minimum(f[:-2], f[2:]) - f[1:-1]
+        jump = np.maximum(above, below)
+    jump = np.where(np.isfinite(jump), jump, -np.inf)
     k = int(np.argmax(jump))
     if jump[k] > SPIKE * level:
         i = k + 1
