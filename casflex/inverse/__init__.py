@@ -14,7 +14,9 @@ The data flow (docs/lab.md, "Inverse dynamics"):
    al. 2012) or each at its own (``cutoff_plates``; None: the plates unfiltered, as OpenSim's ID tool); the
    coordinates by Winter's 4th-order filter or, ``filter="opensim"``, by OpenSim's ID tool's; their rates
    by 7-point central differences;
-4. the loads that make the scene follow that motion under the plates' forces: exact per frame for
+4. each plate's line of force checked to pass near its node over its stance (the fitted pose:
+   :func:`casflex.lab.plate_checks.check_plate_foot`); the loads that make the scene follow that motion under
+   the plates' forces: exact per frame for
    rigid segments (:mod:`casflex.inverse.rigid`); with flexible ones (beams), the scene driven along
    the motion by HHT, the bones' deflections from its dynamics (:mod:`casflex.inverse.flexible`);
 5. where asked (uncertain properties, ``marker_noise``, ``bands``), each load's band, one standard deviation, from the

@@ -6,7 +6,8 @@ decide, so that a wrong option or a corrupted file costs a second, not a marker 
 not: the rates are differences on an even grid), markers a body can produce (:mod:`casflex.lab.checks`:
 no jumps of a metre in a frame, no header whose units lie), the cut-off against both the markers' and the
 plates' sampling, each plate's table covering the window, its missing samples (short gaps filled and
-reported, long ones refused), and the memory the run needs. What it changed in the data is in
+reported, long ones refused), each plate against the body (:mod:`casflex.lab.plate_checks`: one node a plate,
+no pull, a stance, no one-sample spike), and the memory the run needs. What it changed in the data is in
 ``warnings`` (also in the report): the result says it, and the command prints it on stderr.
 """
 

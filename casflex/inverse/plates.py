@@ -16,6 +16,10 @@ not a number is missing; a gap of at most :data:`MAX_PLATE_GAP` samples and :dat
 seconds is filled by a cubic spline through the force and the moment and reported, a longer one refused
 in one line; a table that does not cover the trial's window is refused (another trial's file, a clock
 offset), and the plate is never evaluated outside its samples (:meth:`Plate.at`).
+
+A plate is checked against the body (:mod:`casflex.lab.plate_checks`): its unfiltered record in
+:func:`plate_from_table` (it pushes, carries a stance, holds no single-sample spike; a window it carries no
+load in is said), its line of force against its node's fitted place in :func:`plates_under_feet`.
 """
 
 from __future__ import annotations
