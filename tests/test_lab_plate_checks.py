@@ -215,3 +215,15 @@ def test_a_filtered_record_s_ringing_below_zero_is_no_pull(tmp_path, capsys):
     code = main([str(a) for a in [*BASE, "--loads", _mot(tmp_path, ring), "--plate", "ankle=ground_"]])
     _, err = capsys.readouterr()
     assert code == 0 and "error" not in err, err
+
+
+def test_a_sample_dropped_to_zero_mid_stance_is_refused_naming_its_time(tmp_path, capsys):
+    def dropped(v):
+        v[7, 1:4] = 0.0  # t = 0.517 s, the stance's peak (1455 N): a lost sample written as 0
+
+    _refused(
+        [*BASE, "--loads", _mot(tmp_path, dropped), "--plate", "ankle=ground_"],
+        capsys,
+        r"grf.mot: plate 'ground_': a single sample of 0 N at t = 0.517 s stands 1412 N below both its "
+        r"neighbours' \(1412 and 1455 N.*the limit 0.75\): no foot unloads and reloads a plate so in one sample",
+    )

@@ -24,7 +24,11 @@ meets it (OpenSim's Hamner running trial, whose stance peaks at 2.25 body weight
 - :data:`SPIKE` (x): a single sample standing above both its neighbours by more than twice the larger of W and
   the record's median loaded force (its stance's typical level) is a corrupted sample: a body's force rises
   over the 20-30 ms of an impact and falls again over a stance, never up by several body weights and back in
-  one sample (Hamner's impact peak at 60 Hz stands 3 N above its neighbours).
+  one sample (Hamner's impact peak at 60 Hz stands 3 N above its neighbours). :data:`DROP` (x): a sample
+  dropping below both its neighbours by 0.75 times that level (a sample lost, written as 0) likewise: a stance
+  unloads over 50-100 ms; the dip between a runner's impact and active peaks is broader than a sample at 60 Hz
+  and some half a body weight deep. In the repo's trials no sample stands above or below both its neighbours
+  by more than 0.063 times the level.
 - :data:`MAX_COP_DISTANCE` (m): the centre of pressure lies under the foot; the line of the plate's force
   passes within a foot's length (0.25-0.30 m) of any point of the foot (the node the plate acts on), plus the
   node's height above the sole and the fitted pose's error: 0.4 m. Farther, over the stance (the median over
@@ -46,6 +50,7 @@ __all__ = [
     "PULL_SHARE",
     "MIN_PEAK",
     "SPIKE",
+    "DROP",
     "MAX_COP_DISTANCE",
     "check_plate_record",
     "window_load",
@@ -56,6 +61,7 @@ MAX_PULL = 100.0
 PULL_SHARE = 0.1
 MIN_PEAK = 0.2
 SPIKE = 2.0
+DROP = 0.75
 MAX_COP_DISTANCE = 0.4
 #: N: the vertical force below which a plate carries no load (the readers' limit for a centre of pressure)
 _LOADED = 20.0
@@ -117,8 +123,9 @@ def check_plate_record(
 
 
 def _spike(where: str, t: np.ndarray, force3: np.ndarray, weight: float) -> None:
-    """ValueError for a sample whose force stands above (or below) both its neighbours' by :data:`SPIKE` times
-    the larger of the weight (N) and the record's median loaded force (module docstring)."""
+    """ValueError for a sample whose force stands above both its neighbours' by :data:`SPIKE` times the larger of
+    the weight (N) and the record's median loaded force, or below them by :data:`DROP` times it (module
+    docstring)."""
     with np.errstate(invalid="ignore"):
         f = np.linalg.norm(force3, axis=1)
         if f.size < 3:
@@ -129,18 +136,19 @@ def _spike(where: str, t: np.ndarray, force3: np.ndarray, weight: float) -> None
             return
         above = f[1:-1] - np.maximum(f[:-2], f[2:])
         below = np.minimum(f[:-2], f[2:]) - f[1:-1]
-        jump = np.maximum(above, below)
-    jump = np.where(np.isfinite(jump), jump, -np.inf)
-    k = int(np.argmax(jump))
-    if jump[k] > SPIKE * level:
+    rel = np.maximum(above / SPIKE, below / DROP) / level  # 1 at the limit
+    rel = np.where(np.isfinite(rel), rel, -np.inf)
+    k = int(np.argmax(rel))
+    if rel[k] > 1.0:
         i = k + 1
-        way = "above" if above[k] >= below[k] else "below"
+        up = above[k] / SPIKE >= below[k] / DROP
+        jump, way = (above[k], "above") if up else (below[k], "below")
         raise ValueError(
-            f"{where}: a single sample of {f[i]:.4g} N at t = {t[i]:g} s stands {jump[k]:.4g} N {way} "
+            f"{where}: a single sample of {f[i]:.4g} N at t = {t[i]:g} s stands {jump:.4g} N {way} "
             f"both its neighbours' ({f[i - 1]:.4g} and {f[i + 1]:.4g} N, {t[i + 1] - t[i]:.3g} s "
-            f"apart), {jump[k] / level:.3g} times the stance's level ({level:.0f} N): no foot loads "
-            "and unloads a plate so in one sample; a corrupted sample: delete it (an empty cell is a "
-            "gap, filled by a spline)"
+            f"apart), {jump / level:.3g} times the stance's level ({level:.0f} N; the limit "
+            f"{SPIKE if up else DROP:g}): no foot {'loads and unloads' if up else 'unloads and reloads'} a plate "
+            "so in one sample; a corrupted sample: delete it (an empty cell is a gap, filled by a spline)"
         )
 
 
