@@ -208,3 +208,23 @@ def test_the_c3d_walking_trials_right_plate_goes_to_the_right_foot():
     assert (c.foot, round(c.strike, 3), round(c.off, 3)) == ("ankle", 2.674, 3.244)
     with pytest.raises(ValueError, match=r"plate '1_ground_', contact \[start\]-2.751 s.*nearest: ankle, 0.49 m"):
         assign_plates(leg, C3D, None, PLANE)
+
+
+def test_a_study_trial_s_plate_whose_force_pulls_is_refused_not_left_out():
+    """A plate whose vertical column is negated has no contact above 20 N: the study left it out and the foot's
+    stance went without its ground reaction (exit 0). It is refused, naming the plate and what was seen."""
+    pytest.importorskip("ezc3d")
+
+    from casflex.lab import read_c3d
+    from casflex.scene.io import loads_scene
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from lab_scenes import C3D, PLANE, walking2_leg
+
+    lab, table = read_c3d(C3D)
+    values = table.values.copy()
+    values[:, table.names.index("ground_force_vz")] *= -1
+    flipped = dataclasses.replace(table, values=values)
+    with pytest.raises(ValueError, match=r"walking2_excerpt.c3d: plate 'ground_': its vertical force pulls the foot "
+                                         r"down: -951 N at t = 2.795 s"):
+        assign_plates(loads_scene(walking2_leg()), lab, flipped, PLANE)

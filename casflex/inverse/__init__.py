@@ -14,7 +14,9 @@ The data flow (docs/lab.md, "Inverse dynamics"):
    al. 2012) or each at its own (``cutoff_plates``; None: the plates unfiltered, as OpenSim's ID tool); the
    coordinates by Winter's 4th-order filter or, ``filter="opensim"``, by OpenSim's ID tool's; their rates
    by 7-point central differences;
-4. the loads that make the scene follow that motion under the plates' forces: exact per frame for
+4. each plate's line of force checked to pass near its node over its stance (the fitted pose:
+   :func:`casflex.lab.plate_checks.check_plate_foot`); the loads that make the scene follow that motion under
+   the plates' forces: exact per frame for
    rigid segments (:mod:`casflex.inverse.rigid`); with flexible ones (beams), the scene driven along
    the motion by HHT, the bones' deflections from its dynamics (:mod:`casflex.inverse.flexible`);
 5. where asked (uncertain properties, ``marker_noise``, ``bands``), each load's band, one standard deviation, from the
@@ -33,7 +35,7 @@ from casflex.inverse.fit import FittedMotion, filtered_rates, fit_markers
 from casflex.inverse.flexible import driven_loads
 from casflex.inverse.inputs import InverseInputs, inverse_model, prepare
 from casflex.inverse.lab_names import lab_loads, lab_name
-from casflex.inverse.plates import Plate, plate_loads
+from casflex.inverse.plates import Plate, plate_loads, plates_under_feet
 from casflex.inverse.result import InverseResult
 from casflex.inverse.rigid import rigid_loads
 from casflex.inverse.tree import KinematicTree, kinematic_tree
@@ -139,7 +141,9 @@ def solve(inputs: InverseInputs, *, dt: float | None = None, alpha: float | None
                                               else "Butterworth 4th order zero-lag") + f" at {cutoff:g} Hz")
                   if cutoff else "coordinates not filtered")
     plates = list(inputs.plates)
+    q_fit = np.array(tree.forward.map(t.size)(z.T)).T if plates or model.n_con != model.n_dof - tree.n else None
     if plates:
+        plates_under_feet(model, plates, t, q_fit)
         fc = inputs.settings.get("cutoff_plates_hz", cutoff)
         report.append(f"plates {', '.join(f'{p.name!r} on {p.node}' for p in plates)}: force and moment about "
                       f"the lab origin filtered {f'at {fc:g} Hz' if fc else 'not at all'}")
@@ -148,7 +152,6 @@ def solve(inputs: InverseInputs, *, dt: float | None = None, alpha: float | None
         sol = rigid_loads(tree, t, z, zd, zdd, model.p_nominal, external)
     else:
         run = model.scene.run
-        q_fit = np.array(tree.forward.map(t.size)(z.T)).T
         sol = driven_loads(tree, t, z, plates, q_fit, dt=run.dt if dt is None else dt,
                            alpha=run.alpha if alpha is None else alpha, compiled=compiled)
         report.append(f"flexible segments: driven by HHT (alpha {run.alpha if alpha is None else alpha:g}), the "

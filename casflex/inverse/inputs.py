@@ -6,7 +6,8 @@ decide, so that a wrong option or a corrupted file costs a second, not a marker 
 not: the rates are differences on an even grid), markers a body can produce (:mod:`casflex.lab.checks`:
 no jumps of a metre in a frame, no header whose units lie), the cut-off against both the markers' and the
 plates' sampling, each plate's table covering the window, its missing samples (short gaps filled and
-reported, long ones refused), and the memory the run needs. What it changed in the data is in
+reported, long ones refused), each plate against the body (:mod:`casflex.lab.plate_checks`: one node a plate,
+no pull, a stance, no one-sample spike), and the memory the run needs. What it changed in the data is in
 ``warnings`` (also in the report): the result says it, and the command prints it on stderr.
 """
 
@@ -18,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from casflex.inverse.plates import Plate, plate_from_table
+from casflex.inverse.plates import Plate, model_weight, plate_from_table
 from casflex.inverse.tree import KinematicTree, kinematic_tree
 from casflex.lab.lowpass import check_cutoff, even_times
 from casflex.model import Model
@@ -228,6 +229,19 @@ def _memory(model: Model, tree: KinematicTree, t: np.ndarray, n_markers: int, dt
                          f"memory and {format_bytes(avail)} are available; take a shorter window")
 
 
+def _one_node_a_plate(table, plates: dict[str, str]) -> None:
+    """ValueError naming the plate given to two nodes: its load would be counted twice."""
+    from casflex.lab.filtering import _plate_columns
+
+    seen: dict[str, str] = {}
+    for node, prefix in plates.items():
+        p = _plate_columns(table, prefix)
+        if p in seen:
+            raise ValueError(f"plates: {table.source}: plate {p!r} is given to both {seen[p]!r} and {node!r}: its "
+                             "load would be counted twice; give each plate to the one foot that stands on it")
+        seen[p] = node
+
+
 def weighted(scene, tasks) -> tuple[object, list[str]]:
     """(the scene with its markers weighted by ``tasks``, warnings): an OpenSim IK task set or setup file
     (:func:`casflex.lab.setups.read_tasks`) or a dict label -> weight. As OpenSim's IK, a scene marker with no
@@ -306,9 +320,10 @@ def prepare(scene, markers=None, *, plane="X,Y", grf=None, plates: dict[str, str
     warnings = [*task_notes, *notes]
     plate_list = []
     fc = cutoff if cutoff_plates == "same" else cutoff_plates
+    _one_node_a_plate(table, plates)
     for node, prefix in plates.items():
         plate = plate_from_table(table, prefix, node, pl, fc, window=(float(t[0]), float(t[-1])), rate=rate,
-                                 trial=source)
+                                 trial=source, weight=model_weight(model))
         plate_list.append(plate)
         warnings += plate.notes
     _memory(model, tree, t, len(labels), dt)

@@ -16,6 +16,10 @@ not a number is missing; a gap of at most :data:`MAX_PLATE_GAP` samples and :dat
 seconds is filled by a cubic spline through the force and the moment and reported, a longer one refused
 in one line; a table that does not cover the trial's window is refused (another trial's file, a clock
 offset), and the plate is never evaluated outside its samples (:meth:`Plate.at`).
+
+A plate is checked against the body (:mod:`casflex.lab.plate_checks`): its unfiltered record in
+:func:`plate_from_table` (it pushes, carries a stance, holds no single-sample spike; a window it carries no
+load in is said), its line of force against its node's fitted place in :func:`plates_under_feet`.
 """
 
 from __future__ import annotations
@@ -28,8 +32,10 @@ from casflex.lab import LabTable, Plane
 from casflex.lab.c3d import MIN_PLATE_FORCE
 from casflex.lab.filtering import plate_wrench
 from casflex.lab.lowpass import check_cutoff, even_times, lowpass, runs
+from casflex.lab.plate_checks import check_plate_record, window_load
 
-__all__ = ["Plate", "plate_from_table", "plate_loads", "MAX_PLATE_GAP", "MAX_PLATE_GAP_S"]
+__all__ = ["Plate", "plate_from_table", "plate_loads", "plates_under_feet", "model_weight", "MAX_PLATE_GAP",
+           "MAX_PLATE_GAP_S"]
 
 #: samples: the longest run of missing plate samples filled (the markers' :data:`casflex.lab.filtering.MAX_GAP`).
 MAX_PLATE_GAP = 10
@@ -50,6 +56,7 @@ class Plate:
     force: np.ndarray
     moment: np.ndarray
     notes: tuple[str, ...] = ()
+    source: str = ""  # the file and the plate, as messages name them
 
     def at(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(force (k, 2), moment (k,)) at times t (s), linear between samples. ValueError for a time more than
@@ -112,8 +119,8 @@ def _fill(t: np.ndarray, F: np.ndarray, M: np.ndarray, where: str, written: np.n
 
 
 def plate_from_table(table: LabTable, prefix: str, node: str, plane: Plane, cutoff: float | None, *,
-                     window: tuple[float, float] | None = None, rate: float | None = None, trial: str = "the trial"
-                     ) -> Plate:
+                     window: tuple[float, float] | None = None, rate: float | None = None, trial: str = "the trial",
+                     weight: np.ndarray | None = None) -> Plate:
     """The plate ``prefix`` of ``table`` on ``node``, in ``plane``, filtered at ``cutoff`` Hz (None: as
     recorded). The moment about the lab's origin from the table's ``<prefix>moment_{x,y,z}`` where it has
     them (C3D plates, :func:`casflex.lab.read_c3d`), else p x F + T (:func:`casflex.lab.filtering.plate_wrench`:
@@ -121,7 +128,9 @@ def plate_from_table(table: LabTable, prefix: str, node: str, plane: Plane, cuto
     table must cover. ``rate`` (Hz): the samples' rate where the table's times round it (a .mot at the markers'
     rate, its times written to the ms: their own slope is off by some 1e-4 and the samples would be taken
     between the frames); the table's header ``rate`` (C3D) otherwise. Missing samples as the module docstring
-    says; the plate's ``notes`` say what was done."""
+    says; the plate's ``notes`` say what was done. ``weight`` (N, (2,)): the model's mass x gravity in the plane:
+    its record, unfiltered, is checked against the body (:func:`casflex.lab.plate_checks.check_plate_record`: it
+    pushes, carries a stance, holds no single-sample spike) and a window it carries no load in is said."""
     from casflex.lab.filtering import _plate_columns
 
     where = f"{table.source}: plate {_plate_columns(table, prefix)!r}"
@@ -140,9 +149,34 @@ def plate_from_table(table: LabTable, prefix: str, node: str, plane: Plane, cuto
     E = plane.matrix
     n = np.cross(E[0], E[1])
     force, moment = F @ E.T, M3 @ n
+    if weight is not None and np.linalg.norm(weight) > 0:  # the vertical: against the model's gravity
+        fv, W = force @ (-np.asarray(weight) / np.linalg.norm(weight)), float(np.linalg.norm(weight))
+    else:
+        fv, W = None, 0.0
+    check_plate_record(where, written, F, fv, W, _normal(table, prefix, E, weight))
+    empty = window_load(where, t, force, weight, window) if window is not None else None
+    notes += [empty] if empty else []
     check_cutoff(cutoff, t, f"{where}'s samples")
     both = lowpass(t, np.column_stack([force, moment]), cutoff, what=where)
-    return Plate(prefix, node, t, both[:, :2], both[:, 2], tuple(notes))
+    return Plate(prefix, node, t, both[:, :2], both[:, 2], tuple(notes), where)
+
+
+def _normal(table: LabTable, prefix: str, E: np.ndarray, weight: np.ndarray | None) -> str | None:
+    """A C3D plate's upward normal as its corners give it (the table's header ``up``, one a plate) where it points
+    down, against the model's gravity (lab axes ``E`` (2, 3) of the plane); else None."""
+    from casflex.lab.filtering import _plate_columns
+
+    ups = str(table.header.get("up", "")).split(",")
+    if weight is None or "plates" not in table.header or not ups[0]:
+        return None
+    p = _plate_columns(table, prefix)
+    i = 0 if p == "ground_" else int(p.split("_")[0]) if p.split("_")[0].isdigit() else -1
+    if not 0 <= i < len(ups) and len(ups) != 1:
+        return None
+    axis = ups[i if len(ups) > 1 else 0].strip()
+    u = np.zeros(3)
+    u["XYZ".index(axis[-1])] = -1.0 if axis.startswith("-") else 1.0
+    return axis if float(u @ E.T @ np.asarray(weight, dtype=float)) > 0 else None
 
 
 def plate_loads(model, plates: list[Plate], t: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -156,3 +190,23 @@ def plate_loads(model, plates: list[Plate], t: np.ndarray, q: np.ndarray) -> np.
         f[:, i + 1] += F[:, 1]
         f[:, i + 2] += Mo - (q[:, i] * F[:, 1] - q[:, i + 1] * F[:, 0])
     return f
+
+
+def model_weight(model) -> np.ndarray:
+    """N, (2,): the model's weight in its plane, its total mass (bodies and beams) times its gravity."""
+    from casflex.lab.plate_checks import scene_mass
+
+    return scene_mass(model.scene) * np.asarray(model.scene.gravity, dtype=float)
+
+
+def plates_under_feet(model, plates: list[Plate], t: np.ndarray, q: np.ndarray) -> None:
+    """ValueError in one line for a plate whose force passes farther from its node than a centre of pressure
+    under the foot can (:func:`casflex.lab.plate_checks.check_plate_foot`) over its stance, with the fitted
+    configurations q (k, n_dof) at times t (k,) s: the plate under another foot, or its origin wrong."""
+    from casflex.lab.plate_checks import check_plate_foot
+
+    weight = model_weight(model)
+    for pl in plates:
+        i = 3 * model.node_names.index(pl.node)
+        F, Mo = pl.at(t)
+        check_plate_foot(pl.source or f"plate {pl.name!r}", pl.node, t, F, Mo, q[:, i:i + 2], weight)

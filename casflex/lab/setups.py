@@ -115,6 +115,10 @@ def read_external_loads(path: str | os.PathLike[str]) -> ExternalLoads:
         body, ident = _identifiers(path, force)
         if body in plates:
             raise ValueError(f"{path}: two external forces act on {body!r}; casflex takes one plate a body")
+        twin = next((b for b, other in plates.items() if other[0] == ident[0]), None)
+        if twin is not None:
+            raise ValueError(f"{path}: the external forces on {twin!r} and {body!r} both take the columns "
+                             f"{ident[0]!r}: one plate's load would be counted twice; give each body its own plate")
         plates[body] = ident
     if not plates:
         raise ValueError(f"{path}: no ExternalForce")

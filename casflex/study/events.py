@@ -35,6 +35,7 @@ import numpy as np
 from casflex.lab.c3d import MIN_PLATE_FORCE
 from casflex.lab.filtering import _plate_columns
 from casflex.lab.plane import Plane
+from casflex.lab.plate_checks import check_plate_record, scene_mass
 from casflex.lab.tables import LabMarkers, LabTable, increasing_times
 
 __all__ = ["Contact", "contacts", "vertical_force", "tree_walk", "below", "feet", "plate_contacts", "assign_plates",
@@ -186,7 +187,8 @@ def plate_contacts(scene, markers, grf=None, plane: Plane | str = "X,Y", prefixe
     """Every contact of the plates ``prefixes`` (default: all the table's, ``<prefix>force_vx`` ...) with the
     foot over it (module docstring), in plate order then time. ``markers``: a LabMarkers or a .trc / .c3d
     file; ``grf``: a LabTable or a .mot / .sto / .c3d file (None: the markers' C3D). ValueError in one line:
-    a scene without feet in the trial, a plate unknown, no foot over a contact."""
+    a scene without feet in the trial, a plate unknown, no foot over a contact, a plate whose vertical force pulls
+    or holds a one-sample spike (:func:`casflex.lab.plate_checks.check_plate_record`)."""
     lab, table = read_trial(markers, grf)
     pl = _plane(plane)
     axes = np.vstack([pl.matrix[0], np.cross(*pl.matrix), pl.matrix[1]])  # the floor's two axes, then up
@@ -195,9 +197,13 @@ def plate_contacts(scene, markers, grf=None, plane: Plane | str = "X,Y", prefixe
     if not cands:
         raise ValueError(f"{lab.source}: no marker of the scene's feet {sorted(feet(scene))} is in the trial")
     found = []
+    weight = scene_mass(scene) * float(np.hypot(*scene.gravity))
     for prefix in prefixes or plate_prefixes(table):
         p = _plate_columns(table, prefix)
         fv = vertical_force(table, p, pl)
+        force = np.column_stack([table.column(f"{p}force_v{a}") for a in "xyz"])
+        # a plate that pulls or spikes would have its stances missed or cut: refused, whether a foot is found on it
+        check_plate_record(f"{table.source}: plate {p!r}", table.t, force, fv, weight, stance=False)
         P = np.column_stack([table.column(f"{p}force_p{a}") for a in "xyz"])
         for a, b in contacts(table.t, fv, threshold, min_duration):
             lo, hi = (table.t[0] if a is None else a), (table.t[-1] if b is None else b)

@@ -1,0 +1,205 @@
+"""What a force plate under a foot records: it pushes, it carries about the body's weight over a stance, it lies
+under its foot. A plate that contradicts it is refused in one line that names the file, the plate and what was
+seen, before the loads it would make wrong are computed.
+
+:mod:`casflex.lab.checks` refuses values no lab records (a force of 20 kN, a centre of pressure 100 m away);
+the checks here take the body into account: the model's weight W (its total mass x g, N, in the model's plane;
+for a model of part of the body, e.g. a pelvis and one leg, a third of the subject's, which makes the checks
+that use it lenient, never strict) and, once the pose is known, the node the plate acts on. The vertical is
+the model's up, against its gravity. Each limit is far from what a body does, so that a real trial never
+meets it (OpenSim's Hamner running trial, whose stance peaks at 2.25 body weights, and its walking2.c3d pass):
+
+- :data:`MAX_PULL` (N), :data:`PULL_SHARE`: a foot pushes on a plate and cannot pull it; a vertical force
+  below -100 N and below -0.1 x the record's largest upward force is a sign flipped (the vertical column
+  negated; a C3D plate whose corners are numbered in mirrored order, so that its normal points down) or an
+  offset not zeroed. Plates that labs leave unzeroed read tens of newtons (walking2.c3d's: -14 and -20 N
+  unloaded), their noise some newtons; a record filtered before export rings below zero after a stance by
+  at most 3.4 % of its peak (the zero-lag Butterworth's step response; a 2 kN running stance filtered at
+  6 Hz: -44 N).
+- :data:`MIN_PEAK` (x W): a plate given to a foot whose vertical force never reaches a fifth of the model's
+  weight over its whole record carries no stance (a stance peaks at 1-1.3 body weights walking, 2-3 running):
+  forces in kN where N are read (the loads would be 1000 times too small), or a plate no foot steps on. A
+  record that carries a stance but none inside the trial's window is said, not refused (:func:`window_load`:
+  a window may end before the foot reaches the plate; its load there is zero, as computed).
+- :data:`SPIKE` (x): a single sample standing above both its neighbours by more than twice the larger of W and
+  the record's median loaded force (its stance's typical level) is a corrupted sample: a body's force rises
+  over the 20-30 ms of an impact and falls again over a stance, never up by several body weights and back in
+  one sample (Hamner's impact peak at 60 Hz stands 3 N above its neighbours). :data:`DROP` (x): a sample
+  dropping below both its neighbours by 0.75 times that level (a sample lost, written as 0) likewise: a stance
+  unloads over 50-100 ms; the dip between a runner's impact and active peaks is broader than a sample at 60 Hz
+  and some half a body weight deep. In the repo's trials no sample stands above or below both its neighbours
+  by more than 0.063 times the level.
+- :data:`MAX_COP_DISTANCE` (m): the centre of pressure lies under the foot; the line of the plate's force
+  passes within a foot's length (0.25-0.30 m) of any point of the foot (the node the plate acts on), plus the
+  node's height above the sole and the fitted pose's error: 0.4 m. Farther, over the stance (the median over
+  its samples loaded above a quarter of its peak), the plate is under the other foot, or its origin (a C3D
+  plate's corners, a centre of pressure in another frame) is wrong. The line is the force's through its centre
+  of pressure (the node's distance to it, |M_node| / |F| in the plane): for a force near vertical, the
+  distance across the floor, whatever the node's height. Measured (medians): Hamner's stride, the ankle 0.11 m
+  (0.00-0.17 over the stance); its whole trial, calcn_r 0.13 m and calcn_l 0.19 m; walking2.c3d's right ankle
+  0.12 m; a plate given to the other foot, 0.54 m (walking2) and 0.55 m (Hamner).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "scene_mass",
+    "MAX_PULL",
+    "PULL_SHARE",
+    "MIN_PEAK",
+    "SPIKE",
+    "DROP",
+    "MAX_COP_DISTANCE",
+    "check_plate_record",
+    "window_load",
+    "check_plate_foot",
+]
+
+MAX_PULL = 100.0
+PULL_SHARE = 0.1
+MIN_PEAK = 0.2
+SPIKE = 2.0
+DROP = 0.75
+MAX_COP_DISTANCE = 0.4
+#: N: the vertical force below which a plate carries no load (the readers' limit for a centre of pressure)
+_LOADED = 20.0
+
+
+def _up(weight: np.ndarray) -> np.ndarray | None:
+    """The model's up in its plane (2,), against the weight (N, (2,)); None where it has none."""
+    w = np.asarray(weight, dtype=float)
+    size = float(np.linalg.norm(w))
+    return None if not size > 0 else -w / size
+
+
+def scene_mass(scene) -> float:
+    """kg: a scene's total mass, its bodies' and its beams' (rho A L)."""
+    mass = sum(b.mass for b in scene.bodies)
+    for b in scene.beams:
+        a, c = (scene.node(n) for n in b.nodes)
+        mass += b.rho * b.A * float(np.hypot(c.x - a.x, c.y - a.y))
+    return float(mass)
+
+
+def check_plate_record(
+    where: str,
+    t: np.ndarray,
+    force3: np.ndarray,
+    fv: np.ndarray | None,
+    weight: float = 0.0,
+    up_hint: str | None = None,
+    stance: bool = True,
+) -> None:
+    """ValueError in one line (``where`` names the file and the plate) for a plate's record at times ``t`` (n,) s
+    as written, its force ``force3`` (n, 3) N in the lab and ``fv`` (n,) N its vertical force (None: not known),
+    unfiltered, that holds a single-sample spike (:data:`SPIKE`), pulls (:data:`MAX_PULL`) or, with ``stance``,
+    carries no stance (:data:`MIN_PEAK`), module docstring; samples that are not numbers are passed over.
+    ``weight`` (N): the model's (mass x g; 0: the checks that need it skipped); ``up_hint``: the plate's upward
+    normal as its file gives it (a C3D plate's corners, e.g. "-Z"), said where the force pulls."""
+    _spike(where, t, force3, weight)
+    if fv is None or not np.isfinite(fv).any():
+        return
+    fv = np.where(np.isfinite(fv), fv, 0.0)
+    i, k = int(np.argmin(fv)), int(np.argmax(fv))
+    pull = max(MAX_PULL, PULL_SHARE * fv[k])
+    if fv[i] < -pull:
+        share = 100.0 * np.mean(fv < -pull)
+        hint = f"; its corners give it the upward normal {up_hint}: numbered in mirrored order?" if up_hint else ""
+        raise ValueError(
+            f"{where}: its vertical force pulls the foot down: {fv[i]:.0f} N at t = {t[i]:g} s, below "
+            f"-{pull:.0f} N at {share:.0f} % of its samples, its largest upward force {fv[k]:.0f} N "
+            f"at t = {t[k]:g} s (a foot pushes on a plate and cannot pull it): a sign flipped (the "
+            f"vertical column negated) or an offset not zeroed{hint}"
+        )
+    if stance and fv[k] < MIN_PEAK * weight:
+        raise ValueError(
+            f"{where}: its vertical force peaks at {fv[k]:.3g} N (t = {t[k]:g} s) over its whole "
+            f"record, {100 * fv[k] / weight:.2g} % of the model's weight ({weight:.0f} N, its mass x g; a stance "
+            "peaks at 1-3 times the body's): forces in kN read as N (the loads would be 1000 times too small), "
+            "or a plate no foot steps on; convert its forces to N or give the foot's plate"
+        )
+
+
+def _spike(where: str, t: np.ndarray, force3: np.ndarray, weight: float) -> None:
+    """ValueError for a sample whose force stands above both its neighbours' by :data:`SPIKE` times the larger of
+    the weight (N) and the record's median loaded force, or below them by :data:`DROP` times it (module
+    docstring)."""
+    with np.errstate(invalid="ignore"):
+        f = np.linalg.norm(force3, axis=1)
+        if f.size < 3:
+            return
+        loaded = f[f > _LOADED]
+        level = max(weight, float(np.median(loaded)) if loaded.size else 0.0)
+        if not level > 0:
+            return
+        above = f[1:-1] - np.maximum(f[:-2], f[2:])
+        below = np.minimum(f[:-2], f[2:]) - f[1:-1]
+    rel = np.maximum(above / SPIKE, below / DROP) / level  # 1 at the limit
+    rel = np.where(np.isfinite(rel), rel, -np.inf)
+    k = int(np.argmax(rel))
+    if rel[k] > 1.0:
+        i = k + 1
+        up = above[k] / SPIKE >= below[k] / DROP
+        jump, way = (above[k], "above") if up else (below[k], "below")
+        raise ValueError(
+            f"{where}: a single sample of {f[i]:.4g} N at t = {t[i]:g} s stands {jump:.4g} N {way} "
+            f"both its neighbours' ({f[i - 1]:.4g} and {f[i + 1]:.4g} N, {t[i + 1] - t[i]:.3g} s "
+            f"apart), {jump / level:.3g} times the stance's level ({level:.0f} N; the limit "
+            f"{SPIKE if up else DROP:g}): no foot {'loads and unloads' if up else 'unloads and reloads'} a plate "
+            "so in one sample; a corrupted sample: delete it (an empty cell is a gap, filled by a spline)"
+        )
+
+
+def window_load(
+    where: str, t: np.ndarray, force: np.ndarray, weight: np.ndarray | None, window: tuple[float, float]
+) -> str | None:
+    """A line saying that the plate (its force (n, 2) N in the plane at times t (n,) s) carries no load
+    (its vertical force under 20 N) inside ``window`` (s), else None: its load there is zero, as computed
+    (module docstring)."""
+    up = _up(weight) if weight is not None else None
+    if up is None:
+        return None
+    inside = (t >= window[0] - 1e-9) & (t <= window[1] + 1e-9)
+    fv = force[inside] @ up
+    if fv.size and fv.max() < _LOADED:
+        return (
+            f"{where}: no load in the window {window[0]:g}..{window[1]:g} s (its vertical force at most "
+            f"{fv.max():.3g} N): no foot steps on it there; it adds nothing"
+        )
+    return None
+
+
+def check_plate_foot(
+    where: str,
+    node: str,
+    t: np.ndarray,
+    force: np.ndarray,
+    moment: np.ndarray,
+    node_xy: np.ndarray,
+    weight: np.ndarray | None,
+) -> None:
+    """ValueError in one line when the line of a plate's force passes farther than :data:`MAX_COP_DISTANCE`
+    from the node it acts on over its stance: force (k, 2) N and moment about the lab's origin (k,) N m in the
+    plane, the node's position ``node_xy`` (k, 2) m, at times t (k,) s; the stance: the samples whose vertical
+    force exceeds a quarter of its peak and 20 N (module docstring)."""
+    up = _up(weight) if weight is not None else None
+    if up is None:
+        return
+    fv = force @ up
+    stance = fv > max(_LOADED, 0.25 * float(fv.max(initial=0.0)))
+    if not stance.any():
+        return
+    F, x = force[stance], node_xy[stance]
+    about = moment[stance] - (x[:, 0] * F[:, 1] - x[:, 1] * F[:, 0])
+    d = np.abs(about) / np.linalg.norm(F, axis=1)
+    mid = float(np.median(d))
+    if mid > MAX_COP_DISTANCE:
+        ts = t[stance]
+        raise ValueError(
+            f"{where}: its force passes {mid:.2f} m from {node!r} over its stance (median of "
+            f"{int(stance.sum())} samples at t = {ts[0]:g}..{ts[-1]:g} s; {d.min():.2f}..{d.max():.2f} "
+            f"m): a centre of pressure lies under its foot, within a foot's length of it (the limit "
+            f"is {MAX_COP_DISTANCE:g} m); the plate is under another foot, or its origin is wrong"
+        )

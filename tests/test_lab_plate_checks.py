@@ -1,0 +1,229 @@
+"""Force plates that contradict the body are refused, naming the file, the plate and what was seen
+(casflex.lab.plate_checks through casflex.inverse: ``casflex inverse`` and the Python API a study's trials call).
+
+Each bad file is the Hamner stride's plate table (or the walking2 C3D excerpt) with one thing changed; each of
+these gave loads with exit status 0 before: a vertical column negated, a -300 N offset through the swing, a C3D
+plate's corners in mirrored order, one plate given to two nodes (on the command line or in an ExternalLoads
+file), a centre of pressure half a metre from the foot, forces in kN, a one-sample spike of 11.6 kN. The
+repo's real trials pass every check.
+"""
+
+from __future__ import annotations
+
+import re
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from casflex.cli import main
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+LAB = Path(__file__).parent / "data" / "lab"
+TRC, GRF = LAB / "hamner_running_stride.trc", LAB / "hamner_running_stride_grf.mot"
+BASE = ["inverse", "hamner_leg", "--root", "pelvis", "--cutoff", "10", "--quiet", "--data", TRC]
+VY, PX = 2, 4  # the stride table's columns (time first): ground_force_vy, ground_force_px
+
+
+def _mot(tmp_path: Path, edit, name: str = "grf.mot") -> Path:
+    """A copy of the stride's plate table with ``edit(values)`` applied to its rows (n, 10: time first)."""
+    lines = GRF.read_text().splitlines()
+    end = lines.index("endheader") + 2
+    values = np.array([[float(v) for v in ln.split("\t")] for ln in lines[end:] if ln.strip()])
+    edit(values)
+    path = tmp_path / name
+    path.write_text("\n".join(lines[:end] + ["\t".join(repr(float(v)) for v in r) for r in values]) + "\n")
+    return path
+
+
+def _refused(argv: list, capsys, match: str, out: Path | None = None) -> str:
+    """The command's one line of refusal (exit 2, nothing written), which must match ``match``."""
+    code = main([str(a) for a in argv] + (["--out", str(out)] if out else []))
+    _, err = capsys.readouterr()
+    lines = err.strip().splitlines()
+    assert code == 2 and len(lines) == 1 and lines[0].startswith("casflex: error: "), (code, err)
+    assert re.search(match, lines[0]), lines[0]
+    assert out is None or not out.exists()
+    return lines[0]
+
+
+def test_a_vertical_column_negated_is_refused(tmp_path, capsys):
+    def flip(v):
+        v[:, VY] *= -1
+
+    line = _refused(
+        [*BASE, "--loads", _mot(tmp_path, flip), "--plate", "ankle=ground_"],
+        capsys,
+        r"grf.mot: plate 'ground_': its vertical force pulls the foot down: -1455 N at t = 0.517 s",
+        tmp_path / "loads.csv",
+    )
+    assert "its largest upward force 0 N" in line and "a sign flipped" in line
+
+
+def test_an_offset_of_minus_300_n_through_the_swing_is_refused(tmp_path, capsys):
+    def offset(v):
+        v[:, VY] -= 300.0
+
+    line = _refused(
+        [*BASE, "--loads", _mot(tmp_path, offset), "--plate", "ankle=ground_"],
+        capsys,
+        r"pulls the foot down: -300 N at t = 0.683 s, below -115 N at 68 % of its samples",
+    )
+    assert "largest upward force 1155 N" in line and "an offset not zeroed" in line
+
+
+def test_a_c3d_plate_with_its_corners_in_mirrored_order_is_refused(tmp_path):
+    """ezc3d turns the plate's forces by its corners: numbered the other way round, the plate's normal points
+    down (-Z) and its vertical force with it; the reader keeps what the file says, the body refuses it."""
+    ezc3d = pytest.importorskip("ezc3d")
+    from lab_scenes import C3D, PLANE, walking2_leg
+
+    from casflex.inverse import inverse_dynamics
+    from casflex.scene import loads_scene
+
+    c = ezc3d.c3d(str(C3D))
+    corners = np.array(c["parameters"]["FORCE_PLATFORM"]["CORNERS"]["value"])
+    corners[:, :, 0] = corners[:, ::-1, 0]  # plate 1's corners 4, 3, 2, 1
+    c["parameters"]["FORCE_PLATFORM"]["CORNERS"]["value"] = corners
+    path = tmp_path / "mirrored.c3d"
+    c.write(str(path))
+    leg = loads_scene(walking2_leg())
+    match = (
+        r"mirrored.c3d: plate 'ground_': its vertical force pulls the foot down: -951 N at t = 2.795 s.*"
+        r"its corners give it the upward normal -Z: numbered in mirrored order\?"
+    )
+    with pytest.raises(ValueError, match=match):
+        inverse_dynamics(leg, str(path), grf=str(path), plates={"ankle": "ground_"}, plane=PLANE)
+
+
+def test_one_plate_given_to_two_nodes_is_refused(tmp_path, capsys):
+    _refused(
+        [*BASE, "--loads", GRF, "--plate", "ankle=ground_", "--plate", "knee=ground_"],
+        capsys,
+        r"plates: .*hamner_running_stride_grf.mot: plate 'ground_' is given to both 'ankle' and 'knee': its "
+        "load would be counted twice",
+    )
+
+
+def test_one_plate_on_two_bodies_in_an_external_loads_file_is_refused(tmp_path):
+    from casflex.inverse import inverse_dynamics
+
+    force = """<ExternalForce name="{side}"><applied_to_body>{body}</applied_to_body>
+<force_expressed_in_body>ground</force_expressed_in_body><point_expressed_in_body>ground</point_expressed_in_body>
+<force_identifier>ground_force_v</force_identifier><point_identifier>ground_force_p</point_identifier>
+<torque_identifier>ground_torque_</torque_identifier></ExternalForce>"""
+    loads = tmp_path / "loads.xml"
+    loads.write_text(
+        f'<?xml version="1.0"?><OpenSimDocument><ExternalLoads name="loads"><objects>'
+        f"{force.format(side='right', body='calcn_r')}{force.format(side='left', body='talus_r')}"
+        f"</objects><datafile>{GRF}</datafile></ExternalLoads></OpenSimDocument>"
+    )
+    with pytest.raises(
+        ValueError,
+        match=r"loads.xml: the external forces on 'calcn_r' and 'talus_r' both take the "
+        r"columns 'ground_force_v': one plate's load would be counted twice",
+    ):
+        inverse_dynamics(LAB / "hamner_subject02_leg.osim", TRC, grf=loads)
+
+
+def test_a_centre_of_pressure_half_a_metre_from_its_foot_is_refused(tmp_path, capsys):
+    """The stride's centre of pressure moved 0.5 m forward (a plate's origin wrong): its force passes 0.61 m
+    from the ankle; as recorded, 0.11 m (median over the stance), the other foot's plate 0.54 m (walking2)."""
+
+    def shift(v):
+        v[:, PX] += 0.5
+
+    line = _refused(
+        [*BASE, "--loads", _mot(tmp_path, shift), "--plate", "ankle=ground_"],
+        capsys,
+        r"grf.mot: plate 'ground_': its force passes 0.6\d m from 'ankle' over its stance",
+        tmp_path / "loads.csv",
+    )
+    assert "(the limit is 0.4 m)" in line
+
+
+def test_forces_in_kn_are_refused(tmp_path, capsys):
+    def kilo(v):
+        v[:, 1:4] /= 1e3
+        v[:, 7:10] /= 1e3
+
+    line = _refused(
+        [*BASE, "--loads", _mot(tmp_path, kilo), "--plate", "ankle=ground_"],
+        capsys,
+        r"grf.mot: plate 'ground_': its vertical force peaks at 1.45 N \(t = 0.517 s\) over its whole "
+        r"record, 0.64 % of the model's weight \(227 N",
+    )
+    assert "forces in kN read as N" in line
+
+
+def test_a_window_the_plate_carries_no_load_in_is_said_not_refused(tmp_path, capsys):
+    """The swing of the stride (0.75..1.05 s): the plate's load is zero there, as computed; the line says so."""
+    code = main(
+        [str(a) for a in [*BASE, "--loads", GRF, "--plate", "ankle=ground_", "--t-start", "0.75", "--t-end", "1.05"]]
+    )
+    _, err = capsys.readouterr()
+    assert code == 0, err
+    assert "plate 'ground_': no load in the window 0.75..1.05 s (its vertical force at most 0 N)" in err
+
+
+def test_a_one_sample_spike_of_11_6_kn_is_refused_naming_its_time(tmp_path, capsys):
+    def spike(v):
+        v[9, VY] = 11600.0  # t = 0.55 s, mid-stance (1306 N before)
+
+    _refused(
+        [*BASE, "--loads", _mot(tmp_path, spike), "--plate", "ankle=ground_"],
+        capsys,
+        r"grf.mot: plate 'ground_': a single sample of 1.16e\+04 N at t = 0.55 s stands 1.0\d*e\+04 N above "
+        r"both its neighbours' \(1455 and 1306 N, 0.017 s apart\)",
+    )
+
+
+def test_the_repo_s_real_trials_pass_every_plate_check():
+    """Hamner's running (the stride on the leg, both plates of the whole trial on the planar body: peaks of 2.25
+    body weights, an impact peak at 60 Hz) and walking2.c3d's right foot at 2000 Hz: no refusal, no warning."""
+    pytest.importorskip("ezc3d")
+    from lab_scenes import C3D, PLANE, walking2_leg
+
+    from casflex.inverse import inverse_dynamics
+    from casflex.scene import loads_scene
+
+    runs = [
+        ("hamner_leg", TRC, GRF, {"ankle": "ground_"}, {"root": "pelvis"}),
+        (
+            LAB / "hamner_subject02_planar.osim",
+            LAB / "hamner_running_whole.trc",
+            LAB / "hamner_running_whole_grf.mot",
+            {"calcn_r": "ground_", "calcn_l": "1_ground_"},
+            {"tasks": LAB / "hamner_tasks_ik.xml"},
+        ),
+        (loads_scene(walking2_leg()), C3D, C3D, {"ankle": "ground_"}, {"plane": PLANE}),
+    ]
+    for scene, markers, grf, plates, kw in runs:
+        res = inverse_dynamics(scene, str(markers), grf=str(grf), plates=plates, cutoff=10, **kw)
+        assert not [w for w in res.warnings if "plate '" in w], res.warnings
+
+
+def test_a_filtered_record_s_ringing_below_zero_is_no_pull(tmp_path, capsys):
+    """A record filtered before export rings below zero after the stance (the zero-lag Butterworth's step
+    response: 3.4 % of the jump): -110 N after the stride's 1455 N peak is within a tenth of it, not refused."""
+
+    def ring(v):
+        v[17:20, VY] = [-110.0, -60.0, -20.0]  # t = 0.683..0.717 s, just after toe-off
+
+    code = main([str(a) for a in [*BASE, "--loads", _mot(tmp_path, ring), "--plate", "ankle=ground_"]])
+    _, err = capsys.readouterr()
+    assert code == 0 and "error" not in err, err
+
+
+def test_a_sample_dropped_to_zero_mid_stance_is_refused_naming_its_time(tmp_path, capsys):
+    def dropped(v):
+        v[7, 1:4] = 0.0  # t = 0.517 s, the stance's peak (1455 N): a lost sample written as 0
+
+    _refused(
+        [*BASE, "--loads", _mot(tmp_path, dropped), "--plate", "ankle=ground_"],
+        capsys,
+        r"grf.mot: plate 'ground_': a single sample of 0 N at t = 0.517 s stands 1412 N below both its "
+        r"neighbours' \(1412 and 1455 N.*the limit 0.75\): no foot unloads and reloads a plate so in one sample",
+    )
