@@ -395,3 +395,43 @@ def test_the_documented_plane_with_a_minus_sign_is_taken(capsys):
     code, _, err = _run([*BASE, "--data", TRC, "--plane", "-Z,Y"], capsys)
     # seen from +X the stride's markers do not sit where the scene has them: refused, but by casflex, for that
     assert code == 2 and "expected one argument" not in err and "--plane" not in err, err
+
+
+def test_coordinate_checks_tell_units_from_motion():
+    """check_coordinates on a 60 Hz stride-like motion: the real one passes; each unit error is named."""
+    from casflex.lab.checks import check_coordinates
+
+    t = np.arange(44) / 60.0
+    knee = np.radians(-20 - 40 * (1 - np.cos(2 * np.pi * t / t[-1])))  # to -100 degrees in swing
+    x = 0.8 + 0.02 * np.sin(2 * np.pi * t)
+    good = [("pelvis_tx", x, "length", None), ("knee_angle_r", knee, "hinge", (-2.094, 0.175))]
+    check_coordinates("ik.mot", t, good, True)
+    cases = [
+        # centimetres read as metres, 80 m from the origin: within a lab, but 250 m/s between two frames
+        ([("pelvis_tx", 100 * x + np.sin(60 * t), "length", None)], True, r"^ik.mot: column 'pelvis_tx' moves "),
+        # the knee 40 degrees past its range's end: another model's sign convention
+        ([("knee_angle_r", -knee, "hinge", (-2.094, 0.175))], True,
+         r"column 'knee_angle_r' reaches 99.89 degrees at t = 0.35 s, more than 30 degrees beyond the model's range "
+         r"-120..10.03 degrees"),
+        ([("knee_angle_r", knee, "hinge", None)], True, None),  # without a range, -100 degrees is fine
+        ([("knee_angle_r", np.radians(knee), "hinge", None)], True, r"within 1.74 degrees over the trial"),
+        ([("knee_angle_r", np.radians(knee), "hinge", None)], False, None),  # radians said: tiny is theirs to say
+    ]
+    for columns, degrees, match in cases:
+        if match is None:
+            check_coordinates("ik.mot", t, columns, degrees)
+            continue
+        with pytest.raises(ValueError, match=match):
+            check_coordinates("ik.mot", t, columns, degrees)
+
+
+def test_a_joint_moment_beyond_20_n_m_per_kg_is_refused():
+    from casflex.lab.checks import check_moments
+
+    t = np.arange(5) * 0.01
+    check_moments("trial.trc", t, {"knee.moment": np.full(5, 1599.0)}, 80.0)  # 19.99 N m/kg: no human, still taken
+    with pytest.raises(ValueError, match=r"^trial.trc: knee.moment reaches -1601 N m at t = 0.02 s, 20 N m per kg of a "
+                                         r"body of 80 kg; no human joint carries 20 N m/kg"):
+        check_moments("trial.trc", t, {"knee.moment": np.array([0, 1, -1601, 3, 4.0])}, 80.0)
+    with pytest.raises(ValueError, match=r"knee.moment reaches inf N m at t = 0.03 s"):  # not a number: refused too
+        check_moments("trial.trc", t, {"knee.moment": np.array([0, 1, 2, np.nan, 4.0])}, 80.0)
