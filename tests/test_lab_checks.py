@@ -435,3 +435,78 @@ def test_a_joint_moment_beyond_20_n_m_per_kg_is_refused():
         check_moments("trial.trc", t, {"knee.moment": np.array([0, 1, -1601, 3, 4.0])}, 80.0)
     with pytest.raises(ValueError, match=r"knee.moment reaches inf N m at t = 0.03 s"):  # not a number: refused too
         check_moments("trial.trc", t, {"knee.moment": np.array([0, 1, 2, np.nan, 4.0])}, 80.0)
+
+
+# -- 7. markers that decide no pose, static trials that scale a segment to nothing -----------------------------
+
+FOOT = ("R.Heel", "R.Midfoot.Sup", "R.Midfoot.Lat", "R.Toe.Tip")
+
+
+def _columns(path: Path, labels) -> list[int]:
+    """The cells (x, y, z) of the markers ``labels`` in a TRC's rows."""
+    names = [c for c in path.read_text().splitlines()[3].split("\t")[2:] if c]
+    return [2 + 3 * names.index(lb) + a for lb in labels for a in range(3)]
+
+
+def test_a_segment_whose_markers_are_all_at_the_origin_is_named_before_the_fit(tmp_path, capsys, monkeypatch):
+    """The foot's markers written as (0, 0, 0) (a dropped marker) in every frame: an IndexError in the fit."""
+    cols = _columns(TRC, FOOT)
+
+    def drop(rows):
+        for r in rows:
+            for c in cols:
+                r[c] = "0"
+
+    _no_fit(monkeypatch)
+    _refused([*BASE, "--data", _trc(tmp_path, drop)], capsys,
+             r"trial.trc: the markers do not decide \['ankle.angle'\] in any frame: segment 'ankle' has no marker to "
+             r"place it \(\['R.Heel', 'R.Midfoot.Sup', 'R.Midfoot.Lat', 'R.Toe.Tip'\] never seen in the window or of "
+             r"weight 0\); a hinged segment needs a marker off its joint, the root's two")
+
+
+def test_weights_that_leave_a_segment_undecided_are_named():
+    from casflex.inverse import inverse_dynamics
+
+    with pytest.raises(ValueError, match=r"do not decide \['knee.angle', 'ankle.angle'\] in any frame: segment 'knee' "
+                                         r"has no marker to place it; segment 'ankle' has no marker"):
+        inverse_dynamics("hamner_leg", TRC, root="pelvis", tasks={lb: 1.0 for lb in (
+            "R.ASIS", "L.ASIS", "V.Sacral", "R.Thigh.Upper", "R.Thigh.Front", "R.Thigh.Rear")})
+    with pytest.raises(ValueError, match=r"segment 'pelvis' has no marker to place it; .* segment 'ankle' has the "
+                                         r"markers \['R.Heel'\] to place it"):
+        inverse_dynamics("hamner_leg", TRC, root="pelvis", tasks={"R.Heel": 1.0})
+
+
+def test_markers_never_seen_together_are_one_line_not_an_index_error():
+    """Each marker is seen in some frames (so together they would decide the pose) but no frame sees enough."""
+    from casflex.inverse import kinematic_tree, prepare
+    from casflex.inverse.fit import fit_markers
+
+    inputs = prepare("hamner_leg", str(TRC), root="pelvis")
+    y = inputs.y.copy().reshape(inputs.t.size, -1, 2)
+    foot = [inputs.labels.index(lb) for lb in FOOT]
+    rest = [k for k in range(y.shape[1]) if k not in foot]
+    y[0::2, foot], y[1::2, rest] = np.nan, np.nan
+    tree = kinematic_tree(inputs.model, "pelvis")
+    with pytest.raises(ValueError, match=r"^data: the markers do not decide the coordinates in any frame: no frame "
+                                         r"sees enough of them at once"):
+        fit_markers(tree, inputs.t, y.reshape(inputs.t.size, -1))
+
+
+@pytest.mark.parametrize("spread", [0.0, 2.0])  # mm between the shank's three markers in the static trial
+def test_a_static_trial_whose_segment_markers_coincide_does_not_scale_it_to_nothing(spread, tmp_path, capsys):
+    """The shank's three markers at one point (or within 4 mm): scaled by 0 (a traceback-free refusal only by luck:
+    the pose went undecided) or by 0.048 with exit 0 and a shank of 2 cm."""
+    lines = STATIC.read_text().splitlines()
+    cols = _columns(STATIC, ("R.Shank.Upper", "R.Shank.Front", "R.Shank.Rear"))
+    for i, line in enumerate(lines[5:], start=5):
+        cells = line.split("\t")
+        if len(cells) > 20:
+            for k, c in enumerate(cols[3:]):
+                cells[c] = f"{float(cells[cols[k % 3]]) + spread * (k // 3 + 1) * (k % 3 == k // 3):.5f}"
+            lines[i] = "\t".join(cells)
+    path = tmp_path / "static.trc"
+    path.write_text("\n".join(lines) + "\n")
+    _refused(["calibrate", "hamner_leg", "--static", path, "--scale", "--out", tmp_path / "s.toml"], capsys,
+             r"static.trc: segment 'knee' would be scaled by 0(.0477)?: its markers lie R.Shank.Upper-R.Shank.Front "
+             r"[02] mm \(scene 83\), .* markers that coincide or are mislabelled")
+    assert not (tmp_path / "s.toml").exists()

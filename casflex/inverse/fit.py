@@ -27,7 +27,8 @@ import numpy as np
 from casflex import interrupt
 from casflex.inverse.tree import KinematicTree
 
-__all__ = ["FittedMotion", "coordinate_rates", "filtered_rates", "fit_markers", "fit_pose"]
+__all__ = ["FittedMotion", "check_decided", "coordinate_rates", "filtered_rates", "fit_markers", "fit_pose",
+           "undecided"]
 
 
 @dataclass(frozen=True)
@@ -125,6 +126,56 @@ def fit_pose(tree: KinematicTree, y: np.ndarray, start: np.ndarray | None = None
     if start is None:
         start = _kabsch_start(tree, y, np.array(f(tree.coordinates(tree.model.q0))[0]).ravel())
     return _solve_frame(f, start, y, w=marker_weights(tree), bounds=coordinate_bounds(tree))
+
+
+def undecided(tree: KinematicTree, used: np.ndarray) -> list[int]:
+    """The tree's coordinates (indices) that the markers ``used`` (bool (m,): seen and weighted) cannot decide in
+    any pose: the null space of their Jacobian at two generic poses (random turns of 0.3 rad about the initial
+    one, away from a straight knee's singularity), empty when they decide every coordinate."""
+    rows = np.repeat(np.asarray(used, bool), 2)
+    z0 = tree.coordinates(tree.model.q0)
+    rng = np.random.default_rng(0)
+    free = set(range(tree.n))
+    for _ in range(2):
+        J = np.array(tree.marker_fit(z0 + rng.normal(0.0, 0.3, z0.size))[1])[rows]
+        s, vt = (np.zeros(0), np.eye(tree.n)) if not J.size else np.linalg.svd(J)[1:]
+        null = vt[np.r_[s, np.zeros(tree.n - s.size)] <= 1e-8 * max(s[0] if s.size else 0.0, 1e-300)]
+        free &= {k for k in range(tree.n) if (np.abs(null[:, k]) > 1e-6).any()}
+    return sorted(free)
+
+
+def _segment_of(tree: KinematicTree, k: int) -> int:
+    """The cluster coordinate k moves: the root's for its pose, a hinge's child's for its angle."""
+    idx = tree.model.node_names.index
+    node = tree.root if k < 3 else tree.model.scene.item(tree.hinges[k - 3]).nodes[1]
+    return tree.cluster[idx(node)]
+
+
+def check_decided(tree: KinematicTree, y: np.ndarray, labels: tuple[str, ...] | None = None,
+                  source: str = "data") -> None:
+    """ValueError in one line, before the fit, when the markers y (n, 2 m) (NaN where missing) seen in the
+    window and weighted cannot decide the pose in any frame: it names the coordinates, their segments and those
+    segments' markers (``labels``: the trial's names), and what their markers lack."""
+    sc = tree.model.scene
+    names = labels or tuple(m.name for m in sc.markers)
+    seen = np.isfinite(y).reshape(y.shape[0], -1, 2).all(axis=2).any(axis=0)
+    weighted = np.array([m.weight > 0 for m in sc.markers], bool)
+    free = undecided(tree, seen & weighted)
+    if not free:
+        return
+    lab = {c.scene_coordinate(): c.name for c in sc.coordinates}
+    parts = []
+    for c in dict.fromkeys(_segment_of(tree, k) for k in free):
+        on = [i for i, n in enumerate(tree.marker_nodes) if tree.cluster[n] == c]
+        used = [names[i] for i in on if seen[i] and weighted[i]]
+        lacking = [names[i] for i in on if not (seen[i] and weighted[i])]
+        node = tree.model.node_names[tree.entry[c]]
+        parts.append(f"segment {node!r} has " + (f"the markers {used}" if used else "no marker") + " to place it"
+                     + (f" ({lacking} never seen in the window or of weight 0)" if lacking else ""))
+    coords = [lab.get(tree.names[k], tree.names[k]) for k in free]
+    raise ValueError(f"{source}: the markers do not decide {coords} in any frame: {'; '.join(parts)}; a hinged "
+                     "segment needs a marker off its joint, the root's two: record them, weight them (--tasks), or "
+                     "take the segment out of the scene")
 
 
 def coordinate_bounds(tree: KinematicTree) -> tuple[np.ndarray, np.ndarray] | None:
@@ -236,6 +287,9 @@ def _fill(t: np.ndarray, Z: np.ndarray, max_gap: float, report: list[str]) -> np
     if not bad.any():
         return Z
     from scipy.interpolate import CubicSpline  # here: its import alone costs 0.5 s
+    if bad.all():  # check_decided passed: each frame sees too few of the markers at once
+        raise ValueError("data: the markers do not decide the coordinates in any frame: no frame sees enough of them "
+                         "at once (each marker is seen in some frames, never together); fill the markers' gaps")
     if bad[0] or bad[-1]:
         k = np.flatnonzero(~bad)
         where = "start" if bad[0] else "end"
