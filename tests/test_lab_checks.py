@@ -510,3 +510,20 @@ def test_a_static_trial_whose_segment_markers_coincide_does_not_scale_it_to_noth
              r"static.trc: segment 'knee' would be scaled by 0(.0477)?: its markers lie R.Shank.Upper-R.Shank.Front "
              r"[02] mm \(scene 83\), .* markers that coincide or are mislabelled")
     assert not (tmp_path / "s.toml").exists()
+
+
+def test_a_model_with_massless_feet_names_the_foot_its_markers_left(tmp_path):
+    """OpenSim's talus, calcaneus and toes of mass 0: nodes only, their markers left out by the import; the ankle's
+    angle then had no marker (an IndexError in the fit)."""
+    import re as regex
+
+    from casflex.inverse import inverse_dynamics
+
+    text = (LAB / "hamner_subject02_leg.osim").read_text()
+    for body in ("talus_r", "calcn_r", "toes_r"):
+        text = regex.sub(rf'(<Body name="{body}">\s*<mass>)[^<]*', r"\g<1>0", text)
+    osim = tmp_path / "massless.osim"
+    osim.write_text(text)
+    with pytest.raises(ValueError, match=r"do not decide \['ankle_angle_r'\] in any frame: segment 'talus_r' has no "
+                                         r"marker to place it \(nodes \['talus_r', 'calcn_r', 'toes_r'\] and no body"):
+        inverse_dynamics(osim, TRC)
