@@ -433,7 +433,7 @@ def test_a_joint_moment_beyond_20_n_m_per_kg_is_refused():
     with pytest.raises(ValueError, match=r"^trial.trc: knee.moment reaches -1601 N m at t = 0.02 s, 20 N m per kg of a "
                                          r"body of 80 kg; no human joint carries 20 N m/kg"):
         check_moments("trial.trc", t, {"knee.moment": np.array([0, 1, -1601, 3, 4.0])}, 80.0)
-    with pytest.raises(ValueError, match=r"knee.moment reaches inf N m at t = 0.03 s"):  # not a number: refused too
+    with pytest.raises(ValueError, match=r"^trial.trc: knee.moment is not a number at t = 0.03 s$"):
         check_moments("trial.trc", t, {"knee.moment": np.array([0, 1, 2, np.nan, 4.0])}, 80.0)
 
 

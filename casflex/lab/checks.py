@@ -250,8 +250,10 @@ def check_moments(source: str, t: np.ndarray, moments: dict[str, np.ndarray], ma
     for name, m in moments.items():
         with np.errstate(invalid="ignore"):
             bad = ~(np.abs(m) <= limit)
+        if np.isnan(m).any():
+            raise ValueError(f"{source}: {name} is not a number at t = {t[int(np.argmax(np.isnan(m)))]:g} s")
         if bad.any():
-            at, x = _worst(t, np.nan_to_num(m, nan=np.inf), bad)
+            at, x = _worst(t, m, bad)
             raise ValueError(f"{source}: {name} reaches {x:.4g} N m at t = {at:g} s, {abs(x) / mass:.3g} N m per kg of "
                              f"a body of {mass:.3g} kg; no human joint carries {MAX_MOMENT_PER_KG:g} N m/kg (3-5 in "
                              "sprinting and landing): the coordinates' or the markers' units are wrong, or the scene "
