@@ -489,7 +489,7 @@ def test_markers_never_seen_together_are_one_line_not_an_index_error():
     tree = kinematic_tree(inputs.model, "pelvis")
     with pytest.raises(ValueError, match=r"^data: the markers do not decide the coordinates in any frame: no frame "
                                          r"sees enough of them at once"):
-        fit_markers(tree, inputs.t, y.reshape(inputs.t.size, -1))
+        fit_markers(tree, inputs.t, y.reshape(inputs.t.size, -1), source="data")
 
 
 @pytest.mark.parametrize("spread", [0.0, 2.0])  # mm between the shank's three markers in the static trial

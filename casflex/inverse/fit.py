@@ -233,7 +233,7 @@ def fit_markers(tree: KinematicTree, t: np.ndarray, y: np.ndarray, *, max_gap: f
     report = [f"marker fit: {n} frames, misfit RMS median {1e3 * np.nanmedian(rms):.1f} mm, "
               f"max {1e3 * np.nanmax(rms):.1f} mm"] if np.isfinite(rms).any() else []
     report += _by_marker(misfit, labels, tree) + _at_limits(Z, bounds, tree)
-    Z = _fill(t, Z, max_gap, report)
+    Z = _fill(t, Z, max_gap, report, source)
     return FittedMotion(t, Z, rms, seen, report, misfit)
 
 
@@ -287,27 +287,27 @@ def _check_misfit(misfit: np.ndarray, t: float, limit: float | None, labels, sou
                      "of the plane the scene cannot follow (a running trunk's twist: raise --max-misfit)")
 
 
-def _fill(t: np.ndarray, Z: np.ndarray, max_gap: float, report: list[str]) -> np.ndarray:
+def _fill(t: np.ndarray, Z: np.ndarray, max_gap: float, report: list[str], source: str = "data") -> np.ndarray:
     """Z with its gaps (frames whose markers did not decide the coordinates) filled by a cubic spline."""
     bad = ~np.isfinite(Z).all(axis=1)
     if not bad.any():
         return Z
     from scipy.interpolate import CubicSpline  # here: its import alone costs 0.5 s
     if bad.all():  # check_decided passed: each frame sees too few of the markers at once
-        raise ValueError("data: the markers do not decide the coordinates in any frame: no frame sees enough of them "
-                         "at once (each marker is seen in some frames, never together); fill the markers' gaps")
+        raise ValueError(f"{source}: the markers do not decide the coordinates in any frame: no frame sees enough of "
+                         "them at once (each marker is seen in some frames, never together); fill the markers' gaps")
     if bad[0] or bad[-1]:
         k = np.flatnonzero(~bad)
         where = "start" if bad[0] else "end"
-        raise ValueError(f"data: the markers do not decide the coordinates at the trial's {where}"
+        raise ValueError(f"{source}: the markers do not decide the coordinates at the trial's {where}"
                          f" (t = {t[0] if bad[0] else t[-1]:g} s); trim the trial to "
                          f"{t[k[0]]:g}..{t[k[-1]]:g} s (--t-start, --t-end) or fill the markers' gaps")
     edges = np.flatnonzero(np.diff(bad.astype(int)))
     for s, e in zip(edges[::2], edges[1::2], strict=True):
         span = t[e + 1] - t[s]
         if span > max_gap:
-            raise ValueError(f"data: the markers do not decide the coordinates from t = {t[s + 1]:g} to {t[e]:g} s, "
-                             f"a gap longer than {max_gap:g} s; fill the markers' gaps first")
+            raise ValueError(f"{source}: the markers do not decide the coordinates from t = {t[s + 1]:g} to "
+                             f"{t[e]:g} s, a gap longer than {max_gap:g} s; fill the markers' gaps first")
     runs = ", ".join(f"{t[s + 1]:g}..{t[e]:g} s" for s, e in zip(edges[::2], edges[1::2], strict=True))
     report.append(f"gaps: {int(bad.sum())} frames whose markers do not decide the pose ({runs}), the coordinates "
                   "filled by a cubic spline")
