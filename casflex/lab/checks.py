@@ -28,8 +28,8 @@ measurement never meets it:
   (a joint in motion turns tens of degrees; any human pose in radians lies within +-pi); a position beyond
   :data:`LAB_EXTENT` or moving faster than :data:`MAX_MARKER_SPEED`: millimetres or centimetres read as metres.
 - :func:`check_moments`: :data:`MAX_MOMENT_PER_KG` (20 N m/kg) of the body's mass; the largest joint moments
-  measured are 3-5 N m/kg (the hip and knee in sprinting and landings, Schache et al. 2011; weightlifters'
-  knees about 5): 20 is no body, a unit error in the coordinates or the markers.
+  measured in people are 3-5 N m/kg (the hip and knee in sprinting and in landings): 20 is no body, but a
+  unit error in the coordinates or the markers.
 """
 
 from __future__ import annotations
