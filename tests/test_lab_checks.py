@@ -460,8 +460,8 @@ def test_a_segment_whose_markers_are_all_at_the_origin_is_named_before_the_fit(t
     _no_fit(monkeypatch)
     _refused([*BASE, "--data", _trc(tmp_path, drop)], capsys,
              r"trial.trc: the markers do not decide \['ankle.angle'\] in any frame: segment 'ankle' has no marker to "
-             r"place it \(\['R.Heel', 'R.Midfoot.Sup', 'R.Midfoot.Lat', 'R.Toe.Tip'\] never seen in the window or of "
-             r"weight 0\); a hinged segment needs a marker off its joint, the root's two")
+             r"place it \(\['R.Heel', 'R.Midfoot.Sup', 'R.Midfoot.Lat', 'R.Toe.Tip'\] never seen in the window\); a "
+             r"hinged segment needs a marker off its joint, the root's two")
 
 
 def test_weights_that_leave_a_segment_undecided_are_named():
@@ -474,6 +474,16 @@ def test_weights_that_leave_a_segment_undecided_are_named():
     with pytest.raises(ValueError, match=r"segment 'pelvis' has no marker to place it; .* segment 'ankle' has the "
                                          r"markers \['R.Heel'\] to place it"):
         inverse_dynamics("hamner_leg", TRC, root="pelvis", tasks={"R.Heel": 1.0})
+    import dataclasses
+
+    from casflex.scene.io import load_scene
+
+    sc = load_scene("hamner_leg")  # the scene's own weights: the foot's 0
+    sc = dataclasses.replace(sc, markers=tuple(dataclasses.replace(m, weight=0.0) if m.label in FOOT else m
+                                               for m in sc.markers))
+    with pytest.raises(ValueError, match=r"segment 'ankle' has no marker to place it \(\['R.Heel', 'R.Midfoot.Sup', "
+                                         r"'R.Midfoot.Lat', 'R.Toe.Tip'\] of weight 0\)"):
+        inverse_dynamics(sc, TRC, root="pelvis")
 
 
 def test_markers_never_seen_together_are_one_line_not_an_index_error():

@@ -169,13 +169,15 @@ def check_decided(tree: KinematicTree, y: np.ndarray, labels: tuple[str, ...] | 
     for c in dict.fromkeys(_segment_of(tree, k) for k in free):
         on = [i for i, n in enumerate(tree.marker_nodes) if tree.cluster[n] == c]
         used = [names[i] for i in on if seen[i] and weighted[i]]
-        lacking = [names[i] for i in on if not (seen[i] and weighted[i])]
+        unseen = [names[i] for i in on if not seen[i]]
+        zero = [names[i] for i in on if seen[i] and not weighted[i]]
         node = tree.model.node_names[tree.entry[c]]
         nodes = [n for i, n in enumerate(tree.model.node_names) if tree.cluster[i] == c]
         bodiless = not any(tree.cluster[idx(b.node)] == c for b in sc.bodies) and not any(
             tree.cluster[idx(b.nodes[0])] == c for b in sc.beams)
         parts.append(f"segment {node!r} has " + (f"the markers {used}" if used else "no marker") + " to place it"
-                     + (f" ({lacking} never seen in the window or of weight 0)" if lacking else "")
+                     + (f" ({unseen} never seen in the window)" if unseen else "")
+                     + (f" ({zero} of weight 0)" if zero else "")
                      + (f" (nodes {nodes} and no body: an OpenSim model's massless bodies are nodes, their markers "
                         "left out)" if bodiless and not on else ""))
     coords = [lab.get(tree.names[k], tree.names[k]) for k in free]
