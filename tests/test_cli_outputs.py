@@ -58,7 +58,9 @@ def test_a_directory_where_a_figure_goes_moves_nothing(tmp_path, monkeypatch, ca
     capsys.readouterr()
     assert main(INVERSE) == 2  # the whole stride: other loads than before
     line = _one_line(capsys.readouterr().err)
-    assert re.fullmatch(r"casflex: error: --plots: 'figs/marker_fit.png' is a directory; nothing was written", line)
+    # refused when --plots is reserved, before the fit (it was found when the figures moved into place)
+    assert re.fullmatch(r"casflex: error: --plots: 'figs/marker_fit.png' is a directory; the figure 'marker_fit.png' "
+                        r"would go there: give another directory", line)
     assert _tree(tmp_path) == before
 
 

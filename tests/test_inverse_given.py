@@ -103,3 +103,64 @@ def test_the_command_takes_coordinates_and_refuses_both_or_neither(fitted, tmp_p
                         (["--coordinates", str(table), "--tasks", str(table)], "--tasks: weights the marker fit")):
         run = subprocess.run([*base, *extra], capture_output=True, text=True)
         assert run.returncode == 2 and run.stderr.strip().splitlines() == [run.stderr.strip()] and said in run.stderr
+
+
+def _rewritten(table: Path, path: Path, degrees: str, scale) -> Path:
+    """The table with its header's inDegrees set to ``degrees`` and each column scaled by ``scale(name)``."""
+    lines = table.read_text().splitlines()
+    head = lines.index("endheader") + 1
+    names = lines[head].split("\t")
+    rows = ["\t".join(f"{float(v) * scale(n):.15g}" for n, v in zip(names, row.split("\t"), strict=True))
+            for row in lines[head + 1:]]
+    text = "\n".join(lines[:head + 1] + rows).replace("inDegrees=yes", f"inDegrees={degrees}")
+    path.write_text(text + "\n")
+    return path
+
+
+@pytest.mark.parametrize(("degrees", "scale", "match"), [
+    # degrees under inDegrees=no: the pelvis's -3.4 degrees read as -3.4 rad, 197 degrees past its +-90
+    ("no", lambda n: 1.0, r"column 'pelvis_tilt' reaches -440.4 degrees at t = 0.683 s, more than 30 degrees beyond "
+                          r"the model's range -90..90 degrees; the header says inDegrees=no"),
+    # radians under inDegrees=yes: the knee's 106 degrees of swing read as 1.85 degrees
+    ("yes", lambda n: np.pi / 180 if n not in ("time", "pelvis_tx", "pelvis_ty") else 1.0,
+     r"header inDegrees=yes, yet every angle stays within 1.85 degrees over the trial \(knee_angle_r the largest\)"),
+    # millimetres read as metres: the pelvis 849 m along the lab
+    ("yes", lambda n: 1e3 if n in ("pelvis_tx", "pelvis_ty") else 1.0,
+     r"column 'pelvis_tx' is 848.8 m at t = 1.067 s, beyond any lab \(100 m\): positions are in m; millimetres"),
+    # centimetres: the treadmill's pelvis 80 m along the lab and 101 m up
+    ("yes", lambda n: 1e2 if n in ("pelvis_tx", "pelvis_ty") else 1.0,
+     r"column 'pelvis_ty' is 101.1 m at t = 1.033 s, beyond any lab \(100 m\)"),
+    # a hinge past a full turn where the model gives no range (the hip's 2377 degrees read as radians)
+    ("no", lambda n: 1.0, None),
+])
+def test_coordinates_in_units_the_header_does_not_say_are_refused_naming_the_column(fitted, tmp_path, degrees, scale,
+                                                                                   match):
+    """Each gave loads of 1e6 N m (or, radians as degrees, plausible-looking wrong ones) with exit 0."""
+    import dataclasses
+
+    bad = _rewritten(_table(fitted, tmp_path), tmp_path / "bad.mot", degrees, scale)
+    scene = scene_from_osim(LEG).scene
+    if match is None:  # without the coordinates' ranges only the full turn is left to tell
+        scene = dataclasses.replace(scene, coordinates=tuple(dataclasses.replace(c, limits=None)
+                                                             for c in scene.coordinates))
+        match = (r"column 'hip_flexion_r' reaches 41.49 rad \(2377 degrees\) at t = 0.967 s: no joint turns beyond a "
+                 r"full turn; the header says inDegrees=no: are the angles in the other unit\?")
+    with pytest.raises(ValueError, match=match) as err:
+        inverse_dynamics(scene, coordinates=bad, grf=GRF, plates=PLATES)
+    assert str(err.value).startswith(f"{bad}: ") and "\n" not in str(err.value)
+
+
+def test_joint_moments_no_body_carries_are_refused_with_their_size(fitted, tmp_path, monkeypatch):
+    """The backstop after the inverse dynamics: with the coordinates' checks taken away, millimetres read as metres
+    give a hip moment of 1.2e6 N m: 8000 N m/kg of the 146 kg whose weight the plate's peak of 1432 N is."""
+    import casflex.lab.checks as checks
+
+    monkeypatch.setattr(checks, "check_coordinates", lambda *args: None)
+    mm = lambda n: 1e3 if n in ("pelvis_tx", "pelvis_ty") else 1.0  # noqa: E731
+    bad = _rewritten(_table(fitted, tmp_path), tmp_path / "mm.mot", "yes", mm)
+    with pytest.raises(ValueError, match=r"hip_flexion_r_moment reaches 1.204e\+06 N m at t = 0.516667 s, 8.26e\+03 "
+                                         r"N m per kg of a body of 146 kg; no human joint carries 20 N m/kg"):
+        inverse_dynamics(LEG, coordinates=bad, grf=GRF, plates=PLATES)
+    res = inverse_dynamics(LEG, coordinates=_table(fitted, tmp_path), grf=GRF, plates=PLATES)
+    # the real stride: the knee's 203 N m is 1.4 N m/kg of that weight, far inside the limit
+    assert 150 < np.abs(res.loads["knee_angle_r_moment"]).max() < 250

@@ -111,6 +111,36 @@ def test_header_values_set_apart_by_runs_of_tabs_are_read_as_opensim_reads_them(
     np.testing.assert_allclose(data.xyz, 0.015)  # 1.5 cm
 
 
+def test_a_utf8_byte_order_mark_is_read_past(tmp_path):
+    """Windows' editors write one before the first line: the TRC and the .mot read as without it."""
+    path = tmp_path / "bom.trc"
+    path.write_bytes(b"\xef\xbb\xbf" + TRC.read_bytes())
+    assert read_trc(path).labels == read_trc(TRC).labels
+    mot = tmp_path / "bom.mot"
+    mot.write_bytes(b"\xef\xbb\xbf" + GRF.read_bytes())
+    assert read_sto(mot).names == read_sto(GRF).names
+
+
+def test_what_is_no_regular_text_file_is_refused_before_it_is_read(tmp_path):
+    """/dev/zero behind a link named .trc, a pipe, a folder: read as text they fill the memory (or block)."""
+    import os
+
+    link = tmp_path / "zero.trc"
+    link.symlink_to("/dev/zero")
+    os.mkfifo(tmp_path / "pipe.mot")
+    (tmp_path / "dir.trc").mkdir()
+    for path, reader, kind in ((link, read_trc, "a device or a pipe"), (tmp_path / "pipe.mot", read_sto,
+                                                                         "a device or a pipe"),
+                               (tmp_path / "dir.trc", read_trc, "a directory")):
+        with pytest.raises(ValueError, match=rf"^{path}: not a regular file \({kind}\)"):
+            reader(path)
+    sparse = tmp_path / "sparse.trc"  # 64 MB of zeros and no line end: refused at its first MiB
+    with open(sparse, "wb") as f:
+        f.truncate(64 << 20)
+    with pytest.raises(ValueError, match=r"line 1 is longer than 1,048,576 characters: not a text table"):
+        read_trc(sparse)
+
+
 def test_a_malformed_sto_is_one_line_naming_what_is_wrong(tmp_path):
     path = tmp_path / "f.mot"
     cases = [("time\tfx\n0\t1\n", "no 'endheader' line"),
@@ -210,6 +240,13 @@ def test_a_corrupted_or_unsupported_c3d_is_one_line_naming_the_file(tmp_path):
         with pytest.raises(ValueError, match=match) as err:
             read_c3d(path)
         assert str(err.value).startswith(str(path)) and "\n" not in str(err.value)
+    for first, last in ((641, 600), (900, 850)):  # the header's frames (words 4 and 5) out of order
+        bad = bytearray(raw)
+        bad[6:10] = first.to_bytes(2, "little") + last.to_bytes(2, "little")
+        path.write_bytes(bytes(bad))
+        with pytest.raises(ValueError, match=rf"corrupted header: its first frame \(word 4\) is {first} and its "
+                                             rf"last \(word 5\) {last}: the last cannot precede the first"):
+            read_c3d(path)
     for where, match in ((tmp_path / "none.c3d", "no such file"), (tmp_path, "not a file")):
         with pytest.raises(ValueError, match=f"{match}$"):
             read_c3d(where)

@@ -395,3 +395,145 @@ def test_the_documented_plane_with_a_minus_sign_is_taken(capsys):
     code, _, err = _run([*BASE, "--data", TRC, "--plane", "-Z,Y"], capsys)
     # seen from +X the stride's markers do not sit where the scene has them: refused, but by casflex, for that
     assert code == 2 and "expected one argument" not in err and "--plane" not in err, err
+
+
+def test_coordinate_checks_tell_units_from_motion():
+    """check_coordinates on a 60 Hz stride-like motion: the real one passes; each unit error is named."""
+    from casflex.lab.checks import check_coordinates
+
+    t = np.arange(44) / 60.0
+    knee = np.radians(-20 - 40 * (1 - np.cos(2 * np.pi * t / t[-1])))  # to -100 degrees in swing
+    x = 0.8 + 0.02 * np.sin(2 * np.pi * t)
+    good = [("pelvis_tx", x, "length", None), ("knee_angle_r", knee, "hinge", (-2.094, 0.175))]
+    check_coordinates("ik.mot", t, good, True)
+    cases = [
+        # centimetres read as metres, 80 m from the origin: within a lab, but 250 m/s between two frames
+        ([("pelvis_tx", 100 * x + np.sin(60 * t), "length", None)], True, r"^ik.mot: column 'pelvis_tx' moves "),
+        # the knee 40 degrees past its range's end: another model's sign convention
+        ([("knee_angle_r", -knee, "hinge", (-2.094, 0.175))], True,
+         r"column 'knee_angle_r' reaches 99.89 degrees at t = 0.35 s, more than 30 degrees beyond the model's range "
+         r"-120..10.03 degrees"),
+        ([("knee_angle_r", knee, "hinge", None)], True, None),  # without a range, -100 degrees is fine
+        ([("knee_angle_r", np.radians(knee), "hinge", None)], True, r"within 1.74 degrees over the trial"),
+        ([("knee_angle_r", np.radians(knee), "hinge", None)], False, None),  # radians said: tiny is theirs to say
+    ]
+    for columns, degrees, match in cases:
+        if match is None:
+            check_coordinates("ik.mot", t, columns, degrees)
+            continue
+        with pytest.raises(ValueError, match=match):
+            check_coordinates("ik.mot", t, columns, degrees)
+
+
+def test_a_joint_moment_beyond_20_n_m_per_kg_is_refused():
+    from casflex.lab.checks import check_moments
+
+    t = np.arange(5) * 0.01
+    check_moments("trial.trc", t, {"knee.moment": np.full(5, 1599.0)}, 80.0)  # 19.99 N m/kg: no human, still taken
+    with pytest.raises(ValueError, match=r"^trial.trc: knee.moment reaches -1601 N m at t = 0.02 s, 20 N m per kg of a "
+                                         r"body of 80 kg; no human joint carries 20 N m/kg"):
+        check_moments("trial.trc", t, {"knee.moment": np.array([0, 1, -1601, 3, 4.0])}, 80.0)
+    with pytest.raises(ValueError, match=r"^trial.trc: knee.moment is not a number at t = 0.03 s$"):
+        check_moments("trial.trc", t, {"knee.moment": np.array([0, 1, 2, np.nan, 4.0])}, 80.0)
+
+
+# -- 7. markers that decide no pose, static trials that scale a segment to nothing -----------------------------
+
+FOOT = ("R.Heel", "R.Midfoot.Sup", "R.Midfoot.Lat", "R.Toe.Tip")
+
+
+def _columns(path: Path, labels) -> list[int]:
+    """The cells (x, y, z) of the markers ``labels`` in a TRC's rows."""
+    names = [c for c in path.read_text().splitlines()[3].split("\t")[2:] if c]
+    return [2 + 3 * names.index(lb) + a for lb in labels for a in range(3)]
+
+
+def test_a_segment_whose_markers_are_all_at_the_origin_is_named_before_the_fit(tmp_path, capsys, monkeypatch):
+    """The foot's markers written as (0, 0, 0) (a dropped marker) in every frame: an IndexError in the fit."""
+    cols = _columns(TRC, FOOT)
+
+    def drop(rows):
+        for r in rows:
+            for c in cols:
+                r[c] = "0"
+
+    _no_fit(monkeypatch)
+    _refused([*BASE, "--data", _trc(tmp_path, drop)], capsys,
+             r"trial.trc: the markers do not decide \['ankle.angle'\] in any frame: segment 'ankle' has no marker to "
+             r"place it \(\['R.Heel', 'R.Midfoot.Sup', 'R.Midfoot.Lat', 'R.Toe.Tip'\] never seen in the window\); a "
+             r"hinged segment needs a marker off its joint, the root's two")
+
+
+def test_weights_that_leave_a_segment_undecided_are_named():
+    from casflex.inverse import inverse_dynamics
+
+    with pytest.raises(ValueError, match=r"do not decide \['knee.angle', 'ankle.angle'\] in any frame: segment 'knee' "
+                                         r"has no marker to place it; segment 'ankle' has no marker"):
+        inverse_dynamics("hamner_leg", TRC, root="pelvis", tasks={lb: 1.0 for lb in (
+            "R.ASIS", "L.ASIS", "V.Sacral", "R.Thigh.Upper", "R.Thigh.Front", "R.Thigh.Rear")})
+    with pytest.raises(ValueError, match=r"segment 'pelvis' has no marker to place it; .* segment 'ankle' has the "
+                                         r"markers \['R.Heel'\] to place it"):
+        inverse_dynamics("hamner_leg", TRC, root="pelvis", tasks={"R.Heel": 1.0})
+    import dataclasses
+
+    from casflex.scene.io import load_scene
+
+    sc = load_scene("hamner_leg")  # the scene's own weights: the foot's 0
+    sc = dataclasses.replace(sc, markers=tuple(dataclasses.replace(m, weight=0.0) if m.label in FOOT else m
+                                               for m in sc.markers))
+    with pytest.raises(ValueError, match=r"segment 'ankle' has no marker to place it \(\['R.Heel', 'R.Midfoot.Sup', "
+                                         r"'R.Midfoot.Lat', 'R.Toe.Tip'\] of weight 0\)"):
+        inverse_dynamics(sc, TRC, root="pelvis")
+
+
+def test_markers_never_seen_together_are_one_line_not_an_index_error():
+    """Each marker is seen in some frames (so together they would decide the pose) but no frame sees enough."""
+    from casflex.inverse import kinematic_tree, prepare
+    from casflex.inverse.fit import fit_markers
+
+    inputs = prepare("hamner_leg", str(TRC), root="pelvis")
+    y = inputs.y.copy().reshape(inputs.t.size, -1, 2)
+    foot = [inputs.labels.index(lb) for lb in FOOT]
+    rest = [k for k in range(y.shape[1]) if k not in foot]
+    y[0::2, foot], y[1::2, rest] = np.nan, np.nan
+    tree = kinematic_tree(inputs.model, "pelvis")
+    with pytest.raises(ValueError, match=r"^data: the markers do not decide the coordinates in any frame: no frame "
+                                         r"sees enough of them at once"):
+        fit_markers(tree, inputs.t, y.reshape(inputs.t.size, -1), source="data")
+
+
+@pytest.mark.parametrize("spread", [0.0, 2.0])  # mm between the shank's three markers in the static trial
+def test_a_static_trial_whose_segment_markers_coincide_does_not_scale_it_to_nothing(spread, tmp_path, capsys):
+    """The shank's three markers at one point (or within 4 mm): scaled by 0 (a traceback-free refusal only by luck:
+    the pose went undecided) or by 0.048 with exit 0 and a shank of 2 cm."""
+    lines = STATIC.read_text().splitlines()
+    cols = _columns(STATIC, ("R.Shank.Upper", "R.Shank.Front", "R.Shank.Rear"))
+    for i, line in enumerate(lines[5:], start=5):
+        cells = line.split("\t")
+        if len(cells) > 20:
+            for k, c in enumerate(cols[3:]):
+                cells[c] = f"{float(cells[cols[k % 3]]) + spread * (k // 3 + 1) * (k % 3 == k // 3):.5f}"
+            lines[i] = "\t".join(cells)
+    path = tmp_path / "static.trc"
+    path.write_text("\n".join(lines) + "\n")
+    _refused(["calibrate", "hamner_leg", "--static", path, "--scale", "--out", tmp_path / "s.toml"], capsys,
+             r"static.trc: segment 'knee' would be scaled by 0(.0477)?: its markers lie R.Shank.Upper-R.Shank.Front "
+             r"[02] mm \(scene 83\), .* markers that coincide or are mislabelled")
+    assert not (tmp_path / "s.toml").exists()
+
+
+def test_a_model_with_massless_feet_names_the_foot_its_markers_left(tmp_path):
+    """OpenSim's talus, calcaneus and toes of mass 0: nodes only, their markers left out by the import; the ankle's
+    angle then had no marker (an IndexError in the fit)."""
+    import re as regex
+
+    from casflex.inverse import inverse_dynamics
+
+    text = (LAB / "hamner_subject02_leg.osim").read_text()
+    for body in ("talus_r", "calcn_r", "toes_r"):
+        text = regex.sub(rf'(<Body name="{body}">\s*<mass>)[^<]*', r"\g<1>0", text)
+    osim = tmp_path / "massless.osim"
+    osim.write_text(text)
+    with pytest.raises(ValueError, match=r"do not decide \['ankle_angle_r'\] in any frame: segment 'talus_r' has no "
+                                         r"marker to place it \(nodes \['talus_r', 'calcn_r', 'toes_r'\] and no body"):
+        inverse_dynamics(osim, TRC)

@@ -209,12 +209,19 @@ class Outputs:
         self._staged.append((option, Path(staging), target))
         return Path(staging)
 
-    def directory(self, option: str, path: str) -> Path:
+    def directory(self, option: str, path: str, names: Iterable[str] = ()) -> Path:
         """Reserve the directory ``path`` (new, or existing: its files of the same names are
-        replaced); returns the staging directory to write into."""
+        replaced); returns the staging directory to write into. ``names``: the files the command
+        will write there, where known before the work: none may be a directory there (a file is
+        never replaced by one, so :meth:`commit` would refuse it after the work) nor an input."""
         target = Path(path)
         if target.exists() and not target.is_dir():
             raise OptionError(f"{option}: {path!r} exists and is not a directory")
+        for name in names:
+            if (target / name).is_dir() and not (target / name).is_symlink():
+                raise OptionError(f"{option}: {str(target / name)!r} is a directory; the figure {name!r} would go "
+                                  "there: give another directory")
+            self._refuse_input(option, target / name)
         if self._taken(target):
             raise OptionError(f"{option}: {path!r} is already the target of another option")
         where = target if target.is_dir() else self._parent(option, target)

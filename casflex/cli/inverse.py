@@ -74,7 +74,11 @@ def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
         raise OptionError(f"--t-end: must be after --t-start ({args.t_start:g} s), got {args.t_end:g}")
     out = outputs.file("--out", args.out, (".npz", ".csv", ".sto"), "inverse dynamics") if args.out is not None \
         else None
-    plots = outputs.directory("--plots", args.plots) if args.plots is not None else None
+    plots = None
+    if args.plots is not None:
+        from casflex.plotting.inverse import FIGURES
+
+        plots = outputs.directory("--plots", args.plots, FIGURES if args.data is not None else FIGURES[:1])
     try:
         inputs = prepare(args.scene, args.data, plane=args.plane, grf=args.loads, plates=plates,
                          cutoff=None if args.no_filter else args.cutoff, root=args.root, t_start=args.t_start,

@@ -163,9 +163,31 @@ def solve(inputs: InverseInputs, *, dt: float | None = None, alpha: float | None
     if lab:  # the summary speaks the lab's language
         settings["moments"] = [lab_name(c) for c in model.scene.coordinates
                                if not c.of.startswith(f"{tree.root}.") and lab_name(c) in lab]
+    _check_moments(inputs, {name: loads[name] for name in settings["moments"] if name in loads})
     band, parts = {}, {}
     if inputs.band_spec is not None:
         band, parts, lines, settings["bands"] = inverse_bands(inputs.band_spec, inputs, fit, z, zd, zdd, sorted(loads))
         report += lines
     return InverseResult(t, tree.names, z, zd, zdd, model.dof_names, sol["q"], sol["qd"], sol["qdd"], loads,
                          t, fit.rms, report, settings, warnings, inputs.labels, fit.misfit, inputs.plates, band, parts)
+
+
+#: m/s^2: the weight the plates' largest total force is taken for (:func:`_check_moments`)
+_G = 9.81
+
+
+def _check_moments(inputs: InverseInputs, moments: dict[str, np.ndarray]) -> None:
+    """ValueError when a joint moment exceeds what a body can carry (:func:`casflex.lab.checks.check_moments`):
+    the body's mass is the scene's (bodies and beams) or, when larger, the plates' largest total force over g (a
+    model of a leg is a third of the subject whose weight the plates carry)."""
+    from casflex.lab.checks import check_moments
+
+    sc = inputs.model.scene
+    nodes = {n.name: np.array([n.x, n.y]) for n in sc.nodes}
+    mass = sum(b.mass for b in sc.bodies) + sum(
+        b.rho * b.A * float(np.linalg.norm(nodes[b.nodes[1]] - nodes[b.nodes[0]])) for b in sc.beams)
+    if inputs.plates:
+        total = sum(np.linalg.norm(p.at(inputs.t)[0], axis=1) for p in inputs.plates)
+        mass = max(mass, float(np.nanmax(total)) / _G)
+    if mass > 0:
+        check_moments(inputs.settings.get("source") or "inverse dynamics", inputs.t, moments, mass)

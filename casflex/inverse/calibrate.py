@@ -45,17 +45,29 @@ def _rot(th: float) -> np.ndarray:
 MIN_PAIR = 0.05
 
 
-def _scales(tree: KinematicTree, y0: np.ndarray, ym: np.ndarray) -> dict[int, float]:
+def _scales(tree: KinematicTree, y0: np.ndarray, ym: np.ndarray, labels: list[str], source: str) -> dict[int, float]:
     """Per cluster: the median measured over scene distance of its seen markers' pairs at least :data:`MIN_PAIR`
-    apart in the scene (1 without such a pair)."""
+    apart in the scene (1 without such a pair). ValueError naming the segment and its markers when that median
+    lies beyond :data:`casflex.lab.checks.SCALE_FACTOR` either way: markers that coincide in the trial (a
+    segment scaled to nothing) or lie metres apart are mislabelled or duplicated, no subject's segment."""
+    from casflex.lab.checks import SCALE_FACTOR
+
     cl = np.array([tree.cluster[i] for i in tree.marker_nodes])
     seen = np.isfinite(ym).all(axis=1)
     out = {}
     for c in set(tree.cluster):
         k = np.flatnonzero((cl == c) & seen)
-        ratios = [np.linalg.norm(ym[i] - ym[j]) / np.linalg.norm(y0[i] - y0[j]) for a, i in enumerate(k)
-                  for j in k[a + 1:] if np.linalg.norm(y0[i] - y0[j]) >= MIN_PAIR]
+        pairs = [(i, j) for a, i in enumerate(k) for j in k[a + 1:] if np.linalg.norm(y0[i] - y0[j]) >= MIN_PAIR]
+        ratios = [np.linalg.norm(ym[i] - ym[j]) / np.linalg.norm(y0[i] - y0[j]) for i, j in pairs]
         out[c] = float(np.median(ratios)) if ratios else 1.0
+        if not 1.0 / SCALE_FACTOR < out[c] < SCALE_FACTOR:
+            node = tree.model.node_names[tree.entry[c]]
+            far = ", ".join(f"{labels[i]}-{labels[j]} {1e3 * np.linalg.norm(ym[i] - ym[j]):.0f} mm (scene "
+                            f"{1e3 * np.linalg.norm(y0[i] - y0[j]):.0f})" for i, j in pairs[:4])
+            raise ValueError(f"{source}: segment {node!r} would be scaled by {out[c]:.3g}: its markers lie {far} apart "
+                             f"in the static trial (the median of {len(pairs)} pairs beyond a factor {SCALE_FACTOR:g} "
+                             "of the scene's): markers that coincide or are mislabelled; fix the labels, or calibrate "
+                             "without scaling")
     return out
 
 
@@ -117,7 +129,7 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
               mass: float | None = None):
     """(the calibrated scene, report lines) from the static trial ``static`` (LabMarkers or a .trc/.c3d
     path), module docstring."""
-    from casflex.inverse.fit import fit_pose
+    from casflex.inverse.fit import check_decided, fit_pose
     from casflex.inverse.inputs import inverse_model, read_markers
     from casflex.lab import LabMarkers, Plane, markers_in_plane
     from casflex.lab.checks import check_markers, check_scale, check_static
@@ -146,10 +158,11 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
                 [tree.cluster[i] for i in tree.marker_nodes])
     report = [f"static trial: {lab.t.size} frames averaged, {int(np.isfinite(ym).all(1).sum())} of "
               f"{len(sc.markers)} markers seen"]
+    check_decided(tree, ym.ravel()[None], tuple(labels.values()), lab.source)
     unscaled = fit_pose(tree, ym.ravel())[1]
     if scale:
         y0 = np.array([[m.x, m.y] for m in sc.markers])
-        s = _scales(tree, y0, ym)
+        s = _scales(tree, y0, ym, list(labels.values()), lab.source)
         sc = _scaled_scene(tree, s)
         sc = sc if mass is None else with_mass(sc, mass)
         names = {c: next(n for i, n in enumerate(model.node_names) if tree.cluster[i] == c) for c in s}

@@ -27,7 +27,8 @@ import numpy as np
 from casflex import interrupt
 from casflex.inverse.tree import KinematicTree
 
-__all__ = ["FittedMotion", "coordinate_rates", "filtered_rates", "fit_markers", "fit_pose"]
+__all__ = ["FittedMotion", "check_decided", "coordinate_rates", "filtered_rates", "fit_markers", "fit_pose",
+           "undecided"]
 
 
 @dataclass(frozen=True)
@@ -127,6 +128,64 @@ def fit_pose(tree: KinematicTree, y: np.ndarray, start: np.ndarray | None = None
     return _solve_frame(f, start, y, w=marker_weights(tree), bounds=coordinate_bounds(tree))
 
 
+def undecided(tree: KinematicTree, used: np.ndarray) -> list[int]:
+    """The tree's coordinates (indices) that the markers ``used`` (bool (m,): seen and weighted) cannot decide in
+    any pose: the null space of their Jacobian at two generic poses (random turns of 0.3 rad about the initial
+    one, away from a straight knee's singularity), empty when they decide every coordinate."""
+    rows = np.repeat(np.asarray(used, bool), 2)
+    z0 = tree.coordinates(tree.model.q0)
+    rng = np.random.default_rng(0)
+    free = set(range(tree.n))
+    for _ in range(2):
+        J = np.array(tree.marker_fit(z0 + rng.normal(0.0, 0.3, z0.size))[1])[rows]
+        s, vt = (np.zeros(0), np.eye(tree.n)) if not J.size else np.linalg.svd(J)[1:]
+        null = vt[np.r_[s, np.zeros(tree.n - s.size)] <= 1e-8 * max(s[0] if s.size else 0.0, 1e-300)]
+        free &= {k for k in range(tree.n) if (np.abs(null[:, k]) > 1e-6).any()}
+    return sorted(free)
+
+
+def _segment_of(tree: KinematicTree, k: int) -> int:
+    """The cluster coordinate k moves: the root's for its pose, a hinge's child's for its angle."""
+    idx = tree.model.node_names.index
+    node = tree.root if k < 3 else tree.model.scene.item(tree.hinges[k - 3]).nodes[1]
+    return tree.cluster[idx(node)]
+
+
+def check_decided(tree: KinematicTree, y: np.ndarray, labels: tuple[str, ...] | None = None,
+                  source: str = "data") -> None:
+    """ValueError in one line, before the fit, when the markers y (n, 2 m) (NaN where missing) seen in the
+    window and weighted cannot decide the pose in any frame: it names the coordinates, their segments and those
+    segments' markers (``labels``: the trial's names), and what their markers lack."""
+    sc = tree.model.scene
+    names = labels or tuple(m.name for m in sc.markers)
+    seen = np.isfinite(y).reshape(y.shape[0], -1, 2).all(axis=2).any(axis=0)
+    weighted = np.array([m.weight > 0 for m in sc.markers], bool)
+    free = undecided(tree, seen & weighted)
+    if not free:
+        return
+    lab = {c.scene_coordinate(): c.name for c in sc.coordinates}
+    idx = tree.model.node_names.index
+    parts = []
+    for c in dict.fromkeys(_segment_of(tree, k) for k in free):
+        on = [i for i, n in enumerate(tree.marker_nodes) if tree.cluster[n] == c]
+        used = [names[i] for i in on if seen[i] and weighted[i]]
+        unseen = [names[i] for i in on if not seen[i]]
+        zero = [names[i] for i in on if seen[i] and not weighted[i]]
+        node = tree.model.node_names[tree.entry[c]]
+        nodes = [n for i, n in enumerate(tree.model.node_names) if tree.cluster[i] == c]
+        bodiless = not any(tree.cluster[idx(b.node)] == c for b in sc.bodies) and not any(
+            tree.cluster[idx(b.nodes[0])] == c for b in sc.beams)
+        parts.append(f"segment {node!r} has " + (f"the markers {used}" if used else "no marker") + " to place it"
+                     + (f" ({unseen} never seen in the window)" if unseen else "")
+                     + (f" ({zero} of weight 0)" if zero else "")
+                     + (f" (nodes {nodes} and no body: an OpenSim model's massless bodies are nodes, their markers "
+                        "left out)" if bodiless and not on else ""))
+    coords = [lab.get(tree.names[k], tree.names[k]) for k in free]
+    raise ValueError(f"{source}: the markers do not decide {coords} in any frame: {'; '.join(parts)}; a hinged "
+                     "segment needs a marker off its joint, the root's two: record them, weight them (--tasks), or "
+                     "take the segment out of the scene")
+
+
 def coordinate_bounds(tree: KinematicTree) -> tuple[np.ndarray, np.ndarray] | None:
     """(lower, upper) (n_z,) of the tree's coordinates: the scene's ``[[coordinates]]`` limits (an OpenSim model's
     clamped ranges), -inf and inf elsewhere; None when no coordinate has limits."""
@@ -176,7 +235,7 @@ def fit_markers(tree: KinematicTree, t: np.ndarray, y: np.ndarray, *, max_gap: f
     report = [f"marker fit: {n} frames, misfit RMS median {1e3 * np.nanmedian(rms):.1f} mm, "
               f"max {1e3 * np.nanmax(rms):.1f} mm"] if np.isfinite(rms).any() else []
     report += _by_marker(misfit, labels, tree) + _at_limits(Z, bounds, tree)
-    Z = _fill(t, Z, max_gap, report)
+    Z = _fill(t, Z, max_gap, report, source)
     return FittedMotion(t, Z, rms, seen, report, misfit)
 
 
@@ -230,24 +289,27 @@ def _check_misfit(misfit: np.ndarray, t: float, limit: float | None, labels, sou
                      "of the plane the scene cannot follow (a running trunk's twist: raise --max-misfit)")
 
 
-def _fill(t: np.ndarray, Z: np.ndarray, max_gap: float, report: list[str]) -> np.ndarray:
+def _fill(t: np.ndarray, Z: np.ndarray, max_gap: float, report: list[str], source: str = "data") -> np.ndarray:
     """Z with its gaps (frames whose markers did not decide the coordinates) filled by a cubic spline."""
     bad = ~np.isfinite(Z).all(axis=1)
     if not bad.any():
         return Z
     from scipy.interpolate import CubicSpline  # here: its import alone costs 0.5 s
+    if bad.all():  # check_decided passed: each frame sees too few of the markers at once
+        raise ValueError(f"{source}: the markers do not decide the coordinates in any frame: no frame sees enough of "
+                         "them at once (each marker is seen in some frames, never together); fill the markers' gaps")
     if bad[0] or bad[-1]:
         k = np.flatnonzero(~bad)
         where = "start" if bad[0] else "end"
-        raise ValueError(f"data: the markers do not decide the coordinates at the trial's {where}"
+        raise ValueError(f"{source}: the markers do not decide the coordinates at the trial's {where}"
                          f" (t = {t[0] if bad[0] else t[-1]:g} s); trim the trial to "
                          f"{t[k[0]]:g}..{t[k[-1]]:g} s (--t-start, --t-end) or fill the markers' gaps")
     edges = np.flatnonzero(np.diff(bad.astype(int)))
     for s, e in zip(edges[::2], edges[1::2], strict=True):
         span = t[e + 1] - t[s]
         if span > max_gap:
-            raise ValueError(f"data: the markers do not decide the coordinates from t = {t[s + 1]:g} to {t[e]:g} s, "
-                             f"a gap longer than {max_gap:g} s; fill the markers' gaps first")
+            raise ValueError(f"{source}: the markers do not decide the coordinates from t = {t[s + 1]:g} to "
+                             f"{t[e]:g} s, a gap longer than {max_gap:g} s; fill the markers' gaps first")
     runs = ", ".join(f"{t[s + 1]:g}..{t[e]:g} s" for s, e in zip(edges[::2], edges[1::2], strict=True))
     report.append(f"gaps: {int(bad.sum())} frames whose markers do not decide the pose ({runs}), the coordinates "
                   "filled by a cubic spline")

@@ -196,6 +196,7 @@ def _even_frames(t: np.ndarray, rate: float, source: str) -> np.ndarray:
 def _scene_markers(model: Model, tree: KinematicTree, lab, plane, keep_frames):
     """(scene markers' channels in the plane (a MeasurementSet), their lab labels), checked first
     (:mod:`casflex.lab.checks`): seen in the window, as far apart as the scene's, no sample no body makes."""
+    from casflex.inverse.fit import check_decided
     from casflex.lab import markers_in_plane
     from casflex.lab.checks import check_markers, check_scale
 
@@ -208,6 +209,7 @@ def _scene_markers(model: Model, tree: KinematicTree, lab, plane, keep_frames):
     scene_xy = np.array([[m.x, m.y] for m in model.scene.markers])
     check_scale(lab.source, lab.units, scene_xy, xy, [tree.cluster[i] for i in tree.marker_nodes])
     check_markers(lab, labels, keep_frames)
+    check_decided(tree, xy.reshape(xy.shape[0], -1), labels, lab.source)
     return markers_in_plane(lab, names, plane), labels
 
 

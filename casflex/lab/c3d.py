@@ -91,6 +91,9 @@ def _check_structure(where: str, raw: bytes | mmap.mmap) -> int:
         raise ValueError(f"{where}: the parameter section's processor type is {what}")
     _walk_parameters(where, raw, start + 4)
     first, last = (int.from_bytes(raw[i:i + 2], "little") for i in (6, 8))  # Intel and DEC integers
+    if last < first:  # ezc3d would read the frames on times from the first one: shifted, not refused
+        raise ValueError(f"{where}: corrupted header: its first frame (word 4) is {first} and its last (word 5) "
+                         f"{last}: the last cannot precede the first")
     return last - first + 1
 
 

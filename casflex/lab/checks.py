@@ -22,10 +22,19 @@ measurement never meets it:
   standing still sways by 1-2 cm (:mod:`casflex.inverse.calibrate`).
 - :func:`check_scale`: the trial's markers as far apart as the scene's to within a factor
   :data:`SCALE_FACTOR` (3): subjects differ by 20-30 %, units by 10 or 1000.
+- :func:`check_coordinates`: joint angles and the root's position given as a table (an IK result). A hinge
+  beyond :data:`MAX_ANGLE` (a full turn) or a coordinate :data:`RANGE_MARGIN` past its model's range: degrees
+  read as radians; every angle within :data:`TINY_ANGLES` degrees over the trial: radians labelled degrees
+  (a joint in motion turns tens of degrees; any human pose in radians lies within +-pi); a position beyond
+  :data:`LAB_EXTENT` or moving faster than :data:`MAX_MARKER_SPEED`: millimetres or centimetres read as metres.
+- :func:`check_moments`: :data:`MAX_MOMENT_PER_KG` (20 N m/kg) of the body's mass; the largest joint moments
+  measured in people are 3-5 N m/kg (the hip and knee in sprinting and in landings): 20 is no body, but a
+  unit error in the coordinates or the markers.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
@@ -35,7 +44,8 @@ if TYPE_CHECKING:
     from casflex.lab.tables import LabMarkers, LabTable
 
 __all__ = ["LAB_EXTENT", "MAX_MARKER_SPEED", "MAX_PLATE_FORCE", "MAX_FREE_MOMENT", "MAX_MISFIT", "STATIC_SPREAD",
-           "SCALE_FACTOR", "check_markers", "check_plate_values", "check_static", "check_scale"]
+           "SCALE_FACTOR", "MAX_ANGLE", "RANGE_MARGIN", "TINY_ANGLES", "MAX_MOMENT_PER_KG", "check_markers",
+           "check_plate_values", "check_static", "check_scale", "check_coordinates", "check_moments"]
 
 LAB_EXTENT = 100.0
 MAX_MARKER_SPEED = 50.0
@@ -44,6 +54,10 @@ MAX_FREE_MOMENT = 1.0e3
 MAX_MISFIT = 0.1
 STATIC_SPREAD = 0.05
 SCALE_FACTOR = 3.0
+MAX_ANGLE = 2.0 * math.pi
+RANGE_MARGIN = math.radians(30.0)
+TINY_ANGLES = math.pi
+MAX_MOMENT_PER_KG = 20.0
 
 
 def check_markers(lab: LabMarkers, labels: Sequence[str], frames: np.ndarray | None = None) -> None:
@@ -165,3 +179,82 @@ def check_scale(source: str, units: str, scene_xy: np.ndarray, trial_xy: np.ndar
                 hint = f" (the numbers look like {true})"
         raise ValueError(f"{source}: the trial's markers lie {ratio:.3g} times as far apart as the scene's on the same "
                          f"segments: the header's units {units!r} are wrong{hint}, or the scene is not this subject's")
+
+
+def _worst(t: np.ndarray, v: np.ndarray, bad: np.ndarray) -> tuple[float, float]:
+    """(time s, value) of the largest magnitude among the samples ``bad``."""
+    i = int(np.argmax(np.where(bad, np.abs(v), -np.inf)))
+    return float(t[i]), float(v[i])
+
+
+def _check_angle(source: str, t: np.ndarray, name: str, v: np.ndarray, hinge: bool,
+                 limits: tuple[float, float] | None, unit: str) -> None:
+    """One angle column v (rad): a hinge within :data:`MAX_ANGLE`, any angle within its ``limits`` (rad) and
+    :data:`RANGE_MARGIN`; ``unit``: what the header says the table's angles are."""
+    said = f"the header says inDegrees={'yes' if unit == 'degrees' else 'no'}"
+    if hinge and (np.abs(v) > MAX_ANGLE).any():
+        at, x = _worst(t, v, np.abs(v) > MAX_ANGLE)
+        raise ValueError(f"{source}: column {name!r} reaches {x:.4g} rad ({math.degrees(x):.4g} degrees) at t = "
+                         f"{at:g} s: no joint turns beyond a full turn; {said}: are the angles in the other unit?")
+    if limits is not None:
+        lo, hi = limits[0] - RANGE_MARGIN, limits[1] + RANGE_MARGIN
+        out = (v < lo) | (v > hi)
+        if out.any():
+            at, x = _worst(t, v, out)
+            raise ValueError(f"{source}: column {name!r} reaches {math.degrees(x):.4g} degrees at t = {at:g} s, more "
+                             f"than {math.degrees(RANGE_MARGIN):g} degrees beyond the model's range "
+                             f"{math.degrees(limits[0]):.4g}..{math.degrees(limits[1]):.4g} degrees; {said}: angles "
+                             "in the other unit, or another model's coordinates")
+
+
+def _check_length(source: str, t: np.ndarray, name: str, v: np.ndarray) -> None:
+    """One position column v (m): within :data:`LAB_EXTENT`, no faster than :data:`MAX_MARKER_SPEED`."""
+    far = np.abs(v) > LAB_EXTENT
+    if far.any():
+        at, x = _worst(t, v, far)
+        raise ValueError(f"{source}: column {name!r} is {x:.4g} m at t = {at:g} s, beyond any lab ({LAB_EXTENT:g} m): "
+                         "positions are in m; millimetres read as metres?")
+    if v.size > 1:
+        speed = np.abs(np.diff(v)) / np.diff(t)
+        if (speed > MAX_MARKER_SPEED).any():
+            k = int(np.argmax(speed))
+            raise ValueError(f"{source}: column {name!r} moves {speed[k]:.4g} m/s from t = {t[k]:g} to {t[k + 1]:g} s "
+                             f"(no body moves faster than {MAX_MARKER_SPEED:g} m/s): positions are in m; millimetres "
+                             "or centimetres read as metres?")
+
+
+def check_coordinates(source: str, t: np.ndarray, columns: Sequence[tuple], in_degrees: bool | None) -> None:
+    """ValueError in one line naming the file, the column and the time of coordinates no body takes (module
+    docstring). ``columns``: (name, values (n,) in m or rad, kind, limits (lower, upper) in m or rad or None),
+    kind one of "length", "root angle", "hinge"; ``in_degrees``: what the table's header said."""
+    unit = "degrees" if in_degrees else "radians"
+    for name, v, kind, limits in columns:
+        if kind == "length":
+            _check_length(source, t, name, v)
+        else:
+            _check_angle(source, t, name, v, kind == "hinge", limits, unit)
+    angles = [(name, np.degrees(np.abs(v)).max()) for name, v, kind, _ in columns if kind != "length" and v.size]
+    if in_degrees and any(kind == "hinge" for _, _, kind, _ in columns) and angles:
+        name, top = max(angles, key=lambda a: a[1])
+        if top < TINY_ANGLES:
+            raise ValueError(f"{source}: header inDegrees=yes, yet every angle stays within {top:.3g} degrees over the "
+                             f"trial ({name} the largest): radians labelled degrees look so (a joint in motion turns "
+                             "tens of degrees); give the header inDegrees=no if they are radians")
+
+
+def check_moments(source: str, t: np.ndarray, moments: dict[str, np.ndarray], mass: float) -> None:
+    """ValueError in one line naming the moment, the time and its size per kg when a joint moment (N m) of
+    ``moments`` exceeds :data:`MAX_MOMENT_PER_KG` times ``mass`` (kg: the body's, e.g. the model's or the weight
+    the plates carry, whichever is larger); ``source``: the trial."""
+    limit = MAX_MOMENT_PER_KG * mass
+    for name, m in moments.items():
+        with np.errstate(invalid="ignore"):
+            bad = ~(np.abs(m) <= limit)
+        if np.isnan(m).any():
+            raise ValueError(f"{source}: {name} is not a number at t = {t[int(np.argmax(np.isnan(m)))]:g} s")
+        if bad.any():
+            at, x = _worst(t, m, bad)
+            raise ValueError(f"{source}: {name} reaches {x:.4g} N m at t = {at:g} s, {abs(x) / mass:.3g} N m per kg of "
+                             f"a body of {mass:.3g} kg; no human joint carries {MAX_MOMENT_PER_KG:g} N m/kg (3-5 in "
+                             "sprinting and landing): the coordinates' or the markers' units are wrong, or the scene "
+                             "is not this trial's")

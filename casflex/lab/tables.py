@@ -17,9 +17,9 @@ from __future__ import annotations
 
 import math
 import os
+import stat
 from array import array
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -92,12 +92,31 @@ def _numbers(cells: list[str], where: str, row: int) -> list[float]:
     return out
 
 
+#: Characters: a line longer than this is no row of a lab table (a TRC row of 1000 markers is 36 kB): a binary
+#: file, or one with no line ends (a sparse file of zeros), read no further.
+MAX_LINE = 1 << 20
+
+
 def _lines(path: str | os.PathLike[str]) -> tuple[str, list[str]]:
-    """(the path as text, the file's lines); ValueError naming the file when it cannot be read."""
+    """(the path as text, the file's lines, a UTF-8 byte-order mark dropped); ValueError naming the file when it
+    cannot be read, is no regular file (a directory, a device such as /dev/zero behind a link, a pipe: read until
+    memory runs out) or has a line of more than :data:`MAX_LINE` characters."""
+    where = str(path)
     try:
-        return str(path), Path(path).read_text(encoding="utf-8", errors="replace").splitlines()
+        mode = os.stat(path).st_mode
+        if not stat.S_ISREG(mode):
+            kind = "a directory" if stat.S_ISDIR(mode) else "a device or a pipe"
+            raise ValueError(f"{where}: not a regular file ({kind}); give the table's file")
+        lines = []
+        with open(path, encoding="utf-8-sig", errors="replace", newline=None) as f:
+            while line := f.readline(MAX_LINE + 1):
+                if len(line) > MAX_LINE:
+                    raise ValueError(f"{where}: line {len(lines) + 1} is longer than {MAX_LINE:,} characters: not a "
+                                     "text table (a binary file?)")
+                lines.append(line.rstrip("\n"))
+        return where, lines
     except OSError as exc:
-        raise ValueError(f"{path}: cannot read ({exc.strerror})") from None
+        raise ValueError(f"{where}: cannot read ({exc.strerror})") from None
 
 
 def read_trc(path: str | os.PathLike[str]) -> LabMarkers:

@@ -65,10 +65,14 @@ def plot_marker_fit(res, path: str | os.PathLike[str] | None = None) -> Figure:
     return fig
 
 
+#: The files :func:`save_inverse_figures` writes (the second where markers were fitted).
+FIGURES = ("inverse_loads.png", "marker_fit.png")
+
+
 def save_inverse_figures(res, directory: str | os.PathLike[str]) -> list[Path]:
     """``inverse_loads.png`` and ``marker_fit.png`` (where markers were fitted) in ``directory``."""
     d = Path(directory)
-    paths = [d / "inverse_loads.png", d / "marker_fit.png"]
+    paths = [d / name for name in FIGURES]
     plot_inverse(res, paths[0])
     if not res.marker_labels:  # coordinates given: no marker fit to show
         return paths[:1]
