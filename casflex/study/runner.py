@@ -49,7 +49,7 @@ def calibrate_run(*, model: str, static: str | None, plane: str, root: str | Non
     placed_mass = static is not None and calibrate and scale
     if static is not None and calibrate:
         lab = read_markers(static)[0]
-        plane, report = _trial_plane(scene, lab, plane, vertical, static=True)
+        plane, report = _trial_plane(scene, lab, plane, vertical, static=True, root=root)
         scene, placed = place(scene, lab, plane, root=root, scale=scale, mass=mass if scale else None)
         report += placed
     if mass is not None and not placed_mass:  # weighed, not measured: the masses to it, the sizes as they are
@@ -60,17 +60,19 @@ def calibrate_run(*, model: str, static: str | None, plane: str, root: str | Non
     return {"scene": dumps_scene(scene), "report": list(report)}
 
 
-def _trial_plane(sc, lab, plane: str, vertical: str, static: bool = False) -> tuple[str, list[str]]:
+def _trial_plane(sc, lab, plane: str, vertical: str, static: bool = False, root: str | None = None
+                 ) -> tuple[str, list[str]]:
     """(the trial's plane, report lines): ``plane``, or where "auto" the one the subject travels or faces in
-    (:mod:`.direction`: a static trial by its markers, another by the scene's fit); the subject's heading checked
-    against it (ValueError where it turns)."""
-    from casflex.study.direction import check_straight, facing_plane, fitted_plane, walking_plane
+    (:mod:`.direction`: a static trial by its markers, another by the scene's fit); the subject's heading, from
+    the root segment's markers (:func:`.direction.travel_labels`), checked against it (ValueError where it turns,
+    or where the trial has none of the root's markers)."""
+    from casflex.study.direction import check_straight, facing_plane, fitted_plane, travel_labels, walking_plane
 
-    labels = [lb for lb in (m.label or m.name for m in sc.markers) if lb in lab.labels]
+    labels = travel_labels(sc, lab, root)
     report = []
     if plane == "auto":
         plane, line = walking_plane(lab, labels, vertical) or (facing_plane if static else fitted_plane)(
-            sc, lab, vertical)
+            sc, lab, vertical, *([root] if not static else []))
         report.append(line)
     return plane, [*report, check_straight(lab, labels, plane)]
 
@@ -139,7 +141,7 @@ def trial_run(*, scene: str, trial: dict, options: dict, uncertain: list[str]) -
     t0, t1 = trial["window"] or (None, None)
     inside = (lab.t >= (t0 or -np.inf)) & (lab.t <= (t1 or np.inf))
     plane, plane_report = _trial_plane(sc, dataclasses.replace(lab, t=lab.t[inside], xyz=lab.xyz[inside]),
-                                       options["plane"], options["vertical"])
+                                       options["plane"], options["vertical"], root=options["root"])
     plates, feet, event_report, found = _events(sc, lab, table, trial["plates"], plane)
     grf = trial["grf"] if trial["grf"] is not None and trial["grf"].lower().endswith(".xml") else table
     res = inverse_dynamics(sc, lab, grf=grf, plates=plates, plane=plane,
