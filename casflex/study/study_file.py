@@ -16,6 +16,8 @@ calibrate = true               # place the model's markers from each subject's s
 scale = false                  # scale the segments too (casflex.inverse.calibrate)
 bands = false                  # each load's band (anthropometry and marker noise, casflex.inverse.bands)
 normalise = "none"             # or "mass": the table and figures per kg of each subject's mass (N m/kg, N/kg)
+cycles = "clean"               # the means and figures from the cycles whose stance is wholly on the foot's plate
+                               # (loads.csv flags each cycle: clean, t0, t1); "all": every cycle
 passive = []                   # hinges whose net moment a spring-damper is fitted to, per trial ("knee_r") or
                                # per swing phase ("knee_r:swing"): casflex.inverse.passive; passive.csv
 
@@ -47,10 +49,11 @@ from typing import Any
 __all__ = ["Study", "Subject", "Trial", "Options", "load_study"]
 
 _OPTIONS = {"plane": str, "vertical": str, "cutoff": (float, str), "cutoff_plates": (float, str), "filter": str,
-            "root": str, "tasks": str, "normalise": str, "passive": list, "calibrate": bool, "scale": bool,
-            "bands": bool}
+            "root": str, "tasks": str, "normalise": str, "cycles": str, "passive": list, "calibrate": bool,
+            "scale": bool, "bands": bool}
 _FILTERS = ("butterworth", "opensim")
 _NORMALISE = ("none", "mass")
+_CYCLES = ("clean", "all")
 
 
 @dataclass(frozen=True)
@@ -68,6 +71,7 @@ class Options:
     scale: bool = False
     bands: bool = False
     normalise: str = "none"
+    cycles: str = "clean"
     passive: tuple[tuple[str, str], ...] = ()  # (hinge, "trial" or "swing")
 
 
@@ -159,6 +163,8 @@ def _options(base: Path, table: Any) -> Options:
 
     if t.get("normalise", "none") not in _NORMALISE:
         raise StudyError(f"options.normalise: expected one of {list(_NORMALISE)}, got {t['normalise']!r}")
+    if t.get("cycles", "clean") not in _CYCLES:
+        raise StudyError(f"options.cycles: expected one of {list(_CYCLES)}, got {t['cycles']!r}")
     passive = t.get("passive", [])
     if not all(isinstance(p, str) and re.fullmatch(r"[^:\s]+(:(swing|trial))?", p) for p in passive):
         raise StudyError(f"options.passive: expected hinge names, each alone or with :swing or :trial, got {passive!r}")
@@ -176,7 +182,7 @@ def _options(base: Path, table: Any) -> Options:
                    filter=t.get("filter", "butterworth"), root=t.get("root") or None,
                    tasks=_file(base, "options.tasks", t["tasks"], (".xml",)) if t.get("tasks") else None,
                    calibrate=t.get("calibrate", True), scale=t.get("scale", False), bands=t.get("bands", False),
-                   normalise=t.get("normalise", "none"),
+                   normalise=t.get("normalise", "none"), cycles=t.get("cycles", "clean"),
                    passive=tuple((p.partition(":")[0], p.partition(":")[2] or "trial") for p in passive))
 
 
