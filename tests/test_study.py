@@ -84,6 +84,13 @@ def write(folder: Path, extra: str = "") -> Path:
     (('plane = "X,Y"', 'plane = "X,Y"\nnormalise = "mass"', 1), "subjects[0].mass: needed by options.normalise"),
     (('plane = "X,Y"', 'plane = "X,Y"\nspeed = 3', 1), "options.speed: unknown field"),
     (('plane = "X,Y"', 'plane = "X,Y"\ncycles = "some"', 1), "options.cycles"),
+    # knowable from the files' headers, refused before any work (they failed each trial at run time)
+    (("window = [0.25, 1.15]", "window = [0.25, 3.0]", 1),
+     "subjects[0].trials[1].window: the window 0.25..3 s is not within the markers' times 0.2..1.2 s"),
+    (("cutoff = 6.0", "cutoff = 45.0", 1), "options.cutoff: 45 Hz is not below the Nyquist frequency 30 Hz"),
+    (("cutoff = 6.0", "cutoff = 6.0\ncutoff_plates = 31", 1), "options.cutoff_plates: 31 Hz is not below the Nyquist"),
+    (('window = [0.25, 1.15]', 'window = [0.25, 1.15]\nplates = { calcn_r = "2_ground_" }', 1),
+     "subjects[0].trials[1].plates.calcn_r: hamner_running_whole_grf.mot: no plate '2_ground_'"),
     (("mass = 80.0", 'mass = 80.0\nuncertain = ["pelvis.massx=3%"]', 1), "subjects[1].uncertain"),
     (('window = [0.25, 1.15]', 'window = [0.25, 1.15]\nplates = { calcn_x = "ground_force_" }', 1),
      "subjects[0].trials[1].plates"),
@@ -96,6 +103,26 @@ def test_a_bad_study_file_is_refused_in_one_line_before_any_work(folder, capsys,
     assert main(["study", str(path), "--out", str(folder / "out"), "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and said.split(":")[0] in err[0], err
+    assert not (folder / "out").exists()
+
+
+@pytest.mark.parametrize("field", ["tasks", "grf"])
+def test_a_setup_file_that_names_itself_is_refused_before_any_work(folder, capsys, field):
+    # an IK setup whose IKTaskSet file is itself, an ID setup whose external_loads_file is itself: read forever
+    # (RecursionError, a traceback) where the trial ran
+    tag = {"tasks": ("InverseKinematicsTool", '<IKTaskSet file="self.xml"/>'),
+           "grf": ("InverseDynamicsTool", "<external_loads_file>self.xml</external_loads_file>")}[field]
+    (folder / "self.xml").write_text(f"<OpenSimDocument><{tag[0]}>{tag[1]}</{tag[0]}></OpenSimDocument>\n")
+    path = write(folder)
+    old = 'tasks = "hamner_tasks_ik.xml"' if field == "tasks" else 'grf = "hamner_running_whole_grf.mot"'
+    path.write_text(path.read_text().replace(old, old.split("=")[0] + '= "self.xml"', 1))
+    said = "options.tasks" if field == "tasks" else "subjects[0].trials[0].grf"
+    pattern = said.replace("[", r"\[").replace("]", r"\]") + ": .*self.xml.* is the file itself"
+    with pytest.raises(StudyError, match=pattern):
+        load_study(str(path))
+    assert main(["study", str(path), "--out", str(folder / "out"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and said in err[0], err
     assert not (folder / "out").exists()
 
 
