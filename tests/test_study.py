@@ -89,6 +89,8 @@ def write(folder: Path, extra: str = "") -> Path:
      "subjects[0].trials[1].window: the window 0.25..3 s is not within the markers' times 0.2..1.2 s"),
     (("cutoff = 6.0", "cutoff = 45.0", 1), "options.cutoff: 45 Hz is not below the Nyquist frequency 30 Hz"),
     (("cutoff = 6.0", "cutoff = 6.0\ncutoff_plates = 31", 1), "options.cutoff_plates: 31 Hz is not below the Nyquist"),
+    (('window = [0.25, 1.15]', 'window = [0.25, 1.15]\nplates = { calcn_r = "ground_", calcn_l = "ground_" }', 1),
+     "subjects[0].trials[1].plates: the plate 'ground_' is given to calcn_r and calcn_l"),
     (('window = [0.25, 1.15]', 'window = [0.25, 1.15]\nplates = { calcn_r = "2_ground_" }', 1),
      "subjects[0].trials[1].plates.calcn_r: hamner_running_whole_grf.mot: no plate '2_ground_'"),
     (("mass = 80.0", 'mass = 80.0\nuncertain = ["pelvis.massx=3%"]', 1), "subjects[1].uncertain"),

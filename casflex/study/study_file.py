@@ -215,6 +215,10 @@ def _trial(base: Path, where: str, table: Any) -> Trial:
                                                                     and not isinstance(w, bool) for w in window))
         if not ok or not 0 <= window[0] < window[1]:
             raise StudyError(f"{where}.window: expected [start, end] in s, 0 <= start < end, got {window!r}")
+    twice = sorted({v for v in (plates or {}).values() if list(plates.values()).count(v) > 1})
+    if twice:
+        raise StudyError(f"{where}.plates: the plate {twice[0]!r} is given to " + " and ".join(
+            n for n, v in plates.items() if v == twice[0]) + ": a plate's force acts on one foot (give it once)")
     if plates is not None and "grf" not in t:
         raise StudyError(f"{where}.plates: needs grf (the ground reaction file)")
     return Trial(_name(f"{where}.name", t["name"]), _file(base, f"{where}.markers", t["markers"], (".trc", ".c3d")),
