@@ -292,6 +292,10 @@ def prepare(scene, markers=None, *, plane="X,Y", grf=None, plates: dict[str, str
             raise ValueError(f"plates: no node {node!r} in the scene; nodes are {list(model.node_names)}")
     if plates and grf is None:
         raise ValueError("plates: given without the ground reactions (grf)")
+    twice = sorted({p for p in plates.values() if list(plates.values()).count(p) > 1})
+    if twice:  # its force would act on each: the ground reaction counted twice
+        raise ValueError(f"plates: the plate {twice[0]!r} is given to " + " and ".join(
+            n for n, p in plates.items() if p == twice[0]) + "; a plate's force acts on one node")
     tree = kinematic_tree(model, root)
     spec = band_spec(model, tree, uncertain=uncertain, marker_noise=marker_noise, bands=bands,
                      given=coordinates is not None, n_markers=sum(m.weight > 0 for m in model.scene.markers))
