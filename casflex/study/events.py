@@ -365,6 +365,9 @@ def clean_cycles(found: list[Contact], node: str, spans: list[tuple[float, float
     for t0, t1 in spans:
         mine = [c for c in found if c.foot == node and c.strike is not None and abs(c.strike - t0) <= slack]
         stance = next((c for c in mine if c.plate == plate), None)
+        if plate is None:
+            out.append((False, "no plate is applied to it (the study file's plates)"))
+            continue
         if stance is None:
             on = ", ".join(f"{c.plate!r}" for c in mine)
             out.append((False, f"no strike on its plate {plate!r} within {slack:g} s of {t0:.3f} s"
