@@ -370,7 +370,8 @@ def clean_cycles(found: list[Contact], node: str, spans: list[tuple[float, float
             continue
         if stance is None:
             on = ", ".join(f"{c.plate!r}" for c in mine)
-            near = [c for c in found if c.foot == node and (c.strike or -np.inf) < t1 and (c.off or np.inf) > t0]
+            near = [c for c in found if c.foot == node and (c.strike or -np.inf) < (t0 + t1) / 2  # in its stance
+                    and (c.off or np.inf) > t0]
             said = (f" (on {on}, not applied to it)" if on else f" (its contact {_span(near[0].strike, near[0].off)} "
                     f"on {near[0].plate!r})" if near else " (the foot off every plate)")
             out.append((False, f"no strike on its plate {plate!r} within {slack:g} s of {t0:.3f} s{said}"))
