@@ -83,6 +83,15 @@ def test_a_model_marker_with_no_task_need_not_be_in_the_trial(plain):
     assert np.max(np.abs(res.z - plain.z)) < 1e-8 and "R.Knee.Lat" not in res.marker_labels
 
 
+def test_one_plate_given_to_two_feet_is_refused():
+    # its force acted on both (the ground reaction counted twice), without a word
+    whole = Path(__file__).resolve().parent / "data" / "lab"
+    with pytest.raises(ValueError, match="plate 'ground_' is given to both 'calcn_r' and 'calcn_l'"):
+        inverse_dynamics(str(whole / "hamner_subject02_planar.osim"), str(whole / "hamner_running_whole.trc"),
+                         grf=str(whole / "hamner_running_whole_grf.mot"),
+                         plates={"calcn_r": "ground_", "calcn_l": "ground_"}, tasks=str(whole / "hamner_tasks_ik.xml"))
+
+
 def test_bad_task_files_are_refused_in_one_line(tmp_path):
     bad = tmp_path / "bad.xml"
     bad.write_text("<IKTaskSet><objects><IKMarkerTask name='A'><weight>-3</weight></IKMarkerTask></objects>"

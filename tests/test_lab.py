@@ -406,3 +406,23 @@ def test_a_c3d_trial_gives_the_scenes_markers():
     data = trial_markers(assemble(loads_scene(text)), path, "X,Z")
     assert np.allclose(data.q[:, 0], lab.xyz[:, 0, 0], equal_nan=True)  # x of the first marker: the lab's X, m
     assert np.allclose(data.q[:, 1], lab.xyz[:, 0, 2], equal_nan=True)  # y: the lab's Z (up in this file)
+
+
+def test_a_trial_file_s_span_is_read_from_its_header_and_its_ends():
+    # casflex study checks windows and cut-offs before any work from these: the same times and rates as the
+    # whole files' readers (C3D without ezc3d: its header's frames and rate)
+    from casflex.lab import read_c3d
+    from casflex.lab.c3d import c3d_span
+    from casflex.lab.tables import sto_span, trc_span
+
+    lab = Path(__file__).resolve().parent / "data" / "lab"
+    trc, whole = trc_span(lab / "hamner_running_whole.trc"), read_trc(lab / "hamner_running_whole.trc")
+    assert (trc.t0, trc.t1, trc.rate, trc.names) == (whole.t[0], whole.t[-1], whole.rate, whole.labels)
+    mot, table = sto_span(lab / "hamner_running_whole_grf.mot"), read_sto(lab / "hamner_running_whole_grf.mot")
+    assert (mot.t0, mot.t1, mot.names) == (table.t[0], table.t[-1], table.names)
+    assert mot.rate == pytest.approx(60.0, rel=1e-3)  # times rounded to ms: 0.2, 0.217, 0.233 ...
+    pytest.importorskip("ezc3d")
+    (c3d, analog), (markers, plates) = c3d_span(lab / "walking2_excerpt.c3d"), read_c3d(lab / "walking2_excerpt.c3d")
+    assert (c3d.t0, c3d.rate) == (markers.t[0], markers.rate)
+    assert analog == 2000.0 and 1.0 / (plates.t[1] - plates.t[0]) == pytest.approx(analog, rel=1e-9)
+    assert c3d.t1 == pytest.approx(markers.t[-1], abs=1e-12)  # (last - 1) / rate, computed the same way

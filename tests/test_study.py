@@ -9,6 +9,7 @@ import csv
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from casflex.cli import main
@@ -82,6 +83,16 @@ def write(folder: Path, extra: str = "") -> Path:
     (('plane = "X,Y"', 'plane = "X,Y"\npassive = ["knee_q"]', 1), "options.passive: 'knee_q' is not a joint"),
     (('plane = "X,Y"', 'plane = "X,Y"\nnormalise = "mass"', 1), "subjects[0].mass: needed by options.normalise"),
     (('plane = "X,Y"', 'plane = "X,Y"\nspeed = 3', 1), "options.speed: unknown field"),
+    (('plane = "X,Y"', 'plane = "X,Y"\ncycles = "some"', 1), "options.cycles"),
+    # knowable from the files' headers, refused before any work (they failed each trial at run time)
+    (("window = [0.25, 1.15]", "window = [0.25, 3.0]", 1),
+     "subjects[0].trials[1].window: the window 0.25..3 s is not within the markers' times 0.2..1.2 s"),
+    (("cutoff = 6.0", "cutoff = 45.0", 1), "options.cutoff: 45 Hz is not below the Nyquist frequency 30 Hz"),
+    (("cutoff = 6.0", "cutoff = 6.0\ncutoff_plates = 31", 1), "options.cutoff_plates: 31 Hz is not below the Nyquist"),
+    (('window = [0.25, 1.15]', 'window = [0.25, 1.15]\nplates = { calcn_r = "ground_", calcn_l = "ground_" }', 1),
+     "subjects[0].trials[1].plates: the plate 'ground_' is given to calcn_r and calcn_l"),
+    (('window = [0.25, 1.15]', 'window = [0.25, 1.15]\nplates = { calcn_r = "2_ground_" }', 1),
+     "subjects[0].trials[1].plates.calcn_r: hamner_running_whole_grf.mot: no plate '2_ground_'"),
     (("mass = 80.0", 'mass = 80.0\nuncertain = ["pelvis.massx=3%"]', 1), "subjects[1].uncertain"),
     (('window = [0.25, 1.15]', 'window = [0.25, 1.15]\nplates = { calcn_x = "ground_force_" }', 1),
      "subjects[0].trials[1].plates"),
@@ -94,6 +105,26 @@ def test_a_bad_study_file_is_refused_in_one_line_before_any_work(folder, capsys,
     assert main(["study", str(path), "--out", str(folder / "out"), "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and said.split(":")[0] in err[0], err
+    assert not (folder / "out").exists()
+
+
+@pytest.mark.parametrize("field", ["tasks", "grf"])
+def test_a_setup_file_that_names_itself_is_refused_before_any_work(folder, capsys, field):
+    # an IK setup whose IKTaskSet file is itself, an ID setup whose external_loads_file is itself: read forever
+    # (RecursionError, a traceback) where the trial ran
+    tag = {"tasks": ("InverseKinematicsTool", '<IKTaskSet file="self.xml"/>'),
+           "grf": ("InverseDynamicsTool", "<external_loads_file>self.xml</external_loads_file>")}[field]
+    (folder / "self.xml").write_text(f"<OpenSimDocument><{tag[0]}>{tag[1]}</{tag[0]}></OpenSimDocument>\n")
+    path = write(folder)
+    old = 'tasks = "hamner_tasks_ik.xml"' if field == "tasks" else 'grf = "hamner_running_whole_grf.mot"'
+    path.write_text(path.read_text().replace(old, old.split("=")[0] + '= "self.xml"', 1))
+    said = "options.tasks" if field == "tasks" else "subjects[0].trials[0].grf"
+    pattern = said.replace("[", r"\[").replace("]", r"\]") + ": .*self.xml.* is the file itself"
+    with pytest.raises(StudyError, match=pattern):
+        load_study(str(path))
+    assert main(["study", str(path), "--out", str(folder / "out"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and said in err[0], err
     assert not (folder / "out").exists()
 
 
@@ -119,6 +150,9 @@ def test_a_study_runs_resumes_and_reports_a_failed_trial(folder, capsys):
     assert {r["trial"] for r in rows if r["subject"] == "s02"} == {"run", "run_late"}
     assert "hip_flexion_r_moment" in {r["load"] for r in rows}
     assert all(0.0 <= float(r["percent"]) <= 100.0 for r in rows)
+    # each cycle flagged, with its span: Hamner's right cycle (0.390-1.101 s) stands wholly on its plate
+    right = {(r["clean"], r["t0"][:5], r["t1"][:5]) for r in rows if r["load"] == "ankle_angle_r_moment"}
+    assert right == {("true", "0.389", "1.101")}, right
     assert (out / "group.png").is_file() and (out / "s02.png").is_file()
     summary = (out / "summary.txt").read_text()
     assert "broken run:" in summary
@@ -233,3 +267,66 @@ def test_passive_fits_per_trial_and_per_swing_phase(folder):
     # the right stance's plate off (0.65-0.667 s, tests/data/lab/README.md) to the next strike (1.10 s)
     assert 0.64 <= float(swing["t0"]) <= 0.68 and 1.08 <= float(swing["t1"]) <= 1.12
     assert all(r["passive"] in ("yes", "no") and float(r["kt_se"]) > 0 for r in rows)
+
+
+def _zeroed_grf(folder: Path, name: str, prefix: str, before: float = float("inf")) -> str:
+    """A copy of the trial's plates with the plate ``prefix``'s columns 0 at the times before ``before`` s: a foot
+    that never touches a plate (``1_ground_``: the left), or whose first stance is off the plates (``ground_``
+    before 0.8 s: the right's 0.39-0.665 s stance)."""
+    lines = (LAB / "hamner_running_whole_grf.mot").read_text().splitlines()
+    head = lines.index("endheader") + 1
+    names = lines[head].split("\t")
+    cols = [k for k, n in enumerate(names) if n.startswith(prefix) and (prefix != "ground_" or n[0] == "g")]
+    for i in range(head + 1, len(lines)):
+        row = lines[i].split("\t")
+        if float(row[0]) < before:
+            for k in cols:
+                row[k] = "0"
+        lines[i] = "\t".join(row)
+    (folder / name).write_text("\n".join(lines) + "\n")
+    return str(folder / name)
+
+
+def _trial_run(folder: Path, grf: str) -> dict:
+    from casflex import load_scene
+    from casflex.scene import dumps_scene
+    from casflex.study.runner import trial_run
+
+    options = {"plane": "X,Y", "vertical": "Y", "cutoff": 6.0, "cutoff_plates": "same", "filter": "butterworth",
+               "root": None, "tasks": str(LAB / "hamner_tasks_ik.xml"), "bands": False, "passive": ()}
+    trial = {"name": "run", "markers": str(LAB / "hamner_running_whole.trc"), "grf": grf, "plates": None,
+             "window": None}
+    return trial_run(scene=dumps_scene(load_scene(str(LAB / "hamner_subject02_planar.osim"))), trial=trial,
+                     options=options, uncertain=[])
+
+
+def test_a_foot_that_touches_no_plate_gets_no_kinetic_cycles(tmp_path):
+    # the left plate zeroed: the left leg's loads took the right foot's cycle (and its name, calcn_r) before
+    rec = _trial_run(tmp_path, _zeroed_grf(tmp_path, "left_never.mot", "1_ground_"))
+    assert rec["plates"] == {"calcn_r": "ground_"}
+    for side, cycles in (("l", 0), ("r", 1)):
+        for joint in ("hip_flexion", "knee_angle", "ankle_angle"):
+            ld = rec["loads"][f"{joint}_{side}_moment"]
+            assert ld["foot"] == f"calcn_{side}" and len(ld["cycles"]) == len(ld["value"]) == cycles
+    note, = [w for w in rec["warnings"] if "touches no plate" in w]
+    assert note.startswith("calcn_l touches no plate: no kinetic cycle for hip_flexion_l_moment")
+    assert rec["loads"]["lumbar_extension_moment"]["foot"] == "calcn_r"  # the trunk: the first foot's cycles
+
+
+def test_a_cycle_off_the_plates_is_flagged_and_left_out_of_the_means(tmp_path):
+    # the right foot's first stance (0.39-0.665 s) zeroed: its cycle comes from the heel marker's strikes, with no
+    # ground reaction under the stance; averaged with the clean cycle of the same trial it halved the ankle's peak
+    from casflex.cli.study import cycle_curves
+
+    clean = _trial_run(tmp_path, str(LAB / "hamner_running_whole_grf.mot"))
+    off = _trial_run(tmp_path, _zeroed_grf(tmp_path, "right_off.mot", "ground_", before=0.8))
+    assert clean["loads"]["ankle_angle_r_moment"]["clean"] == [True]
+    ld = off["loads"]["ankle_angle_r_moment"]
+    assert len(ld["cycles"]) == 1 and ld["clean"] == [False]
+    assert any("not clean: no strike on its plate 'ground_'" in w and "off every plate" in w for w in off["warnings"])
+    out = {"trials": {("s02", "run"): clean, ("s02", "right_off"): off}}
+    peak = {k: float(cycle_curves(out, all_cycles=k)["ankle_angle_r_moment"]["s02"].mean(axis=0).min())
+            for k in (False, True)}
+    alone = float(np.min(clean["loads"]["ankle_angle_r_moment"]["value"][0]))
+    assert peak[False] == alone  # the clean cycle alone: the same numbers
+    assert peak[True] > 0.75 * alone  # with the cycle off the plates: some half the peak (the bug's answer)

@@ -74,3 +74,38 @@ def test_a_facing_the_markers_cannot_tell_is_refused():
     lab.xyz[:, :, 0] += np.arange(len(SCENE)) * 1e-9
     with pytest.raises(ValueError, match="cannot tell"):
         facing_plane(_scene(), lab, "Z")
+
+
+def _hamner_legs(drop=()):
+    """(hamner_leg's scene, Hamner's treadmill running trial cut to that scene's pelvis and right-leg markers, less
+    ``drop``): a leg-only marker set, on a treadmill (the pelvis stays within some 0.1 m over the trial)."""
+    import dataclasses
+    from pathlib import Path
+
+    from casflex import load_scene
+    from casflex.lab import read_trc
+
+    scene = load_scene("hamner_leg")
+    lab = read_trc(Path(__file__).resolve().parent / "data" / "lab" / "hamner_running_whole.trc")
+    keep = [i for i, lb in enumerate(lab.labels) if lb in {m.label or m.name for m in scene.markers} - set(drop)]
+    return scene, dataclasses.replace(lab, labels=tuple(lab.labels[i] for i in keep), xyz=lab.xyz[:, keep])
+
+
+@pytest.mark.parametrize("plane", ["X,Y", "auto"])
+def test_a_treadmill_trial_with_a_leg_only_marker_set_is_straight(plane):
+    # the heading from the pelvis's markers: the median over the pelvis and one leg's 13 markers was the swinging
+    # leg's, refused as "the subject turns (the heading from -163 to +16 degrees ...)" where casflex inverse runs
+    from casflex.study.runner import _trial_plane
+
+    scene, lab = _hamner_legs()
+    got, report = _trial_plane(scene, lab, plane, "Y")
+    assert got == "X,Y" and report[-1].startswith("straight"), report
+
+
+def test_a_trial_without_the_pelvis_markers_says_which_are_missing():
+    # it said "the subject walks backwards in the plane X,Y (the heading from -180 to +174 degrees ...)"
+    from casflex.study.runner import _trial_plane
+
+    scene, lab = _hamner_legs(drop=("R.ASIS", "L.ASIS", "V.Sacral"))
+    with pytest.raises(ValueError, match=r"none of the root segment pelvis's markers \(R\.ASIS, L\.ASIS, V\.Sacral\)"):
+        _trial_plane(scene, lab, "X,Y", "Y")

@@ -228,3 +228,26 @@ def test_a_study_trial_s_plate_whose_force_pulls_is_refused_not_left_out():
     with pytest.raises(ValueError, match=r"walking2_excerpt.c3d: plate 'ground_': its vertical force pulls the foot "
                                          r"down: -951 N at t = 2.795 s"):
         assign_plates(loads_scene(walking2_leg()), lab, flipped, PLANE)
+
+
+def test_a_cycle_is_clean_only_where_its_stance_stands_wholly_on_the_foot_s_plate():
+    from casflex.study.events import Contact, clean_cycles
+
+    def c(plate, a, b, foot="calcn_r"):
+        return Contact(plate, a, b, foot, 0.05, 0.04)
+
+    spans = [(0.39, 1.10)]
+    good = [c("ground_", 0.39, 0.665)]
+    assert clean_cycles(good, "calcn_r", spans, "ground_") == [(True, "stance on 'ground_' 0.390-0.665 s")]
+    cases = {  # what makes it unclean -> what the reason says
+        "off every plate": ([], "the foot off every plate"),
+        "heel strike 60 ms before the plate's": ([c("ground_", 0.45, 0.665)], "0.390 s (its contact 0.450-0.665 s"),
+        "on a plate not applied to it": ([c("1_ground_", 0.39, 0.665)], "on '1_ground_', not applied to it"),
+        "on two plates": ([*good, c("1_ground_", 0.5, 0.6)], "calcn_r on '1_ground_' 0.500-0.600 s during"),
+        "the other foot on its plate": ([*good, c("ground_", 0.6, 0.9, "calcn_l")], "calcn_l on 'ground_'"),
+        "still loaded at the cycle's end": ([c("ground_", 0.39, None)], "does not end within the cycle"),
+    }
+    for what, (found, why) in cases.items():
+        (ok, said), = clean_cycles(found, "calcn_r", spans, "ground_")
+        assert not ok and why in said, (what, said)
+    assert clean_cycles(good, "calcn_r", spans, None)[0][0] is False  # no plate applied to the foot

@@ -17,8 +17,9 @@ from casflex.cli._base import OptionError, Outputs, integer, output_path
 def _table(rows: list[tuple]) -> str:
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["subject", "trial", "load", "foot", "cycle", "percent", "value", "band", "unit"])
-    w.writerows([(*r[:5], f"{r[5]:g}", repr(r[6]), "" if r[7] is None else repr(r[7]), r[8]) for r in rows])
+    w.writerow(["subject", "trial", "load", "foot", "cycle", "percent", "value", "band", "unit", "clean", "t0", "t1"])
+    w.writerows([(*r[:5], f"{r[5]:g}", repr(r[6]), "" if r[7] is None else repr(r[7]), r[8],
+                  "" if r[9] is None else str(r[9]).lower(), repr(r[10]), repr(r[11])) for r in rows])
     return buf.getvalue()
 
 
@@ -42,17 +43,27 @@ def _passive_table(out: dict) -> str | None:
     return buf.getvalue()
 
 
-def _figures(out: dict, directory: Path, title: str, per_kg: bool = False) -> list[str]:
-    """Per subject and for the group (the subjects' means): each load over the gait cycle; the files written."""
+def cycle_curves(out: dict, all_cycles: bool = False) -> dict[str, dict[str, np.ndarray]]:
+    """load -> subject -> its cycles (m, 101) over the subject's trials: the clean ones (their stance wholly on the
+    foot's plate, :func:`casflex.study.events.clean_cycles`), every one where ``all_cycles`` (the study's
+    ``cycles = "all"``); a subject without any left out, a load without any subject too."""
+    per: dict[str, dict[str, list]] = {}
+    for (subject, _), rec in out["trials"].items():
+        for name, ld in rec["loads"].items():
+            keep = ld.get("clean") or [False] * len(ld["value"])
+            per.setdefault(name, {}).setdefault(subject, []).extend(
+                v for v, ok in zip(ld["value"], keep, strict=True) if ok or all_cycles)
+    per = {n: {s: np.array(c) for s, c in subs.items() if c} for n, subs in per.items()}
+    return {n: subs for n, subs in per.items() if subs}
+
+
+def _figures(out: dict, directory: Path, title: str, per_kg: bool = False, all_cycles: bool = False) -> list[str]:
+    """Per subject and for the group (the subjects' means): each load over the gait cycle (:func:`cycle_curves`);
+    the files written."""
     from casflex.plotting.study import plot_cycles
     from casflex.study.runner import PERCENT, unit_of
 
-    per: dict[str, dict[str, list]] = {}  # load -> subject -> cycles
-    for (subject, _), rec in out["trials"].items():
-        for name, ld in rec["loads"].items():
-            per.setdefault(name, {}).setdefault(subject, []).extend(ld["value"])
-    per = {n: {s: np.array(c) for s, c in subs.items() if c} for n, subs in per.items()}
-    per = {n: subs for n, subs in per.items() if subs}
+    per = cycle_curves(out, all_cycles)
     if not per:
         return []
     units = {n: unit_of(n, per_kg) for n in per}
@@ -91,13 +102,14 @@ def cmd_study(args: argparse.Namespace, outputs: Outputs) -> int:
     passive = _passive_table(out)
     if passive is not None:
         (staging / "passive.csv").write_text(passive)
-    figures = _figures(per_kg(out, study), staging, study.name, per_kg=kg)
+    figures = _figures(per_kg(out, study), staging, study.name, per_kg=kg, all_cycles=study.options.cycles == "all")
     lines = [f"{len(out['trials'])} of {n} trial(s) done, {len(rows)} rows in loads.csv"
              + (f", {passive.count(chr(10)) - 1} passive fit(s) in passive.csv" if passive else "")
              + f"; figures: {', '.join(figures) or 'none'}"]
     for (subject, trial), rec in out["trials"].items():
-        cycles = {ld["foot"]: len(ld["cycles"]) for ld in rec["loads"].values()}
+        cycles = {ld["foot"]: f"{sum(ld['clean'])} clean of {len(ld['cycles'])}" for ld in rec["loads"].values()}
         lines.append(f"  {subject} {trial}: plates {rec['plates']}; cycles per foot {cycles}")
+        lines += [f"    {note}" for note in rec["warnings"] if "no kinetic cycle" in note or "not clean" in note]
     if out["failed"]:
         lines.append(f"{len(out['failed'])} failed:")
         lines += [f"  {what}: {why}" for what, why in out["failed"]]

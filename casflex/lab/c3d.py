@@ -49,9 +49,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from casflex.lab.tables import LabMarkers, LabTable
+    from casflex.lab.tables import FileSpan, LabMarkers, LabTable
 
-__all__ = ["read_c3d", "MIN_PLATE_FORCE", "NOT_MARKERS"]
+__all__ = ["read_c3d", "c3d_span", "MIN_PLATE_FORCE", "NOT_MARKERS"]
 
 #: N: below this force along a plate's upward normal its centre of pressure is NaN (module docstring).
 MIN_PLATE_FORCE = 20.0
@@ -95,6 +95,34 @@ def _check_structure(where: str, raw: bytes | mmap.mmap) -> int:
         raise ValueError(f"{where}: corrupted header: its first frame (word 4) is {first} and its last (word 5) "
                          f"{last}: the last cannot precede the first")
     return last - first + 1
+
+
+def c3d_span(path: str | os.PathLike[str]) -> tuple[FileSpan, float]:
+    """(the markers' :class:`~casflex.lab.tables.FileSpan`, the analog rate Hz: the plates', NaN without analog
+    channels) from the C3D header alone (its first 512 bytes and the parameter section's processor type), without
+    ezc3d: t0 = (first - 1) / rate, t1 = (last - 1) / rate (:func:`read_c3d`'s times); ``names`` empty.
+    ValueError in one line where the header is not a C3D's (:func:`read_c3d` says more)."""
+    import struct
+
+    from casflex.lab.tables import FileSpan
+
+    where = str(path)
+    try:
+        with open(path, "rb") as f:
+            head = f.read(512)
+            f.seek(max(0, 512 * (head[0] - 1) + 3) if head else 0)
+            proc = f.read(1)
+    except OSError as exc:
+        raise ValueError(f"{where}: cannot read ({exc.strerror})") from None
+    if len(head) < 512 or head[1] != 0x50 or len(proc) != 1 or proc[0] not in (84, 85):
+        raise ValueError(f"{where}: not a C3D file ezc3d reads (its header's key, or its processor type)")
+    first, last, per_frame = (int.from_bytes(head[i:i + 2], "little") for i in (6, 8, 18))
+    raw = head[20:24] if proc[0] == 84 else head[22:24] + head[20:22]  # DEC: the words swapped, the exponent +2
+    rate = struct.unpack("<f", raw)[0] / (1.0 if proc[0] == 84 else 4.0)
+    if not (math.isfinite(rate) and rate > 0):
+        raise ValueError(f"{where}: its header's frame rate {rate!r} is not a rate > 0")
+    analog = rate * per_frame if per_frame else math.nan
+    return FileSpan((first - 1) / rate, (max(last, first) - 1) / rate, rate, ()), analog
 
 
 def _walk_parameters(where: str, raw: bytes | mmap.mmap, pos: int) -> None:

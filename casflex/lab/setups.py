@@ -31,16 +31,26 @@ def _parse(path: str):
         raise ValueError(f"{path}: cannot read it ({exc.strerror or exc})") from None
 
 
-def read_tasks(path: str | os.PathLike[str]) -> MarkerTasks:
+def _inner(path: str, name: str, seen: tuple[str, ...], what: str) -> tuple[str, tuple[str, ...]]:
+    """(the file ``name`` that the setup ``path`` names, resolved from its folder; the files read so far): a file
+    that names itself, or one of the files that named it, refused in one line (it would be read forever)."""
+    inner = os.path.join(os.path.dirname(path), name)
+    chain = (*seen, os.path.realpath(path))
+    if os.path.realpath(inner) in chain:
+        raise ValueError(f"{path}: its {what} {name!r} is " + ("the file itself" if os.path.realpath(inner) ==
+                         chain[-1] else "a file that names it") + ": name the file that holds it")
+    return inner, chain
+
+
+def read_tasks(path: str | os.PathLike[str], _seen: tuple[str, ...] = ()) -> MarkerTasks:
     """The marker tasks of an IK task set file or an IK setup file (module docstring). ValueError in one
-    line for a file with no task set, or a weight that is not a number >= 0."""
+    line for a file with no task set, a weight that is not a number >= 0, or a setup that names itself."""
     path = os.fspath(path)
     root = _parse(path)
     sets = root.findall(".//IKTaskSet") if root.tag != "IKTaskSet" else [root]
     for s in sets:
         if s.get("file") and s.find("objects") is None:  # the setup names a task file
-            inner = os.path.join(os.path.dirname(path), s.get("file"))
-            return read_tasks(inner)
+            return read_tasks(*_inner(path, s.get("file"), _seen, "IKTaskSet file"))
     weights: dict[str, float] = {}
     coords = []
     for s in sets:
@@ -98,17 +108,17 @@ def _identifiers(path: str, force: ET.Element) -> tuple[str, tuple[str, str, str
     return body, ident
 
 
-def read_external_loads(path: str | os.PathLike[str]) -> ExternalLoads:
+def read_external_loads(path: str | os.PathLike[str], _seen: tuple[str, ...] = ()) -> ExternalLoads:
     """The plates of an ``ExternalLoads`` file, or of the one an inverse dynamics setup names in
     ``external_loads_file`` (module docstring). ValueError in one line for a file with no external force,
-    one that is not in the ground, or no data file."""
+    one that is not in the ground, no data file, or a setup that names itself."""
     path = os.fspath(path)
     root = _parse(path)
     loads = root if root.tag == "ExternalLoads" else root.find(".//ExternalLoads")
     if loads is None:
         inner = (root.findtext(".//external_loads_file") or "").strip()
         if inner:
-            return read_external_loads(os.path.join(os.path.dirname(path), inner))
+            return read_external_loads(*_inner(path, inner, _seen, "external_loads_file"))
         raise ValueError(f"{path}: no ExternalLoads: not an OpenSim external loads or inverse dynamics setup file")
     plates: dict[str, tuple[str, str, str]] = {}
     for force in loads.iter("ExternalForce"):

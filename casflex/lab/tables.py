@@ -23,7 +23,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["LabMarkers", "LabTable", "UNITS", "read_trc", "read_sto", "increasing_times"]
+__all__ = ["LabMarkers", "LabTable", "UNITS", "read_trc", "read_sto", "increasing_times", "FileSpan", "trc_span",
+           "sto_span"]
 
 #: Length units of TRC headers, in metres.
 UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
@@ -174,6 +175,73 @@ def _header_rate(text: str, where: str) -> float:
     if not (math.isfinite(rate) and rate > 0):
         raise ValueError(f"{where}: header DataRate {text!r} must be a rate > 0 (frames per second)")
     return rate
+
+
+@dataclass(frozen=True)
+class FileSpan:
+    """What a trial file's header and its first and last rows say, read without its data (a study's checks before
+    any work): the first and last times ``t0``, ``t1`` (s), the ``rate`` (Hz: the header's, else from the first two
+    rows' times; NaN where neither says) and the columns' ``names`` (a TRC's markers, a .mot's columns)."""
+
+    t0: float
+    t1: float
+    rate: float
+    names: tuple[str, ...]
+
+
+def _ends(path: str | os.PathLike[str], head: int) -> tuple[str, list[str], str]:
+    """(the path as text, the file's first ``head`` lines, its last line that is not blank); ValueError naming the
+    file when it cannot be read. Reads the beginning and the last 64 kB, not the whole file."""
+    try:
+        with open(path, "rb") as f:
+            first = [f.readline().decode("utf-8", "replace").rstrip("\r\n") for _ in range(head)]
+            f.seek(0, os.SEEK_END)
+            f.seek(max(0, f.tell() - 65536))
+            tail = f.read().decode("utf-8", "replace").splitlines()
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read ({exc.strerror})") from None
+    return str(path), first, next((ln for ln in reversed(tail) if ln.strip()), "")
+
+
+def _first_cell(line: str, where: str, what: str) -> float:
+    cells = [c for c in line.replace("\t", " ").split(" ") if c.strip()]
+    try:
+        return float(cells[0])
+    except (IndexError, ValueError):
+        raise ValueError(f"{where}: its {what} row has no time: {line[:60]!r}") from None
+
+
+def trc_span(path: str | os.PathLike[str]) -> FileSpan:
+    """A TRC file's :class:`FileSpan` from its header and its first and last frames (ValueError in one line
+    where they cannot be read: :func:`read_trc` says more)."""
+    where, lines, last = _ends(path, 7)
+    if len(lines) < 6 or not lines[0].startswith("PathFileType") or not lines[3].startswith("Frame#"):
+        raise ValueError(f"{where}: not a TRC file (its first line should start with 'PathFileType', its fourth "
+                         "with 'Frame#')")
+    header = dict(zip([k.strip() for k in lines[1].split("\t") if k.strip()],
+                      [v.strip() for v in lines[2].split("\t") if v.strip()], strict=False))
+    rate = _header_rate(header.get("DataRate", ""), where)
+    first = next((ln for ln in lines[5:] if ln.strip()), last)
+    t0, t1 = (_first_cell(ln.split("\t", 1)[-1], where, w) for ln, w in ((first, "first"), (last, "last")))
+    labels = tuple(n.strip() for n in lines[3].split("\t")[2:] if n.strip())
+    return FileSpan(t0, t1, rate, labels)
+
+
+def sto_span(path: str | os.PathLike[str]) -> FileSpan:
+    """A .mot / .sto file's :class:`FileSpan`: its columns (after ``endheader``; time first, left out), its
+    first and last times, its rate from the rows among its first 64 lines (ValueError in one line where they
+    cannot be read)."""
+    where, lines, last = _ends(path, 64)
+    end = next((i for i, ln in enumerate(lines) if ln.strip().lower() == "endheader"), None)
+    if end is None or end + 2 >= len(lines):
+        raise ValueError(f"{where}: no 'endheader' line among its first {len(lines)}: not an OpenSim .mot / .sto file")
+    names = [n.strip() for n in lines[end + 1].split("\t") if n.strip()]
+    if not names or names[0].lower() != "time":
+        raise ValueError(f"{where}: the line after 'endheader' should name the columns, 'time' first")
+    rows = [ln for ln in lines[end + 2:] if ln.strip()]
+    t = [_first_cell(ln, where, "first") for ln in rows] or [_first_cell(last, where, "first")]
+    rate = (len(t) - 1) / (t[-1] - t[0]) if len(t) >= 2 and t[-1] > t[0] else math.nan
+    return FileSpan(t[0], _first_cell(last, where, "last"), rate, tuple(names[1:]))
 
 
 #: How .mot / .sto headers write ``inDegrees`` (OpenSim writes yes/no; other tools true/false).

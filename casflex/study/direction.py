@@ -16,6 +16,11 @@ scenes are (OpenSim's convention: x forward, y up):
 :func:`check_straight` refuses a trial in which the subject turns: a planar model sees a turn's steps foreshortened
 and its joints' moments about the wrong axis, without a word. It compares the heading of the markers' median
 horizontal velocity, while the subject moves faster than :data:`WALKING_SPEED`, with the plane's x.
+
+Travel and heading are read from the markers of the root segment (:func:`travel_labels`: the pelvis of OpenSim's
+models), which moves with the body as a whole: a leg's markers swing forward and back at twice the body's speed
+(on a treadmill the median over a pelvis-and-leg set is the swinging leg's, which turned a straight trial into "the
+subject turns"). A trial that has none of them is refused naming them (it cannot be fitted either).
 """
 
 from __future__ import annotations
@@ -26,7 +31,8 @@ import numpy as np
 
 from casflex.lab import LabMarkers, Plane
 
-__all__ = ["walking_plane", "facing_plane", "fitted_plane", "check_straight", "MIN_TRAVEL", "WALKING_SPEED", "MAX_TURN",
+__all__ = ["travel_labels", "walking_plane", "facing_plane", "fitted_plane", "check_straight", "MIN_TRAVEL",
+           "WALKING_SPEED", "MAX_TURN",
            "MIN_CORRELATION"]
 
 #: m: less travel than this over a trial is standing (a static trial, a treadmill)
@@ -42,6 +48,23 @@ MAX_TURN = 25.0
 MIN_CORRELATION = 0.3
 
 _AXES = "XYZ"
+
+
+def travel_labels(scene, lab: LabMarkers, root: str | None = None) -> list[str]:
+    """The lab labels of the scene's markers that define the subject's travel and heading: those on the root
+    segment (the bodies at the node ``root``, default the scene's first node) that the trial has; where the root
+    carries no marker, every scene marker the trial has. ValueError in one line naming the root's markers where
+    the trial has none of them."""
+    root = root or scene.nodes[0].name
+    on_root = {b.name for b in scene.bodies if b.node == root}
+    everyone = [m.label or m.name for m in scene.markers]
+    mine = [m.label or m.name for m in scene.markers if m.on in on_root]
+    seen = [lb for lb in (mine or everyone) if lb in lab.labels]
+    if mine and not seen:
+        raise ValueError(f"{lab.source}: none of the root segment {root}'s markers ({', '.join(mine)}) is in the "
+                         f"trial: the subject's travel and heading (and its fit) need them; label them as the model "
+                         f"does (the trial has {', '.join(lab.labels[:8])}{', ...' if len(lab.labels) > 8 else ''})")
+    return seen
 
 
 def _horizontal(vertical: str) -> list[int]:

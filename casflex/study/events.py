@@ -23,6 +23,12 @@ and signals normalised to 0..100 % of a cycle. numpy only: no model is assembled
 - Cycles (:func:`gait_cycles`): a foot's strike to its next, from the strikes the lab marked in the file (a C3D's
   events: :func:`marked_strikes`) where the foot has two, else from the plates where it has two plate strikes,
   else from its heel marker (:func:`marker_strikes`), said in the report.
+- A clean cycle (:func:`clean_cycles`): its stance wholly on one plate, the plate inverse dynamics applies to the
+  foot, as labs take kinetics only from such cycles: a cycle whose stance is off every plate (its strikes from the
+  heel marker) or on two plates, or on a plate another foot shares, has loads below the hip without the foot's
+  ground reaction (Hamner's right ankle: a peak of -0.78 N m/kg averaged with such a cycle, -1.54 from the clean).
+- The feet that walk (:func:`ground_feet`): the feet whose markers come down to the floor (a wrist's never do); a
+  foot among them that touches no plate has no kinetic cycle (its leg's loads are not the other foot's).
 """
 
 from __future__ import annotations
@@ -40,7 +46,7 @@ from casflex.lab.tables import LabMarkers, LabTable, increasing_times
 
 __all__ = ["Contact", "contacts", "vertical_force", "tree_walk", "below", "feet", "plate_contacts", "assign_plates",
            "plates_of", "marked_strikes", "swing_phases", "read_trial", "plate_prefixes", "foot_strikes",
-           "marker_strikes", "cycles", "gait_cycles", "normalise"]
+           "marker_strikes", "cycles", "gait_cycles", "clean_cycles", "ground_feet", "normalise"]
 
 
 def contacts(t, fv, threshold: float = MIN_PLATE_FORCE, min_duration: float = 0.05
@@ -352,6 +358,56 @@ def gait_cycles(found: list[Contact], scene, markers, plane: Plane | str = "X,Y"
         said = "" if s is plate else f" ({len(plate)} plate strike(s): {_times(plate)} s)"
         lines.append(f"{node}: {len(out[node])} cycle(s) from {how} strikes at {_times(s)} s{said}")
     return out, lines
+
+
+def clean_cycles(found: list[Contact], node: str, spans: list[tuple[float, float]], plate: str | None,
+                 slack: float = 0.05) -> list[tuple[bool, str]]:
+    """(clean, why) for each gait cycle (t0, t1) s in ``spans`` of the foot ``node`` (module docstring): clean where
+    one of its contacts ``found`` (:func:`plate_contacts`) on ``plate`` (the plate inverse dynamics applies to the
+    foot; None: none) strikes within ``slack`` s of t0 (the heel marker's strikes are -4 to +21 ms from the plates'
+    on Hamner's trial) and comes off before t1, and no other contact (of this foot on another plate, or of another
+    foot on this plate) overlaps its stance; ``why`` says what is wrong, or the stance's span."""
+    out = []
+    for t0, t1 in spans:
+        mine = [c for c in found if c.foot == node and c.strike is not None and abs(c.strike - t0) <= slack]
+        stance = next((c for c in mine if c.plate == plate), None)
+        if plate is None:
+            out.append((False, "no plate is applied to it (the study file's plates)"))
+            continue
+        if stance is None:
+            on = ", ".join(f"{c.plate!r}" for c in mine)
+            near = [c for c in found if c.foot == node and (c.strike or -np.inf) < (t0 + t1) / 2  # in its stance
+                    and (c.off or np.inf) > t0]
+            said = (f" (on {on}, not applied to it)" if on else f" (its contact {_span(near[0].strike, near[0].off)} "
+                    f"on {near[0].plate!r})" if near else " (the foot off every plate)")
+            out.append((False, f"no strike on its plate {plate!r} within {slack:g} s of {t0:.3f} s{said}"))
+            continue
+        if stance.off is None or stance.off > t1:
+            out.append((False, f"its stance on {plate!r} from {stance.strike:.3f} s does not end within the cycle"))
+            continue
+        also = [c for c in found if c is not stance and (c.foot == node) != (c.plate == plate)
+                and (c.strike is None or c.strike < stance.off) and (c.off is None or c.off > stance.strike)]
+        if also:
+            c = also[0]
+            out.append((False, f"{c.foot} on {c.plate!r} {_span(c.strike, c.off)} during its stance on {plate!r} "
+                               f"{_span(stance.strike, stance.off)}"))
+            continue
+        out.append((True, f"stance on {plate!r} {_span(stance.strike, stance.off)}"))
+    return out
+
+
+def ground_feet(scene, lab: LabMarkers, plane: Plane | str = "X,Y", max_height: float = 0.15) -> list[str]:
+    """The scene's feet (:func:`feet`) that walk: whose lowest marker in the trial ``lab`` comes within
+    ``max_height`` m (vertical: the plane's y) of the trial's lowest marker (the floor's level, near enough: heel
+    and toe markers sit some 0.02-0.05 m above it), in :func:`feet`'s order; a wrist's stay 0.7 m up."""
+    up = _plane(plane).matrix[1]
+    low = {}
+    for node, labels in feet(scene).items():
+        h = [lab.marker(lb) @ up for lb in labels if lb in lab.labels]
+        h = np.concatenate(h) if h else np.array([])
+        low[node] = float(np.nanmin(h)) if np.isfinite(h).any() else np.inf
+    floor = min(low.values(), default=np.inf)
+    return [n for n, v in low.items() if v <= floor + max_height]
 
 
 def normalise(t, y, t0: float, t1: float, n: int = 101) -> np.ndarray:

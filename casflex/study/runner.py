@@ -31,6 +31,9 @@ __all__ = ["run_study", "trial_run", "calibrate_run", "check_against_models", "t
 
 #: the points of a gait cycle in the table: 0, 1, ..., 100 % (as labs report it)
 PERCENT = np.linspace(0.0, 100.0, 101)
+#: what a run's record holds, in its fingerprint (:func:`_run`): 2, each cycle's "clean" flag (a record without
+#: it, from before, is done again rather than read as clean or not)
+RECORD_FORMAT = 2
 
 
 def calibrate_run(*, model: str, static: str | None, plane: str, root: str | None, calibrate: bool, scale: bool,
@@ -49,7 +52,7 @@ def calibrate_run(*, model: str, static: str | None, plane: str, root: str | Non
     placed_mass = static is not None and calibrate and scale
     if static is not None and calibrate:
         lab = read_markers(static)[0]
-        plane, report = _trial_plane(scene, lab, plane, vertical, static=True)
+        plane, report = _trial_plane(scene, lab, plane, vertical, static=True, root=root)
         scene, placed = place(scene, lab, plane, root=root, scale=scale, mass=mass if scale else None)
         report += placed
     if mass is not None and not placed_mass:  # weighed, not measured: the masses to it, the sizes as they are
@@ -60,17 +63,19 @@ def calibrate_run(*, model: str, static: str | None, plane: str, root: str | Non
     return {"scene": dumps_scene(scene), "report": list(report)}
 
 
-def _trial_plane(sc, lab, plane: str, vertical: str, static: bool = False) -> tuple[str, list[str]]:
+def _trial_plane(sc, lab, plane: str, vertical: str, static: bool = False, root: str | None = None
+                 ) -> tuple[str, list[str]]:
     """(the trial's plane, report lines): ``plane``, or where "auto" the one the subject travels or faces in
-    (:mod:`.direction`: a static trial by its markers, another by the scene's fit); the subject's heading checked
-    against it (ValueError where it turns)."""
-    from casflex.study.direction import check_straight, facing_plane, fitted_plane, walking_plane
+    (:mod:`.direction`: a static trial by its markers, another by the scene's fit); the subject's heading, from
+    the root segment's markers (:func:`.direction.travel_labels`), checked against it (ValueError where it turns,
+    or where the trial has none of the root's markers)."""
+    from casflex.study.direction import check_straight, facing_plane, fitted_plane, travel_labels, walking_plane
 
-    labels = [lb for lb in (m.label or m.name for m in sc.markers) if lb in lab.labels]
+    labels = travel_labels(sc, lab, root)
     report = []
     if plane == "auto":
         plane, line = walking_plane(lab, labels, vertical) or (facing_plane if static else fitted_plane)(
-            sc, lab, vertical)
+            sc, lab, vertical, *([root] if not static else []))
         report.append(line)
     return plane, [*report, check_straight(lab, labels, plane)]
 
@@ -132,14 +137,13 @@ def trial_run(*, scene: str, trial: dict, options: dict, uncertain: list[str]) -
     from casflex.inverse import inverse_dynamics
     from casflex.scene import loads_scene
     from casflex.scene.uncertain import parse
-    from casflex.study.events import normalise
 
     sc = loads_scene(scene)
     lab, table = _read(trial)
     t0, t1 = trial["window"] or (None, None)
     inside = (lab.t >= (t0 or -np.inf)) & (lab.t <= (t1 or np.inf))
     plane, plane_report = _trial_plane(sc, dataclasses.replace(lab, t=lab.t[inside], xyz=lab.xyz[inside]),
-                                       options["plane"], options["vertical"])
+                                       options["plane"], options["vertical"], root=options["root"])
     plates, feet, event_report, found = _events(sc, lab, table, trial["plates"], plane)
     grf = trial["grf"] if trial["grf"] is not None and trial["grf"].lower().endswith(".xml") else table
     res = inverse_dynamics(sc, lab, grf=grf, plates=plates, plane=plane,
@@ -148,18 +152,40 @@ def trial_run(*, scene: str, trial: dict, options: dict, uncertain: list[str]) -
                            t_end=t1, uncertain=[parse(u) for u in uncertain] or None,
                            bands=bool(options["bands"]))  # false: none, even where the subject declares uncertainty
     feet = {f: [c for c in cs if res.t[0] <= c[0] and c[1] <= res.t[-1]] for f, cs in feet.items()}  # the window's
+    loads, notes = _cycle_loads(sc, res, lab, found, plates or {}, feet, plane)
+    return {"plates": plates, "plane": plane, "report": [*plane_report, *event_report, *notes, *res.report],
+            "warnings": [*res.warnings, *notes], "loads": loads, "t": [float(res.t[0]), float(res.t[-1])],
+            "passive": _passive(res, sc, lab, found, feet, options.get("passive", ()))}
+
+
+def _cycle_loads(sc, res, lab, found, plates: dict[str, str], feet: dict, plane: str) -> tuple[dict, list[str]]:
+    """({load: its foot, cycles [t0, t1] s, whether each is clean, values and bands on 0-100 %}, notes): each load
+    cut into the gait cycles of the foot below its joint (:func:`_load_feet`), each cycle's stance checked
+    (:func:`.events.clean_cycles`: wholly on the foot's plate); a load whose foot walks but has no cycle (it
+    touches no plate) gets none, said in the notes, where it took another foot's; a load above the feet (trunk,
+    arms, root) the first foot's cycles."""
+    from casflex.study.events import clean_cycles, ground_feet, normalise
+
     names = _loads_of(res)
+    walking = ground_feet(sc, lab, plane) if found else []  # no plates read: said in the report already
     first = next(iter(feet), None)
-    loads = {}
-    for name, foot in _load_feet(sc, names, list(feet)).items():
-        spans = feet.get(foot or first, [])
+    clean = {f: clean_cycles(found, f, cs, plates.get(f)) for f, cs in feet.items()}
+    loads, notes, bare = {}, [], {}
+    for name, foot in _load_feet(sc, names, [*feet, *(f for f in walking if f not in feet)]).items():
+        if foot is not None and foot not in feet:
+            bare.setdefault(foot, []).append(name)
+        foot = foot if foot is not None else first
+        spans, flags = feet.get(foot, []), clean.get(foot, [])
         band = res.bands.get(name, {}).get("total") if res.bands else None
-        loads[name] = {"foot": foot or first, "cycles": [list(c) for c in spans],
+        loads[name] = {"foot": foot, "cycles": [list(c) for c in spans], "clean": [ok for ok, _ in flags],
                        "value": [normalise(res.t, res.loads[name], *c).tolist() for c in spans],
                        "band": [normalise(res.t, band, *c).tolist() for c in spans] if band is not None else None}
-    return {"plates": plates, "plane": plane, "report": [*plane_report, *event_report, *res.report],
-            "warnings": res.warnings, "loads": loads, "t": [float(res.t[0]), float(res.t[-1])],
-            "passive": _passive(res, sc, lab, found, feet, options.get("passive", ()))}
+    for foot, names_ in bare.items():
+        notes.append(f"{foot} touches no plate: no kinetic cycle for {', '.join(names_)}")
+    for foot, flags in clean.items():
+        notes += [f"{foot} cycle {k + 1} ({feet[foot][k][0]:.3f}-{feet[foot][k][1]:.3f} s) not clean: {why}: left "
+                  "out of the means and figures" for k, (ok, why) in enumerate(flags) if not ok]
+    return loads, notes
 
 
 def _passive(res, sc, lab, found, feet: dict, specs) -> list[dict]:
@@ -211,7 +237,7 @@ def _run(name: str, fn: Callable[..., dict], kwargs: dict, files: tuple[str | No
     from casflex.study.sweep import Run
 
     text = json.dumps({"fn": fn.__name__, "kwargs": kwargs, "files": [_digest(f) for f in files],
-                       "casflex": __version__}, sort_keys=True, default=str)
+                       "casflex": __version__, "record": RECORD_FORMAT}, sort_keys=True, default=str)
     return Run(f"{name}-{hashlib.sha1(text.encode()).hexdigest()[:8]}", fn, kwargs)
 
 
@@ -322,14 +348,18 @@ def per_kg(out: dict, study: Study) -> dict:
 
 
 def tidy_rows(out: dict, per_kg: bool = False) -> list[tuple]:
-    """(subject, trial, load, foot, cycle, percent, value, band, unit) rows of :func:`run_study`'s trials
-    (``per_kg``: their values are per kg, :func:`per_kg`)."""
+    """(subject, trial, load, foot, cycle, percent, value, band, unit, clean, t0, t1) rows of :func:`run_study`'s
+    trials (``per_kg``: their values are per kg, :func:`per_kg`); ``clean``: the cycle's stance wholly on the
+    foot's plate (:func:`.events.clean_cycles`), None where the record does not say; t0, t1: the cycle's start
+    and end (s)."""
     rows = []
     for (subject, trial), rec in out["trials"].items():
         for name, ld in rec["loads"].items():
             unit = unit_of(name, per_kg)
+            clean = ld.get("clean") or [None] * len(ld["value"])
             for k, values in enumerate(ld["value"]):
                 band = ld["band"][k] if ld["band"] is not None else [None] * len(values)
-                rows += [(subject, trial, name, ld["foot"], k + 1, float(p), v, b, unit)
+                t0, t1 = ld["cycles"][k]
+                rows += [(subject, trial, name, ld["foot"], k + 1, float(p), v, b, unit, clean[k], t0, t1)
                          for p, v, b in zip(PERCENT, values, band, strict=True)]
     return rows

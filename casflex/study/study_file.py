@@ -1,6 +1,12 @@
 """A lab's study as a file (``casflex study STUDY.toml``, issue 38): its subjects, their trials, the options,
 read and checked before any work. Paths are relative to the study file.
 
+Checked before any work, besides every field's type and range (:class:`StudyError` naming the field): each file
+exists; the IK task file and an ExternalLoads grf are read (one that names itself refused); from each trial's
+files' headers and first and last rows (not their data): its window within the markers' and the plates' times,
+the cut-offs below the Nyquist frequency of the markers' and the plates' rates, its plates' prefixes among the
+plates' columns (a .mot / .sto; a C3D's plates are known only once read).
+
 ```toml
 name = "running speeds"
 
@@ -16,6 +22,8 @@ calibrate = true               # place the model's markers from each subject's s
 scale = false                  # scale the segments too (casflex.inverse.calibrate)
 bands = false                  # each load's band (anthropometry and marker noise, casflex.inverse.bands)
 normalise = "none"             # or "mass": the table and figures per kg of each subject's mass (N m/kg, N/kg)
+cycles = "clean"               # the means and figures from the cycles whose stance is wholly on the foot's plate
+                               # (loads.csv flags each cycle: clean, t0, t1); "all": every cycle
 passive = []                   # hinges whose net moment a spring-damper is fitted to, per trial ("knee_r") or
                                # per swing phase ("knee_r:swing"): casflex.inverse.passive; passive.csv
 
@@ -42,15 +50,18 @@ import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 __all__ = ["Study", "Subject", "Trial", "Options", "load_study"]
 
-_OPTIONS = {"plane": str, "vertical": str, "cutoff": (float, str), "cutoff_plates": (float, str), "filter": str,
-            "root": str, "tasks": str, "normalise": str, "passive": list, "calibrate": bool, "scale": bool,
-            "bands": bool}
+_OPTIONS = {"plane": str, "vertical": str, "cutoff": (int, float, str), "cutoff_plates": (int, float, str),
+            "filter": str,
+            "root": str, "tasks": str, "normalise": str, "cycles": str, "passive": list, "calibrate": bool,
+            "scale": bool, "bands": bool}
 _FILTERS = ("butterworth", "opensim")
 _NORMALISE = ("none", "mass")
+_CYCLES = ("clean", "all")
 
 
 @dataclass(frozen=True)
@@ -68,6 +79,7 @@ class Options:
     scale: bool = False
     bands: bool = False
     normalise: str = "none"
+    cycles: str = "clean"
     passive: tuple[tuple[str, str], ...] = ()  # (hinge, "trial" or "swing")
 
 
@@ -152,13 +164,16 @@ def _options(base: Path, table: Any) -> Options:
     t = _check_keys("options", table, set(_OPTIONS), set())
     for k, typ in _OPTIONS.items():
         if k in t and not isinstance(t[k], typ) or (k in t and typ is not bool and isinstance(t[k], bool)):
-            raise StudyError(f"options.{k}: expected {'true or false' if typ is bool else 'a value'}, got {t[k]!r}")
+            want = {bool: "true or false", str: "a text", list: "a list"}.get(typ, "a frequency in Hz or a word")
+            raise StudyError(f"options.{k}: expected {want}, got {t[k]!r}")
     if t.get("filter", "butterworth") not in _FILTERS:
         raise StudyError(f"options.filter: expected one of {list(_FILTERS)}, got {t['filter']!r}")
     from casflex.lab import Plane
 
     if t.get("normalise", "none") not in _NORMALISE:
         raise StudyError(f"options.normalise: expected one of {list(_NORMALISE)}, got {t['normalise']!r}")
+    if t.get("cycles", "clean") not in _CYCLES:
+        raise StudyError(f"options.cycles: expected one of {list(_CYCLES)}, got {t['cycles']!r}")
     passive = t.get("passive", [])
     if not all(isinstance(p, str) and re.fullmatch(r"[^:\s]+(:(swing|trial))?", p) for p in passive):
         raise StudyError(f"options.passive: expected hinge names, each alone or with :swing or :trial, got {passive!r}")
@@ -170,13 +185,21 @@ def _options(base: Path, table: Any) -> Options:
             Plane.parse(t.get("plane", "X,Y"))
     except ValueError as exc:
         raise StudyError(f"options.plane: {exc} (or \"auto\")") from None
+    tasks = _file(base, "options.tasks", t["tasks"], (".xml",)) if t.get("tasks") else None
+    if tasks is not None:
+        from casflex.lab.setups import read_tasks
+
+        try:
+            read_tasks(tasks)
+        except ValueError as exc:
+            raise StudyError(f"options.tasks: {exc}") from None
     return Options(plane=t.get("plane", "X,Y"), vertical=vertical.upper(),
                    cutoff=_frequency("options.cutoff", t.get("cutoff", 6.0), ("none",)),
                    cutoff_plates=_frequency("options.cutoff_plates", t.get("cutoff_plates", "same"), ("none", "same")),
                    filter=t.get("filter", "butterworth"), root=t.get("root") or None,
-                   tasks=_file(base, "options.tasks", t["tasks"], (".xml",)) if t.get("tasks") else None,
+                   tasks=tasks,
                    calibrate=t.get("calibrate", True), scale=t.get("scale", False), bands=t.get("bands", False),
-                   normalise=t.get("normalise", "none"),
+                   normalise=t.get("normalise", "none"), cycles=t.get("cycles", "clean"),
                    passive=tuple((p.partition(":")[0], p.partition(":")[2] or "trial") for p in passive))
 
 
@@ -192,6 +215,10 @@ def _trial(base: Path, where: str, table: Any) -> Trial:
                                                                     and not isinstance(w, bool) for w in window))
         if not ok or not 0 <= window[0] < window[1]:
             raise StudyError(f"{where}.window: expected [start, end] in s, 0 <= start < end, got {window!r}")
+    twice = sorted({v for v in (plates or {}).values() if list(plates.values()).count(v) > 1})
+    if twice:
+        raise StudyError(f"{where}.plates: the plate {twice[0]!r} is given to " + " and ".join(
+            n for n, v in plates.items() if v == twice[0]) + ": a plate's force acts on one foot (give it once)")
     if plates is not None and "grf" not in t:
         raise StudyError(f"{where}.plates: needs grf (the ground reaction file)")
     return Trial(_name(f"{where}.name", t["name"]), _file(base, f"{where}.markers", t["markers"], (".trc", ".c3d")),
@@ -262,4 +289,71 @@ def load_study(path: str) -> Study:
         for i, s in enumerate(subs):
             if s.mass is None:
                 raise StudyError(f"subjects[{i}].mass: needed by options.normalise = \"mass\" (kg)")
+    for i, s in enumerate(subs):
+        for k, t in enumerate(s.trials):
+            _check_trial_files(f"subjects[{i}].trials[{k}]", t, options)
     return Study(data["name"], str(p.resolve()), options, subs)
+
+
+def _spans(where: str, trial: Trial):
+    """(the markers' FileSpan, the plates' FileSpan or None, the plates' rate Hz or NaN) from the trial files'
+    headers and first and last rows (:func:`casflex.lab.tables.trc_span`, :func:`casflex.lab.c3d.c3d_span`); an
+    ExternalLoads file read for its data file (a setup naming itself refused). StudyError naming the field."""
+    from casflex.lab.c3d import c3d_span
+    from casflex.lab.setups import read_external_loads
+    from casflex.lab.tables import sto_span, trc_span
+
+    def span(field_: str, path: str):
+        try:
+            if path.lower().endswith(".c3d"):
+                return c3d_span(path)
+            return (trc_span(path) if path.lower().endswith(".trc") else sto_span(path)), math.nan
+        except ValueError as exc:
+            raise StudyError(f"{where}.{field_}: {exc}") from None
+
+    markers, analog = span("markers", trial.markers)
+    if trial.grf is None:
+        return markers, (markers if trial.markers.lower().endswith(".c3d") else None), analog
+    grf = trial.grf
+    if grf.lower().endswith(".xml"):
+        try:
+            grf = read_external_loads(grf).datafile
+        except ValueError as exc:
+            raise StudyError(f"{where}.grf: {exc}") from None
+        if not Path(grf).is_file():
+            raise StudyError(f"{where}.grf: its datafile {grf}: no such file")
+    plates, analog = span("grf", grf)
+    return markers, plates, analog if grf.lower().endswith(".c3d") else plates.rate
+
+
+def _check_trial_files(where: str, trial: Trial, options: Options) -> None:
+    """What a trial's files' headers tell before any work (:func:`_spans`): its window within the markers' and the
+    plates' times, the cut-offs below the Nyquist frequency of the markers' and the plates' rates, its plates'
+    prefixes among the plates' columns. StudyError naming the field."""
+    from casflex.lab.filtering import _plate_columns
+
+    markers, plates, plate_rate = _spans(where, trial)
+    lo, hi = trial.window or (markers.t0, markers.t1)
+    for what, sp in (("markers", markers), ("grf", plates)):
+        if sp is None or trial.window is None and what == "markers":
+            continue
+        slack = 0.5 / sp.rate if math.isfinite(sp.rate) else 1e-9  # half a sample: a frame's own time
+        if lo < sp.t0 - slack or hi > sp.t1 + slack:
+            field_ = "window" if trial.window else "grf"
+            name = Path(trial.markers if what == "markers" else trial.grf or trial.markers).name
+            span = "the window" if trial.window else "the markers' times"
+            raise StudyError(f"{where}.{field_}: {span} {lo:g}..{hi:g} s is not within the {what}' times "
+                             f"{sp.t0:g}..{sp.t1:g} s ({name}): give a window within both")
+    cutoffs = (("options.cutoff", options.cutoff, markers.rate, "markers"),
+               ("options.cutoff_plates", options.cutoff if options.cutoff_plates == "same" else options.cutoff_plates,
+                plate_rate, "plates"))
+    for field_, cut, rate, what in cutoffs:
+        if cut is not None and math.isfinite(rate) and not cut < rate / 2:
+            raise StudyError(f"{field_}: {cut:g} Hz is not below the Nyquist frequency {rate / 2:g} Hz of "
+                             f"{where}'s {what} ({rate:g} Hz): give a lower cut-off")
+    for node, prefix in (trial.plates or {}).items():
+        if plates is not None and plates.names:
+            try:
+                _plate_columns(SimpleNamespace(names=plates.names, source=Path(trial.grf or "").name), prefix)
+            except ValueError as exc:
+                raise StudyError(f"{where}.plates.{node}: {exc}") from None
