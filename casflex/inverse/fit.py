@@ -236,6 +236,9 @@ def _fill(t: np.ndarray, Z: np.ndarray, max_gap: float, report: list[str]) -> np
     if not bad.any():
         return Z
     from scipy.interpolate import CubicSpline  # here: its import alone costs 0.5 s
+    if bad.all():
+        raise ValueError(f"data: the markers decide the coordinates in none of the {t.size} frames (too few markers "
+                         "seen on a segment, or markers on a hinge's axis); check the trial's labels and gaps")
     if bad[0] or bad[-1]:
         k = np.flatnonzero(~bad)
         where = "start" if bad[0] else "end"

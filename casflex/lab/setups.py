@@ -31,7 +31,25 @@ def _parse(path: str):
         raise ValueError(f"{path}: cannot read it ({exc.strerror or exc})") from None
 
 
-def read_tasks(path: str | os.PathLike[str]) -> MarkerTasks:
+def _named(path: str, name: str, element: str, seen: tuple[str, ...]) -> str:
+    """The file ``name`` that ``path``'s ``element`` names (relative to ``path``'s directory); ValueError in one
+    line when it is one of the files ``seen`` on the way here (a setup naming itself, two naming each other)."""
+    inner = os.path.join(os.path.dirname(path), name)
+    if any(_same(inner, s) for s in (*seen, path)):
+        loop = " -> ".join([*seen, path, inner])
+        raise ValueError(f"{path}: {element} names {name!r}, a file already on the way here ({loop}): a loop of "
+                         "setup files; name the file that holds the data")
+    return inner
+
+
+def _same(a: str, b: str) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return os.path.normpath(a) == os.path.normpath(b)
+
+
+def read_tasks(path: str | os.PathLike[str], _seen: tuple[str, ...] = ()) -> MarkerTasks:
     """The marker tasks of an IK task set file or an IK setup file (module docstring). ValueError in one
     line for a file with no task set, or a weight that is not a number >= 0."""
     path = os.fspath(path)
@@ -39,8 +57,7 @@ def read_tasks(path: str | os.PathLike[str]) -> MarkerTasks:
     sets = root.findall(".//IKTaskSet") if root.tag != "IKTaskSet" else [root]
     for s in sets:
         if s.get("file") and s.find("objects") is None:  # the setup names a task file
-            inner = os.path.join(os.path.dirname(path), s.get("file"))
-            return read_tasks(inner)
+            return read_tasks(_named(path, s.get("file"), "IKTaskSet file", _seen), (*_seen, path))
     weights: dict[str, float] = {}
     coords = []
     for s in sets:
@@ -98,7 +115,7 @@ def _identifiers(path: str, force: ET.Element) -> tuple[str, tuple[str, str, str
     return body, ident
 
 
-def read_external_loads(path: str | os.PathLike[str]) -> ExternalLoads:
+def read_external_loads(path: str | os.PathLike[str], _seen: tuple[str, ...] = ()) -> ExternalLoads:
     """The plates of an ``ExternalLoads`` file, or of the one an inverse dynamics setup names in
     ``external_loads_file`` (module docstring). ValueError in one line for a file with no external force,
     one that is not in the ground, or no data file."""
@@ -108,7 +125,7 @@ def read_external_loads(path: str | os.PathLike[str]) -> ExternalLoads:
     if loads is None:
         inner = (root.findtext(".//external_loads_file") or "").strip()
         if inner:
-            return read_external_loads(os.path.join(os.path.dirname(path), inner))
+            return read_external_loads(_named(path, inner, "external_loads_file", _seen), (*_seen, path))
         raise ValueError(f"{path}: no ExternalLoads: not an OpenSim external loads or inverse dynamics setup file")
     plates: dict[str, tuple[str, str, str]] = {}
     for force in loads.iter("ExternalForce"):

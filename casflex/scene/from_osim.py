@@ -62,6 +62,9 @@ class OsimScene:
     scene: Scene
     report: tuple[str, ...]
     dropped: tuple[str, ...]
+    #: what of the model the scene leaves out that OpenSim's tools would apply (its constraints): a command says
+    #: them on stderr (also in ``report``)
+    warnings: tuple[str, ...] = ()
 
 
 def node_name(s: str) -> str:
@@ -83,6 +86,8 @@ class _Builder:
         self.coords: list[Coordinate] = []
         self.report: list[str] = []
         self.dropped: list[str] = []
+        self.warnings: list[str] = []
+        self.moving: set[str] = set()  # the joints the scene moves (hinges, the root's coordinates)
 
     # -- geometry -------------------------------------------------------------------------
     def transform(self, j: OsimJoint, values: dict[str, float]) -> tuple[np.ndarray, np.ndarray]:
@@ -127,7 +132,10 @@ class _Builder:
         axes_g = self.rotation_axes_in_ground(j, RF)
         hinge = self.hinge(j, axes_g)
         shifts = self.shifts(j, axes_g, hinge) if hinge and j.parent != "ground" else {}
+        n_coords = len(self.coords)
         self.classify(j, axes_g, hinge, shifts, root=j.parent == "ground")
+        if hinge is not None or len(self.coords) > n_coords:
+            self.moving.add(j.name)
         if j.parent == "ground":
             return
         name = node_name(j.name)
@@ -268,6 +276,52 @@ class _Builder:
         return out
 
 
+def _constraints(b: _Builder, by_child: dict[str, OsimJoint]) -> None:
+    """Each constraint of the model: one the scene would break refused (a coupler whose dependent coordinate the
+    scene moves freely, a loop closed between bodies the scene moves relative to each other), the others
+    ignored with a warning (OpenSim's IK and ID keep them; casflex's planar scene does not), an unenforced one
+    reported."""
+    kept = {c.name for c in b.coords}
+    for c in b.m.constraints:
+        what = f"{c.kind} {c.name!r}"
+        if not c.enforced:
+            b.report.append(f"constraint {what}: not enforced in the model; ignored")
+            continue
+        if c.dependent is not None or c.independent:
+            if c.dependent in kept:
+                raise ValueError(f"{b.m.source}: ConstraintSet: {what} makes {c.dependent!r} follow "
+                                 f"{list(c.independent)}, and the planar scene moves {c.dependent!r} on its own "
+                                 "(casflex takes no constraints): lock it in the model (<locked>true</locked>) or "
+                                 "remove the constraint")
+            follows = [i for i in c.independent if i in kept]
+            held = "locked in the model" if c.dependent in b.locked else "held at its default value"
+            b.warnings.append(f"{b.m.source}: constraint {what} ignored: {c.dependent!r} is {held}"
+                              + (f", where OpenSim's tools move it with {follows}" if follows else ""))
+            continue
+        if len(c.bodies) < 2 or None in c.bodies:
+            raise ValueError(f"{b.m.source}: ConstraintSet: {what}: its sockets name no two bodies of the model "
+                             f"(found {list(c.bodies)}); casflex cannot tell what it joins: remove it or name the "
+                             "bodies")
+        path = _path(c.bodies[0], by_child) ^ _path(c.bodies[1], by_child)
+        moving = sorted(path & b.moving)
+        if moving:
+            raise ValueError(f"{b.m.source}: ConstraintSet: {what} closes a loop between {c.bodies[0]!r} and "
+                             f"{c.bodies[1]!r}, which the planar scene moves relative to each other (joints "
+                             f"{moving}); casflex reads trees: remove the constraint, or lock those joints' "
+                             "coordinates in the model")
+        b.warnings.append(f"{b.m.source}: constraint {what} ignored: the planar scene holds {c.bodies[0]!r} and "
+                          f"{c.bodies[1]!r} fixed relative to each other already")
+
+
+def _path(body: str, by_child: dict[str, OsimJoint]) -> set[str]:
+    """The joints from ``body`` to the ground."""
+    out: set[str] = set()
+    while body in by_child and by_child[body].name not in out:
+        out.add(by_child[body].name)
+        body = by_child[body].parent
+    return out
+
+
 def _tree_order(model: OsimModel) -> list[OsimJoint]:
     """The joints from the ground outwards; ValueError for a body with two joints, or none from the ground."""
     by_child: dict[str, OsimJoint] = {}
@@ -300,6 +354,10 @@ def scene_from_osim(source: str | os.PathLike[str] | OsimModel, name: str | None
     for j in _tree_order(model):
         b.joint(j)
     bodies = b.bodies()
+    if not bodies:
+        raise ValueError(f"{model.source}: BodySet: no body of the tree has a mass > 0 ({len(model.bodies)} bodies); "
+                         "a scene of massless nodes has no dynamics: give the bodies their masses")
+    _constraints(b, {j.child: j for j in model.joints})
     markers = b.markers(bodies)
     others: dict[str, int] = {}
     for s, kind, _ in model.others:
@@ -312,5 +370,5 @@ def scene_from_osim(source: str | os.PathLike[str] | OsimModel, name: str | None
                   coordinates=tuple(b.coords),
                   gravity=(float(g[0]), float(g[1])))
     report = [f"{model.source}: {len(bodies)} bodies, {len(b.joints)} joints, {len(markers)} markers, "
-              f"{len(b.coords)} coordinates in the x-y plane", *b.report, *b.dropped]
-    return OsimScene(scene, tuple(report), tuple(b.dropped))
+              f"{len(b.coords)} coordinates in the x-y plane", *b.report, *b.dropped, *b.warnings]
+    return OsimScene(scene, tuple(report), tuple(b.dropped), tuple(b.warnings))
