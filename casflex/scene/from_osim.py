@@ -366,9 +366,11 @@ def scene_from_osim(source: str | os.PathLike[str] | OsimModel, name: str | None
         b.report.append("ignored: " + ", ".join(f"{n} {k}" for k, n in sorted(others.items())))
     g = model.gravity
     title = node_name(name or os.path.splitext(os.path.basename(model.name))[0])
-    scene = Scene(title, tuple(b.nodes), bodies=tuple(bodies), joints=tuple(b.joints), markers=tuple(markers),
-                  coordinates=tuple(b.coords),
-                  gravity=(float(g[0]), float(g[1])))
+    try:
+        scene = Scene(title, tuple(b.nodes), bodies=tuple(bodies), joints=tuple(b.joints), markers=tuple(markers),
+                      coordinates=tuple(b.coords), gravity=(float(g[0]), float(g[1])))
+    except ValueError as exc:  # the scene's own checks (a default outside a clamped range, ...): name the file
+        raise ValueError(f"{model.source}: {exc}") from None
     report = [f"{model.source}: {len(bodies)} bodies, {len(b.joints)} joints, {len(markers)} markers, "
               f"{len(b.coords)} coordinates in the x-y plane", *b.report, *b.dropped, *b.warnings]
     return OsimScene(scene, tuple(report), tuple(b.dropped), tuple(b.warnings))

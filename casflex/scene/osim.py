@@ -180,6 +180,8 @@ class _Reader:
         (casflex keys the parts by name) or be taken for it, as OpenSim refuses such a model."""
         seen: set[str] = set()
         for n in names:
+            if not n.strip():
+                raise ValueError(f"{self.source}: {where}: a {kind} without a name; give it one")
             if n in seen:
                 raise ValueError(f"{self.source}: {where}: two {kind}s named {n!r}; give each its own name (one would "
                                  "be taken for the other)")
@@ -251,6 +253,13 @@ class _Reader:
             inertia = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
             if mass < 0:
                 raise ValueError(f"{self.source}: {owner}.mass: must be >= 0, got {mass:g}")
+            eig = np.linalg.eigvalsh(inertia)
+            if eig[0] < -1e-9 * max(eig[-1], 0.0):  # a moment about some axis < 0: the plane's could be too
+                raise ValueError(f"{self.source}: {owner}.inertia: {' '.join(f'{v:g}' for v in i6)} is no body's "
+                                 f"inertia (principal moments {' '.join(f'{v:.4g}' for v in eig)} kg m^2: each must "
+                                 "be >= 0)")
+            if not name.strip():
+                raise ValueError(f"{self.source}: BodySet: a body without a name; give it one")
             if name in out or name == "ground":
                 what = "a body named 'ground', the ground's name" if name == "ground" else f"two bodies named {name!r}"
                 raise ValueError(f"{self.source}: BodySet: {what}; give each its own name (the second would replace "
@@ -325,6 +334,9 @@ class _Reader:
             if len(c) > 1:
                 raise ValueError(f"{self.source}: {owner} {name}: a function of {len(c)} coordinates; casflex takes "
                                  "functions of one")
+            if c and c[0] not in {k.name for k in coords}:
+                raise ValueError(f"{self.source}: {owner} {name}.coordinates: {c[0]!r} is no coordinate of the joint "
+                                 f"(its coordinates: {[k.name for k in coords]})")
             axis = self.vector(ta, "axis", 3, f"{owner} {name}")
             if np.linalg.norm(axis) < 1e-9:  # OpenSim normalises the axis: one of length 0 has no direction
                 raise ValueError(f"{self.source}: {owner} {name}.axis: {' '.join(f'{v:g}' for v in axis)} has no "
