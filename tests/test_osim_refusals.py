@@ -13,7 +13,8 @@ import pytest
 
 from casflex.cli import main
 from casflex.scene.from_osim import scene_from_osim
-from casflex.scene.osim import MAX_BODIES, read_osim
+from casflex.scene import osim
+from casflex.scene.osim import read_osim
 
 DATA = Path(__file__).parent / "data" / "lab"
 LEG, TRC, GRF = (
@@ -248,7 +249,7 @@ def test_a_jointed_scene_without_masses_assembles():
 
 def test_a_model_of_more_bodies_than_a_body_has_is_refused_before_it_is_read(tmp_path):
     # the hostile tester's 1000-body model ran a 4 GB process out of memory after a minute
-    n = MAX_BODIES + 1
+    n = osim.MAX_BODIES + 1
     bodies = "".join(f'<Body name="b{i}"><mass>1</mass></Body>' for i in range(n))
     path = _model(
         tmp_path,
@@ -256,7 +257,7 @@ def test_a_model_of_more_bodies_than_a_body_has_is_refused_before_it_is_read(tmp
         "</BodySet></Model></OpenSimDocument>",
     )
     with pytest.raises(
-        ValueError, match=re.escape(f"{path}: BodySet: {n} bodies; casflex reads models of up to {MAX_BODIES}")
+        ValueError, match=re.escape(f"{path}: BodySet: {n} bodies; casflex reads models of up to {osim.MAX_BODIES}")
     ):
         read_osim(path)
 
