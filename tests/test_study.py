@@ -233,3 +233,18 @@ def test_passive_fits_per_trial_and_per_swing_phase(folder):
     # the right stance's plate off (0.65-0.667 s, tests/data/lab/README.md) to the next strike (1.10 s)
     assert 0.64 <= float(swing["t0"]) <= 0.68 and 1.08 <= float(swing["t1"]) <= 1.12
     assert all(r["passive"] in ("yes", "no") and float(r["kt_se"]) > 0 for r in rows)
+
+
+def test_a_subject_model_s_constraint_the_scene_leaves_out_is_in_the_subject_s_report(tmp_path):
+    # before: the study read an .osim through load_scene, and an ignored constraint went without a word
+    from casflex.study.runner import calibrate_run
+
+    text = (LAB / "hamner_subject02_leg.osim").read_text()
+    weld = ('<ConstraintSet><objects><WeldConstraint name="w"><socket_frame1>/bodyset/calcn_r</socket_frame1>'
+            "<socket_frame2>/bodyset/toes_r</socket_frame2></WeldConstraint></objects></ConstraintSet>")
+    model = tmp_path / "leg.osim"
+    model.write_text(text.replace("\t\t<MarkerSet", weld + "\n\t\t<MarkerSet", 1))
+    out = calibrate_run(model=str(model), static=None, plane="X,Y", root="pelvis", calibrate=False, scale=False,
+                        mass=None)
+    assert out["report"] == [f"warning: {model}: constraint WeldConstraint 'w' ignored: the planar scene holds "
+                             "'calcn_r' and 'toes_r' fixed relative to each other already"]

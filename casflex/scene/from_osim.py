@@ -24,8 +24,10 @@ inertia about the plane's normal through the centre of mass); each joint a hinge
 - a translation along x or y of the plane that follows the hinge's coordinate (a knee's rolling, a SIMM
   spline or linear function of the knee angle) makes the hinge a coupled one (``shift_x``, ``shift_y``:
   :class:`casflex.scene.Joint`), the spline's knots carried over exactly;
-- markers are projected on the plane; forces (muscles, actuators), constraints, contact geometry,
-  controllers and probes are listed as ignored.
+- markers are projected on the plane; forces (muscles, actuators), contact geometry, controllers and probes
+  are listed as ignored; a constraint is refused where the scene would break it (a coupler whose dependent
+  coordinate the scene moves, a loop closed between bodies it moves relative to each other), else ignored with
+  a warning (``warnings``: OpenSim's tools keep it).
 """
 
 from __future__ import annotations
