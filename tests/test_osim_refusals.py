@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from casflex.cli import main
-from casflex.scene.from_osim import scene_from_osim
 from casflex.scene import osim
+from casflex.scene.from_osim import scene_from_osim
 from casflex.scene.osim import read_osim
 
 DATA = Path(__file__).parent / "data" / "lab"
@@ -61,8 +61,8 @@ def _run(argv: list[str], capsys) -> tuple[int, str, str]:
 
 
 def test_a_second_body_of_the_same_name_is_refused_not_taken_for_the_first(tmp_path, capsys):
-    # the hostile tester's file: a heavy second 'femur_r' replaced the thigh, exit 0 and a hip moment of 290 N m
-    # where the model's is 128 N m
+    # this file (a second 'femur_r' of 40 kg) replaced the thigh: exit 0, a peak hip moment of 182 N m where the
+    # model's is 128 (the hostile tester's: 290)
     heavy = (
         '<Body name="femur_r"><mass>40</mass><mass_center>0 -0.1 0</mass_center><inertia>1 1 1 0 0 0</inertia></Body>\n'
     )
@@ -391,3 +391,17 @@ def test_a_trial_whose_markers_decide_no_frame_is_refused_in_one_line():
     t = np.linspace(0, 1, 11)
     with pytest.raises(ValueError, match="the markers decide the coordinates in none of the 11 frames"):
         _fill(t, np.full((11, 3), np.nan), 0.1, [])
+
+
+def test_a_joint_whose_child_is_the_ground_is_refused(tmp_path):
+    # it closed a loop from the toes to the ground, read before as a massless node welded to the toes (exit 0)
+    fix = (
+        '<WeldJoint name="fix"><socket_parent_frame>p</socket_parent_frame><socket_child_frame>c</socket_child_frame>'
+        "<frames><PhysicalOffsetFrame name='p'><socket_parent>/bodyset/toes_r</socket_parent>{0}</PhysicalOffsetFrame>"
+        "<PhysicalOffsetFrame name='c'><socket_parent>/ground</socket_parent>{0}</PhysicalOffsetFrame></frames>"
+        "</WeldJoint>"
+    ).format("<translation>0 0 0</translation><orientation>0 0 0</orientation>")
+    a = TEXT.index("</objects>", TEXT.index("<JointSet"))
+    path = _model(tmp_path, TEXT[:a] + fix + TEXT[a:])
+    with pytest.raises(ValueError, match=re.escape(f"{path}: joint 'fix': its child frame is on the ground")):
+        scene_from_osim(path)

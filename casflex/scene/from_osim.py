@@ -328,6 +328,9 @@ def _tree_order(model: OsimModel) -> list[OsimJoint]:
     """The joints from the ground outwards; ValueError for a body with two joints, or none from the ground."""
     by_child: dict[str, OsimJoint] = {}
     for j in model.joints:
+        if j.child == "ground":
+            raise ValueError(f"{model.source}: joint {j.name!r}: its child frame is on the ground, which is no joint's "
+                             f"child (it closes a loop from {j.parent!r} to the ground); casflex reads trees")
         if j.child in by_child:
             raise ValueError(f"{model.source}: body {j.child!r} is the child of joints {by_child[j.child].name!r} and "
                              f"{j.name!r}: a closed loop; casflex reads trees")
