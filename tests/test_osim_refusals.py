@@ -405,3 +405,30 @@ def test_a_joint_whose_child_is_the_ground_is_refused(tmp_path):
     path = _model(tmp_path, TEXT[:a] + fix + TEXT[a:])
     with pytest.raises(ValueError, match=re.escape(f"{path}: joint 'fix': its child frame is on the ground")):
         scene_from_osim(path)
+
+
+def test_a_spatial_transform_s_axes_are_taken_by_their_names(tmp_path):
+    # a duplicated TransformAxis was applied twice (a constant offset doubled, exit 0), and the file's order of the
+    # axes taken as the rotations' order where OpenSim's is rotation1, 2, 3 whatever the file's
+    a, b = _block(TEXT, '<CustomJoint name="knee_r">', "</CustomJoint>")
+    knee = TEXT[a:b]
+    t2 = _block(knee, '<TransformAxis name="translation2">', "</TransformAxis>")
+    twice = _model(tmp_path, TEXT[:a] + knee[: t2[1]] + knee[t2[0] : t2[1]] + knee[t2[1] :] + TEXT[b:], "twice.osim")
+    with pytest.raises(
+        ValueError, match=re.escape(f"{twice}: joint 'knee_r' SpatialTransform: two TransformAxis elem")
+    ):
+        scene_from_osim(twice)
+    odd = _model(tmp_path, TEXT[:a] + knee.replace('"rotation1"', '"rotation4"') + TEXT[b:], "odd.osim")
+    with pytest.raises(ValueError, match="a TransformAxis named 'rotation4'; OpenSim's are rotation1, rotation2"):
+        scene_from_osim(odd)
+    # the hip adducted 0.3 rad by default: its flexion axis is then tilted only where adduction comes second
+    text = _coordinate("hip_adduction_r", "<default_value>0</default_value>", "<default_value>0.3</default_value>")
+    a, b = _block(text, '<CustomJoint name="hip_r">', "</CustomJoint>")
+    hip = text[a:b]
+    r1, r2 = (_block(hip, f'<TransformAxis name="rotation{k}">', "</TransformAxis>") for k in (1, 2))
+    swapped = hip[: r1[0]] + hip[r2[0] : r2[1]] + hip[r1[1] : r2[0]] + hip[r1[0] : r1[1]] + hip[r2[1] :]
+    as_is, moved = _model(tmp_path, text, "hip.osim"), _model(tmp_path, text[:a] + swapped + text[b:], "moved.osim")
+    made, want = scene_from_osim(moved), scene_from_osim(as_is)
+    assert made.scene == want.scene and [ln.replace(str(moved), "") for ln in made.report] == [
+        ln.replace(str(as_is), "") for ln in want.report
+    ]

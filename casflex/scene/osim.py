@@ -113,6 +113,8 @@ class OsimModel:
 #: Read as a CustomJoint of those rotations: a rotation about the plane's normal is a hinge, the others are
 #: held at their default values (:mod:`casflex.scene.from_osim`).
 _EULER = {"UniversalJoint": 2, "GimbalJoint": 3, "BallJoint": 3}
+#: A SpatialTransform's axes: three rotations (body-fixed, in this order), then three translations.
+_AXES = ("rotation1", "rotation2", "rotation3", "translation1", "translation2", "translation3")
 #: A 3.x-style constraint's elements that name its bodies (4.x names them in ``socket_*`` elements).
 _BODY_TAGS = ("body_1", "body_2")
 
@@ -328,7 +330,14 @@ class _Reader:
             return (Axis(True, e[2], names[0], Linear(1.0)), Axis(False, e[0], names[1], Linear(1.0)),
                     Axis(False, e[1], names[2], Linear(1.0)))
         out = []
-        for ta in j.findall("SpatialTransform/TransformAxis"):
+        tas = j.findall("SpatialTransform/TransformAxis")
+        names = [ta.get("name", "") for ta in tas]
+        odd = [n for n in names if n not in _AXES]
+        if odd:
+            raise ValueError(f"{self.source}: {owner} SpatialTransform: a TransformAxis named {odd[0]!r}; OpenSim's "
+                             f"are {', '.join(_AXES)}")
+        self.unique(f"{owner} SpatialTransform", "TransformAxis element", names)
+        for ta in sorted(tas, key=lambda ta: _AXES.index(ta.get("name"))):  # OpenSim's order, whatever the file's
             name = ta.get("name", "")
             c = (ta.findtext("coordinates") or "").split()
             if len(c) > 1:
