@@ -1,8 +1,9 @@
 """Corrupted copies of the repo's OpenSim models (tests/osim_fuzz.py) through ``casflex import`` and the reader's
-Python API (``scene_from_osim``, the scene assembled): every one refused in one line naming the file (exit 2, the
-API's ValueError) or read into a scene whose numbers are all finite; no traceback, no hang, and nothing left in
-the output folder by a refusal. One worker process runs them all (tests/lab_fuzz.py); ``CASFLEX_FUZZ_OSIM`` sets
-the cases per model and way (default :data:`CASES`), ``CASFLEX_FUZZ_SEED`` shifts the seeds.
+Python API (``scene_from_osim``, the scene assembled), the leg's first few also through ``casflex inverse``: every
+one refused in one line naming the file (exit 2, the API's ValueError) or read into a scene whose numbers are all
+finite (an inverse's loads too); no traceback, no hang, and nothing left in the output folder by a refusal. One
+worker process runs them all (tests/lab_fuzz.py); ``CASFLEX_FUZZ_OSIM`` sets the cases per model and way (default
+:data:`CASES`), ``CASFLEX_FUZZ_OSIM_INVERSE`` the inverse ones, ``CASFLEX_FUZZ_SEED`` shifts the seeds.
 """
 
 from __future__ import annotations
@@ -19,10 +20,13 @@ from osim_fuzz import corrupt_osim  # noqa: E402
 
 LAB = Path(__file__).parent / "data" / "lab"
 MODELS = (LAB / "hamner_subject02_leg.osim", LAB / "hamner_subject02_planar.osim")
-#: cases per model and way (import, API): 30 x 2 x 2 run in about 15 s on a busy 2-core machine
+#: cases per model and way (import, API): 30 x 2 x 2 and 4 inverse ones run in 10-20 s on a busy 2-core machine
 CASES = int(os.environ.get("CASFLEX_FUZZ_OSIM", "30"))
 SEED = int(os.environ.get("CASFLEX_FUZZ_SEED", "0"))
-#: s: a case's bound; a clean import takes 0.1-0.3 s
+#: of them, the leg's first ones also through ``casflex inverse`` (a third of its running stride: about 1 s each)
+INVERSE = int(os.environ.get("CASFLEX_FUZZ_OSIM_INVERSE", "4"))
+TRC, GRF = LAB / "hamner_running_stride.trc", LAB / "hamner_running_stride_grf.mot"
+#: s: a case's bound; a clean import takes 0.1-0.3 s, an inverse 1 s
 HANG = 30.0
 
 
@@ -56,6 +60,21 @@ def _cases(tmp_path: Path) -> list[dict]:
                     "argv": ["api", str(path)],
                 }
             )
+            if m == 0 and k < INVERSE:
+                folder = tmp_path / f"{name}_inv"
+                folder.mkdir()
+                out = str(folder / "id.npz")
+                argv = ["inverse", str(path), "--data", str(TRC), "--loads", str(GRF), "--plate", "calcn_r=ground_"]
+                cases.append(
+                    {
+                        "name": f"{name}_inv",
+                        "file": path.name,
+                        "also": [TRC.name, GRF.name],  # a model's fault can show as the trial's misfit
+                        "folder": str(folder),
+                        "out": out,
+                        "argv": [*argv, "--t-end", "0.6", "--quiet", "--out", out],
+                    }
+                )
     return cases
 
 
@@ -79,7 +98,7 @@ def test_corrupted_models_are_refused_in_one_line_or_read_finite(tmp_path):
             refused += 1
             if len(errors) != 1 or not errors[0].startswith("casflex: error: ") or "\n" in errors[0]:
                 problems.append(f"{r['case']}: refused without one error line: {errors}")
-            elif case["file"] not in errors[0]:
+            elif not any(f in errors[0] for f in (case["file"], *case.get("also", ()))):
                 problems.append(f"{r['case']}: the refusal does not name the file: {errors[0]}")
             left = sorted(os.listdir(case["folder"]))
             if left and not case.get("api"):
