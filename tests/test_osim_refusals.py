@@ -312,6 +312,9 @@ def test_a_constraint_the_planar_scene_would_break_is_refused(tmp_path):
         ),
     ):
         scene_from_osim(loop)
+    unknown = _constrained(tmp_path, _coupler("patella_angle", "knee_angle_r"), "unknown.osim")
+    with pytest.raises(ValueError, match="CoordinateCouplerConstraint 'cc': 'patella_angle' is no coordinate of the"):
+        scene_from_osim(unknown)
     nowhere = _constrained(tmp_path, _weld("/bodyset/tibia_r", "/bodyset/patella_r"), "nowhere.osim")
     with pytest.raises(ValueError, match="its sockets name no two bodies of the model"):
         scene_from_osim(nowhere)

@@ -290,6 +290,10 @@ def _constraints(b: _Builder, by_child: dict[str, OsimJoint]) -> None:
             b.report.append(f"constraint {what}: not enforced in the model; ignored")
             continue
         if c.dependent is not None or c.independent:
+            unknown = [n for n in (c.dependent or "", *c.independent) if n not in b.default]
+            if unknown:
+                raise ValueError(f"{b.m.source}: ConstraintSet: {what}: {unknown[0]!r} is no coordinate of the model "
+                                 "(dependent_coordinate_name, independent_coordinate_names)")
             if c.dependent in kept:
                 raise ValueError(f"{b.m.source}: ConstraintSet: {what} makes {c.dependent!r} follow "
                                  f"{list(c.independent)}, and the planar scene moves {c.dependent!r} on its own "
