@@ -7,9 +7,10 @@ renamed; tabs turned into spaces; in a C3D, bytes of its header, parameters or d
 NaN, infinite or huge, the file cut.
 
 Run as a script, this module is the worker: it reads one case a line on stdin (JSON: the command's arguments
-and where its output goes), runs ``casflex.cli.main`` on it in this one process (CasADi and numpy loaded once)
-and writes one result a line on stdout (JSON: the exit status, what stderr said, whether every load written is
-finite, or the traceback of an exception that escaped).
+and where its output goes; ``"api": true``: the OpenSim reader's Python API on the model ``argv[1]`` instead),
+runs ``casflex.cli.main`` on it in this one process (CasADi and numpy loaded once) and writes one result a line
+on stdout (JSON: the exit status, what stderr said, whether every load or scene number written is finite, or the
+traceback of an exception that escaped). :func:`run_all` feeds it the cases and watches for hangs.
 """
 
 from __future__ import annotations
@@ -17,8 +18,13 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import os
+import re
 import struct
+import subprocess
 import sys
+import threading
+import time
 import traceback
 
 import numpy as np
@@ -139,8 +145,18 @@ def _finite_loads(path: str) -> bool | None:
         return None
 
 
+def _finite_text(path: str) -> bool | None:
+    """Whether the text file at ``path`` (a scene TOML) holds no NaN or infinity (None: no file)."""
+    try:
+        text = open(path, encoding="utf-8").read().lower()
+    except FileNotFoundError:
+        return None
+    return not re.search(r"\b(nan|inf)\b", text)
+
+
 def run_case(argv: list[str], out: str) -> dict:
-    """``casflex.cli.main(argv)`` in this process: its exit status, stderr's lines, and the loads' finiteness."""
+    """``casflex.cli.main(argv)`` in this process: its exit status, stderr's lines, and whether what it wrote
+    (loads, a scene) is finite."""
     from casflex.cli import main
 
     err = io.StringIO()
@@ -150,13 +166,66 @@ def run_case(argv: list[str], out: str) -> dict:
     except BaseException:  # noqa: BLE001 - a traceback is what the fuzz test looks for
         return {"code": None, "traceback": traceback.format_exc(limit=-4)}
     lines = [ln for ln in err.getvalue().splitlines() if ln.strip()]
-    return {"code": code, "stderr": lines, "finite": _finite_loads(out) if code == 0 else None}
+    finite = (_finite_text(out) if out.endswith(".toml") else _finite_loads(out)) if code == 0 else None
+    return {"code": code, "stderr": lines, "finite": finite}
+
+
+def run_api(model: str) -> dict:
+    """The OpenSim reader's Python API on ``model`` (``scene_from_osim``, then the scene assembled): exit status 0
+    and whether every number of the scene is finite, or 2 and the ValueError's line, or the traceback."""
+    from casflex.model import assemble
+    from casflex.scene.from_osim import scene_from_osim
+    from casflex.scene.io import dumps_scene
+
+    try:
+        made = scene_from_osim(model)
+        assemble(made.scene)
+    except ValueError as exc:
+        return {"code": 2, "stderr": [f"casflex: error: {exc}"], "finite": None}
+    except BaseException:  # noqa: BLE001 - a traceback is what the fuzz test looks for
+        return {"code": None, "traceback": traceback.format_exc(limit=-4)}
+    text = dumps_scene(made.scene).lower() + "\n".join(made.report).lower()
+    return {"code": 0, "stderr": [], "finite": not re.search(r"\b(nan|inf)\b", text)}
+
+
+def run_all(cases: list[dict], hang: float, fail) -> list[dict]:
+    """Each case's result from one worker process (this module); ``fail(message)`` (pytest.fail) names a case
+    that hangs (more than ``hang`` s) or crashes the process."""
+    worker = subprocess.Popen([sys.executable, __file__], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                              cwd=os.path.dirname(os.path.abspath(__file__)))
+    results: list[dict] = []
+    got = threading.Event()
+
+    def read() -> None:
+        for line in worker.stdout:
+            results.append(json.loads(line))
+            got.set()
+
+    threading.Thread(target=read, daemon=True).start()
+    try:
+        for case in cases:
+            got.clear()
+            worker.stdin.write(json.dumps(case) + "\n")
+            worker.stdin.flush()
+            deadline = time.monotonic() + hang
+            while not got.wait(0.2):
+                if worker.poll() is not None:
+                    got.wait(1.0)  # the reader may still be taking the last line
+                    if not got.is_set():
+                        fail(f"case {case['name']} ({' '.join(case['argv'])}) crashed the process (exit status "
+                             f"{worker.returncode})")
+                if time.monotonic() > deadline:
+                    fail(f"case {case['name']} ({' '.join(case['argv'])}) did not finish in {hang:g} s")
+    finally:
+        worker.kill()
+        worker.wait()
+    return results
 
 
 def _worker() -> None:
     for line in sys.stdin:
         case = json.loads(line)
-        result = run_case(case["argv"], case["out"])
+        result = run_api(case["argv"][1]) if case.get("api") else run_case(case["argv"], case["out"])
         sys.stdout.write(json.dumps({"case": case["name"], **result}) + "\n")
         sys.stdout.flush()
 

@@ -11,18 +11,14 @@ number of cases per file (default :data:`CASES`; thousands were run while fixing
 
 from __future__ import annotations
 
-import json
 import os
-import subprocess
 import sys
-import threading
-import time
 from pathlib import Path
 
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-from lab_fuzz import corrupt_c3d, corrupt_text  # noqa: E402
+from lab_fuzz import corrupt_c3d, corrupt_text, run_all  # noqa: E402
 
 LAB = Path(__file__).parent / "data" / "lab"
 TRC, GRF, C3D = LAB / "hamner_running_stride.trc", LAB / "hamner_running_stride_grf.mot", LAB / "walking2_excerpt.c3d"
@@ -61,35 +57,7 @@ def _cases(tmp_path: Path) -> list[dict]:
 
 def _run_all(cases: list[dict]) -> list[dict]:
     """Each case's result from one worker; pytest.fail naming the case that hangs."""
-    worker = subprocess.Popen([sys.executable, str(Path(__file__).parent / "lab_fuzz.py")], stdin=subprocess.PIPE,
-                              stdout=subprocess.PIPE, text=True, cwd=Path(__file__).parent)
-    results: list[dict] = []
-    got = threading.Event()
-
-    def read() -> None:
-        for line in worker.stdout:
-            results.append(json.loads(line))
-            got.set()
-
-    threading.Thread(target=read, daemon=True).start()
-    try:
-        for case in cases:
-            got.clear()
-            worker.stdin.write(json.dumps(case) + "\n")
-            worker.stdin.flush()
-            deadline = time.monotonic() + HANG
-            while not got.wait(0.2):
-                if worker.poll() is not None:
-                    got.wait(1.0)  # the reader may still be taking the last line
-                    if not got.is_set():
-                        pytest.fail(f"case {case['name']} ({' '.join(case['argv'])}) crashed the process (exit "
-                                    f"status {worker.returncode})")
-                if time.monotonic() > deadline:
-                    pytest.fail(f"case {case['name']} ({' '.join(case['argv'])}) did not finish in {HANG:g} s")
-    finally:
-        worker.kill()
-        worker.wait()
-    return results
+    return run_all(cases, HANG, pytest.fail)
 
 
 @pytest.mark.slow

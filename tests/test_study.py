@@ -119,7 +119,7 @@ def test_a_setup_file_that_names_itself_is_refused_before_any_work(folder, capsy
     old = 'tasks = "hamner_tasks_ik.xml"' if field == "tasks" else 'grf = "hamner_running_whole_grf.mot"'
     path.write_text(path.read_text().replace(old, old.split("=")[0] + '= "self.xml"', 1))
     said = "options.tasks" if field == "tasks" else "subjects[0].trials[0].grf"
-    pattern = said.replace("[", r"\[").replace("]", r"\]") + ": .*self.xml.* is the file itself"
+    pattern = said.replace("[", r"\[").replace("]", r"\]") + ": .*self.xml.* names .self.xml., a file already on the way here"
     with pytest.raises(StudyError, match=pattern):
         load_study(str(path))
     assert main(["study", str(path), "--out", str(folder / "out"), "--quiet"]) == 2
@@ -330,3 +330,18 @@ def test_a_cycle_off_the_plates_is_flagged_and_left_out_of_the_means(tmp_path):
     alone = float(np.min(clean["loads"]["ankle_angle_r_moment"]["value"][0]))
     assert peak[False] == alone  # the clean cycle alone: the same numbers
     assert peak[True] > 0.75 * alone  # with the cycle off the plates: some half the peak (the bug's answer)
+
+
+def test_a_subject_model_s_constraint_the_scene_leaves_out_is_in_the_subject_s_report(tmp_path):
+    # before: the study read an .osim through load_scene, and an ignored constraint went without a word
+    from casflex.study.runner import calibrate_run
+
+    text = (LAB / "hamner_subject02_leg.osim").read_text()
+    weld = ('<ConstraintSet><objects><WeldConstraint name="w"><socket_frame1>/bodyset/calcn_r</socket_frame1>'
+            "<socket_frame2>/bodyset/toes_r</socket_frame2></WeldConstraint></objects></ConstraintSet>")
+    model = tmp_path / "leg.osim"
+    model.write_text(text.replace("\t\t<MarkerSet", weld + "\n\t\t<MarkerSet", 1))
+    out = calibrate_run(model=str(model), static=None, plane="X,Y", root="pelvis", calibrate=False, scale=False,
+                        mass=None)
+    assert out["report"] == [f"warning: {model}: constraint WeldConstraint 'w' ignored: the planar scene holds "
+                             "'calcn_r' and 'toes_r' fixed relative to each other already"]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 from casflex.cli._base import OptionError, Outputs, output_path
 
@@ -16,6 +17,8 @@ def cmd_import(args: argparse.Namespace, outputs: Outputs) -> int:
     out = outputs.file("--out", args.out, (".toml",), "scene")
     made = scene_from_osim(args.model, name=args.name)
     print("\n".join(made.report))
+    for line in made.warnings:
+        print(f"casflex: warning: {line}", file=sys.stderr)
     header = "".join(f"# {line}\n" for line in ("Made by casflex import from an OpenSim model; its report:",
                                                  *made.report))
     out.write_text(header + dumps_scene(made.scene))

@@ -106,6 +106,10 @@ def cmd_study(args: argparse.Namespace, outputs: Outputs) -> int:
     lines = [f"{len(out['trials'])} of {n} trial(s) done, {len(rows)} rows in loads.csv"
              + (f", {passive.count(chr(10)) - 1} passive fit(s) in passive.csv" if passive else "")
              + f"; figures: {', '.join(figures) or 'none'}"]
+    for subject, rec in out["subjects"].items():  # what a subject's model holds that its scene leaves out
+        for line in (ln for ln in rec.get("report", ()) if ln.startswith("warning: ")):
+            lines.append(f"  {subject}: {line}")
+            print(f"casflex: warning: subject {subject}: {line.removeprefix('warning: ')}", file=sys.stderr)
     for (subject, trial), rec in out["trials"].items():
         cycles = {ld["foot"]: f"{sum(ld['clean'])} clean of {len(ld['cycles'])}" for ld in rec["loads"].values()}
         lines.append(f"  {subject} {trial}: plates {rec['plates']}; cycles per foot {cycles}")

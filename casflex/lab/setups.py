@@ -31,15 +31,22 @@ def _parse(path: str):
         raise ValueError(f"{path}: cannot read it ({exc.strerror or exc})") from None
 
 
-def _inner(path: str, name: str, seen: tuple[str, ...], what: str) -> tuple[str, tuple[str, ...]]:
-    """(the file ``name`` that the setup ``path`` names, resolved from its folder; the files read so far): a file
-    that names itself, or one of the files that named it, refused in one line (it would be read forever)."""
+def _named(path: str, name: str, element: str, seen: tuple[str, ...]) -> str:
+    """The file ``name`` that ``path``'s ``element`` names (relative to ``path``'s directory); ValueError in one
+    line when it is one of the files ``seen`` on the way here (a setup naming itself, two naming each other)."""
     inner = os.path.join(os.path.dirname(path), name)
-    chain = (*seen, os.path.realpath(path))
-    if os.path.realpath(inner) in chain:
-        raise ValueError(f"{path}: its {what} {name!r} is " + ("the file itself" if os.path.realpath(inner) ==
-                         chain[-1] else "a file that names it") + ": name the file that holds it")
-    return inner, chain
+    if any(_same(inner, s) for s in (*seen, path)):
+        loop = " -> ".join([*seen, path, inner])
+        raise ValueError(f"{path}: {element} names {name!r}, a file already on the way here ({loop}): a loop of "
+                         "setup files; name the file that holds the data")
+    return inner
+
+
+def _same(a: str, b: str) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return os.path.normpath(a) == os.path.normpath(b)
 
 
 def read_tasks(path: str | os.PathLike[str], _seen: tuple[str, ...] = ()) -> MarkerTasks:
@@ -50,7 +57,7 @@ def read_tasks(path: str | os.PathLike[str], _seen: tuple[str, ...] = ()) -> Mar
     sets = root.findall(".//IKTaskSet") if root.tag != "IKTaskSet" else [root]
     for s in sets:
         if s.get("file") and s.find("objects") is None:  # the setup names a task file
-            return read_tasks(*_inner(path, s.get("file"), _seen, "IKTaskSet file"))
+            return read_tasks(_named(path, s.get("file"), "IKTaskSet file", _seen), (*_seen, path))
     weights: dict[str, float] = {}
     coords = []
     for s in sets:
@@ -118,7 +125,7 @@ def read_external_loads(path: str | os.PathLike[str], _seen: tuple[str, ...] = (
     if loads is None:
         inner = (root.findtext(".//external_loads_file") or "").strip()
         if inner:
-            return read_external_loads(*_inner(path, inner, _seen, "external_loads_file"))
+            return read_external_loads(_named(path, inner, "external_loads_file", _seen), (*_seen, path))
         raise ValueError(f"{path}: no ExternalLoads: not an OpenSim external loads or inverse dynamics setup file")
     plates: dict[str, tuple[str, str, str]] = {}
     for force in loads.iter("ExternalForce"):

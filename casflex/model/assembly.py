@@ -107,6 +107,8 @@ def summed(values: ca.MX | ca.SX, lists: list[list[int]]) -> ca.MX | ca.SX:
     contributions as a few plain gathers (a 0/1 matrix product costs CasADi's generated code several
     times more)."""
     ext = ca.vertcat(values, 0)
+    if not lists:  # no target has a source (a scene without masses: its mass matrix has no nonzeros)
+        return ext[[]]
     out = ext[lists[0]]
     for idx in lists[1:]:
         out = out + ext[idx]

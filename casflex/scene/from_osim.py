@@ -24,8 +24,10 @@ inertia about the plane's normal through the centre of mass); each joint a hinge
 - a translation along x or y of the plane that follows the hinge's coordinate (a knee's rolling, a SIMM
   spline or linear function of the knee angle) makes the hinge a coupled one (``shift_x``, ``shift_y``:
   :class:`casflex.scene.Joint`), the spline's knots carried over exactly;
-- markers are projected on the plane; forces (muscles, actuators), constraints, contact geometry,
-  controllers and probes are listed as ignored.
+- markers are projected on the plane; forces (muscles, actuators), contact geometry, controllers and probes
+  are listed as ignored; a constraint is refused where the scene would break it (a coupler whose dependent
+  coordinate the scene moves, a loop closed between bodies it moves relative to each other), else ignored with
+  a warning (``warnings``: OpenSim's tools keep it).
 """
 
 from __future__ import annotations
@@ -62,6 +64,9 @@ class OsimScene:
     scene: Scene
     report: tuple[str, ...]
     dropped: tuple[str, ...]
+    #: what of the model the scene leaves out that OpenSim's tools would apply (its constraints): a command says
+    #: them on stderr (also in ``report``)
+    warnings: tuple[str, ...] = ()
 
 
 def node_name(s: str) -> str:
@@ -83,6 +88,8 @@ class _Builder:
         self.coords: list[Coordinate] = []
         self.report: list[str] = []
         self.dropped: list[str] = []
+        self.warnings: list[str] = []
+        self.moving: set[str] = set()  # the joints the scene moves (hinges, the root's coordinates)
 
     # -- geometry -------------------------------------------------------------------------
     def transform(self, j: OsimJoint, values: dict[str, float]) -> tuple[np.ndarray, np.ndarray]:
@@ -127,7 +134,10 @@ class _Builder:
         axes_g = self.rotation_axes_in_ground(j, RF)
         hinge = self.hinge(j, axes_g)
         shifts = self.shifts(j, axes_g, hinge) if hinge and j.parent != "ground" else {}
+        n_coords = len(self.coords)
         self.classify(j, axes_g, hinge, shifts, root=j.parent == "ground")
+        if hinge is not None or len(self.coords) > n_coords:
+            self.moving.add(j.name)
         if j.parent == "ground":
             return
         name = node_name(j.name)
@@ -268,10 +278,63 @@ class _Builder:
         return out
 
 
+def _constraints(b: _Builder, by_child: dict[str, OsimJoint]) -> None:
+    """Each constraint of the model: one the scene would break refused (a coupler whose dependent coordinate the
+    scene moves freely, a loop closed between bodies the scene moves relative to each other), the others
+    ignored with a warning (OpenSim's IK and ID keep them; casflex's planar scene does not), an unenforced one
+    reported."""
+    kept = {c.name for c in b.coords}
+    for c in b.m.constraints:
+        what = f"{c.kind} {c.name!r}"
+        if not c.enforced:
+            b.report.append(f"constraint {what}: not enforced in the model; ignored")
+            continue
+        if c.dependent is not None or c.independent:
+            unknown = [n for n in (c.dependent or "", *c.independent) if n not in b.default]
+            if unknown:
+                raise ValueError(f"{b.m.source}: ConstraintSet: {what}: {unknown[0]!r} is no coordinate of the model "
+                                 "(dependent_coordinate_name, independent_coordinate_names)")
+            if c.dependent in kept:
+                raise ValueError(f"{b.m.source}: ConstraintSet: {what} makes {c.dependent!r} follow "
+                                 f"{list(c.independent)}, and the planar scene moves {c.dependent!r} on its own "
+                                 "(casflex takes no constraints): lock it in the model (<locked>true</locked>) or "
+                                 "remove the constraint")
+            follows = [i for i in c.independent if i in kept]
+            held = "locked in the model" if c.dependent in b.locked else "held at its default value"
+            b.warnings.append(f"{b.m.source}: constraint {what} ignored: {c.dependent!r} is {held}"
+                              + (f", where OpenSim's tools move it with {follows}" if follows else ""))
+            continue
+        if len(c.bodies) < 2 or None in c.bodies:
+            raise ValueError(f"{b.m.source}: ConstraintSet: {what}: its sockets name no two bodies of the model "
+                             f"(found {list(c.bodies)}); casflex cannot tell what it joins: remove it or name the "
+                             "bodies")
+        path = _path(c.bodies[0], by_child) ^ _path(c.bodies[1], by_child)
+        moving = sorted(path & b.moving)
+        if moving:
+            raise ValueError(f"{b.m.source}: ConstraintSet: {what} closes a loop between {c.bodies[0]!r} and "
+                             f"{c.bodies[1]!r}, which the planar scene moves relative to each other (joints "
+                             f"{moving}); casflex reads trees: remove the constraint, or lock those joints' "
+                             "coordinates in the model")
+        b.warnings.append(f"{b.m.source}: constraint {what} ignored: the planar scene holds {c.bodies[0]!r} and "
+                          f"{c.bodies[1]!r} fixed relative to each other already")
+
+
+def _path(body: str, by_child: dict[str, OsimJoint]) -> set[str]:
+    """The joints from ``body`` to the ground."""
+    out: set[str] = set()
+    while body in by_child and by_child[body].name not in out:
+        out.add(by_child[body].name)
+        body = by_child[body].parent
+    return out
+
+
 def _tree_order(model: OsimModel) -> list[OsimJoint]:
     """The joints from the ground outwards; ValueError for a body with two joints, or none from the ground."""
     by_child: dict[str, OsimJoint] = {}
     for j in model.joints:
+        if j.child == "ground":
+            raise ValueError(f"{model.source}: joint {j.name!r}: its child frame is on the ground, which is no joint's "
+                             f"child (it closes a loop from {j.parent!r} to the ground); casflex reads trees")
         if j.child in by_child:
             raise ValueError(f"{model.source}: body {j.child!r} is the child of joints {by_child[j.child].name!r} and "
                              f"{j.name!r}: a closed loop; casflex reads trees")
@@ -300,6 +363,10 @@ def scene_from_osim(source: str | os.PathLike[str] | OsimModel, name: str | None
     for j in _tree_order(model):
         b.joint(j)
     bodies = b.bodies()
+    if not bodies:
+        raise ValueError(f"{model.source}: BodySet: no body of the tree has a mass > 0 ({len(model.bodies)} bodies); "
+                         "a scene of massless nodes has no dynamics: give the bodies their masses")
+    _constraints(b, {j.child: j for j in model.joints})
     markers = b.markers(bodies)
     others: dict[str, int] = {}
     for s, kind, _ in model.others:
@@ -308,9 +375,11 @@ def scene_from_osim(source: str | os.PathLike[str] | OsimModel, name: str | None
         b.report.append("ignored: " + ", ".join(f"{n} {k}" for k, n in sorted(others.items())))
     g = model.gravity
     title = node_name(name or os.path.splitext(os.path.basename(model.name))[0])
-    scene = Scene(title, tuple(b.nodes), bodies=tuple(bodies), joints=tuple(b.joints), markers=tuple(markers),
-                  coordinates=tuple(b.coords),
-                  gravity=(float(g[0]), float(g[1])))
+    try:
+        scene = Scene(title, tuple(b.nodes), bodies=tuple(bodies), joints=tuple(b.joints), markers=tuple(markers),
+                      coordinates=tuple(b.coords), gravity=(float(g[0]), float(g[1])))
+    except ValueError as exc:  # the scene's own checks (a default outside a clamped range, ...): name the file
+        raise ValueError(f"{model.source}: {exc}") from None
     report = [f"{model.source}: {len(bodies)} bodies, {len(b.joints)} joints, {len(markers)} markers, "
-              f"{len(b.coords)} coordinates in the x-y plane", *b.report, *b.dropped]
-    return OsimScene(scene, tuple(report), tuple(b.dropped))
+              f"{len(b.coords)} coordinates in the x-y plane", *b.report, *b.dropped, *b.warnings]
+    return OsimScene(scene, tuple(report), tuple(b.dropped), tuple(b.warnings))

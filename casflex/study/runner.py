@@ -47,12 +47,16 @@ def calibrate_run(*, model: str, static: str | None, plane: str, root: str | Non
     from casflex.inverse.inputs import read_markers
     from casflex.scene import dumps_scene
 
-    scene = load_scene(model)
-    report: list[str] = []
+    scene, report = load_scene(model), []
+    if str(model).lower().endswith(".osim"):  # what the planar scene leaves out of the model (its constraints)
+        from casflex.scene.from_osim import scene_from_osim
+
+        report = [f"warning: {w}" for w in scene_from_osim(model).warnings]
     placed_mass = static is not None and calibrate and scale
     if static is not None and calibrate:
         lab = read_markers(static)[0]
-        plane, report = _trial_plane(scene, lab, plane, vertical, static=True, root=root)
+        plane, lines = _trial_plane(scene, lab, plane, vertical, static=True, root=root)
+        report += lines
         scene, placed = place(scene, lab, plane, root=root, scale=scale, mass=mass if scale else None)
         report += placed
     if mass is not None and not placed_mass:  # weighed, not measured: the masses to it, the sizes as they are
