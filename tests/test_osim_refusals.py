@@ -382,7 +382,7 @@ def test_a_hinge_no_marker_moves_with_is_refused_before_the_fit(tmp_path):
     with pytest.raises(
         ValueError,
         match=re.escape(
-            f"{path}: no marker moves with the coordinates ['tip_angle'] (1 of 7): the marker fit cannot decide them"
+            f"{TRC}: the markers do not decide ['tip_angle'] in any frame: segment 'tip' has no marker to place it"
         ),
     ):
         prepare(path, TRC, grf=GRF, plates={"calcn_r": "ground_"})
@@ -392,7 +392,7 @@ def test_a_trial_whose_markers_decide_no_frame_is_refused_in_one_line():
     from casflex.inverse.fit import _fill
 
     t = np.linspace(0, 1, 11)
-    with pytest.raises(ValueError, match="the markers decide the coordinates in none of the 11 frames"):
+    with pytest.raises(ValueError, match="the markers do not decide the coordinates in any frame"):
         _fill(t, np.full((11, 3), np.nan), 0.1, [])
 
 

@@ -213,21 +213,6 @@ def _scene_markers(model: Model, tree: KinematicTree, lab, plane, keep_frames):
     return markers_in_plane(lab, names, plane), labels
 
 
-def _check_decided(model: Model, tree: KinematicTree, where: str) -> None:
-    """ValueError naming the coordinates that no marker of the scene moves (at its initial pose): the marker fit
-    could decide them in no frame (a hinge whose segments beyond it carry no marker)."""
-    if not model.scene.markers:
-        return  # said by _from_markers, naming the scene
-    J = np.array(tree.marker_fit(tree.coordinates(model.q0))[1])
-    idle = [k for k in range(tree.n) if not np.any(J[:, k] != 0)]
-    if idle:
-        lab = {c.scene_coordinate(): c.name for c in model.scene.coordinates}
-        names = [lab.get(tree.names[k], tree.names[k]) for k in idle]
-        raise ValueError(f"{where}: no marker moves with the coordinates {names[:8]}{' ...' if len(names) > 8 else ''} "
-                         f"({len(names)} of {tree.n}): the marker fit cannot decide them; give the segments they carry "
-                         "markers, or hold them (an OpenSim model: <locked>true</locked>; a scene: a weld)")
-
-
 def _memory(model: Model, tree: KinematicTree, t: np.ndarray, n_markers: int, dt: float | None) -> None:
     """ValueError when the run's result would not fit in the memory available (the bound of
     :data:`BYTES_PER_VALUE`); with flexible segments, also the HHT steps' (``dt`` s, default the scene's:
@@ -327,7 +312,6 @@ def prepare(scene, markers=None, *, plane="X,Y", grf=None, plates: dict[str, str
         raise ValueError("markers, coordinates: give the trial's markers or its coordinates (one of them)")
     if tasks is not None and coordinates is not None:
         raise ValueError("tasks: they weight the marker fit; with coordinates given there is none")
-    where = f"scene {scene.name!r}" if isinstance(scene, Scene) else os.fspath(scene)
     scene, task_notes = _osim_scene(scene)
     if tasks is not None:
         scene, notes = weighted(scene, tasks)
@@ -342,8 +326,6 @@ def prepare(scene, markers=None, *, plane="X,Y", grf=None, plates: dict[str, str
     tree = kinematic_tree(model, root)
     spec = band_spec(model, tree, uncertain=uncertain, marker_noise=marker_noise, bands=bands,
                      given=coordinates is not None, n_markers=sum(m.weight > 0 for m in model.scene.markers))
-    if coordinates is None:
-        _check_decided(model, tree, where)
     lab, table = _trial(markers, grf, bool(plates))
     if coordinates is None:
         t, y, labels, rate, notes = _from_markers(model, tree, lab, pl, t_start, t_end)
