@@ -300,7 +300,6 @@ def prepare(scene, markers=None, *, plane="X,Y", grf=None, plates: dict[str, str
     from casflex.inverse.bands import band_spec
     from casflex.lab import Plane
     from casflex.lab.checks import MAX_MISFIT
-    from casflex.scene import Scene
 
     pl = Plane.parse(plane) if isinstance(plane, str) else plane
     max_misfit = MAX_MISFIT if max_misfit is None else float(max_misfit)
