@@ -7,12 +7,19 @@ import os
 import sys
 
 
-def _exit_interrupted(code: int) -> None:
+def _exit_interrupted(code: int, hurried: bool = False) -> None:
     """Exit with ``code`` for certain. A KeyboardInterrupt (Terminated is one) that crossed code an
     extension module ran at import (CPython's run_eval_code_obj) is recorded by CPython as
     unhandled, and at exit CPython then kills itself with SIGINT although casflex caught it: run
-    the exit handlers, flush, and end here instead."""
-    atexit._run_exitfuncs()
+    the exit handlers, flush, and end here instead.
+
+    ``hurried`` (a second signal came while the command stopped): the exit handlers are skipped, as the
+    user asks to be out now; dask's would close again, for up to 10 s, a cluster the signal cut short (its
+    worker processes end with this one: each watches a pipe from its parent). Outputs are discarded before."""
+    if not hurried:
+        atexit._run_exitfuncs()
+    elif "multiprocessing.util" in sys.modules:  # its quick finalizers only (semaphores, queues' closing): else
+        sys.modules["multiprocessing.util"]._run_finalizers(0)  # its resource tracker warns of "leaked" ones
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()
@@ -40,5 +47,5 @@ def main() -> int:
             interrupt.tell(f"\ncasflex: {interrupt.describe(signum)}")
             code = interrupt.exit_status(signum)
         if code in interrupt.EXIT_STATUSES:  # inside the guard: its hook keeps finalizer noise off stderr to the end
-            _exit_interrupted(code)
+            _exit_interrupted(code, hurried=signals.count > 1)
     return code
