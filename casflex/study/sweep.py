@@ -50,8 +50,8 @@ REVIVALS = 3
 _POLL_S = 2.0  # s between checks of the workers while no run finishes
 #: the field of a record that names its run (its key): a record is taken only under its own name
 IDENTITY = "run"
-#: bytes of memory a local worker may take: about 0.35 GB resident after a study's trial (casflex, CasADi, numpy,
-#: matplotlib loaded; measured with ps on Hamner's running trial), doubled for larger trials and the scheduler
+#: bytes of memory allowed a local worker: one peaked at 0.10 GB resident in tests/test_study.py's study (Hamner's
+#: running trial, ps every 0.25 s); 10 x that for longer trials, bands, compiled models and the scheduler's share
 WORKER_BYTES = 1 << 30
 
 
