@@ -4,7 +4,17 @@ line, as at any other moment."""
 
 import atexit
 import os
+import signal
 import sys
+
+_spawned = sys.modules.get("multiprocessing.process")
+if _spawned is not None and getattr(_spawned.current_process(), "_inheriting", False):
+    # A process the command spawned (its local dask workers), which multiprocessing prepares by running the
+    # parent's script, this entry point, first. Ctrl-C at a terminal reaches the whole process group; the
+    # command takes it and closes its workers, which printed a KeyboardInterrupt's traceback each. Ignored here,
+    # from the child's first moment after Python's own start-up (the workers' preload, casflex.study._worker,
+    # does it where the command ran as python -m casflex, whose script multiprocessing does not run again).
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _exit_interrupted(code: int, hurried: bool = False) -> None:

@@ -10,7 +10,7 @@ names another run (a record copied by hand under another name) or that lacks a f
 ``{"error": "..."}``, and is not retried unless ``retry_failed=True``.
 
 By default the runs go to a ``LocalCluster`` of ``n_workers`` single-threaded processes (at most
-:func:`max_workers`: the machine's cores and memory; their processes do not take Ctrl-C, which the sweep's
+:func:`max_workers`: the machine's cores and memory; once started they ignore Ctrl-C, which the sweep's
 process handles by closing them);
 ``scheduler="tcp://host:8786"`` sends them to an existing cluster (the workers must have
 casflex installed). A cluster that has lost every worker for :data:`NO_WORKERS_S` seconds (a
@@ -304,23 +304,21 @@ def _workers(n_workers: int | None, scheduler: str | None) -> int:
 def _local_cluster(n_workers: int, started: list) -> Any:
     """A LocalCluster of ``n_workers`` single-threaded processes, appended to ``started`` before this returns.
 
-    Its worker processes do not take SIGINT: a Ctrl-C at a terminal goes to the whole process group, and a
-    worker would print its traceback while this process closes the cluster anyway. A child process inherits
-    the signal mask of the thread that starts it (dask's loop thread and the threads it starts, all begun
-    here), so SIGINT is blocked in this thread while the cluster starts: a Ctrl-C in those seconds is honoured
-    as soon as it is up (SIGTERM and SIGHUP stay as they are: dask stops its workers by SIGTERM)."""
-    import signal
-
+    Its workers preload :mod:`casflex.study._worker` (besides dask's configured preloads): they ignore SIGINT,
+    which a Ctrl-C at a terminal sends to the whole process group, and this process handles by closing them.
+    (A child started by spawn keeps neither a blocked signal mask nor a handler: the worker itself must ignore
+    the signal. The preload runs once it has imported dask, about a second in; under the ``casflex`` command,
+    casflex._entry does it as soon as the worker's Python has started.)"""
+    import dask
     from distributed import LocalCluster
 
-    blocked = hasattr(signal, "pthread_sigmask")
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if blocked else None
-    try:
-        started.append(LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
-                                    dashboard_address=":0", silence_logs=40))
-    finally:
-        if blocked:
-            signal.pthread_sigmask(signal.SIG_SETMASK, old)  # a Ctrl-C received meanwhile is raised here
+    preload = dask.config.get("distributed.worker.preload") or []
+    preload = [preload] if isinstance(preload, str) else list(preload)
+    argv = dask.config.get("distributed.worker.preload-argv") or []
+    argv = [argv] * len(preload) if argv and isinstance(argv[0], str) else list(argv) or [[]] * len(preload)
+    started.append(LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=":0",
+                                silence_logs=40, preload=[*preload, "casflex.study._worker"],
+                                preload_argv=[*argv, []]))
     return started[-1]
 
 
