@@ -23,9 +23,13 @@ def _exit_interrupted(code: int, hurried: bool = False) -> None:
     unhandled, and at exit CPython then kills itself with SIGINT although casflex caught it: run
     the exit handlers, flush, and end here instead.
 
-    ``hurried`` (a second signal came while the command stopped): the exit handlers are skipped, as the
-    user asks to be out now; dask's would close again, for up to 10 s, a cluster the signal cut short (its
-    worker processes end with this one: each watches a pipe from its parent). Outputs are discarded before."""
+    dask's exit handler is not run: it closes again, for up to 10 s, a local cluster the signal cut short in
+    its start or its close (its worker processes end with this one: each watches a pipe from its parent).
+    ``hurried`` (a second signal came while the command stopped): no exit handler is run, as the user asks to
+    be out now. Outputs are discarded before."""
+    spec = sys.modules.get("distributed.deploy.spec")
+    if spec is not None and hasattr(spec, "close_clusters"):
+        atexit.unregister(spec.close_clusters)
     if not hurried:
         atexit._run_exitfuncs()
     elif "multiprocessing.util" in sys.modules:  # its quick finalizers only (semaphores, queues' closing): else
