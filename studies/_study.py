@@ -81,7 +81,7 @@ def sweep(name: str, plan: list[dict], key: Callable[[dict], str], fn: Callable[
 
     runs = [Run(key(r), fn, r) for r in plan]
     with tempfile.TemporaryDirectory(prefix=f"casflex-{name}-") as tmp:
-        done = run_sweep(runs, Path(record or tmp), scheduler=scheduler, n_workers=2, progress=not quick)
+        done = run_sweep(runs, Path(record or tmp), scheduler=scheduler, progress=not quick)  # 2 workers, 1 on 1 core
         if done.interrupted:
             raise KeyboardInterrupt
         return [(r, done.results[run.key]) for r, run in zip(plan, runs, strict=True)]

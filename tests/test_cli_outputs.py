@@ -192,3 +192,43 @@ def test_a_staging_a_signal_left_unrecorded_is_discarded(tmp_path, monkeypatch):
     assert any(p.name.endswith(".casflex-tmp") for p in tmp_path.iterdir())
     outputs.discard()
     assert not any(p.name.endswith(".casflex-tmp") for p in tmp_path.iterdir())
+
+
+def _dead_pid() -> int:
+    """The id of a process that has ended (a command killed by SIGKILL)."""
+    import subprocess
+    import sys
+
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    return int(gone.stdout)
+
+
+def test_a_killed_first_run_s_staging_beside_a_folder_made_since_is_cleared(tmp_path):
+    # casflex study --out NEW, killed (SIGKILL): its staging beside NEW, and NEW itself made by the run (its
+    # records in NEW/record). A later run stages inside NEW; it cleared only there, the first run's stayed forever.
+    killed = tmp_path / f".out.{_dead_pid()}.abc.casflex-tmp"
+    killed.mkdir()
+    (killed / "loads.csv").write_text("half")
+    (tmp_path / "out" / "record").mkdir(parents=True)
+    outputs = Outputs()
+    staging = outputs.directory("--out", str(tmp_path / "out"))
+    assert staging.parent == tmp_path / "out"
+    assert not killed.exists(), sorted(p.name for p in tmp_path.iterdir())
+    outputs.discard()
+
+
+def test_a_folder_written_as_the_command_goes_is_checked_as_an_output(tmp_path):
+    # casflex study --record: a parent that does not exist is not created, and no input or other output is taken
+    (tmp_path / "study.toml").write_text("name = 'x'\n")
+    outputs = Outputs()
+    outputs.protect("the study", [str(tmp_path / "study.toml")])
+    outputs.directory("--out", str(tmp_path / "out"))
+    for path, said in [(tmp_path / "no" / "such", "--record: directory '.*no' does not exist"),
+                       (tmp_path / "study.toml", "--record: .* is an input of the command \\(the study\\)"),
+                       (tmp_path / "out", "--record: .* is also the --out folder")]:
+        with pytest.raises(OptionError, match=said):
+            outputs.folder("--record", str(path))
+    assert not (tmp_path / "no").exists()
+    assert outputs.folder("--record", str(tmp_path / "record")) == tmp_path / "record"
+    assert not (tmp_path / "record").exists()  # made by the first record written, not here
+    outputs.discard()

@@ -96,6 +96,9 @@ def write(folder: Path, extra: str = "") -> Path:
     (("mass = 80.0", 'mass = 80.0\nuncertain = ["pelvis.massx=3%"]', 1), "subjects[1].uncertain"),
     (('window = [0.25, 1.15]', 'window = [0.25, 1.15]\nplates = { calcn_x = "ground_force_" }', 1),
      "subjects[0].trials[1].plates"),
+    # a subject's figure is <name>.png: "group" would be the group's figure, "S02" s02's where case is ignored
+    (('name = "s02_again"', 'name = "Group"', 1), "subjects[1].name: 'Group' names the group's figure"),
+    (('name = "s02_again"', 'name = "S02"', 1), "subjects[1].name: 'S02' and 's02' differ only in case"),
 ])
 def test_a_bad_study_file_is_refused_in_one_line_before_any_work(folder, capsys, edit, said):
     path = write(folder)
@@ -126,6 +129,63 @@ def test_a_setup_file_that_names_itself_is_refused_before_any_work(folder, capsy
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and said in err[0], err
     assert not (folder / "out").exists()
+
+
+def _refusing_port():
+    """A socket bound to a local port and not listening: a connection to it is refused (kept open: the port stays
+    this test's)."""
+    import socket
+
+    sock = socket.socket()
+    sock.bind(("127.0.0.1", 0))
+    return sock
+
+
+@pytest.mark.parametrize("options, said", [
+    (["--workers", "{many}"], "--workers: {many} is more local workers than this machine runs at once (at most"),
+    (["--scheduler", "tcp://127.0.0.1:{port}"], "--scheduler: nothing answers at 'tcp://127.0.0.1:{port}'"),
+    (["--record", "no/such/dir"], "--record: directory 'no/such' does not exist (casflex does not create it)"),
+    (["--record", "study.toml"], "--record: 'study.toml' is an input of the command (the study)"),
+    (["--record", "out"], "--record: 'out' is also the --out folder"),
+], ids=["workers", "scheduler", "record-parent", "record-input", "record-out"])
+def test_the_cluster_and_record_options_are_refused_in_one_line_before_anything_is_made(folder, capsys, monkeypatch,
+                                                                                       options, said):
+    # --workers 10000 started no worker and printed 700k lines; --scheduler with nothing there left an empty record
+    # folder after dask's 30 s; --record no/such/dir made the folders; an input or --out as --record: no word
+    import os
+
+    monkeypatch.chdir(folder)
+    sock = _refusing_port()
+    fill = {"many": str((os.cpu_count() or 1) + 1), "port": str(sock.getsockname()[1])}  # beyond a core a worker
+    write(folder)
+    before = sorted(p.name for p in folder.iterdir())
+    try:
+        code = main(["study", "study.toml", "--out", "out", "--quiet", *[o.format(**fill) for o in options]])
+    finally:
+        sock.close()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and said.format(**fill) in err[0], err
+    assert sorted(p.name for p in folder.iterdir()) == before  # no out, no record, no no/
+
+
+def test_a_record_is_taken_only_under_its_own_name_and_a_broken_one_is_redone(folder, capsys):
+    # another trial's record copied by hand under a trial's name was reused (its loads in that trial's rows, exit 0);
+    # a record holding [] gave a traceback and one holding {} "casflex: error: loads". Each is now redone, and said.
+    path = write(folder)
+    record = folder / "record"
+    assert main(["study", str(path), "--out", str(folder / "first"), "--record", str(record), "--quiet"]) == 0
+    first = (folder / "first" / "loads.csv").read_text()
+    rec = {p.name.rsplit("-", 1)[0]: p for p in record.glob("*.json")}
+    rec["trial-s02-run"].write_bytes(rec["trial-s02-run_late"].read_bytes())
+    rec["trial-s02_again-run"].write_text("[]")
+    rec["calibrate-s02_again"].write_text("{}")
+    capsys.readouterr()
+    assert main(["study", str(path), "--out", str(folder / "again"), "--record", str(record), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert f"{rec['trial-s02-run']} is the record of 'trial-s02-run_late-" in err, err
+    assert f"{rec['trial-s02_again-run']} holds a JSON list, not a run's record" in err, err
+    assert f"{rec['calibrate-s02_again']} does not name its run" in err, err
+    assert (folder / "again" / "loads.csv").read_text() == first  # each run done again: the same table
 
 
 def _table(path: Path) -> list[dict]:

@@ -242,20 +242,34 @@ def test_an_external_scheduler_with_two_workers_gives_the_local_clusters_table(r
     assert not any(_members(p.pid) for p in procs)
 
 
-@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGINT], ids=["SIGKILL", "SIGINT"])
-def test_a_study_killed_halfway_and_run_again_redoes_only_the_unrecorded_trials(reference, tmp_path, capsys, sig):
+def _halfway(tmp_path: Path) -> tuple[Path, subprocess.Popen, Path, str]:
+    """``casflex study`` started on the study in ``tmp_path`` with its workers holding :func:`_held`'s trial (the
+    module docstring), returned once a first trial is recorded and that one held: (the study file, the process,
+    its log, the held run's name)."""
     study = _study(tmp_path)
-    out, log = tmp_path / "out", tmp_path / "killed.log"
-    record = out / "record"
+    log, record = tmp_path / "killed.log", tmp_path / "out" / "record"
     held, t_start = _held(study)
     (tmp_path / "hold.py").write_text(HOLD)
     env = _env(tmp_path, DASK_DISTRIBUTED__WORKER__PRELOAD=json.dumps([str(tmp_path / "hold.py")]),
                CASFLEX_TEST_HOLD_T_START=repr(t_start), CASFLEX_TEST_HELD=str(tmp_path / "held"),
                CASFLEX_TEST_GATE=str(tmp_path / "never"))
-    proc = _spawn([sys.executable, "-m", "casflex", "study", str(study), "--out", str(out)], log, env, tmp_path)
+    proc = _spawn([sys.executable, "-m", "casflex", "study", str(study), "--out", str(tmp_path / "out")], log, env,
+                  tmp_path)
     try:
         _wait_for(lambda: list(record.glob("trial-*.json")) and (tmp_path / "held").exists(), [proc], [log],
                   f"a first trial's record, and {held} held")
+    except BaseException:
+        _stop(proc)
+        raise
+    return study, proc, log, held
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGINT], ids=["SIGKILL", "SIGINT"])
+def test_a_study_killed_halfway_and_run_again_redoes_only_the_unrecorded_trials(reference, tmp_path, capsys, sig):
+    out = tmp_path / "out"
+    record = out / "record"
+    study, proc, log, held = _halfway(tmp_path)
+    try:
         os.killpg(proc.pid, sig)  # the whole group, as a terminal's Ctrl-C (and the kill a crash would be)
         code = proc.wait(TIMEOUT_S)
         left = _wait_gone(proc.pid)
@@ -268,6 +282,8 @@ def test_a_study_killed_halfway_and_run_again_redoes_only_the_unrecorded_trials(
     else:
         assert code == 130, said  # casflex's Ctrl-C status (casflex._entry)
         assert "interrupted" in said
+        # the workers took the terminal's Ctrl-C too: each printed its KeyboardInterrupt's traceback
+        assert "Traceback" not in said and "KeyboardInterrupt" not in said, said
         # the outputs' staging folder removed: nothing but the records and the study's own files
         assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".")) == [], said
     assert not (out / "loads.csv").exists() and not list(tmp_path.rglob("loads.csv")), "no table from a killed run"
@@ -306,3 +322,24 @@ def test_a_study_killed_halfway_and_run_again_redoes_only_the_unrecorded_trials(
     assert all("loads" in json.loads(after[k].read_text()) for k in _of(after, "trial-"))
     assert len(_of(after, "trial-")) == 3
     _same_table((out / "loads.csv").read_text(), reference)
+
+
+def test_a_second_ctrl_c_while_the_cluster_closes_exits_at_once(tmp_path):
+    # the first Ctrl-C closes the cluster (seconds: a held worker is stopped by its nanny); a second one stopped
+    # that close, and dask's exit handler closed it again, for up to 10 s. Now out within 2 s, one line, no process
+    # left (the workers end with their parent: each watches a pipe from it).
+    _, proc, log, _ = _halfway(tmp_path)
+    try:
+        os.killpg(proc.pid, signal.SIGINT)
+        time.sleep(0.3)  # into the close (about 4 s here with the held worker)
+        second = time.monotonic()
+        os.killpg(proc.pid, signal.SIGINT)
+        code = proc.wait(TIMEOUT_S)
+        took = time.monotonic() - second
+        left = _wait_gone(proc.pid)
+    finally:
+        _stop(proc)
+    said = log.read_text(errors="replace")
+    assert code == 130 and took < 2.0, (code, took, said)  # 2 s: an exit, not a close, on a busy machine
+    assert not left, f"processes of the stopped command still running: {left}"
+    assert said.count("casflex: interrupted") == 1 and "Traceback" not in said and "Warning" not in said, said

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -182,3 +183,56 @@ def test_a_killed_writer_s_temporary_files_are_cleared_and_a_fresh_one_kept(tmp_
     os.utime(old, (past, past))
     run_sweep([], tmp_path, progress=False)
     assert not old.exists() and fresh.exists()  # a write in progress elsewhere is left alone
+
+
+def test_more_workers_than_the_machine_runs_are_refused_before_anything_is_made(tmp_path):
+    # n_workers=10000 started no worker and printed 700k lines of tracebacks in 70 s
+    from casflex.study.sweep import max_workers
+
+    limit, why = max_workers()
+    assert 1 <= limit <= (os.cpu_count() or 1) and "core" in why
+    runs = [Run("a", identification_run, {"method": "direct", "start": 1.0, "t_end": 0.75})]
+    with pytest.raises(ValueError, match=f"n_workers: {limit + 1} is more local workers .* at most {limit}"):
+        run_sweep(runs, tmp_path / "rec", n_workers=limit + 1, progress=False)
+    assert not (tmp_path / "rec").exists()
+
+
+def test_a_scheduler_that_does_not_answer_leaves_no_record_folder(tmp_path):
+    # the record folder was made before the connection failed, and stayed, empty
+    import socket
+
+    import dask
+
+    from casflex.study.sweep import unreachable
+
+    sock = socket.socket()
+    sock.bind(("127.0.0.1", 0))  # bound, not listening: refused
+    address = f"tcp://127.0.0.1:{sock.getsockname()[1]}"
+    try:
+        assert unreachable(address) is not None and unreachable("tcp://nohost") is not None
+        runs = [Run("a", identification_run, {"method": "direct", "start": 1.0, "t_end": 0.75})]
+        with dask.config.set({"distributed.comm.timeouts.connect": "2s"}), pytest.raises(OSError):
+            run_sweep(runs, tmp_path / "rec", scheduler=address, progress=False)
+    finally:
+        sock.close()
+    assert not (tmp_path / "rec").exists()
+
+
+def test_a_record_is_taken_only_as_its_own_run_s(tmp_path, capsys):
+    # a record copied under another run's name, one without its name, one that is no object or lacks a field of
+    # its run's records: none is taken as done (each said); the run's own record is
+    from casflex.study.sweep import _read
+
+    run = Run("b", identification_run, {}, fields=("y",))
+    path = tmp_path / "b.json"
+    for text, said in [('{"run": "a", "y": 1}', "is the record of 'a', not of 'b'"),
+                       ('{"y": 1}', "does not name its run"), ("[]", "holds a JSON list"), ("{}", "does not name"),
+                       ('{"run": "b"}', "lacks the field 'y'"), ('{"run": "b", "y"', "is not JSON")]:
+        path.write_text(text)
+        assert _read(path, run) is None, text
+        assert said in capsys.readouterr().err, text
+    path.write_text('{"run": "b", "y": 1}')
+    assert _read(path, run) == {"y": 1}
+    path.write_text('{"run": "b", "error": "ValueError: x"}')  # a failed run's record lacks the fields: it stands
+    assert _read(path, run) == {"error": "ValueError: x"}
+    assert capsys.readouterr().err == ""

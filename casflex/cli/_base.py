@@ -225,7 +225,8 @@ class Outputs:
         if self._taken(target):
             raise OptionError(f"{option}: {path!r} is already the target of another option")
         where = target if target.is_dir() else self._parent(option, target)
-        _clear_abandoned(where, target.name)
+        for place in {where, target.parent}:  # a killed first run staged beside the target, a later one in it
+            _clear_abandoned(place, target.name)
         self._places.append((where, target.name))
         try:
             staging = tempfile.mkdtemp(dir=where, prefix=_prefix(target), suffix=".casflex-tmp")
@@ -234,6 +235,22 @@ class Outputs:
         os.chmod(staging, 0o777 & ~_umask())  # mkdtemp's 0700 would reach a new target: ordinary permissions
         self._staged.append((option, Path(staging), target))
         return Path(staging)
+
+    def folder(self, option: str, path: str) -> Path:
+        """Check the folder ``path`` that the command writes into as it goes, outside the all-or-none outputs
+        (``casflex study --record``: each run's record kept as it finishes): refused, as an output is, where its
+        parent does not exist (nothing is created silently), where it is a file, one of the command's inputs or
+        another option's target; it is created where it does not exist by whoever first writes into it."""
+        target = Path(path)
+        self._refuse_input(option, target)
+        if target.exists() and not target.is_dir():
+            raise OptionError(f"{option}: {path!r} exists and is not a directory")
+        for other, _, t in self._staged:
+            if t.resolve() == target.resolve():
+                raise OptionError(f"{option}: {path!r} is also the {other} folder; give another folder")
+        if not target.exists():
+            self._parent(option, target)
+        return target
 
     def _taken(self, target: Path) -> bool:
         return any(t.resolve() == target.resolve() for _, _, t in self._staged)

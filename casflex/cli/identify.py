@@ -297,7 +297,7 @@ def _multistart(model: Model, sets: list[MeasurementSet], args: argparse.Namespa
     import tempfile
 
     from casflex.identification.problem import start_values
-    from casflex.study.sweep import Run, run_sweep
+    from casflex.study.sweep import Run, max_workers, run_sweep
 
     p0 = start_values(model, start)
     rng = np.random.default_rng(args.seed)
@@ -306,9 +306,10 @@ def _multistart(model: Model, sets: list[MeasurementSet], args: argparse.Namespa
     options["quiet"] = True
     runs = [Run(f"start{k}", run_start, {"scene": args.scene, "sets": sets, "options": options,
                                          "start": s.tolist(), "dofs": dofs}) for k, s in enumerate(starts)]
-    print(f"  multi-start: {len(runs)} starts on 2 worker processes", flush=True)
+    workers = min(2, len(runs), max_workers()[0])  # a one-core machine runs one
+    print(f"  multi-start: {len(runs)} starts on {workers} worker process(es)", flush=True)
     with tempfile.TemporaryDirectory(prefix="casflex-starts-") as rec:
-        sweep = run_sweep(runs, rec, n_workers=min(2, len(runs)), progress=not args.quiet)
+        sweep = run_sweep(runs, rec, n_workers=workers, progress=not args.quiet)
     if sweep.interrupted:
         raise KeyboardInterrupt
     records = [sweep.results[r.key] for r in runs]

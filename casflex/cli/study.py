@@ -62,6 +62,7 @@ def _figures(out: dict, directory: Path, title: str, per_kg: bool = False, all_c
     the files written."""
     from casflex.plotting.study import plot_cycles
     from casflex.study.runner import PERCENT, unit_of
+    from casflex.study.study_file import GROUP  # a subject of this name is refused (its figure would be this)
 
     per = cycle_curves(out, all_cycles)
     if not per:
@@ -72,9 +73,23 @@ def _figures(out: dict, directory: Path, title: str, per_kg: bool = False, all_c
         curves = {n: {subject: subs[subject]} for n, subs in per.items() if subject in subs}
         plot_cycles(PERCENT, curves, f"{title}: {subject}", directory / f"{subject}.png", units=units)
         written.append(f"{subject}.png")
-    group = {n: {"group": np.array([c.mean(axis=0) for c in subs.values()])} for n, subs in per.items()}
-    plot_cycles(PERCENT, group, f"{title}: the subjects' means", directory / "group.png", units=units)
-    return [*written, "group.png"]
+    group = {n: {GROUP: np.array([c.mean(axis=0) for c in subs.values()])} for n, subs in per.items()}
+    plot_cycles(PERCENT, group, f"{title}: the subjects' means", directory / f"{GROUP}.png", units=units)
+    return [*written, f"{GROUP}.png"]
+
+
+def _check_cluster(args: argparse.Namespace) -> None:
+    """--workers within what the machine runs at once, --scheduler answering: one line before any work."""
+    from casflex.study.sweep import max_workers, unreachable
+
+    if args.scheduler is None and args.workers is not None:
+        limit, why = max_workers()
+        if args.workers > limit:
+            raise OptionError(f"--workers: {args.workers} is more local workers than this machine runs at once "
+                              f"(at most {limit}: {why}); give at most {limit}, or --scheduler with its own workers")
+    if args.scheduler is not None and (why := unreachable(args.scheduler)) is not None:
+        raise OptionError(f"--scheduler: nothing answers at {args.scheduler!r} ({why}): start the scheduler "
+                          "(dask scheduler) and its workers, or leave --scheduler out for a local cluster")
 
 
 def cmd_study(args: argparse.Namespace, outputs: Outputs) -> int:
@@ -86,8 +101,9 @@ def cmd_study(args: argparse.Namespace, outputs: Outputs) -> int:
         check_against_models(study)
     except StudyError as exc:
         raise OptionError(f"{args.study}: {exc}") from None
+    _check_cluster(args)
     staging = outputs.directory("--out", args.out)
-    record = Path(args.record) if args.record else Path(args.out) / "record"
+    record = outputs.folder("--record", args.record) if args.record else Path(args.out) / "record"
     n = len(study.trials())
     print(f"study {study.name!r}: {len(study.subjects)} subject(s), {n} trial(s); records in {record}", flush=True)
     out = run_study(study, record, scheduler=args.scheduler, n_workers=args.workers,
@@ -132,8 +148,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="the runs' records (default DIR/record): a run recorded there is not done again")
     s.add_argument("--scheduler", metavar="ADDRESS", help="an existing dask scheduler (tcp://host:8786); default "
                                                           "a local cluster")
-    s.add_argument("--workers", type=integer(1, "a number of workers"), default=2,
-                   help="the local cluster's worker processes (default 2)")
+    s.add_argument("--workers", type=integer(1, "a number of workers"),
+                   help="the local cluster's worker processes (default 2; at most one per core, and 1 GiB of the "
+                        "machine's memory each)")
     s.add_argument("--retry-failed", action="store_true",
                    help="run again the runs recorded as failed (a lost worker, a mended file); by default a failed "
                         "run's record stands until its inputs change")

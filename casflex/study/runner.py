@@ -229,11 +229,17 @@ def _digest(path: str | None) -> str | None:
     return hashlib.sha1(Path(path).read_bytes()).hexdigest()
 
 
+#: the fields of a run's record (a record without one is not taken as done: casflex.study.sweep.Run.fields)
+_FIELDS = {"calibrate_run": ("scene", "report"),
+           "trial_run": ("plates", "plane", "report", "warnings", "loads", "t", "passive")}
+
+
 def _run(name: str, fn: Callable[..., dict], kwargs: dict, files: tuple[str | None, ...]):
     """The sweep's run ``name-<fingerprint>``: the fingerprint (8 hex digits) of its inputs (every option, the
     calibrated scene's text, the ``files``' contents) and casflex's version, so that a record is reused only for
     the same inputs: a study run again after a changed option, window, model or data file redoes what it changes
-    (a failed trial too), and nothing else."""
+    (a failed trial too), and nothing else. The record holds its key (casflex.study.sweep.IDENTITY): a record
+    copied by hand under another run's name is not taken."""
     import hashlib
     import json
 
@@ -242,7 +248,7 @@ def _run(name: str, fn: Callable[..., dict], kwargs: dict, files: tuple[str | No
 
     text = json.dumps({"fn": fn.__name__, "kwargs": kwargs, "files": [_digest(f) for f in files],
                        "casflex": __version__, "record": RECORD_FORMAT}, sort_keys=True, default=str)
-    return Run(f"{name}-{hashlib.sha1(text.encode()).hexdigest()[:8]}", fn, kwargs)
+    return Run(f"{name}-{hashlib.sha1(text.encode()).hexdigest()[:8]}", fn, kwargs, _FIELDS.get(fn.__name__, ()))
 
 
 def _plan(study: Study, calibrated: dict[str, dict]) -> dict:
@@ -290,7 +296,7 @@ def check_against_models(study: Study) -> None:
                                  f"(nodes: {sorted(nodes)[:12]}...)")
 
 
-def run_study(study: Study, record: str | Path, *, scheduler: str | None = None, n_workers: int = 2,
+def run_study(study: Study, record: str | Path, *, scheduler: str | None = None, n_workers: int | None = None,
               progress: Callable[[int, int, str], None] | bool = True, retry_failed: bool = False) -> dict:
     """Calibrate every subject and run every trial (module docstring), resuming from ``record``; returns
     {"subjects": {name: calibration record}, "trials": {(subject, trial): record}, "failed": [(what, why)],

@@ -253,6 +253,27 @@ def _subject(base: Path, i: int, table: Any) -> Subject:
                    tuple(unc))
 
 
+#: the figure of the group (the subjects' means) in --out: no subject's figure may take its name
+GROUP = "group"
+
+
+def _subject_names(subs: tuple[Subject, ...]) -> None:
+    """Each subject's name names its figure (``<name>.png`` in --out): unique, also where case is ignored (macOS,
+    Windows), and not the group's figure's."""
+    names = [s.name for s in subs]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise StudyError(f"subjects: subject {dup[0]!r} is named twice")
+    for i, n in enumerate(names):
+        if n.lower() == GROUP:
+            raise StudyError(f"subjects[{i}].name: {n!r} names the group's figure ({GROUP}.png): give the subject "
+                             "another name")
+        same = [m for m in names[:i] if m.lower() == n.lower()]
+        if same:
+            raise StudyError(f"subjects[{i}].name: {n!r} and {same[0]!r} differ only in case: their figures would be "
+                             "one file where case is ignored (macOS, Windows); give other names")
+
+
 def _uncertain(where: str, text: str):
     """The casflex.scene.Uncertain of ``TARGET=SD|P%|LO:HI``; StudyError naming ``where`` otherwise."""
     from casflex.scene.uncertain import parse
@@ -278,10 +299,7 @@ def load_study(path: str) -> Study:
     if not isinstance(subjects, list) or not subjects:
         raise StudyError("subjects: expected one or more [[subjects]] tables")
     subs = tuple(_subject(base, i, s) for i, s in enumerate(subjects))
-    names = [s.name for s in subs]
-    dup = sorted({n for n in names if names.count(n) > 1})
-    if dup:
-        raise StudyError(f"subjects: subject {dup[0]!r} is named twice")
+    _subject_names(subs)
     if not isinstance(data["name"], str) or not data["name"].strip():
         raise StudyError(f"name: expected the study's name, got {data['name']!r}")
     options = _options(base, data.get("options", {}))

@@ -3,11 +3,15 @@ dask.distributed, resumable.
 
 Each run has a unique key and keyword arguments for one importable function. Its result (a
 JSON-serialisable dict) is written atomically to ``<record>/<key>.json`` as soon as it
-finishes, so an interrupted sweep restarted with the same record directory redoes only the
-runs without a file. A run that raises is recorded too, with ``{"error": "..."}``, and is
-not retried unless ``retry_failed=True``.
+finishes, with its key in the field ``"run"`` (:data:`IDENTITY`), so an interrupted sweep restarted with
+the same record directory redoes only the runs without a valid record: a file that is no JSON object, that
+names another run (a record copied by hand under another name) or that lacks a field the run's record holds
+(:attr:`Run.fields`) is not taken as done, and said on stderr. A run that raises is recorded too, with
+``{"error": "..."}``, and is not retried unless ``retry_failed=True``.
 
-By default the runs go to a ``LocalCluster`` of ``n_workers`` single-threaded processes;
+By default the runs go to a ``LocalCluster`` of ``n_workers`` single-threaded processes (at most
+:func:`max_workers`: the machine's cores and memory; once started they ignore Ctrl-C, which the sweep's
+process handles by closing them);
 ``scheduler="tcp://host:8786"`` sends them to an existing cluster (the workers must have
 casflex installed). A cluster that has lost every worker for :data:`NO_WORKERS_S` seconds (a
 worker gone with its nanny, as happens under heavy load) is started anew, up to
@@ -35,7 +39,7 @@ import numpy as np
 
 from casflex.results import atomic_write_json
 
-__all__ = ["Run", "SweepResult", "run_sweep", "identification_run"]
+__all__ = ["Run", "SweepResult", "run_sweep", "identification_run", "max_workers", "unreachable", "IDENTITY"]
 
 _KEY = re.compile(r"^[A-Za-z0-9_.=+-]{1,200}$")
 #: s with no worker at all on the scheduler before the pending runs are given up on this cluster (a
@@ -44,15 +48,22 @@ NO_WORKERS_S = 60.0
 #: how many times a sweep's own LocalCluster is started anew after it lost every worker
 REVIVALS = 3
 _POLL_S = 2.0  # s between checks of the workers while no run finishes
+#: the field of a record that names its run (its key): a record is taken only under its own name
+IDENTITY = "run"
+#: bytes of memory allowed a local worker: one peaked at 0.10 GB resident in tests/test_study.py's study (Hamner's
+#: running trial, ps every 0.25 s); 10 x that for longer trials, bands, compiled models and the scheduler's share
+WORKER_BYTES = 1 << 30
 
 
 @dataclass(frozen=True)
 class Run:
-    """One run of a sweep: ``fn(**kwargs)`` recorded under ``key`` (letters, digits, ``_.=+-``)."""
+    """One run of a sweep: ``fn(**kwargs)`` recorded under ``key`` (letters, digits, ``_.=+-``); ``fields``: those
+    its record holds when it did not fail (a record without one of them is not taken as done)."""
 
     key: str
     fn: Callable[..., dict]
     kwargs: dict
+    fields: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if not _KEY.match(self.key):
@@ -71,11 +82,46 @@ class SweepResult:
     wall_s: float
 
 
-def _read(path: Path) -> dict | None:
+def _read(path: Path, run: Run) -> dict | None:
+    """The record of ``run`` at ``path`` (without its :data:`IDENTITY`), or None: there is none, or it is not a
+    valid record of this run (said on stderr): the run is done again, never a record taken on trust."""
     try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError):
-        return None  # missing or unreadable: the run is redone
+        text = path.read_text()
+    except FileNotFoundError:
+        return None
+    except (OSError, UnicodeDecodeError) as exc:
+        return _invalid(path, f"cannot be read ({getattr(exc, 'strerror', None) or exc})")
+    try:
+        rec = json.loads(text)
+    except ValueError:
+        return _invalid(path, "is not JSON (a write cut short?)")
+    if not isinstance(rec, dict):
+        return _invalid(path, f"holds a JSON {type(rec).__name__}, not a run's record")
+    named = rec.pop(IDENTITY, None)
+    if named != run.key:
+        return _invalid(path, f"is the record of {named!r}, not of {run.key!r} (copied under another name?)"
+                        if named is not None else f"does not name its run (no {IDENTITY!r} field)")
+    missing = [f for f in run.fields if f not in rec] if "error" not in rec else []
+    if missing:
+        return _invalid(path, f"lacks the field {missing[0]!r} of its run's record")
+    return rec
+
+
+def _invalid(path: Path, why: str) -> None:
+    print(f"casflex sweep: the record {path} {why}: not taken as done, the run is done again", file=sys.stderr)
+    return None
+
+
+def max_workers() -> tuple[int, str]:
+    """(the most local workers this machine runs at once, why): one per core this process may use, and
+    :data:`WORKER_BYTES` of the machine's memory each; more only queue for the cores and can exhaust the memory."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    try:
+        memory = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (AttributeError, ValueError, OSError):  # no sysconf (Windows): the cores alone
+        return cores, f"{cores} core(s)"
+    limit = max(1, min(cores, memory // WORKER_BYTES))
+    return limit, f"{cores} core(s), {memory / 2**30:.1f} GiB of memory at {WORKER_BYTES / 2**30:g} GiB a worker"
 
 
 #: s: a record's temporary file this old was left by a writer killed mid-write (a write takes milliseconds)
@@ -131,14 +177,17 @@ def _call(fn: Callable[..., dict] | bytes, kwargs: dict) -> dict:
 
 
 def run_sweep(runs: Iterable[Run], record: str | os.PathLike[str], *, scheduler: str | None = None,
-              n_workers: int = 2, retry_failed: bool = False,
+              n_workers: int | None = None, retry_failed: bool = False,
               progress: bool | Callable[[int, int, str], None] = True) -> SweepResult:
-    """Run every run without a record on dask.distributed; return all recorded results.
+    """Run every run without a valid record on dask.distributed; return all recorded results.
 
-    Ctrl-C cancels the pending runs, keeps every finished record and returns with
-    ``interrupted=True``; calling again with the same ``record`` resumes.
+    ``n_workers``: the local cluster's processes (default 2, at most :func:`max_workers`; ValueError beyond,
+    before any work). The record directory is created (with its parents) once there is a run to do and the
+    cluster answers: a scheduler that cannot be reached leaves nothing behind. Ctrl-C cancels the pending runs,
+    keeps every finished record and returns with ``interrupted=True``; calling again with the same ``record``
+    resumes.
     """
-    from distributed import Client, LocalCluster
+    from distributed import Client
 
     t0 = time.perf_counter()
     runs = list(runs)
@@ -146,14 +195,13 @@ def run_sweep(runs: Iterable[Run], record: str | os.PathLike[str], *, scheduler:
     if len(set(keys)) != len(keys):
         dup = sorted({k for k in keys if keys.count(k) > 1})
         raise ValueError(f"run keys must be unique; repeated: {dup[:5]}")
-    if not (isinstance(n_workers, int) and n_workers >= 1):
-        raise ValueError(f"n_workers: expected an integer >= 1, got {n_workers!r}")
+    n_workers = _workers(n_workers, scheduler)
     rec = Path(record)
-    rec.mkdir(parents=True, exist_ok=True)
-    _clear_abandoned(rec)
+    if rec.is_dir():
+        _clear_abandoned(rec)
     results, reused, todo = {}, [], []
     for r in runs:
-        old = _read(rec / f"{r.key}.json")
+        old = _read(rec / f"{r.key}.json", r)
         if old is not None and not (retry_failed and "error" in old):
             results[r.key] = old
             reused.append(r.key)
@@ -163,16 +211,22 @@ def run_sweep(runs: Iterable[Run], record: str | os.PathLike[str], *, scheduler:
     executed: list[str] = []
     interrupted = False
     if todo:
+        started: list[Any] = []  # the clusters started, each closed here whatever happens (Ctrl-C included)
+
         def connect() -> tuple[Any, Any]:
-            cluster = None if scheduler is not None else LocalCluster(
-                n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=40)
+            cluster = None if scheduler is not None else _local_cluster(n_workers, started)
             return cluster, Client(scheduler if scheduler is not None else cluster)
 
-        cluster, client = connect()
+        try:
+            cluster, client = connect()
+        except BaseException:
+            _close(None, started[-1] if started else None)
+            raise
+        rec.mkdir(parents=True, exist_ok=True)
         blobs = _ship_by_value({r.fn for r in todo})
 
         def finished(key: str, out: dict) -> None:
-            atomic_write_json(rec / f"{key}.json", out)
+            atomic_write_json(rec / f"{key}.json", {IDENTITY: key, **{k: v for k, v in out.items() if k != IDENTITY}})
             results[key] = out
             executed.append(key)
             if report:
@@ -204,9 +258,68 @@ def run_sweep(runs: Iterable[Run], record: str | os.PathLike[str], *, scheduler:
         except KeyboardInterrupt:
             interrupted = True
         finally:
-            _close(client, cluster)
+            _close(client, started[-1] if started else None)  # a revival closed the clusters before
     return SweepResult({k: results[k] for k in keys if k in results}, tuple(executed), tuple(reused), interrupted,
                        time.perf_counter() - t0)
+
+
+def unreachable(address: str, timeout: float = 10.0) -> str | None:
+    """Why nothing answers at a dask scheduler's ``address`` (``tcp://host:port`` or ``host:port``), or None where
+    a connection is made (or the address is of another protocol, not tried here). A TCP connection alone: quick,
+    where dask's client waits its connect timeout (30 s) before it fails."""
+    import socket
+    from urllib.parse import urlsplit
+
+    scheme, _, rest = address.rpartition("://")
+    if scheme not in ("", "tcp"):
+        return None
+    try:
+        parts = urlsplit(f"tcp://{rest}")
+        host, port = parts.hostname, parts.port
+    except ValueError as exc:
+        return f"not an address tcp://HOST:PORT ({exc})"
+    if not host or port is None:
+        return "not an address tcp://HOST:PORT"
+    try:
+        socket.create_connection((host, port), timeout=timeout).close()
+    except OSError as exc:
+        return exc.strerror or str(exc) or type(exc).__name__
+    return None
+
+
+def _workers(n_workers: int | None, scheduler: str | None) -> int:
+    """The local cluster's number of workers: ``n_workers`` checked (ValueError naming it and the limit), or the
+    default, 2 where the machine runs 2 (an external scheduler's workers are its own: not checked)."""
+    limit, why = max_workers()
+    if n_workers is None:
+        return min(2, limit)
+    if not (isinstance(n_workers, int) and n_workers >= 1):
+        raise ValueError(f"n_workers: expected an integer >= 1, got {n_workers!r}")
+    if scheduler is None and n_workers > limit:
+        raise ValueError(f"n_workers: {n_workers} is more local workers than this machine runs at once (at most "
+                         f"{limit}: {why}); give at most {limit}, or a scheduler with its own workers")
+    return n_workers
+
+
+def _local_cluster(n_workers: int, started: list) -> Any:
+    """A LocalCluster of ``n_workers`` single-threaded processes, appended to ``started`` before this returns.
+
+    Its workers preload :mod:`casflex.study._worker` (besides dask's configured preloads): they ignore SIGINT,
+    which a Ctrl-C at a terminal sends to the whole process group, and this process handles by closing them.
+    (A child started by spawn keeps neither a blocked signal mask nor a handler: the worker itself must ignore
+    the signal. The preload runs once it has imported dask, about a second in; under the ``casflex`` command,
+    casflex._entry does it as soon as the worker's Python has started.)"""
+    import dask
+    from distributed import LocalCluster
+
+    preload = dask.config.get("distributed.worker.preload") or []
+    preload = [preload] if isinstance(preload, str) else list(preload)
+    argv = dask.config.get("distributed.worker.preload-argv") or []
+    argv = [argv] * len(preload) if argv and isinstance(argv[0], str) else list(argv) or [[]] * len(preload)
+    started.append(LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=":0",
+                                silence_logs=40, preload=[*preload, "casflex.study._worker"],
+                                preload_argv=[*argv, []]))
+    return started[-1]
 
 
 def _close(client: Any, cluster: Any) -> None:

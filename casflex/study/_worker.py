@@ -1,0 +1,9 @@
+"""A dask worker preload of the sweep's local clusters (:func:`casflex.study.sweep._local_cluster`): the worker
+process ignores SIGINT from here on. A Ctrl-C at a terminal goes to the whole process group; the sweep's own
+process takes it and closes its cluster, while a worker that took it too printed its KeyboardInterrupt's
+traceback. Done at import, the earliest moment dask runs a preload in the worker (as the Worker is made);
+SIGTERM, by which dask's nanny stops a worker, stays as it is."""
+
+import signal
+
+signal.signal(signal.SIGINT, signal.SIG_IGN)
