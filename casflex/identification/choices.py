@@ -23,3 +23,5 @@ LOSSES = ("linear", "huber")
 SMOOTHERS = ("spline", "butterworth")
 #: casflex's own solver: single shooting by Gauss-Newton on forward sensitivities (the indirect method).
 GAUSS_NEWTON = "gauss-newton"
+#: The identification methods by name (the command line's --method).
+METHODS = ("direct", "adapted-direct", "indirect")

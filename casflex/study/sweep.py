@@ -310,7 +310,8 @@ def identification_run(*, method: str, start: float, scene: str = "twobar", inst
                        data: str = "simulated", **options: Any) -> dict:
     """One identification of a sweep (runs in a worker): returns the parameters, success,
     iterations, wall time, standard errors, the relative error against the nominal values
-    and the weakly identifiable parameters."""
+    and the weakly identifiable parameters. ``options``: the method's option values (``solver=Solver(...)``,
+    ``shooting=Shooting(...)``, ...: :mod:`casflex.identification.options`)."""
     from casflex.identification import identify_adapted_direct, identify_direct, identify_indirect
 
     model, dat = _setup(scene, float(t_end), float(noise), seed, data, method)
