@@ -191,9 +191,8 @@ def test_the_knee_pendulum_with_its_inertia_from_a_table():
     for k in model.parameter_names:
         assert r.extra["uncertainty"]["uncertain_properties"][k] > 0.95 * r.std_errors[k]
     # the centre of mass's distance from the knee uncertain too (5 %, a centre of mass as a parameter): wider
-    with_com = identify_indirect(model, pendulum("both", 0),
-                                 uncertainty=Uncertainty(uncertain=[
-        *TABLE, Uncertain("shank_foot.com_x", relative=0.05)], model_error="none", form="none"))
+    with_com = identify_indirect(model, pendulum("both", 0), uncertainty=Uncertainty(
+        uncertain=[*TABLE, Uncertain("shank_foot.com_x", relative=0.05)], model_error="none", form="none"))
     assert with_com.success and np.all(np.abs(z_scores(with_com, model)) <= 3)  # measured 1.08
     assert with_com.std_errors["kt_knee"] > 1.1 * r.std_errors["kt_knee"]  # measured 0.193 against 0.160
 

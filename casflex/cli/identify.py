@@ -285,7 +285,7 @@ def _recordings(sets: list[MeasurementSet], args: argparse.Namespace, dofs: list
 def _identify(model: Model, sets: list[MeasurementSet], args: argparse.Namespace, start: float | np.ndarray,
               dofs: list[str] | None) -> IdentificationResult:
     """Call the chosen identification method with the command's options."""
-    from casflex.identification.multistart import method_function
+    from casflex.identification import method_function
 
     return method_function(args.method)(model, _recordings(sets, args, dofs), start=start, **_options(args))
 

@@ -22,8 +22,17 @@ _EXPORTS = {
 
 __all__ = ["identify_direct", "identify_adapted_direct", "identify_indirect", "IdentificationResult", "ParameterMap",
            "Experiment", "Budget", "Shooting", "ModelRun", "Solver", "Uncertainty", "Smoothing", "multistart",
-           "RESIDUES", "TRANSCRIPTIONS", "TRANSFORMS", "HESSIANS", "INITIAL_STATES",
+           "method_function", "RESIDUES", "TRANSCRIPTIONS", "TRANSFORMS", "HESSIANS", "INITIAL_STATES",
            "MODEL_ERRORS", "FORMS", "output_band"]
+
+
+def method_function(method: str) -> Any:
+    """The identification function of ``method`` ("direct", "adapted-direct", "indirect": choices.METHODS)."""
+    from casflex.identification.choices import METHODS
+
+    if method not in METHODS:
+        raise ValueError(f"method: expected one of {METHODS}, got {method!r}")
+    return __getattr__("identify_" + method.replace("-", "_"))
 
 
 def __getattr__(name: str) -> Any:

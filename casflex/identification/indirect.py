@@ -119,8 +119,8 @@ def identify_indirect(
     unused = [k for k, v in (("solver_options", solver.options), ("hessian", solver.hessian)) if v is not None]
     if name == GAUSS_NEWTON and unused:
         raise ValueError(f"{unused[0]}: an NLP solver's option, and the solver is {GAUSS_NEWTON!r} (single shooting "
-                         "on Eq. 16, the default); set solver='ipopt' (or another nlpsol) or leave it out (the "
-                         "Gauss-Newton budget is budget=)")
+                         "on Eq. 16, the default); give Solver('ipopt') (or another nlpsol) or leave it out (the "
+                         "Gauss-Newton budget is Solver(budget=))")
     dt, alpha = run.of(model.scene)
     run = ModelRun(dt, alpha, run.newton_tol)
     experiments = _experiments(data, horizon)

@@ -10,30 +10,19 @@ from __future__ import annotations
 
 import dataclasses
 import tempfile
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-from casflex.identification.choices import METHODS
+from casflex.identification import method_function
 from casflex.identification.result import IdentificationResult
 
-__all__ = ["multistart", "run_start", "draw_starts", "method_function", "EveryStartFailed", "METHODS", "SPREAD"]
+__all__ = ["multistart", "run_start", "draw_starts", "EveryStartFailed", "SPREAD"]
 
 #: the drawn starts lie within this factor of the given one (log-uniformly)
 SPREAD = 3.0
 #: worker processes of the local cluster
 WORKERS = 2
-
-
-def method_function(method: str) -> Callable[..., IdentificationResult]:
-    """The identification function of ``method`` ("direct", "adapted-direct", "indirect"), as
-    :mod:`casflex.identification` exports it."""
-    import casflex.identification as ident
-
-    if method not in METHODS:
-        raise ValueError(f"method: expected one of {METHODS}, got {method!r}")
-    return getattr(ident, "identify_" + method.replace("-", "_"))
 
 
 def _model(scene: str) -> Any:

@@ -211,7 +211,7 @@ class _SetUp:
 
 
 def _check_arguments(model: Model, data: MeasurementSet, residue: str, initial_state: str,
-                     transcription: str = "") -> None:
+                     transcription: str) -> None:
     """ValueError for a combination of options this transcription does not take, before any work (each
     option's own values are checked by its object, :mod:`.options`)."""
     if model.n_p == 0:
