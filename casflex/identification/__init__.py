@@ -32,7 +32,8 @@ def method_function(method: str) -> Any:
 
     if method not in METHODS:
         raise ValueError(f"method: expected one of {METHODS}, got {method!r}")
-    return __getattr__("identify_" + method.replace("-", "_"))
+    name = "identify_" + method.replace("-", "_")
+    return globals()[name] if name in globals() else __getattr__(name)  # as the package's attribute is now
 
 
 def __getattr__(name: str) -> Any:
