@@ -25,7 +25,7 @@ MARKERS = {"twobar": ("x3", "y3", "x5", "y5"), "threelink": ("x3", "y3", "x5", "
 #: the default fit's uncertain properties (issue 37): both bars' densities (5 %) and moduli (3 %), as
 #: studies/uncertain.py declares them: (target, relative standard deviation)
 UNCERTAIN = (("bar2.rho", 0.05), ("bar4.rho", 0.05), ("bar2.E", 0.03), ("bar4.E", 0.03))
-#: name: (scene, elements per bar or None, identify_indirect options or None for a simulation)
+#: name: (scene, elements per bar or None, identify_indirect's Uncertainty fields or None for a simulation)
 OPS = {
     "simulation, 3 s": ("twobar", None, None),
     "model run with sensitivities (4 directions), 3 s": ("twobar", None, "sensitivities"),
@@ -63,7 +63,7 @@ def _leg_data():
 
 def operation(scene: str, elements: int | None, what):
     """A zero-argument callable doing the operation once, and the scene's 3 s simulation as another."""
-    from casflex.identification import identify_indirect
+    from casflex.identification import Experiment, ModelRun, Uncertainty, identify_indirect
     from casflex.identification.sensitivity import run_sensitivities
     from casflex.simulate import initial_state, integrator_for, simulate
 
@@ -83,12 +83,13 @@ def operation(scene: str, elements: int | None, what):
                                           seed=seed)), sim
     data = (_leg_data() if scene == "leg"
             else exudyn_recording(f"{scene}_exudyn", MARKERS[scene], 0.0, span, NOISE, SEED))
-    kw = {"start": 0.7} if scene == "leg" else {"start": START, "noise": NOISE}
+    exp, start = (Experiment(data), 0.7) if scene == "leg" else (Experiment(data, noise=NOISE), START)
     if "uncertain" in what:
         from casflex.scene import Uncertain
 
         what = {**what, "uncertain": [Uncertain(t, relative=r) for t, r in what["uncertain"]]}
-    return (lambda: identify_indirect(model, data, dt=DT, **kw, **what)), sim
+    return (lambda: identify_indirect(model, exp, start=start, run=ModelRun(dt=DT),
+                                      uncertainty=Uncertainty(**what))), sim
 
 
 def best(fns: dict, repeat: int = REPEAT) -> dict:

@@ -1,7 +1,7 @@
 """What several studies share beyond the harness (:mod:`_study`): to be hoisted there or into the
 library. Not a study itself (no ``main``).
 
-- :data:`PAPER_NLP`, :func:`capped_ipopt`: the seed paper's NLP formulation with a wall-time cap
+- :func:`paper_nlp`, :func:`capped_ipopt`: the seed paper's NLP formulation with a wall-time cap
   (table1, basins);
 - :func:`exudyn_recording`: channels of an Exudyn reference recording at 100 Hz with noise
   (dampers, realdata, bench_identification);
@@ -26,8 +26,16 @@ from pathlib import Path
 import numpy as np
 
 DATA = Path(__file__).resolve().parents[1] / "tests" / "data"
-#: the seed paper's NLP formulation, as table1 and basins were measured (IPOPT, model Newton tolerance 1e-14)
-PAPER_NLP = {"solver": "ipopt", "newton_tol": 1e-14, "model_error": "none"}
+
+
+def paper_nlp(cap_s: float, transform: str = "linear") -> dict:
+    """identify_indirect's ``solver``, ``run`` and ``uncertainty`` of the seed paper's NLP formulation, as table1 and
+    basins were measured (IPOPT capped at ``cap_s`` s, :func:`capped_ipopt`; model Newton tolerance 1e-14; no
+    model-error refit)."""
+    from casflex.identification import ModelRun, Solver, Uncertainty
+
+    return {"solver": Solver("ipopt", options=capped_ipopt(cap_s), transform=transform),
+            "run": ModelRun(newton_tol=1e-14), "uncertainty": Uncertainty(model_error="none")}
 
 
 def capped_ipopt(cap_s: float) -> dict:

@@ -11,9 +11,10 @@ from itertools import groupby
 from pathlib import Path
 
 import numpy as np
-from _shared import PAPER_NLP, capped_ipopt
+from _shared import paper_nlp
 from _study import Banner, assert_checks, checks, cli, fmt_p, save_raw, sweep, table, write_outputs
 
+from casflex.identification import Shooting
 from casflex.model import assemble
 from casflex.scene.io import load_scene
 
@@ -26,7 +27,7 @@ FACTORS = [0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.1, 1.2, 1.5, 2.0, 2.5, 3.0]
 WALL_CAP = 180.0
 MUST_SHOW = (0.5, 2.0)  # the claim: multiple shooting, positions, 0..0.69 s converges from all of these
 
-INDIRECT = {"method": "indirect", **PAPER_NLP}
+INDIRECT = {"method": "indirect"}
 # key: (label, paper's range, identification_run's keywords)
 METHODS = {
     "direct": ("direct, simulated set, t = 0.69 s", "converges from near p* on the simulated set",
@@ -35,15 +36,16 @@ METHODS = {
                 "k1, k3 from 0.3 p* (kt weakly determined)",
                 {"method": "adapted-direct", "instants": (0.4, 1.1, 1.6, 1.9, 2.3)}),
     "ss-pos": ("indirect Eq. 16, single shooting", "0.90-1.18 (Eq. 16, t1)",
-               {**INDIRECT, "transcription": "single-shooting", "residue": "positions"}),
+               {**INDIRECT, "shooting": Shooting("single-shooting", residue="positions")}),
     "ms-pos": ("indirect Eq. 16, multiple shooting", "0.90-1.18 (Eq. 16, t1)",
-               {**INDIRECT, "transcription": "multiple-shooting", "residue": "positions"}),
+               {**INDIRECT, "shooting": Shooting("multiple-shooting", residue="positions")}),
     "ms-pos-log": ("indirect Eq. 16, multiple shooting, log transform", "0.90-1.18 (Eq. 16, t1)",
-                   {**INDIRECT, "transcription": "multiple-shooting", "residue": "positions", "transform": "log"}),
+                   {**INDIRECT, "shooting": Shooting("multiple-shooting", residue="positions"),
+                    "transform": "log"}),
     "ss-full": ("indirect Eq. 17, single shooting", "0.93-1.10 (Eq. 17, t1)",
-                {**INDIRECT, "transcription": "single-shooting", "residue": "full"}),
+                {**INDIRECT, "shooting": Shooting("single-shooting", residue="full")}),
     "ms-full": ("indirect Eq. 17, multiple shooting", "0.93-1.10 (Eq. 17, t1)",
-                {**INDIRECT, "transcription": "multiple-shooting", "residue": "full"}),
+                {**INDIRECT, "shooting": Shooting("multiple-shooting", residue="full")}),
 }
 
 
@@ -53,7 +55,8 @@ def one_run(*, method: str, factor: float, horizon: float, t_end: float) -> dict
 
     opts = METHODS[method][2]
     if opts["method"] == "indirect":
-        opts = {**opts, "horizon": horizon, "solver_options": capped_ipopt(WALL_CAP)}
+        own = {k: v for k, v in opts.items() if k != "transform"}
+        opts = {**own, "horizon": horizon, **paper_nlp(WALL_CAP, opts.get("transform", "linear"))}
     return identification_run(**opts, start=factor, scene="twobar", t_end=t_end, data="simulated")
 
 

@@ -23,14 +23,17 @@ from _bench_fit import (
 from _shared import cold_and_cached, exudyn_recording
 from _study import Banner, assert_checks, checks, cli, png, table, write_outputs
 
+from casflex.identification import Shooting, Solver, Uncertainty
+
 NOISE, SEED, START = 5e-4, 0, 0.8
 CASES = {  # name: (method, horizon (s), options); the default fit with and without its model-error refit, ...
     **{f"default{' without model-error refit' * bool(o)}, {h:g} s": ("indirect", h, o)
-       for o in ({}, {"model_error": "none"}) for h in (0.69, 3.0)},
+       for o in ({}, {"uncertainty": Uncertainty(model_error="none")}) for h in (0.69, 3.0)},
     **{f"IPOPT {tr} shooting (compiled NLP), 0.69 s": (  # ... the seed paper's NLP transcriptions, ...
-        "indirect", 0.69, {"solver": "ipopt", "compiled": True, "transcription": f"{tr}-shooting"})
+        "indirect", 0.69, {"solver": Solver("ipopt", compiled=True), "shooting": Shooting(f"{tr}-shooting")})
        for tr in ("single", "multiple")},
-    "direct, simulated set, t = 0.69 s (compiled)": ("direct", 0.69, {"compiled": True}),  # ... the direct method
+    # ... the direct method
+    "direct, simulated set, t = 0.69 s (compiled)": ("direct", 0.69, {"solver": Solver(compiled=True)}),
 }
 QUICK = ("default without model-error refit, 0.69 s", "direct, simulated set, t = 0.69 s (compiled)")
 
@@ -39,7 +42,7 @@ def worker(case: str) -> dict:
     """One identification in this (fresh) process: its recorded times and result."""
     import casflex
     from casflex.data import simulated_set
-    from casflex.identification import identify_direct, identify_indirect
+    from casflex.identification import Experiment, ModelRun, identify_direct, identify_indirect
 
     method, horizon, opts = CASES[case]
     model = casflex.assemble(casflex.load_scene("twobar"))
@@ -47,7 +50,7 @@ def worker(case: str) -> dict:
         r = identify_direct(model, simulated_set(model, 1.0), [horizon], start=START, **opts)
     else:
         data = exudyn_recording("twobar_exudyn", ("x3", "y3", "x5", "y5"), 0.0, horizon, NOISE, SEED)
-        r = identify_indirect(model, data, dt=1e-3, start=START, noise=NOISE, **opts)
+        r = identify_indirect(model, Experiment(data, noise=NOISE), start=START, run=ModelRun(dt=1e-3), **opts)
     err, kt = np.abs(r.p / model.p_nominal - 1), np.array([n.startswith("kt") for n in model.parameter_names])
     return {"build_s": r.wall_build_s, "solve_s": r.wall_solve_s, "iterations": r.iterations,
             "success": bool(r.success), "k_err": float(err[~kt].max()), "kt_err": float(err[kt].max())}

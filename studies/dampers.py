@@ -13,6 +13,8 @@ import numpy as np
 from _shared import DATA, exudyn_recording, fit_errors, honesty
 from _study import Banner, assert_checks, checks, cli, sweep, table, write_outputs
 
+from casflex.identification import Experiment, ModelRun
+
 SEEDS = 10
 WINDOWS = {"rest": (0.0, 3.0, "scene"), "mid": (0.5, 2.5, "estimate")}  # (start, end, initial state)
 
@@ -25,7 +27,7 @@ def one_run(*, window: str, seed: int, quick: bool) -> dict:
     a, b, state = WINDOWS[window]
     data = exudyn_recording("twobar_damped_exudyn", ("x3", "y3", "x5", "y5"), a, a + 1.0 if quick else b, 1e-3, seed)
     t0 = time.perf_counter()
-    r = identify_indirect(model, data, dt=1e-3, initial_state=state, start=0.8)
+    r = identify_indirect(model, Experiment(data, initial_state=state), start=0.8, run=ModelRun(dt=1e-3))
     return fit_errors(model, r) | {"wall_s": time.perf_counter() - t0}
 
 

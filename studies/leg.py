@@ -15,6 +15,8 @@ import numpy as np
 from _shared import fit_errors, honesty
 from _study import Banner, assert_checks, checks, cli, sweep, table, write_outputs
 
+from casflex.identification import ModelRun, Uncertainty
+
 MARKERS = ("THI", "KNE", "TIB", "ANK", "TOE")
 SCENES = ("leg", "leg_rigid")  # the fitted models: flexible bones, rigid links
 NOISE = 1e-3
@@ -59,8 +61,8 @@ def one_run(*, seed: int, quick: bool, scene: str) -> dict:
     t0 = time.perf_counter()
     # each model's alternative form is the other (rigid links for flexible bones, and back): compared by AIC
     other = next(sc for sc in SCENES if sc != scene)
-    r = identify_indirect(model, data, dt=1e-3, start=0.7, model_error="none" if quick else "refine",
-                          alternatives=[other])
+    r = identify_indirect(model, data, start=0.7, run=ModelRun(dt=1e-3),
+                          uncertainty=Uncertainty(model_error="none" if quick else "refine", alternatives=[other]))
     wall = time.perf_counter() - t0
     fit = fit_errors(model, r)
     se = np.array(fit.pop("se"))

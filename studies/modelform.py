@@ -13,6 +13,8 @@ import numpy as np
 from _shared import DATA, exudyn_recording, fit_errors, honesty
 from _study import Banner, assert_checks, checks, cli, sweep, table, write_outputs
 
+from casflex.identification import ModelRun, Uncertainty
+
 NOISE = 5e-4
 SEEDS = 10
 #: case -> (fitted scene, recording: a file of tests/data and its key in forms_exudyn.npz (None: the file's own
@@ -56,7 +58,8 @@ def one_run(*, case: str, seed: int, quick: bool) -> dict:
     model = casflex.assemble(casflex.load_scene(CASES[case][0]))
     data = _recording(case, 1.0 if quick else 3.0, seed)
     t0 = time.perf_counter()
-    r = identify_indirect(model, data, dt=1e-3, start=0.8, model_error="none" if quick else "refine")
+    r = identify_indirect(model, data, start=0.8, run=ModelRun(dt=1e-3),
+                          uncertainty=Uncertainty(model_error="none" if quick else "refine"))
     unc = r.extra["uncertainty"]
     se_noise = np.array([unc["noise"][k] for k in model.parameter_names])
     err = r.p - model.p_nominal

@@ -28,7 +28,16 @@ METHODS = (("indirect", "rest"), ("indirect", "mid"), ("adapted", "rest"), ("dir
 
 def one_run(*, scene: str, method: str, window: str, noise: float, seed: int, quick: bool) -> dict:
     import casflex
-    from casflex.identification import identify_adapted_direct, identify_direct, identify_indirect
+    from casflex.identification import (
+        Experiment,
+        ModelRun,
+        Shooting,
+        Solver,
+        Uncertainty,
+        identify_adapted_direct,
+        identify_direct,
+        identify_indirect,
+    )
 
     model = casflex.assemble(casflex.load_scene(scene))
     a, b, state = SCENES[scene][window]
@@ -37,10 +46,11 @@ def one_run(*, scene: str, method: str, window: str, noise: float, seed: int, qu
     if method.startswith("indirect"):  # every method starts 20 % below the truth
         data = exudyn_recording(f"{scene}_exudyn", SCENES[scene]["markers"], a, b, noise, seed)
         # multiple shooting: IPOPT capped at MS_WALL s (a capped run counts as not converged)
-        kw = ({"transcription": "multiple-shooting", "solver": "ipopt",
-               "solver_options": {"ipopt": {"max_wall_time": MS_WALL}}} if method == "indirect-ms" else {})
-        r = identify_indirect(model, data, dt=1e-3, initial_state=state, start=0.8,
-                              model_error="none" if quick else "refine", **kw)
+        kw = ({"shooting": Shooting("multiple-shooting"),
+               "solver": Solver("ipopt", options={"ipopt": {"max_wall_time": MS_WALL}})}
+              if method == "indirect-ms" else {})
+        r = identify_indirect(model, Experiment(data, initial_state=state), start=0.8, run=ModelRun(dt=1e-3),
+                              uncertainty=Uncertainty(model_error="none" if quick else "refine"), **kw)
     else:
         names = tuple(d for d in model.dof_names if method == "direct" or not d.startswith("theta"))
         data = exudyn_recording(f"{scene}_exudyn", names, a, b, noise, seed)

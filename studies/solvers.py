@@ -23,12 +23,11 @@ P_TOL, P_TOL_ADAPTED = 1e-6, 1e-4  # p is right: max |p / p* - 1| <= P_TOL (adap
 P_STAR = [700.0, 0.5, 400.0, 0.5]  # twobar's nominal parameters (checked against the model in main)
 HORIZON, T_DATA = 0.1, 2.4  # indirect horizon; the simulated set's 0..T_DATA s covers the adapted instants + dt
 STARTS, QUICK_STARTS = [0.8, 1.2, 0.5, 2.0], [0.8, 2.0]  # nearest first: after a capped start, farther ones skip
-_IND = {"residue": "positions", "newton_tol": 1e-14, "model_error": "none"}  # the seed paper's NLP formulation
-PROBLEMS = {  # key: (label, casflex.identification function, its instants or horizon, keyword arguments)
-    "direct": ("direct, t = 0.69 s", "identify_direct", [0.69], {}),
-    "adapted": ("adapted direct, [0.4 1.1 1.6 1.9 2.3] s", "identify_adapted_direct", [0.4, 1.1, 1.6, 1.9, 2.3], {}),
-    **{k: (f"indirect Eq. 16, {tr} shooting, 0..{HORIZON:g} s", "identify_indirect", HORIZON,
-           dict(_IND, transcription=f"{tr}-shooting")) for k, tr in (("ss", "single"), ("ms", "multiple"))},
+PROBLEMS = {  # key: (label, casflex.identification function, its instants or horizon, the indirect's transcription)
+    "direct": ("direct, t = 0.69 s", "identify_direct", [0.69], None),
+    "adapted": ("adapted direct, [0.4 1.1 1.6 1.9 2.3] s", "identify_adapted_direct", [0.4, 1.1, 1.6, 1.9, 2.3], None),
+    **{k: (f"indirect Eq. 16, {tr} shooting, 0..{HORIZON:g} s", "identify_indirect", HORIZON, f"{tr}-shooting")
+       for k, tr in (("ss", "single"), ("ms", "multiple"))},
 }
 QUICK_CONFIGS = ["ipopt", "sqp-qpoases"]
 NOT_DEFAULT = {"bonmin"}  # not candidates for the library default (why: docs/studies/solvers.md)
@@ -84,10 +83,14 @@ def _worker(data: str, start: float, config: str, problem: str) -> dict:
     import casflex.identification as ident
     from casflex.data import load_measurements
 
-    fn, arg, kw = PROBLEMS[problem][1:]
+    fn, arg, transcription = PROBLEMS[problem][1:]
     plugin, hessian, opts = CONFIGS[config]
+    # the indirect problems: the seed paper's NLP formulation (Eq. 16, model Newton tolerance 1e-14, no refit)
+    kw = {} if transcription is None else {"shooting": ident.Shooting(transcription, residue="positions"),
+                                           "run": ident.ModelRun(newton_tol=1e-14),
+                                           "uncertainty": ident.Uncertainty(model_error="none")}
     r = getattr(ident, fn)(casflex.assemble(casflex.load_scene("twobar")), load_measurements(data), arg, start=start,
-                           solver=plugin, hessian=hessian, solver_options=opts, **kw)
+                           solver=ident.Solver(plugin, options=opts, hessian=hessian), **kw)
     own = r.extra.get("nlp", r.extra)["solver_parameters"]  # the indirect method keeps its NLP's under "nlp"
     return {"success": bool(r.success), "status": str(r.status), "iterations": int(r.iterations),
             "build_s": r.wall_build_s, "solve_s": r.wall_solve_s, "p": r.p.tolist(), "p_solver": list(own.values())}

@@ -12,11 +12,11 @@ from itertools import product
 from pathlib import Path
 
 import numpy as np
-from _shared import PAPER_NLP, capped_ipopt
+from _shared import paper_nlp
 from _study import Banner, assert_checks, checks, cli, fmt_p, save_raw, table, write_outputs
 
 from casflex.data import MeasurementSet, measured_set, simulated_set
-from casflex.identification import identify_direct, identify_indirect
+from casflex.identification import Shooting, identify_direct, identify_indirect
 from casflex.model import assemble
 from casflex.scene.io import load_scene
 
@@ -76,8 +76,8 @@ def run_one(model, key: str, data: MeasurementSet, t: float, start: float, horiz
     if not indirect:
         res = identify_direct(model, data, [t], start=start)
     else:
-        res = identify_indirect(model, data, horizon, transcription=transcription, residue=residue, start=start,
-                                solver_options=capped_ipopt(WALL_CAP[t]), **PAPER_NLP)
+        res = identify_indirect(model, data, horizon, shooting=Shooting(transcription, residue=residue), start=start,
+                                **paper_nlp(WALL_CAP[t]))
     err = rel_err(res.p, ps)
     # 'bad': a stiffness <= 0 or collapsed onto its bound 0 (below 1e-3 p*), no mechanical meaning
     kind = ("fails" if not res.success else "p*" if err <= TOL

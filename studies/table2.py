@@ -12,7 +12,7 @@ import numpy as np
 from _study import Banner, assert_checks, checks, cli, fmt_p, table, write_outputs
 
 from casflex.data import measured_set, simulated_set
-from casflex.identification import identify_adapted_direct
+from casflex.identification import Solver, identify_adapted_direct
 from casflex.model import assemble
 from casflex.scene.io import load_scene
 
@@ -33,7 +33,8 @@ K, KT = [0, 2], [1, 3]  # the linear and the torsional stiffnesses in p
 
 def run(model, data, instants, start, transform="linear", solver_options=None, **tags) -> dict:
     """One identification and its identifiability report."""
-    r = identify_adapted_direct(model, data, instants, start=start, transform=transform, solver_options=solver_options)
+    r = identify_adapted_direct(model, data, instants, start=start,
+                                solver=Solver(transform=transform, options=solver_options))
     idf = r.identifiability
     return {"p": r.p, "rel_err": r.p / model.p_nominal - 1.0, "success": r.success, "status": r.status,
             "iterations": r.iterations, "wall_s": r.wall_s, "objective": r.objective,

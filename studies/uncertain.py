@@ -15,6 +15,8 @@ import numpy as np
 from _shared import DATA, fit_errors, honesty
 from _study import Banner, assert_checks, checks, cli, sweep, table, write_outputs
 
+from casflex.identification import ModelRun, Uncertainty
+
 SEEDS, DRAWS = 10, {"twobar": 10, "knee_pendulum": 20}
 NOISE = {"twobar": 5e-4, "knee_pendulum": 1e-3}  # m: the realdata study's; a motion-capture lab's
 #: what each scene declares (target, relative standard deviation): the bars' densities and moduli to a few
@@ -84,8 +86,9 @@ def one_run(*, case: str, seed: int, declared: bool, quick: bool) -> dict:
         data, truth = _noisy(scene, z["t"], z["channels"], z[f"q_{variant}"], seed), {}
     model = casflex.assemble(casflex.load_scene(scene))
     t0 = time.perf_counter()
-    r = identify_indirect(model, data, dt=1e-3, uncertain=_declared(scene) if declared else None,
-                          model_error="none" if quick else "refine")
+    r = identify_indirect(model, data, run=ModelRun(dt=1e-3),
+                          uncertainty=Uncertainty(uncertain=_declared(scene) if declared else None,
+                                                  model_error="none" if quick else "refine"))
     unc = r.extra["uncertainty"]
     part = [unc.get("uncertain_properties", {}).get(k, 0.0) for k in model.parameter_names]
     props = r.extra["uncertain"].get("properties", {})

@@ -19,7 +19,7 @@ import casflex
 from casflex import Beam, Node, Parameter, Scene, Spring, Support, TorsionSpring, assemble
 from casflex.data import MeasurementSet
 from casflex.elements.kernels import DAMPERS, KINDS, hht_kernel
-from casflex.identification import identify_indirect
+from casflex.identification import ModelRun, Solver, identify_indirect
 from casflex.identification.estimate import estimate
 from casflex.identification.measurement import Experiment
 from casflex.simulate import simulate
@@ -124,7 +124,7 @@ def test_identify_stiffness_and_damping_from_a_closed_form_recording():
     t = np.arange(0.0, 0.1 + 1e-12, 5e-3)
     x = closed_form(t) + [1.0, 1.5] + 1e-5 * np.random.default_rng(1).normal(size=(t.size, 2))
     data = MeasurementSet(t=t, channels=("xa", "xb"), q=x, qd=None, qdd=None)
-    r = estimate(assemble(scene), [Experiment(data)], start=0.7, compiled=False)
+    r = estimate(assemble(scene), [Experiment(data)], start=0.7, solver=Solver(compiled=False))
     assert r.success, r.message
     truth = np.array([K, C])
     # measured: k -0.23 %, c +1.3 %; the bar for dampers is 5 %
@@ -191,7 +191,7 @@ def test_dampers_identified_from_exudyn_markers():
     t, q, _ = _damped_exudyn(names, 0.0, 3.0, 10)
     data = MeasurementSet(t, names, q + np.random.default_rng(0).normal(0, 1e-3, q.shape), None, None)
     model = assemble(casflex.load_scene(DAMPED / "twobar_damped.toml"))
-    r = identify_indirect(model, data, dt=1e-3, start=0.8)
+    r = identify_indirect(model, data, start=0.8, run=ModelRun(dt=1e-3))
     assert r.success, r.message
     err = r.p - model.p_nominal
     se = np.array([r.std_errors[k] for k in model.parameter_names])

@@ -9,7 +9,7 @@ import pytest
 
 import casflex
 from casflex.data import MeasurementSet, measured_set, simulated_set
-from casflex.identification import identify_direct
+from casflex.identification import Solver, identify_direct
 
 
 @pytest.fixture(scope="module")
@@ -37,9 +37,10 @@ def test_recovers_truth_from_simulated_set(twobar, sim, t_i, start):
 
 
 def test_several_instants_and_other_solver(twobar, sim):
-    r = identify_direct(twobar, sim, [0.4, 1.1, 1.6], start=1.2, solver="sqpmethod",
-                        solver_options={"qpsol": "qrqp", "qpsol_options": {"print_iter": False, "print_header": False},
-                                        "print_iteration": False, "print_header": False})
+    r = identify_direct(twobar, sim, [0.4, 1.1, 1.6], start=1.2,
+                        solver=Solver("sqpmethod", options={
+                            "qpsol": "qrqp", "qpsol_options": {"print_iter": False, "print_header": False},
+                            "print_iteration": False, "print_header": False}))
     np.testing.assert_allclose(r.p, twobar.p_nominal, rtol=1e-8)
     assert r.solver == "sqpmethod" and len(r.multipliers) == 3
 
@@ -72,7 +73,7 @@ def test_bad_inputs(twobar, sim):
     with pytest.raises(ValueError, match="no sample there"):
         identify_direct(twobar, sim, [7.0])
     with pytest.raises(ValueError, match="solver 'nosuch'"):
-        identify_direct(twobar, sim, [0.69], solver="nosuch")
+        identify_direct(twobar, sim, [0.69], solver=Solver("nosuch"))
     with pytest.raises(ValueError, match="start"):
         identify_direct(twobar, sim, [0.69], start=-1.0)
     with pytest.raises(ValueError, match="at least one time"):
@@ -89,11 +90,11 @@ def test_result_json(twobar, sim, tmp_path):
 
 
 @pytest.mark.parametrize("options", [{"hessian": "gauss-newton"}, {"compiled": True},
-                                     {"solver": "sqpmethod", "hessian": "gauss-newton"}],
+                                     {"name": "sqpmethod", "hessian": "gauss-newton"}],
                          ids=["gauss-newton", "compiled", "sqpmethod-gauss-newton"])
 def test_hessian_and_compiled_options_reach_the_same_answer(twobar, sim, options):
     ref = identify_direct(twobar, sim, [0.69], start=0.5)
-    r = identify_direct(twobar, sim, [0.69], start=0.5, **options)
+    r = identify_direct(twobar, sim, [0.69], start=0.5, solver=Solver(**options))
     assert r.success, (r.status, options)
     np.testing.assert_allclose(r.p, ref.p, rtol=1e-9)
     assert r.extra["hessian"] == options.get("hessian", "exact")
@@ -102,12 +103,12 @@ def test_hessian_and_compiled_options_reach_the_same_answer(twobar, sim, options
 
 def test_bad_hessian_named(twobar, sim):
     with pytest.raises(ValueError, match="hessian: expected one of"):
-        identify_direct(twobar, sim, [0.69], hessian="bfgs")
+        identify_direct(twobar, sim, [0.69], solver=Solver(hessian="bfgs"))
 
 
 def test_solver_without_hessian_option_falls_back_with_a_warning(twobar, sim):
     with pytest.warns(UserWarning, match="takes no Hessian function") as rec:
-        r = identify_direct(twobar, sim, [0.69], start=0.8, solver="sleqp", hessian="gauss-newton")
+        r = identify_direct(twobar, sim, [0.69], start=0.8, solver=Solver("sleqp", hessian="gauss-newton"))
     assert len(rec) == 1
     np.testing.assert_allclose(r.p, twobar.p_nominal, rtol=1e-6)
 

@@ -12,7 +12,7 @@ import pytest
 
 import casflex
 from casflex.data import MeasurementSet
-from casflex.identification import identify_indirect
+from casflex.identification import Experiment, ModelRun, Solver, Uncertainty, identify_indirect
 from casflex.identification.form import DECISIVE, delta_aic
 from casflex.identification.output_error import OFFSET_TOL
 
@@ -71,7 +71,8 @@ def test_a_recording_with_rotary_inertia_rejects_the_scenes_beams(twobar):
     """Exudyn's geometrically exact beams (rotary inertia and shear), fitted without rotary inertia: kt3
     comes out 20 % low at 8.5 noise SE with residuals 1.3 x the noise (issue 27); the other beam theory fits
     far better, so no success, and the total interval holds the truth."""
-    r = identify_indirect(twobar, _forms_recording("twobar_rotary", 0), dt=1e-3, start=0.8, model_error="none")
+    r = identify_indirect(twobar, _forms_recording("twobar_rotary", 0), start=0.8, run=ModelRun(dt=1e-3),
+                          uncertainty=Uncertainty(model_error="none"))
     (form,) = r.extra["forms"]
     assert form["verdict"] == "better" and form["delta_aic"] < -10 * DECISIVE
     assert not r.success and "the data reject the scene's form" in r.message
@@ -86,7 +87,7 @@ def test_the_correct_form_keeps_its_success(twobar):
     names = ("x3", "y3", "x5", "y5")
     q = z["q"][np.ix_(rows, [list(z["channels"]).index(c) for c in names])]
     data = MeasurementSet(z["t"][rows], names, q + np.random.default_rng(0).normal(0, 5e-4, q.shape), None, None)
-    r = identify_indirect(twobar, data, dt=1e-3, start=0.8, model_error="none")
+    r = identify_indirect(twobar, data, start=0.8, run=ModelRun(dt=1e-3), uncertainty=Uncertainty(model_error="none"))
     (form,) = r.extra["forms"]
     assert form["verdict"] == "rejected" and r.success, r.message
     # about 1250 AIC units behind: an Akaike weight of exp(-625), nothing beside the noise part
@@ -103,8 +104,8 @@ def test_an_alternative_that_fits_identically_moves_the_parameters_by_its_scale(
     heavier = dataclasses.replace(scene, name="heavier", beams=tuple(
         dataclasses.replace(b, rho=1.05 * b.rho, E=1.05 * b.E) for b in scene.beams))
     data = _forms_recording("twobar_rotary", 1)
-    r = identify_indirect(twobar, data, dt=1e-3, start=0.8, model_error="none", form="none",
-                          alternatives=[heavier], noise=5e-4)
+    r = identify_indirect(twobar, Experiment(data, noise=5e-4), start=0.8, run=ModelRun(dt=1e-3),
+                          uncertainty=Uncertainty(model_error="none", form="none", alternatives=[heavier]))
     (form,) = r.extra["forms"]
     # Both fits end within OFFSET_TOL (Gauss-Newton) SE of their least-squares solutions. The AIC weighs
     # each channel by its own noise, so an offset enters it at first order, by at most 2 OFFSET_TOL
@@ -122,11 +123,11 @@ def test_an_alternative_that_fits_identically_moves_the_parameters_by_its_scale(
 
 def test_vary_refits_at_both_ends(twobar):
     data = _forms_recording("twobar_rotary", 2)
-    r = identify_indirect(twobar, data, horizon=1.0, dt=1e-3, start=0.8, model_error="none", form="none",
-                          vary={"bar2.E": (1.5e11, 2.5e11)})
+    r = identify_indirect(twobar, data, horizon=1.0, start=0.8, run=ModelRun(dt=1e-3),
+                          uncertainty=Uncertainty(model_error="none", form="none", vary={"bar2.E": (1.5e11, 2.5e11)}))
     assert [f["name"] for f in r.extra["forms"]] == ["bar2.E = 1.5e+11", "bar2.E = 2.5e+11"]
     with pytest.raises(ValueError, match="vary bar2.E: expected finite lower < upper"):
-        identify_indirect(twobar, data, vary={"bar2.E": (2.5e11, 1.5e11)})
+        identify_indirect(twobar, data, uncertainty=Uncertainty(vary={"bar2.E": (2.5e11, 1.5e11)}))
 
 
 def _mixed_noise(seed: int) -> tuple[MeasurementSet, dict[str, float]]:
@@ -145,15 +146,15 @@ def test_each_channels_noise_is_estimated_reported_and_weighs_it(twobar):
     the fit is repeated weighted by it: the same answer as with the true noise declared per channel, and
     tighter than one weight for all (the noisy node no longer drowns the precise one)."""
     data, sigma = _mixed_noise(0)
-    kw = {"dt": 1e-3, "start": 0.8, "model_error": "none", "form": "none"}
+    kw = {"run": ModelRun(dt=1e-3), "start": 0.8, "uncertainty": Uncertainty(model_error="none", form="none")}
     est = identify_indirect(twobar, data, **kw)
     rec = est.extra["experiments"]["data"]["noise"]
     assert rec["source"].startswith("estimated from the residuals, the channels weighted")
     for c, s in sigma.items():  # an RMS of 301 samples: 4 % sampling error; the model's own error adds little
         assert rec["channels"][c] == pytest.approx(s, rel=0.15), c
-    known = identify_indirect(twobar, data, noise=sigma, **kw)
+    known = identify_indirect(twobar, Experiment(data, noise=sigma), **kw)
     assert known.extra["experiments"]["data"]["noise"]["source"] == "declared"
-    uniform = identify_indirect(twobar, data, noise=1e-3, **kw)  # one weight for every channel
+    uniform = identify_indirect(twobar, Experiment(data, noise=1e-3), **kw)  # one weight for every channel
     se = {k: est.extra["uncertainty"]["noise"][k] for k in est.parameters}
     for k, v in est.parameters.items():
         assert abs(v - known.parameters[k]) < 0.2 * se[k], k  # weights within 15 %: the same answer
@@ -181,9 +182,10 @@ def test_the_joint_force_band_widens_with_the_model_form(twobar):
     heavier = dataclasses.replace(scene, name="heavier", beams=tuple(
         dataclasses.replace(b, rho=1.05 * b.rho, E=1.05 * b.E) for b in scene.beams))
     data = _forms_recording("twobar_rotary", 3)
-    kw = {"horizon": 1.0, "dt": 1e-3, "start": 0.8, "model_error": "none", "form": "none"}
-    plain = identify_indirect(twobar, data, **kw)
-    wide = identify_indirect(twobar, data, alternatives=[heavier], **kw)
+    kw = {"horizon": 1.0, "run": ModelRun(dt=1e-3), "start": 0.8}
+    plain = identify_indirect(twobar, data, uncertainty=Uncertainty(model_error="none", form="none"), **kw)
+    wide = identify_indirect(twobar, data, uncertainty=Uncertainty(model_error="none", form="none",
+                                                                   alternatives=[heavier]), **kw)
     names = [n for n in twobar.output_names if n.startswith("spring1.")]
     b0, b1 = (output_band(twobar, r, names, draws=30) for r in (plain, wide))
     assert b0["failed"] == b1["failed"] == 0
@@ -233,10 +235,10 @@ def test_a_robust_loss_weighs_marker_artefacts_down(twobar):
     allowed); the parameters within 3 standard errors (its M-estimator sandwich), which are tighter
     than least squares' on the same data (the artefacts inflate its residuals)."""
     data, bad = _with_artefacts(0)
-    kw = {"dt": 1e-3, "start": 0.8, "model_error": "none", "form": "none"}
+    kw = {"run": ModelRun(dt=1e-3), "start": 0.8, "uncertainty": Uncertainty(model_error="none", form="none")}
     truth = dict(zip(twobar.parameter_names, twobar.p_nominal, strict=True))
     plain = identify_indirect(twobar, data, **kw)
-    r = identify_indirect(twobar, data, loss="huber", **kw)
+    r = identify_indirect(twobar, data, solver=Solver(loss="huber"), **kw)
     rob = r.extra["robust"]
     assert rob["loss"] == "huber" and rob["converged"]
     flagged = {(round(s["t"], 6), s["channel"]) for s in rob["lowest"]}

@@ -9,7 +9,7 @@ from conftest import translated
 
 import casflex
 from casflex.data import MeasurementSet, simulated_set
-from casflex.identification import identify_indirect
+from casflex.identification import Experiment, ModelRun, Shooting, Solver, Uncertainty, identify_indirect
 
 H = 0.1  # horizon (s): short enough for CI, long enough that every parameter is felt
 TOL = 1e-12  # the Newton tolerance of data and model (the default: one compiled library serves every test)
@@ -28,7 +28,7 @@ def sim(twobar):
 @pytest.mark.parametrize("transcription", ["single-shooting", "multiple-shooting"])
 @pytest.mark.parametrize("start", [0.8, 1.2])
 def test_recovers_truth_positions_only(twobar, sim, transcription, start):
-    r = identify_indirect(twobar, sim, H, transcription=transcription, start=start, newton_tol=TOL)
+    r = identify_indirect(twobar, sim, H, start=start, shooting=Shooting(transcription), run=ModelRun(newton_tol=TOL))
     assert r.success, (r.status, r.message)
     # 1e-6 (the bar): on 0.1 s the torsional springs are felt weakly; measured 1e-7..3e-7,
     # the floor set by the HHT Newton tolerance inside data and model
@@ -44,8 +44,9 @@ def test_recovers_truth_positions_only(twobar, sim, transcription, start):
 
 
 def test_full_residue_on_a_dof_subset_with_log_transform(twobar, sim):
-    r = identify_indirect(twobar, sim, H, transcription="single-shooting", residue="full",
-                          dofs=["x3", "y3", "x5", "y5"], start=0.5, transform="log", newton_tol=TOL)
+    r = identify_indirect(twobar, Experiment(sim, channels=("x3", "y3", "x5", "y5")), H, start=0.5,
+                          shooting=Shooting("single-shooting", residue="full"), solver=Solver(transform="log"),
+                          run=ModelRun(newton_tol=TOL))
     assert r.success, r.status
     # 1e-5: measured 4.3e-6 on kt1 (IPOPT stops at its tolerance; over 0.1 s the torsion springs are felt
     # weakly, and the polish's steps on Eq. 17 are refused at the Newton floor)
@@ -54,7 +55,8 @@ def test_full_residue_on_a_dof_subset_with_log_transform(twobar, sim):
 
 
 def test_multiple_shooting_from_far(twobar, sim):
-    r = identify_indirect(twobar, sim, H, transcription="multiple-shooting", start=2.0, interval=10, newton_tol=TOL)
+    r = identify_indirect(twobar, sim, H, start=2.0, shooting=Shooting("multiple-shooting", interval=10),
+                          run=ModelRun(newton_tol=TOL))
     assert r.success, r.status
     assert r.extra["intervals"] == 10
     np.testing.assert_allclose(r.p, twobar.p_nominal, rtol=1e-6)
@@ -65,7 +67,8 @@ def test_noisy_positions_standard_errors_cover_truth(twobar, sim):
     sigma = 1e-5  # m, rad
     noisy = MeasurementSet(sim.t, sim.channels, sim.q + rng.normal(0, sigma, sim.q.shape), None, None)
     trans = [d for d in twobar.dof_names if not d.startswith("theta")]
-    r = identify_indirect(twobar, noisy, 0.2, transcription="single-shooting", start=1.2, dofs=trans)
+    r = identify_indirect(twobar, Experiment(noisy, channels=tuple(trans)), 0.2, start=1.2,
+                          shooting=Shooting("single-shooting"))
     assert r.success, r.status
     err = np.abs(r.p - twobar.p_nominal)
     se = np.array(list(r.std_errors.values()))
@@ -80,35 +83,39 @@ def test_noisy_positions_standard_errors_cover_truth(twobar, sim):
 
 
 @pytest.mark.parametrize(("kwargs", "match"), [
-    ({"residue": "velocities"}, "residue"),
-    ({"transcription": "collocation"}, "transcription"),
-    ({"dofs": ["x9"]}, "unknown dof 'x9'"),
-    ({"weights": (1.0, -1.0, 0.0)}, "weights"),
-    ({"transform": "sqrt"}, "transform"),
-    ({"interval": 0, "transcription": "multiple-shooting"}, "interval"),
-    ({"solver": "no_such_solver"}, "solver 'no_such_solver'"),
-    ({"start": -1.0}, "start"),
-    ({"initial_state": "guess"}, "initial_state"),
-    ({"initial_state": "velocities", "solver": "ipopt"}, "from the scene's initial state or an estimated one"),
-    ({"initial_state": "estimate", "solver": "ipopt", "residue": "full"}, "an estimated one .residue 'positions'"),
-    ({"solver": "gauss-newton", "residue": "full"}, "single shooting on positions"),
+    (lambda sim: {"shooting": Shooting(residue="velocities")}, "residue"),
+    (lambda sim: {"shooting": Shooting("collocation")}, "transcription"),
+    (lambda sim: {"data": Experiment(sim, channels=("x9",))}, "unknown dof 'x9'"),
+    (lambda sim: {"shooting": Shooting(weights=(1.0, -1.0, 0.0))}, "weights"),
+    (lambda sim: {"solver": Solver(transform="sqrt")}, "transform"),
+    (lambda sim: {"shooting": Shooting("multiple-shooting", interval=0)}, "interval"),
+    (lambda sim: {"solver": Solver("no_such_solver")}, "solver 'no_such_solver'"),
+    (lambda sim: {"start": -1.0}, "start"),
+    (lambda sim: {"data": Experiment(sim, initial_state="guess")}, "initial_state"),
+    (lambda sim: {"data": Experiment(sim, initial_state="velocities"), "solver": Solver("ipopt")},
+     "from the scene's initial state or an estimated one"),
+    (lambda sim: {"data": Experiment(sim, initial_state="estimate"), "solver": Solver("ipopt"),
+                  "shooting": Shooting(residue="full")}, "an estimated one .residue 'positions'"),
+    (lambda sim: {"solver": Solver("gauss-newton"), "shooting": Shooting(residue="full")},
+     "single shooting on positions"),
 ])
 def test_bad_options_are_named(twobar, sim, kwargs, match):
     with pytest.raises(ValueError, match=match):
-        identify_indirect(twobar, sim, 0.01, **kwargs)
+        options = kwargs(sim)  # the option objects refuse their own bad values when made
+        identify_indirect(twobar, options.pop("data", sim), 0.01, **options)
 
 
 def test_bad_horizons_and_data(twobar, sim):
     with pytest.raises(ValueError, match="beyond the data"):
         identify_indirect(twobar, sim, 1.0)
     with pytest.raises(ValueError, match="whole number of steps"):  # the NLP's grid must hold the samples
-        identify_indirect(twobar, sim, 0.01, dt=7e-4, transcription="multiple-shooting")
+        identify_indirect(twobar, sim, 0.01, shooting=Shooting("multiple-shooting"), run=ModelRun(dt=7e-4))
     pos = MeasurementSet(sim.t, sim.channels, sim.q, None, None)
     with pytest.raises(ValueError, match="residue 'full'"):
-        identify_indirect(twobar, pos, 0.01, residue="full")
+        identify_indirect(twobar, pos, 0.01, shooting=Shooting(residue="full"))
     part = MeasurementSet(sim.t, ("x5", "y5"), sim.q[:, [12, 13]], None, None)
     with pytest.raises(ValueError, match="'x3' is not in the data"):
-        identify_indirect(twobar, part, 0.01, dofs=["x3"])
+        identify_indirect(twobar, Experiment(part, channels=("x3",)), 0.01)
 
 
 @pytest.mark.parametrize("transcription", ["single-shooting", "multiple-shooting"])
@@ -116,9 +123,9 @@ def test_compiled_matches_interpreted(twobar, sim, transcription):
     # generated C for every function IPOPT calls: same iterates, same answer (multiple shooting's
     # compiled NLP: one interval Function mapped over the intervals, ~5 s to build; its slow
     # manifold's Newton solve is fast_newton in C, newton interpreted)
-    kw = {"transcription": transcription, "start": 0.8, "solver": "ipopt", "model_error": "none"}
-    ref = identify_indirect(twobar, sim, 0.05, **kw)
-    r = identify_indirect(twobar, sim, 0.05, compiled=True, **kw)
+    kw = {"shooting": Shooting(transcription), "start": 0.8, "uncertainty": Uncertainty(model_error="none")}
+    ref = identify_indirect(twobar, sim, 0.05, solver=Solver("ipopt"), **kw)
+    r = identify_indirect(twobar, sim, 0.05, solver=Solver("ipopt", compiled=True), **kw)
     assert r.success and r.extra["compiled"]
     assert r.iterations == ref.iterations
     np.testing.assert_allclose(r.p, ref.p, rtol=1e-10)
@@ -129,15 +136,16 @@ def test_compiled_matches_interpreted(twobar, sim, transcription):
 
 
 def test_exact_hessian_option(twobar, sim):
-    r = identify_indirect(twobar, sim, 0.05, transcription="single-shooting", start=0.8, hessian="exact",
-                          solver="ipopt")
+    r = identify_indirect(twobar, sim, 0.05, start=0.8, shooting=Shooting("single-shooting"),
+                          solver=Solver("ipopt", hessian="exact"))
     assert r.success and r.extra["hessian"] == "exact" and r.solver == "ipopt"
     np.testing.assert_allclose(r.p, twobar.p_nominal, rtol=1e-5)
 
 
 def test_multiple_shooting_full_residue_warns(twobar, sim):
     with pytest.warns(UserWarning, match="single shooting is recommended"), pytest.raises(ValueError, match="dofs"):
-        identify_indirect(twobar, sim, 0.01, transcription="multiple-shooting", residue="full", dofs=["nope"])
+        identify_indirect(twobar, Experiment(sim, channels=("nope",)), 0.01,
+                          shooting=Shooting("multiple-shooting", residue="full"))
 
 
 def test_a_scene_far_from_the_origin_is_identified():
@@ -146,7 +154,8 @@ def test_a_scene_far_from_the_origin_is_identified():
     far = casflex.assemble(translated(casflex.load_scene("twobar"), 1e4))
     data = simulated_set(far, 0.3)
     # (model_error "none": a scene 10 km away is a library of its own; its refined twin would be another)
-    r = identify_indirect(far, data, 0.3, transcription="single-shooting", start=1.2, model_error="none")
+    r = identify_indirect(far, data, 0.3, start=1.2, shooting=Shooting("single-shooting"),
+                          uncertainty=Uncertainty(model_error="none"))
     assert r.success, r.message
     # measured 1.7e-7 (6e-11 at the origin): the data's positions carry the round-off of 1e4 m
     np.testing.assert_allclose(r.p, far.p_nominal, rtol=1e-5)

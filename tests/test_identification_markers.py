@@ -12,7 +12,7 @@ import pytest
 
 import casflex
 from casflex.data import MeasurementSet, simulated_set
-from casflex.identification import identify_adapted_direct, identify_direct
+from casflex.identification import Experiment, ModelRun, Shooting, Uncertainty, identify_adapted_direct, identify_direct
 from casflex.identification.estimate import FIT_THRESHOLD, pooled_fit
 from casflex.identification.shooting_nlp import _channel_kinematics, identify_nlp
 from casflex.model.markers import marker_channels, marker_states
@@ -61,8 +61,9 @@ def test_multiple_shooting_on_nodes_and_markers(model):
     # with k3 55-92 % off (casflex's own data, seeds 0-2). Polished: |z| <= 1.9 (seeds 0-3)
     names = ("x3", "y3", "xm2", "ym2", "xm4", "ym4")
     # the model at 2 ms (intervals of 20 ms, as the default's at 1 ms): the same answers, half the time
-    r = identify_nlp(model, recording(names, 0.5), 0.5, transcription="multiple-shooting", start=0.8, dt=2e-3,
-                     interval=10, noise=NOISE)
+    r = identify_nlp(model, Experiment(recording(names, 0.5), noise=NOISE), 0.5, start=0.8,
+                     shooting=Shooting("multiple-shooting", interval=10),
+                     run=ModelRun(dt=2e-3, alpha=0.0, newton_tol=1e-14))
     assert r.success, (r.status, r.message)
     assert r.extra["dofs"] == list(names) and r.extra["constraint_violation"] < 1e-8
     # the identified model through the recording: 99.9 % of the motion, white residuals at the noise (measured
@@ -83,8 +84,8 @@ def test_multiple_shooting_on_a_model_of_the_wrong_form_does_not_say_success():
     text = (DATA / "twobar_markers.toml").read_text().replace("rho = 7800.0", "rho = 15600.0", 1)
     heavy = casflex.assemble(casflex.loads_scene(text, base=DATA))
     names = ("x3", "y3", "xm2", "ym2", "xm4", "ym4")
-    r = identify_nlp(heavy, recording(names, 0.5), 0.5, transcription="multiple-shooting", start=1.0, dt=2e-3,
-                     interval=10)
+    r = identify_nlp(heavy, recording(names, 0.5), 0.5, start=1.0, shooting=Shooting("multiple-shooting", interval=10),
+                     run=ModelRun(dt=2e-3, alpha=0.0, newton_tol=1e-14))
     assert not r.success and any(r.at_bound.values()), (r.status, r.parameters)
     assert "ended on a bound: the best fit lies outside the parameters' range" in r.message
     # the bound alone withholds it: the identified model reproduces 98 % of the motion (measured 98.4 %), the
@@ -110,8 +111,9 @@ def test_multiple_shooting_on_a_model_of_the_wrong_form_within_its_bounds_does_n
     residual white: the default path's rule withholds success and names the experiment and the worst channel.
     (Over 0.5 s the same model fits 98 %: without a declared noise that passes, as in the default path.)"""
     names = ("x3", "y3", "xm2", "ym2", "xm4", "ym4")
-    r = identify_nlp(_heavy_with_free_torsion_springs(), recording(names, 1.0), 1.0, transcription="multiple-shooting",
-                     start=1.0, dt=2e-3, interval=10)
+    r = identify_nlp(_heavy_with_free_torsion_springs(), recording(names, 1.0), 1.0, start=1.0,
+                     shooting=Shooting("multiple-shooting", interval=10),
+                     run=ModelRun(dt=2e-3, alpha=0.0, newton_tol=1e-14))
     assert r.status == "Solved_To_Acceptable_Level" and not any(r.at_bound.values()), (r.status, r.message)
     assert not r.success, r.parameters
     assert r.extra["refusal"]["other"] == []  # the residuals alone withhold it
@@ -128,8 +130,9 @@ def test_multiple_shooting_residuals_above_the_declared_noise_do_not_say_success
     """The heavy bar 2 over 0.5 s: IPOPT converges (kt3 -1.6, kt1 89) and the model reproduces 98 % of the motion,
     which alone passes; with the recording's noise declared (0.1 mm), its residuals are 3-55 x it."""
     names = ("x3", "y3", "xm2", "ym2", "xm4", "ym4")
-    r = identify_nlp(_heavy_with_free_torsion_springs(), recording(names, 0.5), 0.5, transcription="multiple-shooting",
-                     start=1.0, dt=2e-3, interval=10, noise=NOISE)
+    r = identify_nlp(_heavy_with_free_torsion_springs(), Experiment(recording(names, 0.5), noise=NOISE), 0.5, start=1.0,
+                     shooting=Shooting("multiple-shooting", interval=10),
+                     run=ModelRun(dt=2e-3, alpha=0.0, newton_tol=1e-14))
     assert r.status == "Solve_Succeeded" and not any(r.at_bound.values()), (r.status, r.message)
     assert not r.success, r.parameters
     res = r.extra["experiments"]["data"]["residuals"]
@@ -148,7 +151,8 @@ def test_estimated_initial_state_from_nodes_and_markers(model):
 
     names = ("x3", "y3", "xm2", "ym2", "xm4", "ym4")
     data = recording(names, 1.0, seed=1).window(0.3, 1.0)
-    r = identify_indirect(model, data, dt=1e-3, start=0.8, initial_state="estimate", noise=NOISE, model_error="none")
+    r = identify_indirect(model, Experiment(data, initial_state="estimate", noise=NOISE), start=0.8,
+                          run=ModelRun(dt=1e-3), uncertainty=Uncertainty(model_error="none"))
     assert r.success, r.message
     for name, truth in zip(model.parameter_names, model.p_nominal, strict=True):
         assert abs(r.parameters[name] - truth) <= 3 * r.std_errors[name], name
@@ -201,6 +205,7 @@ def test_full_residue_compares_markers_rates(model):
     cols = [sim.channels.index(c) for c in ("x3", "y3")]
     data = MeasurementSet(sim.t, ("x3", "y3", *marker_channels(model)),
                           *(np.hstack([a[:, cols], b]) for a, b in ((sim.q, y), (sim.qd, yd), (sim.qdd, ydd))))
-    r = identify_nlp(model, data, 0.1, transcription="single-shooting", residue="full", start=0.8, newton_tol=1e-12)
+    r = identify_nlp(model, data, 0.1, start=0.8, shooting=Shooting("single-shooting", residue="full"),
+                     run=ModelRun(newton_tol=1e-12, dt=1e-3, alpha=0.0))
     assert r.success, r.status
     np.testing.assert_allclose(r.p, model.p_nominal, rtol=1e-5)

@@ -12,7 +12,7 @@ import pytest
 
 import casflex
 from casflex.data import MeasurementSet
-from casflex.identification import identify_indirect
+from casflex.identification import ModelRun, Shooting, Uncertainty, identify_indirect
 from casflex.identification.pinned import siblings
 from casflex.scene import SceneError, Uncertain, dumps_scene, loads_scene
 
@@ -62,9 +62,10 @@ def test_denser_bars_fall_back_on_the_densities_priors(twobar):
     # and with the densities held every stiffness is fitted 4-5 % off, at hundreds of its standard errors,
     # as success; declared uncertain (5 %), the common scale falls back on their priors
     for seed in (0, 1):
-        held = identify_indirect(twobar, recording("heavy", seed), dt=1e-3)
+        held = identify_indirect(twobar, recording("heavy", seed), run=ModelRun(dt=1e-3))
         assert np.abs(z_scores(held, twobar)).max() > 100  # measured 970-1220 (k1, k3)
-        r = identify_indirect(twobar, recording("heavy", seed), dt=1e-3, uncertain=DENSITIES)
+        r = identify_indirect(twobar, recording("heavy", seed), run=ModelRun(dt=1e-3),
+                              uncertainty=Uncertainty(uncertain=DENSITIES))
         assert r.success, r.message
         assert np.all(np.abs(z_scores(r, twobar)) <= 3), z_scores(r, twobar)  # measured 1.5-1.7
         props = r.extra["uncertain"]["properties"]
@@ -79,8 +80,8 @@ def test_denser_bars_fall_back_on_the_densities_priors(twobar):
 def test_one_denser_bar_is_told_apart_within_the_priors(twobar):
     # bar 2 alone 5 % denser: with the densities held the fit ends with kt1 and kt3 on their bound 0; with them
     # uncertain it starts those again and finds the truth; the data pin the two bars' ratio (1.05, the truth's)
-    r = identify_indirect(twobar, recording("heavy_bar2", 0), dt=1e-3, uncertain=DENSITIES, model_error="none",
-                          form="none")
+    r = identify_indirect(twobar, recording("heavy_bar2", 0), run=ModelRun(dt=1e-3),
+                          uncertainty=Uncertainty(uncertain=DENSITIES, model_error="none", form="none"))
     assert r.success, r.message
     assert np.all(np.abs(z_scores(r, twobar)) <= 3), z_scores(r, twobar)
     props = r.extra["uncertain"]["properties"]
@@ -91,8 +92,8 @@ def test_one_denser_bar_is_told_apart_within_the_priors(twobar):
 def test_a_property_pinned_by_a_held_one_is_said_so(twobar):
     # bar 2's density declared alone: the data fix its ratio to bar 4's, held at the scene's value, and the fit
     # reports bar2.rho to 0.2 % of its prior; it must say that the held density pins it, not that the data do
-    r = identify_indirect(twobar, recording("heavy_bar2", 0), dt=1e-3, uncertain=DENSITIES[:1], model_error="none",
-                          form="none")
+    r = identify_indirect(twobar, recording("heavy_bar2", 0), run=ModelRun(dt=1e-3),
+                          uncertainty=Uncertainty(uncertain=DENSITIES[:1], model_error="none", form="none"))
     prop = r.extra["uncertain"]["properties"]["bar2.rho"]
     assert prop["left_of_prior"] < 0.05  # measured 0.0018: pinned
     assert prop["pinned_by"] == ["bar4.rho"]
@@ -112,8 +113,10 @@ def test_siblings_are_the_same_property_of_elements_of_its_kind(twobar):
 
 def test_a_property_the_data_contradict_is_said(twobar):
     # declared to 0.5 %, bar 2 is 5 % denser in the data: they move both densities ~5 prior sd
-    r = identify_indirect(twobar, recording("heavy_bar2", 0), dt=1e-3, model_error="none", form="none",
-                          uncertain=[Uncertain("bar2.rho", relative=0.005), Uncertain("bar4.rho", relative=0.005)])
+    r = identify_indirect(twobar, recording("heavy_bar2", 0), run=ModelRun(dt=1e-3),
+                          uncertainty=Uncertainty(model_error="none", form="none",
+                                                  uncertain=[Uncertain("bar2.rho", relative=0.005),
+                                                             Uncertain("bar4.rho", relative=0.005)]))
     assert not r.success
     assert "the data contradict the declared uncertainty of bar2.rho" in r.message
     assert abs(r.extra["uncertain"]["properties"]["bar2.rho"]["moved_sd"]) > 3
@@ -121,13 +124,15 @@ def test_a_property_the_data_contradict_is_said(twobar):
 
 def test_a_property_declared_exact_leaves_todays_answer(twobar):
     data = recording("heavy", 0)
-    today = identify_indirect(twobar, data, dt=1e-3)
-    exact = identify_indirect(twobar, data, dt=1e-3, uncertain=[Uncertain("bar2.rho", sd=0.0)])
+    today = identify_indirect(twobar, data, run=ModelRun(dt=1e-3))
+    exact = identify_indirect(twobar, data, run=ModelRun(dt=1e-3),
+                              uncertainty=Uncertainty(uncertain=[Uncertain("bar2.rho", sd=0.0)]))
     assert exact.parameters == today.parameters and exact.std_errors == today.std_errors
     assert exact.extra["uncertain"] == {}
     # known to 1e-6 of its value: the prior holds it, and the answers are today's to 0.01 of a standard error
-    near = identify_indirect(twobar, data, dt=1e-3, uncertain=[Uncertain("bar2.rho", relative=1e-6),
-                                                                 Uncertain("bar4.E", relative=1e-6)])
+    near = identify_indirect(twobar, data, run=ModelRun(dt=1e-3),
+                             uncertainty=Uncertainty(uncertain=[Uncertain("bar2.rho", relative=1e-6),
+                                                                 Uncertain("bar4.E", relative=1e-6)]))
     for k, v in today.parameters.items():
         assert abs(near.parameters[k] - v) <= 0.01 * today.std_errors[k]  # measured 5e-4
         assert near.std_errors[k] == pytest.approx(today.std_errors[k], rel=0.01)  # measured 1e-3
@@ -135,8 +140,8 @@ def test_a_property_declared_exact_leaves_todays_answer(twobar):
 
 def test_vary_and_uncertain_on_one_property_is_refused(twobar):
     with pytest.raises(ValueError, match="vary bar2.rho: it is declared uncertain"):
-        identify_indirect(twobar, recording("heavy", 0), dt=1e-3, uncertain=DENSITIES,
-                          vary={"bar2.rho": (7000.0, 8000.0)})
+        identify_indirect(twobar, recording("heavy", 0), run=ModelRun(dt=1e-3),
+                          uncertainty=Uncertainty(uncertain=DENSITIES, vary={"bar2.rho": (7000.0, 8000.0)}))
 
 
 def test_the_command_line_takes_uncertain_properties(tmp_path, capsys):
@@ -180,14 +185,14 @@ def test_the_knee_pendulum_with_its_inertia_from_a_table():
     model = casflex.assemble(casflex.load_scene("knee_pendulum"))
     held = identify_indirect(model, pendulum("both", 0))
     assert held.success and np.abs(z_scores(held, model)).max() > 50  # measured 182
-    r = identify_indirect(model, pendulum("both", 0), uncertain=TABLE)
+    r = identify_indirect(model, pendulum("both", 0), uncertainty=Uncertainty(uncertain=TABLE))
     assert r.success, r.message
     assert np.all(np.abs(z_scores(r, model)) <= 3), z_scores(r, model)  # measured 1.4
     for k in model.parameter_names:
         assert r.extra["uncertainty"]["uncertain_properties"][k] > 0.95 * r.std_errors[k]
     # the centre of mass's distance from the knee uncertain too (5 %, a centre of mass as a parameter): wider
-    with_com = identify_indirect(model, pendulum("both", 0), uncertain=[
-        *TABLE, Uncertain("shank_foot.com_x", relative=0.05)], model_error="none", form="none")
+    with_com = identify_indirect(model, pendulum("both", 0), uncertainty=Uncertainty(
+        uncertain=[*TABLE, Uncertain("shank_foot.com_x", relative=0.05)], model_error="none", form="none"))
     assert with_com.success and np.all(np.abs(z_scores(with_com, model)) <= 3)  # measured 1.08
     assert with_com.std_errors["kt_knee"] > 1.1 * r.std_errors["kt_knee"]  # measured 0.193 against 0.160
 
@@ -200,7 +205,8 @@ def test_the_knee_force_band_carries_the_segments_mass():
 
     model = casflex.assemble(casflex.load_scene("knee_pendulum"))
     data = pendulum("both", 0)
-    held, r = (identify_indirect(model, data, model_error="none", form="none", uncertain=u) for u in (None, TABLE))
+    held, r = (identify_indirect(model, data, uncertainty=Uncertainty(model_error="none", form="none", uncertain=u))
+               for u in (None, TABLE))
     names = ["knee_pin.fx", "knee_pin.fy"]
     band, narrow = (output_band(model, x, names, draws=40) for x in (r, held))
     assert band["failed"] == 0
@@ -227,6 +233,7 @@ def test_methods_that_cannot_estimate_uncertain_properties_refuse_them(twobar):
     model = casflex.assemble(dataclasses.replace(twobar.scene, uncertain=(DENSITIES[0],)))
     data = simulated_set(twobar, 1.0)
     for call in (lambda: identify_direct(model, data, [0.69]), lambda: identify_adapted_direct(model, data, [0.5]),
-                 lambda: identify_indirect(twobar, data, 0.3, residue="full", uncertain=DENSITIES)):
+                 lambda: identify_indirect(twobar, data, 0.3, shooting=Shooting(residue="full"),
+                                           uncertainty=Uncertainty(uncertain=DENSITIES))):
         with pytest.raises(ValueError, match=r"uncertain properties \['bar2.rho'.*cannot estimate them"):
             call()

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import casflex
+from casflex.identification import Solver
 from casflex.identification.problem import gauss_newton_polish, gauss_newton_statistics
 
 NAMES = ("a", "b", "c")
@@ -60,7 +61,7 @@ def test_polish_returns_a_point_inside_the_bounds():
 
 
 def test_one_option_path_checks_every_front_end_before_any_work():
-    """The direct, adapted direct, indirect and shooting-NLP front ends share NLPOptions: a bad option
+    """The direct, adapted direct, indirect and shooting-NLP front ends share the Solver value: a bad option
     is named before the model is touched (None stands in for the model and data here)."""
     from casflex.identification import identify_adapted_direct, identify_direct, identify_indirect
     from casflex.identification.shooting_nlp import identify_nlp
@@ -72,23 +73,21 @@ def test_one_option_path_checks_every_front_end_before_any_work():
         with pytest.raises(TypeError, match=rf"{name}\(\) got an unexpected keyword argument 'solvr'"):
             call(solvr="ipopt")
         with pytest.raises(ValueError, match="solver 'nosuch': not"):
-            call(solver="nosuch")
+            call(solver=Solver("nosuch"))
         with pytest.raises(ValueError, match="transform: expected one of"):
-            call(transform="exp")
+            call(solver=Solver(transform="exp"))
         with pytest.raises(ValueError, match="hessian: expected one of"):
-            call(hessian="bfgs")
+            call(solver=Solver(hessian="bfgs"))
         with pytest.raises(ValueError, match="compiled: expected True or False"):
-            call(compiled="yes")
+            call(solver=Solver(compiled="yes"))
         with pytest.raises(ValueError, match="solver 'gauss-newton': the indirect method's single shooting"):
-            call(solver="gauss-newton")
+            call(solver=Solver("gauss-newton"))
     with pytest.raises(ValueError, match="solver_options: expected a dict"):
-        identify_indirect(None, None, solver_options=["tol", 1])
+        identify_indirect(None, None, solver=Solver(options=["tol", 1]))
 
 
 def test_nlp_options_record_and_defaults():
-    from casflex.identification.problem import NLPOptions
-
-    o = NLPOptions.of("f", {"transform": "log", "compiled": None}, hessian="exact")
+    o = Solver(transform="log", compiled=None).nlp_options("f", hessian="exact")
     assert (o.solver, o.transform, o.hessian, o.compiled) == ("ipopt", "log", "exact", None)
     assert o.record() == {"transform": "log", "hessian": "exact", "compiled": False}
 
@@ -98,7 +97,7 @@ def test_nlp_options_given_to_gauss_newton_are_refused():
 
     for key, value in (("solver_options", {"ipopt": {"max_wall_time": 60}}), ("hessian", "exact")):
         with pytest.raises(ValueError, match=rf"{key}: an NLP solver's option, and the solver is 'gauss-newton'"):
-            identify_indirect(None, None, **{key: value})
+            identify_indirect(None, None, solver=Solver(**{key.removeprefix("solver_"): value}))
 
 
 def test_a_rest_angle_is_scaled_by_a_radian_at_least():

@@ -18,7 +18,7 @@ import pytest
 import casflex
 from casflex.cli import main
 from casflex.data import MeasurementSet, save_measurements
-from casflex.identification import Budget, Experiment, identify_indirect
+from casflex.identification import Budget, Experiment, ModelRun, Shooting, Solver, Uncertainty, identify_indirect
 
 DATA = Path(__file__).resolve().parent / "data"
 
@@ -85,7 +85,8 @@ def test_cli_recovers_twobar_from_a_recording_that_starts_mid_motion(twobar, tmp
 def test_noise_free_data_from_another_code_lie_within_the_reported_intervals(twobar, start):
     # no noise: all that separates the fit from the truth is the model's own error (1 element per bar),
     # which the refit on the refined model must account for
-    r = identify_indirect(twobar, recording("twobar", MARKERS, 0.0, 3.0, 0.0, seed=0), dt=1e-3, start=start)
+    r = identify_indirect(twobar, recording("twobar", MARKERS, 0.0, 3.0, 0.0, seed=0), start=start,
+                          run=ModelRun(dt=1e-3))
     assert r.success, r.message
     assert r.extra["uncertainty"]["model_error"]["kt3"] > r.extra["uncertainty"]["hac"]["kt3"]
     err = np.abs(r.p - twobar.p_nominal)
@@ -116,7 +117,7 @@ def test_irregular_samples_with_gaps_in_two_recordings(twobar):
         q += rng.normal(0, 3e-4, q.shape)
         q[rng.random(q.shape) < 0.15] = np.nan
         exps.append(Experiment(MeasurementSet(t, MARKERS, q, None, None), initial_state=state))
-    r = identify_indirect(twobar, exps, dt=1e-3, model_error="none", start=0.8)
+    r = identify_indirect(twobar, exps, start=0.8, run=ModelRun(dt=1e-3), uncertainty=Uncertainty(model_error="none"))
     assert r.success, r.message
     assert set(r.extra["experiments"]) == {"experiment 1", "experiment 2"}
     np.testing.assert_allclose(r.p[[0, 2]], twobar.p_nominal[[0, 2]], rtol=1e-2)
@@ -125,10 +126,12 @@ def test_irregular_samples_with_gaps_in_two_recordings(twobar):
 
 def test_budgets_stop_with_the_reason(twobar):
     d = recording("twobar", MARKERS, 0.0, 1.0, 5e-4, seed=3)
-    r = identify_indirect(twobar, d, dt=1e-3, start=2.0, budget=Budget(max_iterations=2), model_error="none")
+    r = identify_indirect(twobar, d, start=2.0, solver=Solver(budget=Budget(max_iterations=2)), run=ModelRun(dt=1e-3),
+                          uncertainty=Uncertainty(model_error="none"))
     assert not r.success and "iteration limit" in r.message
     # one model run with its sensitivities over this 1 s takes about 6 ms: the second run starts past the limit
-    r = identify_indirect(twobar, d, dt=1e-3, start=2.0, budget=Budget(max_time=1e-3), model_error="none")
+    r = identify_indirect(twobar, d, start=2.0, solver=Solver(budget=Budget(max_time=1e-3)), run=ModelRun(dt=1e-3),
+                          uncertainty=Uncertainty(model_error="none"))
     assert not r.success and "time limit" in r.message
 
 
@@ -138,8 +141,8 @@ def test_threelink_from_three_markers():
     # within 1.83 SE without it, 1.75 with it (the noise-free test above checks the refit itself)
     model = casflex.assemble(casflex.load_scene("threelink"))
     names = ("x3", "y3", "x5", "y5", "x7", "y7")
-    r = identify_indirect(model, recording("threelink", names, 0.0, 2.0, 1e-3, seed=2), dt=1e-3, start=1.3,
-                          model_error="none")
+    r = identify_indirect(model, recording("threelink", names, 0.0, 2.0, 1e-3, seed=2), start=1.3,
+                          run=ModelRun(dt=1e-3), uncertainty=Uncertainty(model_error="none"))
     assert r.success, r.message
     err = np.abs(r.p - model.p_nominal)
     se = np.array(list(r.std_errors.values()))
@@ -151,8 +154,9 @@ def test_multiple_shooting_converges_on_two_markers(twobar):
     starts on the slow manifold through the recording's kinematic fits (shooting_nlp's docstring).
     Before, IPOPT regularised its KKT matrix by 1e8-1e17 and hit its wall-time cap on this data."""
     data = recording("twobar", MARKERS, 0.0, 0.6, 5e-4, seed=0)
-    r = identify_indirect(twobar, data, dt=1e-3, start=0.8, transcription="multiple-shooting", solver="ipopt",
-                          solver_options={"ipopt": {"max_wall_time": 120.0}}, model_error="none")
+    r = identify_indirect(twobar, data, start=0.8, shooting=Shooting("multiple-shooting"),
+                          solver=Solver("ipopt", options={"ipopt": {"max_wall_time": 120.0}}), run=ModelRun(dt=1e-3),
+                          uncertainty=Uncertainty(model_error="none"))
     assert r.extra["nlp_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level"), r.extra["nlp_status"]
     assert r.extra["nlp"]["constraint_violation"] < 1e-8  # the intervals joined (scaled defects ~1)
     # the polished answer: as single shooting's (0.6 s pins kt less than the 3 s of _check: within 3 SE)
@@ -166,9 +170,10 @@ def test_multiple_shooting_converges_on_two_markers(twobar):
 def test_multiple_shooting_from_an_estimated_initial_state(twobar):
     """Multiple shooting on a window that starts mid-motion: the first state on the slow manifold too."""
     data = recording("twobar", MARKERS, 0.5, 1.1, 5e-4, seed=1)
-    r = identify_indirect(twobar, data, dt=1e-3, start=0.8, transcription="multiple-shooting", solver="ipopt",
-                          initial_state="estimate", solver_options={"ipopt": {"max_wall_time": 120.0}},
-                          model_error="none")
+    r = identify_indirect(twobar, Experiment(data, initial_state="estimate"), start=0.8,
+                          shooting=Shooting("multiple-shooting"),
+                          solver=Solver("ipopt", options={"ipopt": {"max_wall_time": 120.0}}), run=ModelRun(dt=1e-3),
+                          uncertainty=Uncertainty(model_error="none"))
     assert r.extra["nlp_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level"), r.extra["nlp_status"]
     assert r.extra["nlp"]["constraint_violation"] < 1e-8
     assert r.success, r.message

@@ -13,8 +13,8 @@ import pytest
 
 import casflex
 from casflex.data import MeasurementSet, simulated_set
-from casflex.identification import problem as pb
 from casflex.identification import shooting_nlp as sn
+from casflex.identification.options import Solver
 from casflex.identification.shooting_intervals import Transcription
 from casflex.identification.shooting_starts import slow_start_functions
 
@@ -33,7 +33,7 @@ def sampled(twobar):
 
 def _transcription(model, data, horizon, *, interval=None, transcription="multiple-shooting", residue="positions",
                    initial_state="scene", transform="linear", dofs=("x3", "y3", "x5", "y5"), in_c=False):
-    opts = pb.NLPOptions.of("test", {"transform": transform})
+    opts = Solver(transform=transform).nlp_options("test")
     s = sn._set_up(model, data, horizon, list(dofs), (1.0, 0.5, 0.25), residue, 0.0, 1e-3, 0.8, 1e-12, opts)
     lengths, starts = sn._interval_starts(s, interval, transcription, initial_state)
     tr = Transcription(model, s.integ, s.channels, s.step_data, lengths, s.h, s.t0, s.d, starts, s.pmap, in_c)

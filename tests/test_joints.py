@@ -13,6 +13,7 @@ from scipy.integrate import solve_ivp
 import casflex
 from casflex import Joint, Node, RigidBody, Scene, SceneError
 from casflex.elements.joints import JOINT_KINDS, ROWS, joint_kernel
+from casflex.identification import Experiment, Shooting, Solver
 from casflex.simulate import simulate
 
 G = 9.81
@@ -108,7 +109,7 @@ def test_the_hinges_hold_to_round_off_and_alpha_0_keeps_the_energy(runs):
 @pytest.mark.parametrize("start_at, options", [
     (0.0, {}),  # the default: single shooting by Gauss-Newton from the scene's initial state
     (0.5, {"initial_state": "estimate"}),  # mid-motion: the state on the slow manifold, the hinges closed
-    (0.0, {"solver": "ipopt", "transcription": "multiple-shooting"})])
+    (0.0, {"solver": Solver("ipopt"), "shooting": Shooting("multiple-shooting")})])
 def test_a_hinge_s_torsion_spring_damper_identified_from_two_markers_of_the_ode_s_motion(start_at, options):
     """Data casflex did not make: the minimal-coordinate ODE with a spring-damper at the elbow (DOP853),
     two markers (mid link 1, 0.6 m along link 2) at 100 Hz with 1 mm of noise; the fit starts at 0.7 x."""
@@ -134,7 +135,9 @@ def test_a_hinge_s_torsion_spring_damper_identified_from_two_markers_of_the_ode_
         parameters=(Parameter("kt", "elbow_spring.kt"), Parameter("ct", "elbow_spring.ct")))
     window = t >= start_at
     data = MeasurementSet(t[window], ("xm1", "ym1", "xm2", "ym2"), y[window], None, None)
-    r = identify_indirect(casflex.assemble(scene), data, start=0.7, noise=1e-3, **options)
+    state = options.pop("initial_state", "scene")
+    r = identify_indirect(casflex.assemble(scene), Experiment(data, initial_state=state, noise=1e-3), start=0.7,
+                          **options)
     assert r.success, r.message
     for name, truth in (("kt", kt), ("ct", ct)):  # measured |z| <= 1.1, SE 0.1-1.2 % (1 s mid-motion: the largest)
         se = r.std_errors[name]

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import casflex
+from casflex.identification import Experiment, ModelRun, Uncertainty
 from casflex.scene.io import dumps_scene, loads_scene
 
 BODY = 75.0  # kg: the subject of the scene's header
@@ -109,7 +110,8 @@ def test_leg_identified_from_its_markers_mid_stride():
     data = MeasurementSet(tr.t[rows], marker_channels(fine), y + np.random.default_rng(0).normal(0, 1e-3, y.shape),
                           None, None)
     model = casflex.assemble(leg)
-    r = identify_indirect(model, data, dt=1e-3, start=0.7, initial_state="estimate", model_error="none")
+    r = identify_indirect(model, Experiment(data, initial_state="estimate"), start=0.7, run=ModelRun(dt=1e-3),
+                          uncertainty=Uncertainty(model_error="none"))
     assert r.success, r.message
     se = np.array([r.std_errors[k] for k in model.parameter_names])
     assert np.all(np.abs(r.p - model.p_nominal) < 3 * se), (r.p, se)

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from casflex import Beam, Load, Marker, Node, RigidBody, Scene, SceneError, Support, assemble
+from casflex.identification import Experiment, ModelRun, Solver
 from casflex.model.markers import marker_channels, marker_kinematics, marker_positions
 from casflex.scene.io import dumps_scene, loads_scene
 from casflex.statics import equilibrium
@@ -118,7 +119,8 @@ def test_stiffness_identified_from_markers_only_and_what_is_refused():
     y = np.column_stack([tr.output(f"{n[1:]}.{n[0]}")[rows] for n in names])
     data = MeasurementSet(tr.t[rows], names, y + np.random.default_rng(0).normal(0, 1e-4, y.shape), None, None)
     model = assemble(strip(2))
-    r = identify_indirect(model, data, dt=1e-3, start=0.8, noise=1e-4, compiled=False)  # small: no compile
+    r = identify_indirect(model, Experiment(data, noise=1e-4), start=0.8, solver=Solver(compiled=False),
+                          run=ModelRun(dt=1e-3))  # small: no compile
     assert r.success, r.message
     # the truth within 3 SE (the SE include the model error, from the refit on 4 elements), and
     # the SE say something: below 0.5 % (measured 0.009 %)
@@ -196,7 +198,8 @@ def test_initial_state_estimated_from_markers_only():
     _, Q = kinematic_fits(model, data, list(names), limit=1)
     # (to 0.22 um measured: the bars' axial stretch weighs as much as the markers; the noise is 0.1 mm)
     assert np.abs(marker_positions(model, Q[0]) - data.q[0]).max() < 1e-6
-    r = identify_indirect(model, data, dt=1e-3, start=0.8, initial_state="estimate", noise=1e-4)
+    r = identify_indirect(model, Experiment(data, initial_state="estimate", noise=1e-4), start=0.8,
+                          run=ModelRun(dt=1e-3))
     # measured on seeds 0-3: every fit a success, k within 1e-4, kt within 26 %, the estimated nodes
     # within 0.33 mm of Exudyn's at 0.3 s; largest |z| 3.2 (k3, seed 2), 2.4 otherwise: the refit on
     # a refined mesh does not hold all of the co-rotational vs ANCF difference at 0.1 mm

@@ -13,7 +13,7 @@ from scipy.integrate import solve_ivp
 
 from casflex import Beam, Node, Parameter, RigidBody, Scene, SceneError, Spring, Support, assemble
 from casflex.data import MeasurementSet, simulated_set
-from casflex.identification import identify_direct, identify_indirect
+from casflex.identification import Experiment, ModelRun, Solver, identify_direct, identify_indirect
 from casflex.model.constraints import FixedDof, prescribed
 from casflex.scene.io import dumps_scene, loads_scene
 from casflex.simulate import simulate
@@ -131,7 +131,7 @@ def test_scene_checks_round_trip_and_what_is_refused():
     sim = simulate(declared, 0.1, dt=1e-3)
     data = MeasurementSet(sim.t, ("xe", "ye"), sim.q[:, [declared.dof("xe"), declared.dof("ye")]], None, None)
     with pytest.raises(ValueError, match=r"\['pivot'\] move \(motion\): the NLP transcription"):
-        identify_indirect(declared, data, dt=1e-3, solver="ipopt")
+        identify_indirect(declared, data, solver=Solver("ipopt"), run=ModelRun(dt=1e-3))
     with pytest.raises(ValueError, match="the direct method takes fixed supports only"):
         identify_direct(declared, simulated_set(declared, 0.1), [0.05])
 
@@ -165,8 +165,9 @@ def test_spring_and_damper_identified_under_a_moving_support(t_from, state):
     noise = np.random.default_rng(7).normal(0.0, 1e-3, (t.size, 2))
     data = MeasurementSet(t, ("xm", "ym"), np.column_stack([np.zeros(t.size), sol.y[0]]) + noise, None, None)
     # dt = 2 ms: half the cost of 1 ms, the same estimates to 1e-4 (the model error 0.05 N/m in k)
-    r = identify_indirect(assemble(bouncer()), data, dt=2e-3, initial_state=state, start=0.7,
-                          compiled=False)  # a model of 6 dofs: interpreted beats a compile
+    r = identify_indirect(assemble(bouncer()), Experiment(data, initial_state=state), start=0.7,
+                          # a model of 6 dofs: interpreted beats a compile
+                          solver=Solver(compiled=False), run=ModelRun(dt=2e-3))
     assert r.success, r.message
     for name, truth in (("k", k), ("c", c)):
         # the 3-SE interval holds the truth (the model's own error at dt = 2 ms is far below 1 mm)

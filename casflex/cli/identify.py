@@ -21,13 +21,14 @@ from casflex.cli._base import (
     positive,
 )
 from casflex.cli._base import uncertain_option as _uncertain
+from casflex.identification.choices import METHODS
 
 if TYPE_CHECKING:
     from casflex.data import MeasurementSet
     from casflex.identification import IdentificationResult
     from casflex.model import Model
 
-IDENTIFY_METHODS = ("direct", "adapted-direct", "indirect")
+IDENTIFY_METHODS = METHODS  # the parser takes them from the light choices module, without loading the methods
 #: instants of the direct methods when --instants is not given: this many, evenly spread over the data
 DEFAULT_INSTANT_COUNT = 5
 #: options of the indirect method only (attribute -> option), and of the direct methods only
@@ -67,11 +68,13 @@ def _check_options(args: argparse.Namespace) -> None:
         raise OptionError(f"--window: applies to --method adapted-direct only, not to --method {args.method}")
     if args.cutoff is not None and args.smoothing != "butterworth":
         raise OptionError("--cutoff: applies to --smoothing butterworth only")
-    import casadi as ca
+    from casflex.identification import Solver
 
-    if args.solver is not None and args.solver != "gauss-newton" and not ca.has_nlpsol(args.solver):
+    try:  # the library's rule of what a solver is; the option's own words
+        Solver(args.solver)
+    except ValueError:
         raise OptionError(f"--solver: {args.solver!r} is neither gauss-newton nor an available CasADi nlpsol plugin "
-                          "(e.g. ipopt, sqpmethod)")
+                          "(e.g. ipopt, sqpmethod)") from None
     if args.method == "indirect" and args.solver == "gauss-newton" and (
             args.transcription == "multiple-shooting" or args.residue == "full"):
         raise OptionError("--solver gauss-newton: single shooting on positions only; use --solver ipopt for "
@@ -246,86 +249,75 @@ def _describe_data(info: dict[str, Any]) -> str:
     return text
 
 
-def _casadi_reason(exc: RuntimeError) -> str:
-    """The informative line of a CasADi error (its first lines only locate the failing call)."""
-    lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
-    useful = [ln for ln in lines if not ln.startswith("Error in Function::call") and "Assertion" not in ln]
-    reason = (useful or lines or [type(exc).__name__])[0]
-    return reason if len(reason) <= 200 else reason[:197] + "..."
+def _options(args: argparse.Namespace) -> dict[str, Any]:
+    """The chosen method's option values (:mod:`casflex.identification.options`) from the command's options;
+    each value is checked by its object."""
+    from casflex.identification import Budget, ModelRun, Shooting, Smoothing, Solver, Uncertainty
+
+    indirect = args.method == "indirect"
+    # the NLP solvers' iteration logs unless --quiet; Gauss-Newton reports its stages as progress messages
+    solver = Solver(args.solver, hessian=args.hessian, transform=args.transform,
+                    verbose=not args.quiet and not indirect, compiled=(args.compiled or None) if indirect else
+                    args.compiled, budget=Budget(args.max_iter, args.max_time) if indirect else None,
+                    loss=args.loss or "linear")
+    if not indirect:
+        out = {"solver": solver, "smoothing": Smoothing(args.smoothing or "spline", args.cutoff),
+               "beam_forces": args.beam_forces, "instants": args.instants}
+        return out | ({"window": args.window} if args.method == "adapted-direct" else {})
+    return {"horizon": args.horizon, "solver": solver,
+            "shooting": Shooting(args.transcription, interval=args.interval, residue=args.residue),
+            "run": ModelRun(args.dt, args.alpha),
+            "uncertainty": Uncertainty(args.model_error, args.form, vary=dict(args.vary or ()),
+                                       alternatives=args.alternatives or (), uncertain=args.uncertain)}
+
+
+def _recordings(sets: list[MeasurementSet], args: argparse.Namespace, dofs: list[str] | None) -> Any:
+    """What the method reads: the first set (direct methods), or each set as an Experiment (indirect)."""
+    from casflex.identification import Experiment
+
+    if args.method != "indirect":
+        return sets[0]
+    return [Experiment(d, initial_state=args.initial_state, channels=None if dofs is None else tuple(dofs),
+                       noise=args.sigma, name=f"recording {i + 1}" if len(sets) > 1 else "data")
+            for i, d in enumerate(sets)]
 
 
 def _identify(model: Model, sets: list[MeasurementSet], args: argparse.Namespace, start: float | np.ndarray,
               dofs: list[str] | None) -> IdentificationResult:
     """Call the chosen identification method with the command's options."""
-    from casflex.identification import Budget, Experiment, identify_adapted_direct, identify_direct, identify_indirect
+    from casflex.identification import method_function
 
-    # the NLP solvers' iteration logs unless --quiet; Gauss-Newton reports its stages as progress messages
-    common = {"start": start, "transform": args.transform, "verbose": not args.quiet and args.method != "indirect"}
-    if args.hessian is not None:
-        common["hessian"] = args.hessian
-    direct = {"smoothing": args.smoothing or "spline", "cutoff": args.cutoff, "beam_forces": args.beam_forces,
-              "solver": args.solver or "ipopt", "compiled": args.compiled}
-    if args.method == "direct":
-        return identify_direct(model, sets[0], args.instants, **direct, **common)
-    if args.method == "adapted-direct":
-        return identify_adapted_direct(model, sets[0], args.instants, window=args.window, **direct, **common)
-    experiments = [Experiment(d, initial_state=args.initial_state, channels=None if dofs is None else tuple(dofs),
-                              noise=args.sigma, name=f"recording {i + 1}" if len(sets) > 1 else "data")
-                   for i, d in enumerate(sets)]
-    return identify_indirect(model, experiments, args.horizon, transcription=args.transcription,
-                             residue=args.residue, alpha=args.alpha, dt=args.dt, interval=args.interval,
-                             solver=args.solver, compiled=args.compiled or None,
-                             budget=Budget(args.max_iter, args.max_time), model_error=args.model_error,
-                             form=args.form, vary=dict(args.vary or ()), alternatives=args.alternatives or (),
-                             loss=args.loss or "linear", uncertain=args.uncertain, **common)
+    return method_function(args.method)(model, _recordings(sets, args, dofs), start=start, **_options(args))
 
 
-def run_start(*, scene: str, sets: list[MeasurementSet], options: dict[str, Any], start: list[float],
-              dofs: list[str] | None) -> dict[str, Any]:
-    """One start of a multi-start (a sweep run, in a worker process): the fit's summary record."""
-    model = load_model(scene)
-    r = _identify(model, sets, argparse.Namespace(**options), np.array(start), dofs)
-    return {"start": start, "success": r.success, "status": r.status, "objective": r.objective,
-            "parameters": r.parameters, "message": r.message}
-
-
-def _multistart(model: Model, sets: list[MeasurementSet], args: argparse.Namespace, start: float | np.ndarray,
+def _multistart(sets: list[MeasurementSet], args: argparse.Namespace, start: float | np.ndarray,
                 dofs: list[str] | None) -> IdentificationResult:
-    """--starts N: the given start and N - 1 drawn log-uniformly within a factor 3 of it (seeded by
-    --seed), run as a sweep on a local cluster of 2 workers (casflex.study.sweep); the best successful
-    start (least objective) is fitted again here for the full result, which lists every start."""
-    import tempfile
+    """--starts N: the given start and N - 1 drawn within a factor 3 of it (seeded by --seed), run on 2
+    worker processes (:func:`casflex.identification.multistart.multistart`); the best successful start is
+    fitted again for the full result, which lists every start."""
+    from casflex.identification.multistart import WORKERS, EveryStartFailed, multistart
+    from casflex.study.sweep import max_workers
 
-    from casflex.identification.problem import start_values
-    from casflex.study.sweep import Run, max_workers, run_sweep
+    workers = min(WORKERS, args.starts, max_workers()[0])  # a one-core machine runs one
+    print(f"  multi-start: {args.starts} starts on {workers} worker process(es)", flush=True)
+    try:
+        result = multistart(args.scene, _recordings(sets, args, dofs), args.starts, method=args.method, start=start,
+                            seed=args.seed, progress=not args.quiet, **_options(args))
+    except EveryStartFailed as exc:
+        _print_starts(exc.records)
+        raise OptionError("--starts: every start failed; see the errors above") from None
+    records, best = result.extra["multistart"]["starts"], result.extra["multistart"]["best"]
+    _print_starts(records)
+    good = any(r.get("success") for r in records)
+    print(f"  best: start {best}{'' if good else ' (none succeeded)'}; fitted again for the full report", flush=True)
+    return result
 
-    p0 = start_values(model, start)
-    rng = np.random.default_rng(args.seed)
-    starts = [p0] + [p0 * np.exp(rng.uniform(-np.log(3), np.log(3), p0.size)) for _ in range(args.starts - 1)]
-    options = {k: v for k, v in vars(args).items() if k not in ("func",)}
-    options["quiet"] = True
-    runs = [Run(f"start{k}", run_start, {"scene": args.scene, "sets": sets, "options": options,
-                                         "start": s.tolist(), "dofs": dofs}) for k, s in enumerate(starts)]
-    workers = min(2, len(runs), max_workers()[0])  # a one-core machine runs one
-    print(f"  multi-start: {len(runs)} starts on {workers} worker process(es)", flush=True)
-    with tempfile.TemporaryDirectory(prefix="casflex-starts-") as rec:
-        sweep = run_sweep(runs, rec, n_workers=workers, progress=not args.quiet)
-    if sweep.interrupted:
-        raise KeyboardInterrupt
-    records = [sweep.results[r.key] for r in runs]
+
+def _print_starts(records: list[dict[str, Any]]) -> None:
     for k, rec_k in enumerate(records):
         what = (f"{'success' if rec_k['success'] else 'no success'}, objective {rec_k['objective']:.6g}"
                 if "error" not in rec_k else f"error: {rec_k['error'][:100]}")
         print(f"    start {k}: " + ", ".join(f"{v:.4g}" for v in rec_k.get("start", [])) + f": {what}")
-    good = [k for k, r in enumerate(records) if r.get("success")]
-    pool = good or [k for k, r in enumerate(records) if "error" not in r]
-    if not pool:
-        raise OptionError("--starts: every start failed; see the errors above")
-    best = min(pool, key=lambda k: records[k]["objective"])
-    print(f"  best: start {best}{'' if good else ' (none succeeded)'}; fitted again for the full report", flush=True)
-    result = _identify(model, sets, args, starts[best], dofs)
-    result.extra["multistart"] = {"best": best, "starts": records}
-    return result
 
 
 def _heading(model: Model, args: argparse.Namespace, start: float | np.ndarray) -> str:
@@ -376,12 +368,14 @@ def cmd_identify(args: argparse.Namespace, outputs: Outputs) -> int:
     sys.stdout.flush()
     try:
         if args.starts > 1:
-            result = _multistart(model, sets, args, start, dofs)
+            result = _multistart(sets, args, start, dofs)
         else:
             result = _identify(model, sets, args, start, dofs)
     except RuntimeError as exc:  # CasADi: e.g. a solver plugin that needs a missing library
+        from casflex.identification.problem import casadi_reason
+
         solver = args.solver or ("gauss-newton" if args.method == "indirect" else "ipopt")
-        raise OptionError(f"--solver {solver}: the solver failed: {_casadi_reason(exc)}") from None
+        raise OptionError(f"--solver {solver}: the solver failed: {casadi_reason(exc)}") from None
     result.extra["data"] = infos[0] if len(infos) == 1 else infos
     print(result.summary())
     if out is not None:

@@ -29,7 +29,6 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from typing import Unpack
 
 import casadi as ca
 import numpy as np
@@ -37,8 +36,8 @@ import numpy as np
 from casflex import codegen
 from casflex.data import MeasurementSet
 from casflex.identification import problem as pb
-from casflex.identification.direct import DirectKeywords, direct_options
 from casflex.identification.initial_state import _kinematic_fit
+from casflex.identification.options import Smoothing, Solver
 from casflex.identification.problem import IdentificationResult
 from casflex.identification.reconstruct import dofs_from_markers
 from casflex.model import Model
@@ -83,7 +82,9 @@ def _guesses(model: Model, q_rows: np.ndarray, dt: np.ndarray, unknown: list[int
 
 
 def identify_adapted_direct(model: Model, data: MeasurementSet, instants: Sequence[float], *,
-                            window: int | None = None, **options: Unpack[DirectKeywords]) -> IdentificationResult:
+                            window: int | None = None, start: float | dict[str, float] | np.ndarray | None = None,
+                            solver: Solver | None = None, smoothing: Smoothing | None = None,
+                            beam_forces: str | None = None) -> IdentificationResult:
     """Identify the parameters from the measured dofs around ``instants`` (module docstring).
 
     Parameters
@@ -98,8 +99,9 @@ def identify_adapted_direct(model: Model, data: MeasurementSet, instants: Sequen
         Each needs ``window - 1`` samples after it.
     window : int, optional
         Samples per instant (default: module docstring).
-    **options : :class:`.direct.DirectKeywords`
-        Here ``beam_forces="unknown"`` frees the axial forces of beams with both ends measured;
+    start, smoothing, beam_forces : as :func:`.direct.identify_direct`'s; here ``beam_forces="unknown"``
+        frees the axial forces of beams with both ends measured.
+    solver : Solver, optional
         IPOPT, the Gauss-Newton Hessian, not compiled by default.
 
     Returns
@@ -109,8 +111,8 @@ def identify_adapted_direct(model: Model, data: MeasurementSet, instants: Sequen
         [value, rate, acceleration] of every unknown dof at each t_i (key ``rotations`` too, for
         the rotations).
     """
-    own, opts = direct_options("identify_adapted_direct", dict(options))
-    start, beam_forces, smoothing, cutoff = (own[k] for k in ("start", "beam_forces", "smoothing", "cutoff"))
+    opts = (solver or Solver()).nlp_options("identify_adapted_direct()")
+    smoothing = smoothing or Smoothing()
     pb.require_fixed_supports(model, "the adapted direct method")
     pb.require_no_uncertain(model, "the adapted direct method")
     # a rigid body's rotation between hinges is not in its nodes' translations: its cubic would be free,
@@ -126,7 +128,7 @@ def identify_adapted_direct(model: Model, data: MeasurementSet, instants: Sequen
     trans_measured = [i for i in np.flatnonzero(~model.is_rotation) if sel[i] >= 0]
     if not trans_measured:
         raise ValueError("adapted direct identification needs measured translations; the data have none")
-    data, smoothing_info = pb.smoothed_if_needed(data, smoothing, cutoff)
+    data, smoothing_info = pb.smoothed_if_needed(data, smoothing.kind, smoothing.cutoff)
     mode = pb.beam_forces_mode(model, beam_forces, smoothed=smoothing_info is not None)
     # rotations are unknowns here (measured ones are ignored): only axial forces are freed
     known = {i for i in range(model.n_dof) if (sel[i] >= 0 and not model.is_rotation[i]) or

@@ -19,3 +19,9 @@ MODEL_ERRORS = ("refine", "none")
 FORMS = ("auto", "none")
 #: Losses of the indirect method's fit: least squares, or Huber's, robust to marker artefacts (by reweighting).
 LOSSES = ("linear", "huber")
+#: How the direct methods obtain velocities and accelerations from positions (:mod:`.smoothing`).
+SMOOTHERS = ("spline", "butterworth")
+#: casflex's own solver: single shooting by Gauss-Newton on forward sensitivities (the indirect method).
+GAUSS_NEWTON = "gauss-newton"
+#: The identification methods by name (the command line's --method).
+METHODS = ("direct", "adapted-direct", "indirect")

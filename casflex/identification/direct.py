@@ -15,17 +15,15 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from typing import Any, Unpack
 
 import casadi as ca
 import numpy as np
 
 from casflex import codegen
 from casflex.data import MeasurementSet
+from casflex.identification.options import Smoothing, Solver
 from casflex.identification.problem import (
     IdentificationResult,
-    NLPKeywords,
-    NLPOptions,
     ParameterMap,
     beam_force_basis,
     beam_forces_mode,
@@ -42,7 +40,7 @@ from casflex.identification.problem import (
 from casflex.identification.reconstruct import dofs_from_markers
 from casflex.model import Model
 
-__all__ = ["identify_direct", "DirectKeywords", "direct_options"]
+__all__ = ["identify_direct"]
 
 
 def _instant_data(model: Model, data: MeasurementSet, instants: Sequence[float]):
@@ -63,35 +61,9 @@ def _instant_data(model: Model, data: MeasurementSet, instants: Sequence[float])
     return [(data.t[i], data.q[i, sel], data.qd[i, sel], data.qdd[i, sel]) for i in rows]
 
 
-class DirectKeywords(NLPKeywords, total=False):
-    """The keywords of the direct and adapted direct methods: the NLP's (:class:`.problem.NLPOptions`) and
-
-    - ``start``: starting parameters, a factor on the nominal values, a dict or an array (default nominal);
-    - ``beam_forces``: {"unknown", "model"}, beam deformation forces solved for at each instant (default
-      for positions-only data) or from the positions (the paper; default when the data bring
-      derivatives), :func:`.problem.beam_forces_mode`;
-    - ``smoothing``, ``cutoff``: how velocities and accelerations are obtained when the data lack them
-      (:func:`casflex.identification.smoothing.smooth`; default a GCV smoothing spline).
-    """
-
-    start: float | dict[str, float] | np.ndarray | None
-    beam_forces: str | None
-    smoothing: str
-    cutoff: float | None
-
-
-def direct_options(method: str, options: dict, **defaults: Any) -> tuple[dict[str, Any], NLPOptions]:
-    """The method's own keywords of :class:`DirectKeywords` (with their defaults) and its NLP options,
-    checked before any work."""
-    own = {"start": None, "beam_forces": None, "smoothing": "spline", "cutoff": None}
-    own.update({k: options.pop(k) for k in list(options) if k in own})
-    opts = NLPOptions.of(method, options, **defaults)
-    opts.nlp_solver(f"{method}()")
-    return own, opts
-
-
-def identify_direct(model: Model, data: MeasurementSet, instants: Sequence[float],
-                    **options: Unpack[DirectKeywords]) -> IdentificationResult:
+def identify_direct(model: Model, data: MeasurementSet, instants: Sequence[float], *,
+                    start: float | dict[str, float] | np.ndarray | None = None, solver: Solver | None = None,
+                    smoothing: Smoothing | None = None, beam_forces: str | None = None) -> IdentificationResult:
     """Identify the model's parameters (its declared ones, within their bounds) from full
     kinematics at ``instants`` (s).
 
@@ -99,16 +71,20 @@ def identify_direct(model: Model, data: MeasurementSet, instants: Sequence[float
     when it has none, by smoothing. A recording with markers' channels is first turned into every
     dof by the kinematic fit through its channels at each sample (:mod:`.reconstruct`, reported in
     ``extra["from_markers"]``); the standard errors then ignore that fit's own uncertainty.
-    ``options``: :class:`DirectKeywords`; here IPOPT, the exact Hessian, not compiled by default.
-    The exact linear solution is computed with transform "linear" only.
+    ``start``: starting parameters, a factor on the nominal values, a dict or an array (default nominal);
+    ``solver``: here IPOPT, the exact Hessian, not compiled by default; ``smoothing``: how velocities and
+    accelerations are obtained when the data lack them (default a GCV smoothing spline); ``beam_forces``:
+    {"unknown", "model"}, beam deformation forces solved for at each instant (default for positions-only
+    data) or from the positions (the paper; default when the data bring derivatives),
+    :func:`.problem.beam_forces_mode`. The exact linear solution is computed with transform "linear" only.
     """
-    own, opts = direct_options("identify_direct", dict(options), hessian="exact")
-    start, beam_forces, smoothing, cutoff = (own[k] for k in ("start", "beam_forces", "smoothing", "cutoff"))
+    opts = (solver or Solver()).nlp_options("identify_direct()", hessian="exact")
+    smoothing = smoothing or Smoothing()
     require_fixed_supports(model, "the direct method")
     require_no_uncertain(model, "the direct method")
     t_build = time.perf_counter()
     data, from_markers = dofs_from_markers(model, data, "the direct method")
-    data, smoothing_info = smoothed_if_needed(data, smoothing, cutoff)
+    data, smoothing_info = smoothed_if_needed(data, smoothing.kind, smoothing.cutoff)
     samples = _instant_data(model, data, instants)
     mode = beam_forces_mode(model, beam_forces, smoothed=smoothing_info is not None)
     basis = beam_force_basis(model, set(range(model.n_dof)) if mode == "unknown" else set())  # every dof measured

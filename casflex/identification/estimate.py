@@ -43,15 +43,16 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
 from casflex.codegen import log
-from casflex.identification.choices import LOSSES, MODEL_ERRORS  # noqa: F401 (re-exported)
+from casflex.identification.choices import MODEL_ERRORS  # noqa: F401 (re-exported)
 from casflex.identification.form import alternatives_of, compare_forms, form_part, form_reasons
 from casflex.identification.initial_state import initial_states
 from casflex.identification.measurement import Experiment, check_against_scene
+from casflex.identification.options import GAUSS_NEWTON, ModelRun, Solver, Uncertainty
 from casflex.identification.output_error import Budget, Fit, OutputError, StartDoesNotRun, fit
 from casflex.identification.pinned import pinned
 from casflex.identification.plausibility import (  # noqa: F401 (FIT_THRESHOLD, pooled_fit re-exported)
@@ -71,7 +72,7 @@ from casflex.identification.problem import (
 from casflex.identification.result import IdentificationResult
 from casflex.identification.statistics import residual_analysis, sandwich_covariance
 from casflex.model import Model, assembled
-from casflex.scene.uncertain import Uncertain, declared_uncertain, nuisance_names
+from casflex.scene.uncertain import declared_uncertain, nuisance_names
 
 __all__ = ["estimate", "MODEL_ERRORS", "FIT_THRESHOLD"]
 
@@ -435,34 +436,37 @@ def _experiment_records(problem: OutputError, f: Fit, C: np.ndarray, declared: l
     return channels, records, trajectories, samples
 
 
-def estimate(model: Model, experiments: Sequence[Experiment], *, dt: float | None = None, alpha: float | None = None,
-             start: float | dict[str, float] | np.ndarray | None = None, transform: str = "linear",
-             budget: Budget | None = None, compiled: bool = True, newton_tol: float = 1e-12,
-             model_error: str = "refine", form: str = "auto", vary: Mapping[str, tuple[float, float]] | None = None,
-             alternatives: Sequence = (), loss: str = "linear", uncertain: Sequence[Uncertain] | None = None,
-             check_data: bool = True, verbose: bool = False) -> IdentificationResult:
+def estimate(model: Model, experiments: Sequence[Experiment], *, run: ModelRun | None = None,
+             solver: Solver | None = None, uncertainty: Uncertainty | None = None,
+             start: float | dict[str, float] | np.ndarray | None = None,
+             check_data: bool = True) -> IdentificationResult:
     """Identify the model's parameters (and the unknown initial states) from ``experiments``.
 
-    dt, alpha: the model's step (s) and HHT alpha (default: the scene's run settings, never the
-    samples' spacing); form, vary, alternatives: the alternative forms (:mod:`.form`); uncertain: scene
-    properties known within an uncertainty, besides the scene's own ``[[uncertain]]`` (:mod:`.priors`); the
-    other options as in :func:`casflex.identification.identify_indirect`.
+    run: the model's step (s), HHT alpha (default: the scene's run settings, never the samples' spacing) and
+    Newton tolerance; solver: Gauss-Newton's transform, budget, loss and log, compiled sensitivities (default
+    True); uncertainty: the model error, the alternative forms (:mod:`.form`) and the scene properties known
+    within an uncertainty, besides the scene's own ``[[uncertain]]`` (:mod:`.priors`); the other options as in
+    :func:`casflex.identification.identify_indirect`.
     """
-    for name, value, choices in (("model_error", model_error, MODEL_ERRORS), ("loss", loss, LOSSES)):
-        if value not in choices:
-            raise ValueError(f"{name}: expected one of {choices}, got {value!r}")
+    run, solver, uncertainty = run or ModelRun(), solver or Solver(), uncertainty or Uncertainty()
+    if solver.name not in (None, GAUSS_NEWTON) or solver.options is not None or solver.hessian is not None:
+        raise ValueError(f"solver {solver.name!r}: estimate is single shooting by {GAUSS_NEWTON!r}; an NLP solver "
+                         "and its options are identify_indirect's")
+    transform, budget, compiled, newton_tol = (solver.transform, solver.limits,
+                                               True if solver.compiled is None else solver.compiled, run.newton_tol)
+    loss, verbose, model_error = solver.loss, solver.verbose, uncertainty.model_error
+    vary, uncertain = uncertainty.vary, uncertainty.uncertain
     if model.n_p == 0:
         raise ValueError("the scene declares no parameters to identify ([[parameters]] in the scene file)")
-    dt = float(model.scene.run.dt if dt is None else dt)
-    alpha = float(model.scene.run.alpha if alpha is None else alpha)
-    budget = budget or Budget()
+    dt, alpha = run.of(model.scene)
     t_build = time.perf_counter()
     experiments = _named(model, experiments, check_data)
     scene_u = declared_uncertain(model.scene, uncertain)
     both = sorted(set(vary or {}) & {u.target for u in scene_u.uncertain})
     if both:
         raise ValueError(f"vary {both[0]}: it is declared uncertain, estimated with its prior, not a form to vary")
-    forms = alternatives_of(model, experiments, form=form, vary=vary, alternatives=alternatives)
+    forms = alternatives_of(model, experiments, form=uncertainty.form, vary=vary,
+                            alternatives=uncertainty.alternatives)
     pmap = ParameterMap.of(model, transform)
     p0 = start_values(model, start)
     setup = {"dt": dt, "alpha": alpha, "pmap": pmap, "compiled": compiled, "newton_tol": newton_tol,

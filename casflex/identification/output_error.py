@@ -30,26 +30,13 @@ from scipy.optimize import least_squares
 from casflex import interrupt
 from casflex.identification.initial_state import InitialState, initial_state_of
 from casflex.identification.measurement import Experiment, SampleMap, free_dofs
+from casflex.identification.options import Budget  # noqa: F401 (re-exported)
 from casflex.identification.problem import ParameterMap
 from casflex.identification.sensitivity import run_sensitivities
 from casflex.model import Model
 from casflex.model.markers import marker_states
 
 __all__ = ["Budget", "OutputError", "Fit", "fit"]
-
-
-@dataclass(frozen=True)
-class Budget:
-    """Limits of one solve: Gauss-Newton iterations (model runs) and wall time (s)."""
-
-    max_iterations: int = 100
-    max_time: float = 600.0
-
-    def __post_init__(self) -> None:
-        if not (isinstance(self.max_iterations, int) and self.max_iterations >= 1):
-            raise ValueError(f"max_iterations: expected an integer >= 1, got {self.max_iterations!r}")
-        if not (np.isfinite(self.max_time) and self.max_time > 0):
-            raise ValueError(f"max_time: expected a positive number of seconds, got {self.max_time!r}")
 
 
 class StartDoesNotRun(ValueError):

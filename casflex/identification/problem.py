@@ -7,20 +7,25 @@ import math
 import time
 import warnings
 from dataclasses import dataclass
-from typing import Any, TypedDict
+from typing import Any
 
 import casadi as ca
 import numpy as np
 
 from casflex.codegen import compiled_nlpsol, log
-from casflex.identification.choices import BEAM_FORCES, HESSIANS, TRANSFORMS  # noqa: F401 (re-exported)
+from casflex.identification.choices import (  # noqa: F401 (re-exported)
+    BEAM_FORCES,
+    GAUSS_NEWTON,  # noqa: F401 (re-exported)
+    HESSIANS,
+    TRANSFORMS,
+)
 from casflex.identification.result import IdentificationResult
 from casflex.model import Model
 
 __all__ = ["IdentificationResult", "parameter_scale", "start_values", "bound_flags", "gauss_newton_statistics",
            "gauss_newton_polish", "robust_statistics", "solver_options_for", "least_squares_nlp", "ParameterMap",
-           "TRANSFORMS", "HESSIANS", "GAUSS_NEWTON", "NLPOptions", "NLPKeywords", "solve_and_polish", "failure_reasons",
-           "smoothed_if_needed"]
+           "TRANSFORMS", "HESSIANS", "GAUSS_NEWTON", "NLPOptions", "solve_and_polish", "failure_reasons",
+           "casadi_reason", "smoothed_if_needed"]
 
 
 def parameter_scale(model: Model) -> np.ndarray:
@@ -262,32 +267,16 @@ def solver_options_for(solver: str, verbose: bool, extra: dict | None, tol: floa
 
 
 
-#: casflex's own solver: single shooting by Gauss-Newton on forward sensitivities (the indirect method).
-GAUSS_NEWTON = "gauss-newton"
-
-
-class NLPKeywords(TypedDict, total=False):
-    """The keyword options every identification front end takes (see :class:`NLPOptions`)."""
-
-    solver: str
-    solver_options: dict
-    transform: str
-    hessian: str
-    compiled: bool
-    verbose: bool
-
-
 @dataclass(frozen=True)
 class NLPOptions:
-    """How an identification problem is solved: the one option path of the direct, adapted direct,
-    indirect and shooting-NLP front ends, checked before any work starts.
+    """How an NLP is solved, resolved from a :class:`.options.Solver` with a front end's defaults
+    (:meth:`.options.Solver.nlp_options`; the values are checked there).
 
-    solver : a CasADi nlpsol plugin (``ipopt``, ``sqpmethod``, ...) or ``"gauss-newton"`` (the
-        indirect method's own, single shooting on positions).
+    solver : a CasADi nlpsol plugin (``ipopt``, ``sqpmethod``, ...).
     solver_options : nlpsol options merged into casflex's (nested dicts merged, :func:`merge_options`).
     transform : {"linear", "log"}, the decision variables (:class:`ParameterMap`).
     hessian : {"exact", "gauss-newton"}, the NLP solver's Hessian of the Lagrangian (:func:`least_squares_nlp`).
-    compiled : generate and compile C for the solver's functions (None: the front end's default).
+    compiled : generate and compile C for the solver's functions.
     verbose : the solver's iteration log.
     """
 
@@ -298,40 +287,9 @@ class NLPOptions:
     compiled: bool | None = None
     verbose: bool = False
 
-    def __post_init__(self) -> None:
-        if not isinstance(self.solver, str) or not (self.solver == GAUSS_NEWTON or ca.has_nlpsol(self.solver)):
-            raise ValueError(f"solver {self.solver!r}: not {GAUSS_NEWTON!r} nor a CasADi NLP solver plugin available "
-                             "here (e.g. ipopt, sqpmethod)")
-        if self.solver_options is not None and not isinstance(self.solver_options, dict):
-            raise ValueError(f"solver_options: expected a dict of nlpsol options, got {self.solver_options!r}")
-        if self.transform not in TRANSFORMS:
-            raise ValueError(f"transform: expected one of {TRANSFORMS}, got {self.transform!r}")
-        if self.hessian not in HESSIANS:
-            raise ValueError(f"hessian: expected one of {HESSIANS}, got {self.hessian!r}")
-        for name in ("compiled", "verbose"):
-            value = getattr(self, name)
-            if not (isinstance(value, bool) or (name == "compiled" and value is None)):
-                raise ValueError(f"{name}: expected True or False, got {value!r}")
-
-    @classmethod
-    def of(cls, method: str, options: dict, **defaults: Any) -> NLPOptions:
-        """The options of a front end ``method`` called with keywords ``options`` over its ``defaults``;
-        an unknown keyword is a TypeError, as Python's own."""
-        unknown = sorted(set(options) - set(NLPKeywords.__annotations__))
-        if unknown:
-            raise TypeError(f"{method}() got an unexpected keyword argument {unknown[0]!r}")
-        return cls(**{**defaults, **{k: v for k, v in options.items() if v is not None}})
-
-    def nlp_solver(self, method: str) -> str:
-        """The NLP solver plugin; ``"gauss-newton"`` is refused where ``method`` is an NLP."""
-        if self.solver == GAUSS_NEWTON:
-            raise ValueError(f"solver {GAUSS_NEWTON!r}: the indirect method's single shooting; {method} needs a "
-                             "CasADi NLP solver (e.g. ipopt)")
-        return self.solver
-
     def nlp(self, name: str, w: Any, r: Any, g: Any = None, *, f_scale: float = 1.0, tol: float = 1e-14) -> ca.Function:
         """:func:`least_squares_nlp` with these options."""
-        return least_squares_nlp(name, self.nlp_solver(name), w, r, g, f_scale=f_scale, hessian=self.hessian,
+        return least_squares_nlp(name, self.solver, w, r, g, f_scale=f_scale, hessian=self.hessian,
                                  compiled=bool(self.compiled), verbose=self.verbose,
                                  solver_options=self.solver_options, tol=tol)
 
@@ -397,7 +355,7 @@ def least_squares_nlp(name: str, solver: str, w: Any, r: Any, g: Any = None, *, 
         try:
             S = ca.nlpsol(name, solver, nlp, opts)
         except RuntimeError as exc:
-            msg = _casadi_reason(exc)
+            msg = casadi_reason(exc)
             refused = hessian_refused(msg, triu, solver)
             if refused is None:
                 raise ValueError(f"solver {solver!r}: cannot be created ({msg})") from None
@@ -445,8 +403,10 @@ def smoothed_if_needed(data: Any, smoothing: str, cutoff: float | None) -> tuple
     return data, data.meta["smoothing"]
 
 
-def _casadi_reason(exc: Exception) -> str:
-    """The informative line of a CasADi error, without its suggestions and pointers to the docs."""
+def casadi_reason(exc: Exception) -> str:
+    """The informative line of a CasADi error: its last, without its suggestions and pointers to the docs
+    (the first lines only locate the failing call), and without the source file that raised it. The one
+    rule of the library and the command line."""
     skip = (">", "Did you mean", "Use print_options", "https://", "Tried ", "Error code:")
     lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip() and not ln.strip().startswith(skip)]
     if not lines:

@@ -76,7 +76,7 @@ import time
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Unpack
+from typing import TYPE_CHECKING, Any
 
 import casadi as ca
 import numpy as np
@@ -87,7 +87,8 @@ from casflex.identification import plausibility as pl
 from casflex.identification import problem as pb
 from casflex.identification.choices import RESIDUES, TRANSCRIPTIONS  # noqa: F401 (re-exported)
 from casflex.identification.measurement import Experiment
-from casflex.identification.problem import IdentificationResult, NLPKeywords
+from casflex.identification.options import ModelRun, Shooting, Solver
+from casflex.identification.problem import IdentificationResult
 from casflex.identification.shooting_intervals import SingleShooting, StepData, Transcription
 from casflex.identification.shooting_solver import gauss_newton_nlpsol
 from casflex.identification.shooting_starts import SlowStart, data_states
@@ -104,9 +105,7 @@ def _grid(data: MeasurementSet, horizon: float, dt: float) -> tuple[float, int, 
     (-1: no sample), shape (N,)."""
     if data.t.size < 2:
         raise ValueError("data: the indirect method needs a time series (at least 2 samples)")
-    h = float(dt)
-    if not (np.isfinite(h) and h > 0):
-        raise ValueError(f"dt: must be a positive number of seconds, got {dt!r}")
+    h = float(dt)  # checked by ModelRun (or the scene's)
     if not (np.isfinite(horizon) and horizon > 0):
         raise ValueError(f"horizon: must be a positive number of seconds, got {horizon!r}")
     N = int(round(horizon / h))
@@ -129,9 +128,7 @@ def _intervals(N: int, interval: int | None, transcription: str) -> list[int]:
     """Step counts of the shooting intervals (as equal as possible; the longer ones first)."""
     if transcription == "single-shooting":
         return [N]
-    K = 20 if interval is None else interval
-    if not (isinstance(K, int) and K >= 1):
-        raise ValueError(f"interval: expected a whole number of steps >= 1, got {interval!r}")
+    K = 20 if interval is None else interval  # checked by Shooting
     M = max(1, round(N / K))
     base, extra = divmod(N, M)
     return [base + 1] * extra + [base] * (M - extra)
@@ -213,18 +210,12 @@ class _SetUp:
     noise: float | Mapping[str, float] | None
 
 
-def _check_arguments(model: Model, data: MeasurementSet, transcription: str, residue: str,
-                     weights: Sequence[float], initial_state: str, opts: pb.NLPOptions) -> None:
-    """ValueError for an option out of its choices, before any work."""
-    opts.nlp_solver("the NLP transcription")
-    if transcription not in TRANSCRIPTIONS:
-        raise ValueError(f"transcription: expected one of {TRANSCRIPTIONS}, got {transcription!r}")
-    if residue not in RESIDUES:
-        raise ValueError(f"residue: expected one of {RESIDUES}, got {residue!r}")
+def _check_arguments(model: Model, data: MeasurementSet, residue: str, initial_state: str,
+                     transcription: str) -> None:
+    """ValueError for a combination of options this transcription does not take, before any work (each
+    option's own values are checked by its object, :mod:`.options`)."""
     if model.n_p == 0:
         raise ValueError("the scene declares no parameters to identify ([[parameters]] in the scene file)")
-    if len(weights) != 3 or not all(np.isfinite(w) and w >= 0 for w in weights):
-        raise ValueError(f"weights: expected three numbers >= 0 (xi, psi, phi), got {weights!r}")
     if initial_state not in ("scene", "estimate"):
         raise ValueError(f"initial_state: expected 'scene' or 'estimate' for the NLP transcription, got "
                          f"{initial_state!r}")
@@ -318,7 +309,7 @@ def _transcribe(s: _SetUp, lengths: list[int], starts: list[SlowStart | None], o
         ss = codegen.compiled(ss) if opts.compiled else ss
     else:
         nlp = {"x": w, "f": 0.5 * f_scale * ca.sumsqr(r), "g": g}
-        solver, extra = gauss_newton_nlpsol("indirect", opts.nlp_solver("indirect"), nlp,
+        solver, extra = gauss_newton_nlpsol("indirect", opts.solver, nlp,
                                             lambda triu: tr.gauss_newton(f_scale, triu), compiled=bool(opts.compiled),
                                             verbose=opts.verbose, solver_options=opts.solver_options, tol=1e-8,
                                             extra=[ss])
@@ -416,22 +407,13 @@ def _result(s: _SetUp, nlp: _NLP, out: dict[str, Any], build_s: float, record: d
 
 def identify_nlp(
     model: Model,
-    data: MeasurementSet,
+    data: MeasurementSet | Experiment,
     horizon: float,
     *,
-    transcription: str = "multiple-shooting",
-    residue: str = "positions",
-    dofs: Sequence[str] | None = None,
-    weights: tuple[float, float, float] = (1.0, 1.0, 1.0),
-    alpha: float = 0.0,
-    dt: float = 1e-3,
-    interval: int | None = None,
+    shooting: Shooting | None = None,
+    run: ModelRun | None = None,
+    solver: Solver | None = None,
     start: float | dict[str, float] | np.ndarray | None = None,
-    initial_state: str = "scene",
-    noise: float | Mapping[str, float] | None = None,
-    newton_tol: float = 1e-14,
-    polish: int = 3,
-    **options: Unpack[NLPKeywords],
 ) -> IdentificationResult:
     """Output-error identification over [t0, t0 + ``horizon``] s as an NLP (t0: the first sample).
 
@@ -439,39 +421,28 @@ def identify_nlp(
     ----------
     model : Model
         Its declared parameters are the unknowns, with their bounds.
-    data : MeasurementSet
+    data : MeasurementSet or Experiment
         Samples on the step grid t0 + k dt (others are ignored); positions for Eq. 16, plus
-        velocities and accelerations for Eq. 17.
+        velocities and accelerations for Eq. 17. An Experiment says which channels are compared (nodes'
+        dofs and markers' coordinates, e.g. ``("x3", "y3", "xm2", "ym2")``; default every channel of the
+        data; a marker is compared through its kinematics y(q), y' = J q', y'' = J q'' + (dJ/dq q') q',
+        :mod:`casflex.model.markers`), its noise (for the residual checks of ``success``, module
+        docstring; default estimated from the residuals) and its initial state: the scene's, or
+        ``"estimate"``: on the slow manifold through the recording's first samples with its slow-mode
+        amplitudes and rates as unknowns (as the interval starts of multiple shooting; residue positions only).
     horizon : float, s
         End of the compared window (a whole number of steps).
-    transcription : {"multiple-shooting", "single-shooting"}
-    residue : {"positions", "full"}
-        Eq. 16 or Eq. 17.
-    dofs : names of the compared channels, nodes' dofs and markers' coordinates (e.g.
-        ``["x3", "y3", "xm2", "ym2"]``); default every channel of the data. A marker is compared
-        through its kinematics y(q), y' = J q', y'' = J q'' + (dJ/dq q') q' (:mod:`casflex.model.markers`).
-    weights : (xi, psi, phi)
-        Eq. 15 weights of the dimensionless position, velocity and acceleration residues.
-    alpha, dt : HHT parameter and step (s).
-    interval : int
-        Steps per shooting interval (multiple shooting; default 20).
+    shooting : Shooting, optional
+        Transcription, steps per interval, residue (Eq. 16 or 17) and Eq. 15's weights; default multiple
+        shooting on positions, 20 steps per interval.
+    run : ModelRun, optional
+        HHT step and alpha of the model and its Newton tolerance; default dt = 1e-3 s, alpha = 0, 1e-14.
+    solver : Solver, optional
+        How the NLP is solved (here IPOPT, the Gauss-Newton Hessian, not compiled by default;
+        ``hessian="exact"`` means second derivatives through every HHT Newton solve, several times slower)
+        and ``polish``: Gauss-Newton steps on the single-shooting problem after the solver (0: none).
     start : factor, dict or array, optional
         Starting parameters (a number multiplies the nominal values).
-    initial_state : {"scene", "estimate"}
-        The state at the first sample: the scene's, or on the slow manifold through the
-        recording's first samples with its slow-mode amplitudes and rates as unknowns (as the
-        interval starts of multiple shooting; positions residue only).
-    noise : float or {channel: float}, optional
-        The noise's standard deviation (m, rad; as :class:`.measurement.Experiment`'s) if known, for
-        the residual checks of ``success`` (module docstring); default estimated from the residuals.
-    newton_tol : float
-        Tolerance of the HHT Newton iterations inside the model (scaled, see HHT).
-    polish : int
-        Gauss-Newton steps on the single-shooting problem after the solver (0: none).
-    **options : solver, solver_options, transform, hessian, compiled, verbose
-        How the NLP is solved (:class:`.problem.NLPOptions`; here IPOPT, the Gauss-Newton Hessian,
-        not compiled by default). ``hessian="exact"`` means second derivatives through every HHT
-        Newton solve, several times slower.
 
     Returns
     -------
@@ -482,13 +453,21 @@ def identify_nlp(
         identified model's residual analysis (``experiments["data"]["residuals"]``, as the default
         path's) and why success is withheld (``refusal``: {"residuals", "other"}; module docstring).
     """
-    opts = pb.NLPOptions.of("identify_nlp", options)
-    _check_arguments(model, data, transcription, residue, weights, initial_state, opts)
+    shooting = shooting or Shooting("multiple-shooting")
+    run = run or ModelRun(dt=1e-3, alpha=0.0, newton_tol=1e-14)
+    solver = solver or Solver()
+    opts = solver.nlp_options("the NLP transcription")
+    exp = data if isinstance(data, Experiment) else None
+    data = data.data if exp is not None else data
+    initial_state, dofs, noise = ("scene", None, None) if exp is None else (exp.initial_state, exp.channels, exp.noise)
+    transcription, residue, weights = shooting.transcription, shooting.residue, shooting.weights
+    _check_arguments(model, data, residue, initial_state, transcription)
+    dt, alpha = run.of(model.scene)
     t_build = time.perf_counter()
-    s = _set_up(model, data, horizon, dofs, weights, residue, alpha, dt, start, newton_tol, opts, noise)
-    nlp = _transcribe(s, *_interval_starts(s, interval, transcription, initial_state), opts)
+    s = _set_up(model, data, horizon, dofs, weights, residue, alpha, dt, start, run.newton_tol, opts, noise)
+    nlp = _transcribe(s, *_interval_starts(s, shooting.interval, transcription, initial_state), opts)
     build_s = time.perf_counter() - t_build
-    out = _solve(nlp, polish)
+    out = _solve(nlp, solver.polish)
     record = {"solver": opts.solver, **opts.record(), "transcription": transcription, "residue": residue,
               "dofs": s.names, "weights": list(weights), "initial_state": initial_state}
     return _result(s, nlp, out, build_s, record)

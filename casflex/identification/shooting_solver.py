@@ -79,7 +79,7 @@ def gauss_newton_nlpsol(name: str, solver: str, nlp: dict, gn_of: Callable[[bool
         try:
             S = ca.nlpsol(name, solver, nlp, opts)
         except RuntimeError as exc:
-            msg = pb._casadi_reason(exc)
+            msg = pb.casadi_reason(exc)
             if derivatives and ("grad_f" in msg or "jac_g" in msg):
                 derivatives = False  # the same attempt, the solver making its own first derivatives
                 continue

@@ -25,10 +25,9 @@ from __future__ import annotations
 import numpy as np
 
 from casflex.data import MeasurementSet
+from casflex.identification.choices import SMOOTHERS
 
 __all__ = ["smooth", "SMOOTHERS"]
-
-SMOOTHERS = ("spline", "butterworth")
 
 
 def _spline(t: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

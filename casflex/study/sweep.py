@@ -423,18 +423,14 @@ def identification_run(*, method: str, start: float, scene: str = "twobar", inst
                        data: str = "simulated", **options: Any) -> dict:
     """One identification of a sweep (runs in a worker): returns the parameters, success,
     iterations, wall time, standard errors, the relative error against the nominal values
-    and the weakly identifiable parameters."""
-    from casflex.identification import identify_adapted_direct, identify_direct, identify_indirect
+    and the weakly identifiable parameters. ``options``: the method's option values (``solver=Solver(...)``,
+    ``shooting=Shooting(...)``, ...: :mod:`casflex.identification.options`)."""
+    from casflex.identification import method_function
 
+    identify = method_function(method)
     model, dat = _setup(scene, float(t_end), float(noise), seed, data, method)
-    if method == "direct":
-        r = identify_direct(model, dat, list(instants), start=start, **options)
-    elif method == "adapted-direct":
-        r = identify_adapted_direct(model, dat, list(instants), start=start, **options)
-    elif method == "indirect":
-        r = identify_indirect(model, dat, horizon, start=start, **options)
-    else:
-        raise ValueError(f"method: expected direct, adapted-direct or indirect, got {method!r}")
+    r = identify(model, dat, horizon, start=start, **options) if method == "indirect" else \
+        identify(model, dat, list(instants), start=start, **options)
     rel = np.abs(r.p / model.p_nominal - 1.0)
     return {"parameters": r.parameters, "success": r.success, "status": r.status, "iterations": r.iterations,
             "wall_s": r.wall_s, "std_errors": r.std_errors, "max_rel_error": float(rel.max()),
