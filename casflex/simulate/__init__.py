@@ -1,4 +1,5 @@
-"""The forward simulation: ``simulate(model, t_end, ...) -> Trajectory`` by HHT-alpha (:mod:`casflex.simulate.run`),
+"""The forward simulation: ``simulate(model, t_end, ...) -> Trajectory`` by HHT-alpha (:mod:`casflex.simulate.run`;
+``simulated_set``: a run as a :class:`~casflex.data.MeasurementSet`),
 run here (interpreted or compiled) or exported as standalone C with an example program
 (:mod:`casflex.simulate.export`, ``casflex export``)."""
 
@@ -13,8 +14,9 @@ from casflex.simulate.run import (
     integrator_for,
     memory_available,
     simulate,
+    simulated_set,
     step_count,
 )
 
-__all__ = ["simulate", "SimulationError", "integrator_for", "step_count", "check_memory", "CHUNK", "ENERGY_GROWTH",
-           "compiled_library", "initial_state", "memory_available", "format_bytes"]
+__all__ = ["simulate", "simulated_set", "SimulationError", "integrator_for", "step_count", "check_memory", "CHUNK",
+           "ENERGY_GROWTH", "compiled_library", "initial_state", "memory_available", "format_bytes"]
