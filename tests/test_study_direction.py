@@ -19,7 +19,8 @@ LABELS = list(SCENE)
 
 
 def _scene():
-    return SimpleNamespace(markers=[SimpleNamespace(name=n, label=None, x=x, y=y) for n, (x, y) in SCENE.items()])
+    return SimpleNamespace(markers=[SimpleNamespace(name=n, label=None, lab_label=n, x=x, y=y)
+                                    for n, (x, y) in SCENE.items()])
 
 
 def _trial(heading_deg, speed: float = 1.2, duration: float = 2.0, rate: float = 100.0, facing=None,
