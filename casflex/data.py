@@ -1,7 +1,7 @@
-"""Measurement sets: the paper's "simulated set" and "measured set", with optional noise.
+"""Measurement sets: channels sampled at their times, pure data (no model, no CasADi), with optional noise.
 
 - simulated set: every nodal dof with velocities and accelerations, from an HHT simulation
-  (run at a tight Newton tolerance so that the data satisfy Eq. 1 to round-off at alpha = 0);
+  (:func:`casflex.simulate.simulated_set`, which builds a :class:`MeasurementSet` of a run);
 - measured set: positions only (optionally with Gaussian noise, sigma in m for x, y and rad
   for theta); velocities and accelerations by central differences (2nd order), so the first
   and last samples are dropped;
@@ -20,9 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from casflex.model import Model
-
-__all__ = ["MeasurementSet", "simulated_set", "measured_set", "load_measurements", "save_measurements",
+__all__ = ["MeasurementSet", "measured_set", "load_measurements", "save_measurements",
            "add_position_noise", "FILE_FORMATS", "builtin_recordings"]
 
 #: Example recordings shipped with casflex, beside the built-in scenes they belong to
@@ -93,27 +91,11 @@ class MeasurementSet:
         cut = [None if a is None else np.asarray(a)[keep] for a in (self.q, self.qd, self.qdd)]
         return MeasurementSet(self.t[keep], self.channels, *cut, source=self.source, meta=self.meta)
 
-    def select(self, model: Model) -> np.ndarray:
-        """Column of each model dof in the data (-1 where the dof is not measured). Channels of the
-        scene's markers (``x<marker>``, ``y<marker>``) are known channels, but no dof's."""
-        from casflex.model.markers import marker_channels
-
-        markers = marker_channels(model)
-        unknown = [c for c in self.channels if c not in model.dof_names and c not in markers]
-        if unknown:
-            raise ValueError(f"data: unknown channels {unknown}; the model's dofs are {list(model.dof_names)}"
-                             + (f", its markers' channels {list(markers)}" if markers else ""))
-        return np.array([self.channels.index(d) if d in self.channels else -1 for d in model.dof_names])
-
-
-def simulated_set(model: Model, t_end: float = 3.0, *, dt: float = 1e-3, alpha: float = 0.0,
-                  p: dict[str, float] | np.ndarray | None = None, tol: float = 1e-14) -> MeasurementSet:
-    """All nodal kinematics of an HHT simulation (the paper's simulated set)."""
-    from casflex.simulate import simulate
-
-    tr = simulate(model, t_end, dt=dt, alpha=alpha, p=p, tol=tol)
-    return MeasurementSet(tr.t, tr.dof_names, tr.q, tr.qd, tr.qdd, source="simulated",
-                          meta={"lam": tr.lam, "p": tr.p, "alpha": alpha, "dt": dt})
+    def select(self, model) -> np.ndarray:
+        """Column of each dof of ``model`` (a :class:`casflex.model.Model`) in the data (-1 where the dof is not
+        measured); ValueError for a channel that is neither a dof's nor a marker's
+        (:meth:`casflex.model.Model.data_columns`, where the rule lives: the data know no model)."""
+        return model.data_columns(self.channels)
 
 
 def measured_set(data: MeasurementSet, *, noise: float = 0.0, seed: int | None = None) -> MeasurementSet:

@@ -41,8 +41,8 @@ QUICK = ("default without model-error refit, 0.69 s", "direct, simulated set, t 
 def worker(case: str) -> dict:
     """One identification in this (fresh) process: its recorded times and result."""
     import casflex
-    from casflex.data import simulated_set
     from casflex.identification import Experiment, ModelRun, identify_direct, identify_indirect
+    from casflex.simulate import simulated_set
 
     method, horizon, opts = CASES[case]
     model = casflex.assemble(casflex.load_scene("twobar"))

@@ -136,7 +136,8 @@ def _flag(config: str, r: dict) -> bool:  # SLEQP's interface reports success wh
 def main(quick: bool = False, out_dir: Path | None = None, record: Path | None = None,
          scheduler: str | None = None, raw_path: Path | None = None) -> dict:
     import casflex
-    from casflex.data import save_measurements, simulated_set
+    from casflex.data import save_measurements
+    from casflex.simulate import simulated_set
 
     banner, problems = Banner("solvers", quick), ["direct"] if quick else list(PROBLEMS)
     starts, configs = (QUICK_STARTS, QUICK_CONFIGS) if quick else (STARTS, list(CONFIGS))

@@ -15,10 +15,11 @@ import numpy as np
 from _shared import paper_nlp
 from _study import Banner, assert_checks, checks, cli, fmt_p, save_raw, table, write_outputs
 
-from casflex.data import MeasurementSet, measured_set, simulated_set
+from casflex.data import MeasurementSet, measured_set
 from casflex.identification import Shooting, identify_direct, identify_indirect
 from casflex.model import assemble
 from casflex.scene.io import load_scene
+from casflex.simulate import simulated_set
 
 TOL = 1e-6  # convergence: max relative error of p
 T1, T2 = 0.69, 2.83

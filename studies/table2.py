@@ -11,10 +11,11 @@ from pathlib import Path
 import numpy as np
 from _study import Banner, assert_checks, checks, cli, fmt_p, table, write_outputs
 
-from casflex.data import measured_set, simulated_set
+from casflex.data import measured_set
 from casflex.identification import Solver, identify_adapted_direct
 from casflex.model import assemble
 from casflex.scene.io import load_scene
+from casflex.simulate import simulated_set
 
 #: (label, instants (s), the paper's identified [k1 kt1 k3 kt3])
 SETS = [

@@ -11,10 +11,11 @@ from pathlib import Path
 import numpy as np
 from _study import Banner, assert_checks, checks, cli, table, write_outputs
 
-from casflex.data import MeasurementSet, measured_set, simulated_set
+from casflex.data import MeasurementSet, measured_set
 from casflex.identification import identify_adapted_direct
 from casflex.model import assemble
 from casflex.scene.io import load_scene
+from casflex.simulate import simulated_set
 
 INSTANTS = [0.4, 1.1, 1.6, 1.9, 2.3]
 ROTS = ("theta2", "theta3", "theta4", "theta5")

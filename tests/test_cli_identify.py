@@ -13,7 +13,8 @@ import pytest
 
 import casflex
 from casflex.cli import main
-from casflex.data import load_measurements, save_measurements, simulated_set
+from casflex.data import load_measurements, save_measurements
+from casflex.simulate import simulated_set
 
 K1 = 700.0  # N/m, twobar's nominal spring1.k
 

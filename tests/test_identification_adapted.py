@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 import casflex
-from casflex.data import MeasurementSet, simulated_set
+from casflex.data import MeasurementSet
 from casflex.identification import identify_adapted_direct
+from casflex.simulate import simulated_set
 
 SET3 = [0.4, 1.1, 1.6, 1.9, 2.3]  # the paper's third instant set (Tables 2-3)
 

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 import casflex
-from casflex.data import MeasurementSet, measured_set, simulated_set
+from casflex.data import MeasurementSet, measured_set
 from casflex.identification import Solver, identify_direct
+from casflex.simulate import simulated_set
 
 
 @pytest.fixture(scope="module")

@@ -8,8 +8,9 @@ import pytest
 from conftest import translated
 
 import casflex
-from casflex.data import MeasurementSet, simulated_set
+from casflex.data import MeasurementSet
 from casflex.identification import Experiment, ModelRun, Shooting, Solver, Uncertainty, identify_indirect
+from casflex.simulate import simulated_set
 
 H = 0.1  # horizon (s): short enough for CI, long enough that every parameter is felt
 TOL = 1e-12  # the Newton tolerance of data and model (the default: one compiled library serves every test)

@@ -11,11 +11,12 @@ import numpy as np
 import pytest
 
 import casflex
-from casflex.data import MeasurementSet, simulated_set
+from casflex.data import MeasurementSet
 from casflex.identification import Experiment, ModelRun, Shooting, Uncertainty, identify_adapted_direct, identify_direct
 from casflex.identification.estimate import FIT_THRESHOLD, pooled_fit
 from casflex.identification.shooting_nlp import _channel_kinematics, identify_nlp
 from casflex.model.markers import marker_channels, marker_states
+from casflex.simulate import simulated_set
 
 DATA = Path(__file__).resolve().parent / "data"
 NOISE = 1e-4  # m

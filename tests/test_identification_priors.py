@@ -227,8 +227,8 @@ def test_the_knee_force_band_carries_the_segments_mass():
 def test_methods_that_cannot_estimate_uncertain_properties_refuse_them(twobar):
     import dataclasses
 
-    from casflex.data import simulated_set
     from casflex.identification import identify_adapted_direct, identify_direct
+    from casflex.simulate import simulated_set
 
     model = casflex.assemble(dataclasses.replace(twobar.scene, uncertain=(DENSITIES[0],)))
     data = simulated_set(twobar, 1.0)

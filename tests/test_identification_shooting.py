@@ -12,11 +12,12 @@ import numpy as np
 import pytest
 
 import casflex
-from casflex.data import MeasurementSet, simulated_set
+from casflex.data import MeasurementSet
 from casflex.identification import shooting_nlp as sn
 from casflex.identification.options import Solver
 from casflex.identification.shooting_intervals import Transcription
 from casflex.identification.shooting_starts import slow_start_functions
+from casflex.simulate import simulated_set
 
 
 @pytest.fixture(scope="module")

@@ -208,3 +208,14 @@ def test_forward_simulation_under_the_inverse_moments_retraces_the_motion():
     # HHT's O(dt^2) and the table's linear interpolation, accumulated over 1 s of an undamped swing:
     # measured 2.8e-5 rad; bound 7x that (3e-4 of the swing's 0.7 rad)
     assert np.abs(angle - A * np.sin(W * tr.t)).max() < 2e-4
+
+
+def test_one_rule_for_a_load_s_unit():
+    from casflex.inverse.lab_names import load_unit
+    from casflex.study.runner import unit_of
+
+    forces = ("pelvis_tx_force", "knee.fx", "root.fy", "knee.f_along", "knee.f_across", "slide.force")
+    moments = ("knee_angle_r_moment", "knee.moment", "root.mz")
+    assert [load_unit(n) for n in forces] == ["N"] * len(forces)
+    assert [load_unit(n) for n in moments] == ["N m"] * len(moments)
+    assert [unit_of(n, per_kg=True) for n in ("pelvis_tx_force", "knee.moment")] == ["N/kg", "N m/kg"]

@@ -23,6 +23,7 @@ from casflex.lab import (
     trial_markers,
 )
 from casflex.lab.filtering import zero_lag_minus_3db
+from casflex.lab.tables import write_sto
 
 LAB = Path(__file__).resolve().parent / "data" / "lab"
 TRC, GRF = LAB / "hamner_running_excerpt.trc", LAB / "hamner_running_grf_excerpt.mot"
@@ -72,6 +73,23 @@ def test_the_scene_s_markers_by_their_lab_labels():
     assert casflex.loads_scene(casflex.dumps_scene(model.scene)) == model.scene  # label round-trips
     with pytest.raises(ValueError, match=r"no marker labelled 'R.Knee'; the trial has \['R.ASIS'"):
         trial_markers(casflex.assemble(_scene_with_markers(knee="R.Knee")), TRC)
+
+
+def test_a_marker_stands_for_its_label_or_else_its_name():
+    sc = _scene_with_markers(asis="R.ASIS", sacrum=None)
+    assert [m.lab_label for m in sc.markers] == ["R.ASIS", "sacrum"]
+
+
+def test_write_sto_is_read_back_by_read_sto(tmp_path):
+    t = np.array([0.0, 0.01, 0.02])
+    cols = {"knee_angle_r_moment": np.array([1.5, -2.25, 3.0]), "pelvis_tx_force": np.array([10.0, 0.0, -1e-3])}
+    path = write_sto(tmp_path / "loads.sto", t, cols, title="a test", units={"knee_angle_r_moment": "N m",
+                                                                            "pelvis_tx_force": "N"})
+    back = read_sto(path)
+    assert back.names == tuple(cols) and back.in_degrees is False
+    np.testing.assert_array_equal(back.t, t)
+    np.testing.assert_array_equal(back.values, np.column_stack(list(cols.values())))  # %.10g keeps these exactly
+    assert "units: time s; knee_angle_r_moment N m; pelvis_tx_force N" in path.read_text().splitlines()
 
 
 def _trc(tmp_path, *, units="mm", labels=("A", "B"), rows=((1, 0.0), (2, 0.01)), ncoords=None):

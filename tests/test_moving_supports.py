@@ -12,11 +12,11 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from casflex import Beam, Node, Parameter, RigidBody, Scene, SceneError, Spring, Support, assemble
-from casflex.data import MeasurementSet, simulated_set
+from casflex.data import MeasurementSet
 from casflex.identification import Experiment, ModelRun, Solver, identify_direct, identify_indirect
 from casflex.model.constraints import FixedDof, prescribed
 from casflex.scene.io import dumps_scene, loads_scene
-from casflex.simulate import simulate
+from casflex.simulate import simulate, simulated_set
 from casflex.statics import equilibrium
 
 L, AMP, W, G = 1.0, 0.05, 2 * math.pi * 3.0, 9.81  # m, m, rad/s (3 Hz), m/s^2

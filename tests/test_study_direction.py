@@ -19,7 +19,8 @@ LABELS = list(SCENE)
 
 
 def _scene():
-    return SimpleNamespace(markers=[SimpleNamespace(name=n, label=None, x=x, y=y) for n, (x, y) in SCENE.items()])
+    return SimpleNamespace(markers=[SimpleNamespace(name=n, label=None, lab_label=n, x=x, y=y)
+                                    for n, (x, y) in SCENE.items()])
 
 
 def _trial(heading_deg, speed: float = 1.2, duration: float = 2.0, rate: float = 100.0, facing=None,
@@ -87,7 +88,7 @@ def _hamner_legs(drop=()):
 
     scene = load_scene("hamner_leg")
     lab = read_trc(Path(__file__).resolve().parent / "data" / "lab" / "hamner_running_whole.trc")
-    keep = [i for i, lb in enumerate(lab.labels) if lb in {m.label or m.name for m in scene.markers} - set(drop)]
+    keep = [i for i, lb in enumerate(lab.labels) if lb in {m.lab_label for m in scene.markers} - set(drop)]
     return scene, dataclasses.replace(lab, labels=tuple(lab.labels[i] for i in keep), xyz=lab.xyz[:, keep])
 
 

@@ -190,7 +190,8 @@ def _plane(text: str):
 
 def _data(model: Model, args: argparse.Namespace) -> tuple[list[MeasurementSet], list[dict[str, Any]]]:
     """The recordings and a description of each for --data simulated | measured | FILE [FILE ...]."""
-    from casflex.data import add_position_noise, load_measurements, measured_set, simulated_set
+    from casflex.data import add_position_noise, load_measurements, measured_set
+    from casflex.simulate import simulated_set
 
     seed = args.seed
     if args.noise and seed is None:  # a fresh seed, reported so that the run can be repeated

@@ -21,8 +21,9 @@ p_b = x_b + R(theta_b) r_b and psi = (theta_b - theta_b0) - (theta_a - theta_a0)
 
 A coupled hinge (``hinge_c<key>``, two nodes): a hinge whose point moves on a as the hinge turns, as
 OpenSim's custom joints move a knee's centre with its angle: Phi = p_b - p_a - R(theta_a - theta_a0)
-(s(psi) - s(0)), with s = (s_x, s_y) SIMM splines of psi (:class:`casflex.scene.functions.SimmSpline`,
-m, in a's frame as it is in the initial configuration), registered by :func:`coupled_kind`.
+(s(psi) - s(0)), with s = (s_x, s_y) SIMM splines of psi (their knots and coefficients as the scene's
+:class:`casflex.scene.functions.SimmSpline` holds them, m, in a's frame as it is in the initial configuration;
+evaluated here as a chain of ``if_else``, :func:`spline_of`), registered by :func:`coupled_kind`.
 
 The multipliers mu enter the equations of motion as B^T mu (B = dPhi/dq), so the joint exerts
 -B^T mu: on b's point the force -mu (hinge, weld), -mu_1 n_a across a slider.
@@ -44,6 +45,7 @@ from __future__ import annotations
 import functools
 
 import casadi as ca
+import numpy as np
 
 from casflex.elements.kernels import Kind
 
@@ -71,24 +73,34 @@ def joint_kind(kind: str, grounded: bool) -> str:
     return f"{kind}_g" if grounded else kind
 
 
-def coupled_kind(shift_x, shift_y) -> str:
-    """The kernel kind of a coupled hinge whose point moves by (shift_x(psi), shift_y(psi)) (module
-    docstring; each a table of (psi, m) knots or None): ``hinge_c<digest of the tables>``, a C name."""
+def coupled_kind(splines) -> str:
+    """The kernel kind of a coupled hinge whose point moves by (s_x(psi), s_y(psi)) (module docstring):
+    ``splines`` (s_x, s_y), each None or a cubic spline of psi (knots ``x`` rad, ``y`` m and ``coefficients()``,
+    as :class:`casflex.scene.functions.SimmSpline`): ``hinge_c<digest of the knots>``, a C name."""
     import hashlib
 
-    from casflex.scene.functions import SimmSpline
-
-    key = "hinge_c" + hashlib.sha1(repr((shift_x, shift_y)).encode()).hexdigest()[:12]
-    if key not in _COUPLED:
-        _COUPLED[key] = tuple(None if t is None else SimmSpline(tuple(r[0] for r in t), tuple(r[1] for r in t))
-                              for t in (shift_x, shift_y))
+    tables = tuple(None if f is None else tuple(zip(f.x, f.y, strict=True)) for f in splines)
+    key = "hinge_c" + hashlib.sha1(repr(tables).encode()).hexdigest()[:12]
+    _COUPLED.setdefault(key, tuple(splines))
     return key
+
+
+def spline_of(f, x: ca.SX) -> ca.SX:
+    """The cubic spline ``f`` (knots ``f.x``, ``f.y`` and ``f.coefficients()`` (b, c, d): y_k + b_k s + c_k s^2 +
+    d_k s^3 on [x_k, x_k+1], linear beyond the knots) of a CasADi expression x: a chain of if_else over the knots."""
+    b, c, d = f.coefficients()
+    xk, yk = np.asarray(f.x, dtype=float), np.asarray(f.y, dtype=float)
+    out = yk[-1] + (x - xk[-1]) * b[-1]
+    for k in range(xk.size - 2, -1, -1):
+        s = x - xk[k]
+        out = ca.if_else(x < xk[k + 1], yk[k] + s * (b[k] + s * (c[k] + s * d[k])), out)
+    return ca.if_else(x < xk[0], yk[0] + (x - xk[0]) * b[0], out)
 
 
 def shift(splines, psi):
     """The coupled hinge's point's move s(psi) - s(0) (2,) in a's initial frame; ``splines`` its (s_x, s_y)
     (:func:`coupled_kind`), psi symbolic."""
-    return ca.vertcat(*[0.0 * psi if f is None else f(psi) - f(0.0) for f in splines])
+    return ca.vertcat(*[0.0 * psi if f is None else spline_of(f, psi) - f(0.0) for f in splines])
 
 
 def coupled_splines(kind: str):

@@ -67,7 +67,7 @@ def identify_direct(model: Model, data: MeasurementSet, instants: Sequence[float
     """Identify the model's parameters (its declared ones, within their bounds) from full
     kinematics at ``instants`` (s).
 
-    ``data`` hold q of every dof; qd, qdd from the data (e.g. :func:`casflex.data.simulated_set`) or,
+    ``data`` hold q of every dof; qd, qdd from the data (e.g. :func:`casflex.simulate.simulated_set`) or,
     when it has none, by smoothing. A recording with markers' channels is first turned into every
     dof by the kinematic fit through its channels at each sample (:mod:`.reconstruct`, reported in
     ``extra["from_markers"]``); the standard errors then ignore that fit's own uncertainty.

@@ -141,7 +141,7 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
     tree = kinematic_tree(model, root)
     lab = static if isinstance(static, LabMarkers) else read_markers(static)[0]
     sc = model.scene
-    labels = {m.name: m.label or m.name for m in sc.markers}
+    labels = {m.name: m.lab_label for m in sc.markers}
     absent = tuple(dict.fromkeys(lb for lb in labels.values() if lb not in lab.labels))
     if absent:  # a marker the static trial never recorded: like one it lost, left where it is (reported below)
         lab = dataclasses.replace(lab, labels=lab.labels + absent, xyz=np.concatenate(
@@ -181,7 +181,7 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
     for k, (m, i) in enumerate(zip(sc.markers, tree.marker_nodes, strict=True)):
         if not np.isfinite(ym[k]).all():
             markers.append(m)
-            report.append(f"marker {m.name!r} ({m.label or m.name}): not in the static trial, left where it was")
+            report.append(f"marker {m.name!r} ({m.lab_label}): not in the static trial, left where it was")
             continue
         x_fit, th_fit = q[3 * i:3 * i + 2], q[3 * i + 2]
         x0, th0 = model.q0[3 * i:3 * i + 2], model.q0[3 * i + 2]

@@ -200,7 +200,7 @@ def _scene_markers(model: Model, tree: KinematicTree, lab, plane, keep_frames):
     from casflex.lab import markers_in_plane
     from casflex.lab.checks import check_markers, check_scale
 
-    names = {m.name: m.label or m.name for m in model.scene.markers}
+    names = {m.name: m.lab_label for m in model.scene.markers}
     labels = tuple(names.values())
     with np.errstate(invalid="ignore", over="ignore"):  # absurd samples are check_markers' to name
         xy = np.stack([lab.marker(lb)[keep_frames] for lb in labels], axis=1) @ plane.matrix.T
@@ -271,7 +271,7 @@ def weighted(scene, tasks) -> tuple[object, list[str]]:
     t = tasks if isinstance(tasks, MarkerTasks) else (
         MarkerTasks("tasks", {str(k): float(v) for k, v in tasks.items()}) if isinstance(tasks, dict)
         else read_tasks(tasks))
-    label = {m.name: m.label or m.name for m in scene.markers}
+    label = {m.name: m.lab_label for m in scene.markers}
     markers = tuple(dataclasses.replace(m, weight=t.weights[label[m.name]]) for m in scene.markers
                     if t.weights.get(label[m.name], 0.0) > 0)  # as OpenSim's IK: the trial need not have the others
     notes = []

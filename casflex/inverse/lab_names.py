@@ -1,14 +1,17 @@
 """The loads in the lab's language: along each of the scene's ``[[coordinates]]``
 (:mod:`casflex.scene.coordinates`), named as OpenSim's inverse dynamics names them: ``<coordinate>_moment``
-(N m) for a rotation, ``<coordinate>_force`` (N) for a translation, signed as the coordinate."""
+(N m) for a rotation, ``<coordinate>_force`` (N) for a translation, signed as the coordinate; and the one rule
+for any load's unit (:func:`load_unit`)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["lab_loads", "lab_name"]
+__all__ = ["lab_loads", "lab_name", "load_unit"]
 
 _ROOT = {"x": "root.fx", "y": "root.fy", "theta": "root.mz"}
+#: The endings of a force's name (N); every other load is a moment (N m).
+_FORCES = ("_force", ".fx", ".fy", ".f_along", ".f_across", ".force")
 
 
 def lab_name(coordinate) -> str:
@@ -26,3 +29,9 @@ def lab_loads(scene, loads: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         if key in loads:
             out[lab_name(c)] = c.sign * loads[key]
     return out
+
+
+def load_unit(name: str) -> str:
+    """The unit of a load called ``name``: N for a force (``<coordinate>_force``, ``<hinge>.fx`` ..., ``root.fx``),
+    else N m."""
+    return "N" if name.endswith(_FORCES) else "N m"

@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from casflex.inverse.lab_names import load_unit
+from casflex.lab.tables import write_sto
 from casflex.results import atomic_write_bytes, atomic_write_text
 
 __all__ = ["InverseResult"]
@@ -65,8 +67,8 @@ class InverseResult:
         lines = [*self.report, f"{self.t.size} instants, t = {self.t[0]:g}..{self.t[-1]:g} s"]
         for name in (*self.settings.get("moments", ()), "root.fx", "root.fy", "root.mz"):
             v = self.loads[name]
-            unit = "N" if name.endswith(("fx", "fy")) else "N m"
-            lines.append(f"  {name:24s} {v.min():10.2f} .. {v.max():10.2f} {unit}  (RMS {np.sqrt(np.mean(v**2)):.2f})")
+            lines.append(f"  {name:24s} {v.min():10.2f} .. {v.max():10.2f} {load_unit(name)}  "
+                         f"(RMS {np.sqrt(np.mean(v**2)):.2f})")
         return "\n".join(lines + self._band_lines())
 
     def _band_lines(self) -> list[str]:
@@ -93,7 +95,7 @@ class InverseResult:
         names = sorted(self.loads)
         if (fmt or path.suffix.lstrip(".").lower()) == "sto":
             trial = self.settings.get("source") or "a trial"
-            return atomic_write_text(path, self._sto(f"casflex inverse dynamics of {trial}"))
+            return self._sto(path, f"casflex inverse dynamics of {trial}")
         if (fmt or path.suffix.lstrip(".").lower()) == "csv":
             cols = ["t [s]"] + [f"{c} [{'rad' if c.endswith(('.theta', '.angle')) else 'm'}]"
                                 for c in self.coordinate_names] + names
@@ -120,20 +122,13 @@ class InverseResult:
         np.savez_compressed(buf, **arrays)
         return atomic_write_bytes(path, buf.getvalue())
 
-    def _sto(self, title: str) -> str:
-        """The loads as an OpenSim .sto table (:meth:`save`)."""
+    def _sto(self, path: Path, title: str) -> Path:
+        """The loads as an OpenSim .sto table (:meth:`save`, :func:`casflex.lab.tables.write_sto`)."""
         lab = [n for n in self.loads if n.endswith(("_moment", "_force"))]
         names = lab or sorted(self.loads)
         bands = self._band_columns(names)
-        unit = {n: _unit(n) for n in names} | {c: _unit(c.rsplit("_sd", 1)[0]) for c in bands}
-        header = [title, "version=1", f"nRows={self.t.size}", f"nColumns={len(names) + len(bands) + 1}",
-                  "inDegrees=no", "Units are S.I. units (second, meters, Newtons, ...)",
-                  "units: time s; " + "; ".join(f"{n} {unit[n]}" for n in [*names, *bands]),
-                  "endheader", "\t".join(["time", *names, *bands])]
-        buf = io.StringIO()
-        np.savetxt(buf, np.column_stack([self.t, *(self.loads[n] for n in names), *bands.values()]), delimiter="\t",
-                   fmt="%.10g")
-        return "\n".join(header) + "\n" + buf.getvalue()
+        unit = {n: load_unit(n) for n in names} | {c: load_unit(c.rsplit("_sd", 1)[0]) for c in bands}
+        return write_sto(path, self.t, {**{n: self.loads[n] for n in names}, **bands}, title=title, units=unit)
 
     def _band_columns(self, names: list[str]) -> dict[str, np.ndarray]:
         """The bands as columns (none when not asked): ``<load>_sd`` (the total), ``<load>_sd_anthropometry`` and
@@ -143,10 +138,3 @@ class InverseResult:
             for part, suffix in (("total", ""), ("anthropometry", "_anthropometry"), ("markers", "_markers")):
                 out[f"{n}_sd{suffix}"] = self.bands[n][part]
         return out
-
-
-def _unit(name: str) -> str:
-    """The unit of a load called ``name`` (N or N m)."""
-    if name.endswith("_force") or name.endswith((".fx", ".fy", ".f_along", ".f_across", ".force")):
-        return "N"
-    return "N m"

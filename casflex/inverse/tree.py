@@ -185,7 +185,7 @@ def _forward(tree: KinematicTree) -> ca.Function:
             thb = tha + (q0[i, 2] - q0[a, 2]) + z[k]
             pa = xa + _rot(tha, ra)
             if j.coupled:  # the point on a rolls with the angle (casflex.elements.joints)
-                pa = pa + _rot(tha - q0[a, 2], shift(coupled_splines(coupled_kind(j.shift_x, j.shift_y)), z[k]))
+                pa = pa + _rot(tha - q0[a, 2], shift(coupled_splines(coupled_kind(j.shift_splines())), z[k]))
             pose[i] = (pa - _rot(thb, rb), thb)
         x_e, th_e = pose[i]
         turn = th_e - q0[i, 2]

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from casflex.data import MeasurementSet
 from casflex.lab.c3d import read_c3d
 from casflex.lab.tables import LabMarkers, read_trc
 
@@ -58,11 +59,9 @@ class Plane:
         return ("+" if n[k] > 0 else "-") + "XYZ"[k]
 
 
-def markers_in_plane(lab: LabMarkers, labels: dict[str, str], plane: Plane):
+def markers_in_plane(lab: LabMarkers, labels: dict[str, str], plane: Plane) -> MeasurementSet:
     """A MeasurementSet of channels x<marker>, y<marker> (m) for the scene markers ``labels`` maps to
     their lab labels, projected on ``plane``; NaN where the lab marker is missing."""
-    from casflex.data import MeasurementSet
-
     P = plane.matrix
     channels, cols = [], []
     for name, label in labels.items():
@@ -73,7 +72,7 @@ def markers_in_plane(lab: LabMarkers, labels: dict[str, str], plane: Plane):
                           meta={"plane": f"{plane.x},{plane.y}", "view": plane.view, "labels": dict(labels)})
 
 
-def trial_markers(model, path: str | os.PathLike[str], plane: Plane | str = "X,Y"):
+def trial_markers(model, path: str | os.PathLike[str], plane: Plane | str = "X,Y") -> MeasurementSet:
     """The scene's markers (each by its ``label``, or its name) in the TRC or C3D file ``path``, projected on
     ``plane``: a MeasurementSet for identification (module docstring). ValueError naming a label the
     trial lacks, a scene without markers, or a marker no body moves so (:func:`casflex.lab.checks.check_markers`)."""
@@ -84,6 +83,6 @@ def trial_markers(model, path: str | os.PathLike[str], plane: Plane | str = "X,Y
 
     plane = Plane.parse(plane) if isinstance(plane, str) else plane
     lab = read_c3d(path, plates=False)[0] if os.fspath(path).lower().endswith(".c3d") else read_trc(path)
-    labels = {m.name: m.label or m.name for m in markers}
+    labels = {m.name: m.lab_label for m in markers}
     check_markers(lab, tuple(labels.values()))
     return markers_in_plane(lab, labels, plane)

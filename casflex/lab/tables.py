@@ -6,7 +6,7 @@
   for a dropped marker: a real marker at the lab's origin to 1e-6 mm is implausible) is NaN.
 - :func:`read_sto`: a .mot / .sto table (header up to ``endheader``, then named columns), with
   the header's ``inDegrees`` kept as it says (nothing is converted: the caller knows which columns
-  are angles).
+  are angles); :func:`write_sto` writes one that :func:`read_sto` (and OpenSim) reads.
 
 Every malformed file gives one ValueError line naming the file and what is wrong: missing or
 unknown units, a DataRate that is no rate, duplicated labels, rows of the wrong length, times that do not
@@ -20,11 +20,14 @@ import os
 import stat
 from array import array
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
-__all__ = ["LabMarkers", "LabTable", "UNITS", "read_trc", "read_sto", "increasing_times", "FileSpan", "trc_span",
-           "sto_span"]
+from casflex.results import atomic_write_text
+
+__all__ = ["LabMarkers", "LabTable", "UNITS", "read_trc", "read_sto", "write_sto", "increasing_times", "FileSpan",
+           "trc_span", "sto_span"]
 
 #: Length units of TRC headers, in metres.
 UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
@@ -281,3 +284,19 @@ def read_sto(path: str | os.PathLike[str]) -> LabTable:
         raise ValueError(f"{where}: header inDegrees={deg!r}; expected yes or no (true or false)")
     in_degrees = None if deg is None else _DEGREES[deg.lower()]
     return LabTable(increasing_times(data[:, 0], where), tuple(names[1:]), data[:, 1:], in_degrees, header, where)
+
+
+def write_sto(path: str | os.PathLike[str], t: np.ndarray, columns: dict[str, np.ndarray], *, title: str,
+              units: dict[str, str]) -> Path:
+    """Write OpenSim's .sto table atomically: a header (``title``, the size, ``inDegrees=no``, each column's unit
+    from ``units`` listed once), then time (s) and ``columns`` (name -> (k,) values, in SI), tab-separated, in
+    :func:`read_sto`'s form. Returns the path."""
+    import io
+
+    names = list(columns)
+    header = [title, "version=1", f"nRows={np.size(t)}", f"nColumns={len(names) + 1}", "inDegrees=no",
+              "Units are S.I. units (second, meters, Newtons, ...)",
+              "units: time s; " + "; ".join(f"{n} {units[n]}" for n in names), "endheader", "\t".join(["time", *names])]
+    buf = io.StringIO()
+    np.savetxt(buf, np.column_stack([t, *columns.values()]), delimiter="\t", fmt="%.10g")
+    return atomic_write_text(path, "\n".join(header) + "\n" + buf.getvalue())

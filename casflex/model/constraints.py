@@ -120,7 +120,7 @@ def joint_groups(scene: Scene, nodes: dict[str, tuple[float, ...]], idx: dict[st
     for jt in scene.joints:
         kind = joint_kind(jt.kind, len(jt.nodes) == 1)
         if jt.coupled:
-            kind = coupled_kind(jt.shift_x, jt.shift_y)
+            kind = coupled_kind(jt.shift_splines())
         if kind == "drive":  # theta_c0 in ax's slot (casflex.elements.joints)
             a, b, c = (nodes[nd] for nd in jt.nodes)
             props = [c[2], 0.0, 0.0, 0.0, a[2], b[2], 1.0, 0.0]

@@ -210,6 +210,18 @@ class Model:
         except ValueError:
             raise KeyError(f"unknown dof {name!r}; dofs are {list(self.dof_names)}") from None
 
+    def data_columns(self, channels: tuple[str, ...]) -> np.ndarray:
+        """Column of each dof in a recording's ``channels`` (-1 where the dof is not measured). Channels of the
+        scene's markers (``x<marker>``, ``y<marker>``) are known channels, but no dof's; ValueError for others."""
+        from casflex.model.markers import marker_channels
+
+        markers = marker_channels(self)
+        unknown = [c for c in channels if c not in self.dof_names and c not in markers]
+        if unknown:
+            raise ValueError(f"data: unknown channels {unknown}; the model's dofs are {list(self.dof_names)}"
+                             + (f", its markers' channels {list(markers)}" if markers else ""))
+        return np.array([channels.index(d) if d in channels else -1 for d in self.dof_names])
+
     def params(self, values: dict[str, float] | np.ndarray | None = None) -> np.ndarray:
         """Parameter vector p from a {name: value} dict (others nominal), an array, or None."""
         if values is None:

@@ -1,7 +1,7 @@
 """The functions of one coordinate that OpenSim models use in their joints (a knee's translation as a
 spline of the knee angle): constant, linear, polynomial, SIMM's cubic spline and a multiplier of one of
-these. Numbers only; :meth:`Function.__call__` takes floats or numpy arrays (and CasADi expressions, for
-the symbolic model's coupled joints).
+these. Numbers only; :meth:`Function.__call__` takes floats or numpy arrays. The symbolic model's coupled
+joints evaluate a spline's knots and coefficients as CasADi expressions in :mod:`casflex.elements.joints`.
 
 ``SimmSpline`` is the cubic spline of Forsythe, Malcolm and Moler (Computer Methods for Mathematical
 Computations, 1977, ``spline``/``seval``) that OpenSim's ``SimmSpline`` computes: end conditions that
@@ -20,7 +20,7 @@ __all__ = ["Function", "Constant", "Linear", "Polynomial", "SimmSpline", "Multip
 
 
 class Function:
-    """f(x) of one coordinate (x a float, an array or a CasADi expression)."""
+    """f(x) of one coordinate (x a float or an array)."""
 
     def __call__(self, x):
         raise NotImplementedError
@@ -146,8 +146,6 @@ class SimmSpline(Function):
     def __call__(self, x):
         b, c, d = self._coefficients
         xk, yk = np.asarray(self.x, dtype=float), np.asarray(self.y, dtype=float)
-        if not isinstance(x, (float, int, np.ndarray, np.generic)):
-            return self._symbolic(x, b, c, d)
         xa = np.asarray(x, dtype=float)
         k = np.clip(np.searchsorted(xk, xa, side="right") - 1, 0, xk.size - 2)
         s = xa - xk[k]
@@ -156,17 +154,6 @@ class SimmSpline(Function):
         above = yk[-1] + (xa - xk[-1]) * b[-1]
         out = np.where(xa < xk[0], below, np.where(xa > xk[-1], above, inside))
         return float(out) if np.ndim(out) == 0 else out
-
-    def _symbolic(self, x, b, c, d):
-        """The spline of a CasADi expression: a chain of if_else over the knots."""
-        import casadi as ca
-
-        xk, yk = np.asarray(self.x, dtype=float), np.asarray(self.y, dtype=float)
-        out = yk[-1] + (x - xk[-1]) * b[-1]
-        for k in range(xk.size - 2, -1, -1):
-            s = x - xk[k]
-            out = ca.if_else(x < xk[k + 1], yk[k] + s * (b[k] + s * (c[k] + s * d[k])), out)
-        return ca.if_else(x < xk[0], yk[0] + (x - xk[0]) * b[0], out)
 
     def is_constant(self) -> bool:
         return bool(np.ptp(np.asarray(self.y, dtype=float)) == 0.0)

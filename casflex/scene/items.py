@@ -317,6 +317,14 @@ class Joint:
         """Whether the hinge's point moves with its angle (``shift_x`` or ``shift_y``)."""
         return self.shift_x is not None or self.shift_y is not None
 
+    def shift_splines(self) -> tuple:
+        """(s_x, s_y): the SIMM splines (:class:`casflex.scene.functions.SimmSpline`) through the knots of
+        ``shift_x`` and ``shift_y``, each None where the table is."""
+        from casflex.scene.functions import SimmSpline
+
+        return tuple(None if t is None else SimmSpline(tuple(r[0] for r in t), tuple(r[1] for r in t))
+                     for t in (self.shift_x, self.shift_y))
+
     def __post_init__(self) -> None:
         where = _owner("joint", self.name)
         object.__setattr__(self, "name", _name(where, "name", self.name))

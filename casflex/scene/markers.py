@@ -38,6 +38,11 @@ class Marker:
         if self.label is not None and (not isinstance(self.label, str) or not self.label.strip()):
             raise SceneError.at(where, "label", f"expected the lab's marker label (a string), got {self.label!r}")
 
+    @property
+    def lab_label(self) -> str:
+        """The lab's label of the marker this one stands for in a trial: ``label``, or else the name."""
+        return self.label or self.name
+
 
 def check_markers(scene) -> None:
     """SceneError for a marker on nothing known, a name clashing with a node's or another

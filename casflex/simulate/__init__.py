@@ -1,6 +1,13 @@
-"""The forward simulation: ``simulate(model, t_end, ...) -> Trajectory`` by HHT-alpha (:mod:`casflex.simulate.run`),
+"""The forward simulation: ``simulate(model, t_end, ...) -> Trajectory`` by HHT-alpha (:mod:`casflex.simulate.run`;
+``simulated_set``: a run as a :class:`~casflex.data.MeasurementSet`),
 run here (interpreted or compiled) or exported as standalone C with an example program
-(:mod:`casflex.simulate.export`, ``casflex export``)."""
+(:mod:`casflex.simulate.export`, ``casflex export``).
+
+The package is also the verb: ``casflex.simulate(model, t_end, ...)`` calls :func:`simulate`.
+"""
+
+import sys
+import types
 
 from casflex.simulate.run import (
     CHUNK,
@@ -13,8 +20,20 @@ from casflex.simulate.run import (
     integrator_for,
     memory_available,
     simulate,
+    simulated_set,
     step_count,
 )
 
-__all__ = ["simulate", "SimulationError", "integrator_for", "step_count", "check_memory", "CHUNK", "ENERGY_GROWTH",
-           "compiled_library", "initial_state", "memory_available", "format_bytes"]
+__all__ = ["simulate", "simulated_set", "SimulationError", "integrator_for", "step_count", "check_memory", "CHUNK",
+           "ENERGY_GROWTH", "compiled_library", "initial_state", "memory_available", "format_bytes"]
+
+
+class _Verb(types.ModuleType):
+    """This package, callable as :func:`simulate` (``casflex.simulate(model, t_end)``): the name ``casflex.simulate``
+    is bound to the package as soon as anything imports it, so the verb is the package."""
+
+    def __call__(self, *args, **kwargs):
+        return simulate(*args, **kwargs)
+
+
+sys.modules[__name__].__class__ = _Verb

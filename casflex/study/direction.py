@@ -57,8 +57,8 @@ def travel_labels(scene, lab: LabMarkers, root: str | None = None) -> list[str]:
     the trial has none of them."""
     root = root or scene.nodes[0].name
     on_root = {b.name for b in scene.bodies if b.node == root}
-    everyone = [m.label or m.name for m in scene.markers]
-    mine = [m.label or m.name for m in scene.markers if m.on in on_root]
+    everyone = [m.lab_label for m in scene.markers]
+    mine = [m.lab_label for m in scene.markers if m.on in on_root]
     seen = [lb for lb in (mine or everyone) if lb in lab.labels]
     if mine and not seen:
         raise ValueError(f"{lab.source}: none of the root segment {root}'s markers ({', '.join(mine)}) is in the "
@@ -104,11 +104,11 @@ def facing_plane(scene, lab: LabMarkers, vertical: str) -> tuple[str, str]:
     mean over its frames) lie as the scene's lie along its x (the largest slope of their lab coordinate on the
     scene's x: the subject's toes ahead of its heels, its pelvis's front ahead of its back, whatever its size;
     refused where their correlation is below :data:`MIN_CORRELATION`; module docstring)."""
-    markers = [m for m in scene.markers if (m.label or m.name) in lab.labels]
+    markers = [m for m in scene.markers if m.lab_label in lab.labels]
     x0 = np.array([m.x for m in markers])
     with warnings.catch_warnings():  # a marker never seen: its mean NaN, left out below
         warnings.simplefilter("ignore", RuntimeWarning)
-        mean = np.array([np.nanmean(lab.marker(m.label or m.name), axis=0) for m in markers]).reshape(-1, 3)
+        mean = np.array([np.nanmean(lab.marker(m.lab_label), axis=0) for m in markers]).reshape(-1, 3)
     seen = np.isfinite(mean).all(axis=1)
     if seen.sum() < 3:
         raise ValueError(f"{lab.source}: fewer than 3 of the scene's markers seen: cannot tell which way the "
@@ -140,14 +140,14 @@ def fitted_plane(scene, lab: LabMarkers, vertical: str, root: str | None = None,
     from casflex.inverse.tree import kinematic_tree
 
     tree = kinematic_tree(inverse_model(scene, root), root)
-    labels = {m.name: m.label or m.name for m in tree.model.scene.markers if (m.label or m.name) in lab.labels}
+    labels = {m.name: m.lab_label for m in tree.model.scene.markers if m.lab_label in lab.labels}
     seen = np.flatnonzero(np.isfinite(np.stack([lab.marker(lb) for lb in labels.values()], axis=1)).all(axis=2)
                           .sum(axis=1) >= max(1, len(labels) // 2))
     if not seen.size:
         raise ValueError(f"{lab.source}: no frame with half the scene's markers seen: give the plane")
     pick = seen[np.linspace(0, seen.size - 1, min(frames, seen.size)).round().astype(int)]
     nan = np.full((pick.size, 3), np.nan)
-    X = np.stack([lab.marker(m.label or m.name)[pick] if (m.label or m.name) in lab.labels else nan
+    X = np.stack([lab.marker(m.lab_label)[pick] if m.lab_label in lab.labels else nan
                   for m in tree.model.scene.markers], axis=1)  # (frames, the scene's markers, 3), NaN: not in it
     misfit = {}
     for k in _horizontal(vertical):

@@ -131,7 +131,7 @@ def feet(scene) -> dict[str, tuple[str, ...]]:
     on = {b.name: b.node for b in scene.bodies} | {b.name: max(b.nodes, key=order.index) for b in scene.beams}
     carry: dict[str, list[str]] = {}
     for m in scene.markers:
-        carry.setdefault(on[m.on], []).append(m.label or m.name)
+        carry.setdefault(on[m.on], []).append(m.lab_label)
     beyond = set()
     for n in carry:
         while (n := parent[n]) is not None:

@@ -337,8 +337,10 @@ def run_study(study: Study, record: str | Path, *, scheduler: str | None = None,
 
 
 def unit_of(load: str, per_kg: bool = False) -> str:
-    """A load's unit: N for a force (``<coordinate>_force``, ``.fx``, ``.fy``), else N m; per kg where asked."""
-    return ("N" if load.endswith(("_force", ".fx", ".fy")) else "N m") + ("/kg" if per_kg else "")
+    """A load's unit (:func:`casflex.inverse.lab_names.load_unit`: N for a force, else N m); per kg where asked."""
+    from casflex.inverse.lab_names import load_unit
+
+    return load_unit(load) + ("/kg" if per_kg else "")
 
 
 def per_kg(out: dict, study: Study) -> dict:

@@ -403,9 +403,10 @@ def _setup(scene: str, t_end: float, noise: float, seed: int | None, data: str, 
     the measured set (central differences, from the second sample); the indirect method the noisy
     positions from the first, the scene's initial state (the measured set's first sample, one step
     into the motion, would start the model one step behind the data)."""
-    from casflex.data import MeasurementSet, measured_set, simulated_set
+    from casflex.data import MeasurementSet, measured_set
     from casflex.model import assemble
     from casflex.scene.io import load_scene
+    from casflex.simulate import simulated_set
 
     model = assemble(load_scene(scene))
     sim = simulated_set(model, t_end=t_end)
