@@ -294,9 +294,9 @@ def _identify(model: Model, sets: list[MeasurementSet], args: argparse.Namespace
 def _multistart(sets: list[MeasurementSet], args: argparse.Namespace, start: float | np.ndarray,
                 dofs: list[str] | None) -> IdentificationResult:
     """--starts N: the given start and N - 1 drawn within a factor 3 of it (seeded by --seed), run on 2
-    worker processes (:func:`casflex.identification.multistart.multistart`); the best successful start is
+    worker processes (:func:`casflex.study.multistart.multistart`); the best successful start is
     fitted again for the full result, which lists every start."""
-    from casflex.identification.multistart import WORKERS, EveryStartFailed, multistart
+    from casflex.study.multistart import WORKERS, EveryStartFailed, multistart
     from casflex.study.sweep import max_workers
 
     workers = min(WORKERS, args.starts, max_workers()[0])  # a one-core machine runs one

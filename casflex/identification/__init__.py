@@ -14,14 +14,14 @@ _EXPORTS = {
     "identify_adapted_direct": "adapted", "identify_direct": "direct", "identify_indirect": "indirect",
     "Experiment": "measurement", "Budget": "options", "ParameterMap": "problem",
     "Shooting": "options", "ModelRun": "options", "Solver": "options", "Uncertainty": "options",
-    "Smoothing": "options", "multistart": "multistart",
+    "Smoothing": "options",
     "IdentificationResult": "result",
     "INITIAL_STATES": "choices", "MODEL_ERRORS": "choices", "RESIDUES": "choices", "TRANSCRIPTIONS": "choices",
     "HESSIANS": "choices", "TRANSFORMS": "choices", "FORMS": "choices", "output_band": "bands",
 }
 
 __all__ = ["identify_direct", "identify_adapted_direct", "identify_indirect", "IdentificationResult", "ParameterMap",
-           "Experiment", "Budget", "Shooting", "ModelRun", "Solver", "Uncertainty", "Smoothing", "multistart",
+           "Experiment", "Budget", "Shooting", "ModelRun", "Solver", "Uncertainty", "Smoothing",
            "method_function", "RESIDUES", "TRANSCRIPTIONS", "TRANSFORMS", "HESSIANS", "INITIAL_STATES",
            "MODEL_ERRORS", "FORMS", "output_band"]
 

@@ -1,4 +1,4 @@
-"""Multi-start in the library (casflex.identification.multistart): every start a sweep run in a worker
+"""Multi-start in the library (casflex.study.multistart): every start a sweep run in a worker
 process, the best one fitted again, every start's record in the result."""
 
 from __future__ import annotations
@@ -9,9 +9,13 @@ import pytest
 pytest.importorskip("distributed")
 
 import casflex  # noqa: E402
-from casflex.data import simulated_set  # noqa: E402
-from casflex.identification import Solver, multistart  # noqa: E402
-from casflex.identification.multistart import EveryStartFailed, draw_starts  # noqa: E402
+from casflex.identification import Solver  # noqa: E402
+from casflex.simulate import simulated_set  # noqa: E402
+from casflex.study.multistart import (  # noqa: E402
+    EveryStartFailed,
+    draw_starts,
+    multistart,  # noqa: E402
+)
 
 
 def test_the_starts_run_in_workers_and_the_best_is_fitted_again():
