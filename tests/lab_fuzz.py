@@ -232,3 +232,35 @@ def _worker() -> None:
 
 if __name__ == "__main__":
     _worker()
+
+
+def judge(cases: list[dict], results: list[dict], *, option_ok: bool = False) -> tuple[list[str], int, int]:
+    """(problems, accepted, refused) of the fuzz ``results`` (:func:`run_all`) of ``cases``: a traceback, exit 0 with
+    a non-finite answer or an error line, a refusal (exit 2) other than one ``casflex: error:`` line naming the case's
+    file (or one of its ``also``, or an option where ``option_ok``), a refusal that left something in the case's
+    output ``folder`` (its ``api`` cases excepted), any other exit status."""
+    by_name = {c["name"]: c for c in cases}
+    problems, accepted, refused = [], 0, 0
+    for r in results:
+        case = by_name[r["case"]]
+        if r["code"] is None:
+            problems.append(f"{r['case']}: traceback\n{r['traceback']}")
+            continue
+        errors = [ln for ln in r["stderr"] if not ln.startswith("casflex: warning: ")]
+        if r["code"] == 0:
+            accepted += 1
+            if r["finite"] is not True or errors:
+                problems.append(f"{r['case']}: exit 0 with finite={r['finite']}, stderr {errors}")
+        elif r["code"] == 2:
+            refused += 1
+            if len(errors) != 1 or not errors[0].startswith("casflex: error: "):
+                problems.append(f"{r['case']}: refused without one error line: {errors}")
+            elif not (any(f in errors[0] for f in (case["file"], *case.get("also", ())))
+                      or (option_ok and "--" in errors[0])):
+                problems.append(f"{r['case']}: the refusal names neither the file nor an option: {errors[0]}")
+            left = sorted(os.listdir(case["folder"])) if case.get("folder") and not case.get("api") else []
+            if left:
+                problems.append(f"{r['case']}: refused, but left {left} in the output folder")
+        else:
+            problems.append(f"{r['case']}: exit {r['code']}: {errors}")
+    return problems, accepted, refused

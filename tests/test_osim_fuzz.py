@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-from lab_fuzz import run_all  # noqa: E402
+from lab_fuzz import judge, run_all  # noqa: E402
 from osim_fuzz import corrupt_osim  # noqa: E402
 
 LAB = Path(__file__).parent / "data" / "lab"
@@ -82,29 +82,7 @@ def test_corrupted_models_are_refused_in_one_line_or_read_finite(tmp_path):
     cases = _cases(tmp_path)
     results = run_all(cases, HANG, pytest.fail)
     assert len(results) == len(cases)
-    by_name = {c["name"]: c for c in cases}
-    problems, accepted, refused = [], 0, 0
-    for r in results:
-        case = by_name[r["case"]]
-        if r["code"] is None:
-            problems.append(f"{r['case']}: traceback\n{r['traceback']}")
-            continue
-        errors = [ln for ln in r["stderr"] if not ln.startswith("casflex: warning: ")]
-        if r["code"] == 0:
-            accepted += 1
-            if r["finite"] is not True or errors:
-                problems.append(f"{r['case']}: exit 0 with finite={r['finite']}, stderr {errors}")
-        elif r["code"] == 2:
-            refused += 1
-            if len(errors) != 1 or not errors[0].startswith("casflex: error: ") or "\n" in errors[0]:
-                problems.append(f"{r['case']}: refused without one error line: {errors}")
-            elif not any(f in errors[0] for f in (case["file"], *case.get("also", ()))):
-                problems.append(f"{r['case']}: the refusal does not name the file: {errors[0]}")
-            left = sorted(os.listdir(case["folder"]))
-            if left and not case.get("api"):
-                problems.append(f"{r['case']}: refused, but left {left} in the output folder")
-        else:
-            problems.append(f"{r['case']}: exit {r['code']}: {errors}")
+    problems, accepted, refused = judge(cases, results)
     assert not problems, "\n".join(problems)
     # the faults are not all fatal (a changed comment-like field, a duplicated number the reader skips): some
     # copies are read, most refused

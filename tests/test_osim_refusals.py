@@ -54,6 +54,12 @@ def _coordinate(name: str, *changes: str) -> str:
     return TEXT[:a] + block + TEXT[b:]
 
 
+def _inverse(path: Path, *extra: str) -> list[str]:
+    """``casflex inverse`` of the model ``path`` on the stride, the right foot on its plate, quiet."""
+    return ["inverse", str(path), "--data", str(TRC), "--loads", str(GRF), "--plate", "calcn_r=ground_", "--quiet",
+            *extra]
+
+
 def _run(argv: list[str], capsys) -> tuple[int, str, str]:
     code = main(argv)
     out, err = capsys.readouterr()
@@ -68,22 +74,7 @@ def test_a_second_body_of_the_same_name_is_refused_not_taken_for_the_first(tmp_p
     )
     path = _model(tmp_path, TEXT.replace('<Body name="tibia_r">', heavy + '<Body name="tibia_r">', 1))
     out = tmp_path / "id.sto"
-    code, _, err = _run(
-        [
-            "inverse",
-            str(path),
-            "--data",
-            str(TRC),
-            "--loads",
-            str(GRF),
-            "--plate",
-            "calcn_r=ground_",
-            "--quiet",
-            "--out",
-            str(out),
-        ],
-        capsys,
-    )
+    code, _, err = _run(_inverse(path, "--out", str(out)), capsys)
     assert (
         code == 2
         and err
@@ -332,24 +323,7 @@ def test_a_constraint_the_scene_leaves_out_is_said_by_inverse_and_import(tmp_pat
         "relative to each other already",
     ]
     assert list(scene_from_osim(path).warnings) == said
-    code, _, err = _run(
-        [
-            "inverse",
-            str(path),
-            "--data",
-            str(TRC),
-            "--loads",
-            str(GRF),
-            "--plate",
-            "calcn_r=ground_",
-            "--t-end",
-            "0.6",
-            "--quiet",
-            "--out",
-            str(tmp_path / "id.sto"),
-        ],
-        capsys,
-    )
+    code, _, err = _run(_inverse(path, "--t-end", "0.6", "--out", str(tmp_path / "id.sto")), capsys)
     assert code == 0 and [f"casflex: warning: {s}" for s in said] == [
         ln for ln in err.splitlines() if "constraint" in ln
     ]
