@@ -444,3 +444,4 @@ def test_a_trial_file_s_span_is_read_from_its_header_and_its_ends():
     assert (c3d.t0, c3d.rate) == (markers.t[0], markers.rate)
     assert analog == 2000.0 and 1.0 / (plates.t[1] - plates.t[0]) == pytest.approx(analog, rel=1e-9)
     assert c3d.t1 == pytest.approx(markers.t[-1], abs=1e-12)  # (last - 1) / rate, computed the same way
+    assert c3d.names == tuple(plates.names)  # its plates' columns, from FORCE_PLATFORM:USED (2 plates)

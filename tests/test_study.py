@@ -405,3 +405,18 @@ def test_a_subject_model_s_constraint_the_scene_leaves_out_is_in_the_subject_s_r
                         mass=None)
     assert out["report"] == [f"warning: {model}: constraint WeldConstraint 'w' ignored: the planar scene holds "
                              "'calcn_r' and 'toes_r' fixed relative to each other already"]
+
+
+def test_a_c3d_trial_s_plate_prefix_is_checked_before_any_work(tmp_path, capsys):
+    # a C3D's plates are in its parameter section, read before any work as a .mot's columns are (it failed the trial
+    # at run time)
+    for f in ("walking2_excerpt.c3d", "hamner_subject02_planar.osim"):
+        shutil.copy(LAB / f, tmp_path / f)
+    path = tmp_path / "study.toml"
+    path.write_text('name = "c3d"\n[options]\nplane = "X,Y"\n\n[[subjects]]\nname = "s"\n'
+                    'model = "hamner_subject02_planar.osim"\n\n[[subjects.trials]]\nname = "walk"\n'
+                    'markers = "walking2_excerpt.c3d"\ngrf = "walking2_excerpt.c3d"\n'
+                    'plates = { calcn_r = "2_ground_" }\n')
+    with pytest.raises(StudyError, match=r"subjects\[0\]\.trials\[0\]\.plates\.calcn_r: walking2_excerpt.c3d: no "
+                                         r"plate '2_ground_'.*the plates there are \['1_ground_', 'ground_'\]"):
+        load_study(str(path))

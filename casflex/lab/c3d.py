@@ -99,8 +99,9 @@ def _check_structure(where: str, raw: bytes | mmap.mmap) -> int:
 
 def c3d_span(path: str | os.PathLike[str]) -> tuple[FileSpan, float]:
     """(the markers' :class:`~casflex.lab.tables.FileSpan`, the analog rate Hz: the plates', NaN without analog
-    channels) from the C3D header alone (its first 512 bytes and the parameter section's processor type), without
-    ezc3d: t0 = (first - 1) / rate, t1 = (last - 1) / rate (:func:`read_c3d`'s times); ``names`` empty.
+    channels) from the C3D header and parameter section alone, without ezc3d: t0 = (first - 1) / rate, t1 =
+    (last - 1) / rate (:func:`read_c3d`'s times); ``names`` the plates' columns as :func:`read_c3d` names them
+    (``FORCE_PLATFORM:USED`` plates; empty where the section cannot tell).
     ValueError in one line where the header is not a C3D's (:func:`read_c3d` says more)."""
     import struct
 
@@ -110,32 +111,53 @@ def c3d_span(path: str | os.PathLike[str]) -> tuple[FileSpan, float]:
     try:
         with open(path, "rb") as f:
             head = f.read(512)
-            f.seek(max(0, 512 * (head[0] - 1) + 3) if head else 0)
-            proc = f.read(1)
+            f.seek(max(0, 512 * (head[0] - 1)) if head else 0)
+            section = f.read(4)
+            section += f.read(max(512 * section[2] - 4, 0)) if len(section) == 4 else b""
     except OSError as exc:
         raise ValueError(f"{where}: cannot read ({exc.strerror})") from None
+    proc = section[3:4]
     if len(head) < 512 or head[1] != 0x50 or len(proc) != 1 or proc[0] not in (84, 85):
         raise ValueError(f"{where}: not a C3D file ezc3d reads (its header's key, or its processor type)")
+    try:  # the plates' count; a section its own header sizes wrongly is read_c3d's to judge (None: not known)
+        used = max(_walk_parameters(where, section, 4).get("FORCE_PLATFORM:USED", 0), 0)
+    except ValueError:
+        used = None
     first, last, per_frame = (int.from_bytes(head[i:i + 2], "little") for i in (6, 8, 18))
     raw = head[20:24] if proc[0] == 84 else head[22:24] + head[20:22]  # DEC: the words swapped, the exponent +2
     rate = struct.unpack("<f", raw)[0] / (1.0 if proc[0] == 84 else 4.0)
     if not (math.isfinite(rate) and rate > 0):
         raise ValueError(f"{where}: its header's frame rate {rate!r} is not a rate > 0")
     analog = rate * per_frame if per_frame else math.nan
-    return FileSpan((first - 1) / rate, (max(last, first) - 1) / rate, rate, ()), analog
+    names = () if used is None else plate_names(used)
+    return FileSpan((first - 1) / rate, (max(last, first) - 1) / rate, rate, names), analog
 
 
-def _walk_parameters(where: str, raw: bytes | mmap.mmap, pos: int) -> None:
+def plate_names(count: int) -> tuple[str, ...]:
+    """The columns :func:`read_c3d` names for ``count`` plates (the first's prefix ``ground_``, then ``1_ground_``,
+    ...)."""
+    return tuple(f"{'ground_' if i == 0 else f'{i}_ground_'}{kind}{a}" for i in range(count)
+                 for kind in ("force_v", "force_p", "torque_", "moment_") for a in "xyz")
+
+
+def _walk_parameters(where: str, raw: bytes | mmap.mmap, pos: int) -> dict[str, int]:
+    """Walk the parameter section from byte ``pos`` as ezc3d does, each record ending where the previous one
+    points (ValueError in one line where it does not); returns its integer parameters' first values by
+    ``GROUP:NAME`` (``FORCE_PLATFORM:USED``: the plates)."""
     n = len(raw)
+    groups: dict[int, str] = {}
+    found: list[tuple[int, str, int]] = []
     while True:
         if pos + 2 > n:
             raise ValueError(f"{where}: truncated in its parameter section (byte {pos} of {n})")
         nchar, gid = _int8(raw[pos]), _int8(raw[pos + 1])
         if nchar == 0:
-            return
+            break
         name_end = pos + 2 + abs(nchar)
         name = raw[pos + 2:name_end].decode("ascii", errors="replace")
         end = name_end + 2
+        if gid < 0:
+            groups[-gid] = name.upper()
         if gid > 0:  # a parameter: type (-1 char, 1 byte, 2 int16, 4 float), dimensions, values
             if end + 2 > n:
                 raise ValueError(f"{where}: truncated in its parameter section ({name!r} at byte {pos})")
@@ -143,17 +165,21 @@ def _walk_parameters(where: str, raw: bytes | mmap.mmap, pos: int) -> None:
             if kind not in (-1, 1, 2, 4):
                 raise ValueError(f"{where}: corrupted parameter section: parameter {name!r} at byte {pos} "
                                  f"has the unknown type {kind}")
-            end += 2 + ndims + abs(kind) * math.prod(raw[end + 2:end + 2 + ndims])
+            values = end + 2 + ndims
+            if kind in (1, 2) and values + kind <= n:
+                found.append((gid, name.upper(), int.from_bytes(raw[values:values + kind], "little", signed=True)))
+            end = values + abs(kind) * math.prod(raw[end + 2:end + 2 + ndims])
         end += 1 + (raw[end] if end < n else 0)  # the description
         if end > n:
             raise ValueError(f"{where}: truncated in its parameter section ({name!r} at byte {pos})")
         offset = int.from_bytes(raw[name_end:name_end + 2], "little")
         if offset == 0:
-            return
+            break
         if name_end + offset != end:
             raise ValueError(f"{where}: corrupted parameter section: {name!r} at byte {pos} ends at byte "
                              f"{end} but points to byte {name_end + offset}")
         pos = end
+    return {f"{groups.get(g, g)}:{name}": v for g, name, v in found}
 
 
 #: s: the longest a C3D file's read may take before it is taken for a hang (the excerpt reads in 0.05 s).
@@ -362,8 +388,7 @@ def _plate_columns(pf, where: str, i: int, min_force: float) -> tuple[list[str],
         off = ~(F @ up >= min_force)
     P, T = pf["center_of_pressure"].T * s, pf["Tz"].T * s
     P[off], T[off] = np.nan, np.nan
-    prefix = "ground_" if i == 0 else f"{i}_ground_"
-    names = [f"{prefix}{kind}{a}" for kind in ("force_v", "force_p", "torque_", "moment_") for a in "xyz"]
+    names = list(plate_names(i + 1)[12 * i:])
     axis = int(np.argmax(np.abs(up)))
     return names, [F, P, T, M], ("+" if up[axis] > 0 else "-") + "XYZ"[axis]
 
