@@ -1,4 +1,4 @@
-"""Result records and atomic file output.
+"""Result records and atomic file output; the memory a result or an input may take.
 
 Every file casflex writes goes through :func:`atomic_write_bytes`: the data is written to a
 temporary file in the target directory, flushed, and renamed over the target, so a reader
@@ -18,7 +18,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Trajectory", "atomic_write_bytes", "atomic_write_text", "atomic_write_json", "jsonable", "NPZ_KEYS"]
+__all__ = ["Trajectory", "atomic_write_bytes", "atomic_write_text", "atomic_write_json", "jsonable", "NPZ_KEYS",
+           "memory_available", "format_bytes"]
 
 
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
@@ -192,3 +193,26 @@ class Trajectory:
             success=bool(meta.pop("success")), status=str(meta.pop("status")), message=str(meta.pop("message")),
             meta=meta,
         )
+
+
+def memory_available() -> int | None:
+    """Bytes of memory available to a new allocation (MemAvailable of /proc/meminfo, else the
+    free physical pages), or None where neither can be read."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+def format_bytes(n: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if n < 1024 or unit == "PiB":
+            return f"{n:.3g} {unit}"
+        n /= 1024
+    raise AssertionError("unreachable")

@@ -445,3 +445,18 @@ def test_a_trial_file_s_span_is_read_from_its_header_and_its_ends():
     assert analog == 2000.0 and 1.0 / (plates.t[1] - plates.t[0]) == pytest.approx(analog, rel=1e-9)
     assert c3d.t1 == pytest.approx(markers.t[-1], abs=1e-12)  # (last - 1) / rate, computed the same way
     assert c3d.names == tuple(plates.names)  # its plates' columns, from FORCE_PLATFORM:USED (2 plates)
+
+
+def test_a_table_larger_than_the_memory_can_read_is_refused_before_it_is_read(monkeypatch):
+    # a regular file as large as the memory was read until the memory ran out: its size is checked first
+    import casflex.results
+    from casflex.lab.tables import READ_FACTOR
+
+    path = Path(__file__).resolve().parent / "data" / "lab" / "hamner_running_stride.trc"
+    size = path.stat().st_size
+    monkeypatch.setattr(casflex.results, "memory_available", lambda: READ_FACTOR * size - 1)
+    with pytest.raises(ValueError, match=rf"{path}: 19.7 KiB: reading it needs about 78.7 KiB of memory and "
+                                         r"78.7 KiB are available"):
+        read_trc(path)
+    monkeypatch.setattr(casflex.results, "memory_available", lambda: READ_FACTOR * size)
+    assert read_trc(path).t.size > 0

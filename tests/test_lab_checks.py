@@ -380,10 +380,10 @@ def test_what_the_inputs_decide_is_refused_before_the_marker_fit(extra, match, c
 
 
 def test_a_trial_too_long_for_the_memory_is_refused_before_the_fit(capsys, monkeypatch):
-    import casflex.simulate
+    import casflex.results
 
     _no_fit(monkeypatch)
-    monkeypatch.setattr(casflex.simulate, "memory_available", lambda: 100_000)
+    monkeypatch.setattr(casflex.results, "memory_available", lambda: 100_000)  # the stride's 20 kB read, not its fit
     _refused([*BASE, "--data", TRC], capsys, r"t_start, t_end: 44 frames of \d+ values each need about .* of memory "
              r"and 97.7 KiB are available; take a shorter window")
 

@@ -217,7 +217,8 @@ def _memory(model: Model, tree: KinematicTree, t: np.ndarray, n_markers: int, dt
     """ValueError when the run's result would not fit in the memory available (the bound of
     :data:`BYTES_PER_VALUE`); with flexible segments, also the HHT steps' (``dt`` s, default the scene's:
     :func:`casflex.simulate.check_memory`)."""
-    from casflex.simulate import check_memory, format_bytes, memory_available
+    from casflex.results import format_bytes, memory_available
+    from casflex.simulate import check_memory
 
     n = t.size
     if model.n_con != model.n_dof - tree.n and n > 1:

@@ -99,18 +99,34 @@ def _numbers(cells: list[str], where: str, row: int) -> list[float]:
 #: Characters: a line longer than this is no row of a lab table (a TRC row of 1000 markers is 36 kB): a binary
 #: file, or one with no line ends (a sparse file of zeros), read no further.
 MAX_LINE = 1 << 20
+#: Bytes of memory a table's reading takes per byte of its file, at most (its lines, then its numbers: a 60 MB TRC
+#: peaked at 2.6 x its size; 4 leaves room for the arrays the reader builds from them)
+READ_FACTOR = 4
+
+
+def _fits_in_memory(where: str, size: int) -> None:
+    """ValueError naming the file when reading its ``size`` bytes would take more memory than is available
+    (:data:`READ_FACTOR`): refused before it is read, not read until the memory runs out."""
+    from casflex.results import format_bytes, memory_available
+
+    avail = memory_available()
+    if avail is not None and READ_FACTOR * size > avail:
+        raise ValueError(f"{where}: {format_bytes(size)}: reading it needs about {format_bytes(READ_FACTOR * size)} "
+                         f"of memory and {format_bytes(avail)} are available; cut the trial to the window you need")
 
 
 def _lines(path: str | os.PathLike[str]) -> tuple[str, list[str]]:
     """(the path as text, the file's lines, a UTF-8 byte-order mark dropped); ValueError naming the file when it
     cannot be read, is no regular file (a directory, a device such as /dev/zero behind a link, a pipe: read until
-    memory runs out) or has a line of more than :data:`MAX_LINE` characters."""
+    memory runs out), is too large for the memory available, or has a line of more than :data:`MAX_LINE`
+    characters."""
     where = str(path)
     try:
         mode = os.stat(path).st_mode
         if not stat.S_ISREG(mode):
             kind = "a directory" if stat.S_ISDIR(mode) else "a device or a pipe"
             raise ValueError(f"{where}: not a regular file ({kind}); give the table's file")
+        _fits_in_memory(where, os.stat(path).st_size)
         lines = []
         with open(path, encoding="utf-8-sig", errors="replace", newline=None) as f:
             while line := f.readline(MAX_LINE + 1):

@@ -19,13 +19,11 @@ an unstable integration (``energy_growth``); see :func:`_first_unsound_state`.
 
 from __future__ import annotations
 
-import os
 import sys
 import time
 import warnings
 import weakref
 from collections.abc import Callable
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -36,7 +34,7 @@ from casflex.data import MeasurementSet
 from casflex.integrators.hht import HHT
 from casflex.model import Model, assemble
 from casflex.model.consistent import project_positions, project_velocities
-from casflex.results import Trajectory
+from casflex.results import Trajectory, format_bytes, memory_available
 from casflex.scene import Scene
 
 __all__ = ["simulate", "simulated_set", "SimulationError", "integrator_for", "step_count", "check_memory", "CHUNK",
@@ -96,29 +94,6 @@ def step_count(t_end: float, dt: float, *, names: tuple[str, str] = ("t_end", "d
         raise ValueError(f"{names[0]}: {t_end:g} s is not a whole number of steps {names[1]} = {dt:g} s; use "
                          f"{names[1]} = {t_end / k:.8g} s ({k} steps) or {names[0]} = {max(n_steps, 1) * dt:g} s")
     return n_steps
-
-
-def memory_available() -> int | None:
-    """Bytes of memory available to a new allocation (MemAvailable of /proc/meminfo, else the
-    free physical pages), or None where neither can be read."""
-    try:
-        for line in Path("/proc/meminfo").read_text().splitlines():
-            if line.startswith("MemAvailable:"):
-                return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
-    except (OSError, ValueError, AttributeError):
-        return None
-
-
-def format_bytes(n: float) -> str:
-    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
-        if n < 1024 or unit == "PiB":
-            return f"{n:.3g} {unit}"
-        n /= 1024
-    raise AssertionError("unreachable")
 
 
 def check_memory(model: Model, n_steps: int, dt: float, *, names: tuple[str, str] = ("t_end", "dt")) -> None:
