@@ -409,3 +409,12 @@ def test_a_spatial_transform_s_axes_are_taken_by_their_names(tmp_path):
     assert made.scene == want.scene and [ln.replace(str(moved), "") for ln in made.report] == [
         ln.replace(str(as_is), "") for ln in want.report
     ]
+
+
+def test_a_frame_s_orientation_or_translation_left_out_is_opensim_s_default(tmp_path):
+    # OpenSim reads a PhysicalOffsetFrame without <orientation> (or <translation>) as 0 0 0; it was refused
+    from casflex.scene import dumps_scene
+
+    bare = re.sub(r"\s*<orientation>0 0 0</orientation>", "", TEXT)
+    assert bare.count("<orientation>") < TEXT.count("<orientation>")
+    assert dumps_scene(scene_from_osim(_model(tmp_path, bare)).scene) == dumps_scene(scene_from_osim(LEG).scene)

@@ -189,10 +189,13 @@ class _Reader:
                                  "be taken for the other)")
             seen.add(n)
 
-    def vector(self, el, tag: str, n: int | None, owner: str) -> np.ndarray:
+    def vector(self, el, tag: str, n: int | None, owner: str, default: np.ndarray | None = None) -> np.ndarray:
         """The numbers of ``el``'s element ``tag``: ``n`` of them (None: any number, at least one), each finite
-        and of a magnitude up to :data:`LARGEST`; ValueError naming the file, ``owner`` and the tag otherwise."""
+        and of a magnitude up to :data:`LARGEST`; ValueError naming the file, ``owner`` and the tag otherwise.
+        ``default``: the value of an element left out (OpenSim's property default)."""
         node = el.find(tag)
+        if node is None and default is not None:
+            return default
         text = "" if node is None or node.text is None else node.text
         try:
             v = np.array([float(s) for s in text.split()], dtype=float)
@@ -276,8 +279,9 @@ class _Reader:
         for f in j.findall("frames/PhysicalOffsetFrame"):
             owner = f"joint {jname!r} frame {f.get('name')!r}"
             body = (f.findtext("socket_parent") or "").strip().rsplit("/", 1)[-1]
-            out[f.get("name", "")] = (body, rotation(self.vector(f, "orientation", 3, owner)),
-                                      self.vector(f, "translation", 3, owner))
+            zero = np.zeros(3)  # OpenSim's default of a frame's orientation and translation left out
+            out[f.get("name", "")] = (body, rotation(self.vector(f, "orientation", 3, owner, zero)),
+                                      self.vector(f, "translation", 3, owner, zero))
         return out
 
     def frame(self, frames, socket: str, jname: str) -> tuple[str, tuple[np.ndarray, np.ndarray]]:
