@@ -15,6 +15,9 @@ if _spawned is not None and getattr(_spawned.current_process(), "_inheriting", F
     # from the child's first moment after Python's own start-up (the workers' preload, casflex.study._worker,
     # does it where the command ran as python -m casflex, whose script multiprocessing does not run again).
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    import logging  # and its failed heartbeats at the close are no traceback of the user's (casflex.study._worker)
+
+    logging.getLogger("distributed").setLevel(logging.CRITICAL)
 
 
 def _exit_interrupted(code: int, hurried: bool = False) -> None:
