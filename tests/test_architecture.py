@@ -33,6 +33,7 @@ FLOORS = (
     ("peers",),
     ("simulate", "statics"),
     ("inverse", "identification"),
+    ("muscles",),
     ("study", "plotting"),
     ("cli",),
     ("_entry",),
