@@ -35,7 +35,8 @@ from __future__ import annotations
 import math
 import os
 import re
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -67,6 +68,9 @@ class OsimScene:
     #: what of the model the scene leaves out that OpenSim's tools would apply (its constraints): a command says
     #: them on stderr (also in ``report``)
     warnings: tuple[str, ...] = ()
+    #: each body's frame in the ground at the default pose (the scene's initial configuration): body -> (R (3, 3),
+    #: origin p (3,) m); a point at ``location`` in the body's frame is at ``p + R @ location``
+    frames: Mapping[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
 
 
 def node_name(s: str) -> str:
@@ -382,4 +386,4 @@ def scene_from_osim(source: str | os.PathLike[str] | OsimModel, name: str | None
         raise ValueError(f"{model.source}: {exc}") from None
     report = [f"{model.source}: {len(bodies)} bodies, {len(b.joints)} joints, {len(markers)} markers, "
               f"{len(b.coords)} coordinates in the x-y plane", *b.report, *b.dropped, *b.warnings]
-    return OsimScene(scene, tuple(report), tuple(b.dropped), tuple(b.warnings))
+    return OsimScene(scene, tuple(report), tuple(b.dropped), tuple(b.warnings), dict(b.pose))
