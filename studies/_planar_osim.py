@@ -183,9 +183,27 @@ def _planar_rotations(joint: ET.Element, keep: set[str], report: list[str]) -> N
                           "set to the normal")
 
 
-def planar_osim(source: str, dest: str, keep: Iterable[str], name: str | None = None) -> list[str]:
+#: The muscle classes ``planar_osim(..., muscles=True)`` keeps.
+_MUSCLES = ("Millard2012EquilibriumMuscle", "Thelen2003Muscle", "DeGrooteFregly2016Muscle")
+
+
+def _keep_muscles(forces: ET.Element, report: list[str]) -> None:
+    """The ForceSet's muscles kept, its other forces removed (named in the report)."""
+    holder = forces.find("objects")
+    gone = [el for el in (holder if holder is not None else []) if el.tag not in _MUSCLES]
+    for el in gone:
+        holder.remove(el)
+    if gone:
+        names = ", ".join(f"{el.tag} {el.get('name')}" for el in gone)
+        report.append(f"forces removed (muscles kept): {names}")
+
+
+def planar_osim(source: str, dest: str, keep: Iterable[str], name: str | None = None, *, muscles: bool = False
+                ) -> list[str]:
     """Write ``dest``: the model file ``source`` with only the coordinates ``keep`` free, their rotations about
-    the plane's normal (module docstring). Returns what was changed, one line each."""
+    the plane's normal (module docstring). ``muscles``: the ForceSet's muscles (and the bodies' wrap objects)
+    kept, its other forces removed (the muscle analyses compare casflex and OpenSim on the same planar model).
+    Returns what was changed, one line each."""
     tree = ET.parse(source)
     root = tree.getroot()
     model = root.find("Model")
@@ -217,9 +235,13 @@ def planar_osim(source: str, dest: str, keep: Iterable[str], name: str | None = 
                 report.append(f"constraints removed: {', '.join(c.get('name') for c in child.find('objects'))}")
                 child.remove(child.find("objects"))
                 ET.SubElement(child, "objects")
+            elif child.tag == "ForceSet" and muscles:
+                _keep_muscles(child, report)
             elif child.tag in ("ForceSet", "ControllerSet", "ProbeSet"):
                 parent.remove(child)
                 report.append(f"{child.tag} removed")
+            elif child.tag == "WrapObjectSet" and muscles:
+                continue
             elif child.tag in ("attached_geometry", "VisibleObject", "WrapObjectSet", "FrameGeometry"):
                 parent.remove(child)
     for e in root.iter():  # the source's blank lines (where its comments were) out
