@@ -86,9 +86,9 @@ def knee_z(tree, scene, knee: float) -> np.ndarray:
 A, B = np.array([0.05, 0.15, 0.02]), np.array([0.04, -0.1, -0.01])  # origin (thigh, from the knee), insertion
 
 
-def _simple(tmp_path: Path, extra: str = "", knee0: float = 0.0) -> Path:
+def _simple(tmp_path: Path, extra: str = "", knee0: float = 0.0, name: str = "two.osim") -> Path:
     pts = point("o", "thigh", A[0], A[1] - THIGH, A[2]) + extra + point("i", "shank", *B)
-    return model(tmp_path, muscle("m", pts), knee0=knee0)
+    return model(tmp_path, muscle("m", pts), knee0=knee0, name=name)
 
 
 @pytest.mark.parametrize("knee0", [0.0, -0.5])  # the default pose straight, and bent (the frames then turned)
@@ -212,3 +212,14 @@ def test_a_condition_on_a_coordinate_the_scene_lacks_is_refused(tmp_path):
     gone = dataclasses.replace(s.muscles[0], path=(dataclasses.replace(p, node="calf"), *s.muscles[0].path[1:]))
     with pytest.raises(ValueError, match=r"^muscle 'm' path point 'c': node 'calf' is no node of the scene"):
         MusclePaths(tree, [gone])
+
+
+def test_two_points_at_one_place_give_finite_moment_arms_and_loads(tmp_path):
+    """A path's two points at one place on one body (a model's repeated via point): the zero-length segment adds
+    nothing, where its direction 0/0 made the moment arms and the loads NaN."""
+    s, tree, mp = paths(_simple(tmp_path, point("o2", "thigh", A[0], A[1] - THIGH, A[2])))
+    z = knee_z(tree, s.scene, -0.8)
+    _, _, plain = paths(_simple(tmp_path, name="plain.osim"))
+    r, U = np.array(mp.moment_arms(z)), np.array(mp.unit_loads(z))
+    assert np.isfinite(r).all() and np.isfinite(U).all()
+    assert np.array_equal(r, np.array(plain.moment_arms(z))) and np.array_equal(U, np.array(plain.unit_loads(z)))

@@ -172,3 +172,11 @@ def test_import_refuses_a_bad_muscle_in_one_line_writing_nothing(tmp_path, capsy
     err = capsys.readouterr().err
     assert code == 2 and not out.exists()
     assert err.strip().count("\n") == 0 and err.startswith(f"casflex: error: {path}: ForceSet: ")
+
+
+def test_two_path_points_of_one_name_are_refused(tmp_path):
+    a = TEXT.index('<PathPoint name="bifemlh_r-P2">')
+    b = TEXT.index("</PathPoint>", a) + len("</PathPoint>")
+    path = tmp_path / "model.osim"
+    path.write_text(TEXT[:b] + TEXT[a:b] + TEXT[b:])
+    _refused(path, r"'hamstrings_r'\.GeometryPath: two path points named 'bifemlh_r-P2'; give each its own name")

@@ -66,6 +66,19 @@ def _rot(th, v):
     return ca.vertcat(c * v[0] - s * v[1], s * v[0] + c * v[1])
 
 
+def _distance(a, b):
+    """|b - a| (m), its derivative 0 where the points coincide (two points at one place on one body: the length
+    does not change there), not NaN."""
+    d2 = ca.sumsqr(b - a)
+    return ca.if_else(d2 > 0, ca.sqrt(d2), 0)
+
+
+def _direction(a, b):
+    """The unit vector from a to b, zeros where they coincide (the segment pulls neither point)."""
+    d2 = ca.sumsqr(b - a)
+    return ca.if_else(d2 > 0, (b - a) / ca.sqrt(d2), ca.SX.zeros(3))
+
+
 class MusclePaths:
     """The paths of ``muscles`` (:class:`casflex.scene.muscles.Muscle`) on the kinematic tree ``tree``
     (:class:`casflex.inverse.tree.KinematicTree`; module docstring): ``length``, ``moment_arms``, ``unit_loads``
@@ -148,7 +161,7 @@ class MusclePaths:
         for pts, segs in self._geometry:
             L = 0
             for i, j, on in segs:
-                d = ca.norm_2(pts[j] - pts[i])
+                d = _distance(pts[i], pts[j])
                 L = L + (d if isinstance(on, int) else ca.if_else(on, d, 0))
             out.append(L)
         return ca.vertcat(*out) if out else ca.SX(0, 1)
@@ -210,7 +223,7 @@ class MusclePaths:
                     if (nodes[i] in D) == (nodes[j] in D):
                         continue
                     a, b = (i, j) if nodes[i] in D else (j, i)
-                    u = (pts[b] - pts[a]) / ca.norm_2(pts[b] - pts[a])
+                    u = _direction(pts[a], pts[b])
                     f = u[:2] if isinstance(on, int) else ca.if_else(on, u[:2], ca.SX.zeros(2))
                     arm = pts[a][:2] - C
                     F, M = F + f, M + arm[0] * f[1] - arm[1] * f[0]

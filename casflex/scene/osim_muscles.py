@@ -156,6 +156,7 @@ def _muscle(r, m, bodies, coordinates) -> OsimMuscle:
     gp = m.find("GeometryPath")
     pts = [] if gp is None else [p for p in gp.findall("PathPointSet/objects/*")]
     path = tuple(_point(r, p, owner, bodies, coordinates) for p in pts)
+    r.unique(f"{owner}.GeometryPath", "path point", (p.name for p in path))
     if len(path) < 2:
         raise ValueError(f"{r.source}: {owner}.GeometryPath: {len(path)} path point(s); a muscle's path needs two "
                          "or more (origin and insertion)")
