@@ -19,9 +19,12 @@ N m per N, counter-clockwise about the plane's normal positive) that a muscle's 
 hinge's distal part (the bodies beyond it from the root): each path segment with one end on the distal part and
 one off it pulls that end towards the other. By virtual work the moment equals -dL/d(own angle) of the hinge
 (the moment arm about the scene's own angle; for a lab coordinate of sign s, s times its moment arm) where the
-hinge's centre is fixed on its parent; a coupled hinge's centre rolls with its angle, and its generalised
-force is that moment plus (fx, fy) . d(centre)/d(angle). The out-of-plane component of the pull and its
-moments about the plane's axes are left out (the planar inverse dynamics has none).
+hinge's centre is fixed on its parent and the muscle's points are fixed on their bodies; a coupled hinge's
+centre rolls with its angle, and its generalised force is that moment plus (fx, fy) . d(centre)/d(angle); a
+MovingPathPoint adds its pull along its own motion in its body (d(location)/d(angle)), which moves no body: the
+moment arm holds it, the moment does not. The out-of-plane component of the pull and its moments about the
+plane's axes are left out (the planar inverse dynamics has none). Two points at one place give a segment of
+length 0 whose derivative and pull are taken as 0 (not 0/0).
 """
 
 from __future__ import annotations
