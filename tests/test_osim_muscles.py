@@ -180,3 +180,9 @@ def test_two_path_points_of_one_name_are_refused(tmp_path):
     path = tmp_path / "model.osim"
     path.write_text(TEXT[:b] + TEXT[a:b] + TEXT[b:])
     _refused(path, r"'hamstrings_r'\.GeometryPath: two path points named 'bifemlh_r-P2'; give each its own name")
+
+
+def test_a_path_point_on_the_ground_is_refused(tmp_path):
+    """The planar scene has no node for the ground: such a point had no node to follow."""
+    _refused(_model(tmp_path, "/bodyset/pelvis", "/ground", within=HAM),
+             r"'hamstrings_r': path point 'bifemlh_r-P1': on 'ground', the ground \(casflex's scene has no node")
