@@ -35,7 +35,7 @@ MODEL = """<?xml version="1.0" encoding="UTF-8" ?>
 </PlanarJoint>
 <PinJoint name="knee"><socket_parent_frame>thigh_knee</socket_parent_frame>
 <socket_child_frame>shank_knee</socket_child_frame>
-<coordinates><Coordinate name="knee_angle"><default_value>{knee0}</default_value><range>-2 0.2</range>
+<coordinates><Coordinate name="knee_angle"><default_value>{knee0}</default_value>{knee_range}
 </Coordinate>{extra_coordinate}</coordinates>
 <frames><PhysicalOffsetFrame name="thigh_knee"><socket_parent>/bodyset/thigh</socket_parent>
 <translation>0 -{length} 0</translation></PhysicalOffsetFrame>
@@ -61,11 +61,12 @@ def muscle(name: str, points: str, kind: str = "Thelen2003Muscle", numbers: str 
 
 
 def model(tmp_path: Path, muscles: str, knee0: float = 0.0, wraps: str = "", extra_coordinate: str = "",
-          name: str = "two.osim") -> Path:
+          name: str = "two.osim", knee_range: str = "<range>-2 0.2</range>") -> Path:
     path = tmp_path / name
     path.write_text(MODEL.format(thigh=BODY.format(name="thigh", wraps=wraps),
                                  shank=BODY.format(name="shank", wraps=""),
-                                 muscles=muscles, knee0=knee0, extra_coordinate=extra_coordinate, length=THIGH))
+                                 muscles=muscles, knee0=knee0, extra_coordinate=extra_coordinate, length=THIGH,
+                                 knee_range=knee_range))
     return path
 
 
@@ -223,3 +224,14 @@ def test_two_points_at_one_place_give_finite_moment_arms_and_loads(tmp_path):
     r, U = np.array(mp.moment_arms(z)), np.array(mp.unit_loads(z))
     assert np.isfinite(r).all() and np.isfinite(U).all()
     assert np.array_equal(r, np.array(plain.moment_arms(z))) and np.array_equal(U, np.array(plain.unit_loads(z)))
+
+
+def test_a_moving_point_on_a_coordinate_without_range_is_clamped_to_opensims_default_range(tmp_path):
+    """OpenSim's Coordinate has the range [-10, 10] where the file gives none, and clamps a MovingPathPoint's
+    coordinate to it: the point stops at 10 while the knee turns on."""
+    fx = "<x_location><LinearFunction><coefficients>0.01 0</coefficients></LinearFunction></x_location>"
+    sock = "<socket_x_coordinate>/jointset/knee/knee_angle</socket_x_coordinate>"
+    pts = point("o", "thigh", 0.0, 0.0) + point("i", "thigh", 0, 0, extra=sock + fx, kind="MovingPathPoint")
+    s, tree, mp = paths(model(tmp_path, muscle("m", pts), knee_range=""))
+    for q, x in ((3.0, 0.03), (10.5, 0.1), (-12.0, -0.1)):
+        assert float(mp.length(knee_z(tree, s.scene, q))) == pytest.approx(abs(x), abs=1e-15)

@@ -56,6 +56,9 @@ NORMAL = math.cos(math.radians(1e-3))
 #: (Inman's talocrural axis, Delp 1990) and the lab's sagittal analysis takes it as the flexion axis; an axis
 #: farther off turns the segment mostly out of the plane.
 PROJECTED = 30.0
+#: OpenSim's range of a coordinate whose file gives none (Coordinate's default ``range``): a MovingPathPoint's
+#: location is its function of the coordinate's value clamped to the range.
+OPENSIM_RANGE = (-10.0, 10.0)
 
 
 @dataclass(frozen=True)
@@ -323,7 +326,9 @@ def _path_point(b: _Builder, m, p, lab: set[str], owner: str) -> PathPoint | Non
                 return None
     for axis, c, f in p.moving:
         lo, hi = b.range.get(c, (-math.inf, math.inf)) if c else (-math.inf, math.inf)
-        clamped = Clamped(f, lo, hi) if math.isfinite(lo) and math.isfinite(hi) else f
+        if math.isinf(lo) and math.isinf(hi):  # no <range> in the file: OpenSim's default range clamps it
+            lo, hi = OPENSIM_RANGE
+        clamped = Clamped(f, lo, hi)
         location[axis] = float(clamped(b.default[c] if c else 0.0))
         if c in lab and not f.is_constant():
             moving.append((axis, c, clamped))
