@@ -41,8 +41,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from casflex.scene.coordinates import Coordinate
-from casflex.scene.functions import Linear, Multiplier, SimmSpline
+from casflex.scene.functions import Clamped, Linear, Multiplier, SimmSpline
 from casflex.scene.markers import Marker
+from casflex.scene.muscles import Muscle, PathPoint
 from casflex.scene.osim import OsimJoint, OsimModel, axis_rotation, read_osim
 from casflex.scene.scene import Joint, Node, RigidBody, Scene
 
@@ -56,6 +57,9 @@ NORMAL = math.cos(math.radians(1e-3))
 #: (Inman's talocrural axis, Delp 1990) and the lab's sagittal analysis takes it as the flexion axis; an axis
 #: farther off turns the segment mostly out of the plane.
 PROJECTED = 30.0
+#: OpenSim's range of a coordinate whose file gives none (Coordinate's default ``range``): a MovingPathPoint's
+#: location is its function of the coordinate's value clamped to the range.
+OPENSIM_RANGE = (-10.0, 10.0)
 
 
 @dataclass(frozen=True)
@@ -68,6 +72,8 @@ class OsimScene:
     #: what of the model the scene leaves out that OpenSim's tools would apply (its constraints): a command says
     #: them on stderr (also in ``report``)
     warnings: tuple[str, ...] = ()
+    #: the model's muscles (:mod:`casflex.scene.muscles`), their paths on the scene's nodes
+    muscles: tuple[Muscle, ...] = ()
     #: each body's frame in the ground at the default pose (the scene's initial configuration): body -> (R (3, 3),
     #: origin p (3,) m); a point at ``location`` in the body's frame is at ``p + R @ location``
     frames: Mapping[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
@@ -282,6 +288,79 @@ class _Builder:
         return out
 
 
+def _muscles(b: _Builder) -> tuple[Muscle, ...]:
+    """The model's muscles on the scene's nodes; a condition or moving point of a coordinate the scene does not
+    move evaluated at its default value (reported); a wrap refused (:func:`_wraps`)."""
+    lab = {c.name for c in b.coords}
+    out = []
+    for m in b.m.muscles:
+        owner = f"{b.m.source}: ForceSet: {m.kind} {m.name!r}"
+        _wraps(b, m, owner)
+        path = tuple(p for p in (_path_point(b, m, p, lab, owner) for p in m.path) if p is not None)
+        if len(path) < 2:
+            raise ValueError(f"{owner}: {len(path)} path point(s) on its path at the scene's held coordinates; a "
+                             "muscle's path needs two or more")
+        out.append(Muscle(m.name, m.kind, *(m.numbers[k] for k in ("max_isometric_force", "optimal_fiber_length",
+                          "tendon_slack_length", "pennation_angle_at_optimal", "max_contraction_velocity")),
+                          path=path, properties=m.properties))
+    if out:
+        kinds = sorted({m.kind for m in out})
+        b.report.append(f"muscles: {len(out)} ({', '.join(f'{sum(m.kind == k for m in out)} {k}' for k in kinds)})")
+    return tuple(out)
+
+
+def _path_point(b: _Builder, m, p, lab: set[str], owner: str) -> PathPoint | None:
+    """The scene's path point of the OpenSim point p; None for a conditional point never on the path."""
+    where = f"muscle {m.name!r} path point {p.name!r}"
+    if p.body not in b.pose or p.body == "ground":
+        raise ValueError(f"{owner}: path point {p.name!r}: on {p.body!r}, "
+                         + ("the ground (casflex's scene has no node for it)" if p.body == "ground" else
+                            "a body no joint of the tree places"))
+    R, pos = b.pose[p.body]
+    condition, location, moving = None, np.array(p.location, dtype=float), []
+    if p.condition is not None:
+        c, lo, hi = p.condition
+        if c in lab:
+            condition = (c, lo, hi)
+        else:  # OpenSim's test, with its tolerance (ConditionalPathPoint::isActive)
+            on = lo - 1e-5 <= b.default[c] <= hi + 1e-5
+            b.dropped.append(f"{where}: its coordinate {c!r} is held at {b.default[c]:g} by the scene: "
+                             + ("always on the path" if on else "never on the path; left out"))
+            if not on:
+                return None
+    for axis, c, f in p.moving:
+        lo, hi = b.range.get(c, (-math.inf, math.inf)) if c else (-math.inf, math.inf)
+        if math.isinf(lo) and math.isinf(hi):  # no <range> in the file: OpenSim's default range clamps it
+            lo, hi = OPENSIM_RANGE
+        clamped = Clamped(f, lo, hi)
+        location[axis] = float(clamped(b.default[c] if c else 0.0))
+        if c in lab and not f.is_constant():
+            moving.append((axis, c, clamped))
+        elif c and not f.is_constant():
+            b.dropped.append(f"{where}: its {'xyz'[axis]} follows {c!r}, held at {b.default[c]:g} by the scene: "
+                             f"fixed at {location[axis]:g} m")
+    return PathPoint(p.name, node_name(p.body), tuple(float(v) for v in location),
+                     tuple(float(v) for v in (*R.ravel(), *pos)), condition, tuple(moving))
+
+
+def _wraps(b: _Builder, m, owner: str) -> None:
+    """Refuse the muscle's wraps (one line naming the wrap object and why); an inactive wrap object reported."""
+    for obj, _ in m.wraps:
+        w = b.m.wrap_objects.get(obj)
+        if w is None:
+            raise ValueError(f"{owner}: PathWrap: wrap object {obj!r} is on no body of the model (WrapObjectSet)")
+        if not w.active:
+            b.report.append(f"muscle {m.name!r}: wrap object {obj!r} is not active in the model; ignored")
+            continue
+        R = b.pose[w.body][0] @ w.rotation if w.body in b.pose else w.rotation
+        planar = w.kind == "WrapCylinder" and abs(R[2, 2]) >= NORMAL
+        why = ("a WrapCylinder about the plane's normal: casflex does not compute wrapping yet" if planar else
+               f"a {w.kind}" + (f" whose axis {np.round(R[:, 2], 3).tolist()} is not the plane's normal"
+                                if w.kind == "WrapCylinder" else "") + ": its wrapping leaves the plane")
+        raise ValueError(f"{owner}: wrap object {obj!r}: {why}; remove it from the muscle's PathWrapSet to compute "
+                         "the path without it")
+
+
 def _constraints(b: _Builder, by_child: dict[str, OsimJoint]) -> None:
     """Each constraint of the model: one the scene would break refused (a coupler whose dependent coordinate the
     scene moves freely, a loop closed between bodies the scene moves relative to each other), the others
@@ -360,9 +439,13 @@ def _tree_order(model: OsimModel) -> list[OsimJoint]:
     return order
 
 
-def scene_from_osim(source: str | os.PathLike[str] | OsimModel, name: str | None = None) -> OsimScene:
-    """The planar scene of an OpenSim model file (or its parts) and the report (module docstring)."""
-    model = source if isinstance(source, OsimModel) else read_osim(source)
+def scene_from_osim(source: str | os.PathLike[str] | OsimModel, name: str | None = None, *,
+                    muscles: bool = False) -> OsimScene:
+    """The planar scene of an OpenSim model file (or its parts) and the report (module docstring). ``muscles``:
+    the model's muscles read and carried (``OsimScene.muscles``; a muscle casflex cannot compute, a wrap the plane
+    cannot hold, refused in one line); else they are listed as ignored, as inverse dynamics needs none of them
+    (a model whose muscles wrap in 3D is still read for its bones)."""
+    model = source if isinstance(source, OsimModel) else read_osim(source, muscles=muscles)
     b = _Builder(model)
     for j in _tree_order(model):
         b.joint(j)
@@ -372,8 +455,12 @@ def scene_from_osim(source: str | os.PathLike[str] | OsimModel, name: str | None
                          "a scene of massless nodes has no dynamics: give the bodies their masses")
     _constraints(b, {j.child: j for j in model.joints})
     markers = b.markers(bodies)
+    muscles = _muscles(b) if muscles else ()
+    kept = {("ForceSet", m.kind, m.name) for m in muscles}
     others: dict[str, int] = {}
-    for s, kind, _ in model.others:
+    for s, kind, n in model.others:
+        if (s, kind, n) in kept:
+            continue
         others[f"{s} {kind}"] = others.get(f"{s} {kind}", 0) + 1
     if others:
         b.report.append("ignored: " + ", ".join(f"{n} {k}" for k, n in sorted(others.items())))
@@ -386,4 +473,4 @@ def scene_from_osim(source: str | os.PathLike[str] | OsimModel, name: str | None
         raise ValueError(f"{model.source}: {exc}") from None
     report = [f"{model.source}: {len(bodies)} bodies, {len(b.joints)} joints, {len(markers)} markers, "
               f"{len(b.coords)} coordinates in the x-y plane", *b.report, *b.dropped, *b.warnings]
-    return OsimScene(scene, tuple(report), tuple(b.dropped), tuple(b.warnings), dict(b.pose))
+    return OsimScene(scene, tuple(report), tuple(b.dropped), tuple(b.warnings), muscles, dict(b.pose))

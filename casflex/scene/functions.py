@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Function", "Constant", "Linear", "Polynomial", "SimmSpline", "Multiplier"]
+__all__ = ["Function", "Constant", "Linear", "Polynomial", "SimmSpline", "Multiplier", "Clamped"]
 
 
 class Function:
@@ -82,6 +82,22 @@ class Multiplier(Function):
 
     def is_constant(self) -> bool:
         return self.scale == 0.0 or self.inner.is_constant()
+
+
+@dataclass(frozen=True)
+class Clamped(Function):
+    """inner(x clamped to [lower, upper]): a MovingPathPoint's location, which OpenSim evaluates at its
+    coordinate's value clamped to the coordinate's range."""
+
+    inner: Function
+    lower: float
+    upper: float
+
+    def __call__(self, x):
+        return self.inner(np.clip(x, self.lower, self.upper))
+
+    def is_constant(self) -> bool:
+        return self.inner.is_constant()
 
 
 @dataclass(frozen=True)

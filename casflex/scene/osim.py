@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from casflex.scene.functions import Constant, Function, Linear, Multiplier, Polynomial, SimmSpline
+from casflex.scene.osim_muscles import OsimMuscle, OsimWrapObject, read_muscles, read_wrap_objects
 
 __all__ = ["OsimBody", "OsimConstraint", "OsimCoordinate", "OsimJoint", "OsimMarker", "OsimModel", "read_osim",
            "rotation"]
@@ -107,6 +108,9 @@ class OsimModel:
     markers: tuple[OsimMarker, ...]
     others: tuple[tuple[str, str, str], ...] = field(default=())
     constraints: tuple[OsimConstraint, ...] = field(default=())
+    #: the ForceSet's muscles casflex computes and the wrap objects (:mod:`casflex.scene.osim_muscles`)
+    muscles: tuple[OsimMuscle, ...] = field(default=())
+    wrap_objects: dict[str, OsimWrapObject] = field(default_factory=dict)
 
 
 #: The joints that turn F by body-fixed rotations about its x, y (and z) axes, one coordinate each, and how many.
@@ -421,11 +425,15 @@ class _Reader:
         return leaf if leaf in bodies or leaf == "ground" else None
 
 
-def read_osim(path: str | os.PathLike[str]) -> OsimModel:
+def read_osim(path: str | os.PathLike[str], *, muscles: bool = False) -> OsimModel:
     """The parts of the OpenSim model file ``path`` (module docstring). ValueError in one line naming the
-    file and the element for a file that is no OpenSim 4 model, or a part casflex cannot read."""
+    file and the element for a file that is no OpenSim 4 model, or a part casflex cannot read. ``muscles``: its
+    muscles and wrap objects read too (:mod:`casflex.scene.osim_muscles`; a bad muscle refused); else they are
+    listed with the other forces as not taken (inverse dynamics does not use them)."""
     r = _Reader(path)
     g = r.vector(r.model, "gravity", 3, "model") if r.model.find("gravity") is not None else np.array([0, -9.80665, 0])
     bodies, joints = r.bodies(), r.joints()
+    coordinates = {c.name for j in joints for c in j.coordinates}
     return OsimModel(r.model.get("name", os.path.basename(r.source)), r.source, g, bodies, joints, r.markers(),
-                     r.others(), r.constraints(bodies))
+                     r.others(), r.constraints(bodies), read_muscles(r, bodies, coordinates) if muscles else (),
+                     read_wrap_objects(r, rotation) if muscles else {})
