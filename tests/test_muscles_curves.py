@@ -124,8 +124,9 @@ def test_numpy_and_casadi_give_the_same_values(kind):
         mx = ca.MX.sym("x", 1, x.size)
         g = ca.Function("g", [mx], [getattr(c, k)(mx)])
         for other in (np.array(f(x)).ravel(), np.array(g(x)).ravel(), np.array(getattr(c, k)(ca.DM(x))).ravel()):
-            # the same operations in another order: round-off only
-            assert np.allclose(other, mine, rtol=1e-13, atol=1e-14), (k, np.max(np.abs(other - mine)))
+            # round-off only: Millard's u found from another start (numpy: a table; CasADi: bisection), both
+            # Newton-converged, differ by eps-level amounts the slope (up to 28) amplifies
+            assert np.allclose(other, mine, rtol=1e-12, atol=1e-13), (k, np.max(np.abs(other - mine)))
 
 
 def _kinks(c, name: str) -> list[float]:
