@@ -10,7 +10,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from casflex.muscles.curves import DeGrooteCurves, ThelenCurves, muscle_curves, pennation, rigid_tendon
+from casflex.muscles.curves import PROPERTY_TAGS, DeGrooteCurves, ThelenCurves, muscle_curves, pennation, rigid_tendon
 from casflex.scene.muscles import Muscle
 
 KINDS = ("Millard2012EquilibriumMuscle", "Thelen2003Muscle", "DeGrooteFregly2016Muscle")
@@ -263,3 +263,17 @@ def test_opensims_adjustments_of_millards_curves():
     assert classic.active_force_length.y0 == 0.1  # raised to 0.1 for the classic elastic-tendon model
     assert damped.force_velocity.dydx0 == 0.0 == rigid.force_velocity.dydx0
     assert classic.force_velocity.dydx0 == 0.125  # at least half the slope near vmax (0.25)
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_property_tags_lists_every_tag_read(kind, monkeypatch):
+    read = []
+    original = Muscle.property
+    monkeypatch.setattr(Muscle, "property", lambda self, tag, default: read.append(tag) or original(self, tag, default))
+    optional = (("FiberForceLengthCurve.stiffness_at_low_force", 0.2), ("FiberForceLengthCurve.curviness", 0.75),
+                ("FiberForceLengthCurve.stiffness_at_one_norm_force", 2.0 / 0.7),
+                ("TendonForceLengthCurve.stiffness_at_one_norm_force", 1.375 / 0.049),
+                ("TendonForceLengthCurve.norm_force_at_toe_end", 2 / 3), ("TendonForceLengthCurve.curviness", 0.5))
+    given = optional if kind == "Millard2012EquilibriumMuscle" else ()  # read only where given (all or none)
+    rigid_tendon(muscle(kind, given), 0.3, 0.1)
+    assert set(read) == set(PROPERTY_TAGS[kind])

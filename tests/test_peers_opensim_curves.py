@@ -21,7 +21,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from casflex.muscles.curves import muscle_curves, rigid_tendon
+from casflex.muscles.curves import PROPERTY_TAGS, muscle_curves, rigid_tendon
 from casflex.scene.muscles import Muscle
 
 needs_opensim = pytest.mark.skipif(importlib.util.find_spec("opensim") is None, reason="OpenSim is not installed")
@@ -172,3 +172,15 @@ def test_thelens_tendon_is_opensims(case):
     ref = muscle_values(m, lmt, 0.0 * lmt, fiber_length=np.full(lmt.shape, m.optimal_fiber_length))
     theirs = np.array(ref["tendon_force"]) / m.max_isometric_force
     assert worst(curves.tendon_force_length(lt_n), theirs, 1.0) < RTOL
+
+
+@needs_opensim
+@pytest.mark.parametrize("kind", list(PROPERTY_TAGS))
+def test_the_tags_read_are_opensims_property_names(kind):
+    from casflex.peers.opensim_curves import property_names
+
+    names = property_names(kind)
+    assert set(PROPERTY_TAGS[kind]) <= set(names), set(PROPERTY_TAGS[kind]) - set(names)
+    common = ("max_isometric_force", "optimal_fiber_length", "tendon_slack_length", "pennation_angle_at_optimal",
+              "max_contraction_velocity")
+    assert set(common) <= set(names)

@@ -5,7 +5,7 @@ SegmentedQuinticBezierToolkit). Evaluating y at x needs u such that x(u) = x: Op
 cubic spline of u(x) fitted to 100 samples and runs Newton until |x(u) - x| <= 100 eps (2.2e-14). Here
 the start is, for CasADi, u bracketed by 16 bisection steps (|u - u*| < 1.6e-5; x(u) is monotone on each
 segment of the curves OpenSim's factory makes, so the bracket holds), for numpy u interpolated linearly in
-x(u) sampled at 101 values of u (error ~1e-4, 30 times faster); then 4 Newton steps (quadratic: to
+x(u) sampled at 101 values of u (error ~1e-4); then 4 Newton steps (quadratic: to
 round-off). A fixed number of steps keeps the evaluation one expression, and AD through the Newton steps
 gives dy/dx = y'(u) / x'(u) (and its second derivative) exactly once the steps have converged. Outside
 [x0, x1] the curve is OpenSim's line y0 + dydx0 (x - x0) (and at x1).

@@ -32,8 +32,30 @@ from casflex.muscles._ops import ops, symbolic
 from casflex.muscles.millard import MillardCurves, _flag, _number, _Refuse, millard_curves
 from casflex.scene.muscles import MUSCLE_KINDS, Muscle
 
-__all__ = ["DeGrooteCurves", "MillardCurves", "Pennation", "RigidTendon", "ThelenCurves", "muscle_curves",
-           "rigid_tendon"]
+__all__ = ["PROPERTY_TAGS", "DeGrooteCurves", "MillardCurves", "Pennation", "RigidTendon", "ThelenCurves",
+           "muscle_curves", "pennation", "rigid_tendon"]
+
+#: The .osim tags (``Muscle.properties``) each kind's curves, pennation and rigid-tendon muscle read, beyond
+#: the five common properties; booleans (``ignore_*``) as 1 / 0. Absent tags take OpenSim 4.6's defaults.
+PROPERTY_TAGS: dict[str, tuple[str, ...]] = {
+    "Millard2012EquilibriumMuscle": (
+        "fiber_damping", "maximum_pennation_angle", "ignore_tendon_compliance",
+        *(f"ActiveForceLengthCurve.{t}" for t in ("min_norm_active_fiber_length", "transition_norm_fiber_length",
+                                                  "max_norm_active_fiber_length", "shallow_ascending_slope",
+                                                  "minimum_value")),
+        *(f"ForceVelocityCurve.{t}" for t in ("concentric_slope_at_vmax", "concentric_slope_near_vmax",
+                                              "isometric_slope", "eccentric_slope_at_vmax", "eccentric_slope_near_vmax",
+                                              "max_eccentric_velocity_force_multiplier", "concentric_curviness",
+                                              "eccentric_curviness")),
+        *(f"FiberForceLengthCurve.{t}" for t in ("strain_at_zero_force", "strain_at_one_norm_force",
+                                                 "stiffness_at_low_force", "stiffness_at_one_norm_force", "curviness")),
+        *(f"TendonForceLengthCurve.{t}" for t in ("strain_at_one_norm_force", "stiffness_at_one_norm_force",
+                                                  "norm_force_at_toe_end", "curviness"))),
+    "Thelen2003Muscle": ("FmaxTendonStrain", "FmaxMuscleStrain", "KshapeActive", "KshapePassive", "Af", "Flen",
+                         "fv_linear_extrap_threshold", "maximum_pennation_angle"),
+    "DeGrooteFregly2016Muscle": ("active_force_width_scale", "fiber_damping", "passive_fiber_strain_at_one_norm_force",
+                                 "tendon_strain_at_one_norm_force", "ignore_passive_fiber_force"),
+}
 
 _EPS = float(np.finfo(float).eps)
 _SIGNIFICANT = _EPS ** 0.875  # SimTK::SignificantReal

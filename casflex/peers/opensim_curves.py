@@ -17,7 +17,7 @@ from typing import Any
 
 from casflex.peers.opensim import _opensim, _run
 
-__all__ = ["curve_values", "muscle_data", "muscle_values"]
+__all__ = ["curve_values", "muscle_data", "muscle_values", "property_names"]
 
 _HERE = "casflex.peers.opensim_curves"
 _COMMON = ("max_isometric_force", "optimal_fiber_length", "tendon_slack_length", "pennation_angle_at_optimal",
@@ -133,3 +133,24 @@ def muscle_values(muscle: Any, lmt: list[float], vmt: list[float], *, fiber_leng
     m), and for Millard and DeGroote elastic and damping (along the tendon, N)."""
     return _run(f"{_HERE}:_muscle_here", worker, muscle_data(muscle), [float(v) for v in lmt],
                 [float(v) for v in vmt], None if fiber_length is None else [float(v) for v in fiber_length])
+
+
+def _names_here(kind: str) -> list[str]:
+    osim = _opensim()
+    muscle = getattr(osim, kind)()
+    names = []
+    for i in range(muscle.getNumProperties()):
+        prop = muscle.getPropertyByIndex(i)
+        if prop.getName().endswith("Curve"):
+            curve = getattr(muscle, f"get_{prop.getName()}")()
+            names += [f"{prop.getName()}.{curve.getPropertyByIndex(j).getName()}"
+                      for j in range(curve.getNumProperties())]
+        else:
+            names.append(prop.getName())
+    return names
+
+
+def property_names(kind: str, *, worker: bool | None = None) -> list[str]:
+    """The property names (the .osim's tags) of OpenSim's muscle class ``kind``, its curve objects' as
+    ``<Curve>.<tag>``."""
+    return _run(f"{_HERE}:_names_here", worker, kind)
