@@ -16,6 +16,8 @@ room and is far below any modelling difference.
 from __future__ import annotations
 
 import importlib.util
+import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -184,3 +186,52 @@ def test_the_tags_read_are_opensims_property_names(kind):
     common = ("max_isometric_force", "optimal_fiber_length", "tendon_slack_length", "pennation_angle_at_optimal",
               "max_contraction_velocity")
     assert set(common) <= set(names)
+
+
+DATA = Path(__file__).parent / "data" / "muscles" / "curves"
+_COMMON = {"max_isometric_force": 1000.0, "optimal_fiber_length": 0.1, "tendon_slack_length": 0.2,
+           "pennation_angle_at_optimal": 0.0, "max_contraction_velocity": 10.0}  # OpenSim's Muscle defaults
+
+
+def _from_xml(element: ET.Element) -> Muscle:
+    """A muscle element's numbers as (tag, value) pairs, a curve object's children as ``<Curve>.<tag>``,
+    true / false as 1 / 0: what the .osim reader is to give (tests only)."""
+    def number(text: str) -> float | None:
+        text = (text or "").strip()
+        if text in ("true", "false"):
+            return float(text == "true")
+        try:
+            return float(text)
+        except ValueError:
+            return None
+
+    pairs = []
+    for child in element:
+        if child.tag.endswith("Curve"):
+            pairs += [(f"{child.tag}.{c.tag}", number(c.text)) for c in child if number(c.text) is not None]
+        elif len(child) == 0 and number(child.text) is not None:
+            pairs.append((child.tag, number(child.text)))
+    values = dict(pairs)
+    common = [values.pop(k, d) for k, d in _COMMON.items()]
+    return Muscle(element.get("name"), element.tag, *common, (), tuple(values.items()))
+
+
+@needs_opensim
+@pytest.mark.parametrize("file", ["gait10dof18musc_muscles.xml", "hamner_thelen_muscles.xml"])
+def test_the_models_muscles_as_opensim_reads_them(file):
+    """The muscles of OpenSim's gait10dof18musc (Millard, damped, elastic tendon) and of Hamner's model
+    (Thelen) as their .osim gives them (tests/data/muscles/curves/README.md): the tags as written, OpenSim's
+    defaults for those left out, against the muscles OpenSim reads from the same XML."""
+    from casflex.peers.opensim_curves import file_muscle_values
+
+    elements = list(ET.parse(DATA / file).getroot().iter())
+    muscles = [_from_xml(e) for e in elements if e.tag in ("Millard2012EquilibriumMuscle", "Thelen2003Muscle")]
+    assert len(muscles) == (18 if file.startswith("gait") else 6)
+    for m in muscles:
+        lmt = m.tendon_slack_length + m.optimal_fiber_length * np.linspace(0.3, 1.8, 7)
+        vmt = m.optimal_fiber_length * m.max_contraction_velocity * np.linspace(-0.8, 0.8, 7)
+        mine = rigid_tendon(m, lmt, vmt)
+        ref = file_muscle_values(DATA / file, m.kind, m.name, lmt, vmt, fiber_length=mine.fiber_length)
+        assert worst(mine.active, ref["active"], m.max_isometric_force) < RTOL, m.name
+        for field, key in (("pennation_angle", "phi"), ("active_force_length", "fal"), ("passive_force_length", "fpe")):
+            assert worst(getattr(mine, field), ref[key], 1.0) < RTOL, (m.name, field)

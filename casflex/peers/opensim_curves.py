@@ -13,11 +13,12 @@ slider's coordinate and its lengthening speed the coordinate's speed, and reads 
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
 from casflex.peers.opensim import _opensim, _run
 
-__all__ = ["curve_values", "muscle_data", "muscle_values", "property_names"]
+__all__ = ["curve_values", "file_muscle_values", "muscle_data", "muscle_values", "property_names"]
 
 _HERE = "casflex.peers.opensim_curves"
 _COMMON = ("max_isometric_force", "optimal_fiber_length", "tendon_slack_length", "pennation_angle_at_optimal",
@@ -46,6 +47,11 @@ def _set(osim, obj, tag: str, value: float) -> None:
 
 
 def _muscle(osim, data: dict):
+    if "file" in data:  # the muscle as OpenSim reads it from a ForceSet document
+        forces = osim.ForceSet.safeDownCast(osim.OpenSimObject.makeObjectFromFile(data["file"]))
+        copy = forces.get(data["name"]).clone()
+        copy.thisown = False  # the model the muscle is added to owns it, not this proxy
+        return getattr(osim, data["kind"]).safeDownCast(copy)
     muscle = getattr(osim, data["kind"])()
     muscle.setName(data["name"])
     for tag, value in data["common"].items():
@@ -133,6 +139,15 @@ def muscle_values(muscle: Any, lmt: list[float], vmt: list[float], *, fiber_leng
     m), and for Millard and DeGroote elastic and damping (along the tendon, N)."""
     return _run(f"{_HERE}:_muscle_here", worker, muscle_data(muscle), [float(v) for v in lmt],
                 [float(v) for v in vmt], None if fiber_length is None else [float(v) for v in fiber_length])
+
+
+def file_muscle_values(path: str, kind: str, name: str, lmt: list[float], vmt: list[float], *,
+                       fiber_length: list[float] | None = None, worker: bool | None = None) -> dict[str, list[float]]:
+    """:func:`muscle_values` of the muscle ``name`` (of class ``kind``) as OpenSim reads it from the document
+    ``path`` holding a ForceSet (e.g. a model's muscles cut without their paths)."""
+    data = {"file": os.path.abspath(path), "kind": kind, "name": name}
+    return _run(f"{_HERE}:_muscle_here", worker, data, [float(v) for v in lmt], [float(v) for v in vmt],
+                None if fiber_length is None else [float(v) for v in fiber_length])
 
 
 def _names_here(kind: str) -> list[str]:
