@@ -277,3 +277,20 @@ def test_property_tags_lists_every_tag_read(kind, monkeypatch):
     given = optional if kind == "Millard2012EquilibriumMuscle" else ()  # read only where given (all or none)
     rigid_tendon(muscle(kind, given), 0.3, 0.1)
     assert set(read) == set(PROPERTY_TAGS[kind])
+
+
+@pytest.mark.parametrize("name", CURVES)
+def test_millards_second_derivatives_are_the_slopes_derivatives(name):
+    """AD's second derivative through the Newton steps (an NLP's Hessian) against central differences of the
+    AD slope, inside the segments (the curvature jumps at the joints)."""
+    curve = getattr(muscle_curves(muscle("Millard2012EquilibriumMuscle")), name)
+    s = ca.SX.sym("x")
+    d1 = ca.Function("d1", [s], [ca.jacobian(curve(s), s)])
+    d2 = ca.Function("d2", [s], [ca.hessian(curve(s), s)[0]])
+    for seg in curve.ctrl_x:
+        x = np.linspace(seg[0], seg[5], 13)[1:-1]
+        h = 1e-6 * (seg[5] - seg[0])
+        fd = (np.array(d1.map(x.size)(x + h)) - np.array(d1.map(x.size)(x - h))).ravel() / (2 * h)
+        ad = np.array(d2.map(x.size)(x)).ravel()
+        # central differences of a slope: error ~ h^2 f'''' + eps f' / h, ~1e-6 of curvatures up to ~1e4
+        assert np.allclose(ad, fd, rtol=1e-5, atol=1e-5 * np.max(np.abs(ad))), (name, np.max(np.abs(ad - fd)))
