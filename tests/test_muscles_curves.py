@@ -294,3 +294,18 @@ def test_millards_second_derivatives_are_the_slopes_derivatives(name):
         ad = np.array(d2.map(x.size)(x)).ravel()
         # central differences of a slope: error ~ h^2 f'''' + eps f' / h, ~1e-6 of curvatures up to ~1e4
         assert np.allclose(ad, fd, rtol=1e-5, atol=1e-5 * np.max(np.abs(ad))), (name, np.max(np.abs(ad - fd)))
+
+
+def test_millards_curves_are_one_named_function_each(tmp_path, monkeypatch):
+    """A distinct curve, a distinct name (CasADi's names become C symbols); the same curve, the same Function."""
+    a = muscle_curves(muscle("Millard2012EquilibriumMuscle")).active_force_length
+    b = muscle_curves(muscle("Millard2012EquilibriumMuscle", [("ActiveForceLengthCurve.minimum_value", 0.0),
+                                                               ("fiber_damping", 0.0)])).active_force_length
+    again = muscle_curves(muscle("Millard2012EquilibriumMuscle", name="other")).active_force_length
+    assert a.function is again.function and a.function.name() != b.function.name()
+    x = ca.MX.sym("x", 3)
+    f = ca.Function("both", [x], [a(x) + b(x)])
+    monkeypatch.chdir(tmp_path)
+    f.generate("both.c", {"with_header": False})  # no clash of the two curves' C symbols
+    assert (tmp_path / "both.c").stat().st_size > 0
+    assert float(f(ca.DM([1.0, 1.0, 1.0]))[0]) == pytest.approx(2.0, abs=1e-14)

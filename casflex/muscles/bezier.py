@@ -14,6 +14,7 @@ gives dy/dx = y'(u) / x'(u) (and its second derivative) exactly once the steps h
 from __future__ import annotations
 
 import functools
+import hashlib
 from dataclasses import dataclass
 
 import casadi as ca
@@ -125,20 +126,28 @@ class SegmentedCurve:
         u = np.linspace(0.0, 1.0, 101)
         return [(_value(u, list(seg)), u) for seg in self.ctrl_x]
 
-    @functools.cached_property
+    @property
     def function(self) -> ca.Function:
-        """The curve as a scalar CasADi Function ``name(x) -> y`` (SX inside; map it over vectors)."""
-        x = ca.SX.sym("x")
-        xc = ca.if_else(x < self.x0, self.x0, ca.if_else(x > self.x1, self.x1, x))
-        px, py = list(self.ctrl_x[0]), list(self.ctrl_y[0])
-        for seg_x, seg_y in zip(self.ctrl_x[1:], self.ctrl_y[1:], strict=True):
-            start = xc >= seg_x[0]
-            px = [ca.if_else(start, a, b) for a, b in zip(seg_x, px, strict=True)]
-            py = [ca.if_else(start, a, b) for a, b in zip(seg_y, py, strict=True)]
-        y = _value(_solve_u(xc, px, ops(xc)), py)
-        y = ca.if_else(x < self.x0, self.y0 + self.dydx0 * (x - self.x0),
-                       ca.if_else(x > self.x1, self.y1 + self.dydx1 * (x - self.x1), y))
-        return ca.Function(self.name, [x], [y], ["x"], ["y"])
+        """The curve as a scalar CasADi Function ``<name>_<digest>(x) -> y`` (SX inside; mapped over vectors):
+        one Function per distinct curve, its name unique to its control points (names become C symbols)."""
+        return _function(self)
+
+
+@functools.lru_cache(maxsize=256)
+def _function(curve: SegmentedCurve) -> ca.Function:
+    x = ca.SX.sym("x")
+    xc = ca.if_else(x < curve.x0, curve.x0, ca.if_else(x > curve.x1, curve.x1, x))
+    px, py = list(curve.ctrl_x[0]), list(curve.ctrl_y[0])
+    for seg_x, seg_y in zip(curve.ctrl_x[1:], curve.ctrl_y[1:], strict=True):
+        start = xc >= seg_x[0]
+        px = [ca.if_else(start, a, b) for a, b in zip(seg_x, px, strict=True)]
+        py = [ca.if_else(start, a, b) for a, b in zip(seg_y, py, strict=True)]
+    y = _value(_solve_u(xc, px, ops(xc)), py)
+    y = ca.if_else(x < curve.x0, curve.y0 + curve.dydx0 * (x - curve.x0),
+                   ca.if_else(x > curve.x1, curve.y1 + curve.dydx1 * (x - curve.x1), y))
+    digest = hashlib.sha1(repr((curve.ctrl_x, curve.ctrl_y, curve.x0, curve.x1, curve.y0, curve.y1, curve.dydx0,
+                                curve.dydx1)).encode()).hexdigest()[:10]
+    return ca.Function(f"{curve.name}_{digest}", [x], [y], ["x"], ["y"])
 
 
 def _map(f: ca.Function, x):

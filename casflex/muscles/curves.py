@@ -305,7 +305,7 @@ class RigidTendon:
 
     active : N, OpenSim's ``Muscle::calcInextensibleTendonActiveFiberForce(state, 1.0)``, the force a fully
         activated muscle carries that static optimization scales by the activation, as each kind codes it:
-        Millard: l_iso a f_L f_V cos(phi), 0 at or below the minimum fibre length, but with phi computed
+        Millard: F_iso f_L f_V cos(phi), 0 at or below the minimum fibre length, but with phi computed
         from the normalised fibre length taken as a length (its code passes l / l_opt to the pennation
         model), so cos(phi) is near 1 where the fibre's pennation is not; Thelen: F_iso f_L f_V cos(phi), 0
         at or below the pennation model's minimum fibre length; DeGroote: F_iso f_L f_V, the fibre's force,
