@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields
 
+import casadi as ca
 import numpy as np
 
 from casflex.muscles._ops import ops, symbolic
@@ -399,7 +400,9 @@ def rigid_tendon(muscle: Muscle, lmt, vmt, *, force_length_velocity: bool = True
     force and ``passive`` 0 (the other fields are still the muscle's)."""
     curves, pen = muscle_curves(muscle), pennation(muscle)
     lmt, vmt = _arg(lmt), _arg(vmt)
-    if not symbolic(lmt, vmt):
+    if symbolic(lmt, vmt):  # a number or array beside a CasADi symbol: a CasADi matrix of its own
+        lmt, vmt = (x if symbolic(x) else ca.DM(x) for x in (lmt, vmt))
+    else:
         lmt, vmt = np.broadcast_arrays(lmt, vmt)
     compute = {"Millard2012EquilibriumMuscle": _millard, "Thelen2003Muscle": _thelen_rigid,
                "DeGrooteFregly2016Muscle": _degroote_rigid}[muscle.kind]
