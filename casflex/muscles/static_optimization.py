@@ -1,0 +1,315 @@
+"""Static optimization as OpenSim 4.6 computes it, on arrays: the activations that carry a trial's joint moments at
+least cost, frame by frame (docs/muscles.md, "What OpenSim's static optimization does").
+
+At each frame k the unknowns are the muscles' activations a (n_m) and the reserves' controls u (one per coordinate
+that has a reserve, a ``CoordinateActuator`` of optimal force R_c: its moment is u_c R_c). They minimise
+
+    sum_m a_m^p + sum_c |u_c|^p          (p: OpenSim's activation_exponent; reserves count as muscles do)
+
+subject to the generalized forces' balance on every coordinate c,
+
+    sum_m r_mc(k) a_m F_m(k) + R_c u_c = tau_c(k) - sum_m r_mc(k) P_m(k)        (N m, or N on a translation)
+
+with r (m) the moment arms, F (N) each muscle's active force at full activation (OpenSim's
+``calcInextensibleTendonActiveFiberForce(s, 1)``; the max isometric force with ``force_length_velocity=False``),
+tau the inverse dynamics' generalized forces and P the passive fibre forces: OpenSim's SO overrides each muscle's
+whole tension with a F, so passive forces do not enter (``passive=False``, its behaviour; True applies them as
+known forces), and the bounds lo <= a <= hi (OpenSim: the muscles' min_control and max_control; Millard's
+min_control is its minimum_activation, 0.01), u free (or within ``reserve_bounds``).
+
+OpenSim states the balance as accelerations (udot(a, u) = the kinematics' udot), the same set of solutions since
+the mass matrix is invertible; it solves each frame with IPOPT to its ``optimizer_convergence_criterion`` (1e-4,
+loose). Here all frames are one sparse problem (block diagonal: a frame's unknowns meet only its own rows), solved
+by IPOPT to ``tolerance``; the reserves' |u|^p is u+^p + u-^p with u = u+ - u-, u+- >= 0 (exact at the optimum,
+smooth for any p >= 1). A frame whose moments no activation within the bounds can carry is found by a first
+problem that minimises the shortfall |A x - b|_1 (an exact measure: the least moment the bounds leave uncarried);
+with ``infeasible="raise"`` (default) it is refused naming the frame, the coordinate and the shortfall; with
+"report" those frames carry what they can (the moments minus the least shortfall) and the result says so.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["StaticOptimization", "StaticOptimizationResult", "solve_static_optimization"]
+
+
+@dataclass(frozen=True)
+class StaticOptimization:
+    """Static optimization's choices (OpenSim's names in brackets).
+
+    exponent : p >= 1 of the cost sum a^p + sum |u|^p [activation_exponent, 2]
+    force_length_velocity : a muscle's force per unit activation is its active force at full activation along
+        the fibres' force-length-velocity curves (True); False: its max isometric force [use_muscle_physiology]
+    passive : apply the passive fibre forces as known forces (True); OpenSim's SO does not (False)
+    activation_bounds : (lower, upper) of every activation [the muscles' min_control, max_control: 0.01, 1 for
+        Millard2012EquilibriumMuscle, whose min_control is its minimum_activation]
+    reserve_bounds : (lower, upper) of the reserves' controls [their min_control, max_control: -inf, inf]
+    tolerance : IPOPT's tol and constr_viol_tol (relative to the moments' scale) [optimizer_convergence_criterion,
+        1e-4: loose; 1e-10 here so that the answer is the optimum, not an iterate near it]
+    max_iterations : IPOPT's iteration limit for the whole trial [optimizer_max_iterations, 100, per frame]
+    infeasible : "raise" (a frame no activation satisfies is refused) or "report" (it carries what it can and
+        the result's ``report`` names it)
+    """
+
+    exponent: float = 2.0
+    force_length_velocity: bool = True
+    passive: bool = False
+    activation_bounds: tuple[float, float] = (0.01, 1.0)
+    reserve_bounds: tuple[float, float] = (-math.inf, math.inf)
+    tolerance: float = 1e-10
+    max_iterations: int = 3000
+    infeasible: str = "raise"
+
+    def __post_init__(self) -> None:
+        if not _real(self.exponent) or self.exponent < 1.0:
+            raise ValueError(f"exponent: expected a number >= 1 (OpenSim's activation_exponent), got {self.exponent!r}")
+        for name in ("force_length_velocity", "passive"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name}: expected True or False, got {getattr(self, name)!r}")
+        lo, hi = _pair("activation_bounds", self.activation_bounds)
+        if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo < hi):
+            raise ValueError("activation_bounds: expected 0 <= lower < upper, both finite, got "
+                             f"{self.activation_bounds!r}")
+        lo, hi = _pair("reserve_bounds", self.reserve_bounds)
+        if not (lo <= 0.0 <= hi and lo < hi):
+            raise ValueError(f"reserve_bounds: expected lower <= 0 <= upper, got {self.reserve_bounds!r}")
+        if not _real(self.tolerance) or not 0.0 < self.tolerance < 1e-2:
+            raise ValueError(f"tolerance: expected a number in (0, 1e-2), got {self.tolerance!r}")
+        if isinstance(self.max_iterations, bool) or not isinstance(self.max_iterations, int) or self.max_iterations < 1:
+            raise ValueError(f"max_iterations: expected an integer >= 1, got {self.max_iterations!r}")
+        if self.infeasible not in ("raise", "report"):
+            raise ValueError(f"infeasible: expected 'raise' or 'report', got {self.infeasible!r}")
+
+
+def _real(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and not math.isnan(x)
+
+
+def _pair(name: str, value) -> tuple[float, float]:
+    if not (isinstance(value, (tuple, list)) and len(value) == 2 and all(_real(v) for v in value)):
+        raise ValueError(f"{name}: expected (lower, upper), got {value!r}")
+    return float(value[0]), float(value[1])
+
+
+@dataclass(frozen=True, eq=False)
+class StaticOptimizationResult:
+    """Static optimization of k frames, n_m muscles, n_c coordinates.
+
+    activations (k, n_m); forces (k, n_m) N: a F (+ P with ``passive=True``); reserve_controls (k, n_c) (0 where a
+    coordinate has no reserve); reserve_moments (k, n_c) N m: the controls times the reserves' optimal forces;
+    reserve_share (n_c,): RMS over the trial of a coordinate's reserve moment over RMS of its moment (0: the muscles
+    carry it all; nan: no moment); violation (k, n_c) N m: what the solution leaves unbalanced (carried minus
+    required); infeasible: (frame, coordinate, shortfall N m) of each frame no activation satisfies; report: one
+    line per such frame ("" when none); iterations: IPOPT's; seconds: the solve's wall time.
+    """
+
+    activations: np.ndarray
+    forces: np.ndarray
+    reserve_controls: np.ndarray
+    reserve_moments: np.ndarray
+    reserve_share: np.ndarray
+    violation: np.ndarray
+    infeasible: tuple[tuple[int, str, float], ...] = ()
+    report: str = ""
+    iterations: int = 0
+    seconds: float = 0.0
+    stats: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def success(self) -> bool:
+        """True when every frame's moments are carried."""
+        return not self.infeasible
+
+
+def _array(name: str, value, shape: tuple[int, ...]) -> np.ndarray:
+    a = np.asarray(value, dtype=float)
+    if a.shape != shape:
+        raise ValueError(f"{name}: expected shape {shape}, got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        i = tuple(int(j) for j in np.argwhere(~np.isfinite(a))[0])
+        raise ValueError(f"{name}: not finite at {i} ({a[i]}): the inputs have a gap there; fill or cut it first")
+    return a
+
+
+def _check(moments, arms, active, passive, reserves, coordinates):
+    """The inputs as float arrays, each checked for its shape, finiteness and sign, before any work."""
+    m = np.asarray(moments, dtype=float)
+    if m.ndim != 2 or m.shape[0] < 1 or m.shape[1] < 1:
+        raise ValueError(f"moments: expected (frames, coordinates), got shape {m.shape}")
+    k, n_c = m.shape
+    arms = np.asarray(arms, dtype=float)
+    if arms.ndim != 3 or arms.shape[0] != k or arms.shape[2] != n_c:
+        raise ValueError(f"arms: expected ({k}, muscles, {n_c}) (frames, muscles, coordinates), got {arms.shape}")
+    n_m = arms.shape[1]
+    m, arms = _array("moments", m, (k, n_c)), _array("arms", arms, (k, n_m, n_c))
+    active = _array("active", np.broadcast_to(np.asarray(active, dtype=float), (k, n_m)), (k, n_m))
+    if np.any(active < 0.0):
+        i = tuple(int(j) for j in np.argwhere(active < 0.0)[0])
+        raise ValueError(f"active: a muscle's force at full activation is negative at (frame, muscle) {i}: "
+                         f"{active[i]:g} N")
+    passive = np.zeros((k, n_m)) if passive is None else _array("passive", passive, (k, n_m))
+    r = np.zeros(n_c) if reserves is None else np.asarray([0.0 if v is None else v for v in reserves], dtype=float)
+    r = _array("reserves", r, (n_c,))
+    if np.any(r < 0.0):
+        raise ValueError(f"reserves: an optimal force is negative ({r.min():g}); 0 or None: no reserve")
+    names = tuple(coordinates) if coordinates is not None else tuple(f"coordinate {c}" for c in range(n_c))
+    if len(names) != n_c:
+        raise ValueError(f"coordinates: expected {n_c} names, got {len(names)}")
+    return m, arms, active, passive, r, names
+
+
+def solve_static_optimization(moments, arms, active, passive=None, reserves=None,
+                              options: StaticOptimization | None = None, *, max_isometric=None,
+                              coordinates: Sequence[str] | None = None) -> StaticOptimizationResult:
+    """Static optimization of k frames (module docstring).
+
+    moments (k, n_c) N m (N on a translation): the generalized forces the muscles and reserves must carry (the
+    inverse dynamics', muscles excluded); arms (k, n_m, n_c) m: each muscle's moment arm about each coordinate;
+    active (k, n_m) N: each muscle's active force at full activation along the tendon; passive (k, n_m) N: its
+    passive fibre force along the tendon (used only with ``options.passive``); reserves (n_c,) N m: each
+    coordinate's reserve optimal force (0 or None: no reserve); max_isometric (n_m,) N: the forces per unit
+    activation when ``options.force_length_velocity`` is False; coordinates: names for the report.
+    """
+    import time
+
+    options = options or StaticOptimization()
+    m, arms, active, passive, r, names = _check(moments, arms, active, passive, reserves, coordinates)
+    k, n_m, n_c = arms.shape
+    if not options.force_length_velocity:
+        if max_isometric is None:
+            raise ValueError("max_isometric: needed with force_length_velocity=False (the force per activation)")
+        active = np.broadcast_to(_array("max_isometric", max_isometric, (n_m,)), (k, n_m))
+    target = m - np.einsum("kmc,km->kc", arms, passive) if options.passive else m
+    start = time.perf_counter()
+    problem = _Problem(arms, active, r, target, options)
+    x, iterations, ok, stats = problem.solve(target)
+    short, infeasible = np.zeros((k, n_c)), ()
+    if not ok:
+        short = problem.shortfall(target)
+        infeasible = _infeasible(short, names, options.tolerance * problem.scale)
+        if not infeasible:
+            raise RuntimeError(f"static optimization: IPOPT stopped ({stats.get('return_status')}) on moments the "
+                               "activations can carry; raise max_iterations or loosen tolerance")
+        if options.infeasible == "raise":
+            raise ValueError(_report(infeasible, len(infeasible)))
+        x, it2, ok, stats = problem.solve(target - short)
+        iterations += it2
+    return _result(problem, x, target, short, infeasible, passive, options, iterations,
+                   time.perf_counter() - start, stats)
+
+
+def _infeasible(short: np.ndarray, names, tol: np.ndarray) -> tuple[tuple[int, str, float], ...]:
+    """(frame, coordinate, shortfall) of each frame with a shortfall above the tolerance (its largest)."""
+    bad = np.abs(short) > 1e3 * tol
+    out = []
+    for f in np.flatnonzero(bad.any(axis=1)):
+        c = int(np.argmax(np.abs(short[f]) * bad[f]))
+        out.append((int(f), names[c], float(short[f, c])))
+    return tuple(out)
+
+
+def _report(infeasible, count: int) -> str:
+    lines = [f"frame {f}: {name}: no activation within the bounds carries its moment: {abs(s):.6g} N m "
+             f"{'short' if s > 0 else 'too much'}" for f, name, s in infeasible[:5]]
+    more = f" (and {count - 5} more frames)" if count > 5 else ""
+    return "static optimization: " + "; ".join(lines) + more + ": add a reserve on that coordinate or check the moments"
+
+
+def _result(problem, x, target, short, infeasible, passive, options, iterations, seconds, stats):
+    k, n_m, n_c = problem.arms.shape
+    a, u = problem.split(x)
+    forces = a * problem.active + (passive if options.passive else 0.0)
+    moments = u * problem.reserves
+    carried = np.einsum("kmc,km->kc", problem.arms, a * problem.active) + moments
+    rms = np.sqrt(np.mean(target ** 2, axis=0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        share = np.where(rms > 0.0, np.sqrt(np.mean(moments ** 2, axis=0)) / rms, np.nan)
+    report = _report(infeasible, len(infeasible)) if infeasible else ""
+    return StaticOptimizationResult(a, forces, u, moments, share, carried - target, infeasible, report, iterations,
+                                    seconds, stats)
+
+
+class _Problem:
+    """The trial's frames as one sparse NLP: unknowns frame after frame [a (n_m), u+ (n_r), u- (n_r)], the rows
+    (frame, coordinate) scaled by each coordinate's RMS moment (its unit: N m become O(1))."""
+
+    def __init__(self, arms, active, reserves, target, options: StaticOptimization) -> None:
+        self.arms, self.active, self.reserves, self.options = arms, active, reserves, options
+        k, n_m, n_c = arms.shape
+        self.held = np.flatnonzero(reserves > 0.0)
+        n_r = self.held.size
+        self.n_v = n_m + 2 * n_r
+        self.scale = np.maximum(np.sqrt(np.mean(target ** 2, axis=0)), 1e-6)
+        self.G = self._matrix()
+        lo, hi = options.activation_bounds
+        rlo, rhi = options.reserve_bounds
+        one = np.r_[np.full(n_m, lo), np.zeros(2 * n_r)], np.r_[np.full(n_m, hi), np.full(n_r, rhi), np.full(n_r, -rlo)]
+        self.lbx, self.ubx = np.tile(one[0], k), np.tile(one[1], k)
+
+    def _matrix(self):
+        """G (k n_c, k n_v): the block diagonal of each frame's [r^T diag(F), R, -R] over the rows' scale."""
+        import scipy.sparse as sp
+
+        k, n_m, n_c = self.arms.shape
+        blocks = np.einsum("kmc,km->kcm", self.arms, self.active)
+        res = np.zeros((n_c, self.held.size))
+        res[self.held, np.arange(self.held.size)] = self.reserves[self.held]
+        full = np.concatenate([blocks, np.broadcast_to(res, (k, n_c, self.held.size)),
+                               np.broadcast_to(-res, (k, n_c, self.held.size))], axis=2) / self.scale[None, :, None]
+        rows = np.arange(k * n_c).reshape(k, n_c, 1).repeat(self.n_v, axis=2)
+        cols = (np.arange(k)[:, None, None] * self.n_v + np.arange(self.n_v)[None, None, :]).repeat(n_c, axis=1)
+        return sp.csc_matrix((full.ravel(), (rows.ravel(), cols.ravel())), shape=(k * n_c, k * self.n_v))
+
+    def _ipopt(self, x, f, g, linear_objective=False):
+        import casadi as ca
+
+        tol = self.options.tolerance
+        opts = {"ipopt.tol": tol, "ipopt.constr_viol_tol": tol, "ipopt.max_iter": self.options.max_iterations,
+                "ipopt.print_level": 0, "print_time": False, "ipopt.jac_c_constant": "yes",
+                "ipopt.hessian_constant": "yes" if (linear_objective or self.options.exponent == 2.0) else "no",
+                "ipopt.sb": "yes", "ipopt.mu_strategy": "adaptive"}
+        return ca.nlpsol("static_optimization", "ipopt", {"x": x, "f": f, "g": g}, opts)
+
+    def solve(self, target):
+        """(x, iterations, converged, stats) of the least-cost activations carrying ``target`` (k, n_c)."""
+        import casadi as ca
+
+        x = ca.MX.sym("x", self.G.shape[1])
+        p = self.options.exponent
+        f = ca.sumsqr(x) if p == 2.0 else ca.sum1(ca.fabs(x) ** p)
+        solver = self._ipopt(x, f, ca.mtimes(ca.DM(self.G), x))
+        b = (target / self.scale).ravel()
+        x0 = np.clip(np.zeros_like(self.lbx), self.lbx, self.ubx)
+        sol = solver(x0=x0, lbx=self.lbx, ubx=self.ubx, lbg=b, ubg=b)
+        stats = solver.stats()
+        return np.array(sol["x"]).ravel(), int(stats["iter_count"]), bool(stats["success"]), stats
+
+    def shortfall(self, target) -> np.ndarray:
+        """(k, n_c) N m: the least |s|_1 with G x + s = b within the bounds: what no activation can carry."""
+        import casadi as ca
+
+        k, n_c = target.shape
+        n = self.G.shape[1]
+        z = ca.MX.sym("z", n + 2 * k * n_c)
+        x, sp_, sm = z[:n], z[n:n + k * n_c], z[n + k * n_c:]
+        solver = self._ipopt(z, ca.sum1(sp_ + sm), ca.mtimes(ca.DM(self.G), x) + sp_ - sm, linear_objective=True)
+        b = (target / self.scale).ravel()
+        lbz = np.r_[self.lbx, np.zeros(2 * k * n_c)]
+        ubz = np.r_[self.ubx, np.full(2 * k * n_c, np.inf)]
+        sol = np.array(solver(x0=np.clip(np.zeros(lbz.size), lbz, ubz), lbx=lbz, ubx=ubz, lbg=b, ubg=b)["x"]).ravel()
+        s = sol[n:n + k * n_c] - sol[n + k * n_c:]
+        return s.reshape(k, n_c) * self.scale
+
+    def split(self, x):
+        """(a (k, n_m), u (k, n_c)) of the unknowns x."""
+        k, n_m, n_c = self.arms.shape
+        v = x.reshape(k, self.n_v)
+        n_r = self.held.size
+        u = np.zeros((k, n_c))
+        u[:, self.held] = v[:, n_m:n_m + n_r] - v[:, n_m + n_r:]
+        return v[:, :n_m], u

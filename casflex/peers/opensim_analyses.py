@@ -1,0 +1,171 @@
+"""OpenSim's own static optimization and joint reactions on a lab's trial: the peer of :mod:`casflex.muscles`.
+
+OpenSim 4.6's ``AnalyzeTool`` run as a gait lab runs it from a setup file: the model, the coordinates (.mot, the
+IK result), the ground reactions (an ``ExternalLoads`` file), the reserve and residual actuators (a ``ForceSet``
+file appended to the model's forces), the coordinates' cut-off. :func:`static_optimization` runs its
+``StaticOptimization`` analysis (and, in the same pass, ``MuscleAnalysis``: the muscles' lengths and moment arms
+at the states SO saw), then ``JointReaction`` with SO's forces as its ``forces_file``; :func:`muscle_inputs`
+reads, at the same states, what SO's muscles can give: each muscle's active force at full activation as SO
+computes it (``Muscle::calcInextensibleTendonActiveFiberForce(s, 1)``), its passive fibre force along the tendon,
+its length and its moment arm about each coordinate. They run in OpenSim's worker process (see
+:mod:`casflex.peers.opensim`) and return the output files and the seconds each ``run()`` took.
+
+``rigid_tendon=True`` sets ``ignore_tendon_compliance`` on every muscle first (written to a copy of the model):
+OpenSim 4.6's SO reads a compliant-tendon muscle's fibre length from the state, which it never equilibrates
+(docs/muscles.md), so only the rigid-tendon run is SO's force-length-velocity physiology.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+import xml.etree.ElementTree as ET
+from collections.abc import Sequence
+
+from casflex.peers.opensim import _opensim, _run
+
+__all__ = ["muscle_inputs", "rigid_tendon_model", "static_optimization"]
+
+_HERE = "casflex.peers.opensim_analyses"
+
+
+def rigid_tendon_model(src: str | os.PathLike[str], dest: str | os.PathLike[str]) -> str:
+    """Write ``dest``: the .osim ``src`` with ``<ignore_tendon_compliance>true`` on every muscle (added where the
+    file leaves it out). Needs no OpenSim; returns dest."""
+    tree = ET.parse(os.fspath(src))
+    kinds = ("Millard2012EquilibriumMuscle", "Thelen2003Muscle", "DeGrooteFregly2016Muscle",
+             "Millard2012AccelerationMuscle")
+    for kind in kinds:
+        for muscle in tree.getroot().iter(kind):
+            tag = muscle.find("ignore_tendon_compliance")
+            if tag is None:
+                tag = ET.SubElement(muscle, "ignore_tendon_compliance")
+            tag.text = "true"
+    tree.write(os.fspath(dest), encoding="UTF-8", xml_declaration=True)
+    return os.fspath(dest)
+
+
+def _setup(path: str, name: str, model: str, coordinates: str, loads: str | None, forces: Sequence[str],
+           results: str, cutoff: float | None, t0: float, t1: float, analyses: list[ET.Element]) -> str:
+    """Write an ``AnalyzeTool`` setup file (absolute paths) running ``analyses``; returns its path."""
+    root = ET.Element("OpenSimDocument", Version="40000")
+    tool = ET.SubElement(root, "AnalyzeTool", name=name)
+    for tag, text in (("model_file", model), ("replace_force_set", "false"), ("force_set_files", " ".join(forces)),
+                      ("results_directory", results), ("output_precision", "12"), ("initial_time", repr(t0)),
+                      ("final_time", repr(t1)), ("solve_for_equilibrium_for_auxiliary_states", "false")):
+        ET.SubElement(tool, tag).text = text
+    objects = ET.SubElement(ET.SubElement(tool, "AnalysisSet", name="Analyses"), "objects")
+    objects.extend(analyses)
+    ET.SubElement(tool, "ControllerSet", name="Controllers").append(ET.Element("objects"))
+    ET.SubElement(tool, "external_loads_file").text = loads or ""
+    ET.SubElement(tool, "coordinates_file").text = coordinates
+    ET.SubElement(tool, "lowpass_cutoff_frequency_for_coordinates").text = "-1" if cutoff is None else repr(cutoff)
+    ET.ElementTree(root).write(path, encoding="UTF-8", xml_declaration=True)
+    return path
+
+
+def _analysis(kind: str, t0: float, t1: float, **props: str) -> ET.Element:
+    el = ET.Element(kind, name=kind)
+    for tag, text in (("on", "true"), ("start_time", repr(t0)), ("end_time", repr(t1)), ("step_interval", "1"),
+                      ("in_degrees", "true"), *props.items()):
+        ET.SubElement(el, tag).text = text
+    return el
+
+
+def _so_here(model: str, coordinates: str, loads: str | None, forces: list[str], results: str,
+             cutoff: float | None, t0: float, t1: float, exponent: float, tol: float, iters: int,
+             joints: list[str], on: str, frame: str) -> dict:
+    osim = _opensim()
+    os.makedirs(results, exist_ok=True)
+    so = _analysis("StaticOptimization", t0, t1, use_model_force_set="true", activation_exponent=repr(exponent),
+                   use_muscle_physiology="true", optimizer_convergence_criterion=repr(tol),
+                   optimizer_max_iterations=str(iters))
+    ma = _analysis("MuscleAnalysis", t0, t1, compute_moments="false")
+    setup = _setup(os.path.join(results, "setup_so.xml"), "so", model, coordinates, loads, forces, results, cutoff,
+                   t0, t1, [so])
+    start = time.perf_counter()
+    osim.AnalyzeTool(setup).run()
+    so_seconds = time.perf_counter() - start
+    force = os.path.join(results, "so_StaticOptimization_force.sto")
+    jr = _analysis("JointReaction", t0, t1, forces_file=force, joint_names=" ".join(joints), apply_on_bodies=on,
+                   express_in_frame=frame)
+    setup = _setup(os.path.join(results, "setup_jr.xml"), "jr", model, coordinates, loads, forces, results, cutoff,
+                   t0, t1, [jr])
+    start = time.perf_counter()
+    osim.AnalyzeTool(setup).run()
+    jr_seconds = time.perf_counter() - start
+    setup = _setup(os.path.join(results, "setup_ma.xml"), "ma", model, coordinates, loads, forces, results, cutoff,
+                   t0, t1, [ma])
+    osim.AnalyzeTool(setup).run()
+    return {"activation": os.path.join(results, "so_StaticOptimization_activation.sto"), "force": force,
+            "reactions": os.path.join(results, "jr_JointReaction_ReactionLoads.sto"),
+            "muscles": results, "so_seconds": so_seconds, "jr_seconds": jr_seconds}
+
+
+def static_optimization(model, coordinates, results, *, loads=None, forces: Sequence = (), cutoff: float | None = 6.0,
+                        t_start: float = 0.0, t_end: float = 1e9, exponent: float = 2.0, tol: float = 1e-4,
+                        max_iterations: int = 100, joints: Sequence[str] = ("ALL",), on: str = "child",
+                        frame: str = "child", worker: bool | None = None) -> dict:
+    """OpenSim's static optimization of the model file ``model`` along ``coordinates`` (.mot) with the
+    ``ExternalLoads`` file ``loads`` and the actuator files ``forces`` (reserves and residuals, appended to the
+    model's forces), the coordinates low-pass filtered at ``cutoff`` Hz (None: not), from ``t_start`` to ``t_end``
+    (s), SO's options ``exponent`` (activation_exponent), ``tol`` (optimizer_convergence_criterion) and
+    ``max_iterations``; then its ``JointReaction`` of ``joints`` on the ``on`` body ("child" or "parent"),
+    expressed in ``frame`` ("child", "parent", "ground" or a frame's name), SO's forces applied; then a
+    ``MuscleAnalysis`` at the same states. Outputs in the directory ``results``. Returns {"activation", "force",
+    "reactions": .sto paths, "muscles": the MuscleAnalysis directory, "so_seconds", "jr_seconds": run times}."""
+    return _run(f"{_HERE}:_so_here", worker, os.path.abspath(model), os.path.abspath(coordinates),
+                os.path.abspath(loads) if loads else None, [os.path.abspath(f) for f in forces],
+                os.path.abspath(results), None if cutoff is None else float(cutoff), float(t_start), float(t_end),
+                float(exponent), float(tol), int(max_iterations), list(joints), on, frame)
+
+
+def _inputs_here(model: str, coordinates: str, cutoff: float | None, t0: float, t1: float) -> dict:
+    import numpy as np
+
+    osim = _opensim()
+    m = osim.Model(model)
+    s = m.initSystem()
+    tool = osim.AnalyzeTool(m)
+    tool.setCoordinatesFileName(coordinates)
+    tool.setLowpassCutoffFrequency(-1.0 if cutoff is None else float(cutoff))
+    tool.loadStatesFromFile(s)
+    states = tool.getStatesStorage()
+    names = list(m.getStateVariableNames().get(i) for i in range(m.getNumStateVariables()))
+    labels = states.getColumnLabels()
+    cols = {labels.get(i + 1): i for i in range(labels.getSize() - 1)}
+    muscles = [m.getMuscles().get(i) for i in range(m.getMuscles().getSize())]
+    coords = [m.getCoordinateSet().get(i) for i in range(m.getCoordinateSet().getSize())]
+    rows, t, out = states.getSize(), [], {k: [] for k in ("active", "passive", "length", "speed", "arms")}
+    for r in range(rows):
+        time_r = states.getStateVector(r).getTime()
+        if time_r < t0 - 1e-5 or time_r > t1 + 1e-5:  # the filtered states keep times within 1e-6 s
+            continue
+        data = states.getStateVector(r).getData()
+        values = m.getStateVariableValues(s)
+        for j, name in enumerate(names):
+            if name in cols:
+                values.set(j, data.get(cols[name]))
+        s.setTime(time_r)
+        m.setStateVariableValues(s, values)
+        m.assemble(s)
+        m.realizeVelocity(s)
+        t.append(time_r)
+        out["active"].append([mu.calcInextensibleTendonActiveFiberForce(s, 1.0) for mu in muscles])
+        out["passive"].append([mu.getPassiveFiberForceAlongTendon(s) for mu in muscles])
+        out["length"].append([mu.getLength(s) for mu in muscles])
+        out["speed"].append([mu.getLengtheningSpeed(s) for mu in muscles])
+        out["arms"].append([[mu.computeMomentArm(s, c) for c in coords] for mu in muscles])
+    return {"t": np.array(t), "muscles": [mu.getName() for mu in muscles], "coordinates": [c.getName() for c in coords],
+            **{k: np.array(v) for k, v in out.items()}}
+
+
+def muscle_inputs(model, coordinates, *, cutoff: float | None = 6.0, t_start: float = 0.0, t_end: float = 1e9,
+                  worker: bool | None = None) -> dict:
+    """What OpenSim's SO sees of the muscles of ``model`` along ``coordinates`` (.mot), filtered at ``cutoff`` Hz
+    as its AnalyzeTool filters them (the same states): per frame, "active" (k, n_m) N each muscle's active force
+    at full activation (``calcInextensibleTendonActiveFiberForce(s, 1)``), "passive" (k, n_m) N its passive fibre
+    force along the tendon, "length" (k, n_m) m and "speed" (k, n_m) m/s its path's, "arms" (k, n_m, n_c) m its
+    moment arm about each coordinate; with "t" (k,) s, "muscles" and "coordinates" (the model's orders)."""
+    return _run(f"{_HERE}:_inputs_here", worker, os.path.abspath(model), os.path.abspath(coordinates),
+                None if cutoff is None else float(cutoff), float(t_start), float(t_end))
