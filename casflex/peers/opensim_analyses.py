@@ -3,8 +3,7 @@
 OpenSim 4.6's ``AnalyzeTool`` run as a gait lab runs it from a setup file: the model, the coordinates (.mot, the
 IK result), the ground reactions (an ``ExternalLoads`` file), the reserve and residual actuators (a ``ForceSet``
 file appended to the model's forces), the coordinates' cut-off. :func:`static_optimization` runs its
-``StaticOptimization`` analysis (and, in the same pass, ``MuscleAnalysis``: the muscles' lengths and moment arms
-at the states SO saw), then ``JointReaction`` with SO's forces as its ``forces_file``; :func:`muscle_inputs`
+``StaticOptimization`` analysis, then ``JointReaction`` with SO's forces as its ``forces_file``; :func:`muscle_inputs`
 reads, at the same states, what SO's muscles can give: each muscle's active force at full activation as SO
 computes it (``Muscle::calcInextensibleTendonActiveFiberForce(s, 1)``), its passive fibre force along the tendon,
 its length and its moment arm about each coordinate. They run in OpenSim's worker process (see
@@ -24,7 +23,7 @@ from collections.abc import Sequence
 
 from casflex.peers.opensim import _opensim, _run
 
-__all__ = ["muscle_inputs", "rigid_tendon_model", "static_optimization"]
+__all__ = ["joint_reaction", "muscle_inputs", "rigid_tendon_model", "static_optimization"]
 
 _HERE = "casflex.peers.opensim_analyses"
 
@@ -80,26 +79,42 @@ def _so_here(model: str, coordinates: str, loads: str | None, forces: list[str],
     so = _analysis("StaticOptimization", t0, t1, use_model_force_set="true", activation_exponent=repr(exponent),
                    use_muscle_physiology="true", optimizer_convergence_criterion=repr(tol),
                    optimizer_max_iterations=str(iters))
-    ma = _analysis("MuscleAnalysis", t0, t1, compute_moments="false")
     setup = _setup(os.path.join(results, "setup_so.xml"), "so", model, coordinates, loads, forces, results, cutoff,
                    t0, t1, [so])
     start = time.perf_counter()
     osim.AnalyzeTool(setup).run()
     so_seconds = time.perf_counter() - start
     force = os.path.join(results, "so_StaticOptimization_force.sto")
-    jr = _analysis("JointReaction", t0, t1, forces_file=force, joint_names=" ".join(joints), apply_on_bodies=on,
-                   express_in_frame=frame)
-    setup = _setup(os.path.join(results, "setup_jr.xml"), "jr", model, coordinates, loads, forces, results, cutoff,
-                   t0, t1, [jr])
+    jr = _jr_here(model, coordinates, loads, forces, force, results, "jr", cutoff, t0, t1, joints, on, frame)
+    return {"activation": os.path.join(results, "so_StaticOptimization_activation.sto"), "force": force,
+            "reactions": jr["path"], "so_seconds": so_seconds, "jr_seconds": jr["seconds"]}
+
+
+def _jr_here(model: str, coordinates: str, loads: str | None, forces: list[str], force_file: str, results: str,
+             name: str, cutoff: float | None, t0: float, t1: float, joints: list[str], on: str, frame: str) -> dict:
+    osim = _opensim()
+    os.makedirs(results, exist_ok=True)
+    jr = _analysis("JointReaction", t0, t1, forces_file=force_file, joint_names=" ".join(joints),
+                   apply_on_bodies=on, express_in_frame=frame)
+    setup = _setup(os.path.join(results, f"setup_{name}.xml"), name, model, coordinates, loads, forces, results,
+                   cutoff, t0, t1, [jr])
     start = time.perf_counter()
     osim.AnalyzeTool(setup).run()
-    jr_seconds = time.perf_counter() - start
-    setup = _setup(os.path.join(results, "setup_ma.xml"), "ma", model, coordinates, loads, forces, results, cutoff,
-                   t0, t1, [ma])
-    osim.AnalyzeTool(setup).run()
-    return {"activation": os.path.join(results, "so_StaticOptimization_activation.sto"), "force": force,
-            "reactions": os.path.join(results, "jr_JointReaction_ReactionLoads.sto"),
-            "muscles": results, "so_seconds": so_seconds, "jr_seconds": jr_seconds}
+    return {"path": os.path.join(results, f"{name}_JointReaction_ReactionLoads.sto"),
+            "seconds": time.perf_counter() - start}
+
+
+def joint_reaction(model, coordinates, force_file, results, *, name: str = "jr", loads=None, forces: Sequence = (),
+                   cutoff: float | None = 6.0, t_start: float = 0.0, t_end: float = 1e9,
+                   joints: Sequence[str] = ("ALL",), on: str = "child", frame: str = "child",
+                   worker: bool | None = None) -> dict:
+    """OpenSim's ``JointReaction`` of ``joints`` with every actuator's force read from ``force_file`` (a .sto
+    with a column per actuator, N or N m: e.g. SO's forces), the other arguments as :func:`static_optimization`'s;
+    written to ``<results>/<name>_JointReaction_ReactionLoads.sto``. Returns {"path", "seconds"}."""
+    return _run(f"{_HERE}:_jr_here", worker, os.path.abspath(model), os.path.abspath(coordinates),
+                os.path.abspath(loads) if loads else None, [os.path.abspath(f) for f in forces],
+                os.path.abspath(force_file), os.path.abspath(results), name,
+                None if cutoff is None else float(cutoff), float(t_start), float(t_end), list(joints), on, frame)
 
 
 def static_optimization(model, coordinates, results, *, loads=None, forces: Sequence = (), cutoff: float | None = 6.0,
@@ -111,21 +126,17 @@ def static_optimization(model, coordinates, results, *, loads=None, forces: Sequ
     model's forces), the coordinates low-pass filtered at ``cutoff`` Hz (None: not), from ``t_start`` to ``t_end``
     (s), SO's options ``exponent`` (activation_exponent), ``tol`` (optimizer_convergence_criterion) and
     ``max_iterations``; then its ``JointReaction`` of ``joints`` on the ``on`` body ("child" or "parent"),
-    expressed in ``frame`` ("child", "parent", "ground" or a frame's name), SO's forces applied; then a
-    ``MuscleAnalysis`` at the same states. Outputs in the directory ``results``. Returns {"activation", "force",
-    "reactions": .sto paths, "muscles": the MuscleAnalysis directory, "so_seconds", "jr_seconds": run times}."""
+    expressed in ``frame`` ("child", "parent", "ground" or a frame's name), SO's forces applied. Outputs in the
+    directory ``results``. Returns {"activation", "force", "reactions": .sto paths, "so_seconds", "jr_seconds":
+    the two runs' times}."""
     return _run(f"{_HERE}:_so_here", worker, os.path.abspath(model), os.path.abspath(coordinates),
                 os.path.abspath(loads) if loads else None, [os.path.abspath(f) for f in forces],
                 os.path.abspath(results), None if cutoff is None else float(cutoff), float(t_start), float(t_end),
                 float(exponent), float(tol), int(max_iterations), list(joints), on, frame)
 
 
-def _inputs_here(model: str, coordinates: str, cutoff: float | None, t0: float, t1: float) -> dict:
-    import numpy as np
-
-    osim = _opensim()
-    m = osim.Model(model)
-    s = m.initSystem()
+def _states(osim, m, s, coordinates: str, cutoff: float | None, t0: float, t1: float):
+    """Yield each frame's time, ``s`` set to the states OpenSim's AnalyzeTool makes of ``coordinates``."""
     tool = osim.AnalyzeTool(m)
     tool.setCoordinatesFileName(coordinates)
     tool.setLowpassCutoffFrequency(-1.0 if cutoff is None else float(cutoff))
@@ -134,10 +145,7 @@ def _inputs_here(model: str, coordinates: str, cutoff: float | None, t0: float, 
     names = list(m.getStateVariableNames().get(i) for i in range(m.getNumStateVariables()))
     labels = states.getColumnLabels()
     cols = {labels.get(i + 1): i for i in range(labels.getSize() - 1)}
-    muscles = [m.getMuscles().get(i) for i in range(m.getMuscles().getSize())]
-    coords = [m.getCoordinateSet().get(i) for i in range(m.getCoordinateSet().getSize())]
-    rows, t, out = states.getSize(), [], {k: [] for k in ("active", "passive", "length", "speed", "arms")}
-    for r in range(rows):
+    for r in range(states.getSize()):
         time_r = states.getStateVector(r).getTime()
         if time_r < t0 - 1e-5 or time_r > t1 + 1e-5:  # the filtered states keep times within 1e-6 s
             continue
@@ -150,22 +158,96 @@ def _inputs_here(model: str, coordinates: str, cutoff: float | None, t0: float, 
         m.setStateVariableValues(s, values)
         m.assemble(s)
         m.realizeVelocity(s)
+        yield time_r
+
+
+def _subtrees(m, joints: list[str]) -> list[set[str]]:
+    """The bodies distal to each joint (its child's base body and every body below it)."""
+    parent = {}
+    for i in range(m.getJointSet().getSize()):
+        j = m.getJointSet().get(i)
+        parent[j.getChildFrame().findBaseFrame().getName()] = j.getParentFrame().findBaseFrame().getName()
+    out = []
+    for name in joints:
+        child = m.getJointSet().get(name).getChildFrame().findBaseFrame().getName()
+        below = set()
+        for body in parent:
+            b = body
+            while b in parent and b != child:
+                b = parent[b]
+            if b == child:
+                below.add(body)
+        out.append(below)
+    return out
+
+
+def _angle(frame, s) -> float:
+    import math
+
+    rot = frame.getTransformInGround(s).R().asMat33()
+    return math.atan2(rot.get(1, 0), rot.get(0, 0))
+
+
+def _units(osim, m, s, muscles, joints: list[str], below: list[set[str]]) -> list:
+    """(n_j * 3, n_m): each muscle's load per N of tension on each joint's distal bodies (fx, fy N/N in the
+    ground, mz m about the child frame's origin), from its path's point force directions."""
+    import numpy as np
+
+    out = np.zeros((3 * len(joints), len(muscles)))
+    centres = [m.getJointSet().get(j).getChildFrame().getTransformInGround(s).p() for j in joints]
+    for i, mu in enumerate(muscles):
+        path = osim.GeometryPath.safeDownCast(mu.getPath())
+        pfds = osim.ArrayPointForceDirection()
+        path.getPointForceDirections(s, pfds)
+        for n in range(pfds.getSize()):
+            pfd = pfds.get(n)
+            body = pfd.frame().findBaseFrame().getName()
+            p = pfd.frame().findStationLocationInGround(s, pfd.point())
+            d = pfd.direction()
+            for h, bodies in enumerate(below):
+                if body in bodies:
+                    c = centres[h]
+                    rx, ry = p.get(0) - c.get(0), p.get(1) - c.get(1)
+                    out[3 * h:3 * h + 3, i] += (d.get(0), d.get(1), rx * d.get(1) - ry * d.get(0))
+    return out
+
+
+def _inputs_here(model: str, coordinates: str, cutoff: float | None, t0: float, t1: float, joints: list[str]
+                 ) -> dict:
+    import numpy as np
+
+    osim = _opensim()
+    m = osim.Model(model)
+    s = m.initSystem()
+    muscles = [m.getMuscles().get(i) for i in range(m.getMuscles().getSize())]
+    coords = [m.getCoordinateSet().get(i) for i in range(m.getCoordinateSet().getSize())]
+    below = _subtrees(m, joints)
+    t, out = [], {k: [] for k in ("active", "passive", "length", "speed", "arms", "units", "child", "parent")}
+    for time_r in _states(osim, m, s, coordinates, cutoff, t0, t1):
         t.append(time_r)
         out["active"].append([mu.calcInextensibleTendonActiveFiberForce(s, 1.0) for mu in muscles])
         out["passive"].append([mu.getPassiveFiberForceAlongTendon(s) for mu in muscles])
         out["length"].append([mu.getLength(s) for mu in muscles])
         out["speed"].append([mu.getLengtheningSpeed(s) for mu in muscles])
         out["arms"].append([[mu.computeMomentArm(s, c) for c in coords] for mu in muscles])
+        out["units"].append(_units(osim, m, s, muscles, joints, below))
+        js = [m.getJointSet().get(j) for j in joints]
+        out["child"].append([_angle(j.getChildFrame().findBaseFrame(), s) for j in js])
+        out["parent"].append([_angle(j.getParentFrame().findBaseFrame(), s) for j in js])
     return {"t": np.array(t), "muscles": [mu.getName() for mu in muscles], "coordinates": [c.getName() for c in coords],
-            **{k: np.array(v) for k, v in out.items()}}
+            "joints": list(joints), **{k: np.array(v) for k, v in out.items()}}
 
 
 def muscle_inputs(model, coordinates, *, cutoff: float | None = 6.0, t_start: float = 0.0, t_end: float = 1e9,
-                  worker: bool | None = None) -> dict:
+                  joints: Sequence[str] = (), worker: bool | None = None) -> dict:
     """What OpenSim's SO sees of the muscles of ``model`` along ``coordinates`` (.mot), filtered at ``cutoff`` Hz
     as its AnalyzeTool filters them (the same states): per frame, "active" (k, n_m) N each muscle's active force
     at full activation (``calcInextensibleTendonActiveFiberForce(s, 1)``), "passive" (k, n_m) N its passive fibre
     force along the tendon, "length" (k, n_m) m and "speed" (k, n_m) m/s its path's, "arms" (k, n_m, n_c) m its
-    moment arm about each coordinate; with "t" (k,) s, "muscles" and "coordinates" (the model's orders)."""
+    moment arm about each coordinate; for each joint of ``joints``, "units" (k, n_j * 3, n_m) each muscle's load
+    per N of tension on the joint's distal bodies (fx, fy in the ground, mz m about the child frame's origin: the
+    point OpenSim's JointReaction reports at) from its path's point force directions, "child" and "parent" (k, n_j)
+    rad the angles of the joint's child and parent bodies in the ground (about z; a planar motion's); with "t" (k,)
+    s, "muscles", "coordinates" and "joints" (the model's orders)."""
     return _run(f"{_HERE}:_inputs_here", worker, os.path.abspath(model), os.path.abspath(coordinates),
-                None if cutoff is None else float(cutoff), float(t_start), float(t_end))
+                None if cutoff is None else float(cutoff), float(t_start), float(t_end), list(joints))
