@@ -196,10 +196,11 @@ def solve_static_optimization(moments, arms, active, passive=None, reserves=None
             raise RuntimeError(f"static optimization: IPOPT stopped ({stats.get('return_status')}) on moments the "
                                "activations can carry; raise max_iterations or loosen tolerance")
         if options.infeasible == "raise":
-            raise ValueError(_report(infeasible, len(infeasible)))
+            raise ValueError(_report(infeasible, len(infeasible), target, names))
         x, it2, ok, stats = problem.solve(target - short)
         iterations += it2
-    return _result(problem, x, target, short, infeasible, passive, options, iterations,
+    report = _report(infeasible, len(infeasible), target, names) if infeasible else ""
+    return _result(problem, x, target, infeasible, report, passive, options, iterations,
                    time.perf_counter() - start, stats)
 
 
@@ -213,14 +214,14 @@ def _infeasible(short: np.ndarray, names, tol: np.ndarray) -> tuple[tuple[int, s
     return tuple(out)
 
 
-def _report(infeasible, count: int) -> str:
-    lines = [f"frame {f}: {name}: no activation within the bounds carries its moment: {abs(s):.6g} N m "
-             f"{'short' if s > 0 else 'too much'}" for f, name, s in infeasible[:5]]
+def _report(infeasible, count: int, target: np.ndarray, names) -> str:
+    lines = [f"frame {f}: {name}: no activation within the bounds carries its moment of "
+             f"{target[f, names.index(name)]:.6g} N m: {abs(s):.6g} N m out of reach" for f, name, s in infeasible[:5]]
     more = f" (and {count - 5} more frames)" if count > 5 else ""
     return "static optimization: " + "; ".join(lines) + more + ": add a reserve on that coordinate or check the moments"
 
 
-def _result(problem, x, target, short, infeasible, passive, options, iterations, seconds, stats):
+def _result(problem, x, target, infeasible, report, passive, options, iterations, seconds, stats):
     k, n_m, n_c = problem.arms.shape
     a, u = problem.split(x)
     forces = a * problem.active + (passive if options.passive else 0.0)
@@ -229,7 +230,6 @@ def _result(problem, x, target, short, infeasible, passive, options, iterations,
     rms = np.sqrt(np.mean(target ** 2, axis=0))
     with np.errstate(invalid="ignore", divide="ignore"):
         share = np.where(rms > 0.0, np.sqrt(np.mean(moments ** 2, axis=0)) / rms, np.nan)
-    report = _report(infeasible, len(infeasible)) if infeasible else ""
     return StaticOptimizationResult(a, forces, u, moments, share, carried - target, infeasible, report, iterations,
                                     seconds, stats)
 
