@@ -119,6 +119,17 @@ def test_report_keeps_the_frames_it_can_and_says_which_it_cannot():
     assert res.activations[0] == pytest.approx([0.4, 0.25], rel=1e-6)  # the satisfiable frames are exact
 
 
+def test_a_coordinate_nothing_acts_on_must_need_nothing():
+    arms = np.zeros((3, 1, 2))
+    arms[:, 0, 0], arms[:, 0, 1] = 0.05, 1e-17  # the second: a root's coordinate, the muscle internal to it
+    m = np.array([[5.0, 0.0], [6.0, 0.0], [7.0, 0.0]])
+    res = solve_static_optimization(m, arms, np.full((3, 1), 400.0), options=LOOSE)
+    assert res.activations[:, 0] == pytest.approx(m[:, 0] / 20.0, rel=1e-8)
+    m[2, 1] = 3.0
+    with pytest.raises(ValueError, match="frame 2: pelvis_tx: .* of 3 N m: 3 N m out of reach"):
+        solve_static_optimization(m, arms, np.full((3, 1), 400.0), coordinates=("knee", "pelvis_tx"), options=LOOSE)
+
+
 def test_passive_forces_as_known_forces_and_max_isometric_without_curves():
     arms, active = np.full((1, 1, 1), 0.05), np.full((1, 1), 500.0)
     res = solve_static_optimization([[10.0]], arms, active, passive=[[40.0]],
@@ -152,6 +163,7 @@ def test_options_refuse_bad_values(options, message):
     (dict(active=np.full((2, 1), -5.0)), "active: a muscle's force at full activation is negative"),
     (dict(reserves=[-1.0]), "reserves: an optimal force is negative"),
     (dict(moments=np.zeros(2)), r"moments: expected \(frames, coordinates\)"),
+    (dict(arms=np.full((2, 1, 1), 50.0)), r"arms: 50 m at \(frame, muscle, coordinate\) \(0, 0, 0\): .* mm or cm\?"),
 ])
 def test_bad_inputs_are_refused_before_any_work(change, message):
     args = dict(moments=np.ones((2, 1)), arms=np.full((2, 1, 1), 0.05), active=np.full((2, 1), 100.0), reserves=None)

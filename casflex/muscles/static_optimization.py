@@ -147,6 +147,10 @@ def _check(moments, arms, active, passive, reserves, coordinates):
         raise ValueError(f"arms: expected ({k}, muscles, {n_c}) (frames, muscles, coordinates), got {arms.shape}")
     n_m = arms.shape[1]
     m, arms = _array("moments", m, (k, n_c)), _array("arms", arms, (k, n_m, n_c))
+    if np.abs(arms).max(initial=0.0) > 1.0:  # m, or m/m on a translation: a human muscle's are below 0.2 m
+        i = tuple(int(j) for j in np.unravel_index(np.argmax(np.abs(arms)), arms.shape))
+        raise ValueError(f"arms: {arms[i]:g} m at (frame, muscle, coordinate) {i}: no muscle's moment arm is past "
+                         "1 m; are they in mm or cm?")
     active = _array("active", np.broadcast_to(np.asarray(active, dtype=float), (k, n_m)), (k, n_m))
     if np.any(active < 0.0):
         i = tuple(int(j) for j in np.argwhere(active < 0.0)[0])
@@ -245,7 +249,13 @@ class _Problem:
         n_r = self.held.size
         self.n_v = n_m + 2 * n_r
         self.scale = np.maximum(np.sqrt(np.mean(target ** 2, axis=0)), 1e-6)
-        self.G = self._matrix()
+        G = self._matrix()
+        # rows nothing acts on (a coordinate no muscle crosses and no reserve holds, e.g. the root's, where the
+        # muscles' arms are 1e-16 m of rounding): out of the NLP (such rows slow IPOPT fourfold or make it declare
+        # the problem infeasible); what they require is out of reach as it stands
+        rows = np.abs(G).max(axis=1).toarray().ravel() * np.tile(self.scale, arms.shape[0])  # N m per unit
+        self.keep = rows > 1e-9 * max(float((rows).max()), 1e-300)
+        self.G = G[self.keep]
         lo, hi = options.activation_bounds
         rlo, rhi = options.reserve_bounds
         one = np.r_[np.full(n_m, lo), np.zeros(2 * n_r)], np.r_[np.full(n_m, hi), np.full(n_r, rhi), np.full(n_r, -rlo)]
@@ -283,27 +293,29 @@ class _Problem:
         p = self.options.exponent
         f = ca.sumsqr(x) if p == 2.0 else ca.sum1(ca.fabs(x) ** p)
         solver = self._ipopt(x, f, ca.mtimes(ca.DM(self.G), x))
-        b = (target / self.scale).ravel()
+        b = (target / self.scale).ravel()[self.keep]
         x0 = np.clip(np.zeros_like(self.lbx), self.lbx, self.ubx)
         sol = solver(x0=x0, lbx=self.lbx, ubx=self.ubx, lbg=b, ubg=b)
         stats = solver.stats()
-        return np.array(sol["x"]).ravel(), int(stats["iter_count"]), bool(stats["success"]), stats
+        unheld = np.abs((target / self.scale).ravel()[~self.keep]).max(initial=0.0) > 1e3 * self.options.tolerance
+        return np.array(sol["x"]).ravel(), int(stats["iter_count"]), bool(stats["success"]) and not unheld, stats
 
     def shortfall(self, target) -> np.ndarray:
         """(k, n_c) N m: the least |s|_1 with G x + s = b within the bounds: what no activation can carry."""
         import casadi as ca
 
-        k, n_c = target.shape
-        n = self.G.shape[1]
-        z = ca.MX.sym("z", n + 2 * k * n_c)
-        x, sp_, sm = z[:n], z[n:n + k * n_c], z[n + k * n_c:]
+        n, rows = self.G.shape[1], self.G.shape[0]
+        z = ca.MX.sym("z", n + 2 * rows)
+        x, sp_, sm = z[:n], z[n:n + rows], z[n + rows:]
         solver = self._ipopt(z, ca.sum1(sp_ + sm), ca.mtimes(ca.DM(self.G), x) + sp_ - sm, linear_objective=True)
         b = (target / self.scale).ravel()
-        lbz = np.r_[self.lbx, np.zeros(2 * k * n_c)]
-        ubz = np.r_[self.ubx, np.full(2 * k * n_c, np.inf)]
-        sol = np.array(solver(x0=np.clip(np.zeros(lbz.size), lbz, ubz), lbx=lbz, ubx=ubz, lbg=b, ubg=b)["x"]).ravel()
-        s = sol[n:n + k * n_c] - sol[n + k * n_c:]
-        return s.reshape(k, n_c) * self.scale
+        lbz = np.r_[self.lbx, np.zeros(2 * rows)]
+        ubz = np.r_[self.ubx, np.full(2 * rows, np.inf)]
+        sol = np.array(solver(x0=np.clip(np.zeros(lbz.size), lbz, ubz), lbx=lbz, ubx=ubz, lbg=b[self.keep],
+                              ubg=b[self.keep])["x"]).ravel()
+        s = b.copy()  # the rows nothing acts on fall short by all they require
+        s[self.keep] = sol[n:n + rows] - sol[n + rows:]
+        return s.reshape(target.shape) * self.scale
 
     def split(self, x):
         """(a (k, n_m), u (k, n_c)) of the unknowns x."""
