@@ -3,7 +3,8 @@ bears once the muscles carry their share of the net load across it (docs/muscles
 
 Cut a hinge: everything the proximal part exerts on the distal part (the hinge's child and every body below it)
 is the net intersegmental load N (casflex's rigid inverse dynamics: ``<hinge>.fx``, ``.fy`` N in the ground and
-``<hinge>.moment`` N m about the hinge centre, on the distal part; :mod:`casflex.inverse.rigid`). The muscles
+``<hinge>.moment`` N m about the hinge centre, on the distal part; :mod:`casflex.inverse.rigid`; a coupled
+hinge's ``.moment`` is its generalized force: ``lever`` converts it). The muscles
 crossing the hinge are part of it: muscle m, at tension F_m, loads the distal part with F_m U_m (U_m: its load per
 N of tension on the distal bodies, fx, fy, mz about the hinge centre; zero when it does not cross the hinge). What
 is left is the joint's own reaction on the child,
@@ -88,15 +89,18 @@ def _rotate(f: np.ndarray, angle: np.ndarray) -> np.ndarray:
     return np.stack([c * f[..., 0] + s * f[..., 1], -s * f[..., 0] + c * f[..., 1]], axis=-1)
 
 
-def joint_reactions(net, unit, forces, child=None, parent=None, options: JointReaction | None = None
-                    ) -> JointReactions:
+def joint_reactions(net, unit, forces, child=None, parent=None, options: JointReaction | None = None, *,
+                    lever=None) -> JointReactions:
     """The reactions of n_h hinges over k frames (module docstring).
 
     net (k, n_h, 3): each hinge's net load on its distal part, fx, fy N in the ground and mz N m about the hinge
     centre; unit (k, n_h * 3, n_m): each muscle's load per N of tension on each hinge's distal part (rows fx, fy,
     mz of hinge 0, then hinge 1, ...; N/N and m); forces (k, n_m) N: the muscles' tensions (e.g. SO's forces);
     child, parent (k, n_h) rad: the angles of each hinge's child and parent body frames in the ground, needed
-    only to express in that frame.
+    only to express in that frame; lever (k, n_h, 2) m/rad: for a hinge whose centre moves with its angle (a
+    coupled knee's translation), d(centre in the ground)/d(angle) with the parent held: ``net``'s moment is then
+    casflex's ``<hinge>.moment``, the generalized force, and the moment about the centre is that minus the force
+    along the lever (virtual work: tau = m + f . lever); None: every centre fixed on the parent.
     """
     options = options or JointReaction()
     net = np.asarray(net, dtype=float)
@@ -111,6 +115,10 @@ def joint_reactions(net, unit, forces, child=None, parent=None, options: JointRe
     n_m = unit.shape[2]
     unit = _array("unit", unit, (k, 3 * n_h, n_m))
     forces = _array("forces", forces, (k, n_m))
+    if lever is not None:
+        lever = _array("lever", lever, (k, n_h, 2))
+        net = np.concatenate([net[..., :2], net[..., 2:] - np.sum(net[..., :2] * lever, axis=-1, keepdims=True)],
+                             axis=-1)
     muscles = np.einsum("krm,km->kr", unit, forces).reshape(k, n_h, 3)
     loads = net - muscles
     if options.on == "parent":

@@ -212,6 +212,21 @@ def _units(osim, m, s, muscles, joints: list[str], below: list[set[str]]) -> lis
     return out
 
 
+def _lever(m, s, joint) -> tuple[float, float]:
+    """d(the child frame's origin in the ground)/d(the joint's first coordinate) at fixed other coordinates (m/rad):
+    0 for a pin; a coupled knee's translation. Central differences of 1e-6 rad."""
+    coord = joint.get_coordinates(0)
+    value, out = coord.getValue(s), []
+    for step in (1e-6, -1e-6):
+        coord.setValue(s, value + step, False)
+        m.realizePosition(s)
+        p = joint.getChildFrame().getTransformInGround(s).p()
+        out.append((p.get(0), p.get(1)))
+    coord.setValue(s, value, False)
+    m.realizeVelocity(s)
+    return (out[0][0] - out[1][0]) / 2e-6, (out[0][1] - out[1][1]) / 2e-6
+
+
 def _inputs_here(model: str, coordinates: str, cutoff: float | None, t0: float, t1: float, joints: list[str]
                  ) -> dict:
     import numpy as np
@@ -222,7 +237,8 @@ def _inputs_here(model: str, coordinates: str, cutoff: float | None, t0: float, 
     muscles = [m.getMuscles().get(i) for i in range(m.getMuscles().getSize())]
     coords = [m.getCoordinateSet().get(i) for i in range(m.getCoordinateSet().getSize())]
     below = _subtrees(m, joints)
-    t, out = [], {k: [] for k in ("active", "passive", "length", "speed", "arms", "units", "child", "parent")}
+    t, out = [], {k: [] for k in ("active", "passive", "length", "speed", "arms", "units", "child", "parent",
+                                 "lever")}
     for time_r in _states(osim, m, s, coordinates, cutoff, t0, t1):
         t.append(time_r)
         out["active"].append([mu.calcInextensibleTendonActiveFiberForce(s, 1.0) for mu in muscles])
@@ -234,6 +250,7 @@ def _inputs_here(model: str, coordinates: str, cutoff: float | None, t0: float, 
         js = [m.getJointSet().get(j) for j in joints]
         out["child"].append([_angle(j.getChildFrame().findBaseFrame(), s) for j in js])
         out["parent"].append([_angle(j.getParentFrame().findBaseFrame(), s) for j in js])
+        out["lever"].append([_lever(m, s, j) for j in js])
     return {"t": np.array(t), "muscles": [mu.getName() for mu in muscles], "coordinates": [c.getName() for c in coords],
             "joints": list(joints), **{k: np.array(v) for k, v in out.items()}}
 
@@ -247,7 +264,10 @@ def muscle_inputs(model, coordinates, *, cutoff: float | None = 6.0, t_start: fl
     moment arm about each coordinate; for each joint of ``joints``, "units" (k, n_j * 3, n_m) each muscle's load
     per N of tension on the joint's distal bodies (fx, fy in the ground, mz m about the child frame's origin: the
     point OpenSim's JointReaction reports at) from its path's point force directions, "child" and "parent" (k, n_j)
-    rad the angles of the joint's child and parent bodies in the ground (about z; a planar motion's); with "t" (k,)
+    rad the angles of the joint's child and parent bodies in the ground (about z; a planar motion's), "lever"
+    (k, n_j, 2) m/rad the child frame origin's motion in the ground per radian of the joint's first coordinate
+    (0 for a pin; a coupled knee's translation: the generalized force is the moment about that origin plus the
+    joint's force along it); with "t" (k,)
     s, "muscles", "coordinates" and "joints" (the model's orders)."""
     return _run(f"{_HERE}:_inputs_here", worker, os.path.abspath(model), os.path.abspath(coordinates),
                 None if cutoff is None else float(cutoff), float(t_start), float(t_end), list(joints))

@@ -49,6 +49,20 @@ def _net_forces(src: Path, dest: Path, inputs: dict) -> None:
     write_sto(dest, so.t, cols, title="net", units={n: "N" for n in cols})
 
 
+def _casflex_net(paths: dict, t: np.ndarray) -> np.ndarray:
+    """(k, 3, 3): casflex's rigid inverse dynamics of the same trial (the model's planar scene, OpenSim's IK as
+    the coordinates, OpenSim's filter at 6 Hz, the plates unfiltered as OpenSim applies them): each joint's
+    ``.fx``, ``.fy`` (N, in the ground, on the child) and ``.moment`` (N m: the generalized force), at ``t``."""
+    from casflex.inverse import inverse_dynamics
+    from casflex.scene.from_osim import scene_from_osim
+
+    r = inverse_dynamics(scene_from_osim(paths["model"]).scene, coordinates=paths["ik"], grf=paths["grf"],
+                         plates={"calcn_r": "ground_", "calcn_l": "1_ground_"}, cutoff=CUTOFF, filter="opensim",
+                         cutoff_plates=None)
+    return np.stack([np.column_stack([np.interp(t, r.t, r.loads[f"{j}.{w}"]) for w in ("fx", "fy", "moment")])
+                     for j in JOINTS], axis=1)
+
+
 def main(repo: str = "/work/.mirror/opensim-org+opensim-models/repo") -> None:
     from casflex.lab import read_sto
     from casflex.peers.opensim_analyses import joint_reaction, muscle_inputs, static_optimization
@@ -75,6 +89,7 @@ def main(repo: str = "/work/.mirror/opensim-org+opensim-models/repo") -> None:
         for src, name in ((so["activation"], "so_activation"), (so["force"], "so_force"), (so["reactions"], "jr")):
             (HERE / f"gait10dof18musc_{name}.sto").write_text(Path(src).read_text())
         idt, nt = read_sto(ide["path"]), read_sto(net["path"])
+        mine = _casflex_net(paths, inputs["t"])
         moments = np.column_stack([idt.column(f"{c}_{'force' if c in ('pelvis_tx', 'pelvis_ty') else 'moment'}")
                                    for c in inputs["coordinates"]])
         net_loads = np.stack([np.column_stack([nt.column(f"{j}_on_{b}_in_ground_{w}") for w in ("fx", "fy", "mz")])
@@ -83,7 +98,8 @@ def main(repo: str = "/work/.mirror/opensim-org+opensim-models/repo") -> None:
                             coordinates=inputs["coordinates"], joints=list(JOINTS), active=inputs["active"],
                             passive=inputs["passive"], length=inputs["length"], arms=inputs["arms"],
                             units=inputs["units"], child=inputs["child"], parent=inputs["parent"],
-                            id_moments=moments, id_t=idt.t, net=net_loads, commit=commit,
+                            lever=inputs["lever"], id_moments=moments, id_t=idt.t, net=net_loads, casflex_net=mine,
+                            commit=commit,
                             so_seconds=so["so_seconds"], jr_seconds=so["jr_seconds"])
         print(f"opensim-models {commit}: SO {so['so_seconds']:.2f} s, JR {so['jr_seconds']:.2f} s")
 
