@@ -118,6 +118,15 @@ def test_report_keeps_the_frames_it_can_and_says_which_it_cannot():
     assert res.activations[0] == pytest.approx([0.4, 0.25], rel=1e-6)  # the satisfiable frames are exact
 
 
+def test_moments_reached_only_at_the_bounds_are_carried():
+    """Moments the muscles carry only at a bound (0 with a lower bound 0; 10 N m at full activation): the QP's
+    feasible set has no interior there, and the solve falls back to IPOPT's relaxed bounds."""
+    res = solve_static_optimization([[10.0, 0.0], [4.0, 0.0]], np.array([[[0.05, 0.0], [0.0, 0.02]]] * 2),
+                                    np.full((2, 2), 200.0), options=LOOSE)
+    assert res.success
+    assert res.activations == pytest.approx(np.array([[1.0, 0.0], [0.4, 0.0]]), abs=1e-7)
+
+
 def test_a_coordinate_nothing_acts_on_must_need_nothing():
     arms = np.zeros((3, 1, 2))
     arms[:, 0, 0], arms[:, 0, 1] = 0.05, 1e-17  # the second: a root's coordinate, the muscle internal to it
