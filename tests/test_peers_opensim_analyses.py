@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from casflex.lab import read_sto
-from casflex.peers.opensim_analyses import rigid_tendon_model
+from casflex.peers.opensim_analyses import Trial, rigid_tendon_model
 
 needs_opensim = pytest.mark.skipif(importlib.util.find_spec("opensim") is None, reason="OpenSim is not installed")
 DATA = Path(__file__).parent / "data" / "muscles"
@@ -35,6 +35,15 @@ def files(tmp_path_factory):
     return tmp
 
 
+@pytest.mark.parametrize("change, message", [
+    (dict(cutoff=0.0), "cutoff: expected a positive frequency"),
+    (dict(t_start=2.0, t_end=1.0), "t_start, t_end: expected t_start < t_end"),
+])
+def test_trial_refuses_bad_values(change, message):
+    with pytest.raises(ValueError, match=message):
+        Trial("m.osim", "ik.mot", **change)
+
+
 def test_rigid_tendon_model_sets_every_muscle(files, tmp_path):
     out = rigid_tendon_model(files / "m.osim", tmp_path / "rigid.osim")
     muscles = list(ET.parse(out).getroot().iter("Millard2012EquilibriumMuscle"))
@@ -46,11 +55,11 @@ def test_rigid_tendon_model_sets_every_muscle(files, tmp_path):
 def test_the_peer_reproduces_the_reference(files, tmp_path):
     """SO over 0.5-0.6 s gives the stored rows (the filter sees the whole file either way), JR runs on its forces,
     and muscle_inputs gives the stored active forces and moment arms."""
-    from casflex.peers.opensim_analyses import muscle_inputs, static_optimization
+    from casflex.peers.opensim_analyses import Trial, muscle_inputs, static_optimization
 
-    out = static_optimization(files / "m.osim", files / "ik.mot", tmp_path / "out",
-                              loads=files / "subject01_walk_grf.xml", forces=[files / "reserves.xml"],
-                              cutoff=6.0, t_start=0.5, t_end=0.6, joints=("knee_r",))
+    trial = Trial(str(files / "m.osim"), str(files / "ik.mot"), loads=str(files / "subject01_walk_grf.xml"),
+                  forces=(str(files / "reserves.xml"),), cutoff=6.0, t_start=0.5, t_end=0.6)
+    out = static_optimization(trial, tmp_path / "out", joints=("knee_r",))
     mine, ref = read_sto(out["activation"]), read_sto(DATA / "gait10dof18musc_so_activation.sto")
     rows = np.searchsorted(ref.t, mine.t - 1e-6)
     assert np.allclose(mine.t, ref.t[rows], atol=1e-6)
@@ -58,7 +67,7 @@ def test_the_peer_reproduces_the_reference(files, tmp_path):
         assert np.allclose(mine.column(name), ref.column(name)[rows], atol=1e-6)  # same states, same optimizer
     jr = read_sto(out["reactions"])
     assert "knee_r_on_tibia_r_in_tibia_r_fy" in jr.names and out["so_seconds"] > 0.0
-    ins = muscle_inputs(files / "m.osim", files / "ik.mot", t_start=0.5, t_end=0.6, joints=("knee_r",))
+    ins = muscle_inputs(trial, joints=("knee_r",))
     d = np.load(DATA / "gait10dof18musc_inputs.npz")
     assert np.allclose(ins["active"], d["active"][rows], rtol=1e-9)
     assert np.allclose(ins["arms"], d["arms"][rows], atol=1e-12)

@@ -1,17 +1,16 @@
 """OpenSim's own static optimization and joint reactions on a lab's trial: the peer of :mod:`casflex.muscles`.
 
-OpenSim 4.6's ``AnalyzeTool`` run as a gait lab runs it from a setup file: the model, the coordinates (.mot, the
-IK result), the ground reactions (an ``ExternalLoads`` file), the reserve and residual actuators (a ``ForceSet``
-file appended to the model's forces), the coordinates' cut-off. :func:`static_optimization` runs its
-``StaticOptimization`` analysis, then ``JointReaction`` with SO's forces as its ``forces_file``; :func:`muscle_inputs`
-reads, at the same states, what SO's muscles can give: each muscle's active force at full activation as SO
-computes it (``Muscle::calcInextensibleTendonActiveFiberForce(s, 1)``), its passive fibre force along the tendon,
-its length and its moment arm about each coordinate. They run in OpenSim's worker process (see
+OpenSim 4.6's ``AnalyzeTool`` run as a gait lab runs it from a setup file, on a :class:`Trial`: the model,
+the coordinates (.mot, the IK result), the ground reactions (an ``ExternalLoads`` file), the reserve and
+residual actuators (a ``ForceSet`` file appended to the model's forces), the coordinates' cut-off.
+:func:`static_optimization` runs its ``StaticOptimization`` analysis, then ``JointReaction`` with SO's forces as
+its ``forces_file`` (:func:`joint_reaction`: any forces file); :func:`muscle_inputs` reads, at the same states,
+what SO sees of the muscles: each muscle's force at full activation as SO computes it
+(``Muscle::calcInextensibleTendonActiveFiberForce(s, 1)``), its passive fibre force, its length, its moment arm
+about each coordinate, its load per N on each joint's distal bodies. They run in OpenSim's worker process (see
 :mod:`casflex.peers.opensim`) and return the output files and the seconds each ``run()`` took.
-
-``rigid_tendon=True`` sets ``ignore_tendon_compliance`` on every muscle first (written to a copy of the model):
-OpenSim 4.6's SO reads a compliant-tendon muscle's fibre length from the state, which it never equilibrates
-(docs/muscles.md), so only the rigid-tendon run is SO's force-length-velocity physiology.
+:func:`rigid_tendon_model` writes a model's copy with ``ignore_tendon_compliance`` on every muscle (OpenSim's SO
+treats a Millard muscle's tendon as rigid either way: docs/muscles.md).
 """
 
 from __future__ import annotations
@@ -20,10 +19,11 @@ import os
 import time
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 from casflex.peers.opensim import _opensim, _run
 
-__all__ = ["joint_reaction", "muscle_inputs", "rigid_tendon_model", "static_optimization"]
+__all__ = ["Trial", "joint_reaction", "muscle_inputs", "rigid_tendon_model", "static_optimization"]
 
 _HERE = "casflex.peers.opensim_analyses"
 
@@ -44,102 +44,116 @@ def rigid_tendon_model(src: str | os.PathLike[str], dest: str | os.PathLike[str]
     return os.fspath(dest)
 
 
-def _setup(path: str, name: str, model: str, coordinates: str, loads: str | None, forces: Sequence[str],
-           results: str, cutoff: float | None, t0: float, t1: float, analyses: list[ET.Element]) -> str:
+@dataclass(frozen=True)
+class Trial:
+    """A lab trial as OpenSim's AnalyzeTool takes it: the model file, the coordinates (.mot, e.g. the IK result),
+    the ``ExternalLoads`` file ``loads`` (None: none), the actuator files ``forces`` (reserves and residuals,
+    appended to the model's forces), the coordinates' low-pass ``cutoff`` (Hz; None: not filtered) and the span
+    ``t_start`` to ``t_end`` (s). Paths are made absolute here: the worker runs elsewhere."""
+
+    model: str
+    coordinates: str
+    loads: str | None = None
+    forces: tuple[str, ...] = ()
+    cutoff: float | None = 6.0
+    t_start: float = 0.0
+    t_end: float = 1e9
+
+    def __post_init__(self) -> None:
+        for name in ("model", "coordinates"):
+            object.__setattr__(self, name, os.path.abspath(getattr(self, name)))
+        object.__setattr__(self, "loads", os.path.abspath(self.loads) if self.loads else None)
+        object.__setattr__(self, "forces", tuple(os.path.abspath(f) for f in self.forces))
+        if self.cutoff is not None and not self.cutoff > 0.0:
+            raise ValueError(f"cutoff: expected a positive frequency (Hz) or None, got {self.cutoff!r}")
+        if not self.t_start < self.t_end:
+            raise ValueError(f"t_start, t_end: expected t_start < t_end, got {self.t_start!r}, {self.t_end!r}")
+
+
+def _setup(path: str, name: str, trial: Trial, results: str, analyses: list[ET.Element]) -> str:
     """Write an ``AnalyzeTool`` setup file (absolute paths) running ``analyses``; returns its path."""
     root = ET.Element("OpenSimDocument", Version="40000")
     tool = ET.SubElement(root, "AnalyzeTool", name=name)
-    for tag, text in (("model_file", model), ("replace_force_set", "false"), ("force_set_files", " ".join(forces)),
-                      ("results_directory", results), ("output_precision", "12"), ("initial_time", repr(t0)),
-                      ("final_time", repr(t1)), ("solve_for_equilibrium_for_auxiliary_states", "false")):
+    for tag, text in (("model_file", trial.model), ("replace_force_set", "false"),
+                      ("force_set_files", " ".join(trial.forces)), ("results_directory", results),
+                      ("output_precision", "12"), ("initial_time", repr(trial.t_start)),
+                      ("final_time", repr(trial.t_end)), ("solve_for_equilibrium_for_auxiliary_states", "false")):
         ET.SubElement(tool, tag).text = text
     objects = ET.SubElement(ET.SubElement(tool, "AnalysisSet", name="Analyses"), "objects")
     objects.extend(analyses)
     ET.SubElement(tool, "ControllerSet", name="Controllers").append(ET.Element("objects"))
-    ET.SubElement(tool, "external_loads_file").text = loads or ""
-    ET.SubElement(tool, "coordinates_file").text = coordinates
-    ET.SubElement(tool, "lowpass_cutoff_frequency_for_coordinates").text = "-1" if cutoff is None else repr(cutoff)
+    ET.SubElement(tool, "external_loads_file").text = trial.loads or ""
+    ET.SubElement(tool, "coordinates_file").text = trial.coordinates
+    cutoff = "-1" if trial.cutoff is None else repr(trial.cutoff)
+    ET.SubElement(tool, "lowpass_cutoff_frequency_for_coordinates").text = cutoff
     ET.ElementTree(root).write(path, encoding="UTF-8", xml_declaration=True)
     return path
 
 
-def _analysis(kind: str, t0: float, t1: float, **props: str) -> ET.Element:
+def _analysis(kind: str, trial: Trial, **props: str) -> ET.Element:
     el = ET.Element(kind, name=kind)
-    for tag, text in (("on", "true"), ("start_time", repr(t0)), ("end_time", repr(t1)), ("step_interval", "1"),
-                      ("in_degrees", "true"), *props.items()):
+    for tag, text in (("on", "true"), ("start_time", repr(trial.t_start)), ("end_time", repr(trial.t_end)),
+                      ("step_interval", "1"), ("in_degrees", "true"), *props.items()):
         ET.SubElement(el, tag).text = text
     return el
 
 
-def _so_here(model: str, coordinates: str, loads: str | None, forces: list[str], results: str,
-             cutoff: float | None, t0: float, t1: float, exponent: float, tol: float, iters: int,
-             joints: list[str], on: str, frame: str) -> dict:
+def _so_here(trial: Trial, results: str, exponent: float, tol: float, iters: int, joints: list[str], on: str,
+             frame: str) -> dict:
     osim = _opensim()
     os.makedirs(results, exist_ok=True)
-    so = _analysis("StaticOptimization", t0, t1, use_model_force_set="true", activation_exponent=repr(exponent),
+    so = _analysis("StaticOptimization", trial, use_model_force_set="true", activation_exponent=repr(exponent),
                    use_muscle_physiology="true", optimizer_convergence_criterion=repr(tol),
                    optimizer_max_iterations=str(iters))
-    setup = _setup(os.path.join(results, "setup_so.xml"), "so", model, coordinates, loads, forces, results, cutoff,
-                   t0, t1, [so])
+    setup = _setup(os.path.join(results, "setup_so.xml"), "so", trial, results, [so])
     start = time.perf_counter()
     osim.AnalyzeTool(setup).run()
     so_seconds = time.perf_counter() - start
     force = os.path.join(results, "so_StaticOptimization_force.sto")
-    jr = _jr_here(model, coordinates, loads, forces, force, results, "jr", cutoff, t0, t1, joints, on, frame)
+    jr = _jr_here(trial, force, results, "jr", joints, on, frame)
     return {"activation": os.path.join(results, "so_StaticOptimization_activation.sto"), "force": force,
             "reactions": jr["path"], "so_seconds": so_seconds, "jr_seconds": jr["seconds"]}
 
 
-def _jr_here(model: str, coordinates: str, loads: str | None, forces: list[str], force_file: str, results: str,
-             name: str, cutoff: float | None, t0: float, t1: float, joints: list[str], on: str, frame: str) -> dict:
+def _jr_here(trial: Trial, force_file: str, results: str, name: str, joints: list[str], on: str, frame: str) -> dict:
     osim = _opensim()
     os.makedirs(results, exist_ok=True)
-    jr = _analysis("JointReaction", t0, t1, forces_file=force_file, joint_names=" ".join(joints),
+    jr = _analysis("JointReaction", trial, forces_file=force_file, joint_names=" ".join(joints),
                    apply_on_bodies=on, express_in_frame=frame)
-    setup = _setup(os.path.join(results, f"setup_{name}.xml"), name, model, coordinates, loads, forces, results,
-                   cutoff, t0, t1, [jr])
+    setup = _setup(os.path.join(results, f"setup_{name}.xml"), name, trial, results, [jr])
     start = time.perf_counter()
     osim.AnalyzeTool(setup).run()
     return {"path": os.path.join(results, f"{name}_JointReaction_ReactionLoads.sto"),
             "seconds": time.perf_counter() - start}
 
 
-def joint_reaction(model, coordinates, force_file, results, *, name: str = "jr", loads=None, forces: Sequence = (),
-                   cutoff: float | None = 6.0, t_start: float = 0.0, t_end: float = 1e9,
-                   joints: Sequence[str] = ("ALL",), on: str = "child", frame: str = "child",
-                   worker: bool | None = None) -> dict:
-    """OpenSim's ``JointReaction`` of ``joints`` with every actuator's force read from ``force_file`` (a .sto
-    with a column per actuator, N or N m: e.g. SO's forces), the other arguments as :func:`static_optimization`'s;
-    written to ``<results>/<name>_JointReaction_ReactionLoads.sto``. Returns {"path", "seconds"}."""
-    return _run(f"{_HERE}:_jr_here", worker, os.path.abspath(model), os.path.abspath(coordinates),
-                os.path.abspath(loads) if loads else None, [os.path.abspath(f) for f in forces],
-                os.path.abspath(force_file), os.path.abspath(results), name,
-                None if cutoff is None else float(cutoff), float(t_start), float(t_end), list(joints), on, frame)
+def joint_reaction(trial: Trial, force_file, results, *, name: str = "jr", joints: Sequence[str] = ("ALL",),
+                   on: str = "child", frame: str = "child", worker: bool | None = None) -> dict:
+    """OpenSim's ``JointReaction`` of ``joints`` on ``trial`` with every actuator's force read from ``force_file``
+    (a .sto with a column per actuator, N or N m: e.g. SO's forces), on the ``on`` body ("child" or "parent"),
+    expressed in ``frame`` ("child", "parent", "ground" or a frame's name); written to
+    ``<results>/<name>_JointReaction_ReactionLoads.sto``. Returns {"path", "seconds"}."""
+    return _run(f"{_HERE}:_jr_here", worker, trial, os.path.abspath(force_file), os.path.abspath(results), name,
+                list(joints), on, frame)
 
 
-def static_optimization(model, coordinates, results, *, loads=None, forces: Sequence = (), cutoff: float | None = 6.0,
-                        t_start: float = 0.0, t_end: float = 1e9, exponent: float = 2.0, tol: float = 1e-4,
+def static_optimization(trial: Trial, results, *, exponent: float = 2.0, tol: float = 1e-4,
                         max_iterations: int = 100, joints: Sequence[str] = ("ALL",), on: str = "child",
                         frame: str = "child", worker: bool | None = None) -> dict:
-    """OpenSim's static optimization of the model file ``model`` along ``coordinates`` (.mot) with the
-    ``ExternalLoads`` file ``loads`` and the actuator files ``forces`` (reserves and residuals, appended to the
-    model's forces), the coordinates low-pass filtered at ``cutoff`` Hz (None: not), from ``t_start`` to ``t_end``
-    (s), SO's options ``exponent`` (activation_exponent), ``tol`` (optimizer_convergence_criterion) and
-    ``max_iterations``; then its ``JointReaction`` of ``joints`` on the ``on`` body ("child" or "parent"),
-    expressed in ``frame`` ("child", "parent", "ground" or a frame's name), SO's forces applied. Outputs in the
-    directory ``results``. Returns {"activation", "force", "reactions": .sto paths, "so_seconds", "jr_seconds":
-    the two runs' times}."""
-    return _run(f"{_HERE}:_so_here", worker, os.path.abspath(model), os.path.abspath(coordinates),
-                os.path.abspath(loads) if loads else None, [os.path.abspath(f) for f in forces],
-                os.path.abspath(results), None if cutoff is None else float(cutoff), float(t_start), float(t_end),
-                float(exponent), float(tol), int(max_iterations), list(joints), on, frame)
+    """OpenSim's static optimization of ``trial`` with SO's options ``exponent`` (activation_exponent), ``tol``
+    (optimizer_convergence_criterion) and ``max_iterations`` (OpenSim's defaults), then its ``JointReaction`` of
+    ``joints`` with SO's forces (:func:`joint_reaction`). Outputs in the directory ``results``. Returns
+    {"activation", "force", "reactions": .sto paths, "so_seconds", "jr_seconds": the two runs' times}."""
+    return _run(f"{_HERE}:_so_here", worker, trial, os.path.abspath(results), float(exponent), float(tol),
+                int(max_iterations), list(joints), on, frame)
 
 
-def _states(osim, m, s, coordinates: str, cutoff: float | None, t0: float, t1: float):
-    """Yield each frame's time, ``s`` set to the states OpenSim's AnalyzeTool makes of ``coordinates``."""
+def _states(osim, m, s, trial: Trial):
+    """Yield each frame's time, ``s`` set to the states OpenSim's AnalyzeTool makes of the trial's coordinates."""
+    t0, t1 = trial.t_start, trial.t_end
     tool = osim.AnalyzeTool(m)
-    tool.setCoordinatesFileName(coordinates)
-    tool.setLowpassCutoffFrequency(-1.0 if cutoff is None else float(cutoff))
+    tool.setCoordinatesFileName(trial.coordinates)
+    tool.setLowpassCutoffFrequency(-1.0 if trial.cutoff is None else float(trial.cutoff))
     tool.loadStatesFromFile(s)
     states = tool.getStatesStorage()
     names = list(m.getStateVariableNames().get(i) for i in range(m.getNumStateVariables()))
@@ -227,19 +241,18 @@ def _lever(m, s, joint) -> tuple[float, float]:
     return (out[0][0] - out[1][0]) / 2e-6, (out[0][1] - out[1][1]) / 2e-6
 
 
-def _inputs_here(model: str, coordinates: str, cutoff: float | None, t0: float, t1: float, joints: list[str]
-                 ) -> dict:
+def _inputs_here(trial: Trial, joints: list[str]) -> dict:
     import numpy as np
 
     osim = _opensim()
-    m = osim.Model(model)
+    m = osim.Model(trial.model)
     s = m.initSystem()
     muscles = [m.getMuscles().get(i) for i in range(m.getMuscles().getSize())]
     coords = [m.getCoordinateSet().get(i) for i in range(m.getCoordinateSet().getSize())]
     below = _subtrees(m, joints)
     t, out = [], {k: [] for k in ("active", "passive", "length", "speed", "arms", "units", "child", "parent",
                                  "lever")}
-    for time_r in _states(osim, m, s, coordinates, cutoff, t0, t1):
+    for time_r in _states(osim, m, s, trial):
         t.append(time_r)
         out["active"].append([mu.calcInextensibleTendonActiveFiberForce(s, 1.0) for mu in muscles])
         out["passive"].append([mu.getPassiveFiberForceAlongTendon(s) for mu in muscles])
@@ -255,10 +268,9 @@ def _inputs_here(model: str, coordinates: str, cutoff: float | None, t0: float, 
             "joints": list(joints), **{k: np.array(v) for k, v in out.items()}}
 
 
-def muscle_inputs(model, coordinates, *, cutoff: float | None = 6.0, t_start: float = 0.0, t_end: float = 1e9,
-                  joints: Sequence[str] = (), worker: bool | None = None) -> dict:
-    """What OpenSim's SO sees of the muscles of ``model`` along ``coordinates`` (.mot), filtered at ``cutoff`` Hz
-    as its AnalyzeTool filters them (the same states): per frame, "active" (k, n_m) N each muscle's active force
+def muscle_inputs(trial: Trial, *, joints: Sequence[str] = (), worker: bool | None = None) -> dict:
+    """What OpenSim's SO sees of the muscles on ``trial`` (its model, coordinates and cutoff), at the
+    states its AnalyzeTool makes of them: per frame, "active" (k, n_m) N each muscle's active force
     at full activation (``calcInextensibleTendonActiveFiberForce(s, 1)``), "passive" (k, n_m) N its passive fibre
     force along the tendon, "length" (k, n_m) m and "speed" (k, n_m) m/s its path's, "arms" (k, n_m, n_c) m its
     moment arm about each coordinate; for each joint of ``joints``, "units" (k, n_j * 3, n_m) each muscle's load
@@ -269,5 +281,4 @@ def muscle_inputs(model, coordinates, *, cutoff: float | None = 6.0, t_start: fl
     (0 for a pin; a coupled knee's translation: the generalized force is the moment about that origin plus the
     joint's force along it); with "t" (k,)
     s, "muscles", "coordinates" and "joints" (the model's orders)."""
-    return _run(f"{_HERE}:_inputs_here", worker, os.path.abspath(model), os.path.abspath(coordinates),
-                None if cutoff is None else float(cutoff), float(t_start), float(t_end), list(joints))
+    return _run(f"{_HERE}:_inputs_here", worker, trial, list(joints))

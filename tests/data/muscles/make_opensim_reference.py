@@ -65,7 +65,7 @@ def _casflex_net(paths: dict, t: np.ndarray) -> np.ndarray:
 
 def main(repo: str = "/work/.mirror/opensim-org+opensim-models/repo") -> None:
     from casflex.lab import read_sto
-    from casflex.peers.opensim_analyses import joint_reaction, muscle_inputs, static_optimization
+    from casflex.peers.opensim_analyses import Trial, joint_reaction, muscle_inputs, static_optimization
     from casflex.peers.opensim_tools import inverse_dynamics
 
     commit = subprocess.run(["git", "-C", repo, "rev-parse", "HEAD"], capture_output=True, text=True,
@@ -77,15 +77,15 @@ def main(repo: str = "/work/.mirror/opensim-org+opensim-models/repo") -> None:
             paths[key] = tmp / NAMES.get(key, Path(path).name)
             paths[key].write_bytes(subprocess.run(["git", "-C", repo, "show", f"HEAD:{path}"], capture_output=True,
                                                   check=True).stdout)
-        common = dict(loads=paths["grf_xml"], forces=[paths["reserves"]], cutoff=CUTOFF, t_start=T0, t_end=T1,
-                      joints=JOINTS, on="child")
-        so = static_optimization(paths["model"], paths["ik"], tmp / "out", frame="child", **common)
-        inputs = muscle_inputs(paths["model"], paths["ik"], cutoff=CUTOFF, t_start=T0, t_end=T1, joints=JOINTS)
+        trial = Trial(paths["model"], paths["ik"], loads=paths["grf_xml"], forces=(paths["reserves"],), cutoff=CUTOFF,
+                      t_start=T0, t_end=T1)
+        so = static_optimization(trial, tmp / "out", joints=JOINTS, on="child", frame="child")
+        inputs = muscle_inputs(trial, joints=JOINTS)
         ide = inverse_dynamics(paths["model"], paths["ik"], tmp / "id.sto", loads=paths["grf_xml"], cutoff=CUTOFF,
                                t_start=T0, t_end=T1)
         _net_forces(Path(so["force"]), tmp / "net_forces.sto", inputs)
-        net = joint_reaction(paths["model"], paths["ik"], tmp / "net_forces.sto", tmp / "out", name="net",
-                             frame="ground", **common)
+        net = joint_reaction(trial, tmp / "net_forces.sto", tmp / "out", name="net", joints=JOINTS, on="child",
+                             frame="ground")
         for src, name in ((so["activation"], "so_activation"), (so["force"], "so_force"), (so["reactions"], "jr")):
             (HERE / f"gait10dof18musc_{name}.sto").write_text(Path(src).read_text())
         idt, nt = read_sto(ide["path"]), read_sto(net["path"])
