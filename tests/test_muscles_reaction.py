@@ -96,6 +96,22 @@ def test_opensims_joint_reactions_from_casflexs_rigid_inverse_dynamics():
     assert np.abs(plain.loads[:, 1, 2] - r.loads[:, 1, 2]).max() > 2.0  # N m: without the lever the knee is off
 
 
+def test_opensims_joint_reactions_on_the_parent_in_the_parent():
+    """OpenSim's JR on the parent (pelvis, femur_r, tibia_r) in the parent's frame: the opposite load, its moment
+    about the parent joint frame's origin, which for the knee is the femur's origin at the hip, 0.46 m away."""
+    d = np.load(DATA / "gait10dof18musc_inputs.npz")
+    so, jr = read_sto(DATA / "gait10dof18musc_so_force.sto"), read_sto(DATA / "gait10dof18musc_jr_parent.sto")
+    forces = np.column_stack([so.column(m) for m in d["muscles"]])
+    on = JointReaction(on="parent", frame="parent")
+    r = joint_reactions(d["net"], d["units"], forces, d["child"], d["parent"], on, offset=d["offset"])
+    plain = joint_reactions(d["net"], d["units"], forces, d["child"], d["parent"], on)
+    for h, (joint, body) in enumerate(zip(d["joints"], ("pelvis", "femur_r", "tibia_r"), strict=True)):
+        theirs = np.column_stack([jr.column(f"{joint}_on_{body}_in_{body}_{w}") for w in ("fx", "fy", "mz")])
+        assert np.abs(r.loads[:, h, :2] - theirs[:, :2]).max() < 1e-5 * np.abs(theirs[:, :2]).max(), joint
+        assert np.abs(r.loads[:, h, 2] - theirs[:, 2]).max() < 1e-3, joint  # N m
+    assert np.abs(plain.loads[:, 1, 2] - r.loads[:, 1, 2]).max() > 50.0  # N m: the knee's moment about the hip
+
+
 def test_the_hip_reaction_moment_is_the_reserves():
     d = np.load(DATA / "gait10dof18musc_inputs.npz")
     so = read_sto(DATA / "gait10dof18musc_so_force.sto")

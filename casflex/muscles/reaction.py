@@ -90,7 +90,7 @@ def _rotate(f: np.ndarray, angle: np.ndarray) -> np.ndarray:
 
 
 def joint_reactions(net, unit, forces, child=None, parent=None, options: JointReaction | None = None, *,
-                    lever=None) -> JointReactions:
+                    lever=None, offset=None) -> JointReactions:
     """The reactions of n_h hinges over k frames (module docstring).
 
     net (k, n_h, 3): each hinge's net load on its distal part, fx, fy N in the ground and mz N m about the hinge
@@ -100,7 +100,9 @@ def joint_reactions(net, unit, forces, child=None, parent=None, options: JointRe
     only to express in that frame; lever (k, n_h, 2) m/rad: for a hinge whose centre moves with its angle (a
     coupled knee's translation), d(centre in the ground)/d(angle) with the parent held: ``net``'s moment is then
     casflex's ``<hinge>.moment``, the generalized force, and the moment about the centre is that minus the force
-    along the lever (virtual work: tau = m + f . lever); None: every centre fixed on the parent.
+    along the lever (virtual work: tau = m + f . lever); None: every centre fixed on the parent; offset (k, n_h, 2)
+    m: where the reaction on the parent is reported (OpenSim: the parent joint frame's origin) minus the hinge
+    centre, in the ground, for a hinge whose two joint frames part (the coupled knee's translation); None: 0.
     """
     options = options or JointReaction()
     net = np.asarray(net, dtype=float)
@@ -123,6 +125,10 @@ def joint_reactions(net, unit, forces, child=None, parent=None, options: JointRe
     loads = net - muscles
     if options.on == "parent":
         loads = -loads
+        if offset is not None:  # the parent's load (-f at the centre) about the point offset from it
+            d = _array("offset", offset, (k, n_h, 2))
+            moment = loads[..., 2] - (d[..., 0] * loads[..., 1] - d[..., 1] * loads[..., 0])
+            loads = np.concatenate([loads[..., :2], moment[..., None]], axis=-1)
     if options.frame != "ground":
         angle = child if options.frame == "child" else parent
         if angle is None:

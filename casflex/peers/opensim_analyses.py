@@ -241,6 +241,13 @@ def _lever(m, s, joint) -> tuple[float, float]:
     return (out[0][0] - out[1][0]) / 2e-6, (out[0][1] - out[1][1]) / 2e-6
 
 
+def _offset(joint, s) -> tuple[float, float]:
+    """The parent joint frame's origin minus the child's, in the ground (m): 0 for a pin; a coupled knee's
+    translation (OpenSim reports the reaction on the parent about the parent's origin)."""
+    f, c = joint.getParentFrame().getTransformInGround(s).p(), joint.getChildFrame().getTransformInGround(s).p()
+    return f.get(0) - c.get(0), f.get(1) - c.get(1)
+
+
 def _inputs_here(trial: Trial, joints: list[str]) -> dict:
     import numpy as np
 
@@ -251,7 +258,7 @@ def _inputs_here(trial: Trial, joints: list[str]) -> dict:
     coords = [m.getCoordinateSet().get(i) for i in range(m.getCoordinateSet().getSize())]
     below = _subtrees(m, joints)
     t, out = [], {k: [] for k in ("active", "passive", "length", "speed", "arms", "units", "child", "parent",
-                                 "lever")}
+                                 "lever", "offset")}
     for time_r in _states(osim, m, s, trial):
         t.append(time_r)
         out["active"].append([mu.calcInextensibleTendonActiveFiberForce(s, 1.0) for mu in muscles])
@@ -264,6 +271,7 @@ def _inputs_here(trial: Trial, joints: list[str]) -> dict:
         out["child"].append([_angle(j.getChildFrame().findBaseFrame(), s) for j in js])
         out["parent"].append([_angle(j.getParentFrame().findBaseFrame(), s) for j in js])
         out["lever"].append([_lever(m, s, j) for j in js])
+        out["offset"].append([_offset(j, s) for j in js])
     return {"t": np.array(t), "muscles": [mu.getName() for mu in muscles], "coordinates": [c.getName() for c in coords],
             "joints": list(joints), **{k: np.array(v) for k, v in out.items()}}
 
@@ -279,6 +287,7 @@ def muscle_inputs(trial: Trial, *, joints: Sequence[str] = (), worker: bool | No
     rad the angles of the joint's child and parent bodies in the ground (about z; a planar motion's), "lever"
     (k, n_j, 2) m/rad the child frame origin's motion in the ground per radian of the joint's first coordinate
     (0 for a pin; a coupled knee's translation: the generalized force is the moment about that origin plus the
-    joint's force along it); with "t" (k,)
+    joint's force along it), "offset" (k, n_j, 2) m the parent joint frame's origin minus the child's in the
+    ground (0 for a pin); with "t" (k,)
     s, "muscles", "coordinates" and "joints" (the model's orders)."""
     return _run(f"{_HERE}:_inputs_here", worker, trial, list(joints))

@@ -5,7 +5,8 @@ reactions on opensim-models' Gait10dof18musc walk, with what its SO saw of the m
 
 The models' repository defaults to /work/.mirror/opensim-org+opensim-models/repo (a bare snapshot: its files
 are read with ``git show``). Writes gait10dof18musc_so_activation.sto, gait10dof18musc_so_force.sto,
-gait10dof18musc_jr.sto (OpenSim's own output files, their columns kept) and gait10dof18musc_inputs.npz.
+gait10dof18musc_jr.sto, gait10dof18musc_jr_parent.sto (OpenSim's own output files, their header and columns
+kept, the numbers at 9 significant digits) and gait10dof18musc_inputs.npz.
 """
 
 from __future__ import annotations
@@ -26,6 +27,15 @@ FILES = {"model": f"{PIPE}/OutputReference/subject01.osim", "ik": f"{PIPE}/Outpu
 NAMES = {"grf_xml": "subject01_walk_grf.xml", "grf": "subject01_walk_grf.mot"}  # the .xml names the .mot
 JOINTS = ("hip_r", "knee_r", "ankle_r")
 CUTOFF, T0, T1 = 6.0, 0.0, 2.5
+
+
+def _compact(src: Path, dest: Path) -> None:
+    """``src`` with its header as OpenSim wrote it and its numbers at 9 significant digits (OpenSim pads 12
+    decimals: twice the size)."""
+    lines = src.read_text().splitlines()
+    head = next(i for i, ln in enumerate(lines) if ln.strip().lower() == "endheader") + 2
+    rows = ["\t".join(f"{float(v):.9g}" for v in ln.split()) for ln in lines[head:] if ln.strip()]
+    dest.write_text("\n".join(lines[:head] + rows) + "\n")
 
 
 def _net_forces(src: Path, dest: Path, inputs: dict) -> None:
@@ -86,8 +96,11 @@ def main(repo: str = "/work/.mirror/opensim-org+opensim-models/repo") -> None:
         _net_forces(Path(so["force"]), tmp / "net_forces.sto", inputs)
         net = joint_reaction(trial, tmp / "net_forces.sto", tmp / "out", name="net", joints=JOINTS, on="child",
                              frame="ground")
-        for src, name in ((so["activation"], "so_activation"), (so["force"], "so_force"), (so["reactions"], "jr")):
-            (HERE / f"gait10dof18musc_{name}.sto").write_text(Path(src).read_text())
+        parent = joint_reaction(trial, so["force"], tmp / "out", name="parent", joints=JOINTS, on="parent",
+                                frame="parent")
+        for src, name in ((so["activation"], "so_activation"), (so["force"], "so_force"), (so["reactions"], "jr"),
+                          (parent["path"], "jr_parent")):
+            _compact(Path(src), HERE / f"gait10dof18musc_{name}.sto")
         idt, nt = read_sto(ide["path"]), read_sto(net["path"])
         mine = _casflex_net(paths, inputs["t"])
         moments = np.column_stack([idt.column(f"{c}_{'force' if c in ('pelvis_tx', 'pelvis_ty') else 'moment'}")
@@ -98,8 +111,8 @@ def main(repo: str = "/work/.mirror/opensim-org+opensim-models/repo") -> None:
                             coordinates=inputs["coordinates"], joints=list(JOINTS), active=inputs["active"],
                             passive=inputs["passive"], length=inputs["length"], arms=inputs["arms"],
                             units=inputs["units"], child=inputs["child"], parent=inputs["parent"],
-                            lever=inputs["lever"], id_moments=moments, id_t=idt.t, net=net_loads, casflex_net=mine,
-                            commit=commit,
+                            lever=inputs["lever"], offset=inputs["offset"], id_moments=moments, id_t=idt.t,
+                            net=net_loads, casflex_net=mine, commit=commit,
                             so_seconds=so["so_seconds"], jr_seconds=so["jr_seconds"])
         print(f"opensim-models {commit}: SO {so['so_seconds']:.2f} s, JR {so['jr_seconds']:.2f} s")
 
