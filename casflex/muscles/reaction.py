@@ -4,22 +4,24 @@ bears once the muscles carry their share of the net load across it (docs/muscles
 Cut a hinge: everything the proximal part exerts on the distal part (the hinge's child and every body below it)
 is the net intersegmental load N (casflex's rigid inverse dynamics: ``<hinge>.fx``, ``.fy`` N in the ground and
 ``<hinge>.moment`` N m about the hinge centre, on the distal part; :mod:`casflex.inverse.rigid`; a coupled
-hinge's ``.moment`` is its generalized force: ``lever`` converts it). The muscles
-crossing the hinge are part of it: muscle m, at tension F_m, loads the distal part with F_m U_m (U_m: its load per
-N of tension on the distal bodies, fx, fy, mz about the hinge centre; zero when it does not cross the hinge). What
-is left is the joint's own reaction on the child,
+hinge's ``.moment`` is its generalized force: ``lever`` converts it). The muscles crossing the hinge are part of
+it: muscle m, at tension F_m, loads the distal part with F_m U_m (U_m: its load per N of tension on the distal
+bodies, fx, fy, mz about the hinge centre; zero when it does not cross the hinge). What is left is the joint's
+own reaction on the child,
 
     J_child = N - sum_m F_m U_m,
 
 OpenSim's convention: ``calcReactionOnChildExpressedInGround``, Simbody's mobilizer reaction, the load the joint
 applies to the child at the child joint frame's origin (the hinge centre), mobility forces included: a reserve
-(``CoordinateActuator``) on the hinge's coordinate is in its moment, so with SO's forces J's moment is the reserve's
-moment, and its force the bone-on-bone force plus what holds the segments together. On the parent, -J_child (a
-hinge's parent and child joint frames share their origin). Gravity, inertia and the ground reactions of the distal
-bodies are in N already; so are the reserves, so nothing else of OpenSim's forces set is missing: JointReaction
-with SO's force file applies every actuator's force from that file (muscles, reserves and residuals) and
-realizes the model's accelerations from them, the kinematics' when SO balanced them. Muscles' passive forces
-are not applied there (the file's value overrides each muscle's whole tension), as SO leaves them out.
+(``CoordinateActuator``) on the hinge's coordinate is in its moment (at a pin, with SO's forces, J's moment is
+the reserve's), its force the bone-on-bone force plus what holds the segments together. On the parent,
+-J_child, its moment about the parent joint frame's origin as OpenSim reports it: the hinge centre for a pin,
+elsewhere for a coupled knee whose parent frame is the femur's origin (``offset``). Gravity, inertia and the
+ground reactions of the distal bodies are in N already; so are the reserves, so nothing of OpenSim's forces is
+missing: JointReaction with SO's force file applies every actuator's force from that file (muscles, reserves and
+residuals) and realizes the model's accelerations from them, the kinematics' when SO balanced them. Muscles'
+passive forces are not applied there (the file's value overrides each muscle's whole tension), as SO leaves
+them out.
 
 Expressed in the ground, the child's or the parent's body frame (a rotation of the force by the body's angle;
 the moment about the plane's normal is the same in all three), in N and N m, or in body weights (N / W and
