@@ -1,0 +1,186 @@
+"""casflex.muscles.static_optimization: closed forms, and OpenSim 4.6's own SO on Gait10dof18musc's walk given
+OpenSim's moment arms, forces at full activation and inverse dynamics (tests/data/muscles/README_opensim_runs.md)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from casflex.lab import read_sto
+from casflex.muscles.static_optimization import StaticOptimization, solve_static_optimization
+
+DATA = Path(__file__).parent / "data" / "muscles"
+#: The coordinates the leg muscles and the lumbar reserve carry (the pelvis' three are the residuals' alone: the
+#: muscles are internal forces there, moment arms 0 to 2e-16 m).
+JOINTS = ("hip_flexion_r", "knee_angle_r", "ankle_angle_r", "hip_flexion_l", "knee_angle_l", "ankle_angle_l",
+          "lumbar_extension")
+LOOSE = StaticOptimization(activation_bounds=(0.0, 1.0))
+
+
+def _reference():
+    d = np.load(DATA / "gait10dof18musc_inputs.npz")
+    cols = [list(d["coordinates"]).index(c) for c in JOINTS]
+    moments = np.column_stack([np.interp(d["t"], d["id_t"], d["id_moments"][:, c]) for c in cols])
+    act = read_sto(DATA / "gait10dof18musc_so_activation.sto")
+    return d, cols, moments, act
+
+
+def test_opensims_activations_from_its_own_moment_arms_forces_and_moments():
+    d, cols, moments, act = _reference()
+    r = solve_static_optimization(moments, d["arms"][:, :, cols], d["active"], reserves=np.ones(len(JOINTS)),
+                                  coordinates=JOINTS)
+    theirs = np.column_stack([act.column(m) for m in d["muscles"]])
+    rms = np.sqrt(np.mean((r.activations - theirs) ** 2, axis=0)) / theirs.max(axis=0)
+    # 2 % of each muscle's peak: the brief's bar; OpenSim's IPOPT stops at its convergence criterion 1e-4 (0.62 % seen)
+    assert rms.max() < 0.02, dict(zip(d["muscles"], rms.round(4), strict=True))
+    reserves = np.column_stack([act.column(f"{c}_reserve") for c in JOINTS])
+    assert np.abs(r.reserve_controls - reserves).max() < 0.05  # N m: OpenSim's leg reserves stay below 0.02 N m
+    assert r.reserve_share[-1] == pytest.approx(1.0)  # no muscle crosses the lumbar joint
+    assert r.reserve_share[:6].max() < 1e-3
+    assert np.abs(r.violation).max() < 1e-6  # N m
+    forces = np.column_stack([read_sto(DATA / "gait10dof18musc_so_force.sto").column(m) for m in d["muscles"]])
+    assert np.allclose(forces, theirs * d["active"], rtol=1e-6, atol=1e-6)  # SO's force is a times "active"
+
+
+def test_one_muscle_one_joint_carries_the_moment_alone():
+    m, r, f = np.array([[20.0], [35.0]]), 0.05, 1000.0
+    res = solve_static_optimization(m, np.full((2, 1, 1), r), np.full((2, 1), f), options=LOOSE)
+    assert res.activations[:, 0] == pytest.approx(m[:, 0] / (r * f), rel=1e-8)
+    assert res.forces[:, 0] == pytest.approx(m[:, 0] / r, rel=1e-8)
+    assert res.success and res.report == ""
+
+
+def test_two_identical_muscles_share_equally():
+    res = solve_static_optimization([[30.0]], np.full((1, 2, 1), 0.04), np.full((1, 2), 800.0), options=LOOSE)
+    assert res.activations[0, 0] == pytest.approx(res.activations[0, 1], rel=1e-8)
+    assert res.activations[0, 0] == pytest.approx(30.0 / (2 * 0.04 * 800.0), rel=1e-8)
+
+
+def test_p2_without_active_bounds_is_the_least_norm_solution():
+    rng = np.random.default_rng(3)
+    arms = rng.uniform(0.01, 0.06, (1, 6, 3))
+    active = rng.uniform(500.0, 3000.0, (1, 6))
+    G = (arms[0] * active[0][:, None]).T  # (n_c, n_m): generalized force per unit activation
+    a_true = rng.uniform(0.1, 0.5, 6)
+    a_true = G.T @ np.linalg.solve(G @ G.T, G @ a_true)  # Lagrange: a = G^T (G G^T)^-1 tau
+    assert a_true.min() > 0.0  # the bounds then do not act
+    res = solve_static_optimization((G @ a_true)[None, :], arms, active, options=LOOSE)
+    assert res.activations[0] == pytest.approx(a_true, rel=1e-7)
+
+
+def test_p3_activations_go_as_the_square_root_of_their_strength():
+    g = np.array([0.03 * 1000.0, 0.05 * 2000.0])  # r F, N m per unit activation
+    res = solve_static_optimization([[40.0]], np.array([[[0.03], [0.05]]]), [[1000.0, 2000.0]],
+                                    options=StaticOptimization(exponent=3.0, activation_bounds=(0.0, 1.0)))
+    a = np.sqrt(g) * 40.0 / (g @ np.sqrt(g))  # KKT: 3 a_i^2 = lambda g_i
+    assert res.activations[0] == pytest.approx(a, rel=1e-6)
+
+
+def test_a_reserve_takes_what_the_muscles_cannot():
+    m = np.array([[5.0], [25.0]])  # N m; the muscle carries at most 0.05 * 200 = 10 N m
+    res = solve_static_optimization(m, np.full((2, 1, 1), 0.05), np.full((2, 1), 200.0), reserves=[1.0],
+                                    options=LOOSE)
+    assert res.activations[1, 0] == pytest.approx(1.0, abs=1e-7)
+    assert res.reserve_moments[1, 0] == pytest.approx(15.0, rel=1e-6)
+    # frame 0: cost a^2 + u^2 with 10 a + u = 5: a = 50/101, u = 5/101
+    assert res.activations[0, 0] == pytest.approx(50.0 / 101.0, rel=1e-7)
+    assert res.reserve_share[0] == pytest.approx(np.sqrt(np.mean(res.reserve_moments[:, 0] ** 2))
+                                                 / np.sqrt(np.mean(m[:, 0] ** 2)))
+
+
+def _weak():
+    m = np.array([[4.0, 1.0], [12.0, 1.0], [6.0, -1.0]])  # frame 1's knee needs 12 N m; the muscle gives 10
+    arms = np.zeros((3, 2, 2))
+    arms[:, 0, 0], arms[:, 1, 1] = 0.05, 0.02
+    return m, arms, np.full((3, 2), 200.0)
+
+
+def test_an_unsatisfiable_frame_is_refused_naming_the_coordinate_and_the_shortfall():
+    m, arms, active = _weak()
+    with pytest.raises(ValueError, match=r"frame 1: knee: no activation within the bounds carries its moment of "
+                                         r"12 N m: 2 N m out of reach; frame 2: hip: .* of -1 N m: 1 N m out of reach"):
+        solve_static_optimization(m, arms, active, coordinates=("knee", "hip"),
+                                  options=StaticOptimization(activation_bounds=(0.0, 1.0), tolerance=1e-9))
+
+
+def test_report_keeps_the_frames_it_can_and_says_which_it_cannot():
+    m, arms, active = _weak()
+    res = solve_static_optimization(m, arms, active, coordinates=("knee", "hip"),
+                                    options=StaticOptimization(activation_bounds=(0.0, 1.0), infeasible="report"))
+    assert not res.success
+    assert [(f, c) for f, c, _ in res.infeasible] == [(1, "knee"), (2, "hip")]
+    assert [s for _, _, s in res.infeasible] == pytest.approx([2.0, -1.0], abs=1e-5)
+    assert "frame 1: knee" in res.report
+    assert res.activations[1, 0] == pytest.approx(1.0, abs=1e-6)
+    assert res.violation[1] == pytest.approx([-2.0, 0.0], abs=1e-5)  # carried minus required
+    assert res.activations[0] == pytest.approx([0.4, 0.25], rel=1e-6)  # the satisfiable frames are exact
+
+
+def test_moments_reached_only_at_the_bounds_are_carried():
+    """Moments the muscles carry only at a bound (0 with a lower bound 0; 10 N m at full activation): the QP's
+    feasible set has no interior there, and the solve falls back to IPOPT's relaxed bounds."""
+    res = solve_static_optimization([[10.0, 0.0], [4.0, 0.0]], np.array([[[0.05, 0.0], [0.0, 0.02]]] * 2),
+                                    np.full((2, 2), 200.0), options=LOOSE)
+    assert res.success
+    assert res.activations == pytest.approx(np.array([[1.0, 0.0], [0.4, 0.0]]), abs=1e-7)
+
+
+def test_a_coordinate_nothing_acts_on_must_need_nothing():
+    arms = np.zeros((3, 1, 2))
+    arms[:, 0, 0], arms[:, 0, 1] = 0.05, 1e-17  # the second: a root's coordinate, the muscle internal to it
+    m = np.array([[5.0, 0.0], [6.0, 0.0], [7.0, 0.0]])
+    res = solve_static_optimization(m, arms, np.full((3, 1), 400.0), options=LOOSE)
+    assert res.activations[:, 0] == pytest.approx(m[:, 0] / 20.0, rel=1e-8)
+    m[2, 1] = 3.0
+    with pytest.raises(ValueError, match="frame 2: pelvis_tx: .* of 3 N m: 3 N m out of reach"):
+        solve_static_optimization(m, arms, np.full((3, 1), 400.0), coordinates=("knee", "pelvis_tx"), options=LOOSE)
+
+
+def test_passive_forces_as_known_forces_and_max_isometric_without_curves():
+    arms, active = np.full((1, 1, 1), 0.05), np.full((1, 1), 500.0)
+    res = solve_static_optimization([[10.0]], arms, active, passive=[[40.0]],
+                                    options=StaticOptimization(passive=True, activation_bounds=(0.0, 1.0)))
+    assert res.activations[0, 0] == pytest.approx((10.0 - 0.05 * 40.0) / (0.05 * 500.0), rel=1e-7)
+    assert res.forces[0, 0] == pytest.approx(10.0 / 0.05, rel=1e-7)  # a F + P carries the moment
+    res = solve_static_optimization([[10.0]], arms, active, max_isometric=[1000.0],
+                                    options=StaticOptimization(force_length_velocity=False,
+                                                               activation_bounds=(0.0, 1.0)))
+    assert res.activations[0, 0] == pytest.approx(10.0 / 50.0, rel=1e-7)
+
+
+@pytest.mark.parametrize("options, message", [
+    (dict(exponent=0.5), "exponent: expected a number >= 1"),
+    (dict(activation_bounds=(0.5, 0.2)), "activation_bounds: expected 0 <= lower < upper"),
+    (dict(activation_bounds=(-0.1, 1.0)), "activation_bounds"),
+    (dict(reserve_bounds=(1.0, 2.0)), "reserve_bounds: expected lower <= 0 <= upper"),
+    (dict(tolerance=0.0), "tolerance"),
+    (dict(max_iterations=0), "max_iterations"),
+    (dict(infeasible="ignore"), "infeasible: expected 'raise' or 'report'"),
+    (dict(passive="yes"), "passive: expected True or False"),
+])
+def test_options_refuse_bad_values(options, message):
+    with pytest.raises(ValueError, match=message):
+        StaticOptimization(**options)
+
+
+@pytest.mark.parametrize("change, message", [
+    (dict(arms=np.zeros((2, 3))), r"arms: expected \(2, muscles, 1\)"),
+    (dict(active=np.full((2, 1), np.nan)), r"active: not finite at \(0, 0\)"),
+    (dict(active=np.full((2, 1), -5.0)), "active: a muscle's force at full activation is negative"),
+    (dict(reserves=[-1.0]), "reserves: an optimal force is negative"),
+    (dict(moments=np.zeros(2)), r"moments: expected \(frames, coordinates\)"),
+    (dict(arms=np.full((2, 1, 1), 50.0)), r"arms: 50 m at \(frame, muscle, coordinate\) \(0, 0, 0\): .* mm or cm\?"),
+])
+def test_bad_inputs_are_refused_before_any_work(change, message):
+    args = dict(moments=np.ones((2, 1)), arms=np.full((2, 1, 1), 0.05), active=np.full((2, 1), 100.0), reserves=None)
+    args.update(change)
+    with pytest.raises(ValueError, match=message):
+        solve_static_optimization(args["moments"], args["arms"], args["active"], reserves=args["reserves"])
+
+
+def test_without_max_isometric_the_option_is_refused():
+    with pytest.raises(ValueError, match="max_isometric: needed with force_length_velocity=False"):
+        solve_static_optimization([[1.0]], np.full((1, 1, 1), 0.05), [[100.0]],
+                                  options=StaticOptimization(force_length_velocity=False))
