@@ -77,6 +77,10 @@ class OsimScene:
     #: each body's frame in the ground at the default pose (the scene's initial configuration): body -> (R (3, 3),
     #: origin p (3,) m); a point at ``location`` in the body's frame is at ``p + R @ location``
     frames: Mapping[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    #: each scene joint's OpenSim bodies and its parent frame's origin: joint -> (parent body, child body, the
+    #: origin (3,) m in the ground at the default pose; it moves with the parent; where OpenSim reports a reaction
+    #: on the parent)
+    joint_frames: Mapping[str, tuple[str, str, np.ndarray]] = field(default_factory=dict)
 
 
 def node_name(s: str) -> str:
@@ -100,6 +104,7 @@ class _Builder:
         self.dropped: list[str] = []
         self.warnings: list[str] = []
         self.moving: set[str] = set()  # the joints the scene moves (hinges, the root's coordinates)
+        self.joint_frames: dict[str, tuple[str, str, np.ndarray]] = {}  # OsimScene.joint_frames
 
     # -- geometry -------------------------------------------------------------------------
     def transform(self, j: OsimJoint, values: dict[str, float]) -> tuple[np.ndarray, np.ndarray]:
@@ -151,6 +156,7 @@ class _Builder:
         if j.parent == "ground":
             return
         name = node_name(j.name)
+        self.joint_frames[name] = (j.parent, j.child, pF)
         if hinge is None:
             self.joints.append(Joint(name, "weld", (node_name(j.parent), child)))
             self.report.append(f"joint {j.name!r} ({j.kind}): a weld")
@@ -473,4 +479,5 @@ def scene_from_osim(source: str | os.PathLike[str] | OsimModel, name: str | None
         raise ValueError(f"{model.source}: {exc}") from None
     report = [f"{model.source}: {len(bodies)} bodies, {len(b.joints)} joints, {len(markers)} markers, "
               f"{len(b.coords)} coordinates in the x-y plane", *b.report, *b.dropped, *b.warnings]
-    return OsimScene(scene, tuple(report), tuple(b.dropped), tuple(b.warnings), muscles, dict(b.pose))
+    return OsimScene(scene, tuple(report), tuple(b.dropped), tuple(b.warnings), muscles, dict(b.pose),
+                     dict(b.joint_frames))

@@ -1,0 +1,242 @@
+"""The muscles of a trial, frame by frame: from the inverse dynamics' coordinates to the muscles' forces (static
+optimization) and the loads the joints bear (joint reactions).
+
+Every output at frame k is a function of that frame's coordinates and rates (z, z', z'') and of the model's
+properties (:meth:`TrialMuscles.solve`): the inverse's loads (:func:`casflex.inverse.bands.rigid_load_function`),
+the paths' lengths, speeds, moment arms and unit loads (:mod:`casflex.muscles.path`), the muscles' forces at full
+activation (:mod:`casflex.muscles.curves`), the reserves (:mod:`casflex.muscles.actuators`), static optimization
+(:mod:`casflex.muscles.static_optimization`) and the reactions (:mod:`casflex.muscles.reaction`). The bands
+(:mod:`casflex.muscles.bands`) differentiate that function as the inverse's bands differentiate its loads.
+
+The root's coordinates (the pelvis' pose) are no muscle's: a muscle pulls its two bodies together and moves
+nothing when the whole body turns or slides. Their loads, the inverse dynamics' residuals, go to the residual
+actuators (a PointActuator or TorqueActuator on the root's body, a CoordinateActuator on a root coordinate) at
+least cost, as OpenSim's static optimization, whose muscles cannot reach them either, gives them; the joints'
+coordinates go to static optimization, with the CoordinateActuators on them as its reserves.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from casflex.inverse.bands import rigid_load_function
+from casflex.inverse.lab_names import lab_name
+from casflex.inverse.tree import KinematicTree
+from casflex.muscles.actuators import actuator_columns, check_actuators
+from casflex.muscles.curves import rigid_tendon
+from casflex.muscles.path import MusclePaths
+from casflex.muscles.reaction import JointReaction, JointReactions, joint_reactions
+from casflex.muscles.static_optimization import StaticOptimization, StaticOptimizationResult, solve_static_optimization
+from casflex.scene.from_osim import node_name
+
+__all__ = ["FrameOutputs", "TrialMuscles"]
+
+
+@dataclass(frozen=True, eq=False)
+class FrameOutputs:
+    """What :meth:`TrialMuscles.solve` gives for k frames.
+
+    so : static optimization over the joints' coordinates (``TrialMuscles.joint_coordinates``)
+    residuals : (k, n_r) the residual actuators' controls (``TrialMuscles.residuals``' order)
+    reactions : joint -> :class:`JointReactions` (loads (k, 1, 3): fx, fy N and mz N m as the options express them)
+    lengths, speeds : (k, n_m) m, m/s; arms (k, n_m, n_c) m along ``TrialMuscles.joint_coordinates``
+    active, passive : (k, n_m) N each muscle's force at full activation along its tendon, and its passive force
+    moments : (k, n_c) the generalised forces static optimization carried (N m, N)
+    """
+
+    so: StaticOptimizationResult
+    residuals: np.ndarray
+    reactions: dict[str, JointReactions]
+    lengths: np.ndarray
+    speeds: np.ndarray
+    arms: np.ndarray
+    active: np.ndarray
+    passive: np.ndarray
+    moments: np.ndarray
+
+
+class TrialMuscles:
+    """A trial's muscles: the model (its tree, muscles, actuators), the trial's times and plates and the choices,
+    fixed; :meth:`solve` maps the frames' coordinates to the outputs. ``osim``: the
+    :class:`~casflex.scene.from_osim.OsimScene` read with its muscles; ``tree`` its kinematic tree; ``joints``: the
+    hinges whose reactions are computed (() every one). ValueError in one line for what cannot be honoured."""
+
+    def __init__(self, osim, tree: KinematicTree, t: np.ndarray, plates=(), actuators=(), *,
+                 optimization: StaticOptimization | None = None, reaction: JointReaction | None = None,
+                 joints: tuple[str, ...] = (), source: str = "actuators") -> None:
+        self.osim, self.tree, self.t, self.plates = osim, tree, np.asarray(t, dtype=float), tuple(plates)
+        self.scene = tree.model.scene
+        self.muscles = tuple(osim.muscles)
+        if not self.muscles:
+            raise ValueError("the model has no muscle casflex computes (Millard2012EquilibriumMuscle, "
+                             "Thelen2003Muscle, DeGrooteFregly2016Muscle)")
+        self.optimization = optimization or StaticOptimization()
+        self.reaction = reaction or JointReaction()
+        hinges = list(tree.hinges)
+        self.joints = tuple(joints) or tuple(hinges)
+        unknown = [j for j in self.joints if j not in hinges]
+        if unknown:
+            raise ValueError(f"joints: no hinge {unknown[0]!r} in the scene; its hinges are {hinges}")
+        self.paths = MusclePaths(tree, self.muscles)
+        coords = list(self.scene.coordinates)
+        root = f"{tree.root}."
+        self.root_coordinates = tuple(c for c in coords if c.of.startswith(root))
+        self.joint_coordinates = tuple(c for c in coords if not c.of.startswith(root))
+        self.notes = check_actuators(tuple(actuators), self.scene, source,
+                                     bodies=set(osim.frames) - {"ground"})
+        self._split_actuators(tuple(actuators), source)
+        self._slide = self._slides()
+
+    def _split_actuators(self, actuators, source: str) -> None:
+        """The reserves (a CoordinateActuator on a joint's coordinate: static optimization's) and the residuals
+        (on the root: balanced apart); ValueError for what static optimization cannot take (two reserves on one
+        coordinate, reserves of different bounds, a force on a body other than the root's)."""
+        joint = {c.name for c in self.joint_coordinates}
+        root_node = self.tree.root
+        self.reserves, self.residuals = {}, []
+        bounds = set()
+        for a in actuators:
+            if a.kind == "CoordinateActuator" and a.coordinate in joint:
+                if a.coordinate in self.reserves:
+                    raise ValueError(f"{source}: {a.name!r}: a second reserve on {a.coordinate!r}; give one per "
+                                     "coordinate")
+                self.reserves[a.coordinate] = a
+                bounds.add((a.min_control, a.max_control))
+            elif a.kind == "CoordinateActuator" and a.coordinate not in {c.name for c in self.root_coordinates}:
+                continue  # on a coordinate the scene holds still: no effect (check_actuators said so)
+            elif a.kind != "CoordinateActuator" and node_name(a.body) != root_node:
+                raise ValueError(f"{source}: {a.kind} {a.name!r}: on {a.body!r}; casflex's static optimization "
+                                 f"takes forces and torques on the root's body ({root_node!r}) only, and reserves "
+                                 "as CoordinateActuators")
+            else:
+                self.residuals.append(a)
+        if len(bounds) > 1:
+            raise ValueError(f"{source}: the reserves' control bounds differ ({sorted(bounds)}); give them one pair")
+        if bounds:
+            lo, hi = bounds.pop()
+            self.optimization = _with_reserve_bounds(self.optimization, (lo, hi))
+
+    def _slides(self) -> ca.Function:
+        """``slide(z) -> (2, n_h)``: how far each hinge's point moves (m/rad, ground axes) per radian of its angle,
+        the rest held (0 for a hinge whose centre is fixed in both segments): the reactions' ``lever``."""
+        z = ca.SX.sym("z", self.tree.n)
+        q = self.tree.forward(z)
+        cols = []
+        for h in self.tree.hinges:
+            j = self.scene.item(h)
+            i = self.tree.model.node_names.index(j.nodes[1])
+            x0 = np.asarray(self.tree.model.q0[3 * i: 3 * i + 3], dtype=float).ravel()
+            P0 = np.asarray(self.scene.joint_point(j), dtype=float) - x0[:2]
+            th = q[3 * i + 2] - x0[2]
+            P = q[3 * i: 3 * i + 2] + ca.vertcat(ca.cos(th) * P0[0] - ca.sin(th) * P0[1],
+                                                 ca.sin(th) * P0[0] + ca.cos(th) * P0[1])
+            cols.append(ca.jacobian(P, z)[:, self.tree.names.index(f"{h}.angle")])
+        return ca.Function("hinge_slides", [z], [ca.horzcat(*cols)])
+
+    def capacity(self, lengths: np.ndarray, speeds: np.ndarray, muscles=None) -> tuple[np.ndarray, np.ndarray]:
+        """(active, passive) (k, n_m) N: each muscle's force along its tendon at full activation and its passive
+        force (:func:`casflex.muscles.curves.rigid_tendon`, OpenSim's values), at the paths' lengths and speeds."""
+        act, pas = [], []
+        for i, m in enumerate(muscles or self.muscles):
+            active, passive = rigid_tendon(m, lengths[:, i], speeds[:, i])
+            act.append(active)
+            pas.append(passive)
+        return np.column_stack(act), np.column_stack(pas)
+
+    def solve(self, z: np.ndarray, zd: np.ndarray, zdd: np.ndarray, p: np.ndarray | None = None, muscles=None,
+              optimization: StaticOptimization | None = None) -> FrameOutputs:
+        """The outputs at the frames' coordinates z, z', z'' (k, n_z), with the model's properties p (default its
+        nominal ones), ``muscles`` (default the model's: the bands pass perturbed copies) and ``optimization``
+        (default the trial's: the criteria's spread passes another exponent)."""
+        options = optimization or self.optimization
+        muscles = muscles or self.muscles
+        p = self.tree.model.p_nominal if p is None else p
+        loads = rigid_load_function(self.tree, self.t, self.plates, p)(z, zd, zdd)
+        geo = self.paths.evaluate(z, zd)
+        cols = [list(self.scene.coordinates).index(c) for c in self.joint_coordinates]
+        arms = geo["moment_arms"][:, :, cols]
+        moments = np.column_stack([loads[lab_name(c)] for c in self.joint_coordinates])
+        active, passive = self.capacity(geo["lengths"], geo["speeds"], muscles)
+        reserves = np.array([self.reserves[c.name].optimal_force if c.name in self.reserves else 0.0
+                             for c in self.joint_coordinates])
+        so = solve_static_optimization(moments, arms, active, passive, reserves, options,
+                                       max_isometric=[m.max_isometric_force for m in muscles],
+                                       coordinates=[c.name for c in self.joint_coordinates])
+        return FrameOutputs(so, self._residuals(loads, z), self._reactions(loads, z, so.forces), geo["lengths"],
+                            geo["speeds"], arms, active, passive, moments)
+
+    def _residuals(self, loads: dict[str, np.ndarray], z: np.ndarray) -> np.ndarray:
+        """(k, n_r): the residual actuators' controls that carry the root's loads at least cost (sum u^2: the
+        least-norm solution; with one actuator per root coordinate, OpenSim's FX, FY, MZ, the only one)."""
+        k = z.shape[0]
+        if not self.residuals:
+            return np.zeros((k, 0))
+        rows = [list(self.scene.coordinates).index(c) for c in self.root_coordinates]
+        A = actuator_columns(self.tree, self.scene, tuple(self.residuals), self.osim.frames, z)[:, rows, :]
+        tau = np.column_stack([loads[lab_name(c)] for c in self.root_coordinates])
+        return np.stack([np.linalg.lstsq(A[i], tau[i], rcond=None)[0] for i in range(k)])
+
+    def _reactions(self, loads: dict[str, np.ndarray], z: np.ndarray, forces: np.ndarray) -> dict[str, JointReactions]:
+        """joint -> its reaction (:func:`casflex.muscles.reaction.joint_reactions`) with the muscles' ``forces``."""
+        k, n_m = z.shape[0], len(self.muscles)
+        unit = np.array(self.paths.unit_loads.map(k)(z.T)).reshape(-1, n_m, k, order="F").transpose(2, 0, 1)
+        slide = np.array(self._slide.map(k)(z.T)).reshape(2, -1, k, order="F").transpose(2, 1, 0)
+        q = np.array(self.tree.forward.map(k)(z.T)).T
+        out = {}
+        for h in self.joints:
+            i = self.tree.hinges.index(h)
+            net = np.column_stack([loads[f"{h}.fx"], loads[f"{h}.fy"], loads[f"{h}.moment"]])[:, None, :]
+            parent, child, origin = self.osim.joint_frames[h]
+            angles = {s: self._body_angle(body, q)[:, None] for s, body in (("parent", parent), ("child", child))}
+            offset = self._offset(h, parent, origin, q, k) if self.reaction.on == "parent" else None
+            out[h] = joint_reactions(net, unit[:, 3 * i:3 * i + 3, :], forces, angles["child"], angles["parent"],
+                                     self.reaction, lever=slide[:, i:i + 1, :], offset=offset)
+        return out
+
+    def _node_pose(self, body: str, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(position (k, 2), its turn from the default pose (k,), the default (x, y, theta)) of the OpenSim body's
+        node."""
+        return self._node_of(node_name(body), q)
+
+    def _body_angle(self, body: str, q: np.ndarray) -> np.ndarray:
+        """(k,) rad: the body frame's angle in the ground (the ground's: 0)."""
+        if body == "ground":
+            return np.zeros(q.shape[0])
+        R = self.osim.frames[body][0]
+        return self._node_pose(body, q)[1] + math.atan2(R[1, 0], R[0, 0])
+
+    def _offset(self, hinge: str, parent: str, origin: np.ndarray, q: np.ndarray, k: int) -> np.ndarray:
+        """(k, 1, 2) m: the parent joint frame's origin (which moves with the parent) minus the hinge's point."""
+        j = self.scene.item(hinge)
+        b = j.nodes[1]
+        pb, turn_b, xb = self._node_of(b, q)
+        P0 = np.asarray(self.scene.joint_point(j), dtype=float) - xb[:2]
+        P = pb + _turn(turn_b, P0)
+        if parent == "ground":
+            F = np.broadcast_to(np.asarray(origin, dtype=float)[:2], (k, 2))
+        else:
+            pa, turn_a, xa = self._node_pose(parent, q)
+            F = pa + _turn(turn_a, np.asarray(origin, dtype=float)[:2] - xa[:2])
+        return (F - P)[:, None, :]
+
+    def _node_of(self, node: str, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`_node_pose` of the scene node ``node``."""
+        i = self.tree.model.node_names.index(node)
+        x0 = np.asarray(self.tree.model.q0[3 * i: 3 * i + 3], dtype=float).ravel()
+        return q[:, 3 * i:3 * i + 2], q[:, 3 * i + 2] - x0[2], x0
+
+
+def _turn(angle: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """v (2,) turned by the angles (k,): (k, 2)."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.column_stack([c * v[0] - s * v[1], s * v[0] + c * v[1]])
+
+
+def _with_reserve_bounds(options: StaticOptimization, bounds: tuple[float, float]) -> StaticOptimization:
+    import dataclasses
+
+    return dataclasses.replace(options, reserve_bounds=bounds)
