@@ -67,3 +67,24 @@ def test_the_root_is_the_residual_actuators_and_the_muscles_reach_no_root_coordi
     forces = out.residuals * np.array([a.optimal_force for a in trial.residuals])
     assert np.sqrt(np.mean((forces - theirs) ** 2, axis=0)).max() < 0.02 * np.abs(theirs).max()
     assert [c.name for c in trial.joint_coordinates][0] == "hip_flexion_r"
+
+
+def test_the_files_are_named_and_labelled_as_opensims_and_say_what_opensims_say(walk, tmp_path):
+    from casflex.muscles.analysis import muscle_result
+    from casflex.muscles.result import file_names
+
+    osim, res, trial, out = walk
+    result = muscle_result(trial, out, res.z)
+    written = result.save(tmp_path, "walk")
+    assert [p.name for p in written] == list(file_names("walk"))
+    for ours, theirs in (("walk_StaticOptimization_force.sto", "gait10dof18musc_so_force.sto"),
+                         ("walk_JointReaction_ReactionLoads.sto", "gait10dof18musc_jr.sto")):
+        a, b = read_sto(tmp_path / ours), read_sto(DATA / theirs)
+        assert set(a.names) <= set(b.names)  # OpenSim's labels (its force file adds the plates' columns)
+    jr = read_sto(tmp_path / "walk_JointReaction_ReactionLoads.sto")
+    ref = read_sto(DATA / "gait10dof18musc_jr.sto")
+    for c in ("knee_r_on_tibia_r_in_tibia_r_px", "knee_r_on_tibia_r_in_tibia_r_py"):  # m: exact geometry
+        assert np.abs(jr.column(c) - _at(ref, res.t, [c])[:, 0]).max() < 1e-6
+    text = result.summary()
+    assert text.splitlines()[1].startswith("  hip_r: ") and "BW" in text
+    assert "no muscle crosses lumbar_extension" in text

@@ -223,6 +223,27 @@ class TrialMuscles:
             F = pa + _turn(turn_a, np.asarray(origin, dtype=float)[:2] - xa[:2])
         return (F - P)[:, None, :]
 
+    def reaction_point(self, hinge: str, on: str, frame: str, q: np.ndarray) -> np.ndarray:
+        """(k, 3) m: where the reaction on body ``on`` acts (the hinge's point on the child; the parent joint
+        frame's origin on the parent), from body ``frame``'s origin in its axes ("ground": the ground's). The
+        point's out-of-plane coordinate is the parent joint frame's (the joint's frames share it in a plane)."""
+        parent, child, origin = self.osim.joint_frames[hinge]
+        j = self.scene.item(hinge)
+        pb, turn_b, xb = self._node_of(j.nodes[1], q)
+        P = pb + _turn(turn_b, np.asarray(self.scene.joint_point(j), dtype=float) - xb[:2])
+        if on != child:
+            P = P + self._offset(hinge, parent, origin, q, q.shape[0])[:, 0, :]
+        z = float(origin[2])
+        if frame == "ground":
+            return np.column_stack([P, np.full(q.shape[0], z)])
+        R, p = self.osim.frames[frame]
+        pn, turn, x0 = self._node_pose(frame, q)
+        rel = P - (pn + _turn(turn, p[:2] - x0[:2]))  # from the frame's origin now, in the ground's axes
+        c, s = np.cos(turn), np.sin(turn)
+        back = np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1],
+                                np.full(q.shape[0], z - p[2])])  # the body's turn undone: its default pose
+        return back @ R  # each row R^T v: in the body's axes
+
     def _node_of(self, node: str, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`_node_pose` of the scene node ``node``."""
         i = self.tree.model.node_names.index(node)
@@ -240,3 +261,44 @@ def _with_reserve_bounds(options: StaticOptimization, bounds: tuple[float, float
     import dataclasses
 
     return dataclasses.replace(options, reserve_bounds=bounds)
+
+
+def muscle_result(trial: TrialMuscles, out: FrameOutputs, z: np.ndarray, report=(), settings=None):
+    """The :class:`~casflex.muscles.result.MuscleResult` of :meth:`TrialMuscles.solve`'s ``out`` at the frames'
+    coordinates z (k, n_z): OpenSim's column labels for the reactions, each reaction's point, the actuators in
+    the order given (reserves from static optimization, residuals from the root's balance)."""
+    from casflex.lab.plate_checks import scene_mass
+    from casflex.muscles.result import MuscleResult
+
+    k = z.shape[0]
+    names = [c.name for c in trial.joint_coordinates]
+    controls, forces, actuators = [], [], []
+    for a in (*trial.reserves.values(), *trial.residuals):
+        if a.kind == "CoordinateActuator" and a.coordinate in trial.reserves:
+            u = out.so.reserve_controls[:, names.index(a.coordinate)]
+        else:
+            u = out.residuals[:, trial.residuals.index(a)]
+        actuators.append(a.name)
+        controls.append(u)
+        forces.append(u * a.optimal_force)
+    q = np.array(trial.tree.forward.map(k)(z.T)).T
+    columns, resultants = {}, {}
+    for h, r in out.reactions.items():
+        parent, child, _ = trial.osim.joint_frames[h]
+        on = child if trial.reaction.on == "child" else parent
+        frame = {"child": child, "parent": parent, "ground": "ground"}[trial.reaction.frame]
+        load = r.loads[:, 0, :]
+        point = trial.reaction_point(h, on, frame, q)
+        values = (load[:, 0], load[:, 1], 0 * load[:, 0], 0 * load[:, 0], 0 * load[:, 0], load[:, 2], *point.T)
+        for suffix, v in zip(("fx", "fy", "fz", "mx", "my", "mz", "px", "py", "pz"), values, strict=True):
+            columns[f"{h}_on_{on}_in_{frame}_{suffix}"] = v
+        resultants[h] = np.hypot(load[:, 0], load[:, 1]) * (trial.reaction.body_weight or 1.0)
+    g = float(np.hypot(*trial.scene.gravity))
+    empty = np.zeros((k, 0))
+    return MuscleResult(t=trial.t, muscles=tuple(m.name for m in trial.muscles), activations=out.so.activations,
+                        forces=out.so.forces, actuators=tuple(actuators),
+                        controls=np.column_stack(controls) if controls else empty,
+                        actuator_forces=np.column_stack(forces) if forces else empty, coordinates=tuple(names),
+                        reserve_share=out.so.reserve_share, reactions=columns, resultants=resultants,
+                        body_weight=scene_mass(trial.scene) * g, report=tuple(report), settings=dict(settings or {}),
+                        uncrossed=tuple(n for i, n in enumerate(names) if np.abs(out.arms[:, :, i]).max() < 1e-9))
