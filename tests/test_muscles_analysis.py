@@ -88,3 +88,12 @@ def test_the_files_are_named_and_labelled_as_opensims_and_say_what_opensims_say(
     text = result.summary()
     assert text.splitlines()[1].startswith("  hip_r: ") and "BW" in text
     assert "no muscle crosses lumbar_extension" in text
+
+
+def test_the_figures_are_written(walk, tmp_path):
+    from casflex.muscles.analysis import muscle_result
+    from casflex.plotting.muscles import FIGURES, save_muscle_figures
+
+    _, res, trial, out = walk
+    paths = save_muscle_figures(muscle_result(trial, out, res.z), tmp_path)
+    assert [p.name for p in paths] == list(FIGURES) and all(p.stat().st_size > 10_000 for p in paths)

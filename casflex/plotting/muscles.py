@@ -1,0 +1,73 @@
+"""Figures of a trial's muscles (:class:`casflex.muscles.result.MuscleResult`): the joints' reaction forces in body
+weights with their bands, and the muscles' activations."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from casflex.plotting._figure import _new_figure, _save
+
+__all__ = ["FIGURES", "plot_activations", "plot_reactions", "save_muscle_figures"]
+
+#: The files :func:`save_muscle_figures` writes.
+FIGURES = ("joint_reactions.png", "activations.png")
+
+
+def plot_reactions(res, path: str | os.PathLike[str] | None = None) -> Figure:
+    """Each joint's reaction force (the magnitude, in body weights) over the trial, its band (one standard
+    deviation, shaded) where the result has one and the other criterion's (dashed) where asked; the hip first."""
+    fig = _new_figure((7.5, 4.0))
+    ax = fig.subplots()
+    w = res.body_weight
+    joints = sorted(res.resultants, key=lambda j: (not j.startswith("hip"), j))
+    for k, joint in enumerate(joints):
+        v = res.resultants[joint] / w
+        ax.plot(res.t, v, color=f"C{k}", lw=1.6 if k == 0 else 1.1, label=joint)
+        band = res.bands.get(f"{joint}_resultant")
+        if band is not None:
+            ax.fill_between(res.t, v - band / w, v + band / w, color=f"C{k}", alpha=0.25, lw=0)
+        other = res.spread.get(f"{joint}_resultant")
+        if other is not None:
+            ax.plot(res.t, v + other / w, color=f"C{k}", lw=0.9, ls="--")
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("joint reaction force (body weights)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="upper left")
+    fig.suptitle("joint reactions" + (" (shaded: 1 SD)" if res.bands else "")
+                 + (" (dashed: other criterion)" if res.spread else ""))
+    _save(fig, path)
+    return fig
+
+
+def plot_activations(res, path: str | os.PathLike[str] | None = None) -> Figure:
+    """Each muscle's activation over the trial, one small panel each."""
+    n = len(res.muscles)
+    cols = min(n, 4)
+    rows = int(np.ceil(n / cols))
+    fig = _new_figure((2.2 * cols + 1.0, 1.5 * rows + 0.8))
+    axes = np.atleast_1d(fig.subplots(rows, cols, sharex=True, sharey=True)).ravel()
+    for i, ax in enumerate(axes):
+        if i >= n:
+            ax.set_visible(False)
+            continue
+        ax.plot(res.t, res.activations[:, i], color="C0", lw=1.0)
+        ax.set_title(res.muscles[i], fontsize=8)
+        ax.set_ylim(0.0, 1.0)
+        ax.grid(alpha=0.3)
+    fig.supxlabel("t (s)")
+    fig.supylabel("activation")
+    _save(fig, path)
+    return fig
+
+
+def save_muscle_figures(res, directory: str | os.PathLike[str]) -> list[Path]:
+    """:data:`FIGURES` in ``directory``."""
+    d = Path(directory)
+    paths = [d / name for name in FIGURES]
+    plot_reactions(res, paths[0])
+    plot_activations(res, paths[1])
+    return paths
