@@ -351,13 +351,12 @@ def _trial_run(folder: Path, grf: str) -> dict:
     from casflex import load_scene
     from casflex.scene import dumps_scene
     from casflex.study.runner import trial_run
+    from casflex.study.study_file import Trial, TrialOptions
 
-    options = {"plane": "X,Y", "vertical": "Y", "cutoff": 6.0, "cutoff_plates": "same", "filter": "butterworth",
-               "root": None, "tasks": str(LAB / "hamner_tasks_ik.xml"), "bands": False, "passive": ()}
-    trial = {"name": "run", "markers": str(LAB / "hamner_running_whole.trc"), "grf": grf, "plates": None,
-             "window": None}
+    options = TrialOptions(tasks=str(LAB / "hamner_tasks_ik.xml"))
+    trial = Trial("run", str(LAB / "hamner_running_whole.trc"), grf)
     return trial_run(scene=dumps_scene(load_scene(str(LAB / "hamner_subject02_planar.osim"))), trial=trial,
-                     options=options, uncertain=[])
+                     options=options, uncertain=())
 
 
 def test_a_foot_that_touches_no_plate_gets_no_kinetic_cycles(tmp_path):

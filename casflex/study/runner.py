@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from casflex.study.study_file import Study
+from casflex.study.study_file import Study, Trial, TrialOptions
 
 __all__ = ["run_study", "trial_run", "calibrate_run", "check_against_models", "tidy_rows", "per_kg", "unit_of",
            "PERCENT"]
@@ -32,8 +32,10 @@ __all__ = ["run_study", "trial_run", "calibrate_run", "check_against_models", "t
 #: the points of a gait cycle in the table: 0, 1, ..., 100 % (as labs report it)
 PERCENT = np.linspace(0.0, 100.0, 101)
 #: what a run's record holds, in its fingerprint (:func:`_run`): 2, each cycle's "clean" flag (a record without
-#: it, from before, is done again rather than read as clean or not)
-RECORD_FORMAT = 2
+#: it, from before, is done again rather than read as clean or not); 3, a trial run's options given as values
+#: (:class:`~casflex.study.study_file.TrialOptions`, the study file's trial): the fingerprint's text changed, the
+#: records' content did not
+RECORD_FORMAT = 3
 
 
 def calibrate_run(*, model: str, static: str | None, plane: str, root: str | None, calibrate: bool, scale: bool,
@@ -103,15 +105,15 @@ def _load_feet(scene, names: list[str], feet: list[str]) -> dict[str, str | None
     return out
 
 
-def _read(trial: dict):
+def _read(trial: Trial):
     """(markers, plates' table or None): the trial's files, read once (a C3D's own plates where no grf is named;
     none with an ExternalLoads file, which inverse dynamics reads itself)."""
     from casflex.study.events import read_trial
 
-    grf = trial["grf"]
+    grf = trial.grf
     if grf is not None and grf.lower().endswith(".xml"):
-        return read_trial(trial["markers"], None, plates=False)
-    return read_trial(trial["markers"], grf, required=False)
+        return read_trial(trial.markers, None, plates=False)
+    return read_trial(trial.markers, grf, required=False)
 
 
 def _events(sc, lab, table, plates, plane: str) -> tuple[dict[str, str] | None, dict, list[str], list]:
@@ -136,30 +138,30 @@ def _loads_of(res) -> list[str]:
     return names or sorted(k for k in res.loads if k.endswith(".moment") and not k.startswith("root."))
 
 
-def trial_run(*, scene: str, trial: dict, options: dict, uncertain: list[str]) -> dict:
+def trial_run(*, scene: str, trial: Trial, options: TrialOptions, uncertain: tuple[str, ...]) -> dict:
     """One trial's inverse dynamics and its loads over gait cycles (module docstring): a JSON-ready record."""
-    from casflex.inverse import inverse_dynamics
+    from casflex.inverse import Bands, inverse_dynamics
+    from casflex.inverse import Trial as Inverse
     from casflex.scene import loads_scene
     from casflex.scene.uncertain import parse
 
     sc = loads_scene(scene)
     lab, table = _read(trial)
-    t0, t1 = trial["window"] or (None, None)
+    t0, t1 = trial.window or (None, None)
     inside = (lab.t >= (t0 or -np.inf)) & (lab.t <= (t1 or np.inf))
     plane, plane_report = _trial_plane(sc, dataclasses.replace(lab, t=lab.t[inside], xyz=lab.xyz[inside]),
-                                       options["plane"], options["vertical"], root=options["root"])
-    plates, feet, event_report, found = _events(sc, lab, table, trial["plates"], plane)
-    grf = trial["grf"] if trial["grf"] is not None and trial["grf"].lower().endswith(".xml") else table
-    res = inverse_dynamics(sc, lab, grf=grf, plates=plates, plane=plane,
-                           cutoff=options["cutoff"], cutoff_plates=options["cutoff_plates"],
-                           filter=options["filter"], root=options["root"], tasks=options["tasks"], t_start=t0,
-                           t_end=t1, uncertain=[parse(u) for u in uncertain] or None,
-                           bands=bool(options["bands"]))  # false: none, even where the subject declares uncertainty
+                                       options.plane, options.vertical, root=options.root)
+    plates, feet, event_report, found = _events(sc, lab, table, trial.plates, plane)
+    grf = trial.grf if trial.grf is not None and trial.grf.lower().endswith(".xml") else table
+    res = inverse_dynamics(sc, Inverse(lab, grf=grf, plates=plates, plane=plane, root=options.root, t_start=t0,
+                                       t_end=t1, tasks=options.tasks), filter=options.filter,
+                           bands=Bands([parse(u) for u in uncertain] or None,  # false: none, even where the subject
+                                       asked=bool(options.bands)))             # declares uncertainty
     feet = {f: [c for c in cs if res.t[0] <= c[0] and c[1] <= res.t[-1]] for f, cs in feet.items()}  # the window's
     loads, notes = _cycle_loads(sc, res, lab, found, plates or {}, feet, plane)
     return {"plates": plates, "plane": plane, "report": [*plane_report, *event_report, *notes, *res.report],
             "warnings": [*res.warnings, *notes], "loads": loads, "t": [float(res.t[0]), float(res.t[-1])],
-            "passive": _passive(res, sc, lab, found, feet, options.get("passive", ()))}
+            "passive": _passive(res, sc, lab, found, feet, options.passive)}
 
 
 def _cycle_loads(sc, res, lab, found, plates: dict[str, str], feet: dict, plane: str) -> tuple[dict, list[str]]:
@@ -234,6 +236,11 @@ _FIELDS = {"calibrate_run": ("scene", "report"),
            "trial_run": ("plates", "plane", "report", "warnings", "loads", "t", "passive")}
 
 
+def _jsonable(value: object) -> object:
+    """A value in a run's fingerprint: an option value by its fields, anything else as text."""
+    return dataclasses.asdict(value) if dataclasses.is_dataclass(value) else str(value)
+
+
 def _run(name: str, fn: Callable[..., dict], kwargs: dict, files: tuple[str | None, ...]):
     """The sweep's run ``name-<fingerprint>``: the fingerprint (8 hex digits) of its inputs (every option, the
     calibrated scene's text, the ``files``' contents) and casflex's version, so that a record is reused only for
@@ -247,18 +254,16 @@ def _run(name: str, fn: Callable[..., dict], kwargs: dict, files: tuple[str | No
     from casflex.study.sweep import Run
 
     text = json.dumps({"fn": fn.__name__, "kwargs": kwargs, "files": [_digest(f) for f in files],
-                       "casflex": __version__, "record": RECORD_FORMAT}, sort_keys=True, default=str)
+                       "casflex": __version__, "record": RECORD_FORMAT}, sort_keys=True, default=_jsonable)
     return Run(f"{name}-{hashlib.sha1(text.encode()).hexdigest()[:8]}", fn, kwargs, _FIELDS.get(fn.__name__, ()))
 
 
 def _plan(study: Study, calibrated: dict[str, dict]) -> dict:
     """(subject, trial) -> its run."""
-    o = study.options
-    options = {k: getattr(o, k) for k in ("plane", "vertical", "cutoff", "cutoff_plates", "filter", "root", "tasks",
-                                          "bands", "passive")}
+    o = study.options.trials
     return {(s.name, t.name): _run(f"trial-{s.name}-{t.name}", trial_run,
-                                   {"scene": calibrated[s.name]["scene"], "trial": dataclasses.asdict(t),
-                                    "options": options, "uncertain": list(s.uncertain)}, (t.markers, t.grf, o.tasks))
+                                   {"scene": calibrated[s.name]["scene"], "trial": t, "options": o,
+                                    "uncertain": tuple(s.uncertain)}, (t.markers, t.grf, o.tasks))
             for s, t in study.trials() if "scene" in calibrated.get(s.name, {})}
 
 
@@ -283,12 +288,13 @@ def check_against_models(study: Study) -> None:
             raise StudyError(f"subjects[{i}].uncertain: {exc}") from None
         nodes = {n.name for n in scene.nodes}
         hinges = {j.name for j in scene.joints}
-        for hinge, _ in study.options.passive:
+        for hinge, _ in study.options.trials.passive:
             if hinge not in hinges:
                 raise StudyError(f"options.passive: {hinge!r} is not a joint of subject {s.name}'s model (joints: "
                                  f"{sorted(hinges)[:12]}...)")
-        if study.options.root is not None and study.options.root not in nodes:
-            raise StudyError(f"options.root: {study.options.root!r} is not a node of subject {s.name}'s model")
+        root = study.options.trials.root
+        if root is not None and root not in nodes:
+            raise StudyError(f"options.root: {root!r} is not a node of subject {s.name}'s model")
         for k, t in enumerate(s.trials):
             bad = sorted(set(t.plates or {}) - nodes)
             if bad:
@@ -305,10 +311,10 @@ def run_study(study: Study, record: str | Path, *, scheduler: str | None = None,
     worker lost, a file since mended), where by default its record stands until its inputs change."""
     from casflex.study.sweep import run_sweep
 
-    o = study.options
+    o, to = study.options, study.options.trials
     cal_runs = {s.name: _run(f"calibrate-{s.name}", calibrate_run,
-                             {"model": s.model, "static": s.static, "plane": o.plane, "root": o.root,
-                              "calibrate": o.calibrate, "scale": o.scale, "mass": s.mass, "vertical": o.vertical},
+                             {"model": s.model, "static": s.static, "plane": to.plane, "root": to.root,
+                              "calibrate": o.calibrate, "scale": o.scale, "mass": s.mass, "vertical": to.vertical},
                              (s.model, s.static)) for s in study.subjects}
     cal = run_sweep(list(cal_runs.values()), record, scheduler=scheduler, n_workers=n_workers, progress=progress,
                     retry_failed=retry_failed)
