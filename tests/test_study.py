@@ -383,7 +383,9 @@ def test_a_cycle_off_the_plates_is_flagged_and_left_out_of_the_means(tmp_path):
     ld = off["loads"]["ankle_angle_r_moment"]
     assert len(ld["cycles"]) == 1 and ld["clean"] == [False]
     assert any("not clean: no strike on its plate 'ground_'" in w and "off every plate" in w for w in off["warnings"])
-    out = {"trials": {("s02", "run"): clean, ("s02", "right_off"): off}}
+    from casflex.study.records import TrialRecord
+
+    out = {"trials": {("s02", "run"): TrialRecord.from_json(clean), ("s02", "right_off"): TrialRecord.from_json(off)}}
     peak = {k: float(cycle_curves(out, all_cycles=k)["ankle_angle_r_moment"]["s02"].mean(axis=0).min())
             for k in (False, True)}
     alone = float(np.min(clean["loads"]["ankle_angle_r_moment"]["value"][0]))

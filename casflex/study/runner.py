@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from casflex.study.records import Calibration, CycleLoad, PassiveFit, TrialRecord
 from casflex.study.study_file import Study, Trial, TrialOptions
 
 __all__ = ["run_study", "trial_run", "calibrate_run", "check_against_models", "tidy_rows", "per_kg", "unit_of",
@@ -66,7 +67,7 @@ def calibrate_run(*, model: str, static: str | None, plane: str, root: str | Non
         scene = with_mass(scene, mass)
         report.append(f"the model's masses scaled from {total:.1f} kg to the subject's {mass:g} kg (inertias with "
                       "them; the segments' sizes as they are)")
-    return {"scene": dumps_scene(scene), "report": list(report)}
+    return Calibration(dumps_scene(scene), tuple(report)).to_json()
 
 
 def _trial_plane(sc, lab, plane: str, vertical: str, static: bool = False, root: str | None = None
@@ -139,7 +140,8 @@ def _loads_of(res) -> list[str]:
 
 
 def trial_run(*, scene: str, trial: Trial, options: TrialOptions, uncertain: tuple[str, ...]) -> dict:
-    """One trial's inverse dynamics and its loads over gait cycles (module docstring): a JSON-ready record."""
+    """One trial's inverse dynamics and its loads over gait cycles (module docstring): its record
+    (:class:`~casflex.study.records.TrialRecord`) as JSON, which the sweep writes."""
     from casflex.inverse import Bands, inverse_dynamics
     from casflex.inverse import Trial as Inverse
     from casflex.scene import loads_scene
@@ -159,12 +161,13 @@ def trial_run(*, scene: str, trial: Trial, options: TrialOptions, uncertain: tup
                                        asked=bool(options.bands)))             # declares uncertainty
     feet = {f: [c for c in cs if res.t[0] <= c[0] and c[1] <= res.t[-1]] for f, cs in feet.items()}  # the window's
     loads, notes = _cycle_loads(sc, res, lab, found, plates or {}, feet, plane)
-    return {"plates": plates, "plane": plane, "report": [*plane_report, *event_report, *notes, *res.report],
-            "warnings": [*res.warnings, *notes], "loads": loads, "t": [float(res.t[0]), float(res.t[-1])],
-            "passive": _passive(res, sc, lab, found, feet, options.passive)}
+    return TrialRecord(plates, plane, (*plane_report, *event_report, *notes, *res.report), (*res.warnings, *notes),
+                       loads, (float(res.t[0]), float(res.t[-1])),
+                       tuple(_passive(res, sc, lab, found, feet, options.passive))).to_json()
 
 
-def _cycle_loads(sc, res, lab, found, plates: dict[str, str], feet: dict, plane: str) -> tuple[dict, list[str]]:
+def _cycle_loads(sc, res, lab, found, plates: dict[str, str], feet: dict, plane: str
+                 ) -> tuple[dict[str, CycleLoad], list[str]]:
     """({load: its foot, cycles [t0, t1] s, whether each is clean, values and bands on 0-100 %}, notes): each load
     cut into the gait cycles of the foot below its joint (:func:`_load_feet`), each cycle's stance checked
     (:func:`.events.clean_cycles`: wholly on the foot's plate); a load whose foot walks but has no cycle (it
@@ -183,9 +186,10 @@ def _cycle_loads(sc, res, lab, found, plates: dict[str, str], feet: dict, plane:
         foot = foot if foot is not None else first
         spans, flags = feet.get(foot, []), clean.get(foot, [])
         band = res.bands.get(name, {}).get("total") if res.bands else None
-        loads[name] = {"foot": foot, "cycles": [list(c) for c in spans], "clean": [ok for ok, _ in flags],
-                       "value": [normalise(res.t, res.loads[name], *c).tolist() for c in spans],
-                       "band": [normalise(res.t, band, *c).tolist() for c in spans] if band is not None else None}
+        loads[name] = CycleLoad(foot, tuple(tuple(c) for c in spans), tuple(ok for ok, _ in flags),
+                                tuple(tuple(normalise(res.t, res.loads[name], *c).tolist()) for c in spans),
+                                tuple(tuple(normalise(res.t, band, *c).tolist()) for c in spans)
+                                if band is not None else None)
     for foot, names_ in bare.items():
         notes.append(f"{foot} touches no plate: no kinetic cycle for {', '.join(names_)}")
     for foot, flags in clean.items():
@@ -194,7 +198,7 @@ def _cycle_loads(sc, res, lab, found, plates: dict[str, str], feet: dict, plane:
     return loads, notes
 
 
-def _passive(res, sc, lab, found, feet: dict, specs) -> list[dict]:
+def _passive(res, sc, lab, found, feet: dict, specs) -> list[PassiveFit]:
     """Each (hinge, "trial" or "swing") of the study's ``passive``: the spring-damper fitted to the hinge's net
     moment (:func:`casflex.inverse.passive.fit_passive`) over the trial, or over each swing phase of the foot
     below the hinge (:func:`.events.swing_phases`); a window it cannot fit recorded with the reason."""
@@ -208,17 +212,16 @@ def _passive(res, sc, lab, found, feet: dict, specs) -> list[dict]:
             foot = next((f for f in feet if f in below(sc, sc.item(hinge).nodes[-1])), None)
             windows = swing_phases(found, sc, lab, foot, feet[foot]) if foot else []
             if not windows:
-                out.append({"hinge": hinge, "phase": phase, "window": None,
-                            "error": "no swing phase in the trial (no foot below the hinge with a cycle)"})
+                out.append(PassiveFit(hinge, phase, None,
+                                      error="no swing phase in the trial (no foot below the hinge with a cycle)"))
         for t0, t1 in windows:
             try:
                 f = fit_passive(res, hinge, t0, t1)
             except ValueError as exc:
-                out.append({"hinge": hinge, "phase": phase, "window": [t0, t1], "error": str(exc)})
+                out.append(PassiveFit(hinge, phase, (t0, t1), error=str(exc)))
                 continue
-            out.append({"hinge": hinge, "phase": phase, "window": list(f.window), "kt": f.kt, "ct": f.ct,
-                        "rest_angle": f.rest_angle, "se": f.se, "r2": f.r2, "n_effective": f.n_effective,
-                        "passive": f.passive, "why": list(f.why)})
+            out.append(PassiveFit(hinge, phase, tuple(f.window), kt=f.kt, ct=f.ct, rest_angle=f.rest_angle, se=f.se,
+                                  r2=f.r2, n_effective=f.n_effective, passive=f.passive, why=tuple(f.why)))
     return out
 
 
@@ -258,13 +261,13 @@ def _run(name: str, fn: Callable[..., dict], kwargs: dict, files: tuple[str | No
     return Run(f"{name}-{hashlib.sha1(text.encode()).hexdigest()[:8]}", fn, kwargs, _FIELDS.get(fn.__name__, ()))
 
 
-def _plan(study: Study, calibrated: dict[str, dict]) -> dict:
+def _plan(study: Study, calibrated: dict[str, Calibration]) -> dict:
     """(subject, trial) -> its run."""
     o = study.options.trials
     return {(s.name, t.name): _run(f"trial-{s.name}-{t.name}", trial_run,
-                                   {"scene": calibrated[s.name]["scene"], "trial": t, "options": o,
+                                   {"scene": calibrated[s.name].scene, "trial": t, "options": o,
                                     "uncertain": tuple(s.uncertain)}, (t.markers, t.grf, o.tasks))
-            for s, t in study.trials() if "scene" in calibrated.get(s.name, {})}
+            for s, t in study.trials() if s.name in calibrated}
 
 
 def check_against_models(study: Study) -> None:
@@ -305,7 +308,7 @@ def check_against_models(study: Study) -> None:
 def run_study(study: Study, record: str | Path, *, scheduler: str | None = None, n_workers: int | None = None,
               progress: Callable[[int, int, str], None] | bool = True, retry_failed: bool = False) -> dict:
     """Calibrate every subject and run every trial (module docstring), resuming from ``record``; returns
-    {"subjects": {name: calibration record}, "trials": {(subject, trial): record}, "failed": [(what, why)],
+    {"subjects": {name: its Calibration}, "trials": {(subject, trial): its TrialRecord}, "failed": [(what, why)],
     "interrupted": bool, "records": {(subject, trial): its record's path}}. A failed calibration fails its
     subject's trials, reported; the others go on. ``retry_failed``: a run recorded as failed is run again (a
     worker lost, a file since mended), where by default its record stands until its inputs change."""
@@ -318,9 +321,10 @@ def run_study(study: Study, record: str | Path, *, scheduler: str | None = None,
                              (s.model, s.static)) for s in study.subjects}
     cal = run_sweep(list(cal_runs.values()), record, scheduler=scheduler, n_workers=n_workers, progress=progress,
                     retry_failed=retry_failed)
-    calibrated = {s.name: cal.results.get(cal_runs[s.name].key, {}) for s in study.subjects}
-    failed = [(f"subject {s.name} (calibration)", calibrated[s.name].get("error", "not run"))
-              for s in study.subjects if "scene" not in calibrated[s.name]]
+    recs = {s.name: cal.results.get(cal_runs[s.name].key, {}) for s in study.subjects}
+    failed = [(f"subject {s.name} (calibration)", recs[s.name].get("error", "not run"))
+              for s in study.subjects if "scene" not in recs[s.name]]
+    calibrated = {name: Calibration.from_json(rec) for name, rec in recs.items() if "scene" in rec}
     trials: dict = {}
     plan: dict = {}
     interrupted = cal.interrupted
@@ -332,12 +336,12 @@ def run_study(study: Study, record: str | Path, *, scheduler: str | None = None,
         for s, t in study.trials():
             rec = done.results.get(plan[(s.name, t.name)].key) if (s.name, t.name) in plan else None
             if rec is None:
-                why = "its subject's calibration failed" if "scene" not in calibrated[s.name] else "not run"
+                why = "its subject's calibration failed" if s.name not in calibrated else "not run"
                 failed.append((f"{s.name} {t.name}", why))
             elif "error" in rec:
                 failed.append((f"{s.name} {t.name}", rec["error"]))
             else:
-                trials[(s.name, t.name)] = rec
+                trials[(s.name, t.name)] = TrialRecord.from_json(rec)
     return {"subjects": calibrated, "trials": trials, "failed": failed, "interrupted": interrupted,
             "records": {k: str(Path(record) / f"{r.key}.json") for k, r in plan.items()}}
 
@@ -355,13 +359,8 @@ def per_kg(out: dict, study: Study) -> dict:
     if study.options.normalise != "mass":
         return out
     mass = {s.name: s.mass for s in study.subjects}
-    trials = {}
-    for (subject, trial), rec in out["trials"].items():
-        m = mass[subject]
-        loads = {name: ld | {"value": [[v / m for v in c] for c in ld["value"]],
-                             "band": None if ld["band"] is None else [[b / m for b in c] for c in ld["band"]]}
-                 for name, ld in rec["loads"].items()}
-        trials[(subject, trial)] = rec | {"loads": loads}
+    trials = {key: dataclasses.replace(rec, loads={name: ld.per(mass[key[0]]) for name, ld in rec.loads.items()})
+              for key, rec in out["trials"].items()}
     return out | {"trials": trials}
 
 
@@ -372,12 +371,12 @@ def tidy_rows(out: dict, per_kg: bool = False) -> list[tuple]:
     and end (s)."""
     rows = []
     for (subject, trial), rec in out["trials"].items():
-        for name, ld in rec["loads"].items():
+        for name, ld in rec.loads.items():
             unit = unit_of(name, per_kg)
-            clean = ld.get("clean") or [None] * len(ld["value"])
-            for k, values in enumerate(ld["value"]):
-                band = ld["band"][k] if ld["band"] is not None else [None] * len(values)
-                t0, t1 = ld["cycles"][k]
-                rows += [(subject, trial, name, ld["foot"], k + 1, float(p), v, b, unit, clean[k], t0, t1)
+            clean = ld.clean or [None] * len(ld.value)
+            for k, values in enumerate(ld.value):
+                band = ld.band[k] if ld.band is not None else [None] * len(values)
+                t0, t1 = ld.cycles[k]
+                rows += [(subject, trial, name, ld.foot, k + 1, float(p), v, b, unit, clean[k], t0, t1)
                          for p, v, b in zip(PERCENT, values, band, strict=True)]
     return rows
