@@ -94,6 +94,9 @@ def write(folder: Path, extra: str = "") -> Path:
     (('window = [0.25, 1.15]', 'window = [0.25, 1.15]\nplates = { calcn_r = "2_ground_" }', 1),
      "subjects[0].trials[1].plates.calcn_r: hamner_running_whole_grf.mot: no plate '2_ground_'"),
     (("mass = 80.0", 'mass = 80.0\nuncertain = ["pelvis.massx=3%"]', 1), "subjects[1].uncertain"),
+    # an ExternalLoads file says which body each plate acts on (casflex.inverse.Trial's rule): the run failed on it
+    (('grf = "hamner_running_whole_grf.mot"', 'grf = "hamner_tasks_ik.xml"\nplates = { calcn_r = "ground_" }', 1),
+     "subjects[0].trials[0].plates: .*hamner_tasks_ik.xml says which body each plate acts on; give plates or that"),
     (('window = [0.25, 1.15]', 'window = [0.25, 1.15]\nplates = { calcn_x = "ground_force_" }', 1),
      "subjects[0].trials[1].plates"),
     # a subject's figure is <name>.png: "group" would be the group's figure, "S02" s02's where case is ignored
