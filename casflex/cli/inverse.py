@@ -57,7 +57,7 @@ FLAGS = {"markers": "--data", "coordinates": "--coordinates", "grf": "--loads", 
          "uncertain": "--uncertain", "marker_noise": "--marker-noise", "bands": "--bands"}
 
 
-def options(args: argparse.Namespace) -> dict:
+def inverse_options(args: argparse.Namespace) -> dict:
     """The option values of :func:`casflex.inverse.inverse_dynamics` (``trial``, ``filter``, ``fit``, ``bands``)
     from the command's options, each checked by its object: OptionError naming the option. Shared by the commands
     that take what ``casflex inverse`` takes (:func:`add_trial_options`)."""
@@ -84,7 +84,7 @@ def options(args: argparse.Namespace) -> dict:
 def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
     from casflex.inverse import BandError, prepare, solve
 
-    chosen = options(args)
+    chosen = inverse_options(args)
     out = outputs.file("--out", args.out, (".npz", ".csv", ".sto"), "inverse dynamics") if args.out is not None \
         else None
     plots = None
@@ -144,8 +144,8 @@ def cmd_calibrate(args: argparse.Namespace, outputs: Outputs) -> int:
 
 
 def add_trial_options(s: argparse.ArgumentParser) -> None:
-    """The options that build :func:`options`' values (a trial, its filter, the fit's limit, the bands): ``casflex
-    inverse``'s, for every command that takes what it takes."""
+    """The options that build :func:`inverse_options`' values (a trial, its filter, the fit's limit, the bands):
+    ``casflex inverse``'s, for every command that takes what it takes."""
     s.add_argument("--data", metavar="TRIAL", help="the trial's markers (.trc or .c3d)")
     s.add_argument("--coordinates", metavar="MOT", help="instead of --data: the trial's coordinates (.mot/.sto, "
                                                         "e.g. OpenSim's IK result; columns named as the model's "
