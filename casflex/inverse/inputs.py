@@ -36,7 +36,7 @@ MIN_FRAMES = 10
 BYTES_PER_VALUE = 32
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class InverseInputs:
     """The checked inputs of one inverse run: ``model`` and its ``tree``, the frames ``t`` (n,) s on an even
     grid, the scene's markers ``y`` (n, 2 m) m in the plane (NaN where missing; (n, 0) where the coordinates
@@ -334,5 +334,6 @@ def prepare(scene, trial: Trial, *, filter: Filter | None = None, fit: Fit | Non
                 "moments": [f"{h}.moment" for h in tree.hinges], "weights": {lb: m.weight for lb, m in zip(
                     labels, model.scene.markers, strict=False)}, "source": source or "",
                 "scene": model.scene.name, "max_misfit_m": fit.misfit, "given": z is not None}
-    return InverseInputs(model, tree, t, y, labels, tuple(plate_list), filter, fit,
-                         settings, tuple(report + warnings), tuple(warnings), z, spec)
+    return InverseInputs(model=model, tree=tree, t=t, y=y, labels=labels, plates=tuple(plate_list), filter=filter,
+                         fit=fit, settings=settings, report=tuple(report + warnings), warnings=tuple(warnings), z=z,
+                         band_spec=spec)
