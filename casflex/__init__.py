@@ -2,7 +2,8 @@
 
 The verbs a user types first: ``casflex.simulate(model, t_end)`` (a :class:`~casflex.results.Trajectory`),
 ``casflex.identify(model, data)`` (:func:`casflex.identification.identify_indirect`),
-``casflex.inverse_dynamics(scene, markers)`` (:func:`casflex.inverse.inverse_dynamics`) and
+``casflex.inverse_dynamics(scene, trial)`` (:func:`casflex.inverse.inverse_dynamics`, ``trial`` a
+:class:`casflex.inverse.Trial`) and
 ``casflex.study("study.toml", "records")`` (a lab's whole study, :func:`casflex.study.run`; its file alone:
 ``casflex.load_study``). ``casflex.simulate`` and ``casflex.study`` are the packages of those names, callable.
 

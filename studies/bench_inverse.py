@@ -61,7 +61,7 @@ def _command(trc: Path, mot: Path, out: Path) -> list[str]:
 
 def _stages(trc: Path, mot: Path) -> dict:
     """Each stage's time in this process (s), the imports already paid."""
-    from casflex.inverse import inverse_dynamics, inverse_model, kinematic_tree
+    from casflex.inverse import Filter, Trial, inverse_dynamics, inverse_model, kinematic_tree
     from casflex.inverse.fit import fit_markers
     from casflex.lab import Plane, markers_in_plane, read_trc
 
@@ -74,7 +74,8 @@ def _stages(trc: Path, mot: Path) -> dict:
     t2 = time.perf_counter()
     fit_markers(tree, ms.t, ms.q)
     t3 = time.perf_counter()
-    res = inverse_dynamics("hamner_leg", trc, grf=mot, plates={"ankle": "ground_"}, root="pelvis", cutoff=10.0)
+    res = inverse_dynamics("hamner_leg", Trial(trc, grf=mot, plates={"ankle": "ground_"}, root="pelvis"),
+                           filter=Filter(cutoff=10.0))
     t4 = time.perf_counter()
     return {"model": t1 - t0, "read": t2 - t1, "fit": t3 - t2, "all": t4 - t3, "res": res}
 

@@ -18,7 +18,6 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as the dask workers run (distributed's pre-spawn environ)
 
-import dataclasses  # noqa: E402
 import shutil  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
@@ -139,10 +138,10 @@ def _one_trial(folder: Path, repeat: int, cases: tuple[str, ...]) -> dict:
         path.write_text(study_text(1, 1, bands, uncertain))
         st = load_study(str(path))
         s = st.subjects[0]
-        cal = runner.calibrate_run(model=s.model, static=None, plane=st.options.plane, root=st.options.root,
-                                   calibrate=False, scale=False, mass=None)
-        kwargs = {"scene": cal["scene"], "trial": dataclasses.asdict(s.trials[0]),  # as casflex study sends it
-                  "options": dataclasses.asdict(st.options), "uncertain": list(s.uncertain)}
+        cal = runner.calibrate_run(model=s.model, static=None, plane=st.options.trials.plane,
+                                   root=st.options.trials.root, calibrate=False, scale=False, mass=None)
+        kwargs = {"scene": cal["scene"], "trial": s.trials[0],  # as casflex study sends it
+                  "options": st.options.trials, "uncertain": tuple(s.uncertain)}
 
         def call(kwargs=kwargs) -> dict:
             return runner.trial_run(**kwargs)

@@ -41,11 +41,11 @@ def _flexible(times: float):
 
 
 def _run(scene, cutoff: float = CUTOFF, markers=None):
-    from casflex.inverse import inverse_dynamics
+    from casflex.inverse import Filter, Trial, inverse_dynamics
 
     t0 = time.perf_counter()
-    res = inverse_dynamics(scene, TRC if markers is None else markers, grf=GRF, plates=PLATES, root=ROOT,
-                           cutoff=cutoff)
+    res = inverse_dynamics(scene, Trial(TRC if markers is None else markers, grf=GRF, plates=PLATES, root=ROOT),
+                           filter=Filter(cutoff=cutoff))
     return res, time.perf_counter() - t0
 
 

@@ -129,15 +129,17 @@ def _opensim(files: dict, trial: Trial, tmp: Path) -> dict:
 
 
 def _casflex(files: dict, trial: Trial) -> dict:
-    from casflex.inverse import inverse_dynamics
+    from casflex.inverse import Filter, Fit, inverse_dynamics
+    from casflex.inverse import Trial as Recorded
     from casflex.scene.from_osim import scene_from_osim
 
     scene = scene_from_osim(files["model"]).scene
-    common = dict(grf=files["loads"], tasks=files["tasks"], t_start=trial.window[0], t_end=trial.window[1],
-                  max_misfit=MAX_MISFIT, cutoff_plates=None)
-    raw = inverse_dynamics(scene, files["markers"], cutoff=None, **common)
+    recorded = Recorded(files["markers"], grf=files["loads"], tasks=files["tasks"], t_start=trial.window[0],
+                        t_end=trial.window[1])
+    fit = Fit(max_misfit=MAX_MISFIT)
+    raw = inverse_dynamics(scene, recorded, filter=Filter(None, None), fit=fit)
     start = time.perf_counter()
-    runs = {f: inverse_dynamics(scene, files["markers"], cutoff=trial.cutoff, filter=f, **common)
+    runs = {f: inverse_dynamics(scene, recorded, filter=Filter(trial.cutoff, None, f), fit=fit)
             for f in ("butterworth", "opensim")}
     return {"scene": scene, "raw": raw, "runs": runs, "seconds": (time.perf_counter() - start) / 2}
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from inverse_scenes import INERTIA, M_BASE, C, M, pendulum
 
-from casflex.inverse import inverse_dynamics, inverse_model, kinematic_tree
+from casflex.inverse import Filter, Trial, inverse_dynamics, inverse_model, kinematic_tree
 from casflex.inverse.flexible import driven_loads
 from casflex.inverse.plates import Plate, plate_loads
 from casflex.inverse.rigid import rigid_loads
@@ -89,7 +89,7 @@ def test_pipeline_from_exact_markers_is_second_order():
     y = marker_positions(model, q).reshape(t.size, -1, 2)
     lab = LabMarkers(t, ("BASE.1", "BASE.2", "ARM.1", "ARM.2"), np.concatenate([y, np.zeros_like(y[..., :1])], 2),
                      100.0, "m", "synthetic")
-    res = inverse_dynamics(loads_scene(pendulum()), lab, cutoff=None)
+    res = inverse_dynamics(loads_scene(pendulum()), Trial(lab), filter=Filter(cutoff=None))
     assert res.marker_rms.max() < 1e-9  # the markers fit exactly
     th, thdd = A * np.sin(W * t), -A * W * W * np.sin(W * t)
     tau = (INERTIA + M * C * C) * thdd + M * G * C * np.sin(th)
@@ -154,9 +154,9 @@ def test_missing_label_and_short_window_are_one_line():
     xyz = np.zeros((t.size, 2, 3))
     lab = LabMarkers(t, ("BASE.1", "OTHER"), xyz, 100.0, "m", "trial.trc")
     with pytest.raises(ValueError, match="no marker labelled 'BASE.2'"):
-        inverse_dynamics(loads_scene(pendulum()), lab)
+        inverse_dynamics(loads_scene(pendulum()), Trial(lab))
     with pytest.raises(ValueError, match="plates: no node 'foot'"):
-        inverse_dynamics(loads_scene(pendulum()), lab, grf="x.mot", plates={"foot": "ground_"})
+        inverse_dynamics(loads_scene(pendulum()), Trial(lab, grf="x.mot", plates={"foot": "ground_"}))
 
 
 def test_c3d_plate_is_the_same_load_from_its_moment_or_its_centre_of_pressure():

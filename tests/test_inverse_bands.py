@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from inverse_scenes import INERTIA, C, M, pendulum
 
-from casflex.inverse import inverse_dynamics, inverse_model, kinematic_tree, prepare, solve
+from casflex.inverse import Bands, Filter, Trial, inverse_dynamics, inverse_model, kinematic_tree, prepare, solve
 from casflex.inverse.bands import BandError, rigid_load_function
 from casflex.inverse.fit import FittedMotion, filtered_rates, fit_markers, fit_pose
 from casflex.inverse.inputs import weighted
@@ -30,7 +30,7 @@ A, W = 0.7, 2 * np.pi * 1.3  # the pendulum's swing, rad and rad/s
 LABELS = ("BASE.1", "BASE.2", "ARM.1", "ARM.2")
 LAB = Path(__file__).parent / "data" / "lab"
 TRC, GRF = LAB / "hamner_running_stride.trc", LAB / "hamner_running_stride_grf.mot"
-HAMNER = {"grf": GRF, "plates": {"ankle": "ground_"}, "root": "pelvis", "cutoff": 10.0}
+HAMNER = {"grf": GRF, "plates": {"ankle": "ground_"}, "root": "pelvis"}
 TABLE = [Uncertain(f"{b}.{p}", relative=0.15) for b in ("pelvis", "thigh", "shank", "foot")
          for p in ("mass", "inertia")]
 SPRING = """
@@ -73,8 +73,8 @@ def test_pendulum_band_is_the_closed_form():
     """tau = (I + M C^2) theta'' + M g C sin(theta) + kt theta + ct theta' (the drive leaves the spring its share):
     d tau / dM = C^2 theta'' + g C sin(theta), d/dI = theta'', d/dkt = theta, d/dct = theta', at the pipeline's own
     kinematics; the scene's [[uncertain]] and uncertain= (arm.mass's replaced, the base's mass added)."""
-    res = inverse_dynamics(loads_scene(pendulum(SPRING)), _trial(extra=SPRING), cutoff=None,
-                           uncertain=[Uncertain("arm.mass", sd=0.3), Uncertain("base.mass", sd=0.1)])
+    res = inverse_dynamics(loads_scene(pendulum(SPRING)), Trial(_trial(extra=SPRING)), filter=Filter(None),
+                           bands=Bands([Uncertain("arm.mass", sd=0.3), Uncertain("base.mass", sd=0.1)]))
     th, thd, thdd = res.z[:, 3], res.zd[:, 3], res.zdd[:, 3]
     want = {"arm.mass": 0.3 * (C * C * thdd + G * C * np.sin(th)), "arm.inertia": 0.1 * INERTIA * thdd,
             "tk.kt": 1.0 * th, "tk.ct": 0.4 / np.sqrt(12) * thd, "base.mass": 0.0 * th}
@@ -95,7 +95,8 @@ def test_a_centre_of_mass_the_loads_are_quadratic_in_is_said_and_its_part_is_the
     """The arm's centre of mass 2 cm up or down (its com_y, the pivot 1 - com_y above it): tau is quadratic in the
     distance c, (I + M c^2) theta'' + M g c sin(theta), so the central difference is the derivative exactly,
     -sd (2 M c theta'' + M g sin(theta)); the report names the property as not linear."""
-    res = inverse_dynamics(loads_scene(pendulum()), _trial(), cutoff=None, uncertain=[Uncertain("arm.com_y", sd=0.02)])
+    res = inverse_dynamics(loads_scene(pendulum()), Trial(_trial()), filter=Filter(None),
+                           bands=Bands([Uncertain("arm.com_y", sd=0.02)]))
     th, thdd = res.z[:, 3], res.zdd[:, 3]
     want = -0.02 * (2 * M * C * thdd + M * G * np.sin(th))
     tau = res.load("pivot.moment")
@@ -107,7 +108,7 @@ def test_a_centre_of_mass_the_loads_are_quadratic_in_is_said_and_its_part_is_the
 @pytest.fixture(scope="module")
 def hamner():
     """The Hamner stride's inverse with 15 % on every segment's mass and inertia, and its checked inputs."""
-    inputs = prepare("hamner_leg", TRC, uncertain=TABLE, **HAMNER)
+    inputs = prepare("hamner_leg", Trial(TRC, **HAMNER), filter=Filter(10.0), bands=Bands(TABLE))
     return inputs, solve(inputs)
 
 
@@ -175,7 +176,8 @@ def test_marker_band_is_the_brute_force_propagation_of_every_sample(cutoff):
     lab = dataclasses.replace(lab, xyz=xyz)
     tasks = {"BASE.1": 1.0, "BASE.2": 1.0, "ARM.1": 4.0, "ARM.2": 1.0}
     sigma = 0.001
-    res = inverse_dynamics(loads_scene(pendulum()), lab, cutoff=cutoff, tasks=tasks, marker_noise=sigma)
+    res = inverse_dynamics(loads_scene(pendulum()), Trial(lab, tasks=tasks), filter=Filter(cutoff),
+                           bands=Bands(marker_noise=sigma))
     assert any(line.startswith("gaps: 1 frames") for line in res.report)
     tree = kinematic_tree(inverse_model(weighted(loads_scene(pendulum()), tasks)[0]))
     names = ["pivot.moment", "pivot.fx", "pivot.fy", "root.fx", "root.fy", "root.mz"]
@@ -203,23 +205,26 @@ def test_marker_band_is_zero_for_exact_markers_and_the_spread_of_noisy_copies():
     a copy, 2.5 % each, 0.46 % the mean's SE; measured -1.2 %), and the spread of the copies' moments is the band
     (their variances over the frames away from the ends, within 15 %: 30 copies of 4 filter-correlated stretches
     each; measured +3 %, +1 %, +3 %). Markers declared exact: no band."""
-    res = inverse_dynamics(loads_scene(pendulum()), _trial(moving=True), cutoff=6.0, bands=True)
+    res = inverse_dynamics(loads_scene(pendulum()), Trial(_trial(moving=True)), filter=Filter(6.0),
+                           bands=Bands(asked=True))
     assert res.bands["pivot.moment"]["markers"].max() < 1e-9 * np.abs(res.loads["pivot.moment"]).max()
     assert res.settings["bands"]["marker_noise_m"] < 1e-9
-    copies = [inverse_dynamics(loads_scene(pendulum()), _trial(noise=1e-3, seed=s, moving=True), cutoff=6.0)
+    copies = [inverse_dynamics(loads_scene(pendulum()), Trial(_trial(noise=1e-3, seed=s, moving=True)),
+                               filter=Filter(6.0))
               for s in range(30)]
     tree = kinematic_tree(inverse_model(loads_scene(pendulum())))
     sigma = np.array([residual_noise(tree, FittedMotion(c.t, c.z, c.marker_rms, np.zeros(0), [], c.marker_misfit))
                       for c in copies])
     assert abs(sigma.mean() / 1e-3 - 1) < 0.02
-    declared = inverse_dynamics(loads_scene(pendulum()), _trial(noise=1e-3, moving=True), cutoff=6.0,
-                                marker_noise=1e-3)
+    declared = inverse_dynamics(loads_scene(pendulum()), Trial(_trial(noise=1e-3, moving=True)), filter=Filter(6.0),
+                                bands=Bands(marker_noise=1e-3))
     inner = slice(10, -10)
     for name in ("pivot.moment", "root.fx", "root.mz"):
         spread = np.array([c.loads[name] for c in copies]).var(axis=0, ddof=1)[inner]
         band = declared.bands[name]["markers"][inner] ** 2
         assert abs(spread.mean() / band.mean() - 1) < 0.15, (name, spread.mean() / band.mean())
-    exact = inverse_dynamics(loads_scene(pendulum()), _trial(noise=1e-3, moving=True), cutoff=6.0, marker_noise=0.0)
+    exact = inverse_dynamics(loads_scene(pendulum()), Trial(_trial(noise=1e-3, moving=True)), filter=Filter(6.0),
+                             bands=Bands(marker_noise=0.0))
     assert exact.bands["pivot.moment"]["markers"].max() == 0 and any("declared exact" in ln for ln in exact.report)
 
 
@@ -267,7 +272,7 @@ def test_outputs_carry_the_bands_only_when_asked(hamner, tmp_path):
 
 def test_given_coordinates_have_no_markers_part_and_lab_names_get_bands(tmp_path):
     leg = LAB / "hamner_subject02_leg.osim"
-    fitted = inverse_dynamics(leg, TRC, grf=GRF, plates={"calcn_r": "ground_"}, cutoff=None)
+    fitted = inverse_dynamics(leg, Trial(TRC, grf=GRF, plates={"calcn_r": "ground_"}), filter=Filter(None))
     from casflex.scene.coordinates import to_lab
     from casflex.scene.from_osim import scene_from_osim
 
@@ -277,8 +282,8 @@ def test_given_coordinates_have_no_markers_part_and_lab_names_get_bands(tmp_path
     rows = ["\t".join(f"{v:.15g}" for v in row) for row in np.column_stack([fitted.t, *cols.values()])]
     mot = tmp_path / "ik.mot"
     mot.write_text("\n".join(["ik", "inDegrees=no", "endheader", "\t".join(["time", *cols]), *rows]) + "\n")
-    res = inverse_dynamics(leg, coordinates=mot, grf=GRF, plates={"calcn_r": "ground_"}, cutoff=6.0,
-                           uncertain=[Uncertain("tibia_r.mass", relative=0.1)])
+    res = inverse_dynamics(leg, Trial(coordinates=mot, grf=GRF, plates={"calcn_r": "ground_"}), filter=Filter(6.0),
+                           bands=Bands([Uncertain("tibia_r.mass", relative=0.1)]))
     band = res.bands["knee_angle_r_moment"]
     assert band["markers"].max() == 0 and band["anthropometry"].max() > 0
     sign = next(c.sign for c in scene.coordinates if c.name == "knee_angle_r")
@@ -288,36 +293,36 @@ def test_given_coordinates_have_no_markers_part_and_lab_names_get_bands(tmp_path
     assert "knee_angle_r_moment" in res.summary().split("bands at each moment's peak")[1]
 
 
-@pytest.mark.parametrize(("kwargs", "match"), [
-    ({"uncertain": [Uncertain("nobody.mass", sd=1.0)]}, r"uncertain: .*unknown element or load 'nobody'"),
-    ({"uncertain": [Uncertain("pivot.kt", sd=1.0)]}, r"uncertain: .*'pivot' is a joint"),
-    ({"uncertain": [Uncertain("arm.length", sd=1.0)]}, r"uncertain: .*'arm' has no numeric property 'length'"),
-    ({"uncertain": ["arm.mass"]}, "uncertain: expected casflex.scene.Uncertain entries"),
-    ({"uncertain": [Uncertain("arm.mass", sd=1.0)], "bands": False}, "bands: not asked"),
-    ({"marker_noise": -1.0}, "marker_noise: must be a distance >= 0 m"),
-    ({"marker_noise": 0.001, "coordinates": "x.mot", "markers": None}, "marker_noise: the coordinates were given"),
-    ({"bands": True, "tasks": {"BASE.1": 1.0, "ARM.1": 1.0}}, "marker_noise: the 2 markers give no more channels"),
+@pytest.mark.parametrize(("trial", "bands", "match"), [
+    ({}, {"uncertain": [Uncertain("nobody.mass", sd=1.0)]}, r"uncertain: .*unknown element or load 'nobody'"),
+    ({}, {"uncertain": [Uncertain("pivot.kt", sd=1.0)]}, r"uncertain: .*'pivot' is a joint"),
+    ({}, {"uncertain": [Uncertain("arm.length", sd=1.0)]}, r"uncertain: .*'arm' has no numeric property 'length'"),
+    ({}, {"uncertain": ["arm.mass"]}, "uncertain: expected casflex.scene.Uncertain entries"),
+    ({}, {"uncertain": [Uncertain("arm.mass", sd=1.0)], "asked": False}, "bands: not asked"),
+    ({}, {"marker_noise": -1.0}, "marker_noise: must be a distance >= 0 m"),
+    ({"coordinates": "x.mot", "markers": None}, {"marker_noise": 0.001}, "marker_noise: the coordinates were given"),
+    ({"tasks": {"BASE.1": 1.0, "ARM.1": 1.0}}, {"asked": True}, "marker_noise: the 2 markers give no more channels"),
 ])
-def test_bands_refused_before_the_trial_is_read(kwargs, match):
+def test_bands_refused_before_the_trial_is_read(trial, bands, match):
     """One line naming the option (the trial's file does not exist: nothing was read)."""
-    kwargs = {"markers": "no_such_trial.trc"} | kwargs
+    trial = {"markers": "no_such_trial.trc"} | trial
     with pytest.raises(BandError, match=match) as err:
-        prepare(loads_scene(pendulum()), **kwargs)
+        prepare(loads_scene(pendulum()), Trial(**trial), bands=Bands(**bands))
     assert "\n" not in str(err.value)
 
 
 def test_flexible_segments_are_refused():
     with pytest.raises(BandError, match=r"bands: for rigid segments only: the beams \[.*make this a flexible"):
-        prepare("hamner_leg_flexible", "no_such_trial.trc", root="pelvis", bands=True)
+        prepare("hamner_leg_flexible", Trial("no_such_trial.trc", root="pelvis"), bands=Bands(asked=True))
 
 
 def test_solve_s_options_replace_what_prepare_was_asked(hamner):
     inputs, res = hamner
-    assert solve(inputs, bands=False).bands == {}
+    assert solve(inputs, bands=Bands(asked=False)).bands == {}
     plain = dataclasses.replace(inputs, band_spec=None)
-    again = solve(plain, uncertain=[Uncertain("shank.mass", relative=0.15)], marker_noise=0.0)
+    again = solve(plain, bands=Bands([Uncertain("shank.mass", relative=0.15)], marker_noise=0.0))
     assert list(again.band_parts) == ["shank.mass"] and again.bands["knee.moment"]["markers"].max() == 0
     assert np.allclose(again.band_parts["shank.mass"]["knee.moment"], res.band_parts["shank.mass"]["knee.moment"],
                        rtol=1e-12, atol=0)
     with pytest.raises(BandError, match="uncertain: .*unknown element or load 'shin'"):
-        solve(plain, uncertain=[Uncertain("shin.mass", sd=1.0)])
+        solve(plain, bands=Bands([Uncertain("shin.mass", sd=1.0)]))

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from casflex.inverse import inverse_dynamics
+from casflex.inverse import Filter, Trial, inverse_dynamics
 from casflex.scene.coordinates import to_lab
 from casflex.scene.from_osim import scene_from_osim
 
@@ -27,7 +27,7 @@ def _mot(path: Path, t, columns: dict, degrees: bool | None = True) -> Path:
 @pytest.fixture(scope="module")
 def fitted():
     """The markers' unfiltered fit and its loads: what a table of the same coordinates must give again."""
-    return inverse_dynamics(LEG, TRC, grf=GRF, plates=PLATES, cutoff=None)
+    return inverse_dynamics(LEG, Trial(TRC, grf=GRF, plates=PLATES), filter=Filter(cutoff=None))
 
 
 def _table(fitted, tmp_path, degrees=True) -> Path:
@@ -41,7 +41,8 @@ def _table(fitted, tmp_path, degrees=True) -> Path:
 
 @pytest.mark.parametrize("degrees", [True, False])
 def test_a_table_of_the_fitted_coordinates_gives_the_same_loads(fitted, tmp_path, degrees):
-    res = inverse_dynamics(LEG, coordinates=_table(fitted, tmp_path, degrees), grf=GRF, plates=PLATES, cutoff=None)
+    res = inverse_dynamics(LEG, Trial(coordinates=_table(fitted, tmp_path, degrees), grf=GRF, plates=PLATES),
+                           filter=Filter(cutoff=None))
     assert res.report[0].startswith("coordinates given: 6 columns") and res.marker_labels == ()
     assert np.allclose(res.t, fitted.t, rtol=0, atol=1e-12)  # the rounded times put back on their sixtieths
     # the same coordinates (printed to 15 digits) through the same rates and dynamics
@@ -55,8 +56,8 @@ def test_the_tree_s_own_names_serve_a_scene_without_lab_coordinates(fitted, tmp_
 
     scene = dataclasses.replace(scene_from_osim(LEG).scene, coordinates=())
     cols = {name: fitted.z[:, k] for k, name in enumerate(fitted.coordinate_names)}
-    res = inverse_dynamics(scene, coordinates=_mot(tmp_path / "own.mot", fitted.t, cols, False), grf=GRF,
-                           plates=PLATES, cutoff=None)
+    res = inverse_dynamics(scene, Trial(coordinates=_mot(tmp_path / "own.mot", fitted.t, cols, False), grf=GRF,
+                                        plates=PLATES), filter=Filter(cutoff=None))
     assert np.allclose(res.loads["knee_r.moment"], fitted.loads["knee_r.moment"], rtol=1e-9, atol=1e-8)
 
 
@@ -79,13 +80,13 @@ def test_bad_coordinate_tables_are_refused_in_one_line(fitted, tmp_path):
             body = "\n".join(lines) + "\n"
         path.write_text(body)
         with pytest.raises(ValueError, match=match):
-            inverse_dynamics(LEG, coordinates=path, grf=GRF, plates=PLATES)
+            inverse_dynamics(LEG, Trial(coordinates=path, grf=GRF, plates=PLATES))
     with pytest.raises(ValueError, match="give the trial's markers or its coordinates"):
-        inverse_dynamics(LEG, TRC, coordinates=good)
+        inverse_dynamics(LEG, Trial(TRC, coordinates=good))
     with pytest.raises(ValueError, match="give the trial's markers or its coordinates"):
-        inverse_dynamics(LEG)
+        inverse_dynamics(LEG, Trial())
     with pytest.raises(ValueError, match="tasks: they weight the marker fit"):
-        inverse_dynamics(LEG, coordinates=good, tasks={"R.Heel": 1.0})
+        inverse_dynamics(LEG, Trial(coordinates=good, tasks={"R.Heel": 1.0}))
 
 
 def test_the_command_takes_coordinates_and_refuses_both_or_neither(fitted, tmp_path):
@@ -100,7 +101,7 @@ def test_the_command_takes_coordinates_and_refuses_both_or_neither(fitted, tmp_p
     assert "coordinates given: 6 columns" in run.stdout and (tmp_path / "id.sto").exists()
     for extra, said in (([], "--data, --coordinates: give"), (["--data", str(TRC), "--coordinates", str(table)],
                                                               "--data, --coordinates: give"),
-                        (["--coordinates", str(table), "--tasks", str(table)], "--tasks: weights the marker fit")):
+                        (["--coordinates", str(table), "--tasks", str(table)], "--tasks: they weight the marker fit")):
         run = subprocess.run([*base, *extra], capture_output=True, text=True)
         assert run.returncode == 2 and run.stderr.strip().splitlines() == [run.stderr.strip()] and said in run.stderr
 
@@ -146,7 +147,7 @@ def test_coordinates_in_units_the_header_does_not_say_are_refused_naming_the_col
         match = (r"column 'hip_flexion_r' reaches 41.49 rad \(2377 degrees\) at t = 0.967 s: no joint turns beyond a "
                  r"full turn; the header says inDegrees=no: are the angles in the other unit\?")
     with pytest.raises(ValueError, match=match) as err:
-        inverse_dynamics(scene, coordinates=bad, grf=GRF, plates=PLATES)
+        inverse_dynamics(scene, Trial(coordinates=bad, grf=GRF, plates=PLATES))
     assert str(err.value).startswith(f"{bad}: ") and "\n" not in str(err.value)
 
 
@@ -163,7 +164,7 @@ def test_joint_moments_no_body_carries_are_refused_with_their_size(fitted, tmp_p
     bad = _rewritten(_table(fitted, tmp_path), tmp_path / "mm.mot", "yes", mm)
     with pytest.raises(ValueError, match=r"hip_flexion_r_moment reaches 1.204e\+06 N m at t = 0.516667 s, 8.26e\+03 "
                                          r"N m per kg of a body of 146 kg; no human joint carries 20 N m/kg"):
-        inverse_dynamics(LEG, coordinates=bad, grf=GRF, plates=PLATES)
-    res = inverse_dynamics(LEG, coordinates=_table(fitted, tmp_path), grf=GRF, plates=PLATES)
+        inverse_dynamics(LEG, Trial(coordinates=bad, grf=GRF, plates=PLATES))
+    res = inverse_dynamics(LEG, Trial(coordinates=_table(fitted, tmp_path), grf=GRF, plates=PLATES))
     # the real stride: the knee's 203 N m is 1.4 N m/kg of that weight, far inside the limit
     assert 150 < np.abs(res.loads["knee_angle_r_moment"]).max() < 250

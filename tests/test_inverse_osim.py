@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from casflex.inverse import inverse_dynamics
+from casflex.inverse import Filter, Fit, Trial, inverse_dynamics
 from casflex.lab import read_sto
 from casflex.lab.setups import read_tasks
 
@@ -35,7 +35,7 @@ def _tasks(tmp_path, weights: dict[str, float], name="tasks.xml") -> Path:
 
 @pytest.fixture(scope="module")
 def plain():
-    return inverse_dynamics(LEG, TRC, grf=GRF, plates={"calcn_r": "ground_"})
+    return inverse_dynamics(LEG, Trial(TRC, grf=GRF, plates={"calcn_r": "ground_"}))
 
 
 def test_loads_take_the_model_s_coordinate_names_and_signs(plain):
@@ -51,18 +51,19 @@ def test_task_weights_are_a_weighted_fit_and_a_task_less_marker_is_left_out(tmp_
     labels = plain.marker_labels
     uniform = read_tasks(_tasks(tmp_path, {k: 7.0 for k in labels}))
     assert uniform.coordinate_tasks == ("knee_angle_r",)
-    same = inverse_dynamics(LEG, TRC, grf=GRF, plates={"calcn_r": "ground_"}, tasks=uniform)
+    same = inverse_dynamics(LEG, Trial(TRC, grf=GRF, plates={"calcn_r": "ground_"}, tasks=uniform))
     # one weight for all: the same minimiser (LM's steps scale alike; converged to 1e-10 rad)
     assert np.max(np.abs(same.z - plain.z)) < 1e-8
     heavy = {k: (100.0 if k.startswith("R.Shank") else 1.0) for k in labels} | {"R.Toe.Tip": 0.0}
-    res = inverse_dynamics(LEG, TRC, grf=GRF, plates={"calcn_r": "ground_"}, tasks=_tasks(tmp_path, heavy, "h.xml"))
+    res = inverse_dynamics(LEG, Trial(TRC, grf=GRF, plates={"calcn_r": "ground_"},
+                                      tasks=_tasks(tmp_path, heavy, "h.xml")))
     k = {lb: i for i, lb in enumerate(labels)}
     shank = [k[lb] for lb in labels if lb.startswith("R.Shank")]
     rms = lambda r: np.sqrt(np.nanmean(r.marker_misfit[:, shank] ** 2))  # noqa: E731
     assert rms(res) < 0.7 * rms(plain)  # the weighted markers fitted closer (measured: 7.1 -> 3.0 mm)
     assert "R.Toe.Tip" not in res.marker_labels  # applied false: left out, as OpenSim's IK leaves it
     missing = {lb: 1.0 for lb in labels if lb != "R.Heel"} | {"L.Knee": 2.0}
-    res = inverse_dynamics(LEG, TRC, grf=GRF, plates={"calcn_r": "ground_"}, tasks=missing)
+    res = inverse_dynamics(LEG, Trial(TRC, grf=GRF, plates={"calcn_r": "ground_"}, tasks=missing))
     assert any("['R.Heel'] have no task or a weight of 0: left out" in w for w in res.warnings)
     assert any("tasks of markers the scene does not have, ignored: ['L.Knee']" in w for w in res.warnings)
 
@@ -77,9 +78,9 @@ def test_a_model_marker_with_no_task_need_not_be_in_the_trial(plain):
     m = sc.markers[3]
     extra = dataclasses.replace(sc, markers=(*sc.markers, Marker("R_Knee_Lat", m.on, m.x + 0.05, m.y, "R.Knee.Lat")))
     with pytest.raises(ValueError, match="no marker labelled 'R.Knee.Lat'"):
-        inverse_dynamics(extra, TRC, grf=GRF, plates={"calcn_r": "ground_"})
-    res = inverse_dynamics(extra, TRC, grf=GRF, plates={"calcn_r": "ground_"},
-                           tasks={m: 1.0 for m in plain.marker_labels})  # the lab's tasks leave it out
+        inverse_dynamics(extra, Trial(TRC, grf=GRF, plates={"calcn_r": "ground_"}))
+    res = inverse_dynamics(extra, Trial(TRC, grf=GRF, plates={"calcn_r": "ground_"},
+                                        tasks={m: 1.0 for m in plain.marker_labels}))  # the lab's tasks leave it out
     assert np.max(np.abs(res.z - plain.z)) < 1e-8 and "R.Knee.Lat" not in res.marker_labels
 
 
@@ -87,9 +88,9 @@ def test_one_plate_given_to_two_feet_is_refused():
     # its force acted on both (the ground reaction counted twice), without a word
     whole = Path(__file__).resolve().parent / "data" / "lab"
     with pytest.raises(ValueError, match="plate 'ground_' is given to both 'calcn_r' and 'calcn_l'"):
-        inverse_dynamics(str(whole / "hamner_subject02_planar.osim"), str(whole / "hamner_running_whole.trc"),
-                         grf=str(whole / "hamner_running_whole_grf.mot"),
-                         plates={"calcn_r": "ground_", "calcn_l": "ground_"}, tasks=str(whole / "hamner_tasks_ik.xml"))
+        inverse_dynamics(str(whole / "hamner_subject02_planar.osim"), Trial(
+            str(whole / "hamner_running_whole.trc"), grf=str(whole / "hamner_running_whole_grf.mot"),
+            plates={"calcn_r": "ground_", "calcn_l": "ground_"}, tasks=str(whole / "hamner_tasks_ik.xml")))
 
 
 def test_bad_task_files_are_refused_in_one_line(tmp_path):
@@ -102,11 +103,11 @@ def test_bad_task_files_are_refused_in_one_line(tmp_path):
     with pytest.raises(ValueError, match="no IKMarkerTask"):
         read_tasks(bad)
     with pytest.raises(ValueError, match="no task weights any of the scene's markers"):
-        inverse_dynamics(LEG, TRC, tasks={"X": 1.0})
+        inverse_dynamics(LEG, Trial(TRC, tasks={"X": 1.0}))
 
 
 def test_the_plates_own_cut_off_changes_only_what_the_plates_reach(plain):
-    raw = inverse_dynamics(LEG, TRC, grf=GRF, plates={"calcn_r": "ground_"}, cutoff_plates=None)
+    raw = inverse_dynamics(LEG, Trial(TRC, grf=GRF, plates={"calcn_r": "ground_"}), filter=Filter(cutoff_plates=None))
     assert np.array_equal(raw.z, plain.z)  # the coordinates filtered alike
     d = np.abs(raw.load("ankle_angle_r_moment") - plain.load("ankle_angle_r_moment"))
     stance, swing = raw.t < 0.667, (raw.t > 0.79) & (raw.t < 0.95)  # toe-off at 0.667 s, the next strike 1.117 s
@@ -161,18 +162,18 @@ def test_opensims_external_loads_file_names_the_plates(tmp_path, plain):
 
     shutil.copy(GRF, tmp_path / GRF.name)  # the data file, named relative to the loads file
     loads = _external(tmp_path)
-    res = inverse_dynamics(LEG, TRC, grf=loads)
+    res = inverse_dynamics(LEG, Trial(TRC, grf=loads))
     assert np.array_equal(res.loads["ankle_angle_r_moment"], plain.loads["ankle_angle_r_moment"])
     setup = tmp_path / "id_setup.xml"  # an ID setup naming it
     setup.write_text("<OpenSimDocument><InverseDynamicsTool><external_loads_file>loads.xml</external_loads_file>"
                      "</InverseDynamicsTool></OpenSimDocument>")
-    assert np.array_equal(inverse_dynamics(LEG, TRC, grf=setup).loads["hip_flexion_r_moment"],
+    assert np.array_equal(inverse_dynamics(LEG, Trial(TRC, grf=setup)).loads["hip_flexion_r_moment"],
                           plain.loads["hip_flexion_r_moment"])
     for path, match in ((_external(tmp_path, "a.xml", frame="calcn_r"), "force_expressed_in_body is 'calcn_r'"),
                         (_external(tmp_path, "b.xml", torque="1_ground_torque_"), "no column '1_ground_torque_x'"),
                         (setup, "plates: .* says which body")):
         with pytest.raises(ValueError, match=match):
-            inverse_dynamics(LEG, TRC, grf=path, plates={"calcn_r": "ground_"} if path == setup else None)
+            inverse_dynamics(LEG, Trial(TRC, grf=path, plates={"calcn_r": "ground_"} if path == setup else None))
     cli = subprocess.run([sys.executable, "-m", "casflex", "inverse", str(LEG), "--data", str(TRC), "--loads",
                           str(loads), "--quiet"], capture_output=True, text=True)
     assert cli.returncode == 0 and "plates 'ground_' on calcn_r" in cli.stdout, cli.stderr
@@ -186,7 +187,7 @@ def test_external_forces_whose_columns_carry_the_side_in_their_names(tmp_path, p
     loads = tmp_path / "side.xml"
     loads.write_text(EXTERNAL.format(frame="ground", torque="ground_torque_r_", data=GRF.name)
                      .replace("ground_force_v<", "ground_force_r_v<").replace("ground_force_p<", "ground_force_r_p<"))
-    res = inverse_dynamics(LEG, TRC, grf=loads)
+    res = inverse_dynamics(LEG, Trial(TRC, grf=loads))
     assert np.array_equal(res.loads["ankle_angle_r_moment"], plain.loads["ankle_angle_r_moment"])
     assert any("plates 'calcn_r_' on calcn_r" in line for line in res.report)
 
@@ -217,10 +218,12 @@ def test_a_clamped_coordinate_is_held_in_its_range_at_the_bounded_least_squares(
 
     scene = scene_from_osim(LEG).scene
     knee = next(c for c in scene.coordinates if c.name == "knee_angle_r")
-    unfiltered = inverse_dynamics(LEG, TRC, grf=GRF, plates={"calcn_r": "ground_"}, cutoff=None)  # the fit's z
+    unfiltered = inverse_dynamics(LEG, Trial(TRC, grf=GRF, plates={"calcn_r": "ground_"}),
+                                  filter=Filter(cutoff=None))  # the fit's z
     free = to_lab(scene, knee, unfiltered.z[:, unfiltered.coordinate_names.index(knee.scene_coordinate())])
     upper = float(np.median(free))
-    res = inverse_dynamics(_clamped_knee(tmp_path, upper), TRC, grf=GRF, plates={"calcn_r": "ground_"}, cutoff=None)
+    res = inverse_dynamics(_clamped_knee(tmp_path, upper), Trial(TRC, grf=GRF, plates={"calcn_r": "ground_"}),
+                           filter=Filter(cutoff=None))
     held = to_lab(scene, knee, res.z[:, res.coordinate_names.index(knee.scene_coordinate())])
     assert held.max() <= upper + 1e-12  # projected on the limit: at it to rounding, never beyond
     at = held >= upper - 1e-12
@@ -252,4 +255,5 @@ def test_a_range_too_narrow_for_the_trial_is_named_in_the_misfit_refusal(tmp_pat
     end far off, and the refusal names the held coordinate before the usual causes."""
     with pytest.raises(ValueError, match=r"knee_angle_r held at a limit of its range \(the model's clamped range: "
                                          r"widen it, or unclamp it\)"):
-        inverse_dynamics(_clamped_knee(tmp_path, -1.5), TRC, grf=GRF, plates={"calcn_r": "ground_"}, max_misfit=0.03)
+        inverse_dynamics(_clamped_knee(tmp_path, -1.5), Trial(TRC, grf=GRF, plates={"calcn_r": "ground_"}),
+                         fit=Fit(max_misfit=0.03))

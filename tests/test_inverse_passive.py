@@ -8,7 +8,7 @@ import pytest
 from inverse_scenes import INERTIA, C, M, pendulum
 from scipy.integrate import solve_ivp
 
-from casflex.inverse import inverse_dynamics, inverse_model, kinematic_tree
+from casflex.inverse import Filter, Trial, inverse_dynamics, inverse_model, kinematic_tree
 from casflex.inverse.passive import fit_passive
 from casflex.lab import LabMarkers
 from casflex.model.markers import marker_positions
@@ -37,7 +37,7 @@ def _trial(muscle: float, seed: int = 3, noise: float = 5e-4):
 
 
 def test_a_passive_swing_gives_back_its_spring_and_damper():
-    res = inverse_dynamics(loads_scene(pendulum()), _trial(0.0), cutoff=8.0)
+    res = inverse_dynamics(loads_scene(pendulum()), Trial(_trial(0.0)), filter=Filter(cutoff=8.0))
     fit = fit_passive(res, "pivot", 0.1, 1.9)  # the filter's ends left out
     assert fit.passive and fit.r2 > 0.95
     for name, truth in (("kt", KT), ("ct", CT), ("rest_angle", REST)):
@@ -48,14 +48,14 @@ def test_a_passive_swing_gives_back_its_spring_and_damper():
 
 
 def test_a_muscle_at_work_is_not_explained():
-    res = inverse_dynamics(loads_scene(pendulum()), _trial(2.0), cutoff=15.0)
+    res = inverse_dynamics(loads_scene(pendulum()), Trial(_trial(2.0)), filter=Filter(cutoff=15.0))
     fit = fit_passive(res, "pivot", 0.1, 1.9)
     assert not fit.passive and fit.r2 < 0.8
     assert "not a passive joint: it explains" in fit.summary()
 
 
 def test_bad_hinge_or_window_is_one_line():
-    res = inverse_dynamics(loads_scene(pendulum()), _trial(0.0), cutoff=8.0)
+    res = inverse_dynamics(loads_scene(pendulum()), Trial(_trial(0.0)), filter=Filter(cutoff=8.0))
     with pytest.raises(ValueError, match="no hinge 'knee'"):
         fit_passive(res, "knee")
     with pytest.raises(ValueError, match="window 3..4 s holds 0 frames"):

@@ -465,15 +465,15 @@ def test_a_segment_whose_markers_are_all_at_the_origin_is_named_before_the_fit(t
 
 
 def test_weights_that_leave_a_segment_undecided_are_named():
-    from casflex.inverse import inverse_dynamics
+    from casflex.inverse import Trial, inverse_dynamics
 
     with pytest.raises(ValueError, match=r"do not decide \['knee.angle', 'ankle.angle'\] in any frame: segment 'knee' "
                                          r"has no marker to place it; segment 'ankle' has no marker"):
-        inverse_dynamics("hamner_leg", TRC, root="pelvis", tasks={lb: 1.0 for lb in (
-            "R.ASIS", "L.ASIS", "V.Sacral", "R.Thigh.Upper", "R.Thigh.Front", "R.Thigh.Rear")})
+        inverse_dynamics("hamner_leg", Trial(TRC, root="pelvis", tasks={lb: 1.0 for lb in (
+            "R.ASIS", "L.ASIS", "V.Sacral", "R.Thigh.Upper", "R.Thigh.Front", "R.Thigh.Rear")}))
     with pytest.raises(ValueError, match=r"segment 'pelvis' has no marker to place it; .* segment 'ankle' has the "
                                          r"markers \['R.Heel'\] to place it"):
-        inverse_dynamics("hamner_leg", TRC, root="pelvis", tasks={"R.Heel": 1.0})
+        inverse_dynamics("hamner_leg", Trial(TRC, root="pelvis", tasks={"R.Heel": 1.0}))
     import dataclasses
 
     from casflex.scene.io import load_scene
@@ -483,15 +483,15 @@ def test_weights_that_leave_a_segment_undecided_are_named():
                                                for m in sc.markers))
     with pytest.raises(ValueError, match=r"segment 'ankle' has no marker to place it \(\['R.Heel', 'R.Midfoot.Sup', "
                                          r"'R.Midfoot.Lat', 'R.Toe.Tip'\] of weight 0\)"):
-        inverse_dynamics(sc, TRC, root="pelvis")
+        inverse_dynamics(sc, Trial(TRC, root="pelvis"))
 
 
 def test_markers_never_seen_together_are_one_line_not_an_index_error():
     """Each marker is seen in some frames (so together they would decide the pose) but no frame sees enough."""
-    from casflex.inverse import kinematic_tree, prepare
+    from casflex.inverse import Trial, kinematic_tree, prepare
     from casflex.inverse.fit import fit_markers
 
-    inputs = prepare("hamner_leg", str(TRC), root="pelvis")
+    inputs = prepare("hamner_leg", Trial(str(TRC), root="pelvis"))
     y = inputs.y.copy().reshape(inputs.t.size, -1, 2)
     foot = [inputs.labels.index(lb) for lb in FOOT]
     rest = [k for k in range(y.shape[1]) if k not in foot]
@@ -527,7 +527,7 @@ def test_a_model_with_massless_feet_names_the_foot_its_markers_left(tmp_path):
     angle then had no marker (an IndexError in the fit)."""
     import re as regex
 
-    from casflex.inverse import inverse_dynamics
+    from casflex.inverse import Trial, inverse_dynamics
 
     text = (LAB / "hamner_subject02_leg.osim").read_text()
     for body in ("talus_r", "calcn_r", "toes_r"):
@@ -536,4 +536,4 @@ def test_a_model_with_massless_feet_names_the_foot_its_markers_left(tmp_path):
     osim.write_text(text)
     with pytest.raises(ValueError, match=r"do not decide \['ankle_angle_r'\] in any frame: segment 'talus_r' has no "
                                          r"marker to place it \(nodes \['talus_r', 'calcn_r', 'toes_r'\] and no body"):
-        inverse_dynamics(osim, TRC)
+        inverse_dynamics(osim, Trial(TRC))

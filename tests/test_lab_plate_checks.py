@@ -80,7 +80,7 @@ def test_a_c3d_plate_with_its_corners_in_mirrored_order_is_refused(tmp_path):
     ezc3d = pytest.importorskip("ezc3d")
     from lab_scenes import C3D, PLANE, walking2_leg
 
-    from casflex.inverse import inverse_dynamics
+    from casflex.inverse import Trial, inverse_dynamics
     from casflex.scene import loads_scene
 
     c = ezc3d.c3d(str(C3D))
@@ -95,7 +95,7 @@ def test_a_c3d_plate_with_its_corners_in_mirrored_order_is_refused(tmp_path):
         r"its corners give it the upward normal -Z: numbered in mirrored order\?"
     )
     with pytest.raises(ValueError, match=match):
-        inverse_dynamics(leg, str(path), grf=str(path), plates={"ankle": "ground_"}, plane=PLANE)
+        inverse_dynamics(leg, Trial(str(path), grf=str(path), plates={"ankle": "ground_"}, plane=PLANE))
 
 
 def test_one_plate_given_to_two_nodes_is_refused(tmp_path, capsys):
@@ -108,7 +108,7 @@ def test_one_plate_given_to_two_nodes_is_refused(tmp_path, capsys):
 
 
 def test_one_plate_on_two_bodies_in_an_external_loads_file_is_refused(tmp_path):
-    from casflex.inverse import inverse_dynamics
+    from casflex.inverse import Trial, inverse_dynamics
 
     force = """<ExternalForce name="{side}"><applied_to_body>{body}</applied_to_body>
 <force_expressed_in_body>ground</force_expressed_in_body><point_expressed_in_body>ground</point_expressed_in_body>
@@ -125,7 +125,7 @@ def test_one_plate_on_two_bodies_in_an_external_loads_file_is_refused(tmp_path):
         match=r"loads.xml: the external forces on 'calcn_r' and 'talus_r' both take the "
         r"columns 'ground_force_v': one plate's load would be counted twice",
     ):
-        inverse_dynamics(LAB / "hamner_subject02_leg.osim", TRC, grf=loads)
+        inverse_dynamics(LAB / "hamner_subject02_leg.osim", Trial(TRC, grf=loads))
 
 
 def test_a_centre_of_pressure_half_a_metre_from_its_foot_is_refused(tmp_path, capsys):
@@ -186,7 +186,7 @@ def test_the_repo_s_real_trials_pass_every_plate_check():
     pytest.importorskip("ezc3d")
     from lab_scenes import C3D, PLANE, walking2_leg
 
-    from casflex.inverse import inverse_dynamics
+    from casflex.inverse import Filter, Trial, inverse_dynamics
     from casflex.scene import loads_scene
 
     runs = [
@@ -201,7 +201,7 @@ def test_the_repo_s_real_trials_pass_every_plate_check():
         (loads_scene(walking2_leg()), C3D, C3D, {"ankle": "ground_"}, {"plane": PLANE}),
     ]
     for scene, markers, grf, plates, kw in runs:
-        res = inverse_dynamics(scene, str(markers), grf=str(grf), plates=plates, cutoff=10, **kw)
+        res = inverse_dynamics(scene, Trial(str(markers), grf=str(grf), plates=plates, **kw), filter=Filter(10))
         assert not [w for w in res.warnings if "plate '" in w], res.warnings
 
 

@@ -340,7 +340,7 @@ def test_a_constraint_the_scene_leaves_out_is_said_by_inverse_and_import(tmp_pat
 # -- what the marker fit cannot decide -----------------------------------------------------------------------------
 def test_a_hinge_no_marker_moves_with_is_refused_before_the_fit(tmp_path):
     # a segment without markers beyond the toes: before, the fit decided no frame and ended in an IndexError
-    from casflex.inverse import prepare
+    from casflex.inverse import Trial, prepare
 
     extra = (
         '<PinJoint name="tip"><socket_parent_frame>p</socket_parent_frame><socket_child_frame>c'
@@ -359,7 +359,7 @@ def test_a_hinge_no_marker_moves_with_is_refused_before_the_fit(tmp_path):
             f"{TRC}: the markers do not decide ['tip_angle'] in any frame: segment 'tip' has no marker to place it"
         ),
     ):
-        prepare(path, TRC, grf=GRF, plates={"calcn_r": "ground_"})
+        prepare(path, Trial(TRC, grf=GRF, plates={"calcn_r": "ground_"}))
 
 
 def test_a_trial_whose_markers_decide_no_frame_is_refused_in_one_line():

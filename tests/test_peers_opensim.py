@@ -250,13 +250,13 @@ def test_casflex_inverse_of_the_hamner_stride_is_opensims():
     against OpenSim's InverseDynamicsSolver on the same model, motion and plate: the same equations of
     motion solved by two codes, so they agree to round-off (measured 4e-16 of the peak RMS)."""
 
-    from casflex.inverse import inverse_dynamics, inverse_model
+    from casflex.inverse import Filter, Trial, inverse_dynamics, inverse_model
     from casflex.peers import opensim as osp
 
     lab = Path(__file__).parent / "data" / "lab"
     grf = lab / "hamner_running_stride_grf.mot"
-    res = inverse_dynamics("hamner_leg", lab / "hamner_running_stride.trc", grf=grf, plates={"ankle": "ground_"},
-                           root="pelvis", cutoff=10.0)
+    res = inverse_dynamics("hamner_leg", Trial(lab / "hamner_running_stride.trc", grf=grf, plates={"ankle": "ground_"},
+                                               root="pelvis"), filter=Filter(cutoff=10.0))
     F, Mo = res.plates[0].at(res.t)  # the plate as the inverse applied it
     peer = osp.inverse_dynamics(inverse_model("hamner_leg").scene, "pelvis", res.t, res.q, res.qd, res.qdd,
                                 plates=[("ankle", F, np.zeros_like(F), Mo)])

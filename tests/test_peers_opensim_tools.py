@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from casflex.inverse import inverse_dynamics
+from casflex.inverse import Filter, Fit, Trial, inverse_dynamics
 from casflex.lab import read_sto
 from casflex.scene.coordinates import to_lab
 from casflex.scene.from_osim import scene_from_osim
@@ -49,9 +49,10 @@ def opensim(tmp_path_factory):
     return read_sto(ik["path"]), read_sto(ide["path"]), exact, grf, read_sto(both["path"])
 
 
-def _casflex(**options):
-    return inverse_dynamics(scene_from_osim(OSIM).scene, TRC, grf=GRF, plates=PLATES, tasks=TASKS, cutoff_plates=None,
-                            max_misfit=0.3, **options)  # a planar trunk misses the running trunk's twist: 0.1 m
+def _casflex(cutoff, kind="butterworth"):
+    return inverse_dynamics(scene_from_osim(OSIM).scene, Trial(TRC, grf=GRF, plates=PLATES, tasks=TASKS),
+                            filter=Filter(cutoff, None, kind),
+                            fit=Fit(max_misfit=0.3))  # a planar trunk misses the running trunk's twist: 0.1 m
 
 
 @needs_opensim
@@ -74,7 +75,7 @@ def test_the_marker_fit_gives_opensims_ik_on_its_model_and_task_weights(opensim)
 @pytest.mark.parametrize("filter", ["opensim", "butterworth"])
 def test_the_moments_are_opensims_over_each_stance(opensim, filter):
     ref = opensim[1]
-    res = _casflex(cutoff=CUTOFF, filter=filter)
+    res = _casflex(cutoff=CUTOFF, kind=filter)
     assert np.allclose(res.t, ref.t, atol=1e-7)
     worst = {}
     for joint in ("hip_flexion", "knee_angle", "ankle_angle"):
@@ -92,8 +93,8 @@ def test_the_moments_are_opensims_over_each_stance(opensim, filter):
 @needs_opensim
 def test_opensims_own_angles_give_opensims_moments(opensim):
     angles, grf, ref = opensim[2:]
-    res = inverse_dynamics(scene_from_osim(OSIM).scene, coordinates=angles, grf=grf, plates=PLATES, cutoff=CUTOFF,
-                           cutoff_plates=None, filter="opensim")
+    res = inverse_dynamics(scene_from_osim(OSIM).scene, Trial(coordinates=angles, grf=grf, plates=PLATES),
+                           filter=Filter(cutoff=CUTOFF, cutoff_plates=None, kind="opensim"))
     worst = {}
     for joint, prefix in (("hip_flexion_r", "ground_"), ("knee_angle_r", "ground_"), ("ankle_angle_r", "ground_"),
                           ("hip_flexion_l", "1_ground_"), ("knee_angle_l", "1_ground_"),

@@ -60,7 +60,7 @@ import casflex.inverse as inv
 
 def _hold(original):
     def inverse_dynamics(*args, **kwargs):
-        if kwargs.get("t_start") == float(os.environ["CASFLEX_TEST_HOLD_T_START"]):
+        if args[1].t_start == float(os.environ["CASFLEX_TEST_HOLD_T_START"]):  # (scene, trial)
             open(os.environ["CASFLEX_TEST_HELD"], "w").close()
             end = time.monotonic() + 900.0
             while not os.path.exists(os.environ["CASFLEX_TEST_GATE"]) and time.monotonic() < end:

@@ -6,6 +6,7 @@ import argparse
 import sys
 
 from casflex.cli._base import OptionError, Outputs, non_negative, output_path, positive, uncertain_option
+from casflex.inverse.options import FILTERS
 
 
 def _plate(text: str) -> tuple[str, str]:
@@ -48,30 +49,42 @@ def _progress(done: int, total: int) -> None:
         sys.stderr.flush()
 
 
-def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
-    from casflex.inverse import prepare, solve
-    from casflex.inverse.bands import BandError
-    from casflex.lab import Plane
+#: The command's options by the names of the option values they build (:mod:`casflex.inverse.options`): how a value
+#: refused is said (:meth:`~casflex.inverse.options.OptionRefused.said`).
+FLAGS = {"markers": "--data", "coordinates": "--coordinates", "grf": "--loads", "plates": "--plate", "plane": "--plane",
+         "root": "--root", "t_start": "--t-start", "t_end": "--t-end", "tasks": "--tasks", "cutoff": "--cutoff",
+         "cutoff_plates": "--cutoff-plates", "filter": "--filter", "max_misfit": "--max-misfit",
+         "uncertain": "--uncertain", "marker_noise": "--marker-noise", "bands": "--bands"}
 
-    Plane.parse(args.plane, option="--plane")
-    if (args.data is None) == (args.coordinates is None):
-        raise OptionError("--data, --coordinates: give the trial's markers (--data) or its coordinates "
-                          "(--coordinates), one of them")
-    if args.coordinates is not None and args.tasks is not None:
-        raise OptionError("--tasks: weights the marker fit; with --coordinates there is none")
+
+def inverse_options(args: argparse.Namespace) -> dict:
+    """The option values of :func:`casflex.inverse.inverse_dynamics` (``trial``, ``filter``, ``fit``, ``bands``)
+    from the command's options, each checked by its object: OptionError naming the option. Shared by the commands
+    that take what ``casflex inverse`` takes (:func:`add_trial_options`)."""
+    from casflex.inverse import Bands, Filter, Fit, OptionRefused, Trial
+
     plates = dict(args.plate or [])
     if len(plates) != len(args.plate or []):
         raise OptionError("--plate: a node is given twice")
-    if plates and not args.loads:
-        raise OptionError("--plate: needs --loads (the ground reaction file)")
     external = bool(args.loads) and args.loads.lower().endswith(".xml")  # OpenSim's ExternalLoads: it says
-    if external and plates:
-        raise OptionError(f"--plate: {args.loads} says which body each plate acts on; give --plate or that file")
-    if args.loads and not plates and not external:
+    if args.loads and not plates and not external:  # the library would take the plates as none: a command asks
         raise OptionError("--loads: say which node each plate acts on with --plate NODE=PREFIX (e.g. ankle=ground_), "
                           "or give OpenSim's ExternalLoads file")
-    if args.t_start is not None and args.t_end is not None and args.t_end <= args.t_start:
-        raise OptionError(f"--t-end: must be after --t-start ({args.t_start:g} s), got {args.t_end:g}")
+    try:
+        return {"trial": Trial(args.data, args.coordinates, grf=args.loads, plates=plates, plane=args.plane,
+                               root=args.root, t_start=args.t_start, t_end=args.t_end, tasks=args.tasks),
+                "filter": Filter(None, None, args.filter) if args.no_filter else Filter(args.cutoff, args.cutoff_plates,
+                                                                                        args.filter),
+                "fit": Fit(max_misfit=args.max_misfit),
+                "bands": Bands(args.uncertain, args.marker_noise, args.bands)}
+    except OptionRefused as exc:
+        raise OptionError(exc.said(FLAGS)) from None
+
+
+def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
+    from casflex.inverse import BandError, prepare, solve
+
+    chosen = inverse_options(args)
     out = outputs.file("--out", args.out, (".npz", ".csv", ".sto"), "inverse dynamics") if args.out is not None \
         else None
     plots = None
@@ -80,14 +93,9 @@ def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
 
         plots = outputs.directory("--plots", args.plots, FIGURES if args.data is not None else FIGURES[:1])
     try:
-        inputs = prepare(args.scene, args.data, plane=args.plane, grf=args.loads, plates=plates,
-                         cutoff=None if args.no_filter else args.cutoff, root=args.root, t_start=args.t_start,
-                         t_end=args.t_end, max_misfit=args.max_misfit, tasks=args.tasks,
-                         cutoff_plates=None if args.no_filter else args.cutoff_plates, filter=args.filter,
-                         coordinates=args.coordinates, uncertain=args.uncertain, marker_noise=args.marker_noise,
-                         bands=args.bands)
+        inputs = prepare(args.scene, **chosen)
     except BandError as exc:
-        raise OptionError(f"--{exc.option.replace('_', '-')}: {exc.reason}") from None
+        raise OptionError(exc.said(FLAGS)) from None
     _check_passive(args.passive or [], inputs)
     for line in inputs.warnings:
         print(f"casflex: warning: {line}", file=sys.stderr)
@@ -135,10 +143,9 @@ def cmd_calibrate(args: argparse.Namespace, outputs: Outputs) -> int:
     return 0
 
 
-def add_parsers(sub: argparse._SubParsersAction) -> None:
-    s = sub.add_parser("inverse", help="net joint moments and intersegmental forces from a lab trial")
-    s.add_argument("scene", help="built-in scene name (hamner_leg), a TOML file (segments on hinges, labelled "
-                                 "markers) or an OpenSim model (.osim)")
+def add_trial_options(s: argparse.ArgumentParser) -> None:
+    """The options that build :func:`inverse_options`' values (a trial, its filter, the fit's limit, the bands):
+    ``casflex inverse``'s, for every command that takes what it takes."""
     s.add_argument("--data", metavar="TRIAL", help="the trial's markers (.trc or .c3d)")
     s.add_argument("--coordinates", metavar="MOT", help="instead of --data: the trial's coordinates (.mot/.sto, "
                                                         "e.g. OpenSim's IK result; columns named as the model's "
@@ -154,7 +161,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--cutoff-plates", type=_cutoff_or_none, default="same", metavar="HZ|none",
                    help="the plates' own cut-off, Hz, 'none' (unfiltered, as OpenSim's ID tool) or 'same' (the "
                         "default: --cutoff's)")
-    s.add_argument("--filter", choices=("butterworth", "opensim"), default="butterworth",
+    s.add_argument("--filter", choices=FILTERS, default="butterworth",
                    help="the coordinates' filter: butterworth (2nd order forward and back: 4th-order zero-lag, the "
                         "default) or opensim (as OpenSim's ID tool: the record padded by half its length, 3rd "
                         "order forward and back); both -6 dB at --cutoff")
@@ -167,9 +174,6 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--max-misfit", type=positive("a distance in m"), metavar="M",
                    help="refuse a marker farther than this from the fitted pose, m (default 0.1: no soft-tissue "
                         "artefact is that large)")
-    s.add_argument("--passive", action="append", type=_passive, metavar="HINGE[:T0:T1]",
-                   help="fit a torsion spring-damper to HINGE's net moment (over T0..T1 s) and say how much of it "
-                        "it explains; repeat per hinge")
     s.add_argument("--uncertain", type=uncertain_option, action="append", metavar="TARGET=SD|P%|LO:HI",
                    help="a property known only within an uncertainty (a segment's mass or inertia from an "
                         "anthropometric table: shank.mass=10%%, shank.inertia=0.04:0.06), added to the scene's "
@@ -181,6 +185,16 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--bands", action=argparse.BooleanOptionalAction, default=None,
                    help="the loads' bands (1 SD) from the uncertain properties and the markers' noise (default: when "
                         "a property is uncertain or --marker-noise is given); written as <load>_sd columns")
+
+
+def add_parsers(sub: argparse._SubParsersAction) -> None:
+    s = sub.add_parser("inverse", help="net joint moments and intersegmental forces from a lab trial")
+    s.add_argument("scene", help="built-in scene name (hamner_leg), a TOML file (segments on hinges, labelled "
+                                 "markers) or an OpenSim model (.osim)")
+    add_trial_options(s)
+    s.add_argument("--passive", action="append", type=_passive, metavar="HINGE[:T0:T1]",
+                   help="fit a torsion spring-damper to HINGE's net moment (over T0..T1 s) and say how much of it "
+                        "it explains; repeat per hinge")
     s.add_argument("--out", type=output_path, metavar="FILE",
                    help="write the loads to FILE.npz (everything), FILE.csv (a table) or FILE.sto (OpenSim's table, "
                         "the lab's names)")

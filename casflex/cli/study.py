@@ -25,7 +25,7 @@ def _table(rows: list[tuple]) -> str:
 
 def _passive_table(out: dict) -> str | None:
     """passive.csv: one row per subject, trial, hinge and window of the study's passive fits (None: none asked)."""
-    rows = [(subject, trial, f) for (subject, trial), rec in out["trials"].items() for f in rec.get("passive", ())]
+    rows = [(subject, trial, f) for (subject, trial), rec in out["trials"].items() for f in rec.passive]
     if not rows:
         return None
     buf = io.StringIO()
@@ -33,13 +33,13 @@ def _passive_table(out: dict) -> str | None:
     w.writerow(["subject", "trial", "hinge", "phase", "t0", "t1", "kt", "kt_se", "ct", "ct_se", "rest_angle",
                 "rest_angle_se", "r2", "passive", "why"])
     for subject, trial, f in rows:
-        window = f["window"] or ["", ""]
-        if "error" in f:
-            w.writerow([subject, trial, f["hinge"], f["phase"], *window, *[""] * 8, f["error"]])
+        window = f.window or ["", ""]
+        if f.error is not None:
+            w.writerow([subject, trial, f.hinge, f.phase, *window, *[""] * 8, f.error])
             continue
-        w.writerow([subject, trial, f["hinge"], f["phase"], *window, repr(f["kt"]), repr(f["se"]["kt"]),
-                    repr(f["ct"]), repr(f["se"]["ct"]), repr(f["rest_angle"]), repr(f["se"]["rest_angle"]),
-                    repr(f["r2"]), "yes" if f["passive"] else "no", "; ".join(f["why"])])
+        w.writerow([subject, trial, f.hinge, f.phase, *window, repr(f.kt), repr(f.se["kt"]), repr(f.ct),
+                    repr(f.se["ct"]), repr(f.rest_angle), repr(f.se["rest_angle"]), repr(f.r2),
+                    "yes" if f.passive else "no", "; ".join(f.why)])
     return buf.getvalue()
 
 
@@ -49,10 +49,10 @@ def cycle_curves(out: dict, all_cycles: bool = False) -> dict[str, dict[str, np.
     ``cycles = "all"``); a subject without any left out, a load without any subject too."""
     per: dict[str, dict[str, list]] = {}
     for (subject, _), rec in out["trials"].items():
-        for name, ld in rec["loads"].items():
-            keep = ld.get("clean") or [False] * len(ld["value"])
+        for name, ld in rec.loads.items():
+            keep = ld.clean or [False] * len(ld.value)
             per.setdefault(name, {}).setdefault(subject, []).extend(
-                v for v, ok in zip(ld["value"], keep, strict=True) if ok or all_cycles)
+                v for v, ok in zip(ld.value, keep, strict=True) if ok or all_cycles)
     per = {n: {s: np.array(c) for s, c in subs.items() if c} for n, subs in per.items()}
     return {n: subs for n, subs in per.items() if subs}
 
@@ -123,13 +123,13 @@ def cmd_study(args: argparse.Namespace, outputs: Outputs) -> int:
              + (f", {passive.count(chr(10)) - 1} passive fit(s) in passive.csv" if passive else "")
              + f"; figures: {', '.join(figures) or 'none'}"]
     for subject, rec in out["subjects"].items():  # what a subject's model holds that its scene leaves out
-        for line in (ln for ln in rec.get("report", ()) if ln.startswith("warning: ")):
+        for line in (ln for ln in rec.report if ln.startswith("warning: ")):
             lines.append(f"  {subject}: {line}")
             print(f"casflex: warning: subject {subject}: {line.removeprefix('warning: ')}", file=sys.stderr)
     for (subject, trial), rec in out["trials"].items():
-        cycles = {ld["foot"]: f"{sum(ld['clean'])} clean of {len(ld['cycles'])}" for ld in rec["loads"].values()}
-        lines.append(f"  {subject} {trial}: plates {rec['plates']}; cycles per foot {cycles}")
-        lines += [f"    {note}" for note in rec["warnings"] if "no kinetic cycle" in note or "not clean" in note]
+        cycles = {ld.foot: f"{sum(ld.clean)} clean of {len(ld.cycles)}" for ld in rec.loads.values()}
+        lines.append(f"  {subject} {trial}: plates {rec.plates}; cycles per foot {cycles}")
+        lines += [f"    {note}" for note in rec.warnings if "no kinetic cycle" in note or "not clean" in note]
     if out["failed"]:
         lines.append(f"{len(out['failed'])} failed:")
         lines += [f"  {what}: {why}" for what, why in out["failed"]]

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from casflex.inverse.lab_names import lab_loads
+from casflex.inverse.options import BandError, Bands
 from casflex.inverse.plates import plate_loads
 from casflex.inverse.rigid import rigid_loads
 from casflex.inverse.tree import KinematicTree, kinematic_tree
@@ -39,14 +40,6 @@ __all__ = ["BandError", "BandSpec", "anthropometry", "band_spec", "inverse_bands
 _MOTION = ("q", "qd", "qdd", "lam")
 #: A property whose second difference exceeds this fraction of its first is reported as not linear.
 LINEAR = 1e-9
-
-
-class BandError(ValueError):
-    """An option of the bands refused: ``option`` (the API's name: uncertain, marker_noise, bands) and ``reason``."""
-
-    def __init__(self, option: str, reason: str) -> None:
-        super().__init__(f"{option}: {reason}")
-        self.option, self.reason = option, reason
 
 
 @dataclass(frozen=True)
@@ -80,20 +73,20 @@ def _merged(scene, uncertain) -> object:
         raise BandError("uncertain", str(exc)) from None
 
 
-def band_spec(model: Model, tree: KinematicTree, *, uncertain=None, marker_noise: float | None = None,
-              bands: bool | None = None, given: bool = False, n_markers: int = 0) -> BandSpec | None:
-    """The bands asked (None: none), checked before any work. ``bands`` None: computed when the scene (or
-    ``uncertain``) declares an uncertain property of sd > 0 or ``marker_noise`` (m) is given; True: always; False:
-    never (then neither may be given). ``n_markers``: the scene's markers the fit weighs (their channels must
-    outnumber the coordinates to estimate the noise). :class:`BandError` (a ValueError) in one line otherwise."""
+def band_spec(model: Model, tree: KinematicTree, bands: Bands, *, given: bool = False,
+              n_markers: int = 0) -> BandSpec | None:
+    """The bands asked (None: none), checked before any work (:class:`~casflex.inverse.options.Bands` checks its
+    own fields). ``bands.asked`` None: computed when the scene (or ``bands.uncertain``) declares an uncertain
+    property of sd > 0 or the markers' noise (m) is given; True: always; False: never. ``given``: the coordinates
+    were given (no marker fit); ``n_markers``: the scene's markers the fit weighs (their channels must outnumber the
+    coordinates to estimate the noise). :class:`BandError` (a ValueError) in one line otherwise."""
     from casflex.model import assembled
     from casflex.scene.uncertain import nuisance_names, with_uncertain_estimated
 
-    if bands is False:
-        if uncertain or marker_noise is not None:
-            raise BandError("bands", "not asked (False), yet uncertain or marker_noise is given: they ask for bands")
+    if bands.asked is False:
         return None
-    if model.n_con != model.n_dof - tree.n and (bands or uncertain or marker_noise is not None
+    uncertain, marker_noise = bands.uncertain, bands.marker_noise
+    if model.n_con != model.n_dof - tree.n and (bands.asked or uncertain or marker_noise is not None
                                                 or model.scene.uncertain):
         beams = [b.name for b in model.scene.beams][:3]
         raise BandError("bands", f"for rigid segments only: the beams {beams} make this a flexible inverse (an HHT "
@@ -101,13 +94,11 @@ def band_spec(model: Model, tree: KinematicTree, *, uncertain=None, marker_noise
                                  "--no-bands: the loads alone)")
     scene = _merged(model.scene, uncertain)
     names = nuisance_names(scene)
-    if bands is None and not names and marker_noise is None:
+    if bands.asked is None and not names and marker_noise is None:
         return None
     if marker_noise is not None:
         if given:
             raise BandError("marker_noise", "the coordinates were given: there is no marker fit for it to enter")
-        if not (np.isfinite(marker_noise) and marker_noise >= 0):
-            raise BandError("marker_noise", f"must be a distance >= 0 m (0: the markers exact), got {marker_noise!r}")
     elif not given and 2 * n_markers <= tree.n:
         raise BandError("marker_noise", f"the {n_markers} markers give no more channels than the {tree.n} coordinates: "
                                         "the fit leaves no residual to estimate their noise; declare it (m; 0: the "

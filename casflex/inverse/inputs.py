@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from casflex.inverse.options import Bands, Filter, Fit, Flexible, Trial
 from casflex.inverse.plates import Plate, model_weight, plate_from_table
 from casflex.inverse.tree import KinematicTree, kinematic_tree
 from casflex.lab.lowpass import check_cutoff, even_times
@@ -26,9 +27,6 @@ from casflex.model import Model
 
 __all__ = ["InverseInputs", "prepare", "inverse_model", "read_markers", "weighted"]
 
-#: The coordinates' filters: a 2nd-order Butterworth forward and back (Winter's 4th-order zero-lag), or
-#: OpenSim's inverse dynamics tool's (:func:`casflex.lab.lowpass.opensim_lowpass`).
-FILTERS = ("butterworth", "opensim")
 #: The fewest frames an inverse takes (the filter's padding and the end differences need them).
 MIN_FRAMES = 10
 #: Bytes a frame of the inverse needs per value of its result (:func:`_memory` counts the values), with the
@@ -38,13 +36,13 @@ MIN_FRAMES = 10
 BYTES_PER_VALUE = 32
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class InverseInputs:
     """The checked inputs of one inverse run: ``model`` and its ``tree``, the frames ``t`` (n,) s on an even
     grid, the scene's markers ``y`` (n, 2 m) m in the plane (NaN where missing; (n, 0) where the coordinates
-    ``z`` (n, n_z) m, rad were given instead: no marker fit), the ``plates``, the
-    ``cutoff`` (Hz, None: unfiltered), the options ``max_gap`` (s), ``max_misfit`` (m), ``settings`` (what was
-    asked), ``report`` (what was done to the data, a line each) and ``warnings`` (what changed the data)."""
+    ``z`` (n, n_z) m, rad were given instead: no marker fit), the ``plates``, the ``filter`` and the ``fit``'s
+    limits (:mod:`casflex.inverse.options`), ``settings`` (what was asked), ``report`` (what was done to the data,
+    a line each) and ``warnings`` (what changed the data)."""
 
     model: Model
     tree: KinematicTree
@@ -52,14 +50,18 @@ class InverseInputs:
     y: np.ndarray
     labels: tuple[str, ...]
     plates: tuple[Plate, ...]
-    cutoff: float | None
-    max_gap: float
-    max_misfit: float
+    filter: Filter
+    fit: Fit
     settings: dict
     report: tuple[str, ...] = ()
     warnings: tuple[str, ...] = field(default=())
     z: np.ndarray | None = None  # the tree's coordinates (n, n_z) where they were given instead of markers
     band_spec: object = None  # the bands asked (casflex.inverse.bands.BandSpec), None: none
+
+    @property
+    def cutoff(self) -> float | None:
+        """The coordinates' cut-off, Hz (None: unfiltered)."""
+        return self.filter.cutoff
 
 
 def inverse_model(scene, root: str | None = None) -> Model:
@@ -122,9 +124,7 @@ def _external_loads(grf, plates: dict[str, str] | None) -> tuple[object, dict[st
     from casflex.lab.setups import read_external_loads
     from casflex.scene.from_osim import node_name
 
-    ext = read_external_loads(grf)
-    if plates:
-        raise ValueError(f"plates: {ext.source} says which body each plate acts on; give plates or that file")
+    ext = read_external_loads(grf)  # plates given with it: refused by Trial
     prefixes = {body: ext.prefix(body) for body in ext.plates}
     if all(p is not None for p in prefixes.values()):
         return ext.datafile, {node_name(body): p for body, p in prefixes.items()}
@@ -289,65 +289,51 @@ def weighted(scene, tasks) -> tuple[object, list[str]]:
     return dataclasses.replace(scene, markers=markers), notes
 
 
-def prepare(scene, markers=None, *, plane="X,Y", grf=None, plates: dict[str, str] | None = None,
-            cutoff: float | None = 6.0, root: str | None = None, t_start: float | None = None,
-            t_end: float | None = None, max_gap: float = 0.1, max_misfit: float | None = None,
-            dt: float | None = None, tasks=None, cutoff_plates: float | None | str = "same",
-            filter: str = "butterworth", coordinates=None, uncertain=None, marker_noise: float | None = None,
-            bands: bool | None = None) -> InverseInputs:
-    """The inputs of :func:`casflex.inverse.inverse_dynamics` (its parameters), read and checked (module
-    docstring); the bands asked (``uncertain``, ``marker_noise``, ``bands``: :func:`casflex.inverse.bands.band_spec`)
-    checked before the trial is read. ValueError in one line naming the option, file, marker or plate otherwise."""
+def prepare(scene, trial: Trial, *, filter: Filter | None = None, fit: Fit | None = None, bands: Bands | None = None,
+            flexible: Flexible | None = None) -> InverseInputs:
+    """The inputs of :func:`casflex.inverse.inverse_dynamics` (its parameters; None: the object's defaults), read and
+    checked (module docstring); the bands asked (:func:`casflex.inverse.bands.band_spec`) checked before the trial
+    is read. ValueError in one line naming the option, file, marker or plate otherwise."""
     from casflex.inverse.bands import band_spec
-    from casflex.lab import Plane
-    from casflex.lab.checks import MAX_MISFIT
 
-    pl = Plane.parse(plane) if isinstance(plane, str) else plane
-    max_misfit = MAX_MISFIT if max_misfit is None else float(max_misfit)
-    if filter not in FILTERS:
-        raise ValueError(f"filter: one of {', '.join(FILTERS)}, got {filter!r}")
-    if not max_misfit > 0:
-        raise ValueError(f"max_misfit: must be a distance > 0 m, got {max_misfit:g}")
-    if (markers is None) == (coordinates is None):
-        raise ValueError("markers, coordinates: give the trial's markers or its coordinates (one of them)")
-    if tasks is not None and coordinates is not None:
-        raise ValueError("tasks: they weight the marker fit; with coordinates given there is none")
+    filter, fit, bands, flexible = filter or Filter(), fit or Fit(), bands or Bands(), flexible or Flexible()
+
+    pl = trial.plane
     scene, task_notes = _osim_scene(scene)
-    if tasks is not None:
-        scene, notes = weighted(scene, tasks)
+    if trial.tasks is not None:
+        scene, notes = weighted(scene, trial.tasks)
         task_notes += notes
-    model = inverse_model(scene, root)
-    grf, plates = _external_loads(grf, plates)
+    model = inverse_model(scene, trial.root)
+    grf, plates = _external_loads(trial.grf, trial.plates)
     for node in plates:
         if node not in model.node_names:
             raise ValueError(f"plates: no node {node!r} in the scene; nodes are {list(model.node_names)}")
-    if plates and grf is None:
-        raise ValueError("plates: given without the ground reactions (grf)")
-    tree = kinematic_tree(model, root)
-    spec = band_spec(model, tree, uncertain=uncertain, marker_noise=marker_noise, bands=bands,
-                     given=coordinates is not None, n_markers=sum(m.weight > 0 for m in model.scene.markers))
-    lab, table = _trial(markers, grf, bool(plates))
-    if coordinates is None:
-        t, y, labels, rate, notes = _from_markers(model, tree, lab, pl, t_start, t_end)
+    tree = kinematic_tree(model, trial.root)
+    spec = band_spec(model, tree, bands, given=trial.given, n_markers=sum(m.weight > 0 for m in model.scene.markers))
+    lab, table = _trial(trial.markers, grf, bool(plates))
+    if not trial.given:
+        t, y, labels, rate, notes = _from_markers(model, tree, lab, pl, trial.t_start, trial.t_end)
         z, report, source = None, [], lab.source
     else:
-        t, z, report, source = _from_coordinates(model, tree, coordinates, t_start, t_end)
+        t, z, report, source = _from_coordinates(model, tree, trial.coordinates, trial.t_start, trial.t_end)
         y, labels, rate, notes = np.zeros((t.size, 0)), (), 1.0 / float(t[1] - t[0]), []
+    cutoff = filter.cutoff
     check_cutoff(cutoff, t, "markers" if z is None else "coordinates")
     warnings = [*task_notes, *notes]
     plate_list = []
-    fc = cutoff if cutoff_plates == "same" else cutoff_plates
+    fc = filter.plates
     _one_node_a_plate(table, plates)
     for node, prefix in plates.items():
         plate = plate_from_table(table, prefix, node, pl, fc, window=(float(t[0]), float(t[-1])), rate=rate,
                                  trial=source, weight=model_weight(model))
         plate_list.append(plate)
         warnings += plate.notes
-    _memory(model, tree, t, len(labels), dt)
-    settings = {"plane": f"{pl.x},{pl.y}", "cutoff_hz": cutoff, "filter": filter,
+    _memory(model, tree, t, len(labels), flexible.dt)
+    settings = {"plane": f"{pl.x},{pl.y}", "cutoff_hz": cutoff, "filter": filter.kind,
                 "cutoff_plates_hz": fc, "root": tree.root, "plates": plates,
                 "moments": [f"{h}.moment" for h in tree.hinges], "weights": {lb: m.weight for lb, m in zip(
                     labels, model.scene.markers, strict=False)}, "source": source or "",
-                "scene": model.scene.name, "max_misfit_m": max_misfit, "given": z is not None}
-    return InverseInputs(model, tree, t, y, labels, tuple(plate_list), cutoff, max_gap, max_misfit,
-                         settings, tuple(report + warnings), tuple(warnings), z, spec)
+                "scene": model.scene.name, "max_misfit_m": fit.misfit, "given": z is not None}
+    return InverseInputs(model=model, tree=tree, t=t, y=y, labels=labels, plates=tuple(plate_list), filter=filter,
+                         fit=fit, settings=settings, report=tuple(report + warnings), warnings=tuple(warnings), z=z,
+                         band_spec=spec)

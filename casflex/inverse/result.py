@@ -17,9 +17,9 @@ from casflex.results import atomic_write_bytes, atomic_write_text
 __all__ = ["InverseResult"]
 
 
-@dataclass
+@dataclass(frozen=True, kw_only=True)
 class InverseResult:
-    """Inverse dynamics over a trial.
+    """Inverse dynamics over a trial (a frozen value, made with named fields).
 
     t (k,) s; ``coordinate_names`` (n_z,) with z, zd, zdd (k, n_z) the filtered coordinates (m, rad)
     and their rates; q, qd, qdd (k, n_dof) the scene's motion (``dof_names``); ``loads``: name -> (k,)

@@ -24,7 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from casflex.study.study_file import Study
+from casflex.study.records import Calibration, CycleLoad, PassiveFit, TrialRecord
+from casflex.study.study_file import Study, Trial, TrialOptions
 
 __all__ = ["run_study", "trial_run", "calibrate_run", "check_against_models", "tidy_rows", "per_kg", "unit_of",
            "PERCENT"]
@@ -32,8 +33,10 @@ __all__ = ["run_study", "trial_run", "calibrate_run", "check_against_models", "t
 #: the points of a gait cycle in the table: 0, 1, ..., 100 % (as labs report it)
 PERCENT = np.linspace(0.0, 100.0, 101)
 #: what a run's record holds, in its fingerprint (:func:`_run`): 2, each cycle's "clean" flag (a record without
-#: it, from before, is done again rather than read as clean or not)
-RECORD_FORMAT = 2
+#: it, from before, is done again rather than read as clean or not); 3, a trial run's options given as values
+#: (:class:`~casflex.study.study_file.TrialOptions`, the study file's trial): the fingerprint's text changed, the
+#: records' content did not
+RECORD_FORMAT = 3
 
 
 def calibrate_run(*, model: str, static: str | None, plane: str, root: str | None, calibrate: bool, scale: bool,
@@ -64,7 +67,7 @@ def calibrate_run(*, model: str, static: str | None, plane: str, root: str | Non
         scene = with_mass(scene, mass)
         report.append(f"the model's masses scaled from {total:.1f} kg to the subject's {mass:g} kg (inertias with "
                       "them; the segments' sizes as they are)")
-    return {"scene": dumps_scene(scene), "report": list(report)}
+    return Calibration(dumps_scene(scene), tuple(report)).to_json()
 
 
 def _trial_plane(sc, lab, plane: str, vertical: str, static: bool = False, root: str | None = None
@@ -103,15 +106,15 @@ def _load_feet(scene, names: list[str], feet: list[str]) -> dict[str, str | None
     return out
 
 
-def _read(trial: dict):
+def _read(trial: Trial):
     """(markers, plates' table or None): the trial's files, read once (a C3D's own plates where no grf is named;
     none with an ExternalLoads file, which inverse dynamics reads itself)."""
     from casflex.study.events import read_trial
 
-    grf = trial["grf"]
+    grf = trial.grf
     if grf is not None and grf.lower().endswith(".xml"):
-        return read_trial(trial["markers"], None, plates=False)
-    return read_trial(trial["markers"], grf, required=False)
+        return read_trial(trial.markers, None, plates=False)
+    return read_trial(trial.markers, grf, required=False)
 
 
 def _events(sc, lab, table, plates, plane: str) -> tuple[dict[str, str] | None, dict, list[str], list]:
@@ -136,33 +139,35 @@ def _loads_of(res) -> list[str]:
     return names or sorted(k for k in res.loads if k.endswith(".moment") and not k.startswith("root."))
 
 
-def trial_run(*, scene: str, trial: dict, options: dict, uncertain: list[str]) -> dict:
-    """One trial's inverse dynamics and its loads over gait cycles (module docstring): a JSON-ready record."""
-    from casflex.inverse import inverse_dynamics
+def trial_run(*, scene: str, trial: Trial, options: TrialOptions, uncertain: tuple[str, ...]) -> dict:
+    """One trial's inverse dynamics and its loads over gait cycles (module docstring): its record
+    (:class:`~casflex.study.records.TrialRecord`) as JSON, which the sweep writes."""
+    from casflex.inverse import Bands, inverse_dynamics
+    from casflex.inverse import Trial as Inverse
     from casflex.scene import loads_scene
     from casflex.scene.uncertain import parse
 
     sc = loads_scene(scene)
     lab, table = _read(trial)
-    t0, t1 = trial["window"] or (None, None)
+    t0, t1 = trial.window or (None, None)
     inside = (lab.t >= (t0 or -np.inf)) & (lab.t <= (t1 or np.inf))
     plane, plane_report = _trial_plane(sc, dataclasses.replace(lab, t=lab.t[inside], xyz=lab.xyz[inside]),
-                                       options["plane"], options["vertical"], root=options["root"])
-    plates, feet, event_report, found = _events(sc, lab, table, trial["plates"], plane)
-    grf = trial["grf"] if trial["grf"] is not None and trial["grf"].lower().endswith(".xml") else table
-    res = inverse_dynamics(sc, lab, grf=grf, plates=plates, plane=plane,
-                           cutoff=options["cutoff"], cutoff_plates=options["cutoff_plates"],
-                           filter=options["filter"], root=options["root"], tasks=options["tasks"], t_start=t0,
-                           t_end=t1, uncertain=[parse(u) for u in uncertain] or None,
-                           bands=bool(options["bands"]))  # false: none, even where the subject declares uncertainty
+                                       options.plane, options.vertical, root=options.root)
+    plates, feet, event_report, found = _events(sc, lab, table, trial.plates, plane)
+    grf = trial.grf if trial.grf is not None and trial.grf.lower().endswith(".xml") else table
+    res = inverse_dynamics(sc, Inverse(lab, grf=grf, plates=plates, plane=plane, root=options.root, t_start=t0,
+                                       t_end=t1, tasks=options.tasks), filter=options.filter,
+                           bands=Bands([parse(u) for u in uncertain] or None,  # false: none, even where the subject
+                                       asked=bool(options.bands)))             # declares uncertainty
     feet = {f: [c for c in cs if res.t[0] <= c[0] and c[1] <= res.t[-1]] for f, cs in feet.items()}  # the window's
     loads, notes = _cycle_loads(sc, res, lab, found, plates or {}, feet, plane)
-    return {"plates": plates, "plane": plane, "report": [*plane_report, *event_report, *notes, *res.report],
-            "warnings": [*res.warnings, *notes], "loads": loads, "t": [float(res.t[0]), float(res.t[-1])],
-            "passive": _passive(res, sc, lab, found, feet, options.get("passive", ()))}
+    return TrialRecord(plates, plane, (*plane_report, *event_report, *notes, *res.report), (*res.warnings, *notes),
+                       loads, (float(res.t[0]), float(res.t[-1])),
+                       tuple(_passive(res, sc, lab, found, feet, options.passive))).to_json()
 
 
-def _cycle_loads(sc, res, lab, found, plates: dict[str, str], feet: dict, plane: str) -> tuple[dict, list[str]]:
+def _cycle_loads(sc, res, lab, found, plates: dict[str, str], feet: dict, plane: str
+                 ) -> tuple[dict[str, CycleLoad], list[str]]:
     """({load: its foot, cycles [t0, t1] s, whether each is clean, values and bands on 0-100 %}, notes): each load
     cut into the gait cycles of the foot below its joint (:func:`_load_feet`), each cycle's stance checked
     (:func:`.events.clean_cycles`: wholly on the foot's plate); a load whose foot walks but has no cycle (it
@@ -181,9 +186,10 @@ def _cycle_loads(sc, res, lab, found, plates: dict[str, str], feet: dict, plane:
         foot = foot if foot is not None else first
         spans, flags = feet.get(foot, []), clean.get(foot, [])
         band = res.bands.get(name, {}).get("total") if res.bands else None
-        loads[name] = {"foot": foot, "cycles": [list(c) for c in spans], "clean": [ok for ok, _ in flags],
-                       "value": [normalise(res.t, res.loads[name], *c).tolist() for c in spans],
-                       "band": [normalise(res.t, band, *c).tolist() for c in spans] if band is not None else None}
+        loads[name] = CycleLoad(foot, tuple(tuple(c) for c in spans), tuple(ok for ok, _ in flags),
+                                tuple(tuple(normalise(res.t, res.loads[name], *c).tolist()) for c in spans),
+                                tuple(tuple(normalise(res.t, band, *c).tolist()) for c in spans)
+                                if band is not None else None)
     for foot, names_ in bare.items():
         notes.append(f"{foot} touches no plate: no kinetic cycle for {', '.join(names_)}")
     for foot, flags in clean.items():
@@ -192,7 +198,7 @@ def _cycle_loads(sc, res, lab, found, plates: dict[str, str], feet: dict, plane:
     return loads, notes
 
 
-def _passive(res, sc, lab, found, feet: dict, specs) -> list[dict]:
+def _passive(res, sc, lab, found, feet: dict, specs) -> list[PassiveFit]:
     """Each (hinge, "trial" or "swing") of the study's ``passive``: the spring-damper fitted to the hinge's net
     moment (:func:`casflex.inverse.passive.fit_passive`) over the trial, or over each swing phase of the foot
     below the hinge (:func:`.events.swing_phases`); a window it cannot fit recorded with the reason."""
@@ -206,17 +212,16 @@ def _passive(res, sc, lab, found, feet: dict, specs) -> list[dict]:
             foot = next((f for f in feet if f in below(sc, sc.item(hinge).nodes[-1])), None)
             windows = swing_phases(found, sc, lab, foot, feet[foot]) if foot else []
             if not windows:
-                out.append({"hinge": hinge, "phase": phase, "window": None,
-                            "error": "no swing phase in the trial (no foot below the hinge with a cycle)"})
+                out.append(PassiveFit(hinge, phase, None,
+                                      error="no swing phase in the trial (no foot below the hinge with a cycle)"))
         for t0, t1 in windows:
             try:
                 f = fit_passive(res, hinge, t0, t1)
             except ValueError as exc:
-                out.append({"hinge": hinge, "phase": phase, "window": [t0, t1], "error": str(exc)})
+                out.append(PassiveFit(hinge, phase, (t0, t1), error=str(exc)))
                 continue
-            out.append({"hinge": hinge, "phase": phase, "window": list(f.window), "kt": f.kt, "ct": f.ct,
-                        "rest_angle": f.rest_angle, "se": f.se, "r2": f.r2, "n_effective": f.n_effective,
-                        "passive": f.passive, "why": list(f.why)})
+            out.append(PassiveFit(hinge, phase, tuple(f.window), kt=f.kt, ct=f.ct, rest_angle=f.rest_angle, se=f.se,
+                                  r2=f.r2, n_effective=f.n_effective, passive=f.passive, why=tuple(f.why)))
     return out
 
 
@@ -234,6 +239,11 @@ _FIELDS = {"calibrate_run": ("scene", "report"),
            "trial_run": ("plates", "plane", "report", "warnings", "loads", "t", "passive")}
 
 
+def _jsonable(value: object) -> object:
+    """A value in a run's fingerprint: an option value by its fields, anything else as text."""
+    return dataclasses.asdict(value) if dataclasses.is_dataclass(value) else str(value)
+
+
 def _run(name: str, fn: Callable[..., dict], kwargs: dict, files: tuple[str | None, ...]):
     """The sweep's run ``name-<fingerprint>``: the fingerprint (8 hex digits) of its inputs (every option, the
     calibrated scene's text, the ``files``' contents) and casflex's version, so that a record is reused only for
@@ -247,19 +257,17 @@ def _run(name: str, fn: Callable[..., dict], kwargs: dict, files: tuple[str | No
     from casflex.study.sweep import Run
 
     text = json.dumps({"fn": fn.__name__, "kwargs": kwargs, "files": [_digest(f) for f in files],
-                       "casflex": __version__, "record": RECORD_FORMAT}, sort_keys=True, default=str)
+                       "casflex": __version__, "record": RECORD_FORMAT}, sort_keys=True, default=_jsonable)
     return Run(f"{name}-{hashlib.sha1(text.encode()).hexdigest()[:8]}", fn, kwargs, _FIELDS.get(fn.__name__, ()))
 
 
-def _plan(study: Study, calibrated: dict[str, dict]) -> dict:
+def _plan(study: Study, calibrated: dict[str, Calibration]) -> dict:
     """(subject, trial) -> its run."""
-    o = study.options
-    options = {k: getattr(o, k) for k in ("plane", "vertical", "cutoff", "cutoff_plates", "filter", "root", "tasks",
-                                          "bands", "passive")}
+    o = study.options.trials
     return {(s.name, t.name): _run(f"trial-{s.name}-{t.name}", trial_run,
-                                   {"scene": calibrated[s.name]["scene"], "trial": dataclasses.asdict(t),
-                                    "options": options, "uncertain": list(s.uncertain)}, (t.markers, t.grf, o.tasks))
-            for s, t in study.trials() if "scene" in calibrated.get(s.name, {})}
+                                   {"scene": calibrated[s.name].scene, "trial": t, "options": o,
+                                    "uncertain": tuple(s.uncertain)}, (t.markers, t.grf, o.tasks))
+            for s, t in study.trials() if s.name in calibrated}
 
 
 def check_against_models(study: Study) -> None:
@@ -283,12 +291,13 @@ def check_against_models(study: Study) -> None:
             raise StudyError(f"subjects[{i}].uncertain: {exc}") from None
         nodes = {n.name for n in scene.nodes}
         hinges = {j.name for j in scene.joints}
-        for hinge, _ in study.options.passive:
+        for hinge, _ in study.options.trials.passive:
             if hinge not in hinges:
                 raise StudyError(f"options.passive: {hinge!r} is not a joint of subject {s.name}'s model (joints: "
                                  f"{sorted(hinges)[:12]}...)")
-        if study.options.root is not None and study.options.root not in nodes:
-            raise StudyError(f"options.root: {study.options.root!r} is not a node of subject {s.name}'s model")
+        root = study.options.trials.root
+        if root is not None and root not in nodes:
+            raise StudyError(f"options.root: {root!r} is not a node of subject {s.name}'s model")
         for k, t in enumerate(s.trials):
             bad = sorted(set(t.plates or {}) - nodes)
             if bad:
@@ -299,22 +308,23 @@ def check_against_models(study: Study) -> None:
 def run_study(study: Study, record: str | Path, *, scheduler: str | None = None, n_workers: int | None = None,
               progress: Callable[[int, int, str], None] | bool = True, retry_failed: bool = False) -> dict:
     """Calibrate every subject and run every trial (module docstring), resuming from ``record``; returns
-    {"subjects": {name: calibration record}, "trials": {(subject, trial): record}, "failed": [(what, why)],
+    {"subjects": {name: its Calibration}, "trials": {(subject, trial): its TrialRecord}, "failed": [(what, why)],
     "interrupted": bool, "records": {(subject, trial): its record's path}}. A failed calibration fails its
     subject's trials, reported; the others go on. ``retry_failed``: a run recorded as failed is run again (a
     worker lost, a file since mended), where by default its record stands until its inputs change."""
     from casflex.study.sweep import run_sweep
 
-    o = study.options
+    o, to = study.options, study.options.trials
     cal_runs = {s.name: _run(f"calibrate-{s.name}", calibrate_run,
-                             {"model": s.model, "static": s.static, "plane": o.plane, "root": o.root,
-                              "calibrate": o.calibrate, "scale": o.scale, "mass": s.mass, "vertical": o.vertical},
+                             {"model": s.model, "static": s.static, "plane": to.plane, "root": to.root,
+                              "calibrate": o.calibrate, "scale": o.scale, "mass": s.mass, "vertical": to.vertical},
                              (s.model, s.static)) for s in study.subjects}
     cal = run_sweep(list(cal_runs.values()), record, scheduler=scheduler, n_workers=n_workers, progress=progress,
                     retry_failed=retry_failed)
-    calibrated = {s.name: cal.results.get(cal_runs[s.name].key, {}) for s in study.subjects}
-    failed = [(f"subject {s.name} (calibration)", calibrated[s.name].get("error", "not run"))
-              for s in study.subjects if "scene" not in calibrated[s.name]]
+    recs = {s.name: cal.results.get(cal_runs[s.name].key, {}) for s in study.subjects}
+    failed = [(f"subject {s.name} (calibration)", recs[s.name].get("error", "not run"))
+              for s in study.subjects if "scene" not in recs[s.name]]
+    calibrated = {name: Calibration.from_json(rec) for name, rec in recs.items() if "scene" in rec}
     trials: dict = {}
     plan: dict = {}
     interrupted = cal.interrupted
@@ -326,12 +336,12 @@ def run_study(study: Study, record: str | Path, *, scheduler: str | None = None,
         for s, t in study.trials():
             rec = done.results.get(plan[(s.name, t.name)].key) if (s.name, t.name) in plan else None
             if rec is None:
-                why = "its subject's calibration failed" if "scene" not in calibrated[s.name] else "not run"
+                why = "its subject's calibration failed" if s.name not in calibrated else "not run"
                 failed.append((f"{s.name} {t.name}", why))
             elif "error" in rec:
                 failed.append((f"{s.name} {t.name}", rec["error"]))
             else:
-                trials[(s.name, t.name)] = rec
+                trials[(s.name, t.name)] = TrialRecord.from_json(rec)
     return {"subjects": calibrated, "trials": trials, "failed": failed, "interrupted": interrupted,
             "records": {k: str(Path(record) / f"{r.key}.json") for k, r in plan.items()}}
 
@@ -349,13 +359,8 @@ def per_kg(out: dict, study: Study) -> dict:
     if study.options.normalise != "mass":
         return out
     mass = {s.name: s.mass for s in study.subjects}
-    trials = {}
-    for (subject, trial), rec in out["trials"].items():
-        m = mass[subject]
-        loads = {name: ld | {"value": [[v / m for v in c] for c in ld["value"]],
-                             "band": None if ld["band"] is None else [[b / m for b in c] for c in ld["band"]]}
-                 for name, ld in rec["loads"].items()}
-        trials[(subject, trial)] = rec | {"loads": loads}
+    trials = {key: dataclasses.replace(rec, loads={name: ld.per(mass[key[0]]) for name, ld in rec.loads.items()})
+              for key, rec in out["trials"].items()}
     return out | {"trials": trials}
 
 
@@ -366,12 +371,12 @@ def tidy_rows(out: dict, per_kg: bool = False) -> list[tuple]:
     and end (s)."""
     rows = []
     for (subject, trial), rec in out["trials"].items():
-        for name, ld in rec["loads"].items():
+        for name, ld in rec.loads.items():
             unit = unit_of(name, per_kg)
-            clean = ld.get("clean") or [None] * len(ld["value"])
-            for k, values in enumerate(ld["value"]):
-                band = ld["band"][k] if ld["band"] is not None else [None] * len(values)
-                t0, t1 = ld["cycles"][k]
-                rows += [(subject, trial, name, ld["foot"], k + 1, float(p), v, b, unit, clean[k], t0, t1)
+            clean = ld.clean or [None] * len(ld.value)
+            for k, values in enumerate(ld.value):
+                band = ld.band[k] if ld.band is not None else [None] * len(values)
+                t0, t1 = ld.cycles[k]
+                rows += [(subject, trial, name, ld.foot, k + 1, float(p), v, b, unit, clean[k], t0, t1)
                          for p, v, b in zip(PERCENT, values, band, strict=True)]
     return rows

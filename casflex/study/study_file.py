@@ -53,34 +53,44 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
-__all__ = ["Study", "Subject", "Trial", "Options", "load_study"]
+from casflex.inverse.options import Filter, OptionRefused
+
+__all__ = ["Study", "Subject", "Trial", "Options", "TrialOptions", "load_study"]
 
 _OPTIONS = {"plane": str, "vertical": str, "cutoff": (int, float, str), "cutoff_plates": (int, float, str),
             "filter": str,
             "root": str, "tasks": str, "normalise": str, "cycles": str, "passive": list, "calibrate": bool,
             "scale": bool, "bands": bool}
-_FILTERS = ("butterworth", "opensim")
 _NORMALISE = ("none", "mass")
 _CYCLES = ("clean", "all")
 
 
 @dataclass(frozen=True)
-class Options:
-    """The study's inverse-dynamics options (module docstring); ``tasks`` a resolved path or None."""
+class TrialOptions:
+    """What each trial's inverse dynamics is asked (module docstring; every run's fingerprint: a change redoes the
+    trials): ``plane`` (or "auto": each trial's own), ``vertical``, the ``filter`` (:class:`casflex.inverse.Filter`),
+    ``root``, ``tasks`` (a resolved path or None), ``bands`` (each load's band, or none even where the subject
+    declares uncertainty) and ``passive`` ((hinge, "trial" or "swing") each)."""
 
     plane: str = "X,Y"
     vertical: str = "Y"
-    cutoff: float | None = 6.0
-    cutoff_plates: float | None | str = "same"
-    filter: str = "butterworth"
+    filter: Filter = Filter()
     root: str | None = None
     tasks: str | None = None
+    bands: bool = False
+    passive: tuple[tuple[str, str], ...] = ()
+
+
+@dataclass(frozen=True)
+class Options:
+    """The study's options (module docstring): what each trial is asked (``trials``), each subject's calibration
+    (``calibrate``, ``scale``) and the table's and figures' (``normalise``, ``cycles``)."""
+
+    trials: TrialOptions = TrialOptions()
     calibrate: bool = True
     scale: bool = False
-    bands: bool = False
     normalise: str = "none"
     cycles: str = "clean"
-    passive: tuple[tuple[str, str], ...] = ()  # (hinge, "trial" or "swing")
 
 
 @dataclass(frozen=True)
@@ -152,12 +162,20 @@ def _file(base: Path, where: str, value: Any, suffixes: tuple[str, ...], builtin
     return str(path)
 
 
-def _frequency(where: str, value: Any, allowed: tuple[str, ...]) -> float | None | str:
-    if isinstance(value, str) and value.lower() in allowed:
-        return None if value.lower() == "none" else value.lower()
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (0 < value < math.inf):
-        raise StudyError(f"{where}: expected a frequency in Hz (> 0) or one of {list(allowed)}, got {value!r}")
-    return float(value)
+def _frequency(value: Any) -> Any:
+    """A cut-off as TOML writes it: "none" (unfiltered) and "same" are words (:class:`casflex.inverse.Filter` says
+    what a cut-off may be)."""
+    return (None if value.lower() == "none" else value.lower()) if isinstance(value, str) else value
+
+
+def _filter(t: dict) -> Filter:
+    """The [options] table's filter (its fields ``cutoff``, ``cutoff_plates``, ``filter``), checked by
+    :class:`casflex.inverse.Filter`; StudyError naming the field."""
+    try:
+        return Filter(_frequency(t.get("cutoff", 6.0)), _frequency(t.get("cutoff_plates", "same")),
+                      t.get("filter", "butterworth"))
+    except OptionRefused as exc:
+        raise StudyError(exc.said(lambda o: f"options.{o}")) from None
 
 
 def _options(base: Path, table: Any) -> Options:
@@ -166,8 +184,6 @@ def _options(base: Path, table: Any) -> Options:
         if k in t and not isinstance(t[k], typ) or (k in t and typ is not bool and isinstance(t[k], bool)):
             want = {bool: "true or false", str: "a text", list: "a list"}.get(typ, "a frequency in Hz or a word")
             raise StudyError(f"options.{k}: expected {want}, got {t[k]!r}")
-    if t.get("filter", "butterworth") not in _FILTERS:
-        raise StudyError(f"options.filter: expected one of {list(_FILTERS)}, got {t['filter']!r}")
     from casflex.lab import Plane
 
     if t.get("normalise", "none") not in _NORMALISE:
@@ -193,14 +209,11 @@ def _options(base: Path, table: Any) -> Options:
             read_tasks(tasks)
         except ValueError as exc:
             raise StudyError(f"options.tasks: {exc}") from None
-    return Options(plane=t.get("plane", "X,Y"), vertical=vertical.upper(),
-                   cutoff=_frequency("options.cutoff", t.get("cutoff", 6.0), ("none",)),
-                   cutoff_plates=_frequency("options.cutoff_plates", t.get("cutoff_plates", "same"), ("none", "same")),
-                   filter=t.get("filter", "butterworth"), root=t.get("root") or None,
-                   tasks=tasks,
-                   calibrate=t.get("calibrate", True), scale=t.get("scale", False), bands=t.get("bands", False),
-                   normalise=t.get("normalise", "none"), cycles=t.get("cycles", "clean"),
-                   passive=tuple((p.partition(":")[0], p.partition(":")[2] or "trial") for p in passive))
+    trials = TrialOptions(plane=t.get("plane", "X,Y"), vertical=vertical.upper(), filter=_filter(t),
+                          root=t.get("root") or None, tasks=tasks, bands=t.get("bands", False),
+                          passive=tuple((p.partition(":")[0], p.partition(":")[2] or "trial") for p in passive))
+    return Options(trials, calibrate=t.get("calibrate", True), scale=t.get("scale", False),
+                   normalise=t.get("normalise", "none"), cycles=t.get("cycles", "clean"))
 
 
 def _trial(base: Path, where: str, table: Any) -> Trial:
@@ -213,17 +226,34 @@ def _trial(base: Path, where: str, table: Any) -> Trial:
     if window is not None:
         ok = (isinstance(window, list) and len(window) == 2 and all(isinstance(w, (int, float))
                                                                     and not isinstance(w, bool) for w in window))
-        if not ok or not 0 <= window[0] < window[1]:
+        if not ok:
             raise StudyError(f"{where}.window: expected [start, end] in s, 0 <= start < end, got {window!r}")
     twice = sorted({v for v in (plates or {}).values() if list(plates.values()).count(v) > 1})
     if twice:
         raise StudyError(f"{where}.plates: the plate {twice[0]!r} is given to " + " and ".join(
             n for n, v in plates.items() if v == twice[0]) + ": a plate's force acts on one foot (give it once)")
-    if plates is not None and "grf" not in t:
-        raise StudyError(f"{where}.plates: needs grf (the ground reaction file)")
-    return Trial(_name(f"{where}.name", t["name"]), _file(base, f"{where}.markers", t["markers"], (".trc", ".c3d")),
-                 _file(base, f"{where}.grf", t["grf"], (".mot", ".sto", ".c3d", ".xml")) if "grf" in t else None,
-                 dict(plates) if plates else None, tuple(float(w) for w in window) if window else None)
+    trial = Trial(_name(f"{where}.name", t["name"]), _file(base, f"{where}.markers", t["markers"], (".trc", ".c3d")),
+                  _file(base, f"{where}.grf", t["grf"], (".mot", ".sto", ".c3d", ".xml")) if "grf" in t else None,
+                  dict(plates) if plates else None, tuple(float(w) for w in window) if window else None)
+    _as_inverse(where, trial)
+    return trial
+
+
+#: The study trial's field of each option of :class:`casflex.inverse.Trial` it sets, and how a refusal mentions it.
+_TRIAL_FIELDS = {"t_start": "window", "t_end": "window"}
+_TRIAL_MENTIONS = {"t_start": "the window's start"}
+
+
+def _as_inverse(where: str, trial: Trial) -> None:
+    """What :class:`casflex.inverse.Trial` refuses in a study's trial (its window, its plates without grf, plates
+    with an ExternalLoads file); StudyError naming the field."""
+    from casflex.inverse import Trial as Inverse
+
+    try:
+        Inverse(trial.markers, grf=trial.grf, plates=trial.plates, t_start=trial.window and trial.window[0],
+                t_end=trial.window and trial.window[1])
+    except OptionRefused as exc:
+        raise StudyError(exc.said(lambda o: f"{where}.{_TRIAL_FIELDS.get(o, o)}", _TRIAL_MENTIONS)) from None
 
 
 def _subject(base: Path, i: int, table: Any) -> Subject:
@@ -362,9 +392,9 @@ def _check_trial_files(where: str, trial: Trial, options: Options) -> None:
             span = "the window" if trial.window else "the markers' times"
             raise StudyError(f"{where}.{field_}: {span} {lo:g}..{hi:g} s is not within the {what}' times "
                              f"{sp.t0:g}..{sp.t1:g} s ({name}): give a window within both")
-    cutoffs = (("options.cutoff", options.cutoff, markers.rate, "markers"),
-               ("options.cutoff_plates", options.cutoff if options.cutoff_plates == "same" else options.cutoff_plates,
-                plate_rate, "plates"))
+    f = options.trials.filter
+    cutoffs = (("options.cutoff", f.cutoff, markers.rate, "markers"), ("options.cutoff_plates", f.plates, plate_rate,
+                                                                       "plates"))
     for field_, cut, rate, what in cutoffs:
         if cut is not None and math.isfinite(rate) and not cut < rate / 2:
             raise StudyError(f"{field_}: {cut:g} Hz is not below the Nyquist frequency {rate / 2:g} Hz of "
