@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from casflex.inverse import prepare, solve
+from casflex.inverse import Filter, Trial, prepare, solve
 from casflex.lab.tables import read_sto
 from casflex.muscles.analysis import TrialMuscles
 from casflex.muscles.reaction import JointReaction
@@ -24,8 +24,8 @@ JOINTS = (("hip_r", "femur_r"), ("knee_r", "tibia_r"), ("ankle_r", "talus_r"))
 
 @pytest.fixture(scope="module")
 def walk():
-    inputs = prepare(MODEL, None, coordinates=DATA / "subject01_walk_IK.mot", grf=DATA / "subject01_walk_grf.xml",
-                     cutoff=6.0, cutoff_plates=None, filter="opensim")
+    inputs = prepare(MODEL, Trial(coordinates=DATA / "subject01_walk_IK.mot", grf=DATA / "subject01_walk_grf.xml"),
+                     filter=Filter(6.0, None, "opensim"))
     res = solve(inputs)
     osim = scene_from_osim(MODEL, muscles=True)
     trial = TrialMuscles(osim, inputs.tree, res.t, res.plates, read_actuators(DATA / "gait10dof_Reserve_Actuators.xml"),

@@ -9,7 +9,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from casflex.inverse import inverse_dynamics, inverse_model, kinematic_tree
+from casflex.inverse import Trial, inverse_dynamics, inverse_model, kinematic_tree
 from casflex.muscles.cut import distal_nodes, joint_loads
 from casflex.scene.from_osim import scene_from_osim
 
@@ -23,7 +23,7 @@ EXACT = 1e-9
 @pytest.fixture(scope="module")
 def stride():
     scene = scene_from_osim(LEG).scene
-    res = inverse_dynamics(LEG, TRC, grf=GRF, plates={"calcn_r": "ground_"})
+    res = inverse_dynamics(LEG, Trial(TRC, grf=GRF, plates={"calcn_r": "ground_"}))
     return scene, res, joint_loads(scene, res.dof_names, res.q, res.qd, res.qdd, res.t, res.plates)
 
 

@@ -16,7 +16,7 @@ import argparse
 import sys
 
 from casflex import interrupt
-from casflex.cli import cache, export, identify, inverse, model_import, simulate, statics, study
+from casflex.cli import cache, export, identify, inverse, model_import, muscles, simulate, statics, study
 from casflex.cli._base import CliParser, OptionError, Outputs, progress_messages
 
 __all__ = ["main"]
@@ -29,7 +29,7 @@ def _parser() -> CliParser:
                    description="Planar flexible multibody dynamics and parameter identification on CasADi.")
     ap.add_argument("--version", action="version", version=f"casflex {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
-    for module in (simulate, statics, identify, inverse, model_import, export, cache, study):
+    for module in (simulate, statics, identify, inverse, muscles, model_import, export, cache, study):
         module.add_parsers(sub)
     return ap
 
@@ -57,7 +57,8 @@ def _check_compiler_flags() -> None:
 #: The arguments (argparse destinations) that name files a command reads, and how an error names them:
 #: no output may replace one of them.
 _INPUTS = {"scene": "the scene", "data": "--data", "loads": "--loads", "static": "--static",
-           "alternatives": "--alternatives", "coordinates": "--coordinates", "tasks": "--tasks", "study": "the study"}
+           "alternatives": "--alternatives", "coordinates": "--coordinates", "tasks": "--tasks", "study": "the study",
+           "model": "the model", "actuators": "--actuators"}
 
 
 def _protect_inputs(args: argparse.Namespace, outputs: Outputs) -> None:

@@ -63,12 +63,13 @@ def _casflex_net(paths: dict, t: np.ndarray) -> np.ndarray:
     """(k, 3, 3): casflex's rigid inverse dynamics of the same trial (the model's planar scene, OpenSim's IK as
     the coordinates, OpenSim's filter at 6 Hz, the plates unfiltered as OpenSim applies them): each joint's
     ``.fx``, ``.fy`` (N, in the ground, on the child) and ``.moment`` (N m: the generalized force), at ``t``."""
-    from casflex.inverse import inverse_dynamics
+    from casflex.inverse import Filter, Trial, inverse_dynamics
     from casflex.scene.from_osim import scene_from_osim
 
-    r = inverse_dynamics(scene_from_osim(paths["model"]).scene, coordinates=paths["ik"], grf=paths["grf"],
-                         plates={"calcn_r": "ground_", "calcn_l": "1_ground_"}, cutoff=CUTOFF, filter="opensim",
-                         cutoff_plates=None)
+    r = inverse_dynamics(scene_from_osim(paths["model"]).scene,
+                         Trial(coordinates=paths["ik"], grf=paths["grf"],
+                               plates={"calcn_r": "ground_", "calcn_l": "1_ground_"}),
+                         filter=Filter(CUTOFF, None, "opensim"))
     return np.stack([np.column_stack([np.interp(t, r.t, r.loads[f"{j}.{w}"]) for w in ("fx", "fy", "moment")])
                      for j in JOINTS], axis=1)
 

@@ -1,0 +1,114 @@
+"""``casflex muscles``: the muscles of a lab trial (static optimization) and the force each joint bears (joint
+reactions), written as OpenSim's StaticOptimization and JointReaction write them."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+from casflex.cli._base import OptionError, Outputs, output_path
+
+#: The command's options for static optimization and the reactions, by the field of the value each fills.
+FLAGS = {"exponent": "--exponent", "activation_bounds": "--activation-bounds", "on": "--on", "frame": "--in",
+         "joints": "--joints", "force_length_velocity": "--no-force-length-velocity"}
+
+
+def _bounds(text: str) -> tuple[float, float]:
+    lo, sep, hi = text.partition(":")
+    try:
+        return float(lo), float(hi)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected LOWER:UPPER (e.g. 0.01:1), got {text!r}") from None
+
+
+def _options(args: argparse.Namespace):
+    """(StaticOptimization, JointReaction, joints) from the command's options, each checked by its value."""
+    from casflex.muscles.reaction import JointReaction
+    from casflex.muscles.static_optimization import StaticOptimization
+
+    so = {"exponent": args.exponent, "force_length_velocity": not args.no_force_length_velocity}
+    if args.activation_bounds is not None:
+        so["activation_bounds"] = args.activation_bounds
+    for make, kw in ((StaticOptimization, so), (JointReaction, {"on": args.on, "frame": args.frame,
+                                                                 "body_weight": None})):
+        try:
+            make(**kw)
+        except ValueError as exc:
+            field, _, reason = str(exc).partition(": ")
+            raise OptionError(f"{FLAGS.get(field, field)}: {reason}") from None
+    joints = tuple(j.strip() for j in args.joints.split(",")) if args.joints else ()
+    if any(not j for j in joints):
+        raise OptionError(f"--joints: expected joint names separated by commas, got {args.joints!r}")
+    return StaticOptimization(**so), JointReaction(on=args.on, frame=args.frame), joints
+
+
+def cmd_muscles(args: argparse.Namespace, outputs: Outputs) -> int:
+    from casflex.cli.inverse import _progress, inverse_options
+    from casflex.inverse import prepare, solve
+    from casflex.muscles import _so_lines
+    from casflex.muscles.analysis import TrialMuscles, muscle_result
+    from casflex.muscles.result import file_names
+    from casflex.scene.from_osim import scene_from_osim
+    from casflex.scene.osim_actuators import read_actuators
+
+    if not args.model.lower().endswith(".osim"):
+        raise OptionError(f"model: expected an OpenSim model (.osim) with its muscles, got {args.model!r}")
+    chosen = inverse_options(args)
+    optimization, reaction, joints = _options(args)
+    name = args.name or os.path.splitext(os.path.basename(args.data or args.coordinates))[0]
+    out = outputs.directory("--out", args.out, file_names(name))
+    plots = None
+    if args.plots is not None:
+        from casflex.plotting.muscles import FIGURES
+
+        plots = outputs.directory("--plots", args.plots, FIGURES)
+    osim = scene_from_osim(args.model, muscles=True)
+    acts = read_actuators(args.model) + (read_actuators(args.actuators) if args.actuators else ())
+    inputs = prepare(args.model, **chosen)
+    trial = TrialMuscles(osim, inputs.tree, inputs.t, inputs.plates, acts, optimization=optimization,
+                         reaction=reaction, joints=joints, source=args.actuators or args.model)
+    for line in [*osim.warnings, *inputs.warnings]:
+        print(f"casflex: warning: {line}", file=sys.stderr)
+    res = solve(inputs, progress=None if args.quiet else _progress)
+    frames = trial.solve(res.z, res.zd, res.zdd)
+    result = muscle_result(trial, frames, res.z, report=(*trial.notes, *_so_lines(frames)),
+                           settings={"model": args.model, "trial": args.data or args.coordinates})
+    print(result.summary())
+    result.save(out, name)
+    if plots is not None:
+        from casflex.plotting.muscles import save_muscle_figures
+
+        save_muscle_figures(result, plots)
+    return 0
+
+
+def add_parsers(sub: argparse._SubParsersAction) -> None:
+    from casflex.cli.inverse import add_trial_options
+
+    s = sub.add_parser("muscles", help="muscle forces (static optimization) and joint reactions from a lab trial")
+    s.add_argument("model", help="an OpenSim model (.osim) with its muscles (Millard2012EquilibriumMuscle, "
+                                 "Thelen2003Muscle, DeGrooteFregly2016Muscle)")
+    add_trial_options(s)
+    s.add_argument("--actuators", metavar="XML", help="reserve and residual actuators (an OpenSim ForceSet file, e.g. "
+                                                      "the pipeline's *_Reserve_Actuators.xml), added to the model's")
+    s.add_argument("--exponent", type=float, default=2.0, metavar="P",
+                   help="static optimization minimises the sum of activation^P (OpenSim's activation_exponent; "
+                        "default 2)")
+    s.add_argument("--no-force-length-velocity", action="store_true",
+                   help="a muscle's force per activation is its maximum isometric force (OpenSim's "
+                        "use_muscle_physiology false)")
+    s.add_argument("--activation-bounds", type=_bounds, metavar="LO:HI",
+                   help="every activation's bounds (default 0.01:1, Millard's minimum activation)")
+    s.add_argument("--joints", metavar="J1,J2", help="the joints whose reactions are written (default: every hinge)")
+    s.add_argument("--on", choices=("child", "parent"), default="child",
+                   help="the reaction on the joint's child (default) or parent body, as OpenSim's apply_on_bodies")
+    s.add_argument("--in", dest="frame", choices=("child", "parent", "ground"), default="ground",
+                   help="the frame the reactions are expressed in (default ground, as OpenSim's express_in_frame)")
+    s.add_argument("--name", help="the files' prefix (default: the trial file's name)")
+    s.add_argument("--out", type=output_path, required=True, metavar="DIR",
+                   help="write <name>_StaticOptimization_activation.sto, _force.sto and "
+                        "<name>_JointReaction_ReactionLoads.sto into this directory")
+    s.add_argument("--plots", type=output_path, metavar="DIR", help="write figures into this directory")
+    s.add_argument("--quiet", action="store_true", help="no progress messages")
+    s.set_defaults(func=cmd_muscles)
