@@ -114,6 +114,7 @@ class TrialMuscles:
                                  "as CoordinateActuators")
             else:
                 self.residuals.append(a)
+        self.used = tuple(a for a in actuators if a in self.residuals or a in self.reserves.values())
         if len(bounds) > 1:
             raise ValueError(f"{source}: the reserves' control bounds differ ({sorted(bounds)}); give them one pair")
         if bounds:
@@ -273,7 +274,7 @@ def muscle_result(trial: TrialMuscles, out: FrameOutputs, z: np.ndarray, report=
     k = z.shape[0]
     names = [c.name for c in trial.joint_coordinates]
     controls, forces, actuators = [], [], []
-    for a in (*trial.reserves.values(), *trial.residuals):
+    for a in trial.used:  # the order given (OpenSim writes its actuator set's)
         if a.kind == "CoordinateActuator" and a.coordinate in trial.reserves:
             u = out.so.reserve_controls[:, names.index(a.coordinate)]
         else:
