@@ -69,6 +69,34 @@ def test_bad_muscles_and_actuators_are_refused_naming_them(tmp_path, capsys):
 
 
 def test_a_frame_no_activation_can_carry_is_refused_naming_it(tmp_path, capsys):
-    """Activations held below 5 % and no reserves: the walk's moments are out of reach; the first frames named."""
-    _refused(tmp_path, capsys, [str(MODEL), *TRIAL, "--activation-bounds", "0.01:0.05"],
+    """Activations held below 5 % and a reserve on the lumbar joint only: the legs' moments are out of reach; the
+    first frames named with the coordinate and the moment missing."""
+    text = Path(RESERVES).read_text()
+    a = text.index('<CoordinateActuator name="hip_flexion_r_reserve">')
+    b = text.index('<CoordinateActuator name="lumbar_extension_reserve">')
+    lumbar = tmp_path / "lumbar.xml"
+    lumbar.write_text(text[:a] + text[b:])
+    _refused(tmp_path, capsys, [str(MODEL), *TRIAL, "--actuators", str(lumbar), "--activation-bounds", "0.01:0.05"],
              "no activation within the bounds carries its moment")
+
+
+def test_reserves_by_option_and_the_root_left_unbalanced_said(tmp_path, capsys):
+    """--reserves 1: OpenSim's reserve file's actuators made by option (one on each joint coordinate, FX, FY, MZ):
+    the same activations as the file's (the file's residuals sit 3.4 cm behind the pelvis' origin: the root's
+    balance differs, the joints' does not); reserves without residuals: the summary says the root is left; none at
+    all: the lumbar joint, which no muscle crosses, is refused by name."""
+    for flag, name in ((["--reserves", "1"], "opt"), (["--actuators", RESERVES], "file")):
+        out = tmp_path / name
+        out.mkdir()
+        assert main(["muscles", str(MODEL), *TRIAL, *flag, "--name", "w", "--out", str(out), "--quiet"]) == 0
+    joints_only = tmp_path / "joints.xml"
+    text = Path(RESERVES).read_text()
+    joints_only.write_text(text[:text.index("<PointActuator")] + text[text.index("<CoordinateActuator"):])
+    (tmp_path / "j").mkdir()
+    assert main(["muscles", str(MODEL), *TRIAL, "--actuators", str(joints_only), "--out", str(tmp_path / "j"),
+                 "--quiet"]) == 0
+    assert capsys.readouterr().out.count("no residual actuator on the root") == 1
+    _refused(tmp_path, capsys, [str(MODEL), *TRIAL], "lumbar_extension: no muscle crosses it and no reserve")
+    a, b = (read_sto(tmp_path / n / "w_StaticOptimization_activation.sto") for n in ("opt", "file"))
+    assert abs(a.column("soleus_r") - b.column("soleus_r")).max() < 1e-6  # the QP's tolerance
+    assert "FX" in a.names and "hip_flexion_r_reserve" in a.names

@@ -7,7 +7,7 @@ import argparse
 import os
 import sys
 
-from casflex.cli._base import OptionError, Outputs, output_path
+from casflex.cli._base import OptionError, Outputs, output_path, positive
 
 #: The command's options for static optimization and the reactions, by the field of the value each fills.
 FLAGS = {"exponent": "--exponent", "activation_bounds": "--activation-bounds", "on": "--on", "frame": "--in",
@@ -47,7 +47,7 @@ def cmd_muscles(args: argparse.Namespace, outputs: Outputs) -> int:
     from casflex.cli.inverse import _progress, inverse_options
     from casflex.inverse import prepare, solve
     from casflex.muscles import _so_lines
-    from casflex.muscles.analysis import TrialMuscles, muscle_result
+    from casflex.muscles.analysis import TrialMuscles, muscle_result, reserve_actuators
     from casflex.muscles.result import file_names
     from casflex.scene.from_osim import scene_from_osim
     from casflex.scene.osim_actuators import read_actuators
@@ -64,8 +64,12 @@ def cmd_muscles(args: argparse.Namespace, outputs: Outputs) -> int:
 
         plots = outputs.directory("--plots", args.plots, FIGURES)
     osim = scene_from_osim(args.model, muscles=True)
+    if args.actuators and args.reserves is not None:
+        raise OptionError("--reserves: --actuators gives the reserves; give one of them")
     acts = read_actuators(args.model) + (read_actuators(args.actuators) if args.actuators else ())
     inputs = prepare(args.model, **chosen)
+    if args.reserves is not None:
+        acts += reserve_actuators(osim.scene, inputs.tree.root, args.reserves)
     trial = TrialMuscles(osim, inputs.tree, inputs.t, inputs.plates, acts, optimization=optimization,
                          reaction=reaction, joints=joints, source=args.actuators or args.model)
     for line in [*osim.warnings, *inputs.warnings]:
@@ -92,6 +96,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     add_trial_options(s)
     s.add_argument("--actuators", metavar="XML", help="reserve and residual actuators (an OpenSim ForceSet file, e.g. "
                                                       "the pipeline's *_Reserve_Actuators.xml), added to the model's")
+    s.add_argument("--reserves", type=positive("an optimal force in N m"), metavar="N",
+                   help="instead of --actuators: a reserve of this optimal force on every joint coordinate and the "
+                        "residuals FX, FY, MZ on the root")
     s.add_argument("--exponent", type=float, default=2.0, metavar="P",
                    help="static optimization minimises the sum of activation^P (OpenSim's activation_exponent; "
                         "default 2)")

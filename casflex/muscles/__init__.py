@@ -41,19 +41,23 @@ def muscle_analysis(model, trial: Trial, *, filter: Filter | None = None, fit: F
     reaction : on which body and in which frame the reactions are given, N or body weights
         (:class:`~casflex.muscles.reaction.JointReaction`); ``joints`` the hinges reported (() every one)
     actuators : an OpenSim actuator file (reserves and residuals, e.g. a pipeline's ``*_Reserve_Actuators.xml``),
-        added to the model's own actuators as OpenSim's ``replace_force_set`` false does; None: the model's only
+        added to the model's own actuators as OpenSim's ``replace_force_set`` false does; or a number: a reserve of
+        that optimal force (N m, N) on every joint coordinate and the residuals FX, FY, MZ on the root
+        (:func:`casflex.muscles.analysis.reserve_actuators`); None: the model's own only
 
     ValueError in one line naming the file, option, muscle or frame for what cannot be honoured, before the work
     where the inputs can tell.
     """
     from casflex.inverse import prepare, solve
-    from casflex.muscles.analysis import TrialMuscles, muscle_result
+    from casflex.muscles.analysis import TrialMuscles, muscle_result, reserve_actuators
     from casflex.scene.from_osim import scene_from_osim
     from casflex.scene.osim_actuators import read_actuators
 
     osim = scene_from_osim(model, muscles=True)
-    acts = read_actuators(model) + (read_actuators(actuators) if actuators is not None else ())
     inputs = prepare(model, trial, filter=filter, fit=fit)
+    extra = () if actuators is None else reserve_actuators(osim.scene, inputs.tree.root, actuators) \
+        if isinstance(actuators, (int, float)) else read_actuators(actuators)
+    acts = read_actuators(model) + extra
     muscles = TrialMuscles(osim, inputs.tree, inputs.t, inputs.plates, acts, optimization=optimization,
                            reaction=reaction, joints=joints, source=str(actuators or model))
     res = solve(inputs)

@@ -33,7 +33,7 @@ from casflex.muscles.reaction import JointReaction, JointReactions, joint_reacti
 from casflex.muscles.static_optimization import StaticOptimization, StaticOptimizationResult, solve_static_optimization
 from casflex.scene.from_osim import node_name
 
-__all__ = ["FrameOutputs", "TrialMuscles"]
+__all__ = ["FrameOutputs", "TrialMuscles", "muscle_result", "reserve_actuators"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -89,6 +89,10 @@ class TrialMuscles:
         self.notes = check_actuators(tuple(actuators), self.scene, source,
                                      bodies=set(osim.frames) - {"ground"})
         self._split_actuators(tuple(actuators), source)
+        if not self.residuals:
+            self.notes.append(f"no residual actuator on the root ({tree.root}): its loads (the inverse dynamics' "
+                              "residuals) are not balanced by static optimization; give them as PointActuator and "
+                              "TorqueActuator (e.g. OpenSim's FX, FY, MZ) or --reserves")
         self._slide = self._slides()
 
     def _split_actuators(self, actuators, source: str) -> None:
@@ -164,6 +168,11 @@ class TrialMuscles:
         active, passive = self.capacity(geo["lengths"], geo["speeds"], muscles)
         reserves = np.array([self.reserves[c.name].optimal_force if c.name in self.reserves else 0.0
                              for c in self.joint_coordinates])
+        bare = [c.name for i, c in enumerate(self.joint_coordinates)
+                if np.abs(arms[:, :, i]).max() < 1e-9 and not reserves[i] and np.abs(moments[:, i]).max() > 1e-6]
+        if bare:
+            raise ValueError(f"{', '.join(bare)}: no muscle crosses it and no reserve acts on it: its moment has "
+                             "nothing to carry it; give reserves (an actuator file, or --reserves / actuators=N)")
         so = solve_static_optimization(moments, arms, active, passive, reserves, options,
                                        max_isometric=[m.max_isometric_force for m in muscles],
                                        coordinates=[c.name for c in self.joint_coordinates])
@@ -250,6 +259,21 @@ class TrialMuscles:
         i = self.tree.model.node_names.index(node)
         x0 = np.asarray(self.tree.model.q0[3 * i: 3 * i + 3], dtype=float).ravel()
         return q[:, 3 * i:3 * i + 2], q[:, 3 * i + 2] - x0[2], x0
+
+
+def reserve_actuators(scene, root: str, optimal_force: float) -> tuple:
+    """A reserve (CoordinateActuator) of ``optimal_force`` (N m or N) on every lab coordinate of ``scene`` and the
+    residuals on the root's body: a force along x and y at its node and a torque about the plane's normal (as
+    OpenSim's reserve files give them, ``FX``, ``FY``, ``MZ``), all with free controls."""
+    from casflex.scene.osim_actuators import Actuator
+
+    if not (math.isfinite(optimal_force) and optimal_force > 0):
+        raise ValueError(f"reserves: expected an optimal force > 0 (N m or N), got {optimal_force!r}")
+    coords = [c for c in scene.coordinates if not c.of.startswith(f"{root}.")]
+    return (Actuator("FX", "PointActuator", optimal_force, body=root, direction=(1.0, 0.0, 0.0), force_is_global=True),
+            Actuator("FY", "PointActuator", optimal_force, body=root, direction=(0.0, 1.0, 0.0), force_is_global=True),
+            Actuator("MZ", "TorqueActuator", optimal_force, body=root, other="ground"),
+            *(Actuator(f"{c.name}_reserve", "CoordinateActuator", optimal_force, coordinate=c.name) for c in coords))
 
 
 def _turn(angle: np.ndarray, v: np.ndarray) -> np.ndarray:
