@@ -211,8 +211,8 @@ def _muscle_parts(trial, z, zd, zdd, uncertainty, base, base_out):
         up, down = (muscle_outputs(trial, o, bounds=True) for o in outs[2 * j:2 * j + 2])
         parts[key] = {n: 0.5 * (up[n] - down[n]) for n in up}
         for n in base_out:
-            if not n.startswith("_"):
-                s = float(np.max(np.abs(base_out[n]))) or 1.0  # each output relative to its own peak
+            s = float(np.max(np.abs(base_out[n])))  # each output relative to its own peak
+            if not n.startswith("_") and s > 1e-6:  # not a pin's moment, 0 but for rounding
                 first[prop] = max(first.get(prop, 0.0), float(np.max(np.abs(up[n] - down[n]))) / s)
                 second[prop] = max(second.get(prop, 0.0), float(np.max(np.abs(up[n] + down[n] - 2 * base_out[n]))) / s)
     bend = {p: second[p] / first[p] if first.get(p) else 0.0 for p in first}
