@@ -199,6 +199,7 @@ def solve_static_optimization(moments, arms, active, passive=None, reserves=None
     problem = _Problem(arms, active, r, target, options)
     if near is not None and options.exponent == 2.0 and near.activations.shape == (k, n_m):
         x, kept = _on_active_set(problem, target, near)
+        infeasible = ()
         if not kept.all():  # the frames whose active set changed: the QP
             sub = solve_static_optimization(moments[~kept], arms[~kept], active[~kept], passive[~kept], r, options,
                                             coordinates=names)
@@ -207,7 +208,10 @@ def solve_static_optimization(moments, arms, active, passive=None, reserves=None
             u = sub.reserve_controls[:, problem.held]
             v[~kept, n_m:] = np.concatenate([np.maximum(u, 0.0), np.maximum(-u, 0.0)], axis=1)
             x = v.ravel()
-        return _result(problem, x, target, (), "", passive, options, -1, time.perf_counter() - start,
+            frames = np.flatnonzero(~kept)
+            infeasible = tuple((int(frames[f]), c, s) for f, c, s in sub.infeasible)
+        report = _report(infeasible, len(infeasible), target, names) if infeasible else ""
+        return _result(problem, x, target, infeasible, report, passive, options, -1, time.perf_counter() - start,
                        {"kept": kept})
     x, iterations, ok, stats = problem.solve(target)
     short, infeasible = np.zeros((k, n_c)), ()
