@@ -49,6 +49,7 @@ import numpy as np
 
 from casflex.inverse.bands import anthropometry, marker_part, rigid_load_function
 from casflex.muscles.options import MuscleUncertainty
+from casflex.muscles.static_optimization import AT_BOUND
 
 __all__ = ["MuscleBands", "muscle_bands", "muscle_outputs", "output_units"]
 
@@ -56,8 +57,6 @@ __all__ = ["MuscleBands", "muscle_bands", "muscle_outputs", "output_units"]
 GRAVITY = 9.81
 #: rad or m: the step along the coordinates for the markers' part
 STEP = 1e-4
-#: An activation within this of its bound counts as at the bound (the active set)
-AT_BOUND = 1e-6
 
 
 def _reaction_names(trial, joint: str) -> tuple[str, str]:
