@@ -219,14 +219,13 @@ def test_walk_report_and_summary_lines(walk):
     ({"criteria": (2.0,)}, "criteria: 2 is the trial's own exponent"),
     ({"criteria": (0.5,)}, r"criteria: expected exponents >= 1"),
     ({"z": "short"}, r"z: expected \(30, "),
+    ({"inputs": None}, r"inputs: the inverse's inputs the trial was made from are needed"),
 ])
 def test_bad_options_are_refused_in_one_line_before_any_work(walk, change, pattern):
     inputs, res, trial, _ = walk
     kw = {"uncertainty": MuscleUncertainty(max_isometric_force=0.1), "criteria": (3.0,)}
-    z = res.z
-    if change.get("z") == "short":
-        z = res.z[:-1]
-    else:
-        kw |= change
+    z = res.z[:-1] if change.get("z") == "short" else res.z
+    inputs = change["inputs"] if "inputs" in change else inputs
+    kw |= {k: v for k, v in change.items() if k in kw}
     with pytest.raises(ValueError, match=pattern):
         muscle_bands(trial, inputs, None, z, res.zd, res.zdd, **kw)

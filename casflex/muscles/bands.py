@@ -153,9 +153,9 @@ class MuscleBands:
         b = {k: float(x[i]) for k, x in self.bands[name].items()}
         label = f"{name[:-len('_resultant')]} resultant" if name.endswith("_resultant") else name
         force = f"{name}.activation" not in self.values and name.endswith(("_fx", "_fy", "_resultant"))
-        scale, shown, other = 1.0, unit, ""
+        scale, shown, other = 1.0, f" {unit}" if unit else "", ""
         if force and unit == "N":
-            scale, shown, other = 1.0 / self.body_weight, "BW", f" ({v[i]:.0f} N)"
+            scale, shown, other = 1.0 / self.body_weight, " BW", f" ({v[i]:.0f} N)"
         elif force:
             other = f" ({v[i] * self.body_weight:.0f} N)"
 
@@ -163,13 +163,13 @@ class MuscleBands:
             return f"{x * scale:.3g}"
 
         top = ", ".join(f"{k} {f(x)}" for k, x in self.contributors(name, i) if x > 0)
-        line = (f"{label}: peak {f(v[i])} {shown}{other} at t = {self.t[i]:.3g} s +- {f(b['total'])} {shown} "
+        line = (f"{label}: peak {f(v[i])}{shown}{other} at t = {self.t[i]:.3g} s +- {f(b['total'])}{shown} "
                 f"(muscles {f(b['muscles'])}, anthropometry {f(b['anthropometry'])}, markers {f(b['markers'])}"
                 + (f"; largest {top})" if top else ")"))
         for key, crit in self.criteria.items():
             c, d = crit[name], self.spread[name][key]
             j = int(np.argmax(np.abs(c)))
-            line += (f"; {key[0]}={key[1:]}: peak {f(c[j])} {shown}, max |diff| {f(np.abs(d).max())}, "
+            line += (f"; {key[0]}={key[1:]}: peak {f(c[j])}{shown}, max |diff| {f(np.abs(d).max())}, "
                      f"RMS {f(np.sqrt(np.mean(d ** 2)))}")
         return line
 
@@ -183,7 +183,9 @@ def _check(trial, inputs, z, zd, zdd, uncertainty, criteria) -> None:
         if np.shape(a) != (k, n):
             raise ValueError(f"{name}: expected ({k}, {n}) (the trial's frames, its tree's coordinates), got "
                              f"{np.shape(a)}")
-    if inputs is not None and (inputs.t.size != k or not np.allclose(inputs.t, trial.t)):
+    if inputs is None:
+        raise ValueError("inputs: the inverse's inputs the trial was made from are needed (their bands' settings)")
+    if inputs.t.size != k or not np.allclose(inputs.t, trial.t):
         raise ValueError(f"inputs: their {inputs.t.size} frames are not the trial's {k}: give the inverse inputs "
                          "the trial was made from")
     for p in criteria:
@@ -236,7 +238,7 @@ def muscle_bands(trial, inputs, fit, z: np.ndarray, zd: np.ndarray, zdd: np.ndar
     no such part) and its marker ``fit`` (None: fitted again where the inputs are markers); the spread of the
     exponents ``criteria`` beside the trial's. ValueError in one line for what cannot be honoured."""
     _check(trial, inputs, z, zd, zdd, uncertainty, criteria)
-    spec = inputs.band_spec if spec is None and inputs is not None else spec
+    spec = inputs.band_spec if spec is None else spec
     seconds, report = {}, []
     start = time.perf_counter()
     base = trial.solve(z, zd, zdd)
@@ -279,6 +281,19 @@ def muscle_bands(trial, inputs, fit, z: np.ndarray, zd: np.ndarray, zdd: np.ndar
     bands = {n: {"muscles": musc[n], "anthropometry": anth[n], "markers": mark[n],
                  "total": np.sqrt(musc[n] ** 2 + anth[n] ** 2 + mark[n] ** 2)} for n in names}
     start = time.perf_counter()
+    crit, spread = _criteria(trial, z, zd, zdd, criteria, out0, names)
+    seconds["criteria"] = time.perf_counter() - start
+    if criteria:
+        report.append(f"criteria: static optimization with exponent {', '.join(f'{p:g}' for p in criteria)} beside "
+                      f"{trial.optimization.exponent:g}: a modelling choice, not noise; beside the bands, not in them")
+    bw = trial.reaction.body_weight or GRAVITY * sum(b.mass for b in trial.scene.bodies)
+    return MuscleBands(trial.t, {n: out0[n] for n in names}, output_units(trial), bands, parts, anth_parts, crit,
+                       spread, changed, float(bw), report, seconds)
+
+
+def _criteria(trial, z, zd, zdd, criteria, out0, names):
+    """({"p3": {name: (k,)}}, {name: {"p3": (k,)}}): the outputs with each exponent, and their differences from
+    ``out0``'s."""
     crit, spread = {}, {n: {} for n in names}
     for p in criteria:
         key = f"p{p:g}"
@@ -287,13 +302,7 @@ def muscle_bands(trial, inputs, fit, z: np.ndarray, zd: np.ndarray, zdd: np.ndar
         crit[key] = {n: other[n] for n in names}
         for n in names:
             spread[n][key] = other[n] - out0[n]
-    seconds["criteria"] = time.perf_counter() - start
-    if criteria:
-        report.append(f"criteria: static optimization with exponent {', '.join(f'{p:g}' for p in criteria)} beside "
-                      f"{trial.optimization.exponent:g}: a modelling choice, not noise; beside the bands, not in them")
-    bw = trial.reaction.body_weight or GRAVITY * sum(b.mass for b in trial.scene.bodies)
-    return MuscleBands(trial.t, {n: out0[n] for n in names}, output_units(trial), bands, parts, anth_parts, crit,
-                       spread, changed, float(bw), report, seconds)
+    return crit, spread
 
 
 def _muscle_lines(trial, uncertainty, bend, n_parts, seconds) -> list[str]:
