@@ -84,12 +84,16 @@ def test_two_muscles_bands_are_the_spread_of_a_monte_carlo_over_the_muscle_prior
                                                          for j, p in enumerate(props)})
                               for i, m in enumerate(trial.muscles)))
     draws = [muscle_outputs(trial, o) for o in trial.solve_variants(res.z, res.zd, res.zdd, variants)]
+    checked = muscle_bands(trial, inputs, None, res.z, res.zd, res.zdd, uncertainty=unc, criteria=(), draws=300)
     for name in ("back", "front", "back.activation", "knee_resultant"):
         i = int(np.argmax(np.abs(mb.values[name])))
         spread = np.std([d[name][i] for d in draws], ddof=1)
         band = mb.bands[name]["muscles"][i]
         assert abs(spread / band - 1) < 3 * 0.041, (name, spread, band)
-        assert mb.values["back"].min() > 0 and mb.values["front"].min() > 0  # both carry load everywhere
+        assert abs(checked.monte_carlo[name][i] / band - 1) < 3 * 0.041, name  # the option's own draws
+    assert mb.values["back"].min() > 0 and mb.values["front"].min() > 0  # both carry load everywhere
+    assert any(x.startswith("muscle bands: a Monte Carlo of 300 draws") for x in checked.report)
+    assert "[Monte Carlo " in checked.summary(["back"])[0]
 
 
 def test_one_muscles_marker_band_is_the_markers_chain_through_the_moment_over_the_arm(tmp_path):
@@ -220,10 +224,11 @@ def test_walk_report_and_summary_lines(walk):
     ({"criteria": (0.5,)}, r"criteria: expected exponents >= 1"),
     ({"z": "short"}, r"z: expected \(30, "),
     ({"inputs": None}, r"inputs: the inverse's inputs the trial was made from are needed"),
+    ({"draws": 1}, r"draws: expected 0 \(no Monte Carlo\) or a number of draws >= 2, got 1"),
 ])
 def test_bad_options_are_refused_in_one_line_before_any_work(walk, change, pattern):
     inputs, res, trial, _ = walk
-    kw = {"uncertainty": MuscleUncertainty(max_isometric_force=0.1), "criteria": (3.0,)}
+    kw = {"uncertainty": MuscleUncertainty(max_isometric_force=0.1), "criteria": (3.0,), "draws": 0}
     z = res.z[:-1] if change.get("z") == "short" else res.z
     inputs = change["inputs"] if "inputs" in change else inputs
     kw |= {k: v for k, v in change.items() if k in kw}

@@ -51,7 +51,7 @@ from casflex.inverse.bands import anthropometry, marker_part, rigid_load_functio
 from casflex.muscles.options import MuscleUncertainty
 from casflex.muscles.static_optimization import AT_BOUND
 
-__all__ = ["MuscleBands", "muscle_bands", "muscle_outputs", "output_units"]
+__all__ = ["MuscleBands", "monte_carlo", "muscle_bands", "muscle_outputs", "output_units"]
 
 #: m/s^2: a body weight is the model's mass times this (N)
 GRAVITY = 9.81
@@ -118,7 +118,8 @@ class MuscleBands:
     property moves by +SD (the anthropometry's: ``anthropometry_parts``, by target); criteria: "p3" -> name ->
     (k,) the outputs with that exponent; spread: name -> "p3" -> (k,) their difference from ``values``;
     changed: source -> (k,) bool the frames whose active set changed between +h and -h; body_weight N; report:
-    what was done, one line each; seconds: source -> wall time."""
+    what was done, one line each; seconds: source -> wall time; monte_carlo: name -> (k,) the muscles' part by a
+    Monte Carlo where asked (``draws``)."""
 
     t: np.ndarray
     values: dict[str, np.ndarray]
@@ -132,6 +133,7 @@ class MuscleBands:
     body_weight: float
     report: list[str] = field(default_factory=list)
     seconds: dict[str, float] = field(default_factory=dict)
+    monte_carlo: dict[str, np.ndarray] = field(default_factory=dict)
 
     def contributors(self, name: str, frame: int, n: int = 3) -> list[tuple[str, float]]:
         """The ``n`` muscle properties whose parts are largest in ``name`` at ``frame``: (property, |part|)."""
@@ -164,7 +166,9 @@ class MuscleBands:
 
         top = ", ".join(f"{k} {f(x)}" for k, x in self.contributors(name, i) if x > 0)
         line = (f"{label}: peak {f(v[i])}{shown}{other} at t = {self.t[i]:.3g} s +- {f(b['total'])}{shown} "
-                f"(muscles {f(b['muscles'])}, anthropometry {f(b['anthropometry'])}, markers {f(b['markers'])}"
+                f"(muscles {f(b['muscles'])}"
+                + (f" [Monte Carlo {f(self.monte_carlo[name][i])}]" if self.monte_carlo else "")
+                + f", anthropometry {f(b['anthropometry'])}, markers {f(b['markers'])}"
                 + (f"; largest {top})" if top else ")"))
         for key, crit in self.criteria.items():
             c, d = crit[name], self.spread[name][key]
@@ -174,8 +178,10 @@ class MuscleBands:
         return line
 
 
-def _check(trial, inputs, z, zd, zdd, uncertainty, criteria) -> None:
+def _check(trial, inputs, z, zd, zdd, uncertainty, criteria, draws) -> None:
     """ValueError in one line for what cannot be honoured, before any work."""
+    if isinstance(draws, bool) or not isinstance(draws, int) or draws < 0 or draws == 1:
+        raise ValueError(f"draws: expected 0 (no Monte Carlo) or a number of draws >= 2, got {draws!r}")
     if not isinstance(uncertainty, MuscleUncertainty):
         raise ValueError(f"uncertainty: expected a MuscleUncertainty (relative SDs), got {type(uncertainty).__name__}")
     k, n = trial.t.size, trial.tree.n
@@ -220,6 +226,24 @@ def _muscle_parts(trial, z, zd, zdd, uncertainty, base, base_out):
     return parts, bend
 
 
+def monte_carlo(trial, z: np.ndarray, zd: np.ndarray, zdd: np.ndarray, uncertainty: MuscleUncertainty,
+                draws: int, seed: int = 0) -> dict[str, np.ndarray]:
+    """name -> (k,): each output's standard deviation over ``draws`` draws of every declared muscle property from
+    its prior (normal, independent), each draw solved (on the nominal solution's active set where it holds): the
+    check of the muscles' first-order part where the outputs are far from linear (relative standard error of an
+    SD from n draws: 1 / sqrt(2 (n - 1)))."""
+    rng = np.random.default_rng(seed)
+    base = trial.solve(z, zd, zdd)
+    variants = []
+    for _ in range(int(draws)):
+        x = rng.standard_normal((len(trial.muscles), len(uncertainty.declared)))
+        variants.append(tuple(dataclasses.replace(m, **{p: getattr(m, p) * (1.0 + sd * x[i, j])
+                                                       for j, (p, sd) in enumerate(uncertainty.declared)})
+                              for i, m in enumerate(trial.muscles)))
+    outs = [muscle_outputs(trial, o) for o in trial.solve_variants(z, zd, zdd, variants, near=base)]
+    return {n: np.std([o[n] for o in outs], axis=0, ddof=1) for n in outs[0]} if outs else {}
+
+
 def _fit(inputs):
     """The inverse's marker fit again (:func:`casflex.inverse.solve` does not keep it), None where given."""
     from casflex.inverse.fit import fit_markers
@@ -231,13 +255,16 @@ def _fit(inputs):
 
 
 def muscle_bands(trial, inputs, fit, z: np.ndarray, zd: np.ndarray, zdd: np.ndarray, *,
-                 uncertainty: MuscleUncertainty, criteria=(3.0,), spec=None) -> MuscleBands:
+                 uncertainty: MuscleUncertainty, criteria=(3.0,), spec=None, draws: int = 0,
+                 seed: int = 0) -> MuscleBands:
     """The bands of ``trial``'s outputs (module docstring) at its filtered coordinates z, z', z'' (k, n_z), from
     the declared muscle ``uncertainty``, the inverse's ``inputs`` (:class:`~casflex.inverse.inputs.InverseInputs`;
     its ``band_spec``, or ``spec``, gives the anthropometry's uncertain properties and the markers' noise: none,
     no such part) and its marker ``fit`` (None: fitted again where the inputs are markers); the spread of the
-    exponents ``criteria`` beside the trial's. ValueError in one line for what cannot be honoured."""
-    _check(trial, inputs, z, zd, zdd, uncertainty, criteria)
+    exponents ``criteria`` beside the trial's; ``draws`` > 0: the muscles' part checked by a Monte Carlo of that
+    many draws (:func:`monte_carlo`, ``MuscleBands.monte_carlo``). ValueError in one line for what cannot be
+    honoured."""
+    _check(trial, inputs, z, zd, zdd, uncertainty, criteria, draws)
     spec = inputs.band_spec if spec is None else spec
     seconds, report = {}, []
     start = time.perf_counter()
@@ -281,6 +308,11 @@ def muscle_bands(trial, inputs, fit, z: np.ndarray, zd: np.ndarray, zdd: np.ndar
     bands = {n: {"muscles": musc[n], "anthropometry": anth[n], "markers": mark[n],
                  "total": np.sqrt(musc[n] ** 2 + anth[n] ** 2 + mark[n] ** 2)} for n in names}
     start = time.perf_counter()
+    mc = monte_carlo(trial, z, zd, zdd, uncertainty, draws, seed) if draws and uncertainty.declared else {}
+    if mc:
+        seconds["monte_carlo"] = time.perf_counter() - start
+        report.append(_monte_carlo_line(names, out0, musc, mc, draws))
+    start = time.perf_counter()
     crit, spread = _criteria(trial, z, zd, zdd, criteria, out0, names)
     seconds["criteria"] = time.perf_counter() - start
     if criteria:
@@ -288,7 +320,7 @@ def muscle_bands(trial, inputs, fit, z: np.ndarray, zd: np.ndarray, zdd: np.ndar
                       f"{trial.optimization.exponent:g}: a modelling choice, not noise; beside the bands, not in them")
     bw = trial.reaction.body_weight or GRAVITY * sum(b.mass for b in trial.scene.bodies)
     return MuscleBands(trial.t, {n: out0[n] for n in names}, output_units(trial), bands, parts, anth_parts, crit,
-                       spread, changed, float(bw), report, seconds)
+                       spread, changed, float(bw), report, seconds, {n: mc[n] for n in names} if mc else {})
 
 
 def _criteria(trial, z, zd, zdd, criteria, out0, names):
@@ -314,6 +346,19 @@ def _muscle_lines(trial, uncertainty, bend, n_parts, seconds) -> list[str]:
             f" ({n_parts} properties, {2 * n_parts} problems of {trial.t.size} frames, {seconds:.1f} s); the "
             f"outputs' largest second difference over their first (0: linear; past 0.1 the band is a secant, "
             f"not a derivative): {far}"]
+
+
+def _monte_carlo_line(names, values, first, mc, draws: int) -> str:
+    """The Monte Carlo's SD over the first-order part at each output's peak: the range of the ratios."""
+    ratios = []
+    for n in names:
+        i = int(np.argmax(np.abs(values[n])))
+        if first[n][i] > 0:
+            ratios.append((mc[n][i] / first[n][i], n))
+    lo, hi = min(ratios), max(ratios)
+    return (f"muscle bands: a Monte Carlo of {draws} draws of the muscle properties (relative SE of an SD "
+            f"{1 / np.sqrt(2 * (draws - 1)):.0%}): its SD over the first-order part at each output's peak "
+            f"{lo[0]:.2f} ({lo[1]}) to {hi[0]:.2f} ({hi[1]})")
 
 
 def _changed_line(changed: dict[str, np.ndarray], k: int) -> str:
