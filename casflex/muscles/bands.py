@@ -349,15 +349,16 @@ def _muscle_lines(trial, uncertainty, bend, n_parts, seconds) -> list[str]:
 
 
 def _monte_carlo_line(names, values, first, mc, draws: int) -> str:
-    """The Monte Carlo's SD over the first-order part at each output's peak: the range of the ratios."""
+    """The Monte Carlo's SD over the first-order part at each force's peak (the muscles' and the reactions'
+    resultants: a pin's moment is its reserve's, near 0): the range of the ratios."""
     ratios = []
-    for n in names:
+    for n in (n for n in names if n.endswith("_resultant") or f"{n}.activation" in names):
         i = int(np.argmax(np.abs(values[n])))
         if first[n][i] > 0:
             ratios.append((mc[n][i] / first[n][i], n))
     lo, hi = min(ratios), max(ratios)
     return (f"muscle bands: a Monte Carlo of {draws} draws of the muscle properties (relative SE of an SD "
-            f"{1 / np.sqrt(2 * (draws - 1)):.0%}): its SD over the first-order part at each output's peak "
+            f"{1 / np.sqrt(2 * (draws - 1)):.0%}): its SD over the first-order part at each force's peak "
             f"{lo[0]:.2f} ({lo[1]}) to {hi[0]:.2f} ({hi[1]})")
 
 
