@@ -34,7 +34,7 @@ from casflex.inverse.rigid import rigid_loads
 from casflex.inverse.tree import KinematicTree, kinematic_tree
 from casflex.model import Model
 
-__all__ = ["BandError", "BandSpec", "anthropometry", "band_spec", "inverse_bands"]
+__all__ = ["BandError", "BandSpec", "anthropometry", "band_spec", "inverse_bands", "marker_part"]
 
 #: rigid_loads' outputs that are the motion, not loads
 _MOTION = ("q", "qd", "qdd", "lam")
@@ -126,14 +126,16 @@ def rigid_load_function(tree: KinematicTree, t: np.ndarray, plates, p: np.ndarra
 
 
 def anthropometry(spec: BandSpec, t: np.ndarray, z: np.ndarray, zd: np.ndarray, zdd: np.ndarray,
-                  plates=()) -> tuple[dict[str, dict[str, np.ndarray]], dict[str, float]]:
+                  plates=(), function=None) -> tuple[dict[str, dict[str, np.ndarray]], dict[str, float]]:
     """({target: {load: (k,)}}, {target: bend}): the change of every load (N, N m) at the frames t (k,) when each
     uncertain property moves by its standard deviation, by central differences at the coordinates z, z', z''
     (k, n_z); ``bend``: the largest second difference over the largest first (round-off, ~1e-15, where the loads
-    are linear in the property)."""
+    are linear in the property). ``function(z, zd, zdd, p) -> {name: (k,)}``: the outputs differenced, any
+    function of each frame's coordinates and of the properties p of ``spec.model`` (default the rigid inverse's
+    loads: :func:`rigid_load_function`, with the ``plates``; the muscles' outputs: :mod:`casflex.muscles.bands`)."""
     p0 = spec.model.p_nominal
-    loads = rigid_load_function(spec.tree, t, plates, p0)
-    base = loads(z, zd, zdd)
+    loads = rigid_load_function(spec.tree, t, plates, p0) if function is None else function
+    base = loads(z, zd, zdd, p0)
     parts, bend = {}, {}
     for j, target, sd in zip(spec.index, spec.targets, spec.sd, strict=True):
         dp = np.zeros_like(p0)
@@ -159,18 +161,34 @@ def _anthropometry_lines(spec: BandSpec, bend: dict[str, float]) -> list[str]:
 
 
 def inverse_bands(spec: BandSpec, inputs, fit, z: np.ndarray, zd: np.ndarray, zdd: np.ndarray,
-                  names: list[str]) -> tuple[dict, dict, list[str], dict]:
+                  names: list[str], function=None) -> tuple[dict, dict, list[str], dict]:
     """The bands of the loads ``names`` of an inverse run (module docstring): (bands {load: {"anthropometry",
     "markers", "total": (k,)}}, parts {target: {load: (k,)}}, report lines, settings), from its checked
     ``inputs`` (:class:`~casflex.inverse.inputs.InverseInputs`), its marker ``fit`` and its filtered coordinates
-    z, z', z'' (k, n_z)."""
-    from casflex.inverse.marker_band import fit_covariances, load_jacobians, marker_band, residual_noise
-
+    z, z', z'' (k, n_z); ``function(z, zd, zdd, p) -> {name: (k,)}``: the outputs, as :func:`anthropometry`'s
+    (default the rigid inverse's loads)."""
     t, plates = inputs.t, inputs.plates
-    parts, bend = anthropometry(spec, t, z, zd, zdd, plates)
+    parts, bend = anthropometry(spec, t, z, zd, zdd, plates, function)
     lines = _anthropometry_lines(spec, bend)
     anth = {k: np.sqrt(sum(parts[g][k] ** 2 for g in parts)) if parts else np.zeros(t.size) for k in names}
     settings = spec.describe()
+    outputs = None if function is None else (lambda z, zd, zdd: function(z, zd, zdd, spec.model.p_nominal))
+    mark, more, noise = marker_part(spec, inputs, fit, z, zd, zdd, names, outputs)
+    lines += more
+    settings |= noise
+    bands = {k: {"anthropometry": anth[k], "markers": mark[k], "total": np.hypot(anth[k], mark[k])} for k in names}
+    return bands, parts, lines, settings
+
+
+def marker_part(spec: BandSpec, inputs, fit, z: np.ndarray, zd: np.ndarray, zdd: np.ndarray, names: list[str],
+                outputs=None, step: float = 1e-5) -> tuple[dict[str, np.ndarray], list[str], dict]:
+    """({name: (k,)}, report lines, settings): the markers' part of the bands of ``outputs(z, zd, zdd) ->
+    {name: (k,)}`` (default the rigid inverse's loads) (module docstring; 0 where the coordinates were given or
+    the markers declared exact), differenced by ``step`` along z (:func:`~.marker_band.load_jacobians`)."""
+    from casflex.inverse.marker_band import fit_covariances, load_jacobians, marker_band, residual_noise
+
+    t, plates = inputs.t, inputs.plates
+    lines, settings = [], {}
     if spec.given or spec.marker_noise == 0:
         mark = {k: np.zeros(t.size) for k in names}
         why = "the coordinates were given, their noise is not known" if spec.given else \
@@ -180,12 +198,13 @@ def inverse_bands(spec: BandSpec, inputs, fit, z: np.ndarray, zd: np.ndarray, zd
         declared = spec.marker_noise is not None
         sigma = spec.marker_noise if declared else residual_noise(inputs.tree, fit)
         C = fit_covariances(inputs.tree, fit, inputs.y, sigma)
-        D = load_jacobians(rigid_load_function(inputs.tree, t, plates, inputs.model.p_nominal), z, zd, zdd, names)
+        if outputs is None:
+            outputs = rigid_load_function(inputs.tree, t, plates, inputs.model.p_nominal)
+        D = load_jacobians(outputs, z, zd, zdd, names, step=step)
         sd = marker_band(t, np.isfinite(fit.rms), C, D, inputs.cutoff, inputs.settings.get("filter", "butterworth"))
         mark = {k: sd[:, i] for i, k in enumerate(names)}
-        settings |= {"marker_noise_m": sigma, "marker_noise_from": "declared" if declared else "residuals"}
+        settings = {"marker_noise_m": sigma, "marker_noise_from": "declared" if declared else "residuals"}
         source = "declared" if declared else "the fit's residuals"
         lines.append(f"bands: markers' noise {1e3 * sigma:.2f} mm per axis ({source}; white, independent between "
                      "markers and frames) through the fit, the filter and the loads, to first order")
-    bands = {k: {"anthropometry": anth[k], "markers": mark[k], "total": np.hypot(anth[k], mark[k])} for k in names}
-    return bands, parts, lines, settings
+    return mark, lines, settings

@@ -98,17 +98,19 @@ def fit_covariances(tree: KinematicTree, fit: FittedMotion, y: np.ndarray, sigma
 
 
 def load_jacobians(loads: Callable[[np.ndarray, np.ndarray, np.ndarray], dict[str, np.ndarray]],
-                   z: np.ndarray, zd: np.ndarray, zdd: np.ndarray, names: list[str]) -> np.ndarray:
+                   z: np.ndarray, zd: np.ndarray, zdd: np.ndarray, names: list[str], step: float = 1e-5
+                   ) -> np.ndarray:
     """D (3, n, n_loads, n_z): the derivatives of the loads ``names`` (N, N m) at each frame along z, z', z''
     (n, n_z) each, by central differences of ``loads(z, zd, zdd) -> {name: (n,)}`` (every frame moved at once:
-    a frame's loads depend on its own coordinates only). Steps: 1e-5 along z (m, rad; error ~1e-10 relative),
-    1e-3 of the coordinate's scale along z' and z'' (the loads are quadratic and linear in them: exact)."""
+    a frame's loads depend on its own coordinates only). Steps: ``step`` along z (m, rad; 1e-5: error ~1e-10
+    relative for the loads), 1e-3 of the coordinate's scale along z' and z'' (the loads are quadratic and linear
+    in them: exact). Any per-frame function of (z, z', z'') will do (the muscles': :mod:`casflex.muscles.bands`)."""
     n, nz = z.shape
     D = np.zeros((3, n, len(names), nz))
     base = (z, zd, zdd)
     for a in range(3):
         for c in range(nz):
-            h = 1e-5 if a == 0 else 1e-3 * max(1.0, float(np.sqrt(np.mean(base[a][:, c] ** 2))))
+            h = step if a == 0 else 1e-3 * max(1.0, float(np.sqrt(np.mean(base[a][:, c] ** 2))))
             moved = []
             for sign in (1.0, -1.0):
                 args = [x.copy() for x in base]

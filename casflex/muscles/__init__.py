@@ -9,7 +9,9 @@ The data flow (docs/muscles.md):
 4. the activations that carry the inverse dynamics' joint moments at least cost (static optimization,
    :mod:`casflex.muscles.static_optimization`);
 5. the force and moment each joint bears: the net intersegmental load plus every muscle crossing it
-   (:mod:`casflex.muscles.reaction`).
+   (:mod:`casflex.muscles.reaction`); a trial end to end: :mod:`casflex.muscles.analysis`;
+6. each output's band, one standard deviation, from the muscles' uncertain properties, the anthropometry and the
+   markers' noise, and beside it the spread between static optimization's criteria (:mod:`casflex.muscles.bands`).
 
 :func:`muscle_analysis` runs them on a lab trial; :mod:`casflex.muscles.analysis` is the same frame by frame.
 """

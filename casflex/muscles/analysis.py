@@ -153,19 +153,34 @@ class TrialMuscles:
         return np.column_stack(act), np.column_stack(pas)
 
     def solve(self, z: np.ndarray, zd: np.ndarray, zdd: np.ndarray, p: np.ndarray | None = None, muscles=None,
-              optimization: StaticOptimization | None = None) -> FrameOutputs:
+              optimization: StaticOptimization | None = None, loads: dict[str, np.ndarray] | None = None,
+              near: FrameOutputs | None = None) -> FrameOutputs:
         """The outputs at the frames' coordinates z, z', z'' (k, n_z), with the model's properties p (default its
         nominal ones), ``muscles`` (default the model's: the bands pass perturbed copies) and ``optimization``
-        (default the trial's: the criteria's spread passes another exponent)."""
+        (default the trial's: the criteria's spread passes another exponent); ``loads``: the inverse's loads at
+        those frames (name -> (k,), N, N m) when computed elsewhere (the bands': by a model whose uncertain
+        properties are parameters), instead of the trial's rigid inverse at p; ``near``: :meth:`solve_variants`'."""
+        return self.solve_variants(z, zd, zdd, [muscles or self.muscles], p, optimization, loads, near)[0]
+
+    def solve_variants(self, z: np.ndarray, zd: np.ndarray, zdd: np.ndarray, variants, p: np.ndarray | None = None,
+                       optimization: StaticOptimization | None = None, loads: dict[str, np.ndarray] | None = None,
+                       near: FrameOutputs | None = None) -> list[FrameOutputs]:
+        """:meth:`solve` for each of ``variants`` (each a tuple of muscles, the model's with some properties
+        changed: the bands'), at once: the loads, paths and reaction geometry computed once, the forces at full
+        activation only of the muscles that differ from the model's (one variant per solve of static
+        optimization: the walk's 108 variants stacked as one problem took 22 s, solved one by one 15 s);
+        ``near``: the outputs of nearby inputs at the same frames (the bands' perturbations): with p = 2 each
+        variant's frames are solved on their active set, the QP only where it changed (3 s for those 108:
+        :func:`~casflex.muscles.static_optimization.solve_static_optimization`'s ``near``)."""
         options = optimization or self.optimization
-        muscles = muscles or self.muscles
         p = self.tree.model.p_nominal if p is None else p
-        loads = rigid_load_function(self.tree, self.t, self.plates, p)(z, zd, zdd)
+        loads = rigid_load_function(self.tree, self.t, self.plates, p)(z, zd, zdd) if loads is None else loads
         geo = self.paths.evaluate(z, zd)
         cols = [list(self.scene.coordinates).index(c) for c in self.joint_coordinates]
         arms = geo["moment_arms"][:, :, cols]
         moments = np.column_stack([loads[lab_name(c)] for c in self.joint_coordinates])
-        active, passive = self.capacity(geo["lengths"], geo["speeds"], muscles)
+        active0, passive0 = self.capacity(geo["lengths"], geo["speeds"])
+        capacity = [self._capacity_of(v, geo, active0, passive0) for v in variants]
         reserves = np.array([self.reserves[c.name].optimal_force if c.name in self.reserves else 0.0
                              for c in self.joint_coordinates])
         bare = [c.name for i, c in enumerate(self.joint_coordinates)
@@ -173,11 +188,28 @@ class TrialMuscles:
         if bare:
             raise ValueError(f"{', '.join(bare)}: no muscle crosses it and no reserve acts on it: its moment has "
                              "nothing to carry it; give reserves (an actuator file, or --reserves / actuators=N)")
-        so = solve_static_optimization(moments, arms, active, passive, reserves, options,
-                                       max_isometric=[m.max_isometric_force for m in muscles],
-                                       coordinates=[c.name for c in self.joint_coordinates])
-        return FrameOutputs(so, self._residuals(loads, z), self._reactions(loads, z, so.forces), geo["lengths"],
-                            geo["speeds"], arms, active, passive, moments)
+        names = [c.name for c in self.joint_coordinates]
+        sos = [solve_static_optimization(moments, arms, a, ps, reserves, options, coordinates=names,
+                                         max_isometric=[m.max_isometric_force for m in v],
+                                         near=None if near is None else near.so)
+               for v, (a, ps) in zip(variants, capacity, strict=True)]
+        residuals, geometry = self._residuals(loads, z), self._reaction_geometry(z)
+        out = []
+        for s, (active, passive) in zip(sos, capacity, strict=True):
+            out.append(FrameOutputs(s, residuals, self._reactions(loads, geometry, s.forces), geo["lengths"],
+                                    geo["speeds"], arms, active, passive, moments))
+        return out
+
+    def _capacity_of(self, muscles, geo, active0, passive0) -> tuple[np.ndarray, np.ndarray]:
+        """(active, passive) (k, n_m) of ``muscles``: the model's (``active0``, ``passive0``) but in the columns
+        of the muscles that differ from the model's."""
+        if len(muscles) != len(self.muscles):
+            raise ValueError(f"muscles: expected {len(self.muscles)} (the model's), got {len(muscles)}")
+        active, passive = active0.copy(), passive0.copy()
+        for i, (m, m0) in enumerate(zip(muscles, self.muscles, strict=True)):
+            if m is not m0 and m != m0:
+                active[:, i], passive[:, i] = rigid_tendon(m, geo["lengths"][:, i], geo["speeds"][:, i])
+        return active, passive
 
     def _residuals(self, loads: dict[str, np.ndarray], z: np.ndarray) -> np.ndarray:
         """(k, n_r): the residual actuators' controls that carry the root's loads at least cost (sum u^2: the
@@ -190,8 +222,9 @@ class TrialMuscles:
         tau = np.column_stack([loads[lab_name(c)] for c in self.root_coordinates])
         return np.stack([np.linalg.lstsq(A[i], tau[i], rcond=None)[0] for i in range(k)])
 
-    def _reactions(self, loads: dict[str, np.ndarray], z: np.ndarray, forces: np.ndarray) -> dict[str, JointReactions]:
-        """joint -> its reaction (:func:`casflex.muscles.reaction.joint_reactions`) with the muscles' ``forces``."""
+    def _reaction_geometry(self, z: np.ndarray) -> dict[str, tuple]:
+        """joint -> (unit (k, 3, n_m), lever (k, 1, 2), child and parent angles (k, 1), offset (k, 1, 2) or None):
+        what its reaction takes from the frames' coordinates (:func:`casflex.muscles.reaction.joint_reactions`)."""
         k, n_m = z.shape[0], len(self.muscles)
         unit = np.array(self.paths.unit_loads.map(k)(z.T)).reshape(-1, n_m, k, order="F").transpose(2, 0, 1)
         slide = np.array(self._slide.map(k)(z.T)).reshape(2, -1, k, order="F").transpose(2, 1, 0)
@@ -199,12 +232,20 @@ class TrialMuscles:
         out = {}
         for h in self.joints:
             i = self.tree.hinges.index(h)
-            net = np.column_stack([loads[f"{h}.fx"], loads[f"{h}.fy"], loads[f"{h}.moment"]])[:, None, :]
             parent, child, origin = self.osim.joint_frames[h]
             angles = {s: self._body_angle(body, q)[:, None] for s, body in (("parent", parent), ("child", child))}
             offset = self._offset(h, parent, origin, q, k) if self.reaction.on == "parent" else None
-            out[h] = joint_reactions(net, unit[:, 3 * i:3 * i + 3, :], forces, angles["child"], angles["parent"],
-                                     self.reaction, lever=slide[:, i:i + 1, :], offset=offset)
+            out[h] = (unit[:, 3 * i:3 * i + 3, :], slide[:, i:i + 1, :], angles["child"], angles["parent"], offset)
+        return out
+
+    def _reactions(self, loads: dict[str, np.ndarray], geometry: dict[str, tuple], forces: np.ndarray
+                   ) -> dict[str, JointReactions]:
+        """joint -> its reaction (:func:`casflex.muscles.reaction.joint_reactions`) with the muscles' ``forces``,
+        the frames' ``geometry`` (:meth:`_reaction_geometry`)."""
+        out = {}
+        for h, (unit, lever, child, parent, offset) in geometry.items():
+            net = np.column_stack([loads[f"{h}.fx"], loads[f"{h}.fy"], loads[f"{h}.moment"]])[:, None, :]
+            out[h] = joint_reactions(net, unit, forces, child, parent, self.reaction, lever=lever, offset=offset)
         return out
 
     def _node_pose(self, body: str, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -172,7 +172,8 @@ def _check(moments, arms, active, passive, reserves, coordinates):
 
 def solve_static_optimization(moments, arms, active, passive=None, reserves=None,
                               options: StaticOptimization | None = None, *, max_isometric=None,
-                              coordinates: Sequence[str] | None = None) -> StaticOptimizationResult:
+                              coordinates: Sequence[str] | None = None,
+                              near: StaticOptimizationResult | None = None) -> StaticOptimizationResult:
     """Static optimization of k frames (module docstring).
 
     moments (k, n_c) N m (N on a translation): the generalized forces the muscles and reserves must carry (the
@@ -180,7 +181,9 @@ def solve_static_optimization(moments, arms, active, passive=None, reserves=None
     active (k, n_m) N: each muscle's active force at full activation along the tendon; passive (k, n_m) N: its
     passive fibre force along the tendon (used only with ``options.passive``); reserves (n_c,) N m: each
     coordinate's reserve optimal force (0 or None: no reserve); max_isometric (n_m,) N: the forces per unit
-    activation when ``options.force_length_velocity`` is False; coordinates: names for the report.
+    activation when ``options.force_length_velocity`` is False; coordinates: names for the report; near: the
+    result of nearby inputs with the same frames (the bands' perturbations): with p = 2, each frame solved on its
+    active set (:func:`_on_active_set`), the QP only for the frames where that set changed.
     """
     import time
 
@@ -194,6 +197,22 @@ def solve_static_optimization(moments, arms, active, passive=None, reserves=None
     target = m - np.einsum("kmc,km->kc", arms, passive) if options.passive else m
     start = time.perf_counter()
     problem = _Problem(arms, active, r, target, options)
+    if near is not None and options.exponent == 2.0 and near.activations.shape == (k, n_m):
+        x, kept = _on_active_set(problem, target, near)
+        infeasible = ()
+        if not kept.all():  # the frames whose active set changed: the QP
+            sub = solve_static_optimization(moments[~kept], arms[~kept], active[~kept], passive[~kept], r, options,
+                                            coordinates=names)
+            v = x.reshape(k, problem.n_v)
+            v[~kept, :n_m] = sub.activations
+            u = sub.reserve_controls[:, problem.held]
+            v[~kept, n_m:] = np.concatenate([np.maximum(u, 0.0), np.maximum(-u, 0.0)], axis=1)
+            x = v.ravel()
+            frames = np.flatnonzero(~kept)
+            infeasible = tuple((int(frames[f]), c, s) for f, c, s in sub.infeasible)
+        report = _report(infeasible, len(infeasible), target, names) if infeasible else ""
+        return _result(problem, x, target, infeasible, report, passive, options, -1, time.perf_counter() - start,
+                       {"kept": kept})
     x, iterations, ok, stats = problem.solve(target)
     short, infeasible = np.zeros((k, n_c)), ()
     if not ok:
@@ -209,6 +228,47 @@ def solve_static_optimization(moments, arms, active, passive=None, reserves=None
     report = _report(infeasible, len(infeasible), target, names) if infeasible else ""
     return _result(problem, x, target, infeasible, report, passive, options, iterations,
                    time.perf_counter() - start, stats)
+
+
+#: An activation within this of a bound in the nearby solution is taken as held there (the QP's are within 4e-8
+#: of theirs on the walk, its free ones 6e-5 or more away).
+AT_BOUND = 1e-6
+
+
+def _on_active_set(problem: _Problem, target: np.ndarray, near: StaticOptimizationResult
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """(x, kept (k,)): each frame of p = 2 solved on ``near``'s active set: its activations within
+    :data:`AT_BOUND` of a bound held there, the others (and the reserves, within theirs) the least-norm solution
+    of the balance, exact; ``kept`` where that is the optimum (the balance met, the free unknowns within their
+    bounds, the held ones' reduced gradients of the sign that keeps them there; to 1e-9)."""
+    k, n_m, n_c = problem.arms.shape
+    lo, hi = problem.options.activation_bounds
+    n_r = problem.held.size
+    G = np.zeros((k, n_c, n_m + n_r))
+    G[:, :, :n_m] = np.einsum("kmc,km->kcm", problem.arms, problem.active)
+    G[:, problem.held, n_m + np.arange(n_r)] = problem.reserves[problem.held]
+    a0 = near.activations
+    fixed = np.zeros((k, n_m + n_r))
+    held = np.zeros((k, n_m + n_r), dtype=bool)
+    held[:, :n_m] = (a0 <= lo + AT_BOUND) | (a0 >= hi - AT_BOUND)
+    fixed[:, :n_m] = np.where(a0 <= lo + AT_BOUND, lo, hi) * held[:, :n_m]
+    rest = target - np.einsum("kcv,kv->kc", G, fixed)
+    Gf = np.where(held[:, None, :], 0.0, G)
+    pinv = np.linalg.pinv(Gf)
+    v = fixed + np.einsum("kvc,kc->kv", pinv, rest)
+    lam = -2.0 * np.einsum("kcv,kv->kc", pinv.transpose(0, 2, 1), np.where(held, 0.0, v))
+    grad = 2.0 * v + np.einsum("kcv,kc->kv", G, lam)
+    rlo, rhi = problem.options.reserve_bounds
+    low = np.r_[np.full(n_m, lo), np.full(n_r, rlo)]
+    high = np.r_[np.full(n_m, hi), np.full(n_r, rhi)]
+    tol = 1e-9
+    balance = np.abs(np.einsum("kcv,kv->kc", G, v) - target) <= tol * problem.scale
+    inside = (v >= low - tol) & (v <= high + tol)
+    sign = np.where(held & (v <= lo + AT_BOUND), grad >= -tol, True) & np.where(held & (v >= hi - AT_BOUND),
+                                                                                grad <= tol, True)
+    kept = balance.all(axis=1) & (inside | held).all(axis=1) & sign.all(axis=1)
+    x = np.concatenate([v[:, :n_m], np.maximum(v[:, n_m:], 0.0), np.maximum(-v[:, n_m:], 0.0)], axis=1)
+    return x.ravel(), kept
 
 
 def _infeasible(short: np.ndarray, names, tol: np.ndarray) -> tuple[tuple[int, str, float], ...]:
