@@ -22,6 +22,34 @@ def _bounds(text: str) -> tuple[float, float]:
         raise argparse.ArgumentTypeError(f"expected LOWER:UPPER (e.g. 0.01:1), got {text!r}") from None
 
 
+def _uncertainty(args: argparse.Namespace):
+    """The muscles' declared uncertainty (:class:`~casflex.muscles.options.MuscleUncertainty`) of
+    --muscle-uncertainty, or None."""
+    from casflex.muscles.options import UNCERTAIN_PROPERTIES, MuscleUncertainty
+
+    given = {}
+    for text in args.muscle_uncertainty or []:
+        prop, sep, value = text.partition("=")
+        prop = prop.strip()
+        if not sep or prop not in UNCERTAIN_PROPERTIES:
+            raise OptionError(f"--muscle-uncertainty: expected PROPERTY=P% with PROPERTY one of "
+                              f"{', '.join(UNCERTAIN_PROPERTIES)}, got {text!r}")
+        try:
+            v = float(value.strip().removesuffix("%")) / (100.0 if value.strip().endswith("%") else 1.0)
+        except ValueError:
+            raise OptionError(f"--muscle-uncertainty: {prop}: expected a relative SD (10% or 0.1), got {value!r}") \
+                from None
+        if prop in given:
+            raise OptionError(f"--muscle-uncertainty: {prop} given twice")
+        given[prop] = v
+    if not given:
+        return None
+    try:
+        return MuscleUncertainty(**given)
+    except ValueError as exc:
+        raise OptionError(f"--muscle-uncertainty: {exc}") from None
+
+
 def _options(args: argparse.Namespace):
     """(StaticOptimization, JointReaction, joints) from the command's options, each checked by its value."""
     from casflex.muscles.reaction import JointReaction
@@ -56,8 +84,14 @@ def cmd_muscles(args: argparse.Namespace, outputs: Outputs) -> int:
         raise OptionError(f"model: expected an OpenSim model (.osim) with its muscles, got {args.model!r}")
     chosen = inverse_options(args)
     optimization, reaction, joints = _options(args)
+    uncertainty = _uncertainty(args)
+    criteria = tuple(args.criteria or ())
+    if any(not (p >= 1.0) or p == optimization.exponent for p in criteria):
+        raise OptionError(f"--criteria: expected exponents >= 1 other than --exponent ({optimization.exponent:g}), "
+                          f"got {' '.join(f'{p:g}' for p in criteria)}")
+    banded = uncertainty is not None or chosen["bands"].asked or args.uncertain or args.marker_noise is not None
     name = args.name or os.path.splitext(os.path.basename(args.data or args.coordinates))[0]
-    out = outputs.directory("--out", args.out, file_names(name))
+    out = outputs.directory("--out", args.out, file_names(name, bool(banded)))
     plots = None
     if args.plots is not None:
         from casflex.plotting.muscles import FIGURES
@@ -78,6 +112,8 @@ def cmd_muscles(args: argparse.Namespace, outputs: Outputs) -> int:
     frames = trial.solve(res.z, res.zd, res.zdd)
     result = muscle_result(trial, frames, res.z, report=(*trial.notes, *_so_lines(frames)),
                            settings={"model": args.model, "trial": args.data or args.coordinates})
+    if banded:
+        result = _with_bands(result, trial, inputs, res, uncertainty, criteria or (3.0,), args.draws)
     print(result.summary())
     result.save(out, name)
     if plots is not None:
@@ -85,6 +121,21 @@ def cmd_muscles(args: argparse.Namespace, outputs: Outputs) -> int:
 
         save_muscle_figures(result, plots)
     return 0
+
+
+def _with_bands(result, trial, inputs, res, uncertainty, criteria, draws):
+    """``result`` with its outputs' bands and the criteria's spread (:func:`casflex.muscles.bands.muscle_bands`)."""
+    import dataclasses
+
+    from casflex.muscles.bands import muscle_bands
+    from casflex.muscles.options import MuscleUncertainty
+
+    mb = muscle_bands(trial, inputs, None, res.z, res.zd, res.zdd, uncertainty=uncertainty or MuscleUncertainty(),
+                      criteria=criteria, draws="auto" if draws is None else draws)
+    key = next(iter(mb.criteria), None)
+    return dataclasses.replace(result, bands={n: b["total"] for n, b in mb.bands.items()},
+                               spread={n: d[key] for n, d in mb.spread.items()} if key else {},
+                               lines=tuple(mb.summary()), report=(*result.report, *mb.report))
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
@@ -112,6 +163,16 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="the reaction on the joint's child (default) or parent body, as OpenSim's apply_on_bodies")
     s.add_argument("--in", dest="frame", choices=("child", "parent", "ground"), default="ground",
                    help="the frame the reactions are expressed in (default ground, as OpenSim's express_in_frame)")
+    s.add_argument("--muscle-uncertainty", action="append", metavar="PROPERTY=P%",
+                   help="every muscle's max_isometric_force, optimal_fiber_length or tendon_slack_length known within "
+                        "P%% (1 SD, independent between muscles); repeat per property: the outputs' bands (written as "
+                        "<name>_..._sd.sto), with the anthropometry's and the markers' (--uncertain, --marker-noise)")
+    s.add_argument("--criteria", action="append", type=float, metavar="P",
+                   help="with bands: the outputs also with static optimization's exponent P, their spread said "
+                        "beside the bands (default 3); repeatable")
+    s.add_argument("--draws", type=int, metavar="N",
+                   help="the muscles' part of the bands by a Monte Carlo of N draws (default: 100 where a fibre or "
+                        "tendon length is uncertain, the outputs being far from linear in them; 0: first order)")
     s.add_argument("--name", help="the files' prefix (default: the trial file's name)")
     s.add_argument("--out", type=output_path, required=True, metavar="DIR",
                    help="write <name>_StaticOptimization_activation.sto, _force.sto and "

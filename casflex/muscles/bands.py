@@ -57,6 +57,8 @@ __all__ = ["MuscleBands", "monte_carlo", "muscle_bands", "muscle_outputs", "outp
 GRAVITY = 9.81
 #: rad or m: the step along the coordinates for the markers' part
 STEP = 1e-4
+#: Draws of the muscles' Monte Carlo where ``draws="auto"`` asks for one (:func:`muscle_bands`).
+AUTO_DRAWS = 100
 
 
 def _reaction_names(trial, joint: str) -> tuple[str, str]:
@@ -255,15 +257,20 @@ def _fit(inputs):
 
 
 def muscle_bands(trial, inputs, fit, z: np.ndarray, zd: np.ndarray, zdd: np.ndarray, *,
-                 uncertainty: MuscleUncertainty, criteria=(3.0,), spec=None, draws: int = 0,
+                 uncertainty: MuscleUncertainty, criteria=(3.0,), spec=None, draws: int | str = 0,
                  seed: int = 0) -> MuscleBands:
     """The bands of ``trial``'s outputs (module docstring) at its filtered coordinates z, z', z'' (k, n_z), from
     the declared muscle ``uncertainty``, the inverse's ``inputs`` (:class:`~casflex.inverse.inputs.InverseInputs`;
     its ``band_spec``, or ``spec``, gives the anthropometry's uncertain properties and the markers' noise: none,
     no such part) and its marker ``fit`` (None: fitted again where the inputs are markers); the spread of the
     exponents ``criteria`` beside the trial's; ``draws`` > 0: the muscles' part checked by a Monte Carlo of that
-    many draws (:func:`monte_carlo`, ``MuscleBands.monte_carlo``). ValueError in one line for what cannot be
+    many draws (:func:`monte_carlo`, ``MuscleBands.monte_carlo``), "auto": :data:`AUTO_DRAWS` where an optimal
+    fibre or tendon slack length is uncertain (the outputs are far from linear in them: on the walk the first-order
+    part understates the knee's peak contact force's band sixfold), none otherwise; where drawn, the Monte Carlo's
+    SD is the muscles' part (the first-order one said beside it). ValueError in one line for what cannot be
     honoured."""
+    if draws == "auto":
+        draws = AUTO_DRAWS if any(p != "max_isometric_force" for p, _ in uncertainty.declared) else 0
     _check(trial, inputs, z, zd, zdd, uncertainty, criteria, draws)
     spec = inputs.band_spec if spec is None else spec
     seconds, report = {}, []
@@ -312,6 +319,12 @@ def muscle_bands(trial, inputs, fit, z: np.ndarray, zd: np.ndarray, zdd: np.ndar
     if mc:
         seconds["monte_carlo"] = time.perf_counter() - start
         report.append(_monte_carlo_line(names, out0, musc, mc, draws))
+        report.append(f"muscle bands: the muscles' part is the Monte Carlo's ({draws} draws; an SD's relative standard "
+                      f"error {1 / np.sqrt(2 * (draws - 1)):.0%}), not the first order's")
+        for n in names:
+            b = bands[n]
+            b["muscles"] = mc[n]
+            b["total"] = np.sqrt(mc[n] ** 2 + b["anthropometry"] ** 2 + b["markers"] ** 2)
     start = time.perf_counter()
     crit, spread = _criteria(trial, z, zd, zdd, criteria, out0, names)
     seconds["criteria"] = time.perf_counter() - start

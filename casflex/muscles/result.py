@@ -43,8 +43,10 @@ class MuscleResult:
     joints' lab coordinates static optimization balanced and ``reserve_share`` (n_c,) each one's reserve moment
     over its moment (RMS over the trial); ``reactions``: OpenSim's column label -> (k,) (N, N m, m);
     ``resultants``: joint -> (k,) N the reaction force's magnitude; ``body_weight`` N; ``report`` what was done,
-    a line each; ``settings`` the options; ``bands``: column label -> (k,) one standard deviation (where asked);
-    ``spread``: column label -> (k,) the same output under another criterion minus this one (where asked).
+    a line each; ``settings`` the options; ``bands``: output -> (k,) one standard deviation (where asked; the
+    outputs of :func:`casflex.muscles.bands.muscle_outputs`: ``<muscle>`` its force, ``<muscle>.activation``,
+    the reactions' column labels, ``<joint>_resultant``); ``spread``: output -> (k,) the same output under
+    another criterion minus this one (where asked); ``lines``: the bands' summary lines.
     """
 
     t: np.ndarray
@@ -65,6 +67,7 @@ class MuscleResult:
     spread: Mapping[str, np.ndarray] = field(default_factory=dict)
     #: the coordinates no muscle crosses (their reserves carry all of their moments)
     uncrossed: tuple[str, ...] = ()
+    lines: tuple[str, ...] = ()
 
     def tables(self, name: str) -> dict[str, tuple[str, dict[str, np.ndarray], dict[str, str]]]:
         """file name -> (title, columns, units) of each file :meth:`save` writes."""
@@ -82,7 +85,8 @@ class MuscleResult:
                                                              react_units)}
         if self.bands:
             for fname, (title, cols, u) in list(files.items()):
-                sd = {c: self.bands[c] for c in cols if c in self.bands}
+                key = (lambda c: f"{c}.activation") if "activation" in fname else (lambda c: c)
+                sd = {c: self.bands[key(c)] for c in cols if key(c) in self.bands}
                 files[fname.replace(".sto", "_sd.sto")] = (f"{title}: one standard deviation", sd,
                                                            {c: u[c] for c in sd})
         return files
@@ -114,4 +118,4 @@ class MuscleResult:
             lines.append(f"reserves: largest share {100 * s:.1f} % of {c}'s moment (RMS)")
         if self.uncrossed:
             lines.append(f"no muscle crosses {', '.join(self.uncrossed)}: the reserves carry their moments")
-        return "\n".join([*lines, *self.report])
+        return "\n".join([*lines, *self.lines, *self.report])
