@@ -38,7 +38,7 @@ STANCE_N = 20.0  # N: a plate's vertical force above this is contact
 #: In-vivo hip contact force, instrumented implants: (BW, what, source) per trial.
 IN_VIVO = {"walk": (2.38, "average peak, 4 patients walking at about 4 km/h",
                     "Bergmann et al. 2001, J Biomech 34:859-871"),
-           "run": (5.5, "jogging, one patient (very fast walking the same; walking at 5 km/h 4.8 BW)",
+           "run": (5.5, "jogging, one patient",
                    "Bergmann, Graichen, Rohlmann 1993, J Biomech 26:969-990")}
 
 
@@ -158,8 +158,9 @@ def compare(mine: dict, ref: dict) -> dict:
     theirs = _at(ref["force"], t, names)
     rms = np.sqrt(np.mean((out.so.forces - theirs) ** 2, axis=0))
     peak = np.abs(theirs).max(axis=0)
-    ok = ~failed
-    rms_ok = np.sqrt(np.mean((out.so.forces[ok] - theirs[ok]) ** 2, axis=0)) if ok.any() else rms * np.nan
+    ok = ~failed  # the frames OpenSim solved: at the others its answer depends on the actuators' order
+    rms_ok = np.sqrt(np.mean((out.so.forces[ok] - theirs[ok]) ** 2, axis=0))
+    peak_ok = np.abs(theirs[ok]).max(axis=0)
     coords = [c.name for c in mine["trial"].joint_coordinates]
     acts = _at(ref["activation"], t, names)
     controls = _at(ref["activation"], t, [f"{c}_reserve" for c in coords])
@@ -176,7 +177,8 @@ def compare(mine: dict, ref: dict) -> dict:
                          / f_os.max(),
                          "mz_rms": float(np.sqrt(np.mean((ours[:, 2] - th[:, 3]) ** 2))), "peak": float(f_os.max()),
                          "cf": f_cf, "os": f_os, "os3d": np.sqrt(f_os ** 2 + th[:, 2] ** 2)}
-    return {"pct": 100 * rms / peak, "rms": rms, "peak": peak, "pct_ok": 100 * rms_ok / peak, "failed": failed,
+    return {"pct": 100 * rms / peak, "rms": rms, "peak": peak, "pct_ok": 100 * rms_ok / peak_ok, "rms_ok": rms_ok,
+            "peak_ok": peak_ok, "failed": failed,
             "theirs": theirs, "cost_os": cost_os, "cost_cf": cost_cf, "balance": np.abs(balance).max(axis=1),
             "joints": joints, "seconds": ref["seconds"], "so_seconds": ref["so_seconds"],
             "jr_seconds": ref["jr_seconds"]}
@@ -259,22 +261,25 @@ def _section(r: dict, quick: bool) -> list[str]:
         i = int(np.argmax(c["pct"]))
         big = c["peak"] >= 50.0
         j = int(np.argmax(np.where(big, c["pct"], -1)))
-        ok = c["pct_ok"]
+        big_ok = c["peak_ok"] >= 50.0
+        k = int(np.argmax(np.where(big_ok, c["pct_ok"], -1)))
         rows.append([f"OpenSim at {key} iterations", f"{int(c['failed'].sum())} of {len(c['failed'])}",
                      f"{c['pct'][i]:.2f} ({names[i]}, peak {c['peak'][i]:.0f} N)",
-                     f"{c['pct'][j]:.2f} ({names[j]})", f"{np.median(c['pct']):.2f}",
-                     "-" if np.isnan(ok).all() else f"{np.nanmax(ok):.2f} ({names[int(np.nanargmax(ok))]})",
-                     f"{c['rms'].max():.2f}",
+                     f"{c['pct'][j]:.2f} ({names[j]})", f"{np.median(c['pct']):.2f}", f"{c['rms'].max():.2f}",
+                     f"{c['pct_ok'][k]:.2f} ({names[k]}) / {c['rms_ok'][~big_ok].max(initial=0.0):.2f}",
                      *(f"{c['joints'][j_]['force_pct']:.3f} / {c['joints'][j_]['mz_rms']:.3f}" for j_, _ in JOINTS)])
     c = r["cmp"][100]
     fail = c["failed"]
     gap, viol = c["cost_os"] - c["cost_cf"], np.abs(mine["out"].so.violation).max()
     if fail.any():
         cost = (f"At the {int(fail.sum())} frames OpenSim's SO reported as failed, its cost (the sum of squared "
-                f"activations and reserve controls) exceeds casflex's by {np.median(gap[fail]):.3g} (median; largest "
-                f"{gap[fail].max():.3g}) while casflex balances every coordinate to {viol:.1e} N m; elsewhere the "
-                f"costs differ by at most {np.abs(gap[~fail]).max():.3g} (OpenSim's balance: within "
-                f"{c['balance'][~fail].max():.3f} N m of casflex's moments).")
+                f"activations and reserve controls) minus casflex's: median {np.median(gap[fail]):.3g}, from "
+                f"{gap[fail].min():.3g} to {gap[fail].max():.3g}; at the others from {gap[~fail].min():.3g} to "
+                f"{gap[~fail].max():.3g}. casflex balances every coordinate to {viol:.1e} N m; OpenSim's balance (its "
+                f"activations and reserves on casflex's moment arms, forces at full activation and moments) misses by "
+                f"up to {c['balance'][fail].max():.3f} N m at the failed frames and {c['balance'][~fail].max():.3f} "
+                "N m at the others: with reserves of 1 N m carrying up to some 20 N m, each 0.01 N m of that slack "
+                "buys up to 0.4 of cost.")
     else:
         cost = (f"OpenSim's SO converged at every frame; its balance is within {c['balance'].max():.3f} N m of "
                 "casflex's moments (casflex's inverse dynamics, moment arms and forces at full activation).")
@@ -286,8 +291,9 @@ def _section(r: dict, quick: bool) -> list[str]:
             f"{len(mine['t'])} frames, t = {trial.window[0]:g}..{trial.window[1]:g} s, {len(names)} muscles, "
             f"coordinates filtered at {trial.cutoff:g} Hz; body weight {r['bw']:.0f} N.", "",
             *table(["OpenSim's SO", "frames it reported failed", "worst muscle: RMS % of its peak",
-                    "worst muscle of peak >= 50 N (%)", "median muscle (%)", "worst, OpenSim's converged frames (%)",
-                    "largest RMS (N)", *(f"{j} force % / mz N m" for j, _ in JOINTS)], rows, "lrrrrrr" + "r" * 3),
+                    "worst muscle of peak >= 50 N (%)", "median muscle (%)", "largest RMS (N)",
+                    "OpenSim's solved frames: worst of peak >= 50 N (%) / largest RMS of the others (N)",
+                    *(f"{j} force % / mz N m" for j, _ in JOINTS)], rows, "lrrrrrr" + "r" * 3),
             "", cost, "",
             f"Right hip contact force, peak over the complete right stances: casflex {hip['cf']:.2f} BW, OpenSim "
             f"{hip['os']:.2f} BW in the plane ({hip['os3d']:.2f} BW with its out-of-plane component); in vivo "
@@ -318,20 +324,21 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
             "in-plane force's magnitude, % of its peak; RMS of the moment's difference (N m: the reserves').", ""]
     for r in results:
         page += _section(r, quick)
-    best = {r["trial"].stem: r["cmp"][max(r["cmp"])] for r in results}
-    big = {s: float(np.max(np.where(c["peak"] >= 50.0, c["pct"], 0.0))) for s, c in best.items()}
-    small = {s: float(c["rms"][c["peak"] < 50.0].max(initial=0.0)) for s, c in best.items()}
-    react = max(c["joints"][j]["force_pct"] for c in best.values() for j, _ in JOINTS)
+    lab = {r["trial"].stem: r["cmp"][100] for r in results}
+    big = {s: float(np.max(np.where(c["peak_ok"] >= 50.0, c["pct_ok"], 0.0))) for s, c in lab.items()}
+    small = {s: float(c["rms_ok"][c["peak_ok"] < 50.0].max(initial=0.0)) for s, c in lab.items()}
+    react = max(c["joints"][j]["force_pct"] for c in lab.values() for j, _ in JOINTS)
     walk = results[0]["cmp"][100]
     lines, failed = checks([
         ("the walk: every muscle within 2 % of its peak (RMS), OpenSim at its defaults",
          f"largest {walk['pct'].max():.2f} %", walk["pct"].max() < 2.0),
-        ("every muscle whose peak is 50 N or more within 2 % of its peak, OpenSim at its most iterations, every "
-         "trial", ", ".join(f"{s} {v:.2f} %" for s, v in big.items()), max(big.values()) < 2.0),
+        ("every muscle whose peak is 50 N or more within 2 % of its peak over the frames OpenSim's SO solved (at its "
+         "defaults), every trial", ", ".join(f"{s} {v:.2f} %" for s, v in big.items()), max(big.values()) < 2.0),
         ("the muscles of smaller peak (at the 0.01 activation floor most of the trial, where OpenSim's interior point "
-         "stops above it) within 1 N RMS", ", ".join(f"{s} {v:.2f} N" for s, v in small.items()),
+         "stops above it) within 1 N RMS, the same frames", ", ".join(f"{s} {v:.2f} N" for s, v in small.items()),
          max(small.values()) < 1.0),
-        ("hip, knee and ankle reaction forces within 2 % of peak (RMS), every trial", f"largest {react:.3f} %",
+        ("hip, knee and ankle reaction forces within 2 % of peak (RMS over every frame), OpenSim at its defaults, "
+         "every trial", f"largest {react:.3f} %",
          react < 2.0),
         ("casflex's muscle path faster than OpenSim's SO + JR, every trial",
          ", ".join(f"{r['mine']['seconds']:.1f} s against {r['cmp'][100]['seconds']:.1f} s" for r in results),
