@@ -116,3 +116,15 @@ def test_an_actuator_on_a_missing_coordinate_or_body_is_refused(leg, tmp_path):
     acts = read_actuators(_write(tmp_path, "<CoordinateActuator name='r'><coordinate>subtalar_angle_r</coordinate>"
                                            "</CoordinateActuator>"))
     assert "holds still" in check_actuators(acts, osim.scene, "acts.xml", model_coordinates={"subtalar_angle_r"})[0]
+
+
+def test_written_actuators_read_back_as_they_were(tmp_path):
+    """write_actuators (a study's reserves) writes what read_actuators reads back field for field: the pipeline's
+    file through both, and infinite control bounds."""
+    from casflex.scene.osim_actuators import write_actuators
+
+    acts = read_actuators(RESERVES)
+    assert {a.kind for a in acts} == {"PointActuator", "TorqueActuator", "CoordinateActuator"}
+    assert read_actuators(write_actuators(tmp_path / "a.xml", acts)) == acts
+    with pytest.raises(ValueError, match="'m': kind 'Thelen2003Muscle'"):
+        write_actuators(tmp_path / "b.xml", [Actuator("m", "Thelen2003Muscle", 1.0)])

@@ -52,6 +52,24 @@ def test_rigid_tendon_model_sets_every_muscle(files, tmp_path):
 
 
 @needs_opensim
+def test_the_frames_opensims_so_logged_as_failed_are_read_from_its_log(tmp_path):
+    """OpenSim's SO records a frame it could not solve anyway; static_optimization's "failed" lists those times
+    from its log (the lines as OpenSim 4.6 writes them)."""
+    from casflex.peers.opensim_analyses import _failed_times
+
+    log = tmp_path / "so.log"
+    log.write_text("  Optimizer failed: Ipopt: Maximum iterations exceeded (status -1)\n"
+                   "[2026-11-29 05:50:58.029] [warning] OPTIMIZATION FAILED...\n"
+                   "[2026-11-29 05:50:58.029] [warning] StaticOptimization.record: The optimizer could not find a "
+                   "solution at time = 0.233333331199998.\n"
+                   "[2026-11-29 05:50:58.030] [warning] The model appears too weak for static optimization.\n"
+                   "[...] [warning] StaticOptimization.record: The optimizer could not find a solution at "
+                   "time = 1.2.\n")
+    assert _failed_times(str(log)) == [0.233333331199998, 1.2]
+    log.write_text("")
+    assert _failed_times(str(log)) == []
+
+
 def test_the_peer_reproduces_the_reference(files, tmp_path):
     """SO over 0.5-0.6 s gives the stored rows (the filter sees the whole file either way), JR runs on its forces,
     and muscle_inputs gives the stored active forces and moment arms."""
@@ -67,6 +85,7 @@ def test_the_peer_reproduces_the_reference(files, tmp_path):
         assert np.allclose(mine.column(name), ref.column(name)[rows], atol=1e-6)  # same states, same optimizer
     jr = read_sto(out["reactions"])
     assert "knee_r_on_tibia_r_in_tibia_r_fy" in jr.names and out["so_seconds"] > 0.0
+    assert out["failed"] == [] and Path(out["log"]).exists()  # the walk's frames all solved
     ins = muscle_inputs(trial, joints=("knee_r",))
     d = np.load(DATA / "gait10dof18musc_inputs.npz")
     assert np.allclose(ins["active"], d["active"][rows], rtol=1e-9)

@@ -106,13 +106,31 @@ def _so_here(trial: Trial, results: str, exponent: float, tol: float, iters: int
                    use_muscle_physiology="true", optimizer_convergence_criterion=repr(tol),
                    optimizer_max_iterations=str(iters))
     setup = _setup(os.path.join(results, "setup_so.xml"), "so", trial, results, [so])
-    start = time.perf_counter()
-    osim.AnalyzeTool(setup).run()
-    so_seconds = time.perf_counter() - start
+    log, level = os.path.join(results, "so.log"), osim.Logger.getLevelString()
+    osim.Logger.setLevelString("warn")  # SO's failed frames are warnings: kept in the log, read back below
+    osim.Logger.addFileSink(log)
+    try:
+        start = time.perf_counter()
+        osim.AnalyzeTool(setup).run()
+        so_seconds = time.perf_counter() - start
+    finally:
+        osim.Logger.removeFileSink()
+        osim.Logger.setLevelString(level)
     force = os.path.join(results, "so_StaticOptimization_force.sto")
     jr = _jr_here(trial, force, results, "jr", joints, on, frame)
     return {"activation": os.path.join(results, "so_StaticOptimization_activation.sto"), "force": force,
-            "reactions": jr["path"], "so_seconds": so_seconds, "jr_seconds": jr["seconds"]}
+            "reactions": jr["path"], "so_seconds": so_seconds, "jr_seconds": jr["seconds"], "log": log,
+            "failed": _failed_times(log)}
+
+
+def _failed_times(log: str) -> list[float]:
+    """The times (s) of the frames OpenSim's SO logged as failed ("... could not find a solution at time = t."):
+    it records them anyway, with whatever its optimizer left (docs/muscles.md)."""
+    import re
+
+    with open(log) as fh:
+        text = fh.read()
+    return [float(m.group(1).rstrip(".")) for m in re.finditer(r"could not find a solution at time = (\S+)", text)]
 
 
 def _jr_here(trial: Trial, force_file: str, results: str, name: str, joints: list[str], on: str, frame: str) -> dict:
@@ -143,7 +161,9 @@ def static_optimization(trial: Trial, results, *, exponent: float = 2.0, tol: fl
     """OpenSim's static optimization of ``trial`` with SO's options ``exponent`` (activation_exponent), ``tol``
     (optimizer_convergence_criterion) and ``max_iterations`` (OpenSim's defaults), then its ``JointReaction`` of
     ``joints`` with SO's forces (:func:`joint_reaction`). Outputs in the directory ``results``. Returns
-    {"activation", "force", "reactions": .sto paths, "so_seconds", "jr_seconds": the two runs' times}."""
+    {"activation", "force", "reactions": .sto paths, "so_seconds", "jr_seconds": the two runs' times, "log": SO's
+    warnings (``<results>/so.log``), "failed": the times (s) of the frames SO logged as failed (its optimizer
+    stopped, e.g. at ``max_iterations``; OpenSim records them anyway)}."""
     return _run(f"{_HERE}:_so_here", worker, trial, os.path.abspath(results), float(exponent), float(tol),
                 int(max_iterations), list(joints), on, frame)
 

@@ -2,7 +2,8 @@
 pipeline's ``*_Reserve_Actuators.xml``): the reserve and residual actuators static optimization adds to the
 muscles. Pure data; what each does along the scene's coordinates is :mod:`casflex.muscles.actuators`'s.
 
-Read: ``CoordinateActuator`` (a generalised force on one coordinate), ``PointActuator`` (a force at a point
+Read (:func:`read_actuators`) and written (:func:`write_actuators`, e.g. a study's reserves):
+``CoordinateActuator`` (a generalised force on one coordinate), ``PointActuator`` (a force at a point
 of a body) and ``TorqueActuator`` (a torque on one body and its opposite on another), each with its
 ``optimal_force`` and control bounds; one the file disables (``isDisabled`` true, ``appliesForce`` false)
 is left out. Any other actuator (a muscle is not one here: :mod:`casflex.scene.osim_muscles` reads those)
@@ -16,7 +17,7 @@ import os
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
-__all__ = ["ACTUATOR_KINDS", "Actuator", "read_actuators"]
+__all__ = ["ACTUATOR_KINDS", "Actuator", "read_actuators", "write_actuators"]
 
 #: The actuators casflex reads, by their OpenSim class names.
 ACTUATOR_KINDS = ("CoordinateActuator", "PointActuator", "TorqueActuator")
@@ -172,3 +173,35 @@ def read_actuators(path: str | os.PathLike[str]) -> tuple[Actuator, ...]:
     if twice is not None:
         raise ValueError(f"{source}: two actuators named {twice!r}; give each its own name")
     return tuple(out)
+
+
+def _number(v: float) -> str:
+    return "Inf" if v == math.inf else "-Inf" if v == -math.inf else f"{v:.17g}"
+
+
+def write_actuators(path: str | os.PathLike[str], actuators, name: str = "actuators") -> str:
+    """Write ``path``: an OpenSim actuator file (a ForceSet document, as OpenSim 4 writes one) holding
+    ``actuators`` (:class:`Actuator`), which OpenSim's tools append to a model's forces and :func:`read_actuators`
+    reads back as they are. Needs no OpenSim; returns the path."""
+    root = ET.Element("OpenSimDocument", Version="40000")
+    objects = ET.SubElement(ET.SubElement(root, "ForceSet", name=name), "objects")
+    for a in actuators:
+        if a.kind not in ACTUATOR_KINDS:
+            raise ValueError(f"actuators: {a.name!r}: kind {a.kind!r}; one of {', '.join(ACTUATOR_KINDS)}")
+        el = ET.SubElement(objects, a.kind, name=a.name)
+        fields = [("min_control", _number(a.min_control)), ("max_control", _number(a.max_control))]
+        if a.kind == "CoordinateActuator":
+            fields.append(("coordinate", a.coordinate))
+        elif a.kind == "PointActuator":
+            fields += [("body", a.body), ("point", " ".join(map(_number, a.point))),
+                       ("point_is_global", str(a.point_is_global).lower()),
+                       ("direction", " ".join(map(_number, a.direction))),
+                       ("force_is_global", str(a.force_is_global).lower())]
+        else:
+            fields += [("bodyA", a.body), ("bodyB", a.other or "ground"),
+                       ("torque_is_global", str(a.torque_is_global).lower()), ("axis", " ".join(map(_number, a.axis)))]
+        for tag, text in (*fields, ("optimal_force", _number(a.optimal_force))):
+            ET.SubElement(el, tag).text = text
+    ET.indent(root, space="\t")
+    ET.ElementTree(root).write(os.fspath(path), encoding="UTF-8", xml_declaration=True)
+    return os.fspath(path)
