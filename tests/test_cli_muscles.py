@@ -100,3 +100,30 @@ def test_reserves_by_option_and_the_root_left_unbalanced_said(tmp_path, capsys):
     a, b = (read_sto(tmp_path / n / "w_StaticOptimization_activation.sto") for n in ("opt", "file"))
     assert abs(a.column("soleus_r") - b.column("soleus_r")).max() < 1e-6  # the QP's tolerance
     assert "FX" in a.names and "hip_flexion_r_reserve" in a.names
+
+
+def test_bands_are_written_beside_the_outputs_and_said(tmp_path, capsys):
+    """--muscle-uncertainty: each output's SD in <name>_..._sd.sto (OpenSim's labels), the hip's said with its band
+    and the other criterion's peak; a fibre or tendon length uncertain: the muscles' part by a Monte Carlo."""
+    out = tmp_path / "out"
+    out.mkdir()
+    assert main(["muscles", str(MODEL), *TRIAL[:-1], "0.3", "--actuators", RESERVES, "--joints", "hip_r",
+                 "--muscle-uncertainty", "max_isometric_force=10%", "--muscle-uncertainty", "tendon_slack_length=2%",
+                 "--draws", "10", "--name", "w", "--out", str(out), "--quiet"]) == 0
+    text = capsys.readouterr().out
+    assert " +- " in text.splitlines()[1] and "other criterion" in text.splitlines()[1]
+    assert "the muscles' part is the Monte Carlo's (10 draws" in text
+    sd = read_sto(out / "w_StaticOptimization_force_sd.sto")
+    assert "soleus_r" in sd.names and (sd.column("soleus_r") >= 0).all() and sd.column("soleus_r").max() > 0
+    jr = read_sto(out / "w_JointReaction_ReactionLoads_sd.sto")
+    assert "hip_r_on_femur_r_in_ground_fx" in jr.names
+    act = read_sto(out / "w_StaticOptimization_activation_sd.sto")
+    assert act.column("soleus_r").max() < 1.0  # an activation's SD, not a force's
+
+
+def test_bad_band_options_are_refused(tmp_path, capsys):
+    _refused(tmp_path, capsys, [str(MODEL), *TRIAL, "--muscle-uncertainty", "mass=10%"],
+             "--muscle-uncertainty: expected PROPERTY=P%")
+    _refused(tmp_path, capsys, [str(MODEL), *TRIAL, "--muscle-uncertainty", "tendon_slack_length=60%"],
+             "--muscle-uncertainty: tendon_slack_length: expected a relative standard deviation in [0, 0.5)")
+    _refused(tmp_path, capsys, [str(MODEL), *TRIAL, "--criteria", "2"], "--criteria: expected exponents >= 1 other")

@@ -136,6 +136,8 @@ class MuscleBands:
     report: list[str] = field(default_factory=list)
     seconds: dict[str, float] = field(default_factory=dict)
     monte_carlo: dict[str, np.ndarray] = field(default_factory=dict)
+    #: name -> (k,): the muscles' first-order part where the Monte Carlo's replaced it in ``bands``
+    first_order: dict[str, np.ndarray] = field(default_factory=dict)
 
     def contributors(self, name: str, frame: int, n: int = 3) -> list[tuple[str, float]]:
         """The ``n`` muscle properties whose parts are largest in ``name`` at ``frame``: (property, |part|)."""
@@ -169,7 +171,8 @@ class MuscleBands:
         top = ", ".join(f"{k} {f(x)}" for k, x in self.contributors(name, i) if x > 0)
         line = (f"{label}: peak {f(v[i])}{shown}{other} at t = {self.t[i]:.3g} s +- {f(b['total'])}{shown} "
                 f"(muscles {f(b['muscles'])}"
-                + (f" [Monte Carlo {f(self.monte_carlo[name][i])}]" if self.monte_carlo else "")
+                + (f" [first order {f(self.first_order[name][i])}]" if self.first_order else
+                   f" [Monte Carlo {f(self.monte_carlo[name][i])}]" if self.monte_carlo else "")
                 + f", anthropometry {f(b['anthropometry'])}, markers {f(b['markers'])}"
                 + (f"; largest {top})" if top else ")"))
         for key, crit in self.criteria.items():
@@ -321,6 +324,7 @@ def muscle_bands(trial, inputs, fit, z: np.ndarray, zd: np.ndarray, zdd: np.ndar
         report.append(_monte_carlo_line(names, out0, musc, mc, draws))
         report.append(f"muscle bands: the muscles' part is the Monte Carlo's ({draws} draws; an SD's relative standard "
                       f"error {1 / np.sqrt(2 * (draws - 1)):.0%}), not the first order's")
+        first = {n: bands[n]["muscles"] for n in names}
         for n in names:
             b = bands[n]
             b["muscles"] = mc[n]
@@ -333,7 +337,8 @@ def muscle_bands(trial, inputs, fit, z: np.ndarray, zd: np.ndarray, zdd: np.ndar
                       f"{trial.optimization.exponent:g}: a modelling choice, not noise; beside the bands, not in them")
     bw = trial.reaction.body_weight or GRAVITY * sum(b.mass for b in trial.scene.bodies)
     return MuscleBands(trial.t, {n: out0[n] for n in names}, output_units(trial), bands, parts, anth_parts, crit,
-                       spread, changed, float(bw), report, seconds, {n: mc[n] for n in names} if mc else {})
+                       spread, changed, float(bw), report, seconds, {n: mc[n] for n in names} if mc else {},
+                       first if mc else {})
 
 
 def _criteria(trial, z, zd, zdd, criteria, out0, names):
