@@ -126,10 +126,8 @@ def _levenberg_marquardt(f: ca.Function | _MarkerFit, z: np.ndarray, y: np.ndarr
     for _ in range(max_iter):
         A, g = J.T @ J, J.T @ r
         free = ~(((z <= lo) & (g > 0)) | ((z >= hi) & (g < 0)))
-        step = np.zeros_like(z)
-        Af = A[np.ix_(free, free)]
-        step[free] = np.linalg.solve(Af + lam * np.diag(np.diag(Af) + 1e-12), -g[free])
-        step = np.clip(z + step, lo, hi) - z
+        step = _damped_step(A, g, free, lam)
+        step = np.minimum(np.maximum(z + step, lo), hi) - z  # np.clip's numbers at a fifth of its cost
         if np.max(np.abs(step)) < 1e-10:  # converged: 0.1 nm, 1e-10 rad
             break
         ym2, J2 = f(z + step)
@@ -143,6 +141,21 @@ def _levenberg_marquardt(f: ca.Function | _MarkerFit, z: np.ndarray, y: np.ndarr
     s = np.linalg.svd(J, compute_uv=False) if J.size else np.zeros(1)
     decided = J.shape[0] >= J.shape[1] and s[-1] > 1e-8 * max(s[0], 1e-300)
     return z, r / sw, bool(decided)
+
+
+def _damped_step(A: np.ndarray, g: np.ndarray, free: np.ndarray, lam: float) -> np.ndarray:
+    """The Levenberg-Marquardt step (n_z,) of the normal equations A, g on the ``free`` coordinates (0 on the
+    others): (A_ff + lam (diag A_ff + 1e-12)) s_f = -g_f, the damping added to A's diagonal in place of a
+    diagonal matrix added whole (the same numbers; the marker fit solves some 2600 of these per trial)."""
+    every = free.all()
+    M = A.copy() if every else A[np.ix_(free, free)]
+    d = M.ravel()[::M.shape[0] + 1]  # a view of the diagonal
+    d += lam * (d + 1e-12)
+    if every:
+        return np.linalg.solve(M, -g)
+    step = np.zeros_like(g)
+    step[free] = np.linalg.solve(M, -g[free])
+    return step
 
 
 def fit_pose(tree: KinematicTree, y: np.ndarray, start: np.ndarray | None = None) -> tuple[np.ndarray, float, bool]:
