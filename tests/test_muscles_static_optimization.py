@@ -184,3 +184,25 @@ def test_without_max_isometric_the_option_is_refused():
     with pytest.raises(ValueError, match="max_isometric: needed with force_length_velocity=False"):
         solve_static_optimization([[1.0]], np.full((1, 1, 1), 0.05), [[100.0]],
                                   options=StaticOptimization(force_length_velocity=False))
+
+
+def test_the_block_diagonal_is_scipys_with_its_zeros_kept():
+    """The constraints' matrix built in numpy (issue 49) against scipy's COO -> CSC and row selection, which it
+    replaced: the same compressed columns (explicit zeros kept: the solvers see the same structure) and values,
+    on random frames with zero arms and left-out rows."""
+    import scipy.sparse as sp
+
+    from casflex.muscles.static_optimization import _block_diagonal
+
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        k, n_c, n_v = (int(v) for v in rng.integers(1, 6, 3))
+        full = rng.normal(size=(k, n_c, n_v)) * (rng.random((k, n_c, n_v)) > 0.4)
+        keep = rng.random(k * n_c) > 0.3
+        rows = np.arange(k * n_c).reshape(k, n_c, 1).repeat(n_v, axis=2)
+        cols = (np.arange(k)[:, None, None] * n_v + np.arange(n_v)[None, None, :]).repeat(n_c, axis=1)
+        want = sp.csc_matrix((full.ravel(), (rows.ravel(), cols.ravel())), shape=(k * n_c, k * n_v))[keep].tocsc()
+        want.sort_indices()
+        got = _block_diagonal(full, keep.reshape(k, n_c))
+        assert got.shape == want.shape and np.array_equal(got.indptr, want.indptr)
+        assert np.array_equal(got.indices, want.indices) and np.array_equal(got.data, want.data)
