@@ -58,6 +58,9 @@ __all__ = ["BufferedCall", "CompiledLibrary", "compile_functions", "compiled", "
 CFLAGS = ("-ffp-contract=off", "-fPIC", "-shared")
 #: The environment variable whose flags (split like a shell) follow casflex's own in every build.
 FLAGS_ENV = "CASFLEX_CFLAGS"
+#: What ``casflex export`` writes (:func:`casflex.simulate.export.export_c`): here, where the command line's parser
+#: takes them without importing the simulator.
+EXPORTS = ("step", "simulate", "direct", "indirect")
 #: Flags that keep the bitwise promise: optimisation level, tuning, debug information, and x86-64
 #: targets without FMA instructions (x86-64, x86-64-v2).
 _BITWISE_SAFE = re.compile(r"-O[0-3sg]?|-g[0-3]?|-pipe|-mtune=[\w.-]+|-march=x86-64(-v2)?|-mno-fma")

@@ -127,3 +127,22 @@ def test_bad_band_options_are_refused(tmp_path, capsys):
     _refused(tmp_path, capsys, [str(MODEL), *TRIAL, "--muscle-uncertainty", "tendon_slack_length=60%"],
              "--muscle-uncertainty: tendon_slack_length: expected a relative standard deviation in [0, 0.5)")
     _refused(tmp_path, capsys, [str(MODEL), *TRIAL, "--criteria", "2"], "--criteria: expected exponents >= 1 other")
+
+
+def test_the_command_imports_neither_the_simulator_nor_identification_nor_plotting(tmp_path):
+    """What ``casflex muscles`` loads from markers to reactions (a new process, as a user runs it): none of the
+    simulator, identification's methods, the studies, the figures or scipy.sparse (they cost it 0.3 s of imports)."""
+    import subprocess
+    import sys
+
+    heavy = ("casflex.simulate", "casflex.integrators", "casflex.identification.problem", "casflex.study",
+             "casflex.plotting", "dask", "matplotlib", "scipy.sparse")
+    argv = ["muscles", str(MODEL), "--data", str(DATA / "subject01_walk.trc"), "--tasks",
+            str(DATA / "walk_ik_tasks.xml"), "--loads", str(DATA / "subject01_walk_grf.xml"), "--filter", "opensim",
+            "--cutoff-plates", "none", "--t-end", "0.6", "--actuators", RESERVES, "--joints", "knee_r", "--quiet",
+            "--out", str(tmp_path)]
+    code = (f"import sys\nfrom casflex.cli import main\nassert main({argv!r}) == 0\n"
+            f"print(sorted(m for m in sys.modules if m.startswith({heavy!r})))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().splitlines()[-1] == "[]"

@@ -219,3 +219,65 @@ def test_one_rule_for_a_load_s_unit():
     assert [load_unit(n) for n in forces] == ["N"] * len(forces)
     assert [load_unit(n) for n in moments] == ["N m"] * len(moments)
     assert [unit_of(n, per_kg=True) for n in ("pelvis_tx_force", "knee.moment")] == ["N/kg", "N m/kg"]
+
+
+def _reference_lm(f, z, y, w, lo, hi, max_iter=50):
+    """The marker fit's Levenberg-Marquardt as written before it was made fast (a CasADi call and its DM
+    conversions per evaluation, np.clip, the damping as a diagonal matrix added): the numbers to keep."""
+    seen = np.isfinite(y) & (w > 0)
+    sw = w[seen]
+    z, lam = np.clip(z, lo, hi), 1e-3
+    ym, J = (np.array(v) for v in f(z))
+    r, J = sw * (ym.ravel()[seen] - y[seen]), sw[:, None] * J[seen]
+    for _ in range(max_iter):
+        A, g = J.T @ J, J.T @ r
+        free = ~(((z <= lo) & (g > 0)) | ((z >= hi) & (g < 0)))
+        step = np.zeros_like(z)
+        Af = A[np.ix_(free, free)]
+        step[free] = np.linalg.solve(Af + lam * np.diag(np.diag(Af) + 1e-12), -g[free])
+        step = np.clip(z + step, lo, hi) - z
+        if np.max(np.abs(step)) < 1e-10:
+            break
+        ym2, J2 = (np.array(v) for v in f(z + step))
+        r2 = sw * (ym2.ravel()[seen] - y[seen])
+        if r2 @ r2 <= r @ r:
+            z, r, J, lam = z + step, r2, sw[:, None] * J2[seen], max(lam / 10, 1e-12)
+        else:
+            lam *= 10
+            if lam > 1e8:
+                break
+    return z, r / sw
+
+
+def test_the_fast_marker_fit_gives_the_numbers_of_the_plain_one():
+    """The marker fit's buffered evaluations and in-place damping (issue 49) against the plain algorithm, on the
+    Gait10dof18musc walk with its task weights: bit-equal coordinates and residuals, free and with a coordinate
+    held at a limit below its free optimum (the active set's path). Equal, not close: the same arithmetic."""
+    from pathlib import Path
+
+    from casflex.inverse.fit import _kabsch_start, _levenberg_marquardt, _MarkerFit, coordinate_bounds, marker_weights
+    from casflex.inverse.inputs import weighted
+    from casflex.lab import read_trc
+    from casflex.scene.from_osim import scene_from_osim
+
+    data = Path(__file__).parent / "data" / "muscles"
+    scene = weighted(scene_from_osim(data / "gait10dof18musc_subject01.osim").scene, data / "walk_ik_tasks.xml")[0]
+    tree = kinematic_tree(inverse_model(scene))
+    f, w = tree.marker_fit, marker_weights(tree)
+    lo, hi = coordinate_bounds(tree) or (np.full(tree.n, -np.inf), np.full(tree.n, np.inf))
+    z = np.random.default_rng(0).normal(size=tree.n)
+    assert all(np.array_equal(np.array(a).reshape(b.shape), b) for a, b in zip(f(z), _MarkerFit(f)(z), strict=True))
+    trc = read_trc(data / "subject01_walk.trc")
+    y0 = _MarkerFit(f)(tree.coordinates(tree.model.q0))[0].copy()
+    for i in (0, 40, 100):
+        y = np.concatenate([trc.marker(m.label)[i, :2] for m in tree.model.scene.markers])
+        start = _kabsch_start(tree, y, y0)
+        z_free, r_free = _reference_lm(f, start, y, w, lo, hi)
+        k = 3 + i % (tree.n - 3)  # a hinge given a limit below its free optimum: held there
+        hi2 = hi.copy()
+        hi2[k] = z_free[k] - 0.05
+        for bounds in ((lo, hi), (lo, hi2)):
+            want, got = _reference_lm(f, start, y, w, *bounds), _levenberg_marquardt(_MarkerFit(f), start, y, 50, w,
+                                                                                      bounds)
+            assert np.array_equal(want[0], got[0]) and np.array_equal(want[1], got[1]), (i, bounds[1])
+        assert got[0][k] == hi2[k]  # the held path was taken

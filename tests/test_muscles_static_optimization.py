@@ -204,3 +204,25 @@ def test_near_solves_on_the_active_set_where_it_holds_and_by_the_qp_where_it_cha
         assert np.abs(near.violation).max() < 1e-6  # N m
         kept.append(near.stats["kept"].mean())
     assert kept[0] > 0.9 and kept[1] < kept[0], kept
+
+
+def test_the_block_diagonal_is_scipys_with_its_zeros_kept():
+    """The constraints' matrix built in numpy (issue 49) against scipy's COO -> CSC and row selection, which it
+    replaced: the same compressed columns (explicit zeros kept: the solvers see the same structure) and values,
+    on random frames with zero arms and left-out rows."""
+    import scipy.sparse as sp
+
+    from casflex.muscles.static_optimization import _block_diagonal
+
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        k, n_c, n_v = (int(v) for v in rng.integers(1, 6, 3))
+        full = rng.normal(size=(k, n_c, n_v)) * (rng.random((k, n_c, n_v)) > 0.4)
+        keep = rng.random(k * n_c) > 0.3
+        rows = np.arange(k * n_c).reshape(k, n_c, 1).repeat(n_v, axis=2)
+        cols = (np.arange(k)[:, None, None] * n_v + np.arange(n_v)[None, None, :]).repeat(n_c, axis=1)
+        want = sp.csc_matrix((full.ravel(), (rows.ravel(), cols.ravel())), shape=(k * n_c, k * n_v))[keep].tocsc()
+        want.sort_indices()
+        got = _block_diagonal(full, keep.reshape(k, n_c))
+        assert got.shape == want.shape and np.array_equal(got.indptr, want.indptr)
+        assert np.array_equal(got.indices, want.indices) and np.array_equal(got.data, want.data)

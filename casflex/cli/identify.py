@@ -402,10 +402,10 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         LOSSES,
         MODEL_ERRORS,
         RESIDUES,
+        SMOOTHERS,
         TRANSCRIPTIONS,
         TRANSFORMS,
     )
-    from casflex.identification.smoothing import SMOOTHERS
 
     s = sub.add_parser("identify", help="identify the scene's parameters from simulated, measured or file data",
                        description="Identify the scene's [[parameters]] from kinematic data. Examples and the data "

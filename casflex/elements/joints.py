@@ -88,10 +88,12 @@ def coupled_kind(splines) -> str:
 def spline_of(f, x: ca.SX) -> ca.SX:
     """The cubic spline ``f`` (knots ``f.x``, ``f.y`` and ``f.coefficients()`` (b, c, d): y_k + b_k s + c_k s^2 +
     d_k s^3 on [x_k, x_k+1], linear beyond the knots) of a CasADi expression x: a chain of if_else over the knots."""
-    b, c, d = f.coefficients()
-    xk, yk = np.asarray(f.x, dtype=float), np.asarray(f.y, dtype=float)
+    # Python floats: a numpy scalar meeting an SX goes through numpy's dispatch first, six times as slow (the
+    # same expression; the muscles' paths build some 20 of these splines)
+    b, c, d = (np.asarray(v, dtype=float).tolist() for v in f.coefficients())
+    xk, yk = np.asarray(f.x, dtype=float).tolist(), np.asarray(f.y, dtype=float).tolist()
     out = yk[-1] + (x - xk[-1]) * b[-1]
-    for k in range(xk.size - 2, -1, -1):
+    for k in range(len(xk) - 2, -1, -1):
         s = x - xk[k]
         out = ca.if_else(x < xk[k + 1], yk[k] + s * (b[k] + s * (c[k] + s * d[k])), out)
     return ca.if_else(x < xk[0], yk[0] + (x - xk[0]) * b[0], out)

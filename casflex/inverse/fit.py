@@ -74,7 +74,30 @@ def _kabsch_start(tree: KinematicTree, y: np.ndarray, y0: np.ndarray) -> np.ndar
     return z
 
 
-def _solve_frame(f: ca.Function, z: np.ndarray, y: np.ndarray, max_iter: int = 50,
+class _MarkerFit:
+    """``marker_fit`` evaluated into numpy arrays it owns: ``(y (2 m,), J (2 m, n_z))`` of z (n_z,), the
+    same numbers as ``np.array(f(z))`` (the same expressions), without a CasADi call's and its DM conversions'
+    0.2 ms each time (CasADi's function buffer: the marker fit makes some 2600 calls on a 151-frame trial). The
+    arrays are overwritten by the next call: copy what is kept."""
+
+    def __init__(self, f: ca.Function) -> None:
+        z = ca.SX.sym("z", f.size1_in(0))
+        y, J = f(z)
+        self._f = ca.Function("marker_fit_dense", [z], [ca.densify(y), ca.densify(J)])
+        self._buf, self._eval = self._f.buffer()
+        self._z, self.y, self._jt = np.zeros(z.numel()), np.zeros(y.numel()), np.zeros((J.size2(), J.size1()))
+        for k, a in enumerate((self._z,)):
+            self._buf.set_arg(k, memoryview(a))
+        for k, a in enumerate((self.y, self._jt)):  # J column-major: its transpose row-major
+            self._buf.set_res(k, memoryview(a))
+
+    def __call__(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        self._z[:] = z
+        self._eval()
+        return self.y, self._jt.T
+
+
+def _solve_frame(f: ca.Function | _MarkerFit, z: np.ndarray, y: np.ndarray, max_iter: int = 50,
                  w: np.ndarray | None = None, bounds: tuple[np.ndarray, np.ndarray] | None = None
                  ) -> tuple[np.ndarray, float, bool]:
     """Levenberg-Marquardt from z on the seen entries of y: (z, rms misfit (m), decided)."""
@@ -82,32 +105,33 @@ def _solve_frame(f: ca.Function, z: np.ndarray, y: np.ndarray, max_iter: int = 5
     return z, float(np.sqrt(np.mean(r.reshape(-1, 2) ** 2, axis=0).sum())) if r.size else np.nan, decided
 
 
-def _levenberg_marquardt(f: ca.Function, z: np.ndarray, y: np.ndarray, max_iter: int, w: np.ndarray | None = None,
-                         bounds: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray, bool]:
+def _levenberg_marquardt(f: ca.Function | _MarkerFit, z: np.ndarray, y: np.ndarray, max_iter: int,
+                         w: np.ndarray | None = None, bounds: tuple[np.ndarray, np.ndarray] | None = None
+                         ) -> tuple[np.ndarray, np.ndarray, bool]:
     """(z, the residuals (m, unweighted) of the seen entries of y, decided) from the start z, minimising the
     weighted sum of squares: ``w`` (2 m,) the square roots of the markers' weights per channel (entries of
     weight 0 are left out, as unseen ones); ``bounds`` (lower, upper) (n_z,) the coordinates' limits (-inf,
     inf: none). Within bounds the steps are projected on them, and a coordinate at a bound that the descent
     pushes outward is held there for the step (an active set: the fit's KKT point, as OpenSim's IK's)."""
+    f = _MarkerFit(f) if isinstance(f, ca.Function) else f
     seen = np.isfinite(y) if w is None else np.isfinite(y) & (w > 0)
     sw = np.ones(int(seen.sum())) if w is None else w[seen]
     lo, hi = bounds if bounds is not None else (np.full(z.size, -np.inf), np.full(z.size, np.inf))
     z = np.clip(z, lo, hi)
     lam = 1e-3
-    ym, J = (np.array(v) for v in f(z))
-    r = sw * (ym.ravel()[seen] - y[seen])
+    ys = y[seen]
+    ym, J = f(z)
+    r = sw * (ym[seen] - ys)
     J = sw[:, None] * J[seen]
     for _ in range(max_iter):
         A, g = J.T @ J, J.T @ r
         free = ~(((z <= lo) & (g > 0)) | ((z >= hi) & (g < 0)))
-        step = np.zeros_like(z)
-        Af = A[np.ix_(free, free)]
-        step[free] = np.linalg.solve(Af + lam * np.diag(np.diag(Af) + 1e-12), -g[free])
-        step = np.clip(z + step, lo, hi) - z
+        step = _damped_step(A, g, free, lam)
+        step = np.minimum(np.maximum(z + step, lo), hi) - z  # np.clip's numbers at a fifth of its cost
         if np.max(np.abs(step)) < 1e-10:  # converged: 0.1 nm, 1e-10 rad
             break
-        ym2, J2 = (np.array(v) for v in f(z + step))
-        r2 = sw * (ym2.ravel()[seen] - y[seen])
+        ym2, J2 = f(z + step)
+        r2 = sw * (ym2[seen] - ys)
         if r2 @ r2 <= r @ r:
             z, r, J, lam = z + step, r2, sw[:, None] * J2[seen], max(lam / 10, 1e-12)
         else:
@@ -117,6 +141,21 @@ def _levenberg_marquardt(f: ca.Function, z: np.ndarray, y: np.ndarray, max_iter:
     s = np.linalg.svd(J, compute_uv=False) if J.size else np.zeros(1)
     decided = J.shape[0] >= J.shape[1] and s[-1] > 1e-8 * max(s[0], 1e-300)
     return z, r / sw, bool(decided)
+
+
+def _damped_step(A: np.ndarray, g: np.ndarray, free: np.ndarray, lam: float) -> np.ndarray:
+    """The Levenberg-Marquardt step (n_z,) of the normal equations A, g on the ``free`` coordinates (0 on the
+    others): (A_ff + lam (diag A_ff + 1e-12)) s_f = -g_f, the damping added to A's diagonal in place of a
+    diagonal matrix added whole (the same numbers; the marker fit solves some 2600 of these per trial)."""
+    every = free.all()
+    M = A.copy() if every else A[np.ix_(free, free)]
+    d = M.ravel()[::M.shape[0] + 1]  # a view of the diagonal
+    d += lam * (d + 1e-12)
+    if every:
+        return np.linalg.solve(M, -g)
+    step = np.zeros_like(g)
+    step[free] = np.linalg.solve(M, -g[free])
+    return step
 
 
 def fit_pose(tree: KinematicTree, y: np.ndarray, start: np.ndarray | None = None) -> tuple[np.ndarray, float, bool]:
@@ -213,8 +252,8 @@ def fit_markers(tree: KinematicTree, t: np.ndarray, y: np.ndarray, *, max_gap: f
     ``max_misfit`` (m): a marker farther than that from the fitted pose is refused in one line naming the
     frame and the marker (``labels``, the trial's names for the scene's markers; ``source``, the trial):
     :data:`casflex.lab.checks.MAX_MISFIT`."""
-    f = tree.marker_fit
-    y0 = np.array(f(tree.coordinates(tree.model.q0))[0]).ravel()
+    f = _MarkerFit(tree.marker_fit)
+    y0 = f(tree.coordinates(tree.model.q0))[0].copy()
     n, m = t.size, y.shape[1] // 2
     Z, rms, seen = np.full((n, tree.n), np.nan), np.full(n, np.nan), np.isfinite(y).reshape(n, -1, 2).all(2).sum(1)
     misfit = np.full((n, m), np.nan)

@@ -218,10 +218,11 @@ def _memory(model: Model, tree: KinematicTree, t: np.ndarray, n_markers: int, dt
     :data:`BYTES_PER_VALUE`); with flexible segments, also the HHT steps' (``dt`` s, default the scene's:
     :func:`casflex.simulate.check_memory`)."""
     from casflex.results import format_bytes, memory_available
-    from casflex.simulate import check_memory
 
     n = t.size
     if model.n_con != model.n_dof - tree.n and n > 1:
+        from casflex.simulate import check_memory  # here: the simulator's import (0.05 s) only where it would run
+
         h = float(t[1] - t[0])
         sub = max(1, int(np.ceil(h / (model.scene.run.dt if dt is None else dt) - 1e-9)))
         check_memory(model, (n - 1) * sub, h / sub, names=("t_start, t_end", "dt"))

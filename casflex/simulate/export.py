@@ -32,14 +32,13 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from casflex.codegen import CodegenError, generate_c
+from casflex.codegen import EXPORTS, CodegenError, generate_c
 from casflex.model import Model
 from casflex.results import atomic_write_text
 from casflex.simulate.run import step_count
 
 __all__ = ["export_c", "ExportedCode", "EXPORTS"]
 
-EXPORTS = ("step", "simulate", "direct", "indirect")
 STEM = "casflex_model"
 
 
