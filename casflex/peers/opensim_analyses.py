@@ -128,6 +128,8 @@ def _failed_times(log: str) -> list[float]:
     it records them anyway, with whatever its optimizer left (docs/muscles.md)."""
     import re
 
+    if not os.path.exists(log):  # OpenSim's file sink makes the file at its first line: nothing logged
+        return []
     with open(log) as fh:
         text = fh.read()
     return [float(m.group(1).rstrip(".")) for m in re.finditer(r"could not find a solution at time = (\S+)", text)]
