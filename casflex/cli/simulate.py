@@ -59,14 +59,15 @@ def summary(model, traj, times: Sequence[float] | None = None) -> None:
 def _run(model, args: argparse.Namespace, *, t_end: float, compiled: bool, progress: bool,
          times: Sequence[float] | None = None, out: Path | None = None, plots: Path | None = None) -> None:
     """Simulate, print the summary, write the trajectory and figures into their staging places."""
-    from casflex.simulate import check_memory, simulate, step_count
+    from casflex.simulate import Stepping, check_memory, simulate, step_count
 
     run = model.scene.run
     dt = run.dt if getattr(args, "dt", None) is None else args.dt
     n_steps = step_count(t_end, dt, names=("--t-end", "--dt"))
     check_memory(model, n_steps, dt, names=("--t-end", "--dt"))
-    traj = simulate(model, t_end, dt=dt, alpha=getattr(args, "alpha", None), compiled=compiled, progress=progress,
-                    newton=getattr(args, "newton", "exact"))
+    stepping = Stepping(dt=dt, alpha=getattr(args, "alpha", None), newton=getattr(args, "newton", "exact"),
+                        compiled=compiled)
+    traj = simulate(model, t_end, stepping=stepping, progress=progress)
     summary(model, traj, times)
     if out is not None:
         traj.save(out)

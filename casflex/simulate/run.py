@@ -36,6 +36,7 @@ from casflex.model import Model, assemble
 from casflex.model.consistent import project_positions, project_velocities
 from casflex.results import Trajectory, format_bytes, memory_available
 from casflex.scene import Scene
+from casflex.simulate.options import Start, Stepping
 
 __all__ = ["simulate", "simulated_set", "SimulationError", "integrator_for", "step_count", "check_memory", "CHUNK",
            "ENERGY_GROWTH"]
@@ -109,6 +110,12 @@ def check_memory(model: Model, n_steps: int, dt: float, *, names: tuple[str, str
                          f"{format_bytes(avail)} are available; shorten {names[0]} or raise {names[1]}")
 
 
+def _value(name: str, value: object, kind: type) -> object:
+    if not isinstance(value, kind):
+        raise ValueError(f"{name}: expected a casflex.simulate.{kind.__name__}(...), got {value!r}")
+    return value
+
+
 def _text_progress(done: int, total: int, t: float) -> None:
     width = 30
     k = int(width * done / max(total, 1))
@@ -122,58 +129,47 @@ def simulate(
     system: Model | Scene,
     t_end: float | None = None,
     *,
-    dt: float | None = None,
-    alpha: float | None = None,
+    stepping: Stepping | None = None,
     p: dict[str, float] | np.ndarray | None = None,
-    q0: np.ndarray | None = None,
-    qd0: np.ndarray | None = None,
-    t0: float = 0.0,
-    compiled: bool = False,
-    tol: float = 1e-12,
-    max_iter: int = 25,
-    newton: str = "exact",
+    start: Start | None = None,
     progress: bool | Callable[[int, int, float], None] | None = None,
     raise_on_failure: bool = True,
 ) -> Trajectory:
-    """Simulate ``system`` from t = 0 to ``t_end`` with HHT-alpha steps of ``dt``.
+    """Simulate ``system`` from t0 to t0 + ``t_end`` with HHT-alpha steps.
 
     Parameters
     ----------
     system : Model or Scene
         A Scene is assembled with its own inertia form.
-    t_end, dt : float, s
-        Defaults from the scene's run settings; t_end must be a whole number of steps.
-    alpha : float in [-1/3, 0]
-        HHT numerical damping; default from the scene.
+    t_end : float, s
+        Default from the scene's run settings; a whole number of steps dt.
+    stepping : Stepping, optional
+        HHT's step dt (s) and alpha, its Newton iterations (variant, tolerance, limit) and whether the run is
+        compiled C (see module docstring); default ``Stepping()``: the scene's
+        dt and alpha, exact Newton to 1e-12, interpreted.
     p : dict or array (n_p,), optional
         Parameter values; missing ones nominal.
-    q0, qd0 : ndarray (n_dof,), optional
-        Initial state (default: the scene's). qd0 must satisfy the velocity constraints.
-    t0 : float, s
-        Time of the initial state (the run covers t0 .. t0 + t_end; loads are taken at absolute
-        time).
-    compiled : bool
-        Run compiled C (see module docstring).
-    tol, max_iter
-        Newton tolerance (scaled, see :class:`~casflex.integrators.HHT`) and iteration limit.
-    newton : {"exact", "modified"}
-        "modified" keeps the factorised Jacobian from step to step while a chord update converges
-        the step (:mod:`casflex.integrators.modified`): cheaper at loose tolerances (1e-8), not at
-        the default 1e-12.
+    start : Start, optional
+        The initial state q0, qd0 (n_dof,) at t0 (s); default the scene's at t0 = 0.
     progress : bool or callable(done_steps, total_steps, t)
         True prints a progress bar on stderr.
+    raise_on_failure : bool
+        False: a failed run returns its converged steps (``success=False``) instead of raising SimulationError.
 
     Returns
     -------
     Trajectory
-        With t of shape (n,) = 0, dt, ..., t_end and arrays as in
+        With t of shape (n,) = t0, t0 + dt, ..., t0 + t_end and arrays as in
         :data:`casflex.results.NPZ_KEYS`.
     """
+    stepping = _value("stepping", Stepping() if stepping is None else stepping, Stepping)
+    start = _value("start", Start() if start is None else start, Start)
+    tol, max_iter, newton, compiled = stepping.tol, stepping.max_iter, stepping.newton, stepping.compiled
+    q0, qd0, t0 = start.q0, start.qd0, start.t0
     model = assemble(system) if isinstance(system, Scene) else system
     run = model.scene.run
     t_end = float(run.t_end if t_end is None else t_end)
-    dt = float(run.dt if dt is None else dt)
-    alpha = float(run.alpha if alpha is None else alpha)
+    dt, alpha = stepping.of(model.scene)
     n_steps = step_count(t_end, dt)
     check_memory(model, n_steps, dt)
     if alpha == 0.0 and model.joint_row_names and model.moving:
@@ -462,6 +458,6 @@ def simulated_set(model: Model, t_end: float = 3.0, *, dt: float = 1e-3, alpha: 
     """All nodal kinematics of an HHT simulation (the paper's simulated set): every dof with velocities and
     accelerations, run at a tight Newton tolerance ``tol`` so that the data satisfy Eq. 1 to round-off at
     alpha = 0; t_end, dt in s."""
-    tr = simulate(model, t_end, dt=dt, alpha=alpha, p=p, tol=tol)
+    tr = simulate(model, t_end, stepping=Stepping(dt=dt, alpha=alpha, tol=tol), p=p)
     return MeasurementSet(tr.t, tr.dof_names, tr.q, tr.qd, tr.qdd, source="simulated",
                           meta={"lam": tr.lam, "p": tr.p, "alpha": alpha, "dt": dt})
