@@ -45,9 +45,9 @@ def test_no_pyplot_state():
     code = (
         "import sys, casflex\n"
         "from casflex import plotting\n"
-        "from casflex.simulate import simulate\n"
+        "from casflex.simulate import Stepping, simulate\n"
         "m = casflex.assemble(casflex.load_scene('twobar'))\n"
-        "tr = simulate(m, 0.02, dt=1e-3)\n"
+        "tr = simulate(m, 0.02, stepping=Stepping(dt=1e-3))\n"
         "plotting.plot_node(tr); plotting.plot_energies(tr); plotting.plot_configuration(m, tr.q[-1])\n"
         "assert 'matplotlib.pyplot' not in sys.modules, 'pyplot imported'\n"
     )
