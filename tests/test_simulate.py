@@ -226,3 +226,11 @@ def test_modified_newton_keeps_the_factors_and_agrees_with_the_exact_one():
     # (2.5e-7 m against dt = 1e-4); 1e-6 m is four times that
     assert np.abs(a.q - exact.q).max() < 1e-6
     assert (a.newton_iterations >= 1).all()
+
+
+def test_simulate_takes_at_most_eight_parameters():
+    # docs/architecture.md "Choices are values": an entry point's choices are values, not a list of keywords
+    import inspect
+
+    assert list(inspect.signature(simulate).parameters) == ["system", "t_end", "stepping", "p", "start", "progress",
+                                                             "raise_on_failure"]
