@@ -28,6 +28,7 @@ _EXPORTS = {
     "Marker": "casflex.scene", "Uncertain": "casflex.scene",
     "builtin_scenes": "casflex.scene", "dumps_scene": "casflex.scene", "load_scene": "casflex.scene",
     "loads_scene": "casflex.scene", "save_scene": "casflex.scene",
+    "Stepping": "casflex.simulate.options", "Start": "casflex.simulate.options",
     "inverse_dynamics": "casflex.inverse", "load_study": "casflex.study.study_file",
 }
 #: Verbs under another name in their module: name -> (module, attribute).

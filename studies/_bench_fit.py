@@ -65,13 +65,13 @@ def operation(scene: str, elements: int | None, what):
     """A zero-argument callable doing the operation once, and the scene's 3 s simulation as another."""
     from casflex.identification import Experiment, ModelRun, Uncertainty, identify_indirect
     from casflex.identification.sensitivity import run_sensitivities
-    from casflex.simulate import initial_state, integrator_for, simulate
+    from casflex.simulate import Stepping, initial_state, integrator_for, simulate
 
     model = _model(scene, elements)
     span = 2.2 if scene == "leg" else SPAN
 
     def sim():
-        return simulate(model, span, dt=DT, compiled=True)
+        return simulate(model, span, stepping=Stepping(dt=DT, compiled=True))
 
     if what is None:
         return sim, sim

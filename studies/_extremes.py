@@ -10,7 +10,7 @@ import warnings
 
 import numpy as np
 
-from casflex.simulate import integrator_for, simulate
+from casflex.simulate import Start, Stepping, integrator_for, simulate
 from casflex.statics import StabilityWarning, modes
 
 ALPHAS = (0.0, -1.0 / 3.0)
@@ -74,7 +74,8 @@ def run_case(model, *, k_scale: float, e_scale: float, alpha: float, dt: float, 
              ref_scale: float | None = None) -> tuple[dict, object]:
     """One simulation with every measurement of the study: (row, trajectory)."""
     p = model.p_nominal * k_scale if p is None else p
-    tr = simulate(model, t_end, dt=dt, alpha=alpha, p=p, qd0=qd0, compiled=True, raise_on_failure=False)
+    tr = simulate(model, t_end, stepping=Stepping(dt=dt, alpha=alpha, compiled=True), p=p, start=Start(qd0=qd0),
+                  raise_on_failure=False)
     row = {"k_scale": k_scale, "e_scale": e_scale, "alpha": alpha, "dt": dt, "t_end": t_end, "omega_dt": omega_max * dt,
            "success": bool(tr.success), "status": tr.status, "message": tr.message, "steps": int(tr.stats["steps"]),
            "t_reached": float(tr.t[-1]), "finite": finite(tr), "energy": energy(tr, ref_scale)}
@@ -88,7 +89,8 @@ def run_case(model, *, k_scale: float, e_scale: float, alpha: float, dt: float, 
     big = np.flatnonzero(np.abs(tr.energies["total"] - tr.energies["total"][0]) > 0.01 * row["energy"]["scale_J"])
     row["t_drift_1pct"] = float(tr.t[big[0]]) if big.size else None
     if interpreted_check:  # the whole run on the interpreted path: the same steps, the same message
-        ti = simulate(model, t_end, dt=dt, alpha=alpha, p=p, qd0=qd0, raise_on_failure=False)
+        ti = simulate(model, t_end, stepping=Stepping(dt=dt, alpha=alpha), p=p, start=Start(qd0=qd0),
+                      raise_on_failure=False)
         row["interpreted_same"] = bool(ti.success == tr.success and ti.stats["steps"] == tr.stats["steps"]
                                        and ti.message == tr.message and finite(ti))
     return row, tr

@@ -15,7 +15,7 @@ from _shared import twobar
 from _study import Banner, assert_checks, best_of, checks, cli, fnum, png, table, write_outputs
 
 import casflex
-from casflex.simulate import compiled_library, integrator_for, simulate
+from casflex.simulate import Stepping, compiled_library, integrator_for, simulate
 
 GRID = 1e-2  # errors on t = 0, 0.01, ...
 TOL_PHYSICS = {"ancf": 2e-6, "ge": 5e-6}  # converged Exudyn from casflex's converged reference, node 5 (m; why: docs)
@@ -36,7 +36,7 @@ def run(code: str, elements: int, h: float, t_end: float, repeat: int = 1) -> tu
     if code.startswith("casflex"):
         model = twobar(elements, code == "casflex-rot")
         compiled_library(integrator_for(model, alpha=0.0))  # built (or loaded) once, not timed
-        t, tr = best_of(lambda: simulate(model, t_end, dt=h, alpha=0.0, compiled=True), repeat)
+        t, tr = best_of(lambda: simulate(model, t_end, stepping=Stepping(dt=h, alpha=0.0, compiled=True)), repeat)
         p5 = np.stack([tr.dof("x5"), tr.dof("y5")], axis=1)
     else:
         import exudyn

@@ -40,10 +40,11 @@ def models() -> dict:
 def run(model, force, dt: float, ref, repeat: int) -> dict:
     """One model at one step: best wall time of simulate(), and the errors against ``ref`` on its grid."""
     from casflex.model.markers import marker_positions
-    from casflex.simulate import SimulationError, simulate
+    from casflex.simulate import SimulationError, Stepping, simulate
 
     try:
-        wall, tr = best_of(lambda: simulate(model, T_END, dt=dt, compiled=True), repeat, float("inf"))
+        wall, tr = best_of(lambda: simulate(model, T_END,
+                                            stepping=Stepping(dt=dt, compiled=True)), repeat, float("inf"))
     except SimulationError as exc:
         return {"dt": dt, "ok": False, "why": str(exc).split(":")[0]}
     k = np.round(tr.t / ref["dt"]).astype(int)
@@ -55,14 +56,14 @@ def run(model, force, dt: float, ref, repeat: int) -> dict:
 
 def main(quick: bool = False, out_dir: Path | None = None) -> dict:
     from casflex.model.markers import marker_positions
-    from casflex.simulate import simulate
+    from casflex.simulate import Stepping, simulate
 
     banner = Banner("bench_joints", quick)
     dts = QUICK_DTS if quick else DTS
     rows = {}
     for label, (model, force) in models().items():
         fine = min(dts) / 20
-        tr = simulate(model, T_END, dt=fine, compiled=True)
+        tr = simulate(model, T_END, stepping=Stepping(dt=fine, compiled=True))
         ref = {"dt": fine, "markers": marker_positions(model, tr.q), "force": force(tr)}
         rows[label] = [run(model, force, dt, ref, 2 if quick else 7) for dt in dts]
     ok = {k: [r for r in v if r["ok"]] for k, v in rows.items()}

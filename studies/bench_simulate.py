@@ -15,7 +15,7 @@ import numpy as np
 from _shared import cold_and_cached, twobar
 from _study import Banner, assert_checks, best_of, checks, cli, paths_check, png, table, write_outputs
 
-from casflex.simulate import simulate
+from casflex.simulate import Stepping, simulate
 
 #: the environment of the runs built for this processor instead of the generic target (casflex.codegen)
 NATIVE = {"CASFLEX_CFLAGS": "-march=native"}
@@ -45,7 +45,8 @@ def mesh_worker(elements: int, t_end: float, repeat: int) -> dict:
     model = twobar(elements)
     lib = compiled_library(integrator_for(model, alpha=0.0))
     build_s = time.perf_counter() - t0
-    t_sim, tr = best_of(lambda: simulate(model, t_end, dt=1e-3, compiled=True), repeat, enough=float("inf"))
+    t_sim, tr = best_of(lambda: simulate(model, t_end,
+                                         stepping=Stepping(dt=1e-3, compiled=True)), repeat, enough=float("inf"))
     return {"elements": elements, "dofs": model.n_dof, "build_s": build_s, "cached": lib.cached,
             "simulate_ms": 1e3 * t_sim, "run_ms": 1e3 * tr.stats["run_s"], "steps": tr.stats["steps"],
             "code_kb": lib.path.stat().st_size // 1024, "y5": float(tr.dof("y5")[-1]),
@@ -99,10 +100,13 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
     # per dt, 1 element per bar: both paths; node 5's error against a dt 10x below the smallest (coarsest grid)
     acc_t, dts, acc = 0.5 if quick else 3.0, [1e-2, 5e-3, 2e-3, 1e-3] + ([] if quick else [5e-4, 2e-4, 1e-4]), []
     model, grid, fine = twobar(1), np.arange(0, acc_t + 1e-12, dts[0]), dts[-1] / 10
-    ref = simulate(model, acc_t, dt=fine, alpha=0.0, compiled=True).q[np.round(grid / fine).astype(int)][:, 12:14]
+    ref = simulate(model, acc_t,
+                   stepping=Stepping(dt=fine, alpha=0.0, compiled=True)).q[np.round(grid / fine).astype(int)][:, 12:14]
     for dt in dts:
-        t_c, tc = best_of(lambda dt=dt: simulate(model, acc_t, dt=dt, alpha=0.0, compiled=True), 5, float("inf"))
-        t_i, ti = best_of(lambda dt=dt: simulate(model, acc_t, dt=dt, alpha=0.0), 1 if dt < 1e-3 else 2, float("inf"))
+        t_c, tc = best_of(lambda dt=dt: simulate(model, acc_t,
+                                                 stepping=Stepping(dt=dt, alpha=0.0, compiled=True)), 5, float("inf"))
+        t_i, ti = best_of(lambda dt=dt: simulate(model, acc_t, stepping=Stepping(dt=dt, alpha=0.0)),
+                          1 if dt < 1e-3 else 2, float("inf"))
         err = np.linalg.norm(ti.q[np.round(grid / dt).astype(int)][:, 12:14] - ref, axis=1).max()
         acc.append({"dt": dt, "steps": ti.stats["steps"], "interpreted_ms": 1e3 * t_i, "compiled_ms": 1e3 * t_c,
                     "speedup": t_i / t_c, "compiled_run_ms": 1e3 * tc.stats["run_s"], "err_node5_m": float(err),
@@ -116,9 +120,9 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
         for dt in (1e-3,) if quick else (1e-3, 2e-4):
             t, tr = {}, {}
             for kind in ("exact", "modified"):
-                simulate(model, kinds_t, dt=dt, newton=kind, compiled=True)  # build, not timed
-                t[kind], tr[kind] = best_of(lambda k=kind, m=model, dt=dt: simulate(m, kinds_t, dt=dt, newton=k,
-                                                                                    compiled=True), 3, float("inf"))
+                simulate(model, kinds_t, stepping=Stepping(dt=dt, newton=kind, compiled=True))  # build, not timed
+                t[kind], tr[kind] = best_of(lambda k=kind, m=model, dt=dt: simulate(
+                    m, kinds_t, stepping=Stepping(dt=dt, newton=k, compiled=True)), 3, float("inf"))
             kinds.append({"elements": ne, "dt": dt, "exact_ms": 1e3 * t["exact"], "modified_ms": 1e3 * t["modified"],
                           "ratio": t["modified"] / t["exact"],
                           "refresh": 100 * tr["modified"].stats["jacobian_refreshes"] / tr["modified"].stats["steps"],

@@ -15,7 +15,7 @@ from _shared import twobar
 from _study import Banner, assert_checks, checks, cli, table, write_outputs
 
 import casflex
-from casflex.simulate import integrator_for, simulate
+from casflex.simulate import Stepping, integrator_for, simulate
 
 SPIN_OMEGA, SPIN_SPRING_SCALE = 10.0, 1e3  # rad/s; springs x1e3: centrifugal forces stretch them by mm, not m
 EPS = float(np.finfo(float).eps)
@@ -54,7 +54,7 @@ def roundoff_probe(quick: bool) -> list[dict]:
     for shift in (0.0, 1e4) if quick else (0.0, 1e3, 1e4, 1e5, 1e6):
         model = casflex.assemble(dataclasses.replace(base, nodes=tuple(dataclasses.replace(n, x=n.x + shift)
                                                                        for n in base.nodes)))
-        tr = simulate(model, t_end, dt=1e-3, alpha=0.0, raise_on_failure=False)
+        tr = simulate(model, t_end, stepping=Stepping(dt=1e-3, alpha=0.0), raise_on_failure=False)
         it, ref = tr.newton_iterations, tr if ref is None else ref
         k, rot = min(len(tr.t), len(ref.t)), np.asarray(model.is_rotation)
         dq = tr.q[:k] - ref.q[:k]

@@ -14,7 +14,7 @@ from _study import Banner, assert_checks, checks, cli, png, table, write_outputs
 
 from casflex.model import assemble
 from casflex.scene.io import load_scene
-from casflex.simulate import simulate
+from casflex.simulate import Stepping, simulate
 
 PARAMS = {"p*": None, "p1": [663, 0.49, 379, 0.49], "p2": [757, 0.50, 465, 0.53]}
 NODE5 = ("x5", "y5", "theta5")
@@ -106,7 +106,8 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
     banner = Banner("figures2_5", quick)
     t_end = 0.5 if quick else 3.0
     model = assemble(load_scene("twobar"))
-    trajs = {label: simulate(model, t_end, dt=DT, p=model.p_nominal if p is None else np.array(p, dtype=float))
+    trajs = {label: simulate(model, t_end, stepping=Stepping(dt=DT),
+                             p=model.p_nominal if p is None else np.array(p, dtype=float))
              for label, p in PARAMS.items()}
     windows = [w for w in (0.5, 1.0, 2.0, 3.0) if w <= t_end + 1e-12]
     rows = differences(trajs, windows)

@@ -24,11 +24,11 @@ SEEDS = 10
 DRAWS = 40
 
 
-def _force(model, t_end: float, dt: float = 1e-3, **kw):
+def _force(model, t_end: float, dt: float = 1e-3, alpha: float | None = None, **kw):
     """A simulation, and its |hip joint force| (N): the bushing's elastic and damper parts."""
-    from casflex.simulate import simulate
+    from casflex.simulate import Stepping, simulate
 
-    tr = simulate(model, t_end, dt=dt, **kw)
+    tr = simulate(model, t_end, stepping=Stepping(dt=dt, alpha=alpha), **kw)
     o, i = np.asarray(tr.outputs), {n: k for k, n in enumerate(model.output_names)}
     return tr, np.hypot(*(o[:, i[f"hip_joint.{c}"]] + o[:, i[f"hip_joint.damper_{c}"]] for c in ("fx", "fy")))
 

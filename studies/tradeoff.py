@@ -14,7 +14,7 @@ from _study import Banner, assert_checks, best_of, checks, cli, fnum, paths_chec
 from matplotlib.lines import Line2D
 
 from casflex.plotting._figure import _new_figure
-from casflex.simulate import compiled_library, integrator_for, simulate
+from casflex.simulate import Stepping, compiled_library, integrator_for, simulate
 
 ALPHAS = (0.0, -0.05, -0.1, -0.3, -1.0 / 3.0)
 NODES, FORCES = ("3", "5"), ("spring1.force", "spring3.force", "torsion1.moment", "torsion3.moment")
@@ -83,7 +83,8 @@ def run(cfg: Config, dt: float, interp: bool, plan: dict, m, samples: dict) -> d
     """One setting's row (its samples on the error grid into ``samples``): compiled, then interpreted on a window."""
     t_end, steps = plan["t_end"], int(round(plan["t_end"] / dt))
     w = min(steps, plan["window"])  # the interpreted window
-    t_c, tr = best_of(lambda: simulate(m, t_end, dt=dt, alpha=cfg.alpha, compiled=True, raise_on_failure=False), 3)
+    t_c, tr = best_of(lambda: simulate(m, t_end, stepping=Stepping(dt=dt, alpha=cfg.alpha, compiled=True),
+                                       raise_on_failure=False), 3)
     row = {"cfg": cfg, "dt": dt, "ok": tr.success, "message": tr.message, "compiled_s": t_c if tr.success else None,
            "interp_s": None, "interp_projected": False, "newton_per_step": None,
            "paths_diff": None, "is_ref": cfg == Config(plan["meshes"][-1], "lagrange", 0.0) and dt == plan["dt_fine"]}
@@ -97,7 +98,8 @@ def run(cfg: Config, dt: float, interp: bool, plan: dict, m, samples: dict) -> d
         "drift": float(np.abs(energy - energy[0]).max())}
     del tr  # a fine-dt trajectory is large
     if interp:
-        t_i, ti = best_of(lambda: simulate(m, w * dt, dt=dt, alpha=cfg.alpha, raise_on_failure=False), 3)
+        t_i, ti = best_of(lambda: simulate(m, w * dt, stepping=Stepping(dt=dt, alpha=cfg.alpha),
+                                           raise_on_failure=False), 3)
         if ti.success:
             dy = (np.abs(ti.outputs - y).max(axis=0) / np.maximum(np.abs(y).max(axis=0), 1e-300)).max()
             row.update(interp_s=t_i / w * steps, interp_projected=w < steps,
@@ -223,7 +225,8 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
         compiled_library(integrator_for(models[cfg[:2]], alpha=cfg.alpha))  # the one-off build: cached, untimed
         rows.append(run(cfg, dt, interp, plan, models[cfg[:2]], samples))
     vrow = next(r for r in rows if r["cfg"] == CENTRE and r["dt"] == plan["validate_dt"])  # checks the projection
-    v_full, _ = best_of(lambda: simulate(models[CENTRE[:2]], plan["t_end"], dt=plan["validate_dt"], alpha=0.0), 3)
+    v_full, _ = best_of(lambda: simulate(models[CENTRE[:2]], plan["t_end"],
+                                         stepping=Stepping(dt=plan["validate_dt"], alpha=0.0)), 3)
     an = dict(analyse(plan, rows, samples), vcheck=(v_full, vrow))
     check_lines, failed = checks(self_checks(rows, an))
     write_outputs("tradeoff", out_dir, quick, "\n".join(_page(quick, plan, rows, an, banner) + check_lines),

@@ -176,7 +176,7 @@ def test_import_casflex_is_light_and_offers_the_verbs():
 
 def test_the_verb_simulate_runs_a_scene():
     model = casflex.assemble(casflex.load_scene("twobar"))
-    tr = casflex.simulate(model, 0.005, dt=1e-3)
+    tr = casflex.simulate(model, 0.005, stepping=casflex.Stepping(dt=1e-3))
     assert tr.t.shape == (6,) and tr.success
 
 

@@ -14,7 +14,7 @@ from scipy.special import ellipk
 
 from casflex import Node, Parameter, RigidBody, Scene, SceneError, Support, assemble, dumps_scene, loads_scene
 from casflex.elements.kernels import hht_kernel
-from casflex.simulate import simulate
+from casflex.simulate import Stepping, simulate
 
 PROPS = [2.0, 0.03, 0.15, -0.05]  # m (kg), J (kg m^2), rx, ry (m)
 G = [0.3, -9.81]
@@ -68,7 +68,7 @@ def compound_pendulum(theta0: float, d: float = 0.3, m: float = 1.5, J: float = 
 
 def test_compound_pendulum_period_against_the_elliptic_integral():
     th0, d, m, J = 1.0, 0.3, 1.5, 0.02
-    tr = simulate(assemble(compound_pendulum(th0, d, m, J)), 3.0, dt=1e-4, alpha=0.0)
+    tr = simulate(assemble(compound_pendulum(th0, d, m, J)), 3.0, stepping=Stepping(dt=1e-4, alpha=0.0))
     assert tr.success
     th = tr.q[:, 2]
     s = np.flatnonzero((th[:-1] > 0) & (th[1:] <= 0))  # downward zero crossings
@@ -90,7 +90,7 @@ def test_a_free_body_falls_on_a_parabola_while_it_spins():
                   bodies=(body,))
     errors = []
     for dt in (1e-3, 5e-4):
-        tr = simulate(assemble(scene), 1.0, dt=dt, alpha=0.0)
+        tr = simulate(assemble(scene), 1.0, stepping=Stepping(dt=dt, alpha=0.0))
         assert tr.success
         th, t = tr.q[:, 2], tr.t
         np.testing.assert_allclose(th, omega * t, rtol=0, atol=1e-9)  # theta'' = 0: Newmark is exact

@@ -81,3 +81,22 @@ def test_cache_lists_and_clears_the_compiled_libraries(tmp_path, monkeypatch, ca
     assert f"{tmp_path}" in capsys.readouterr().out and len(list(tmp_path.glob("*.so"))) == 1
     assert main(["cache", "--clear"]) == 0
     assert "removed" in capsys.readouterr().out and not list(tmp_path.glob("*.so"))
+
+
+@pytest.mark.parametrize("flags, message", [
+    ({"alpha": 0.1}, r"^--alpha: must lie in \[-1/3, 0\], got 0.1$"),
+    ({"dt": -1e-3}, r"^--dt: must be a positive number of seconds, got -0.001$"),
+    ({"newton": "quasi"}, r"^--newton: expected one of \('exact', 'modified'\), got 'quasi'$"),
+])
+def test_simulate_flags_become_a_stepping_whose_refusals_name_the_flag(flags, message):
+    # argparse refuses these first; a value that reaches Stepping some other way is still said by its flag
+    import argparse
+
+    from casflex.cli._base import OptionError
+    from casflex.cli.simulate import stepping_options
+
+    args = argparse.Namespace(**{"dt": None, "alpha": None, "newton": "exact", **flags})
+    with pytest.raises(OptionError, match=message):
+        stepping_options(args, compiled=False)
+    ok = stepping_options(argparse.Namespace(dt=2e-3, alpha=-0.1, newton="modified"), compiled=True)
+    assert (ok.dt, ok.alpha, ok.newton, ok.compiled) == (2e-3, -0.1, "modified", True)

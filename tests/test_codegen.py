@@ -12,7 +12,7 @@ from conftest import twobar_meshed
 
 import casflex
 from casflex import codegen
-from casflex.simulate import simulate
+from casflex.simulate import Stepping, simulate
 
 pytestmark = pytest.mark.skipif(shutil.which(os.environ.get("CC", "gcc")) is None, reason="needs a C compiler")
 
@@ -53,8 +53,8 @@ def test_compiled_steps_are_bitwise_the_interpreted_ones(alpha, elements):
     # alpha = -0.05 differed in the last bit from step 7 when gcc's vectoriser fused multiply-adds
     # (-march=native, with or without -mno-fma on AVX-512); 16 elements per bar run the mapped kernels
     model = casflex.assemble(twobar_meshed(elements))
-    a = simulate(model, 0.3, dt=1e-3, alpha=alpha)
-    b = simulate(model, 0.3, dt=1e-3, alpha=alpha, compiled=True)
+    a = simulate(model, 0.3, stepping=Stepping(dt=1e-3, alpha=alpha))
+    b = simulate(model, 0.3, stepping=Stepping(dt=1e-3, alpha=alpha, compiled=True))
     for x, y in ((a.q, b.q), (a.qd, b.qd), (a.qdd, b.qdd), (a.lam, b.lam), (a.outputs, b.outputs)):
         assert np.array_equal(x, y)
 
@@ -70,8 +70,8 @@ def test_a_time_dependent_scene_stays_bitwise_past_the_first_chunk():
     from casflex.simulate import CHUNK
 
     model = casflex.assemble(casflex.loads_scene(driven_pendulum()))
-    a = simulate(model, (2 * CHUNK + 20) * 1e-3, dt=1e-3, alpha=-0.1)
-    b = simulate(model, (2 * CHUNK + 20) * 1e-3, dt=1e-3, alpha=-0.1, compiled=True)
+    a = simulate(model, (2 * CHUNK + 20) * 1e-3, stepping=Stepping(dt=1e-3, alpha=-0.1))
+    b = simulate(model, (2 * CHUNK + 20) * 1e-3, stepping=Stepping(dt=1e-3, alpha=-0.1, compiled=True))
     for x, y in ((a.q, b.q), (a.lam, b.lam)):
         assert np.array_equal(x, y)
 
@@ -83,7 +83,7 @@ def _compiled_steps_solve_the_interpreted_equations(model, alpha: float, t_end: 
     from casflex.integrators.hht import ROUNDOFF_FLOOR
     from casflex.simulate import integrator_for
 
-    b = simulate(model, t_end, dt=dt, alpha=alpha, compiled=True)
+    b = simulate(model, t_end, stepping=Stepping(dt=dt, alpha=alpha, compiled=True))
     hht = integrator_for(model, alpha=alpha)
     X = np.hstack([b.q, b.qd, b.qdd, b.lam])
     d = np.array(hht.scale(b.q[0], b.qd[0], b.p, dt)).ravel()

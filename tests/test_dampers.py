@@ -22,7 +22,7 @@ from casflex.elements.kernels import DAMPERS, KINDS, hht_kernel
 from casflex.identification import ModelRun, Solver, identify_indirect
 from casflex.identification.estimate import estimate
 from casflex.identification.measurement import Experiment
-from casflex.simulate import simulate
+from casflex.simulate import Start, Stepping, simulate
 
 K, C, EA, L, M_BAR, V0 = 1000.0, 2.0, 1000.0, 0.5, 0.05, 0.1  # N/m, N s/m, N, m, kg, m/s
 
@@ -59,7 +59,7 @@ def test_damped_oscillator_against_its_closed_form(bushing):
     assert {g.kind for g in model.groups} >= {"damper0" if bushing else "damper"}
     errors = []
     for dt in (2e-4, 1e-4):
-        tr = simulate(model, 0.2, dt=dt, alpha=0.0, compiled=False)
+        tr = simulate(model, 0.2, stepping=Stepping(dt=dt, alpha=0.0, compiled=False))
         assert tr.success
         ia, ib = model.dof_names.index("xa"), model.dof_names.index("xb")
         exact = closed_form(tr.t)
@@ -72,7 +72,7 @@ def test_damped_oscillator_against_its_closed_form(bushing):
 
 
 def _balance(scene: Scene, dt: float, t_end: float = 0.5):
-    tr = simulate(assemble(scene), t_end, dt=dt, alpha=0.0, compiled=False)
+    tr = simulate(assemble(scene), t_end, stepping=Stepping(dt=dt, alpha=0.0, compiled=False))
     assert tr.success
     return np.abs(tr.energies["balance_error"]).max(), tr.energies["work_dampers"]
 
@@ -173,10 +173,11 @@ def test_damped_twobar_matches_exudyn():
     for el in (2, 4):
         model = assemble(dataclasses.replace(scene, beams=tuple(dataclasses.replace(b, elements=el)
                                                                 for b in scene.beams)))
-        runs[el] = simulate(model, 2.0, dt=2.5e-4).q[::4][:, [model.dof(c) for c in names]]
+        runs[el] = simulate(model, 2.0, stepping=Stepping(dt=2.5e-4)).q[::4][:, [model.dof(c) for c in names]]
     undamped = model.p_nominal.copy()
     undamped[[model.parameter_names.index(n) for n in ("c1", "ct1", "c3", "ct3")]] = 0.0
-    effect = np.abs(simulate(model, 2.0, dt=2.5e-4, p=undamped).q[::4][:, [model.dof(c) for c in names]] - runs[4])
+    effect = np.abs(simulate(model, 2.0, stepping=Stepping(dt=2.5e-4),
+                             p=undamped).q[::4][:, [model.dof(c) for c in names]] - runs[4])
     # tolerance: Exudyn's own error (its file's check against 16 elements and h / 2) plus casflex's at
     # 2 elements per beam, estimated by the change to 4
     own = np.abs(runs[2] - runs[4]).max()
@@ -206,7 +207,7 @@ def test_damper_forces_are_joint_outputs():
     # omega_a), a bushing's c (v_b - v_a) on node b; against the velocities of the run itself
     scene = casflex.load_scene(DAMPED / "twobar_damped.toml")
     model = assemble(scene)
-    tr = simulate(model, 0.2, dt=1e-3)
+    tr = simulate(model, 0.2, stepping=Stepping(dt=1e-3))
     q, qd = tr.q[-1], tr.qd[-1]
     d = np.array([q[model.dof("x2")] - q[model.dof("x1")], q[model.dof("y2")] - q[model.dof("y1")]])
     v = np.array([qd[model.dof("x2")] - qd[model.dof("x1")], qd[model.dof("y2")] - qd[model.dof("y1")]])
@@ -215,7 +216,7 @@ def test_damper_forces_are_joint_outputs():
     assert np.isclose(tr.output("torsion3.damper_moment")[-1], 1.0 * rate, rtol=1e-12)
     assert abs(tr.output("spring1.damper_force")[-1]) > 1.0  # the check is not 0 = 0
     bushing = assemble(slider(bushing=True))
-    tb = simulate(bushing, 0.01, dt=1e-3)
+    tb = simulate(bushing, 0.01, stepping=Stepping(dt=1e-3))
     va = tb.qd[-1][bushing.dof("xa")]
     assert np.isclose(tb.output("s.damper_fx")[-1], -C * (va - 0.0), rtol=1e-12)
     assert "s.damper_force" not in bushing.output_names
@@ -237,7 +238,7 @@ def test_beam_stiffness_proportional_damping_gives_the_modal_damping_ratio():
     zeta = beta * omega / 2
     period = 2 * np.pi / omega
     dt = period / 400
-    tr = simulate(model, round(6 * period / dt) * dt, dt=dt, qd0=1e-4 * omega * phi)
+    tr = simulate(model, round(6 * period / dt) * dt, stepping=Stepping(dt=dt), start=Start(qd0=1e-4 * omega * phi))
     M = np.array(model.mass(model.q0, model.p_nominal))
     eta = (tr.q - model.q0) @ M @ phi
     peaks = [eta[i] for i in range(1, eta.size - 1) if eta[i - 1] < eta[i] > eta[i + 1]]
@@ -269,7 +270,8 @@ def test_beam_damping_matches_exudyn():
     tips = {}
     for el in (4, 8):
         model = assemble(dataclasses.replace(scene, beams=(dataclasses.replace(scene.beams[0], elements=el),)))
-        tips[el] = simulate(model, 1.0, dt=1e-4).q[::10, model.dof("yb")]  # (at 0.2 ms the energy guard trips
+        tips[el] = simulate(model, 1.0,
+                            stepping=Stepping(dt=1e-4)).q[::10, model.dof("yb")]  # (at 0.2 ms the energy guard trips
         # on the overdamped stiff modes, which HHT rings rather than damps)
     own = np.abs(tips[4] - tips[8]).max()
     assert np.abs(tips[8] - ref[:1001]).max() <= own, (np.abs(tips[8] - ref[:1001]).max(), own)

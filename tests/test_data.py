@@ -96,10 +96,10 @@ def test_csv_comments_blank_lines_spaces_and_column_order(tmp_path):
 def test_a_casflex_trajectory_file_is_accepted(tmp_path):
     import casflex
     from casflex.data import load_measurements
-    from casflex.simulate import simulate
+    from casflex.simulate import Stepping, simulate
 
     model = casflex.assemble(casflex.load_scene("twobar"))
-    tr = simulate(model, 0.003, dt=1e-3)
+    tr = simulate(model, 0.003, stepping=Stepping(dt=1e-3))
     d = load_measurements(tr.save(tmp_path / "run.npz"))
     assert d.channels == tuple(model.dof_names)
     np.testing.assert_array_equal(d.qdd, tr.qdd)

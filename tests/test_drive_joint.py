@@ -9,11 +9,11 @@ from inverse_scenes import INERTIA, A, C, M, W, driven_pendulum, pendulum
 
 from casflex.scene import SceneError
 from casflex.scene.io import loads_scene
-from casflex.simulate import simulate
+from casflex.simulate import Stepping, simulate
 
 
 def test_drive_moment_is_the_closed_form():
-    tr = simulate(loads_scene(driven_pendulum()), 1.0, dt=1e-3, alpha=-0.1)
+    tr = simulate(loads_scene(driven_pendulum()), 1.0, stepping=Stepping(dt=1e-3, alpha=-0.1))
     th, thdd = A * np.sin(W * tr.t), -A * W * W * np.sin(W * tr.t)
     tau = (INERTIA + M * C * C) * thdd + M * 9.81 * C * np.sin(th)
     assert np.abs(tr.output("act.angle") - th).max() < 1e-6  # the path's spline through 100 Hz rows

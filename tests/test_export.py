@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import casflex
-from casflex.simulate import simulate
+from casflex.simulate import Stepping, simulate
 from casflex.simulate.export import export_c
 
 needs_cc = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs gcc")
@@ -28,7 +28,7 @@ def test_exported_simulation_matches_python(twobar, tmp_path):
     csv = np.loadtxt(tmp_path / "trajectory.csv", delimiter=",", skiprows=1)
     header = (tmp_path / "trajectory.csv").read_text().splitlines()[0].split(",")
     assert header == ["t", *twobar.dof_names]
-    tr = simulate(twobar, 0.3, dt=1e-3, alpha=-0.05)
+    tr = simulate(twobar, 0.3, stepping=Stepping(dt=1e-3, alpha=-0.05))
     assert csv.shape == (301, 1 + twobar.n_dof)
     # 1e-10 m: the bar; the same generated code runs in both, so it is ~0 in practice
     np.testing.assert_allclose(csv[:, 0], tr.t, atol=1e-12)
@@ -44,7 +44,7 @@ def test_exported_slider_crank_starts_where_python_does_and_matches_it(tmp_path)
     exe = export_c(model, tmp_path, what="simulate", t_end=0.2, dt=1e-3).build()
     subprocess.run([str(exe)], check=True, cwd=tmp_path, timeout=60)
     csv = np.loadtxt(tmp_path / "trajectory.csv", delimiter=",", skiprows=1)
-    np.testing.assert_allclose(csv[:, 1:], simulate(model, 0.2, dt=1e-3).q, atol=1e-10)  # as above
+    np.testing.assert_allclose(csv[:, 1:], simulate(model, 0.2, stepping=Stepping(dt=1e-3)).q, atol=1e-10)  # as above
 
 
 @needs_cc

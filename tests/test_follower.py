@@ -16,7 +16,7 @@ from scipy.optimize import brentq, fsolve
 from casflex import Beam, Load, Node, Parameter, Scene, SceneError, Support, assemble
 from casflex.elements.kernels import kernel
 from casflex.scene.io import dumps_scene, loads_scene
-from casflex.simulate import simulate
+from casflex.simulate import Stepping, simulate
 from casflex.statics import StaticsError, critical_load, equilibrium, equilibrium_path, modes
 
 EI, EA, MU = 1.0, 1e6, 1.0  # N m^2, N, kg/m: a unit column, L = 1 m, stiff in tension (P / EA <= 5e-6)
@@ -127,7 +127,7 @@ def test_energy_balance_with_the_power_a_follower_load_supplies():
     scene = column(2, fy=0.5, ea=1e3)
     err = []
     for dt in (4e-3, 2e-3):
-        tr = simulate(assemble(scene), 0.5, dt=dt)
+        tr = simulate(assemble(scene), 0.5, stepping=Stepping(dt=dt))
         err.append(np.abs(tr.energies["balance_error"]).max())
         assert tr.energies["work_external"][-1] > 0.09  # the load did work (0.098 J)
     assert err[0] / err[1] > 3.5, err  # at least order 2 (measured 4.9: 1.8e-5 J, then 3.8e-6 J)

@@ -14,7 +14,7 @@ import pytest
 import casflex
 from casflex.integrators import HHT, hht_coefficients
 from casflex.scene import Beam, Node, RunSettings, Scene, Support
-from casflex.simulate import initial_state, simulate
+from casflex.simulate import Stepping, initial_state, simulate
 
 E, A, RHO, L = 2.0e7, 1e-3, 1000.0, 1.0  # axial bar: k = EA/L = 2e4 N/m, m = 1 kg
 
@@ -102,11 +102,11 @@ def test_spectral_radius_at_infinity(alpha):
 
 def test_energy_conserved_at_alpha_zero_and_removed_otherwise():
     model = casflex.assemble(axial_oscillator(vx=0.2))
-    tr0 = simulate(model, 0.5, dt=2e-4, alpha=0.0)
+    tr0 = simulate(model, 0.5, stepping=Stepping(dt=2e-4, alpha=0.0))
     E0 = tr0.energies["total"][0]
     # trapezoidal rule conserves the quadratic energy of a linear system to round-off
     assert np.abs(tr0.energies["total"] - E0).max() < 1e-10 * E0
-    tr1 = simulate(model, 0.5, dt=2e-4, alpha=-0.3)
+    tr1 = simulate(model, 0.5, stepping=Stepping(dt=2e-4, alpha=-0.3))
     # the energy HHT removes is exactly what its amplification matrix predicts
     k, m_eff = E * A / L, RHO * A * L / 3.0
     h = 2e-4
@@ -120,7 +120,7 @@ def test_energy_conserved_at_alpha_zero_and_removed_otherwise():
 
 def _twobar_node5(dt: float, alpha: float, t_end: float = 0.4) -> np.ndarray:
     model = casflex.assemble(casflex.load_scene("twobar"))
-    tr = simulate(model, t_end, dt=dt, alpha=alpha)
+    tr = simulate(model, t_end, stepping=Stepping(dt=dt, alpha=alpha))
     return tr.q[-1, 12:14]
 
 
@@ -215,7 +215,7 @@ def test_scaled_newton_works_for_any_stiffness(k):
         supports=base.supports, gravity=(0.0, 0.0),
     )
     h = 0.05 / omega
-    tr = simulate(casflex.assemble(scene), 200 * h, dt=h, alpha=-0.1)
+    tr = simulate(casflex.assemble(scene), 200 * h, stepping=Stepping(dt=h, alpha=-0.1))
     assert tr.newton_iterations.max() <= 2
     y = np.array([0.0, 1e-2 * omega * h, 0.0])  # (u, h v, h^2 a): at rest length, moving
     y = np.linalg.matrix_power(hht_amplification(0.05, -0.1), 200) @ y
@@ -230,7 +230,7 @@ def _spinning_bar_order(alpha: float) -> float:
     scene = Scene(name="spin", nodes=(Node("a", -0.5, 0, vy=-0.5 * w, omega=w), Node("b", 0.5, 0, vy=0.5 * w, omega=w)),
                   beams=(Beam("bar", ("a", "b"), E=2.1e11, A=1e-4, I=1e-8, rho=7800.0),), gravity=(0.0, 0.0))
     model = casflex.assemble(scene)
-    q = [simulate(model, 1.0, dt=h, alpha=alpha).q[:, 3:5] for h in (5e-4, 2.5e-4, 1.25e-4)]
+    q = [simulate(model, 1.0, stepping=Stepping(dt=h, alpha=alpha)).q[:, 3:5] for h in (5e-4, 2.5e-4, 1.25e-4)]
     d = [np.linalg.norm(q[i] - q[i + 1][::2], axis=1).max() for i in range(2)]
     return math.log2(d[0] / d[1])
 

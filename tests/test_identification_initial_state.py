@@ -11,7 +11,7 @@ import casflex
 from casflex.data import MeasurementSet
 from casflex.identification.initial_state import initial_guess, initial_state_of, slow_modes
 from casflex.identification.measurement import Experiment
-from casflex.simulate import simulate
+from casflex.simulate import Stepping, simulate
 
 
 @pytest.fixture(scope="module")
@@ -77,7 +77,7 @@ def test_the_slow_manifold_compiles_to_c(twobar):
 
 def test_the_kinematic_guess_of_a_recording_mid_motion(twobar):
     # exact positions of nodes 3 and 5 from 0.5 s on: node 2 and the rotations follow from the bars
-    tr = simulate(twobar, 0.6, dt=1e-3)
+    tr = simulate(twobar, 0.6, stepping=Stepping(dt=1e-3))
     rows = np.arange(500, 601, 10)
     names = ("x3", "y3", "x5", "y5")
     data = MeasurementSet(tr.t[rows], names, tr.q[np.ix_(rows, [twobar.dof(c) for c in names])], None, None)

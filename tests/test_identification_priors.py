@@ -201,7 +201,7 @@ def test_the_knee_force_band_carries_the_segments_mass():
     # the knee's force is the shank-foot's weight and inertial force: its band must hold the mass's uncertainty,
     # and the true force (the recording's properties, run by the model) where the band of the held fit misses it
     from casflex.identification import output_band
-    from casflex.simulate import simulate
+    from casflex.simulate import Stepping, simulate
 
     model = casflex.assemble(casflex.load_scene("knee_pendulum"))
     data = pendulum("both", 0)
@@ -212,7 +212,7 @@ def test_the_knee_force_band_carries_the_segments_mass():
     assert band["failed"] == 0
     truth_scene = model.scene.with_property("shank_foot.mass", 1.1 * 4.575).with_property(
         "shank_foot.inertia", 1.2 * 0.14639109888)
-    tr = simulate(casflex.assemble(truth_scene), 5.0, dt=1e-3)
+    tr = simulate(casflex.assemble(truth_scene), 5.0, stepping=Stepping(dt=1e-3))
     true = np.column_stack([tr.outputs[:, tr.output_names.index(n)] for n in names])
     inside = (true >= band["lo"]) & (true <= band["hi"])
     assert inside[:, 1].mean() > 0.9  # fy: measured 1.0

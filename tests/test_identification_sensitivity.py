@@ -8,7 +8,7 @@ from conftest import assert_same_numbers
 
 import casflex
 from casflex.identification.sensitivity import run_sensitivities
-from casflex.simulate import initial_state, integrator_for, simulate
+from casflex.simulate import Stepping, initial_state, integrator_for, simulate
 
 
 @pytest.fixture(scope="module")
@@ -24,14 +24,15 @@ def test_states_are_the_simulation_and_sensitivities_match_finite_differences(se
     p, dt, n = model.p_nominal, 1e-3, 300
     run = run_sensitivities(integ, x0, p, 0.0, dt, n, np.array([0, 150, 300]))
     assert run.converged
-    tr = simulate(model, n * dt, dt=dt, alpha=0.0)
+    tr = simulate(model, n * dt, stepping=Stepping(dt=dt, alpha=0.0))
     assert_same_numbers(tr.q[[0, 150, 300]], run.X[:, :model.n_dof])  # the same steps (compiled: bitwise by default)
     # d q_300 / d p by central differences, step 1e-5 relative: each trajectory converged to the Newton
     # tolerance (1e-12, scaled), which after the division by 2h leaves ~1e-6 of the largest sensitivity
     # (measured 1.4e-6 on kt1)
     for j in range(model.n_p):
         h = 1e-5 * p[j]
-        qs = [simulate(model, n * dt, dt=dt, alpha=0.0, p=p + s * h * np.eye(model.n_p)[j]).q[-1] for s in (1, -1)]
+        qs = [simulate(model, n * dt, stepping=Stepping(dt=dt, alpha=0.0),
+                       p=p + s * h * np.eye(model.n_p)[j]).q[-1] for s in (1, -1)]
         fd = (qs[0] - qs[1]) / (2 * h)
         ad = run.S[-1, integ.nx + j, :model.n_dof]
         np.testing.assert_allclose(ad, fd, rtol=1e-5, atol=1e-5 * np.abs(fd).max())

@@ -188,7 +188,7 @@ def test_forward_simulation_under_the_inverse_moments_retraces_the_motion():
     import dataclasses
 
     from casflex.scene import Load, Support
-    from casflex.simulate import simulate
+    from casflex.simulate import Start, Stepping, simulate
 
     model, tree = _tree()
     t = np.arange(0.0, 1.0 + 1e-9, 1e-3)
@@ -203,7 +203,7 @@ def test_forward_simulation_under_the_inverse_moments_retraces_the_motion():
     driven = dataclasses.replace(sc, supports=(Support("ground", "base", "clamp", path),),
                                  loads=(Load("muscle", "link", table=moment, against="base"),))
     q0, qd0 = sol["q"][0], sol["qd"][0]
-    tr = simulate(driven, 1.0, dt=1e-3, alpha=-0.05, q0=q0, qd0=qd0)
+    tr = simulate(driven, 1.0, stepping=Stepping(dt=1e-3, alpha=-0.05), start=Start(q0=q0, qd0=qd0))
     angle = tr.output("pivot.angle")
     # HHT's O(dt^2) and the table's linear interpolation, accumulated over 1 s of an undamped swing:
     # measured 2.8e-5 rad; bound 7x that (3e-4 of the swing's 0.7 rad)

@@ -14,7 +14,7 @@ import casflex
 from casflex import Joint, Node, RigidBody, Scene, SceneError
 from casflex.elements.joints import JOINT_KINDS, ROWS, joint_kernel
 from casflex.identification import Experiment, Shooting, Solver
-from casflex.simulate import simulate
+from casflex.simulate import Start, Stepping, simulate
 
 G = 9.81
 # an asymmetric double pendulum: link 1 (pivot to elbow, L1) and link 2 (from the elbow), rigid bodies
@@ -69,7 +69,7 @@ def runs():
     model = casflex.assemble(double_pendulum())
     t_end, out = 1.0, {}
     for dt in (4e-3, 2e-3, 1e-3):
-        out[dt] = simulate(model, t_end, dt=dt, alpha=0.0)
+        out[dt] = simulate(model, t_end, stepping=Stepping(dt=dt, alpha=0.0))
     return model, out
 
 
@@ -148,7 +148,7 @@ def test_compiled_runs_with_joints_keep_the_contract(runs):
     from conftest import assert_same_numbers
 
     model, out = runs
-    b = simulate(model, 1.0, dt=1e-3, alpha=0.0, compiled=True)
+    b = simulate(model, 1.0, stepping=Stepping(dt=1e-3, alpha=0.0, compiled=True))
     assert_same_numbers(out[1e-3].q, b.q)
     assert_same_numbers(out[1e-3].lam, b.lam)
 
@@ -159,7 +159,7 @@ def test_velocities_that_ignore_the_joints_are_projected_onto_them():
     qd0 = np.zeros(model.n_dof)
     qd0[model.dof("xb")] = 0.7  # the elbow cannot move along link 1
     qd0[model.dof("thetaa")] = 0.4
-    tr = simulate(model, 0.01, dt=1e-3, qd0=qd0)
+    tr = simulate(model, 0.01, stepping=Stepping(dt=1e-3), start=Start(qd0=qd0))
     B = np.array(model.constraint(tr.q[0])[1])
     assert np.abs(B @ tr.qd[0]).max() < 1e-12
     assert tr.qd[0][model.dof("thetaa")] != 0.0  # the least change, not a stop
@@ -169,7 +169,7 @@ def test_a_state_that_opens_a_joint_is_closed_or_refused():
     model = casflex.assemble(double_pendulum())
     q = model.q0.copy()
     q[model.dof("xb")] += 0.01  # 1 cm off the elbow
-    tr = simulate(model, 0.01, dt=1e-3, q0=q)
+    tr = simulate(model, 0.01, stepping=Stepping(dt=1e-3), start=Start(q0=q))
     assert np.abs(np.array(model.constraint(tr.q[0])[0])).max() < 1e-12
     from casflex.model.consistent import project_positions
 
@@ -267,7 +267,7 @@ def test_the_slider_crank_matches_its_closed_form_kinematics_and_inverse_dynamic
     model = casflex.assemble(casflex.load_scene("slidercrank"))
     late, whole = {}, {}
     for dt in (2e-3, 1e-3, 5e-4):
-        tr = simulate(model, 0.5, dt=dt, alpha=-0.1)
+        tr = simulate(model, 0.5, stepping=Stepping(dt=dt, alpha=-0.1))
         truth = _slider_crank_truth(tr.t)
         got = {"travel": tr.output("cylinder.travel"), "normal": tr.output("cylinder.force"),
                "f_a": np.column_stack([tr.output("crankpin.fx"), tr.output("crankpin.fy")]),
@@ -294,7 +294,8 @@ def test_the_built_in_hinged_leg_is_written_from_leg_rigid():
 
     # bit for bit, on any machine: hinged_leg copies the two files' numbers and adds literals, no arithmetic
     assert casflex.load_scene("leg_hinged") == hinged_leg(casflex.load_scene("leg_rigid"), casflex.load_scene("leg"))
-    tr = simulate(casflex.assemble(casflex.load_scene("leg_hinged")), 0.5, dt=1e-3)  # the ankle turns
+    tr = simulate(casflex.assemble(casflex.load_scene("leg_hinged")), 0.5,
+                  stepping=Stepping(dt=1e-3))  # the ankle turns
     assert np.ptp(tr.output("ankle_pin.angle")) > 1e-3 and np.ptp(tr.output("knee_pin.angle")) > 1e-2
 
 
@@ -316,13 +317,13 @@ def test_stiffer_bushings_converge_to_the_hinges():
         n, vx=v[0], vy=v[1], omega=v[2] if n.name == "pelvis" else 0.0) for n in rigid.nodes))
     hinged = casflex.assemble(hinged_leg(rigid, casflex.load_scene("leg"), ankle=False))
     dt, w = 1e-4, 200  # s; the filter's samples (20 ms)
-    th = simulate(hinged, 0.4, dt=dt)
+    th = simulate(hinged, 0.4, stepping=Stepping(dt=dt))
     f_hinge = uniform_filter1d(np.hypot(th.output("hip_pin.fx"), th.output("hip_pin.fy")), w)
     gap, force = {}, {}
     for factor in (10, 100):
         model = casflex.assemble(dataclasses.replace(rigid, springs=tuple(
             dataclasses.replace(s, k=factor * s.k) for s in rigid.springs)))
-        tr = simulate(model, 0.4, dt=dt)
+        tr = simulate(model, 0.4, stepping=Stepping(dt=dt))
         gap[factor] = np.abs(marker_positions(model, tr.q) - marker_positions(hinged, th.q)).max()
         late = tr.t > 0.2
         force[factor] = np.abs(uniform_filter1d(tr.output("hip_joint.force"), w) - f_hinge)[late].max()
@@ -404,7 +405,7 @@ def test_the_direct_method_takes_the_joints_multipliers_as_unknowns():
 def test_alpha_0_on_a_driven_mechanism_warns_that_its_joint_forces_ring():
     model = casflex.assemble(casflex.load_scene("slidercrank"))
     with pytest.warns(RuntimeWarning, match="alpha = 0 with ideal joints driven by a moving support"):
-        simulate(model, 0.01, dt=1e-3, alpha=0.0)
+        simulate(model, 0.01, stepping=Stepping(dt=1e-3, alpha=0.0))
 
 
 def test_static_equilibrium_with_joints_against_the_minimal_coordinates():

@@ -21,7 +21,7 @@ import casflex
 from casflex.cli import main
 from casflex.data import add_position_noise, load_measurements
 from casflex.identification import identify_indirect
-from casflex.simulate import simulate
+from casflex.simulate import Stepping, simulate
 
 RECORDING = Path(__file__).resolve().parent / "data" / "knee_pendulum_exudyn.npz"
 NOISE = 1e-3  # m: a motion-capture lab's marker noise
@@ -42,7 +42,7 @@ def exudyn() -> dict:
 
 def _casflex(model, channels: list[str], dt: float) -> tuple[np.ndarray, np.ndarray]:
     """casflex's markers (m) and knee flexion (rad, -knee_pin.angle) over 5 s at steps of dt (s), at 100 Hz."""
-    tr = simulate(model, 5.0, dt=dt)
+    tr = simulate(model, 5.0, stepping=Stepping(dt=dt))
     every = int(round(0.01 / dt))
     q = np.column_stack([tr.channel(c) for c in channels])[::every]
     return q, -tr.outputs[::every, tr.output_names.index("knee_pin.angle")]

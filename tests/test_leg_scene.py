@@ -42,10 +42,10 @@ def test_state_guessed_from_the_markers_mid_stride_does_not_wind_a_node():
     from casflex.identification.initial_state import _elastic_energy, initial_guess
     from casflex.identification.measurement import Experiment
     from casflex.model.markers import marker_channels, marker_positions
-    from casflex.simulate import simulate
+    from casflex.simulate import Stepping, simulate
 
     model = casflex.assemble(casflex.load_scene("leg"))
-    tr = simulate(model, 0.6, dt=1e-3)
+    tr = simulate(model, 0.6, stepping=Stepping(dt=1e-3))
     rows = np.arange(550, 601, 10)  # 100 Hz from 0.55 s
     data = MeasurementSet(tr.t[rows], marker_channels(model), marker_positions(model, tr.q[rows]), None, None)
     q_g, _ = initial_guess(model, Experiment(data, initial_state="estimate"))
@@ -64,7 +64,7 @@ def test_rigid_leg_is_the_leg_derived_and_its_stiffened_bones_limit():
     from leg_rigid import rigid_leg
 
     from casflex.model.markers import marker_positions
-    from casflex.simulate import simulate
+    from casflex.simulate import Stepping, simulate
 
     leg, rigid = casflex.load_scene("leg"), casflex.load_scene("leg_rigid")
     # the bodies' masses and Izz: math.hypot (within an ulp, not the same bits everywhere) and a few products:
@@ -79,7 +79,7 @@ def test_rigid_leg_is_the_leg_derived_and_its_stiffened_bones_limit():
 
     def markers(scene) -> np.ndarray:
         m = casflex.assemble(scene)
-        return marker_positions(m, simulate(m, 0.4, dt=1e-3, alpha=-0.05).q)
+        return marker_positions(m, simulate(m, 0.4, stepping=Stepping(dt=1e-3, alpha=-0.05)).q)
 
     y_rigid = markers(rigid)
     gaps = [np.abs(markers(dataclasses.replace(leg, beams=tuple(dataclasses.replace(b, E=b.E * s) for b in leg.beams)))
@@ -99,12 +99,12 @@ def test_leg_identified_from_its_markers_mid_stride():
     from casflex.data import MeasurementSet
     from casflex.identification import identify_indirect
     from casflex.model.markers import marker_channels, marker_positions
-    from casflex.simulate import simulate
+    from casflex.simulate import Stepping, simulate
 
     leg = casflex.load_scene("leg")
     fine = casflex.assemble(dataclasses.replace(leg, beams=tuple(dataclasses.replace(b, elements=2)
                                                                  for b in leg.beams)))
-    tr = simulate(fine, 1.65, dt=5e-4)
+    tr = simulate(fine, 1.65, stepping=Stepping(dt=5e-4))
     rows = np.arange(1100, tr.t.size, 20)  # 100 Hz from 0.55 s
     y = marker_positions(fine, tr.q[rows])
     data = MeasurementSet(tr.t[rows], marker_channels(fine), y + np.random.default_rng(0).normal(0, 1e-3, y.shape),

@@ -87,10 +87,10 @@ def test_markers_round_trip_and_what_is_refused():
 
 
 def test_a_simulation_reports_its_markers():
-    from casflex.simulate import simulate
+    from casflex.simulate import Stepping, simulate
 
     scene = cantilever(2, (Marker("a", "strip", 0.7, -0.02),))
-    tr = simulate(assemble(scene), 0.01, dt=1e-3)
+    tr = simulate(assemble(scene), 0.01, stepping=Stepping(dt=1e-3))
     model = assemble(scene)
     y = marker_positions(model, tr.q)
     assert np.array_equal(tr.output("a.x"), y[:, 0]) and np.array_equal(tr.output("a.y"), y[:, 1])
@@ -103,7 +103,7 @@ def test_stiffness_identified_from_markers_only_and_what_is_refused():
     from casflex import Load, Parameter
     from casflex.data import MeasurementSet
     from casflex.identification import identify_adapted_direct, identify_indirect
-    from casflex.simulate import simulate
+    from casflex.simulate import Stepping, simulate
 
     def strip(elements: int) -> Scene:
         push = ((0.0, 0.0, 0.0, 0.0), (0.05, 0.0, 5.0, 0.0), (0.15, 0.0, 5.0, 0.0), (0.2, 0.0, 0.0, 0.0))
@@ -113,7 +113,7 @@ def test_stiffness_identified_from_markers_only_and_what_is_refused():
                      loads=(Load("push", "tip", table=push),), parameters=(Parameter("E", "strip.E"),),
                      markers=(Marker("mid", "strip", 1.0, 0.01), Marker("end", "mass", 2.05, 0.02)), gravity=(0.0, 0.0))
 
-    tr = simulate(assemble(strip(6)), 1.5, dt=1e-4)
+    tr = simulate(assemble(strip(6)), 1.5, stepping=Stepping(dt=1e-4))
     rows = np.arange(0, tr.t.size, 100)
     names = ("xmid", "ymid", "xend", "yend")
     y = np.column_stack([tr.output(f"{n[1:]}.{n[0]}")[rows] for n in names])
@@ -145,14 +145,14 @@ def test_markers_on_twobar_agree_with_exudyns():
     from pathlib import Path
 
     from casflex import load_scene
-    from casflex.simulate import simulate
+    from casflex.simulate import Stepping, simulate
 
     here = Path(__file__).parent / "data"
     z = np.load(here / "twobar_markers_exudyn.npz")
     ch = [str(c) for c in z["channels"]]
     scene = load_scene(here / "twobar_markers.toml")
     scene = dataclasses.replace(scene, beams=tuple(dataclasses.replace(b, elements=4) for b in scene.beams))
-    tr = simulate(assemble(scene), 1.0, dt=1e-4, alpha=0.0)
+    tr = simulate(assemble(scene), 1.0, stepping=Stepping(dt=1e-4, alpha=0.0))
     rows = np.arange(0, tr.t.size, 10)
     assert np.allclose(tr.t[rows], z["t"])
 

@@ -16,7 +16,7 @@ from casflex.data import MeasurementSet
 from casflex.identification import Experiment, ModelRun, Solver, identify_direct, identify_indirect
 from casflex.model.constraints import FixedDof, prescribed
 from casflex.scene.io import dumps_scene, loads_scene
-from casflex.simulate import simulate, simulated_set
+from casflex.simulate import Stepping, simulate, simulated_set
 from casflex.statics import equilibrium
 
 L, AMP, W, G = 1.0, 0.05, 2 * math.pi * 3.0, 9.81  # m, m, rad/s (3 Hz), m/s^2
@@ -73,7 +73,7 @@ def test_a_driven_leg_s_hinge_forces_converge_at_second_order():
     grid = np.arange(0.2, 0.5 + 1e-9, 4e-3)
     runs = {}
     for dt in (2e-3, 1e-3, 5e-4, 1.25e-4):
-        tr = simulate(model, 0.5, dt=dt)
+        tr = simulate(model, 0.5, stepping=Stepping(dt=dt))
         at = np.rint(grid / dt).astype(int)
         runs[dt] = np.column_stack([tr.output(k)[at] for k in names])
     err = [np.abs(runs[dt] - runs[1.25e-4]).max() for dt in (2e-3, 1e-3, 5e-4)]
@@ -84,7 +84,7 @@ def test_a_driven_leg_s_hinge_forces_converge_at_second_order():
 
 def test_pendulum_on_a_shaking_pivot_and_its_driving_force():
     model = assemble(shaken())
-    tr = simulate(model, 1.5, dt=1e-3, alpha=-0.2)  # alpha < 0 damps the stiff rod's axial ringing
+    tr = simulate(model, 1.5, stepping=Stepping(dt=1e-3, alpha=-0.2))  # alpha < 0 damps the stiff rod's axial ringing
     ref, rhs = rigid(1.5)
     yp = tr.q[:, model.dof("yp")]
     th = np.arctan2(tr.q[:, model.dof("xe")], yp - tr.q[:, model.dof("ye")])
@@ -100,7 +100,7 @@ def test_pendulum_on_a_shaking_pivot_and_its_driving_force():
     late = tr.t > 0.05
     assert np.abs(tr.output("pivot.y") - fy)[late].max() < 1.0  # of 226 N
     assert np.abs(tr.output("pivot.x") - fx)[late].max() < 1.0  # of 74 N
-    interpreted = simulate(model, 0.05, dt=1e-3, alpha=-0.2, compiled=False)
+    interpreted = simulate(model, 0.05, stepping=Stepping(dt=1e-3, alpha=-0.2, compiled=False))
     np.testing.assert_allclose(interpreted.q, tr.q[:51], rtol=0, atol=1e-12)
 
 
@@ -108,7 +108,7 @@ def test_energy_balance_includes_the_supports_work():
     # E - E0 = W_ext, the moving pivot's work included: to order 2 at alpha = 0
     err = []
     for dt in (1e-3, 5e-4):
-        tr = simulate(assemble(shaken()), 1.0, dt=dt, alpha=0.0)
+        tr = simulate(assemble(shaken()), 1.0, stepping=Stepping(dt=dt, alpha=0.0))
         err.append(np.abs(tr.energies["balance_error"]).max())
         assert np.abs(tr.energies["work_external"]).max() > 1.0  # the pivot did work
     assert err[0] / err[1] > 3.0, err  # measured 4.0
@@ -128,7 +128,7 @@ def test_scene_checks_round_trip_and_what_is_refused():
     q = equilibrium(fine, t=1 / 12).q  # a quarter period: the pivot at its top
     assert q[model.dof("yp")] == float(fine.prescribed(1 / 12)[0][1]) == pytest.approx(AMP, abs=1e-7)
     declared = assemble(dataclasses.replace(scene, parameters=(Parameter("E", "rod.E"),)))
-    sim = simulate(declared, 0.1, dt=1e-3)
+    sim = simulate(declared, 0.1, stepping=Stepping(dt=1e-3))
     data = MeasurementSet(sim.t, ("xe", "ye"), sim.q[:, [declared.dof("xe"), declared.dof("ye")]], None, None)
     with pytest.raises(ValueError, match=r"\['pivot'\] move \(motion\): the NLP transcription"):
         identify_indirect(declared, data, solver=Solver("ipopt"), run=ModelRun(dt=1e-3))

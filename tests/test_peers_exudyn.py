@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import casflex
-from casflex.simulate import simulate
+from casflex.simulate import Stepping, simulate
 
 
 def _meshed(scene, elements: int, rotary: bool):
@@ -26,7 +26,7 @@ def test_ge_beam_moves_as_casflex_beam_with_rotary_inertia():
     cols = [ms.channels.index(c) for c in ("x3", "y3", "x5", "y5")]
 
     def gap(rotary: bool) -> float:
-        tr = simulate(casflex.assemble(_meshed(scene, 4, rotary)), 0.2, dt=1e-4)
+        tr = simulate(casflex.assemble(_meshed(scene, 4, rotary)), 0.2, stepping=Stepping(dt=1e-4))
         return float(np.abs(ms.q[:, cols] - tr.q[rows][:, [tr.dof_names.index(c) for c in ("x3", "y3", "x5", "y5")]])
                      .max())
 
@@ -112,7 +112,7 @@ def test_a_strip_hinged_to_a_rigid_body_moves_as_in_exudyn():
                       bodies=(RigidBody("link", "o", mass, inertia, com_x=lb / 2, com_y=0.0),),
                       joints=(Joint("pin", "hinge", ("o",)), Joint("h", "hinge", ("o", "p"))))
         model = casflex.assemble(scene)
-        tr = simulate(model, t_end, dt=h, alpha=0.0, compiled=True)
+        tr = simulate(model, t_end, stepping=Stepping(dt=h, alpha=0.0, compiled=True))
         t, tip, f_exu = _body_and_strip_exudyn(elements, h, t_end, mass=mass, inertia=inertia, lb=lb, strip=strip)
         k = np.round(t / h).astype(int)
         gap[elements] = np.abs(tr.q[k][:, [model.dof("xe"), model.dof("ye")]] - tip).max()

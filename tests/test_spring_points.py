@@ -15,7 +15,7 @@ from scipy.special import ellipk
 from casflex import Node, RigidBody, Scene, SceneError, Spring, Support, assemble
 from casflex.elements.kernels import AT_POINTS, KINDS, hht_kernel
 from casflex.scene.io import dumps_scene, loads_scene
-from casflex.simulate import simulate
+from casflex.simulate import Stepping, simulate
 
 PLAIN_PROPS = {"spring": [40.0, 0.3], "spring0": [40.0], "damper": [3.0], "damper0": [3.0]}
 
@@ -50,7 +50,7 @@ def test_body_hung_at_a_point_swings_as_a_compound_pendulum():
     th0, d, m, J, k = 1.0, 0.3, 1.5, 0.02, 1e9
     model = assemble(hung_body(th0, d, m, J, k))
     assert {g.kind for g in model.groups} == {"ospring0", "body"}
-    tr = simulate(model, 1.75, dt=2e-4, alpha=0.0, compiled=False)  # two downward crossings
+    tr = simulate(model, 1.75, stepping=Stepping(dt=2e-4, alpha=0.0, compiled=False))  # two downward crossings
     assert tr.success
     th = tr.q[:, model.dof("thetab")]
     s = np.flatnonzero((th[:-1] > 0) & (th[1:] <= 0))  # downward zero crossings
@@ -67,7 +67,7 @@ def test_body_at_rest_on_a_point_hangs_on_its_weight():
     scene = hung_body(0.0, d + stretch, m, 0.02, k)
     scene = Scene(name="rest", nodes=scene.nodes, bodies=scene.bodies, supports=scene.supports,
                   springs=(Spring("pin", ("o", "b"), k=k, rest_length=0.0, point_b=(0.0, -stretch)),))
-    tr = simulate(assemble(scene), 0.05, dt=1e-3)
+    tr = simulate(assemble(scene), 0.05, stepping=Stepping(dt=1e-3))
     assert np.abs(tr.q - tr.q[0]).max() < 1e-12  # m: at rest from the start
     assert tr.output("pin.fy")[-1] == pytest.approx(m * 9.81, rel=1e-9)  # N, on the body: up
     assert tr.output("pin.length")[-1] == pytest.approx(stretch, rel=1e-9)
@@ -78,7 +78,7 @@ def test_energy_balance_with_a_damper_at_a_point():
     scene = hung_body(0.6, 0.25, 1.0, 0.01, k=2e3, c=2.0)  # a soft bushing: its damper works
 
     def balance(dt: float):
-        tr = simulate(assemble(scene), 0.5, dt=dt, alpha=0.0, compiled=False)
+        tr = simulate(assemble(scene), 0.5, stepping=Stepping(dt=dt, alpha=0.0, compiled=False))
         assert tr.success
         return np.abs(tr.energies["balance_error"]).max(), tr.energies["work_dampers"]
 

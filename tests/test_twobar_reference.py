@@ -31,7 +31,7 @@ import pytest
 from reference.rigid_twobar import RigidTwoBar, reference, solve
 
 import casflex
-from casflex.simulate import simulate
+from casflex.simulate import Stepping, simulate
 
 POSITIONS = ("x2", "y2", "x3", "y3", "x4", "y4", "x5", "y5")
 ROTATIONS = (("theta2", "phi2"), ("theta3", "phi2"), ("theta4", "phi4"), ("theta5", "phi4"))
@@ -48,7 +48,7 @@ def run(e_factor: float = 1.0, inertia: str = "lagrange", dt: float = DT):
     if e_factor != 1.0:
         scene = replace(scene, beams=tuple(replace(b, E=b.E * e_factor) for b in scene.beams))
     model = casflex.assemble(scene, inertia=inertia)
-    tr = simulate(model, 3.0, dt=dt, alpha=0.0, compiled=COMPILED)
+    tr = simulate(model, 3.0, stepping=Stepping(dt=dt, alpha=0.0, compiled=COMPILED))
     assert tr.success
     return tr
 

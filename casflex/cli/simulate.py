@@ -6,13 +6,32 @@ import argparse
 import shutil
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from casflex.cli._base import Outputs, alpha_value, load_model, output_path, positive
+from casflex.cli._base import OptionError, Outputs, alpha_value, load_model, output_path, positive
+
+if TYPE_CHECKING:
+    from casflex.simulate import Stepping
 
 #: the seed paper's instants (s), printed by the demo (its Table 3 and Fig. 2)
 PAPER_INSTANTS = (0.69, 2.83)
+#: The command line's flag of each field of :class:`casflex.simulate.Stepping`: a value refused is said by its flag.
+FLAGS = {"dt": "--dt", "alpha": "--alpha", "newton": "--newton", "compiled": "--compiled"}
+
+
+def stepping_options(args: argparse.Namespace, *, compiled: bool) -> Stepping:
+    """The :class:`casflex.simulate.Stepping` of the flags (--dt, --alpha, --newton; None: the scene's); a value it
+    refuses is an OptionError naming the flag (``--alpha: must lie in [-1/3, 0], got 0.1``)."""
+    from casflex.simulate import Stepping
+
+    try:
+        return Stepping(dt=getattr(args, "dt", None), alpha=getattr(args, "alpha", None),
+                        newton=getattr(args, "newton", "exact"), compiled=compiled)
+    except ValueError as exc:  # "<field>: <reason>", the field as the Python API calls it
+        field, _, reason = str(exc).partition(": ")
+        raise OptionError(f"{FLAGS.get(field, field)}: {reason}") from None
 
 
 def _print_node_table(traj, node: str, times: Sequence[float]) -> None:
@@ -61,12 +80,11 @@ def _run(model, args: argparse.Namespace, *, t_end: float, compiled: bool, progr
     """Simulate, print the summary, write the trajectory and figures into their staging places."""
     from casflex.simulate import check_memory, simulate, step_count
 
-    run = model.scene.run
-    dt = run.dt if getattr(args, "dt", None) is None else args.dt
+    stepping = stepping_options(args, compiled=compiled)
+    dt, _ = stepping.of(model.scene)
     n_steps = step_count(t_end, dt, names=("--t-end", "--dt"))
     check_memory(model, n_steps, dt, names=("--t-end", "--dt"))
-    traj = simulate(model, t_end, dt=dt, alpha=getattr(args, "alpha", None), compiled=compiled, progress=progress,
-                    newton=getattr(args, "newton", "exact"))
+    traj = simulate(model, t_end, stepping=stepping, progress=progress)
     summary(model, traj, times)
     if out is not None:
         traj.save(out)

@@ -29,7 +29,7 @@ def output_band(model: Model, result: IdentificationResult, outputs: Sequence[st
     Returns {"t": (n,) s, "names": output names, "value": (n, k) at the estimate, "lo", "hi": (n, k),
     "draws": used, "failed": draws that did not run}. Units: the outputs' (N, N m, m, J).
     """
-    from casflex.simulate import simulate
+    from casflex.simulate import Start, Stepping, simulate
 
     if not result.trajectories:
         raise ValueError("result: no trajectories (an output-error fit's result is needed)")
@@ -50,8 +50,8 @@ def output_band(model: Model, result: IdentificationResult, outputs: Sequence[st
     dt, alpha = result.extra["dt"], result.extra["alpha"]
     runs = []
     for p in samples:
-        d = simulate(model, tr.t[-1] - tr.t[0], dt=dt, alpha=alpha, p=p, q0=tr.q[0], qd0=tr.qd[0], t0=float(tr.t[0]),
-                     compiled=result.extra.get("compiled", False), raise_on_failure=False)
+        d = simulate(model, tr.t[-1] - tr.t[0], stepping=Stepping(dt=dt, alpha=alpha, compiled=result.extra.get(
+            "compiled", False)), p=p, start=Start(q0=tr.q[0], qd0=tr.qd[0], t0=float(tr.t[0])), raise_on_failure=False)
         if d.success and d.t.size == tr.t.size:
             runs.append(np.asarray(d.outputs)[:, cols])
     if not runs:

@@ -407,7 +407,7 @@ def _experiment_records(problem: OutputError, f: Fit, C: np.ndarray, declared: l
                         dt: float, alpha: float, compiled: bool, newton_tol: float) -> tuple[list, dict, list, list]:
     """Per experiment: the residual analysis, the record (states, noise, residuals), the identified
     model's trajectory and the samples for plots: (channels, records, trajectories, samples)."""
-    from casflex.simulate import simulate
+    from casflex.simulate import Start, Stepping, simulate
 
     model = problem.model
     rows, start_row, channels, records = [], 0, [], {}
@@ -420,8 +420,8 @@ def _experiment_records(problem: OutputError, f: Fit, C: np.ndarray, declared: l
         samples.append({"name": exp.name, "channels": sm.channels, "t": sm.time, "channel": sm.channel,
                         "measured": sm.y, "model": sm.y + f.r[rows[-1]] * problem.sigma[e]})
         q0, qd0 = problem.state(f.w, e)
-        tr = simulate(model, sm.n_steps * dt, dt=dt, alpha=alpha, p=p_hat, q0=q0, qd0=qd0, t0=sm.t0,
-                      compiled=compiled, tol=newton_tol, raise_on_failure=False)
+        tr = simulate(model, sm.n_steps * dt, stepping=Stepping(dt=dt, alpha=alpha, tol=newton_tol, compiled=compiled),
+                      p=p_hat, start=Start(q0=q0, qd0=qd0, t0=sm.t0), raise_on_failure=False)
         trajectories.append(tr)
         rec = {"initial_state": exp.initial_state, "samples": int(sm.y.size), "t0": sm.t0,
                "t_end": sm.t0 + sm.n_steps * dt, "channels": list(sm.channels), "residuals": channels[-1],

@@ -234,7 +234,7 @@ def _set_up(model: Model, data: MeasurementSet, horizon: float, dofs: Sequence[s
             opts: pb.NLPOptions, noise: float | Mapping[str, float] | None = None) -> _SetUp:
     """The grid, compared channels and per-step data, the integrator, and a simulation at the start
     (its states' magnitudes set the accepted Newton residual)."""
-    from casflex.simulate import integrator_for, simulate
+    from casflex.simulate import Start, Stepping, integrator_for, simulate
 
     h, N, rows = _grid(data, horizon, dt)
     if not (rows >= 0).any():
@@ -246,7 +246,8 @@ def _set_up(model: Model, data: MeasurementSet, horizon: float, dofs: Sequence[s
     pb.require_fixed_supports(model, "the NLP transcription (solver other than gauss-newton)")
     p0 = pb.start_values(model, start)
     T, t0 = N * h, float(data.t[0])
-    guess = simulate(model, T, dt=h, alpha=alpha, p=p0, tol=newton_tol, t0=t0, raise_on_failure=False)
+    guess = simulate(model, T, stepping=Stepping(dt=h, alpha=alpha, tol=newton_tol), p=p0, start=Start(t0=t0),
+                     raise_on_failure=False)
     # a step converged when its residual is within newton_tol, or the round-off floor of the
     # scene's coordinates where that is higher (see HHT.tolerance)
     tol_acc = float(np.max(integ.tolerance(guess.q)))

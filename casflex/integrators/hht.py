@@ -72,12 +72,23 @@ from casflex.integrators.hht_pieces import (
 from casflex.integrators.modified import ModifiedNewton
 from casflex.model import Model
 
-__all__ = ["HHT", "hht_coefficients", "roundoff_tolerance", "ROUNDOFF_FLOOR", "NEWTON"]
+__all__ = ["HHT", "check_newton", "hht_coefficients", "roundoff_tolerance", "ROUNDOFF_FLOOR", "NEWTON"]
 
 #: The Newton variants of simulate (HHT.newton).
 NEWTON = ("exact", "modified")
 #: Up to this many elements the Newton functions are expanded into flat SX (see expand_by_default).
 EXPAND_ELEMENTS = 8
+
+
+def check_newton(tol: float, max_iter: int, newton: str) -> None:
+    """ValueError naming the field when the Newton settings of a step are not usable (the one place that says
+    so: :class:`HHT` and :class:`casflex.simulate.Stepping`)."""
+    if not (isinstance(tol, float) and 0.0 < tol < 1e-2):
+        raise ValueError(f"tol: expected a float in (0, 1e-2), got {tol!r}")
+    if not (isinstance(max_iter, int) and max_iter >= 1):
+        raise ValueError(f"max_iter: expected an integer >= 1, got {max_iter!r}")
+    if newton not in NEWTON:
+        raise ValueError(f"newton: expected one of {NEWTON}, got {newton!r}")
 
 
 def expand_by_default(model: Model) -> bool:
@@ -123,12 +134,7 @@ class HHT:
 
     def __post_init__(self) -> None:
         hht_coefficients(self.alpha)
-        if not (isinstance(self.tol, float) and 0.0 < self.tol < 1e-2):
-            raise ValueError(f"tol: expected a float in (0, 1e-2), got {self.tol!r}")
-        if not (isinstance(self.max_iter, int) and self.max_iter >= 1):
-            raise ValueError(f"max_iter: expected an integer >= 1, got {self.max_iter!r}")
-        if self.newton not in NEWTON:
-            raise ValueError(f"newton: expected one of {NEWTON}, got {self.newton!r}")
+        check_newton(self.tol, self.max_iter, self.newton)
         self._build()
 
     # -- sizes -------------------------------------------------------------------------------

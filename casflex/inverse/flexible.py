@@ -119,14 +119,14 @@ def driven_loads(tree: KinematicTree, t: np.ndarray, z: np.ndarray, plates: list
     ``tree.model``), the loads by name (k,), and ``deflection`` (k,) m: the largest distance of a node
     from where the rigid pose has it. ``dt`` (s): the largest time step wanted (made to divide the frames')."""
     from casflex.model import assemble
-    from casflex.simulate import simulate
+    from casflex.simulate import Start, Stepping, simulate
 
     h = float(t[1] - t[0])
     sub = max(1, int(np.ceil(h / dt - 1e-9)))
     model = assemble(driven_scene(tree, t, z, plates, q_fit))
     q0, qd0 = _start(tree, model, float(t[0]), z[0])
-    traj = simulate(model, (t.size - 1) * h, dt=h / sub, alpha=alpha, q0=q0, qd0=qd0, t0=float(t[0]),
-                    compiled=compiled)
+    traj = simulate(model, (t.size - 1) * h, stepping=Stepping(dt=h / sub, alpha=alpha, compiled=compiled),
+                    start=Start(q0=q0, qd0=qd0, t0=float(t[0])))
     keep = np.arange(0, (t.size - 1) * sub + 1, sub)
     cols = [model.dof(n) for n in tree.model.dof_names]
     out = {"q": traj.q[keep][:, cols], "qd": traj.qd[keep][:, cols], "qdd": traj.qdd[keep][:, cols]}

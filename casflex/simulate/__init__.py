@@ -1,7 +1,8 @@
 """The forward simulation: ``simulate(model, t_end, ...) -> Trajectory`` by HHT-alpha (:mod:`casflex.simulate.run`;
 ``simulated_set``: a run as a :class:`~casflex.data.MeasurementSet`),
 run here (interpreted or compiled) or exported as standalone C with an example program
-(:mod:`casflex.simulate.export`, ``casflex export``).
+(:mod:`casflex.simulate.export`, ``casflex export``). Its choices are values (:mod:`casflex.simulate.options`):
+``simulate(model, t_end, stepping=Stepping(dt=1e-3, alpha=-0.05), start=Start(q0=q))``.
 
 The package is also the verb: ``casflex.simulate(model, t_end, ...)`` calls :func:`simulate`.
 """
@@ -9,6 +10,7 @@ The package is also the verb: ``casflex.simulate(model, t_end, ...)`` calls :fun
 import sys
 import types
 
+from casflex.simulate.options import Start, Stepping
 from casflex.simulate.run import (
     CHUNK,
     ENERGY_GROWTH,
@@ -24,8 +26,9 @@ from casflex.simulate.run import (
     step_count,
 )
 
-__all__ = ["simulate", "simulated_set", "SimulationError", "integrator_for", "step_count", "check_memory", "CHUNK",
-           "ENERGY_GROWTH", "compiled_library", "initial_state", "memory_available", "format_bytes"]
+__all__ = ["simulate", "simulated_set", "Stepping", "Start", "SimulationError", "integrator_for", "step_count",
+           "check_memory", "CHUNK", "ENERGY_GROWTH", "compiled_library", "initial_state", "memory_available",
+           "format_bytes"]
 
 
 class _Verb(types.ModuleType):

@@ -12,7 +12,7 @@ from PIL import Image
 
 import casflex
 from casflex import plotting
-from casflex.simulate import simulate
+from casflex.simulate import Stepping, simulate
 
 from .helpers import assert_clean, assert_png
 
@@ -34,7 +34,7 @@ def test_save_standard_figures(twobar, tmp_path):
 
 def test_save_standard_figures_other_scene(tmp_path):
     model = casflex.assemble(pendulum(2))
-    tr = simulate(model, 0.05, dt=1e-3)
+    tr = simulate(model, 0.05, stepping=Stepping(dt=1e-3))
     paths = plotting.save_standard_figures(model, tr, tmp_path, animation=False)
     assert [p.name for p in paths] == ["nodeend_q.png", "nodeend_qd.png", "nodeend_qdd.png",
                                        "configuration.png", "energies.png"]
@@ -45,9 +45,9 @@ def test_no_pyplot_state():
     code = (
         "import sys, casflex\n"
         "from casflex import plotting\n"
-        "from casflex.simulate import simulate\n"
+        "from casflex.simulate import Stepping, simulate\n"
         "m = casflex.assemble(casflex.load_scene('twobar'))\n"
-        "tr = simulate(m, 0.02, dt=1e-3)\n"
+        "tr = simulate(m, 0.02, stepping=Stepping(dt=1e-3))\n"
         "plotting.plot_node(tr); plotting.plot_energies(tr); plotting.plot_configuration(m, tr.q[-1])\n"
         "assert 'matplotlib.pyplot' not in sys.modules, 'pyplot imported'\n"
     )

@@ -10,7 +10,7 @@ from conftest import pendulum
 from matplotlib.figure import Figure
 
 from casflex import plotting
-from casflex.simulate import simulate
+from casflex.simulate import Stepping, simulate
 
 from .helpers import assert_clean, assert_png, legend_texts
 
@@ -56,7 +56,7 @@ def test_plot_energies(twobar, tmp_path):
 
 
 def test_plot_energies_with_loads(tmp_path):
-    tr = simulate(pendulum(2, load=(1.0, 0.0, 0.0)), 0.05, dt=1e-3)
+    tr = simulate(pendulum(2, load=(1.0, 0.0, 0.0)), 0.05, stepping=Stepping(dt=1e-3))
     fig = plotting.plot_energies(tr, tmp_path / "e.png")
     assert len(fig.axes[1].lines) == 2
     assert "work of external loads" in legend_texts(fig.axes[1])
