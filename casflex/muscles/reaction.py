@@ -35,6 +35,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from casflex.muscles.static_optimization import finite_array
+
 __all__ = ["JointReaction", "JointReactions", "joint_reactions"]
 
 
@@ -75,16 +77,6 @@ class JointReactions:
     unit: str
 
 
-def _array(name: str, value, shape: tuple[int, ...]) -> np.ndarray:
-    a = np.asarray(value, dtype=float)
-    if a.shape != shape:
-        raise ValueError(f"{name}: expected shape {shape}, got {a.shape}")
-    if not np.all(np.isfinite(a)):
-        i = tuple(int(j) for j in np.argwhere(~np.isfinite(a))[0])
-        raise ValueError(f"{name}: not finite at {i}: the inputs have a gap there; fill or cut it first")
-    return a
-
-
 def _rotate(f: np.ndarray, angle: np.ndarray) -> np.ndarray:
     """The (k, n_h, 2) ground vectors f in the axes of frames at ``angle`` (k, n_h) rad: R(angle)^T f."""
     c, s = np.cos(angle), np.sin(angle)
@@ -111,16 +103,16 @@ def joint_reactions(net, unit, forces, child=None, parent=None, options: JointRe
     if net.ndim != 3 or net.shape[2] != 3:
         raise ValueError(f"net: expected (frames, hinges, 3) (fx, fy, mz), got shape {net.shape}")
     k, n_h, _ = net.shape
-    net = _array("net", net, (k, n_h, 3))
+    net = finite_array("net", net, (k, n_h, 3))
     unit = np.asarray(unit, dtype=float)
     if unit.ndim != 3 or unit.shape[:2] != (k, 3 * n_h):
         raise ValueError(f"unit: expected ({k}, {3 * n_h}, muscles) (frames, hinges x (fx, fy, mz), muscles), "
                          f"got shape {unit.shape}")
     n_m = unit.shape[2]
-    unit = _array("unit", unit, (k, 3 * n_h, n_m))
-    forces = _array("forces", forces, (k, n_m))
+    unit = finite_array("unit", unit, (k, 3 * n_h, n_m))
+    forces = finite_array("forces", forces, (k, n_m))
     if lever is not None:
-        lever = _array("lever", lever, (k, n_h, 2))
+        lever = finite_array("lever", lever, (k, n_h, 2))
         net = np.concatenate([net[..., :2], net[..., 2:] - np.sum(net[..., :2] * lever, axis=-1, keepdims=True)],
                              axis=-1)
     muscles = np.einsum("krm,km->kr", unit, forces).reshape(k, n_h, 3)
@@ -128,7 +120,7 @@ def joint_reactions(net, unit, forces, child=None, parent=None, options: JointRe
     if options.on == "parent":
         loads = -loads
         if offset is not None:  # the parent's load (-f at the centre) about the point offset from it
-            d = _array("offset", offset, (k, n_h, 2))
+            d = finite_array("offset", offset, (k, n_h, 2))
             moment = loads[..., 2] - (d[..., 0] * loads[..., 1] - d[..., 1] * loads[..., 0])
             loads = np.concatenate([loads[..., :2], moment[..., None]], axis=-1)
     if options.frame != "ground":
@@ -136,7 +128,7 @@ def joint_reactions(net, unit, forces, child=None, parent=None, options: JointRe
         if angle is None:
             raise ValueError(f"{options.frame}: the {options.frame} bodies' angles are needed to express the loads "
                              "in their frames")
-        angle = _array(options.frame, angle, (k, n_h))
+        angle = finite_array(options.frame, angle, (k, n_h))
         loads = np.concatenate([_rotate(loads[..., :2], angle), loads[..., 2:]], axis=-1)
         muscles = np.concatenate([_rotate(muscles[..., :2], angle), muscles[..., 2:]], axis=-1)
     if options.body_weight is not None:

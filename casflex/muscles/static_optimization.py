@@ -129,7 +129,8 @@ class StaticOptimizationResult:
         return not self.infeasible
 
 
-def _array(name: str, value, shape: tuple[int, ...]) -> np.ndarray:
+def finite_array(name: str, value, shape: tuple[int, ...]) -> np.ndarray:
+    """``value`` as a float array of ``shape``; ValueError naming ``name`` for another shape or a value not finite."""
     a = np.asarray(value, dtype=float)
     if a.shape != shape:
         raise ValueError(f"{name}: expected shape {shape}, got {a.shape}")
@@ -149,19 +150,19 @@ def _check(moments, arms, active, passive, reserves, coordinates):
     if arms.ndim != 3 or arms.shape[0] != k or arms.shape[2] != n_c:
         raise ValueError(f"arms: expected ({k}, muscles, {n_c}) (frames, muscles, coordinates), got {arms.shape}")
     n_m = arms.shape[1]
-    m, arms = _array("moments", m, (k, n_c)), _array("arms", arms, (k, n_m, n_c))
+    m, arms = finite_array("moments", m, (k, n_c)), finite_array("arms", arms, (k, n_m, n_c))
     if np.abs(arms).max(initial=0.0) > 1.0:  # m, or m/m on a translation: a human muscle's are below 0.2 m
         i = tuple(int(j) for j in np.unravel_index(np.argmax(np.abs(arms)), arms.shape))
         raise ValueError(f"arms: {arms[i]:g} m at (frame, muscle, coordinate) {i}: no muscle's moment arm is past "
                          "1 m; are they in mm or cm?")
-    active = _array("active", np.broadcast_to(np.asarray(active, dtype=float), (k, n_m)), (k, n_m))
+    active = finite_array("active", np.broadcast_to(np.asarray(active, dtype=float), (k, n_m)), (k, n_m))
     if np.any(active < 0.0):
         i = tuple(int(j) for j in np.argwhere(active < 0.0)[0])
         raise ValueError(f"active: a muscle's force at full activation is negative at (frame, muscle) {i}: "
                          f"{active[i]:g} N")
-    passive = np.zeros((k, n_m)) if passive is None else _array("passive", passive, (k, n_m))
+    passive = np.zeros((k, n_m)) if passive is None else finite_array("passive", passive, (k, n_m))
     r = np.zeros(n_c) if reserves is None else np.asarray([0.0 if v is None else v for v in reserves], dtype=float)
-    r = _array("reserves", r, (n_c,))
+    r = finite_array("reserves", r, (n_c,))
     if np.any(r < 0.0):
         raise ValueError(f"reserves: an optimal force is negative ({r.min():g}); 0 or None: no reserve")
     names = tuple(coordinates) if coordinates is not None else tuple(f"coordinate {c}" for c in range(n_c))
@@ -193,7 +194,7 @@ def solve_static_optimization(moments, arms, active, passive=None, reserves=None
     if not options.force_length_velocity:
         if max_isometric is None:
             raise ValueError("max_isometric: needed with force_length_velocity=False (the force per activation)")
-        active = np.broadcast_to(_array("max_isometric", max_isometric, (n_m,)), (k, n_m))
+        active = np.broadcast_to(finite_array("max_isometric", max_isometric, (n_m,)), (k, n_m))
     target = m - np.einsum("kmc,km->kc", arms, passive) if options.passive else m
     start = time.perf_counter()
     problem = _Problem(arms, active, r, target, options)
