@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from test_muscles_path import THIGH, model, muscle, point
 
-from casflex.inverse import prepare, solve
+from casflex.inverse import Bands, Filter, Trial, prepare, solve
 from casflex.lab.tables import LabTable
 from casflex.muscles.analysis import TrialMuscles
 from casflex.muscles.bands import muscle_bands, muscle_outputs
@@ -37,7 +37,8 @@ def _knee(tmp_path: Path, muscles: str, path: Path | None = None):
     q = -0.6 + 0.4 * np.sin(2 * np.pi * 1.5 * t)
     coords = LabTable(t, ("rz", "tx", "ty", "knee_angle"), np.column_stack([0 * t, 0 * t, 1 + 0 * t, q]),
                       in_degrees=False, source="knee.mot")
-    inputs = prepare(path, None, coordinates=coords, cutoff=None, uncertain=[Uncertain("shank.mass", relative=0.1)])
+    inputs = prepare(path, Trial(coordinates=coords), filter=Filter(None, None),
+                     bands=Bands([Uncertain("shank.mass", relative=0.1)]))
     res = solve(inputs)
     trial = TrialMuscles(scene_from_osim(path, muscles=True), inputs.tree, res.t, res.plates)
     return inputs, res, trial
@@ -93,7 +94,8 @@ def test_two_muscles_bands_are_the_spread_of_a_monte_carlo_over_the_muscle_prior
         assert abs(checked.monte_carlo[name][i] / band - 1) < 3 * 0.041, name  # the option's own draws
     assert mb.values["back"].min() > 0 and mb.values["front"].min() > 0  # both carry load everywhere
     assert any(x.startswith("muscle bands: a Monte Carlo of 300 draws") for x in checked.report)
-    assert "[Monte Carlo " in checked.summary(["back"])[0]
+    assert "[first order " in checked.summary(["back"])[0]  # the Monte Carlo's part, the first order's beside it
+    assert checked.bands["back"]["muscles"] is checked.monte_carlo["back"]
 
 
 def test_one_muscles_marker_band_is_the_markers_chain_through_the_moment_over_the_arm(tmp_path):
@@ -118,7 +120,7 @@ def test_one_muscles_marker_band_is_the_markers_chain_through_the_moment_over_th
     y = y + 0.0002 * np.random.default_rng(2).standard_normal(y.shape)
     lab = LabMarkers(t, tuple(m.name for m in given.model.scene.markers),
                      np.concatenate([y, np.zeros_like(y[..., :1])], 2), 100.0, "m", "synthetic")
-    inputs = prepare(path, lab, cutoff=6.0, marker_noise=0.001)
+    inputs = prepare(path, Trial(lab), filter=Filter(6.0), bands=Bands(marker_noise=0.001))
     res = solve(inputs)
     trial = TrialMuscles(scene_from_osim(path, muscles=True), inputs.tree, res.t, res.plates)
     mb = muscle_bands(trial, inputs, None, res.z, res.zd, res.zdd, uncertainty=MuscleUncertainty(), criteria=())
@@ -141,8 +143,8 @@ def walk():
     """30 frames (0.5 s) of OpenSim's Gait10dof18musc walk from its IK and plates, the reserves and residuals of its
     pipeline, the pelvis', femur's, tibia's and torso's masses 10 % uncertain."""
     table = [Uncertain(f"{b}.mass", relative=0.1) for b in ("pelvis", "femur_r", "tibia_r", "torso")]
-    inputs = prepare(WALK, None, coordinates=DATA / "subject01_walk_IK.mot", grf=DATA / "subject01_walk_grf.xml",
-                     cutoff=6.0, cutoff_plates=None, filter="opensim", t_start=0.6, t_end=1.09, uncertain=table)
+    inputs = prepare(WALK, Trial(coordinates=DATA / "subject01_walk_IK.mot", grf=DATA / "subject01_walk_grf.xml",
+                                 t_start=0.6, t_end=1.09), filter=Filter(6.0, None, "opensim"), bands=Bands(table))
     res = solve(inputs)
     trial = TrialMuscles(scene_from_osim(WALK, muscles=True), inputs.tree, res.t, res.plates,
                          read_actuators(DATA / "gait10dof_Reserve_Actuators.xml"),

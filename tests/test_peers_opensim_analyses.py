@@ -70,6 +70,7 @@ def test_the_frames_opensims_so_logged_as_failed_are_read_from_its_log(tmp_path)
     assert _failed_times(str(log)) == []
 
 
+@needs_opensim
 def test_the_peer_reproduces_the_reference(files, tmp_path):
     """SO over 0.5-0.6 s gives the stored rows (the filter sees the whole file either way), JR runs on its forces,
     and muscle_inputs gives the stored active forces and moment arms."""

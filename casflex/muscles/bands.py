@@ -255,7 +255,7 @@ def _fit(inputs):
 
     if inputs.z is not None:
         return None
-    return fit_markers(inputs.tree, inputs.t, inputs.y, max_gap=inputs.max_gap, max_misfit=inputs.max_misfit,
+    return fit_markers(inputs.tree, inputs.t, inputs.y, max_gap=inputs.fit.max_gap, max_misfit=inputs.fit.misfit,
                        labels=inputs.labels, source=inputs.settings["source"])
 
 
