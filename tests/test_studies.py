@@ -10,9 +10,17 @@ import pytest
 
 HERE = Path(__file__).resolve().parents[1] / "studies"
 STUDIES = sorted(p for p in HERE.glob("*.py") if not p.name.startswith("_"))  # _study.py: their shared parts
+#: The quick runs left to ``pytest -m long`` (the suite's budget, ~10 minutes on 2 cores): the benchmarks, whose
+#: timings are never asserted, and the leg study, whose identification tests/test_leg_scene.py covers.
+LONG = {"leg"}
 
 
-@pytest.mark.parametrize("path", STUDIES, ids=[p.stem for p in STUDIES])
+def _param(p: Path):
+    long = p.stem.startswith("bench_") or p.stem in LONG
+    return pytest.param(p, id=p.stem, marks=[pytest.mark.long] if long else [])
+
+
+@pytest.mark.parametrize("path", [_param(p) for p in STUDIES])
 def test_study_quick(path, tmp_path, monkeypatch):
     monkeypatch.syspath_prepend(str(HERE))  # as ``python studies/<name>.py`` has it
     spec = importlib.util.spec_from_file_location(path.stem, path)
