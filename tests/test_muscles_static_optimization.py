@@ -226,3 +226,12 @@ def test_the_block_diagonal_is_scipys_with_its_zeros_kept():
         got = _block_diagonal(full, keep.reshape(k, n_c))
         assert got.shape == want.shape and np.array_equal(got.indptr, want.indptr)
         assert np.array_equal(got.indices, want.indices) and np.array_equal(got.data, want.data)
+
+
+def test_muscles_with_no_force_anywhere_leave_every_frame_refused_by_name():
+    """A path shorter than its tendon's slack length gives no active force: nothing acts on any row; the frames are
+    refused naming the coordinate and the moment (a CasADi error on an empty problem before)."""
+    k = 3
+    with pytest.raises(ValueError, match=r"frame 0: knee: no activation within the bounds carries its moment of 5 N m"):
+        solve_static_optimization(np.full((k, 1), 5.0), np.full((k, 1, 1), 0.05), np.zeros((k, 1)),
+                                  coordinates=["knee"])

@@ -422,10 +422,12 @@ class _Problem:
         import casadi as ca
 
         n, rows = self.G.shape[1], self.G.shape[0]
+        b = (target / self.scale).ravel()
+        if rows == 0:  # nothing acts on any row (no muscle has force there): every row falls short by all it needs
+            return b.reshape(target.shape) * self.scale
         z = ca.MX.sym("z", n + 2 * rows)
         x, sp_, sm = z[:n], z[n:n + rows], z[n + rows:]
         solver = self._ipopt(z, ca.sum1(sp_ + sm), ca.mtimes(_dm(self.G), x) + sp_ - sm, linear_objective=True)
-        b = (target / self.scale).ravel()
         lbz = np.r_[self.lbx, np.zeros(2 * rows)]
         ubz = np.r_[self.ubx, np.full(2 * rows, np.inf)]
         sol = np.array(solver(x0=np.clip(np.zeros(lbz.size), lbz, ubz), lbx=lbz, ubx=ubz, lbg=b[self.keep],
