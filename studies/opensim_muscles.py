@@ -17,7 +17,7 @@ forces. casflex runs ``prepare``/``solve`` (filter "opensim", plates unfiltered)
 minus OpenSim over the trial, % of that muscle's peak), the reactions' in-plane force (RMS, % of its peak) and moment
 (RMS, N m), each SO's cost and OpenSim's balance where its optimizer reported failure, the right hip's contact force
 in body weights beside the instrumented implants' (docs/muscles.md), and the wall time of both paths.
-``--quick``: the walk only, OpenSim at its defaults. What the numbers mean: docs/studies/opensim_muscles.md.
+``--quick``: the first trial at hand, OpenSim at its defaults. What the numbers mean: docs/studies/opensim_muscles.md.
 """
 
 from __future__ import annotations
@@ -62,7 +62,7 @@ class Trial:
     reserves: Path | None = None
 
 
-TRIALS = (Trial("Gait10dof18musc, subject01 walking", "walk", MUSCLES / "gait10dof18musc_subject01.osim",
+ALL_TRIALS = (Trial("Gait10dof18musc, subject01 walking", "walk", MUSCLES / "gait10dof18musc_subject01.osim",
                 MUSCLES / "subject01_walk_grf.mot", 6.0, (0.0, 2.5), 60.0,
                 ("glut_max_r", "hamstrings_r", "vasti_r", "soleus_r"),
                 coordinates=MUSCLES / "subject01_walk_IK.mot", loads=MUSCLES / "subject01_walk_grf.xml",
@@ -71,6 +71,9 @@ TRIALS = (Trial("Gait10dof18musc, subject01 walking", "walk", MUSCLES / "gait10d
                 MUSCLES / "hamner_subject02_planar_muscles.osim", LAB / "hamner_running_whole_grf.mot", 10.0,
                 (0.2, 1.2), 60.0, ("glut_max2_r", "glut_med1_r", "vas_lat_r", "soleus_r"),
                 markers=LAB / "hamner_running_whole.trc", tasks=LAB / "hamner_tasks_ik.xml"))
+#: The trials at hand: OpenSim's subject01 walk is held out of the repository for independent checks (the study
+#: takes it where its files are put back in tests/data/muscles: tests/data/muscles/README_opensim_runs.md).
+TRIALS = tuple(t for t in ALL_TRIALS if t.model.exists())
 
 
 def reserves(path: Path, model: Path) -> Path:
@@ -330,7 +333,7 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
     react = max(c["joints"][j]["force_pct"] for c in lab.values() for j, _ in JOINTS)
     walk = results[0]["cmp"][100]
     lines, failed = checks([
-        ("the walk: every muscle within 2 % of its peak (RMS), OpenSim at its defaults",
+        (f"{results[0]['trial'].stem}: every muscle within 2 % of its peak (RMS), OpenSim at its defaults",
          f"largest {walk['pct'].max():.2f} %", walk["pct"].max() < 2.0),
         ("every muscle whose peak is 50 N or more within 2 % of its peak over the frames OpenSim's SO solved (at its "
          "defaults), every trial", ", ".join(f"{s} {v:.2f} %" for s, v in big.items()), max(big.values()) < 2.0),
