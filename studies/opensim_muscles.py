@@ -124,15 +124,16 @@ def opensim(trial: Trial, f: dict, tmp: Path, iterations: int) -> dict:
 
 def casflex(trial: Trial, f: dict) -> dict:
     """casflex's whole muscle path from the files: inverse dynamics, paths, SO, residuals, reactions (timed)."""
-    from casflex.inverse import prepare, solve
+    from casflex.inverse import Filter, prepare, solve
+    from casflex.inverse import Trial as InverseTrial
     from casflex.muscles.analysis import TrialMuscles
     from casflex.muscles.reaction import JointReaction
     from casflex.scene.from_osim import scene_from_osim
     from casflex.scene.osim_actuators import read_actuators
 
     start = time.perf_counter()
-    inputs = prepare(f["model"], None, coordinates=f["coordinates"], grf=f["loads"], cutoff=trial.cutoff,
-                     cutoff_plates=None, filter="opensim")
+    inputs = prepare(f["model"], InverseTrial(coordinates=f["coordinates"], grf=f["loads"]),
+                     filter=Filter(trial.cutoff, None, "opensim"))
     res = solve(inputs)
     osim = scene_from_osim(f["model"], muscles=True)
     tm = TrialMuscles(osim, inputs.tree, res.t, res.plates, read_actuators(f["reserves"]),
@@ -332,9 +333,10 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
     small = {s: float(c["rms_ok"][c["peak_ok"] < 50.0].max(initial=0.0)) for s, c in lab.items()}
     react = max(c["joints"][j]["force_pct"] for c in lab.values() for j, _ in JOINTS)
     walk = results[0]["cmp"][100]
-    lines, failed = checks([
-        (f"{results[0]['trial'].stem}: every muscle within 2 % of its peak (RMS), OpenSim at its defaults",
-         f"largest {walk['pct'].max():.2f} %", walk["pct"].max() < 2.0),
+    held = results[0]["trial"].stem == "walk"  # the run's OpenSim fails frames: compared where it solved (below)
+    walk_rows = [("the walk: every muscle within 2 % of its peak (RMS), OpenSim at its defaults",
+                  f"largest {walk['pct'].max():.2f} %", walk["pct"].max() < 2.0)] if held else []
+    lines, failed = checks([*walk_rows,
         ("every muscle whose peak is 50 N or more within 2 % of its peak over the frames OpenSim's SO solved (at its "
          "defaults), every trial", ", ".join(f"{s} {v:.2f} %" for s, v in big.items()), max(big.values()) < 2.0),
         ("the muscles of smaller peak (at the 0.01 activation floor most of the trial, where OpenSim's interior point "
