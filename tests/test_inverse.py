@@ -251,8 +251,9 @@ def _reference_lm(f, z, y, w, lo, hi, max_iter=50):
 
 def test_the_fast_marker_fit_gives_the_numbers_of_the_plain_one():
     """The marker fit's buffered evaluations and in-place damping (issue 49) against the plain algorithm, on the
-    Gait10dof18musc walk with its task weights: bit-equal coordinates and residuals, free and with a coordinate
-    held at a limit below its free optimum (the active set's path). Equal, not close: the same arithmetic."""
+    planar Hamner subject 02 run with its task weights: bit-equal coordinates and residuals, free and with a
+    coordinate held at a limit below its free optimum (the active set's path). Equal, not close: the same
+    arithmetic."""
     from pathlib import Path
 
     from casflex.inverse.fit import _kabsch_start, _levenberg_marquardt, _MarkerFit, coordinate_bounds, marker_weights
@@ -260,18 +261,16 @@ def test_the_fast_marker_fit_gives_the_numbers_of_the_plain_one():
     from casflex.lab import read_trc
     from casflex.scene.from_osim import scene_from_osim
 
-    data = Path(__file__).parent / "data" / "muscles"
-    if not (data / "gait10dof18musc_subject01.osim").exists():
-        pytest.skip("OpenSim's subject01 walk is held out of the repository for independent checks")
-    scene = weighted(scene_from_osim(data / "gait10dof18musc_subject01.osim").scene, data / "walk_ik_tasks.xml")[0]
+    data = Path(__file__).parent / "data" / "lab"
+    scene = weighted(scene_from_osim(data / "hamner_subject02_planar.osim").scene, data / "hamner_tasks_ik.xml")[0]
     tree = kinematic_tree(inverse_model(scene))
     f, w = tree.marker_fit, marker_weights(tree)
     lo, hi = coordinate_bounds(tree) or (np.full(tree.n, -np.inf), np.full(tree.n, np.inf))
     z = np.random.default_rng(0).normal(size=tree.n)
     assert all(np.array_equal(np.array(a).reshape(b.shape), b) for a, b in zip(f(z), _MarkerFit(f)(z), strict=True))
-    trc = read_trc(data / "subject01_walk.trc")
+    trc = read_trc(data / "hamner_running_whole.trc")
     y0 = _MarkerFit(f)(tree.coordinates(tree.model.q0))[0].copy()
-    for i in (0, 40, 100):
+    for i in (0, 25, 50):
         y = np.concatenate([trc.marker(m.label)[i, :2] for m in tree.model.scene.markers])
         start = _kabsch_start(tree, y, y0)
         z_free, r_free = _reference_lm(f, start, y, w, lo, hi)

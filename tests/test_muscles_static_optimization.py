@@ -1,4 +1,4 @@
-"""casflex.muscles.static_optimization: closed forms, and OpenSim 4.6's own SO on Gait10dof18musc's walk given
+"""casflex.muscles.static_optimization: closed forms, and OpenSim 4.6's own SO on Hamner's subject 02 run given
 OpenSim's moment arms, forces at full activation and inverse dynamics (tests/data/muscles/README_opensim_runs.md)."""
 
 from __future__ import annotations
@@ -13,40 +13,54 @@ from casflex.muscles.static_optimization import StaticOptimization, solve_static
 
 DATA = Path(__file__).parent / "data" / "muscles"
 
-#: OpenSim's runs on its subject01 walk: held out of the repository for independent checks (present only where
-#: tests/data/muscles/make_opensim_reference.py wrote them); OpenSim on Hamner's run: tests/test_peers_*
-HELD_OUT = pytest.mark.skipif(not (DATA / "gait10dof18musc_inputs.npz").exists(),
-                              reason="OpenSim's subject01 reference is held out of the repository")
-#: The coordinates the leg muscles and the lumbar reserve carry (the pelvis' three are the residuals' alone: the
-#: muscles are internal forces there, moment arms 0 to 2e-16 m).
+#: OpenSim 4.6's SO on Hamner's subject 02 run (tests/data/muscles/README_opensim_runs.md): the coordinates the
+#: muscles and the reserves carry (the pelvis' three are the residuals' alone: the muscles are internal forces there,
+#: moment arms 0 to 3e-16 m; no muscle crosses the arms' four)
 JOINTS = ("hip_flexion_r", "knee_angle_r", "ankle_angle_r", "hip_flexion_l", "knee_angle_l", "ankle_angle_l",
-          "lumbar_extension")
+          "lumbar_extension", "arm_flex_r", "elbow_flex_r", "arm_flex_l", "elbow_flex_l")
+ARMS = slice(7, 11)
 LOOSE = StaticOptimization(activation_bounds=(0.0, 1.0))
 
 
 def _reference():
-    d = np.load(DATA / "gait10dof18musc_inputs.npz")
+    d = np.load(DATA / "hamner_run_inputs.npz")
     cols = [list(d["coordinates"]).index(c) for c in JOINTS]
     moments = np.column_stack([np.interp(d["t"], d["id_t"], d["id_moments"][:, c]) for c in cols])
-    act = read_sto(DATA / "gait10dof18musc_so_activation.sto")
+    act = read_sto(DATA / "hamner_run_so_activation.sto")
     return d, cols, moments, act
 
 
-@HELD_OUT
+def _solved(d) -> np.ndarray:
+    """The frames OpenSim's SO solved (10 of the 61 it logged as failed: its IPOPT at 100 iterations)."""
+    return np.array([np.abs(d["failed"] - t).min() > 1e-6 for t in d["t"]])
+
+
 def test_opensims_activations_from_its_own_moment_arms_forces_and_moments():
     d, cols, moments, act = _reference()
     r = solve_static_optimization(moments, d["arms"][:, :, cols], d["active"], reserves=np.ones(len(JOINTS)),
                                   coordinates=JOINTS)
+    ok = _solved(d)
+    assert ok.sum() >= 45
     theirs = np.column_stack([act.column(m) for m in d["muscles"]])
-    rms = np.sqrt(np.mean((r.activations - theirs) ** 2, axis=0)) / theirs.max(axis=0)
-    # 2 % of each muscle's peak: the brief's bar; OpenSim's IPOPT stops at its convergence criterion 1e-4 (0.62 % seen)
-    assert rms.max() < 0.02, dict(zip(d["muscles"], rms.round(4), strict=True))
+    force = (r.activations[ok] - theirs[ok]) * d["active"][ok]
+    rms, peak = np.sqrt(np.mean(force ** 2, axis=0)), (theirs[ok] * d["active"][ok]).max(axis=0)
+    big = peak >= 50.0  # N
+    assert big.sum() >= 80
+    # 2 % of each muscle's peak force: the brief's bar (measured 0.45 %: OpenSim's IPOPT stops at its criterion
+    # 1e-4); the muscles of smaller peak sit at the 0.01 activation floor, where OpenSim's interior point stops above
+    # the bound: within 1 N RMS (measured 0.33 N)
+    assert (rms[big] < 0.02 * peak[big]).all(), {m: e for m, e, b in zip(d["muscles"], rms / peak, big, strict=True)
+                                                  if b and e >= 0.02}
+    assert rms[~big].max() < 1.0, rms[~big].max()
     reserves = np.column_stack([act.column(f"{c}_reserve") for c in JOINTS])
-    assert np.abs(r.reserve_controls - reserves).max() < 0.05  # N m: OpenSim's leg reserves stay below 0.02 N m
-    assert r.reserve_share[-1] == pytest.approx(1.0)  # no muscle crosses the lumbar joint
-    assert r.reserve_share[:6].max() < 1e-3
+    assert np.abs(r.reserve_controls[ok, :7] - reserves[ok, :7]).max() < 0.05  # N m: the legs' and lumbar's
+    assert r.reserve_controls[:, ARMS] == pytest.approx(moments[:, ARMS], abs=1e-6)  # no muscle crosses the arms
+    assert r.reserve_share[ARMS] == pytest.approx(1.0)
+    # running saturates the legs' muscles (activation 1 at some frames): the leg reserves take up to 55 N m there,
+    # as OpenSim's do (their 0.05 N m agreement above); the lumbar muscles carry the trunk alone
+    assert r.reserve_share[6] < 1e-3 and np.abs(reserves[ok, :6]).max() > 10.0
     assert np.abs(r.violation).max() < 1e-6  # N m
-    forces = np.column_stack([read_sto(DATA / "gait10dof18musc_so_force.sto").column(m) for m in d["muscles"]])
+    forces = np.column_stack([read_sto(DATA / "hamner_run_so_force.sto").column(m) for m in d["muscles"]])
     assert np.allclose(forces, theirs * d["active"], rtol=1e-6, atol=1e-6)  # SO's force is a times "active"
 
 
@@ -192,12 +206,13 @@ def test_without_max_isometric_the_option_is_refused():
                                   options=StaticOptimization(force_length_velocity=False))
 
 
-@HELD_OUT
 def test_near_solves_on_the_active_set_where_it_holds_and_by_the_qp_where_it_changed():
-    """OpenSim's walk inputs, the moments moved by 1 % and by 30 %: ``near=`` (the nominal solution's active set
-    in closed form, the QP for the frames where that set is not optimal) against the plain QP: the same
-    activations within 1e-6 (AT_BOUND: an activation that close to its bound is held there; measured 1.1e-7, the
-    interior-point QP's distance from a bound); the frames kept in closed form: 99 % at 1 %, 72 % at 30 %."""
+    """OpenSim's inputs of Hamner's run, the moments moved by 1 % and by 30 %: ``near=`` (the nominal solution's
+    active set in closed form, the QP for the frames where that set is not optimal) against the plain QP: each
+    frame's objective within 1e-8 and the activations within 1e-4 (two interior-point solves of one frame, the
+    trial's and the changed frames', end up to 2.4e-5 apart in a muscle 2e-5 above its 0.01 floor: a bound
+    nearly but not quite active, where IPOPT's iterate stops at about sqrt(mu) from it; the objectives 2e-9
+    apart); the frames kept in closed form: 87 % at 1 %, 5 % at 30 % (running saturates muscles)."""
     d, cols, moments, _ = _reference()
     args = (d["arms"][:, :, cols], d["active"])
     opts = {"reserves": np.ones(len(JOINTS)), "coordinates": JOINTS}
@@ -207,10 +222,12 @@ def test_near_solves_on_the_active_set_where_it_holds_and_by_the_qp_where_it_cha
         moved = moments * scale
         plain = solve_static_optimization(moved, *args, **opts)
         near = solve_static_optimization(moved, *args, **opts, near=base)
-        assert np.abs(near.activations - plain.activations).max() < 1e-6
+        assert np.abs(near.activations - plain.activations).max() < 1e-4
+        cost = [(r.activations ** 2).sum(axis=1) + (r.reserve_controls ** 2).sum(axis=1) for r in (near, plain)]
+        assert np.abs(cost[0] - cost[1]).max() < 1e-8 * cost[1].max()
         assert np.abs(near.violation).max() < 1e-6  # N m
         kept.append(near.stats["kept"].mean())
-    assert kept[0] > 0.9 and kept[1] < kept[0], kept
+    assert kept[0] > 0.8 and kept[1] < kept[0], kept
 
 
 def test_the_block_diagonal_is_scipys_with_its_zeros_kept():
