@@ -16,7 +16,7 @@ import argparse
 import sys
 
 from casflex import interrupt
-from casflex.cli import cache, export, identify, inverse, model_import, muscles, simulate, statics, study
+from casflex.cli import cache, export, identify, inverse, model_import, muscles, scene, simulate, statics, study
 from casflex.cli._base import CliParser, OptionError, Outputs, progress_messages
 
 __all__ = ["main"]
@@ -29,7 +29,7 @@ def _parser() -> CliParser:
                    description="Planar flexible multibody dynamics and parameter identification on CasADi.")
     ap.add_argument("--version", action="version", version=f"casflex {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
-    for module in (simulate, statics, identify, inverse, muscles, model_import, export, cache, study):
+    for module in (simulate, statics, identify, inverse, muscles, model_import, export, cache, study, scene):
         module.add_parsers(sub)
     return ap
 
