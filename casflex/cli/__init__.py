@@ -17,7 +17,7 @@ import sys
 
 from casflex import interrupt
 from casflex.cli import cache, export, identify, inverse, model_import, muscles, scene, simulate, statics, study
-from casflex.cli._base import CliParser, OptionError, Outputs, progress_messages
+from casflex.cli._base import CliParser, OptionError, Outputs, missing_extra, progress_messages
 
 __all__ = ["main"]
 
@@ -92,6 +92,9 @@ def main(argv: list[str] | None = None) -> int:
                 signum = interrupts.stopped_by(exc)
                 interrupt.tell(f"\ncasflex: {interrupt.describe(signum)}")
                 return interrupt.exit_status(signum)
+            if (line := missing_extra(exc)) is not None:  # an extra not installed: what to install, no traceback
+                print(f"casflex: error: {line}", file=sys.stderr)
+                return 2
             if isinstance(exc, _known_errors()):
                 msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
                 print(f"casflex: error: {msg}", file=sys.stderr)

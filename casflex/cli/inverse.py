@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from casflex.cli._base import OptionError, Outputs, non_negative, output_path, positive, uncertain_option
+from casflex.cli._base import OptionError, Outputs, need_extra, non_negative, output_path, positive, uncertain_option
 from casflex.inverse.options import FILTERS
 
 
@@ -63,6 +63,9 @@ def inverse_options(args: argparse.Namespace) -> dict:
     that take what ``casflex inverse`` takes (:func:`add_trial_options`)."""
     from casflex.inverse import Bands, Filter, Fit, OptionRefused, Trial
 
+    for flag, value in (("--data", args.data), ("--loads", args.loads)):
+        if value and value.lower().endswith(".c3d"):
+            need_extra("ezc3d", f"{flag} {value!r} (a C3D file)")
     plates = dict(args.plate or [])
     if len(plates) != len(args.plate or []):
         raise OptionError("--plate: a node is given twice")
@@ -134,6 +137,8 @@ def cmd_calibrate(args: argparse.Namespace, outputs: Outputs) -> int:
     from casflex.scene.io import dumps_scene
 
     Plane.parse(args.plane, option="--plane")
+    if args.static.lower().endswith(".c3d"):
+        need_extra("ezc3d", f"--static {args.static!r} (a C3D file)")
     if args.mass is not None and not args.scale:
         raise OptionError("--mass: scales the bodies with the segments; give --scale too")
     out = outputs.file("--out", args.out, (".toml",), "calibrated scene")

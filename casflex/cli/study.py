@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from casflex.cli._base import OptionError, Outputs, integer, output_path
+from casflex.cli._base import OptionError, Outputs, integer, need_extra, output_path
 
 
 def _table(rows: list[tuple]) -> str:
@@ -93,6 +93,7 @@ def _check_cluster(args: argparse.Namespace) -> None:
 
 
 def cmd_study(args: argparse.Namespace, outputs: Outputs) -> int:
+    need_extra("distributed", "casflex study")  # before the study file is read: one line, not a traceback at the end
     from casflex.study.runner import check_against_models, per_kg, run_study, tidy_rows
     from casflex.study.study_file import StudyError, load_study
 
@@ -101,6 +102,9 @@ def cmd_study(args: argparse.Namespace, outputs: Outputs) -> int:
         check_against_models(study)
     except StudyError as exc:
         raise OptionError(f"{args.study}: {exc}") from None
+    files = [f for s, t in study.trials() for f in (t.markers, t.grf)] + [s.static for s in study.subjects]
+    if c3d := next((f for f in files if f and f.lower().endswith(".c3d")), None):  # the workers would fail each trial
+        need_extra("ezc3d", f"{args.study}: its C3D file {Path(c3d).name!r}")
     _check_cluster(args)
     staging = outputs.directory("--out", args.out)
     record = outputs.folder("--record", args.record) if args.record else Path(args.out) / "record"
