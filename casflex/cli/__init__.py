@@ -83,7 +83,8 @@ def main(argv: list[str] | None = None) -> int:
             interrupt.check()  # a signal that a library swallowed
             interrupts.armed = False  # the work is done: from here a signal no longer stops the command
             for path in outputs.commit():
-                print(f"  wrote {path}")
+                if not getattr(args, "quiet", False):
+                    print(f"  wrote {path}")
             return code
         except BaseException as exc:
             interrupts.armed = False  # a second signal does not cut the clean-up short

@@ -42,11 +42,10 @@ def _cutoff_or_none(text: str) -> float | None | str:
 
 
 def _progress(done: int, total: int) -> None:
+    from casflex.interrupt import progress
+
     if done == total or done % max(total // 20, 1) == 0:
-        sys.stderr.write(f"\rcasflex: marker fit {done}/{total} frames")
-        if done == total:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
+        progress(f"casflex: marker fit {done}/{total} frames", done, total)
 
 
 #: The command's options by the names of the option values they build (:mod:`casflex.inverse.options`): how a value
@@ -88,8 +87,8 @@ def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
     from casflex.inverse import BandError, prepare, solve
 
     chosen = inverse_options(args)
-    out = outputs.file("--out", args.out, (".npz", ".csv", ".sto"), "inverse dynamics") if args.out is not None \
-        else None
+    outs = [(outputs.file("--out", path, (".npz", ".csv", ".sto", ".mot"), "inverse dynamics"), path)
+            for path in args.out or []]  # each checked and reserved before any work
     plots = None
     if args.plots is not None:
         from casflex.plotting.inverse import FIGURES
@@ -105,13 +104,14 @@ def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
     res = solve(inputs, progress=None if args.quiet else _progress)
     for line in res.warnings[len(inputs.warnings):]:
         print(f"casflex: warning: {line}", file=sys.stderr)
-    print(res.summary())
-    for hinge, t0, t1 in args.passive or []:
+    if not args.quiet:
+        print(res.summary())
+    for hinge, t0, t1 in args.passive or []:  # asked for, and written nowhere else: printed under --quiet too
         from casflex.inverse.passive import fit_passive
 
         print(fit_passive(res, hinge, t0, t1).summary())
-    if out is not None:
-        res.save(out, fmt=args.out.rsplit(".", 1)[-1].lower())
+    for staged, path in outs:
+        res.save(staged, fmt=path.rsplit(".", 1)[-1].lower())
     if plots is not None:
         from casflex.plotting.inverse import save_inverse_figures
 
@@ -200,11 +200,14 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--passive", action="append", type=_passive, metavar="HINGE[:T0:T1]",
                    help="fit a torsion spring-damper to HINGE's net moment (over T0..T1 s) and say how much of it "
                         "it explains; repeat per hinge")
-    s.add_argument("--out", type=output_path, metavar="FILE",
-                   help="write the loads to FILE.npz (everything), FILE.csv (a table) or FILE.sto (OpenSim's table, "
-                        "the lab's names)")
+    s.add_argument("--out", type=output_path, action="append", metavar="FILE",
+                   help="write the result to FILE.npz (everything), FILE.csv (a table: the filtered coordinates and "
+                        "the loads), FILE.sto (OpenSim's table of the loads, the lab's names) or FILE.mot (the joint "
+                        "angles as OpenSim's IK writes them: the marker fit, unfiltered, in degrees); repeat for "
+                        "several files (docs/lab.md)")
     s.add_argument("--plots", type=output_path, metavar="DIR", help="write figures into this directory")
-    s.add_argument("--quiet", action="store_true", help="no progress messages")
+    s.add_argument("--quiet", action="store_true", help="print nothing but warnings and errors (stderr), and "
+                                                        "the --passive fits asked")
     s.set_defaults(func=cmd_inverse)
 
     s = sub.add_parser("calibrate", help="place a scene's markers (and scale its segments) from a static trial")

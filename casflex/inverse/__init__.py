@@ -126,13 +126,29 @@ def solve(inputs: InverseInputs, *, bands: Bands | None = None, flexible: Flexib
                                if not c.of.startswith(f"{tree.root}.") and lab_name(c) in lab]
     _check_moments(inputs, {name: loads[name] for name in settings["moments"] if name in loads})
     band, parts = {}, {}
+    fitted, units = _lab_coordinates(model.scene, tree, fit.z)  # the IK result, unfiltered
     if inputs.band_spec is not None:
         band, parts, lines, settings["bands"] = inverse_bands(inputs.band_spec, inputs, fit, z, zd, zdd, sorted(loads))
         report += lines
     return InverseResult(t=t, coordinate_names=tree.names, z=z, zd=zd, zdd=zdd, dof_names=model.dof_names, q=sol["q"],
                          qd=sol["qd"], qdd=sol["qdd"], loads=loads, frame_t=t, marker_rms=fit.rms, report=report,
                          settings=settings, warnings=warnings, marker_labels=inputs.labels, marker_misfit=fit.misfit,
-                         plates=inputs.plates, bands=band, band_parts=parts)
+                         plates=inputs.plates, bands=band, band_parts=parts, fitted=fitted, fitted_units=units)
+
+
+def _lab_coordinates(scene, tree, z: np.ndarray) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    """The coordinates z (k, n_z) as the lab's (:func:`casflex.scene.coordinates.to_lab`: their names and values
+    where the scene has ``[[coordinates]]``, else the tree's) and their units (m, rad): the IK result."""
+    from casflex.scene.coordinates import to_lab
+
+    lab = {c.scene_coordinate(): c for c in getattr(scene, "coordinates", ())}
+    values, units = {}, {}
+    for k, own in enumerate(tree.names):
+        c = lab.get(own)
+        name = c.name if c is not None else own
+        values[name] = to_lab(scene, c, z[:, k]) if c is not None else z[:, k]
+        units[name] = c.unit if c is not None else ("m" if own.endswith((".x", ".y")) else "rad")
+    return values, units
 
 
 #: m/s^2: the weight the plates' largest total force is taken for (:func:`_check_moments`)
