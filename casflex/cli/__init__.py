@@ -58,7 +58,7 @@ def _check_compiler_flags() -> None:
 #: no output may replace one of them.
 _INPUTS = {"scene": "the scene", "data": "--data", "loads": "--loads", "static": "--static",
            "alternatives": "--alternatives", "coordinates": "--coordinates", "tasks": "--tasks", "study": "the study",
-           "model": "the model", "actuators": "--actuators"}
+           "model": "the model", "actuators": "--actuators", "normative": "--normative"}
 
 
 def _protect_inputs(args: argparse.Namespace, outputs: Outputs) -> None:

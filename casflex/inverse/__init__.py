@@ -36,7 +36,7 @@ from casflex.inverse.bands import band_spec, inverse_bands
 from casflex.inverse.fit import FittedMotion, filtered_rates, fit_markers
 from casflex.inverse.flexible import driven_loads
 from casflex.inverse.inputs import InverseInputs, inverse_model, prepare
-from casflex.inverse.lab_names import lab_loads, lab_name
+from casflex.inverse.lab_names import lab_coordinates, lab_loads, lab_name
 from casflex.inverse.options import BandError, Bands, Filter, Fit, Flexible, OptionRefused, Trial
 from casflex.inverse.plates import Plate, plate_loads, plates_under_feet
 from casflex.inverse.result import InverseResult
@@ -126,7 +126,7 @@ def solve(inputs: InverseInputs, *, bands: Bands | None = None, flexible: Flexib
                                if not c.of.startswith(f"{tree.root}.") and lab_name(c) in lab]
     _check_moments(inputs, {name: loads[name] for name in settings["moments"] if name in loads})
     band, parts = {}, {}
-    fitted, units = _lab_coordinates(model.scene, tree, fit.z)  # the IK result, unfiltered
+    fitted, units = lab_coordinates(model.scene, tree.names, fit.z)  # the IK result, unfiltered
     if inputs.band_spec is not None:
         band, parts, lines, settings["bands"] = inverse_bands(inputs.band_spec, inputs, fit, z, zd, zdd, sorted(loads))
         report += lines
@@ -135,20 +135,6 @@ def solve(inputs: InverseInputs, *, bands: Bands | None = None, flexible: Flexib
                          settings=settings, warnings=warnings, marker_labels=inputs.labels, marker_misfit=fit.misfit,
                          plates=inputs.plates, bands=band, band_parts=parts, fitted=fitted, fitted_units=units)
 
-
-def _lab_coordinates(scene, tree, z: np.ndarray) -> tuple[dict[str, np.ndarray], dict[str, str]]:
-    """The coordinates z (k, n_z) as the lab's (:func:`casflex.scene.coordinates.to_lab`: their names and values
-    where the scene has ``[[coordinates]]``, else the tree's) and their units (m, rad): the IK result."""
-    from casflex.scene.coordinates import to_lab
-
-    lab = {c.scene_coordinate(): c for c in getattr(scene, "coordinates", ())}
-    values, units = {}, {}
-    for k, own in enumerate(tree.names):
-        c = lab.get(own)
-        name = c.name if c is not None else own
-        values[name] = to_lab(scene, c, z[:, k]) if c is not None else z[:, k]
-        units[name] = c.unit if c is not None else ("m" if own.endswith((".x", ".y")) else "rad")
-    return values, units
 
 
 #: m/s^2: the weight the plates' largest total force is taken for (:func:`_check_moments`)
