@@ -54,11 +54,15 @@ def cycle_curves(out: dict, all_cycles: bool = False, kind: str = "loads") -> di
 
 def _kept(out: dict, all_cycles: bool, kind: str) -> dict[str, dict[str, list[tuple[tuple, float | None]]]]:
     """name -> subject -> [(cycle's values, its toe-off %)] of the cycles kept (:func:`cycle_curves`)."""
+    from casflex.plotting.gait import split_side
+
     per: dict[str, dict[str, list]] = {}
     for (subject, _), rec in out["trials"].items():
         for name, ld in getattr(rec, kind).items():
             keep = ld.clean or [False] * len(ld.value)
             offs = rec.toe_off.get(ld.foot) or [None] * len(ld.value)
+            if split_side(name)[1] != split_side(ld.foot or "")[1]:  # an arm or the trunk on a foot's cycles
+                offs = [None] * len(ld.value)  # its toe-off is no event of its own side: not drawn
             per.setdefault(name, {}).setdefault(subject, []).extend(
                 (v, off) for v, ok, off in zip(ld.value, keep, offs, strict=True) if ok or all_cycles)
     per = {n: {s: c for s, c in subs.items() if c} for n, subs in per.items()}

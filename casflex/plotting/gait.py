@@ -1,7 +1,8 @@
 """A study's figures as gait reports show them (``casflex study``): one row per joint, its angle and its moment
 over the gait cycle (0-100 %), left and right overlaid (left red, right green, as gait labs draw them), each
-side's mean and its band of +- 1 standard deviation, each side's mean toe-off as a dashed line, and optionally a
-normative band (grey) read from a file (:func:`read_normative`).
+side's mean and its band of +- 1 standard deviation, each side's mean toe-off as a dashed line (where the curve's
+cycles are its own side's foot's), and optionally a normative band (grey) read from a file
+(:func:`read_normative`); one legend below the panels says which is which.
 
 **Signs.** By default each curve has the model's sign: the lab coordinate's (``hip_flexion_r``: flexion +, its
 moment flexor +; OpenSim's ``knee_angle_r``: extension +). ``clinical`` gives the signs of clinical gait reports,
@@ -190,7 +191,7 @@ def _panel(ax, percent, names: list[str], curves: dict[str, np.ndarray], toe_off
         colour = _COLOURS[side]
         c = np.atleast_2d(curves[name]) * factors.get(name, 1.0)
         who = (side or "mean").capitalize()
-        _band(ax, percent, c, colour, f"{who}: mean +- 1 SD ({c.shape[0]} {what})")
+        _band(ax, percent, c, colour, f"{who}: mean +- 1 SD ({c.shape[0]} {what if c.shape[0] > 1 else what[:-1]})")
         offs = [v for v in toe_off.get(name, []) if v is not None]
         if offs:
             ax.axvline(float(np.mean(offs)), color=colour, ls="--", lw=1.0,
@@ -198,7 +199,6 @@ def _panel(ax, percent, names: list[str], curves: dict[str, np.ndarray], toe_off
     ax.axhline(0.0, color="0.6", lw=0.6)
     ax.grid(True, alpha=0.3)
     ax.set_xlim(0, 100)
-    ax.legend(fontsize="xx-small", loc="best")
 
 
 def gait_figure(percent: np.ndarray, curves: dict[str, np.ndarray], toe_off: dict[str, list[float]], title: str,
@@ -237,6 +237,11 @@ def gait_figure(percent: np.ndarray, curves: dict[str, np.ndarray], toe_off: dic
             ax.set(title=f"{joint_title(joint)} {kind}", ylabel=f"{units[keys[key][0]]} ({sign})")
     for ax in axes[-1]:
         ax.set_xlabel("gait cycle (%)")
+    seen: dict[str, object] = {}  # one legend for the figure: each label once (a panel's normative band too)
+    for ax in fig.axes:
+        for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
+            seen.setdefault(label, handle)
+    fig.legend(list(seen.values()), list(seen), loc="outside lower center", ncols=3, fontsize="small")
     fig.suptitle(title)
     _save(fig, path)
     return fig
