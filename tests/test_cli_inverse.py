@@ -177,3 +177,26 @@ def test_progress_lines_end_with_a_newline_where_stderr_is_no_terminal(tmp_path,
     assert code == 0
     fit = [line for line in err.splitlines() if "marker fit" in line and "frames" in line]
     assert "\r" not in err and fit[-1] == "casflex: marker fit 44/44 frames" and 2 <= len(fit) <= 5, fit
+
+
+def test_match_opensim_filters_as_opensim_s_id_tool_and_refuses_an_option_against_it(tmp_path, capsys):
+    """--match opensim: OpenSim's IK then its ID tool as a lab runs them (the README's first .osim command): the
+    coordinates filtered as the ID tool does at --cutoff, the plates unfiltered."""
+    base = [*BASE, "--loads", GRF, "--plate", "ankle=ground_"]
+    runs = {"match": ["--match", "opensim"], "spelled": ["--filter", "opensim", "--cutoff-plates", "none"], "own": []}
+    loads = {}
+    for tag, extra in runs.items():
+        code, _, err = _run([*base, *extra, "--out", str(tmp_path / f"{tag}.npz")], capsys)
+        assert code == 0, err
+        with np.load(tmp_path / f"{tag}.npz") as z:
+            loads[tag] = z["loads"]
+            settings = __import__("json").loads(str(z["meta"]))["settings"]
+        if tag == "match":
+            assert settings["filter"] == "opensim" and settings["cutoff_plates_hz"] is None, settings
+    assert np.array_equal(loads["match"], loads["spelled"])
+    assert np.abs(loads["match"] - loads["own"]).max() > 1.0  # N m: the filters differ (36 N m at the ankle)
+    for extra, said in ((["--filter", "butterworth"], "--filter: butterworth contradicts --match opensim"),
+                        (["--cutoff-plates", "same"], "--cutoff-plates: same contradicts --match opensim")):
+        code, _, err = _run([*base, "--match", "opensim", *extra, "--out", str(tmp_path / "x.csv")], capsys)
+        assert code == 2 and err.startswith(f"casflex: error: {said}") and len(err.splitlines()) == 1, err
+    assert not (tmp_path / "x.csv").exists()

@@ -41,6 +41,9 @@ def _cutoff_or_none(text: str) -> float | None | str:
     return v
 
 
+_UNSET = object()  # --cutoff-plates not given (its values include None: 'none')
+
+
 def _progress(done: int, total: int) -> None:
     from casflex.interrupt import progress
 
@@ -72,15 +75,36 @@ def inverse_options(args: argparse.Namespace) -> dict:
     if args.loads and not plates and not external:  # the library would take the plates as none: a command asks
         raise OptionError("--loads: say which node each plate acts on with --plate NODE=PREFIX (e.g. ankle=ground_), "
                           "or give OpenSim's ExternalLoads file")
+    how, plates_hz = _matched(args)
     try:
         return {"trial": Trial(args.data, args.coordinates, grf=args.loads, plates=plates, plane=args.plane,
                                root=args.root, t_start=args.t_start, t_end=args.t_end, tasks=args.tasks),
-                "filter": Filter(None, None, args.filter) if args.no_filter else Filter(args.cutoff, args.cutoff_plates,
-                                                                                        args.filter),
+                "filter": Filter(None, None, how) if args.no_filter else Filter(args.cutoff, plates_hz, how),
                 "fit": Fit(max_misfit=args.max_misfit),
                 "bands": Bands(args.uncertain, args.marker_noise, args.bands)}
     except OptionRefused as exc:
         raise OptionError(exc.said(FLAGS)) from None
+
+
+#: ``--match``'s presets: the options each sets, (--filter, --cutoff-plates), as the peer's tools run.
+MATCH = {"opensim": ("opensim", None)}
+_DEFAULT_FILTER, _DEFAULT_PLATES = "butterworth", "same"
+
+
+def _matched(args: argparse.Namespace) -> tuple[str, float | None | str]:
+    """(--filter, --cutoff-plates) as given, else as --match's preset sets them, else the defaults; an option
+    given against the preset is refused (one line naming both)."""
+    given_filter, given_plates = getattr(args, "filter", None), getattr(args, "cutoff_plates", _UNSET)
+    if getattr(args, "match", None) is None:
+        return given_filter or _DEFAULT_FILTER, _DEFAULT_PLATES if given_plates is _UNSET else given_plates
+    how, plates_hz = MATCH[args.match]
+    if given_filter is not None and given_filter != how:
+        raise OptionError(f"--filter: {given_filter} contradicts --match {args.match} (its filter is {how}); give "
+                          "one or the other")
+    if given_plates is not _UNSET and given_plates != plates_hz:
+        raise OptionError(f"--cutoff-plates: {given_plates} contradicts --match {args.match} (the plates "
+                          f"{'unfiltered' if plates_hz is None else f'at {plates_hz} Hz'}); give one or the other")
+    return how, plates_hz
 
 
 def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
@@ -163,13 +187,17 @@ def add_trial_options(s: argparse.ArgumentParser) -> None:
                    help="a plate's columns (PREFIXforce_vx ...) act on NODE's segment; repeat per plate")
     s.add_argument("--cutoff", type=positive("a frequency in Hz"), default=6.0,
                    help="zero-lag Butterworth cut-off for the kinematics and the plates alike, Hz (default 6)")
-    s.add_argument("--cutoff-plates", type=_cutoff_or_none, default="same", metavar="HZ|none",
+    s.add_argument("--cutoff-plates", type=_cutoff_or_none, default=_UNSET, metavar="HZ|none",
                    help="the plates' own cut-off, Hz, 'none' (unfiltered, as OpenSim's ID tool) or 'same' (the "
                         "default: --cutoff's)")
-    s.add_argument("--filter", choices=FILTERS, default="butterworth",
+    s.add_argument("--filter", choices=FILTERS, default=None,
                    help="the coordinates' filter: butterworth (2nd order forward and back: 4th-order zero-lag, the "
                         "default) or opensim (as OpenSim's ID tool: the record padded by half its length, 3rd "
                         "order forward and back); both -6 dB at --cutoff")
+    s.add_argument("--match", choices=sorted(MATCH), default=None,
+                   help="filter as a peer's tools do, as a lab runs them: opensim = OpenSim's IK then its ID tool "
+                        "(--filter opensim --cutoff-plates none: the coordinates filtered at --cutoff, 6 Hz by "
+                        "default as OpenSim's example ID setups say, the plates as measured)")
     s.add_argument("--no-filter", action="store_true", help="use the data unfiltered")
     s.add_argument("--tasks", metavar="XML", help="marker weights: an OpenSim IK task set or IK setup file (markers "
                                                   "with no task are left out); default the scene's weights")
