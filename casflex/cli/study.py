@@ -88,10 +88,11 @@ def _figures(out: dict, directory: Path, title: str, per_kg: bool = False, all_c
     from casflex.study.runner import PERCENT, unit_of
     from casflex.study.study_file import GROUP  # a subject of this name is refused (its figure would be this)
 
-    kept = _kept(out, all_cycles, "loads") | _kept(out, all_cycles, "angles")
+    loads = _kept(out, all_cycles, "loads")
+    kept = loads | _kept(out, all_cycles, "angles")
     if not kept:
         return [], []
-    units = {n: unit_of(n, per_kg) if n in _kept(out, all_cycles, "loads") else "deg" for n in kept}
+    units = {n: unit_of(n, per_kg) if n in loads else "deg" for n in kept}
     options = {"units": units, "clinical": clinical, "normative": normative,
                "coordinate_signs": _coordinate_signs(out) if clinical else None}
     written = []
