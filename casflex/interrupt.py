@@ -20,7 +20,8 @@ import signal
 import sys
 from collections.abc import Iterator
 
-__all__ = ["Guard", "Terminated", "SIGNALS", "EXIT_STATUSES", "guard", "check", "exit_status", "describe", "tell"]
+__all__ = ["Guard", "Terminated", "SIGNALS", "EXIT_STATUSES", "guard", "check", "exit_status", "describe", "tell",
+           "progress"]
 
 #: The guarded signals: Ctrl-C; the polite "end now" of kill, timeout and batch schedulers; a closed
 #: terminal (SIGHUP does not exist on Windows).
@@ -52,6 +53,27 @@ def tell(line: str) -> None:
         sys.stderr.write(line + "\n")
         sys.stderr.flush()
     except (OSError, ValueError):
+        pass
+
+
+_shown = [-1]  # the quarter of the loop that :func:`progress` last showed (not on a terminal); -1: none yet
+
+
+def progress(text: str, done: int, total: int, *, each: bool = False) -> None:
+    """Show a long loop's progress ``text`` at step ``done`` of ``total`` on stderr: on a terminal one line
+    rewritten in place (carriage return), ended at the last step; elsewhere (a log file, a pipe, a batch job's
+    output) whole lines only, so a log holds no carriage returns: every step's where ``each`` (each says what
+    finished: a study's runs), else at the first step, each quarter and the last (a counter's)."""
+    try:
+        if getattr(sys.stderr, "isatty", lambda: False)():
+            sys.stderr.write(f"\r{text}" + ("\n" if done >= total else ""))
+        elif each:
+            sys.stderr.write(text.rstrip() + "\n")
+        elif (quarter := min(4 * done // max(total, 1), 4)) > _shown[0]:
+            sys.stderr.write(text.rstrip() + "\n")
+            _shown[0] = -1 if done >= total else quarter  # the loop's end: the next loop starts afresh
+        sys.stderr.flush()
+    except (OSError, ValueError):  # a terminal already closed (SIGHUP)
         pass
 
 

@@ -12,6 +12,7 @@ from casflex.cli import main
 LAB = Path(__file__).parent / "data" / "lab"
 TRC, GRF = str(LAB / "hamner_running_stride.trc"), str(LAB / "hamner_running_stride_grf.mot")
 BASE = ["inverse", "hamner_leg", "--data", TRC, "--root", "pelvis", "--quiet"]
+LOUD = [a for a in BASE if a != "--quiet"]  # the summary on stdout (--quiet prints nothing but warnings and errors)
 
 
 def _run(argv: list[str], capsys) -> tuple[int, str, str]:
@@ -23,7 +24,7 @@ def _run(argv: list[str], capsys) -> tuple[int, str, str]:
 def test_writes_the_loads_as_csv_npz_and_figures(tmp_path, capsys):
     csv, npz, figs = tmp_path / "loads.csv", tmp_path / "loads.npz", tmp_path / "figs"
     for out in (csv, npz):
-        code, text, err = _run([*BASE, "--loads", GRF, "--plate", "ankle=ground_", "--cutoff", "10", "--out", str(out),
+        code, text, err = _run([*LOUD, "--loads", GRF, "--plate", "ankle=ground_", "--cutoff", "10", "--out", str(out),
                                 "--passive", "knee:0.7:1.05"]
                                + (["--plots", str(figs)] if out == csv else []), capsys)
         assert code == 0, err
@@ -33,12 +34,12 @@ def test_writes_the_loads_as_csv_npz_and_figures(tmp_path, capsys):
         assert "passive knee over t = 0.7" in text and "not a passive joint" in text
     header = csv.read_text().splitlines()[0].split(",")
     assert header[0] == "t [s]" and "pelvis.x [m]" in header and "knee.angle [rad]" in header
-    assert "knee.moment" in header and "root.fy" in header
+    assert "knee.moment [N m]" in header and "root.fy [N]" in header
     table = np.loadtxt(csv, delimiter=",", skiprows=1)
     with np.load(npz) as z:
         names = [str(s) for s in z["load_names"]]
         k = names.index("knee.moment")
-        assert np.allclose(table[:, header.index("knee.moment")], z["loads"][:, k], rtol=1e-9)
+        assert np.allclose(table[:, header.index("knee.moment [N m]")], z["loads"][:, k], rtol=1e-9)
         assert z["q"].shape == (table.shape[0], 12)
     assert sorted(p.name for p in figs.iterdir()) == ["inverse_loads.png", "marker_fit.png"]
 
@@ -89,7 +90,7 @@ def test_a_label_the_trial_lacks_is_named(tmp_path, capsys):
 
 def test_uncertain_properties_give_each_load_its_band(tmp_path, capsys):
     out = tmp_path / "loads.sto"
-    code, text, err = _run([*BASE, "--uncertain", "shank.mass=10%", "--uncertain", "thigh.inertia=0.12:0.16",
+    code, text, err = _run([*LOUD, "--uncertain", "shank.mass=10%", "--uncertain", "thigh.inertia=0.12:0.16",
                             "--marker-noise", "0.002", "--out", str(out)], capsys)
     assert code == 0, err
     assert "anthropometry from shank.mass (sd 0.325), thigh.inertia (sd 0.0115)" in text
@@ -127,3 +128,75 @@ def test_a_figure_s_place_taken_by_a_folder_is_refused_before_the_fit(tmp_path, 
     assert code == 2 and err.strip() == (f"casflex: error: --plots: '{figs / 'marker_fit.png'}' is a directory; the "
                                          "figure 'marker_fit.png' would go there: give another directory")
     assert [p.name for p in figs.iterdir()] == ["marker_fit.png"]
+
+
+def test_several_outputs_in_one_run_the_ik_mot_read_back_gives_the_same_loads(tmp_path, capsys):
+    """--out repeated writes every file (it kept only the last); the .mot is OpenSim's IK result (the fit,
+    unfiltered, degrees), which --coordinates reads back: the same filter on the same coordinates, the same loads."""
+    outs = {fmt: tmp_path / f"run.{fmt}" for fmt in ("npz", "csv", "sto", "mot")}
+    code, text, err = _run([*BASE, "--loads", GRF, "--plate", "ankle=ground_",
+                            *(a for p in outs.values() for a in ("--out", str(p)))], capsys)
+    assert code == 0, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(p.name for p in outs.values())
+    head, _, body = outs["mot"].read_text().partition("endheader\n")
+    assert head.splitlines()[0].startswith("Coordinates") and "inDegrees=yes" in head.splitlines()
+    assert body.splitlines()[0].split("\t") == ["time", "pelvis.x", "pelvis.y", "pelvis.theta", "hip.angle",
+                                                "knee.angle", "ankle.angle"]
+    with np.load(outs["npz"]) as z:
+        from casflex.inverse.result import NPZ_KEYS  # docs/lab.md's table of the keys
+
+        assert set(z.files) == {k for k in NPZ_KEYS if not k.startswith(("sd_", "band_"))}  # no bands asked
+        fitted, names = z["fitted"], [str(s) for s in z["fitted_names"]]
+        assert [str(u) for u in z["fitted_units"]] == ["m", "m", "rad", "rad", "rad", "rad"]
+        first = z["loads"]
+        # the .mot holds the fit, unfiltered: not the filtered z (they differ by the 6 Hz filter's smoothing)
+        assert np.abs(fitted - z["z"]).max() > 1e-3
+    mot = np.loadtxt(outs["mot"], skiprows=len(head.splitlines()) + 2)  # the header, endheader, the names
+    assert np.allclose(np.radians(mot[:, 4:]), fitted[:, 3:], atol=1e-9)  # %.10g of degrees
+    again = tmp_path / "again.npz"
+    code, _, err = _run(["inverse", "hamner_leg", "--coordinates", str(outs["mot"]), "--loads", GRF, "--plate",
+                         "ankle=ground_", "--root", "pelvis", "--quiet", "--out", str(again)], capsys)
+    assert code == 0, err
+    with np.load(again) as z:
+        # 10 significant digits in the .mot: loads of up to ~1000 N agree to well under 1e-3 N
+        assert np.allclose(z["loads"], first, atol=1e-3) and names == [str(s) for s in z["fitted_names"]]
+
+
+def test_quiet_prints_nothing_and_the_csv_header_names_each_column_once_with_its_unit(tmp_path, capsys):
+    csv = tmp_path / "loads.csv"
+    code, text, err = _run([*BASE, "--loads", GRF, "--plate", "ankle=ground_", "--out", str(csv)], capsys)
+    assert code == 0 and text == "" and err == ""
+    header = csv.read_text().splitlines()[0].split(",")
+    assert len(header) == len(set(h.split(" [")[0] for h in header))  # hip.angle was there twice
+    assert all(h.endswith(("[s]", "[m]", "[rad]", "[N]", "[N m]")) for h in header), header
+    assert header.count("knee.angle [rad]") == 1 and "knee.moment [N m]" in header and "root.mz [N m]" in header
+
+
+def test_progress_lines_end_with_a_newline_where_stderr_is_no_terminal(tmp_path, capsys):
+    code, _, err = _run(LOUD, capsys)  # capsys's stderr is no terminal, as a log file
+    assert code == 0
+    fit = [line for line in err.splitlines() if "marker fit" in line and "frames" in line]
+    assert "\r" not in err and fit[-1] == "casflex: marker fit 44/44 frames" and 2 <= len(fit) <= 5, fit
+
+
+def test_match_opensim_filters_as_opensim_s_id_tool_and_refuses_an_option_against_it(tmp_path, capsys):
+    """--match opensim: OpenSim's IK then its ID tool as a lab runs them (the README's first .osim command): the
+    coordinates filtered as the ID tool does at --cutoff, the plates unfiltered."""
+    base = [*BASE, "--loads", GRF, "--plate", "ankle=ground_"]
+    runs = {"match": ["--match", "opensim"], "spelled": ["--filter", "opensim", "--cutoff-plates", "none"], "own": []}
+    loads = {}
+    for tag, extra in runs.items():
+        code, _, err = _run([*base, *extra, "--out", str(tmp_path / f"{tag}.npz")], capsys)
+        assert code == 0, err
+        with np.load(tmp_path / f"{tag}.npz") as z:
+            loads[tag] = z["loads"]
+            settings = __import__("json").loads(str(z["meta"]))["settings"]
+        if tag == "match":
+            assert settings["filter"] == "opensim" and settings["cutoff_plates_hz"] is None, settings
+    assert np.array_equal(loads["match"], loads["spelled"])
+    assert np.abs(loads["match"] - loads["own"]).max() > 1.0  # N m: the filters differ (36 N m at the ankle)
+    for extra, said in ((["--filter", "butterworth"], "--filter: butterworth contradicts --match opensim"),
+                        (["--cutoff-plates", "same"], "--cutoff-plates: same contradicts --match opensim")):
+        code, _, err = _run([*base, "--match", "opensim", *extra, "--out", str(tmp_path / "x.csv")], capsys)
+        assert code == 2 and err.startswith(f"casflex: error: {said}") and len(err.splitlines()) == 1, err
+    assert not (tmp_path / "x.csv").exists()

@@ -88,3 +88,25 @@ def test_sigterm_raises_terminated_a_keyboardinterrupt_and_an_ignored_sighup_sta
         assert signal.getsignal(signal.SIGTERM) == term  # the guard restores what it found
     finally:
         signal.signal(signal.SIGHUP, hup)
+
+
+def test_progress_is_whole_lines_where_stderr_is_no_terminal(monkeypatch):
+    import io
+    import sys
+
+    from casflex.interrupt import progress
+
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    for stream, each in ((io.StringIO(), False), (io.StringIO(), True), (Terminal(), False)):
+        monkeypatch.setattr(sys, "stderr", stream)
+        for done in range(1, 11):
+            progress(f"step {done}/10  ", done, 10, each=each)
+        text = stream.getvalue()
+        if isinstance(stream, Terminal):  # one line rewritten in place, ended at the last step
+            assert text.count("\r") == 10 and text.endswith("step 10/10  \n") and text.count("\n") == 1
+        else:  # a log: whole lines, every step's or the first, at each quarter and the end
+            assert "\r" not in text and text.endswith("step 10/10\n")
+            assert len(text.splitlines()) == (10 if each else 5), text  # 1/10, then 3/10, 5/10, 8/10, 10/10

@@ -95,7 +95,7 @@ def test_the_command_takes_coordinates_and_refuses_both_or_neither(fitted, tmp_p
 
     table = _table(fitted, tmp_path)
     base = [sys.executable, "-m", "casflex", "inverse", str(LEG), "--loads", str(GRF), "--plate", "calcn_r=ground_"]
-    run = subprocess.run([*base, "--coordinates", str(table), "--out", str(tmp_path / "id.sto"), "--quiet"],
+    run = subprocess.run([*base, "--coordinates", str(table), "--out", str(tmp_path / "id.sto")],
                          capture_output=True, text=True)
     assert run.returncode == 0, run.stderr
     assert "coordinates given: 6 columns" in run.stdout and (tmp_path / "id.sto").exists()

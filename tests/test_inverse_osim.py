@@ -175,7 +175,7 @@ def test_opensims_external_loads_file_names_the_plates(tmp_path, plain):
         with pytest.raises(ValueError, match=match):
             inverse_dynamics(LEG, Trial(TRC, grf=path, plates={"calcn_r": "ground_"} if path == setup else None))
     cli = subprocess.run([sys.executable, "-m", "casflex", "inverse", str(LEG), "--data", str(TRC), "--loads",
-                          str(loads), "--quiet"], capture_output=True, text=True)
+                          str(loads)], capture_output=True, text=True)  # not --quiet: the report on stdout
     assert cli.returncode == 0 and "plates 'ground_' on calcn_r" in cli.stdout, cli.stderr
 
 

@@ -16,8 +16,8 @@ import argparse
 import sys
 
 from casflex import interrupt
-from casflex.cli import cache, export, identify, inverse, model_import, muscles, simulate, statics, study
-from casflex.cli._base import CliParser, OptionError, Outputs, progress_messages
+from casflex.cli import cache, export, identify, inverse, model_import, muscles, scene, simulate, statics, study
+from casflex.cli._base import CliParser, OptionError, Outputs, missing_extra, progress_messages
 
 __all__ = ["main"]
 
@@ -29,7 +29,7 @@ def _parser() -> CliParser:
                    description="Planar flexible multibody dynamics and parameter identification on CasADi.")
     ap.add_argument("--version", action="version", version=f"casflex {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
-    for module in (simulate, statics, identify, inverse, muscles, model_import, export, cache, study):
+    for module in (simulate, statics, identify, inverse, muscles, model_import, export, cache, study, scene):
         module.add_parsers(sub)
     return ap
 
@@ -58,7 +58,7 @@ def _check_compiler_flags() -> None:
 #: no output may replace one of them.
 _INPUTS = {"scene": "the scene", "data": "--data", "loads": "--loads", "static": "--static",
            "alternatives": "--alternatives", "coordinates": "--coordinates", "tasks": "--tasks", "study": "the study",
-           "model": "the model", "actuators": "--actuators"}
+           "model": "the model", "actuators": "--actuators", "normative": "--normative"}
 
 
 def _protect_inputs(args: argparse.Namespace, outputs: Outputs) -> None:
@@ -83,7 +83,8 @@ def main(argv: list[str] | None = None) -> int:
             interrupt.check()  # a signal that a library swallowed
             interrupts.armed = False  # the work is done: from here a signal no longer stops the command
             for path in outputs.commit():
-                print(f"  wrote {path}")
+                if not getattr(args, "quiet", False):
+                    print(f"  wrote {path}")
             return code
         except BaseException as exc:
             interrupts.armed = False  # a second signal does not cut the clean-up short
@@ -92,6 +93,9 @@ def main(argv: list[str] | None = None) -> int:
                 signum = interrupts.stopped_by(exc)
                 interrupt.tell(f"\ncasflex: {interrupt.describe(signum)}")
                 return interrupt.exit_status(signum)
+            if (line := missing_extra(exc)) is not None:  # an extra not installed: what to install, no traceback
+                print(f"casflex: error: {line}", file=sys.stderr)
+                return 2
             if isinstance(exc, _known_errors()):
                 msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
                 print(f"casflex: error: {msg}", file=sys.stderr)

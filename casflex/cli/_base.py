@@ -93,6 +93,40 @@ class OptionError(ValueError):
     """A command-line option is wrong; the message starts with the option's name."""
 
 
+#: casflex's optional extras (pyproject's optional-dependencies) by the module each brings, and what needs it.
+EXTRAS = {"distributed": ("sweep", "runs a study on dask"), "dask": ("sweep", "runs a study on dask"),
+          "ezc3d": ("lab", "reads C3D files"), "opensim": ("peers", "runs OpenSim"), "exudyn": ("peers", "runs Exudyn")}
+
+
+def _extra_line(module: str, needed_by: str) -> str:
+    extra, does = EXTRAS[module]
+    return (f"{needed_by} needs casflex's {extra!r} extra (the {module} package, which {does}), not installed: "
+            f"pip install 'casflex[{extra}]'")
+
+
+def need_extra(module: str, needed_by: str) -> None:
+    """OptionError in one line naming the extra to install where ``module`` (a key of :data:`EXTRAS`) cannot be
+    imported; ``needed_by`` says who needs it ("casflex study"). Called before any work."""
+    import importlib
+
+    try:
+        importlib.import_module(module)
+    except ImportError:
+        raise OptionError(_extra_line(module, needed_by)) from None
+
+
+def missing_extra(exc: BaseException) -> str | None:
+    """The one line for an ImportError of an extra's module met during the work (a C3D file read deep in a
+    command), or None where ``exc`` is no such error: the command says what to install instead of a traceback."""
+    if not isinstance(exc, ImportError):
+        return None
+    top = (exc.name or "").partition(".")[0]
+    if top in EXTRAS:
+        return _extra_line(top, "this command")
+    text = str(exc)
+    return text if "pip install 'casflex[" in text else None
+
+
 def uncertain_option(text: str):
     """--uncertain TARGET=SD, TARGET=P% (relative) or TARGET=LOWER:UPPER (argparse type): a casflex.scene.Uncertain
     (``casflex identify --uncertain``, ``casflex inverse --uncertain``; :func:`casflex.scene.uncertain.parse`)."""

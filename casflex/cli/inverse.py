@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from casflex.cli._base import OptionError, Outputs, non_negative, output_path, positive, uncertain_option
+from casflex.cli._base import OptionError, Outputs, need_extra, non_negative, output_path, positive, uncertain_option
 from casflex.inverse.options import FILTERS
 
 
@@ -41,12 +41,14 @@ def _cutoff_or_none(text: str) -> float | None | str:
     return v
 
 
+_UNSET = object()  # --cutoff-plates not given (its values include None: 'none')
+
+
 def _progress(done: int, total: int) -> None:
+    from casflex.interrupt import progress
+
     if done == total or done % max(total // 20, 1) == 0:
-        sys.stderr.write(f"\rcasflex: marker fit {done}/{total} frames")
-        if done == total:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
+        progress(f"casflex: marker fit {done}/{total} frames", done, total)
 
 
 #: The command's options by the names of the option values they build (:mod:`casflex.inverse.options`): how a value
@@ -63,6 +65,9 @@ def inverse_options(args: argparse.Namespace) -> dict:
     that take what ``casflex inverse`` takes (:func:`add_trial_options`)."""
     from casflex.inverse import Bands, Filter, Fit, OptionRefused, Trial
 
+    for flag, value in (("--data", args.data), ("--loads", args.loads)):
+        if value and value.lower().endswith(".c3d"):
+            need_extra("ezc3d", f"{flag} {value!r} (a C3D file)")
     plates = dict(args.plate or [])
     if len(plates) != len(args.plate or []):
         raise OptionError("--plate: a node is given twice")
@@ -70,23 +75,44 @@ def inverse_options(args: argparse.Namespace) -> dict:
     if args.loads and not plates and not external:  # the library would take the plates as none: a command asks
         raise OptionError("--loads: say which node each plate acts on with --plate NODE=PREFIX (e.g. ankle=ground_), "
                           "or give OpenSim's ExternalLoads file")
+    how, plates_hz = _matched(args)
     try:
         return {"trial": Trial(args.data, args.coordinates, grf=args.loads, plates=plates, plane=args.plane,
                                root=args.root, t_start=args.t_start, t_end=args.t_end, tasks=args.tasks),
-                "filter": Filter(None, None, args.filter) if args.no_filter else Filter(args.cutoff, args.cutoff_plates,
-                                                                                        args.filter),
+                "filter": Filter(None, None, how) if args.no_filter else Filter(args.cutoff, plates_hz, how),
                 "fit": Fit(max_misfit=args.max_misfit),
                 "bands": Bands(args.uncertain, args.marker_noise, args.bands)}
     except OptionRefused as exc:
         raise OptionError(exc.said(FLAGS)) from None
 
 
+#: ``--match``'s presets: the options each sets, (--filter, --cutoff-plates), as the peer's tools run.
+MATCH = {"opensim": ("opensim", None)}
+_DEFAULT_FILTER, _DEFAULT_PLATES = "butterworth", "same"
+
+
+def _matched(args: argparse.Namespace) -> tuple[str, float | None | str]:
+    """(--filter, --cutoff-plates) as given, else as --match's preset sets them, else the defaults; an option
+    given against the preset is refused (one line naming both)."""
+    given_filter, given_plates = getattr(args, "filter", None), getattr(args, "cutoff_plates", _UNSET)
+    if getattr(args, "match", None) is None:
+        return given_filter or _DEFAULT_FILTER, _DEFAULT_PLATES if given_plates is _UNSET else given_plates
+    how, plates_hz = MATCH[args.match]
+    if given_filter is not None and given_filter != how:
+        raise OptionError(f"--filter: {given_filter} contradicts --match {args.match} (its filter is {how}); give "
+                          "one or the other")
+    if given_plates is not _UNSET and given_plates != plates_hz:
+        raise OptionError(f"--cutoff-plates: {given_plates} contradicts --match {args.match} (the plates "
+                          f"{'unfiltered' if plates_hz is None else f'at {plates_hz} Hz'}); give one or the other")
+    return how, plates_hz
+
+
 def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
     from casflex.inverse import BandError, prepare, solve
 
     chosen = inverse_options(args)
-    out = outputs.file("--out", args.out, (".npz", ".csv", ".sto"), "inverse dynamics") if args.out is not None \
-        else None
+    outs = [(outputs.file("--out", path, (".npz", ".csv", ".sto", ".mot"), "inverse dynamics"), path)
+            for path in args.out or []]  # each checked and reserved before any work
     plots = None
     if args.plots is not None:
         from casflex.plotting.inverse import FIGURES
@@ -102,13 +128,14 @@ def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
     res = solve(inputs, progress=None if args.quiet else _progress)
     for line in res.warnings[len(inputs.warnings):]:
         print(f"casflex: warning: {line}", file=sys.stderr)
-    print(res.summary())
-    for hinge, t0, t1 in args.passive or []:
+    if not args.quiet:
+        print(res.summary())
+    for hinge, t0, t1 in args.passive or []:  # asked for, and written nowhere else: printed under --quiet too
         from casflex.inverse.passive import fit_passive
 
         print(fit_passive(res, hinge, t0, t1).summary())
-    if out is not None:
-        res.save(out, fmt=args.out.rsplit(".", 1)[-1].lower())
+    for staged, path in outs:
+        res.save(staged, fmt=path.rsplit(".", 1)[-1].lower())
     if plots is not None:
         from casflex.plotting.inverse import save_inverse_figures
 
@@ -134,6 +161,8 @@ def cmd_calibrate(args: argparse.Namespace, outputs: Outputs) -> int:
     from casflex.scene.io import dumps_scene
 
     Plane.parse(args.plane, option="--plane")
+    if args.static.lower().endswith(".c3d"):
+        need_extra("ezc3d", f"--static {args.static!r} (a C3D file)")
     if args.mass is not None and not args.scale:
         raise OptionError("--mass: scales the bodies with the segments; give --scale too")
     out = outputs.file("--out", args.out, (".toml",), "calibrated scene")
@@ -158,13 +187,17 @@ def add_trial_options(s: argparse.ArgumentParser) -> None:
                    help="a plate's columns (PREFIXforce_vx ...) act on NODE's segment; repeat per plate")
     s.add_argument("--cutoff", type=positive("a frequency in Hz"), default=6.0,
                    help="zero-lag Butterworth cut-off for the kinematics and the plates alike, Hz (default 6)")
-    s.add_argument("--cutoff-plates", type=_cutoff_or_none, default="same", metavar="HZ|none",
+    s.add_argument("--cutoff-plates", type=_cutoff_or_none, default=_UNSET, metavar="HZ|none",
                    help="the plates' own cut-off, Hz, 'none' (unfiltered, as OpenSim's ID tool) or 'same' (the "
                         "default: --cutoff's)")
-    s.add_argument("--filter", choices=FILTERS, default="butterworth",
+    s.add_argument("--filter", choices=FILTERS, default=None,
                    help="the coordinates' filter: butterworth (2nd order forward and back: 4th-order zero-lag, the "
                         "default) or opensim (as OpenSim's ID tool: the record padded by half its length, 3rd "
                         "order forward and back); both -6 dB at --cutoff")
+    s.add_argument("--match", choices=sorted(MATCH), default=None,
+                   help="filter as a peer's tools do, as a lab runs them: opensim = OpenSim's IK then its ID tool "
+                        "(--filter opensim --cutoff-plates none: the coordinates filtered at --cutoff, 6 Hz by "
+                        "default as OpenSim's example ID setups say, the plates as measured)")
     s.add_argument("--no-filter", action="store_true", help="use the data unfiltered")
     s.add_argument("--tasks", metavar="XML", help="marker weights: an OpenSim IK task set or IK setup file (markers "
                                                   "with no task are left out); default the scene's weights")
@@ -195,11 +228,14 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--passive", action="append", type=_passive, metavar="HINGE[:T0:T1]",
                    help="fit a torsion spring-damper to HINGE's net moment (over T0..T1 s) and say how much of it "
                         "it explains; repeat per hinge")
-    s.add_argument("--out", type=output_path, metavar="FILE",
-                   help="write the loads to FILE.npz (everything), FILE.csv (a table) or FILE.sto (OpenSim's table, "
-                        "the lab's names)")
+    s.add_argument("--out", type=output_path, action="append", metavar="FILE",
+                   help="write the result to FILE.npz (everything), FILE.csv (a table: the filtered coordinates and "
+                        "the loads), FILE.sto (OpenSim's table of the loads, the lab's names) or FILE.mot (the joint "
+                        "angles as OpenSim's IK writes them: the marker fit, unfiltered, in degrees); repeat for "
+                        "several files (docs/lab.md)")
     s.add_argument("--plots", type=output_path, metavar="DIR", help="write figures into this directory")
-    s.add_argument("--quiet", action="store_true", help="no progress messages")
+    s.add_argument("--quiet", action="store_true", help="print nothing but warnings and errors (stderr), and "
+                                                        "the --passive fits asked")
     s.set_defaults(func=cmd_inverse)
 
     s = sub.add_parser("calibrate", help="place a scene's markers (and scale its segments) from a static trial")

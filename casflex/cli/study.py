@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from casflex.cli._base import OptionError, Outputs, integer, output_path
+from casflex.cli._base import OptionError, Outputs, integer, need_extra, output_path
 
 
 def _table(rows: list[tuple]) -> str:
@@ -43,39 +43,76 @@ def _passive_table(out: dict) -> str | None:
     return buf.getvalue()
 
 
-def cycle_curves(out: dict, all_cycles: bool = False) -> dict[str, dict[str, np.ndarray]]:
-    """load -> subject -> its cycles (m, 101) over the subject's trials: the clean ones (their stance wholly on the
-    foot's plate, :func:`casflex.study.events.clean_cycles`), every one where ``all_cycles`` (the study's
-    ``cycles = "all"``); a subject without any left out, a load without any subject too."""
+def cycle_curves(out: dict, all_cycles: bool = False, kind: str = "loads") -> dict[str, dict[str, np.ndarray]]:
+    """load (or joint angle, ``kind`` "angles") -> subject -> its cycles (m, 101) over the subject's trials: the
+    clean ones (their stance wholly on the foot's plate, :func:`casflex.study.events.clean_cycles`), every one
+    where ``all_cycles`` (the study's ``cycles = "all"``); a subject without any left out, a load without any
+    subject too."""
+    return {n: {s: np.array([c for c, _ in cs]) for s, cs in subs.items()}
+            for n, subs in _kept(out, all_cycles, kind).items()}
+
+
+def _kept(out: dict, all_cycles: bool, kind: str) -> dict[str, dict[str, list[tuple[tuple, float | None]]]]:
+    """name -> subject -> [(cycle's values, its toe-off %)] of the cycles kept (:func:`cycle_curves`)."""
+    from casflex.plotting.gait import split_side
+
     per: dict[str, dict[str, list]] = {}
     for (subject, _), rec in out["trials"].items():
-        for name, ld in rec.loads.items():
+        for name, ld in getattr(rec, kind).items():
             keep = ld.clean or [False] * len(ld.value)
+            offs = rec.toe_off.get(ld.foot) or [None] * len(ld.value)
+            if split_side(name)[1] != split_side(ld.foot or "")[1]:  # an arm or the trunk on a foot's cycles
+                offs = [None] * len(ld.value)  # its toe-off is no event of its own side: not drawn
             per.setdefault(name, {}).setdefault(subject, []).extend(
-                v for v, ok in zip(ld.value, keep, strict=True) if ok or all_cycles)
-    per = {n: {s: np.array(c) for s, c in subs.items() if c} for n, subs in per.items()}
+                (v, off) for v, ok, off in zip(ld.value, keep, offs, strict=True) if ok or all_cycles)
+    per = {n: {s: c for s, c in subs.items() if c} for n, subs in per.items()}
     return {n: subs for n, subs in per.items() if subs}
 
 
-def _figures(out: dict, directory: Path, title: str, per_kg: bool = False, all_cycles: bool = False) -> list[str]:
-    """Per subject and for the group (the subjects' means): each load over the gait cycle (:func:`cycle_curves`);
-    the files written."""
-    from casflex.plotting.study import plot_cycles
+def _coordinate_signs(out: dict) -> dict[str, float]:
+    """The subjects' scene coordinates' signs by name (the clinical signs turn a coordinate of sign -1 again)."""
+    from casflex.scene.io import loads_scene
+
+    signs: dict[str, float] = {}
+    for rec in out["subjects"].values():
+        signs |= {c.name: c.sign for c in getattr(loads_scene(rec.scene), "coordinates", ())}
+    return signs
+
+
+def _figures(out: dict, directory: Path, title: str, per_kg: bool = False, all_cycles: bool = False,
+             clinical: bool = False, normative: dict | None = None) -> tuple[list[str], list[str]]:
+    """Per subject and for the group (the subjects' means): each joint's angle and moment over the gait cycle as
+    gait reports show them (:func:`casflex.plotting.gait.gait_figure`); (the files written, warnings)."""
+    from casflex.plotting._figure import _close
+    from casflex.plotting.gait import gait_figure, split_side
     from casflex.study.runner import PERCENT, unit_of
     from casflex.study.study_file import GROUP  # a subject of this name is refused (its figure would be this)
 
-    per = cycle_curves(out, all_cycles)
-    if not per:
-        return []
-    units = {n: unit_of(n, per_kg) for n in per}
+    loads = _kept(out, all_cycles, "loads")
+    kept = loads | _kept(out, all_cycles, "angles")
+    if not kept:
+        return [], []
+    units = {n: unit_of(n, per_kg) if n in loads else "deg" for n in kept}
+    options = {"units": units, "clinical": clinical, "normative": normative,
+               "coordinate_signs": _coordinate_signs(out) if clinical else None}
     written = []
-    for subject in sorted({s for subs in per.values() for s in subs}):
-        curves = {n: {subject: subs[subject]} for n, subs in per.items() if subject in subs}
-        plot_cycles(PERCENT, curves, f"{title}: {subject}", directory / f"{subject}.png", units=units)
+    for subject in sorted({s for subs in kept.values() for s in subs}):
+        mine = {n: subs[subject] for n, subs in kept.items() if subject in subs}
+        _close(gait_figure(PERCENT, {n: np.array([c for c, _ in cs]) for n, cs in mine.items()},
+                           {n: [off for _, off in cs] for n, cs in mine.items()}, f"{title}: {subject}",
+                           directory / f"{subject}.png", what="cycles", **options))
         written.append(f"{subject}.png")
-    group = {n: {GROUP: np.array([c.mean(axis=0) for c in subs.values()])} for n, subs in per.items()}
-    plot_cycles(PERCENT, group, f"{title}: the subjects' means", directory / f"{GROUP}.png", units=units)
-    return [*written, f"{GROUP}.png"]
+    means = {n: {s: (np.array([c for c, _ in cs]).mean(axis=0),
+                     float(np.mean(offs)) if (offs := [o for _, o in cs if o is not None]) else None)
+                 for s, cs in subs.items()} for n, subs in kept.items()}
+    _close(gait_figure(PERCENT, {n: np.array([m for m, _ in subs.values()]) for n, subs in means.items()},
+                       {n: [o for _, o in subs.values()] for n, subs in means.items()},
+                       f"{title}: the subjects' means", directory / f"{GROUP}.png", what="subjects", **options))
+    drawn = {split_side(n)[0] for n in kept}
+    unused = sorted(set(normative or {}) - drawn)
+    notes = [f"--normative: no curve {k!r} in the figures (theirs: {', '.join(sorted(drawn))}): its band is not "
+             "drawn" for k in unused]
+    return [*written, f"{GROUP}.png"], notes
 
 
 def _check_cluster(args: argparse.Namespace) -> None:
@@ -92,7 +129,20 @@ def _check_cluster(args: argparse.Namespace) -> None:
                           "(dask scheduler) and its workers, or leave --scheduler out for a local cluster")
 
 
+def _normative(path: str | None, per_kg: bool) -> dict | None:
+    """--normative's bands, checked before any work (:func:`casflex.plotting.gait.read_normative`)."""
+    from casflex.plotting.gait import read_normative
+
+    if path is None:
+        return None
+    try:
+        return read_normative(path, {"angle": "deg", "moment": "N m/kg" if per_kg else "N m"})
+    except ValueError as exc:
+        raise OptionError(f"--normative: {exc}") from None
+
+
 def cmd_study(args: argparse.Namespace, outputs: Outputs) -> int:
+    need_extra("distributed", "casflex study")  # before the study file is read: one line, not a traceback at the end
     from casflex.study.runner import check_against_models, per_kg, run_study, tidy_rows
     from casflex.study.study_file import StudyError, load_study
 
@@ -101,7 +151,11 @@ def cmd_study(args: argparse.Namespace, outputs: Outputs) -> int:
         check_against_models(study)
     except StudyError as exc:
         raise OptionError(f"{args.study}: {exc}") from None
+    files = [f for s, t in study.trials() for f in (t.markers, t.grf)] + [s.static for s in study.subjects]
+    if c3d := next((f for f in files if f and f.lower().endswith(".c3d")), None):  # the workers would fail each trial
+        need_extra("ezc3d", f"{args.study}: its C3D file {Path(c3d).name!r}")
     _check_cluster(args)
+    normative = _normative(args.normative, study.options.normalise == "mass")
     staging = outputs.directory("--out", args.out)
     record = outputs.folder("--record", args.record) if args.record else Path(args.out) / "record"
     n = len(study.trials())
@@ -118,7 +172,11 @@ def cmd_study(args: argparse.Namespace, outputs: Outputs) -> int:
     passive = _passive_table(out)
     if passive is not None:
         (staging / "passive.csv").write_text(passive)
-    figures = _figures(per_kg(out, study), staging, study.name, per_kg=kg, all_cycles=study.options.cycles == "all")
+    figures, notes = _figures(per_kg(out, study), staging, study.name, per_kg=kg,
+                              all_cycles=study.options.cycles == "all", clinical=args.signs == "clinical",
+                              normative=normative)
+    for note in notes:
+        print(f"casflex: warning: {note}", file=sys.stderr)
     lines = [f"{len(out['trials'])} of {n} trial(s) done, {len(rows)} rows in loads.csv"
              + (f", {passive.count(chr(10)) - 1} passive fit(s) in passive.csv" if passive else "")
              + f"; figures: {', '.join(figures) or 'none'}"]
@@ -154,5 +212,12 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--retry-failed", action="store_true",
                    help="run again the runs recorded as failed (a lost worker, a mended file); by default a failed "
                         "run's record stands until its inputs change")
+    s.add_argument("--signs", choices=("model", "clinical"), default="model",
+                   help="the figures' signs: the model's (default: as loads.csv, OpenSim's coordinates) or clinical "
+                        "(hip and knee flexion and ankle dorsiflexion +; hip and knee extensor and ankle "
+                        "plantarflexor moments +; docs/lab.md)")
+    s.add_argument("--normative", metavar="CSV",
+                   help="a normative band (grey, mean +- 1 SD) in each figure's panels, from a CSV file: "
+                        "load,percent,mean,sd,unit (docs/lab.md)")
     s.add_argument("--quiet", action="store_true", help="no progress messages")
     s.set_defaults(func=cmd_study)

@@ -36,7 +36,7 @@ from casflex.inverse.bands import band_spec, inverse_bands
 from casflex.inverse.fit import FittedMotion, filtered_rates, fit_markers
 from casflex.inverse.flexible import driven_loads
 from casflex.inverse.inputs import InverseInputs, inverse_model, prepare
-from casflex.inverse.lab_names import lab_loads, lab_name
+from casflex.inverse.lab_names import lab_coordinates, lab_loads, lab_name
 from casflex.inverse.options import BandError, Bands, Filter, Fit, Flexible, OptionRefused, Trial
 from casflex.inverse.plates import Plate, plate_loads, plates_under_feet
 from casflex.inverse.result import InverseResult
@@ -126,13 +126,15 @@ def solve(inputs: InverseInputs, *, bands: Bands | None = None, flexible: Flexib
                                if not c.of.startswith(f"{tree.root}.") and lab_name(c) in lab]
     _check_moments(inputs, {name: loads[name] for name in settings["moments"] if name in loads})
     band, parts = {}, {}
+    fitted, units = lab_coordinates(model.scene, tree.names, fit.z)  # the IK result, unfiltered
     if inputs.band_spec is not None:
         band, parts, lines, settings["bands"] = inverse_bands(inputs.band_spec, inputs, fit, z, zd, zdd, sorted(loads))
         report += lines
     return InverseResult(t=t, coordinate_names=tree.names, z=z, zd=zd, zdd=zdd, dof_names=model.dof_names, q=sol["q"],
                          qd=sol["qd"], qdd=sol["qdd"], loads=loads, frame_t=t, marker_rms=fit.rms, report=report,
                          settings=settings, warnings=warnings, marker_labels=inputs.labels, marker_misfit=fit.misfit,
-                         plates=inputs.plates, bands=band, band_parts=parts)
+                         plates=inputs.plates, bands=band, band_parts=parts, fitted=fitted, fitted_units=units)
+
 
 
 #: m/s^2: the weight the plates' largest total force is taken for (:func:`_check_moments`)

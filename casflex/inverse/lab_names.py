@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["lab_loads", "lab_name", "load_unit"]
+__all__ = ["lab_coordinates", "lab_loads", "lab_name", "load_unit"]
 
 _ROOT = {"x": "root.fx", "y": "root.fy", "theta": "root.mz"}
 #: The endings of a force's name (N); every other load is a moment (N m).
@@ -35,3 +35,19 @@ def load_unit(name: str) -> str:
     """The unit of a load called ``name``: N for a force (``<coordinate>_force``, ``<hinge>.fx`` ..., ``root.fx``),
     else N m."""
     return "N" if name.endswith(_FORCES) else "N m"
+
+
+def lab_coordinates(scene, names, z: np.ndarray) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    """The tree's coordinates ``names`` (``pelvis.x``, ``knee.angle``) with values z (k, n_z) as the lab's
+    (:func:`casflex.scene.coordinates.to_lab`: their names and values where the scene has ``[[coordinates]]``, else
+    the tree's), and their units (m, rad)."""
+    from casflex.scene.coordinates import to_lab
+
+    lab = {c.scene_coordinate(): c for c in getattr(scene, "coordinates", ())}
+    values, units = {}, {}
+    for k, own in enumerate(names):
+        c = lab.get(own)
+        name = c.name if c is not None else own
+        values[name] = to_lab(scene, c, z[:, k]) if c is not None else z[:, k]
+        units[name] = c.unit if c is not None else ("m" if own.endswith((".x", ".y")) else "rad")
+    return values, units

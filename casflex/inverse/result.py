@@ -14,7 +14,38 @@ from casflex.inverse.lab_names import load_unit
 from casflex.lab.tables import write_sto
 from casflex.results import atomic_write_bytes, atomic_write_text
 
-__all__ = ["InverseResult"]
+__all__ = ["InverseResult", "NPZ_KEYS"]
+
+#: Every key of the .npz that :meth:`InverseResult.save` writes, and what it holds (docs/lab.md lists them).
+NPZ_KEYS = {
+    "t": "(k,) s: the instants",
+    "coordinate_names": "(n_z,) the tree's coordinates (pelvis.x, pelvis.y, pelvis.theta, <hinge>.angle)",
+    "z": "(k, n_z) the coordinates, filtered (m, rad)",
+    "zd": "(k, n_z) their rates (m/s, rad/s)",
+    "zdd": "(k, n_z) their accelerations (m/s^2, rad/s^2)",
+    "dof_names": "(n_dof,) the scene's degrees of freedom",
+    "q": "(k, n_dof) the scene's motion (m, rad)", "qd": "(k, n_dof) its rates", "qdd": "(k, n_dof) its accelerations",
+    "load_names": "(n_l,) the loads' names, sorted",
+    "loads": "(k, n_l) the loads (N, N m; a hinge's .angle column: rad)",
+    "fitted_names": "(n_z,) the IK result's coordinates: the lab's names where the scene has them",
+    "fitted_units": "(n_z,) their units (m, rad)",
+    "fitted": "(k, n_z) the IK result: the marker fit's coordinates (or those given), unfiltered, in the lab's values",
+    "frame_t": "(k,) s: the frames of the fit", "marker_rms": "(k,) m: the markers' RMS misfit per frame",
+    "marker_labels": "(m,) the trial's markers", "marker_misfit": "(k, m) m: each marker's misfit (NaN: missing)",
+    "meta": "JSON text: report, settings, warnings",
+    "sd_total": "(k, n_l) with bands: each load's 1 SD", "sd_anthropometry": "(k, n_l) its part from the properties",
+    "sd_markers": "(k, n_l) its part from the markers' noise",
+    "band_targets": "(g,) with bands: the uncertain properties",
+    "band_parts": "(g, k, n_l) with bands: each load's change when the property moves by its SD",
+}
+
+
+def _unit(name: str, coordinate: bool = False) -> str:
+    """A column's unit: rad for an angle (a coordinate's, or a hinge's ``.angle`` among the loads), m for a
+    coordinate's position, else the load's (N or N m)."""
+    if name.endswith((".theta", ".angle")):
+        return "rad"
+    return "m" if coordinate else load_unit(name)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -33,7 +64,9 @@ class InverseResult:
     ``bands`` (where asked: :mod:`casflex.inverse.bands`): load -> {"anthropometry", "markers", "total"} -> (k,),
     one standard deviation (N, N m) from the uncertain properties, from the markers' noise and both
     (root-sum-square); ``band_parts``: uncertain property (its target) -> load -> (k,), the load's change when
-    the property moves by its standard deviation (signed).
+    the property moves by its standard deviation (signed); ``fitted``: the marker fit's coordinates (or those
+    given), unfiltered, the IK result (k,) each, named and valued as the lab's coordinates where the scene has
+    ``[[coordinates]]`` (``hip_flexion_r``), else as the tree's (``knee.angle``), in ``fitted_units`` (m, rad).
     """
 
     t: np.ndarray
@@ -56,6 +89,8 @@ class InverseResult:
     plates: tuple = ()
     bands: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
     band_parts: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
+    fitted: dict[str, np.ndarray] = field(default_factory=dict)
+    fitted_units: dict[str, str] = field(default_factory=dict)
 
     def load(self, name: str) -> np.ndarray:
         """(k,) the load called ``name``; KeyError naming the known ones."""
@@ -87,30 +122,41 @@ class InverseResult:
         return lines
 
     def save(self, path: str | os.PathLike[str], fmt: str | None = None) -> Path:
-        """Write ``npz`` (every array, names and the report), ``csv`` (t, the coordinates and the
-        loads, one column each, a header line of names with units in brackets) or ``sto`` (OpenSim's
-        table: time and the loads, in the lab's names where the scene has ``[[coordinates]]``, every
-        column's unit listed once in the header), atomically; ``fmt`` defaults to the path's suffix."""
+        """Write the result atomically as ``fmt`` (default the path's suffix): ``npz`` (every array, names and the
+        report: :data:`NPZ_KEYS`), ``csv`` (t, the filtered coordinates and the loads, one column each, a header
+        line of names with units in brackets, no name twice), ``sto`` (OpenSim's table: time and the loads, in
+        the lab's names where the scene has ``[[coordinates]]``, every column's unit listed once in the header) or
+        ``mot`` (the IK result as OpenSim's IK writes it: :attr:`fitted`, unfiltered, angles in degrees under
+        ``inDegrees=yes``; ``casflex inverse --coordinates`` reads it back)."""
         path = Path(path)
-        names = sorted(self.loads)
-        if (fmt or path.suffix.lstrip(".").lower()) == "sto":
-            trial = self.settings.get("source") or "a trial"
+        fmt = fmt or path.suffix.lstrip(".").lower()
+        trial = self.settings.get("source") or "a trial"
+        if fmt == "sto":
             return self._sto(path, f"casflex inverse dynamics of {trial}")
-        if (fmt or path.suffix.lstrip(".").lower()) == "csv":
-            cols = ["t [s]"] + [f"{c} [{'rad' if c.endswith(('.theta', '.angle')) else 'm'}]"
-                                for c in self.coordinate_names] + names
-            bands = self._band_columns(names)
-            cols += list(bands)
-            data = np.column_stack([self.t, self.z, *(self.loads[n] for n in names), *bands.values()])
-            buf = io.StringIO()
-            np.savetxt(buf, data, delimiter=",", header=",".join(cols), comments="", fmt="%.10g")
-            return atomic_write_text(path, buf.getvalue())
+        if fmt == "mot":
+            return self._mot(path, f"Coordinates (casflex marker fit of {trial}, unfiltered)")
+        if fmt == "csv":
+            return atomic_write_text(path, self._csv())
+        buf = io.BytesIO()
+        np.savez_compressed(buf, **self._arrays())
+        return atomic_write_bytes(path, buf.getvalue())
+
+    def _arrays(self) -> dict[str, np.ndarray]:
+        """The .npz's arrays (:data:`NPZ_KEYS`)."""
+        names = sorted(self.loads)
+        fitted = list(self.fitted)
         arrays = {"t": self.t, "z": self.z, "zd": self.zd, "zdd": self.zdd, "q": self.q, "qd": self.qd,
                   "qdd": self.qdd, "coordinate_names": np.array(self.coordinate_names),
                   "dof_names": np.array(self.dof_names), "load_names": np.array(names),
                   "loads": np.column_stack([self.loads[n] for n in names]), "frame_t": self.frame_t,
-                  "marker_rms": self.marker_rms,
-                  "meta": np.array(json.dumps({"report": self.report, "settings": self.settings}))}
+                  "marker_rms": self.marker_rms, "fitted_names": np.array(fitted, dtype=str),
+                  "fitted_units": np.array([self.fitted_units[n] for n in fitted], dtype=str),
+                  "fitted": np.column_stack([self.fitted[n] for n in fitted]) if fitted else np.zeros((self.t.size, 0)),
+                  "marker_labels": np.array(self.marker_labels, dtype=str),
+                  "marker_misfit": (self.marker_misfit if self.marker_misfit is not None
+                                    else np.zeros((self.frame_t.size, 0))),
+                  "meta": np.array(json.dumps({"report": self.report, "settings": self.settings,
+                                               "warnings": self.warnings}))}
         if self.bands:
             for part in ("total", "anthropometry", "markers"):
                 arrays[f"sd_{part}"] = np.column_stack([self.bands[n][part] for n in names])
@@ -118,9 +164,28 @@ class InverseResult:
             arrays["band_targets"] = np.array(targets)
             arrays["band_parts"] = np.array([np.column_stack([self.band_parts[g][n] for n in names])
                                              for g in targets]).reshape(len(targets), self.t.size, len(names))
-        buf = io.BytesIO()
-        np.savez_compressed(buf, **arrays)
-        return atomic_write_bytes(path, buf.getvalue())
+        return arrays
+
+    def _csv(self) -> str:
+        """The .csv's text: t, the filtered coordinates, the loads (a hinge's angle among the element outputs is
+        the coordinate's column already: not again) and the bands, each header cell ``name [unit]``."""
+        names = [n for n in sorted(self.loads) if n not in self.coordinate_names]
+        bands = self._band_columns(names)
+        cols = ["t [s]", *(f"{c} [{_unit(c, True)}]" for c in self.coordinate_names),
+                *(f"{n} [{_unit(n)}]" for n in names), *(f"{c} [{_unit(c.partition('_sd')[0])}]" for c in bands)]
+        data = np.column_stack([self.t, self.z, *(self.loads[n] for n in names), *bands.values()])
+        buf = io.StringIO()
+        np.savetxt(buf, data, delimiter=",", header=",".join(cols), comments="", fmt="%.10g")
+        return buf.getvalue()
+
+    def _mot(self, path: Path, title: str) -> Path:
+        """:attr:`fitted` as OpenSim's IK .mot (:meth:`save`)."""
+        if not self.fitted:
+            raise ValueError(f"{path}: this result holds no fitted coordinates to write as a .mot")
+        deg = {n: self.fitted_units[n] == "rad" for n in self.fitted}
+        cols = {n: np.degrees(v) if deg[n] else v for n, v in self.fitted.items()}
+        return write_sto(path, self.t, cols, title=title, units={n: "deg" if deg[n] else "m" for n in cols},
+                         in_degrees=True)
 
     def _sto(self, path: Path, title: str) -> Path:
         """The loads as an OpenSim .sto table (:meth:`save`, :func:`casflex.lab.tables.write_sto`)."""

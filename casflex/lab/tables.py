@@ -303,14 +303,16 @@ def read_sto(path: str | os.PathLike[str]) -> LabTable:
 
 
 def write_sto(path: str | os.PathLike[str], t: np.ndarray, columns: dict[str, np.ndarray], *, title: str,
-              units: dict[str, str]) -> Path:
-    """Write OpenSim's .sto table atomically: a header (``title``, the size, ``inDegrees=no``, each column's unit
-    from ``units`` listed once), then time (s) and ``columns`` (name -> (k,) values, in SI), tab-separated, in
-    :func:`read_sto`'s form. Returns the path."""
+              units: dict[str, str], in_degrees: bool = False) -> Path:
+    """Write OpenSim's .sto (or .mot) table atomically: a header (``title``, the size, ``inDegrees=no``, or yes
+    where ``in_degrees``: the angles given in degrees, as OpenSim's IK writes its .mot; each column's unit from
+    ``units`` listed once), then time (s) and ``columns`` (name -> (k,) values, in SI but for those angles),
+    tab-separated, in :func:`read_sto`'s form. Returns the path."""
     import io
 
     names = list(columns)
-    header = [title, "version=1", f"nRows={np.size(t)}", f"nColumns={len(names) + 1}", "inDegrees=no",
+    header = [title, "version=1", f"nRows={np.size(t)}", f"nColumns={len(names) + 1}",
+              f"inDegrees={'yes' if in_degrees else 'no'}",
               "Units are S.I. units (second, meters, Newtons, ...)",
               "units: time s; " + "; ".join(f"{n} {units[n]}" for n in names), "endheader", "\t".join(["time", *names])]
     buf = io.StringIO()

@@ -32,7 +32,8 @@ from casflex.scene.scene import (
 )
 from casflex.scene.uncertain import Uncertain
 
-__all__ = ["load_scene", "loads_scene", "dumps_scene", "save_scene", "builtin_scenes", "scene_from_dict"]
+__all__ = ["load_scene", "loads_scene", "dumps_scene", "save_scene", "builtin_scenes", "builtin_scene_text",
+           "scene_from_dict"]
 
 _BUILTIN_DIR = Path(__file__).parent / "builtin"
 _LISTS: dict[str, type] = {
@@ -55,6 +56,14 @@ _TOP_KEYS = {"name", "gravity", "run", *_LISTS}
 def builtin_scenes() -> list[str]:
     """Names of the scenes shipped with casflex (``casflex/scene/builtin/*.toml``)."""
     return sorted(p.stem for p in _BUILTIN_DIR.glob("*.toml"))
+
+
+def builtin_scene_text(name: str) -> str:
+    """The TOML text of the built-in scene ``name`` as shipped (its comments, sources and units kept): a starting
+    point to edit (``casflex scene show NAME > my.toml``). SceneError naming the built-in scenes for another name."""
+    if name not in builtin_scenes():
+        raise SceneError(f"scene {name!r}: not a built-in scene (built-in: {', '.join(builtin_scenes())})")
+    return (_BUILTIN_DIR / f"{name}.toml").read_text(encoding="utf-8")
 
 
 def load_scene(source: str | os.PathLike[str]) -> Scene:

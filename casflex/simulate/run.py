@@ -119,10 +119,8 @@ def _value(name: str, value: object, kind: type) -> object:
 def _text_progress(done: int, total: int, t: float) -> None:
     width = 30
     k = int(width * done / max(total, 1))
-    sys.stderr.write(f"\r  [{'#' * k}{'.' * (width - k)}] {100 * done / max(total, 1):5.1f} %  t = {t:.4f} s")
-    if done >= total:
-        sys.stderr.write("\n")
-    sys.stderr.flush()
+    interrupt.progress(f"  [{'#' * k}{'.' * (width - k)}] {100 * done / max(total, 1):5.1f} %  t = {t:.4f} s", done,
+                       total)
 
 
 def simulate(

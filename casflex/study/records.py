@@ -99,7 +99,8 @@ class PassiveFit:
 class TrialRecord:
     """A trial's run: the ``plates`` (node -> prefix) and the ``plane`` it was run with, the ``report`` and the
     ``warnings``, each load over the gait cycles (``loads``), the window run ``t`` [t0, t1] s and the passive
-    fits asked."""
+    fits asked; ``angles``: each joint's angle (deg, the lab's coordinate, filtered) over its moment's cycles;
+    ``toe_off``: foot -> each of its cycles' toe-off, % of the cycle (None: not found)."""
 
     plates: dict[str, str] | None
     plane: str
@@ -108,14 +109,20 @@ class TrialRecord:
     loads: dict[str, CycleLoad]
     t: tuple[float, float]
     passive: tuple[PassiveFit, ...] = ()
+    angles: dict[str, CycleLoad] = field(default_factory=dict)
+    toe_off: dict[str, tuple[float | None, ...]] = field(default_factory=dict)
 
     def to_json(self) -> dict:
         return {"plates": self.plates, "plane": self.plane, "report": list(self.report),
                 "warnings": list(self.warnings), "loads": {k: v.to_json() for k, v in self.loads.items()},
-                "t": list(self.t), "passive": [p.to_json() for p in self.passive]}
+                "t": list(self.t), "passive": [p.to_json() for p in self.passive],
+                "angles": {k: v.to_json() for k, v in self.angles.items()},
+                "toe_off": {k: list(v) for k, v in self.toe_off.items()}}
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> TrialRecord:
         return cls(d["plates"], d["plane"], tuple(d["report"]), tuple(d["warnings"]),
                    {k: CycleLoad.from_json(v) for k, v in d["loads"].items()}, tuple(d["t"]),
-                   tuple(PassiveFit.from_json(p) for p in d.get("passive", ())))
+                   tuple(PassiveFit.from_json(p) for p in d.get("passive", ())),
+                   {k: CycleLoad.from_json(v) for k, v in d.get("angles", {}).items()},
+                   {k: tuple(v) for k, v in d.get("toe_off", {}).items()})

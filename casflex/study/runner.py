@@ -35,8 +35,9 @@ PERCENT = np.linspace(0.0, 100.0, 101)
 #: what a run's record holds, in its fingerprint (:func:`_run`): 2, each cycle's "clean" flag (a record without
 #: it, from before, is done again rather than read as clean or not); 3, a trial run's options given as values
 #: (:class:`~casflex.study.study_file.TrialOptions`, the study file's trial): the fingerprint's text changed, the
-#: records' content did not
-RECORD_FORMAT = 3
+#: records' content did not; 4, each trial's joint angles over its cycles and their toe-offs (the figures': a
+#: record from before is done again rather than drawn without them)
+RECORD_FORMAT = 4
 
 
 def calibrate_run(*, model: str, static: str | None, plane: str, root: str | None, calibrate: bool, scale: bool,
@@ -146,6 +147,7 @@ def trial_run(*, scene: str, trial: Trial, options: TrialOptions, uncertain: tup
     from casflex.inverse import Trial as Inverse
     from casflex.scene import loads_scene
     from casflex.scene.uncertain import parse
+    from casflex.study.kinematics import cycle_angles, toe_offs
 
     sc = loads_scene(scene)
     lab, table = _read(trial)
@@ -163,7 +165,8 @@ def trial_run(*, scene: str, trial: Trial, options: TrialOptions, uncertain: tup
     loads, notes = _cycle_loads(sc, res, lab, found, plates or {}, feet, plane)
     return TrialRecord(plates, plane, (*plane_report, *event_report, *notes, *res.report), (*res.warnings, *notes),
                        loads, (float(res.t[0]), float(res.t[-1])),
-                       tuple(_passive(res, sc, lab, found, feet, options.passive))).to_json()
+                       tuple(_passive(res, sc, lab, found, feet, options.passive)),
+                       cycle_angles(sc, res, loads), toe_offs(found, sc, lab, feet)).to_json()
 
 
 def _cycle_loads(sc, res, lab, found, plates: dict[str, str], feet: dict, plane: str

@@ -391,10 +391,9 @@ def _execute(client: Any, runs: list[Run], blobs: dict, finished: Callable[[str,
 
 
 def _text_progress(done: int, total: int, key: str) -> None:
-    sys.stderr.write(f"\r  sweep: {done}/{total} runs  (last: {key[:40]})" + " " * 10)
-    if done >= total:
-        sys.stderr.write("\n")
-    sys.stderr.flush()
+    from casflex.interrupt import progress
+
+    progress(f"  sweep: {done}/{total} runs  (last: {key[:40]})" + " " * 10, done, total, each=True)
 
 
 @functools.lru_cache(maxsize=8)

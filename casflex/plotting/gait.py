@@ -1,0 +1,247 @@
+"""A study's figures as gait reports show them (``casflex study``): one row per joint, its angle and its moment
+over the gait cycle (0-100 %), left and right overlaid (left red, right green, as gait labs draw them), each
+side's mean and its band of +- 1 standard deviation, each side's mean toe-off as a dashed line (where the curve's
+cycles are its own side's foot's), and optionally a normative band (grey) read from a file
+(:func:`read_normative`); one legend below the panels says which is which.
+
+**Signs.** By default each curve has the model's sign: the lab coordinate's (``hip_flexion_r``: flexion +, its
+moment flexor +; OpenSim's ``knee_angle_r``: extension +). ``clinical`` gives the signs of clinical gait reports,
+from the joint's rotation in the sagittal plane, the model facing +x (OpenSim's convention, and casflex's
+scenes'), z out of the page, each coordinate's moment along the child segment's rotation relative to the
+parent's:
+
+- hip: angle flexion + (the thigh turning +z), moment **extensor** + (-z);
+- knee: angle flexion + (the shank turning -z relative to the thigh), moment **extensor** + (+z);
+- ankle: angle dorsiflexion + (+z), moment **plantarflexor** + (-z).
+
+So OpenSim's ``hip_flexion_r_moment`` and ``ankle_angle_r_moment`` change sign, ``knee_angle_r_moment`` keeps it,
+and ``knee_angle_r`` changes sign (knee flexion +). A coordinate whose ``sign`` is -1 in the scene is turned
+again. Other joints (trunk, arms) keep the model's sign, and their axis says so.
+
+**Normative band file** (:func:`read_normative`): CSV with a header line ``load,percent,mean,sd,unit`` (in any
+order; lines starting with ``#`` are comments), one row per load and percent of the gait cycle (0-100,
+increasing per load; any number of points, drawn as given): ``load`` the panel's curve without its side
+(``hip_flexion_moment`` for ``hip_flexion_r_moment`` and ``hip_flexion_l_moment``, ``knee_angle`` for the angle,
+``knee.moment`` for a scene's own hinge ``knee_r``), ``mean`` and ``sd`` (>= 0) in ``unit``, which must be the
+figure's (deg for an angle; N m, or N m/kg where the study normalises by mass, for a moment), in the figure's
+sign convention.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import re
+from dataclasses import dataclass
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from casflex.plotting._figure import _new_figure, _save
+
+__all__ = ["Normative", "gait_figure", "read_normative", "split_side", "sign_factor", "joint_title"]
+
+#: Gait labs' colours: left red, right green; a curve of no side blue.
+_COLOURS = {"left": "tab:red", "right": "tab:green", None: "tab:blue"}
+#: The joints whose clinical sign is defined (module docstring): (angle's, moment's) factor on the rotation
+#: about +z of the child segment relative to the parent, and what is positive.
+_CLINICAL = {"hip": ((1.0, "flexion"), (-1.0, "extensor")), "knee": ((-1.0, "flexion"), (1.0, "extensor")),
+             "ankle": ((1.0, "dorsiflexion"), (-1.0, "plantarflexor"))}
+#: Joint titles of OpenSim's usual coordinates (the panel's key without "_moment"); others: the key's words.
+_TITLES = {"hip_flexion": "Hip flexion/extension", "knee_angle": "Knee flexion/extension",
+           "ankle_angle": "Ankle dorsi/plantarflexion", "lumbar_extension": "Lumbar flexion/extension",
+           "pelvis_tilt": "Pelvic tilt", "arm_flex": "Shoulder flexion/extension", "elbow_flex": "Elbow flexion",
+           "mtp_angle": "Toe (MTP) flexion", "subtalar_angle": "Subtalar angle", "hip": "Hip", "knee": "Knee",
+           "ankle": "Ankle"}
+_SIDES = {"r": "right", "l": "left", "right": "right", "left": "left"}
+_MOMENT = ("_moment", ".moment", "_force", ".force")
+
+
+def split_side(name: str) -> tuple[str, str | None]:
+    """(the name without its side, "left" / "right" / None): ``hip_flexion_r_moment`` -> (``hip_flexion_moment``,
+    "right"), ``knee_l.moment`` -> (``knee.moment``, "left"), ``r_knee.angle``, ``knee.moment`` (no side)."""
+    parts = re.split(r"([_.])", name)
+    for i in range(0, len(parts), 2):  # the words; the separators between them at odd places
+        side = _SIDES.get(parts[i].lower())
+        if side is not None and len(parts) > 1:
+            start = i - 1 if i > 0 else i  # the word and one separator beside it
+            del parts[start:start + 2]
+            return "".join(parts), side
+    return name, None
+
+
+def _joint(key: str) -> str | None:
+    found = re.search(r"(?:^|[_.])(hip|knee|ankle)(?=[_.]|$)", key.lower())
+    return found.group(1) if found else None
+
+
+def is_moment(name: str) -> bool:
+    return name.endswith(_MOMENT)
+
+
+def _base(key: str) -> str:
+    """The joint's key: the name without side and without its load's suffix (``hip_flexion``, ``knee``)."""
+    for suffix in (*_MOMENT, ".angle"):
+        key = key.removesuffix(suffix)
+    return key
+
+
+def joint_title(key: str) -> str:
+    """The joint's title of a panel key (a name without its side): ``hip_flexion_moment`` -> "Hip
+    flexion/extension"."""
+    base = _base(key)
+    return _TITLES.get(base) or re.sub(r"[_.]+", " ", base).strip().capitalize()
+
+
+def sign_factor(name: str, clinical: bool, coordinate_sign: float = 1.0) -> tuple[float, str]:
+    """(the factor the curve ``name`` is drawn with, what its positive values are) under the model's or the
+    clinical signs (module docstring); ``coordinate_sign``: the scene coordinate's ``sign`` (lab names)."""
+    joint = _joint(split_side(name)[0])
+    if not clinical or joint is None:
+        return 1.0, ("the model's sign" if not clinical or joint is None else "")
+    factor, positive = _CLINICAL[joint][1 if is_moment(name) else 0]
+    return factor * coordinate_sign, positive
+
+
+@dataclass(frozen=True)
+class Normative:
+    """A normative band of one panel key: ``percent`` (n,) of the gait cycle, its ``mean`` and ``sd`` (n,) in
+    ``unit``."""
+
+    percent: np.ndarray
+    mean: np.ndarray
+    sd: np.ndarray
+    unit: str
+
+
+_COLUMNS = ("load", "percent", "mean", "sd", "unit")
+
+
+def _number(where: str, field: str, text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise ValueError(f"{where}: {field}: expected a number, got {text!r}") from None
+    if not math.isfinite(v):
+        raise ValueError(f"{where}: {field}: expected a finite number, got {text!r}")
+    return v
+
+
+def read_normative(path: str | os.PathLike[str], units: dict[str, str] | None = None) -> dict[str, Normative]:
+    """The normative bands of the file ``path`` (module docstring), by panel key; ``units``: the unit each kind
+    of curve must have ({"angle": "deg", "moment": "N m/kg"}), checked. ValueError naming the file, the line and
+    the field of anything wrong."""
+    rows: dict[str, list[tuple[float, float, float, str, int]]] = {}
+    try:
+        with open(path, encoding="utf-8", newline="") as f:
+            lines = [(n, ln) for n, ln in enumerate(f, 1) if ln.strip() and not ln.lstrip().startswith("#")]
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path}: cannot be read ({exc})") from None
+    if not lines:
+        raise ValueError(f"{path}: no header line {','.join(_COLUMNS)} and no rows")
+    header = [h.strip().lower() for h in next(csv.reader([lines[0][1]]))]
+    if missing := [c for c in _COLUMNS if c not in header]:
+        raise ValueError(f"{path}: line {lines[0][0]}: the header has no column {', '.join(missing)}; expected "
+                         f"{','.join(_COLUMNS)}")
+    for n, cells in ((n, next(csv.reader([ln]))) for n, ln in lines[1:]):
+        where = f"{path}: line {n}"
+        if len(cells) != len(header):
+            raise ValueError(f"{where}: {len(cells)} cells, the header has {len(header)}")
+        cell = dict(zip(header, (c.strip() for c in cells), strict=True))
+        p, mean, sd = (_number(where, k, cell[k]) for k in ("percent", "mean", "sd"))
+        if not 0.0 <= p <= 100.0:
+            raise ValueError(f"{where}: percent: must lie in 0..100 (% of the gait cycle), got {p:g}")
+        if sd < 0:
+            raise ValueError(f"{where}: sd: must be >= 0 (one standard deviation), got {sd:g}")
+        kind = "moment" if is_moment(cell["load"]) else "angle"
+        if units and cell["unit"] != units[kind]:
+            raise ValueError(f"{where}: unit: the figures draw {cell['load']!r} (a {kind}) in {units[kind]}, the file "
+                             f"says {cell['unit']!r}; give the band in {units[kind]}")
+        if split_side(cell["load"])[1] is not None:
+            raise ValueError(f"{where}: load: {cell['load']!r} names a side; give it without (one band for both: "
+                             f"{split_side(cell['load'])[0]!r})")
+        rows.setdefault(cell["load"], []).append((p, mean, sd, cell["unit"], n))
+    out = {}
+    for key, r in rows.items():
+        p = np.array([x[0] for x in r])
+        if len(r) < 2 or np.any(np.diff(p) <= 0):
+            bad = r[1 + int(np.argmax(np.diff(p) <= 0))][4] if len(r) >= 2 else r[0][4]
+            raise ValueError(f"{path}: line {bad}: percent: {key!r} needs two or more points with increasing "
+                             "percents")
+        out[key] = Normative(p, np.array([x[1] for x in r]), np.array([x[2] for x in r]), r[0][3])
+    return out
+
+
+def _band(ax, percent, curves: np.ndarray, colour: str, label: str) -> None:
+    c = np.atleast_2d(curves)
+    mean = c.mean(axis=0)
+    sd = c.std(axis=0, ddof=1) if c.shape[0] > 1 else np.zeros(c.shape[1])
+    ax.fill_between(percent, mean - sd, mean + sd, color=colour, alpha=0.2, lw=0)
+    ax.plot(percent, mean, color=colour, label=label)
+
+
+def _panel(ax, percent, names: list[str], curves: dict[str, np.ndarray], toe_off: dict[str, list[float]],
+           factors: dict[str, float], what: str, norm: Normative | None) -> None:
+    if norm is not None:
+        ax.fill_between(norm.percent, norm.mean - norm.sd, norm.mean + norm.sd, color="0.6", alpha=0.35, lw=0,
+                        label="normative mean +- 1 SD")
+    for name in names:
+        side = split_side(name)[1]
+        colour = _COLOURS[side]
+        c = np.atleast_2d(curves[name]) * factors.get(name, 1.0)
+        who = (side or "mean").capitalize()
+        _band(ax, percent, c, colour, f"{who}: mean +- 1 SD ({c.shape[0]} {what if c.shape[0] > 1 else what[:-1]})")
+        offs = [v for v in toe_off.get(name, []) if v is not None]
+        if offs:
+            ax.axvline(float(np.mean(offs)), color=colour, ls="--", lw=1.0,
+                       label=f"{side.capitalize() + ' t' if side else 'T'}oe-off ({np.mean(offs):.0f} %)")
+    ax.axhline(0.0, color="0.6", lw=0.6)
+    ax.grid(True, alpha=0.3)
+    ax.set_xlim(0, 100)
+
+
+def gait_figure(percent: np.ndarray, curves: dict[str, np.ndarray], toe_off: dict[str, list[float]], title: str,
+                path: str | os.PathLike[str], *, units: dict[str, str], what: str = "cycles", clinical: bool = False,
+                coordinate_signs: dict[str, float] | None = None, normative: dict[str, Normative] | None = None
+                ) -> Figure:
+    """One row per joint: its angle (left) and moment (right) over ``percent`` (0-100 % of the gait cycle), the
+    sides overlaid (module docstring), written to ``path``; returns the figure.
+
+    ``curves``: name (``hip_flexion_r``, ``hip_flexion_r_moment``) -> (m, 101) in ``units[name]``, ``what``
+    saying what the m rows are ("cycles", "subjects"); ``toe_off``: name -> the rows' toe-offs (%); ``clinical``:
+    the clinical signs (module docstring; ``coordinate_signs``: the scene coordinates' signs by name);
+    ``normative``: a band per panel key (:func:`read_normative`)."""
+    keys: dict[str, list[str]] = {}
+    for name in curves:
+        keys.setdefault(split_side(name)[0], []).append(name)
+    joints: dict[str, dict[str, str]] = {}  # joint key -> {"angle": panel key, "moment": panel key}
+    for key in keys:
+        joints.setdefault(_base(key), {})["moment" if is_moment(key) else "angle"] = key
+    order = sorted(joints, key=lambda j: (["hip", "knee", "ankle"].index(_joint(j)) if _joint(j) else 3, j))
+    fig = _new_figure((9.0, 2.7 * len(order) + 0.6))
+    axes = np.atleast_2d(fig.subplots(len(order), 2, squeeze=False))
+    signs = coordinate_signs or {}
+    factors, positive = {}, {}
+    for name in curves:  # a lab moment's sign is its coordinate's (hip_flexion_r_moment: hip_flexion_r's)
+        factors[name], positive[split_side(name)[0]] = sign_factor(name, clinical,
+                                                                   signs.get(name.removesuffix("_moment"), 1.0))
+    for row, joint in zip(axes, order, strict=True):
+        for ax, kind in zip(row, ("angle", "moment"), strict=True):
+            key = joints[joint].get(kind)
+            if key is None:
+                ax.set_visible(False)
+                continue
+            _panel(ax, percent, sorted(keys[key]), curves, toe_off, factors, what, (normative or {}).get(key))
+            sign = positive[key] if positive[key] == "the model's sign" else f"{positive[key]} +"
+            ax.set(title=f"{joint_title(joint)} {kind}", ylabel=f"{units[keys[key][0]]} ({sign})")
+    for ax in axes[-1]:
+        ax.set_xlabel("gait cycle (%)")
+    seen: dict[str, object] = {}  # one legend for the figure: each label once (a panel's normative band too)
+    for ax in fig.axes:
+        for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
+            seen.setdefault(label, handle)
+    fig.legend(list(seen.values()), list(seen), loc="outside lower center", ncols=3, fontsize="small")
+    fig.suptitle(title)
+    _save(fig, path)
+    return fig

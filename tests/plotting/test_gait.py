@@ -1,0 +1,166 @@
+"""A study's figures as gait reports show them (issue 48, item 8): joint names as titles, angles and moments, left
+and right overlaid with their bands (mean +- 1 SD) and toe-offs, the clinical signs, a normative band from a file.
+The data: one trial run of Hamner's subject 02 running (tests/data/lab: one right stride on its plate), as the study
+runs it (:func:`casflex.study.runner.trial_run`)."""
+
+from __future__ import annotations
+
+import shutil
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from casflex.cli import main
+from casflex.plotting.gait import gait_figure, joint_title, read_normative, sign_factor, split_side
+
+from .helpers import assert_png
+
+LAB = Path(__file__).resolve().parents[1] / "data" / "lab"
+PERCENT = np.linspace(0.0, 100.0, 101)
+
+
+@pytest.fixture(scope="module")
+def record():
+    from casflex import load_scene
+    from casflex.scene import dumps_scene
+    from casflex.study.records import Calibration, TrialRecord
+    from casflex.study.runner import trial_run
+    from casflex.study.study_file import Trial, TrialOptions
+
+    scene = dumps_scene(load_scene(str(LAB / "hamner_subject02_planar.osim")))
+    rec = trial_run(scene=scene, trial=Trial("run", str(LAB / "hamner_running_whole.trc"),
+                                             str(LAB / "hamner_running_whole_grf.mot")),
+                    options=TrialOptions(tasks=str(LAB / "hamner_tasks_ik.xml")), uncertain=())
+    return {"subjects": {"s02": Calibration(scene)}, "trials": {("s02", "run"): TrialRecord.from_json(rec)}}
+
+
+@pytest.mark.parametrize("name, key, side, title", [
+    ("hip_flexion_r_moment", "hip_flexion_moment", "right", "Hip flexion/extension"),
+    ("knee_angle_l", "knee_angle", "left", "Knee flexion/extension"),
+    ("knee_l.moment", "knee.moment", "left", "Knee"),
+    ("r_ankle.angle", "ankle.angle", "right", "Ankle"),
+    ("ankle.moment", "ankle.moment", None, "Ankle"),
+    ("lumbar_extension_moment", "lumbar_extension_moment", None, "Lumbar flexion/extension"),
+])
+def test_a_curve_s_side_and_its_joint_s_title(name, key, side, title):
+    assert split_side(name) == (key, side) and joint_title(key) == title
+
+
+def test_the_record_holds_each_joint_s_angle_over_its_moment_s_cycles_and_the_toe_off(record):
+    rec = record["trials"][("s02", "run")]
+    knee, moment = rec.angles["knee_angle_r"], rec.loads["knee_angle_r_moment"]
+    assert (knee.foot, knee.cycles, knee.clean) == (moment.foot, moment.cycles, moment.clean) == (
+        "calcn_r", moment.cycles, (True,))
+    v = np.array(knee.value[0])
+    # OpenSim's knee_angle_r, degrees: extension +, a running knee flexed 17 to 106 degrees over the stride
+    assert -110 < v.min() < -95 and -20 < v.max() < -10
+    toe_off, = rec.toe_off["calcn_r"]
+    assert 33 < toe_off < 43  # running: stance some 35-40 % of the stride (the plate's foot off at 20 N)
+    assert rec.toe_off["calcn_l"] == () and rec.angles["knee_angle_l"].value == ()  # the left has no cycle here
+
+
+def test_the_clinical_signs_make_stance_s_extensor_and_plantarflexor_moments_positive(record):
+    rec = record["trials"][("s02", "run")]
+    for name, stance in (("hip_flexion_r_moment", slice(0, 15)), ("knee_angle_r_moment", slice(10, 30)),
+                         ("ankle_angle_r_moment", slice(15, 35)), ("knee_angle_r", slice(0, 101))):
+        factor, positive = sign_factor(name, clinical=True)
+        v = factor * np.array(rec.loads.get(name, rec.angles.get(name)).value[0])[stance]
+        # early stance's hip extensor, mid-stance's knee extensor and push-off's plantarflexor moments (N m), the
+        # knee's flexion (deg): positive, as gait reports draw them
+        assert v[np.argmax(np.abs(v))] > 50, (name, positive)
+    assert sign_factor("knee_angle_r_moment", clinical=False) == (1.0, "the model's sign")
+    assert sign_factor("lumbar_extension_moment", clinical=True) == (1.0, "the model's sign")
+    assert sign_factor("hip_flexion_r_moment", clinical=True, coordinate_sign=-1.0) == (1.0, "extensor")
+
+
+def _norms(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "norms.csv"
+    path.write_text(text)
+    return path
+
+
+def test_the_figure_overlays_the_sides_bands_toe_offs_and_the_normative_band(record, tmp_path):
+    rec = record["trials"][("s02", "run")]
+    right = {n: np.array(rec.loads.get(n, rec.angles.get(n)).value) for n in
+             ("hip_flexion_r", "hip_flexion_r_moment", "knee_angle_r", "knee_angle_r_moment")}
+    curves = right | {n.replace("_r", "_l"): np.vstack([c, c + 5.0]) for n, c in right.items()}  # a left, 2 cycles
+    toe_off = {n: [38.7] if "_r" in n else [60.0, 62.0] for n in curves}
+    norms = read_normative(_norms(tmp_path, "# made up\nload,percent,mean,sd,unit\nhip_flexion_moment,0,10,5,N m\n"
+                                            "hip_flexion_moment,100,20,5,N m\n"), {"angle": "deg", "moment": "N m"})
+    fig = gait_figure(PERCENT, curves, toe_off, "s02", tmp_path / "s02.png",
+                      units={n: "N m" if n.endswith("moment") else "deg" for n in curves}, clinical=True,
+                      normative=norms)
+    assert_png(tmp_path / "s02.png")
+    axes = {ax.get_title(): ax for ax in fig.axes if ax.get_visible()}
+    assert sorted(axes) == ["Hip flexion/extension angle", "Hip flexion/extension moment",
+                            "Knee flexion/extension angle", "Knee flexion/extension moment"]
+    hip = axes["Hip flexion/extension moment"]
+    assert [t.get_text() for t in fig.legends[0].get_texts()] == [
+        "Left: mean +- 1 SD (2 cycles)", "Left toe-off (61 %)", "Right: mean +- 1 SD (1 cycle)",
+        "Right toe-off (39 %)", "normative mean +- 1 SD"]  # one legend for the figure, the panels' labels once
+    assert hip.get_ylabel() == "N m (extensor +)" and axes["Knee flexion/extension angle"].get_ylabel() == \
+        "deg (flexion +)"
+    lines = {ln.get_label(): ln for ln in hip.get_lines()}
+    # the right's mean line, drawn in the clinical sign: OpenSim's hip moment turned
+    assert np.allclose(lines["Right: mean +- 1 SD (1 cycle)"].get_ydata(), -right["hip_flexion_r_moment"][0])
+    assert lines["Right toe-off (39 %)"].get_xdata()[0] == pytest.approx(38.7)
+    knee = axes["Knee flexion/extension moment"].get_legend_handles_labels()[1]
+    assert "normative mean +- 1 SD" not in knee and "normative mean +- 1 SD" in hip.get_legend_handles_labels()[1]
+
+
+@pytest.mark.parametrize("text, said", [
+    ("load,percent,mean\nknee_angle,0,1\n", "line 1: the header has no column sd, unit"),
+    ("load,percent,mean,sd,unit\nknee_angle,0,1,2,deg\nknee_angle,120,1,2,deg\n",
+     "line 3: percent: must lie in 0..100"),
+    ("load,percent,mean,sd,unit\nknee_angle,0,1,-2,deg\n", "line 2: sd: must be >= 0"),
+    ("load,percent,mean,sd,unit\nknee_angle,0,one,2,deg\n", "line 2: mean: expected a number, got 'one'"),
+    ("load,percent,mean,sd,unit\nknee_angle_moment,0,1,2,N m\n",
+     "line 2: unit: the figures draw 'knee_angle_moment' (a moment) in N m/kg, the file says 'N m'"),
+    ("load,percent,mean,sd,unit\nknee_angle_r,0,1,2,deg\n", "line 2: load: 'knee_angle_r' names a side"),
+    ("load,percent,mean,sd,unit\nknee_angle,50,1,2,deg\nknee_angle,40,1,2,deg\n",
+     "line 3: percent: 'knee_angle' needs two or more points with increasing percents"),
+])
+def test_a_bad_normative_file_is_refused_naming_the_line_and_field(text, said, tmp_path):
+    path = _norms(tmp_path, text)
+    with pytest.raises(ValueError) as err:
+        read_normative(path, {"angle": "deg", "moment": "N m/kg"})
+    assert str(err.value).startswith(f"{path}: ") and said in str(err.value), str(err.value)
+
+
+def test_study_refuses_a_bad_normative_file_in_one_line_before_any_work(tmp_path, capsys):
+    for f in ("hamner_subject02_planar.osim", "hamner_running_whole.trc", "hamner_running_whole_grf.mot"):
+        shutil.copy(LAB / f, tmp_path / f)
+    study = tmp_path / "study.toml"
+    study.write_text('name = "s"\n[options]\nplane = "X,Y"\nnormalise = "mass"\n\n[[subjects]]\nname = "s02"\n'
+                     'model = "hamner_subject02_planar.osim"\nmass = 80.0\n\n[[subjects.trials]]\nname = "run"\n'
+                     'markers = "hamner_running_whole.trc"\ngrf = "hamner_running_whole_grf.mot"\n')
+    norms = _norms(tmp_path, "load,percent,mean,sd,unit\nknee_angle_moment,0,1,2,N m\nknee_angle_moment,100,1,2,N m\n")
+    before = sorted(p.name for p in tmp_path.iterdir())
+    assert main(["study", str(study), "--out", str(tmp_path / "res"), "--normative", str(norms)]) == 2
+    err = capsys.readouterr().err
+    assert err == (f"casflex: error: --normative: {norms}: line 2: unit: the figures draw 'knee_angle_moment' (a "
+                   "moment) in N m/kg, the file says 'N m'; give the band in N m/kg\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_the_study_s_figures_and_a_normative_band_no_curve_takes(record, tmp_path):
+    from casflex.cli.study import _figures
+
+    norms = read_normative(_norms(tmp_path, "load,percent,mean,sd,unit\nknee_angle,0,1,2,deg\nknee_angle,100,1,2,deg\n"
+                                            "hip_rotation,0,1,2,deg\nhip_rotation,100,1,2,deg\n"))
+    written, notes = _figures(record, tmp_path, "running", clinical=True, normative=norms)
+    assert written == ["s02.png", "group.png"]
+    for name in written:
+        assert_png(tmp_path / name)
+    assert len(notes) == 1 and notes[0].startswith("--normative: no curve 'hip_rotation' in the figures (theirs: ")
+    from casflex.cli.study import _kept
+
+    kept = _kept(record, False, "angles")  # an arm, cut on the right foot's cycles: no toe-off of its own side
+    assert [o for _, o in kept["knee_angle_r"]["s02"]] == [pytest.approx(38.69, abs=0.01)]
+    assert [o for _, o in kept["arm_flex_l"]["s02"]] == [None] == [o for _, o in kept["lumbar_extension"]["s02"]]
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(pytest.main([__file__]))
