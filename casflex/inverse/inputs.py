@@ -83,6 +83,11 @@ def inverse_model(scene, root: str | None = None) -> Model:
     return assemble(dataclasses.replace(scene, supports=()))
 
 
+def _c3d(markers) -> bool:
+    """Whether ``markers`` is the path of a C3D file (whose plates a trial takes where it names no grf)."""
+    return isinstance(markers, (str, os.PathLike)) and os.fspath(markers).lower().endswith(".c3d")
+
+
 def read_markers(path, *, plates: bool = False):
     """(markers, plates or None) of a .trc or .c3d file (a C3D's plates read only when ``plates``)."""
     from casflex.lab import read_c3d, read_trc
@@ -111,7 +116,7 @@ def _trial(markers, grf, need_plates: bool):
     return lab, table
 
 
-def _external_loads(grf, plates: dict[str, str] | None) -> tuple[object, dict[str, str]]:
+def _external_loads(grf, plates) -> tuple[object, dict | str]:
     """(the ground reactions' file or table, plates node -> prefix): an OpenSim ExternalLoads (or ID setup)
     file given as ``grf`` names both (:func:`casflex.lab.setups.read_external_loads`; its bodies are the
     nodes of a model read from .osim). A plate whose identifiers are not ``<prefix>force_v`` ... (e.g.
@@ -120,7 +125,7 @@ def _external_loads(grf, plates: dict[str, str] | None) -> tuple[object, dict[st
     from casflex.lab import LabTable, read_sto
 
     if grf is None or isinstance(grf, LabTable) or not os.fspath(grf).lower().endswith(".xml"):
-        return grf, dict(plates or {})
+        return grf, plates if isinstance(plates, str) else dict(plates or {})
     from casflex.lab.setups import read_external_loads
     from casflex.scene.from_osim import node_name
 
@@ -233,17 +238,52 @@ def _memory(model: Model, tree: KinematicTree, t: np.ndarray, n_markers: int, dt
                          f"memory and {format_bytes(avail)} are available; take a shorter window")
 
 
-def _one_node_a_plate(table, plates: dict[str, str]) -> None:
-    """ValueError naming the plate given to two nodes: its load would be counted twice."""
+def _one_node_a_plate(table, pairs: list[tuple[str, str]]) -> None:
+    """ValueError naming a plate given to two nodes (``pairs``: (node, prefix) over the whole trial): its load would
+    be counted twice."""
     from casflex.lab.filtering import _plate_columns
 
     seen: dict[str, str] = {}
-    for node, prefix in plates.items():
+    for node, prefix in pairs:
         p = _plate_columns(table, prefix)
         if p in seen:
             raise ValueError(f"plates: {table.source}: plate {p!r} is given to both {seen[p]!r} and {node!r}: its "
-                             "load would be counted twice; give each plate to the one foot that stands on it")
+                             "load would be counted twice; give each plate to the one foot that stands on it, or "
+                             "plates=\"auto\" (each contact to the foot over it)")
         seen[p] = node
+
+
+def _shares(model: Model, lab, table, plates, plane, window: tuple[float, float]
+            ) -> tuple[list[tuple[str, str, tuple | None]], dict, list[str]]:
+    """([(prefix, node, spans or None: all its samples)], the settings' plates, report lines): the trial's
+    ``plates`` resolved. A mapping node -> prefix (or prefixes): each plate on its node over the whole trial (a
+    plate given to two nodes refused); "auto" (the trial's markers ``lab`` given): each plate's contacts to the foot
+    over each
+    (:func:`casflex.inverse.contacts.plate_shares`), a foot's share of a plate kept where one of its contacts on it
+    falls in the ``window`` (s)."""
+    from casflex.inverse.contacts import AUTO, plate_contacts, plate_prefixes, plate_shares
+
+    if not (isinstance(plates, str) and plates == AUTO):
+        pairs = [(node, p) for node, v in plates.items() for p in ([v] if isinstance(v, str) else v)]
+        _one_node_a_plate(table, pairs)
+        return [(p, node, None) for node, p in pairs], plates, []
+    found = plate_contacts(model.scene, lab, table, plane, plate_prefixes(table))
+    lo, hi = window
+    inside = {(c.plate, c.foot) for c in found
+              if (c.strike is None or c.strike <= hi) and (c.off is None or c.off >= lo)}
+    out, lines, said = [], [], {}
+    for (p, node), spans in plate_shares(found).items():
+        theirs = [c for c in found if c.plate == p and c.foot == node]
+        when = ", ".join(f"{'start' if c.strike is None else f'{c.strike:.3f}'}-"
+                         f"{'end' if c.off is None else f'{c.off:.3f}'} s" for c in theirs)
+        if (p, node) in inside:
+            out.append((p, node, spans))
+            said.setdefault(node, []).append(p)
+        lines.append(f"plate {p!r} -> {node} (plates=\"auto\"): contact(s) {when}"
+                     + ("" if (p, node) in inside else ", none in the window: left out"))
+    lines += [f"plate {p!r}: no contact above 20 N: left out" for p in plate_prefixes(table)
+              if p not in {c.plate for c in found}]
+    return out, {n: ps[0] if len(ps) == 1 else ps for n, ps in said.items()}, lines
 
 
 def _osim_scene(scene) -> tuple[object, list[str]]:
@@ -306,7 +346,9 @@ def prepare(scene, trial: Trial, *, filter: Filter | None = None, fit: Fit | Non
         task_notes += notes
     model = inverse_model(scene, trial.root)
     grf, plates = _external_loads(trial.grf, trial.plates)
-    for node in plates:
+    if grf is None and plates and _c3d(trial.markers):  # a C3D trial's plates: its own
+        grf = trial.markers
+    for node in plates if not isinstance(plates, str) else ():
         if node not in model.node_names:
             raise ValueError(f"plates: no node {node!r} in the scene; nodes are {list(model.node_names)}")
     tree = kinematic_tree(model, trial.root)
@@ -323,12 +365,13 @@ def prepare(scene, trial: Trial, *, filter: Filter | None = None, fit: Fit | Non
     warnings = [*task_notes, *notes]
     plate_list = []
     fc = filter.plates
-    _one_node_a_plate(table, plates)
-    for node, prefix in plates.items():
-        plate = plate_from_table(table, prefix, node, pl, fc, window=(float(t[0]), float(t[-1])), rate=rate,
-                                 trial=source, weight=model_weight(model))
+    window = (float(t[0]), float(t[-1]))
+    shares, plates, share_report = _shares(model, lab, table, plates, pl, window) if plates else ([], plates, [])
+    for prefix, node, spans in shares:
+        plate = plate_from_table(table, prefix, node, pl, fc, window=window, rate=rate, trial=source,
+                                 weight=model_weight(model), spans=spans)
         plate_list.append(plate)
-        warnings += plate.notes
+        warnings += [n for n in plate.notes if n not in warnings]  # a plate shared by two feet: said once
     _memory(model, tree, t, len(labels), flexible.dt)
     settings = {"plane": f"{pl.x},{pl.y}", "cutoff_hz": cutoff, "filter": filter.kind,
                 "cutoff_plates_hz": fc, "root": tree.root, "plates": plates,
@@ -336,5 +379,6 @@ def prepare(scene, trial: Trial, *, filter: Filter | None = None, fit: Fit | Non
                     labels, model.scene.markers, strict=False)}, "source": source or "",
                 "scene": model.scene.name, "max_misfit_m": fit.misfit, "given": z is not None}
     return InverseInputs(model=model, tree=tree, t=t, y=y, labels=labels, plates=tuple(plate_list), filter=filter,
-                         fit=fit, settings=settings, report=tuple(report + warnings), warnings=tuple(warnings), z=z,
+                         fit=fit, settings=settings, report=tuple(report + share_report + warnings),
+                         warnings=tuple(warnings), z=z,
                          band_spec=spec)

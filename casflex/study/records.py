@@ -101,7 +101,7 @@ class TrialRecord:
     ``warnings``, each load over the gait cycles (``loads``), the window run ``t`` [t0, t1] s and the passive
     fits asked."""
 
-    plates: dict[str, str] | None
+    plates: dict[str, str | list[str]] | None
     plane: str
     report: tuple[str, ...]
     warnings: tuple[str, ...]
