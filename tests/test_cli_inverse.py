@@ -127,3 +127,39 @@ def test_a_figure_s_place_taken_by_a_folder_is_refused_before_the_fit(tmp_path, 
     assert code == 2 and err.strip() == (f"casflex: error: --plots: '{figs / 'marker_fit.png'}' is a directory; the "
                                          "figure 'marker_fit.png' would go there: give another directory")
     assert [p.name for p in figs.iterdir()] == ["marker_fit.png"]
+
+
+def _npz_loads(path) -> dict[str, np.ndarray]:
+    with np.load(path) as z:
+        return dict(zip((str(s) for s in z["load_names"]), z["loads"].T, strict=True))
+
+
+def test_plate_auto_applies_each_plate_s_contacts_to_the_foot_over_each(tmp_path, capsys):
+    # the whole body on Hamner's run: --plate auto finds what Pipelines/Hamner/External_Loads.xml says
+    whole = ["inverse", str(LAB / "hamner_subject02_planar.osim"), "--data", str(LAB / "hamner_running_whole.trc"),
+             "--loads", str(LAB / "hamner_running_whole_grf.mot"), "--tasks", str(LAB / "hamner_tasks_ik.xml")]
+    code, text, err = _run([*whole, "--plate", "auto", "--out", str(tmp_path / "auto.npz")], capsys)
+    assert code == 0, err
+    assert "plate 'ground_' -> calcn_r (plates=\"auto\"): contact(s) 0.390-0.665 s, 1.101-end s" in text
+    code, _, err = _run([*whole, "--plate", "calcn_r=ground_", "--plate", "calcn_l=1_ground_", "--out",
+                         str(tmp_path / "named.npz")], capsys)
+    assert code == 0, err
+    auto, named = _npz_loads(tmp_path / "auto.npz"), _npz_loads(tmp_path / "named.npz")
+    assert auto.keys() == named.keys() and all(np.array_equal(auto[k], named[k]) for k in auto)
+    code, _, err = _run([*whole, "--plate", "auto", "--plate", "calcn_r=ground_"], capsys)
+    assert code == 2 and err.strip() == "casflex: error: --plate: auto (each contact to the foot over it) takes " \
+                                        "every plate: give it alone"
+
+
+def test_a_c3d_trial_s_plates_are_its_own_without_loads(tmp_path, capsys):
+    # before: "--plate: needs --loads" (the same .c3d named again)
+    from tests.lab_scenes import C3D, PLANE, walking2_leg
+
+    scene = tmp_path / "leg.toml"
+    scene.write_text(walking2_leg())
+    base = ["inverse", str(scene), "--data", str(C3D), "--plane", PLANE, "--root", "pelvis", "--plate", "ankle=ground_"]
+    for name, extra in (("own", []), ("again", ["--loads", str(C3D)])):
+        code, _, err = _run([*base, *extra, "--out", str(tmp_path / f"{name}.npz")], capsys)
+        assert code == 0, err
+    own, again = _npz_loads(tmp_path / "own.npz"), _npz_loads(tmp_path / "again.npz")
+    assert np.array_equal(own["knee.moment"], again["knee.moment"])

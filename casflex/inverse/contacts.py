@@ -217,7 +217,9 @@ def plate_contacts(scene, markers, grf=None, plane: Plane | str = "X,Y", prefixe
             if not near:
                 raise ValueError(f"plate {p!r}, contact {_span(a, b)}: no foot within {max_distance:g} m across the "
                                  f"floor of its centre of pressure and {max_height:g} m above it (nearest: "
-                                 f"{score[0][0]}, {score[0][1]:.2f} m and {score[0][2]:.2f} m); plane {pl.x},{pl.y}")
+                                 f"{score[0][0]}, {score[0][1]:.2f} m and {score[0][2]:.2f} m); plane {pl.x},{pl.y}"
+                                 " (a foot the scene does not model, e.g. a leg's other foot: name each plate's node, "
+                                 "plates={node: prefix})")
             found.append(Contact(p, a, b, near[0][0], near[0][1], near[0][2],
                                  tuple(s for s in score if s is not near[0])))
     return found
