@@ -80,11 +80,23 @@ def test_bad_options_exit_2_with_one_line_and_write_nothing(extra, match, tmp_pa
     assert list(tmp_path.iterdir()) == []
 
 
-def test_a_label_the_trial_lacks_is_named(tmp_path, capsys):
+def test_a_label_the_trial_lacks_is_left_out_and_said_unless_its_segment_needs_it(tmp_path, capsys):
+    # before: refused ("no marker labelled 'R.Heel'"); OpenSim's IK leaves such a marker out
     trc = tmp_path / "t.trc"
     trc.write_text(Path(TRC).read_text().replace("R.Heel", "R.Heal"))
+    code, _, err = _run(["inverse", "hamner_leg", "--data", str(trc), "--root", "pelvis", "--out",
+                         str(tmp_path / "loads.npz")], capsys)
+    assert code == 0, err
+    assert f"casflex: warning: {trc}: the scene's markers ['R.Heel'] are not in the trial: left out of the fit (as " \
+           "OpenSim's IK leaves out a marker the trial lacks)" in err.splitlines()
+    text = Path(TRC).read_text()
+    for label in ("R.Heel", "R.Midfoot.Sup", "R.Midfoot.Lat", "R.Toe.Tip"):  # the foot's every marker
+        text = text.replace(label, label.replace(".", "_"))
+    trc.write_text(text)
     code, _, err = _run(["inverse", "hamner_leg", "--data", str(trc), "--root", "pelvis", "--quiet"], capsys)
-    assert code == 2 and "no marker labelled 'R.Heel'" in err
+    assert code == 2 and err.count("\n") == 1
+    assert "segment 'ankle' has no marker to place it (['R.Heel', 'R.Midfoot.Sup', 'R.Midfoot.Lat', 'R.Toe.Tip'] " \
+           "not in the trial)" in err
 
 
 def test_uncertain_properties_give_each_load_its_band(tmp_path, capsys):

@@ -418,6 +418,23 @@ def test_a_plate_both_feet_step_on_in_turn_gives_each_foot_its_contacts(tmp_path
     assert two["loads"]["ankle_angle_r_moment"]["clean"] == [True]
 
 
+def test_a_marker_the_trial_lacks_is_left_out_with_a_warning(tmp_path):
+    # before: the trial failed ("no marker labelled 'R.Toe.Lat'"); OpenSim's IK leaves such a marker out
+    from casflex import load_scene
+    from casflex.scene import dumps_scene
+    from casflex.study.runner import trial_run
+    from casflex.study.study_file import Trial, TrialOptions
+
+    trc = tmp_path / "run.trc"
+    trc.write_text((LAB / "hamner_running_whole.trc").read_text().replace("R.Toe.Lat", "R.Toe.Lost"))
+    rec = trial_run(scene=dumps_scene(load_scene(str(LAB / "hamner_subject02_planar.osim"))),
+                    trial=Trial("run", str(trc), str(LAB / "hamner_running_whole_grf.mot")),
+                    options=TrialOptions(tasks=str(LAB / "hamner_tasks_ik.xml")), uncertain=())
+    assert f"{trc}: the scene's markers ['R.Toe.Lat'] are not in the trial: left out of the fit (as OpenSim's IK " \
+           "leaves out a marker the trial lacks)" in rec["warnings"]
+    assert rec["loads"]["ankle_angle_r_moment"]["clean"] == [True]
+
+
 def test_a_subject_model_s_constraint_the_scene_leaves_out_is_in_the_subject_s_report(tmp_path):
     # before: the study read an .osim through load_scene, and an ignored constraint went without a word
     from casflex.study.runner import calibrate_run

@@ -151,13 +151,27 @@ def _from_markers(model: Model, tree: KinematicTree, lab, plane, t_start, t_end)
     if not model.scene.markers:
         raise ValueError("scene: it has no [[markers]] to fit to the trial")
     keep = _window(lab.t, t_start, t_end, lab.source)
-    ms, labels = _scene_markers(model, tree, lab, plane, keep)
+    lab, absent = _with_absent(model, lab)
+    ms, labels = _scene_markers(model, tree, lab, plane, keep, absent)
     t = _even_frames(ms.t[keep], lab.rate, lab.source)
     unseen = [lb for lb, xy in zip(labels, np.moveaxis(ms.q[keep].reshape(t.size, -1, 2), 1, 0), strict=True)
-              if not np.isfinite(xy).all(axis=1).any()]
-    notes = [f"{lab.source}: markers {unseen} are not seen in the window; the pose is fitted without them"] \
+              if not np.isfinite(xy).all(axis=1).any() and lb not in absent]
+    notes = [f"{lab.source}: the scene's markers {list(absent)} are not in the trial: left out of the fit (as "
+             "OpenSim's IK leaves out a marker the trial lacks)"] if absent else []
+    notes += [f"{lab.source}: markers {unseen} are not seen in the window; the pose is fitted without them"] \
         if unseen else []
     return t, ms.q[keep], labels, lab.rate, notes
+
+
+def _with_absent(model: Model, lab) -> tuple[object, tuple[str, ...]]:
+    """(the trial's markers with a column of NaN for each weighted scene marker it lacks entirely, those labels):
+    such a marker is left out of the fit as one never seen, where the others decide the pose (else
+    :func:`casflex.inverse.fit.check_decided` refuses, naming the segment)."""
+    absent = tuple(dict.fromkeys(m.lab_label for m in model.scene.markers if m.lab_label not in lab.labels))
+    if not absent:
+        return lab, ()
+    xyz = np.concatenate([lab.xyz, np.full((lab.t.size, len(absent), 3), np.nan)], axis=1)
+    return dataclasses.replace(lab, labels=tuple(lab.labels) + absent, xyz=xyz), absent
 
 
 def _from_coordinates(model: Model, tree: KinematicTree, coordinates, t_start, t_end):
@@ -198,7 +212,7 @@ def _even_frames(t: np.ndarray, rate: float, source: str) -> np.ndarray:
     return grid
 
 
-def _scene_markers(model: Model, tree: KinematicTree, lab, plane, keep_frames):
+def _scene_markers(model: Model, tree: KinematicTree, lab, plane, keep_frames, absent: tuple[str, ...] = ()):
     """(scene markers' channels in the plane (a MeasurementSet), their lab labels), checked first
     (:mod:`casflex.lab.checks`): seen in the window, as far apart as the scene's, no sample no body makes."""
     from casflex.inverse.fit import check_decided
@@ -214,7 +228,7 @@ def _scene_markers(model: Model, tree: KinematicTree, lab, plane, keep_frames):
     scene_xy = np.array([[m.x, m.y] for m in model.scene.markers])
     check_scale(lab.source, lab.units, scene_xy, xy, [tree.cluster[i] for i in tree.marker_nodes])
     check_markers(lab, labels, keep_frames)
-    check_decided(tree, xy.reshape(xy.shape[0], -1), labels, lab.source)
+    check_decided(tree, xy.reshape(xy.shape[0], -1), labels, lab.source, absent)
     return markers_in_plane(lab, names, plane), labels
 
 
