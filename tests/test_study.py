@@ -435,6 +435,30 @@ def test_a_marker_the_trial_lacks_is_left_out_with_a_warning(tmp_path):
     assert rec["loads"]["ankle_angle_r_moment"]["clean"] == [True]
 
 
+def test_calibration_s_warnings_are_in_the_summary(folder, monkeypatch, capsys):
+    # issue 48: a marker the static trial puts 10 cm from the model's was said in the record only (as a median)
+    import casflex.study.runner as runner
+    from casflex.study.records import Calibration
+
+    lines = (LAB / "hamner_static_excerpt.trc").read_text().splitlines()
+    k = lines[3].split("\t").index("R.Toe.Tip")  # its X column (each label over its X, Y, Z)
+    for i in range(6, len(lines)):
+        row = lines[i].split("\t")
+        row[k] = f"{float(row[k]) + 120.0:.6f}"  # mm, along the foot
+        lines[i] = "\t".join(row)
+    (folder / "static.trc").write_text("\n".join(lines) + "\n")
+    rec = runner.calibrate_run(model="hamner_leg", static=str(folder / "static.trc"), plane="X,Y", root="pelvis",
+                               calibrate=True, scale=False, mass=None)
+    said = [r for r in rec["report"] if r.startswith("warning: markers moved more than 50 mm")]
+    assert len(said) == 1 and "(R.Toe.Tip)" in said[0]
+    monkeypatch.setattr(runner, "run_study", lambda *a, **k: {
+        "subjects": {"s02": Calibration.from_json(rec)}, "trials": {}, "failed": [], "interrupted": False,
+        "records": {}})
+    main(["study", str(write(folder)), "--out", str(folder / "out")])
+    assert f"  s02: {said[0]}" in (folder / "out" / "summary.txt").read_text().splitlines()
+    assert f"casflex: warning: subject s02: {said[0].removeprefix('warning: ')}" in capsys.readouterr().err
+
+
 def test_a_subject_model_s_constraint_the_scene_leaves_out_is_in_the_subject_s_report(tmp_path):
     # before: the study read an .osim through load_scene, and an ignored constraint went without a word
     from casflex.study.runner import calibrate_run

@@ -148,7 +148,9 @@ def cmd_calibrate(args: argparse.Namespace, outputs: Outputs) -> int:
         raise OptionError("--mass: scales the bodies with the segments; give --scale too")
     out = outputs.file("--out", args.out, (".toml",), "calibrated scene")
     scene, report = calibrate(args.scene, args.static, args.plane, root=args.root, scale=args.scale, mass=args.mass)
-    print("\n".join(report))
+    print("\n".join(ln for ln in report if not ln.startswith("warning: ")))
+    for line in (ln for ln in report if ln.startswith("warning: ")):
+        print(f"casflex: {line}", file=sys.stderr)
     out.write_text(dumps_scene(scene))
     return 0
 
