@@ -79,7 +79,7 @@ def inverse_options(args: argparse.Namespace) -> dict:
     external = bool(args.loads) and args.loads.lower().endswith(".xml")  # OpenSim's ExternalLoads: it says
     if args.loads and not plates and not external:  # the library would take the plates as none: a command asks
         raise OptionError("--loads: say which node each plate acts on with --plate NODE=PREFIX (e.g. ankle=ground_), "
-                          "or give OpenSim's ExternalLoads file")
+                          "or --plate auto (each contact to the foot over it), or give OpenSim's ExternalLoads file")
     try:
         return {"trial": Trial(args.data, args.coordinates, grf=args.loads, plates=plates, plane=args.plane,
                                root=args.root, t_start=args.t_start, t_end=args.t_end, tasks=args.tasks),

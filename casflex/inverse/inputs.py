@@ -164,7 +164,7 @@ def _from_markers(model: Model, tree: KinematicTree, lab, plane, t_start, t_end)
 
 
 def _with_absent(model: Model, lab) -> tuple[object, tuple[str, ...]]:
-    """(the trial's markers with a column of NaN for each weighted scene marker it lacks entirely, those labels):
+    """(the trial's markers with a column of NaN for each scene marker it lacks entirely, those labels):
     such a marker is left out of the fit as one never seen, where the others decide the pose (else
     :func:`casflex.inverse.fit.check_decided` refuses, naming the segment)."""
     absent = tuple(dict.fromkeys(m.lab_label for m in model.scene.markers if m.lab_label not in lab.labels))
@@ -272,9 +272,8 @@ def _shares(model: Model, lab, table, plates, plane, window: tuple[float, float]
     """([(prefix, node, spans or None: all its samples)], the settings' plates, report lines): the trial's
     ``plates`` resolved. A mapping node -> prefix (or prefixes): each plate on its node over the whole trial (a
     plate given to two nodes refused); "auto" (the trial's markers ``lab`` given): each plate's contacts to the foot
-    over each
-    (:func:`casflex.inverse.contacts.plate_shares`), a foot's share of a plate kept where one of its contacts on it
-    falls in the ``window`` (s)."""
+    over each (:func:`casflex.inverse.contacts.plate_shares`), a foot's share of a plate kept where one of its
+    contacts on it falls in the ``window`` (s)."""
     from casflex.inverse.contacts import AUTO, plate_contacts, plate_prefixes, plate_shares
 
     if not (isinstance(plates, str) and plates == AUTO):
