@@ -81,11 +81,23 @@ def test_bad_options_exit_2_with_one_line_and_write_nothing(extra, match, tmp_pa
     assert list(tmp_path.iterdir()) == []
 
 
-def test_a_label_the_trial_lacks_is_named(tmp_path, capsys):
+def test_a_label_the_trial_lacks_is_left_out_and_said_unless_its_segment_needs_it(tmp_path, capsys):
+    # before: refused ("no marker labelled 'R.Heel'"); OpenSim's IK leaves such a marker out
     trc = tmp_path / "t.trc"
     trc.write_text(Path(TRC).read_text().replace("R.Heel", "R.Heal"))
+    code, _, err = _run(["inverse", "hamner_leg", "--data", str(trc), "--root", "pelvis", "--out",
+                         str(tmp_path / "loads.npz")], capsys)
+    assert code == 0, err
+    assert f"casflex: warning: {trc}: the scene's markers ['R.Heel'] are not in the trial: left out of the fit (as " \
+           "OpenSim's IK leaves out a marker the trial lacks)" in err.splitlines()
+    text = Path(TRC).read_text()
+    for label in ("R.Heel", "R.Midfoot.Sup", "R.Midfoot.Lat", "R.Toe.Tip"):  # the foot's every marker
+        text = text.replace(label, label.replace(".", "_"))
+    trc.write_text(text)
     code, _, err = _run(["inverse", "hamner_leg", "--data", str(trc), "--root", "pelvis", "--quiet"], capsys)
-    assert code == 2 and "no marker labelled 'R.Heel'" in err
+    assert code == 2 and err.count("\n") == 1
+    assert "segment 'ankle' has no marker to place it (['R.Heel', 'R.Midfoot.Sup', 'R.Midfoot.Lat', 'R.Toe.Tip'] " \
+           "not in the trial)" in err
 
 
 def test_uncertain_properties_give_each_load_its_band(tmp_path, capsys):
@@ -200,3 +212,39 @@ def test_match_opensim_filters_as_opensim_s_id_tool_and_refuses_an_option_agains
         code, _, err = _run([*base, "--match", "opensim", *extra, "--out", str(tmp_path / "x.csv")], capsys)
         assert code == 2 and err.startswith(f"casflex: error: {said}") and len(err.splitlines()) == 1, err
     assert not (tmp_path / "x.csv").exists()
+
+
+def _npz_loads(path) -> dict[str, np.ndarray]:
+    with np.load(path) as z:
+        return dict(zip((str(s) for s in z["load_names"]), z["loads"].T, strict=True))
+
+
+def test_plate_auto_applies_each_plate_s_contacts_to_the_foot_over_each(tmp_path, capsys):
+    # the whole body on Hamner's run: --plate auto finds what Pipelines/Hamner/External_Loads.xml says
+    whole = ["inverse", str(LAB / "hamner_subject02_planar.osim"), "--data", str(LAB / "hamner_running_whole.trc"),
+             "--loads", str(LAB / "hamner_running_whole_grf.mot"), "--tasks", str(LAB / "hamner_tasks_ik.xml")]
+    code, text, err = _run([*whole, "--plate", "auto", "--out", str(tmp_path / "auto.npz")], capsys)
+    assert code == 0, err
+    assert "plate 'ground_' -> calcn_r (plates=\"auto\"): contact(s) 0.390-0.665 s, 1.101-end s" in text
+    code, _, err = _run([*whole, "--plate", "calcn_r=ground_", "--plate", "calcn_l=1_ground_", "--out",
+                         str(tmp_path / "named.npz")], capsys)
+    assert code == 0, err
+    auto, named = _npz_loads(tmp_path / "auto.npz"), _npz_loads(tmp_path / "named.npz")
+    assert auto.keys() == named.keys() and all(np.array_equal(auto[k], named[k]) for k in auto)
+    code, _, err = _run([*whole, "--plate", "auto", "--plate", "calcn_r=ground_"], capsys)
+    assert code == 2 and err.strip() == "casflex: error: --plate: auto (each contact to the foot over it) takes " \
+                                        "every plate: give it alone"
+
+
+def test_a_c3d_trial_s_plates_are_its_own_without_loads(tmp_path, capsys):
+    # before: "--plate: needs --loads" (the same .c3d named again)
+    from tests.lab_scenes import C3D, PLANE, walking2_leg
+
+    scene = tmp_path / "leg.toml"
+    scene.write_text(walking2_leg())
+    base = ["inverse", str(scene), "--data", str(C3D), "--plane", PLANE, "--root", "pelvis", "--plate", "ankle=ground_"]
+    for name, extra in (("own", []), ("again", ["--loads", str(C3D)])):
+        code, _, err = _run([*base, *extra, "--out", str(tmp_path / f"{name}.npz")], capsys)
+        assert code == 0, err
+    own, again = _npz_loads(tmp_path / "own.npz"), _npz_loads(tmp_path / "again.npz")
+    assert np.array_equal(own["knee.moment"], again["knee.moment"])

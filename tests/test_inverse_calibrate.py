@@ -107,3 +107,24 @@ def test_a_marker_the_static_trial_never_recorded_stays_where_it_is():
     assert (cal.markers[-1].x, cal.markers[-1].y) == (extra.x, extra.y)
     worst = max(abs(a.x - b.x) + abs(a.y - b.y) for a, b in zip(cal.markers[:-1], plain.markers, strict=True))
     assert worst < 1e-9  # the same least squares (the absent marker weighs nothing): to the solver's tolerance
+
+
+def test_a_segment_scaled_far_and_a_marker_moved_far_are_warned():
+    # issue 48: the report said the scales and the median move, nothing stood out (a 1.6 x arm, a 6 cm move)
+    truth = _subject()
+    long = dataclasses.replace(truth, markers=tuple(dataclasses.replace(m, x=1.6 * n.x, y=1.0 + 1.6 * (n.y - 1.0))
+                                                    if m.on == "arm" else m
+                                                    for m, n in zip(truth.markers, loads_scene(pendulum()).markers,
+                                                                    strict=True)))
+    _, report = calibrate(loads_scene(pendulum()), _static(long, np.array([0.0, 1.0, 0.0, 0.3])), scale=True)
+    said = [r for r in report if r.startswith("warning: ")]
+    assert len(said) == 1 and said[0].startswith("warning: segment 'link' scaled by 1.600, beyond 0.5-1.5")
+    # an arm marker 12 cm off (a marker on another segment): the fitted pose shares it between the two, 58-71 mm
+    moved = dataclasses.replace(truth, markers=tuple(dataclasses.replace(m, x=m.x + 0.12) if m.name == "m2" else m
+                                                     for m in truth.markers))
+    _, report = calibrate(loads_scene(pendulum()), _static(moved, np.array([0.3, 1.2, 0.1, 0.4])))
+    said = [r for r in report if r.startswith("warning: ")]
+    assert len(said) == 1 and said[0].startswith("warning: markers moved more than 50 mm on their segments: 'm1' "
+                                                 "(ARM.1) 58 mm, 'm2' (ARM.2) 71 mm: ")
+    _, report = calibrate(loads_scene(pendulum()), _static(truth, np.array([0.3, 1.2, 0.1, 0.4])))
+    assert not [r for r in report if r.startswith("warning: ")]  # 1-2 cm: nothing to say

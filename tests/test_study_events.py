@@ -105,23 +105,47 @@ def test_one_leg_takes_its_own_plate_and_refuses_the_other_foots():
     assert plates == {"ankle": "ground_"}
 
 
-def test_a_plate_under_both_feet_in_turn_or_two_plates_under_one_foot_are_refused(hamner):
-    """One plate both feet step on (the two plates' samples merged: the runner's feet never share a moment on
-    the ground), and the right plate copied as a third plate: each refused in one line; plate_contacts still
-    gives the foot of each contact."""
-    scene, lab, grf = hamner
+def _merged(grf) -> LabTable:
+    """The two plates' samples merged into one plate both feet step on in turn (the runner's feet never share a
+    moment on the ground)."""
     kinds = [n[len("ground_"):] for n in grf.names if n.startswith("ground_")]
     right = grf.column("ground_force_vy") > 0
     merged = np.column_stack([np.where(right, grf.column("ground_" + k), grf.column("1_ground_" + k)) for k in kinds])
-    one = LabTable(grf.t, tuple("ground_" + k for k in kinds), merged, source="merged")
+    return LabTable(grf.t, tuple("ground_" + k for k in kinds), merged, source="merged")
+
+
+def test_a_plate_under_both_feet_in_turn_has_no_node_per_trial_and_two_plates_under_one_foot_are_both_its(hamner):
+    """One plate both feet step on: refused per trial in one line pointing to plates="auto", and plate_contacts
+    gives the foot of each contact; the right plate copied as a third plate: both under calcn_r (before: refused,
+    "one plate per node")."""
+    scene, lab, grf = hamner
+    kinds = [n[len("ground_"):] for n in grf.names if n.startswith("ground_")]
+    one = _merged(grf)
     with pytest.raises(ValueError, match=r"plate 'ground_' is stepped on by calcn_l \(\[start\]-0.327 s, 0.751-1.010 "
-                                         r"s\) and calcn_r \(0.390-0.665 s, 1.101-\[end\] s\)"):
+                                         r"s\) and calcn_r \(0.390-0.665 s, 1.101-\[end\] s\): .*plates=\"auto\""):
         assign_plates(scene, lab, one)
     assert [c.foot for c in plate_contacts(scene, lab, one)] == ["calcn_l", "calcn_r", "calcn_l", "calcn_r"]
     three = LabTable(grf.t, grf.names + tuple("2_ground_" + k for k in kinds),
                      np.hstack([grf.values, np.column_stack([grf.column("ground_" + k) for k in kinds])]))
-    with pytest.raises(ValueError, match="plates 'ground_' and '2_ground_' are both under calcn_r"):
-        assign_plates(scene, lab, three)
+    plates, lines = assign_plates(scene, lab, three)
+    assert plates == {"calcn_r": ["ground_", "2_ground_"], "calcn_l": "1_ground_"}
+    assert len(lines) == 3
+
+
+def test_a_plate_s_samples_are_shared_among_its_feet_halfway_across_each_unloaded_gap(hamner):
+    from casflex.study.events import plate_shares
+
+    scene, lab, grf = hamner
+    found = plate_contacts(scene, lab, _merged(grf))
+    shares = plate_shares(found)
+    # contacts: calcn_l [start]-0.327, calcn_r 0.390-0.665, calcn_l 0.751-1.010, calcn_r 1.101-[end]
+    (l_a, l_b), (r_a, r_b) = shares[("ground_", "calcn_l")], shares[("ground_", "calcn_r")]
+    assert l_a[0] is None and r_b[1] is None
+    assert l_a[1] == r_a[0] == pytest.approx(0.5 * (0.327 + 0.390), abs=1e-3)  # the contacts' 3 digits
+    assert r_a[1] == l_b[0] == pytest.approx(0.5 * (0.665 + 0.751), abs=1e-3)
+    assert l_b[1] == r_b[0] == pytest.approx(0.5 * (1.010 + 1.101), abs=1e-3)
+    assert plate_shares(plate_contacts(scene, lab, grf)) == {("ground_", "calcn_r"): ((None, None),),
+                                                               ("1_ground_", "calcn_l"): ((None, None),)}
 
 
 def test_a_running_stride_from_the_plates_and_the_heel_markers(hamner):
@@ -242,7 +266,8 @@ def test_a_cycle_is_clean_only_where_its_stance_stands_wholly_on_the_foot_s_plat
     cases = {  # what makes it unclean -> what the reason says
         "off every plate": ([], "the foot off every plate"),
         "heel strike 60 ms before the plate's": ([c("ground_", 0.45, 0.665)], "0.390 s (its contact 0.450-0.665 s"),
-        "on a plate not applied to it": ([c("1_ground_", 0.39, 0.665)], "on '1_ground_', not applied to it"),
+        "on a plate not applied to it": ([c("1_ground_", 0.39, 0.665)],
+                                         "on '1_ground_' 0.390-0.665 s during its stance 0.390-0.665 s: not applied"),
         "on two plates": ([*good, c("1_ground_", 0.5, 0.6)], "calcn_r on '1_ground_' 0.500-0.600 s during"),
         "the other foot on its plate": ([*good, c("ground_", 0.6, 0.9, "calcn_l")], "calcn_l on 'ground_'"),
         "still loaded at the cycle's end": ([c("ground_", 0.39, None)], "does not end within the cycle"),

@@ -10,9 +10,11 @@ from casflex.inverse.options import FILTERS
 
 
 def _plate(text: str) -> tuple[str, str]:
+    if text.strip() == "auto":  # each plate's contacts to the foot over each (casflex.inverse.contacts)
+        return "auto", ""
     node, sep, prefix = text.partition("=")
     if not sep or not node.strip() or not prefix.strip():
-        raise argparse.ArgumentTypeError(f"expected NODE=PREFIX (e.g. ankle=ground_), got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected NODE=PREFIX (e.g. ankle=ground_) or auto, got {text!r}")
     return node.strip(), prefix.strip()
 
 
@@ -68,13 +70,21 @@ def inverse_options(args: argparse.Namespace) -> dict:
     for flag, value in (("--data", args.data), ("--loads", args.loads)):
         if value and value.lower().endswith(".c3d"):
             need_extra("ezc3d", f"{flag} {value!r} (a C3D file)")
-    plates = dict(args.plate or [])
-    if len(plates) != len(args.plate or []):
-        raise OptionError("--plate: a node is given twice")
+    given = args.plate or []
+    plates: dict | str = {}
+    for node, prefix in given:
+        if node == "auto" and not prefix:
+            if len(given) > 1:
+                raise OptionError("--plate: auto (each contact to the foot over it) takes every plate: give it alone")
+            plates = "auto"
+        elif node in plates:
+            plates[node] = [*([plates[node]] if isinstance(plates[node], str) else plates[node]), prefix]
+        else:
+            plates[node] = prefix
     external = bool(args.loads) and args.loads.lower().endswith(".xml")  # OpenSim's ExternalLoads: it says
     if args.loads and not plates and not external:  # the library would take the plates as none: a command asks
         raise OptionError("--loads: say which node each plate acts on with --plate NODE=PREFIX (e.g. ankle=ground_), "
-                          "or give OpenSim's ExternalLoads file")
+                          "or --plate auto (each contact to the foot over it), or give OpenSim's ExternalLoads file")
     how, plates_hz = _matched(args)
     try:
         return {"trial": Trial(args.data, args.coordinates, grf=args.loads, plates=plates, plane=args.plane,
@@ -167,7 +177,9 @@ def cmd_calibrate(args: argparse.Namespace, outputs: Outputs) -> int:
         raise OptionError("--mass: scales the bodies with the segments; give --scale too")
     out = outputs.file("--out", args.out, (".toml",), "calibrated scene")
     scene, report = calibrate(args.scene, args.static, args.plane, root=args.root, scale=args.scale, mass=args.mass)
-    print("\n".join(report))
+    print("\n".join(ln for ln in report if not ln.startswith("warning: ")))
+    for line in (ln for ln in report if ln.startswith("warning: ")):
+        print(f"casflex: {line}", file=sys.stderr)
     out.write_text(dumps_scene(scene))
     return 0
 
@@ -184,7 +196,9 @@ def add_trial_options(s: argparse.ArgumentParser) -> None:
                                                   "trial's own C3D file again for its plates), or OpenSim's "
                                                   "ExternalLoads .xml (or ID setup) naming the file and the bodies")
     s.add_argument("--plate", action="append", type=_plate, metavar="NODE=PREFIX",
-                   help="a plate's columns (PREFIXforce_vx ...) act on NODE's segment; repeat per plate")
+                   help="a plate's columns (PREFIXforce_vx ...) act on NODE's segment; repeat per plate (a node "
+                        "given twice: both plates act on it); 'auto': each plate's contacts act on the foot over "
+                        "each, by the feet's markers (a .c3d trial without --loads: its own plates)")
     s.add_argument("--cutoff", type=positive("a frequency in Hz"), default=6.0,
                    help="zero-lag Butterworth cut-off for the kinematics and the plates alike, Hz (default 6)")
     s.add_argument("--cutoff-plates", type=_cutoff_or_none, default=_UNSET, metavar="HZ|none",

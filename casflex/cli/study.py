@@ -187,7 +187,8 @@ def cmd_study(args: argparse.Namespace, outputs: Outputs) -> int:
     for (subject, trial), rec in out["trials"].items():
         cycles = {ld.foot: f"{sum(ld.clean)} clean of {len(ld.cycles)}" for ld in rec.loads.values()}
         lines.append(f"  {subject} {trial}: plates {rec.plates}; cycles per foot {cycles}")
-        lines += [f"    {note}" for note in rec.warnings if "no kinetic cycle" in note or "not clean" in note]
+        lines += [f"    {note}" for note in rec.warnings
+                  if "no kinetic cycle" in note or "not clean" in note or "are not in the trial" in note]
     if out["failed"]:
         lines.append(f"{len(out['failed'])} failed:")
         lines += [f"  {what}: {why}" for what, why in out["failed"]]

@@ -40,6 +40,14 @@ def _rot(th: float) -> np.ndarray:
     return np.array([[c, -s], [s, c]])
 
 
+#: a segment scaled by less than the first or more than the second is said (a warning in the report): subjects differ
+#: by 20-30 % from a model; beyond, a marker mislabelled or on the wrong segment is likelier than such a subject
+SCALE_WARN = (0.5, 1.5)
+#: m: a marker the static trial moves farther than this on its segment is said: skin markers sit within some 1-3 cm
+#: of where a model of the subject has them; 5 cm is a marker on the wrong segment, swapped, or the wrong model
+MOVE_WARN = 0.05
+
+
 #: m: a pair of markers closer than this in the scene's plane measures their placement, not the segment's size (a
 #: few mm of placement is 10 % of it; two markers across a limb, a wrist's two, project within it)
 MIN_PAIR = 0.05
@@ -168,6 +176,9 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
         names = {c: next(n for i, n in enumerate(model.node_names) if tree.cluster[i] == c) for c in s}
         report.append("segments scaled (by the node that carries each): "
                       + ", ".join(f"{names[c]} {v:.3f}" for c, v in s.items()))
+        report += [f"warning: segment {names[c]!r} scaled by {v:.3f}, beyond {SCALE_WARN[0]:g}-{SCALE_WARN[1]:g} (its "
+                   "static markers' distances over the scene's): a marker mislabelled or on another segment?"
+                   for c, v in s.items() if not SCALE_WARN[0] <= v <= SCALE_WARN[1]]
     elif mass is not None:
         raise ValueError("mass: scales the bodies with the segments (scale=True)")
     model = inverse_model(sc, root)
@@ -177,7 +188,7 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
         raise ValueError("static trial: its markers do not decide the pose (a segment with fewer than two seen markers "
                          "and no other way to place it)")
     q = np.array(tree.forward(z)).ravel()
-    markers, moved = [], []
+    markers, moved, far = [], [], []
     for k, (m, i) in enumerate(zip(sc.markers, tree.marker_nodes, strict=True)):
         if not np.isfinite(ym[k]).all():
             markers.append(m)
@@ -187,6 +198,7 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
         x0, th0 = model.q0[3 * i:3 * i + 2], model.q0[3 * i + 2]
         p = x0 + _rot(th0 - th_fit) @ (ym[k] - x_fit)
         moved.append(float(np.hypot(p[0] - m.x, p[1] - m.y)))
+        far += [f"{m.name!r} ({m.lab_label}) {1e3 * moved[-1]:.0f} mm"] * (moved[-1] > MOVE_WARN)
         markers.append(dataclasses.replace(m, x=float(p[0]), y=float(p[1])))
     out = dataclasses.replace(sc, markers=tuple(markers))
     after_model = inverse_model(out, root)
@@ -199,4 +211,7 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
                       f"{1e3 * before:.1f} mm scaled{worse}")
     report.append(f"markers placed: moved by {1e3 * np.median(moved):.1f} mm (median), {1e3 * max(moved):.1f} mm "
                   f"(most); static misfit RMS {1e3 * before:.1f} mm before, {1e3 * after:.2g} mm after")
+    if far:
+        report.append(f"warning: markers moved more than {1e3 * MOVE_WARN:.0f} mm on their segments: {', '.join(far)}: "
+                      "a marker on another segment, labels swapped, or a model not of this subject?")
     return out, report

@@ -191,10 +191,11 @@ def _segment_of(tree: KinematicTree, k: int) -> int:
 
 
 def check_decided(tree: KinematicTree, y: np.ndarray, labels: tuple[str, ...] | None = None,
-                  source: str = "data") -> None:
+                  source: str = "data", absent: tuple[str, ...] = ()) -> None:
     """ValueError in one line, before the fit, when the markers y (n, 2 m) (NaN where missing) seen in the
     window and weighted cannot decide the pose in any frame: it names the coordinates, their segments and those
-    segments' markers (``labels``: the trial's names), and what their markers lack."""
+    segments' markers (``labels``: the trial's names; ``absent``: those the trial lacks entirely), and what their
+    markers lack."""
     sc = tree.model.scene
     names = labels or tuple(m.name for m in sc.markers)
     seen = np.isfinite(y).reshape(y.shape[0], -1, 2).all(axis=2).any(axis=0)
@@ -208,7 +209,8 @@ def check_decided(tree: KinematicTree, y: np.ndarray, labels: tuple[str, ...] | 
     for c in dict.fromkeys(_segment_of(tree, k) for k in free):
         on = [i for i, n in enumerate(tree.marker_nodes) if tree.cluster[n] == c]
         used = [names[i] for i in on if seen[i] and weighted[i]]
-        unseen = [names[i] for i in on if not seen[i]]
+        unseen = [names[i] for i in on if not seen[i] and names[i] not in absent]
+        lacked = [names[i] for i in on if not seen[i] and names[i] in absent]
         zero = [names[i] for i in on if seen[i] and not weighted[i]]
         node = tree.model.node_names[tree.entry[c]]
         nodes = [n for i, n in enumerate(tree.model.node_names) if tree.cluster[i] == c]
@@ -216,6 +218,7 @@ def check_decided(tree: KinematicTree, y: np.ndarray, labels: tuple[str, ...] | 
             tree.cluster[idx(b.nodes[0])] == c for b in sc.beams)
         parts.append(f"segment {node!r} has " + (f"the markers {used}" if used else "no marker") + " to place it"
                      + (f" ({unseen} never seen in the window)" if unseen else "")
+                     + (f" ({lacked} not in the trial)" if lacked else "")
                      + (f" ({zero} of weight 0)" if zero else "")
                      + (f" (nodes {nodes} and no body: an OpenSim model's massless bodies are nodes, their markers "
                         "left out)" if bodiless and not on else ""))

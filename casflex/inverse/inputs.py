@@ -83,6 +83,11 @@ def inverse_model(scene, root: str | None = None) -> Model:
     return assemble(dataclasses.replace(scene, supports=()))
 
 
+def _c3d(markers) -> bool:
+    """Whether ``markers`` is the path of a C3D file (whose plates a trial takes where it names no grf)."""
+    return isinstance(markers, (str, os.PathLike)) and os.fspath(markers).lower().endswith(".c3d")
+
+
 def read_markers(path, *, plates: bool = False):
     """(markers, plates or None) of a .trc or .c3d file (a C3D's plates read only when ``plates``)."""
     from casflex.lab import read_c3d, read_trc
@@ -111,7 +116,7 @@ def _trial(markers, grf, need_plates: bool):
     return lab, table
 
 
-def _external_loads(grf, plates: dict[str, str] | None) -> tuple[object, dict[str, str]]:
+def _external_loads(grf, plates) -> tuple[object, dict | str]:
     """(the ground reactions' file or table, plates node -> prefix): an OpenSim ExternalLoads (or ID setup)
     file given as ``grf`` names both (:func:`casflex.lab.setups.read_external_loads`; its bodies are the
     nodes of a model read from .osim). A plate whose identifiers are not ``<prefix>force_v`` ... (e.g.
@@ -120,7 +125,7 @@ def _external_loads(grf, plates: dict[str, str] | None) -> tuple[object, dict[st
     from casflex.lab import LabTable, read_sto
 
     if grf is None or isinstance(grf, LabTable) or not os.fspath(grf).lower().endswith(".xml"):
-        return grf, dict(plates or {})
+        return grf, plates if isinstance(plates, str) else dict(plates or {})
     from casflex.lab.setups import read_external_loads
     from casflex.scene.from_osim import node_name
 
@@ -146,13 +151,27 @@ def _from_markers(model: Model, tree: KinematicTree, lab, plane, t_start, t_end)
     if not model.scene.markers:
         raise ValueError("scene: it has no [[markers]] to fit to the trial")
     keep = _window(lab.t, t_start, t_end, lab.source)
-    ms, labels = _scene_markers(model, tree, lab, plane, keep)
+    lab, absent = _with_absent(model, lab)
+    ms, labels = _scene_markers(model, tree, lab, plane, keep, absent)
     t = _even_frames(ms.t[keep], lab.rate, lab.source)
     unseen = [lb for lb, xy in zip(labels, np.moveaxis(ms.q[keep].reshape(t.size, -1, 2), 1, 0), strict=True)
-              if not np.isfinite(xy).all(axis=1).any()]
-    notes = [f"{lab.source}: markers {unseen} are not seen in the window; the pose is fitted without them"] \
+              if not np.isfinite(xy).all(axis=1).any() and lb not in absent]
+    notes = [f"{lab.source}: the scene's markers {list(absent)} are not in the trial: left out of the fit (as "
+             "OpenSim's IK leaves out a marker the trial lacks)"] if absent else []
+    notes += [f"{lab.source}: markers {unseen} are not seen in the window; the pose is fitted without them"] \
         if unseen else []
     return t, ms.q[keep], labels, lab.rate, notes
+
+
+def _with_absent(model: Model, lab) -> tuple[object, tuple[str, ...]]:
+    """(the trial's markers with a column of NaN for each scene marker it lacks entirely, those labels):
+    such a marker is left out of the fit as one never seen, where the others decide the pose (else
+    :func:`casflex.inverse.fit.check_decided` refuses, naming the segment)."""
+    absent = tuple(dict.fromkeys(m.lab_label for m in model.scene.markers if m.lab_label not in lab.labels))
+    if not absent:
+        return lab, ()
+    xyz = np.concatenate([lab.xyz, np.full((lab.t.size, len(absent), 3), np.nan)], axis=1)
+    return dataclasses.replace(lab, labels=tuple(lab.labels) + absent, xyz=xyz), absent
 
 
 def _from_coordinates(model: Model, tree: KinematicTree, coordinates, t_start, t_end):
@@ -193,7 +212,7 @@ def _even_frames(t: np.ndarray, rate: float, source: str) -> np.ndarray:
     return grid
 
 
-def _scene_markers(model: Model, tree: KinematicTree, lab, plane, keep_frames):
+def _scene_markers(model: Model, tree: KinematicTree, lab, plane, keep_frames, absent: tuple[str, ...] = ()):
     """(scene markers' channels in the plane (a MeasurementSet), their lab labels), checked first
     (:mod:`casflex.lab.checks`): seen in the window, as far apart as the scene's, no sample no body makes."""
     from casflex.inverse.fit import check_decided
@@ -209,7 +228,7 @@ def _scene_markers(model: Model, tree: KinematicTree, lab, plane, keep_frames):
     scene_xy = np.array([[m.x, m.y] for m in model.scene.markers])
     check_scale(lab.source, lab.units, scene_xy, xy, [tree.cluster[i] for i in tree.marker_nodes])
     check_markers(lab, labels, keep_frames)
-    check_decided(tree, xy.reshape(xy.shape[0], -1), labels, lab.source)
+    check_decided(tree, xy.reshape(xy.shape[0], -1), labels, lab.source, absent)
     return markers_in_plane(lab, names, plane), labels
 
 
@@ -233,17 +252,51 @@ def _memory(model: Model, tree: KinematicTree, t: np.ndarray, n_markers: int, dt
                          f"memory and {format_bytes(avail)} are available; take a shorter window")
 
 
-def _one_node_a_plate(table, plates: dict[str, str]) -> None:
-    """ValueError naming the plate given to two nodes: its load would be counted twice."""
+def _one_node_a_plate(table, pairs: list[tuple[str, str]]) -> None:
+    """ValueError naming a plate given to two nodes (``pairs``: (node, prefix) over the whole trial): its load would
+    be counted twice."""
     from casflex.lab.filtering import _plate_columns
 
     seen: dict[str, str] = {}
-    for node, prefix in plates.items():
+    for node, prefix in pairs:
         p = _plate_columns(table, prefix)
         if p in seen:
             raise ValueError(f"plates: {table.source}: plate {p!r} is given to both {seen[p]!r} and {node!r}: its "
-                             "load would be counted twice; give each plate to the one foot that stands on it")
+                             "load would be counted twice; give each plate to the one foot that stands on it, or "
+                             "plates=\"auto\" (each contact to the foot over it)")
         seen[p] = node
+
+
+def _shares(model: Model, lab, table, plates, plane, window: tuple[float, float]
+            ) -> tuple[list[tuple[str, str, tuple | None]], dict, list[str]]:
+    """([(prefix, node, spans or None: all its samples)], the settings' plates, report lines): the trial's
+    ``plates`` resolved. A mapping node -> prefix (or prefixes): each plate on its node over the whole trial (a
+    plate given to two nodes refused); "auto" (the trial's markers ``lab`` given): each plate's contacts to the foot
+    over each (:func:`casflex.inverse.contacts.plate_shares`), a foot's share of a plate kept where one of its
+    contacts on it falls in the ``window`` (s)."""
+    from casflex.inverse.contacts import AUTO, plate_contacts, plate_prefixes, plate_shares
+
+    if not (isinstance(plates, str) and plates == AUTO):
+        pairs = [(node, p) for node, v in plates.items() for p in ([v] if isinstance(v, str) else v)]
+        _one_node_a_plate(table, pairs)
+        return [(p, node, None) for node, p in pairs], plates, []
+    found = plate_contacts(model.scene, lab, table, plane, plate_prefixes(table))
+    lo, hi = window
+    inside = {(c.plate, c.foot) for c in found
+              if (c.strike is None or c.strike <= hi) and (c.off is None or c.off >= lo)}
+    out, lines, said = [], [], {}
+    for (p, node), spans in plate_shares(found).items():
+        theirs = [c for c in found if c.plate == p and c.foot == node]
+        when = ", ".join(f"{'start' if c.strike is None else f'{c.strike:.3f}'}-"
+                         f"{'end' if c.off is None else f'{c.off:.3f}'} s" for c in theirs)
+        if (p, node) in inside:
+            out.append((p, node, spans))
+            said.setdefault(node, []).append(p)
+        lines.append(f"plate {p!r} -> {node} (plates=\"auto\"): contact(s) {when}"
+                     + ("" if (p, node) in inside else ", none in the window: left out"))
+    lines += [f"plate {p!r}: no contact above 20 N: left out" for p in plate_prefixes(table)
+              if p not in {c.plate for c in found}]
+    return out, {n: ps[0] if len(ps) == 1 else ps for n, ps in said.items()}, lines
 
 
 def _osim_scene(scene) -> tuple[object, list[str]]:
@@ -306,7 +359,9 @@ def prepare(scene, trial: Trial, *, filter: Filter | None = None, fit: Fit | Non
         task_notes += notes
     model = inverse_model(scene, trial.root)
     grf, plates = _external_loads(trial.grf, trial.plates)
-    for node in plates:
+    if grf is None and plates and _c3d(trial.markers):  # a C3D trial's plates: its own
+        grf = trial.markers
+    for node in plates if not isinstance(plates, str) else ():
         if node not in model.node_names:
             raise ValueError(f"plates: no node {node!r} in the scene; nodes are {list(model.node_names)}")
     tree = kinematic_tree(model, trial.root)
@@ -323,12 +378,13 @@ def prepare(scene, trial: Trial, *, filter: Filter | None = None, fit: Fit | Non
     warnings = [*task_notes, *notes]
     plate_list = []
     fc = filter.plates
-    _one_node_a_plate(table, plates)
-    for node, prefix in plates.items():
-        plate = plate_from_table(table, prefix, node, pl, fc, window=(float(t[0]), float(t[-1])), rate=rate,
-                                 trial=source, weight=model_weight(model))
+    window = (float(t[0]), float(t[-1]))
+    shares, plates, share_report = _shares(model, lab, table, plates, pl, window) if plates else ([], plates, [])
+    for prefix, node, spans in shares:
+        plate = plate_from_table(table, prefix, node, pl, fc, window=window, rate=rate, trial=source,
+                                 weight=model_weight(model), spans=spans)
         plate_list.append(plate)
-        warnings += plate.notes
+        warnings += [n for n in plate.notes if n not in warnings]  # a plate shared by two feet: said once
     _memory(model, tree, t, len(labels), flexible.dt)
     settings = {"plane": f"{pl.x},{pl.y}", "cutoff_hz": cutoff, "filter": filter.kind,
                 "cutoff_plates_hz": fc, "root": tree.root, "plates": plates,
@@ -336,5 +392,6 @@ def prepare(scene, trial: Trial, *, filter: Filter | None = None, fit: Fit | Non
                     labels, model.scene.markers, strict=False)}, "source": source or "",
                 "scene": model.scene.name, "max_misfit_m": fit.misfit, "given": z is not None}
     return InverseInputs(model=model, tree=tree, t=t, y=y, labels=labels, plates=tuple(plate_list), filter=filter,
-                         fit=fit, settings=settings, report=tuple(report + warnings), warnings=tuple(warnings), z=z,
+                         fit=fit, settings=settings, report=tuple(report + share_report + warnings),
+                         warnings=tuple(warnings), z=z,
                          band_spec=spec)

@@ -81,6 +81,14 @@ def _path(value: Any) -> bool:
     return isinstance(value, (str, os.PathLike))
 
 
+def _prefixes(value: Any) -> bool:
+    """A plate's column prefix, or a non-empty list of distinct ones."""
+    if isinstance(value, str):
+        return bool(value)
+    return isinstance(value, (list, tuple)) and bool(value) and len(set(value)) == len(value) and all(
+        isinstance(v, str) and v for v in value)
+
+
 @dataclass(frozen=True)
 class Trial:
     """One lab trial and how it meets the scene.
@@ -90,7 +98,11 @@ class Trial:
         OpenSim's IK result; :mod:`casflex.inverse.given`), no marker fit.
     grf : LabTable or the path of a .mot / .sto or .c3d file (the markers' own C3D: its plates), or an OpenSim
         ExternalLoads (or ID setup) .xml, which names the plates' bodies itself.
-    plates : node -> the plate's column prefix (``{"ankle": "ground_"}``: :mod:`casflex.inverse.plates`).
+    plates : node -> the plate's column prefix (``{"ankle": "ground_"}``: :mod:`casflex.inverse.plates`), or
+        several (``{"calcn_r": ["ground_", "2_ground_"]}``: a foot on either over the trial, their loads summed); or
+        "auto": each plate's contacts applied to the foot over each, by the feet's markers (a foot on plate 1, a
+        stride later on plate 3; a plate stepped on by either foot in turn: :mod:`casflex.inverse.contacts`).
+        With a C3D trial and no ``grf``, the plates are the markers' file's own.
     plane : the lab axes that become the model's x and y (:class:`casflex.lab.Plane`), e.g. "X,Y"; kept parsed.
     root : the node the data drive (None: the scene's first).
     t_start, t_end : s, the part of the trial used (None: from its start, to its end).
@@ -101,7 +113,7 @@ class Trial:
     markers: Any = None
     coordinates: Any = None
     grf: Any = None
-    plates: Mapping[str, str] | None = None
+    plates: Mapping[str, str | Sequence[str]] | str | None = None
     plane: Any = "X,Y"
     root: str | None = None
     t_start: float | None = None
@@ -134,10 +146,16 @@ class Trial:
     def _plates(self) -> None:
         if self.plates is None:
             return
-        if not isinstance(self.plates, Mapping) or not all(
-                isinstance(k, str) and k and isinstance(v, str) and v for k, v in self.plates.items()):
-            raise OptionRefused("plates", f"expected node -> the plate's column prefix, got {self.plates!r}")
-        if self.plates and self.grf is None:
+        if isinstance(self.plates, str) and self.plates != "auto" or not isinstance(self.plates, (str, Mapping)) \
+                or isinstance(self.plates, Mapping) and not all(isinstance(k, str) and k and _prefixes(v)
+                                                                for k, v in self.plates.items()):
+            raise OptionRefused("plates", "expected node -> the plate's column prefix (or a list of them), or "
+                                          f"\"auto\", got {self.plates!r}")
+        if self.plates == "auto" and self.coordinates is not None:
+            raise OptionRefused("plates", "\"auto\" takes the foot over each plate from the markers; with "
+                                          f"{named('coordinates')} given, name each plate's node (node -> prefix)")
+        own = _path(self.markers) and os.fspath(self.markers).lower().endswith(".c3d")  # its own plates
+        if self.plates and self.grf is None and not own:
             raise OptionRefused("plates", f"needs {named('grf')} (the ground reaction file)")
         if self.plates and _path(self.grf) and os.fspath(self.grf).lower().endswith(".xml"):
             raise OptionRefused("plates", f"{os.fspath(self.grf)} says which body each plate acts on; give "

@@ -120,7 +120,8 @@ def _fill(t: np.ndarray, F: np.ndarray, M: np.ndarray, where: str, written: np.n
 
 def plate_from_table(table: LabTable, prefix: str, node: str, plane: Plane, cutoff: float | None, *,
                      window: tuple[float, float] | None = None, rate: float | None = None, trial: str = "the trial",
-                     weight: np.ndarray | None = None) -> Plate:
+                     weight: np.ndarray | None = None,
+                     spans: tuple[tuple[float | None, float | None], ...] | None = None) -> Plate:
     """The plate ``prefix`` of ``table`` on ``node``, in ``plane``, filtered at ``cutoff`` Hz (None: as
     recorded). The moment about the lab's origin from the table's ``<prefix>moment_{x,y,z}`` where it has
     them (C3D plates, :func:`casflex.lab.read_c3d`), else p x F + T (:func:`casflex.lab.filtering.plate_wrench`:
@@ -130,7 +131,10 @@ def plate_from_table(table: LabTable, prefix: str, node: str, plane: Plane, cuto
     between the frames); the table's header ``rate`` (C3D) otherwise. Missing samples as the module docstring
     says; the plate's ``notes`` say what was done. ``weight`` (N, (2,)): the model's mass x gravity in the plane:
     its record, unfiltered, is checked against the body (:func:`casflex.lab.plate_checks.check_plate_record`: it
-    pushes, carries a stance, holds no single-sample spike) and a window it carries no load in is said."""
+    pushes, carries a stance, holds no single-sample spike) and a window it carries no load in is said. ``spans``
+    (s, None: open): ``node`` takes the plate's samples in these spans [start, end) only, the others taken as no
+    load before filtering (the foot's share of a plate that carries two feet in turn,
+    :func:`casflex.inverse.contacts.plate_shares`: the shares' loads sum to the whole plate's); None: every sample."""
     from casflex.lab.filtering import _plate_columns
 
     where = f"{table.source}: plate {_plate_columns(table, prefix)!r}"
@@ -143,6 +147,12 @@ def plate_from_table(table: LabTable, prefix: str, node: str, plane: Plane, cuto
     if window is None and not np.isfinite(F[[0, -1]]).all():
         raise ValueError(f"{where}: its first or last sample is not a number")
     F, M3, notes = _fill(t, F, M3, where, written)
+    whole = F  # the record is checked whole (below), a foot's share of it applied
+    if spans is not None:
+        mine = np.zeros(t.size, dtype=bool)
+        for a, b in spans:
+            mine |= (written >= (-np.inf if a is None else a)) & (written < (np.inf if b is None else b))
+        F, M3 = np.where(mine[:, None], F, 0.0), np.where(mine[:, None], M3, 0.0)
     if unloaded.any():
         notes.append(f"{where}: {int(unloaded.sum())} samples of a force under {MIN_PLATE_FORCE:g} N without a "
                      "centre of pressure, taken as no load")
@@ -150,10 +160,10 @@ def plate_from_table(table: LabTable, prefix: str, node: str, plane: Plane, cuto
     n = np.cross(E[0], E[1])
     force, moment = F @ E.T, M3 @ n
     if weight is not None and np.linalg.norm(weight) > 0:  # the vertical: against the model's gravity
-        fv, W = force @ (-np.asarray(weight) / np.linalg.norm(weight)), float(np.linalg.norm(weight))
+        fv, W = (whole @ E.T) @ (-np.asarray(weight) / np.linalg.norm(weight)), float(np.linalg.norm(weight))
     else:
         fv, W = None, 0.0
-    check_plate_record(where, written, F, fv, W, _normal(table, prefix, E, weight))
+    check_plate_record(where, written, whole, fv, W, _normal(table, prefix, E, weight))
     empty = window_load(where, t, force, weight, window) if window is not None else None
     notes += [empty] if empty else []
     check_cutoff(cutoff, t, f"{where}'s samples")

@@ -1,233 +1,58 @@
-"""Gait events from a lab trial: the plates' contacts, the foot each plate is under, foot strikes, gait cycles,
-and signals normalised to 0..100 % of a cycle. numpy only: no model is assembled.
+"""Gait events from a lab trial: foot strikes, gait cycles, the clean ones, and signals normalised to 0..100 % of a
+cycle, from the plates' contacts and the foot over each (:mod:`casflex.inverse.contacts`, whose names this module
+offers too). numpy only: no model is assembled.
 
-- Vertical: the model's y, the :class:`casflex.lab.Plane`'s second lab axis ("X,Y" for OpenSim's files, Y up;
-  "X,Z" for a C3D lab, Z up); a plate's vertical force fv (N) is its force along it. Horizontal: the lab's
-  floor, the plane's x and its normal: the planar model drops the normal, but it sets the left foot apart
-  from the right, so distances keep it.
-- A contact (:func:`contacts`): fv above ``threshold`` (20 N: below it casflex's C3D plates give no centre of
-  pressure), crossings interpolated linearly, shorter than ``min_duration`` dropped; loaded at the record's
-  start or end: strike or off None, never a cycle's end.
-- A foot (:func:`feet`): a node carrying markers (a body's on it, a beam's on its end farther from the root)
-  with none on the nodes beyond it from the root (the scene's first node) along joints and beams: OpenSim's
-  calcn_r, calcn_l (the toes carry none), and a wrist's radius, which the height check sets apart. Where the
-  toes carry markers the toes are the foot: give ``plates={node: prefix}`` yourself.
-- The foot over a contact (:func:`plate_contacts`): each foot's nearest marker's distance across the floor
-  from the centre of pressure and its lowest marker's height above it, averaged over the contact weighted by
-  fv (the centre of pressure is noise where the force is small); of the feet within ``max_distance`` (0.3 m)
-  across and ``max_height`` (0.1 m) above, the nearest. On Hamner's trial the foot on the plate: 0.05 m and
-  0.04-0.05 m; the other foot coming down at the end of a stance: 0.17 m and 0.15 m. None: ValueError.
-  :func:`assign_plates` refuses a plate stepped on by two feet (over-ground walking on one plate) and two
-  plates under one foot: casflex's inverse takes ``plates={node: prefix}``, one node per plate and one plate
-  per node; :func:`plate_contacts` gives the foot of each contact.
+- The plates' feet per trial (:func:`plates_of`, :func:`assign_plates`): ``{node: prefix}``, or ``{node:
+  [prefixes]}`` for a foot on several plates over the trial; a plate stepped on by two feet in turn has no such
+  mapping (ValueError): ``plates="auto"`` (:class:`casflex.inverse.Trial`) applies each of its contacts to its foot
+  (:func:`casflex.inverse.contacts.plate_shares`), what a study does where its file names no plates.
 - Cycles (:func:`gait_cycles`): a foot's strike to its next, from the strikes the lab marked in the file (a C3D's
-  events: :func:`marked_strikes`) where the foot has two, else from the plates where it has two plate strikes,
-  else from its heel marker (:func:`marker_strikes`), said in the report.
-- A clean cycle (:func:`clean_cycles`): its stance wholly on one plate, the plate inverse dynamics applies to the
-  foot, as labs take kinetics only from such cycles: a cycle whose stance is off every plate (its strikes from the
-  heel marker) or on two plates, or on a plate another foot shares, has loads below the hip without the foot's
-  ground reaction (Hamner's right ankle: a peak of -0.78 N m/kg averaged with such a cycle, -1.54 from the clean).
+  events: :func:`marked_strikes`) where the foot has two, else from the plates where it has two plate strikes (a
+  stance straddling two plates strikes once: :func:`foot_strikes`), else from its heel marker
+  (:func:`marker_strikes`), said in the report.
+- A clean cycle (:func:`clean_cycles`): its stance wholly on plates applied to the foot (one, or two it straddles:
+  their wrenches are summed), as labs take kinetics only from such cycles: a cycle whose stance is off every plate
+  (its strikes from the heel marker), on a plate not applied to the foot, or on a plate another foot shares at the
+  time, has loads below the hip without the foot's ground reaction (Hamner's right ankle: a peak of -0.78 N m/kg
+  averaged with such a cycle, -1.54 from the clean).
 - The feet that walk (:func:`ground_feet`): the feet whose markers come down to the floor (a wrist's never do); a
   foot among them that touches no plate has no kinetic cycle (its leg's loads are not the other foot's).
 """
 
 from __future__ import annotations
 
-import os
-from dataclasses import dataclass
+from collections.abc import Sequence
 
 import numpy as np
 
+from casflex.inverse.contacts import (
+    AUTO,
+    Contact,
+    _plane,
+    _span,
+    below,
+    contacts,
+    feet,
+    plate_contacts,
+    plate_prefixes,
+    plate_shares,
+    read_trial,
+    tree_walk,
+    vertical_force,
+)
 from casflex.lab.c3d import MIN_PLATE_FORCE
 from casflex.lab.filtering import _plate_columns
 from casflex.lab.plane import Plane
-from casflex.lab.plate_checks import check_plate_record, scene_mass
-from casflex.lab.tables import LabMarkers, LabTable, increasing_times
+from casflex.lab.tables import LabMarkers, increasing_times
 
 __all__ = ["Contact", "contacts", "vertical_force", "tree_walk", "below", "feet", "plate_contacts", "assign_plates",
            "plates_of", "marked_strikes", "swing_phases", "read_trial", "plate_prefixes", "foot_strikes",
-           "marker_strikes", "cycles", "gait_cycles", "clean_cycles", "ground_feet", "normalise"]
-
-
-def contacts(t, fv, threshold: float = MIN_PLATE_FORCE, min_duration: float = 0.05
-             ) -> list[tuple[float | None, float | None]]:
-    """A plate's contacts [(strike, off)] (s) from its vertical force ``fv`` (n,) N at the times ``t`` (n,) s:
-    where fv > ``threshold`` N, each crossing interpolated linearly between its two samples; an interval
-    shorter than ``min_duration`` s (its part in the record) dropped; strike None where the record starts
-    loaded, off None where it ends loaded. Samples that are not numbers are left out (the crossings are
-    interpolated across them)."""
-    t, f = np.asarray(t, dtype=float), np.asarray(fv, dtype=float)
-    if t.ndim != 1 or f.shape != t.shape:
-        raise ValueError(f"t, fv: expected two (n,) arrays, got {t.shape} and {f.shape}")
-    t, f = increasing_times(t[np.isfinite(f)], "t"), f[np.isfinite(f)]
-    if t.size < 2:
-        return []
-    on = f > threshold
-    edges = np.flatnonzero(on[1:] != on[:-1])
-    at = t[edges] + (threshold - f[edges]) / (f[edges + 1] - f[edges]) * (t[edges + 1] - t[edges])
-    ups = [None] * bool(on[0]) + [float(x) for x, i in zip(at, edges, strict=True) if on[i + 1]]
-    downs = [float(x) for x, i in zip(at, edges, strict=True) if on[i]] + [None] * bool(on[-1])
-    return [(a, b) for a, b in zip(ups, downs, strict=True)
-            if (t[-1] if b is None else b) - (t[0] if a is None else a) >= min_duration]
-
-
-def _plane(plane: Plane | str) -> Plane:
-    return Plane.parse(plane) if isinstance(plane, str) else plane
-
-
-def plate_prefixes(table: LabTable) -> list[str]:
-    return [n[:-len("force_vx")] for n in table.names if n.endswith("force_vx")]
+           "marker_strikes", "cycles", "gait_cycles", "clean_cycles", "ground_feet", "normalise", "plate_shares",
+           "AUTO"]
 
 
 def _times(ts) -> str:
     return ", ".join(f"{x:.3f}" for x in ts) or "-"
-
-
-def _span(a: float | None, b: float | None) -> str:
-    return f"{'[start]' if a is None else f'{a:.3f}'}-{'[end]' if b is None else f'{b:.3f}'} s"
-
-
-def vertical_force(table: LabTable, prefix: str, plane: Plane | str = "X,Y") -> np.ndarray:
-    """(n,) N: the plate ``prefix``'s force along the model's y (module docstring)."""
-    p, up = _plate_columns(table, prefix), _plane(plane).matrix[1]
-    return np.column_stack([table.column(f"{p}force_v{a}") for a in "xyz"]) @ up
-
-
-def tree_walk(scene) -> tuple[dict[str, str | None], list[str]]:
-    """(parent of each node, the nodes in walk order): the scene's nodes breadth first along its joints and beams
-    from its first node (then from any node that does not reach), each node's parent the one it was reached from."""
-    links = [pair for j in [*scene.joints, *scene.beams] for pair in zip(j.nodes[:-1], j.nodes[1:], strict=True)]
-    nbr = {n.name: [b for a, b in links if a == n.name] + [a for a, b in links if b == n.name] for n in scene.nodes}
-    parent: dict[str, str | None] = {}
-    order: list[str] = []
-    for root in (r for r in nbr if r not in parent):
-        parent[root] = None
-        order.append(root)
-        for n in order:  # grows as it is walked
-            for m in nbr[n]:
-                if m not in parent:
-                    parent[m] = n
-                    order.append(m)
-    return parent, order
-
-
-def below(scene, node: str) -> set[str]:
-    """``node`` and the nodes beyond it from the scene's first node (:func:`tree_walk`): what a joint at ``node``
-    carries."""
-    parent, _ = tree_walk(scene)
-    out = set()
-    for n in parent:
-        m: str | None = n
-        while m is not None and m != node:
-            m = parent[m]
-        if m == node:
-            out.add(n)
-    return out
-
-
-def feet(scene) -> dict[str, tuple[str, ...]]:
-    """The scene's feet (module docstring): node -> the lab labels of its markers (``label``, or the name)."""
-    parent, order = tree_walk(scene)
-    on = {b.name: b.node for b in scene.bodies} | {b.name: max(b.nodes, key=order.index) for b in scene.beams}
-    carry: dict[str, list[str]] = {}
-    for m in scene.markers:
-        carry.setdefault(on[m.on], []).append(m.lab_label)
-    beyond = set()
-    for n in carry:
-        while (n := parent[n]) is not None:
-            beyond.add(n)
-    return {n: tuple(labels) for n, labels in carry.items() if n not in beyond}
-
-
-@dataclass(frozen=True)
-class Contact:
-    """One contact of the plate ``plate`` (its columns' prefix): ``strike``, ``off`` (s, None: the record
-    starts or ends during it), the ``foot`` (node) over it, ``distance`` and ``height`` (m: module docstring),
-    and ``others``: (node, distance, height) of the other feet, nearest first."""
-
-    plate: str
-    strike: float | None
-    off: float | None
-    foot: str
-    distance: float
-    height: float
-    others: tuple[tuple[str, float, float], ...] = ()
-
-
-def read_trial(markers, grf, plates: bool = True, required: bool = True) -> tuple[LabMarkers, LabTable | None]:
-    """(markers, plates) from objects or files (.trc / .c3d; .mot / .sto / .c3d; grf None: the markers' C3D);
-    ``plates`` False: the markers alone; ``required`` False: None where there are no plates, else ValueError."""
-    from casflex.lab import read_c3d, read_sto, read_trc
-
-    if not isinstance(markers, LabMarkers):
-        path = os.fspath(markers)
-        same = plates and path.lower().endswith(".c3d") and (grf is None or (
-            not isinstance(grf, LabTable) and os.fspath(grf) == path))
-        markers, table = read_c3d(path, plates=same) if path.lower().endswith(".c3d") else (read_trc(path), None)
-        grf = table if same else grf
-    if plates and grf is not None and not isinstance(grf, LabTable):
-        grf = read_c3d(grf)[1] if os.fspath(grf).lower().endswith(".c3d") else read_sto(grf)
-    if plates and grf is None and required:
-        raise ValueError("grf: no force plates (give a .mot / .sto or .c3d file with plates, or a LabTable)")
-    return markers, grf if plates else None
-
-
-def _foot_distance(lab: LabMarkers, labels, t, P, w, axes) -> tuple[float, float]:
-    """(distance, height) m of the foot with the markers ``labels`` from the centres of pressure P (k, 3) m
-    at the times t (k,) s, means weighted by w (k,) N; inf where its markers are missing throughout."""
-    X = np.empty((t.size, len(labels), 3))  # the markers at the plate's times
-    for j, lb in enumerate(labels):
-        X[:, j] = np.column_stack([np.interp(t, lab.t, c) for c in lab.marker(lb).T])
-    d = X - P[:, None, :]
-    across, up = np.linalg.norm(d @ axes[:2].T, axis=2), d @ axes[2]
-    across, up = (np.where(np.isfinite(v), v, np.inf).min(axis=1) for v in (across, up))
-    ok = np.isfinite(across)
-    if not ok.any():
-        return np.inf, np.inf
-    return float(np.average(across[ok], weights=w[ok])), float(np.average(up[ok], weights=w[ok]))
-
-
-def plate_contacts(scene, markers, grf=None, plane: Plane | str = "X,Y", prefixes=None, *,
-                   threshold: float = MIN_PLATE_FORCE, min_duration: float = 0.05, max_distance: float = 0.3,
-                   max_height: float = 0.1) -> list[Contact]:
-    """Every contact of the plates ``prefixes`` (default: all the table's, ``<prefix>force_vx`` ...) with the
-    foot over it (module docstring), in plate order then time. ``markers``: a LabMarkers or a .trc / .c3d
-    file; ``grf``: a LabTable or a .mot / .sto / .c3d file (None: the markers' C3D). ValueError in one line:
-    a scene without feet in the trial, a plate unknown, no foot over a contact, a plate whose vertical force pulls
-    or holds a one-sample spike (:func:`casflex.lab.plate_checks.check_plate_record`)."""
-    lab, table = read_trial(markers, grf)
-    pl = _plane(plane)
-    axes = np.vstack([pl.matrix[0], np.cross(*pl.matrix), pl.matrix[1]])  # the floor's two axes, then up
-    cands = {n: [lb for lb in labels if lb in lab.labels] for n, labels in feet(scene).items()}
-    cands = {n: labels for n, labels in cands.items() if labels}
-    if not cands:
-        raise ValueError(f"{lab.source}: no marker of the scene's feet {sorted(feet(scene))} is in the trial")
-    found = []
-    weight = scene_mass(scene) * float(np.hypot(*scene.gravity))
-    for prefix in prefixes or plate_prefixes(table):
-        p = _plate_columns(table, prefix)
-        fv = vertical_force(table, p, pl)
-        force = np.column_stack([table.column(f"{p}force_v{a}") for a in "xyz"])
-        # a plate that pulls or spikes would have its stances missed or cut: refused, whether a foot is found on it
-        check_plate_record(f"{table.source}: plate {p!r}", table.t, force, fv, weight, stance=False)
-        P = np.column_stack([table.column(f"{p}force_p{a}") for a in "xyz"])
-        for a, b in contacts(table.t, fv, threshold, min_duration):
-            lo, hi = (table.t[0] if a is None else a), (table.t[-1] if b is None else b)
-            rows = (table.t >= lo) & (table.t <= hi) & (fv > threshold) & np.isfinite(P).all(axis=1)
-            rows &= (table.t >= lab.t[0]) & (table.t <= lab.t[-1])
-            if not rows.any():
-                raise ValueError(f"plate {p!r}, contact {_span(a, b)}: no centre of pressure within the markers' "
-                                 f"times {lab.t[0]:g}..{lab.t[-1]:g} s")
-            score = sorted(((n, *_foot_distance(lab, labels, table.t[rows], P[rows], fv[rows], axes))
-                            for n, labels in cands.items()), key=lambda s: s[1])
-            near = [s for s in score if s[1] <= max_distance and s[2] <= max_height]
-            if not near:
-                raise ValueError(f"plate {p!r}, contact {_span(a, b)}: no foot within {max_distance:g} m across the "
-                                 f"floor of its centre of pressure and {max_height:g} m above it (nearest: "
-                                 f"{score[0][0]}, {score[0][1]:.2f} m and {score[0][2]:.2f} m); plane {pl.x},{pl.y}")
-            found.append(Contact(p, a, b, near[0][0], near[0][1], near[0][2],
-                                 tuple(s for s in score if s is not near[0])))
-    return found
 
 
 def assign_plates(scene, markers, grf=None, plane: Plane | str = "X,Y", prefixes=None, **options
@@ -241,11 +66,12 @@ def assign_plates(scene, markers, grf=None, plane: Plane | str = "X,Y", prefixes
 
 
 def plates_of(found: list[Contact], prefixes: list[str], threshold: float = MIN_PLATE_FORCE
-              ) -> tuple[dict[str, str], list[str]]:
-    """({node: prefix}, report lines) from :func:`plate_contacts`' contacts ``found`` of the plates ``prefixes``
-    (above ``threshold`` N); a plate without contacts is left out and said. ValueError in one line for a plate
-    stepped on by two feet and for two plates under one foot (module docstring)."""
-    plates: dict[str, str] = {}
+              ) -> tuple[dict[str, str | list[str]], list[str]]:
+    """({node: prefix, or [prefixes] for a foot on several plates}, report lines) from :func:`plate_contacts`'
+    contacts ``found`` of the plates ``prefixes`` (above ``threshold`` N); a plate without contacts is left out and
+    said. ValueError in one line for a plate stepped on by two feet: it has no node for the whole trial (module
+    docstring)."""
+    plates: dict[str, list[str]] = {}
     lines = []
     for p in prefixes:
         mine = [c for c in found if c.plate == p]
@@ -255,19 +81,35 @@ def plates_of(found: list[Contact], prefixes: list[str], threshold: float = MIN_
         by = {c.foot: [_span(d.strike, d.off) for d in mine if d.foot == c.foot] for c in mine}
         if len(by) > 1:
             raise ValueError(f"plate {p!r} is stepped on by " + " and ".join(f"{n} ({', '.join(s)})" for n, s in
-                             by.items()) + ": casflex's inverse takes one node per plate; cut the trial "
-                             "(t_start, t_end) to one foot's contacts, or take plate_contacts' feet per contact")
+                             by.items()) + ": no one node takes it over the trial; give plates=\"auto\" (each "
+                             "contact applied to its foot)")
         node = mine[0].foot
-        if node in plates:
-            raise ValueError(f"plates {plates[node]!r} and {p!r} are both under {node}: casflex's inverse takes one "
-                             "plate per node; cut the trial (t_start, t_end) to one of them")
-        plates[node] = p
-        nxt = min((o for c in mine for o in c.others), key=lambda o: o[1], default=None)
-        lines.append(f"plate {p!r} -> {node}: {len(mine)} contact(s) {', '.join(by[node])}; its markers within "
-                     f"{max(c.distance for c in mine):.3f} m of the centre of pressure across the floor and "
-                     f"{max(c.height for c in mine):.3f} m above it" + (
-                         f"; next: {nxt[0]}, {nxt[1]:.2f} m and {nxt[2]:.2f} m" if nxt else ""))
-    return plates, lines
+        plates.setdefault(node, []).append(p)
+        lines.append(_plate_line(p, node, mine, by[node]))
+    return {n: ps[0] if len(ps) == 1 else ps for n, ps in plates.items()}, lines
+
+
+def _plate_line(p: str, node: str, mine: list[Contact], spans: list[str]) -> str:
+    """The report's line of the plate ``p``'s contacts ``mine`` with the foot ``node`` (their ``spans``)."""
+    nxt = min((o for c in mine for o in c.others), key=lambda o: o[1], default=None)
+    return (f"plate {p!r} -> {node}: {len(mine)} contact(s) {', '.join(spans)}; its markers within "
+            f"{max(c.distance for c in mine):.3f} m of the centre of pressure across the floor and "
+            f"{max(c.height for c in mine):.3f} m above it" + (
+                f"; next: {nxt[0]}, {nxt[1]:.2f} m and {nxt[2]:.2f} m" if nxt else ""))
+
+
+def contact_lines(found: list[Contact], prefixes: list[str], threshold: float = MIN_PLATE_FORCE) -> list[str]:
+    """The report's lines of ``plates="auto"``: for each plate ``prefixes``, each foot and its contacts on it (a
+    plate without contacts: left out)."""
+    lines = []
+    for p in prefixes:
+        mine = [c for c in found if c.plate == p]
+        if not mine:
+            lines.append(f"plate {p!r}: no contact above {threshold:g} N: left out")
+        for foot in dict.fromkeys(c.foot for c in mine):
+            theirs = [c for c in mine if c.foot == foot]
+            lines.append(_plate_line(p, foot, theirs, [_span(c.strike, c.off) for c in theirs]))
+    return lines
 
 
 def swing_phases(found: list[Contact], scene, lab: LabMarkers, node: str, spans: list[tuple[float, float]]
@@ -280,11 +122,24 @@ def swing_phases(found: list[Contact], scene, lab: LabMarkers, node: str, spans:
     return [(off, c1) for c0, c1 in spans for off in sorted(offs) if c0 < off < c1]
 
 
+def _stances(found: list[Contact], node: str) -> list[tuple[float | None, float | None, list[Contact]]]:
+    """The stances of the foot ``node``: its contacts ``found`` merged where they overlap in time (a stance
+    straddling two plates), (strike, off, contacts) in time order; None: at the record's start or end."""
+    lo = lambda c: -np.inf if c.strike is None else c.strike  # noqa: E731
+    out: list[list] = []
+    for c in sorted((c for c in found if c.foot == node), key=lo):
+        if out and (out[-1][1] is None or lo(c) < out[-1][1]):  # it starts before the stance so far ends
+            out[-1][1] = None if c.off is None else max(out[-1][1], c.off)
+            out[-1][2].append(c)
+        else:
+            out.append([c.strike, c.off, [c]])
+    return [(a, b, cs) for a, b, cs in out]
+
+
 def foot_strikes(found: list[Contact]) -> dict[str, list[float]]:
-    """node -> its plate strikes (s, increasing) from :func:`plate_contacts`' contacts (those loaded at the
-    record's start give none)."""
-    feet_ = dict.fromkeys(c.foot for c in found)
-    return {n: sorted(c.strike for c in found if c.foot == n and c.strike is not None) for n in feet_}
+    """node -> its plate strikes (s, increasing) from :func:`plate_contacts`' contacts: each stance's first
+    (:func:`_stances`: a stance straddling two plates strikes once; one loaded at the record's start gives none)."""
+    return {n: [a for a, _, _ in _stances(found, n) if a is not None] for n in dict.fromkeys(c.foot for c in found)}
 
 
 def marker_strikes(t, height, lift: float = 0.1) -> list[float]:
@@ -360,40 +215,51 @@ def gait_cycles(found: list[Contact], scene, markers, plane: Plane | str = "X,Y"
     return out, lines
 
 
-def clean_cycles(found: list[Contact], node: str, spans: list[tuple[float, float]], plate: str | None,
-                 slack: float = 0.05) -> list[tuple[bool, str]]:
-    """(clean, why) for each gait cycle (t0, t1) s in ``spans`` of the foot ``node`` (module docstring): clean where
-    one of its contacts ``found`` (:func:`plate_contacts`) on ``plate`` (the plate inverse dynamics applies to the
-    foot; None: none) strikes within ``slack`` s of t0 (the heel marker's strikes are -4 to +21 ms from the plates'
-    on Hamner's trial) and comes off before t1, and no other contact (of this foot on another plate, or of another
-    foot on this plate) overlaps its stance; ``why`` says what is wrong, or the stance's span."""
-    out = []
-    for t0, t1 in spans:
-        mine = [c for c in found if c.foot == node and c.strike is not None and abs(c.strike - t0) <= slack]
-        stance = next((c for c in mine if c.plate == plate), None)
-        if plate is None:
-            out.append((False, "no plate is applied to it (the study file's plates)"))
-            continue
-        if stance is None:
-            on = ", ".join(f"{c.plate!r}" for c in mine)
-            near = [c for c in found if c.foot == node and (c.strike or -np.inf) < (t0 + t1) / 2  # in its stance
-                    and (c.off or np.inf) > t0]
-            said = (f" (on {on}, not applied to it)" if on else f" (its contact {_span(near[0].strike, near[0].off)} "
-                    f"on {near[0].plate!r})" if near else " (the foot off every plate)")
-            out.append((False, f"no strike on its plate {plate!r} within {slack:g} s of {t0:.3f} s{said}"))
-            continue
-        if stance.off is None or stance.off > t1:
-            out.append((False, f"its stance on {plate!r} from {stance.strike:.3f} s does not end within the cycle"))
-            continue
-        also = [c for c in found if c is not stance and (c.foot == node) != (c.plate == plate)
-                and (c.strike is None or c.strike < stance.off) and (c.off is None or c.off > stance.strike)]
-        if also:
-            c = also[0]
-            out.append((False, f"{c.foot} on {c.plate!r} {_span(c.strike, c.off)} during its stance on {plate!r} "
-                               f"{_span(stance.strike, stance.off)}"))
-            continue
-        out.append((True, f"stance on {plate!r} {_span(stance.strike, stance.off)}"))
-    return out
+def clean_cycles(found: list[Contact], node: str, spans: list[tuple[float, float]],
+                 plate: str | Sequence[str] | None, slack: float = 0.05) -> list[tuple[bool, str]]:
+    """(clean, why) for each gait cycle (t0, t1) s in ``spans`` of the foot ``node`` (module docstring). ``plate``:
+    what inverse dynamics applies to the foot: a plate's prefix or several (over the whole trial), None (none), or
+    :data:`AUTO` (each contact to the foot over it). Clean where a stance of the foot (its contacts ``found``,
+    :func:`plate_contacts`, merged where they overlap: :func:`_stances`) strikes within ``slack`` s of t0 (the heel
+    marker's strikes are -4 to +21 ms from the plates' on Hamner's trial) and comes off before t1, every contact
+    of it on a plate applied to the foot, and no other foot on those plates (or on a plate applied to this foot)
+    during it; ``why`` says what is wrong, or the stance's span and plates."""
+    auto = isinstance(plate, str) and plate == AUTO
+    applied = set() if plate is None or auto else {plate} if isinstance(plate, str) else set(plate)
+    stances = _stances(found, node)
+    return [_clean(found, node, stances, t0, t1, auto, applied, slack) for t0, t1 in spans]
+
+
+def _clean(found, node, stances, t0, t1, auto, applied, slack) -> tuple[bool, str]:
+    """:func:`clean_cycles` of one cycle (t0, t1) s."""
+    def on(cs) -> str:
+        return " and ".join(repr(p) for p in dict.fromkeys(c.plate for c in cs))
+
+    if not auto and not applied:
+        return False, "no plate is applied to it (the study file's plates)"
+    which = "a plate" if auto else f"its plate {on([Contact(p, None, None, node, 0, 0) for p in sorted(applied)])}"
+    st = next((s for s in stances if s[0] is not None and abs(s[0] - t0) <= slack), None)
+    if st is None:
+        near = [s for s in stances if (-np.inf if s[0] is None else s[0]) < (t0 + t1) / 2  # in its stance
+                and (np.inf if s[1] is None else s[1]) > t0]
+        said = f" (its contact {_span(near[0][0], near[0][1])} on {on(near[0][2])})" if near else \
+            " (the foot off every plate)"
+        return False, f"no strike on {which} within {slack:g} s of {t0:.3f} s{said}"
+    strike, off, cs = st
+    if off is None or off > t1:
+        return False, f"its stance on {on(cs)} from {strike:.3f} s does not end within the cycle"
+    for c in cs:
+        if not auto and c.plate not in applied:
+            return False, (f"{node} on {c.plate!r} {_span(c.strike, c.off)} during its stance {_span(strike, off)}: "
+                           "not applied to it")
+    plates = {c.plate for c in cs} | applied
+    also = [c for c in found if c.foot != node and c.plate in plates
+            and (c.strike is None or c.strike < off) and (c.off is None or c.off > strike)]
+    if also:
+        c = also[0]
+        return False, f"{c.foot} on {c.plate!r} {_span(c.strike, c.off)} during its stance on {on(cs)} " \
+                      f"{_span(strike, off)}"
+    return True, f"stance on {on(cs)} {_span(strike, off)}"
 
 
 def ground_feet(scene, lab: LabMarkers, plane: Plane | str = "X,Y", max_height: float = 0.15) -> list[str]:

@@ -102,7 +102,7 @@ class TrialRecord:
     fits asked; ``angles``: each joint's angle (deg, the lab's coordinate, filtered) over its moment's cycles;
     ``toe_off``: foot -> each of its cycles' toe-off, % of the cycle (None: not found)."""
 
-    plates: dict[str, str] | None
+    plates: dict[str, str | list[str]] | None
     plane: str
     report: tuple[str, ...]
     warnings: tuple[str, ...]

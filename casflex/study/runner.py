@@ -5,8 +5,9 @@ then one tidy table and the figures.
 
 The runs: ``calibrate-<subject>-<inputs>`` (the subject's scene placed on its static trial, :func:`casflex.inverse.
 calibrate.calibrate`, the masses scaled to its mass) and ``trial-<subject>-<trial>-<inputs>`` (``<inputs>``: a
-fingerprint of the run's inputs, :func:`_run`; :func:`trial_run`: the
-plates assigned to the feet from the data where the study file does not say, :func:`.events.plates_of`;
+fingerprint of the run's inputs, :func:`_run`; :func:`trial_run`: each plate's contacts applied to the foot over
+each where the study file does not say which plate acts on which node (``plates="auto"``,
+:mod:`casflex.inverse.contacts`);
 inverse dynamics; each load cut into gait cycles, foot strike to foot strike of the foot below the load's joint,
 and resampled on 0-100 % of the cycle, :func:`.events.normalise`). Each run's record is a JSON file in the
 record directory: a run with a record is not done again.
@@ -36,7 +37,8 @@ PERCENT = np.linspace(0.0, 100.0, 101)
 #: it, from before, is done again rather than read as clean or not); 3, a trial run's options given as values
 #: (:class:`~casflex.study.study_file.TrialOptions`, the study file's trial): the fingerprint's text changed, the
 #: records' content did not; 4, each trial's joint angles over its cycles and their toe-offs (the figures': a
-#: record from before is done again rather than drawn without them)
+#: record from before is done again rather than drawn without them), and the plates applied per contact where the
+#: study file names none (a plate on either foot in turn, a foot on two plates), a stance straddling two plates clean
 RECORD_FORMAT = 4
 
 
@@ -90,7 +92,7 @@ def _trial_plane(sc, lab, plane: str, vertical: str, static: bool = False, root:
 
 def _load_feet(scene, names: list[str], feet: list[str]) -> dict[str, str | None]:
     """For each load, the foot (a node bearing a plate) below its joint: that foot's strikes cut it into cycles;
-    None where no foot is (a root load, the trunk, the arms: the first foot's cycles are used)."""
+    None where no foot is (a root load, the trunk, the arms: the first foot's cycles that has any are used)."""
     from casflex.scene import SceneError
     from casflex.study.events import below
 
@@ -118,20 +120,19 @@ def _read(trial: Trial):
     return read_trial(trial.markers, grf, required=False)
 
 
-def _events(sc, lab, table, plates, plane: str) -> tuple[dict[str, str] | None, dict, list[str], list]:
-    """The trial's plates' feet (the study file's, else from the data: :func:`.events.plates_of`), each foot's gait
-    cycles (:func:`.events.gait_cycles`: the strikes the lab marked in the file, else the plates', else the heel
-    marker's), report lines and the contacts, from one pass over its plates' contacts."""
-    from casflex.study.events import gait_cycles, plate_contacts, plate_prefixes, plates_of
+def _events(sc, lab, table, plates, plane: str) -> tuple[dict | str | None, dict, list[str], list]:
+    """The trial's plates (the study file's, else "auto": each plate's contacts applied to the foot over each,
+    :func:`casflex.inverse.contacts.plate_shares`), each foot's gait cycles (:func:`.events.gait_cycles`: the strikes
+    the lab marked in the file, else the plates', else the heel marker's), report lines and the contacts, from one
+    pass over its plates' contacts."""
+    from casflex.study.events import AUTO, gait_cycles, plate_contacts, plate_prefixes
 
     if table is None:
         return plates, {}, ["no plates read for the gait cycles (the trial names none, or an ExternalLoads "
                             "file): loads over time only"], []
-    prefixes = plate_prefixes(table)
-    found = plate_contacts(sc, lab, table, plane, prefixes)
-    plates, report = (plates, []) if plates is not None else plates_of(found, prefixes)
+    found = plate_contacts(sc, lab, table, plane, plate_prefixes(table))
     feet, cycle_report = gait_cycles(found, sc, lab, plane)
-    return plates, feet, report + cycle_report, found
+    return plates if plates is not None else AUTO, feet, cycle_report, found
 
 
 def _loads_of(res) -> list[str]:
@@ -163,25 +164,27 @@ def trial_run(*, scene: str, trial: Trial, options: TrialOptions, uncertain: tup
                                        asked=bool(options.bands)))             # declares uncertainty
     feet = {f: [c for c in cs if res.t[0] <= c[0] and c[1] <= res.t[-1]] for f, cs in feet.items()}  # the window's
     loads, notes = _cycle_loads(sc, res, lab, found, plates or {}, feet, plane)
-    return TrialRecord(plates, plane, (*plane_report, *event_report, *notes, *res.report), (*res.warnings, *notes),
+    return TrialRecord(res.settings.get("plates") or plates, plane, (*plane_report, *event_report, *notes, *res.report),
+                       (*res.warnings, *notes),
                        loads, (float(res.t[0]), float(res.t[-1])),
                        tuple(_passive(res, sc, lab, found, feet, options.passive)),
                        cycle_angles(sc, res, loads), toe_offs(found, sc, lab, feet)).to_json()
 
 
-def _cycle_loads(sc, res, lab, found, plates: dict[str, str], feet: dict, plane: str
+def _cycle_loads(sc, res, lab, found, plates: dict | str, feet: dict, plane: str
                  ) -> tuple[dict[str, CycleLoad], list[str]]:
     """({load: its foot, cycles [t0, t1] s, whether each is clean, values and bands on 0-100 %}, notes): each load
     cut into the gait cycles of the foot below its joint (:func:`_load_feet`), each cycle's stance checked
     (:func:`.events.clean_cycles`: wholly on the foot's plate); a load whose foot walks but has no cycle (it
     touches no plate) gets none, said in the notes, where it took another foot's; a load above the feet (trunk,
-    arms, root) the first foot's cycles."""
+    arms, root) the first foot's cycles that has any."""
     from casflex.study.events import clean_cycles, ground_feet, normalise
 
     names = _loads_of(res)
     walking = ground_feet(sc, lab, plane) if found else []  # no plates read: said in the report already
-    first = next(iter(feet), None)
-    clean = {f: clean_cycles(found, f, cs, plates.get(f)) for f, cs in feet.items()}
+    first = next((f for f, cs in feet.items() if cs), next(iter(feet), None))  # a foot with cycles
+    clean = {f: clean_cycles(found, f, cs, plates if isinstance(plates, str) else plates.get(f))
+             for f, cs in feet.items()}
     loads, notes, bare = {}, [], {}
     for name, foot in _load_feet(sc, names, [*feet, *(f for f in walking if f not in feet)]).items():
         if foot is not None and foot not in feet:

@@ -38,7 +38,8 @@ uncertain = ["pelvis.mass=10%"]   # optional: the anthropometry's uncertainty (T
 name = "run3"
 markers = "s02_run3.trc"       # .trc or .c3d
 grf = "s02_run3_grf.mot"       # .mot/.sto, the .c3d's plates, or an ExternalLoads .xml (optional)
-plates = { calcn_r = "ground_force_", calcn_l = "1_ground_force_" }   # optional: else from the data
+plates = { calcn_r = "ground_force_", calcn_l = ["1_ground_force_", "2_ground_force_"] }   # optional: else
+                               # each plate's contacts go to the foot over each, from the data (plates="auto")
 window = [0.5, 2.0]            # s, optional
 ```
 """
@@ -98,7 +99,7 @@ class Trial:
     name: str
     markers: str
     grf: str | None = None
-    plates: dict[str, str] | None = None
+    plates: dict[str, str | list[str]] | None = None
     window: tuple[float, float] | None = None
 
 
@@ -219,19 +220,23 @@ def _options(base: Path, table: Any) -> Options:
 def _trial(base: Path, where: str, table: Any) -> Trial:
     t = _check_keys(where, table, {"name", "markers", "grf", "plates", "window"}, {"name", "markers"})
     plates = t.get("plates")
-    if plates is not None and (not isinstance(plates, dict) or not plates
-                               or not all(isinstance(v, str) and v for v in plates.values())):
-        raise StudyError(f"{where}.plates: expected a table node = \"column prefix\", got {plates!r}")
+    if plates is not None and (not isinstance(plates, dict) or not plates or not all(
+            isinstance(v, str) and v or isinstance(v, list) and v and all(isinstance(p, str) and p for p in v)
+            for v in plates.values())):
+        raise StudyError(f"{where}.plates: expected a table node = \"column prefix\" (or a list of them: a foot on "
+                         f"several plates), got {plates!r}")
     window = t.get("window")
     if window is not None:
         ok = (isinstance(window, list) and len(window) == 2 and all(isinstance(w, (int, float))
                                                                     and not isinstance(w, bool) for w in window))
         if not ok:
             raise StudyError(f"{where}.window: expected [start, end] in s, 0 <= start < end, got {window!r}")
-    twice = sorted({v for v in (plates or {}).values() if list(plates.values()).count(v) > 1})
+    given = [(n, p) for n, v in (plates or {}).items() for p in ([v] if isinstance(v, str) else v)]
+    twice = sorted({p for _, p in given if [q for _, q in given].count(p) > 1})
     if twice:
         raise StudyError(f"{where}.plates: the plate {twice[0]!r} is given to " + " and ".join(
-            n for n, v in plates.items() if v == twice[0]) + ": a plate's force acts on one foot (give it once)")
+            dict.fromkeys(n for n, p in given if p == twice[0])) + ": a plate's force acts on one foot at a time "
+            "(give it once, or leave plates out: each contact then goes to the foot over it)")
     trial = Trial(_name(f"{where}.name", t["name"]), _file(base, f"{where}.markers", t["markers"], (".trc", ".c3d")),
                   _file(base, f"{where}.grf", t["grf"], (".mot", ".sto", ".c3d", ".xml")) if "grf" in t else None,
                   dict(plates) if plates else None, tuple(float(w) for w in window) if window else None)
@@ -399,7 +404,7 @@ def _check_trial_files(where: str, trial: Trial, options: Options) -> None:
         if cut is not None and math.isfinite(rate) and not cut < rate / 2:
             raise StudyError(f"{field_}: {cut:g} Hz is not below the Nyquist frequency {rate / 2:g} Hz of "
                              f"{where}'s {what} ({rate:g} Hz): give a lower cut-off")
-    for node, prefix in (trial.plates or {}).items():
+    for node, prefix in ((n, p) for n, v in (trial.plates or {}).items() for p in ([v] if isinstance(v, str) else v)):
         if plates is not None and plates.names:
             try:
                 _plate_columns(SimpleNamespace(names=plates.names, source=Path(trial.grf or "").name), prefix)
