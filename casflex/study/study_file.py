@@ -27,6 +27,9 @@ cycles = "clean"               # the means and figures from the cycles whose sta
 passive = []                   # hinges whose net moment a spring-damper is fitted to, per trial ("knee_r") or
                                # per swing phase ("knee_r:swing"): casflex.inverse.passive; passive.csv
 
+[options.muscles]              # optional: each trial's muscles and joint reactions too (casflex.study.muscles:
+exponent = 2.0                 # its keys); the subjects' models .osim with their muscles; muscles.csv
+
 [[subjects]]
 name = "s02"
 model = "subject02.osim"       # an OpenSim model, a scene TOML or a built-in scene
@@ -91,6 +94,8 @@ class Options:
     scale: bool = False
     normalise: str = "none"
     cycles: str = "clean"
+    #: ``[options.muscles]`` (:class:`casflex.study.muscles.MuscleOptions`), None: no muscles computed
+    muscles: Any = None
 
 
 @dataclass(frozen=True)
@@ -179,7 +184,7 @@ def _filter(t: dict) -> Filter:
 
 
 def _options(base: Path, table: Any) -> Options:
-    t = _check_keys("options", table, set(_OPTIONS), set())
+    t = _check_keys("options", table, set(_OPTIONS) | {"muscles"}, set())
     for k, typ in _OPTIONS.items():
         if k in t and not isinstance(t[k], typ) or (k in t and typ is not bool and isinstance(t[k], bool)):
             want = {bool: "true or false", str: "a text", list: "a list"}.get(typ, "a frequency in Hz or a word")
@@ -212,8 +217,13 @@ def _options(base: Path, table: Any) -> Options:
     trials = TrialOptions(plane=t.get("plane", "X,Y"), vertical=vertical.upper(), filter=_filter(t),
                           root=t.get("root") or None, tasks=tasks, bands=t.get("bands", False),
                           passive=tuple((p.partition(":")[0], p.partition(":")[2] or "trial") for p in passive))
+    muscles = None
+    if "muscles" in t:
+        from casflex.study.muscles import muscle_options
+
+        muscles = muscle_options(base, t["muscles"])
     return Options(trials, calibrate=t.get("calibrate", True), scale=t.get("scale", False),
-                   normalise=t.get("normalise", "none"), cycles=t.get("cycles", "clean"))
+                   normalise=t.get("normalise", "none"), cycles=t.get("cycles", "clean"), muscles=muscles)
 
 
 def _trial(base: Path, where: str, table: Any) -> Trial:
