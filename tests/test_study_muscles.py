@@ -219,3 +219,9 @@ def test_a_two_subject_study_writes_the_muscles_and_redoes_only_them_when_their_
     assert len(after) == len(before) + 2
     hip3 = _hip(out / "muscles.csv")
     assert not np.allclose(hip3["s02"], hip["s02"], atol=0.01)  # p = 3 shares the load otherwise
+
+
+def test_a_subject_named_as_the_contact_figure_is_refused(folder):
+    with pytest.raises(StudyError, match=r"subjects\[1\]\.name: 'Group_Contact' names the group's figure "
+                                         r"\(group_contact\.png\)"):
+        load_study(str(write(folder, "", 'name = "s02_heavy"', 'name = "Group_Contact"')))

@@ -88,7 +88,7 @@ def _muscles(out: dict, directory: Path, study) -> list[str]:
 
     if study.options.muscles is None:
         return []
-    rows = muscle_rows(out["muscles"])
+    rows = muscle_rows(out["muscles"], PERCENT)
     (directory / "muscles.csv").write_text(_table(rows).replace("subject,trial,load,", "subject,trial,output,", 1))
     curves = contact_curves(out["muscles"], study.options.cycles == "all")
     if not curves:

@@ -27,135 +27,15 @@ fy, mz, in body weights, BW m) and resultant (the contact force, BW), each muscl
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from casflex.muscles.options import UNCERTAIN_PROPERTIES, MuscleUncertainty
+from casflex.study.muscle_options import MuscleOptions
 from casflex.study.records import CycleLoad, MuscleRecord
 from casflex.study.study_file import StudyError, Trial, TrialOptions
 
-__all__ = ["MuscleOptions", "muscle_options", "check_muscles", "muscle_run", "muscle_rows"]
-
-_KEYS = {"exponent", "force_length_velocity", "activation_bounds", "actuators", "reserves", "joints", "on", "frame",
-         "uncertainty", "criteria"}
-
-
-@dataclass(frozen=True)
-class MuscleOptions:
-    """``[options.muscles]`` (module docstring), checked: static optimization's ``exponent``,
-    ``force_length_velocity`` and ``activation_bounds``; the ``actuators`` file (resolved path) or ``reserves`` (N m);
-    the reported ``joints`` (() every hinge), the reactions' ``on`` and ``frame``; the muscles' ``uncertainty`` and
-    the ``criteria`` (exponents) for the bands."""
-
-    exponent: float = 2.0
-    force_length_velocity: bool = True
-    activation_bounds: tuple[float, float] = (0.01, 1.0)
-    actuators: str | None = None
-    reserves: float | None = None
-    joints: tuple[str, ...] = ()
-    on: str = "child"
-    frame: str = "ground"
-    uncertainty: MuscleUncertainty = MuscleUncertainty()
-    criteria: tuple[float, ...] = (3.0,)
-
-    def optimization(self):
-        from casflex.muscles.static_optimization import StaticOptimization
-
-        return StaticOptimization(exponent=self.exponent, force_length_velocity=self.force_length_velocity,
-                                  activation_bounds=self.activation_bounds, infeasible="report")
-
-
-def _number(where: str, v: Any) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise StudyError(f"{where}: expected a number, got {v!r}")
-    return float(v)
-
-
-def _uncertainty(where: str, table: Any) -> MuscleUncertainty:
-    """``{property = "P%" or a fraction}`` as :class:`MuscleUncertainty`; StudyError naming the property."""
-    if not isinstance(table, dict):
-        raise StudyError(f"{where}: expected a table PROPERTY = \"P%\" with PROPERTY among {list(UNCERTAIN_PROPERTIES)}"
-                         f", got {table!r}")
-    given = {}
-    for prop, v in table.items():
-        if prop not in UNCERTAIN_PROPERTIES:
-            raise StudyError(f"{where}.{prop}: unknown property; expected some of {list(UNCERTAIN_PROPERTIES)}")
-        text = v.strip() if isinstance(v, str) else None
-        try:
-            given[prop] = float(text.removesuffix("%")) / (100.0 if text.endswith("%") else 1.0) if text is not None \
-                else _number(f"{where}.{prop}", v)
-        except ValueError:
-            raise StudyError(f"{where}.{prop}: expected a relative SD (\"10%\" or 0.1), got {v!r}") from None
-    try:
-        return MuscleUncertainty(**given)
-    except ValueError as exc:
-        field, _, reason = str(exc).partition(": ")
-        raise StudyError(f"{where}.{field}: {reason}") from None
-
-
-def muscle_options(base: Path, table: Any) -> MuscleOptions:
-    """The ``[options.muscles]`` table checked (module docstring): StudyError naming ``options.muscles.<field>``."""
-    from casflex.muscles.reaction import JointReaction
-    from casflex.study.study_file import _check_keys, _file
-
-    where = "options.muscles"
-    t = _check_keys(where, table, _KEYS, set())
-    kw: dict[str, Any] = {}
-    if "exponent" in t:
-        kw["exponent"] = _number(f"{where}.exponent", t["exponent"])
-    if "force_length_velocity" in t:
-        if not isinstance(t["force_length_velocity"], bool):
-            raise StudyError(f"{where}.force_length_velocity: expected true or false, got "
-                             f"{t['force_length_velocity']!r}")
-        kw["force_length_velocity"] = t["force_length_velocity"]
-    if "activation_bounds" in t:
-        b = t["activation_bounds"]
-        if not isinstance(b, list) or len(b) != 2:
-            raise StudyError(f"{where}.activation_bounds: expected [lower, upper], got {b!r}")
-        kw["activation_bounds"] = tuple(_number(f"{where}.activation_bounds", v) for v in b)
-    if "actuators" in t and "reserves" in t:
-        raise StudyError(f"{where}.reserves: actuators gives the reserves; give one of them")
-    if "actuators" in t:
-        kw["actuators"] = _file(base, f"{where}.actuators", t["actuators"], (".xml", ".osim"))
-        from casflex.scene.osim_actuators import read_actuators
-
-        try:
-            read_actuators(kw["actuators"])
-        except ValueError as exc:
-            raise StudyError(f"{where}.actuators: {exc}") from None
-    if "reserves" in t:
-        kw["reserves"] = _number(f"{where}.reserves", t["reserves"])
-        if not kw["reserves"] > 0:
-            raise StudyError(f"{where}.reserves: expected an optimal force > 0 (N m), got {t['reserves']!r}")
-    joints = t.get("joints", [])
-    if not isinstance(joints, list) or not all(isinstance(j, str) and j.strip() for j in joints):
-        raise StudyError(f"{where}.joints: expected a list of joint names, got {joints!r}")
-    kw["joints"] = tuple(joints)
-    for k in ("on", "frame"):
-        if k in t:
-            kw[k] = t[k]
-    if "uncertainty" in t:
-        kw["uncertainty"] = _uncertainty(f"{where}.uncertainty", t["uncertainty"])
-    crit = t.get("criteria", [2.0 if kw.get("exponent") == 3.0 else 3.0])  # the issue's two criteria, p = 2 and 3
-    if not isinstance(crit, list):
-        raise StudyError(f"{where}.criteria: expected a list of exponents, got {crit!r}")
-    kw["criteria"] = tuple(_number(f"{where}.criteria", p) for p in crit)
-    opts = MuscleOptions(**kw)
-    if any(not p >= 1.0 or p == opts.exponent for p in opts.criteria):
-        raise StudyError(f"{where}.criteria: expected exponents >= 1 other than exponent ({opts.exponent:g}), got "
-                         f"{list(opts.criteria)}")
-    for make in (opts.optimization, lambda: JointReaction(on=opts.on, frame=opts.frame)):
-        try:
-            make()
-        except ValueError as exc:
-            field, _, reason = str(exc).partition(": ")
-            raise StudyError(f"{where}.{field}: {reason}") from None
-    return opts
-
+__all__ = ["check_muscles", "muscle_run", "muscle_rows", "run_muscles", "contact_curves"]
 
 def _actuators(model: str, opts: MuscleOptions, scene, root: str) -> tuple:
     from casflex.muscles.analysis import reserve_actuators
@@ -242,11 +122,13 @@ def muscle_run(*, model: str, scene: str, trial: Trial, options: TrialOptions, p
     from casflex.muscles.bands import muscle_outputs
     from casflex.scene import loads_scene
     from casflex.scene.uncertain import parse
-    from casflex.study.runner import _read
+    from casflex.study.events import read_trial
 
     sc = loads_scene(scene)
-    lab, table = _read(trial)
-    grf = trial.grf if trial.grf is not None and trial.grf.lower().endswith(".xml") else table
+    external = trial.grf is not None and trial.grf.lower().endswith(".xml")  # read by inverse dynamics itself
+    lab, table = read_trial(trial.markers, None, plates=False) if external else \
+        read_trial(trial.markers, trial.grf, required=False)
+    grf = trial.grf if external else table
     t0, t1 = trial.window or (None, None)
     inputs = prepare(sc, Inverse(lab, grf=grf, plates=plates, plane=plane, root=options.root, t_start=t0, t_end=t1,
                                  tasks=options.tasks), filter=options.filter,
@@ -316,11 +198,10 @@ def foot_cycles(rec) -> dict[str, list]:
     return out
 
 
-def muscle_rows(records: dict) -> list[tuple]:
+def muscle_rows(records: dict, percent: np.ndarray) -> list[tuple]:
     """(subject, trial, output, foot, cycle, percent, value, band, unit, clean, t0, t1) rows of the muscle records
-    ((subject, trial) -> :class:`~casflex.study.records.MuscleRecord`), as :func:`casflex.study.runner.tidy_rows`."""
-    from casflex.study.runner import PERCENT
-
+    ((subject, trial) -> :class:`~casflex.study.records.MuscleRecord`) on ``percent`` (the gait cycle's 101
+    points), as :func:`casflex.study.runner.tidy_rows`."""
     rows = []
     for (subject, trial), rec in records.items():
         for name, ld in rec.outputs.items():
@@ -329,16 +210,15 @@ def muscle_rows(records: dict) -> list[tuple]:
                 band = ld.band[k] if ld.band is not None else [None] * len(values)
                 t0, t1 = ld.cycles[k]
                 rows += [(subject, trial, name, ld.foot, k + 1, float(p), v, b, rec.units[name], clean[k], t0, t1)
-                         for p, v, b in zip(PERCENT, values, band, strict=True)]
+                         for p, v, b in zip(percent, values, band, strict=True)]
     return rows
 
 
 
-def run_muscles(study, calibrated: dict, trials: dict, record, **sweep) -> tuple[dict, list, bool]:
-    """Every done trial's muscle run (module docstring) on the sweep: ({(subject, trial): MuscleRecord}, failed
+def run_muscles(study, calibrated: dict, trials: dict, record, make_run, **sweep) -> tuple[dict, list, bool]:
+    """Every done trial's muscle run (module docstring) on the sweep, each made by ``make_run`` (name, function,
+    kwargs, files) (:func:`casflex.study.runner._run`: fingerprinted): ({(subject, trial): MuscleRecord}, failed
     [(what, why)], interrupted)."""
-    from casflex.study.records import MuscleRecord
-    from casflex.study.runner import _run
     from casflex.study.sweep import run_sweep
 
     o = study.options
@@ -350,7 +230,7 @@ def run_muscles(study, calibrated: dict, trials: dict, record, **sweep) -> tuple
         kwargs = {"model": s.model, "scene": calibrated[s.name].scene, "trial": t, "options": o.trials,
                   "plane": rec.plane, "plates": rec.plates, "cycles": foot_cycles(rec), "muscles": o.muscles,
                   "uncertain": tuple(s.uncertain)}
-        plan[(s.name, t.name)] = _run(f"muscles-{s.name}-{t.name}", muscle_run, kwargs,
+        plan[(s.name, t.name)] = make_run(f"muscles-{s.name}-{t.name}", muscle_run, kwargs,
                                       (s.model, t.markers, t.grf, o.trials.tasks, o.muscles.actuators))
     if not plan:
         return {}, [], False

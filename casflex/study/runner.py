@@ -351,7 +351,7 @@ def run_study(study: Study, record: str | Path, *, scheduler: str | None = None,
     if study.options.muscles is not None and not interrupted:  # after the trials: their plates and cycles
         from casflex.study.muscles import run_muscles
 
-        muscles, more, interrupted = run_muscles(study, calibrated, trials, record, scheduler=scheduler,
+        muscles, more, interrupted = run_muscles(study, calibrated, trials, record, _run, scheduler=scheduler,
                                                  n_workers=n_workers, progress=progress, retry_failed=retry_failed)
         failed += more
     return {"subjects": calibrated, "trials": trials, "failed": failed, "interrupted": interrupted,
