@@ -292,3 +292,4 @@ def solve_muscles(paths: FlexiblePaths, q: np.ndarray, qd: np.ndarray, loads: di
     r = joint_reactions(net, geo["unit"], so.forces, options=JointReaction(frame="ground", body_weight=body_weight))
     return {"so": so, "reactions": {h: r.loads[:, i, :] for i, h in enumerate(hinges)}, "arms": arms,
             "lengths": geo["lengths"]}
+
