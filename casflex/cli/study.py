@@ -151,7 +151,8 @@ def cmd_study(args: argparse.Namespace, outputs: Outputs) -> int:
         lines.append(f"  {subject} {trial}: plates {rec.plates}; cycles per foot {cycles}")
         lines += [f"    {note}" for note in rec.warnings if "no kinetic cycle" in note or "not clean" in note]
     for (subject, trial), rec in out.get("muscles", {}).items():
-        lines += [f"  {subject} {trial} muscles: {note}" for note in rec.warnings]
+        lines += [f"  {subject} {trial} muscles: {note}" for note in (*rec.warnings, *(  # the bands' peaks, p = 3
+            ln for ln in rec.report if " resultant: peak " in ln))]
     if out["failed"]:
         lines.append(f"{len(out['failed'])} failed:")
         lines += [f"  {what}: {why}" for what, why in out["failed"]]
