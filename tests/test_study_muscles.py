@@ -225,3 +225,9 @@ def test_a_subject_named_as_the_contact_figure_is_refused(folder):
     with pytest.raises(StudyError, match=r"subjects\[1\]\.name: 'Group_Contact' names the group's figure "
                                          r"\(group_contact\.png\)"):
         load_study(str(write(folder, "", 'name = "s02_heavy"', 'name = "Group_Contact"')))
+
+
+def test_the_criteria_default_to_the_other_of_2_and_3(folder):
+    """The bands' spread is to p = 3 beside p = 2, and to p = 2 beside p = 3 (the issue's two criteria)."""
+    assert load_study(str(write(folder))).options.muscles.criteria == (3.0,)
+    assert load_study(str(write(folder, "exponent = 3.0"))).options.muscles.criteria == (2.0,)
