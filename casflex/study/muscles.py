@@ -86,7 +86,7 @@ def check_muscles(i: int, model: str, scene, opts: MuscleOptions, root: str | No
     hinges = [j.name for j in scene.joints if len(j.nodes) == 2 and j.kind == "hinge"]
     bad = [j for j in opts.joints if j not in hinges]
     if bad:
-        raise StudyError(f"options.muscles.joints: {bad[0]!r} is not a hinge of subject {i}'s model (hinges: "
+        raise StudyError(f"options.muscles.joints: {bad[0]!r} is not a hinge of subjects[{i}]'s model (hinges: "
                          f"{hinges[:12]})")
     try:
         _trial_muscles(model, scene, opts, root, osim=osim)
