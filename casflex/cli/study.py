@@ -115,6 +115,25 @@ def _figures(out: dict, directory: Path, title: str, per_kg: bool = False, all_c
     return [*written, f"{GROUP}.png"], notes
 
 
+def _muscles(out: dict, directory: Path, study) -> list[str]:
+    """muscles.csv (one row per subject, trial, output, cycle and percent: the joints' reactions in body weights,
+    the muscles' activations) and the group's contact force figure; the figures written."""
+    from casflex.plotting.study_muscles import plot_contact
+    from casflex.study.muscles import contact_curves, muscle_rows
+    from casflex.study.runner import PERCENT
+    from casflex.study.study_file import GROUP
+
+    if study.options.muscles is None:
+        return []
+    rows = muscle_rows(out["muscles"], PERCENT)
+    (directory / "muscles.csv").write_text(_table(rows).replace("subject,trial,load,", "subject,trial,output,", 1))
+    curves = contact_curves(out["muscles"], study.options.cycles == "all")
+    if not curves:
+        return []
+    plot_contact(PERCENT, curves, f"{study.name}: joint contact forces", directory / f"{GROUP}_contact.png")
+    return [f"{GROUP}_contact.png"]
+
+
 def _check_cluster(args: argparse.Namespace) -> None:
     """--workers within what the machine runs at once, --scheduler answering: one line before any work."""
     from casflex.study.sweep import max_workers, unreachable
@@ -177,6 +196,7 @@ def cmd_study(args: argparse.Namespace, outputs: Outputs) -> int:
                               normative=normative)
     for note in notes:
         print(f"casflex: warning: {note}", file=sys.stderr)
+    figures += _muscles(out, staging, study)
     lines = [f"{len(out['trials'])} of {n} trial(s) done, {len(rows)} rows in loads.csv"
              + (f", {passive.count(chr(10)) - 1} passive fit(s) in passive.csv" if passive else "")
              + f"; figures: {', '.join(figures) or 'none'}"]
@@ -189,6 +209,9 @@ def cmd_study(args: argparse.Namespace, outputs: Outputs) -> int:
         lines.append(f"  {subject} {trial}: plates {rec.plates}; cycles per foot {cycles}")
         lines += [f"    {note}" for note in rec.warnings
                   if "no kinetic cycle" in note or "not clean" in note or "are not in the trial" in note]
+    for (subject, trial), rec in out.get("muscles", {}).items():
+        lines += [f"  {subject} {trial} muscles: {note}" for note in (*rec.warnings, *(  # the bands' peaks, p = 3
+            ln for ln in rec.report if " resultant: peak " in ln))]
     if out["failed"]:
         lines.append(f"{len(out['failed'])} failed:")
         lines += [f"  {what}: {why}" for what, why in out["failed"]]

@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-__all__ = ["Calibration", "CycleLoad", "PassiveFit", "TrialRecord"]
+__all__ = ["Calibration", "CycleLoad", "MuscleRecord", "PassiveFit", "TrialRecord"]
 
 
 @dataclass(frozen=True)
@@ -126,3 +126,27 @@ class TrialRecord:
                    tuple(PassiveFit.from_json(p) for p in d.get("passive", ())),
                    {k: CycleLoad.from_json(v) for k, v in d.get("angles", {}).items()},
                    {k: tuple(v) for k, v in d.get("toe_off", {}).items()})
+
+
+@dataclass(frozen=True)
+class MuscleRecord:
+    """A trial's muscles (:mod:`casflex.study.muscles`): the ``report`` and ``warnings``, each output (a joint's
+    reaction component or resultant, a muscle's activation) over the gait cycles (``outputs``, in ``units``: BW,
+    BW m or 1) and the subject's ``body_weight`` (N) they are divided by."""
+
+    report: tuple[str, ...]
+    warnings: tuple[str, ...]
+    outputs: dict[str, CycleLoad]
+    units: dict[str, str]
+    body_weight: float
+
+    def to_json(self) -> dict:
+        return {"report": list(self.report), "warnings": list(self.warnings),
+                "outputs": {k: v.to_json() for k, v in self.outputs.items()}, "units": dict(self.units),
+                "body_weight": self.body_weight}
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> MuscleRecord:
+        return cls(tuple(d["report"]), tuple(d["warnings"]), {k: CycleLoad.from_json(v) for k, v in
+                                                               d["outputs"].items()}, dict(d["units"]),
+                   float(d["body_weight"]))

@@ -242,7 +242,8 @@ def _digest(path: str | None) -> str | None:
 
 #: the fields of a run's record (a record without one is not taken as done: casflex.study.sweep.Run.fields)
 _FIELDS = {"calibrate_run": ("scene", "report"),
-           "trial_run": ("plates", "plane", "report", "warnings", "loads", "t", "passive")}
+           "trial_run": ("plates", "plane", "report", "warnings", "loads", "t", "passive"),
+           "muscle_run": ("report", "warnings", "outputs", "units", "body_weight")}
 
 
 def _jsonable(value: object) -> object:
@@ -304,6 +305,10 @@ def check_against_models(study: Study) -> None:
         root = study.options.trials.root
         if root is not None and root not in nodes:
             raise StudyError(f"options.root: {root!r} is not a node of subject {s.name}'s model")
+        if study.options.muscles is not None:  # the muscles' options against the model (casflex.study.muscles)
+            from casflex.study.muscles import check_muscles
+
+            check_muscles(i, s.model, scene, study.options.muscles, root)
         for k, t in enumerate(s.trials):
             bad = sorted(set(t.plates or {}) - nodes)
             if bad:
@@ -348,8 +353,15 @@ def run_study(study: Study, record: str | Path, *, scheduler: str | None = None,
                 failed.append((f"{s.name} {t.name}", rec["error"]))
             else:
                 trials[(s.name, t.name)] = TrialRecord.from_json(rec)
+    muscles: dict = {}
+    if study.options.muscles is not None and not interrupted:  # after the trials: their plates and cycles
+        from casflex.study.muscles import run_muscles
+
+        muscles, more, interrupted = run_muscles(study, calibrated, trials, record, _run, scheduler=scheduler,
+                                                 n_workers=n_workers, progress=progress, retry_failed=retry_failed)
+        failed += more
     return {"subjects": calibrated, "trials": trials, "failed": failed, "interrupted": interrupted,
-            "records": {k: str(Path(record) / f"{r.key}.json") for k, r in plan.items()}}
+            "records": {k: str(Path(record) / f"{r.key}.json") for k, r in plan.items()}, "muscles": muscles}
 
 
 def unit_of(load: str, per_kg: bool = False) -> str:

@@ -27,6 +27,9 @@ cycles = "clean"               # the means and figures from the cycles whose sta
 passive = []                   # hinges whose net moment a spring-damper is fitted to, per trial ("knee_r") or
                                # per swing phase ("knee_r:swing"): casflex.inverse.passive; passive.csv
 
+[options.muscles]              # optional: each trial's muscles and joint reactions too (casflex.study.muscles:
+exponent = 2.0                 # its keys); the subjects' models .osim with their muscles; muscles.csv
+
 [[subjects]]
 name = "s02"
 model = "subject02.osim"       # an OpenSim model, a scene TOML or a built-in scene
@@ -92,6 +95,8 @@ class Options:
     scale: bool = False
     normalise: str = "none"
     cycles: str = "clean"
+    #: ``[options.muscles]`` (:class:`casflex.study.muscle_options.MuscleOptions`), None: no muscles computed
+    muscles: Any = None
 
 
 @dataclass(frozen=True)
@@ -180,7 +185,7 @@ def _filter(t: dict) -> Filter:
 
 
 def _options(base: Path, table: Any) -> Options:
-    t = _check_keys("options", table, set(_OPTIONS), set())
+    t = _check_keys("options", table, set(_OPTIONS) | {"muscles"}, set())
     for k, typ in _OPTIONS.items():
         if k in t and not isinstance(t[k], typ) or (k in t and typ is not bool and isinstance(t[k], bool)):
             want = {bool: "true or false", str: "a text", list: "a list"}.get(typ, "a frequency in Hz or a word")
@@ -213,8 +218,27 @@ def _options(base: Path, table: Any) -> Options:
     trials = TrialOptions(plane=t.get("plane", "X,Y"), vertical=vertical.upper(), filter=_filter(t),
                           root=t.get("root") or None, tasks=tasks, bands=t.get("bands", False),
                           passive=tuple((p.partition(":")[0], p.partition(":")[2] or "trial") for p in passive))
+    muscles = _muscles(base, t["muscles"]) if "muscles" in t else None
     return Options(trials, calibrate=t.get("calibrate", True), scale=t.get("scale", False),
-                   normalise=t.get("normalise", "none"), cycles=t.get("cycles", "clean"))
+                   normalise=t.get("normalise", "none"), cycles=t.get("cycles", "clean"), muscles=muscles)
+
+
+def _muscles(base: Path, table: Any):
+    """``[options.muscles]`` (:class:`casflex.study.muscle_options.MuscleOptions`; its actuator file read);
+    StudyError naming the field."""
+    from casflex.scene.osim_actuators import read_actuators
+    from casflex.study.muscle_options import KEYS, muscle_options
+
+    t = _check_keys("options.muscles", table, KEYS, set())
+    actuators = _file(base, "options.muscles.actuators", t["actuators"], (".xml", ".osim")) if "actuators" in t \
+        else None
+    try:
+        if actuators is not None:
+            read_actuators(actuators)
+        return muscle_options(t, actuators)
+    except ValueError as exc:
+        field = "actuators: " if actuators is not None and str(exc).startswith(actuators) else ""
+        raise StudyError(f"options.muscles.{field}{exc}") from None
 
 
 def _trial(base: Path, where: str, table: Any) -> Trial:
@@ -300,8 +324,8 @@ def _subject_names(subs: tuple[Subject, ...]) -> None:
     if dup:
         raise StudyError(f"subjects: subject {dup[0]!r} is named twice")
     for i, n in enumerate(names):
-        if n.lower() == GROUP:
-            raise StudyError(f"subjects[{i}].name: {n!r} names the group's figure ({GROUP}.png): give the subject "
+        if n.lower() in (GROUP, f"{GROUP}_contact"):  # the group's figures (group_contact.png: the muscles')
+            raise StudyError(f"subjects[{i}].name: {n!r} names the group's figure ({n.lower()}.png): give the subject "
                              "another name")
         same = [m for m in names[:i] if m.lower() == n.lower()]
         if same:
