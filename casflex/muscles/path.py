@@ -35,6 +35,7 @@ import casadi as ca
 import numpy as np
 
 from casflex.elements.joints import spline_of
+from casflex.muscles.wrap import check_wraps, wrapped_pieces
 from casflex.scene.coordinates import to_lab
 from casflex.scene.functions import Clamped, Constant, Linear, Multiplier, Polynomial, SimmSpline
 
@@ -118,6 +119,7 @@ class MusclePaths:
                                          f"{sorted(lab)})")
             if len(m.path) < 2:
                 raise ValueError(f"muscle {m.name!r}: {len(m.path)} path point(s); a path needs two or more")
+            check_wraps(m, nodes)
 
     # -- geometry -------------------------------------------------------------------------
     def _point(self, p) -> ca.SX:
@@ -155,16 +157,22 @@ class MusclePaths:
         return out
 
     @functools.cached_property
-    def _geometry(self) -> list[tuple[list[ca.SX], list[tuple[int, int, object]]]]:
-        return [([self._point(p) for p in m.path], self._segments(m)) for m in self.muscles]
+    def _geometry(self) -> list[list[tuple]]:
+        """Each muscle's pieces (a, node a, b, node b, on, length): the straight segments between its points and,
+        where a wrap applies, the wrapped segment's tangent lines and arc (:mod:`casflex.muscles.wrap`)."""
+        out = []
+        for m in self.muscles:
+            pts, segs = [self._point(p) for p in m.path], self._segments(m)
+            nodes = [self.tree.model.node_names.index(p.node) for p in m.path]
+            out.append(wrapped_pieces(self, m, pts, nodes, segs))
+        return out
 
     @functools.cached_property
     def _lengths(self) -> ca.SX:
         out = []
-        for pts, segs in self._geometry:
+        for pieces in self._geometry:
             L = 0
-            for i, j, on in segs:
-                d = _distance(pts[i], pts[j])
+            for *_, on, d in pieces:
                 L = L + (d if isinstance(on, int) else ca.if_else(on, d, 0))
             out.append(L)
         return ca.vertcat(*out) if out else ca.SX(0, 1)
@@ -217,18 +225,17 @@ class MusclePaths:
         cols = []
         distal = [self._distal(h) for h in self.tree.hinges]
         centres = [self._centre(h) for h in self.tree.hinges]
-        for m, (pts, segs) in zip(self.muscles, self._geometry, strict=True):
-            nodes = [self.tree.model.node_names.index(p.node) for p in m.path]
+        for pieces in self._geometry:
             col = []
             for D, C in zip(distal, centres, strict=True):
                 F, M = ca.SX.zeros(2), 0
-                for i, j, on in segs:
-                    if (nodes[i] in D) == (nodes[j] in D):
+                for pa, na, pb, nb, on, _ in pieces:
+                    if (na in D) == (nb in D):
                         continue
-                    a, b = (i, j) if nodes[i] in D else (j, i)
-                    u = _direction(pts[a], pts[b])
+                    a, b = (pa, pb) if na in D else (pb, pa)
+                    u = _direction(a, b)
                     f = u[:2] if isinstance(on, int) else ca.if_else(on, u[:2], ca.SX.zeros(2))
-                    arm = pts[a][:2] - C
+                    arm = a[:2] - C
                     F, M = F + f, M + arm[0] * f[1] - arm[1] * f[0]
                 col.append(ca.vertcat(F, M))
             cols.append(ca.vertcat(*col) if col else ca.SX(0, 1))
