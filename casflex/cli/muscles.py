@@ -11,7 +11,7 @@ from casflex.cli._base import OptionError, Outputs, output_path, positive
 
 #: The command's options for static optimization and the reactions, by the field of the value each fills.
 FLAGS = {"exponent": "--exponent", "activation_bounds": "--activation-bounds", "on": "--on", "frame": "--in",
-         "joints": "--joints", "force_length_velocity": "--no-force-length-velocity"}
+         "joints": "--joints", "force_length_velocity": "--no-force-length-velocity", "tendon": "--tendon"}
 
 
 def _bounds(text: str) -> tuple[float, float]:
@@ -55,7 +55,8 @@ def _options(args: argparse.Namespace):
     from casflex.muscles.reaction import JointReaction
     from casflex.muscles.static_optimization import StaticOptimization
 
-    so = {"exponent": args.exponent, "force_length_velocity": not args.no_force_length_velocity}
+    so = {"exponent": args.exponent, "force_length_velocity": not args.no_force_length_velocity,
+          "tendon": args.tendon}
     if args.activation_bounds is not None:
         so["activation_bounds"] = args.activation_bounds
     for make, kw in ((StaticOptimization, so), (JointReaction, {"on": args.on, "frame": args.frame,
@@ -156,6 +157,10 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--no-force-length-velocity", action="store_true",
                    help="a muscle's force per activation is its maximum isometric force (OpenSim's "
                         "use_muscle_physiology false)")
+    s.add_argument("--tendon", choices=("rigid", "compliant"), default="rigid",
+                   help="rigid: each tendon at its slack length (OpenSim's static optimization); compliant: each "
+                        "muscle's fibre and tendon in static equilibrium, the fibre's length solved with the "
+                        "activations (docs/muscles.md)")
     s.add_argument("--activation-bounds", type=_bounds, metavar="LO:HI",
                    help="every activation's bounds (default 0.01:1, Millard's minimum activation)")
     s.add_argument("--joints", metavar="J1,J2", help="the joints whose reactions are written (default: every hinge)")
