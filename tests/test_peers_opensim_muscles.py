@@ -121,3 +121,29 @@ def test_wrapped_paths_off_the_cylinders_plane_differ_from_opensims_by_micrometr
     assert np.abs(out["lengths"] - L_ref).max() < 2e-5  # 6x the measured 3.1e-6 m
     assert np.abs(out["moment_arms"] - r_ref).max() < 2e-5
     assert np.abs(out["lengths"] - L_ref)[:, 4].max() < 1e-9  # the soleus, with no wrap: exact
+
+
+@needs_opensim
+@pytest.mark.parametrize("model", [GAIT, HAMNER])
+def test_the_compliant_tendons_equilibrium_is_opensims(model):
+    """casflex.muscles.compliant's fibre-tendon equilibrium (the fibre's velocity 0, passive forces in) against
+    OpenSim 4.6's ``equilibrateMuscles`` with the speeds 0, every muscle at activation 0.3, 3 random poses:
+    gait10dof18musc's 18 Millard muscles and Hamner's 92 Thelen muscles (measured: 8e-9 of F_iso, OpenSim's own
+    equilibrium tolerance)."""
+    from casflex.muscles.compliant import tendon_equilibrium
+    from casflex.peers.opensim_muscles import fiber_equilibrium
+
+    poses = _poses(model, 3)
+    ref = fiber_equilibrium(model, poses, 0.3)
+    s = scene_from_osim(model, muscles=True)
+    assert ref["muscles"] == [m.name for m in s.muscles]
+    worst, loaded = 0.0, 0
+    for i, m in enumerate(s.muscles):
+        for k in range(len(poses)):
+            T, ln = tendon_equilibrium(m, ref["lengths"][k, i], 0.3, passive=True)
+            worst = max(worst, abs(T - ref["tendon_forces"][k, i]) / m.max_isometric_force)
+            if ref["tendon_forces"][k, i] > 0.01 * m.max_isometric_force:  # a slack tendon leaves the fibre free
+                loaded += 1
+                assert abs(ln - ref["norm_fiber_lengths"][k, i]) < 1e-5
+    assert worst < 1e-7  # OpenSim solves its equilibrium to ~1e-8 of F_iso
+    assert loaded > len(s.muscles)  # most tendons pull
