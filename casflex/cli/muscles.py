@@ -86,6 +86,7 @@ def cmd_muscles(args: argparse.Namespace, outputs: Outputs) -> int:
     chosen = inverse_options(args)
     optimization, reaction, joints = _options(args)
     uncertainty = _uncertainty(args)
+    emg_columns = _emg_columns(args)
     criteria = tuple(args.criteria or ())
     if any(not (p >= 1.0) or p == optimization.exponent for p in criteria):
         raise OptionError(f"--criteria: expected exponents >= 1 other than --exponent ({optimization.exponent:g}), "
@@ -103,6 +104,11 @@ def cmd_muscles(args: argparse.Namespace, outputs: Outputs) -> int:
         raise OptionError("--reserves: --actuators gives the reserves; give one of them")
     acts = read_actuators(args.model) + (read_actuators(args.actuators) if args.actuators else ())
     inputs = prepare(args.model, **chosen)
+    emg = None
+    if emg_columns:
+        from casflex.muscles.emg import emg_envelopes
+
+        emg = emg_envelopes(args.emg, emg_columns, inputs.t, tuple(m.name for m in osim.muscles))
     if args.reserves is not None:
         acts += reserve_actuators(osim.scene, inputs.tree.root, args.reserves)
     trial = TrialMuscles(osim, inputs.tree, inputs.t, inputs.plates, acts, optimization=optimization,
@@ -120,8 +126,27 @@ def cmd_muscles(args: argparse.Namespace, outputs: Outputs) -> int:
     if plots is not None:
         from casflex.plotting.muscles import save_muscle_figures
 
-        save_muscle_figures(result, plots)
+        save_muscle_figures(result, plots, emg)
     return 0
+
+
+def _emg_columns(args: argparse.Namespace) -> dict[str, str]:
+    """--emg-column MUSCLE=COLUMN, each checked for its form, with --emg and --plots."""
+    pairs = args.emg_column or []
+    if not pairs and args.emg is None:
+        return {}
+    if args.emg is None or not pairs:
+        raise OptionError("--emg: give the EMG file (--emg FILE) and the column of each muscle (--emg-column "
+                          "MUSCLE=COLUMN, repeated)")
+    if args.plots is None:
+        raise OptionError("--emg: the envelopes are drawn beside the activations: give --plots DIR")
+    out = {}
+    for text in pairs:
+        muscle, sep, column = (v.strip() for v in text.partition("="))
+        if not (sep and muscle and column):
+            raise OptionError(f"--emg-column: expected MUSCLE=COLUMN, got {text!r}")
+        out[muscle] = column
+    return out
 
 
 def _with_bands(result, trial, inputs, res, uncertainty, criteria, draws):
@@ -183,5 +208,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="write <name>_StaticOptimization_activation.sto, _force.sto and "
                         "<name>_JointReaction_ReactionLoads.sto into this directory")
     s.add_argument("--plots", type=output_path, metavar="DIR", help="write figures into this directory")
+    s.add_argument("--emg", metavar="FILE", help="a .mot / .sto of the trial's raw EMG: each muscle's envelope drawn "
+                   "beside its activation (--plots; band-pass 20-400 Hz, rectified, low-pass 6 Hz, over its peak)")
+    s.add_argument("--emg-column", action="append", metavar="MUSCLE=COLUMN",
+                   help="the --emg file's column of a muscle (repeat for each muscle)")
     s.add_argument("--quiet", action="store_true", help="no progress messages")
     s.set_defaults(func=cmd_muscles)
