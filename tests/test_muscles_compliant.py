@@ -102,3 +102,20 @@ def test_the_command_takes_tendon_compliant(tmp_path, capsys):
                  "--out", str(tmp_path / "o2"), "--quiet"])
     err = capsys.readouterr().err
     assert code == 2 and "--tendon: 'compliant' needs force_length_velocity" in err
+
+
+def _soleus():
+    return next(m for m in scene_from_osim(MODEL, muscles=True).muscles if m.name == "soleus_r")
+
+
+def test_a_muscle_shorter_than_its_tendon_carries_nothing_and_a_moment_out_of_reach_is_refused():
+    m = _soleus()
+    lmt = np.array([[0.9 * m.tendon_slack_length], [m.tendon_slack_length + m.optimal_fiber_length]])
+    arms = np.full((2, 1, 1), -0.05)
+    out = solve_compliant(np.array([[0.0], [-20.0]]), arms, lmt, [m], np.array([1.0]),
+                          StaticOptimization(tendon="compliant"), coordinates=["ankle_angle_r"])
+    assert out.forces[0, 0] == 0.0 and out.stats["slack"][0, 0] and not out.stats["slack"][1, 0]
+    assert out.forces[1, 0] > 0 and np.abs(out.violation).max() < 1e-6
+    with pytest.raises(ValueError, match=r"static optimization \(compliant tendons\): IPOPT stopped \("):
+        solve_compliant(np.array([[-1e5]]), arms[:1], lmt[1:], [m], None, StaticOptimization(tendon="compliant"),
+                        coordinates=["ankle_angle_r"])
