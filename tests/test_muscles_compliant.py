@@ -119,3 +119,13 @@ def test_a_muscle_shorter_than_its_tendon_carries_nothing_and_a_moment_out_of_re
     with pytest.raises(ValueError, match=r"static optimization \(compliant tendons\): IPOPT stopped \("):
         solve_compliant(np.array([[-1e5]]), arms[:1], lmt[1:], [m], None, StaticOptimization(tendon="compliant"),
                         coordinates=["ankle_angle_r"])
+
+
+def test_the_command_refuses_bands_with_compliant_tendons(tmp_path, capsys):
+    code = main(["muscles", str(MODEL), "--data", str(LAB / "hamner_running_whole.trc"), "--loads",
+                 str(LAB / "hamner_running_whole_grf.mot"), "--plate", "calcn_r=ground_", "--plate",
+                 "calcn_l=1_ground_", "--tasks", str(LAB / "hamner_tasks_ik.xml"), "--tendon", "compliant",
+                 "--muscle-uncertainty", "max_isometric_force=10%", "--out", str(tmp_path / "o"), "--quiet"])
+    err = [ln for ln in capsys.readouterr().err.splitlines() if not ln.startswith("casflex: warning: ")]
+    assert code == 2 and len(err) == 1 and "--tendon: 'compliant' takes no bands yet" in err[0], err
+    assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())

@@ -92,6 +92,10 @@ def cmd_muscles(args: argparse.Namespace, outputs: Outputs) -> int:
         raise OptionError(f"--criteria: expected exponents >= 1 other than --exponent ({optimization.exponent:g}), "
                           f"got {' '.join(f'{p:g}' for p in criteria)}")
     banded = uncertainty is not None or chosen["bands"].asked or args.uncertain or args.marker_noise is not None
+    if banded and optimization.tendon == "compliant":
+        raise OptionError("--tendon: 'compliant' takes no bands yet (each perturbed property or frame set would be a "
+                          "whole IPOPT solve of the trial, some 10 s each): drop the band options, or use rigid "
+                          "tendons for the bands")
     name = args.name or os.path.splitext(os.path.basename(args.data or args.coordinates))[0]
     out = outputs.directory("--out", args.out, file_names(name, bool(banded)))
     plots = None
