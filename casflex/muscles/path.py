@@ -7,7 +7,8 @@ theta0) (P0_xy - (x0, y0)) in the plane and at P0_z out of it. A MovingPathPoint
 coordinate's value (its function of the value clamped to the coordinate's range, as OpenSim does); a
 ConditionalPathPoint is on the path while its coordinate is within [lower - 1e-5, upper + 1e-5] (OpenSim's
 ``ConditionalPathPoint::isActive``), switched by CasADi's ``if_else``. The length is the sum of the 3D
-distances between consecutive points on the path (OpenSim's ``GeometryPath`` without wrapping).
+distances between consecutive points on the path (OpenSim's ``GeometryPath``), a segment in a wrap's range that
+wraps replaced by its tangent lines and its arc on the cylinder (:mod:`casflex.muscles.wrap`).
 
 Moment arms are OpenSim's, -dL/d(value) along each lab coordinate (``scene.coordinates`` order; m for a
 rotation, dimensionless for a translation), exact by AD: a lab coordinate's value is value0 + sign (own -
@@ -17,7 +18,8 @@ Unit loads. For each hinge (``tree.hinges`` order) the force (fx, fy; N per N of
 moment about the hinge's centre (its point carried by its child node, i.e. the point of the scene joint;
 N m per N, counter-clockwise about the plane's normal positive) that a muscle's unit tension applies to the
 hinge's distal part (the bodies beyond it from the root): each path segment with one end on the distal part and
-one off it pulls that end towards the other. By virtual work the moment equals -dL/d(own angle) of the hinge
+one off it pulls that end towards the other (a wrapped segment's tangent points are on the cylinder's node, so
+the cylinder's body takes the wrap's pull there). By virtual work the moment equals -dL/d(own angle) of the hinge
 (the moment arm about the scene's own angle; for a lab coordinate of sign s, s times its moment arm) where the
 hinge's centre is fixed on its parent and the muscle's points are fixed on their bodies; a coupled hinge's
 centre rolls with its angle, and its generalised force is that moment plus (fx, fy) . d(centre)/d(angle); a
