@@ -71,3 +71,15 @@ def test_the_command_draws_the_emg_and_refuses_it_half_given(tmp_path, capsys):
         err = [ln for ln in capsys.readouterr().err.splitlines() if not ln.startswith("casflex: warning: ")]
         assert code == 2 and len(err) == 1 and message in err[0], err
         assert not o.exists() or not any(o.iterdir())
+
+
+def test_a_c3d_files_analog_channel_is_read_by_its_label():
+    """The walking2 excerpt's analog channels (its plates' raw signals at 2000 Hz, tests/data/lab/README.md) stand
+    in for EMG: the channel named reaches the envelope, a label the file lacks is refused naming its labels."""
+    c3d = LAB / "walking2_excerpt.c3d"
+    t = np.linspace(2.6, 3.3, 43)
+    env = emg_envelopes(c3d, {"soleus_r": "Fz1"}, t)["soleus_r"]
+    assert env.shape == t.shape and np.isclose(env.max(), 1.0, atol=0.05) and env.min() >= -0.05
+    with pytest.raises(ValueError, match=r"column 'EMG1' \(for 'soleus_r'\) is not in the file; its columns are "
+                                         r"\['Fx1', 'Fy1'"):
+        emg_envelopes(c3d, {"soleus_r": "EMG1"}, t)

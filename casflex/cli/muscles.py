@@ -212,9 +212,10 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="write <name>_StaticOptimization_activation.sto, _force.sto and "
                         "<name>_JointReaction_ReactionLoads.sto into this directory")
     s.add_argument("--plots", type=output_path, metavar="DIR", help="write figures into this directory")
-    s.add_argument("--emg", metavar="FILE", help="a .mot / .sto of the trial's raw EMG: each muscle's envelope drawn "
+    s.add_argument("--emg", metavar="FILE", help="a .c3d (its analog channels) or .mot / .sto of the trial's raw EMG: "
+                   "each muscle's envelope drawn "
                    "beside its activation (--plots; band-pass 20-400 Hz, rectified, low-pass 6 Hz, over its peak)")
     s.add_argument("--emg-column", action="append", metavar="MUSCLE=COLUMN",
-                   help="the --emg file's column of a muscle (repeat for each muscle)")
+                   help="the --emg file's column (a C3D's analog label) of a muscle (repeat for each muscle)")
     s.add_argument("--quiet", action="store_true", help="no progress messages")
     s.set_defaults(func=cmd_muscles)

@@ -1,7 +1,8 @@
 """EMG envelopes beside static optimization's activations (drawn on or off only: an envelope's height is not an
 activation, its timing is what compares).
 
-A trial's raw EMG from an OpenSim .mot / .sto table with EMG columns, the columns named per muscle. Each column's
+A trial's raw EMG from a C3D file's analog channels (by their ANALOG:LABELS) or an OpenSim .mot / .sto table with
+EMG columns, the channels named per muscle. Each column's
 envelope: band-pass 20-400 Hz (the upper edge at most 0.45 of the sampling rate; 4th order, Butterworth, forward and
 backward: no lag), rectified, low-pass 6 Hz (4th order, no lag), normalised to its peak over the trial's window, then
 sampled at the trial's frames. Refused in one line naming the file and the column: a column the file does not
@@ -38,13 +39,14 @@ def emg_envelopes(path: str | os.PathLike[str], columns: Mapping[str, str], t: n
                   muscles: tuple[str, ...] = ()) -> dict[str, np.ndarray]:
     """muscle -> its EMG envelope (k,) at the trial's times t (s), normalised to 1 at its peak over [t[0], t[-1]]:
     ``columns`` muscle -> the file's column; ``muscles`` the model's (a muscle not among them refused)."""
+    from casflex.lab.c3d import read_c3d_analogs
     from casflex.lab.tables import read_sto
 
     where = f"emg: {os.fspath(path)}"
     for m in columns:
         if muscles and m not in muscles:
             raise ValueError(f"{where}: muscle {m!r} is no muscle of the model")
-    table = read_sto(path)
+    table = read_c3d_analogs(path) if os.fspath(path).lower().endswith(".c3d") else read_sto(path)
     for m, c in columns.items():
         if c not in table.names:
             raise ValueError(f"{where}: column {c!r} (for {m!r}) is not in the file; its columns are "
