@@ -64,7 +64,9 @@ def plot_activations(res, path: str | os.PathLike[str] | None = None, emg=None) 
         ax.set_ylim(0.0, 1.0)
         ax.grid(alpha=0.3)
     fig.supxlabel("t (s)")
-    fig.supylabel("activation" + (" (grey: EMG envelope / its peak)" if emg else ""))
+    fig.supylabel("activation")
+    if emg:
+        fig.suptitle("grey: EMG envelope over its peak (timing only)", fontsize=9)
     _save(fig, path)
     return fig
 
