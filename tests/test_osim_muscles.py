@@ -8,6 +8,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from casflex.cli import main
@@ -146,16 +147,48 @@ def _wrapped(tmp_path: Path, obj: str) -> Path:
 
 
 @pytest.mark.parametrize("obj, why", [
-    ('<WrapCylinder name="knee_wrap"><radius>0.03</radius><length>0.1</length></WrapCylinder>',
-     "a WrapCylinder about the plane's normal: casflex does not compute wrapping yet"),
     ('<WrapSphere name="knee_wrap"><radius>0.03</radius></WrapSphere>', "a WrapSphere: its wrapping leaves the plane"),
     ('<WrapCylinder name="knee_wrap"><xyz_body_rotation>0.5 0 0</xyz_body_rotation><radius>0.03</radius>'
      "</WrapCylinder>", r"a WrapCylinder whose axis \[0.0, -0.479, 0.878\] is not the plane's normal: its wrapping "
      "leaves the plane"),
     ('<WrapSphere name="other"><radius>0.03</radius></WrapSphere>', "PathWrap: wrap object 'knee_wrap' is on no body"),
+    ('<WrapEllipsoid name="knee_wrap"><dimensions>0.03 0.03 0.05</dimensions></WrapEllipsoid>',
+     "a WrapEllipsoid: its wrapping leaves the plane"),
+    ('<WrapTorus name="knee_wrap"><inner_radius>0.01</inner_radius><outer_radius>0.03</outer_radius></WrapTorus>',
+     "a WrapTorus: its wrapping leaves the plane"),
 ])
 def test_wraps_are_refused_naming_the_muscle_the_wrap_object_and_why(tmp_path, obj, why):
     _refused(_wrapped(tmp_path, obj), r"^\S+: ForceSet: Millard2012EquilibriumMuscle 'bifemsh_r': .*" + why)
+
+
+def test_a_cylinder_about_the_planes_normal_is_kept_as_a_circle(tmp_path):
+    s = scene_from_osim(_wrapped(tmp_path, '<WrapCylinder name="knee_wrap"><translation>0 -0.4 0</translation>'
+                                           "<radius>0.03</radius><length>0.1</length><quadrant>-x</quadrant>"
+                                           "</WrapCylinder>"), muscles=True)
+    (w,) = next(m for m in s.muscles if m.name == "bifemsh_r").wraps
+    assert (w.name, w.radius, w.length, w.quadrant, w.points) == ("knee_wrap", 0.03, 0.1, "-x", (-1, -1))
+    R, p = s.frames["femur_r"]
+    assert np.allclose(w.centre, p + R @ [0, -0.4, 0], atol=1e-15) and abs(w.frame[8]) == 1
+    assert "muscle 'bifemsh_r': wraps over 'knee_wrap' (a circle in the plane, radius 0.03 m)" in s.report
+
+
+@pytest.mark.parametrize("obj, why", [
+    ('<WrapCylinder name="knee_wrap"><radius>0.03</radius><quadrant>+w</quadrant></WrapCylinder>',
+     r"wrap object 'knee_wrap'\.quadrant: '\+w' is none of OpenSim's"),
+    ('<WrapCylinder name="knee_wrap"><radius>-0.03</radius></WrapCylinder>',
+     r"wrap object 'knee_wrap': radius -0.03 m, length 1 m: both must be > 0"),
+])
+def test_a_bad_cylinder_is_refused(tmp_path, obj, why):
+    _refused(_wrapped(tmp_path, obj), why)
+
+
+def test_two_wraps_on_one_path_are_refused(tmp_path):
+    path = _wrapped(tmp_path, '<WrapCylinder name="knee_wrap"><radius>0.03</radius></WrapCylinder>'
+                              '<WrapCylinder name="w2"><radius>0.02</radius></WrapCylinder>')
+    text = path.read_text().replace("</PathWrap></objects>", "</PathWrap><PathWrap name=\"w2\"><wrap_object>w2"
+                                    "</wrap_object></PathWrap></objects>", 1)
+    path.write_text(text)
+    _refused(path, r"'bifemsh_r': wrap objects \['knee_wrap', 'w2'\]: 2 wraps on one path; OpenSim iterates")
 
 
 def test_an_inactive_wrap_object_is_reported_and_left_out(tmp_path):

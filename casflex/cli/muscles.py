@@ -11,7 +11,7 @@ from casflex.cli._base import OptionError, Outputs, output_path, positive
 
 #: The command's options for static optimization and the reactions, by the field of the value each fills.
 FLAGS = {"exponent": "--exponent", "activation_bounds": "--activation-bounds", "on": "--on", "frame": "--in",
-         "joints": "--joints", "force_length_velocity": "--no-force-length-velocity"}
+         "joints": "--joints", "force_length_velocity": "--no-force-length-velocity", "tendon": "--tendon"}
 
 
 def _bounds(text: str) -> tuple[float, float]:
@@ -55,7 +55,8 @@ def _options(args: argparse.Namespace):
     from casflex.muscles.reaction import JointReaction
     from casflex.muscles.static_optimization import StaticOptimization
 
-    so = {"exponent": args.exponent, "force_length_velocity": not args.no_force_length_velocity}
+    so = {"exponent": args.exponent, "force_length_velocity": not args.no_force_length_velocity,
+          "tendon": args.tendon}
     if args.activation_bounds is not None:
         so["activation_bounds"] = args.activation_bounds
     for make, kw in ((StaticOptimization, so), (JointReaction, {"on": args.on, "frame": args.frame,
@@ -85,11 +86,16 @@ def cmd_muscles(args: argparse.Namespace, outputs: Outputs) -> int:
     chosen = inverse_options(args)
     optimization, reaction, joints = _options(args)
     uncertainty = _uncertainty(args)
+    emg_columns = _emg_columns(args)
     criteria = tuple(args.criteria or ())
     if any(not (p >= 1.0) or p == optimization.exponent for p in criteria):
         raise OptionError(f"--criteria: expected exponents >= 1 other than --exponent ({optimization.exponent:g}), "
                           f"got {' '.join(f'{p:g}' for p in criteria)}")
     banded = uncertainty is not None or chosen["bands"].asked or args.uncertain or args.marker_noise is not None
+    if banded and optimization.tendon == "compliant":
+        raise OptionError("--tendon: 'compliant' takes no bands yet (each perturbed property or frame set would be a "
+                          "whole IPOPT solve of the trial, some 10 s each): drop the band options, or use rigid "
+                          "tendons for the bands")
     name = args.name or os.path.splitext(os.path.basename(args.data or args.coordinates))[0]
     out = outputs.directory("--out", args.out, file_names(name, bool(banded)))
     plots = None
@@ -102,6 +108,11 @@ def cmd_muscles(args: argparse.Namespace, outputs: Outputs) -> int:
         raise OptionError("--reserves: --actuators gives the reserves; give one of them")
     acts = read_actuators(args.model) + (read_actuators(args.actuators) if args.actuators else ())
     inputs = prepare(args.model, **chosen)
+    emg = None
+    if emg_columns:
+        from casflex.muscles.emg import emg_envelopes
+
+        emg = emg_envelopes(args.emg, emg_columns, inputs.t, tuple(m.name for m in osim.muscles))
     if args.reserves is not None:
         acts += reserve_actuators(osim.scene, inputs.tree.root, args.reserves)
     trial = TrialMuscles(osim, inputs.tree, inputs.t, inputs.plates, acts, optimization=optimization,
@@ -119,8 +130,27 @@ def cmd_muscles(args: argparse.Namespace, outputs: Outputs) -> int:
     if plots is not None:
         from casflex.plotting.muscles import save_muscle_figures
 
-        save_muscle_figures(result, plots)
+        save_muscle_figures(result, plots, emg)
     return 0
+
+
+def _emg_columns(args: argparse.Namespace) -> dict[str, str]:
+    """--emg-column MUSCLE=COLUMN, each checked for its form, with --emg and --plots."""
+    pairs = args.emg_column or []
+    if not pairs and args.emg is None:
+        return {}
+    if args.emg is None or not pairs:
+        raise OptionError("--emg: give the EMG file (--emg FILE) and the column of each muscle (--emg-column "
+                          "MUSCLE=COLUMN, repeated)")
+    if args.plots is None:
+        raise OptionError("--emg: the envelopes are drawn beside the activations: give --plots DIR")
+    out = {}
+    for text in pairs:
+        muscle, sep, column = (v.strip() for v in text.partition("="))
+        if not (sep and muscle and column):
+            raise OptionError(f"--emg-column: expected MUSCLE=COLUMN, got {text!r}")
+        out[muscle] = column
+    return out
 
 
 def _with_bands(result, trial, inputs, res, uncertainty, criteria, draws):
@@ -156,6 +186,10 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--no-force-length-velocity", action="store_true",
                    help="a muscle's force per activation is its maximum isometric force (OpenSim's "
                         "use_muscle_physiology false)")
+    s.add_argument("--tendon", choices=("rigid", "compliant"), default="rigid",
+                   help="rigid: each tendon at its slack length (OpenSim's static optimization); compliant: each "
+                        "muscle's fibre and tendon in static equilibrium, the fibre's length solved with the "
+                        "activations (docs/muscles.md)")
     s.add_argument("--activation-bounds", type=_bounds, metavar="LO:HI",
                    help="every activation's bounds (default 0.01:1, Millard's minimum activation)")
     s.add_argument("--joints", metavar="J1,J2", help="the joints whose reactions are written (default: every hinge)")
@@ -178,5 +212,10 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="write <name>_StaticOptimization_activation.sto, _force.sto and "
                         "<name>_JointReaction_ReactionLoads.sto into this directory")
     s.add_argument("--plots", type=output_path, metavar="DIR", help="write figures into this directory")
+    s.add_argument("--emg", metavar="FILE", help="a .c3d (its analog channels) or .mot / .sto of the trial's raw EMG: "
+                   "each muscle's envelope drawn "
+                   "beside its activation (--plots; band-pass 20-400 Hz, rectified, low-pass 6 Hz, over its peak)")
+    s.add_argument("--emg-column", action="append", metavar="MUSCLE=COLUMN",
+                   help="the --emg file's column (a C3D's analog label) of a muscle (repeat for each muscle)")
     s.add_argument("--quiet", action="store_true", help="no progress messages")
     s.set_defaults(func=cmd_muscles)

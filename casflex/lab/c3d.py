@@ -51,7 +51,7 @@ import numpy as np
 if TYPE_CHECKING:
     from casflex.lab.tables import FileSpan, LabMarkers, LabTable
 
-__all__ = ["read_c3d", "c3d_span", "MIN_PLATE_FORCE", "NOT_MARKERS"]
+__all__ = ["read_c3d", "read_c3d_analogs", "c3d_span", "MIN_PLATE_FORCE", "NOT_MARKERS"]
 
 #: N: below this force along a plate's upward normal its centre of pressure is NaN (module docstring).
 MIN_PLATE_FORCE = 20.0
@@ -187,26 +187,28 @@ READ_TIMEOUT = 60.0
 _PLATFORM_KEYS = ("force", "moment", "center_of_pressure", "Tz", "corners", "unit_force", "unit_position")
 
 
-def _plain(c, plates: bool) -> dict:
-    """What casflex reads of an ezc3d object, as plain dicts and arrays (picklable)."""
+def _plain(c, plates: bool, analogs: bool = False) -> dict:
+    """What casflex reads of an ezc3d object, as plain dicts and arrays (picklable); ``analogs``: the analog
+    channels and their ANALOG parameters too."""
     data = c["data"]
     return {
         "header": {"points": dict(c["header"]["points"]), "analogs": dict(c["header"]["analogs"])},
         "parameters": {g: {k: {"value": v["value"]} for k, v in c["parameters"][g].items() if k != "__METADATA__"}
-                       for g in ("POINT", "EVENT") if g in c["parameters"]},
+                       for g in ("POINT", "EVENT", *(("ANALOG",) if analogs else ())) if g in c["parameters"]},
         "data": {"points": data["points"], "meta_points": {"residuals": data["meta_points"]["residuals"]},
-                 "analogs": np.empty((0, data["analogs"].shape[1] if data["analogs"].ndim > 1 else 0)),
+                 "analogs": np.asarray(data["analogs"]) if analogs else
+                 np.empty((0, data["analogs"].shape[1] if data["analogs"].ndim > 1 else 0)),
                  "platform": [{k: pf[k] for k in _PLATFORM_KEYS} for pf in data["platform"]]
                  if plates and "platform" in data.keys() else []},
     }
 
 
-def _read(path: str, plates: bool) -> dict:
+def _read(path: str, plates: bool, analogs: bool = False) -> dict:
     """:func:`_plain` of ezc3d's reading; ValueError naming the problem (ezc3d raises RuntimeError, OSError ...:
     all are the file's)."""
     ezc3d = _ezc3d()
     try:
-        return _plain(ezc3d.c3d(path, extract_forceplat_data=plates), plates)
+        return _plain(ezc3d.c3d(path, extract_forceplat_data=plates), plates, analogs)
     except Exception as exc:
         msg = " ".join(str(exc).replace(": iostream error", "").split())
         if plates:
@@ -220,13 +222,13 @@ def _read(path: str, plates: bool) -> dict:
         raise ValueError(f"ezc3d cannot read it: {msg}") from None
 
 
-def _read_apart(path: str, plates: bool) -> dict:
+def _read_apart(path: str, plates: bool, analogs: bool = False) -> dict:
     """:func:`_read` in a forked child process: ezc3d 1.7 crashes (a segmentation fault) or hangs on some
     corrupted files that pass :func:`_check_structure` (a parameter renamed by a flipped byte), and that must
     not take the caller with it. ValueError naming what happened; in the process itself where there is no
     fork (then a crash is ezc3d's to have)."""
     if not hasattr(os, "fork"):
-        return _read(path, plates)
+        return _read(path, plates, analogs)
     _ezc3d()  # ModuleNotFoundError here, not in the child
     rd, wr = os.pipe()
     pid = os.fork()
@@ -235,7 +237,7 @@ def _read_apart(path: str, plates: bool) -> dict:
         try:
             signal.signal(signal.SIGINT, signal.SIG_DFL)
             try:
-                out = ("ok", _read(path, plates))
+                out = ("ok", _read(path, plates, analogs))
             except ValueError as exc:
                 out = ("error", str(exc))
             with os.fdopen(wr, "wb") as f:
@@ -282,7 +284,7 @@ def _reap(pid: int) -> int | None:
     return -os.WTERMSIG(status) if os.WIFSIGNALED(status) else os.WEXITSTATUS(status)
 
 
-def _open(where: str, path: str | os.PathLike[str], plates: bool) -> dict:
+def _open(where: str, path: str | os.PathLike[str], plates: bool, analogs: bool = False) -> dict:
     """What casflex reads of the file (:func:`_plain`), checked whole; ValueError in one line otherwise."""
     if not Path(path).is_file():  # ezc3d hangs on a directory
         raise ValueError(f"{where}: " + ("not a file" if Path(path).exists() else "no such file"))
@@ -295,7 +297,7 @@ def _open(where: str, path: str | os.PathLike[str], plates: bool) -> dict:
     except OSError as exc:
         raise ValueError(f"{where}: cannot read ({exc.strerror})") from None
     try:
-        c = _read_apart(str(path), plates)
+        c = _read_apart(str(path), plates, analogs)
     except ValueError as exc:
         raise ValueError(f"{where}: {exc}") from None
     got = c["data"]["points"].shape[2]  # ezc3d reads what there is and sets its header to it
@@ -428,3 +430,22 @@ def read_c3d(path: str | os.PathLike[str], *, plates: bool = True,
     markers = _markers(c, where)
     table = _plates(c, where, min_force) if plates else None
     return markers, table
+
+
+def read_c3d_analogs(path: str | os.PathLike[str]) -> LabTable:
+    """The analog channels of the C3D file ``path`` (EMG, plates' raw signals) as a table at the analog rate: the
+    columns named by ANALOG:LABELS, the values as ezc3d scales them (ANALOG:SCALE, OFFSET, GEN_SCALE), the times
+    from the first frame's. ValueError in one line for a file that cannot be read or has no analog channel."""
+    from casflex.lab.tables import LabTable
+
+    where = str(path)
+    c = _open(where, path, False, analogs=True)
+    values = np.asarray(c["data"]["analogs"], dtype=float)
+    values = values.reshape(values.shape[-2], values.shape[-1]).T if values.size else np.zeros((0, 0))
+    rate = float(c["header"]["analogs"]["frame_rate"])
+    if not values.shape[1] or not (math.isfinite(rate) and rate > 0):
+        raise ValueError(f"{where}: no analog channel (ANALOG:USED {values.shape[1]}, ANALOG:RATE {rate:g} Hz)")
+    labels = [str(v).strip() for v in (_param(c, "ANALOG", "LABELS") or [])]
+    labels += [f"analog{i + 1}" for i in range(len(labels), values.shape[1])]
+    t = _t0(c) + np.arange(values.shape[0]) / rate
+    return LabTable(t, tuple(labels[:values.shape[1]]), values, None, {"rate": rate}, where)

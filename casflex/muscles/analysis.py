@@ -27,6 +27,7 @@ from casflex.inverse.bands import rigid_load_function
 from casflex.inverse.lab_names import lab_name
 from casflex.inverse.tree import KinematicTree
 from casflex.muscles.actuators import actuator_columns, check_actuators
+from casflex.muscles.compliant import solve_compliant
 from casflex.muscles.curves import rigid_tendon
 from casflex.muscles.path import MusclePaths
 from casflex.muscles.reaction import JointReaction, JointReactions, joint_reactions
@@ -189,10 +190,14 @@ class TrialMuscles:
             raise ValueError(f"{', '.join(bare)}: no muscle crosses it and no reserve acts on it: its moment has "
                              "nothing to carry it; give reserves (an actuator file, or --reserves / actuators=N)")
         names = [c.name for c in self.joint_coordinates]
-        sos = [solve_static_optimization(moments, arms, a, ps, reserves, options, coordinates=names,
-                                         max_isometric=[m.max_isometric_force for m in v],
-                                         near=None if near is None else near.so)
-               for v, (a, ps) in zip(variants, capacity, strict=True)]
+        if options.tendon == "compliant":
+            sos = [solve_compliant(moments, arms, geo["lengths"], v, reserves, options, coordinates=names)
+                   for v in variants]
+        else:
+            sos = [solve_static_optimization(moments, arms, a, ps, reserves, options, coordinates=names,
+                                             max_isometric=[m.max_isometric_force for m in v],
+                                             near=None if near is None else near.so)
+                   for v, (a, ps) in zip(variants, capacity, strict=True)]
         residuals, geometry = self._residuals(loads, z), self._reaction_geometry(z)
         out = []
         for s, (active, passive) in zip(sos, capacity, strict=True):

@@ -7,7 +7,8 @@ theta0) (P0_xy - (x0, y0)) in the plane and at P0_z out of it. A MovingPathPoint
 coordinate's value (its function of the value clamped to the coordinate's range, as OpenSim does); a
 ConditionalPathPoint is on the path while its coordinate is within [lower - 1e-5, upper + 1e-5] (OpenSim's
 ``ConditionalPathPoint::isActive``), switched by CasADi's ``if_else``. The length is the sum of the 3D
-distances between consecutive points on the path (OpenSim's ``GeometryPath`` without wrapping).
+distances between consecutive points on the path (OpenSim's ``GeometryPath``), a segment in a wrap's range that
+wraps replaced by its tangent lines and its arc on the cylinder (:mod:`casflex.muscles.wrap`).
 
 Moment arms are OpenSim's, -dL/d(value) along each lab coordinate (``scene.coordinates`` order; m for a
 rotation, dimensionless for a translation), exact by AD: a lab coordinate's value is value0 + sign (own -
@@ -17,7 +18,8 @@ Unit loads. For each hinge (``tree.hinges`` order) the force (fx, fy; N per N of
 moment about the hinge's centre (its point carried by its child node, i.e. the point of the scene joint;
 N m per N, counter-clockwise about the plane's normal positive) that a muscle's unit tension applies to the
 hinge's distal part (the bodies beyond it from the root): each path segment with one end on the distal part and
-one off it pulls that end towards the other. By virtual work the moment equals -dL/d(own angle) of the hinge
+one off it pulls that end towards the other (a wrapped segment's tangent points are on the cylinder's node, so
+the cylinder's body takes the wrap's pull there). By virtual work the moment equals -dL/d(own angle) of the hinge
 (the moment arm about the scene's own angle; for a lab coordinate of sign s, s times its moment arm) where the
 hinge's centre is fixed on its parent and the muscle's points are fixed on their bodies; a coupled hinge's
 centre rolls with its angle, and its generalised force is that moment plus (fx, fy) . d(centre)/d(angle); a
@@ -35,6 +37,7 @@ import casadi as ca
 import numpy as np
 
 from casflex.elements.joints import spline_of
+from casflex.muscles.wrap import check_wraps, wrapped_pieces
 from casflex.scene.coordinates import to_lab
 from casflex.scene.functions import Clamped, Constant, Linear, Multiplier, Polynomial, SimmSpline
 
@@ -118,6 +121,7 @@ class MusclePaths:
                                          f"{sorted(lab)})")
             if len(m.path) < 2:
                 raise ValueError(f"muscle {m.name!r}: {len(m.path)} path point(s); a path needs two or more")
+            check_wraps(m, nodes)
 
     # -- geometry -------------------------------------------------------------------------
     def _point(self, p) -> ca.SX:
@@ -155,16 +159,22 @@ class MusclePaths:
         return out
 
     @functools.cached_property
-    def _geometry(self) -> list[tuple[list[ca.SX], list[tuple[int, int, object]]]]:
-        return [([self._point(p) for p in m.path], self._segments(m)) for m in self.muscles]
+    def _geometry(self) -> list[list[tuple]]:
+        """Each muscle's pieces (a, node a, b, node b, on, length): the straight segments between its points and,
+        where a wrap applies, the wrapped segment's tangent lines and arc (:mod:`casflex.muscles.wrap`)."""
+        out = []
+        for m in self.muscles:
+            pts, segs = [self._point(p) for p in m.path], self._segments(m)
+            nodes = [self.tree.model.node_names.index(p.node) for p in m.path]
+            out.append(wrapped_pieces(self, m, pts, nodes, segs))
+        return out
 
     @functools.cached_property
     def _lengths(self) -> ca.SX:
         out = []
-        for pts, segs in self._geometry:
+        for pieces in self._geometry:
             L = 0
-            for i, j, on in segs:
-                d = _distance(pts[i], pts[j])
+            for *_, on, d in pieces:
                 L = L + (d if isinstance(on, int) else ca.if_else(on, d, 0))
             out.append(L)
         return ca.vertcat(*out) if out else ca.SX(0, 1)
@@ -217,18 +227,17 @@ class MusclePaths:
         cols = []
         distal = [self._distal(h) for h in self.tree.hinges]
         centres = [self._centre(h) for h in self.tree.hinges]
-        for m, (pts, segs) in zip(self.muscles, self._geometry, strict=True):
-            nodes = [self.tree.model.node_names.index(p.node) for p in m.path]
+        for pieces in self._geometry:
             col = []
             for D, C in zip(distal, centres, strict=True):
                 F, M = ca.SX.zeros(2), 0
-                for i, j, on in segs:
-                    if (nodes[i] in D) == (nodes[j] in D):
+                for pa, na, pb, nb, on, _ in pieces:
+                    if (na in D) == (nb in D):
                         continue
-                    a, b = (i, j) if nodes[i] in D else (j, i)
-                    u = _direction(pts[a], pts[b])
+                    a, b = (pa, pb) if na in D else (pb, pa)
+                    u = _direction(a, b)
                     f = u[:2] if isinstance(on, int) else ca.if_else(on, u[:2], ca.SX.zeros(2))
-                    arm = pts[a][:2] - C
+                    arm = a[:2] - C
                     F, M = F + f, M + arm[0] * f[1] - arm[1] * f[0]
                 col.append(ca.vertcat(F, M))
             cols.append(ca.vertcat(*col) if col else ca.SX(0, 1))

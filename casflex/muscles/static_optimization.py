@@ -56,6 +56,9 @@ class StaticOptimization:
     max_iterations : IPOPT's iteration limit for the whole trial [optimizer_max_iterations, 100, per frame]
     infeasible : "raise" (a frame no activation satisfies is refused) or "report" (it carries what it can and
         the result's ``report`` names it)
+    tendon : "rigid" (OpenSim's: the tendon at its slack length) or "compliant" (each muscle's fibre and tendon in
+        static equilibrium, its fibre length an unknown: :mod:`casflex.muscles.compliant`; needs
+        force_length_velocity)
     """
 
     exponent: float = 2.0
@@ -66,6 +69,7 @@ class StaticOptimization:
     tolerance: float = 1e-10
     max_iterations: int = 3000
     infeasible: str = "raise"
+    tendon: str = "rigid"
 
     def __post_init__(self) -> None:
         if not _real(self.exponent) or self.exponent < 1.0:
@@ -86,6 +90,11 @@ class StaticOptimization:
             raise ValueError(f"max_iterations: expected an integer >= 1, got {self.max_iterations!r}")
         if self.infeasible not in ("raise", "report"):
             raise ValueError(f"infeasible: expected 'raise' or 'report', got {self.infeasible!r}")
+        if self.tendon not in ("rigid", "compliant"):
+            raise ValueError(f"tendon: expected 'rigid' or 'compliant', got {self.tendon!r}")
+        if self.tendon == "compliant" and not self.force_length_velocity:
+            raise ValueError("tendon: 'compliant' needs force_length_velocity (a tendon's stretch matters through the "
+                             "fibre's force-length curve only)")
 
 
 def _real(x) -> bool:

@@ -11,7 +11,7 @@ import numpy as np
 
 from casflex.peers.opensim import _opensim, _run
 
-__all__ = ["muscle_geometry"]
+__all__ = ["fiber_equilibrium", "muscle_geometry"]
 
 _HERE = "casflex.peers.opensim_muscles"
 
@@ -45,3 +45,35 @@ def muscle_geometry(model_path: str | os.PathLike[str], poses: Sequence[Mapping[
     "coordinates": the unlocked coordinates' names, "lengths": (k, n_m) m, "moment_arms": (k, n_m, n_c)}."""
     return _run(f"{_HERE}:_geometry_here", worker, os.path.abspath(model_path),
                 [{str(c): float(v) for c, v in p.items()} for p in poses])
+
+
+def _equilibrium_here(model_path: str, poses: list[dict[str, float]], activation: float) -> dict:
+    osim = _opensim()
+    model = osim.Model(model_path)
+    state = model.initSystem()
+    cs = model.getCoordinateSet()
+    muscles = model.getMuscles()
+    ms = [muscles.get(i) for i in range(muscles.getSize())]
+    T = np.zeros((len(poses), len(ms)))
+    ln = np.zeros((len(poses), len(ms)))
+    L = np.zeros((len(poses), len(ms)))
+    for k, pose in enumerate(poses):
+        for name, value in pose.items():
+            cs.get(name).setValue(state, float(value), False)
+            cs.get(name).setSpeedValue(state, 0.0)
+        for m in ms:
+            m.setActivation(state, activation)
+        model.equilibrateMuscles(state)
+        model.realizeDynamics(state)
+        for i, m in enumerate(ms):
+            T[k, i], ln[k, i], L[k, i] = m.getTendonForce(state), m.getNormalizedFiberLength(state), m.getLength(state)
+    return {"muscles": [m.getName() for m in ms], "tendon_forces": T, "norm_fiber_lengths": ln, "lengths": L}
+
+
+def fiber_equilibrium(model_path: str | os.PathLike[str], poses: Sequence[Mapping[str, float]], activation: float,
+                      *, worker: bool | None = None) -> dict:
+    """OpenSim 4's fibre-tendon equilibrium (``Model::equilibrateMuscles``, the speeds 0) of each muscle of the model
+    file at each pose, every muscle at ``activation``: {"muscles": names, "tendon_forces": (k, n_m) N,
+    "norm_fiber_lengths": (k, n_m), "lengths": (k, n_m) m}."""
+    return _run(f"{_HERE}:_equilibrium_here", worker, os.path.abspath(model_path),
+                [{str(c): float(v) for c, v in p.items()} for p in poses], float(activation))

@@ -43,8 +43,11 @@ def plot_reactions(res, path: str | os.PathLike[str] | None = None) -> Figure:
     return fig
 
 
-def plot_activations(res, path: str | os.PathLike[str] | None = None) -> Figure:
-    """Each muscle's activation over the trial, one small panel each."""
+def plot_activations(res, path: str | os.PathLike[str] | None = None, emg=None) -> Figure:
+    """Each muscle's activation over the trial, one small panel each; ``emg`` (muscle -> (k,) the EMG's envelope
+    at the frames, normalised to its peak: :func:`casflex.muscles.emg.emg_envelopes`) drawn beside it, grey, for
+    its timing (on or off), not its height."""
+    emg = emg or {}
     n = len(res.muscles)
     cols = min(n, 4)
     rows = int(np.ceil(n / cols))
@@ -55,19 +58,23 @@ def plot_activations(res, path: str | os.PathLike[str] | None = None) -> Figure:
             ax.set_visible(False)
             continue
         ax.plot(res.t, res.activations[:, i], color="C0", lw=1.0)
+        if res.muscles[i] in emg:
+            ax.fill_between(res.t, 0.0, emg[res.muscles[i]], color="0.6", alpha=0.4, lw=0)
         ax.set_title(res.muscles[i], fontsize=8)
         ax.set_ylim(0.0, 1.0)
         ax.grid(alpha=0.3)
     fig.supxlabel("t (s)")
     fig.supylabel("activation")
+    if emg:
+        fig.suptitle("grey: EMG envelope over its peak (timing only)", fontsize=9)
     _save(fig, path)
     return fig
 
 
-def save_muscle_figures(res, directory: str | os.PathLike[str]) -> list[Path]:
-    """:data:`FIGURES` in ``directory``."""
+def save_muscle_figures(res, directory: str | os.PathLike[str], emg=None) -> list[Path]:
+    """:data:`FIGURES` in ``directory`` (``emg``: :func:`plot_activations`')."""
     d = Path(directory)
     paths = [d / name for name in FIGURES]
     plot_reactions(res, paths[0])
-    plot_activations(res, paths[1])
+    plot_activations(res, paths[1], emg)
     return paths

@@ -43,7 +43,7 @@ import numpy as np
 from casflex.scene.coordinates import Coordinate
 from casflex.scene.functions import Clamped, Linear, Multiplier, SimmSpline
 from casflex.scene.markers import Marker
-from casflex.scene.muscles import Muscle, PathPoint
+from casflex.scene.muscles import Muscle, PathPoint, Wrap
 from casflex.scene.osim import OsimJoint, OsimModel, axis_rotation, read_osim
 from casflex.scene.scene import Joint, Node, RigidBody, Scene
 
@@ -296,19 +296,20 @@ class _Builder:
 
 def _muscles(b: _Builder) -> tuple[Muscle, ...]:
     """The model's muscles on the scene's nodes; a condition or moving point of a coordinate the scene does not
-    move evaluated at its default value (reported); a wrap refused (:func:`_wraps`)."""
+    move evaluated at its default value (reported); its wraps (:func:`_wraps`)."""
     lab = {c.name for c in b.coords}
     out = []
     for m in b.m.muscles:
         owner = f"{b.m.source}: ForceSet: {m.kind} {m.name!r}"
-        _wraps(b, m, owner)
-        path = tuple(p for p in (_path_point(b, m, p, lab, owner) for p in m.path) if p is not None)
+        points = [(k, _path_point(b, m, p, lab, owner)) for k, p in enumerate(m.path)]
+        path = tuple(p for _, p in points if p is not None)
+        wraps = _wraps(b, m, owner, [k for k, p in points if p is not None])
         if len(path) < 2:
             raise ValueError(f"{owner}: {len(path)} path point(s) on its path at the scene's held coordinates; a "
                              "muscle's path needs two or more")
         out.append(Muscle(m.name, m.kind, *(m.numbers[k] for k in ("max_isometric_force", "optimal_fiber_length",
                           "tendon_slack_length", "pennation_angle_at_optimal", "max_contraction_velocity")),
-                          path=path, properties=m.properties))
+                          path=path, properties=m.properties, wraps=wraps))
     if out:
         kinds = sorted({m.kind for m in out})
         b.report.append(f"muscles: {len(out)} ({', '.join(f'{sum(m.kind == k for m in out)} {k}' for k in kinds)})")
@@ -349,22 +350,42 @@ def _path_point(b: _Builder, m, p, lab: set[str], owner: str) -> PathPoint | Non
                      tuple(float(v) for v in (*R.ravel(), *pos)), condition, tuple(moving))
 
 
-def _wraps(b: _Builder, m, owner: str) -> None:
-    """Refuse the muscle's wraps (one line naming the wrap object and why); an inactive wrap object reported."""
-    for obj, _ in m.wraps:
+def _wraps(b: _Builder, m, owner: str, kept: list[int]) -> tuple[Wrap, ...]:
+    """The muscle's wraps that stay in the plane (a WrapCylinder whose axis is the plane's normal: a circle), their
+    ranges counted in the scene's path (``kept``: the model's index of each point the scene keeps); any other wrap
+    refused in one line naming the wrap object and why; an inactive wrap object reported."""
+    out = []
+    for obj, (first, last) in m.wraps:
         w = b.m.wrap_objects.get(obj)
         if w is None:
             raise ValueError(f"{owner}: PathWrap: wrap object {obj!r} is on no body of the model (WrapObjectSet)")
         if not w.active:
             b.report.append(f"muscle {m.name!r}: wrap object {obj!r} is not active in the model; ignored")
             continue
-        R = b.pose[w.body][0] @ w.rotation if w.body in b.pose else w.rotation
-        planar = w.kind == "WrapCylinder" and abs(R[2, 2]) >= NORMAL
-        why = ("a WrapCylinder about the plane's normal: casflex does not compute wrapping yet" if planar else
-               f"a {w.kind}" + (f" whose axis {np.round(R[:, 2], 3).tolist()} is not the plane's normal"
-                                if w.kind == "WrapCylinder" else "") + ": its wrapping leaves the plane")
-        raise ValueError(f"{owner}: wrap object {obj!r}: {why}; remove it from the muscle's PathWrapSet to compute "
-                         "the path without it")
+        if w.body not in b.pose or w.body == "ground":
+            raise ValueError(f"{owner}: wrap object {obj!r}: on {w.body!r}, "
+                             + ("the ground (casflex's scene has no node for it)" if w.body == "ground" else
+                                "a body no joint of the tree places"))
+        Rb, pb = b.pose[w.body]
+        R = Rb @ w.rotation
+        if not (w.kind == "WrapCylinder" and abs(R[2, 2]) >= NORMAL):
+            why = (f"a {w.kind}" + (f" whose axis {np.round(R[:, 2], 3).tolist()} is not the plane's normal"
+                                    if w.kind == "WrapCylinder" else "") + ": its wrapping leaves the plane")
+            raise ValueError(f"{owner}: wrap object {obj!r}: {why}; remove it from the muscle's PathWrapSet to compute "
+                             "the path without it")
+        centre = pb + Rb @ w.translation
+        lo = next((k + 1 for k, i in enumerate(kept) if i >= first - 1), 0) if first >= 1 else -1
+        hi = next((k + 1 for k, i in reversed(list(enumerate(kept))) if i <= last - 1), 0) if last >= 1 else -1
+        out.append(Wrap(obj, node_name(w.body), float(w.radius), tuple(float(v) for v in centre),
+                        tuple(float(v) for v in (*R.ravel(), *centre)), w.quadrant, (lo, hi), float(w.length)))
+    if len(out) > 1:
+        raise ValueError(f"{owner}: wrap objects {[w.name for w in out]}: {len(out)} wraps on one path; OpenSim "
+                         "iterates between several until the path's length settles, casflex computes one: keep one "
+                         "in the muscle's PathWrapSet")
+    if out:
+        b.report.append(f"muscle {m.name!r}: wraps over {out[0].name!r} (a circle in the plane, radius "
+                        f"{out[0].radius:g} m)")
+    return tuple(out)
 
 
 def _constraints(b: _Builder, by_child: dict[str, OsimJoint]) -> None:

@@ -15,14 +15,21 @@ in the default pose and the path's length is measured in 3D, as OpenSim measures
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from casflex.scene.functions import Function
 
-__all__ = ["MUSCLE_KINDS", "Muscle", "PathPoint", "Wrap"]
+__all__ = ["MUSCLE_KINDS", "QUADRANTS", "Muscle", "PathPoint", "Wrap"]
 
 #: The muscle models casflex computes, by their OpenSim class names.
 MUSCLE_KINDS = ("Millard2012EquilibriumMuscle", "Thelen2003Muscle", "DeGrooteFregly2016Muscle")
+
+#: OpenSim's quadrant names of a wrap object (WrapObject::setupQuadrant) -> (axis 0-2, sign; 0 for all quadrants).
+QUADRANTS = {**{q: (0, -1) for q in ("-x", "-X")}, **{q: (0, 1) for q in ("x", "+x", "X", "+X")},
+             **{q: (1, -1) for q in ("-y", "-Y")}, **{q: (1, 1) for q in ("y", "+y", "Y", "+Y")},
+             **{q: (2, -1) for q in ("-z", "-Z")}, **{q: (2, 1) for q in ("z", "+z", "Z", "+Z")},
+             **{q: (0, 0) for q in ("all", "ALL", "All", "Unassigned")}}
 
 
 @dataclass(frozen=True)
@@ -51,10 +58,17 @@ class PathPoint:
 @dataclass(frozen=True)
 class Wrap:
     """A wrap object a muscle's path may wrap over, kept where the wrapping stays in the plane: a cylinder whose
-    axis is the plane's normal wraps as a circle of ``radius`` (m) about ``centre`` (x, y, z in the ground at
-    the default pose, m), on ``node``; ``quadrant`` OpenSim's (e.g. "+x", "-y", "all"), in the ground's axes at
-    the default pose; ``points`` the range of the path's points (1-based, inclusive, OpenSim's PathWrap
-    ``range``; (-1, -1) the whole path) between which it applies."""
+    axis is the plane's normal wraps as a circle of ``radius`` (m) (:mod:`casflex.muscles.wrap`), on ``node``.
+
+    centre : the cylinder's centre (x, y, z in the ground at the default pose, m)
+    frame : the cylinder's frame in the ground at the default pose: R (9 numbers, row-major; its columns the
+        cylinder's x, y and z axes, z the plane's normal or its opposite), then p (3 numbers, m: ``centre``)
+    quadrant : OpenSim's (e.g. "+x", "-y", "all"), in the cylinder's own axes (OpenSim's meaning)
+    points : the range of the path's points (1-based, inclusive, as OpenSim's PathWrap ``range`` but counted in
+        the scene's ``Muscle.path``; (-1, -1) the whole path) between which it applies
+    length : the cylinder's length along its axis (m): a segment whose two points both lie beyond its ends does not
+        wrap (OpenSim's test on the tangent points, at the points' depths)
+    """
 
     name: str
     node: str
@@ -63,6 +77,7 @@ class Wrap:
     frame: tuple[float, ...]
     quadrant: str = "all"
     points: tuple[int, int] = (-1, -1)
+    length: float = math.inf
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from casflex.scene.functions import Constant, Function
-from casflex.scene.muscles import MUSCLE_KINDS
+from casflex.scene.muscles import MUSCLE_KINDS, QUADRANTS
 
 __all__ = ["OsimPathPoint", "OsimMuscle", "OsimWrapObject", "read_muscles", "read_wrap_objects"]
 
@@ -50,7 +50,8 @@ class OsimPathPoint:
 class OsimWrapObject:
     """A wrap object of a body's (or the ground's) WrapObjectSet: its class ``kind`` (``WrapCylinder``,
     ``WrapSphere``, ...), body, orientation (3, 3) and origin (3,) in the body's frame, ``quadrant``, ``active``,
-    and a cylinder's ``radius`` (m; NaN for other kinds)."""
+    and a cylinder's ``radius`` and ``length`` (m; NaN for other kinds; OpenSim's default 1 m where a cylinder's
+    file gives none)."""
 
     name: str
     kind: str
@@ -60,6 +61,7 @@ class OsimWrapObject:
     quadrant: str
     active: bool
     radius: float = math.nan
+    length: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -187,9 +189,16 @@ def read_wrap_objects(r, rotation) -> dict[str, OsimWrapObject]:
             name = w.get("name", "")
             owner = f"body {body!r} wrap object {name!r}"
             zero = np.zeros(3)
-            radius = r.number(w, "radius", owner, math.nan) if w.find("radius") is not None else math.nan
+            cylinder = w.tag == "WrapCylinder"
+            radius = r.number(w, "radius", owner, 1.0 if cylinder else math.nan)
+            length = r.number(w, "length", owner, 1.0) if cylinder else math.nan
+            quadrant = (w.findtext("quadrant") or "all").strip()
+            if quadrant not in QUADRANTS:
+                raise ValueError(f"{r.source}: {owner}.quadrant: {quadrant!r} is none of OpenSim's (all, +x, -x, +y, "
+                                 "-y, +z, -z)")
+            if cylinder and not (radius > 0 and length > 0):
+                raise ValueError(f"{r.source}: {owner}: radius {radius:g} m, length {length:g} m: both must be > 0")
             out[name] = OsimWrapObject(name, w.tag, body, rotation(r.vector(w, "xyz_body_rotation", 3, owner, zero)),
-                                       r.vector(w, "translation", 3, owner, zero),
-                                       (w.findtext("quadrant") or "all").strip(),
-                                       (w.findtext("active") or "true").strip().lower() != "false", radius)
+                                       r.vector(w, "translation", 3, owner, zero), quadrant,
+                                       (w.findtext("active") or "true").strip().lower() != "false", radius, length)
     return out
