@@ -460,3 +460,23 @@ def test_a_table_larger_than_the_memory_can_read_is_refused_before_it_is_read(mo
         read_trc(path)
     monkeypatch.setattr(casflex.results, "memory_available", lambda: READ_FACTOR * size)
     assert read_trc(path).t.size > 0
+
+
+def test_write_trc_round_trips_read_trc_with_opensim_s_header(tmp_path):
+    from casflex.lab import read_c3d, read_trc, write_trc
+
+    m = read_c3d(LAB / "walking2_excerpt.c3d")[0]  # 44 markers, some missing in places, from t = 2.56 s
+    assert np.isnan(m.xyz).any()
+    back = read_trc(write_trc(tmp_path / "walk.trc", m))
+    assert back.labels == m.labels and (back.rate, back.units) == (250.0, "mm")
+    np.testing.assert_allclose(back.t, m.t, rtol=0, atol=1e-12)
+    assert (np.isnan(back.xyz) == np.isnan(m.xyz)).all()  # a missing sample stays missing (empty cells)
+    np.testing.assert_allclose(back.xyz, m.xyz, rtol=0, atol=1e-9)  # 10 significant digits of mm
+    head = (tmp_path / "walk.trc").read_text().splitlines()[:5]
+    assert head[0].split("\t")[:3] == ["PathFileType", "4", "(X/Y/Z)"]  # what OpenSim's TRC reader checks
+    assert dict(zip(head[1].split("\t"), head[2].split("\t"), strict=True))["NumMarkers"] == "44"
+    assert head[3].split("\t")[:3] == ["Frame#", "Time", "RTH1"] and head[4].split("\t")[2:5] == ["X1", "Y1", "Z1"]
+    in_m = read_trc(write_trc(tmp_path / "walk_m.trc", m, units="m"))
+    np.testing.assert_allclose(in_m.xyz, m.xyz, rtol=0, atol=1e-9)
+    with pytest.raises(ValueError, match="units: 'inch' is not a length unit"):
+        write_trc(tmp_path / "x.trc", m, units="inch")
