@@ -8,10 +8,11 @@ Not copied into casflex: the environment's BIOMECHZOO_HELP names a clone (or a b
 child: a static trial, a straight walk and a walk with a 90-degree turn, each with the child's mass, Vicon's gait
 events and Plug-in Gait's own outputs (joint centres; joint moments in N mm/kg).
 
-The study file this writes, as a lab would: one model for all (studies/_pig_osim.py: the planar gait2392 of
+The study file this writes, as a lab would: one model for all (the built-in ``pig``: the planar gait2392 of
 tests/data/lab with Plug-in Gait's markers and joint centres, the arms locked to the torso), each child scaled
-on its static trial (segments by the joint centres' and markers' distances, masses to the child's), an IK task
-file weighing the skin markers alike and leaving the joint centres out, ``plane = "auto"`` (the children walk
+on its static trial (segments by the joint centres' and markers' distances, masses to the child's, read from its
+C3D), the skin markers weighed alike and the joint centres left out of the fit (the model's weights),
+``plane = "auto"`` (the children walk
 the walkway both ways and stand facing its end), each trial's window the span of its marked gait events
 widened by WINDOW_MARGIN (the cycles from those events), the cut-off 6 Hz, the table and figures per kg. The
 turns are expected to be refused (a planar model cannot follow them: casflex.study.direction); the straight walks
@@ -38,7 +39,6 @@ import unittest
 from pathlib import Path
 
 import numpy as np
-from _pig_osim import CENTRES, pig_osim
 from _study import Banner, assert_checks, checks, cli, table, write_outputs
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -89,18 +89,11 @@ def _window(path: Path) -> list[float] | None:
 def write_study(data: Path, work: Path, subjects: tuple[str, ...] | None = None) -> Path:
     """The model, the task file and the study file in ``work`` (module docstring), of every child or of
     ``subjects``; the study file's path."""
-    names = pig_osim(ROOT / "tests" / "data" / "lab" / "hamner_subject02_planar.osim", work / "pig_planar.osim")
-    tasks = "".join(f'<IKMarkerTask name="{n}"><apply>true</apply><weight>1</weight></IKMarkerTask>'
-                    for n in names if n[1:] not in CENTRES)
-    (work / "pig_tasks_ik.xml").write_text(f'<?xml version="1.0"?>\n<IKTaskSet name="pig"><objects>{tasks}</objects>'
-                                           "</IKTaskSet>\n")
     lines = ['name = "biomechZoo sample study"', "", "[options]", 'plane = "auto"', 'vertical = "Z"',
-             'tasks = "pig_tasks_ik.xml"', "scale = true", "cutoff = 6.0", 'normalise = "mass"', ""]
+             "scale = true", "cutoff = 6.0", 'normalise = "mass"', ""]
     for folder in sorted(p for p in data.iterdir() if p.is_dir() and (subjects is None or p.name in subjects)):
         static = next((folder / "Static").glob("*.c3d"))
-        mass = float(_c3d(static)["PROCESSING"]["Bodymass"]["value"][0])
-        lines += ["[[subjects]]", f'name = "{folder.name}"', 'model = "pig_planar.osim"', f"mass = {mass:.1f}",
-                  f'static = "{static}"', ""]
+        lines += ["[[subjects]]", f'name = "{folder.name}"', 'model = "pig"', f'static = "{static}"', ""]
         for kind in ("Straight", "Turn"):
             for f in sorted((folder / kind).glob("*.c3d")):
                 window = _window(f)

@@ -1,0 +1,42 @@
+"""The marker sets labs use, by their usual names: what casflex's built-in models (``pig``, ``pig_psis``, ``cast``:
+``casflex/scene/builtin``, docs/lab.md) expect of a trial, and the other names a lab's software writes for the
+same point.
+
+Plug-in Gait (Vicon's conventional gait model) writes its joint centres as virtual points: Nexus 2 and pyCGM2 as
+``RHJC``, ``RKJC``, ``RAJC`` (and ``L...``), older Plug-in Gait only as its segments' origins, the femur's at the
+knee's centre (``RFEO``) and the tibia's at the ankle's (``RTIO``). The built-in models carry the joint centres
+under the first names, with weight 0: the calibration places and scales the segments on them where the static
+trial has them (between them they measure the thigh and shank, which skin markers do not), and the marker fit
+leaves them out (it follows the skin markers, as OpenSim's IK task files of these sets do).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from casflex.lab.tables import LabMarkers
+
+__all__ = ["JOINT_CENTRE_ALIASES", "joint_centres"]
+
+#: a joint centre's usual name -> the other names Plug-in Gait writes it under (module docstring)
+JOINT_CENTRE_ALIASES = {f"{s}{k}": tuple(f"{s}{a}" for a in v) for s in "RL"
+                        for k, v in {"KJC": ("FEO",), "AJC": ("TIO",)}.items()}
+
+
+def joint_centres(lab: LabMarkers, wanted: list[str] | tuple[str, ...]) -> tuple[LabMarkers, list[str]]:
+    """(the trial with each ``wanted`` joint centre it lacks taken from the first of its other names the trial has
+    (:data:`JOINT_CENTRE_ALIASES`), a report line per one taken); the trial as it is where none is."""
+    add, lines = {}, []
+    for name in wanted:
+        if name in lab.labels or name in add:
+            continue
+        alias = next((a for a in JOINT_CENTRE_ALIASES.get(name, ()) if a in lab.labels), None)
+        if alias is not None:
+            add[name] = lab.marker(alias)
+            lines.append(f"{lab.source}: joint centre {name} taken from {alias} (Plug-in Gait's segment origin there)")
+    if not add:
+        return lab, []
+    xyz = np.concatenate([lab.xyz, np.stack(list(add.values()), axis=1)], axis=1)
+    return dataclasses.replace(lab, labels=lab.labels + tuple(add), xyz=xyz), lines
