@@ -79,7 +79,7 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
                               "--quiet"], capture_output=True, text=True)
         wall = time.perf_counter() - t0
         summary = (work / "out" / "summary.txt").read_text() if (work / "out" / "summary.txt").is_file() else ""
-        rows = compare(study_file, work / "out" / "record") if summary else []
+        rows = compare(study_file, work / "out" / "record", clean_only=True) if summary else []
         figure = (work / "out" / "group.png").read_bytes() if (work / "out" / "group.png").is_file() else b""
         excerpt = "\n".join(study_file.read_text().splitlines()[:16]).replace(str(data), "...")
     n = sum(len(SESSIONS[s][1]) for s in (QUICK if quick else SESSIONS))
@@ -90,8 +90,8 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
         f"# A second public collection: BTKData's Plug-in Gait walks ({n} walks), by `casflex study`", "",
         banner.line(), "", f"`casflex study`: {wall:.0f} s wall. The study file's start (paths shortened):", "",
         "```toml", excerpt, "```", "", "## What ran, and what was refused", "", "```",
-        (summary or run.stderr).strip(), "```", "",
-        "## casflex against Plug-in Gait's own moments (per kg, per gait cycle; median and range)", "",
+        (summary or run.stderr).strip().replace(str(data), "..."), "```", "",
+        "## casflex against Plug-in Gait's own moments (per kg, per clean gait cycle; median and range)", "",
         *table(["joint", "cycles", "correlation", "peak ratio casflex / PiG"], _summary(rows)), "",
         *check_lines, "", *(["![the subjects' means over the gait cycle](../figures/labs_study.png)", ""]
                             if figure else [])])

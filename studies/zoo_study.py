@@ -73,15 +73,14 @@ def _c3d(path: Path) -> dict:
 
 
 def _window(path: Path) -> list[float] | None:
-    """[start, end] s: the marked gait events' span widened by WINDOW_MARGIN, in casflex's times (the C3D's
-    first frame at its own time), None without events."""
+    """[start, end] s: the marked gait events' span (as casflex reads them) widened by WINDOW_MARGIN, in casflex's
+    times (the C3D's first frame at its own time), None without events."""
     from casflex.lab import read_c3d
 
-    p = _c3d(path)
-    times = np.asarray(p.get("EVENT", {}).get("TIMES", {}).get("value", np.zeros((2, 0))))[1]
+    lab = read_c3d(str(path), plates=False)[0]
+    times, t = np.array([e[2] for e in lab.events]), lab.t
     if times.size == 0:
         return None
-    t = read_c3d(str(path), plates=False)[0].t
     return [round(float(max(t[0], times.min() - WINDOW_MARGIN)), 3),
             round(float(min(t[-1], times.max() + WINDOW_MARGIN)), 3)]
 
@@ -121,8 +120,9 @@ def _pig_moment(path: str, point: str) -> np.ndarray:
     return np.where(x == 0.0, np.nan, x)
 
 
-def compare(study_file: Path, record: Path) -> list[dict]:
-    """Per straight walk, load and cycle: casflex against Plug-in Gait (module docstring)."""
+def compare(study_file: Path, record: Path, clean_only: bool = False) -> list[dict]:
+    """Per straight walk, load and cycle: casflex against Plug-in Gait (module docstring); ``clean_only``: the
+    cycles whose stance is wholly on the foot's plate (loads.csv's clean flag) alone."""
     from casflex.lab import read_c3d
     from casflex.study.events import normalise
     from casflex.study.study_file import load_study
@@ -137,7 +137,10 @@ def compare(study_file: Path, record: Path) -> list[dict]:
         time_axis = read_c3d(t.markers, plates=False)[0].t
         for name, (point, sign) in PIG.items():
             ld = rec["loads"].get(name)
-            for cyc, val in zip(ld["cycles"], ld["value"], strict=True) if ld else ():
+            flags = (ld.get("clean") or [True] * len(ld["cycles"])) if ld else ()
+            for cyc, val, ok_cycle in zip(ld["cycles"], ld["value"], flags, strict=True) if ld else ():
+                if clean_only and not ok_cycle:
+                    continue
                 pig = sign * normalise(time_axis, _pig_moment(t.markers, point), *cyc)
                 ours = np.asarray(val) / s.mass
                 ok = np.isfinite(pig)

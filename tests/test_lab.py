@@ -480,3 +480,20 @@ def test_write_trc_round_trips_read_trc_with_opensim_s_header(tmp_path):
     np.testing.assert_allclose(in_m.xyz, m.xyz, rtol=0, atol=1e-9)
     with pytest.raises(ValueError, match="units: 'inch' is not a length unit"):
         write_trc(tmp_path / "x.trc", m, units="inch")
+
+
+def test_c3d_events_stored_as_one_list_of_minute_second_pairs_are_read(tmp_path):
+    # BTKData's Plug-in Gait walks hold EVENT:TIMES as one list (ezc3d reads it flat): their events were dropped,
+    # and the gait cycles taken from the heel markers without a word
+    ezc3d = pytest.importorskip("ezc3d")
+    from casflex.lab import read_c3d
+
+    c = ezc3d.c3d(str(LAB / "walking2_excerpt.c3d"))
+    c.add_parameter("EVENT", "USED", [2])
+    c.add_parameter("EVENT", "CONTEXTS", ["Right", "Left"])
+    c.add_parameter("EVENT", "LABELS", ["Foot Strike", "Foot Off"])
+    c.add_parameter("EVENT", "TIMES", [0.0, 3.1, 0.0, 2.7])  # (minutes, seconds) pairs
+    c.write(str(tmp_path / "events.c3d"))
+    events = read_c3d(tmp_path / "events.c3d", plates=False)[0].events
+    assert [(cx, lb) for cx, lb, _ in events] == [("Left", "Foot Off"), ("Right", "Foot Strike")]  # by time
+    np.testing.assert_allclose([e[2] for e in events], [2.7, 3.1], atol=1e-6)  # float32 in the file

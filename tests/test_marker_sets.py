@@ -70,14 +70,15 @@ def test_a_trial_without_the_trunk_s_markers_runs_with_the_trunk_locked():
 
 def test_plug_in_gait_s_segment_origins_stand_for_the_joint_centres_in_the_calibration():
     from casflex.inverse.calibrate import calibrate
-    from casflex.lab.marker_sets import joint_centres
+    from casflex.lab.marker_sets import JOINT_CENTRE_ALIASES, joint_centres
 
     sc = load_scene("pig")
     knee = next(m for m in sc.markers if m.name == "RKJC")
     shifted = (knee.x + 0.01, knee.y, 0.0)  # the subject's knee centre 10 mm off the model's
     lab = _static(sc, [*(m.name for m in sc.markers if m.weight > 0), "RFEO"], {"RFEO": shifted})
     taken, lines = joint_centres(lab, [m.name for m in sc.markers])
-    assert lines == ["static.trc: joint centre RKJC taken from RFEO (Plug-in Gait's segment origin there)"]
+    assert lines == ["static.trc: joint centre RKJC taken from RFEO (Plug-in Gait's segment point there)"]
+    assert JOINT_CENTRE_ALIASES["LHJC"] == ("LFEP",) and JOINT_CENTRE_ALIASES["RAJC"] == ("RTIO",)
     np.testing.assert_array_equal(taken.marker("RKJC"), lab.marker("RFEO"))
     out, report = calibrate(sc, lab, "X,Y")
     placed = next(m for m in out.markers if m.name == "RKJC")

@@ -137,6 +137,8 @@ def _undecided_at(tree: KinematicTree, z: np.ndarray, ym: np.ndarray) -> str:
     free = [k for k in range(tree.n) if (np.abs(null[:, k]) > 1e-6).any()]
     lab = {c.scene_coordinate(): c.name for c in tree.model.scene.coordinates}
     segments = dict.fromkeys(tree.model.node_names[tree.entry[_segment_of(tree, k)]] for k in free)
+    if not free:  # within the fit's tolerance only: no coordinate stands out
+        return "the markers' Jacobian is singular at the static pose"
     return (f"{[lab.get(tree.names[k], tree.names[k]) for k in free]} free, of the segment"
             f"{'s' * (len(segments) > 1)} {', '.join(repr(n) for n in segments)}")
 

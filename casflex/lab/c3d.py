@@ -383,9 +383,12 @@ def _markers(c, where: str) -> LabMarkers:
 def _events(c) -> tuple[tuple[str, str, float], ...]:
     """The EVENT section's (context, label, time s), by time: the C3D standard's TIMES are (minutes, seconds) from
     the recording's start, the first frame's time being (first - 1) / rate, as :func:`_t0`'s (Vicon Nexus writes
-    minutes 0). Empty where the file marks none or its section is inconsistent."""
+    minutes 0; some files, BTKData's Plug-in Gait walks, hold them as one list of (minutes, seconds) pairs, which
+    ezc3d reads flat). Empty where the file marks none or its section is inconsistent."""
     labels, contexts = _param(c, "EVENT", "LABELS", []), _param(c, "EVENT", "CONTEXTS", [])
     times = np.asarray(_param(c, "EVENT", "TIMES", np.zeros((2, 0))), dtype=float)
+    if times.ndim == 1 and times.size == 2 * len(labels):  # (minutes, seconds) pairs, as some files store them
+        times = times.reshape(-1, 2).T
     if times.ndim != 2 or times.shape[0] != 2 or not len(labels) == len(contexts) == times.shape[1]:
         return ()
     secs = 60.0 * times[0] + times[1]

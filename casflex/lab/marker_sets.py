@@ -4,7 +4,10 @@ same point.
 
 Plug-in Gait (Vicon's conventional gait model) writes its joint centres as virtual points: Nexus 2 and pyCGM2 as
 ``RHJC``, ``RKJC``, ``RAJC`` (and ``L...``), older Plug-in Gait only as its segments' origins, the femur's at the
-knee's centre (``RFEO``) and the tibia's at the ankle's (``RTIO``). The built-in models carry the joint centres
+knee's centre (``RFEO``) and the tibia's at the ankle's (``RTIO``), each segment's axes as points at the
+segment's length from its origin: the femur's proximal one (``RFEP``) at the hip's centre (BTKData's Plug-in Gait
+statics: the tibia's proximal point 20-21 mm from the femur's origin, the two centres of one knee; the same
+within that for the hip). The built-in models carry the joint centres
 under the first names, with weight 0: the calibration places and scales the segments on them where the static
 trial has them (between them they measure the thigh and shank, which skin markers do not), and the marker fit
 leaves them out (it follows the skin markers, as OpenSim's IK task files of these sets do).
@@ -22,7 +25,7 @@ __all__ = ["JOINT_CENTRE_ALIASES", "joint_centres"]
 
 #: a joint centre's usual name -> the other names Plug-in Gait writes it under (module docstring)
 JOINT_CENTRE_ALIASES = {f"{s}{k}": tuple(f"{s}{a}" for a in v) for s in "RL"
-                        for k, v in {"KJC": ("FEO",), "AJC": ("TIO",)}.items()}
+                        for k, v in {"HJC": ("FEP",), "KJC": ("FEO",), "AJC": ("TIO",)}.items()}
 
 
 def joint_centres(lab: LabMarkers, wanted: list[str] | tuple[str, ...]) -> tuple[LabMarkers, list[str]]:
@@ -35,7 +38,7 @@ def joint_centres(lab: LabMarkers, wanted: list[str] | tuple[str, ...]) -> tuple
         alias = next((a for a in JOINT_CENTRE_ALIASES.get(name, ()) if a in lab.labels), None)
         if alias is not None:
             add[name] = lab.marker(alias)
-            lines.append(f"{lab.source}: joint centre {name} taken from {alias} (Plug-in Gait's segment origin there)")
+            lines.append(f"{lab.source}: joint centre {name} taken from {alias} (Plug-in Gait's segment point there)")
     if not add:
         return lab, []
     xyz = np.concatenate([lab.xyz, np.stack(list(add.values()), axis=1)], axis=1)
