@@ -65,13 +65,6 @@ def _data(work: Path, quick: bool) -> Path:
     return work / RAW
 
 
-def _c3d(path: Path) -> dict:
-    import ezc3d
-
-    c = ezc3d.c3d(str(path))
-    return c["parameters"]
-
-
 def _window(path: Path) -> list[float] | None:
     """[start, end] s: the marked gait events' span (as casflex reads them) widened by WINDOW_MARGIN, in casflex's
     times (the C3D's first frame at its own time), None without events."""
