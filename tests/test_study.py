@@ -520,3 +520,18 @@ def test_a_subject_s_own_task_file_weighs_its_trials(folder):
     path.write_text(path.read_text().replace('tasks = "other_tasks.xml"', 'tasks = "none.xml"'))
     with pytest.raises(StudyError, match=r"subjects\[1\]\.tasks: none.xml: no such file"):
         load_study(str(path))
+
+
+def test_a_c3d_study_on_a_built_in_marker_set_model_says_where_its_mass_came_from(tmp_path, capsys):
+    # walking2.c3d's excerpt (a CAST-type set with its joint centres) on the built-in cast model, no mass in the
+    # study file: the C3D's PROCESSING:Bodymass, said in summary.txt
+    _c3d_with_mass(tmp_path, "walk.c3d", 61.5)
+    path = tmp_path / "study.toml"
+    path.write_text('name = "cast"\n[options]\nplane = "X,Z"\nvertical = "Z"\nnormalise = "mass"\n'
+                    '[[subjects]]\nname = "s"\nmodel = "cast"\nstatic = "walk.c3d"\nstatic_window = [2.56, 2.58]\n'
+                    '[[subjects.trials]]\nname = "walk"\nmarkers = "walk.c3d"\n')
+    code = main(["study", str(path), "--out", str(tmp_path / "out"), "--workers", "1", "--quiet"])
+    summary = (tmp_path / "out" / "summary.txt").read_text()
+    assert code == 0, summary
+    assert "  s: mass 61.5 kg read from walk.c3d (PROCESSING:BODYMASS)" in summary.splitlines()
+    assert "1 of 1 trial(s) done" in summary
