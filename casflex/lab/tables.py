@@ -322,7 +322,8 @@ def write_trc(path: str | os.PathLike[str], markers: LabMarkers, *, units: str |
     """Write ``markers`` as a TRC file atomically, in OpenSim's form (what its IK and scale tools and
     :func:`read_trc` read): the header's DataRate, CameraRate, NumFrames, NumMarkers, Units, OrigDataRate,
     OrigDataStartFrame and OrigNumFrames, the labels each over its X, Y, Z columns, then one row a frame
-    (Frame# from 1, Time s), a missing sample (NaN) as empty cells. ``units`` (mm, cm or m; default the markers'
+    (Frame# from 1, Time s), a missing sample as NaN (OpenSim's reader drops a row's trailing empty cells, and
+    then refuses the row). ``units`` (mm, cm or m; default the markers'
     own, mm where they say none) are the file's; positions are written to 10 significant digits, so
     ``read_trc(write_trc(p, m))`` gives m back to 1e-9 of its size. Returns the path. A rate the times do not
     give (NaN) is written as the times' mean step's."""
@@ -344,6 +345,6 @@ def write_trc(path: str | os.PathLike[str], markers: LabMarkers, *, units: str |
     buf = io.StringIO()
     xyz = np.asarray(markers.xyz, dtype=float).reshape(n, 3 * k) / UNITS[units]
     for i in range(n):
-        cells = ("" if math.isnan(v) else f"{v:.10g}" for v in xyz[i])
+        cells = ("NaN" if math.isnan(v) else f"{v:.10g}" for v in xyz[i])
         buf.write(f"{i + 1}\t{t[i]:.10g}\t" + "\t".join(cells) + "\n")
     return atomic_write_text(path, "\n".join(head) + "\n" + buf.getvalue())
