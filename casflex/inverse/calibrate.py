@@ -152,7 +152,7 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
     from casflex.inverse.locking import lock_unmarked
     from casflex.lab import LabMarkers, Plane, markers_in_plane
     from casflex.lab.checks import check_markers, check_scale, check_static
-    from casflex.lab.marker_sets import joint_centres
+    from casflex.lab.marker_sets import JOINT_CENTRES, joint_centres
     from casflex.scene import Scene, load_scene
 
     if mass is not None and not mass > 0:
@@ -161,6 +161,9 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
     lab = static if isinstance(static, LabMarkers) else read_markers(static)[0]
     scene = scene if isinstance(scene, Scene) else load_scene(scene)
     lab, early = joint_centres(lab, [m.lab_label for m in scene.markers])
+    centres = {m.name for m in scene.markers if m.weight == 0 and m.lab_label in JOINT_CENTRES}
+    scene = dataclasses.replace(scene, markers=tuple(  # the joint centres place the segments here (weight 1)
+        dataclasses.replace(m, weight=1.0) if m.name in centres else m for m in scene.markers))
     scene, locked = lock_unmarked(scene, lab.labels, f"the static trial {lab.source}")
     early += locked
     model = inverse_model(scene, root)
@@ -215,6 +218,8 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
         moved.append(float(np.hypot(p[0] - m.x, p[1] - m.y)))
         markers.append(dataclasses.replace(m, x=float(p[0]), y=float(p[1])))
     out = dataclasses.replace(sc, markers=tuple(markers))
+    out = dataclasses.replace(out, markers=tuple(dataclasses.replace(m, weight=0.0) if m.name in centres else m
+                                                 for m in out.markers))  # the marker fit's weights again
     after_model = inverse_model(out, root)
     y_after = np.array(kinematic_tree(after_model, root).marker_fit(z)[0]).reshape(-1, 2)
     ok = np.isfinite(ym).all(axis=1)

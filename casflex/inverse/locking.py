@@ -52,7 +52,7 @@ def lock_unmarked(scene, recorded: Iterable[str], source: str = "the trial") -> 
         if m.weight > 0:
             marks.setdefault(node_of.get(m.on, m.on), []).append(m)
     below = _subtrees(scene)
-    locked, lines = set(), []
+    locked, riding, lines = set(), set(), []
     for j in scene.joints:
         if j.kind != "hinge" or len(j.nodes) != 2 or j.nodes[1] in locked:
             continue
@@ -62,6 +62,7 @@ def lock_unmarked(scene, recorded: Iterable[str], source: str = "the trial") -> 
             continue
         hinges = [h for h in scene.joints if h.kind == "hinge" and len(h.nodes) == 2 and h.nodes[1] in carried]
         locked |= {h.nodes[1] for h in hinges}
+        riding |= carried
         coords = [c.name for c in scene.coordinates if c.of in {h.name for h in hinges}]
         lines.append(f"segment {j.nodes[1]!r}: {source} has none of its markers {[m.lab_label for m in on]}: its "
                      f"joint{'s' * (len(hinges) > 1)} {', '.join(repr(h.name) for h in hinges)}"
@@ -72,7 +73,7 @@ def lock_unmarked(scene, recorded: Iterable[str], source: str = "the trial") -> 
     welded = tuple(dataclasses.replace(j, kind="weld", axis=None, shift_x=None, shift_y=None)
                    if j.kind == "hinge" and len(j.nodes) == 2 and j.nodes[1] in locked else j for j in scene.joints)
     gone = {j.name for j, w in zip(scene.joints, welded, strict=True) if w is not j}
-    lost = {m.name for n in locked for m in marks.get(n, ())}  # the trial has none of them: nothing to fit
+    lost = {m.name for n in riding for m in marks.get(n, ())}  # the trial has none of them: nothing to fit
     return dataclasses.replace(scene, joints=welded,
                                coordinates=tuple(c for c in scene.coordinates if c.of not in gone),
                                markers=tuple(m for m in scene.markers if m.name not in lost)), lines

@@ -8,9 +8,10 @@ knee's centre (``RFEO``) and the tibia's at the ankle's (``RTIO``), each segment
 segment's length from its origin: the femur's proximal one (``RFEP``) at the hip's centre (BTKData's Plug-in Gait
 statics: the tibia's proximal point 20-21 mm from the femur's origin, the two centres of one knee; the same
 within that for the hip). The built-in models carry the joint centres
-under the first names, with weight 0: the calibration places and scales the segments on them where the static
-trial has them (between them they measure the thigh and shank, which skin markers do not), and the marker fit
-leaves them out (it follows the skin markers, as OpenSim's IK task files of these sets do).
+under the first names, with weight 0: where the static trial has them, the calibration fits the static pose to them
+(weight 1 there) and scales the segments on them (between them they measure the thigh and shank, which skin
+markers do not); the marker fit leaves them out (it follows the skin markers, as OpenSim's IK task files of these
+sets do).
 """
 
 from __future__ import annotations
@@ -21,7 +22,11 @@ import numpy as np
 
 from casflex.lab.tables import LabMarkers
 
-__all__ = ["JOINT_CENTRE_ALIASES", "joint_centres"]
+__all__ = ["JOINT_CENTRES", "JOINT_CENTRE_ALIASES", "joint_centres"]
+
+#: the joint centres' usual names (module docstring): a model's markers of these names and weight 0 are the
+#: calibration's (casflex.inverse.calibrate fits the static pose to them, weighed as the skin markers)
+JOINT_CENTRES = tuple(f"{s}{k}" for s in "RL" for k in ("HJC", "KJC", "AJC"))
 
 #: a joint centre's usual name -> the other names Plug-in Gait writes it under (module docstring)
 JOINT_CENTRE_ALIASES = {f"{s}{k}": tuple(f"{s}{a}" for a in v) for s in "RL"
