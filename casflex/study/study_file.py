@@ -29,7 +29,8 @@ passive = []                   # hinges whose net moment a spring-damper is fitt
 
 [[subjects]]
 name = "s02"
-model = "subject02.osim"       # an OpenSim model, a scene TOML or a built-in scene
+model = "subject02.osim"       # an OpenSim model, a scene TOML or a built-in scene (the marker sets' pig,
+                               # pig_psis, cast: docs/lab.md)
 mass = 72.8                    # kg (optional: the model's masses scaled to it; where not given, the
                                # C3D's own, PROCESSING:Bodymass as Vicon writes it: casflex.lab.c3d.BODY_MASS)
 static = "s02_static.trc"      # optional: the calibration trial
