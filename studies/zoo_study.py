@@ -8,10 +8,11 @@ Not copied into casflex: the environment's BIOMECHZOO_HELP names a clone (or a b
 child: a static trial, a straight walk and a walk with a 90-degree turn, each with the child's mass, Vicon's gait
 events and Plug-in Gait's own outputs (joint centres; joint moments in N mm/kg).
 
-The study file this writes, as a lab would: one model for all (studies/_pig_osim.py: the planar gait2392 of
+The study file this writes, as a lab would: one model for all (the built-in ``pig``: the planar gait2392 of
 tests/data/lab with Plug-in Gait's markers and joint centres, the arms locked to the torso), each child scaled
-on its static trial (segments by the joint centres' and markers' distances, masses to the child's), an IK task
-file weighing the skin markers alike and leaving the joint centres out, ``plane = "auto"`` (the children walk
+on its static trial (segments by the joint centres' and markers' distances, masses to the child's, read from its
+C3D), the skin markers weighed alike and the joint centres left out of the fit (the model's weights),
+``plane = "auto"`` (the children walk
 the walkway both ways and stand facing its end), each trial's window the span of its marked gait events
 widened by WINDOW_MARGIN (the cycles from those events), the cut-off 6 Hz, the table and figures per kg. The
 turns are expected to be refused (a planar model cannot follow them: casflex.study.direction); the straight walks
@@ -38,7 +39,6 @@ import unittest
 from pathlib import Path
 
 import numpy as np
-from _pig_osim import CENTRES, pig_osim
 from _study import Banner, assert_checks, checks, cli, table, write_outputs
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -65,23 +65,15 @@ def _data(work: Path, quick: bool) -> Path:
     return work / RAW
 
 
-def _c3d(path: Path) -> dict:
-    import ezc3d
-
-    c = ezc3d.c3d(str(path))
-    return c["parameters"]
-
-
 def _window(path: Path) -> list[float] | None:
-    """[start, end] s: the marked gait events' span widened by WINDOW_MARGIN, in casflex's times (the C3D's
-    first frame at its own time), None without events."""
+    """[start, end] s: the marked gait events' span (as casflex reads them) widened by WINDOW_MARGIN, in casflex's
+    times (the C3D's first frame at its own time), None without events."""
     from casflex.lab import read_c3d
 
-    p = _c3d(path)
-    times = np.asarray(p.get("EVENT", {}).get("TIMES", {}).get("value", np.zeros((2, 0))))[1]
+    lab = read_c3d(str(path), plates=False)[0]
+    times, t = np.array([e[2] for e in lab.events]), lab.t
     if times.size == 0:
         return None
-    t = read_c3d(str(path), plates=False)[0].t
     return [round(float(max(t[0], times.min() - WINDOW_MARGIN)), 3),
             round(float(min(t[-1], times.max() + WINDOW_MARGIN)), 3)]
 
@@ -89,18 +81,11 @@ def _window(path: Path) -> list[float] | None:
 def write_study(data: Path, work: Path, subjects: tuple[str, ...] | None = None) -> Path:
     """The model, the task file and the study file in ``work`` (module docstring), of every child or of
     ``subjects``; the study file's path."""
-    names = pig_osim(ROOT / "tests" / "data" / "lab" / "hamner_subject02_planar.osim", work / "pig_planar.osim")
-    tasks = "".join(f'<IKMarkerTask name="{n}"><apply>true</apply><weight>1</weight></IKMarkerTask>'
-                    for n in names if n[1:] not in CENTRES)
-    (work / "pig_tasks_ik.xml").write_text(f'<?xml version="1.0"?>\n<IKTaskSet name="pig"><objects>{tasks}</objects>'
-                                           "</IKTaskSet>\n")
     lines = ['name = "biomechZoo sample study"', "", "[options]", 'plane = "auto"', 'vertical = "Z"',
-             'tasks = "pig_tasks_ik.xml"', "scale = true", "cutoff = 6.0", 'normalise = "mass"', ""]
+             "scale = true", "cutoff = 6.0", 'normalise = "mass"', ""]
     for folder in sorted(p for p in data.iterdir() if p.is_dir() and (subjects is None or p.name in subjects)):
         static = next((folder / "Static").glob("*.c3d"))
-        mass = float(_c3d(static)["PROCESSING"]["Bodymass"]["value"][0])
-        lines += ["[[subjects]]", f'name = "{folder.name}"', 'model = "pig_planar.osim"', f"mass = {mass:.1f}",
-                  f'static = "{static}"', ""]
+        lines += ["[[subjects]]", f'name = "{folder.name}"', 'model = "pig"', f'static = "{static}"', ""]
         for kind in ("Straight", "Turn"):
             for f in sorted((folder / kind).glob("*.c3d")):
                 window = _window(f)
@@ -128,8 +113,9 @@ def _pig_moment(path: str, point: str) -> np.ndarray:
     return np.where(x == 0.0, np.nan, x)
 
 
-def compare(study_file: Path, record: Path) -> list[dict]:
-    """Per straight walk, load and cycle: casflex against Plug-in Gait (module docstring)."""
+def compare(study_file: Path, record: Path, clean_only: bool = False) -> list[dict]:
+    """Per straight walk, load and cycle: casflex against Plug-in Gait (module docstring); ``clean_only``: the
+    cycles whose stance is wholly on the foot's plate (loads.csv's clean flag) alone."""
     from casflex.lab import read_c3d
     from casflex.study.events import normalise
     from casflex.study.study_file import load_study
@@ -144,7 +130,10 @@ def compare(study_file: Path, record: Path) -> list[dict]:
         time_axis = read_c3d(t.markers, plates=False)[0].t
         for name, (point, sign) in PIG.items():
             ld = rec["loads"].get(name)
-            for cyc, val in zip(ld["cycles"], ld["value"], strict=True) if ld else ():
+            flags = (ld.get("clean") or [True] * len(ld["cycles"])) if ld else ()
+            for cyc, val, ok_cycle in zip(ld["cycles"], ld["value"], flags, strict=True) if ld else ():
+                if clean_only and not ok_cycle:
+                    continue
                 pig = sign * normalise(time_axis, _pig_moment(t.markers, point), *cyc)
                 ours = np.asarray(val) / s.mass
                 ok = np.isfinite(pig)

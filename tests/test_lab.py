@@ -460,3 +460,62 @@ def test_a_table_larger_than_the_memory_can_read_is_refused_before_it_is_read(mo
         read_trc(path)
     monkeypatch.setattr(casflex.results, "memory_available", lambda: READ_FACTOR * size)
     assert read_trc(path).t.size > 0
+
+
+def test_write_trc_round_trips_read_trc_with_opensim_s_header(tmp_path):
+    from casflex.lab import read_c3d, read_trc, write_trc
+
+    m = read_c3d(LAB / "walking2_excerpt.c3d")[0]  # 44 markers, some missing in places, from t = 2.56 s
+    assert np.isnan(m.xyz).any()
+    back = read_trc(write_trc(tmp_path / "walk.trc", m))
+    assert back.labels == m.labels and (back.rate, back.units) == (250.0, "mm")
+    np.testing.assert_allclose(back.t, m.t, rtol=0, atol=1e-12)
+    assert (np.isnan(back.xyz) == np.isnan(m.xyz)).all()  # a missing sample stays missing (NaN)
+    np.testing.assert_allclose(back.xyz, m.xyz, rtol=0, atol=1e-9)  # 10 significant digits of mm
+    head = (tmp_path / "walk.trc").read_text().splitlines()[:5]
+    assert head[0].split("\t")[:3] == ["PathFileType", "4", "(X/Y/Z)"]  # what OpenSim's TRC reader checks
+    assert dict(zip(head[1].split("\t"), head[2].split("\t"), strict=True))["NumMarkers"] == "44"
+    assert head[3].split("\t")[:3] == ["Frame#", "Time", "RTH1"] and head[4].split("\t")[2:5] == ["X1", "Y1", "Z1"]
+    in_m = read_trc(write_trc(tmp_path / "walk_m.trc", m, units="m"))
+    np.testing.assert_allclose(in_m.xyz, m.xyz, rtol=0, atol=1e-9)
+    with pytest.raises(ValueError, match="units: 'inch' is not a length unit"):
+        write_trc(tmp_path / "x.trc", m, units="inch")
+
+
+def test_c3d_events_stored_as_one_list_of_minute_second_pairs_are_read(tmp_path):
+    # BTKData's Plug-in Gait walks hold EVENT:TIMES as one list (ezc3d reads it flat): their events were dropped,
+    # and the gait cycles taken from the heel markers without a word
+    ezc3d = pytest.importorskip("ezc3d")
+    from casflex.lab import read_c3d
+
+    c = ezc3d.c3d(str(LAB / "walking2_excerpt.c3d"))
+    c.add_parameter("EVENT", "USED", [2])
+    c.add_parameter("EVENT", "CONTEXTS", ["Right", "Left"])
+    c.add_parameter("EVENT", "LABELS", ["Foot Strike", "Foot Off"])
+    c.add_parameter("EVENT", "TIMES", [0.0, 3.1, 0.0, 2.7])  # (minutes, seconds) pairs
+    c.write(str(tmp_path / "events.c3d"))
+    events = read_c3d(tmp_path / "events.c3d", plates=False)[0].events
+    assert [(cx, lb) for cx, lb, _ in events] == [("Left", "Foot Off"), ("Right", "Foot Strike")]  # by time
+    np.testing.assert_allclose([e[2] for e in events], [2.7, 3.1], atol=1e-6)  # float32 in the file
+
+
+@pytest.mark.skipif(__import__("importlib").util.find_spec("opensim") is None, reason="OpenSim is not installed")
+def test_write_trc_is_read_by_opensim(tmp_path):
+    # a missing marker at a row's end written as empty cells made OpenSim's reader refuse the row ("Unexpected
+    # number of columns"); OpenSim runs in its own process (it cannot share one with CasADi)
+    import json
+    import subprocess
+
+    from casflex.lab import read_c3d, write_trc
+
+    m = read_c3d(LAB / "walking2_excerpt.c3d")[0]
+    assert np.isnan(m.xyz[203, -1]).all()  # the last marker missing in that frame
+    write_trc(tmp_path / "walk.trc", m)
+    code = ("import json, sys, opensim as o; t = o.TimeSeriesTableVec3(sys.argv[1]); r = t.getRowAtIndex(0); "
+            "print(json.dumps([t.getNumRows(), list(t.getColumnLabels()), t.getIndependentColumn()[0], "
+            "[r[0][k] for k in range(3)], t.getTableMetaDataAsString('Units')]))")
+    out = subprocess.run([sys.executable, "-c", code, str(tmp_path / "walk.trc")], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr[-500:]
+    n, labels, t0, first, units = json.loads(out.stdout)
+    assert (n, labels, units) == (m.t.size, list(m.labels), "mm")
+    assert abs(t0 - m.t[0]) < 1e-9 and np.allclose(first, 1e3 * m.xyz[0, 0], atol=1e-6)

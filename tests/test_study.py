@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 import shutil
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -487,3 +488,113 @@ def test_a_c3d_trial_s_plate_prefix_is_checked_before_any_work(tmp_path, capsys)
     with pytest.raises(StudyError, match=r"subjects\[0\]\.trials\[0\]\.plates\.calcn_r: walking2_excerpt.c3d: no "
                                          r"plate '2_ground_'.*the plates there are \['1_ground_', 'ground_'\]"):
         load_study(str(path))
+
+
+def _c3d_with_mass(folder: Path, name: str, mass: float | None) -> Path:
+    """walking2_excerpt.c3d (tests/data/lab) with the subject's mass as Vicon's Nexus writes it
+    (PROCESSING:Bodymass), or as it is (None)."""
+    import ezc3d
+
+    c = ezc3d.c3d(str(LAB / "walking2_excerpt.c3d"))
+    if mass is not None:
+        c.add_parameter("PROCESSING", "Bodymass", [mass])
+    c.write(str(folder / name))
+    return folder / name
+
+
+C3D_STUDY = """name = "mass from the C3D"
+[options]
+plane = "X,Y"
+normalise = "mass"
+[[subjects]]
+name = "s"
+model = "hamner_subject02_planar.osim"
+{subject}
+[[subjects.trials]]
+name = "walk"
+markers = "walk.c3d"
+"""
+
+
+def test_a_subject_s_mass_is_read_from_its_c3d_where_the_study_file_gives_none(tmp_path):
+    # normalise = "mass" without a mass refused the study; the lab's C3D holds it (Nexus: PROCESSING:Bodymass)
+    shutil.copy(LAB / "hamner_subject02_planar.osim", tmp_path)
+    _c3d_with_mass(tmp_path, "walk.c3d", 61.5)
+    path = tmp_path / "study.toml"
+    path.write_text(C3D_STUDY.replace("{subject}", ""))
+    s = load_study(str(path)).subjects[0]
+    assert (s.mass, s.mass_from) == (61.5, "walk.c3d (PROCESSING:BODYMASS)")
+    path.write_text(C3D_STUDY.replace("{subject}", "mass = 70.0"))  # the study file's own wins, and says so
+    assert (load_study(str(path)).subjects[0].mass, load_study(str(path)).subjects[0].mass_from) == (70.0, None)
+    _c3d_with_mass(tmp_path, "static.c3d", 66.0)  # two files of one subject that disagree: refused, both named
+    path.write_text(C3D_STUDY.replace("{subject}", 'static = "static.c3d"'))
+    with pytest.raises(StudyError, match=r"subjects\[0\]\.mass: not given, and the subject's C3D files disagree: "
+                                         r"66 kg in static.c3d \(PROCESSING:BODYMASS\), 61.5 kg in walk.c3d"):
+        load_study(str(path))
+    _c3d_with_mass(tmp_path, "walk.c3d", None)  # none anywhere: the refusal says where it looked
+    path.write_text(C3D_STUDY.replace("{subject}", ""))
+    with pytest.raises(StudyError, match=r"subjects\[0\]\.mass: needed by options.normalise = \"mass\" \(kg\), and "
+                                         "none of the subject's C3D files holds it"):
+        load_study(str(path))
+
+
+def test_the_calibration_says_where_the_mass_came_from():
+    from casflex.study.runner import calibrate_run
+
+    out = calibrate_run(model="hamner_leg", static=None, plane="X,Y", root="pelvis", calibrate=True, scale=False,
+                        mass=61.5, mass_from="walk.c3d (PROCESSING:BODYMASS)")
+    assert "the subject's mass 61.5 kg read from walk.c3d (PROCESSING:BODYMASS)" in out["report"][0]
+
+
+def test_a_static_trial_s_window_averages_only_its_frames(tmp_path):
+    from casflex.study.runner import calibrate_run
+
+    static = str(LAB / "hamner_static_excerpt.trc")  # 30 frames at 60 Hz from t = 0
+    kw = dict(model="hamner_leg", static=static, plane="X,Y", root="pelvis", calibrate=True, scale=False, mass=None)
+    assert "30 frames averaged" in "\n".join(calibrate_run(**kw)["report"])
+    assert "11 frames averaged" in "\n".join(calibrate_run(**kw, static_window=(0.1, 0.27))["report"])
+    shutil.copy(LAB / "hamner_subject02_planar.osim", tmp_path)
+    shutil.copy(LAB / "hamner_static_excerpt.trc", tmp_path)
+    _c3d_with_mass(tmp_path, "walk.c3d", 61.5)
+    path = tmp_path / "study.toml"
+    for window, said in (("[0.1, 0.27]", None), ("[0.27, 0.1]", r"subjects\[0\]\.static_window: expected \[start, "),
+                         ("[0.1, 9.0]", r"subjects\[0\]\.static_window: 0.1..9 s is not within the static trial's "
+                                        r"times 0..0.483")):
+        path.write_text(C3D_STUDY.replace("{subject}", f'static = "hamner_static_excerpt.trc"\n'
+                                                       f"static_window = {window}"))
+        if said is None:
+            assert load_study(str(path)).subjects[0].static_window == (0.1, 0.27)
+        else:
+            with pytest.raises(StudyError, match=said):
+                load_study(str(path))
+
+
+def test_a_subject_s_own_task_file_weighs_its_trials(folder):
+    from casflex.study.runner import _plan
+
+    (folder / "other_tasks.xml").write_text((folder / "hamner_tasks_ik.xml").read_text())
+    path = write(folder)
+    path.write_text(path.read_text().replace('mass = 80.0', 'mass = 80.0\ntasks = "other_tasks.xml"'))
+    study = load_study(str(path))
+    assert study.subjects[1].tasks == str(folder / "other_tasks.xml")
+    plan = _plan(study, {"s02": SimpleNamespace(scene=""), "s02_again": SimpleNamespace(scene="")})
+    assert plan[("s02", "run")].kwargs["options"].tasks == str(folder / "hamner_tasks_ik.xml")
+    assert plan[("s02_again", "run")].kwargs["options"].tasks == str(folder / "other_tasks.xml")
+    path.write_text(path.read_text().replace('tasks = "other_tasks.xml"', 'tasks = "none.xml"'))
+    with pytest.raises(StudyError, match=r"subjects\[1\]\.tasks: none.xml: no such file"):
+        load_study(str(path))
+
+
+def test_a_c3d_study_on_a_built_in_marker_set_model_says_where_its_mass_came_from(tmp_path, capsys):
+    # walking2.c3d's excerpt (a CAST-type set with its joint centres) on the built-in cast model, no mass in the
+    # study file: the C3D's PROCESSING:Bodymass, said in summary.txt
+    _c3d_with_mass(tmp_path, "walk.c3d", 61.5)
+    path = tmp_path / "study.toml"
+    path.write_text('name = "cast"\n[options]\nplane = "X,Z"\nvertical = "Z"\nnormalise = "mass"\n'
+                    '[[subjects]]\nname = "s"\nmodel = "cast"\nstatic = "walk.c3d"\nstatic_window = [2.56, 2.58]\n'
+                    '[[subjects.trials]]\nname = "walk"\nmarkers = "walk.c3d"\n')
+    code = main(["study", str(path), "--out", str(tmp_path / "out"), "--workers", "1", "--quiet"])
+    summary = (tmp_path / "out" / "summary.txt").read_text()
+    assert code == 0, summary
+    assert "  s: mass 61.5 kg read from walk.c3d (PROCESSING:BODYMASS)" in summary.splitlines()
+    assert "1 of 1 trial(s) done" in summary

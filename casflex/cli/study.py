@@ -200,6 +200,7 @@ def cmd_study(args: argparse.Namespace, outputs: Outputs) -> int:
     lines = [f"{len(out['trials'])} of {n} trial(s) done, {len(rows)} rows in loads.csv"
              + (f", {passive.count(chr(10)) - 1} passive fit(s) in passive.csv" if passive else "")
              + f"; figures: {', '.join(figures) or 'none'}"]
+    lines += [f"  {s.name}: mass {s.mass:g} kg read from {s.mass_from}" for s in study.subjects if s.mass_from]
     for subject, rec in out["subjects"].items():  # what a subject's model holds that its scene leaves out
         for line in (ln for ln in rec.report if ln.startswith("warning: ")):
             lines.append(f"  {subject}: {line}")

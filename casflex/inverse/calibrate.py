@@ -133,21 +133,49 @@ def _parents_first(tree: KinematicTree) -> list[str]:
     return order
 
 
+def _undecided_at(tree: KinematicTree, z: np.ndarray, ym: np.ndarray) -> str:
+    """The coordinates the seen and weighted markers ``ym`` (m, 2) leave free at the pose ``z``, and the segments
+    they move, as a phrase (the null space of the markers' Jacobian there)."""
+    from casflex.inverse.fit import _segment_of
+
+    used = np.isfinite(ym).all(axis=1) & np.array([m.weight > 0 for m in tree.model.scene.markers], bool)
+    J = np.array(tree.marker_fit(z)[1])[np.repeat(used, 2)]
+    s, vt = (np.zeros(0), np.eye(tree.n)) if not J.size else np.linalg.svd(J)[1:]
+    null = vt[np.r_[s, np.zeros(tree.n - s.size)] <= 1e-8 * max(s[0] if s.size else 0.0, 1e-300)]
+    free = [k for k in range(tree.n) if (np.abs(null[:, k]) > 1e-6).any()]
+    lab = {c.scene_coordinate(): c.name for c in tree.model.scene.coordinates}
+    segments = dict.fromkeys(tree.model.node_names[tree.entry[_segment_of(tree, k)]] for k in free)
+    if not free:  # within the fit's tolerance only: no coordinate stands out
+        return "the markers' Jacobian is singular at the static pose"
+    return (f"{[lab.get(tree.names[k], tree.names[k]) for k in free]} free, of the segment"
+            f"{'s' * (len(segments) > 1)} {', '.join(repr(n) for n in segments)}")
+
+
 def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, scale: bool = False,
               mass: float | None = None):
     """(the calibrated scene, report lines) from the static trial ``static`` (LabMarkers or a .trc/.c3d
     path), module docstring."""
     from casflex.inverse.fit import check_decided, fit_pose
     from casflex.inverse.inputs import inverse_model, read_markers
+    from casflex.inverse.locking import lock_unmarked
     from casflex.lab import LabMarkers, Plane, markers_in_plane
     from casflex.lab.checks import check_markers, check_scale, check_static
+    from casflex.lab.marker_sets import JOINT_CENTRES, joint_centres
+    from casflex.scene import Scene, load_scene
 
     if mass is not None and not mass > 0:
         raise ValueError(f"mass: must be > 0 kg, got {mass}")
     pl = Plane.parse(plane) if isinstance(plane, str) else plane
+    lab = static if isinstance(static, LabMarkers) else read_markers(static)[0]
+    scene = scene if isinstance(scene, Scene) else load_scene(scene)
+    lab, early = joint_centres(lab, [m.lab_label for m in scene.markers])
+    centres = {m.name for m in scene.markers if m.weight == 0 and m.lab_label in JOINT_CENTRES}
+    scene = dataclasses.replace(scene, markers=tuple(  # the joint centres place the segments here (weight 1)
+        dataclasses.replace(m, weight=1.0) if m.name in centres else m for m in scene.markers))
+    scene, locked = lock_unmarked(scene, lab.labels, f"the static trial {lab.source}")
+    early += locked
     model = inverse_model(scene, root)
     tree = kinematic_tree(model, root)
-    lab = static if isinstance(static, LabMarkers) else read_markers(static)[0]
     sc = model.scene
     labels = {m.name: m.lab_label for m in sc.markers}
     absent = tuple(dict.fromkeys(lb for lb in labels.values() if lb not in lab.labels))
@@ -164,8 +192,8 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
         ym = np.nanmean(ms.q, axis=0).reshape(-1, 2)  # the static trial's mean
     check_scale(lab.source, lab.units, np.array([[m.x, m.y] for m in sc.markers]), ym[None],
                 [tree.cluster[i] for i in tree.marker_nodes])
-    report = [f"static trial: {lab.t.size} frames averaged, {int(np.isfinite(ym).all(1).sum())} of "
-              f"{len(sc.markers)} markers seen"]
+    report = [*early, f"static trial: {lab.t.size} frames averaged, {int(np.isfinite(ym).all(1).sum())} of "
+                       f"{len(sc.markers)} markers seen"]
     check_decided(tree, ym.ravel()[None], tuple(labels.values()), lab.source)
     unscaled = fit_pose(tree, ym.ravel())[1]
     if scale:
@@ -185,8 +213,9 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
     tree = kinematic_tree(model, root)
     z, before, decided = fit_pose(tree, ym.ravel())
     if not decided:
-        raise ValueError("static trial: its markers do not decide the pose (a segment with fewer than two seen markers "
-                         "and no other way to place it)")
+        raise ValueError(f"static trial: its markers do not decide the pose: {_undecided_at(tree, z, ym)} (a segment "
+                         "with fewer than two seen markers and no other way to place it): record them, or take the "
+                         "segment out of the scene")
     q = np.array(tree.forward(z)).ravel()
     markers, moved, far = [], [], []
     for k, (m, i) in enumerate(zip(sc.markers, tree.marker_nodes, strict=True)):
@@ -201,6 +230,8 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
         far += [f"{m.name!r} ({m.lab_label}) {1e3 * moved[-1]:.0f} mm"] * (moved[-1] > MOVE_WARN)
         markers.append(dataclasses.replace(m, x=float(p[0]), y=float(p[1])))
     out = dataclasses.replace(sc, markers=tuple(markers))
+    out = dataclasses.replace(out, markers=tuple(dataclasses.replace(m, weight=0.0) if m.name in centres else m
+                                                 for m in out.markers))  # the marker fit's weights again
     after_model = inverse_model(out, root)
     y_after = np.array(kinematic_tree(after_model, root).marker_fit(z)[0]).reshape(-1, 2)
     ok = np.isfinite(ym).all(axis=1)

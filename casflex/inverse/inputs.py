@@ -343,12 +343,29 @@ def weighted(scene, tasks) -> tuple[object, list[str]]:
     return dataclasses.replace(scene, markers=markers), notes
 
 
+def _marker_set(scene, lab):
+    """(the scene with the segments the trial's marker set leaves out locked, the trial with the scene's markers of
+    weight 0 it lacks as never seen, the lines saying what was locked): a whole-body model on lower-body markers
+    (:func:`casflex.inverse.locking.lock_unmarked`); the joint centres a built-in model carries with weight 0 for its
+    calibration (:mod:`casflex.lab.marker_sets`) are not the marker fit's, and a trial need not have them."""
+    from casflex.inverse.locking import lock_unmarked
+
+    scene, lines = lock_unmarked(scene, lab.labels, lab.source)
+    absent = tuple(dict.fromkeys(m.lab_label for m in scene.markers if m.weight == 0 and m.lab_label not in lab.labels))
+    if absent:
+        lab = dataclasses.replace(lab, labels=lab.labels + absent, xyz=np.concatenate(
+            [lab.xyz, np.full((lab.t.size, len(absent), 3), np.nan)], axis=1))
+    return scene, lab, lines
+
+
 def prepare(scene, trial: Trial, *, filter: Filter | None = None, fit: Fit | None = None, bands: Bands | None = None,
             flexible: Flexible | None = None) -> InverseInputs:
     """The inputs of :func:`casflex.inverse.inverse_dynamics` (its parameters; None: the object's defaults), read and
     checked (module docstring); the bands asked (:func:`casflex.inverse.bands.band_spec`) checked before the trial
     is read. ValueError in one line naming the option, file, marker or plate otherwise."""
     from casflex.inverse.bands import band_spec
+    from casflex.scene import Scene
+    from casflex.scene.io import load_scene
 
     filter, fit, bands, flexible = filter or Filter(), fit or Fit(), bands or Bands(), flexible or Flexible()
 
@@ -357,16 +374,20 @@ def prepare(scene, trial: Trial, *, filter: Filter | None = None, fit: Fit | Non
     if trial.tasks is not None:
         scene, notes = weighted(scene, trial.tasks)
         task_notes += notes
-    model = inverse_model(scene, trial.root)
     grf, plates = _external_loads(trial.grf, trial.plates)
     if grf is None and plates and _c3d(trial.markers):  # a C3D trial's plates: its own
         grf = trial.markers
+    scene = scene if isinstance(scene, Scene) else load_scene(scene)
     for node in plates if not isinstance(plates, str) else ():
-        if node not in model.node_names:
-            raise ValueError(f"plates: no node {node!r} in the scene; nodes are {list(model.node_names)}")
+        if node not in (names := [n.name for n in scene.nodes]):
+            raise ValueError(f"plates: no node {node!r} in the scene; nodes are {names}")
+    lab, table = _trial(trial.markers, grf, bool(plates))
+    if lab is not None and not trial.given:
+        scene, lab, locked = _marker_set(scene, lab)
+        task_notes += locked
+    model = inverse_model(scene, trial.root)
     tree = kinematic_tree(model, trial.root)
     spec = band_spec(model, tree, bands, given=trial.given, n_markers=sum(m.weight > 0 for m in model.scene.markers))
-    lab, table = _trial(trial.markers, grf, bool(plates))
     if not trial.given:
         t, y, labels, rate, notes = _from_markers(model, tree, lab, pl, trial.t_start, trial.t_end)
         z, report, source = None, [], lab.source

@@ -42,6 +42,7 @@ import os
 import pickle
 import select
 import signal
+import struct
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -51,7 +52,7 @@ import numpy as np
 if TYPE_CHECKING:
     from casflex.lab.tables import FileSpan, LabMarkers, LabTable
 
-__all__ = ["read_c3d", "read_c3d_analogs", "c3d_span", "MIN_PLATE_FORCE", "NOT_MARKERS"]
+__all__ = ["read_c3d", "read_c3d_analogs", "c3d_span", "c3d_body_mass", "MIN_PLATE_FORCE", "NOT_MARKERS", "BODY_MASS"]
 
 #: N: below this force along a plate's upward normal its centre of pressure is NaN (module docstring).
 MIN_PLATE_FORCE = 20.0
@@ -103,22 +104,11 @@ def c3d_span(path: str | os.PathLike[str]) -> tuple[FileSpan, float]:
     (last - 1) / rate (:func:`read_c3d`'s times); ``names`` the plates' columns as :func:`read_c3d` names them
     (``FORCE_PLATFORM:USED`` plates; empty where the section cannot tell).
     ValueError in one line where the header is not a C3D's (:func:`read_c3d` says more)."""
-    import struct
-
     from casflex.lab.tables import FileSpan
 
     where = str(path)
-    try:
-        with open(path, "rb") as f:
-            head = f.read(512)
-            f.seek(max(0, 512 * (head[0] - 1)) if head else 0)
-            section = f.read(4)
-            section += f.read(max(512 * section[2] - 4, 0)) if len(section) == 4 else b""
-    except OSError as exc:
-        raise ValueError(f"{where}: cannot read ({exc.strerror})") from None
+    head, section = _head_and_parameters(path)
     proc = section[3:4]
-    if len(head) < 512 or head[1] != 0x50 or len(proc) != 1 or proc[0] not in (84, 85):
-        raise ValueError(f"{where}: not a C3D file ezc3d reads (its header's key, or its processor type)")
     try:  # the plates' count; a section its own header sizes wrongly is read_c3d's to judge (None: not known)
         used = max(_walk_parameters(where, section, 4).get("FORCE_PLATFORM:USED", 0), 0)
     except ValueError:
@@ -133,6 +123,46 @@ def c3d_span(path: str | os.PathLike[str]) -> tuple[FileSpan, float]:
     return FileSpan((first - 1) / rate, (max(last, first) - 1) / rate, rate, names), analog
 
 
+def _head_and_parameters(path: str | os.PathLike[str]) -> tuple[bytes, bytes]:
+    """(the header's 512 bytes, the parameter section) of a C3D file, read without ezc3d; ValueError in one line
+    where the header is not a C3D's."""
+    where = str(path)
+    try:
+        with open(path, "rb") as f:
+            head = f.read(512)
+            f.seek(max(0, 512 * (head[0] - 1)) if head else 0)
+            section = f.read(4)
+            section += f.read(max(512 * section[2] - 4, 0)) if len(section) == 4 else b""
+    except OSError as exc:
+        raise ValueError(f"{where}: cannot read ({exc.strerror})") from None
+    proc = section[3:4]
+    if len(head) < 512 or head[1] != 0x50 or len(proc) != 1 or proc[0] not in (84, 85):
+        raise ValueError(f"{where}: not a C3D file ezc3d reads (its header's key, or its processor type)")
+    return head, section
+
+
+#: the parameters a subject's mass (kg) is read from, in this order: Vicon's (Nexus writes the subject's
+#: ``Bodymass`` under PROCESSING, some exports under SUBJECTS), and the names other systems use
+BODY_MASS = ("PROCESSING:BODYMASS", "SUBJECTS:BODYMASS", "SUBJECTS:MASS", "SUBJECTS:WEIGHT", "SUBJECT:MASS",
+             "SUBJECT:WEIGHT")
+
+
+def c3d_body_mass(path: str | os.PathLike[str]) -> tuple[float, str] | None:
+    """(the subject's mass in kg, the parameter it was read from as ``GROUP:NAME``) from a C3D file's parameter
+    section (:data:`BODY_MASS`, the first that holds a number > 0: Vicon writes 0 where none was entered), without
+    ezc3d; None where none does. ValueError in one line where the header is not a C3D's."""
+    head, section = _head_and_parameters(path)
+    try:
+        found = _walk_parameters(str(path), section, 4, floats=section[3] == 84)
+    except ValueError:  # a section read_c3d refuses: no mass from it
+        return None
+    for key in BODY_MASS:
+        value = found.get(key)
+        if value is not None and math.isfinite(value) and value > 0:
+            return float(value), key
+    return None
+
+
 def plate_names(count: int) -> tuple[str, ...]:
     """The columns :func:`read_c3d` names for ``count`` plates (the first's prefix ``ground_``, then ``1_ground_``,
     ...)."""
@@ -140,10 +170,11 @@ def plate_names(count: int) -> tuple[str, ...]:
                  for kind in ("force_v", "force_p", "torque_", "moment_") for a in "xyz")
 
 
-def _walk_parameters(where: str, raw: bytes | mmap.mmap, pos: int) -> dict[str, int]:
+def _walk_parameters(where: str, raw: bytes | mmap.mmap, pos: int, floats: bool = False) -> dict[str, float]:
     """Walk the parameter section from byte ``pos`` as ezc3d does, each record ending where the previous one
     points (ValueError in one line where it does not); returns its integer parameters' first values by
-    ``GROUP:NAME`` (``FORCE_PLATFORM:USED``: the plates)."""
+    ``GROUP:NAME`` (``FORCE_PLATFORM:USED``: the plates), and where ``floats`` (an Intel file's: IEEE floats) its
+    float parameters' too (``PROCESSING:BODYMASS``)."""
     n = len(raw)
     groups: dict[int, str] = {}
     found: list[tuple[int, str, int]] = []
@@ -168,6 +199,8 @@ def _walk_parameters(where: str, raw: bytes | mmap.mmap, pos: int) -> dict[str, 
             values = end + 2 + ndims
             if kind in (1, 2) and values + kind <= n:
                 found.append((gid, name.upper(), int.from_bytes(raw[values:values + kind], "little", signed=True)))
+            elif kind == 4 and floats and values + 4 <= n:
+                found.append((gid, name.upper(), struct.unpack("<f", raw[values:values + 4])[0]))
             end = values + abs(kind) * math.prod(raw[end + 2:end + 2 + ndims])
         end += 1 + (raw[end] if end < n else 0)  # the description
         if end > n:
@@ -352,9 +385,12 @@ def _markers(c, where: str) -> LabMarkers:
 def _events(c) -> tuple[tuple[str, str, float], ...]:
     """The EVENT section's (context, label, time s), by time: the C3D standard's TIMES are (minutes, seconds) from
     the recording's start, the first frame's time being (first - 1) / rate, as :func:`_t0`'s (Vicon Nexus writes
-    minutes 0). Empty where the file marks none or its section is inconsistent."""
+    minutes 0; some files, BTKData's Plug-in Gait walks, hold them as one list of (minutes, seconds) pairs, which
+    ezc3d reads flat). Empty where the file marks none or its section is inconsistent."""
     labels, contexts = _param(c, "EVENT", "LABELS", []), _param(c, "EVENT", "CONTEXTS", [])
     times = np.asarray(_param(c, "EVENT", "TIMES", np.zeros((2, 0))), dtype=float)
+    if times.ndim == 1 and times.size == 2 * len(labels):  # (minutes, seconds) pairs, as some files store them
+        times = times.reshape(-1, 2).T
     if times.ndim != 2 or times.shape[0] != 2 or not len(labels) == len(contexts) == times.shape[1]:
         return ()
     secs = 60.0 * times[0] + times[1]

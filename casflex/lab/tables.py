@@ -26,8 +26,8 @@ import numpy as np
 
 from casflex.results import atomic_write_text
 
-__all__ = ["LabMarkers", "LabTable", "UNITS", "read_trc", "read_sto", "write_sto", "increasing_times", "FileSpan",
-           "trc_span", "sto_span"]
+__all__ = ["LabMarkers", "LabTable", "UNITS", "read_trc", "write_trc", "read_sto", "write_sto", "increasing_times",
+           "FileSpan", "trc_span", "sto_span"]
 
 #: Length units of TRC headers, in metres.
 UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
@@ -318,3 +318,35 @@ def write_sto(path: str | os.PathLike[str], t: np.ndarray, columns: dict[str, np
     buf = io.StringIO()
     np.savetxt(buf, np.column_stack([t, *columns.values()]), delimiter="\t", fmt="%.10g")
     return atomic_write_text(path, "\n".join(header) + "\n" + buf.getvalue())
+
+
+def write_trc(path: str | os.PathLike[str], markers: LabMarkers, *, units: str | None = None) -> Path:
+    """Write ``markers`` as a TRC file atomically, in OpenSim's form (what its IK and scale tools and
+    :func:`read_trc` read): the header's DataRate, CameraRate, NumFrames, NumMarkers, Units, OrigDataRate,
+    OrigDataStartFrame and OrigNumFrames, the labels each over its X, Y, Z columns, then one row a frame
+    (Frame# from 1, Time s), a missing sample as NaN (OpenSim's reader drops a row's trailing empty cells, and
+    then refuses the row). ``units`` (mm, cm or m; default the markers'
+    own, mm where they say none) are the file's; positions are written to 10 significant digits, so
+    ``read_trc(write_trc(p, m))`` gives m back to 1e-9 of its size. Returns the path. A rate the times do not
+    give (NaN) is written as the times' mean step's."""
+    import io
+
+    units = units or (markers.units if markers.units in UNITS else "mm")
+    if units not in UNITS:
+        raise ValueError(f"units: {units!r} is not a length unit; expected one of {list(UNITS)}")
+    t = np.asarray(markers.t, dtype=float)
+    n, k = t.size, len(markers.labels)
+    rate = markers.rate if math.isfinite(markers.rate) else (
+        (n - 1) / (t[-1] - t[0]) if n > 1 else 1.0)
+    name = Path(path).name
+    head = [f"PathFileType\t4\t(X/Y/Z)\t{name}",
+            "DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\tOrigDataStartFrame\tOrigNumFrames",
+            f"{rate:g}\t{rate:g}\t{n}\t{k}\t{units}\t{rate:g}\t1\t{n}",
+            "Frame#\tTime\t" + "\t".join(f"{lb}\t\t" for lb in markers.labels),
+            "\t\t" + "\t".join(f"X{i + 1}\tY{i + 1}\tZ{i + 1}" for i in range(k)), ""]
+    buf = io.StringIO()
+    xyz = np.asarray(markers.xyz, dtype=float).reshape(n, 3 * k) / UNITS[units]
+    for i in range(n):
+        cells = ("NaN" if math.isnan(v) else f"{v:.10g}" for v in xyz[i])
+        buf.write(f"{i + 1}\t{t[i]:.10g}\t" + "\t".join(cells) + "\n")
+    return atomic_write_text(path, "\n".join(head) + "\n" + buf.getvalue())

@@ -43,9 +43,11 @@ RECORD_FORMAT = 4
 
 
 def calibrate_run(*, model: str, static: str | None, plane: str, root: str | None, calibrate: bool, scale: bool,
-                  mass: float | None, vertical: str = "Y") -> dict:
-    """The subject's scene (TOML text) on its static trial (``calibrate``) or as given, its masses scaled to
-    ``mass`` (with the segments where ``scale``), and the report; ``plane`` "auto": the static trial's own
+                  mass: float | None, vertical: str = "Y", static_window: tuple[float, float] | None = None,
+                  mass_from: str | None = None) -> dict:
+    """The subject's scene (TOML text) on its static trial (``calibrate``; its frames in ``static_window`` s, all
+    where None) or as given, its masses scaled to ``mass`` (with the segments where ``scale``; ``mass_from``: where
+    the mass was read, said in the report), and the report; ``plane`` "auto": the static trial's own
     (:mod:`.direction`)."""
     from casflex import load_scene
     from casflex.inverse.calibrate import calibrate as place
@@ -59,8 +61,10 @@ def calibrate_run(*, model: str, static: str | None, plane: str, root: str | Non
 
         report = [f"warning: {w}" for w in scene_from_osim(model).warnings]
     placed_mass = static is not None and calibrate and scale
+    if mass_from is not None:
+        report.append(f"the subject's mass {mass:g} kg read from {mass_from} (the study file gives none)")
     if static is not None and calibrate:
-        lab = read_markers(static)[0]
+        lab = _frames(read_markers(static)[0], static_window)
         plane, lines = _trial_plane(scene, lab, plane, vertical, static=True, root=root)
         report += lines
         scene, placed = place(scene, lab, plane, root=root, scale=scale, mass=mass if scale else None)
@@ -71,6 +75,14 @@ def calibrate_run(*, model: str, static: str | None, plane: str, root: str | Non
         report.append(f"the model's masses scaled from {total:.1f} kg to the subject's {mass:g} kg (inertias with "
                       "them; the segments' sizes as they are)")
     return Calibration(dumps_scene(scene), tuple(report)).to_json()
+
+
+def _frames(lab, window: tuple[float, float] | None):
+    """The static trial's frames within ``window`` (s; all where None)."""
+    if window is None:
+        return lab
+    inside = (lab.t >= window[0] - 1e-9) & (lab.t <= window[1] + 1e-9)
+    return dataclasses.replace(lab, t=lab.t[inside], xyz=lab.xyz[inside])
 
 
 def _trial_plane(sc, lab, plane: str, vertical: str, static: bool = False, root: str | None = None
@@ -270,10 +282,12 @@ def _run(name: str, fn: Callable[..., dict], kwargs: dict, files: tuple[str | No
 
 def _plan(study: Study, calibrated: dict[str, Calibration]) -> dict:
     """(subject, trial) -> its run."""
-    o = study.options.trials
+    def options(s):  # the subject's own task file, where it gives one
+        return study.options.trials if s.tasks is None else dataclasses.replace(study.options.trials, tasks=s.tasks)
+
     return {(s.name, t.name): _run(f"trial-{s.name}-{t.name}", trial_run,
-                                   {"scene": calibrated[s.name].scene, "trial": t, "options": o,
-                                    "uncertain": tuple(s.uncertain)}, (t.markers, t.grf, o.tasks))
+                                   {"scene": calibrated[s.name].scene, "trial": t, "options": options(s),
+                                    "uncertain": tuple(s.uncertain)}, (t.markers, t.grf, options(s).tasks))
             for s, t in study.trials() if s.name in calibrated}
 
 
@@ -316,6 +330,16 @@ def check_against_models(study: Study) -> None:
                                  f"(nodes: {sorted(nodes)[:12]}...)")
 
 
+def _calibration_kwargs(study: Study, s) -> dict:
+    """A subject's calibration run's arguments (:func:`calibrate_run`); its static window and where its mass was
+    read only where there are some (a study that gives neither keeps its records' fingerprints)."""
+    o, to = study.options, study.options.trials
+    kwargs = {"model": s.model, "static": s.static, "plane": to.plane, "root": to.root, "calibrate": o.calibrate,
+              "scale": o.scale, "mass": s.mass, "vertical": to.vertical}
+    extra = {"static_window": s.static_window, "mass_from": s.mass_from}
+    return kwargs | {k: v for k, v in extra.items() if v is not None}
+
+
 def run_study(study: Study, record: str | Path, *, scheduler: str | None = None, n_workers: int | None = None,
               progress: Callable[[int, int, str], None] | bool = True, retry_failed: bool = False) -> dict:
     """Calibrate every subject and run every trial (module docstring), resuming from ``record``; returns
@@ -325,11 +349,8 @@ def run_study(study: Study, record: str | Path, *, scheduler: str | None = None,
     worker lost, a file since mended), where by default its record stands until its inputs change."""
     from casflex.study.sweep import run_sweep
 
-    o, to = study.options, study.options.trials
-    cal_runs = {s.name: _run(f"calibrate-{s.name}", calibrate_run,
-                             {"model": s.model, "static": s.static, "plane": to.plane, "root": to.root,
-                              "calibrate": o.calibrate, "scale": o.scale, "mass": s.mass, "vertical": to.vertical},
-                             (s.model, s.static)) for s in study.subjects}
+    cal_runs = {s.name: _run(f"calibrate-{s.name}", calibrate_run, _calibration_kwargs(study, s), (s.model, s.static))
+                for s in study.subjects}
     cal = run_sweep(list(cal_runs.values()), record, scheduler=scheduler, n_workers=n_workers, progress=progress,
                     retry_failed=retry_failed)
     recs = {s.name: cal.results.get(cal_runs[s.name].key, {}) for s in study.subjects}

@@ -32,9 +32,13 @@ exponent = 2.0                 # its keys); the subjects' models .osim with thei
 
 [[subjects]]
 name = "s02"
-model = "subject02.osim"       # an OpenSim model, a scene TOML or a built-in scene
-mass = 72.8                    # kg (optional: the model's masses scaled to it)
+model = "subject02.osim"       # an OpenSim model, a scene TOML or a built-in scene (the marker sets' pig,
+                               # pig_psis, cast: docs/lab.md)
+mass = 72.8                    # kg (optional: the model's masses scaled to it; where not given, the
+                               # C3D's own, PROCESSING:Bodymass as Vicon writes it: casflex.lab.c3d.BODY_MASS)
 static = "s02_static.trc"      # optional: the calibration trial
+static_window = [0.5, 1.5]     # s, optional: the static trial's frames averaged (default: all)
+tasks = "s02_tasks.xml"        # optional: this subject's IK task file (default: options.tasks)
 uncertain = ["pelvis.mass=10%"]   # optional: the anthropometry's uncertainty (TARGET=SD|P%|LO:HI)
 
 [[subjects.trials]]
@@ -116,6 +120,11 @@ class Subject:
     mass: float | None = None
     static: str | None = None
     uncertain: tuple[str, ...] = ()
+    #: where ``mass`` came from: None (the study file) or the C3D file and its parameter (``mass`` not given)
+    mass_from: str | None = None
+    static_window: tuple[float, float] | None = None
+    #: this subject's IK task file (a resolved path), None: the study's ``options.tasks``
+    tasks: str | None = None
 
 
 @dataclass(frozen=True)
@@ -207,14 +216,7 @@ def _options(base: Path, table: Any) -> Options:
             Plane.parse(t.get("plane", "X,Y"))
     except ValueError as exc:
         raise StudyError(f"options.plane: {exc} (or \"auto\")") from None
-    tasks = _file(base, "options.tasks", t["tasks"], (".xml",)) if t.get("tasks") else None
-    if tasks is not None:
-        from casflex.lab.setups import read_tasks
-
-        try:
-            read_tasks(tasks)
-        except ValueError as exc:
-            raise StudyError(f"options.tasks: {exc}") from None
+    tasks = _tasks(base, "options.tasks", t["tasks"]) if t.get("tasks") else None
     trials = TrialOptions(plane=t.get("plane", "X,Y"), vertical=vertical.upper(), filter=_filter(t),
                           root=t.get("root") or None, tasks=tasks, bands=t.get("bands", False),
                           passive=tuple((p.partition(":")[0], p.partition(":")[2] or "trial") for p in passive))
@@ -241,6 +243,19 @@ def _muscles(base: Path, table: Any):
         raise StudyError(f"options.muscles.{field}{exc}") from None
 
 
+def _tasks(base: Path, where: str, value: Any) -> str:
+    """An IK task (or setup) file's resolved path, the file read (:func:`casflex.lab.setups.read_tasks`);
+    StudyError naming ``where``."""
+    from casflex.lab.setups import read_tasks
+
+    tasks = _file(base, where, value, (".xml",))
+    try:
+        read_tasks(tasks)
+    except ValueError as exc:
+        raise StudyError(f"{where}: {exc}") from None
+    return tasks
+
+
 def _trial(base: Path, where: str, table: Any) -> Trial:
     t = _check_keys(where, table, {"name", "markers", "grf", "plates", "window"}, {"name", "markers"})
     plates = t.get("plates")
@@ -249,12 +264,7 @@ def _trial(base: Path, where: str, table: Any) -> Trial:
             for v in plates.values())):
         raise StudyError(f"{where}.plates: expected a table node = \"column prefix\" (or a list of them: a foot on "
                          f"several plates), got {plates!r}")
-    window = t.get("window")
-    if window is not None:
-        ok = (isinstance(window, list) and len(window) == 2 and all(isinstance(w, (int, float))
-                                                                    and not isinstance(w, bool) for w in window))
-        if not ok:
-            raise StudyError(f"{where}.window: expected [start, end] in s, 0 <= start < end, got {window!r}")
+    window = _window(f"{where}.window", t.get("window"))
     given = [(n, p) for n, v in (plates or {}).items() for p in ([v] if isinstance(v, str) else v)]
     twice = sorted({p for _, p in given if [q for _, q in given].count(p) > 1})
     if twice:
@@ -263,9 +273,21 @@ def _trial(base: Path, where: str, table: Any) -> Trial:
             "(give it once, or leave plates out: each contact then goes to the foot over it)")
     trial = Trial(_name(f"{where}.name", t["name"]), _file(base, f"{where}.markers", t["markers"], (".trc", ".c3d")),
                   _file(base, f"{where}.grf", t["grf"], (".mot", ".sto", ".c3d", ".xml")) if "grf" in t else None,
-                  dict(plates) if plates else None, tuple(float(w) for w in window) if window else None)
+                  dict(plates) if plates else None, window)
     _as_inverse(where, trial)
     return trial
+
+
+def _window(where: str, window: Any, ordered: bool = False) -> tuple[float, float] | None:
+    """A window [start, end] s as the study file gives it (None where not); StudyError naming ``where``
+    (``ordered``: here also where not 0 <= start < end; a trial's is checked as inverse dynamics checks it)."""
+    if window is None:
+        return None
+    ok = (isinstance(window, list) and len(window) == 2 and all(isinstance(w, (int, float)) and not isinstance(w, bool)
+                                                                for w in window))
+    if not ok or ordered and not 0 <= window[0] < window[1]:
+        raise StudyError(f"{where}: expected [start, end] in s, 0 <= start < end, got {window!r}")
+    return float(window[0]), float(window[1])
 
 
 #: The study trial's field of each option of :class:`casflex.inverse.Trial` it sets, and how a refusal mentions it.
@@ -287,8 +309,8 @@ def _as_inverse(where: str, trial: Trial) -> None:
 
 def _subject(base: Path, i: int, table: Any) -> Subject:
     where = f"subjects[{i}]"
-    s = _check_keys(where, table, {"name", "model", "mass", "static", "uncertain", "trials"}, {"name", "model",
-                                                                                              "trials"})
+    s = _check_keys(where, table, {"name", "model", "mass", "static", "static_window", "tasks", "uncertain", "trials"},
+                    {"name", "model", "trials"})
     name = _name(f"{where}.name", s["name"])
     mass = s.get("mass")
     if mass is not None and (isinstance(mass, bool) or not isinstance(mass, (int, float)) or not 0 < mass < 1000):
@@ -306,10 +328,42 @@ def _subject(base: Path, i: int, table: Any) -> Subject:
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
         raise StudyError(f"{where}.trials: trial {dup[0]!r} is named twice")
+    static = _file(base, f"{where}.static", s["static"], (".trc", ".c3d")) if "static" in s else None
+    static_window = _window(f"{where}.static_window", s.get("static_window"), ordered=True)
+    if static_window is not None and static is None:
+        raise StudyError(f"{where}.static_window: the subject has no static trial (give static, or leave the "
+                         "window out)")
+    mass_from = None
+    if mass is None:  # the lab's own record of it, where its C3D files hold one (said in the report)
+        mass, mass_from = _c3d_mass(f"{where}.mass", [static, *(t.markers for t in out)])
     return Subject(name, _file(base, f"{where}.model", s["model"], (".osim", ".toml"), builtin=True), out,
-                   float(mass) if mass is not None else None,
-                   _file(base, f"{where}.static", s["static"], (".trc", ".c3d")) if "static" in s else None,
-                   tuple(unc))
+                   float(mass) if mass is not None else None, static, tuple(unc), mass_from, static_window,
+                   _tasks(base, f"{where}.tasks", s["tasks"]) if "tasks" in s else None)
+
+
+def _c3d_mass(where: str, files: list[str | None]) -> tuple[float | None, str | None]:
+    """(kg, where from: the file's name and its parameter) of the first of ``files`` (the static trial, then the
+    trials) that is a C3D holding the subject's mass (:func:`casflex.lab.c3d.c3d_body_mass`); (None, None) where
+    none does. StudyError naming ``where`` where two files disagree by more than 1 %: the lab's record of the
+    subject is not one."""
+    from casflex.lab.c3d import c3d_body_mass
+
+    found = []
+    for f in files:
+        if f is not None and f.lower().endswith(".c3d"):
+            try:
+                m = c3d_body_mass(f)
+            except ValueError:  # a file its own check refuses, naming the field
+                m = None
+            if m is not None:
+                found.append((m[0], f"{Path(f).name} ({m[1]})"))
+    if not found:
+        return None, None
+    far = [(m, w) for m, w in found if abs(m - found[0][0]) > 0.01 * found[0][0]]
+    if far:
+        raise StudyError(f"{where}: not given, and the subject's C3D files disagree: {found[0][0]:g} kg in "
+                         f"{found[0][1]}, {far[0][0]:g} kg in {far[0][1]}; give the subject's mass")
+    return found[0]
 
 
 #: the figure of the group (the subjects' means) in --out: no subject's figure may take its name
@@ -365,8 +419,10 @@ def load_study(path: str) -> Study:
     if options.normalise == "mass":
         for i, s in enumerate(subs):
             if s.mass is None:
-                raise StudyError(f"subjects[{i}].mass: needed by options.normalise = \"mass\" (kg)")
+                raise StudyError(f"subjects[{i}].mass: needed by options.normalise = \"mass\" (kg), and none of "
+                                 "the subject's C3D files holds it (PROCESSING:Bodymass): give the subject's mass")
     for i, s in enumerate(subs):
+        _check_static_window(f"subjects[{i}].static_window", s)
         for k, t in enumerate(s.trials):
             _check_trial_files(f"subjects[{i}].trials[{k}]", t, options)
     return Study(data["name"], str(p.resolve()), options, subs)
@@ -401,6 +457,19 @@ def _spans(where: str, trial: Trial):
             raise StudyError(f"{where}.grf: its datafile {grf}: no such file")
     plates, analog = span("grf", grf)
     return markers, plates, analog if grf.lower().endswith(".c3d") else plates.rate
+
+
+def _check_static_window(where: str, subject: Subject) -> None:
+    """The static trial's window within its file's times (its header and first and last rows); StudyError
+    naming ``where``."""
+    if subject.static_window is None:
+        return
+    markers = _spans(where.rpartition(".")[0] + ".static", Trial("static", subject.static))[0]
+    lo, hi = subject.static_window
+    slack = 0.5 / markers.rate if math.isfinite(markers.rate) else 1e-9  # half a sample: a frame's own time
+    if lo < markers.t0 - slack or hi > markers.t1 + slack:
+        raise StudyError(f"{where}: {lo:g}..{hi:g} s is not within the static trial's times {markers.t0:g}.."
+                         f"{markers.t1:g} s ({Path(subject.static).name}): give a window within them")
 
 
 def _check_trial_files(where: str, trial: Trial, options: Options) -> None:
