@@ -14,7 +14,7 @@ FlatFoot-Hole`` / ``PiG_Motion-FlatFoot-Hole`` and ``-One`` (66.5 kg, 2 plates),
 
 The study file, as docs/lab.md describes it: the built-in ``pig_psis`` model, each subject calibrated and
 scaled on its static trial, its mass read from the C3D (the study file gives none), ``plane = "auto"``,
-``vertical = "Z"``, each walk's window the span of its marked events widened by 0.1 s, 6 Hz, per kg. The
+``vertical = "Z"``, no window (casflex cuts each walk to its marked events' span +- 0.1 s), 6 Hz, per kg. The
 comparison is studies/zoo_study.py's (per cycle and joint: correlation and peak ratio with Plug-in Gait's X
 moment, signs mapped to OpenSim's). The plates are assigned per contact (a foot on two plates in one walk:
 their wrenches summed); the page records what ran, each cycle left out and why.
@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 from _study import Banner, assert_checks, checks, cli, table, write_outputs
-from zoo_study import _summary, _window, compare
+from zoo_study import _summary, compare
 
 PIG = "Input/C3DSamples/PiG"
 #: subject -> (its static trial, its walks), file stems in PIG (module docstring)
@@ -62,9 +62,8 @@ def write_study(data: Path, work: Path, subjects: tuple[str, ...] | None = None)
         lines += ["[[subjects]]", f'name = "{name}"', 'model = "pig_psis"', f'static = "{data / static}.c3d"', ""]
         for w in walks:
             f = data / f"{w}.c3d"
-            window = _window(f)
             lines += ["[[subjects.trials]]", f'name = "{w.removeprefix("PiG_").replace("-", "_")}"',
-                      f'markers = "{f}"', *([f"window = {window}"] if window else []), ""]
+                      f'markers = "{f}"', ""]
     (work / "study.toml").write_text("\n".join(lines))
     return work / "study.toml"
 

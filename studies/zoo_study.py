@@ -13,8 +13,8 @@ tests/data/lab with Plug-in Gait's markers and joint centres, the arms locked to
 on its static trial (segments by the joint centres' and markers' distances, masses to the child's, read from its
 C3D), the skin markers weighed alike and the joint centres left out of the fit (the model's weights),
 ``plane = "auto"`` (the children walk
-the walkway both ways and stand facing its end), each trial's window the span of its marked gait events
-widened by WINDOW_MARGIN (the cycles from those events), the cut-off 6 Hz, the table and figures per kg. The
+the walkway both ways and stand facing its end), each trial cut to the span of its marked gait events
++- 0.1 s by casflex itself (the study file gives no window), the cut-off 6 Hz, the table and figures per kg. The
 turns are expected to be refused (a planar model cannot follow them: casflex.study.direction); the straight walks
 run.
 
@@ -43,7 +43,6 @@ from _study import Banner, assert_checks, checks, cli, table, write_outputs
 
 ROOT = Path(__file__).resolve().parents[1]
 RAW = "sample study/Data/raw c3d files"
-WINDOW_MARGIN = 0.1  # s: either side of the marked events: the first and last strikes' own cycles
 #: casflex's load -> (Plug-in Gait's point, the sign that maps its X component to OpenSim's convention)
 QUICK = ("HC030A", "HC036A")  # --quick: two children, one walking each way
 PIG = {f"{j}_{s}_moment": (f"{s.upper()}{p}Moment", sign) for s in "rl"
@@ -65,19 +64,6 @@ def _data(work: Path, quick: bool) -> Path:
     return work / RAW
 
 
-def _window(path: Path) -> list[float] | None:
-    """[start, end] s: the marked gait events' span (as casflex reads them) widened by WINDOW_MARGIN, in casflex's
-    times (the C3D's first frame at its own time), None without events."""
-    from casflex.lab import read_c3d
-
-    lab = read_c3d(str(path), plates=False)[0]
-    times, t = np.array([e[2] for e in lab.events]), lab.t
-    if times.size == 0:
-        return None
-    return [round(float(max(t[0], times.min() - WINDOW_MARGIN)), 3),
-            round(float(min(t[-1], times.max() + WINDOW_MARGIN)), 3)]
-
-
 def write_study(data: Path, work: Path, subjects: tuple[str, ...] | None = None) -> Path:
     """The model, the task file and the study file in ``work`` (module docstring), of every child or of
     ``subjects``; the study file's path."""
@@ -88,9 +74,7 @@ def write_study(data: Path, work: Path, subjects: tuple[str, ...] | None = None)
         lines += ["[[subjects]]", f'name = "{folder.name}"', 'model = "pig"', f'static = "{static}"', ""]
         for kind in ("Straight", "Turn"):
             for f in sorted((folder / kind).glob("*.c3d")):
-                window = _window(f)
                 lines += ["[[subjects.trials]]", f'name = "{kind.lower()}"', f'markers = "{f}"']
-                lines += [f"window = {window}"] if window else []
                 lines.append("")
     (work / "study.toml").write_text("\n".join(lines))
     return work / "study.toml"
@@ -165,7 +149,8 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
         run = subprocess.run([sys.executable, "-m", "casflex", "study", str(study_file), "--out", str(work / "out"),
                               "--quiet"], capture_output=True, text=True)
         wall = time.perf_counter() - t0
-        summary = (work / "out" / "summary.txt").read_text() if (work / "out" / "summary.txt").is_file() else ""
+        out_summary = work / "out" / "summary.txt"
+        summary = out_summary.read_text().replace(str(work), "...") if out_summary.is_file() else ""
         rows = compare(study_file, work / "out" / "record")
         figure = (work / "out" / "group.png").read_bytes()
         n_rows = max(0, len((work / "out" / "loads.csv").read_text().splitlines()) - 1)

@@ -598,3 +598,25 @@ def test_a_c3d_study_on_a_built_in_marker_set_model_says_where_its_mass_came_fro
     assert code == 0, summary
     assert "  s: mass 61.5 kg read from walk.c3d (PROCESSING:BODYMASS)" in summary.splitlines()
     assert "1 of 1 trial(s) done" in summary
+
+
+def test_a_trial_with_marked_events_and_no_window_is_cut_to_their_span():
+    """A C3D walk's frames beyond its marked gait events (walking in and out of the volume, often half tracked)
+    carry no cycle: without a study file's window the trial is cut to the events' span +- 0.1 s within the trial,
+    and the report says so; a window given, or no events, keeps what it was (before: the whole trial, where a
+    lab's half-tracked ends were refused)."""
+    import dataclasses
+
+    from casflex.lab import read_c3d
+    from casflex.study.runner import EVENTS_MARGIN, _window
+    from casflex.study.study_file import Trial
+
+    lab = read_c3d(str(LAB / "walking2_excerpt.c3d"), plates=False)[0]
+    trial = Trial("walk", "walk.c3d")
+    assert _window(trial, lab) == (None, None, [])  # no events: the whole trial
+    marked = dataclasses.replace(lab, events=(("Right", "Foot Strike", 2.7), ("Left", "Foot Off", 2.95),
+                                              ("Right", "Foot Strike", 3.35)))
+    t0, t1, report = _window(trial, marked)
+    assert (t0, t1) == (pytest.approx(2.7 - EVENTS_MARGIN), pytest.approx(lab.t[-1]))  # clipped to the trial
+    assert report[0].startswith("window: 2.600-3.396 s, the marked gait events' span +- 0.1 s")
+    assert _window(dataclasses.replace(trial, window=(2.6, 3.0)), marked) == (2.6, 3.0, [])

@@ -153,6 +153,24 @@ def _loads_of(res) -> list[str]:
     return names or sorted(k for k in res.loads if k.endswith(".moment") and not k.startswith("root."))
 
 
+#: s: the marked gait events' span widened by this on each side is a trial's window where the study file gives none
+EVENTS_MARGIN = 0.1
+
+
+def _window(trial: Trial, lab) -> tuple[float | None, float | None, list[str]]:
+    """(t0, t1, report): the study file's window, else (a C3D trial with marked gait events) the events' span widened
+    by :data:`EVENTS_MARGIN` within the trial, as a lab processes a trial (the frames beyond the marked events, the
+    subject walking in and out of the volume, carry no cycle and are often half tracked), else the whole trial."""
+    if trial.window is not None:
+        return (*trial.window, [])
+    times = [e[2] for e in lab.events]
+    if not times:
+        return None, None, []
+    t0, t1 = max(float(lab.t[0]), min(times) - EVENTS_MARGIN), min(float(lab.t[-1]), max(times) + EVENTS_MARGIN)
+    return t0, t1, [f"window: {t0:.3f}-{t1:.3f} s, the marked gait events' span +- {EVENTS_MARGIN:g} s (the trial "
+                    f"{lab.t[0]:.3f}-{lab.t[-1]:.3f} s; `window` in the study file sets another)"]
+
+
 def trial_run(*, scene: str, trial: Trial, options: TrialOptions, uncertain: tuple[str, ...]) -> dict:
     """One trial's inverse dynamics and its loads over gait cycles (module docstring): its record
     (:class:`~casflex.study.records.TrialRecord`) as JSON, which the sweep writes."""
@@ -164,7 +182,7 @@ def trial_run(*, scene: str, trial: Trial, options: TrialOptions, uncertain: tup
 
     sc = loads_scene(scene)
     lab, table = _read(trial)
-    t0, t1 = trial.window or (None, None)
+    t0, t1, window_report = _window(trial, lab)
     inside = (lab.t >= (t0 or -np.inf)) & (lab.t <= (t1 or np.inf))
     plane, plane_report = _trial_plane(sc, dataclasses.replace(lab, t=lab.t[inside], xyz=lab.xyz[inside]),
                                        options.plane, options.vertical, root=options.root)
@@ -176,7 +194,8 @@ def trial_run(*, scene: str, trial: Trial, options: TrialOptions, uncertain: tup
                                        asked=bool(options.bands)))             # declares uncertainty
     feet = {f: [c for c in cs if res.t[0] <= c[0] and c[1] <= res.t[-1]] for f, cs in feet.items()}  # the window's
     loads, notes = _cycle_loads(sc, res, lab, found, plates or {}, feet, plane)
-    return TrialRecord(res.settings.get("plates") or plates, plane, (*plane_report, *event_report, *notes, *res.report),
+    return TrialRecord(res.settings.get("plates") or plates, plane,
+                       (*window_report, *plane_report, *event_report, *notes, *res.report),
                        (*res.warnings, *notes),
                        loads, (float(res.t[0]), float(res.t[-1])),
                        tuple(_passive(res, sc, lab, found, feet, options.passive)),
