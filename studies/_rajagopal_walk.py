@@ -74,8 +74,9 @@ def scaled(tmp: Path) -> Path:
 
 
 def patella_samples(model: Path, side: str, points: list[tuple[str, np.ndarray]]) -> tuple[np.ndarray, dict]:
-    """(knee angles (rad), {point: (n, 3) its place in femur_<side>'s frame (m)}) with the patella's coordinate
-    at each angle (the coupler's identity), by OpenSim on the scaled 3D model."""
+    """(knee angles (rad), {point: (n, 3) its place (m) in the frame of patella_<side> held at the patella's
+    default}) with the patella's coordinate at each angle (the coupler's identity), by OpenSim on the scaled 3D
+    model."""
     import opensim as osim
 
     m = osim.Model(str(model))
@@ -85,20 +86,26 @@ def patella_samples(model: Path, side: str, points: list[tuple[str, np.ndarray]]
     q = np.radians(np.arange(0.0, np.degrees(knee.getRangeMax()) + 1e-9, STEP_DEG))
     patella, femur = m.getBodySet().get(f"patella_{side}"), m.getBodySet().get(f"femur_{side}")
     out = {name: np.zeros((len(q), 3)) for name, _ in points}
-    for k, v in enumerate(q):
+    on_femur = {name: [] for name, _ in points}
+    for v in q:
         knee.setValue(state, float(v), False)
         beta.setValue(state, float(v), False)
         m.realizePosition(state)
         for name, p in points:
-            r = patella.findStationLocationInAnotherFrame(state, osim.Vec3(*p), femur)
+            on_femur[name].append(patella.findStationLocationInAnotherFrame(state, osim.Vec3(*p), femur))
+    beta.setValue(state, beta.getDefaultValue(), False)  # where the planar model holds the patella
+    m.realizePosition(state)
+    for name, _ in points:
+        for k, r in enumerate(on_femur[name]):
+            r = femur.findStationLocationInAnotherFrame(state, r, patella)
             out[name][k] = [r.get(i) for i in range(3)]
     return q, out
 
 
 def _moving(point: ET.Element, side: str, q: np.ndarray, xyz: np.ndarray) -> ET.Element:
-    """A MovingPathPoint on femur_<side> at ``xyz`` (n, 3) over knee angles ``q``, named as ``point``."""
+    """A MovingPathPoint on patella_<side> at ``xyz`` (n, 3) over knee angles ``q``, named as ``point``."""
     mp = ET.Element("MovingPathPoint", name=point.get("name"))
-    ET.SubElement(mp, "socket_parent_frame").text = f"/bodyset/femur_{side}"
+    ET.SubElement(mp, "socket_parent_frame").text = f"/bodyset/patella_{side}"
     for axis in "xyz":
         ET.SubElement(mp, f"socket_{axis}_coordinate").text = f"/jointset/walker_knee_{side}/knee_angle_{side}"
     for k, axis in enumerate("xyz"):
@@ -108,8 +115,9 @@ def _moving(point: ET.Element, side: str, q: np.ndarray, xyz: np.ndarray) -> ET.
     return mp
 
 
-def edit(planar: Path, source3d: Path, dest: Path) -> list[str]:
-    """The planar model's patella points moved onto the femur and its wraps removed (module docstring, 3-4)."""
+def edit(planar: Path, source3d: Path, dest: Path, wraps: bool = False) -> list[str]:
+    """The planar model's patella points made moving and its wraps removed (module docstring, 3-4); ``wraps``:
+    kept (the wraps' effect, :func:`wrap_effect`)."""
     tree = ET.parse(planar)
     model = tree.getroot().find("Model")
     report, wrapped = [], []
@@ -126,16 +134,16 @@ def edit(planar: Path, source3d: Path, dest: Path) -> list[str]:
             objects = pps.find("objects")
             objects.insert(list(objects).index(p), _moving(p, side, q, xyz[p.get("name")]))
             objects.remove(p)
-        report.append(f"patella_{side}: {len(holders)} path points moved onto femur_{side} as MovingPathPoints of "
+        report.append(f"patella_{side}: its {len(holders)} path points made MovingPathPoints of "
                       f"knee_angle_{side} ({len(q)} samples, {STEP_DEG:g} deg apart)")
-    for muscle in [el for el in model.iter() if el.find("GeometryPath") is not None]:
+    for muscle in [el for el in model.iter() if el.find("GeometryPath") is not None and not wraps]:
         objects = muscle.find("GeometryPath").find("PathWrapSet/objects")
         if objects is not None and len(objects):
             wrapped.append(muscle.get("name"))
             for w in list(objects):
                 objects.remove(w)
     gone = []
-    for wos in model.iter("WrapObjectSet"):
+    for wos in model.iter("WrapObjectSet") if not wraps else ():
         objects = wos.find("objects")
         if objects is not None:
             gone += [w.get("name") for w in objects]
@@ -157,8 +165,9 @@ def _cut_table(src: Path, dest: Path, t0: float, t1: float, every: int, trc: boo
     rows = rows[::every]
     header = lines[:head]
     if trc:
-        vals = header[2].split("\t")
-        vals[2], vals[7] = str(len(rows)), str(len(rows))
+        vals = header[2].split()  # DataRate CameraRate NumFrames NumMarkers Units OrigDataRate OrigDataStartFrame ...
+        vals[2] = vals[7] = str(len(rows))
+        vals[6] = rows[0].split("\t")[0]  # the source's frame number of the first kept
         header[2] = "\t".join(vals)
         rows = ["\t".join([str(k + 1), *r.split("\t")[1:]]) for k, r in enumerate(rows)]
     else:
@@ -180,6 +189,45 @@ def trial(tmp: Path) -> list[str]:
     return [f"{TRC}: {trc} frames", f"{GRF}: {grf} rows"]
 
 
+#: (muscle, coordinate) pairs whose moment arms :func:`wrap_effect` reports
+WRAP_ARMS = (("vaslat_r", "knee_angle_r"), ("vasint_r", "knee_angle_r"), ("recfem_r", "knee_angle_r"),
+             ("gasmed_r", "knee_angle_r"), ("semimem_r", "knee_angle_r"), ("bfsh_r", "knee_angle_r"),
+             ("glmax2_r", "hip_flexion_r"), ("psoas_r", "hip_flexion_r"), ("iliacus_r", "hip_flexion_r"),
+             ("addlong_r", "hip_flexion_r"), ("gasmed_r", "ankle_angle_r"))
+
+
+def wrap_effect(with_wraps: Path, without: Path) -> list[str]:
+    """OpenSim's moment arms (``computeMomentArm``) of WRAP_ARMS with the wraps and without, over the walk's
+    range (hip -20..40 deg, knee 0..70 deg, ankle -20..20 deg, 5 deg apart, one coordinate moved at a time):
+    one line per pair, the arms in mm at the coordinate's 0, middle and end, and the largest difference."""
+    import opensim as osim
+
+    lines = []
+    spans = {"hip_flexion_r": (-20, 40), "knee_angle_r": (0, 70), "ankle_angle_r": (-20, 20)}
+    arms = {}
+    for tag, path in (("with", with_wraps), ("without", without)):
+        m = osim.Model(str(path))
+        state = m.initSystem()
+        for muscle, coord in WRAP_ARMS:
+            c = m.getCoordinateSet().get(coord)
+            values = np.radians(np.arange(spans[coord][0], spans[coord][1] + 1e-9, 5.0))
+            r = []
+            for v in values:
+                c.setValue(state, float(v), False)
+                m.realizePosition(state)
+                r.append(m.getMuscles().get(muscle).computeMomentArm(state, c))
+            c.setValue(state, 0.0, False)
+            arms[tag, muscle, coord] = (np.degrees(values), 1e3 * np.array(r))
+    for muscle, coord in WRAP_ARMS:
+        deg, a = arms["with", muscle, coord]
+        _, b = arms["without", muscle, coord]
+        at = [0, len(deg) // 2, len(deg) - 1]
+        lines.append(f"{muscle} about {coord}: with wraps " + ", ".join(f"{a[i]:.1f}" for i in at) + " mm, without "
+                     + ", ".join(f"{b[i]:.1f}" for i in at) + f" mm at {', '.join(f'{deg[i]:g}' for i in at)} deg; "
+                     f"largest difference {np.abs(a - b).max():.1f} mm")
+    return lines
+
+
 def main() -> None:
     import opensim  # noqa: F401  (first: the ScaleTool then runs here, not in a worker)
 
@@ -188,6 +236,8 @@ def main() -> None:
         source = scaled(tmp)
         report = planar_osim(str(source), str(tmp / "planar.osim"), KEEP, "rajagopal_walk_planar", muscles=True)
         report += edit(tmp / "planar.osim", source, OUT / MODEL)
+        edit(tmp / "planar.osim", source, tmp / "wrapped.osim", wraps=True)
+        report += wrap_effect(tmp / "wrapped.osim", OUT / MODEL)
         report += trial(tmp)
         if len(sys.argv) > 1:  # the scaled 3D model kept where asked (the wraps' effect: the study's page)
             Path(sys.argv[1]).write_bytes(source.read_bytes())
