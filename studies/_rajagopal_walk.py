@@ -16,10 +16,11 @@ What it does, in order (nothing else):
 4. every wrap object removed (from the bodies and from the paths): Rajagopal's wrap cylinders turn about axes
    off the plane's normal, which no planar path holds; both tools then run this edited model (its moment arms
    differ from the real model's where a wrap was active: docs/studies/opensim_muscles.md);
-5. the trial cut to 0.1-1.6 s (the right foot's strikes at 0.268 and 1.412 s inside, with room for the 6 Hz
-   filter's edges): the .trc's frames, and the plates' rows at 2000 Hz kept every 5th (400 Hz: the frames' times
-   at 100 Hz are rows of it, where both tools take the plates); the pipeline's IK tasks and ExternalLoads (its
-   data file named as the cut, its model kinematics file cleared: the plates are in the ground).
+5. the trial cut to 0.1-1.75 s (the right foot's strikes at 0.268 and 1.412 s and the left toe-off at 1.59 s
+   inside, with room for the 6 Hz filter's edges): the .trc's frames, and the plates' rows at 2000 Hz kept every
+   5th (400 Hz: the frames' times at 100 Hz are rows of it, where both tools take the plates); the pipeline's IK
+   tasks and ExternalLoads (its data file named as the cut, its model kinematics file cleared: the plates are in
+   the ground).
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ KEEP = ("pelvis_tilt", "pelvis_tx", "pelvis_ty", "hip_flexion_r", "hip_flexion_l
         "elbow_flex_l")
 SETUPS = ("Scale/scale_setup_walk_scaleOnly.xml", "Scale/scale_setup_walk.xml")
 INPUTS = ("Scale/markerset_walk_preScale.xml", "ExpData/static_walk_1.trc", "ExpData/static_walk_2.trc")
-WINDOW = (0.1, 1.6)  # s
+WINDOW = (0.1, 1.75)  # s
 GRF_EVERY = 5  # rows of the plates' 2000 Hz kept
 STEP_DEG = 2.0  # the patella's samples over the knee's range
 MODEL, TRC, GRF = "rajagopal_walk_planar_muscles.osim", "rajagopal_walk.trc", "rajagopal_walk_grf.mot"

@@ -55,7 +55,7 @@ def run(quick: bool) -> dict:
     start = time.perf_counter()
     osim = scene_from_osim(str(MODEL), muscles=True)
     trial = Trial(str(DATA / "rajagopal_walk.trc"), grf=str(DATA / "rajagopal_walk_grf.xml"),
-                  tasks=str(DATA / "rajagopal_walk_ik_tasks.xml"), t_start=0.1, t_end=1.6)
+                  tasks=str(DATA / "rajagopal_walk_ik_tasks.xml"), t_start=0.1, t_end=1.75)
     inputs = prepare(str(MODEL), trial, filter=Filter(6.0, None, "opensim"), fit=Fit(),
                      bands=Bands([uncertain_option(u) for u in UNCERTAIN_MASSES], 0.0, True))
     acts = read_actuators(str(MODEL)) + reserve_actuators(osim.scene, inputs.tree.root, 1.0)

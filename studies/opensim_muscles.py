@@ -76,7 +76,7 @@ ALL_TRIALS = (Trial("Gait10dof18musc, subject01 walking", "walk", MUSCLES / "gai
                 (0.2, 1.2), 60.0, ("glut_max2_r", "glut_med1_r", "vas_lat_r", "soleus_r"),
                 markers=LAB / "hamner_running_whole.trc", tasks=LAB / "hamner_tasks_ik.xml"),
           Trial("Rajagopal pipeline's walk (planar, 80 Millard muscles, no wraps)", "rajagopal_walk",
-                MUSCLES / "rajagopal_walk_planar_muscles.osim", MUSCLES / "rajagopal_walk_grf.mot", 6.0, (0.1, 1.6),
+                MUSCLES / "rajagopal_walk_planar_muscles.osim", MUSCLES / "rajagopal_walk_grf.mot", 6.0, (0.1, 1.75),
                 100.0, ("glmax2_r", "glmed1_r", "vaslat_r", "soleus_r"), loads=MUSCLES / "rajagopal_walk_grf.xml",
                 markers=MUSCLES / "rajagopal_walk.trc", tasks=MUSCLES / "rajagopal_walk_ik_tasks.xml",
                 vertical="ground_force_r_vy", joints=(("hip_r", "femur_r"), ("walker_knee_r", "tibia_r"),

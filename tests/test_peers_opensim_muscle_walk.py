@@ -1,6 +1,6 @@
 """casflex's muscle path (casflex.muscles.analysis.TrialMuscles) against OpenSim 4.6's StaticOptimization and
 JointReaction on a public walk: the Rajagopal pipeline's (opensim-models, Pipelines/Rajagopal; tests/data/muscles'
-cut, 0.1-1.6 s at 100 Hz, one right gait cycle inside), on Rajagopal 2016 scaled by the pipeline, made planar with
+cut, 0.1-1.75 s at 100 Hz, one right gait cycle inside), on Rajagopal 2016 scaled by the pipeline, made planar with
 its 80 Millard2012EquilibriumMuscle muscles, the patella's path points made MovingPathPoints of the knee and every
 wrap object removed (an edited model, not Rajagopal's: tests/data/muscles/README.md, studies/_rajagopal_walk.py).
 OpenSim's IK of the cut on that model with the pipeline's task weights, the pipeline's ExternalLoads, a
@@ -22,7 +22,7 @@ needs_opensim = pytest.mark.skipif(importlib.util.find_spec("opensim") is None, 
 DATA = Path(__file__).parent / "data" / "muscles"
 MODEL = DATA / "rajagopal_walk_planar_muscles.osim"
 JOINTS = (("hip_r", "femur_r"), ("walker_knee_r", "tibia_r"), ("ankle_r", "talus_r"))
-T0, T1, RATE, CUTOFF = 0.1, 1.6, 100.0, 6.0
+T0, T1, RATE, CUTOFF = 0.1, 1.75, 100.0, 6.0
 
 
 def test_the_edited_model_has_its_muscles_without_wraps_and_the_patella_points_moving():
