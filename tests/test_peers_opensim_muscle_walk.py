@@ -127,7 +127,8 @@ def test_muscle_forces_are_opensims_within_2_percent_of_each_peak_but_four_of_th
 @needs_opensim
 def test_hip_knee_and_ankle_reactions_are_opensims_within_2_percent_of_peak(run):
     """On the child, in the child's axes, every frame: fx and fy within 2 % of the in-plane force's peak (RMS;
-    the study measures the magnitude's: 0.32 % hip, 0.19 % knee, 0.14 % ankle) and mz within 0.1 N m (0.02 at the knee)."""
+    the study measures the magnitude's: 0.32 % hip, 0.19 % knee, 0.14 % ankle) and mz within 0.1 N m (0.02 at
+    the knee)."""
     out = run["out"]
     for joint, body in JOINTS:
         theirs = _at(run["jr"], run["t"], [f"{joint}_on_{body}_in_{body}_{c}" for c in ("fx", "fy", "mz")])
