@@ -60,7 +60,8 @@ def _reserves(path: Path) -> Path:
 def run(tmp_path_factory):
     import xml.etree.ElementTree as ET
 
-    from casflex.inverse import prepare, solve
+    from casflex.inverse import Filter, prepare, solve
+    from casflex.inverse import Trial as Recorded
     from casflex.lab.tables import read_sto
     from casflex.muscles.analysis import TrialMuscles
     from casflex.muscles.reaction import JointReaction
@@ -80,7 +81,7 @@ def run(tmp_path_factory):
     reserves = _reserves(tmp / "reserves.xml")
     so = static_optimization(Trial(MODEL, coords, loads=loads, forces=(str(reserves),), cutoff=CUTOFF, t_start=T0,
                                    t_end=T1), tmp / "so", joints=[j for j, _ in JOINTS], on="child", frame="child")
-    inputs = prepare(MODEL, None, coordinates=coords, grf=loads, cutoff=CUTOFF, cutoff_plates=None, filter="opensim")
+    inputs = prepare(MODEL, Recorded(coordinates=coords, grf=loads), filter=Filter(CUTOFF, None, "opensim"))
     res = solve(inputs)
     osim = scene_from_osim(MODEL, muscles=True)
     trial = TrialMuscles(osim, inputs.tree, res.t, res.plates, read_actuators(reserves),
