@@ -23,6 +23,7 @@ from __future__ import annotations
 import importlib.util
 import tempfile
 import time
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,7 +35,9 @@ MUSCLES, LAB = ROOT / "tests" / "data" / "muscles", ROOT / "tests" / "data" / "l
 JOINTS = (("hip_r", "femur_r"), ("knee_r", "tibia_r"), ("ankle_r", "talus_r"))
 STANCE_N = 20.0  # N: a plate's vertical force above this is contact
 #: In-vivo hip contact force, instrumented implants: (BW, what, source) per trial.
-IN_VIVO = {"run": (5.5, "jogging, one patient",
+IN_VIVO = {"walk": (2.38, "average peak, 4 patients walking at about 4 km/h",
+                    "Bergmann et al. 2001, J Biomech 34:859-871"),
+           "run": (5.5, "jogging, one patient",
                    "Bergmann, Graichen, Rohlmann 1993, J Biomech 26:969-990")}
 
 
@@ -56,12 +59,21 @@ class Trial:
     markers: Path | None = None
     tasks: Path | None = None
     reserves: Path | None = None
+    vertical: str = "ground_force_vy"  # the right plate's vertical force's column
+    joints: tuple[tuple[str, str], ...] = JOINTS
+    gait: str = ""  # IN_VIVO's key (else the stem)
 
 
 TRIALS = (Trial("Hamner subject 02, running (planar, 92 Thelen muscles)", "run",
                 MUSCLES / "hamner_subject02_planar_muscles.osim", LAB / "hamner_running_whole_grf.mot", 10.0,
                 (0.2, 1.2), 60.0, ("glut_max2_r", "glut_med1_r", "vas_lat_r", "soleus_r"),
-                markers=LAB / "hamner_running_whole.trc", tasks=LAB / "hamner_tasks_ik.xml"))
+                markers=LAB / "hamner_running_whole.trc", tasks=LAB / "hamner_tasks_ik.xml"),
+          Trial("Rajagopal pipeline's walk (planar, 80 Millard muscles, no wraps)", "rajagopal_walk",
+                MUSCLES / "rajagopal_walk_planar_muscles.osim", MUSCLES / "rajagopal_walk_grf.mot", 6.0, (0.1, 1.75),
+                100.0, ("glmax2_r", "glmed1_r", "vaslat_r", "soleus_r"), loads=MUSCLES / "rajagopal_walk_grf.xml",
+                markers=MUSCLES / "rajagopal_walk.trc", tasks=MUSCLES / "rajagopal_walk_ik_tasks.xml",
+                vertical="ground_force_r_vy", joints=(("hip_r", "femur_r"), ("walker_knee_r", "tibia_r"),
+                                                      ("ankle_r", "talus_r")), gait="walk"))
 
 
 def reserves(path: Path, model: Path) -> Path:
@@ -88,10 +100,17 @@ def files(trial: Trial, tmp: Path) -> dict:
                 "reserves": trial.reserves, "grf": trial.grf, "ik_seconds": 0.0}
     t0, t1 = trial.window
     ik = inverse_kinematics(trial.model, trial.markers, trial.tasks, tmp / "ik.mot", t_start=t0, t_end=t1)
-    grf = exact_times(trial.grf, tmp / "grf.mot", t0, trial.rate)
+    if trial.loads is not None:  # the pipeline's ExternalLoads, its plates' rows on the frames' times already
+        tree = ET.parse(trial.loads)
+        tree.getroot().find(".//datafile").text = str(trial.grf)
+        tree.write(tmp / "loads.xml", encoding="UTF-8", xml_declaration=True)
+        grf, loads = trial.grf, tmp / "loads.xml"
+    else:
+        grf = exact_times(trial.grf, tmp / "grf.mot", t0, trial.rate)
+        loads = Path(external_loads(tmp / "loads.xml", grf, {"calcn_r": "ground_", "calcn_l": "1_ground_"}))
     return {"model": trial.model, "coordinates": Path(exact_times(ik["path"], tmp / "ik_even.mot", t0, trial.rate)),
-            "loads": Path(external_loads(tmp / "loads.xml", grf, {"calcn_r": "ground_", "calcn_l": "1_ground_"})),
-            "reserves": reserves(tmp / "reserves.xml", trial.model), "grf": Path(grf), "ik_seconds": ik["seconds"]}
+            "loads": loads, "reserves": reserves(tmp / "reserves.xml", trial.model), "grf": Path(grf),
+            "ik_seconds": ik["seconds"]}
 
 
 def opensim(trial: Trial, f: dict, tmp: Path, iterations: int) -> dict:
@@ -104,7 +123,7 @@ def opensim(trial: Trial, f: dict, tmp: Path, iterations: int) -> dict:
     run = OsimTrial(f["model"], f["coordinates"], loads=f["loads"], forces=(f["reserves"],), cutoff=trial.cutoff,
                     t_start=t0, t_end=t1)
     so = static_optimization(run, tmp / f"so{iterations}", max_iterations=iterations,
-                             joints=[j for j, _ in JOINTS], on="child", frame="child")
+                             joints=[j for j, _ in trial.joints], on="child", frame="child")
     return {"force": read_sto(so["force"]), "activation": read_sto(so["activation"]), "jr": read_sto(so["reactions"]),
             "failed": so["failed"], "seconds": so["so_seconds"] + so["jr_seconds"], "so_seconds": so["so_seconds"],
             "jr_seconds": so["jr_seconds"]}
@@ -125,7 +144,7 @@ def casflex(trial: Trial, f: dict) -> dict:
     res = solve(inputs)
     osim = scene_from_osim(f["model"], muscles=True)
     tm = TrialMuscles(osim, inputs.tree, res.t, res.plates, read_actuators(f["reserves"]),
-                      reaction=JointReaction(on="child", frame="child"), joints=tuple(j for j, _ in JOINTS))
+                      reaction=JointReaction(on="child", frame="child"), joints=tuple(j for j, _ in trial.joints))
     out = tm.solve(res.z, res.zd, res.zdd)
     return {"t": res.t, "out": out, "trial": tm, "names": [m.name for m in osim.muscles],
             "seconds": time.perf_counter() - start}
@@ -143,7 +162,7 @@ def body_weight(model: Path) -> float:
     return float(sum(b.mass for b in m.bodies.values()) * np.linalg.norm(m.gravity))
 
 
-def compare(mine: dict, ref: dict) -> dict:
+def compare(mine: dict, ref: dict, joints_: tuple = JOINTS) -> dict:
     """The measures of one OpenSim run against casflex's (module docstring)."""
     t, out, names = mine["t"], mine["out"], mine["names"]
     failed = np.array([any(abs(x - f) < 1e-6 for f in ref["failed"]) for x in t])
@@ -160,7 +179,7 @@ def compare(mine: dict, ref: dict) -> dict:
     cost_cf = (out.so.activations ** 2).sum(1) + (out.so.reserve_controls ** 2).sum(1)
     balance = np.einsum("kmc,km->kc", out.arms, acts * out.active) + controls - out.moments
     joints = {}
-    for joint, body in JOINTS:
+    for joint, body in joints_:
         th = _at(ref["jr"], t, [f"{joint}_on_{body}_in_{body}_{c}" for c in ("fx", "fy", "fz", "mz")])
         ours = out.reactions[joint].loads[:, 0, :]
         f_cf, f_os = np.hypot(ours[:, 0], ours[:, 1]), np.hypot(th[:, 0], th[:, 1])
@@ -197,9 +216,9 @@ def run_trial(trial: Trial, tmp: Path, quick: bool) -> dict:
     if not quick:
         refs[1000] = opensim(trial, f, tmp, 1000)
     bw = body_weight(trial.model)
-    res = {"trial": trial, "mine": mine, "bw": bw, "cmp": {k: compare(mine, r) for k, r in refs.items()},
+    res = {"trial": trial, "mine": mine, "bw": bw, "cmp": {k: compare(mine, r, trial.joints) for k, r in refs.items()},
            "ik_seconds": f["ik_seconds"]}
-    res["stance"], on = stance(f["grf"], mine["t"])
+    res["stance"], on = stance(f["grf"], mine["t"], trial.vertical)
     hip = res["cmp"][100]["joints"]["hip_r"]
     res["hip_bw"] = {k: float(hip[k][on].max() / bw) for k in ("cf", "os", "os3d")}
     return res
@@ -216,7 +235,7 @@ def figure(r: dict) -> bytes:
     hip = c["joints"]["hip_r"]
     for a, b in _spans(r["stance"]):
         ax.axvspan(t[a], t[b], color="0.92", lw=0)
-    value, what, source = IN_VIVO[trial.stem]
+    value, what, source = IN_VIVO[trial.gait or trial.stem]
     ax.axhline(value, color="C2", ls=":", lw=1.5, label=f"in vivo {value:g} BW: {what} ({source})")
     ax.plot(t, hip["os3d"] / bw, color="0.5", lw=1.0, ls="--", label="OpenSim 4.6 JR, with its out-of-plane force")
     ax.plot(t, hip["os"] / bw, color="k", lw=2.4, alpha=0.45, label="OpenSim 4.6 SO + JR, in the plane")
@@ -259,7 +278,8 @@ def _section(r: dict, quick: bool) -> list[str]:
                      f"{c['pct'][i]:.2f} ({names[i]}, peak {c['peak'][i]:.0f} N)",
                      f"{c['pct'][j]:.2f} ({names[j]})", f"{np.median(c['pct']):.2f}", f"{c['rms'].max():.2f}",
                      f"{c['pct_ok'][k]:.2f} ({names[k]}) / {c['rms_ok'][~big_ok].max(initial=0.0):.2f}",
-                     *(f"{c['joints'][j_]['force_pct']:.3f} / {c['joints'][j_]['mz_rms']:.3f}" for j_, _ in JOINTS)])
+                     *(f"{c['joints'][j_]['force_pct']:.3f} / {c['joints'][j_]['mz_rms']:.3f}"
+                       for j_, _ in trial.joints)])
     c = r["cmp"][100]
     fail = c["failed"]
     gap, viol = c["cost_os"] - c["cost_cf"], np.abs(mine["out"].so.violation).max()
@@ -276,7 +296,7 @@ def _section(r: dict, quick: bool) -> list[str]:
         cost = (f"OpenSim's SO converged at every frame; its balance is within {c['balance'].max():.3f} N m of "
                 "casflex's moments (casflex's inverse dynamics, moment arms and forces at full activation).")
     hip = r["hip_bw"]
-    value, what, source = IN_VIVO[trial.stem]
+    value, what, source = IN_VIVO[trial.gait or trial.stem]
     stem = f"opensim_muscles_{trial.stem}"
     times = r["cmp"][100]
     return [f"## {trial.name}", "", f"![hip contact force and muscles](../figures/{stem}{'_quick' * quick}.png)", "",
@@ -285,7 +305,7 @@ def _section(r: dict, quick: bool) -> list[str]:
             *table(["OpenSim's SO", "frames it reported failed", "worst muscle: RMS % of its peak",
                     "worst muscle of peak >= 50 N (%)", "median muscle (%)", "largest RMS (N)",
                     "OpenSim's solved frames: worst of peak >= 50 N (%) / largest RMS of the others (N)",
-                    *(f"{j} force % / mz N m" for j, _ in JOINTS)], rows, "lrrrrrr" + "r" * 3),
+                    *(f"{j} force % / mz N m" for j, _ in trial.joints)], rows, "lrrrrrr" + "r" * 3),
             "", cost, "",
             f"Right hip contact force, peak over the complete right stances: casflex {hip['cf']:.2f} BW, OpenSim "
             f"{hip['os']:.2f} BW in the plane ({hip['os3d']:.2f} BW with its out-of-plane component); in vivo "
@@ -319,7 +339,7 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
     lab = {r["trial"].stem: r["cmp"][100] for r in results}
     big = {s: float(np.max(np.where(c["peak_ok"] >= 50.0, c["pct_ok"], 0.0))) for s, c in lab.items()}
     small = {s: float(c["rms_ok"][c["peak_ok"] < 50.0].max(initial=0.0)) for s, c in lab.items()}
-    react = max(c["joints"][j]["force_pct"] for c in lab.values() for j, _ in JOINTS)
+    react = max(c["joints"][j]["force_pct"] for c in lab.values() for j in c["joints"])
     lines, failed = checks([
         ("every muscle whose peak is 50 N or more within 2 % of its peak over the frames OpenSim's SO solved (at its "
          "defaults), every trial", ", ".join(f"{s} {v:.2f} %" for s, v in big.items()), max(big.values()) < 2.0),
