@@ -38,7 +38,7 @@ import casadi as ca
 import numpy as np
 
 from casflex.elements.beam import wrap_angle
-from casflex.muscles.path import CONDITION_TOLERANCE, symbolic
+from casflex.muscles.path import CONDITION_TOLERANCE, distal_nodes, symbolic
 
 __all__ = ["BeamSite", "FlexiblePaths"]
 
@@ -204,19 +204,7 @@ class FlexiblePaths:
                            [self._lengths, ca.jtimes(self._lengths, self.q, qd)])
 
     def _distal(self, hinge: str) -> set[int]:
-        tree, idx = self.tree, self.model.node_names.index
-        parent = {tree.cluster[idx(self.scene.item(h).nodes[1])]: tree.cluster[idx(self.scene.item(h).nodes[0])]
-                  for h in tree.hinges}
-        top = tree.cluster[idx(self.scene.item(hinge).nodes[1])]
-
-        def beyond(c: int) -> bool:
-            while c in parent:
-                if c == top:
-                    return True
-                c = parent[c]
-            return c == top
-
-        return {n for n in range(len(tree.cluster)) if beyond(tree.cluster[n])}
+        return distal_nodes(self.tree, self.scene, hinge)
 
     def centre(self, hinge: str) -> ca.SX:
         """The hinge's point (2,) at q, carried by its child node."""

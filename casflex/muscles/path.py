@@ -246,19 +246,7 @@ class MusclePaths:
 
     def _distal(self, hinge: str) -> set[int]:
         """The model nodes beyond ``hinge`` from the root."""
-        tree, idx = self.tree, self.tree.model.node_names.index
-        parent = {tree.cluster[idx(self.scene.item(h).nodes[1])]: tree.cluster[idx(self.scene.item(h).nodes[0])]
-                  for h in tree.hinges}
-        top = tree.cluster[idx(self.scene.item(hinge).nodes[1])]
-
-        def beyond(c: int) -> bool:
-            while c in parent:
-                if c == top:
-                    return True
-                c = parent[c]
-            return c == top
-
-        return {n for n in range(len(tree.cluster)) if beyond(tree.cluster[n])}
+        return distal_nodes(self.tree, self.scene, hinge)
 
     def _centre(self, hinge: str) -> ca.SX:
         """The hinge's point (2,) at z, carried by its child node."""
@@ -267,3 +255,20 @@ class MusclePaths:
         x0 = self.tree.model.q0[3 * i: 3 * i + 3]
         P = np.asarray(self.scene.joint_point(j), dtype=float)
         return self.q[3 * i: 3 * i + 2] + _rot(self.q[3 * i + 2] - x0[2], ca.DM(P - x0[:2]))
+
+
+def distal_nodes(tree, scene, hinge: str) -> set[int]:
+    """The model nodes of ``tree`` beyond ``hinge`` (a hinge of ``scene``) from the tree's root."""
+    idx = tree.model.node_names.index
+    parent = {tree.cluster[idx(scene.item(h).nodes[1])]: tree.cluster[idx(scene.item(h).nodes[0])]
+              for h in tree.hinges}
+    top = tree.cluster[idx(scene.item(hinge).nodes[1])]
+
+    def beyond(c: int) -> bool:
+        while c in parent:
+            if c == top:
+                return True
+            c = parent[c]
+        return c == top
+
+    return {n for n in range(len(tree.cluster)) if beyond(tree.cluster[n])}
