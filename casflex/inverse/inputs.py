@@ -381,13 +381,18 @@ def prepare(scene, trial: Trial, *, filter: Filter | None = None, fit: Fit | Non
     for node in plates if not isinstance(plates, str) else ():
         if node not in (names := [n.name for n in scene.nodes]):
             raise ValueError(f"plates: no node {node!r} in the scene; nodes are {names}")
-    lab, table = _trial(trial.markers, grf, bool(plates))
+    model = inverse_model(scene, trial.root)
+    tree = kinematic_tree(model, trial.root)
+    spec = band_spec(model, tree, bands, given=trial.given, n_markers=sum(m.weight > 0 for m in scene.markers))
+    lab, table = _trial(trial.markers, grf, bool(plates))  # the bands checked before: a bad band costs no reading
     if lab is not None and not trial.given:
         scene, lab, locked = _marker_set(scene, lab)
         task_notes += locked
-    model = inverse_model(scene, trial.root)
-    tree = kinematic_tree(model, trial.root)
-    spec = band_spec(model, tree, bands, given=trial.given, n_markers=sum(m.weight > 0 for m in model.scene.markers))
+        if locked:  # a segment the trial records no marker of, locked: the model and the bands' spec again
+            model = inverse_model(scene, trial.root)
+            tree = kinematic_tree(model, trial.root)
+            spec = band_spec(model, tree, bands, given=trial.given,
+                             n_markers=sum(m.weight > 0 for m in scene.markers))
     if not trial.given:
         t, y, labels, rate, notes = _from_markers(model, tree, lab, pl, trial.t_start, trial.t_end)
         z, report, source = None, [], lab.source
