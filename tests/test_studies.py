@@ -11,8 +11,9 @@ import pytest
 HERE = Path(__file__).resolve().parents[1] / "studies"
 STUDIES = sorted(p for p in HERE.glob("*.py") if not p.name.startswith("_"))  # _study.py: their shared parts
 #: The quick runs left to ``pytest -m long`` (the suite's budget, ~10 minutes on 2 cores): the benchmarks, whose
-#: timings are never asserted, and the leg study, whose identification tests/test_leg_scene.py covers.
-LONG = {"leg"}
+#: timings are never asserted, the leg study, whose identification tests/test_leg_scene.py covers, and the hip over
+#: the walk's cycle (108 s on a busy machine; its muscle path and bands: test_muscles_bands, test_peers_*_walk).
+LONG = {"leg", "hip_contact_walk"}
 
 
 def _param(p: Path):
