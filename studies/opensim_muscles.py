@@ -79,16 +79,11 @@ TRIALS = (Trial("Hamner subject 02, running (planar, 92 Thelen muscles)", "run",
 def reserves(path: Path, model: Path) -> Path:
     """The run's reserves: a CoordinateActuator of 1 N m on each free coordinate but the pelvis's, FX and FY
     (1 N, in the ground's axes, at the pelvis's origin) and MZ (1 N m) on the pelvis."""
-    from casflex.scene.osim import read_osim
-    from casflex.scene.osim_actuators import Actuator, write_actuators
+    from casflex.muscles.analysis import reserve_actuators
+    from casflex.scene.from_osim import scene_from_osim
+    from casflex.scene.osim_actuators import write_actuators
 
-    free = [c.name for j in read_osim(model).joints for c in j.coordinates if not c.locked]
-    acts = [Actuator("FX", "PointActuator", 1.0, body="pelvis", direction=(1.0, 0.0, 0.0), force_is_global=True),
-            Actuator("FY", "PointActuator", 1.0, body="pelvis", direction=(0.0, 1.0, 0.0), force_is_global=True),
-            Actuator("MZ", "TorqueActuator", 1.0, body="pelvis", other="ground", axis=(0.0, 0.0, 1.0))]
-    acts += [Actuator(f"{c}_reserve", "CoordinateActuator", 1.0, coordinate=c) for c in free
-             if not c.startswith("pelvis_")]
-    return Path(write_actuators(path, acts, "reserves"))
+    return Path(write_actuators(path, reserve_actuators(scene_from_osim(model).scene, "pelvis", 1.0), "reserves"))
 
 
 def files(trial: Trial, tmp: Path) -> dict:

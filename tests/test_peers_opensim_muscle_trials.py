@@ -27,30 +27,17 @@ JOINTS = (("hip_r", "femur_r"), ("knee_r", "tibia_r"), ("ankle_r", "talus_r"))
 T0, T1, RATE, CUTOFF = 0.2, 1.2, 60.0, 10.0
 
 
-def _reserves(path: Path) -> Path:
-    from casflex.scene.osim import read_osim
-    from casflex.scene.osim_actuators import Actuator, write_actuators
-
-    free = [c.name for j in read_osim(MODEL).joints for c in j.coordinates if not c.locked]
-    acts = [Actuator("FX", "PointActuator", 1.0, body="pelvis", direction=(1.0, 0.0, 0.0), force_is_global=True),
-            Actuator("FY", "PointActuator", 1.0, body="pelvis", direction=(0.0, 1.0, 0.0), force_is_global=True),
-            Actuator("MZ", "TorqueActuator", 1.0, body="pelvis", other="ground", axis=(0.0, 0.0, 1.0))]
-    acts += [Actuator(f"{c}_reserve", "CoordinateActuator", 1.0, coordinate=c) for c in free
-             if not c.startswith("pelvis_")]
-    return Path(write_actuators(path, acts))
-
-
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     from casflex.inverse import Filter, prepare, solve
     from casflex.inverse import Trial as InverseTrial
     from casflex.lab.tables import read_sto
-    from casflex.muscles.analysis import TrialMuscles
+    from casflex.muscles.analysis import TrialMuscles, reserve_actuators
     from casflex.muscles.reaction import JointReaction
     from casflex.peers.opensim_analyses import Trial, static_optimization
     from casflex.peers.opensim_tools import exact_times, external_loads, inverse_kinematics
     from casflex.scene.from_osim import scene_from_osim
-    from casflex.scene.osim_actuators import read_actuators
+    from casflex.scene.osim_actuators import read_actuators, write_actuators
 
     tmp = tmp_path_factory.mktemp("hamner_muscles")
     ik = inverse_kinematics(MODEL, LAB / "hamner_running_whole.trc", LAB / "hamner_tasks_ik.xml", tmp / "ik.mot",
@@ -60,12 +47,12 @@ def run(tmp_path_factory):
     coords = exact_times(ik["path"], tmp / "ik_even.mot", T0, RATE)
     grf = exact_times(LAB / "hamner_running_whole_grf.mot", tmp / "grf.mot", T0, RATE)
     loads = external_loads(tmp / "loads.xml", grf, {"calcn_r": "ground_", "calcn_l": "1_ground_"})
-    reserves = _reserves(tmp / "reserves.xml")
+    osim = scene_from_osim(MODEL, muscles=True)
+    reserves = Path(write_actuators(tmp / "reserves.xml", reserve_actuators(osim.scene, "pelvis", 1.0)))
     so = static_optimization(Trial(MODEL, coords, loads=loads, forces=(str(reserves),), cutoff=CUTOFF, t_start=T0,
                                    t_end=T1), tmp / "so", joints=[j for j, _ in JOINTS], on="child", frame="child")
     inputs = prepare(MODEL, InverseTrial(coordinates=coords, grf=loads), filter=Filter(CUTOFF, None, "opensim"))
     res = solve(inputs)
-    osim = scene_from_osim(MODEL, muscles=True)
     trial = TrialMuscles(osim, inputs.tree, res.t, res.plates, read_actuators(reserves),
                          reaction=JointReaction(on="child", frame="child"), joints=tuple(j for j, _ in JOINTS))
     out = trial.solve(res.z, res.zd, res.zdd)

@@ -43,19 +43,6 @@ def test_the_edited_model_has_its_muscles_without_wraps_and_the_patella_points_m
     assert not list(model.iter("CoordinateCouplerConstraint"))
 
 
-def _reserves(path: Path) -> Path:
-    from casflex.scene.osim import read_osim
-    from casflex.scene.osim_actuators import Actuator, write_actuators
-
-    free = [c.name for j in read_osim(MODEL).joints for c in j.coordinates if not c.locked]
-    acts = [Actuator("FX", "PointActuator", 1.0, body="pelvis", direction=(1.0, 0.0, 0.0), force_is_global=True),
-            Actuator("FY", "PointActuator", 1.0, body="pelvis", direction=(0.0, 1.0, 0.0), force_is_global=True),
-            Actuator("MZ", "TorqueActuator", 1.0, body="pelvis", other="ground", axis=(0.0, 0.0, 1.0))]
-    acts += [Actuator(f"{c}_reserve", "CoordinateActuator", 1.0, coordinate=c) for c in free
-             if not c.startswith("pelvis_")]
-    return Path(write_actuators(path, acts))
-
-
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     import xml.etree.ElementTree as ET
@@ -63,12 +50,12 @@ def run(tmp_path_factory):
     from casflex.inverse import Filter, prepare, solve
     from casflex.inverse import Trial as Recorded
     from casflex.lab.tables import read_sto
-    from casflex.muscles.analysis import TrialMuscles
+    from casflex.muscles.analysis import TrialMuscles, reserve_actuators
     from casflex.muscles.reaction import JointReaction
     from casflex.peers.opensim_analyses import Trial, static_optimization
     from casflex.peers.opensim_tools import exact_times, inverse_kinematics
     from casflex.scene.from_osim import scene_from_osim
-    from casflex.scene.osim_actuators import read_actuators
+    from casflex.scene.osim_actuators import read_actuators, write_actuators
 
     tmp = tmp_path_factory.mktemp("rajagopal_muscles")
     ik = inverse_kinematics(MODEL, DATA / "rajagopal_walk.trc", DATA / "rajagopal_walk_ik_tasks.xml",
@@ -78,12 +65,12 @@ def run(tmp_path_factory):
     tree.getroot().find(".//datafile").text = str(DATA / "rajagopal_walk_grf.mot")
     tree.write(tmp / "loads.xml", encoding="UTF-8", xml_declaration=True)
     loads = tmp / "loads.xml"
-    reserves = _reserves(tmp / "reserves.xml")
+    osim = scene_from_osim(MODEL, muscles=True)
+    reserves = Path(write_actuators(tmp / "reserves.xml", reserve_actuators(osim.scene, "pelvis", 1.0)))
     so = static_optimization(Trial(MODEL, coords, loads=loads, forces=(str(reserves),), cutoff=CUTOFF, t_start=T0,
                                    t_end=T1), tmp / "so", joints=[j for j, _ in JOINTS], on="child", frame="child")
     inputs = prepare(MODEL, Recorded(coordinates=coords, grf=loads), filter=Filter(CUTOFF, None, "opensim"))
     res = solve(inputs)
-    osim = scene_from_osim(MODEL, muscles=True)
     trial = TrialMuscles(osim, inputs.tree, res.t, res.plates, read_actuators(reserves),
                          reaction=JointReaction(on="child", frame="child"), joints=tuple(j for j, _ in JOINTS))
     out = trial.solve(res.z, res.zd, res.zdd)

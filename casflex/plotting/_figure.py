@@ -40,6 +40,26 @@ def _save(fig: Figure, path: str | os.PathLike[str] | None, dpi: float = DPI) ->
     atomic_write_bytes(path, buf.getvalue())
 
 
+def _panel_grid(n: int, cols: int, size: tuple[float, float]) -> tuple[Figure, list]:
+    """A figure of ``n`` panels, at most ``cols`` in a row, each ``size`` (inches): the figure and its axes in
+    reading order (the grid's spare axes after the ``n`` used ones, for :func:`_finish_panels`)."""
+    import numpy as np
+
+    cols = min(cols, n)
+    rows = -(-n // cols)
+    fig = _new_figure((size[0] * cols, size[1] * rows))
+    return fig, list(np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).ravel())
+
+
+def _finish_panels(fig: Figure, axes: list, n: int, title: str, path: str | os.PathLike[str] | None) -> None:
+    """Hide the grid's spare axes, put the legend on the first panel, title the figure and save it."""
+    for ax in axes[n:]:
+        ax.set_visible(False)
+    axes[0].legend(fontsize="x-small")
+    fig.suptitle(title)
+    _save(fig, path)
+
+
 def _close(fig: Figure) -> None:
     """Drop a figure's artists (figures are not registered anywhere, so this only frees memory sooner)."""
     fig.clear()

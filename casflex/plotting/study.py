@@ -8,7 +8,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from casflex.plotting._figure import _new_figure, _save
+from casflex.plotting._figure import _finish_panels, _panel_grid
 
 __all__ = ["plot_cycles"]
 
@@ -20,10 +20,7 @@ def plot_cycles(percent: np.ndarray, curves: dict[str, dict[str, np.ndarray]], t
     deviation (shaded) of its curves (m, 101) over ``percent`` (0-100 % of the gait cycle). ``curves``:
     load -> label -> (m, 101) in the load's unit (``units[load]``; default N for a force, else N m)."""
     names = list(loads or curves)
-    cols = min(3, len(names))
-    rows = -(-len(names) // cols)
-    fig = _new_figure((4.2 * cols, 3.0 * rows))
-    axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).ravel()
+    fig, axes = _panel_grid(len(names), 3, (4.2, 3.0))
     for ax, name in zip(axes, names, strict=False):
         for label, c in curves[name].items():
             c = np.atleast_2d(c)
@@ -34,8 +31,4 @@ def plot_cycles(percent: np.ndarray, curves: dict[str, dict[str, np.ndarray]], t
         ax.set(title=name, xlabel="gait cycle (%)", ylabel=unit)
         ax.axhline(0.0, color="0.6", lw=0.6)
         ax.grid(True, alpha=0.3)
-    for ax in axes[len(names):]:
-        ax.set_visible(False)
-    axes[0].legend(fontsize="x-small")
-    fig.suptitle(title)
-    _save(fig, path)
+    _finish_panels(fig, axes, len(names), title, path)

@@ -9,7 +9,7 @@ import os
 
 import numpy as np
 
-from casflex.plotting._figure import _new_figure, _save
+from casflex.plotting._figure import _finish_panels, _panel_grid
 
 __all__ = ["plot_contact"]
 
@@ -19,10 +19,7 @@ def plot_contact(percent: np.ndarray, curves: dict[str, dict[str, tuple[np.ndarr
     """One panel per joint: for every subject its cycles' mean (line) with the mean band shaded (where given), and
     the group's mean (black). ``curves``: joint -> subject -> (values (m, 101) BW, bands (m, 101) or None)."""
     names = list(curves)
-    cols = min(2, len(names))
-    rows = -(-len(names) // cols)
-    fig = _new_figure((5.0 * cols, 3.4 * rows))
-    axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).ravel()
+    fig, axes = _panel_grid(len(names), 2, (5.0, 3.4))
     for ax, name in zip(axes, names, strict=False):
         means = []
         for subject, (v, b) in curves[name].items():
@@ -37,8 +34,4 @@ def plot_contact(percent: np.ndarray, curves: dict[str, dict[str, tuple[np.ndarr
         ax.set(title=f"{name.removesuffix('_resultant')}: contact force", xlabel="gait cycle (%)",
                ylabel="body weights")
         ax.grid(True, alpha=0.3)
-    for ax in axes[len(names):]:
-        ax.set_visible(False)
-    axes[0].legend(fontsize="x-small")
-    fig.suptitle(title)
-    _save(fig, path)
+    _finish_panels(fig, axes, len(names), title, path)
