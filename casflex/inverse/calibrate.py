@@ -151,6 +151,41 @@ def _undecided_at(tree: KinematicTree, z: np.ndarray, ym: np.ndarray) -> str:
             f"{'s' * (len(segments) > 1)} {', '.join(repr(n) for n in segments)}")
 
 
+def _scaled(tree, sc, ym: np.ndarray, labels: list[str], source: str, mass: float | None):
+    """(the scene scaled segment by segment to the static markers' mean ``ym`` (n_m, 2) m, its report lines)."""
+    model = tree.model
+    y0 = np.array([[m.x, m.y] for m in sc.markers])
+    s = _scales(tree, y0, ym, labels, source)
+    sc = _scaled_scene(tree, s)
+    sc = sc if mass is None else with_mass(sc, mass)
+    names = {c: next(n for i, n in enumerate(model.node_names) if tree.cluster[i] == c) for c in s}
+    lines = ["segments scaled (by the node that carries each): "
+             + ", ".join(f"{names[c]} {v:.3f}" for c, v in s.items())]
+    lines += [f"warning: segment {names[c]!r} scaled by {v:.3f}, beyond {SCALE_WARN[0]:g}-{SCALE_WARN[1]:g} (its "
+              "static markers' distances over the scene's): a marker mislabelled or on another segment?"
+              for c, v in s.items() if not SCALE_WARN[0] <= v <= SCALE_WARN[1]]
+    return sc, lines
+
+
+def _placed(sc, model, tree, z: np.ndarray, ym: np.ndarray, report: list[str]):
+    """(the scene's markers moved on their segments to where the static pose ``z`` puts the trial's mean ``ym``,
+    each marker's move (m), the far moves' descriptions); a marker the trial never saw stays (said in ``report``)."""
+    q = np.array(tree.forward(z)).ravel()
+    markers, moved, far = [], [], []
+    for k, (m, i) in enumerate(zip(sc.markers, tree.marker_nodes, strict=True)):
+        if not np.isfinite(ym[k]).all():
+            markers.append(m)
+            report.append(f"marker {m.name!r} ({m.lab_label}): not in the static trial, left where it was")
+            continue
+        x_fit, th_fit = q[3 * i:3 * i + 2], q[3 * i + 2]
+        x0, th0 = model.q0[3 * i:3 * i + 2], model.q0[3 * i + 2]
+        p = x0 + _rot(th0 - th_fit) @ (ym[k] - x_fit)
+        moved.append(float(np.hypot(p[0] - m.x, p[1] - m.y)))
+        far += [f"{m.name!r} ({m.lab_label}) {1e3 * moved[-1]:.0f} mm"] * (moved[-1] > MOVE_WARN)
+        markers.append(dataclasses.replace(m, x=float(p[0]), y=float(p[1])))
+    return markers, moved, far
+
+
 def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, scale: bool = False,
               mass: float | None = None):
     """(the calibrated scene, report lines) from the static trial ``static`` (LabMarkers or a .trc/.c3d
@@ -197,16 +232,8 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
     check_decided(tree, ym.ravel()[None], tuple(labels.values()), lab.source)
     unscaled = fit_pose(tree, ym.ravel())[1]
     if scale:
-        y0 = np.array([[m.x, m.y] for m in sc.markers])
-        s = _scales(tree, y0, ym, list(labels.values()), lab.source)
-        sc = _scaled_scene(tree, s)
-        sc = sc if mass is None else with_mass(sc, mass)
-        names = {c: next(n for i, n in enumerate(model.node_names) if tree.cluster[i] == c) for c in s}
-        report.append("segments scaled (by the node that carries each): "
-                      + ", ".join(f"{names[c]} {v:.3f}" for c, v in s.items()))
-        report += [f"warning: segment {names[c]!r} scaled by {v:.3f}, beyond {SCALE_WARN[0]:g}-{SCALE_WARN[1]:g} (its "
-                   "static markers' distances over the scene's): a marker mislabelled or on another segment?"
-                   for c, v in s.items() if not SCALE_WARN[0] <= v <= SCALE_WARN[1]]
+        sc, lines = _scaled(tree, sc, ym, list(labels.values()), lab.source, mass)
+        report += lines
     elif mass is not None:
         raise ValueError("mass: scales the bodies with the segments (scale=True)")
     model = inverse_model(sc, root)
@@ -216,19 +243,7 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
         raise ValueError(f"static trial: its markers do not decide the pose: {_undecided_at(tree, z, ym)} (a segment "
                          "with fewer than two seen markers and no other way to place it): record them, or take the "
                          "segment out of the scene")
-    q = np.array(tree.forward(z)).ravel()
-    markers, moved, far = [], [], []
-    for k, (m, i) in enumerate(zip(sc.markers, tree.marker_nodes, strict=True)):
-        if not np.isfinite(ym[k]).all():
-            markers.append(m)
-            report.append(f"marker {m.name!r} ({m.lab_label}): not in the static trial, left where it was")
-            continue
-        x_fit, th_fit = q[3 * i:3 * i + 2], q[3 * i + 2]
-        x0, th0 = model.q0[3 * i:3 * i + 2], model.q0[3 * i + 2]
-        p = x0 + _rot(th0 - th_fit) @ (ym[k] - x_fit)
-        moved.append(float(np.hypot(p[0] - m.x, p[1] - m.y)))
-        far += [f"{m.name!r} ({m.lab_label}) {1e3 * moved[-1]:.0f} mm"] * (moved[-1] > MOVE_WARN)
-        markers.append(dataclasses.replace(m, x=float(p[0]), y=float(p[1])))
+    markers, moved, far = _placed(sc, model, tree, z, ym, report)
     out = dataclasses.replace(sc, markers=tuple(markers))
     out = dataclasses.replace(out, markers=tuple(dataclasses.replace(m, weight=0.0) if m.name in centres else m
                                                  for m in out.markers))  # the marker fit's weights again
