@@ -22,8 +22,10 @@ from casflex.results import atomic_write_bytes
 DPI = 120
 
 
-def _new_figure(figsize: tuple[float, float]) -> Figure:
-    fig = Figure(figsize=figsize, layout="constrained")
+def _new_figure(figsize: tuple[float, float], layout: str | None = "constrained") -> Figure:
+    """A figure of ``figsize`` (inches) on its own Agg canvas; ``layout`` None for a grid laid out by hand (the
+    constrained layout's cost grows with the square of the panels: minutes for a hundred)."""
+    fig = Figure(figsize=figsize, layout=layout)
     FigureCanvasAgg(fig)
     return fig
 

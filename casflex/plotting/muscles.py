@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 
 from casflex.plotting._figure import _new_figure, _save
 
@@ -51,8 +52,13 @@ def plot_activations(res, path: str | os.PathLike[str] | None = None, emg=None) 
     n = len(res.muscles)
     cols = min(n, 4)
     rows = int(np.ceil(n / cols))
-    fig = _new_figure((2.2 * cols + 1.0, 1.5 * rows + 0.8))
-    axes = np.atleast_1d(fig.subplots(rows, cols, sharex=True, sharey=True)).ravel()
+    w, h = 2.2 * cols + 1.0, 1.5 * rows + 0.8
+    fig = _new_figure((w, h), layout=None)  # by hand: shared axes and the constrained layout are quadratic in panels
+    fig.subplots_adjust(left=0.7 / w, right=1 - 0.3 / w, bottom=0.75 / h, top=1 - 0.7 / h, wspace=0.12,
+                        hspace=0.45 * 1.5 / 1.2)
+    axes = np.atleast_1d(fig.subplots(rows, cols)).ravel()
+    t0, t1 = float(res.t[0]), float(res.t[-1])
+    span = (t0, t1) if t1 > t0 else (t0 - 0.5, t0 + 0.5)  # one frame: a second around it
     for i, ax in enumerate(axes):
         if i >= n:
             ax.set_visible(False)
@@ -61,12 +67,14 @@ def plot_activations(res, path: str | os.PathLike[str] | None = None, emg=None) 
         if res.muscles[i] in emg:
             ax.fill_between(res.t, 0.0, emg[res.muscles[i]], color="0.6", alpha=0.4, lw=0)
         ax.set_title(res.muscles[i], fontsize=8)
-        ax.set_ylim(0.0, 1.0)
+        ax.set(xlim=span, ylim=(0.0, 1.0), yticks=(0.0, 0.5, 1.0))
+        ax.xaxis.set_major_locator(MaxNLocator(4))
+        ax.tick_params(labelsize=7, labelleft=i % cols == 0, labelbottom=i + cols >= n)  # the outer panels' labels
         ax.grid(alpha=0.3)
-    fig.supxlabel("t (s)")
+    fig.supxlabel("t (s)", y=0.25 / h)
     fig.supylabel("activation")
     if emg:
-        fig.suptitle("grey: EMG envelope over its peak (timing only)", fontsize=9)
+        fig.suptitle("grey: EMG envelope over its peak (timing only)", fontsize=9, y=1 - 0.3 / h)
     _save(fig, path)
     return fig
 
