@@ -87,7 +87,7 @@ def test_pendulum_band_is_the_closed_form():
     assert np.allclose(res.band_parts["base.mass"]["root.fy"], 0.1 * G)  # the base still: its weight, no more
     assert band["markers"].max() < 1e-6 * band["anthropometry"].max()  # exact markers: no noise in the residuals
     assert np.allclose(band["total"], np.hypot(band["anthropometry"], band["markers"]))
-    assert any("the loads linear in each (second differences within" in line for line in res.report)
+    assert any("the loads linear in each (second derivatives within" in line for line in res.report)
     assert "pivot.moment" in res.summary().split("bands at each moment's peak")[1]
 
 
@@ -101,7 +101,7 @@ def test_a_centre_of_mass_the_loads_are_quadratic_in_is_said_and_its_part_is_the
     want = -0.02 * (2 * M * C * thdd + M * G * np.sin(th))
     tau = res.load("pivot.moment")
     assert np.abs(res.band_parts["arm.com_y"]["pivot.moment"] - want).max() < 1e-9 * np.abs(tau).max()
-    assert any("the loads linear in all but ['arm.com_y']: their parts are central differences" in line
+    assert any("the loads linear in all but ['arm.com_y']: their parts are first-order changes" in line
                for line in res.report)
 
 
