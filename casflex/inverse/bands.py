@@ -185,7 +185,8 @@ def inverse_bands(spec: BandSpec, inputs, fit, z: np.ndarray, zd: np.ndarray, zd
     t, plates = inputs.t, inputs.plates
     derivs = None  # the rigid loads' derivatives: taken once for both parts
     if function is None and (spec.targets or not (spec.given or spec.marker_noise == 0)):
-        derivs = load_derivatives(spec.tree, t, plates, z, zd, zdd, spec.model.p_nominal, spec.index)
+        derivs = load_derivatives(spec.tree, t, plates, z, zd, zdd, spec.model.p_nominal, spec.index,
+                                  kinematics=inputs.tree)
     parts, bend = anthropometry(spec, t, z, zd, zdd, plates, function, derivatives=derivs)
     lines = _anthropometry_lines(spec, bend)
     anth = {k: np.sqrt(sum(parts[g][k] ** 2 for g in parts)) if parts else np.zeros(t.size) for k in names}

@@ -20,7 +20,7 @@ import numpy as np
 
 from casflex.inverse.lab_names import lab_loads
 from casflex.inverse.plates import plate_loads
-from casflex.inverse.rigid import _frame_function, driver_rows
+from casflex.inverse.rigid import driver_rows
 from casflex.inverse.tree import KinematicTree
 
 __all__ = ["LoadDerivatives", "load_derivatives"]
@@ -45,15 +45,17 @@ class LoadDerivatives:
         return np.stack([self.motion[n] for n in names], axis=2)
 
 
-def _frame_loads(tree: KinematicTree, index: np.ndarray) -> tuple[ca.Function, list[str]]:
+def _frame_loads(tree: KinematicTree, index: np.ndarray, rates: ca.Function) -> tuple[ca.Function, list[str]]:
     """``frame(z, zd, zdd, t, p, e0) -> (y, dy/d(z, zd, zdd), dy/dp_u, d2y/dp_u^2 (columns))`` at one frame, e0
     the plates' generalised forces at q = 0, and the names of y's rows (the model's outputs, then the root's and
-    the hinges' drivers)."""
+    the hinges' drivers); ``rates`` the tree's (z, z', z'') -> (q, q', q'')."""
     m = tree.model
     n, nd, nc = tree.n, m.n_dof, m.n_con
     z, zd, zdd = (ca.SX.sym(s, n) for s in ("z", "zd", "zdd"))
     t, p, e0 = ca.SX.sym("t"), ca.SX.sym("p", m.n_p), ca.SX.sym("e0", nd)
-    q, qd, _, r, B = _frame_function(tree).expand()(z, zd, zdd, t, p)
+    q, qd, qdd = rates(z, zd, zdd)
+    r = m.equilibrium(q, qd, qdd, ca.SX.zeros(nc), t, p)[0]  # Eq. 1 without the constraints' forces
+    B = m.constraint(q)[1]
     moment = ca.SX.zeros(nd)  # the plates' moments about the nodes as they move: M_o - (x F_y - y F_x)
     for i in range(0, nd, 3):
         moment[i + 2] = -(q[i] * e0[i + 1] - q[i + 1] * e0[i])
@@ -70,13 +72,19 @@ def _frame_loads(tree: KinematicTree, index: np.ndarray) -> tuple[ca.Function, l
 
 
 def load_derivatives(tree: KinematicTree, t: np.ndarray, plates, z: np.ndarray, zd: np.ndarray, zdd: np.ndarray,
-                     p: np.ndarray, index: np.ndarray | None = None) -> LoadDerivatives:
+                     p: np.ndarray, index: np.ndarray | None = None, *,
+                     kinematics: KinematicTree | None = None) -> LoadDerivatives:
     """The loads at the frames t (k,) s, coordinates z, z', z'' (k, n_z) each, properties p of ``tree.model``,
     with the ``plates`` applied, and their exact derivatives (module docstring) along the coordinates and along
-    the properties p[index]."""
+    the properties p[index]. ``kinematics``: a tree of the same scene's geometry whose rates are built already
+    (the inverse's, whose model lacks the uncertain parameters; the properties move no node): its coordinates
+    and dofs must be ``tree``'s."""
     m, k = tree.model, t.size
     index = np.zeros(0, dtype=int) if index is None else np.asarray(index, dtype=int)
-    f, names = _frame_loads(tree, index)
+    kin = tree if kinematics is None else kinematics
+    if kin is not tree and (kin.names != tree.names or kin.model.dof_names != m.dof_names):
+        raise ValueError(f"kinematics: its coordinates {kin.names} and dofs are not the tree's {tree.names}")
+    f, names = _frame_loads(tree, index, kin.rates)
     e0 = plate_loads(m, list(plates), t, np.zeros((k, m.n_dof))) if plates else np.zeros((k, m.n_dof))
     y, motion, props, curv = (np.array(v) for v in f.map(k)(z.T, zd.T, zdd.T, t[None, :],
                                                            np.tile(np.asarray(p, float)[:, None], (1, k)), e0.T))
