@@ -11,8 +11,10 @@ The chain from the markers to the loads is, frame by frame and then over the tri
 2. the filter, the gap filling and the rates: linear in z, the same for every coordinate: (z, z', z'')_k =
    sum_i (R0, R1, R2)[k, i] z_i, the operators R taken by passing unit impulses through the very functions the
    inverse runs (:func:`casflex.inverse.fit.filtered_rates`, the spline of :func:`casflex.inverse.fit.fit_markers`);
-3. the loads: at each frame a function of that frame's (z, z', z''), linearised by central differences along each
-   coordinate (quadratic in z' and linear in z'': their differences exact; along z, errors of 1e-10).
+3. the loads: at each frame a function of that frame's (z, z', z''), linearised exactly by AD, every frame in one
+   call (:mod:`casflex.inverse.load_jacobian`); other outputs of the frame's coordinates (the muscles') by central
+   differences along each coordinate (:func:`load_jacobians`: quadratic in z' and linear in z'', their differences
+   exact; along z, errors of 1e-10).
 
 With white noise of standard deviation sigma per axis of every marker (independent between markers, axes and
 frames), the variance of a load L at frame k is
