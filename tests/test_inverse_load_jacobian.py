@@ -91,3 +91,17 @@ def test_a_tree_of_another_scene_is_refused(stride):
     with pytest.raises(ValueError, match=r"kinematics: its coordinates .* are not the tree's"):
         load_derivatives(spec.tree, res.t, inputs.plates, res.z, res.zd, res.zdd, spec.model.p_nominal,
                          kinematics=other)
+
+
+def test_blocks_of_frames_give_the_whole_record_s(stride, monkeypatch):
+    """Blocks of 10 frames (the last padded) against one block of all 44: the same numbers."""
+    import casflex.inverse.load_jacobian as lj
+
+    inputs, res, d = stride
+    spec = inputs.band_spec
+    monkeypatch.setattr(lj, "BLOCK", 10)
+    b = load_derivatives(spec.tree, res.t, inputs.plates, res.z, res.zd, res.zdd, spec.model.p_nominal, spec.index,
+                         kinematics=inputs.tree)
+    for field in ("value", "motion", "props", "curvature"):
+        whole, blocks = getattr(d, field), getattr(b, field)
+        assert all(np.array_equal(whole[k], blocks[k]) for k in whole), field

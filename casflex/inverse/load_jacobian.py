@@ -20,7 +20,7 @@ import numpy as np
 
 from casflex.inverse.lab_names import lab_loads
 from casflex.inverse.plates import plate_loads
-from casflex.inverse.rigid import driver_rows
+from casflex.inverse.rigid import BLOCK, driver_rows
 from casflex.inverse.tree import KinematicTree
 
 __all__ = ["LoadDerivatives", "load_derivatives"]
@@ -86,11 +86,19 @@ def load_derivatives(tree: KinematicTree, t: np.ndarray, plates, z: np.ndarray, 
         raise ValueError(f"kinematics: its coordinates {kin.names} and dofs are not the tree's {tree.names}")
     f, names = _frame_loads(tree, index, kin.rates)
     e0 = plate_loads(m, list(plates), t, np.zeros((k, m.n_dof))) if plates else np.zeros((k, m.n_dof))
-    y, motion, props, curv = (np.array(v) for v in f.map(k)(z.T, zd.T, zdd.T, t[None, :],
-                                                           np.tile(np.asarray(p, float)[:, None], (1, k)), e0.T))
     nl, nu, n = len(names), len(index), tree.n
-    motion = motion.reshape(nl, k, 3, n).transpose(0, 2, 1, 3)  # (n_l, 3, k, n_z)
-    props, curv = (v.reshape(nl, k, nu) for v in (props, curv))
+    size = min(BLOCK, k)
+    fm, pk = f.map(size), np.tile(np.asarray(p, float)[:, None], (1, size))
+    blocks = []
+    for s in range(0, k, size):  # blocks of frames: the mapped function's outputs stay small
+        rows = np.minimum(np.arange(s, s + size), k - 1)  # the last block padded with its last frame
+        y, motion, props, curv = (np.array(v) for v in fm(z[rows].T, zd[rows].T, zdd[rows].T, t[rows][None, :], pk,
+                                                          e0[rows].T))
+        keep = min(size, k - s)
+        blocks.append((y[:, :keep], motion.reshape(nl, size, 3, n)[:, :keep],
+                       props.reshape(nl, size, nu)[:, :keep], curv.reshape(nl, size, nu)[:, :keep]))
+    y, motion, props, curv = (np.concatenate([b[i] for b in blocks], axis=1) for i in range(4))
+    motion = motion.transpose(0, 2, 1, 3)  # (n_l, 3, k, n_z)
     if plates:  # the plates' linear form against plate_loads itself, at the fitted configurations
         q = np.array(tree.forward.map(k)(z.T)).T
         e = plate_loads(m, list(plates), t, q)
