@@ -100,7 +100,7 @@ def load_derivatives(tree: KinematicTree, t: np.ndarray, plates, z: np.ndarray, 
     y, motion, props, curv = (np.concatenate([b[i] for b in blocks], axis=1) for i in range(4))
     motion = motion.transpose(0, 2, 1, 3)  # (n_l, 3, k, n_z)
     if plates:  # the plates' linear form against plate_loads itself, at the fitted configurations
-        q = np.array(tree.forward.map(k)(z.T)).T
+        q = np.array(kin.forward.map(k)(z.T)).T
         e = plate_loads(m, list(plates), t, q)
         lin = e0.copy()
         lin[:, 2::3] -= q[:, 0::3] * e0[:, 1::3] - q[:, 1::3] * e0[:, 0::3]
