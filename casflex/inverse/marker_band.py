@@ -39,6 +39,7 @@ from collections.abc import Callable
 import numpy as np
 
 from casflex.inverse.fit import FittedMotion, coordinate_bounds, filtered_rates, marker_weights
+from casflex.inverse.load_jacobian import dense_outputs
 from casflex.inverse.tree import KinematicTree
 
 __all__ = ["fit_covariances", "load_jacobians", "marker_band", "memory", "residual_noise"]
@@ -69,13 +70,16 @@ def residual_noise(tree: KinematicTree, fit: FittedMotion) -> float:
     return float(np.sqrt(np.nansum(mis**2) / dof))
 
 
-def _curvature(tree: KinematicTree):
-    """``curvature(z, v) -> (n_z, n_z)``: the Hessian of v . f(z), f the markers' channels at the coordinates z."""
+def _fit_terms(tree: KinematicTree):
+    """``terms(z, y, w) -> (f, J, H)``: the markers' channels f(z) (2 m), their Jacobian J (2 m, n_z) and the Hessian
+    of v . f at fixed v = w (f - y) (n_z, n_z), the fit's weighted residuals (w 0 where a channel is not seen)."""
     import casadi as ca
 
-    z, v = ca.SX.sym("z", tree.n), ca.SX.sym("v", len(tree.model.scene.markers) * 2)
-    J = tree.marker_fit(z)[1]
-    return ca.Function("marker_curvature", [z, v], [ca.jacobian(ca.mtimes(J.T, v), z)])
+    m2 = len(tree.model.scene.markers) * 2
+    z, y, w, v = ca.SX.sym("z", tree.n), ca.SX.sym("y", m2), ca.SX.sym("w", m2), ca.SX.sym("v", m2)
+    f, J = tree.marker_fit(z)
+    H = ca.substitute(ca.jacobian(ca.mtimes(J.T, v), z), v, w * (f - y))
+    return ca.Function("marker_fit_terms", [z, y, w], [ca.densify(e) for e in (f, J, H)])
 
 
 def fit_covariances(tree: KinematicTree, fit: FittedMotion, y: np.ndarray, sigma: float) -> np.ndarray:
@@ -86,12 +90,11 @@ def fit_covariances(tree: KinematicTree, fit: FittedMotion, y: np.ndarray, sigma
     and the coordinates not held at a limit; 0 where the fit did not decide the pose (a gap)."""
     n, nz = fit.z.shape
     decided = np.isfinite(fit.rms)
-    f, J = (np.array(v) for v in tree.marker_fit.map(n)(fit.z.T))
-    J = J.reshape(y.shape[1], n, nz).transpose(1, 0, 2)
     w = marker_weights(tree)
     W = np.where(np.isfinite(y) & decided[:, None], 1.0 if w is None else w**2, 0.0)  # (n, 2 m)
-    r = np.where(W > 0, f.T - np.nan_to_num(y), 0.0)
-    H = np.array(_curvature(tree).map(n)(fit.z.T, (W * r).T)).reshape(nz, n, nz).transpose(1, 0, 2)
+    _, J, H = dense_outputs(_fit_terms(tree).map(n), [fit.z.T, np.nan_to_num(y).T, W.T])  # one call, every frame
+    J = J.reshape(y.shape[1], n, nz).transpose(1, 0, 2)
+    H = H.reshape(nz, n, nz).transpose(1, 0, 2)
     free = _free(tree, fit.z) & decided[:, None]
     both = free[:, :, None] & free[:, None, :]
     Jf = np.where(free[:, None, :], J, 0.0)
