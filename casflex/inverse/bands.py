@@ -4,13 +4,14 @@ from the markers' noise.
 - **Anthropometry.** The scene's ``[[uncertain]]`` properties (and those given as ``uncertain=``, replacing the
   scene's of the same target: :mod:`casflex.scene.uncertain`), e.g. a segment's mass and inertia from a table
   (10-20 %), become the last parameters of the inverse's model
-  (:func:`~casflex.scene.uncertain.with_uncertain_estimated`). At the fitted kinematics the rigid inverse's loads
-  are linear in the bodies' masses and inertias (and in a torsion spring's stiffness and damping, a load's size,
-  gravity): each property's part is the change of every load when it moves by its standard deviation,
-  (L(p + sd e_j) - L(p - sd e_j)) / 2, exact for those. The second difference is measured and reported; where it is
-  more than round-off (a property the loads are not linear in: a centre of mass' position, where the scene takes it
-  as a property, is quadratic) the part is that central difference, the first-order change. With independent
-  priors, sd_anthropometry = sqrt(sum_j part_j^2).
+  (:func:`~casflex.scene.uncertain.with_uncertain_estimated`). Each property's part is the first-order change of
+  every load when it moves by its standard deviation, sd dL/dp_j, the derivative exact by AD
+  (:mod:`casflex.inverse.load_jacobian`). At the fitted kinematics the rigid inverse's loads are linear in the
+  bodies' masses and inertias (and in a torsion spring's stiffness and damping, a load's size, gravity): the part
+  is then the whole change, (L(p + sd e_j) - L(p - sd e_j)) / 2. The second derivative is taken too and reported;
+  where it is not 0 (a property the loads are not linear in: a centre of mass' position, where the scene takes it
+  as a property, is quadratic, and the part is then still its central difference) the report names it. With
+  independent priors, sd_anthropometry = sqrt(sum_j part_j^2).
 - **Markers.** The markers' white noise (declared ``marker_noise``, m per axis, or the fit's residuals')
   propagated exactly to first order through the fit, the filter, the rates and the loads
   (:mod:`casflex.inverse.marker_band`); none where the coordinates were given instead of markers.
@@ -28,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from casflex.inverse.lab_names import lab_loads
+from casflex.inverse.load_jacobian import LoadDerivatives, load_derivatives
 from casflex.inverse.options import BandError, Bands
 from casflex.inverse.plates import plate_loads
 from casflex.inverse.rigid import rigid_loads
@@ -38,7 +40,7 @@ __all__ = ["BandError", "BandSpec", "anthropometry", "band_spec", "inverse_bands
 
 #: rigid_loads' outputs that are the motion, not loads
 _MOTION = ("q", "qd", "qdd", "lam")
-#: A property whose second difference exceeds this fraction of its first is reported as not linear.
+#: A property whose second derivative (difference) exceeds this fraction of its first is reported as not linear.
 LINEAR = 1e-9
 
 
@@ -126,21 +128,34 @@ def rigid_load_function(tree: KinematicTree, t: np.ndarray, plates, p: np.ndarra
 
 
 def anthropometry(spec: BandSpec, t: np.ndarray, z: np.ndarray, zd: np.ndarray, zdd: np.ndarray,
-                  plates=(), function=None) -> tuple[dict[str, dict[str, np.ndarray]], dict[str, float]]:
+                  plates=(), function=None, *, derivatives: LoadDerivatives | None = None
+                  ) -> tuple[dict[str, dict[str, np.ndarray]], dict[str, float]]:
     """({target: {load: (k,)}}, {target: bend}): the change of every load (N, N m) at the frames t (k,) when each
-    uncertain property moves by its standard deviation, by central differences at the coordinates z, z', z''
-    (k, n_z); ``bend``: the largest second difference over the largest first (round-off, ~1e-15, where the loads
-    are linear in the property). ``function(z, zd, zdd, p) -> {name: (k,)}``: the outputs differenced, any
-    function of each frame's coordinates and of the properties p of ``spec.model`` (default the rigid inverse's
-    loads: :func:`rigid_load_function`, with the ``plates``; the muscles' outputs: :mod:`casflex.muscles.bands`)."""
+    uncertain property moves by its standard deviation, at the coordinates z, z', z'' (k, n_z); ``bend``: the
+    largest second change over the largest first (0 or round-off where the loads are linear in the property).
+    The rigid inverse's loads (with the ``plates``): sd times their exact derivative, the bend from their second
+    (:mod:`casflex.inverse.load_jacobian`; ``derivatives``: already taken at these frames with ``spec.tree`` and
+    ``spec.index``). ``function(z, zd, zdd, p) -> {name: (k,)}``: other outputs of each frame's coordinates and of
+    the properties p of ``spec.model`` (the muscles': :mod:`casflex.muscles.bands`), by central differences."""
     p0 = spec.model.p_nominal
-    loads = rigid_load_function(spec.tree, t, plates, p0) if function is None else function
-    base = loads(z, zd, zdd, p0)
+    if not spec.targets:
+        return {}, {}
+    if function is None:
+        d = derivatives if derivatives is not None else load_derivatives(spec.tree, t, plates, z, zd, zdd, p0,
+                                                                         spec.index)
+        parts, bend = {}, {}
+        for j, (target, sd) in enumerate(zip(spec.targets, spec.sd, strict=True)):
+            parts[target] = {k: sd * v[:, j] for k, v in d.props.items()}
+            first = max(float(np.max(np.abs(2.0 * sd * v[:, j]))) for v in d.props.values())
+            second = max(float(np.max(np.abs(sd * sd * v[:, j]))) for v in d.curvature.values())
+            bend[target] = second / first if first > 0 else 0.0
+        return parts, bend
+    base = function(z, zd, zdd, p0)
     parts, bend = {}, {}
     for j, target, sd in zip(spec.index, spec.targets, spec.sd, strict=True):
         dp = np.zeros_like(p0)
         dp[j] = sd
-        up, down = loads(z, zd, zdd, p0 + dp), loads(z, zd, zdd, p0 - dp)
+        up, down = function(z, zd, zdd, p0 + dp), function(z, zd, zdd, p0 - dp)
         parts[target] = {k: 0.5 * (up[k] - down[k]) for k in base}
         first = max(float(np.max(np.abs(up[k] - down[k]))) for k in base)
         second = max(float(np.max(np.abs(up[k] + down[k] - 2.0 * base[k]))) for k in base)
@@ -155,8 +170,8 @@ def _anthropometry_lines(spec: BandSpec, bend: dict[str, float]) -> list[str]:
     bent = [t for t, b in bend.items() if b > LINEAR]
     worst = max(bend.values())
     lines = [f"bands (1 SD): anthropometry from {props}; the loads linear in "
-             + (f"each (second differences within {worst:.1g} of the first)" if not bent else
-                f"all but {bent}: their parts are central differences (second differences up to {worst:.2g})")]
+             + (f"each (second derivatives within {worst:.1g} of the first)" if not bent else
+                f"all but {bent}: their parts are first-order changes (second derivatives up to {worst:.2g})")]
     return lines
 
 
@@ -168,12 +183,16 @@ def inverse_bands(spec: BandSpec, inputs, fit, z: np.ndarray, zd: np.ndarray, zd
     z, z', z'' (k, n_z); ``function(z, zd, zdd, p) -> {name: (k,)}``: the outputs, as :func:`anthropometry`'s
     (default the rigid inverse's loads)."""
     t, plates = inputs.t, inputs.plates
-    parts, bend = anthropometry(spec, t, z, zd, zdd, plates, function)
+    derivs = None  # the rigid loads' derivatives: taken once for both parts
+    if function is None and (spec.targets or not (spec.given or spec.marker_noise == 0)):
+        derivs = load_derivatives(spec.tree, t, plates, z, zd, zdd, spec.model.p_nominal, spec.index,
+                                  kinematics=inputs.tree)
+    parts, bend = anthropometry(spec, t, z, zd, zdd, plates, function, derivatives=derivs)
     lines = _anthropometry_lines(spec, bend)
     anth = {k: np.sqrt(sum(parts[g][k] ** 2 for g in parts)) if parts else np.zeros(t.size) for k in names}
     settings = spec.describe()
     outputs = None if function is None else (lambda z, zd, zdd: function(z, zd, zdd, spec.model.p_nominal))
-    mark, more, noise = marker_part(spec, inputs, fit, z, zd, zdd, names, outputs)
+    mark, more, noise = marker_part(spec, inputs, fit, z, zd, zdd, names, outputs, derivatives=derivs)
     lines += more
     settings |= noise
     bands = {k: {"anthropometry": anth[k], "markers": mark[k], "total": np.hypot(anth[k], mark[k])} for k in names}
@@ -181,10 +200,12 @@ def inverse_bands(spec: BandSpec, inputs, fit, z: np.ndarray, zd: np.ndarray, zd
 
 
 def marker_part(spec: BandSpec, inputs, fit, z: np.ndarray, zd: np.ndarray, zdd: np.ndarray, names: list[str],
-                outputs=None, step: float = 1e-5) -> tuple[dict[str, np.ndarray], list[str], dict]:
-    """({name: (k,)}, report lines, settings): the markers' part of the bands of ``outputs(z, zd, zdd) ->
-    {name: (k,)}`` (default the rigid inverse's loads) (module docstring; 0 where the coordinates were given or
-    the markers declared exact), differenced by ``step`` along z (:func:`~.marker_band.load_jacobians`)."""
+                outputs=None, step: float = 1e-5, *, derivatives: LoadDerivatives | None = None
+                ) -> tuple[dict[str, np.ndarray], list[str], dict]:
+    """({name: (k,)}, report lines, settings): the markers' part of the bands (module docstring; 0 where the
+    coordinates were given or the markers declared exact) of the rigid inverse's loads, by their exact derivatives
+    along z, z', z'' (:mod:`casflex.inverse.load_jacobian`; ``derivatives``: already taken at these frames), or of
+    ``outputs(z, zd, zdd) -> {name: (k,)}``, differenced by ``step`` along z (:func:`~.marker_band.load_jacobians`)."""
     from casflex.inverse.marker_band import fit_covariances, load_jacobians, marker_band, residual_noise
 
     t, plates = inputs.t, inputs.plates
@@ -198,9 +219,12 @@ def marker_part(spec: BandSpec, inputs, fit, z: np.ndarray, zd: np.ndarray, zdd:
         declared = spec.marker_noise is not None
         sigma = spec.marker_noise if declared else residual_noise(inputs.tree, fit)
         C = fit_covariances(inputs.tree, fit, inputs.y, sigma)
-        if outputs is None:
-            outputs = rigid_load_function(inputs.tree, t, plates, inputs.model.p_nominal)
-        D = load_jacobians(outputs, z, zd, zdd, names, step=step)
+        if outputs is not None:
+            D = load_jacobians(outputs, z, zd, zdd, names, step=step)
+        else:
+            d = derivatives if derivatives is not None else load_derivatives(inputs.tree, t, plates, z, zd, zdd,
+                                                                             inputs.model.p_nominal)
+            D = d.jacobians(names)
         sd = marker_band(t, np.isfinite(fit.rms), C, D, inputs.cutoff, inputs.settings.get("filter", "butterworth"))
         mark = {k: sd[:, i] for i, k in enumerate(names)}
         settings = {"marker_noise_m": sigma, "marker_noise_from": "declared" if declared else "residuals"}

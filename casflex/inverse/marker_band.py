@@ -11,8 +11,10 @@ The chain from the markers to the loads is, frame by frame and then over the tri
 2. the filter, the gap filling and the rates: linear in z, the same for every coordinate: (z, z', z'')_k =
    sum_i (R0, R1, R2)[k, i] z_i, the operators R taken by passing unit impulses through the very functions the
    inverse runs (:func:`casflex.inverse.fit.filtered_rates`, the spline of :func:`casflex.inverse.fit.fit_markers`);
-3. the loads: at each frame a function of that frame's (z, z', z''), linearised by central differences along each
-   coordinate (quadratic in z' and linear in z'': their differences exact; along z, errors of 1e-10).
+3. the loads: at each frame a function of that frame's (z, z', z''), linearised exactly by AD, every frame in one
+   call (:mod:`casflex.inverse.load_jacobian`); other outputs of the frame's coordinates (the muscles') by central
+   differences along each coordinate (:func:`load_jacobians`: quadratic in z' and linear in z'', their differences
+   exact; along z, errors of 1e-10).
 
 With white noise of standard deviation sigma per axis of every marker (independent between markers, axes and
 frames), the variance of a load L at frame k is
@@ -20,8 +22,10 @@ frames), the variance of a load L at frame k is
     Var L_k = sum_i sum_(a, b) (dL_k/dz^(a))^T R_a[k, i] R_b[k, i] C_i (dL_k/dz^(b)),  C_i = sigma^2 G_i G_i^T.
 
 The filter forgets: R[k, i] falls below 1e-13 of its peak within :func:`memory` frames of k (the filter's slowest
-pole), so long trials are taken in segments, each with that many frames of margin on both sides: the cost grows
-with the frames, not their square. ``sigma`` is declared or, by default, the fit's residuals' (their sum of
+pole), and farther than that from the record's ends and its gaps the filter and the rates are one shift-invariant
+operator, R[k, i] = r(k - i): there the sum over i is a convolution of the covariances with r_a r_b (by FFT). The
+frames near the ends and the gaps are taken in segments, each with that many frames of margin on both sides: the
+cost grows with the frames, not their square. ``sigma`` is declared or, by default, the fit's residuals' (their sum of
 squares over the degrees of freedom the fit leaves: unbiased for white noise). What this leaves out: noise that
 is not white (soft tissue moving with the muscles, a marker placed off its landmark: correlated over frames, it
 passes the filter), and the terms of second order in the noise (relative size: the noise over the segments'
@@ -35,6 +39,7 @@ from collections.abc import Callable
 import numpy as np
 
 from casflex.inverse.fit import FittedMotion, coordinate_bounds, filtered_rates, marker_weights
+from casflex.inverse.load_jacobian import dense_outputs
 from casflex.inverse.tree import KinematicTree
 
 __all__ = ["fit_covariances", "load_jacobians", "marker_band", "memory", "residual_noise"]
@@ -65,13 +70,16 @@ def residual_noise(tree: KinematicTree, fit: FittedMotion) -> float:
     return float(np.sqrt(np.nansum(mis**2) / dof))
 
 
-def _curvature(tree: KinematicTree):
-    """``curvature(z, v) -> (n_z, n_z)``: the Hessian of v . f(z), f the markers' channels at the coordinates z."""
+def _fit_terms(tree: KinematicTree):
+    """``terms(z, y, w) -> (f, J, H)``: the markers' channels f(z) (2 m), their Jacobian J (2 m, n_z) and the Hessian
+    of v . f at fixed v = w (f - y) (n_z, n_z), the fit's weighted residuals (w 0 where a channel is not seen)."""
     import casadi as ca
 
-    z, v = ca.SX.sym("z", tree.n), ca.SX.sym("v", len(tree.model.scene.markers) * 2)
-    J = tree.marker_fit(z)[1]
-    return ca.Function("marker_curvature", [z, v], [ca.jacobian(ca.mtimes(J.T, v), z)])
+    m2 = len(tree.model.scene.markers) * 2
+    z, y, w, v = ca.SX.sym("z", tree.n), ca.SX.sym("y", m2), ca.SX.sym("w", m2), ca.SX.sym("v", m2)
+    f, J = tree.marker_fit(z)
+    H = ca.substitute(ca.jacobian(ca.mtimes(J.T, v), z), v, w * (f - y))
+    return ca.Function("marker_fit_terms", [z, y, w], [ca.densify(e) for e in (f, J, H)])
 
 
 def fit_covariances(tree: KinematicTree, fit: FittedMotion, y: np.ndarray, sigma: float) -> np.ndarray:
@@ -82,12 +90,11 @@ def fit_covariances(tree: KinematicTree, fit: FittedMotion, y: np.ndarray, sigma
     and the coordinates not held at a limit; 0 where the fit did not decide the pose (a gap)."""
     n, nz = fit.z.shape
     decided = np.isfinite(fit.rms)
-    f, J = (np.array(v) for v in tree.marker_fit.map(n)(fit.z.T))
-    J = J.reshape(y.shape[1], n, nz).transpose(1, 0, 2)
     w = marker_weights(tree)
     W = np.where(np.isfinite(y) & decided[:, None], 1.0 if w is None else w**2, 0.0)  # (n, 2 m)
-    r = np.where(W > 0, f.T - np.nan_to_num(y), 0.0)
-    H = np.array(_curvature(tree).map(n)(fit.z.T, (W * r).T)).reshape(nz, n, nz).transpose(1, 0, 2)
+    _, J, H = dense_outputs(_fit_terms(tree).map(n), [fit.z.T, np.nan_to_num(y).T, W.T])  # one call, every frame
+    J = J.reshape(y.shape[1], n, nz).transpose(1, 0, 2)
+    H = H.reshape(nz, n, nz).transpose(1, 0, 2)
     free = _free(tree, fit.z) & decided[:, None]
     both = free[:, :, None] & free[:, None, :]
     Jf = np.where(free[:, None, :], J, 0.0)
@@ -168,10 +175,49 @@ def _segment(t, decided, C, D, core: tuple[int, int], margin: int, cutoff, how: 
         Cf = C[a + chunk].reshape(chunk.size, nz * nz)
         for p, (i, j) in enumerate(PAIRS):
             Q[p] += (R[i] * R[j]) @ Cf
-    var = np.zeros((c1 - c0, D.shape[2]))
+    return _variance(D[:, c0:c1], Q)
+
+
+def _interior(decided: np.ndarray, margin: int) -> np.ndarray:
+    """(n,) bool: the frames more than ``margin`` frames from both ends of the record and from every frame the fit
+    did not decide: there the filter and the rates are the same operator whatever the frame (shift-invariant)."""
+    n = decided.size
+    near = np.zeros(n + 1, dtype=int)  # a difference array: +1 where a window of 2 margin + 1 frames starts
+    for g in np.flatnonzero(~decided):
+        near[max(0, g - margin)] += 1
+        near[min(n, g + margin + 1)] -= 1
+    inner = np.cumsum(near[:n]) == 0
+    inner[:margin] = inner[max(margin, n - margin):] = False
+    return inner
+
+
+def _shift_invariant(t: np.ndarray, C: np.ndarray, margin: int, cutoff, how: str) -> np.ndarray:
+    """Q (len(PAIRS), n, n_z^2): sum_i R_a[k, i] R_b[k, i] C_i for every frame k as if R were the interior's
+    operator, R_a[k, i] = r_a(k - i): a convolution of C with r_a r_b, by FFT. The kernels r_a are the response to
+    one impulse in the middle of a record of 4 ``margin`` + 1 frames at the trial's rate (the same functions the
+    inverse runs); exact (to round-off) at the frames :func:`_interior` gives."""
+    n, nz = C.shape[:2]
+    L = 4 * margin + 1
+    tt = t[0] + (t[1] - t[0]) * np.arange(L)
+    X = np.zeros((L, 1))
+    X[2 * margin, 0] = 1.0
+    r = [v[margin:3 * margin + 1, 0] for v in filtered_rates(tt, X, cutoff, how)]  # offsets -margin..margin
+    size = 1 << int(np.ceil(np.log2(n + 2 * margin)))
+    spectrum = np.fft.rfft(C.reshape(n, nz * nz), size, axis=0)
+    Q = np.empty((len(PAIRS), n, nz * nz))
     for p, (i, j) in enumerate(PAIRS):
-        var += (1.0 if i == j else 2.0) * np.einsum("klc,kcd,kld->kl", D[i, c0:c1], Q[p].reshape(-1, nz, nz),
-                                                    D[j, c0:c1])
+        full = np.fft.irfft(spectrum * np.fft.rfft(r[i] * r[j], size)[:, None], size, axis=0)
+        Q[p] = full[margin:margin + n]
+    return Q
+
+
+def _variance(D: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """The loads' variances (k, n_loads) from their derivatives D (3, k, n_loads, n_z) and Q (len(PAIRS), k,
+    n_z^2) (the module docstring's sum)."""
+    nz = D.shape[3]
+    var = np.zeros(D.shape[1:3])
+    for p, (i, j) in enumerate(PAIRS):
+        var += (1.0 if i == j else 2.0) * np.einsum("klc,kcd,kld->kl", D[i], Q[p].reshape(-1, nz, nz), D[j])
     return var
 
 
@@ -180,11 +226,19 @@ def marker_band(t: np.ndarray, decided: np.ndarray, C: np.ndarray, D: np.ndarray
     """(n, n_loads): the loads' standard deviations (N, N m) from the fit's covariances C (n, n_z, n_z) and the
     loads' derivatives D (3, n, n_loads, n_z) (:func:`load_jacobians`), through the filter (``cutoff`` Hz, None:
     none; ``how``) and the rates (module docstring), over the frames t (n,) s, ``decided`` (n,) where the fit
-    decided the pose. Taken in segments of ``core`` frames (default 4 x :func:`memory`, at least 512) with
-    :func:`memory` frames of margin: the same to 1e-13 as the whole record at once."""
+    decided the pose. Frames farther than :func:`memory` from the ends and the gaps see the filter's interior
+    operator: a convolution (:func:`_shift_invariant`); the others are taken in segments of ``core`` frames
+    (default 4 x :func:`memory`, at least 512) with :func:`memory` frames of margin: the same to 1e-13 as the whole
+    record at once."""
     n = t.size
     margin = memory(t, cutoff, how)
     core = max(4 * margin, 512) if core is None else int(core)
-    var = np.concatenate([_segment(t, decided, C, D, (c0, min(n, c0 + core)), margin, cutoff, how)
-                          for c0 in range(0, n, core)])
+    inner = _interior(decided, margin)
+    var = np.zeros((n, D.shape[2]))
+    if inner.any():
+        var[inner] = _variance(D[:, inner], _shift_invariant(t, C, margin, cutoff, how)[:, inner])
+    edges = np.flatnonzero(np.diff(np.r_[0, (~inner).astype(int), 0]))  # the runs of frames not inner
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        for c0 in range(a, b, core):
+            var[c0:min(b, c0 + core)] = _segment(t, decided, C, D, (c0, min(b, c0 + core)), margin, cutoff, how)
     return np.sqrt(np.maximum(var, 0.0))
