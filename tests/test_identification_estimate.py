@@ -130,3 +130,35 @@ def test_transfer_state_puts_every_mesh_node_where_the_coarse_beam_has_it():
     mid = model.qd0[model.dof("ybar.1")] + model.dof("ybar.1")
     assert qd[fine.dof("ybar.2")] == pytest.approx(mid)
     assert q[fine.dof("yb")] == model.q0[model.dof("yb")]
+
+
+def test_the_model_error_refit_by_chord_steps_gives_the_exact_refits_error(monkeypatch):
+    # Exudyn's twobar (8 ANCF elements per bar) fitted with casflex's 1 element per bar: a real model error
+    from pathlib import Path
+
+    import casflex
+    from casflex.data import MeasurementSet
+    from casflex.identification import ModelRun, Uncertainty, identify_indirect
+
+    z = np.load(Path(__file__).resolve().parent / "data" / "twobar_exudyn.npz")
+    names, rows = ("x3", "y3", "x5", "y5"), np.arange(0, 1001, 10)
+    ch = [str(c) for c in z["channels"]]
+    q = z["q"][np.ix_(rows, [ch.index(c) for c in names])]
+    data = MeasurementSet(z["t"][rows], names, q + np.random.default_rng(0).normal(0, 5e-4, q.shape), None, None)
+    model = casflex.assemble(casflex.load_scene("twobar"))
+
+    def run():
+        return identify_indirect(model, Experiment(data, noise=5e-4), start=0.8, run=ModelRun(dt=1e-3),
+                                 uncertainty=Uncertainty(form="none"))
+
+    fast = run()
+    monkeypatch.setattr(est, "chord_fit", lambda *a, **k: None)  # the exact refit, with sensitivities
+    exact = run()
+    assert fast.extra["uncertainty"]["model_error_refit"]["status"] == "chord"
+    assert exact.extra["uncertainty"]["model_error_refit"]["status"] != "chord"
+    se = fast.extra["uncertainty"]["noise"]
+    me_fast, me_exact = (r.extra["uncertainty"]["model_error"] for r in (fast, exact))
+    assert max(me_exact[k] / se[k] for k in se) > 0.05  # an error the standard errors feel
+    # to the fit's own tolerance (OFFSET_TOL = 0.01 SE): the refit's answer and so the reported errors
+    assert all(abs(me_fast[k] - me_exact[k]) <= 0.01 * se[k] for k in se), (me_fast, me_exact, se)
+    assert all(abs(fast.std_errors[k] - exact.std_errors[k]) <= 0.01 * se[k] for k in se)

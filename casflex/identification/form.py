@@ -48,7 +48,7 @@ import numpy as np
 from casflex.identification.choices import FORMS
 from casflex.identification.initial_state import initial_states
 from casflex.identification.measurement import Experiment, check_against_scene
-from casflex.identification.output_error import Budget, Fit, OutputError, fit
+from casflex.identification.output_error import Budget, Fit, OutputError, chord_fit, fit
 from casflex.identification.problem import ParameterMap
 from casflex.identification.statistics import bartlett_bandwidth
 from casflex.model import Model, assembled
@@ -199,7 +199,14 @@ def _refit(alt_model: Model, problem: OutputError, first: Fit, p_hat: dict[str, 
         allowed four times over."""
         return offset <= REJECT_SE and delta_aic((problem, first.r), (prob, r))[0] - 4 * offset**2 > REJECT_AIC
 
-    return prob, fit(prob, prob.pack(pmap.theta(p0)), budget, verbose=verbose, near=True, enough=rejected)
+    w0 = prob.pack(pmap.theta(p0))
+    if prob.n_unknowns == problem.n_unknowns == alt_model.n_p and same:
+        # ruled out for good with the fit's own Jacobian and model runs without sensitivities (chord steps, a
+        # third of the cost); any other verdict rests on the alternative's exact fit, its moves and AIC
+        quick = chord_fit(prob, w0, first.J, budget, enough=rejected)
+        if quick is not None and quick.status == "within_se":
+            return prob, quick
+    return prob, fit(prob, w0, budget, verbose=verbose, near=True, enough=rejected)
 
 
 def compare_forms(problem: OutputError, first: Fit, alternatives: list[tuple[Alternative, Model]], *, setup: dict,

@@ -26,7 +26,7 @@ from casflex import interrupt
 from casflex.codegen import BufferedCall, compile_functions, log
 from casflex.integrators.hht import HHT
 
-__all__ = ["SensitivityRun", "run_sensitivities", "CHUNK"]
+__all__ = ["SensitivityRun", "run_sensitivities", "run_states", "CHUNK"]
 
 #: Steps per compiled call.
 CHUNK = 250
@@ -125,3 +125,50 @@ def run_sensitivities(integ: HHT, x0: np.ndarray, p: np.ndarray, t0: float, dt: 
         S = SS[(m - 1) * nw:m * nw].copy()
         interrupt.check()
     return SensitivityRun(keep, Xk, Sk, True, None)
+
+
+def _state_functions(integ: HHT, compiled: bool) -> tuple:
+    """(chunk call, one-step call) of the plain HHT run: the simulator's compiled library (BufferedCalls), or
+    the CasADi Functions."""
+    from casflex.simulate.run import CHUNK as SIM_CHUNK
+    from casflex.simulate.run import compiled_library
+
+    chunk = integ.trajectory(SIM_CHUNK)
+    if compiled and shutil.which("gcc") is not None:
+        lib = compiled_library(integ)
+        return BufferedCall(lib[chunk.name()]), BufferedCall(lib[integ.step.name()]), SIM_CHUNK
+    return chunk, integ.step, SIM_CHUNK
+
+
+def run_states(integ: HHT, x0: np.ndarray, p: np.ndarray, t0: float, dt: float, n_steps: int, keep: np.ndarray, *,
+               compiled: bool = True) -> SensitivityRun:
+    """:func:`run_sensitivities` without the sensitivities (``S`` has no directions): the model run alone, at
+    about a third of the cost of one in 4 directions (twobar). The same steps, Newton scaling and step times, so
+    the states agree with a run with sensitivities to the Newton tolerance."""
+    n = integ.model.n_dof
+    chunk_fn, step_fn, chunk = _state_functions(integ, compiled)
+    d = np.array(integ.scale(x0[:n], x0[n:2 * n], p, dt)).ravel()
+    keep = np.asarray(keep, dtype=int)
+    X = np.empty((n_steps + 1, integ.nx))
+    X[0] = x0
+    R = np.empty(chunk)
+    pv, hv, done = np.ascontiguousarray(p, dtype=float), np.array([float(dt)]), 0
+    while done < n_steps:
+        m = chunk if n_steps - done >= chunk else 1
+        fn = chunk_fn if m == chunk else step_fn
+        t_in = np.array([t0 + done * dt])
+        out = X[done + 1:done + 1 + m]
+        if isinstance(fn, BufferedCall):
+            fn([np.ascontiguousarray(X[done]), t_in, pv, hv, d], [out, R[:m]])
+        else:
+            res = fn(X[done], t_in, pv, hv, d)
+            out[:] = np.array(res[0]).T.reshape(m, -1)
+            R[:m] = np.array(res[1]).ravel()
+        bad = ~(np.isfinite(out).all(axis=1) & (R[:m] <= integ.tolerance(out[:, :n])))
+        if bad.any():
+            good = int(np.argmax(bad))
+            kept = keep[keep <= done + good]
+            return SensitivityRun(kept, X[kept], np.empty((kept.size, 0, integ.nx)), False, done + good + 1)
+        done += m
+        interrupt.check()
+    return SensitivityRun(keep, X[keep], np.empty((keep.size, 0, integ.nx)), True, None)
