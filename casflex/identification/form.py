@@ -212,9 +212,10 @@ def _refit(alt_model: Model, problem: OutputError, first: Fit, p_hat: dict[str, 
 def compare_forms(problem: OutputError, first: Fit, alternatives: list[tuple[Alternative, Model]], *, setup: dict,
                   budget: Budget, verbose: bool = False) -> list[dict]:
     """Refit every alternative and compare it with the fit (module docstring): one record each, with
-    ``name``, ``verdict``, ``delta_aic``, ``kappa``, ``parameters``, ``moves`` {name: p_alt - p}, ``runs``
-    and ``offset_se``, the refit's distance to its own solution in standard errors (up to REJECT_SE for
-    an alternative ruled out for good)."""
+    ``name``, ``verdict``, ``delta_aic``, ``kappa``, ``parameters``, ``moves`` {name: p_alt - p}, ``runs``,
+    ``offset_se``, the refit's distance to its own solution in standard errors (up to REJECT_SE for
+    an alternative ruled out for good), and ``chord``: ruled out by chord steps with the fit's Jacobian
+    (:func:`.output_error.chord_fit`), the offset measured with it."""
     model, t0 = problem.model, time.perf_counter()
     p_hat = dict(zip(model.parameter_names, problem.pmap.p(first.w[:model.n_p]).tolist(), strict=True))
     records = []
@@ -230,6 +231,7 @@ def compare_forms(problem: OutputError, first: Fit, alternatives: list[tuple[Alt
         p_alt = dict(zip(alt_model.parameter_names, prob.pmap.p(f.w[:alt_model.n_p]).tolist(), strict=True))
         d, kappa = delta_aic((problem, first.r), (prob, f.r))
         rec |= {"delta_aic": d, "kappa": kappa, "parameters": p_alt, "runs": f.iterations, "offset_se": f.offset,
+                "chord": f.J is first.J,  # ruled out by chord steps with the fit's Jacobian
                 "moves": {n: p_alt[n] - v for n, v in p_hat.items()}}
         if d > DECISIVE:
             rec["verdict"] = "rejected"
