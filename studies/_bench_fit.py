@@ -25,19 +25,33 @@ MARKERS = {"twobar": ("x3", "y3", "x5", "y5"), "threelink": ("x3", "y3", "x5", "
 #: the default fit's uncertain properties (issue 37): both bars' densities (5 %) and moduli (3 %), as
 #: studies/uncertain.py declares them: (target, relative standard deviation)
 UNCERTAIN = (("bar2.rho", 0.05), ("bar4.rho", 0.05), ("bar2.E", 0.03), ("bar4.E", 0.03))
-#: name: (scene, elements per bar or None, identify_indirect's Uncertainty fields or None for a simulation)
+#: the ways before issue 49, switched off in casflex.identification.output_error for a row: "chord" (the model-error
+#: refit and the alternative forms' rejection by chord steps on the fit's Jacobian, CHORD_STEPS) and "continue" (each
+#: growing-horizon stage's first run carried on from the last stage's, CONTINUE_STAGES)
+BEFORE = {"chord": "CHORD_STEPS", "continue": "CONTINUE_STAGES"}
+#: name: (scene, elements per bar or None, identify_indirect's Uncertainty fields or None for a simulation; the key
+#: "before" lists the BEFORE switches off)
 OPS = {
     "simulation, 3 s": ("twobar", None, None),
+    "model run without sensitivities, 3 s": ("twobar", None, "states"),
     "model run with sensitivities (4 directions), 3 s": ("twobar", None, "sensitivities"),
     "default fit": ("twobar", None, {}),
+    "default fit as before issue 49 (exact refits, every stage from t0)": (
+        "twobar", None, {"before": ("chord", "continue")}),
+    "default fit without chord steps (exact refits)": ("twobar", None, {"before": ("chord",)}),
+    "default fit without continued stages": ("twobar", None, {"before": ("continue",)}),
     "without model-error refit": ("twobar", None, {"model_error": "none"}),
     "without model-error refit or form comparison": ("twobar", None, {"model_error": "none", "form": "none"}),
     "default fit, 4 uncertain properties": ("twobar", None, {"uncertain": UNCERTAIN}),
 }
+#: the default fit's variants compared with the way before (BEFORE), to 1/100 of a noise SE
+AS_BEFORE = "default fit as before issue 49 (exact refits, every stage from t0)"
 #: the reference for the estimates: every stage of the growing horizon to the full tolerance (the way before)
 REFERENCE = {"model_error": "none", "form": "none"}
 MESH = (1, 2, 4, 8)
-CALLGRIND = tuple(OPS)
+CALLGRIND = ("simulation, 3 s", "model run with sensitivities (4 directions), 3 s", "default fit", AS_BEFORE,
+             "without model-error refit", "without model-error refit or form comparison",
+             "default fit, 4 uncertain properties")
 
 
 def _model(scene: str, elements: int | None):
@@ -64,7 +78,7 @@ def _leg_data():
 def operation(scene: str, elements: int | None, what):
     """A zero-argument callable doing the operation once, and the scene's 3 s simulation as another."""
     from casflex.identification import Experiment, ModelRun, Uncertainty, identify_indirect
-    from casflex.identification.sensitivity import run_sensitivities
+    from casflex.identification.sensitivity import run_sensitivities, run_states
     from casflex.simulate import Stepping, initial_state, integrator_for, simulate
 
     model = _model(scene, elements)
@@ -75,10 +89,12 @@ def operation(scene: str, elements: int | None, what):
 
     if what is None:
         return sim, sim
-    if what == "sensitivities":
+    if what in ("sensitivities", "states"):
         integ = integrator_for(model, alpha=model.scene.run.alpha)
         x0, n = initial_state(integ, model.p_nominal), int(round(span / DT))
         seed = (np.zeros((integ.nx, model.n_p)), np.eye(model.n_p))
+        if what == "states":
+            return (lambda: run_states(integ, x0, model.p_nominal, 0.0, DT, n, np.arange(0, n + 1, 10))), sim
         return (lambda: run_sensitivities(integ, x0, model.p_nominal, 0.0, DT, n, np.arange(0, n + 1, 10),
                                           seed=seed)), sim
     data = (_leg_data() if scene == "leg"
@@ -88,8 +104,22 @@ def operation(scene: str, elements: int | None, what):
         from casflex.scene import Uncertain
 
         what = {**what, "uncertain": [Uncertain(t, relative=r) for t, r in what["uncertain"]]}
-    return (lambda: identify_indirect(model, exp, start=start, run=ModelRun(dt=DT),
-                                      uncertainty=Uncertainty(**what))), sim
+    before = what.get("before", ())
+    what = {k: v for k, v in what.items() if k != "before"}
+
+    def fit():
+        import casflex.identification.output_error as oe
+
+        saved = {BEFORE[b]: getattr(oe, BEFORE[b]) for b in before}
+        try:
+            for name in saved:
+                setattr(oe, name, False)
+            return identify_indirect(model, exp, start=start, run=ModelRun(dt=DT), uncertainty=Uncertainty(**what))
+        finally:
+            for name, v in saved.items():
+                setattr(oe, name, v)
+
+    return fit, sim
 
 
 def best(fns: dict, repeat: int = REPEAT) -> dict:
@@ -108,9 +138,11 @@ def best(fns: dict, repeat: int = REPEAT) -> dict:
 
 def _fit_record(r, wall: float, sim: float) -> dict:
     names = list(r.parameters)
+    u = r.extra["uncertainty"]
     return {"wall_s": wall, "sims": wall / sim, "runs": int(r.iterations), "success": bool(r.success),
             "p": [r.parameters[k] for k in names], "se": [r.std_errors[k] for k in names],
-            "se_noise": [r.extra["uncertainty"]["noise"][k] for k in names], "names": names}
+            "se_noise": [u["noise"][k] for k in names], "model_error": [u["model_error"][k] for k in names],
+            "verdicts": [f["verdict"] for f in r.extra["forms"]], "names": names}
 
 
 def twobar_side_by_side() -> dict:

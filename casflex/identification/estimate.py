@@ -170,7 +170,7 @@ def _fit_growing(model: Model, experiments: list[Experiment], w0: np.ndarray, bu
         runs_left = max(1, budget.max_iterations - runs)
         sub = Budget(max_iterations=runs_left if last else min(runs_left, STAGE_RUNS), max_time=max(left, 1e-3))
         try:
-            stage_problem = OutputError(model, stage, **setup)
+            stage_problem = OutputError(model, stage, previous=problem, **setup)
             stage_fit = fit(stage_problem if last else _Anchored(stage_problem, w0[:model.n_p]), w, sub,
                             verbose=verbose, near=f is not None, tol_se=None if last else STAGE_SE)
         except StartDoesNotRun as exc:

@@ -32,7 +32,7 @@ from casflex.identification.initial_state import InitialState, initial_state_of
 from casflex.identification.measurement import Experiment, SampleMap, free_dofs
 from casflex.identification.options import Budget  # noqa: F401 (re-exported)
 from casflex.identification.problem import ParameterMap
-from casflex.identification.sensitivity import run_sensitivities, run_states
+from casflex.identification.sensitivity import SensitivityRun, run_sensitivities, run_states
 from casflex.model import Model
 from casflex.model.markers import marker_states
 
@@ -88,7 +88,7 @@ class OutputError:
 
     def __init__(self, model: Model, experiments: list[Experiment], *, dt: float, alpha: float,
                  pmap: ParameterMap, compiled: bool, newton_tol: float,
-                 initial: list[InitialState] | None = None) -> None:
+                 initial: list[InitialState] | None = None, previous: OutputError | None = None) -> None:
         from casflex.simulate import integrator_for
 
         self.model, self.experiments, self.dt, self.pmap, self.compiled = model, experiments, dt, pmap, compiled
@@ -121,6 +121,10 @@ class OutputError:
         self.prior_mean = np.array([pr[0] for _, pr in priors], dtype=float)
         self.prior_sd = np.array([pr[1] for _, pr in priors], dtype=float)
         self.n_prior = len(priors)
+        # a growing horizon's earlier stage (the first part of each recording, the same unknowns): a run at the
+        # point where it ran last goes on from its end instead of from t0 (:meth:`_continued`)
+        self.previous = previous
+        self.last_runs: list[tuple[np.ndarray, object] | None] = [None] * len(experiments)
 
     # -- unknowns ----------------------------------------------------------------------------
     def pack(self, theta: np.ndarray) -> np.ndarray:
@@ -176,8 +180,10 @@ class OutputError:
             dq, dqd = self.initial[e].jacobian(w[self.offsets[e]:self.offsets[e + 1]])
             M0 = np.hstack([Jp, Jq @ dq + Jqd @ dqd])
             if jacobian:
-                run = run_sensitivities(self.integ, x0.ravel(), p, sm.t0, sm.dt, sm.n_steps, sm.needed_steps,
-                                        seed=(M0, np.eye(npar, M0.shape[1])), compiled=self.compiled)
+                run = self._continued(e, w, p, M0.shape[1]) or run_sensitivities(
+                    self.integ, x0.ravel(), p, sm.t0, sm.dt, sm.n_steps, np.union1d(sm.needed_steps, [sm.n_steps]),
+                    seed=(M0, np.eye(npar, M0.shape[1])), compiled=self.compiled)
+                self.last_runs[e] = (w.copy(), run) if run.converged else None
             else:  # the model run alone: the same states, a third of the cost (twobar, 4 directions)
                 run = run_states(self.integ, x0.ravel(), p, sm.t0, sm.dt, sm.n_steps, sm.needed_steps,
                                  compiled=self.compiled)
@@ -222,6 +228,32 @@ class OutputError:
                 Jp[np.arange(self.n_prior), j] = dp[j] / self.prior_sd
                 Js.append(Jp)
         return np.concatenate(rs), (np.vstack(Js) if jacobian else None)
+
+    def _continued(self, e: int, w: np.ndarray, p: np.ndarray, nw: int):
+        """Experiment e's run with sensitivities at w as the earlier stage's last run there, carried on from its
+        end (state and sensitivities at its last step, its Newton scaling) to this stage's; None where there is
+        no such run or it does not hold every step this stage's samples need. The growing horizon's first run
+        of a stage is at the last one's answer: twobar 3 s saves 3750 of its 13750 steps with sensitivities."""
+        prev = self.previous if CONTINUE_STAGES else None
+        last = prev.last_runs[e] if prev is not None and e < len(prev.last_runs) else None
+        if last is None or not np.array_equal(last[0], w):
+            return None
+        run, sm, psm = last[1], self.maps[e], prev.maps[e]
+        n0 = psm.n_steps
+        if (prev.integ is not self.integ or psm.t0 != sm.t0 or psm.dt != sm.dt or n0 >= sm.n_steps
+                or run.S.shape[1] != nw or run.steps[-1] != n0):
+            return None
+        need = np.union1d(sm.needed_steps, [sm.n_steps])
+        early, later = need[need <= n0], need[need > n0]
+        idx = np.minimum(np.searchsorted(run.steps, early), run.steps.size - 1)
+        if not np.array_equal(run.steps[idx], early):
+            return None
+        npar = self.model.n_p
+        tail = run_sensitivities(self.integ, run.X[-1], p, sm.t0 + n0 * sm.dt, sm.dt, sm.n_steps - n0, later - n0,
+                                 seed=(run.S[-1].T, np.eye(npar, nw)), compiled=self.compiled, scale=run.scale)
+        return SensitivityRun(np.concatenate([early, tail.steps + n0]), np.concatenate([run.X[idx], tail.X]),
+                              np.concatenate([run.S[idx], tail.S]), tail.converged,
+                              None if tail.converged else n0 + tail.failed_step, run.scale)
 
     def prior_information(self, w: np.ndarray) -> np.ndarray:
         """(n, n) J_prior^T J_prior at unknowns w: the priors' information in the unknowns (zero without priors)."""
@@ -441,6 +473,10 @@ def fit(problem: OutputError, w0: np.ndarray, budget: Budget, *, verbose: bool =
     return Fit(w, r, J, status, converged, iters, time.perf_counter() - t0, message, offset)
 
 
+#: Chord steps (:func:`chord_fit`) and growing-horizon stages continued from the last one's run
+#: (:meth:`OutputError._continued`); False: every refit exact and every run from t0, the way before issue 49
+#: (studies/bench_identification.py measures both)
+CHORD_STEPS, CONTINUE_STAGES = True, True
 #: The fall of the distance to the solution a chord step must bring (:func:`chord_fit`): less, and the borrowed
 #: Jacobian is too far from the problem's own to trust its fixed point
 CHORD_RATE = 0.1
@@ -459,6 +495,8 @@ def chord_fit(problem: OutputError, w0: np.ndarray, J: np.ndarray, budget: Budge
     fit to decide, where a step does not bring the distance down by CHORD_RATE (the Jacobians differ too much), a
     step leaves the bounds or does not descend, the model does not run, or the budget's runs or time run out.
     The Fit's J is the borrowed one."""
+    if not CHORD_STEPS:
+        return None
     lb, ub = problem.bounds()
     t0, runs0 = time.perf_counter(), problem.evaluations
     w = np.asarray(w0, dtype=float)

@@ -40,7 +40,8 @@ class SensitivityRun:
 
     steps : (m,) kept step-end indices (0: the initial state); X : (m, nx) states; S : (m, nw, nx)
     with S[i, j, :] = dx_steps[i] / dw_j, w = (x_0, p); converged : every step's Newton met its
-    tolerance (if not, ``failed_step`` is the first that did not and the arrays stop before it).
+    tolerance (if not, ``failed_step`` is the first that did not and the arrays stop before it);
+    scale : the run's Newton scaling (``HHT.scale`` at its first state), for a run that continues it.
     """
 
     steps: np.ndarray
@@ -48,6 +49,7 @@ class SensitivityRun:
     S: np.ndarray
     converged: bool
     failed_step: int | None
+    scale: np.ndarray | None = None
 
 
 def _functions(integ: HHT, compiled: bool, n_dir: int) -> tuple:
@@ -70,12 +72,14 @@ def _functions(integ: HHT, compiled: bool, n_dir: int) -> tuple:
 
 def run_sensitivities(integ: HHT, x0: np.ndarray, p: np.ndarray, t0: float, dt: float, n_steps: int,
                       keep: np.ndarray, *, seed: tuple[np.ndarray, np.ndarray] | None = None,
-                      compiled: bool = True) -> SensitivityRun:
+                      compiled: bool = True, scale: np.ndarray | None = None) -> SensitivityRun:
     """Step from x0 at t0 (s) ``n_steps`` steps of ``dt`` (s) with parameters p; keep the states
     and sensitivities at the step ends in ``keep`` (sorted indices in 0..n_steps).
 
     ``seed``: (dx0/dw (nx, D), dp/dw (n_p, D)), the directions w to carry; default every direction
-    of w = (x_0, p). A fit carries its unknowns' directions only: the cost per step grows with D."""
+    of w = (x_0, p). A fit carries its unknowns' directions only: the cost per step grows with D.
+    ``scale``: the Newton scaling of the run this one continues (its ``scale``; default from x0), so that
+    the continued steps are those of one run."""
     model = integ.model
     n, nx = model.n_dof, integ.nx
     if seed is None:
@@ -85,7 +89,7 @@ def run_sensitivities(integ: HHT, x0: np.ndarray, p: np.ndarray, t0: float, dt: 
     if S0.shape != (nx, nw) or P.shape != (model.n_p, nw):
         raise ValueError(f"seed: expected shapes ({nx}, D) and ({model.n_p}, D), got {S0.shape} and {P.shape}")
     chunk_fn, step_fn = _functions(integ, compiled, nw)
-    d = np.array(integ.scale(x0[:n], x0[n:2 * n], p, dt)).ravel()
+    d = np.array(integ.scale(x0[:n], x0[n:2 * n], p, dt)).ravel() if scale is None else np.asarray(scale, float)
     keep = np.asarray(keep, dtype=int)
     Xk = np.empty((keep.size, nx))
     Sk = np.empty((keep.size, nw, nx))
@@ -119,12 +123,12 @@ def run_sensitivities(integ: HHT, x0: np.ndarray, p: np.ndarray, t0: float, dt: 
             Xk[j], Sk[j] = X[i], SS[i * nw:(i + 1) * nw]
             j += 1
         if good < m:
-            return SensitivityRun(keep[:j], Xk[:j], Sk[:j], False, done + good + 1)
+            return SensitivityRun(keep[:j], Xk[:j], Sk[:j], False, done + good + 1, d)
         done += m
         x = X[m - 1].copy()
         S = SS[(m - 1) * nw:m * nw].copy()
         interrupt.check()
-    return SensitivityRun(keep, Xk, Sk, True, None)
+    return SensitivityRun(keep, Xk, Sk, True, None, d)
 
 
 def _state_functions(integ: HHT, compiled: bool) -> tuple:
