@@ -172,7 +172,7 @@ def run_states(integ: HHT, x0: np.ndarray, p: np.ndarray, t0: float, dt: float, 
         if bad.any():
             good = int(np.argmax(bad))
             kept = keep[keep <= done + good]
-            return SensitivityRun(kept, X[kept], np.empty((kept.size, 0, integ.nx)), False, done + good + 1)
+            return SensitivityRun(kept, X[kept], np.empty((kept.size, 0, integ.nx)), False, done + good + 1, d)
         done += m
         interrupt.check()
-    return SensitivityRun(keep, X[keep], np.empty((keep.size, 0, integ.nx)), True, None)
+    return SensitivityRun(keep, X[keep], np.empty((keep.size, 0, integ.nx)), True, None, d)
