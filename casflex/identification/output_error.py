@@ -233,6 +233,8 @@ class OutputError:
                 Jp = np.zeros((self.n_prior, self.n_unknowns))
                 Jp[np.arange(self.n_prior), j] = dp[j] / self.prior_sd
                 Js.append(Jp)
+        if jacobian:  # a stage's first run is the one that may go on from the earlier stage's: let that go
+            self.previous = None
         return np.concatenate(rs), (np.vstack(Js) if jacobian else None)
 
     def _continued(self, e: int, w: np.ndarray, p: np.ndarray, nw: int):
