@@ -130,3 +130,67 @@ def test_transfer_state_puts_every_mesh_node_where_the_coarse_beam_has_it():
     mid = model.qd0[model.dof("ybar.1")] + model.dof("ybar.1")
     assert qd[fine.dof("ybar.2")] == pytest.approx(mid)
     assert q[fine.dof("yb")] == model.q0[model.dof("yb")]
+
+
+def _exudyn_twobar(span: float):
+    """Exudyn's twobar (8 ANCF elements per bar), nodes 3 and 5 at 100 Hz with 0.5 mm of noise, and casflex's
+    model of it (1 element per bar): a real model error."""
+    from pathlib import Path
+
+    import casflex
+
+    z = np.load(Path(__file__).resolve().parent / "data" / "twobar_exudyn.npz")
+    names, rows = ("x3", "y3", "x5", "y5"), np.arange(0, int(round(1000 * span)) + 1, 10)
+    ch = [str(c) for c in z["channels"]]
+    q = z["q"][np.ix_(rows, [ch.index(c) for c in names])]
+    data = MeasurementSet(z["t"][rows], names, q + np.random.default_rng(0).normal(0, 5e-4, q.shape), None, None)
+    return casflex.assemble(casflex.load_scene("twobar")), Experiment(data, noise=5e-4)
+
+
+def test_each_stage_of_the_growing_horizon_goes_on_from_the_last_ones_run(monkeypatch):
+    from casflex.identification import ModelRun, Uncertainty, identify_indirect
+    from casflex.identification import output_error as oe
+
+    model, exp = _exudyn_twobar(1.0)
+    steps: list[int] = []
+    real = oe.run_sensitivities
+    monkeypatch.setattr(oe, "run_sensitivities", lambda *a, **k: steps.append(a[5]) or real(*a, **k))
+
+    def run():
+        steps.clear()
+        r = identify_indirect(model, exp, start=0.8, run=ModelRun(dt=1e-3),
+                              uncertainty=Uncertainty(model_error="none", form="none"))
+        return r, list(steps)
+
+    (fast, s_fast) = run()
+    monkeypatch.setattr(oe, "CONTINUE_STAGES", False)
+    (slow, s_slow) = run()
+    # the same model runs (the same steps, Newton scaling and step times): the same answer to the last digits
+    assert fast.parameters == pytest.approx(slow.parameters, rel=1e-12)
+    assert fast.std_errors == pytest.approx(slow.std_errors, rel=1e-9)
+    assert fast.iterations == slow.iterations
+    # each stage's first run carries on the last stage's: 0.25 + 0.5 s of the stages 0.5 s and 1 s not run again
+    assert sum(s_slow) - sum(s_fast) == 750, (s_fast, s_slow)
+
+
+def test_the_model_error_refit_by_chord_steps_gives_the_exact_refits_error(monkeypatch):
+    from casflex.identification import ModelRun, Uncertainty, identify_indirect
+
+    model, exp = _exudyn_twobar(1.0)
+
+    def run():
+        return identify_indirect(model, exp, start=0.8, run=ModelRun(dt=1e-3), uncertainty=Uncertainty(form="none"))
+
+    fast = run()
+    from casflex.identification import output_error as oe
+
+    monkeypatch.setattr(oe, "CHORD_STEPS", False)  # the exact refit, with sensitivities
+    exact = run()
+    assert fast.extra["uncertainty"]["model_error_refit"]["status"] == "chord"
+    assert exact.extra["uncertainty"]["model_error_refit"]["status"] != "chord"
+    se = fast.extra["uncertainty"]["noise"]
+    me_fast, me_exact = (r.extra["uncertainty"]["model_error"] for r in (fast, exact))
+    assert max(me_exact[k] / se[k] for k in se) > 0.05  # an error the standard errors feel
+    # to the fit's own tolerance (OFFSET_TOL = 0.01 SE): the refit's answer and so the reported errors
+    assert all(abs(me_fast[k] - me_exact[k]) <= 0.01 * se[k] for k in se), (me_fast, me_exact, se)
+    assert all(abs(fast.std_errors[k] - exact.std_errors[k]) <= 0.01 * se[k] for k in se)

@@ -13,6 +13,7 @@ import pytest
 import casflex
 from casflex.data import MeasurementSet
 from casflex.identification import Experiment, ModelRun, Solver, Uncertainty, identify_indirect
+from casflex.identification import form as form_module
 from casflex.identification.form import DECISIVE, delta_aic
 from casflex.identification.output_error import OFFSET_TOL
 
@@ -93,6 +94,17 @@ def test_the_correct_form_keeps_its_success(twobar):
     # about 1250 AIC units behind: an Akaike weight of exp(-625), nothing beside the noise part
     noise = r.extra["uncertainty"]["noise"]
     assert all(v < 1e-100 * noise[k] for k, v in r.extra["uncertainty"]["model_form"].items())
+    # ruled out by chord steps (model runs without sensitivities), as the alternative's exact fit rules it out
+    assert form["chord"]
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(form_module, "chord_fit", lambda *a, **k: None)
+        exact = identify_indirect(twobar, data, start=0.8, run=ModelRun(dt=1e-3),
+                                  uncertainty=Uncertainty(model_error="none"))
+    (ref,) = exact.extra["forms"]
+    assert not ref["chord"] and ref["verdict"] == "rejected"
+    assert exact.std_errors == pytest.approx(r.std_errors, rel=1e-12)  # the form part is exp(-600) either way
+    # both stop within REJECT_SE of the alternative's solution, where its AIC is behind by about the same
+    assert form["delta_aic"] == pytest.approx(ref["delta_aic"], rel=0.01)
 
 
 def test_an_alternative_that_fits_identically_moves_the_parameters_by_its_scale(twobar):

@@ -7,7 +7,7 @@ import pytest
 from conftest import assert_same_numbers
 
 import casflex
-from casflex.identification.sensitivity import run_sensitivities
+from casflex.identification.sensitivity import run_sensitivities, run_states
 from casflex.simulate import Stepping, initial_state, integrator_for, simulate
 
 
@@ -83,3 +83,17 @@ def test_the_mapped_kernels_directions_agree_with_the_flat_ones(setup, monkeypat
     monkeypatch.setattr(directions, "EXPAND_DIRECTIONS", 0)
     mapped = run_sensitivities(HHT(model, alpha=0.0), x0, model.p_nominal, 0.0, 1e-3, 30, keep, compiled=False)
     np.testing.assert_allclose(mapped.S, flat.S, rtol=0, atol=1e-10 * np.abs(flat.S).max())
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_run_without_sensitivities_has_the_states_of_one_with_them(setup, compiled):
+    # 260 steps: a compiled chunk of 250 and 10 single steps; the chord steps' model runs
+    model, integ, x0 = setup
+    keep = np.array([0, 7, 250, 251, 260])
+    full = run_sensitivities(integ, x0, model.p_nominal, 0.0, 1e-3, 260, keep, compiled=compiled)
+    plain = run_states(integ, x0, model.p_nominal, 0.0, 1e-3, 260, keep, compiled=compiled)
+    assert plain.converged and plain.S.shape == (keep.size, 0, integ.nx)
+    assert_same_numbers(plain.X, full.X)  # the same steps, Newton scaling and step times
+    # a run that stops (parameters not numbers): the steps up to the failure, and which step failed
+    bad = run_states(integ, x0, np.full(model.n_p, np.nan), 0.0, 1e-3, 260, keep, compiled=compiled)
+    assert not bad.converged and bad.failed_step == 1 and list(bad.steps) == [0]

@@ -53,7 +53,7 @@ from casflex.identification.form import alternatives_of, compare_forms, form_par
 from casflex.identification.initial_state import initial_states
 from casflex.identification.measurement import Experiment, check_against_scene
 from casflex.identification.options import GAUSS_NEWTON, ModelRun, Solver, Uncertainty
-from casflex.identification.output_error import Budget, Fit, OutputError, StartDoesNotRun, fit
+from casflex.identification.output_error import Budget, Fit, OutputError, StartDoesNotRun, chord_fit, fit
 from casflex.identification.pinned import pinned
 from casflex.identification.plausibility import (  # noqa: F401 (FIT_THRESHOLD, pooled_fit re-exported)
     FIT_THRESHOLD,
@@ -170,7 +170,7 @@ def _fit_growing(model: Model, experiments: list[Experiment], w0: np.ndarray, bu
         runs_left = max(1, budget.max_iterations - runs)
         sub = Budget(max_iterations=runs_left if last else min(runs_left, STAGE_RUNS), max_time=max(left, 1e-3))
         try:
-            stage_problem = OutputError(model, stage, **setup)
+            stage_problem = OutputError(model, stage, previous=problem, **setup)
             stage_fit = fit(stage_problem if last else _Anchored(stage_problem, w0[:model.n_p]), w, sub,
                             verbose=verbose, near=f is not None, tol_se=None if last else STAGE_SE)
         except StartDoesNotRun as exc:
@@ -246,7 +246,12 @@ def _model_error(model: Model, experiments: list[Experiment], first: Fit, proble
     w0 = prob.pack(first.w[:model.n_p])
     sub = Budget(max_iterations=min(30, budget.max_iterations), max_time=budget.max_time)
     try:
-        f = fit(prob, w0, sub, verbose=verbose, near=True)
+        # the coarse fit's Jacobian serves the refined model (the same unknowns, the parameters only: estimated
+        # initial states are slow-mode amplitudes of each mesh's own modes, not the same unknowns): plain model runs
+        # of the refined model, a fifth of one with sensitivities; the exact refit where it does not contract
+        same = problem.n_unknowns == prob.n_unknowns == model.n_p
+        f = (chord_fit(prob, w0, first.J, sub) if same else None) \
+            or fit(prob, w0, sub, verbose=verbose, near=True)
     except ValueError as exc:  # the refined model does not run from there
         return np.full(model.n_p, np.nan), {"error": str(exc)}
     p_coarse = problem.pmap.p(first.w[:model.n_p])

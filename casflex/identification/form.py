@@ -48,7 +48,7 @@ import numpy as np
 from casflex.identification.choices import FORMS
 from casflex.identification.initial_state import initial_states
 from casflex.identification.measurement import Experiment, check_against_scene
-from casflex.identification.output_error import Budget, Fit, OutputError, fit
+from casflex.identification.output_error import Budget, Fit, OutputError, chord_fit, fit
 from casflex.identification.problem import ParameterMap
 from casflex.identification.statistics import bartlett_bandwidth
 from casflex.model import Model, assembled
@@ -199,15 +199,23 @@ def _refit(alt_model: Model, problem: OutputError, first: Fit, p_hat: dict[str, 
         allowed four times over."""
         return offset <= REJECT_SE and delta_aic((problem, first.r), (prob, r))[0] - 4 * offset**2 > REJECT_AIC
 
-    return prob, fit(prob, prob.pack(pmap.theta(p0)), budget, verbose=verbose, near=True, enough=rejected)
+    w0 = prob.pack(pmap.theta(p0))
+    if prob.n_unknowns == problem.n_unknowns == alt_model.n_p and same:
+        # ruled out for good with the fit's own Jacobian and model runs without sensitivities (chord steps, a
+        # third of the cost); any other verdict rests on the alternative's exact fit, its moves and AIC
+        quick = chord_fit(prob, w0, first.J, budget, enough=rejected)
+        if quick is not None and quick.status == "within_se":
+            return prob, quick
+    return prob, fit(prob, w0, budget, verbose=verbose, near=True, enough=rejected)
 
 
 def compare_forms(problem: OutputError, first: Fit, alternatives: list[tuple[Alternative, Model]], *, setup: dict,
                   budget: Budget, verbose: bool = False) -> list[dict]:
     """Refit every alternative and compare it with the fit (module docstring): one record each, with
-    ``name``, ``verdict``, ``delta_aic``, ``kappa``, ``parameters``, ``moves`` {name: p_alt - p}, ``runs``
-    and ``offset_se``, the refit's distance to its own solution in standard errors (up to REJECT_SE for
-    an alternative ruled out for good)."""
+    ``name``, ``verdict``, ``delta_aic``, ``kappa``, ``parameters``, ``moves`` {name: p_alt - p}, ``runs``,
+    ``offset_se``, the refit's distance to its own solution in standard errors (up to REJECT_SE for
+    an alternative ruled out for good), and ``chord``: ruled out by chord steps with the fit's Jacobian
+    (:func:`.output_error.chord_fit`), the offset measured with it."""
     model, t0 = problem.model, time.perf_counter()
     p_hat = dict(zip(model.parameter_names, problem.pmap.p(first.w[:model.n_p]).tolist(), strict=True))
     records = []
@@ -223,6 +231,7 @@ def compare_forms(problem: OutputError, first: Fit, alternatives: list[tuple[Alt
         p_alt = dict(zip(alt_model.parameter_names, prob.pmap.p(f.w[:alt_model.n_p]).tolist(), strict=True))
         d, kappa = delta_aic((problem, first.r), (prob, f.r))
         rec |= {"delta_aic": d, "kappa": kappa, "parameters": p_alt, "runs": f.iterations, "offset_se": f.offset,
+                "chord": f.J is first.J,  # ruled out by chord steps with the fit's Jacobian
                 "moves": {n: p_alt[n] - v for n, v in p_hat.items()}}
         if d > DECISIVE:
             rec["verdict"] = "rejected"

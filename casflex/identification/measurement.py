@@ -161,7 +161,7 @@ class SampleMap:
         s[np.abs(s) < 1e-9] = 0.0
         weights = np.column_stack([2 * s**3 - 3 * s**2 + 1, dt * (s**3 - 2 * s**2 + s),
                                    -2 * s**3 + 3 * s**2, dt * (s**3 - s**2)])
-        dof = np.array([channel_index(model, names[c]) for c in ch], dtype=int)  # >= n_dof: a marker's
+        dof = np.array([channel_index(model, n) for n in names], dtype=int)[ch]  # >= n_dof: a marker's
         return cls(t0, float(dt), n_steps, names, ch, dof, time, Y[rows, ch], step, weights, rows)
 
     @property

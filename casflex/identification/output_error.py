@@ -32,11 +32,11 @@ from casflex.identification.initial_state import InitialState, initial_state_of
 from casflex.identification.measurement import Experiment, SampleMap, free_dofs
 from casflex.identification.options import Budget  # noqa: F401 (re-exported)
 from casflex.identification.problem import ParameterMap
-from casflex.identification.sensitivity import run_sensitivities
+from casflex.identification.sensitivity import SensitivityRun, run_sensitivities, run_states
 from casflex.model import Model
 from casflex.model.markers import marker_states
 
-__all__ = ["Budget", "OutputError", "Fit", "fit"]
+__all__ = ["Budget", "OutputError", "Fit", "fit", "chord_fit"]
 
 
 class StartDoesNotRun(ValueError):
@@ -62,16 +62,19 @@ class _CloseEnough(Exception):
 _X0: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
-def _x0_map(integ) -> ca.Function:
-    """``x0_map(q0, qd0, t0, p) -> (x0, dx0/dq0, dx0/dqd0, dx0/dp)``: the consistent initial state."""
+def _x0_map(integ, of_state: bool = True) -> ca.Function:
+    """``x0_map(q0, qd0, t0, p) -> (x0, dx0/dq0, dx0/dqd0, dx0/dp)``: the consistent initial state; without
+    ``of_state`` ``(x0, dx0/dp)`` only, for an initial state without unknowns (twobar: 0.3 ms a call against 1.6,
+    in every model run)."""
     if integ not in _X0:
         m = integ.model
         q, qd, t, p = ca.MX.sym("q0", m.n_dof), ca.MX.sym("qd0", m.n_dof), ca.MX.sym("t0"), ca.MX.sym("p", m.n_p)
         qdd, lam = integ.initial(q, qd, t, p)
         x0 = ca.vertcat(q, qd, qdd, lam)
-        _X0[integ] = ca.Function("x0_map", [q, qd, t, p],
-                                 [x0, ca.jacobian(x0, q), ca.jacobian(x0, qd), ca.jacobian(x0, p)])
-    return _X0[integ]
+        _X0[integ] = (ca.Function("x0_map", [q, qd, t, p],
+                                  [x0, ca.jacobian(x0, q), ca.jacobian(x0, qd), ca.jacobian(x0, p)]),
+                      ca.Function("x0_map_p", [q, qd, t, p], [x0, ca.jacobian(x0, p)]))
+    return _X0[integ][0 if of_state else 1]
 
 
 class OutputError:
@@ -88,7 +91,7 @@ class OutputError:
 
     def __init__(self, model: Model, experiments: list[Experiment], *, dt: float, alpha: float,
                  pmap: ParameterMap, compiled: bool, newton_tol: float,
-                 initial: list[InitialState] | None = None) -> None:
+                 initial: list[InitialState] | None = None, previous: OutputError | None = None) -> None:
         from casflex.simulate import integrator_for
 
         self.model, self.experiments, self.dt, self.pmap, self.compiled = model, experiments, dt, pmap, compiled
@@ -121,6 +124,10 @@ class OutputError:
         self.prior_mean = np.array([pr[0] for _, pr in priors], dtype=float)
         self.prior_sd = np.array([pr[1] for _, pr in priors], dtype=float)
         self.n_prior = len(priors)
+        # a growing horizon's earlier stage (the first part of each recording, the same unknowns): a run at the
+        # point where it ran last goes on from its end instead of from t0 (:meth:`_continued`)
+        self.previous = previous
+        self.last_runs: list[tuple[np.ndarray, object] | None] = [None] * len(experiments)
 
     # -- unknowns ----------------------------------------------------------------------------
     def pack(self, theta: np.ndarray) -> np.ndarray:
@@ -171,12 +178,21 @@ class OutputError:
             except RuntimeError:  # CasADi's Newton on the slow manifold found no state there
                 raise _Diverged(f"experiment {e + 1}: no initial state on the slow manifold at these unknowns") \
                     from None
-            x0, Jq, Jqd, Jp = (np.array(v) for v in _x0_map(self.integ)(q0, qd0, sm.t0, p))
             # carry the directions of the local unknowns (p, xi_e) only: d x0 / d(p, xi_e), (nx, npar + n_xi)
-            dq, dqd = self.initial[e].jacobian(w[self.offsets[e]:self.offsets[e + 1]])
-            M0 = np.hstack([Jp, Jq @ dq + Jqd @ dqd])
-            run = run_sensitivities(self.integ, x0.ravel(), p, sm.t0, sm.dt, sm.n_steps, sm.needed_steps,
-                                    seed=(M0, np.eye(npar, M0.shape[1])), compiled=self.compiled)
+            if self.initial[e].size:
+                x0, Jq, Jqd, Jp = (np.array(v) for v in _x0_map(self.integ)(q0, qd0, sm.t0, p))
+                dq, dqd = self.initial[e].jacobian(w[self.offsets[e]:self.offsets[e + 1]])
+                M0 = np.hstack([Jp, Jq @ dq + Jqd @ dqd])
+            else:  # the scene's initial state: no unknowns of its own
+                x0, M0 = (np.array(v) for v in _x0_map(self.integ, of_state=False)(q0, qd0, sm.t0, p))
+            if jacobian:
+                run = self._continued(e, w, p, M0.shape[1]) or run_sensitivities(
+                    self.integ, x0.ravel(), p, sm.t0, sm.dt, sm.n_steps, np.union1d(sm.needed_steps, [sm.n_steps]),
+                    seed=(M0, np.eye(npar, M0.shape[1])), compiled=self.compiled)
+                self.last_runs[e] = (w.copy(), run) if run.converged else None
+            else:  # the model run alone: the same states, a third of the cost (twobar, 4 directions)
+                run = run_states(self.integ, x0.ravel(), p, sm.t0, sm.dt, sm.n_steps, sm.needed_steps,
+                                 compiled=self.compiled)
             if not run.converged:
                 raise _Diverged(f"experiment {e + 1}: the model's Newton failed at t = "
                                 f"{sm.t0 + run.failed_step * sm.dt:.6g} s")
@@ -217,7 +233,35 @@ class OutputError:
                 Jp = np.zeros((self.n_prior, self.n_unknowns))
                 Jp[np.arange(self.n_prior), j] = dp[j] / self.prior_sd
                 Js.append(Jp)
+        if jacobian:  # a stage's first run is the one that may go on from the earlier stage's: let that go
+            self.previous = None
         return np.concatenate(rs), (np.vstack(Js) if jacobian else None)
+
+    def _continued(self, e: int, w: np.ndarray, p: np.ndarray, nw: int):
+        """Experiment e's run with sensitivities at w as the earlier stage's last run there, carried on from its
+        end (state and sensitivities at its last step, its Newton scaling) to this stage's; None where there is
+        no such run or it does not hold every step this stage's samples need. The growing horizon's first run
+        of a stage is at the last one's answer: twobar 3 s saves 3750 of its 13750 steps with sensitivities."""
+        prev = self.previous if CONTINUE_STAGES else None
+        last = prev.last_runs[e] if prev is not None and e < len(prev.last_runs) else None
+        if last is None or not np.array_equal(last[0], w):
+            return None
+        run, sm, psm = last[1], self.maps[e], prev.maps[e]
+        n0 = psm.n_steps
+        if (prev.integ is not self.integ or psm.t0 != sm.t0 or psm.dt != sm.dt or n0 >= sm.n_steps
+                or run.S.shape[1] != nw or run.steps[-1] != n0):
+            return None
+        need = np.union1d(sm.needed_steps, [sm.n_steps])
+        early, later = need[need <= n0], need[need > n0]
+        idx = np.minimum(np.searchsorted(run.steps, early), run.steps.size - 1)
+        if not np.array_equal(run.steps[idx], early):
+            return None
+        npar = self.model.n_p
+        tail = run_sensitivities(self.integ, run.X[-1], p, sm.t0 + n0 * sm.dt, sm.dt, sm.n_steps - n0, later - n0,
+                                 seed=(run.S[-1].T, np.eye(npar, nw)), compiled=self.compiled, scale=run.scale)
+        return SensitivityRun(np.concatenate([early, tail.steps + n0]), np.concatenate([run.X[idx], tail.X]),
+                              np.concatenate([run.S[idx], tail.S]), tail.converged,
+                              None if tail.converged else n0 + tail.failed_step, run.scale)
 
     def prior_information(self, w: np.ndarray) -> np.ndarray:
         """(n, n) J_prior^T J_prior at unknowns w: the priors' information in the unknowns (zero without priors)."""
@@ -435,3 +479,62 @@ def fit(problem: OutputError, w0: np.ndarray, budget: Budget, *, verbose: bool =
         return evaluate.close_fit(close)
     r, J = evaluate(w, limited=False)
     return Fit(w, r, J, status, converged, iters, time.perf_counter() - t0, message, offset)
+
+
+#: Chord steps (:func:`chord_fit`) and growing-horizon stages continued from the last one's run
+#: (:meth:`OutputError._continued`); False: every refit exact and every run from t0, the way before issue 49
+#: (studies/bench_identification.py measures both)
+CHORD_STEPS, CONTINUE_STAGES = True, True
+#: The fall of the distance to the solution a chord step must bring (:func:`chord_fit`): less, and the borrowed
+#: Jacobian is too far from the problem's own to trust its fixed point
+CHORD_RATE = 0.1
+
+
+def chord_fit(problem: OutputError, w0: np.ndarray, J: np.ndarray, budget: Budget, *,
+              enough: Callable[[np.ndarray, float], bool] | None = None) -> Fit | None:
+    """Gauss-Newton steps on ``problem``'s residuals with a fixed Jacobian ``J``, another fit's at ``w0``, of a
+    nearby problem with the same unknowns and rows (the model refined, the same model of another form): the
+    chord method. Every model run goes without sensitivities (twobar refined: a fifth of one with them).
+
+    It stops, as :func:`fit` does, within OFFSET_TOL standard errors of the least-squares solution, or when
+    ``enough(r, offset)``, the offset measured with ``J``. The point reached solves J^T r = 0, not the problem's
+    own J_own^T r = 0: they differ by (J^T J)^-1 (J_own - J)^T r, of the order of the relative difference of the
+    Jacobians in standard errors, which the chord's contraction per step measures too. Returns None, for an exact
+    fit to decide, where a step does not bring the distance down by CHORD_RATE (the Jacobians differ too much), a
+    step leaves the bounds or does not descend, the model does not run, or the budget's runs or time run out.
+    The Fit's J is the borrowed one."""
+    if not CHORD_STEPS:
+        return None
+    lb, ub = problem.bounds()
+    t0, runs0 = time.perf_counter(), problem.evaluations
+    w = np.asarray(w0, dtype=float)
+    if J.shape[1] != w.size or np.any(_on_bound(w, lb, ub)):  # on a bound: the trust region decides
+        return None
+    try:
+        r, _ = problem.evaluate(w, jacobian=False)
+    except _Diverged:
+        return None
+    if r.size != J.shape[0]:
+        return None
+    last = np.inf
+    while True:
+        offset, step = offset_in_se(r, J, np.arange(w.size))
+        runs = problem.evaluations - runs0 - 1  # the steps taken, as fit(near=True) counts them
+        if enough is not None and enough(r, offset):
+            return Fit(w, r, J, "within_se", True, runs, time.perf_counter() - t0, "", offset)
+        if offset <= OFFSET_TOL:
+            return Fit(w, r, J, "chord", True, runs, time.perf_counter() - t0, "", offset)
+        if offset > CHORD_RATE * last or runs >= budget.max_iterations \
+                or time.perf_counter() - t0 > budget.max_time:
+            return None
+        trial = w + step
+        if np.any((trial <= lb) | (trial >= ub)):
+            return None
+        interrupt.check()
+        try:
+            rt, _ = problem.evaluate(trial, jacobian=False)
+        except _Diverged:
+            return None
+        if not float(rt @ rt) < float(r @ r):
+            return None
+        w, r, last = trial, rt, offset
