@@ -27,6 +27,11 @@ import numpy as np
 from casflex import interrupt
 from casflex.inverse.tree import KinematicTree
 
+try:  # np.linalg.solve's own kernel: its wrapper (an errstate each call) costs as much as the 14 x 14 solve
+    from numpy.linalg._umath_linalg import solve1 as _solve1
+except ImportError:  # pragma: no cover (another numpy's layout)
+    _solve1 = None
+
 __all__ = ["FittedMotion", "check_decided", "coordinate_rates", "filtered_rates", "fit_markers", "fit_pose",
            "undecided"]
 
@@ -118,22 +123,29 @@ def _levenberg_marquardt(f: ca.Function | _MarkerFit, z: np.ndarray, y: np.ndarr
     sw = np.ones(int(seen.sum())) if w is None else w[seen]
     lo, hi = bounds if bounds is not None else (np.full(z.size, -np.inf), np.full(z.size, np.inf))
     z = np.clip(z, lo, hi)
-    lam = 1e-3
-    ys = y[seen]
+    every = bool(seen.all())  # every channel seen: no row selection (the same numbers, no copies)
+    ys, sw_col = (y if every else y[seen]), sw[:, None]
     ym, J = f(z)
-    r = sw * (ym[seen] - ys)
-    J = sw[:, None] * J[seen]
+    r = sw * ((ym if every else ym[seen]) - ys)
+    J = np.multiply(sw_col, J if every else J[seen], order="C")  # C-ordered as J[seen] is: BLAS's sums alike
+    with np.errstate(invalid="ignore"):  # for _solve's kernel: the loop's numbers are finite
+        return _iterate(f, z, r, J, seen, every, ys, sw, lo, hi, max_iter)
+
+
+def _iterate(f, z, r, J, seen, every, ys, sw, lo, hi, max_iter) -> tuple[np.ndarray, np.ndarray, bool]:
+    """The iterations of :func:`_levenberg_marquardt` from z with residuals r and Jacobian J (weighted)."""
+    lam, sw_col = 1e-3, sw[:, None]
     for _ in range(max_iter):
         A, g = J.T @ J, J.T @ r
         free = ~(((z <= lo) & (g > 0)) | ((z >= hi) & (g < 0)))
         step = _damped_step(A, g, free, lam)
         step = np.minimum(np.maximum(z + step, lo), hi) - z  # np.clip's numbers at a fifth of its cost
-        if np.max(np.abs(step)) < 1e-10:  # converged: 0.1 nm, 1e-10 rad
+        if abs(step).max() < 1e-10:  # converged: 0.1 nm, 1e-10 rad
             break
         ym2, J2 = f(z + step)
-        r2 = sw * (ym2[seen] - ys)
+        r2 = sw * ((ym2 if every else ym2[seen]) - ys)
         if r2 @ r2 <= r @ r:
-            z, r, J, lam = z + step, r2, sw[:, None] * J2[seen], max(lam / 10, 1e-12)
+            z, r, J, lam = z + step, r2, np.multiply(sw_col, J2 if every else J2[seen], order="C"), max(lam / 10, 1e-12)
         else:
             lam *= 10
             if lam > 1e8:
@@ -152,10 +164,20 @@ def _damped_step(A: np.ndarray, g: np.ndarray, free: np.ndarray, lam: float) -> 
     d = M.ravel()[::M.shape[0] + 1]  # a view of the diagonal
     d += lam * (d + 1e-12)
     if every:
-        return np.linalg.solve(M, -g)
+        return _solve(M, -g)
     step = np.zeros_like(g)
-    step[free] = np.linalg.solve(M, -g[free])
+    step[free] = _solve(M, -g[free])
     return step
+
+
+def _solve(M: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.linalg.solve(M, b)``, the same LAPACK call and numbers, through its kernel; a singular M (NaN from the
+    kernel) goes to np.linalg.solve, which raises as it always did."""
+    if _solve1 is not None:
+        x = _solve1(M, b)  # its caller ignores the invalid-value flag a singular M raises (an errstate per frame)
+        if np.isfinite(x).all():
+            return x
+    return np.linalg.solve(M, b)
 
 
 def fit_pose(tree: KinematicTree, y: np.ndarray, start: np.ndarray | None = None) -> tuple[np.ndarray, float, bool]:
