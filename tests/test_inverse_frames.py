@@ -122,3 +122,10 @@ def test_starts_that_do_not_agree_fall_back_to_frame_by_frame(trial, monkeypatch
     f, w = _MarkerFit(tree.marker_fit), marker_weights(tree)
     second = _levenberg_marquardt(f, got.z[0], y[1], 50, w, coordinate_bounds(tree))[0]
     assert np.array_equal(got.z[1], second)  # frame 1 fitted alone, from frame 0's pose
+
+
+def test_a_trial_longer_than_a_block_is_fitted_block_by_block_alike(trial, monkeypatch):
+    tree, t, y = trial
+    whole = fit_markers(tree, t, y)
+    monkeypatch.setattr(fit_module, "_BLOCK", 16)  # 61 frames: four blocks, the last one short
+    assert np.abs(fit_markers(tree, t, y).z - whole.z).max() < SPREAD

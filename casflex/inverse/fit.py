@@ -305,7 +305,7 @@ def fit_markers(tree: KinematicTree, t: np.ndarray, y: np.ndarray, *, max_gap: f
 #: one by one, each from the one before)
 _PREDICT, _AGREE = 1e-4, 1e-3
 #: frames fitted at once: the stacked Jacobians of a block stay small (2 m x n_z x 8 bytes a frame)
-_BLOCK = 4096
+_BLOCK = 1024
 
 
 def _fit_frames(tree: KinematicTree, f: _MarkerFit, y: np.ndarray, y0: np.ndarray, w: np.ndarray | None,
