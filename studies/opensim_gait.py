@@ -196,11 +196,12 @@ def _moments(res, ref, grf, loads: Path) -> dict:
     return out
 
 
-def _command_times(files: dict, trial: Trial, tmp: Path, repeat: int) -> dict:
-    """Wall time (s, best of ``repeat``) of the whole ``casflex inverse`` command and of a Python script running
-    OpenSim's IK and ID tools, each a fresh process, side by side."""
+def commands(files: dict, trial: Trial, tmp: Path, casflex_python: str = sys.executable,
+             opensim_python: str = sys.executable) -> dict[str, list[str]]:
+    """{"casflex": the whole ``casflex inverse`` command, "opensim": a Python script running OpenSim's IK and ID
+    tools} on the trial's files, each writing into ``tmp`` (also studies/bench_opensim_trials.py's)."""
     t0, t1 = trial.window
-    cf = [sys.executable, "-m", "casflex", "inverse", str(files["model"]), "--data", str(files["markers"]),
+    cf = [casflex_python, "-m", "casflex", "inverse", str(files["model"]), "--data", str(files["markers"]),
           "--loads", str(files["loads"]), "--tasks", str(files["tasks"]), "--cutoff", f"{trial.cutoff:g}",
           "--cutoff-plates", "none", "--t-start", f"{t0:g}", "--t-end", f"{t1:g}", "--max-misfit",
           f"{MAX_MISFIT:g}", "--out", str(tmp / "cf.sto"), "--quiet"]
@@ -214,8 +215,14 @@ def _command_times(files: dict, trial: Trial, tmp: Path, repeat: int) -> dict:
               f"i.setCoordinatesFileName({str(tmp / 'os_ik.mot')!r})\ni.setLowpassCutoffFrequency({trial.cutoff})\n"
               f"i.setExternalLoadsFileName({str(files['loads'])!r})\ni.setStartTime({t0})\ni.setEndTime({t1})\n"
               f"i.setResultsDir({str(tmp)!r})\ni.setOutputGenForceFileName('os_id.sto')\ni.run()\n")
+    return {"casflex": cf, "opensim": [opensim_python, "-c", script]}
+
+
+def _command_times(files: dict, trial: Trial, tmp: Path, repeat: int) -> dict:
+    """Wall time (s, best of ``repeat``) of the whole ``casflex inverse`` command and of a Python script running
+    OpenSim's IK and ID tools, each a fresh process, side by side."""
     best = {}
-    for name, cmd in (("casflex", cf), ("opensim", [sys.executable, "-c", script])):
+    for name, cmd in commands(files, trial, tmp).items():
         walls = []
         for _ in range(repeat):
             start = time.perf_counter()

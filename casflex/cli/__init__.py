@@ -13,44 +13,70 @@ identify`` exits with 1 when the identification does not succeed (its record is 
 from __future__ import annotations
 
 import argparse
+import importlib
+import os
 import sys
 
 from casflex import interrupt
-from casflex.cli import cache, export, identify, inverse, model_import, muscles, scene, simulate, statics, study
 from casflex.cli._base import CliParser, OptionError, Outputs, missing_extra, progress_messages
 
 __all__ = ["main"]
 
+#: Each command and the module (casflex.cli.<module>) whose ``add_parsers`` builds its options and runs it, in the
+#: order ``casflex --help`` lists them. A command line naming one imports that module alone: the others' imports
+#: (numpy, CasADi, the identification's choices) are not the command's start-up (``casflex inverse --help``).
+COMMANDS = {"simulate": "simulate", "demo": "simulate", "static": "statics", "modes": "statics",
+            "identify": "identify", "inverse": "inverse", "calibrate": "inverse", "muscles": "muscles",
+            "import": "model_import", "export": "export", "cache": "cache", "study": "study", "scene": "scene"}
 
-def _parser() -> CliParser:
+
+def _command_word(argv: list[str]) -> str | None:
+    """The command named on the command line (its first word that is no option: casflex's own options take no
+    value), or None."""
+    return next((a for a in argv if not a.startswith("-")), None)
+
+
+def _parser(argv: list[str] | None = None) -> CliParser:
+    """The parser of the command ``argv`` names, or of every command where it names none (``casflex --help``, a
+    misspelt command: their lists name every command)."""
     from casflex import __version__
 
     ap = CliParser(prog="casflex",
                    description="Planar flexible multibody dynamics and parameter identification on CasADi.")
     ap.add_argument("--version", action="version", version=f"casflex {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
-    for module in (simulate, statics, identify, inverse, muscles, model_import, export, cache, study, scene):
-        module.add_parsers(sub)
+    word = _command_word(sys.argv[1:] if argv is None else argv)
+    modules = [COMMANDS[word]] if word in COMMANDS else list(dict.fromkeys(COMMANDS.values()))
+    for name in modules:
+        importlib.import_module(f"casflex.cli.{name}").add_parsers(sub)
     return ap
+
+
+#: The errors of casflex's modules that are a documented failure (module, class): named where the module was
+#: imported, since only then can the command have raised one (importing casflex.statics to name its error would
+#: load scipy, 0.6 s, on every refused input).
+_MODULE_ERRORS = (("casflex.codegen", "CodegenError"), ("casflex.simulate", "SimulationError"),
+                  ("casflex.statics", "StaticsError"))
 
 
 def _known_errors() -> tuple[type[BaseException], ...]:
     """The exceptions that are the user's input or a documented failure: one line, exit 2."""
-    from casflex.codegen import CodegenError
-    from casflex.simulate import SimulationError
-    from casflex.statics import StaticsError
+    loaded = (getattr(sys.modules.get(module), name, None) for module, name in _MODULE_ERRORS)
+    return (OptionError, *(e for e in loaded if e is not None), ValueError, KeyError, OSError)
 
-    return (OptionError, SimulationError, CodegenError, StaticsError, ValueError, KeyError, OSError)
+
+#: casflex.codegen.FLAGS_ENV, read here without importing casflex.codegen (it loads CasADi and numpy: not for a
+#: command refused before any work); tests/test_cli_startup.py holds them equal.
+_FLAGS_ENV = "CASFLEX_CFLAGS"
 
 
 def _check_compiler_flags() -> None:
     """``$CASFLEX_CFLAGS``, when set and a compiler is there: CodegenError naming it if rejected."""
-    import os
     import shutil
 
-    from casflex import codegen
+    if os.environ.get(_FLAGS_ENV) and shutil.which(os.environ.get("CC", "gcc")):
+        from casflex import codegen
 
-    if os.environ.get(codegen.FLAGS_ENV) and shutil.which(os.environ.get("CC", "gcc")):
         codegen.build_flags("-O1")
 
 
@@ -70,7 +96,7 @@ def _protect_inputs(args: argparse.Namespace, outputs: Outputs) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     try:
-        args = _parser().parse_args(argv)  # one line on a bad option, before any work
+        args = _parser(argv).parse_args(argv)  # one line on a bad option, before any work
     except SystemExit as exc:  # 2 for a bad option, 0 for --help and --version
         return int(exc.code or 0)
     outputs = Outputs()

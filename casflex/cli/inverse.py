@@ -6,7 +6,22 @@ import argparse
 import sys
 
 from casflex.cli._base import OptionError, Outputs, need_extra, non_negative, output_path, positive, uncertain_option
-from casflex.inverse.options import FILTERS
+
+
+def _filter_kind(text: str) -> str:
+    """--filter's value, one of :data:`casflex.inverse.options.FILTERS`, checked as argparse checks choices (the
+    same message). Not argparse's ``choices``: the help expands them, and importing them loads the package
+    casflex.inverse (numpy, CasADi: 0.3 s), which ``casflex inverse --help`` does not need (its usage line names
+    them by :data:`FILTER_METAVAR`)."""
+    from casflex.inverse.options import FILTERS
+
+    if text not in FILTERS:
+        raise argparse.ArgumentTypeError(f"invalid choice: {text!r} (choose from {', '.join(map(repr, FILTERS))})")
+    return text
+
+
+#: FILTERS as argparse writes choices in the usage line (tests/test_cli_startup.py holds them equal).
+FILTER_METAVAR = "{butterworth,opensim}"
 
 
 def _plate(text: str) -> tuple[str, str]:
@@ -65,8 +80,6 @@ def inverse_options(args: argparse.Namespace) -> dict:
     """The option values of :func:`casflex.inverse.inverse_dynamics` (``trial``, ``filter``, ``fit``, ``bands``)
     from the command's options, each checked by its object: OptionError naming the option. Shared by the commands
     that take what ``casflex inverse`` takes (:func:`add_trial_options`)."""
-    from casflex.inverse import Bands, Filter, Fit, OptionRefused, Trial
-
     for flag, value in (("--data", args.data), ("--loads", args.loads)):
         if value and value.lower().endswith(".c3d"):
             need_extra("ezc3d", f"{flag} {value!r} (a C3D file)")
@@ -86,6 +99,8 @@ def inverse_options(args: argparse.Namespace) -> dict:
         raise OptionError("--loads: say which node each plate acts on with --plate NODE=PREFIX (e.g. ankle=ground_), "
                           "or --plate auto (each contact to the foot over it), or give OpenSim's ExternalLoads file")
     how, plates_hz = _matched(args)
+    from casflex.inverse import Bands, Filter, Fit, OptionRefused, Trial  # here: the options' own checks first
+
     try:
         return {"trial": Trial(args.data, args.coordinates, grf=args.loads, plates=plates, plane=args.plane,
                                root=args.root, t_start=args.t_start, t_end=args.t_end, tasks=args.tasks),
@@ -118,8 +133,6 @@ def _matched(args: argparse.Namespace) -> tuple[str, float | None | str]:
 
 
 def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
-    from casflex.inverse import BandError, prepare, solve
-
     chosen = inverse_options(args)
     outs = [(outputs.file("--out", path, (".npz", ".csv", ".sto", ".mot"), "inverse dynamics"), path)
             for path in args.out or []]  # each checked and reserved before any work
@@ -128,6 +141,8 @@ def cmd_inverse(args: argparse.Namespace, outputs: Outputs) -> int:
         from casflex.plotting.inverse import FIGURES
 
         plots = outputs.directory("--plots", args.plots, FIGURES if args.data is not None else FIGURES[:1])
+    from casflex.inverse import BandError, prepare, solve  # after the options' checks: numpy, CasADi
+
     try:
         inputs = prepare(args.scene, **chosen)
     except BandError as exc:
@@ -204,7 +219,7 @@ def add_trial_options(s: argparse.ArgumentParser) -> None:
     s.add_argument("--cutoff-plates", type=_cutoff_or_none, default=_UNSET, metavar="HZ|none",
                    help="the plates' own cut-off, Hz, 'none' (unfiltered, as OpenSim's ID tool) or 'same' (the "
                         "default: --cutoff's)")
-    s.add_argument("--filter", choices=FILTERS, default=None,
+    s.add_argument("--filter", type=_filter_kind, metavar=FILTER_METAVAR, default=None,
                    help="the coordinates' filter: butterworth (2nd order forward and back: 4th-order zero-lag, the "
                         "default) or opensim (as OpenSim's ID tool: the record padded by half its length, 3rd "
                         "order forward and back); both -6 dB at --cutoff")

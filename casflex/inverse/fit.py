@@ -3,7 +3,8 @@
 Per frame, the coordinates z of the kinematic tree (:mod:`casflex.inverse.tree`) that bring the
 scene's markers nearest the measured ones (least squares over the markers seen in that frame;
 Levenberg-Marquardt on exact Jacobians, each frame started at the one before, the first one at
-every segment's pose by a rigid (Kabsch) fit of its own markers). A frame whose markers do not
+every segment's pose by a rigid (Kabsch) fit of its own markers; every frame's iterations run together,
+:mod:`casflex.inverse.frames`). A frame whose markers do not
 decide every coordinate is a gap; gaps up to ``max_gap`` s are filled by a cubic spline through the
 frames around them and reported, longer ones refused in one line.
 
@@ -26,6 +27,11 @@ import numpy as np
 
 from casflex import interrupt
 from casflex.inverse.tree import KinematicTree
+
+try:  # np.linalg.solve's own kernel: its wrapper (an errstate each call) costs as much as the 14 x 14 solve
+    from numpy.linalg._umath_linalg import solve1 as _solve1
+except ImportError:  # pragma: no cover (another numpy's layout)
+    _solve1 = None
 
 __all__ = ["FittedMotion", "check_decided", "coordinate_rates", "filtered_rates", "fit_markers", "fit_pose",
            "undecided"]
@@ -118,22 +124,29 @@ def _levenberg_marquardt(f: ca.Function | _MarkerFit, z: np.ndarray, y: np.ndarr
     sw = np.ones(int(seen.sum())) if w is None else w[seen]
     lo, hi = bounds if bounds is not None else (np.full(z.size, -np.inf), np.full(z.size, np.inf))
     z = np.clip(z, lo, hi)
-    lam = 1e-3
-    ys = y[seen]
+    every = bool(seen.all())  # every channel seen: no row selection (the same numbers, no copies)
+    ys, sw_col = (y if every else y[seen]), sw[:, None]
     ym, J = f(z)
-    r = sw * (ym[seen] - ys)
-    J = sw[:, None] * J[seen]
+    r = sw * ((ym if every else ym[seen]) - ys)
+    J = np.multiply(sw_col, J if every else J[seen], order="C")  # C-ordered as J[seen] is: BLAS's sums alike
+    with np.errstate(invalid="ignore"):  # for _solve's kernel: the loop's numbers are finite
+        return _iterate(f, z, r, J, seen, every, ys, sw, lo, hi, max_iter)
+
+
+def _iterate(f, z, r, J, seen, every, ys, sw, lo, hi, max_iter) -> tuple[np.ndarray, np.ndarray, bool]:
+    """The iterations of :func:`_levenberg_marquardt` from z with residuals r and Jacobian J (weighted)."""
+    lam, sw_col = 1e-3, sw[:, None]
     for _ in range(max_iter):
         A, g = J.T @ J, J.T @ r
         free = ~(((z <= lo) & (g > 0)) | ((z >= hi) & (g < 0)))
         step = _damped_step(A, g, free, lam)
         step = np.minimum(np.maximum(z + step, lo), hi) - z  # np.clip's numbers at a fifth of its cost
-        if np.max(np.abs(step)) < 1e-10:  # converged: 0.1 nm, 1e-10 rad
+        if abs(step).max() < 1e-10:  # converged: 0.1 nm, 1e-10 rad
             break
         ym2, J2 = f(z + step)
-        r2 = sw * (ym2[seen] - ys)
+        r2 = sw * ((ym2 if every else ym2[seen]) - ys)
         if r2 @ r2 <= r @ r:
-            z, r, J, lam = z + step, r2, sw[:, None] * J2[seen], max(lam / 10, 1e-12)
+            z, r, J, lam = z + step, r2, np.multiply(sw_col, J2 if every else J2[seen], order="C"), max(lam / 10, 1e-12)
         else:
             lam *= 10
             if lam > 1e8:
@@ -152,10 +165,20 @@ def _damped_step(A: np.ndarray, g: np.ndarray, free: np.ndarray, lam: float) -> 
     d = M.ravel()[::M.shape[0] + 1]  # a view of the diagonal
     d += lam * (d + 1e-12)
     if every:
-        return np.linalg.solve(M, -g)
+        return _solve(M, -g)
     step = np.zeros_like(g)
-    step[free] = np.linalg.solve(M, -g[free])
+    step[free] = _solve(M, -g[free])
     return step
+
+
+def _solve(M: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.linalg.solve(M, b)``, the same LAPACK call and numbers, through its kernel; a singular M (NaN from the
+    kernel) goes to np.linalg.solve, which raises as it always did."""
+    if _solve1 is not None:
+        x = _solve1(M, b)  # its caller ignores the invalid-value flag a singular M raises (an errstate per frame)
+        if np.isfinite(x).all():
+            return x
+    return np.linalg.solve(M, b)
 
 
 def fit_pose(tree: KinematicTree, y: np.ndarray, start: np.ndarray | None = None) -> tuple[np.ndarray, float, bool]:
@@ -258,27 +281,91 @@ def fit_markers(tree: KinematicTree, t: np.ndarray, y: np.ndarray, *, max_gap: f
     f = _MarkerFit(tree.marker_fit)
     y0 = f(tree.coordinates(tree.model.q0))[0].copy()
     n, m = t.size, y.shape[1] // 2
-    Z, rms, seen = np.full((n, tree.n), np.nan), np.full(n, np.nan), np.isfinite(y).reshape(n, -1, 2).all(2).sum(1)
+    rms, seen = np.full(n, np.nan), np.isfinite(y).reshape(n, -1, 2).all(2).sum(1)
     misfit = np.full((n, m), np.nan)
     w, bounds = marker_weights(tree), coordinate_bounds(tree)
     used = np.ones(m, dtype=bool) if w is None else w[::2] > 0
-    z_prev = None
-    for i in range(n):
-        start = _kabsch_start(tree, y[i], y0) if z_prev is None else z_prev
-        z, r, ok = _levenberg_marquardt(f, start, y[i], 50, w, bounds)
-        if ok:
-            Z[i], z_prev = z, z
-            rms[i] = float(np.sqrt(np.mean(r.reshape(-1, 2) ** 2, axis=0).sum()))
-            misfit[i, np.isfinite(y[i]).reshape(m, 2).all(axis=1) & used] = np.hypot(*r.reshape(-1, 2).T)
-            _check_misfit(misfit[i], t[i], max_misfit, labels, source, _held(z, bounds, tree))
-        if progress is not None:
-            progress(i + 1, n)
-        interrupt.check()  # a Ctrl-C that a CasADi call swallowed
+    Z, R, ok = _fit_frames(tree, f, y, y0, w, bounds, progress)
+    Z[~ok] = np.nan
+    pairs = R[ok].reshape(-1, m, 2)
+    rms[ok] = np.sqrt(np.nanmean(pairs**2, axis=1).sum(axis=1))
+    misfit[ok] = np.where(used, np.hypot(pairs[..., 0], pairs[..., 1]), np.nan)
+    if max_misfit is not None:  # the first frame with a marker too far is named, as the fit meets it
+        for i in np.flatnonzero(ok & (np.nan_to_num(misfit, nan=0.0) > max_misfit).any(axis=1)):
+            _check_misfit(misfit[i], t[i], max_misfit, labels, source, _held(Z[i], bounds, tree))
     report = [f"marker fit: {n} frames, misfit RMS median {1e3 * np.nanmedian(rms):.1f} mm, "
               f"max {1e3 * np.nanmax(rms):.1f} mm"] if np.isfinite(rms).any() else []
     report += _by_marker(misfit, labels, tree) + _at_limits(Z, bounds, tree)
     Z = _fill(t, Z, max_gap, report, source)
     return FittedMotion(t, Z, rms, seen, report, misfit)
+
+
+#: m, rad: the first pass's stop (each frame near its own pose: a start for the frame after it), and how near the
+#: second pass must end to it for that start to be the frame-by-frame fit's (else the frames from there are fitted
+#: one by one, each from the one before)
+_PREDICT, _AGREE = 1e-4, 1e-3
+#: frames fitted at once: the stacked Jacobians of a block stay small (2 m x n_z x 8 bytes a frame)
+_BLOCK = 1024
+
+
+def _fit_frames(tree: KinematicTree, f: _MarkerFit, y: np.ndarray, y0: np.ndarray, w: np.ndarray | None,
+                bounds: tuple[np.ndarray, np.ndarray] | None, progress) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(Z (n, n_z), residuals (n, 2 m) (NaN where unused), decided (n,)) of the frames y (n, 2 m), each frame's
+    fit started at the frame before it (the last one decided), the first at its segments' rigid fits: on all frames
+    at once (:mod:`casflex.inverse.frames`), a first pass from each frame's rigid fits giving each frame the pose
+    of the one before it."""
+    from casflex.inverse.frames import MappedFit, kabsch_starts, levenberg_marquardt
+
+    n = y.shape[0]
+    lo, hi = bounds if bounds is not None else (np.full(tree.n, -np.inf), np.full(tree.n, np.inf))
+    fm = MappedFit(tree.marker_fit)
+
+    def blocks(starts, tol, report=None):
+        parts = [levenberg_marquardt(fm, starts[s:s + _BLOCK], y[s:s + _BLOCK], w, lo, hi, tol=tol,
+                                     progress=None if report is None else lambda d, _, s=s: report(s + d, n))
+                 for s in range(0, n, _BLOCK)]
+        return tuple(np.concatenate([p[k] for p in parts]) for k in range(3))
+
+    def tick(done: int, total: int) -> None:
+        if progress is not None:
+            progress(done, total)
+        interrupt.check()  # a Ctrl-C that a CasADi call swallowed
+
+    Z1, _, ok1 = blocks(kabsch_starts(tree, y, y0), _PREDICT)
+    interrupt.check()
+    before = _last_before(ok1)
+    starts = Z1[np.maximum(before, 0)]
+    for i in np.flatnonzero(before < 0):  # no frame decided before it: its segments' rigid fits
+        starts[i] = _kabsch_start(tree, y[i], y0)
+    Z, R, ok = blocks(starts, 1e-10, tick)
+    used = before[(before >= 0)]
+    apart = np.zeros(n, dtype=bool)
+    apart[before >= 0] = np.abs(Z1[used] - Z[used]).max(axis=1) > _AGREE
+    wrong = np.flatnonzero((_last_before(ok) != before) | apart)
+    if wrong.size:  # a start not the frame-by-frame fit's: from there, frame by frame
+        _one_by_one(tree, f, y, y0, w, bounds, Z, R, ok, int(wrong[0]))
+    return Z, R, ok
+
+
+def _last_before(ok: np.ndarray) -> np.ndarray:
+    """(n,) the index of the last frame before each that is ``ok``, -1 where none is."""
+    idx = np.where(ok, np.arange(ok.size), -1)
+    return np.r_[-1, np.maximum.accumulate(idx)[:-1]]
+
+
+def _one_by_one(tree, f, y, y0, w, bounds, Z, R, ok, first: int) -> None:
+    """Fit the frames from ``first`` on, each from the last one decided before it, into Z, R, ok (in place)."""
+    back = _last_before(ok)[first]
+    z_prev = Z[back] if back >= 0 else None
+    for i in range(first, y.shape[0]):
+        start = _kabsch_start(tree, y[i], y0) if z_prev is None else z_prev
+        z, r, ok[i] = _levenberg_marquardt(f, start, y[i], 50, w, bounds)
+        seen = np.isfinite(y[i]) if w is None else np.isfinite(y[i]) & (w > 0)
+        Z[i], R[i] = z, np.nan
+        R[i, seen] = r
+        if ok[i]:
+            z_prev = z
+        interrupt.check()
 
 
 def _at_limit(Z: np.ndarray, bounds: tuple[np.ndarray, np.ndarray] | None, tree: KinematicTree) -> dict[str, int]:

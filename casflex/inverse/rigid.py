@@ -28,6 +28,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from casflex.codegen import BufferedCall
 from casflex.inverse.tree import KinematicTree
 
 __all__ = ["driver_rows", "rigid_loads"]
@@ -73,7 +74,7 @@ def rigid_loads(tree: KinematicTree, t: np.ndarray, z: np.ndarray, zd: np.ndarra
         raise ValueError(f"the scene has {m.n_dof} dofs and {m.n_con} joint rows: with the {tree.n} coordinates they "
                          "do not decide its motion; flexible segments need the flexible inverse")
     size = min(BLOCK, t.size)
-    f = _frame_function(tree).map(size)
+    f = _dense(_frame_function(tree).map(size))
     parts = [_block(tree, f, size, t[s:s + size], z[s:s + size], zd[s:s + size], zdd[s:s + size], p, external)
              for s in range(0, t.size, size)]
     q, qd, qdd, lam = (np.concatenate([pt[i] for pt in parts]) for i in range(4))
@@ -81,15 +82,18 @@ def rigid_loads(tree: KinematicTree, t: np.ndarray, z: np.ndarray, zd: np.ndarra
     return {"q": q, "qd": qd, "qdd": qdd, "lam": lam, **out}
 
 
-def _block(tree: KinematicTree, f: ca.Function, size: int, t, z, zd, zdd, p, external):
+def _block(tree: KinematicTree, f: BufferedCall, size: int, t, z, zd, zdd, p, external):
     """(q, qd, qdd, lam) of up to ``size`` frames by the mapped frame Function ``f`` (the last block padded
     with its last frame)."""
     m, k = tree.model, t.size
     pad = np.r_[np.arange(k), np.full(size - k, k - 1)]
-    q, qd, qdd, r, B = (np.array(v) for v in f(z[pad].T, zd[pad].T, zdd[pad].T, t[pad][None, :],
-                                                 np.tile(p[:, None], (1, size))))
-    q, qd, qdd, r = q.T[:k], qd.T[:k], qdd.T[:k], r.T[:k]
-    B = B.reshape(m.n_con, size, m.n_dof).transpose(1, 0, 2)[:k] if m.n_con else np.zeros((k, 0, m.n_dof))
+    # a matrix (rows, size) of the mapped Function is column-major: a C-ordered (size, rows) array, frame by frame
+    args = [np.ascontiguousarray(a, dtype=float) for a in (z[pad], zd[pad], zdd[pad], t[pad], np.tile(p, (size, 1)))]
+    q, qd, qdd, r = (np.empty((size, m.n_dof)) for _ in range(4))
+    Bt = np.empty((size, m.n_dof, m.n_con))  # B (n_con, size n_dof) column-major: each frame's B transposed
+    f(args, [q, qd, qdd, r, Bt])
+    q, qd, qdd, r = q[:k], qd[:k], qdd[:k], r[:k]
+    B = Bt.transpose(0, 2, 1)[:k]
     if external is not None:
         r = r - external(t, q)
     A = np.concatenate([B, np.broadcast_to(driver_rows(tree), (k, tree.n, m.n_dof))], axis=1)
@@ -99,6 +103,12 @@ def _block(tree: KinematicTree, f: ca.Function, size: int, t, z, zd, zdd, p, ext
         raise ValueError(f"the coordinates do not decide the scene's motion at t = {t[i]:g} s (singular joints)")
     lam = np.linalg.solve(A.transpose(0, 2, 1), -r[:, :, None])[:, :, 0]
     return q, qd, qdd, lam
+
+
+def _dense(f: ca.Function) -> BufferedCall:
+    """``f`` with dense outputs, called on numpy memory (no DM conversions: they took as long as the frames' work)."""
+    ins = [ca.MX.sym(f.name_in(i), f.sparsity_in(i)) for i in range(f.n_in())]
+    return BufferedCall(ca.Function(f"{f.name()}_dense", ins, [ca.densify(o) for o in f.call(ins)]))
 
 
 def loads_by_name(tree: KinematicTree, q: np.ndarray, qd: np.ndarray, lam: np.ndarray,

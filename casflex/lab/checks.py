@@ -150,13 +150,14 @@ def check_static(lab: LabMarkers, labels: Sequence[str]) -> None:
 def _median_ratio(seg: np.ndarray, scene_xy: np.ndarray, trial_xy: np.ndarray) -> float:
     """The median, over pairs of markers on one segment and the frames, of trial over scene distance (1: none)."""
     ratios = []
-    for a in range(seg.size):
-        for b in range(a + 1, seg.size):
-            d0 = np.linalg.norm(scene_xy[a] - scene_xy[b])
-            if seg[a] != seg[b] or d0 < 1e-3:  # markers on one segment, 1 mm apart at least
-                continue
-            d = np.linalg.norm(trial_xy[:, a] - trial_xy[:, b], axis=1)
-            ratios.append(d[np.isfinite(d)] / d0)
+    for s in dict.fromkeys(seg.tolist()):  # a segment's pairs at once (a Python loop over pairs took 0.1 s)
+        on = np.flatnonzero(seg == s)
+        a, b = (on[k] for k in np.triu_indices(on.size, 1))
+        d0 = np.sqrt(((scene_xy[a] - scene_xy[b]) ** 2).sum(axis=1))
+        apart = ~(d0 < 1e-3)  # markers 1 mm apart at least
+        a, b, d0 = a[apart], b[apart], d0[apart]
+        d = np.sqrt(((trial_xy[:, a] - trial_xy[:, b]) ** 2).sum(axis=2))  # (n, pairs)
+        ratios.append((d / d0)[np.isfinite(d)])
     every = np.concatenate(ratios) if ratios else np.zeros(0)
     return float(np.median(every)) if every.size else 1.0
 
