@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _callgrind import instructions
 from _shared import cold_and_cached, twobar
 from _study import Banner, assert_checks, best_of, checks, cli, paths_check, png, table, write_outputs
 
@@ -24,7 +25,10 @@ TABLES = (  # the page's tables: (title, {column: format over a row's numbers})
      {"el./bar": "{elements}", "dofs": "{dofs}", "cold build (s)": "{cold_build_s:.1f}",
       "cached build (s)": "{build_s:.2f}", "library (kB)": "{code_kb}", "simulate (ms)": "{simulate_ms:.1f}",
       "integration (ms)": "{run_ms:.1f}", "per step (us)": "{per_step_us:.1f}",
-      "per step, -march=native (us)": "{native_per_step_us:.1f}", "default / native": "{native_gain:.2f}",
+      "per step and dof (ns)": "{per_dof_ns:.0f}", "instructions / step (k)": "{kinstr:.1f}",
+      "bandwidth": "{bandwidth}",
+      "Newton updates / step": "{updates:.2f}", "per step, -march=native (us)": "{native_per_step_us:.1f}",
+      "default / native": "{native_gain:.2f}",
       "peak memory (MB)": "{peak_mb:.0f}"}),
     ("Accuracy and the two paths (1 element per bar; error against a dt = {dt_ref:g} s reference)",
      {"dt (s)": "{dt:.0e}", "steps": "{steps}", "interpreted (ms)": "{interpreted_ms:.1f}",
@@ -39,15 +43,23 @@ TABLES = (  # the page's tables: (title, {column: format over a row's numbers})
 
 def mesh_worker(elements: int, t_end: float, repeat: int) -> dict:
     """In a fresh process: build (or load) the compiled step, then time simulate() (JSON on stdout)."""
-    from casflex.simulate import compiled_library, integrator_for
+    from casflex.simulate import CHUNK, compiled_library, initial_state, integrator_for
 
     t0 = time.perf_counter()
     model = twobar(elements)
-    lib = compiled_library(integrator_for(model, alpha=0.0))
+    integ = integrator_for(model, alpha=0.0)
+    lib = compiled_library(integ)
     build_s = time.perf_counter() - t0
     t_sim, tr = best_of(lambda: simulate(model, t_end,
                                          stepping=Stepping(dt=1e-3, compiled=True)), repeat, enough=float("inf"))
+    counted = simulate(model, min(t_end, 0.2), stepping=Stepping(dt=1e-3))  # interpreted: Newton updates counted
+    p, n = model.params(None), model.n_dof
+    x0 = initial_state(integ, p)
+    d = np.array(integ.scale(x0[:n], x0[n:2 * n], p, 1e-3)).ravel()
+    count = instructions(lib.path, f"hht_trajectory_{CHUNK}", [x0, np.zeros(1), p, np.array([1e-3]), d])
     return {"elements": elements, "dofs": model.n_dof, "build_s": build_s, "cached": lib.cached,
+            "bandwidth": integ.bandwidth, "kinstr": np.nan if count is None else count / CHUNK / 1e3,
+            "updates": counted.stats["newton_iterations"] / counted.stats["steps"],
             "simulate_ms": 1e3 * t_sim, "run_ms": 1e3 * tr.stats["run_s"], "steps": tr.stats["steps"],
             "code_kb": lib.path.stat().st_size // 1024, "y5": float(tr.dof("y5")[-1]),
             "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
@@ -55,6 +67,26 @@ def mesh_worker(elements: int, t_end: float, repeat: int) -> dict:
 
 def slope(x, y) -> float:  # of the least-squares line through the log-log points
     return float(np.polyfit(np.log(x), np.log(y), 1)[0])
+
+
+def growth(rows: list[dict], key: str = "per_step_us") -> dict:
+    """How the per step cost t (us) grows with the dofs n: the log-log slope (t = b n^k, no constant), the
+    slope with a constant (t = a + b n^k, least squares in log t over a grid of k), the straight line
+    t = a + b n (b: the marginal cost of a dof) and the slope over the last three meshes."""
+    n, t = np.array([r["dofs"] for r in rows], float), np.array([r[key] for r in rows])
+
+    def with_constant(k: float) -> tuple[float, float, float]:  # (misfit, a, b) of t = a + b n^k
+        A = np.stack([np.ones_like(n), n**k], axis=1)
+        (a, b), *_ = np.linalg.lstsq(A / t[:, None], np.ones_like(t), rcond=None)  # relative residuals
+        fit = a + b * n**k
+        return (float(np.sum(np.log(np.maximum(fit, 1e-12) / t) ** 2)) if (fit > 0).all() else np.inf), a, b
+
+    ks = np.arange(0.5, 2.001, 0.005)
+    k1 = float(ks[np.argmin([with_constant(k)[0] for k in ks])])
+    b_lin, a_lin = np.polyfit(n, t, 1)
+    return {"elements": slope([r["elements"] for r in rows], t), "dofs": slope(n, t), "dofs_const": k1,
+            "const_us": with_constant(k1)[1], "line_a_us": float(a_lin), "line_b_ns": 1e3 * float(b_lin),
+            "dofs_tail": slope(n[-3:], t[-3:]) if len(n) >= 3 else float("nan")}
 
 
 def figure(scale: list[dict], acc: list[dict]) -> bytes:
@@ -94,9 +126,12 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
                                                 for n in (1, 2 if quick else 7)), timeout=1800, env=NATIVE)
         scale.append({**warm, "cold_build_s": cold["build_s"], "cold_cached": cold["cached"],
                       "per_step_us": 1e3 * warm["run_ms"] / warm["steps"],
+                      "per_dof_ns": 1e6 * warm["run_ms"] / warm["steps"] / warm["dofs"],
                       "native_per_step_us": 1e3 * native["run_ms"] / native["steps"],
                       "native_gain": warm["run_ms"] / native["run_ms"]})
-    expo = {k: slope([r[k] for r in scale], [r["per_step_us"] for r in scale]) for k in ("elements", "dofs")}
+    expo = growth(scale)
+    counted = all(np.isfinite(r["kinstr"]) for r in scale)
+    expo_i = growth(scale, "kinstr") if counted else None
     # per dt, 1 element per bar: both paths; node 5's error against a dt 10x below the smallest (coarsest grid)
     acc_t, dts, acc = 0.5 if quick else 3.0, [1e-2, 5e-3, 2e-3, 1e-3] + ([] if quick else [5e-4, 2e-4, 1e-4]), []
     model, grid, fine = twobar(1), np.arange(0, acc_t + 1e-12, dts[0]), dts[-1] / 10
@@ -133,18 +168,30 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
          not any(r["cold_cached"] for r in scale) and all(r["cached"] for r in scale)),
         paths_check(max(r["max_diff_paths"] for r in acc), "on q, every step size"),
         ("HHT-alpha's convergence order over dt <= 2e-3 is 2 (1.8 .. 2.2)", f"{order:.3f}", 1.8 < order < 2.2),
-        ("the meshes agree on node 5's final y (< 1e-3 m)", f"{y5:.1e} m", y5 < 1e-3)])
+        ("the meshes agree on node 5's final y (< 1e-3 m)", f"{y5:.1e} m", y5 < 1e-3),
+        ("the bandwidth is the same at every mesh", ", ".join(str(r["bandwidth"]) for r in scale),
+         len({r["bandwidth"] for r in scale}) == 1)])
     page = ["# Simulation benchmark: twobar", "", f"{banner.line()} What is measured and what the numbers mean: "
             "[studies/bench_simulate.md](../studies/bench_simulate.md).", "",
             f"![cost against the mesh, time and error against dt](../figures/bench_simulate{'_quick' * quick}.png)",
-            "", f"Per-step cost from {scale[0]['elements']} to {scale[-1]['elements']} elements per bar: growth "
-            f"exponent **{expo['elements']:.2f}** against the elements, {expo['dofs']:.2f} against the dofs.", ""]
+            "", f"Per-step cost from {scale[0]['elements']} to {scale[-1]['elements']} elements per bar "
+            f"({scale[0]['dofs']} to {scale[-1]['dofs']} dofs): growth exponent **{expo['dofs']:.2f}** against the "
+            f"dofs (least-squares line through the log-log points, t = b n^k), "
+            f"{expo['dofs_const']:.2f} with a constant "
+            f"(t = a + b n^k, a = {expo['const_us']:.2f} us), {expo['dofs_tail']:.2f} over the last three meshes, "
+            f"{expo['elements']:.2f} against the elements. Straight line: t = {expo['line_a_us']:.2f} us + "
+            f"{expo['line_b_ns']:.0f} ns per dof (the marginal cost of a dof).", ""]
+    if expo_i:  # the same fits on the instructions, which the machine's load does not change
+        page += [f"In instructions per step (callgrind): exponent **{expo_i['dofs']:.2f}** against the dofs, "
+                 f"{expo_i['dofs_const']:.2f} with a constant, {expo_i['dofs_tail']:.2f} over the last three meshes, "
+                 f"{expo_i['elements']:.2f} against the elements; straight line: "
+                 f"{expo_i['line_b_ns']:.0f} instructions per dof.", ""]
     for (title, spec), rows in zip(TABLES, (scale, acc, kinds), strict=True):
         page += [f"## {title.format(t_end=t_end, dt_ref=acc[-1]['dt'] / 10, kinds_t=kinds_t)}", "",
                  *table(list(spec), [[f.format(**r) for f in spec.values()] for r in rows], "r" * len(spec)), ""]
     write_outputs("bench_simulate", out_dir, quick, "\n".join(page + lines), figure(scale, acc))
     assert_checks(failed)
-    return {"scale": scale, "exponent": expo, "accuracy": acc, "order": order, "newton": kinds}
+    return {"scale": scale, "exponent": expo, "exponent_instructions": expo_i, "accuracy": acc, "order": order, "newton": kinds}
 
 
 if __name__ == "__main__":

@@ -5,6 +5,7 @@ trajectory Function against finite differences."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import casadi as ca
@@ -244,3 +245,13 @@ def test_second_order_with_a_rotating_mass_matrix_at_alpha_negative(alpha):
     # The mass matrix is taken at the alpha-weighted configuration; with M(q_n+1), as the
     # paper writes Eq. 4, this order was 1.03 at alpha = -0.1.
     assert _spinning_bar_order(alpha) > 1.8  # measured 2.00
+
+
+@pytest.mark.parametrize("elements", [1, 6])
+def test_the_newton_matrix_band_does_not_widen_with_the_mesh(elements):
+    """The banded LU's order keeps twobar's Newton matrix at bandwidth 5 at any mesh (three dofs per node,
+    each node coupled to its neighbours): a step's factorisation costs O(n), not more (issue 49, the mesh)."""
+    scene = casflex.load_scene("twobar")
+    model = casflex.assemble(dataclasses.replace(scene, beams=tuple(dataclasses.replace(b, elements=elements)
+                                                                    for b in scene.beams)))
+    assert HHT(model).bandwidth == 5

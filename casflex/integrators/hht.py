@@ -131,6 +131,7 @@ class HHT:
     newton: str = "exact"
     _fn: dict = field(default_factory=dict, init=False, repr=False)
     _ell: np.ndarray = field(default=None, init=False, repr=False)  # characteristic length per dof
+    _band: int = field(default=0, init=False, repr=False)  # the Newton matrix's bandwidth (band.py)
 
     def __post_init__(self) -> None:
         hht_coefficients(self.alpha)
@@ -165,6 +166,7 @@ class HHT:
         # over 0.4 s).
         band = band_lu(jac.sparsity_out(0), "hht_band", late=lay.n_mu)
         factor, apply = (band.factor.expand(), band.apply.expand()) if expand else (band.factor, band.apply)
+        object.__setattr__(self, "_band", band.bandwidth)
         z0, P = ca.MX.sym("z0", resid.nnz_in(0)), ca.MX.sym("prm", resid.nnz_in(1))
         J0, G0 = jac(z0, P)
         F0 = factor(J0.nz[:])
@@ -205,6 +207,12 @@ class HHT:
                           [f"jac_{o}_{i}" for o in ("x1", "res") for i in ("x0", "t0", "p", "h", "d")])
         return ca.Function("hht_step", [x0, t0, p, h, d], [X1, res1], ["x0", "t0", "p", "h", "d"], ["x1", "res"],
                            {"custom_jacobian": jac, "jac_penalty": 0})
+
+    @property
+    def bandwidth(self) -> int:
+        """The bandwidth of the Newton matrix in the banded LU's order (:mod:`casflex.integrators.band`):
+        a step's factorisation costs O(n b^2) for n unknowns."""
+        return self._band
 
     def tolerance(self, q: np.ndarray) -> np.ndarray:
         """Largest accepted scaled residual of a step ending at q, shape (n_dof,) or (k, n_dof):
