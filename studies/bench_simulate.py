@@ -191,7 +191,8 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
                  *table(list(spec), [[f.format(**r) for f in spec.values()] for r in rows], "r" * len(spec)), ""]
     write_outputs("bench_simulate", out_dir, quick, "\n".join(page + lines), figure(scale, acc))
     assert_checks(failed)
-    return {"scale": scale, "exponent": expo, "exponent_instructions": expo_i, "accuracy": acc, "order": order, "newton": kinds}
+    return {"scale": scale, "exponent": expo, "exponent_instructions": expo_i, "accuracy": acc, "order": order,
+            "newton": kinds}
 
 
 if __name__ == "__main__":
