@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import functools
 import io
 import os
 import sys
@@ -14,14 +15,25 @@ import numpy as np
 
 from casflex.cli._base import OptionError, Outputs, integer, need_extra, output_path
 
+_HEAD = ["subject", "trial", "load", "foot", "cycle", "percent", "value", "band", "unit", "clean", "t0", "t1"]
+
 
 def _table(rows: list[tuple]) -> str:
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["subject", "trial", "load", "foot", "cycle", "percent", "value", "band", "unit", "clean", "t0", "t1"])
-    w.writerows([(*r[:5], f"{r[5]:g}", repr(r[6]), "" if r[7] is None else repr(r[7]), r[8],
-                  "" if r[9] is None else str(r[9]).lower(), repr(r[10]), repr(r[11])) for r in rows])
-    return buf.getvalue()
+    """loads.csv's text: each value and band by repr (the shortest text that reads back to the same double). Its
+    rows formatted directly where no name needs CSV's quoting (a comma, a quote, a line break), else by the csv
+    module: the same text, twice as fast (160 000 rows for 200 trials)."""
+    names = {r[i] for r in rows for i in (0, 1, 2, 3, 8)}
+    if any(isinstance(n, str) and any(c in n for c in ',"\r\n') for n in names):
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        w.writerow(_HEAD)
+        w.writerows([(*r[:5], f"{r[5]:g}", repr(r[6]), "" if r[7] is None else repr(r[7]), r[8],
+                      "" if r[9] is None else str(r[9]).lower(), repr(r[10]), repr(r[11])) for r in rows])
+        return buf.getvalue()
+    return "".join([",".join(_HEAD) + "\n", *(
+        f"{r[0]},{r[1]},{r[2]},{'' if r[3] is None else r[3]},{r[4]},{r[5]:g},{r[6]!r},"
+        f"{'' if r[7] is None else repr(r[7])},{r[8]},{'' if r[9] is None else str(r[9]).lower()},{r[10]!r},{r[11]!r}\n"
+        for r in rows)])
 
 
 def _passive_table(out: dict) -> str | None:
@@ -57,12 +69,13 @@ def _kept(out: dict, all_cycles: bool, kind: str) -> dict[str, dict[str, list[tu
     """name -> subject -> [(cycle's values, its toe-off %)] of the cycles kept (:func:`cycle_curves`)."""
     from casflex.plotting.gait import split_side
 
+    side = functools.lru_cache(maxsize=None)(lambda name: split_side(name)[1])  # a few names, 200 trials' worth
     per: dict[str, dict[str, list]] = {}
     for (subject, _), rec in out["trials"].items():
         for name, ld in getattr(rec, kind).items():
             keep = ld.clean or [False] * len(ld.value)
             offs = rec.toe_off.get(ld.foot) or [None] * len(ld.value)
-            if split_side(name)[1] != split_side(ld.foot or "")[1]:  # an arm or the trunk on a foot's cycles
+            if side(name) != side(ld.foot or ""):  # an arm or the trunk on a foot's cycles
                 offs = [None] * len(ld.value)  # its toe-off is no event of its own side: not drawn
             per.setdefault(name, {}).setdefault(subject, []).extend(
                 (v, off) for v, ok, off in zip(ld.value, keep, offs, strict=True) if ok or all_cycles)

@@ -329,9 +329,10 @@ def check_against_models(study: Study) -> None:
     from casflex.scene.uncertain import parse
     from casflex.study.study_file import StudyError
 
+    scenes: dict[str, object] = {}  # a model that several subjects share read once
     for i, s in enumerate(study.subjects):
         try:
-            scene = load_scene(s.model)
+            scene = scenes[s.model] if s.model in scenes else scenes.setdefault(s.model, load_scene(s.model))
         except (SceneError, ValueError, OSError) as exc:
             raise StudyError(f"subjects[{i}].model: {exc}") from None
         try:
