@@ -254,6 +254,8 @@ def render(raw: dict, out_dir: Path | None, banner: Banner | None = None) -> dic
                      f"{r['wall'] / n:.3f}", f"{_overhead(r['wall'], n, work):+.0f} %",
                      f"{rec[0]:.1f}" if rec else "-", f"{steady:.3f}", f"{r['wall'] - rec[-1]:.1f}" if rec else "-"])
     tl = {w: ext[w]["timeline"] for w in (1, 2)}
+    rec1 = best[1]["records"]
+    steady1 = (rec1[-1] - rec1[0]) / (len(rec1) - 1) if len(rec1) > 1 else float("nan")
     ld = raw["load"]
     s = ld["samples"]
     head = "# What a 200-trial `casflex study` costs" if not raw["quick"] else "# What a `casflex study` costs (quick)"
@@ -270,13 +272,21 @@ def render(raw: dict, out_dir: Path | None, banner: Banner | None = None) -> dic
             f"The study: {raw['subjects']} subjects x {raw['trials']} trials = {n}, the same 1 s of Hamner's running "
             "(61 frames at 60 Hz, 41 markers, two plates) on the planar whole-body model, each subject's masses "
             "scaled to its own mass; no bands. One trial's work in one process (casflex.study.runner.trial_run, no "
-            f"dask): {work:.3f} s (best; the first call {raw['work_first']:.2f} s).", "",
+            f"dask, the subject's scene read once as a worker reads it): {work:.3f} s (best; the first call "
+            f"{raw['work_first']:.2f} s).", "",
             "## The command, a new process and a new record folder each time", "",
             *table(["cluster", "wall s", "CPU s (all processes)", "trials per minute", "wall s per trial",
                     "overhead per trial (of the work)", "first record s", "s per record (steady)",
                     "after the last record s (table, figures)"], rows, "lrrrrrrrr"), "",
             f"- 2 workers against 1: **{speed_local:.2f} x** on the local cluster, **{speed_ext:.2f} x** on the "
             "external scheduler.",
+            f"- The overhead per trial, {_overhead(best[1]['wall'], n, work):+.0f} % of a trial's work on 1 local "
+            f"worker, in parts: the start-up before the first record {best[1]['records'][0]:.1f} s (process, imports, "
+            f"study check, the cluster's start, the worker's imports, the calibrations, a first trial), "
+            f"{100 * (steady1 - work) / work:+.0f} % per trial in the steady stream of records (dask's round trip, "
+            f"the record written; the worker's CPU shared with this process), and after the last record "
+            f"{best[1]['wall'] - best[1]['records'][-1]:.1f} s (the table, {raw['subjects'] + 1} figures, the summary)."
+            if best[1]["records"] else "- No record times (none written?).",
             f"- The same command on its finished outputs (nothing to run; process, imports, study check, freshness "
             f"check of the records and outputs): **{again:.2f} s** (best of {len(raw['again'])}: "
             f"{again_walls}); it said up to date: "
