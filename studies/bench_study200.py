@@ -126,14 +126,17 @@ class External:
         return total
 
     def tasks(self, since: float) -> list[dict]:
-        """The trials' tasks since ``since`` (time.time()): worker, start and stop (s, wall clock)."""
+        """The tasks since ``since`` (time.time()): kind ("trial", "calibrate", "figure"), worker, start and stop
+        (s, wall clock)."""
         out = []
         for ts in self.client.get_task_stream(start=since):
-            if not str(ts["key"]).startswith("casflex-trial-"):
-                continue
+            key = str(ts["key"])
+            kind = next((k for k in ("trial", "calibrate") if key.startswith(f"casflex-{k}-")),
+                        "figure" if key.startswith("draw_figure") else None)
             compute = [s for s in ts["startstops"] if s["action"] == "compute"]
-            if compute:
-                out.append({"worker": ts["worker"], "start": compute[0]["start"], "stop": compute[-1]["stop"]})
+            if kind and compute:
+                out.append({"kind": kind, "worker": ts["worker"], "start": compute[0]["start"],
+                            "stop": compute[-1]["stop"]})
         return out
 
     def close(self) -> None:
@@ -173,15 +176,15 @@ def _external_runs(folder: Path, study: Path, env: dict) -> tuple[dict, dict]:
             r = _command(study, folder / f"ext{w}", env, "--scheduler", ext.address)
             r["cpu"] += ext.workers_cpu() - cpu0
             tasks[w] = [dict(t, start=t["start"] - since, stop=t["stop"] - since) for t in ext.tasks(since)]
-            r["timeline"] = _timeline(tasks[w])
+            r["timeline"] = _timeline([t for t in tasks[w] if t["kind"] == "trial"])
             runs[w] = r
     finally:
         ext.close()
     return runs, tasks
 
 
-def figure(tpm: dict[str, float], tasks: list[dict], n: int) -> bytes:
-    """Trials per minute by workers and cluster; the external two-worker run's tasks over time."""
+def figure(tpm: dict[str, float], tasks: list[dict], n: int, wall: float) -> bytes:
+    """Trials per minute by workers and cluster; the external two-worker run's tasks over its ``wall`` s."""
     from casflex.plotting._figure import _new_figure
 
     fig = _new_figure((12, 4))
@@ -191,11 +194,17 @@ def figure(tpm: dict[str, float], tasks: list[dict], n: int) -> bytes:
     a.set_xticks(np.arange(len(tpm)), list(tpm), fontsize="small")
     a.set(ylabel="trials per minute (whole command)", title=f"casflex study, {n} trials")
     workers = sorted({t["worker"] for t in tasks})
+    colours = {"calibrate": "0.6", "trial": "C0", "figure": "C3"}
     for t in tasks:
-        k = workers.index(t["worker"])
-        b.barh(k, t["stop"] - t["start"], left=t["start"], height=0.6, color=f"C{k}", edgecolor="white", lw=0.3)
+        b.barh(workers.index(t["worker"]), t["stop"] - t["start"], left=t["start"], height=0.6,
+               color=colours[t.get("kind", "trial")], edgecolor="white", lw=0.3)
+    for kind, c in colours.items():
+        b.barh(0, 0, color=c, label={"calibrate": "a calibration", "trial": "a trial", "figure": "a figure"}[kind])
     b.set_yticks(range(len(workers)), [f"worker {k + 1}" for k in range(len(workers))])
-    b.set(xlabel="s after the command's start", title="external scheduler, 2 workers: each trial's task")
+    b.set_xlim(0, wall)
+    b.legend(loc="upper left", fontsize="small", ncols=3)
+    b.set(xlabel="s after the command's start (its end: the axis's)",
+          title="external scheduler, 2 workers: each task")
     return png(fig)
 
 
@@ -309,7 +318,7 @@ def render(raw: dict, out_dir: Path | None, banner: Banner | None = None) -> dic
                ("the rerun takes less than 1 s", f"{again:.2f} s", again < 1.0, False)]
     lines, failed = checks(rows_ok)
     write_outputs("bench_study200", out_dir, raw["quick"], "\n".join(page + lines),
-                  figure(tpm, raw["ext_tasks"][2], n))
+                  figure(tpm, raw["ext_tasks"][2], n, ext[2]["wall"]))
     assert_checks(failed)
     return raw
 
