@@ -160,7 +160,15 @@ def _fingerprint(plan: dict) -> str:
 FIGURES_ON_CLUSTER = 4
 
 
-def _figures(plans: dict[str, dict], directory: Path, kept: dict[str, str], session=None) -> dict[str, str]:
+def _figures(out: dict, directory: Path, title: str, per_kg: bool = False, all_cycles: bool = False,
+             clinical: bool = False, normative: dict | None = None) -> tuple[list[str], list[str]]:
+    """Every figure of :func:`_figure_plans` drawn into ``directory``, here: (the files written, warnings)."""
+    plans, notes = _figure_plans(out, title, per_kg, all_cycles, clinical, normative)
+    _draw_figures(plans, directory, {})
+    return list(plans), notes
+
+
+def _draw_figures(plans: dict[str, dict], directory: Path, kept: dict[str, str], session=None) -> dict[str, str]:
     """Each figure of ``plans`` written into ``directory`` but those whose fingerprint is in ``kept`` (up to date
     in the target folder): drawn on ``session``'s workers in parallel where there are :data:`FIGURES_ON_CLUSTER` or
     more, else here. Returns {file name: fingerprint} of every figure."""
@@ -377,7 +385,7 @@ def _run(args: argparse.Namespace, study, staging: Path, record: Path, old: dict
         plans, notes = _figure_plans(per_kg(out, study), study.name, per_kg=kg,
                                      all_cycles=study.options.cycles == "all", clinical=args.signs == "clinical",
                                      normative=normative)
-        prints = _figures(plans, staging, _kept_figures(old, args.out, old.get("figures", {})), session)
+        prints = _draw_figures(plans, staging, _kept_figures(old, args.out, old.get("figures", {})), session)
     for note in notes:
         print(f"casflex: warning: {note}", file=sys.stderr)
     figures = [*plans, *_muscles(out, staging, study)]
