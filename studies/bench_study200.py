@@ -208,6 +208,17 @@ def figure(tpm: dict[str, float], tasks: list[dict], n: int, wall: float) -> byt
     return png(fig)
 
 
+def _kinds(tasks: list[dict]) -> list[str]:
+    """The page's line on the external two-worker run's tasks by kind: how many, their compute s, each's mean."""
+    parts = []
+    for kind in ("calibrate", "trial", "figure"):
+        d = [t["stop"] - t["start"] for t in tasks if t.get("kind", "trial") == kind]
+        if d:
+            parts.append(f"{len(d)} {kind} tasks {sum(d):.1f} s ({np.mean(d):.2f} s each)")
+    return [f"- The external two-worker run's tasks by kind (compute s, the figure's part includes each worker's "
+            f"first import of matplotlib): {'; '.join(parts)}."] if parts else []
+
+
 def _overhead(wall: float, n: int, work: float) -> float:
     """The per-trial overhead in % of one trial's work: the command's wall per trial less the work."""
     return 100.0 * (wall / n - work) / work
@@ -305,7 +316,8 @@ def render(raw: dict, out_dir: Path | None, banner: Banner | None = None) -> dic
             f"{tl[2]['workers']} workers, {tl[2]['busy']:.1f} s of compute in {tl[2]['span']:.1f} s, two tasks at "
             f"once {100 * tl[2]['overlap']:.0f} % of the span: the compute's sum is the same work (a core's "
             f"contention shows as a longer sum), the span its spread over the workers "
-            f"({tl[1]['span'] / max(tl[2]['span'], 1e-9):.2f} x).", ""]
+            f"({tl[1]['span'] / max(tl[2]['span'], 1e-9):.2f} x).",
+            *_kinds(raw["ext_tasks"][2]), ""]
     rows_ok = [("the table is the same, bit for bit, from every run", f"{raw['n_tables']} runs", raw["same_tables"]),
                ("the rerun on finished outputs ran nothing", str(all("up to date" in r["stdout"]
                                                                     for r in raw["again"])),
