@@ -9,6 +9,7 @@ import functools
 import io
 import os
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -168,20 +169,22 @@ def _figures(out: dict, directory: Path, title: str, per_kg: bool = False, all_c
     return list(plans), notes
 
 
-def _draw_figures(plans: dict[str, dict], directory: Path, kept: dict[str, str], session=None) -> dict[str, str]:
+def _draw_figures(plans: dict[str, dict], directory: Path, kept: dict[str, str], session=None,
+                  meanwhile: Callable[[], None] | None = None) -> dict[str, str]:
     """Each figure of ``plans`` written into ``directory`` but those whose fingerprint is in ``kept`` (up to date
     in the target folder): drawn on ``session``'s workers in parallel where there are :data:`FIGURES_ON_CLUSTER` or
-    more, else here. Returns {file name: fingerprint} of every figure."""
+    more, else here; ``meanwhile()`` (the table's writing) called while the workers draw. Returns {file name:
+    fingerprint} of every figure."""
     prints = {name: _fingerprint(plan) for name, plan in plans.items()}
     todo = [name for name in plans if kept.get(name) != prints[name]]
+    futures = {}
     if session is not None and len(todo) >= FIGURES_ON_CLUSTER:
         client = session.client()
         futures = {name: client.submit(draw_figure, plans[name], pure=False) for name in todo}
-        for name, fut in futures.items():
-            (directory / name).write_bytes(fut.result())
-    else:
-        for name in todo:
-            (directory / name).write_bytes(draw_figure(plans[name]))
+    if meanwhile is not None:
+        meanwhile()
+    for name in todo:
+        (directory / name).write_bytes(futures[name].result() if futures else draw_figure(plans[name]))
     return prints
 
 
@@ -377,15 +380,19 @@ def _run(args: argparse.Namespace, study, staging: Path, record: Path, old: dict
                   file=sys.stderr)
             raise KeyboardInterrupt
         kg = study.options.normalise == "mass"
-        rows = tidy_rows(per_kg(out, study), per_kg=kg)
-        (staging / "loads.csv").write_text(_table(rows))
-        passive = _passive_table(out)
-        if passive is not None:
-            (staging / "passive.csv").write_text(passive)
         plans, notes = _figure_plans(per_kg(out, study), study.name, per_kg=kg,
                                      all_cycles=study.options.cycles == "all", clinical=args.signs == "clinical",
                                      normative=normative)
-        prints = _draw_figures(plans, staging, _kept_figures(old, args.out, old.get("figures", {})), session)
+        rows, passive = [], _passive_table(out)
+
+        def tables() -> None:  # while the workers draw the figures
+            rows.extend(tidy_rows(per_kg(out, study), per_kg=kg))
+            (staging / "loads.csv").write_text(_table(rows))
+            if passive is not None:
+                (staging / "passive.csv").write_text(passive)
+
+        prints = _draw_figures(plans, staging, _kept_figures(old, args.out, old.get("figures", {})), session,
+                               tables)
     for note in notes:
         print(f"casflex: warning: {note}", file=sys.stderr)
     figures = [*plans, *_muscles(out, staging, study)]
