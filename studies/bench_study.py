@@ -7,7 +7,7 @@ eight answers; 2 x 1 with ``--quick``). Timed: the command ``casflex study STUDY
 user runs it, a new process and a new output (record) folder each time, for 1 and 2 workers, without bands and with
 them (``bands = true`` and six segment masses uncertain by 10 %: anthropometry and marker-noise bands), the four
 taken in turn, twice, so that a drifting host slows all alike; the first command of all apart (a first process);
-the same command on its finished records (nothing to run: process, imports, table and figures); a local cluster's
+the same command on its finished outputs (up to date: nothing run, nothing written); a local cluster's
 start and close; and one trial's work in this process without dask, without and with bands. The machine's load is
 sampled through the run. What is measured and what the numbers mean: docs/studies/bench_study.md.
 """
@@ -248,10 +248,11 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
             f"no bands): {first:.1f} s; the cache holds {cache_files} files after all the commands (the rigid inverse "
             "compiles nothing).",
             *([] if again is None else [
-                f"- The same command on its finished records (nothing to run; process, imports, study check, table, "
-                f"figures): {again:.1f} s.",
+                f"- The same command on its finished outputs (up to date: process, imports, study check, the records' "
+                f"and outputs' sizes and times; nothing run, nothing written): {again:.2f} s.",
                 f"- A local cluster's start and close, as the sweep makes it: {clusters[1]:.1f} s (1 worker), "
-                f"{clusters[2]:.1f} s (2 workers); a study starts two (its calibrations', then its trials')."]),
+                f"{clusters[2]:.1f} s (2 workers); a study starts one (its calibrations, trials and figures), "
+                "none where everything is recorded and drawn."]),
             *(f"- 2 workers against 1, {'with' if b else 'without'} bands: {s:.2f} x the trials per minute"
               for b, s in speed.items()), "",
             "## One trial's work in one process (no dask, no new process)", "",

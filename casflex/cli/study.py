@@ -5,22 +5,36 @@ from __future__ import annotations
 
 import argparse
 import csv
+import functools
 import io
+import os
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
 from casflex.cli._base import OptionError, Outputs, integer, need_extra, output_path
 
+_HEAD = ["subject", "trial", "load", "foot", "cycle", "percent", "value", "band", "unit", "clean", "t0", "t1"]
+
 
 def _table(rows: list[tuple]) -> str:
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["subject", "trial", "load", "foot", "cycle", "percent", "value", "band", "unit", "clean", "t0", "t1"])
-    w.writerows([(*r[:5], f"{r[5]:g}", repr(r[6]), "" if r[7] is None else repr(r[7]), r[8],
-                  "" if r[9] is None else str(r[9]).lower(), repr(r[10]), repr(r[11])) for r in rows])
-    return buf.getvalue()
+    """loads.csv's text: each value and band by repr (the shortest text that reads back to the same double). Its
+    rows formatted directly where no name needs CSV's quoting (a comma, a quote, a line break), else by the csv
+    module: the same text, twice as fast (160 000 rows for 200 trials)."""
+    names = {r[i] for r in rows for i in (0, 1, 2, 3, 8)}
+    if any(isinstance(n, str) and any(c in n for c in ',"\r\n') for n in names):
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        w.writerow(_HEAD)
+        w.writerows([(*r[:5], f"{r[5]:g}", repr(r[6]), "" if r[7] is None else repr(r[7]), r[8],
+                      "" if r[9] is None else str(r[9]).lower(), repr(r[10]), repr(r[11])) for r in rows])
+        return buf.getvalue()
+    return "".join([",".join(_HEAD) + "\n", *(
+        f"{r[0]},{r[1]},{r[2]},{'' if r[3] is None else r[3]},{r[4]},{r[5]:g},{r[6]!r},"
+        f"{'' if r[7] is None else repr(r[7])},{r[8]},{'' if r[9] is None else str(r[9]).lower()},{r[10]!r},{r[11]!r}\n"
+        for r in rows)])
 
 
 def _passive_table(out: dict) -> str | None:
@@ -56,12 +70,13 @@ def _kept(out: dict, all_cycles: bool, kind: str) -> dict[str, dict[str, list[tu
     """name -> subject -> [(cycle's values, its toe-off %)] of the cycles kept (:func:`cycle_curves`)."""
     from casflex.plotting.gait import split_side
 
+    side = functools.lru_cache(maxsize=None)(lambda name: split_side(name)[1])  # a few names, 200 trials' worth
     per: dict[str, dict[str, list]] = {}
     for (subject, _), rec in out["trials"].items():
         for name, ld in getattr(rec, kind).items():
             keep = ld.clean or [False] * len(ld.value)
             offs = rec.toe_off.get(ld.foot) or [None] * len(ld.value)
-            if split_side(name)[1] != split_side(ld.foot or "")[1]:  # an arm or the trunk on a foot's cycles
+            if side(name) != side(ld.foot or ""):  # an arm or the trunk on a foot's cycles
                 offs = [None] * len(ld.value)  # its toe-off is no event of its own side: not drawn
             per.setdefault(name, {}).setdefault(subject, []).extend(
                 (v, off) for v, ok, off in zip(ld.value, keep, offs, strict=True) if ok or all_cycles)
@@ -79,40 +94,98 @@ def _coordinate_signs(out: dict) -> dict[str, float]:
     return signs
 
 
-def _figures(out: dict, directory: Path, title: str, per_kg: bool = False, all_cycles: bool = False,
-             clinical: bool = False, normative: dict | None = None) -> tuple[list[str], list[str]]:
+def _figure_plans(out: dict, title: str, per_kg: bool = False, all_cycles: bool = False, clinical: bool = False,
+                  normative: dict | None = None) -> tuple[dict[str, dict], list[str]]:
     """Per subject and for the group (the subjects' means): each joint's angle and moment over the gait cycle as
-    gait reports show them (:func:`casflex.plotting.gait.gait_figure`); (the files written, warnings)."""
-    from casflex.plotting._figure import _close
-    from casflex.plotting.gait import gait_figure, split_side
+    gait reports show them (:func:`casflex.plotting.gait.gait_figure`): ({file name: gait_figure's arguments but
+    its path}, warnings)."""
+    from casflex.plotting.gait import split_side
     from casflex.study.runner import PERCENT, unit_of
     from casflex.study.study_file import GROUP  # a subject of this name is refused (its figure would be this)
 
     loads = _kept(out, all_cycles, "loads")
     kept = loads | _kept(out, all_cycles, "angles")
     if not kept:
-        return [], []
+        return {}, []
     units = {n: unit_of(n, per_kg) if n in loads else "deg" for n in kept}
     options = {"units": units, "clinical": clinical, "normative": normative,
                "coordinate_signs": _coordinate_signs(out) if clinical else None}
-    written = []
+    plans = {}
     for subject in sorted({s for subs in kept.values() for s in subs}):
         mine = {n: subs[subject] for n, subs in kept.items() if subject in subs}
-        _close(gait_figure(PERCENT, {n: np.array([c for c, _ in cs]) for n, cs in mine.items()},
-                           {n: [off for _, off in cs] for n, cs in mine.items()}, f"{title}: {subject}",
-                           directory / f"{subject}.png", what="cycles", **options))
-        written.append(f"{subject}.png")
+        plans[f"{subject}.png"] = {"percent": PERCENT, "curves": {n: np.array([c for c, _ in cs])
+                                                                  for n, cs in mine.items()},
+                                   "toe_off": {n: [off for _, off in cs] for n, cs in mine.items()},
+                                   "title": f"{title}: {subject}", "what": "cycles", **options}
     means = {n: {s: (np.array([c for c, _ in cs]).mean(axis=0),
                      float(np.mean(offs)) if (offs := [o for _, o in cs if o is not None]) else None)
                  for s, cs in subs.items()} for n, subs in kept.items()}
-    _close(gait_figure(PERCENT, {n: np.array([m for m, _ in subs.values()]) for n, subs in means.items()},
-                       {n: [o for _, o in subs.values()] for n, subs in means.items()},
-                       f"{title}: the subjects' means", directory / f"{GROUP}.png", what="subjects", **options))
+    plans[f"{GROUP}.png"] = {"percent": PERCENT,
+                             "curves": {n: np.array([m for m, _ in subs.values()]) for n, subs in means.items()},
+                             "toe_off": {n: [o for _, o in subs.values()] for n, subs in means.items()},
+                             "title": f"{title}: the subjects' means", "what": "subjects", **options}
     drawn = {split_side(n)[0] for n in kept}
     unused = sorted(set(normative or {}) - drawn)
     notes = [f"--normative: no curve {k!r} in the figures (theirs: {', '.join(sorted(drawn))}): its band is not "
              "drawn" for k in unused]
-    return [*written, f"{GROUP}.png"], notes
+    return plans, notes
+
+
+def draw_figure(plan: dict) -> bytes:
+    """The PNG of one figure of :func:`_figure_plans` (in a dask worker, or here): drawn into a temporary file and
+    read back, so that a worker on another machine returns it."""
+    import tempfile
+
+    from casflex.plotting._figure import _close
+    from casflex.plotting.gait import gait_figure
+
+    with tempfile.TemporaryDirectory(prefix="casflex-figure-") as tmp:
+        path = Path(tmp) / "figure.png"
+        _close(gait_figure(path=path, **plan))
+        return path.read_bytes()
+
+
+def _fingerprint(plan: dict) -> str:
+    """What a figure is drawn from (its data, title and options) and casflex's version, as 16 hex digits: a figure
+    whose fingerprint is the one recorded beside it is not drawn again."""
+    import hashlib
+    import pickle
+
+    from casflex import __version__
+
+    return hashlib.sha1(pickle.dumps((__version__, sorted(plan.items(), key=lambda kv: kv[0])))).hexdigest()[:16]
+
+
+#: figures to draw from which they are drawn on the study's cluster (started for them where every run is recorded);
+#: fewer are drawn here: a worker's first figure pays matplotlib's import (about a second), this process's not
+FIGURES_ON_CLUSTER = 4
+
+
+def _figures(out: dict, directory: Path, title: str, per_kg: bool = False, all_cycles: bool = False,
+             clinical: bool = False, normative: dict | None = None) -> tuple[list[str], list[str]]:
+    """Every figure of :func:`_figure_plans` drawn into ``directory``, here: (the files written, warnings)."""
+    plans, notes = _figure_plans(out, title, per_kg, all_cycles, clinical, normative)
+    _draw_figures(plans, directory, {})
+    return list(plans), notes
+
+
+def _draw_figures(plans: dict[str, dict], directory: Path, kept: dict[str, str], session=None,
+                  meanwhile: Callable[[], None] | None = None) -> dict[str, str]:
+    """Each figure of ``plans`` written into ``directory`` but those whose fingerprint is in ``kept`` (up to date
+    in the target folder): drawn on ``session``'s workers in parallel where there are :data:`FIGURES_ON_CLUSTER` or
+    more, else here; ``meanwhile()`` (the table's writing) called while the workers draw. Returns {file name:
+    fingerprint} of every figure."""
+    prints = {name: _fingerprint(plan) for name, plan in plans.items()}
+    todo = [name for name in plans if kept.get(name) != prints[name]]
+    futures = {}
+    if session is not None and len(todo) >= FIGURES_ON_CLUSTER:
+        client = session.client()
+        futures = {name: client.submit(draw_figure, plans[name], pure=False) for name in todo}
+    if meanwhile is not None:
+        meanwhile()
+    for name in todo:
+        (directory / name).write_bytes(futures[name].result() if futures else draw_figure(plans[name]))
+    return prints
 
 
 def _muscles(out: dict, directory: Path, study) -> list[str]:
@@ -160,43 +233,176 @@ def _normative(path: str | None, per_kg: bool) -> dict | None:
         raise OptionError(f"--normative: {exc}") from None
 
 
+#: the file beside the outputs that says what they were made from (:func:`_inputs_key`) and each one's size and
+#: time: the same command again with nothing changed reads it and the summary, and does nothing else
+MANIFEST = ".casflex-study.json"
+
+
+def _paths(value, out: set[str]) -> set[str]:
+    """Every text in ``value`` (the study's dataclasses, lists, dicts) that may name a file."""
+    import dataclasses
+
+    if dataclasses.is_dataclass(value):
+        for f in dataclasses.fields(value):
+            _paths(getattr(value, f.name), out)
+    elif isinstance(value, (list, tuple)):
+        for v in value:
+            _paths(v, out)
+    elif isinstance(value, dict):
+        for v in value.values():
+            _paths(v, out)
+    elif isinstance(value, str) and value:
+        out.add(value)
+    return out
+
+
+def _stat(path: str | Path) -> list[int] | None:
+    try:
+        st = os.stat(path)
+    except (OSError, ValueError):  # no such file (a built-in scene's name, an option's value)
+        return None
+    return [st.st_size, st.st_mtime_ns]
+
+
+def _inputs_key(args: argparse.Namespace, study, record: Path) -> str:
+    """What the outputs are made from, as 40 hex digits: casflex's version, the options that change them, the
+    study file's text, the size and modification time (ns) of every file the study names and of every record in
+    ``record``. Sizes and times, not contents: as make and rsync tell a changed file (a file rewritten with its old
+    size and time, to the nanosecond, is taken as unchanged; --retry-failed or a new --out redoes everything)."""
+    import hashlib
+    import json
+
+    from casflex import __version__
+
+    files = sorted(_paths(study, set()) | {args.normative or ""})
+    try:
+        recs = sorted((e.name, e.stat().st_size, e.stat().st_mtime_ns) for e in os.scandir(record)
+                      if e.name.endswith(".json"))
+    except OSError:
+        recs = []
+    text = json.dumps({"casflex": __version__, "study": Path(args.study).read_text(), "signs": args.signs,
+                       "normative": args.normative, "record": str(Path(record).resolve()),
+                       "files": [(f, _stat(f)) for f in files], "records": recs})
+    return hashlib.sha1(text.encode()).hexdigest()
+
+
+def _manifest(out: str) -> dict:
+    """The manifest beside the outputs in ``out`` (:data:`MANIFEST`), {} where there is none or it is unreadable."""
+    import json
+
+    try:
+        d = json.loads((Path(out) / MANIFEST).read_text())
+    except (OSError, ValueError):
+        return {}
+    return d if isinstance(d, dict) else {}
+
+
+def _up_to_date(args: argparse.Namespace, old: dict, key: str) -> int | None:
+    """The exit status of the run that made the outputs in --out where they are up to date (the same inputs'
+    :func:`_inputs_key`, each output file as it wrote it), else None: the study is run."""
+    files = old.get("files")
+    if old.get("inputs") != key or not isinstance(files, dict) or not files or (args.retry_failed and old.get("code")):
+        return None
+    if any(_stat(Path(args.out) / name) != stat for name, stat in files.items()):
+        return None
+    return int(old.get("code", 0))
+
+
+def _write_manifest(staging: Path, old: dict, key: str, figures: dict[str, str], code: int) -> None:
+    """The manifest of the outputs staged in ``staging`` (their sizes and times, kept by the moves into --out) and
+    of the figures kept from before (``old``'s)."""
+    import json
+
+    files = {f.name: _stat(f) for f in staging.iterdir() if f.name != MANIFEST}
+    files |= {name: old.get("files", {}).get(name) for name in figures if name not in files}
+    (staging / MANIFEST).write_text(json.dumps({"inputs": key, "code": code, "files": files, "figures": figures}))
+
+
+def _kept_figures(old: dict, out: str, key_figures: dict) -> dict[str, str]:
+    """{figure: fingerprint} of the figures in --out as the manifest says they were written (not changed since)."""
+    files = old.get("files", {})
+    return {name: fp for name, fp in key_figures.items()
+            if name in files and _stat(Path(out) / name) == files[name]}
+
+
+def _need_distributed() -> None:
+    """need_extra's check without importing dask (a second of a command that may have nothing to do)."""
+    import importlib.util
+
+    from casflex.cli._base import _extra_line
+
+    if importlib.util.find_spec("distributed") is None:
+        raise OptionError(_extra_line("distributed", "casflex study"))
+
+
 def cmd_study(args: argparse.Namespace, outputs: Outputs) -> int:
-    need_extra("distributed", "casflex study")  # before the study file is read: one line, not a traceback at the end
-    from casflex.study.runner import check_against_models, per_kg, run_study, tidy_rows
+    _need_distributed()  # before the study file is read: one line, not a traceback at the end
     from casflex.study.study_file import StudyError, load_study
 
     try:
         study = load_study(args.study)
+    except StudyError as exc:
+        raise OptionError(f"{args.study}: {exc}") from None
+    _check_cluster(args)
+    staging = outputs.directory("--out", args.out)
+    record = outputs.folder("--record", args.record) if args.record else Path(args.out) / "record"
+    n = len(study.trials())
+    print(f"study {study.name!r}: {len(study.subjects)} subject(s), {n} trial(s); records in {record}", flush=True)
+    old, key = _manifest(args.out), _inputs_key(args, study, record)
+    if (code := _up_to_date(args, old, key)) is not None:
+        print((Path(args.out) / "summary.txt").read_text(), end="")
+        print(f"up to date: the outputs in {args.out} are those of these inputs and records (nothing run, nothing "
+              "written)")
+        return code
+    return _run(args, study, staging, record, old)
+
+
+def _run(args: argparse.Namespace, study, staging: Path, record: Path, old: dict) -> int:
+    """The study run (what is not recorded yet), its table, figures and summary staged in ``staging``."""
+    from casflex.study.runner import check_against_models, per_kg, run_study, tidy_rows
+    from casflex.study.study_file import StudyError
+    from casflex.study.sweep import Session
+
+    try:
         check_against_models(study)
     except StudyError as exc:
         raise OptionError(f"{args.study}: {exc}") from None
     files = [f for s, t in study.trials() for f in (t.markers, t.grf)] + [s.static for s in study.subjects]
     if c3d := next((f for f in files if f and f.lower().endswith(".c3d")), None):  # the workers would fail each trial
         need_extra("ezc3d", f"{args.study}: its C3D file {Path(c3d).name!r}")
-    _check_cluster(args)
     normative = _normative(args.normative, study.options.normalise == "mass")
-    staging = outputs.directory("--out", args.out)
-    record = outputs.folder("--record", args.record) if args.record else Path(args.out) / "record"
     n = len(study.trials())
-    print(f"study {study.name!r}: {len(study.subjects)} subject(s), {n} trial(s); records in {record}", flush=True)
-    out = run_study(study, record, scheduler=args.scheduler, n_workers=args.workers,
-                    progress=not args.quiet, retry_failed=args.retry_failed)
-    if out["interrupted"]:
-        kept = len(list(record.glob("*.json")))
-        print(f"casflex: {kept} finished run(s) kept in {record}: the same command again resumes", file=sys.stderr)
-        raise KeyboardInterrupt
-    kg = study.options.normalise == "mass"
-    rows = tidy_rows(per_kg(out, study), per_kg=kg)
-    (staging / "loads.csv").write_text(_table(rows))
-    passive = _passive_table(out)
-    if passive is not None:
-        (staging / "passive.csv").write_text(passive)
-    figures, notes = _figures(per_kg(out, study), staging, study.name, per_kg=kg,
-                              all_cycles=study.options.cycles == "all", clinical=args.signs == "clinical",
-                              normative=normative)
+    with Session(args.scheduler, args.workers) as session:
+        out = run_study(study, record, progress=not args.quiet, retry_failed=args.retry_failed, session=session)
+        if out["interrupted"]:
+            kept = len(list(record.glob("*.json")))
+            print(f"casflex: {kept} finished run(s) kept in {record}: the same command again resumes",
+                  file=sys.stderr)
+            raise KeyboardInterrupt
+        kg = study.options.normalise == "mass"
+        plans, notes = _figure_plans(per_kg(out, study), study.name, per_kg=kg,
+                                     all_cycles=study.options.cycles == "all", clinical=args.signs == "clinical",
+                                     normative=normative)
+        rows, passive = [], _passive_table(out)
+
+        def tables() -> None:  # while the workers draw the figures
+            rows.extend(tidy_rows(per_kg(out, study), per_kg=kg))
+            (staging / "loads.csv").write_text(_table(rows))
+            if passive is not None:
+                (staging / "passive.csv").write_text(passive)
+
+        prints = _draw_figures(plans, staging, _kept_figures(old, args.out, old.get("figures", {})), session,
+                               tables)
     for note in notes:
         print(f"casflex: warning: {note}", file=sys.stderr)
-    figures += _muscles(out, staging, study)
+    figures = [*plans, *_muscles(out, staging, study)]
+    code = _summary(study, out, rows, passive, figures, n, staging)
+    _write_manifest(staging, old, _inputs_key(args, study, record), prints, code)
+    return code
+
+
+def _summary(study, out: dict, rows: list, passive: str | None, figures: list[str], n: int, staging: Path) -> int:
+    """summary.txt, printed too: the trials done, each trial's plates and cycles, the failures; the exit status."""
     lines = [f"{len(out['trials'])} of {n} trial(s) done, {len(rows)} rows in loads.csv"
              + (f", {passive.count(chr(10)) - 1} passive fit(s) in passive.csv" if passive else "")
              + f"; figures: {', '.join(figures) or 'none'}"]

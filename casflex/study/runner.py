@@ -20,6 +20,7 @@ value and its band (one standard deviation, where the study asks for bands; else
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable
 from pathlib import Path
 
@@ -171,16 +172,24 @@ def _window(trial: Trial, lab) -> tuple[float | None, float | None, list[str]]:
                     f"{lab.t[0]:.3f}-{lab.t[-1]:.3f} s; `window` in the study file sets another)"]
 
 
+@functools.lru_cache(maxsize=8)
+def _scene(text: str):
+    """The scene of a calibrated scene's TOML text, read once per process (a worker runs a subject's trials one
+    after the other: the same text each time). A scene is immutable (frozen dataclasses): sharing it is safe."""
+    from casflex.scene import loads_scene
+
+    return loads_scene(text)
+
+
 def trial_run(*, scene: str, trial: Trial, options: TrialOptions, uncertain: tuple[str, ...]) -> dict:
     """One trial's inverse dynamics and its loads over gait cycles (module docstring): its record
     (:class:`~casflex.study.records.TrialRecord`) as JSON, which the sweep writes."""
     from casflex.inverse import Bands, inverse_dynamics
     from casflex.inverse import Trial as Inverse
-    from casflex.scene import loads_scene
     from casflex.scene.uncertain import parse
     from casflex.study.kinematics import cycle_angles, toe_offs
 
-    sc = loads_scene(scene)
+    sc = _scene(scene)
     lab, table = _read(trial)
     t0, t1, window_report = _window(trial, lab)
     inside = (lab.t >= (t0 or -np.inf)) & (lab.t <= (t1 or np.inf))
@@ -320,9 +329,10 @@ def check_against_models(study: Study) -> None:
     from casflex.scene.uncertain import parse
     from casflex.study.study_file import StudyError
 
+    scenes: dict[str, object] = {}  # a model that several subjects share read once
     for i, s in enumerate(study.subjects):
         try:
-            scene = load_scene(s.model)
+            scene = scenes[s.model] if s.model in scenes else scenes.setdefault(s.model, load_scene(s.model))
         except (SceneError, ValueError, OSError) as exc:
             raise StudyError(f"subjects[{i}].model: {exc}") from None
         try:
@@ -360,18 +370,25 @@ def _calibration_kwargs(study: Study, s) -> dict:
 
 
 def run_study(study: Study, record: str | Path, *, scheduler: str | None = None, n_workers: int | None = None,
-              progress: Callable[[int, int, str], None] | bool = True, retry_failed: bool = False) -> dict:
+              progress: Callable[[int, int, str], None] | bool = True, retry_failed: bool = False,
+              session=None) -> dict:
     """Calibrate every subject and run every trial (module docstring), resuming from ``record``; returns
     {"subjects": {name: its Calibration}, "trials": {(subject, trial): its TrialRecord}, "failed": [(what, why)],
     "interrupted": bool, "records": {(subject, trial): its record's path}}. A failed calibration fails its
     subject's trials, reported; the others go on. ``retry_failed``: a run recorded as failed is run again (a
-    worker lost, a file since mended), where by default its record stands until its inputs change."""
-    from casflex.study.sweep import run_sweep
+    worker lost, a file since mended), where by default its record stands until its inputs change. ``session``:
+    the :class:`casflex.study.sweep.Session` to run on (kept open for the caller: the figures'), else one of its
+    own (``scheduler``, ``n_workers``): one cluster for the calibrations, the trials and the muscles, started only
+    where a run is to be done."""
+    from casflex.study.sweep import Session, run_sweep
 
+    if session is None:
+        with Session(scheduler, n_workers) as own:
+            return run_study(study, record, progress=progress, retry_failed=retry_failed, session=own)
+    sweep = {"progress": progress, "retry_failed": retry_failed, "session": session}
     cal_runs = {s.name: _run(f"calibrate-{s.name}", calibrate_run, _calibration_kwargs(study, s), (s.model, s.static))
                 for s in study.subjects}
-    cal = run_sweep(list(cal_runs.values()), record, scheduler=scheduler, n_workers=n_workers, progress=progress,
-                    retry_failed=retry_failed)
+    cal = run_sweep(list(cal_runs.values()), record, **sweep)
     recs = {s.name: cal.results.get(cal_runs[s.name].key, {}) for s in study.subjects}
     failed = [(f"subject {s.name} (calibration)", recs[s.name].get("error", "not run"))
               for s in study.subjects if "scene" not in recs[s.name]]
@@ -381,8 +398,7 @@ def run_study(study: Study, record: str | Path, *, scheduler: str | None = None,
     interrupted = cal.interrupted
     if not interrupted:
         plan = _plan(study, calibrated)
-        done = run_sweep(list(plan.values()), record, scheduler=scheduler, n_workers=n_workers, progress=progress,
-                         retry_failed=retry_failed)
+        done = run_sweep(list(plan.values()), record, **sweep)
         interrupted = done.interrupted
         for s, t in study.trials():
             rec = done.results.get(plan[(s.name, t.name)].key) if (s.name, t.name) in plan else None
@@ -397,8 +413,7 @@ def run_study(study: Study, record: str | Path, *, scheduler: str | None = None,
     if study.options.muscles is not None and not interrupted:  # after the trials: their plates and cycles
         from casflex.study.muscles import run_muscles
 
-        muscles, more, interrupted = run_muscles(study, calibrated, trials, record, _run, scheduler=scheduler,
-                                                 n_workers=n_workers, progress=progress, retry_failed=retry_failed)
+        muscles, more, interrupted = run_muscles(study, calibrated, trials, record, _run, **sweep)
         failed += more
     return {"subjects": calibrated, "trials": trials, "failed": failed, "interrupted": interrupted,
             "records": {k: str(Path(record) / f"{r.key}.json") for k, r in plan.items()}, "muscles": muscles}

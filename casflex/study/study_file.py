@@ -54,6 +54,7 @@ window = [0.5, 2.0]            # s, optional
 from __future__ import annotations
 
 import math
+import os
 import re
 import tomllib
 from dataclasses import dataclass, field
@@ -428,6 +429,10 @@ def load_study(path: str) -> Study:
     return Study(data["name"], str(p.resolve()), options, subs)
 
 
+#: (path, size, modification time ns) -> what :func:`_spans` read from that file's header and first and last rows
+_SPANS: dict[tuple[str, int, int], Any] = {}
+
+
 def _spans(where: str, trial: Trial):
     """(the markers' FileSpan, the plates' FileSpan or None, the plates' rate Hz or NaN) from the trial files'
     headers and first and last rows (:func:`casflex.lab.tables.trc_span`, :func:`casflex.lab.c3d.c3d_span`); an
@@ -436,11 +441,18 @@ def _spans(where: str, trial: Trial):
     from casflex.lab.setups import read_external_loads
     from casflex.lab.tables import sto_span, trc_span
 
+    def read(path: str):
+        if path.lower().endswith(".c3d"):
+            return c3d_span(path)
+        return (trc_span(path) if path.lower().endswith(".trc") else sto_span(path)), math.nan
+
     def span(field_: str, path: str):
         try:
-            if path.lower().endswith(".c3d"):
-                return c3d_span(path)
-            return (trc_span(path) if path.lower().endswith(".trc") else sto_span(path)), math.nan
+            st = os.stat(path)
+            key = (os.path.abspath(path), st.st_size, st.st_mtime_ns)
+            if key not in _SPANS:  # a file that many trials name (or a study checked again) read once
+                _SPANS[key] = read(path)
+            return _SPANS[key]
         except ValueError as exc:
             raise StudyError(f"{where}.{field_}: {exc}") from None
 

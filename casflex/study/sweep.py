@@ -39,7 +39,7 @@ import numpy as np
 
 from casflex.results import atomic_write_json
 
-__all__ = ["Run", "SweepResult", "run_sweep", "identification_run", "max_workers", "unreachable", "IDENTITY"]
+__all__ = ["Run", "SweepResult", "Session", "run_sweep", "identification_run", "max_workers", "unreachable", "IDENTITY"]
 
 _KEY = re.compile(r"^[A-Za-z0-9_.=+-]{1,200}$")
 #: s with no worker at all on the scheduler before the pending runs are given up on this cluster (a
@@ -178,24 +178,25 @@ def _call(fn: Callable[..., dict] | bytes, kwargs: dict) -> dict:
 
 def run_sweep(runs: Iterable[Run], record: str | os.PathLike[str], *, scheduler: str | None = None,
               n_workers: int | None = None, retry_failed: bool = False,
-              progress: bool | Callable[[int, int, str], None] = True) -> SweepResult:
+              progress: bool | Callable[[int, int, str], None] = True, session: Session | None = None
+              ) -> SweepResult:
     """Run every run without a valid record on dask.distributed; return all recorded results.
 
     ``n_workers``: the local cluster's processes (default 2, at most :func:`max_workers`; ValueError beyond,
     before any work). The record directory is created (with its parents) once there is a run to do and the
     cluster answers: a scheduler that cannot be reached leaves nothing behind. Ctrl-C cancels the pending runs,
     keeps every finished record and returns with ``interrupted=True``; calling again with the same ``record``
-    resumes.
+    resumes. ``session``: the :class:`Session` to run on (its cluster started at its first run, and kept for the
+    caller's next sweep; ``scheduler`` and ``n_workers`` are then the session's), else one of the sweep's own.
     """
-    from distributed import Client
-
     t0 = time.perf_counter()
     runs = list(runs)
     keys = [r.key for r in runs]
     if len(set(keys)) != len(keys):
         dup = sorted({k for k in keys if keys.count(k) > 1})
         raise ValueError(f"run keys must be unique; repeated: {dup[:5]}")
-    n_workers = _workers(n_workers, scheduler)
+    if session is None:
+        n_workers = _workers(n_workers, scheduler)
     rec = Path(record)
     if rec.is_dir():
         _clear_abandoned(rec)
@@ -211,16 +212,13 @@ def run_sweep(runs: Iterable[Run], record: str | os.PathLike[str], *, scheduler:
     executed: list[str] = []
     interrupted = False
     if todo:
-        started: list[Any] = []  # the clusters started, each closed here whatever happens (Ctrl-C included)
-
-        def connect() -> tuple[Any, Any]:
-            cluster = None if scheduler is not None else _local_cluster(n_workers, started)
-            return cluster, Client(scheduler if scheduler is not None else cluster)
-
+        own = session is None  # a sweep of its own: its cluster closed here whatever happens (Ctrl-C included)
+        session = Session(scheduler, n_workers) if own else session
         try:
-            cluster, client = connect()
+            client = session.client()
         except BaseException:
-            _close(None, started[-1] if started else None)
+            if own:
+                session.close()
             raise
         rec.mkdir(parents=True, exist_ok=True)
         blobs = _ship_by_value({r.fn for r in todo})
@@ -245,20 +243,20 @@ def run_sweep(runs: Iterable[Run], record: str | os.PathLike[str], *, scheduler:
                     break
                 except _NoWorkers as lost:
                     todo = [r for r in todo if r.key in lost.keys]
-                    if cluster is None or revival == REVIVALS:
+                    if session.scheduler is not None or revival == REVIVALS:
                         why = (f"NoWorkers: no worker on the scheduler for {NO_WORKERS_S:g} s"
-                               + (f" ({scheduler}): start workers, then run again with retry_failed=True"
-                                  if cluster is None else f", {REVIVALS} new local clusters lost theirs too: "
-                                  "run this run alone to see whether it kills its worker"))
+                               + (f" ({session.scheduler}): start workers, then run again with retry_failed=True"
+                                  if session.scheduler is not None else f", {REVIVALS} new local clusters lost "
+                                  "theirs too: run this run alone to see whether it kills its worker"))
                         for r in todo:
                             finished(r.key, {"error": why})
                         break
-                    _close(client, cluster)
-                    cluster, client = connect()
+                    client = session.restart()
         except KeyboardInterrupt:
             interrupted = True
         finally:
-            _close(client, started[-1] if started else None)  # a revival closed the clusters before
+            if own:
+                session.close()
     return SweepResult({k: results[k] for k in keys if k in results}, tuple(executed), tuple(reused), interrupted,
                        time.perf_counter() - t0)
 
@@ -299,6 +297,54 @@ def _workers(n_workers: int | None, scheduler: str | None) -> int:
         raise ValueError(f"n_workers: {n_workers} is more local workers than this machine runs at once (at most "
                          f"{limit}: {why}); give at most {limit}, or a scheduler with its own workers")
     return n_workers
+
+
+class Session:
+    """The cluster of one or more sweeps (a study's calibrations, trials and figures): a local cluster of
+    ``n_workers`` processes (checked: :func:`_workers`), or the scheduler at ``scheduler``, connected at the first
+    :meth:`client` only (a study with nothing to do starts none) and closed by :meth:`close` (or the ``with``
+    block's end, whatever happens). One cluster for all: a local cluster's start is about a second, and its workers
+    keep their imports and caches from one sweep to the next."""
+
+    def __init__(self, scheduler: str | None = None, n_workers: int | None = None) -> None:
+        self.scheduler = scheduler
+        self.n_workers = _workers(n_workers, scheduler)
+        self._started: list[Any] = []  # the local clusters started, the last one live
+        self._client: Any = None
+
+    def client(self) -> Any:
+        """The session's dask Client, connected (its local cluster started) at the first call."""
+        if self._client is None:
+            from distributed import Client
+
+            cluster = None if self.scheduler is not None else _local_cluster(self.n_workers, self._started)
+            try:
+                self._client = Client(self.scheduler if self.scheduler is not None else cluster)
+            except BaseException:
+                self.close()
+                raise
+        return self._client
+
+    @property
+    def connected(self) -> bool:
+        """Whether the session has its cluster (a run or a figure asked for it)."""
+        return self._client is not None
+
+    def restart(self) -> Any:
+        """A new local cluster for one that lost every worker: its Client."""
+        self.close()
+        return self.client()
+
+    def close(self) -> None:
+        _close(self._client, self._started[-1] if self._started else None)
+        self._client = None
+        self._started.clear()
+
+    def __enter__(self) -> Session:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 def _local_cluster(n_workers: int, started: list) -> Any:

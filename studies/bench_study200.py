@@ -1,0 +1,340 @@
+"""What a 200-trial ``casflex study`` costs (issue 49, goal 3): trials per minute on 1 and 2 workers, on the
+command's own local cluster and on an external ``dask scheduler`` with ``dask worker`` processes; the per-trial
+overhead against one trial's work in one process; the same command again on its finished outputs.
+
+The study is synthetic: Hamner's subject 02 running (tests/data/lab: 1 s at 60 Hz, 41 markers, two plates) on the
+planar whole-body model, replicated as 10 subjects x 20 trials, each subject's model its masses scaled to its own
+mass (55 to 82 kg: casflex.inverse.calibrate.with_mass, inertias with them), with ``--quick`` 4 x 5. The same
+motion for every trial: the machinery's cost, not 200 answers.
+
+Timed, each a new process and a new output (record) folder, as a user runs it: ``casflex study STUDY --out NEW
+--workers W --quiet`` for W = 1 and 2, taken in turn (twice, ``--quick`` once); then the same command on its
+finished outputs (best of 3); then on an external scheduler (``dask scheduler`` and ``dask worker --nthreads 1``
+processes started here on a free port of localhost): ``--scheduler ADDRESS`` with one worker, then with two. The
+scheduler's task stream (each task's start and stop and its worker) is read for the external runs, the records'
+modification times (each trial's record written as it finishes) for the local ones: the start-up before the first
+record, the steady stream of records, the table and figures after the last. CPU time: the commands' and their
+workers' (the local clusters' workers are the command's children; the external workers' read from /proc). The
+machine's load is sampled through the run: with other work on the machine the second worker's gain is bounded by
+the idle core, which the page states beside the ratio.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as the dask workers run (distributed's pre-spawn environ)
+
+import shutil  # noqa: E402
+import signal  # noqa: E402
+import socket  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+from _study import Banner, assert_checks, checks, cli, png, table, write_outputs  # noqa: E402
+from bench_study import FILES, LAB, LoadSampler, _busy_s, _one_trial, _own_s, _uptime  # noqa: E402
+
+
+def study_text(subjects: int, trials: int) -> str:
+    """The synthetic study: ``subjects`` x ``trials`` of the same 1 s of running, each subject's masses scaled to
+    its own mass (55 kg, then 3 kg more per subject, wrapping at 82)."""
+    lines = ['name = "bench200"', "", "[options]", 'plane = "X,Y"', "cutoff = 6.0", 'tasks = "hamner_tasks_ik.xml"']
+    for s in range(subjects):
+        lines += ["", "[[subjects]]", f'name = "s{s + 1:02d}"', 'model = "hamner_subject02_planar.osim"',
+                  f"mass = {55 + 3 * (s % 10)}"]
+        for t in range(trials):
+            lines += ["", "[[subjects.trials]]", f'name = "run{t + 1:02d}"', 'markers = "hamner_running_whole.trc"',
+                      'grf = "hamner_running_whole_grf.mot"']
+    return "\n".join(lines) + "\n"
+
+
+def _env(folder: Path) -> dict:
+    """The commands' environment: a new CASFLEX_CACHE, dask's scratch space here; Python writes its bytecode (a
+    user's install has it: PYTHONDONTWRITEBYTECODE, set in some shells, would make every command compile casflex)."""
+    env = dict(os.environ, CASFLEX_CACHE=str(folder / "cache"), DASK_TEMPORARY_DIRECTORY=str(folder / "dask"))
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
+    return env
+
+
+def _children_cpu() -> float:
+    t = os.times()
+    return t.children_user + t.children_system
+
+
+def _command(study: Path, out: Path, env: dict, *options: str) -> dict:
+    """One ``casflex study`` command into ``out``: wall s, CPU s (the command's and its local workers'), its
+    stdout, and the records' modification times (s after the start) of its trials."""
+    cmd = [sys.executable, "-m", "casflex", "study", str(study), "--out", str(out), "--quiet", *options]
+    c0, t0, w0 = _children_cpu(), time.time(), time.perf_counter()
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    wall, cpu = time.perf_counter() - w0, _children_cpu() - c0
+    if done.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)}: exit {done.returncode}\n{done.stdout[-2000:]}\n{done.stderr[-2000:]}")
+    stamps = sorted(p.stat().st_mtime - t0 for p in (out / "record").glob("trial-*.json")) \
+        if (out / "record").is_dir() else []
+    return {"wall": wall, "cpu": cpu, "stdout": done.stdout, "records": stamps}
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class External:
+    """A ``dask scheduler`` and its ``dask worker`` processes (one single-threaded worker each) on localhost."""
+
+    def __init__(self, folder: Path, env: dict) -> None:
+        self.folder, self.env, self.procs = folder, env, []
+        exe = Path(sys.executable).with_name("dask")
+        self.dask = str(exe) if exe.exists() else shutil.which("dask") or "dask"
+        self.address = f"tcp://127.0.0.1:{_free_port()}"
+        self._spawn("scheduler", "--host", "127.0.0.1", "--port", self.address.rpartition(":")[2], "--no-dashboard")
+        from distributed import Client
+
+        self.client = Client(self.address, timeout="120s")
+        self.client.get_task_stream()  # the scheduler's task stream plugin from here on
+
+    def _spawn(self, *args: str) -> None:
+        log = open(self.folder / f"dask{len(self.procs)}.log", "w")  # noqa: SIM115 (open while the process runs)
+        self.procs.append(subprocess.Popen([self.dask, *args], stdout=log, stderr=subprocess.STDOUT, env=self.env,
+                                           cwd=self.folder, start_new_session=True))
+
+    def add_worker(self) -> None:
+        n = len(self.procs)
+        self._spawn("worker", self.address, "--nworkers", "1", "--nthreads", "1", "--no-dashboard", "--host",
+                    "127.0.0.1", "--name", f"w{n}", "--local-directory", str(self.folder / f"w{n}"))
+        self.client.wait_for_workers(n, timeout=300)
+
+    def workers_cpu(self) -> float:
+        """CPU s of the worker processes (and their nannies' children) so far."""
+        import psutil
+
+        total = 0.0
+        for p in self.procs[1:]:
+            try:
+                proc = psutil.Process(p.pid)
+                for q in [proc, *proc.children(recursive=True)]:
+                    t = q.cpu_times()
+                    total += t.user + t.system
+            except psutil.Error:
+                pass
+        return total
+
+    def tasks(self, since: float) -> list[dict]:
+        """The tasks since ``since`` (time.time()): kind ("trial", "calibrate", "figure"), worker, start and stop
+        (s, wall clock)."""
+        out = []
+        for ts in self.client.get_task_stream(start=since):
+            key = str(ts["key"])
+            kind = next((k for k in ("trial", "calibrate") if key.startswith(f"casflex-{k}-")),
+                        "figure" if key.startswith("draw_figure") else None)
+            compute = [s for s in ts["startstops"] if s["action"] == "compute"]
+            if kind and compute:
+                out.append({"kind": kind, "worker": ts["worker"], "start": compute[0]["start"],
+                            "stop": compute[-1]["stop"]})
+        return out
+
+    def close(self) -> None:
+        self.client.close()
+        for p in reversed(self.procs):
+            if p.poll() is None:
+                os.killpg(p.pid, signal.SIGTERM)
+        for p in self.procs:
+            try:
+                p.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                os.killpg(p.pid, signal.SIGKILL)
+
+
+def _timeline(tasks: list[dict]) -> dict:
+    """From a run's trial tasks: their number, the sum of their compute s, the span from the first start to the
+    last stop, the workers, and the share of that span in which two or more tasks computed at once."""
+    if not tasks:
+        return {"n": 0, "busy": 0.0, "span": 0.0, "workers": 0, "overlap": 0.0}
+    t0, t1 = min(t["start"] for t in tasks), max(t["stop"] for t in tasks)
+    grid = np.linspace(t0, t1, 2000)
+    running = sum(((grid >= t["start"]) & (grid < t["stop"])).astype(int) for t in tasks)
+    return {"n": len(tasks), "busy": float(sum(t["stop"] - t["start"] for t in tasks)), "span": t1 - t0,
+            "workers": len({t["worker"] for t in tasks}), "overlap": float(np.mean(running >= 2)),
+            "first": t0, "last": t1}
+
+
+def _external_runs(folder: Path, study: Path, env: dict) -> tuple[dict, dict]:
+    """The command on an external scheduler with one worker, then two: ({workers: the command's numbers and its
+    tasks' timeline}, {workers: the tasks})."""
+    ext = External(folder, env)
+    runs, tasks = {}, {}
+    try:
+        for w in (1, 2):
+            ext.add_worker()
+            cpu0, since = ext.workers_cpu(), time.time()
+            r = _command(study, folder / f"ext{w}", env, "--scheduler", ext.address)
+            r["cpu"] += ext.workers_cpu() - cpu0
+            tasks[w] = [dict(t, start=t["start"] - since, stop=t["stop"] - since) for t in ext.tasks(since)]
+            r["timeline"] = _timeline([t for t in tasks[w] if t["kind"] == "trial"])
+            runs[w] = r
+    finally:
+        ext.close()
+    return runs, tasks
+
+
+def figure(tpm: dict[str, float], tasks: list[dict], n: int, wall: float) -> bytes:
+    """Trials per minute by workers and cluster; the external two-worker run's tasks over its ``wall`` s."""
+    from casflex.plotting._figure import _new_figure
+
+    fig = _new_figure((12, 4))
+    a, b = fig.subplots(1, 2, width_ratios=[1, 1.6])
+    bars = a.bar(np.arange(len(tpm)), list(tpm.values()), 0.6, color=["C0", "C0", "C1", "C1"][:len(tpm)])
+    a.bar_label(bars, fmt="%.0f", fontsize="small")
+    a.set_xticks(np.arange(len(tpm)), list(tpm), fontsize="small")
+    a.set(ylabel="trials per minute (whole command)", title=f"casflex study, {n} trials")
+    workers = sorted({t["worker"] for t in tasks})
+    colours = {"calibrate": "0.6", "trial": "C0", "figure": "C3"}
+    for t in tasks:
+        b.barh(workers.index(t["worker"]), t["stop"] - t["start"], left=t["start"], height=0.6,
+               color=colours[t.get("kind", "trial")], edgecolor="white", lw=0.3)
+    for kind, c in colours.items():
+        b.barh(0, 0, color=c, label={"calibrate": "a calibration", "trial": "a trial", "figure": "a figure"}[kind])
+    b.set_yticks(range(len(workers)), [f"worker {k + 1}" for k in range(len(workers))])
+    b.set_xlim(0, wall)
+    b.legend(loc="upper left", fontsize="small", ncols=3)
+    b.set(xlabel="s after the command's start (its end: the axis's)",
+          title="external scheduler, 2 workers: each task")
+    return png(fig)
+
+
+def _kinds(tasks: list[dict]) -> list[str]:
+    """The page's line on the external two-worker run's tasks by kind: how many, their compute s, each's mean."""
+    parts = []
+    for kind in ("calibrate", "trial", "figure"):
+        d = [t["stop"] - t["start"] for t in tasks if t.get("kind", "trial") == kind]
+        if d:
+            parts.append(f"{len(d)} {kind} tasks {sum(d):.1f} s ({np.mean(d):.2f} s each)")
+    return [f"- The external two-worker run's tasks by kind (compute s, the figure's part includes each worker's "
+            f"first import of matplotlib): {'; '.join(parts)}."] if parts else []
+
+
+def _overhead(wall: float, n: int, work: float) -> float:
+    """The per-trial overhead in % of one trial's work: the command's wall per trial less the work."""
+    return 100.0 * (wall / n - work) / work
+
+
+def main(quick: bool = False, out_dir: Path | None = None) -> dict:
+    banner = Banner("bench_study200", quick)
+    up0, load, busy0, own0 = _uptime(), LoadSampler(2.0 if quick else 5.0), _busy_s(), _own_s()
+    subjects, trials, rounds = (4, 5, 1) if quick else (10, 20, 2)
+    local: dict[int, list[dict]] = {1: [], 2: []}
+    with tempfile.TemporaryDirectory(prefix="casflex-bench-study200-") as tmp:
+        folder = Path(tmp)
+        for f in FILES:
+            shutil.copy(LAB / f, folder / f)
+        study = folder / "study.toml"
+        study.write_text(study_text(subjects, trials))
+        env = _env(folder)
+        one = _one_trial(folder, 1 if quick else 5, ("none",))["none"]
+        (folder / "warm.toml").write_text(study_text(1, 1))
+        _command(folder / "warm.toml", folder / "warm", env, "--workers", "2")  # bytecode written, caches warm
+        k = 0
+        for _ in range(rounds):
+            for w in (1, 2):
+                k += 1
+                local[w].append(_command(study, folder / f"out{k}", env, "--workers", str(w)))
+        again = [_command(study, folder / "out1", env, "--workers", "1") for _ in range(3)]
+        ext, ext_tasks = _external_runs(folder, study, env)
+        tables = {name: (folder / name / "loads.csv").read_text()
+                  for name in [f"out{i + 1}" for i in range(k)] + ["ext1", "ext2"]}
+    samples, up1, busy1, own1 = load.stop(), _uptime(), _busy_s(), _own_s()
+    others = None if busy0 is None or busy1 is None else max(0.0, (busy1 - busy0) - (own1 - own0)) / banner.wall
+    return render({"quick": quick, "subjects": subjects, "trials": trials, "work": one["best"],
+                   "work_first": one["first"], "local": local, "again": again, "ext": ext, "ext_tasks": ext_tasks,
+                   "same_tables": len(set(tables.values())) == 1, "n_tables": len(tables),
+                   "load": {"up0": up0, "up1": up1, "samples": samples, "others": others}}, out_dir, banner)
+
+
+def render(raw: dict, out_dir: Path | None, banner: Banner | None = None) -> dict:
+    n, work = raw["subjects"] * raw["trials"], raw["work"]
+    best = {w: min(raw["local"][w], key=lambda r: r["wall"]) for w in (1, 2)}
+    ext = raw["ext"]
+    walls = {"local, 1 worker": best[1]["wall"], "local, 2 workers": best[2]["wall"],
+             "external, 1 worker": ext[1]["wall"], "external, 2 workers": ext[2]["wall"]}
+    tpm = {k.replace(", ", "\n"): 60.0 * n / v for k, v in walls.items()}
+    speed_local, speed_ext = best[1]["wall"] / best[2]["wall"], ext[1]["wall"] / ext[2]["wall"]
+    again = min(r["wall"] for r in raw["again"])
+    again_walls = " / ".join(f"{r['wall']:.2f}" for r in raw["again"])
+    rows = []
+    for name, r in (("local, 1 worker", best[1]), ("local, 2 workers", best[2]), ("external, 1 worker", ext[1]),
+                    ("external, 2 workers", ext[2])):
+        rec = r["records"]
+        steady = (rec[-1] - rec[0]) / (len(rec) - 1) if len(rec) > 1 else float("nan")
+        rows.append([name, f"{r['wall']:.1f}", f"{r['cpu']:.1f}", f"{60.0 * n / r['wall']:.1f}",
+                     f"{r['wall'] / n:.3f}", f"{_overhead(r['wall'], n, work):+.0f} %",
+                     f"{rec[0]:.1f}" if rec else "-", f"{steady:.3f}", f"{r['wall'] - rec[-1]:.1f}" if rec else "-"])
+    tl = {w: ext[w]["timeline"] for w in (1, 2)}
+    rec1 = best[1]["records"]
+    steady1 = (rec1[-1] - rec1[0]) / (len(rec1) - 1) if len(rec1) > 1 else float("nan")
+    ld = raw["load"]
+    s = ld["samples"]
+    head = "# What a 200-trial `casflex study` costs" if not raw["quick"] else "# What a `casflex study` costs (quick)"
+    page = [head,
+            "", (banner.line() if banner else "Re-rendered from raw numbers.")
+            + " What is measured: the docstring of [studies/bench_study200.py](../../studies/bench_study200.py).", "",
+            f"**The machine's load.** {os.cpu_count()} cores. `uptime` before: `{ld['up0']}`; after: `{ld['up1']}`. "
+            f"The 1-minute load average through the run ({len(s)} samples): min {min(s):.2f}, median "
+            f"{np.median(s):.2f}, max {max(s):.2f}, this benchmark's own processes included. "
+            + ("" if ld["others"] is None else f"The machine's other processes kept {ld['others']:.2f} cores busy on "
+               "average (/proc/stat's busy time less this benchmark's CPU time): the second worker's gain is "
+               "bounded by the core they leave idle."), "",
+            "![trials per minute; the external two-worker run's tasks](../figures/bench_study200.png)", "",
+            f"The study: {raw['subjects']} subjects x {raw['trials']} trials = {n}, the same 1 s of Hamner's running "
+            "(61 frames at 60 Hz, 41 markers, two plates) on the planar whole-body model, each subject's masses "
+            "scaled to its own mass; no bands. One trial's work in one process (casflex.study.runner.trial_run, no "
+            f"dask, the subject's scene read once as a worker reads it): {work:.3f} s (best; the first call "
+            f"{raw['work_first']:.2f} s).", "",
+            "## The command, a new process and a new record folder each time", "",
+            *table(["cluster", "wall s", "CPU s (all processes)", "trials per minute", "wall s per trial",
+                    "overhead per trial (of the work)", "first record s", "s per record (steady)",
+                    "after the last record s (table, figures)"], rows, "lrrrrrrrr"), "",
+            f"- 2 workers against 1: **{speed_local:.2f} x** on the local cluster, **{speed_ext:.2f} x** on the "
+            "external scheduler.",
+            f"- The overhead per trial, {_overhead(best[1]['wall'], n, work):+.0f} % of a trial's work on 1 local "
+            f"worker, in parts: the start-up before the first record {best[1]['records'][0]:.1f} s (process, imports, "
+            f"study check, the cluster's start, the worker's imports, the calibrations, a first trial), "
+            f"{100 * (steady1 - work) / work:+.0f} % per trial in the steady stream of records (dask's round trip, "
+            f"the record written; the worker's CPU shared with this process), and after the last record "
+            f"{best[1]['wall'] - best[1]['records'][-1]:.1f} s (the table, {raw['subjects'] + 1} figures, the summary)."
+            if best[1]["records"] else "- No record times (none written?).",
+            f"- The same command on its finished outputs (nothing to run; process, imports, study check, freshness "
+            f"check of the records and outputs): **{again:.2f} s** (best of {len(raw['again'])}: "
+            f"{again_walls}); it said up to date: "
+            f"{all('up to date' in r['stdout'] for r in raw['again'])}.",
+            f"- The external scheduler's task stream (the trials' tasks): 1 worker {tl[1]['n']} tasks, "
+            f"{tl[1]['busy']:.1f} s of compute in a span of {tl[1]['span']:.1f} s; 2 workers {tl[2]['n']} tasks on "
+            f"{tl[2]['workers']} workers, {tl[2]['busy']:.1f} s of compute in {tl[2]['span']:.1f} s, two tasks at "
+            f"once {100 * tl[2]['overlap']:.0f} % of the span: the compute's sum is the same work (a core's "
+            f"contention shows as a longer sum), the span its spread over the workers "
+            f"({tl[1]['span'] / max(tl[2]['span'], 1e-9):.2f} x).",
+            *_kinds(raw["ext_tasks"][2]), ""]
+    rows_ok = [("the table is the same, bit for bit, from every run", f"{raw['n_tables']} runs", raw["same_tables"]),
+               ("the rerun on finished outputs ran nothing", str(all("up to date" in r["stdout"]
+                                                                    for r in raw["again"])),
+                all("up to date" in r["stdout"] for r in raw["again"])),
+               ("the external run's tasks ran on both workers", f"{tl[2]['workers']} workers", tl[2]["workers"] == 2),
+               ("2 workers give at least 1.8 x (local / external)", f"{speed_local:.2f} x / {speed_ext:.2f} x",
+                min(speed_local, speed_ext) >= 1.8, False),
+               ("the per-trial overhead is below 10 % of a trial's work (local, 1 worker)",
+                f"{_overhead(best[1]['wall'], n, work):+.0f} %", _overhead(best[1]['wall'], n, work) < 10, False),
+               ("the rerun takes less than 1 s", f"{again:.2f} s", again < 1.0, False)]
+    lines, failed = checks(rows_ok)
+    write_outputs("bench_study200", out_dir, raw["quick"], "\n".join(page + lines),
+                  figure(tpm, raw["ext_tasks"][2], n, ext[2]["wall"]))
+    assert_checks(failed)
+    return raw
+
+
+if __name__ == "__main__":
+    cli(__doc__, main)
