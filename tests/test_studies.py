@@ -12,8 +12,10 @@ HERE = Path(__file__).resolve().parents[1] / "studies"
 STUDIES = sorted(p for p in HERE.glob("*.py") if not p.name.startswith("_"))  # _study.py: their shared parts
 #: The quick runs left to ``pytest -m long`` (the suite's budget, ~10 minutes on 2 cores): the benchmarks, whose
 #: timings are never asserted, the leg study, whose identification tests/test_leg_scene.py covers, and the hip over
-#: the walk's cycle (108 s on a busy machine; its muscle path and bands: test_muscles_bands, test_peers_*_walk).
-LONG = {"leg", "hip_contact_walk"}
+#: the walk's cycle (108 s on a busy machine; its muscle path and bands: test_muscles_bands, test_peers_*_walk), the
+#: basins (46 s; each method's convergence from far starts: tests/test_identification_*.py) and the uncertain
+#: properties' fits (30 s; tests/test_identification_priors.py).
+LONG = {"leg", "hip_contact_walk", "basins", "uncertain"}
 
 
 def _param(p: Path):
