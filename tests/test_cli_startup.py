@@ -5,6 +5,7 @@ Checked in fresh processes by what they imported (``sys.modules``), not by time.
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -24,11 +25,14 @@ HEAVY = ("numpy", "casadi", "scipy", "casflex.identification", "casflex.statics"
 
 def _imported(argv: list[str], cwd: Path) -> tuple[int, str, list[str]]:
     """(exit status, stderr, the modules loaded) of ``casflex ARGV`` run through the script's entry point in a
-    fresh process."""
+    fresh process, without ``$CASFLEX_CFLAGS`` (flags set there are tried on the compiler before any command, which
+    loads CasADi: tests/test_codegen.py covers that check)."""
     code = ("import json, sys\nsys.argv = ['casflex', *json.loads(sys.argv[1])]\nfrom casflex._entry import main\n"
             "try:\n    code = main()\nexcept SystemExit as exc:\n    code = exc.code\n"
             "print(json.dumps(sorted(sys.modules)), file=sys.stdout)\nsys.exit(code)\n")
-    out = subprocess.run([sys.executable, "-c", code, json.dumps(argv)], capture_output=True, text=True, cwd=cwd)
+    env = {k: v for k, v in os.environ.items() if k != "CASFLEX_CFLAGS"}
+    out = subprocess.run([sys.executable, "-c", code, json.dumps(argv)], capture_output=True, text=True, cwd=cwd,
+                         env=env)
     return out.returncode, out.stderr, json.loads(out.stdout.splitlines()[-1])
 
 
