@@ -228,18 +228,24 @@ def test_marker_band_is_zero_for_exact_markers_and_the_spread_of_noisy_copies():
     assert exact.bands["pivot.moment"]["markers"].max() == 0 and any("declared exact" in ln for ln in exact.report)
 
 
+def _random_record(n: int, gap: int, seed: int):
+    """(t at 100 Hz, decided (a 4-frame gap at ``gap``), the fit's covariances C (n, 3, 3), the loads' sensitivities
+    D (3, n, 2, 3)) of a random record of n frames, 3 coordinates and 2 loads."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * 0.01
+    decided = np.ones(n, dtype=bool)
+    decided[gap:gap + 4] = False
+    R = rng.standard_normal((n, 3, 5))
+    C = R @ R.transpose(0, 2, 1) * decided[:, None, None]
+    return t, decided, C, rng.standard_normal((3, n, 2, 3))
+
+
 @pytest.mark.parametrize("how", ["butterworth", "opensim"])
 def test_segments_give_the_whole_record_s_band(how):
     """A long record taken in segments of 60 frames (with the filter's memory as margins) against the whole at
     once: the same to 1e-12, a gap in it."""
-    rng = np.random.default_rng(0)
-    n, nz, nl = 700, 3, 2
-    t = np.arange(n) * 0.01
-    decided = np.ones(n, dtype=bool)
-    decided[300:304] = False
-    R = rng.standard_normal((n, nz, 5))
-    C = R @ R.transpose(0, 2, 1) * decided[:, None, None]
-    D = rng.standard_normal((3, n, nl, nz))
+    n = 700
+    t, decided, C, D = _random_record(n, 300, seed=0)
     whole = marker_band(t, decided, C, D, 6.0, how, core=n)
     parts = marker_band(t, decided, C, D, 6.0, how, core=60)
     assert memory(t, 6.0, how) < 300  # margins shorter than the record: the segments are real
@@ -253,14 +259,8 @@ def test_the_interior_s_convolution_gives_the_whole_record_s_band(how, cutoff):
     peak (round-off of the FFT and of the impulses' sums; measured 2e-13 to 3e-13)."""
     from casflex.inverse.marker_band import _interior, _segment
 
-    rng = np.random.default_rng(1)
-    n, nz, nl = 1500, 3, 2
-    t = np.arange(n) * 0.01
-    decided = np.ones(n, dtype=bool)
-    decided[700:704] = False
-    R = rng.standard_normal((n, nz, 5))
-    C = R @ R.transpose(0, 2, 1) * decided[:, None, None]
-    D = rng.standard_normal((3, n, nl, nz))
+    n = 1500
+    t, decided, C, D = _random_record(n, 700, seed=1)
     margin = memory(t, cutoff, how)
     assert 300 < _interior(decided, margin).sum() < n - 4 * margin  # both routes are taken
     whole = np.sqrt(np.maximum(_segment(t, decided, C, D, (0, n), margin, cutoff, how), 0.0))
