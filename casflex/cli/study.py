@@ -161,14 +161,6 @@ def _fingerprint(plan: dict) -> str:
 FIGURES_ON_CLUSTER = 4
 
 
-def _figures(out: dict, directory: Path, title: str, per_kg: bool = False, all_cycles: bool = False,
-             clinical: bool = False, normative: dict | None = None) -> tuple[list[str], list[str]]:
-    """Every figure of :func:`_figure_plans` drawn into ``directory``, here: (the files written, warnings)."""
-    plans, notes = _figure_plans(out, title, per_kg, all_cycles, clinical, normative)
-    _draw_figures(plans, directory, {})
-    return list(plans), notes
-
-
 def _draw_figures(plans: dict[str, dict], directory: Path, kept: dict[str, str], session=None,
                   meanwhile: Callable[[], None] | None = None) -> dict[str, str]:
     """Each figure of ``plans`` written into ``directory`` but those whose fingerprint is in ``kept`` (up to date

@@ -146,11 +146,13 @@ def test_study_refuses_a_bad_normative_file_in_one_line_before_any_work(tmp_path
 
 
 def test_the_study_s_figures_and_a_normative_band_no_curve_takes(record, tmp_path):
-    from casflex.cli.study import _figures
+    from casflex.cli.study import _draw_figures, _figure_plans
 
     norms = read_normative(_norms(tmp_path, "load,percent,mean,sd,unit\nknee_angle,0,1,2,deg\nknee_angle,100,1,2,deg\n"
                                             "hip_rotation,0,1,2,deg\nhip_rotation,100,1,2,deg\n"))
-    written, notes = _figures(record, tmp_path, "running", clinical=True, normative=norms)
+    plans, notes = _figure_plans(record, "running", False, False, True, norms)
+    _draw_figures(plans, tmp_path, {})
+    written = list(plans)
     assert written == ["s02.png", "group.png"]
     for name in written:
         assert_png(tmp_path / name)
