@@ -25,8 +25,11 @@ The reproducibility contract (README, "Compiled and interpreted runs"):
 
 Everything casflex compiles goes through :func:`compile_functions`: simulation steps,
 sensitivities, and the functions of identification NLPs (:func:`compiled`,
-:func:`compiled_nlpsol`), so a later process pays no compile. ``casflex cache`` shows the cache
-and ``casflex cache --clear`` empties it (:func:`clear_cache`).
+:func:`compiled_nlpsol`), so a later process pays no compile. The same directory keeps CasADi
+Functions built (not compiled) from a model, which a later process loads instead of building them
+again (:func:`load_built`, :func:`store_built`: the inverse's model and kinematic tree,
+:mod:`casflex.inverse.built`). ``casflex cache`` shows the cache and ``casflex cache --clear``
+empties it (:func:`clear_cache`).
 """
 
 from __future__ import annotations
@@ -36,13 +39,16 @@ import functools
 import hashlib
 import logging
 import os
+import pickle
 import platform
 import re
 import shlex
 import shutil
 import subprocess
+import sys
 import tempfile
 import time
+import zlib
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,8 +57,8 @@ import casadi as ca
 import numpy as np
 
 __all__ = ["BufferedCall", "CompiledLibrary", "compile_functions", "compiled", "compiled_nlpsol", "generate_c",
-           "cache_dir", "cache_entries", "clear_cache", "CodegenError", "CFLAGS", "FLAGS_ENV", "user_flags",
-           "build_flags", "bitwise_expected"]
+           "cache_dir", "cache_entries", "built_entries", "clear_cache", "CodegenError", "CFLAGS", "FLAGS_ENV",
+           "user_flags", "build_flags", "bitwise_expected", "built_key", "load_built", "store_built"]
 
 #: Flags of every build: no fused multiply-adds (the interpreter has none), a shared library.
 CFLAGS = ("-ffp-contract=off", "-fPIC", "-shared")
@@ -323,20 +329,92 @@ def compiled_nlpsol(name: str, plugin: str, nlp: dict, opts: dict, *, interprete
     return solver, {f.name(): ca.external(f.name(), str(target)) for f in extra}
 
 
+#: A built entry's file: its first line is this and the SHA-256 of the rest (the pickled value), which is read
+#: only when they agree: a truncated or damaged file is rebuilt, never fed to the unpickler.
+BUILT_SUFFIX, _BUILT_HEAD = ".built", b"casflex-built 1 "
+
+
+def built_key(*parts: str) -> str:
+    """The cache key (24 hex digits) of an entry built from ``parts`` (the content it is made of and the code
+    that makes it, the caller's) and of what else its build and its loading depend on: CasADi's, numpy's and
+    Python's versions and the machine."""
+    where = (ca.__version__, np.__version__, sys.version, platform.machine())
+    return hashlib.sha256("\n".join((*parts, *where)).encode()).hexdigest()[:24]
+
+
+def _built_path(stem: str, key: str) -> Path:
+    return cache_dir() / f"{stem}-{key}{BUILT_SUFFIX}"
+
+
+def load_built(stem: str, key: str) -> object | None:
+    """The value :func:`store_built` kept under ``stem`` and ``key``, or None where there is none or it cannot
+    be read whole (truncated, damaged, unreadable, or not unpickled): the caller builds it again and stores it,
+    replacing the bad file. Values are pickled (a CasADi Function by its own serialisation): the cache is the
+    user's, as are the compiled libraries beside it, which run as code."""
+    path = _built_path(stem, key)
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return None
+    head, _, body = data.partition(b"\n")
+    if head != _BUILT_HEAD + hashlib.sha256(body).hexdigest().encode():
+        log.info("%s: damaged (its checksum disagrees): built again", path)
+        return None
+    try:
+        return pickle.loads(zlib.decompress(body))
+    except Exception as exc:  # noqa: BLE001 - any failure to read the entry back means: build it again
+        log.info("%s: not read (%s): built again", path, exc)
+        return None
+
+
+def store_built(stem: str, key: str, value: object) -> None:
+    """Keep ``value`` (pickled, zlib-compressed) under ``stem`` and ``key`` in the cache: written to a temporary
+    file in the cache and renamed over the entry, so that a reader sees a whole file or none, whoever writes it
+    at the same time or stops half-way (a Ctrl-C). A cache that cannot be written (read-only, full) is passed
+    over: the next run builds again."""
+    body = zlib.compress(pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL), 1)  # 1/6 of the size, 5 ms to read
+    path = _built_path(stem, key)
+    tmp = None
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f"{path.stem}.", suffix=f"{BUILT_SUFFIX}.tmp")
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(_BUILT_HEAD + hashlib.sha256(body).hexdigest().encode() + b"\n" + body)
+        os.replace(tmp, path)
+        tmp = None
+    except OSError as exc:
+        log.info("%s: not written (%s): the next run builds it again", path, exc)
+    finally:
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+
+
 def cache_entries() -> list[Path]:
     """The compiled libraries in the cache directory."""
     d = cache_dir()
     return sorted(d.glob("*.so")) if d.is_dir() else []
 
 
+def built_entries() -> list[Path]:
+    """The built Functions' files in the cache directory (:func:`store_built`)."""
+    d = cache_dir()
+    return sorted(d.glob(f"*{BUILT_SUFFIX}")) if d.is_dir() else []
+
+
 def clear_cache() -> tuple[int, int]:
-    """Remove every compiled library (and lock and probe file) from the cache: (files, bytes)."""
+    """Remove every compiled library and built entry (and lock, probe and temporary file) from the cache:
+    (files, bytes)."""
     count = size = 0
     d = cache_dir()
     if not d.is_dir():
         return 0, 0
-    for f in [*d.glob("*.so"), *d.glob(".*.lock"), *d.glob("native*.txt"), *d.glob("*.so.tmp")]:
-        size += f.stat().st_size
-        f.unlink(missing_ok=True)
+    for f in [*d.glob("*.so"), *d.glob(".*.lock"), *d.glob("native*.txt"), *d.glob("*.so.tmp"),
+              *d.glob(f"*{BUILT_SUFFIX}"), *d.glob(f"*{BUILT_SUFFIX}.tmp")]:
+        try:  # a file another process renames or removes meanwhile is not this one's to count
+            size += f.stat().st_size
+            f.unlink()
+        except FileNotFoundError:
+            continue
         count += 1
     return count, size

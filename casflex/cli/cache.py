@@ -1,4 +1,5 @@
-"""``casflex cache``: where the compiled libraries are kept, how many, how large; ``--clear`` empties it."""
+"""``casflex cache``: where the compiled libraries and the built models are kept, how many, how large; ``--clear``
+empties it."""
 
 from __future__ import annotations
 
@@ -8,12 +9,18 @@ from casflex.cli._base import Outputs
 
 
 def cmd_cache(args: argparse.Namespace, outputs: Outputs) -> int:
-    from casflex.codegen import cache_dir, cache_entries, clear_cache
+    from casflex.codegen import built_entries, cache_dir, cache_entries, clear_cache
 
-    entries = cache_entries()
-    size = sum(f.stat().st_size for f in entries)
+    entries, built = cache_entries(), built_entries()
+    size = 0
+    for f in (*entries, *built):
+        try:
+            size += f.stat().st_size
+        except FileNotFoundError:  # replaced or removed by another process meanwhile
+            pass
     print(f"casflex cache: {cache_dir()} (set CASFLEX_CACHE to move it): {len(entries)} compiled libraries, "
-          f"{size / 2**20:.1f} MiB")
+          f"{len(built)} built model{'' if len(built) == 1 else 's'} (inverse dynamics' models and their functions, "
+          f"one per scene), {size / 2**20:.1f} MiB")
     if args.clear:
         count, freed = clear_cache()
         print(f"  removed {count} files ({freed / 2**20:.1f} MiB); the next runs build what they need again")
@@ -21,6 +28,7 @@ def cmd_cache(args: argparse.Namespace, outputs: Outputs) -> int:
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
-    s = sub.add_parser("cache", help="show (or --clear) the cache of compiled libraries")
-    s.add_argument("--clear", action="store_true", help="remove every compiled library from the cache")
+    s = sub.add_parser("cache", help="show (or --clear) the cache of compiled libraries and built models")
+    s.add_argument("--clear", action="store_true", help="remove every compiled library and built model from the "
+                                                        "cache")
     s.set_defaults(func=cmd_cache)

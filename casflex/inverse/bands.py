@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from casflex.inverse.built import inverse_tree
 from casflex.inverse.lab_names import lab_loads
 from casflex.inverse.load_jacobian import LoadDerivatives, load_derivatives
 from casflex.inverse.options import BandError, Bands
@@ -105,12 +106,16 @@ def band_spec(model: Model, tree: KinematicTree, bands: Bands, *, given: bool = 
         raise BandError("marker_noise", f"the {n_markers} markers give no more channels than the {tree.n} coordinates: "
                                         "the fit leaves no residual to estimate their noise; declare it (m; 0: the "
                                         "markers taken as exact)")
-    model_u = assembled(with_uncertain_estimated(scene), inertia=model.inertia)
+    estimated = with_uncertain_estimated(scene)
+    if not estimated.supports and model.inertia == estimated.run.inertia:  # the inverse's model: kept (.built)
+        tree_u = inverse_tree(estimated, tree.root)
+    else:
+        tree_u = kinematic_tree(assembled(estimated, inertia=model.inertia), tree.root)
+    model_u = tree_u.model
     index = np.array([model_u.parameter_names.index(n) for n in names], dtype=int)
     targets = tuple(u.target for u in scene.uncertain if u.name in names)
     sd = np.array([u.prior(scene.property_value(u.target))[1] for u in scene.uncertain if u.name in names])
-    return BandSpec(model_u, kinematic_tree(model_u, tree.root), targets, sd, index,
-                    None if marker_noise is None else float(marker_noise), given)
+    return BandSpec(model_u, tree_u, targets, sd, index, None if marker_noise is None else float(marker_noise), given)
 
 
 def rigid_load_function(tree: KinematicTree, t: np.ndarray, plates, p: np.ndarray):

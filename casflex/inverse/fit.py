@@ -84,14 +84,16 @@ class _MarkerFit:
     """``marker_fit`` evaluated into numpy arrays it owns: ``(y (2 m,), J (2 m, n_z))`` of z (n_z,), the
     same numbers as ``np.array(f(z))`` (the same expressions), without a CasADi call's and its DM conversions'
     0.2 ms each time (CasADi's function buffer: the marker fit makes some 2600 calls on a 151-frame trial). The
-    arrays are overwritten by the next call: copy what is kept."""
+    arrays are overwritten by the next call: copy what is kept. ``tree``: the tree whose ``marker_fit`` ``f`` is,
+    which keeps the dense Function for the next fit of its scene."""
 
-    def __init__(self, f: ca.Function) -> None:
-        z = ca.SX.sym("z", f.size1_in(0))
-        y, J = f(z)
-        self._f = ca.Function("marker_fit_dense", [z], [ca.densify(y), ca.densify(J)])
+    def __init__(self, f: ca.Function, tree: KinematicTree | None = None) -> None:
+        if tree is not None and tree.marker_fit is not f:
+            raise ValueError("_MarkerFit: f is not the tree's marker_fit")
+        self._f = _dense_fit(f) if tree is None else tree.built(("marker_fit_dense",), lambda: _dense_fit(f))
         self._buf, self._eval = self._f.buffer()
-        self._z, self.y, self._jt = np.zeros(z.numel()), np.zeros(y.numel()), np.zeros((J.size2(), J.size1()))
+        n, rows = f.size1_in(0), f.size1_out(0)
+        self._z, self.y, self._jt = np.zeros(n), np.zeros(rows), np.zeros((n, rows))
         for k, a in enumerate((self._z,)):
             self._buf.set_arg(k, memoryview(a))
         for k, a in enumerate((self.y, self._jt)):  # J column-major: its transpose row-major
@@ -101,6 +103,13 @@ class _MarkerFit:
         self._z[:] = z
         self._eval()
         return self.y, self._jt.T
+
+
+def _dense_fit(f: ca.Function) -> ca.Function:
+    """``marker_fit_dense(z) -> (y, J)``: ``f``'s expressions with dense outputs (:class:`_MarkerFit`)."""
+    z = ca.SX.sym("z", f.size1_in(0))
+    y, J = f(z)
+    return ca.Function("marker_fit_dense", [z], [ca.densify(y), ca.densify(J)])
 
 
 def _solve_frame(f: ca.Function | _MarkerFit, z: np.ndarray, y: np.ndarray, max_iter: int = 50,
@@ -278,7 +287,7 @@ def fit_markers(tree: KinematicTree, t: np.ndarray, y: np.ndarray, *, max_gap: f
     ``max_misfit`` (m): a marker farther than that from the fitted pose is refused in one line naming the
     frame and the marker (``labels``, the trial's names for the scene's markers; ``source``, the trial):
     :data:`casflex.lab.checks.MAX_MISFIT`."""
-    f = _MarkerFit(tree.marker_fit)
+    f = _MarkerFit(tree.marker_fit, tree)
     y0 = f(tree.coordinates(tree.model.q0))[0].copy()
     n, m = t.size, y.shape[1] // 2
     rms, seen = np.full(n, np.nan), np.isfinite(y).reshape(n, -1, 2).all(2).sum(1)
@@ -318,7 +327,7 @@ def _fit_frames(tree: KinematicTree, f: _MarkerFit, y: np.ndarray, y0: np.ndarra
 
     n = y.shape[0]
     lo, hi = bounds if bounds is not None else (np.full(tree.n, -np.inf), np.full(tree.n, np.inf))
-    fm = MappedFit(tree.marker_fit)
+    fm = MappedFit(tree.marker_fit, tree)
 
     def blocks(starts, tol, report=None):
         parts = [levenberg_marquardt(fm, starts[s:s + _BLOCK], y[s:s + _BLOCK], w, lo, hi, tol=tol,

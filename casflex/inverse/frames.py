@@ -26,19 +26,27 @@ __all__ = ["MappedFit", "kabsch_starts", "levenberg_marquardt"]
 class MappedFit:
     """``tree.marker_fit`` on k frames at once: ``(Y (k, 2 m), J (k, 2 m, n_z))`` of Z (k, n_z), each frame's the
     numbers of ``marker_fit(z)`` (the same Function mapped), in chunks of the sizes :attr:`SIZES` (each mapped
-    Function built when first needed)."""
+    Function built when first needed). ``tree``: the tree whose ``marker_fit`` ``f`` is, which keeps the mapped
+    Functions for the next fit of its scene (:meth:`casflex.inverse.tree.KinematicTree.built`)."""
 
     SIZES = (512, 64, 8, 1)
 
-    def __init__(self, f: ca.Function) -> None:
-        self._f, self._calls = f, {}
+    def __init__(self, f: ca.Function, tree: KinematicTree | None = None) -> None:
+        if tree is not None and tree.marker_fit is not f:
+            raise ValueError("MappedFit: f is not the tree's marker_fit")
+        self._f, self._tree, self._calls = f, tree, {}
         self.n, self.rows = f.size1_in(0), f.size1_out(0)
+
+    def _mapped(self, size: int) -> ca.Function:
+        z = ca.MX.sym("z", self.n, size)
+        y, J = self._f.map(size)(z)  # (2 m, size) and (2 m, n_z size): column-major, frame after frame
+        return ca.Function(f"marker_fit_{size}", [z], [ca.densify(y), ca.densify(J)])
 
     def _call(self, size: int) -> BufferedCall:
         if size not in self._calls:
-            z = ca.MX.sym("z", self.n, size)
-            y, J = self._f.map(size)(z)  # (2 m, size) and (2 m, n_z size): column-major, frame after frame
-            self._calls[size] = BufferedCall(ca.Function(f"marker_fit_{size}", [z], [ca.densify(y), ca.densify(J)]))
+            f = self._mapped(size) if self._tree is None else self._tree.built(("marker_fit", size),
+                                                                               lambda: self._mapped(size))
+            self._calls[size] = BufferedCall(f)
         return self._calls[size]
 
     def __call__(self, Z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

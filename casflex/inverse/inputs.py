@@ -19,9 +19,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from casflex.inverse.built import inverse_scene, inverse_tree
 from casflex.inverse.options import Bands, Filter, Fit, Flexible, Trial
 from casflex.inverse.plates import Plate, model_weight, plate_from_table
-from casflex.inverse.tree import KinematicTree, kinematic_tree
+from casflex.inverse.tree import KinematicTree
 from casflex.lab.lowpass import check_cutoff, even_times
 from casflex.model import Model
 
@@ -67,20 +68,12 @@ class InverseInputs:
 def inverse_model(scene, root: str | None = None) -> Model:
     """The model inverse dynamics drives: the scene without the supports of its root (default: its
     first node), which the root's driver replaces (they would fix what the data moves). A support on
-    another node is refused in one line: the data, not the scene, say where the segments go."""
+    another node is refused in one line: the data, not the scene, say where the segments go
+    (:func:`casflex.inverse.built.inverse_scene`). A new model each call; :func:`prepare` takes the
+    one :func:`casflex.inverse.built.inverse_tree` keeps."""
     from casflex.model import assemble
-    from casflex.scene import Scene
 
-    if not isinstance(scene, Scene):
-        from casflex.scene.io import load_scene
-
-        scene = load_scene(scene)
-    root = scene.nodes[0].name if root is None else root
-    for s in scene.supports:
-        if s.node != root:
-            raise ValueError(f"support {s.name!r}: inverse dynamics drives the scene from its root {root!r} only; "
-                             "remove the support or make its node the root (--root)")
-    return assemble(dataclasses.replace(scene, supports=()))
+    return assemble(inverse_scene(scene, root))
 
 
 def _c3d(markers) -> bool:
@@ -381,16 +374,16 @@ def prepare(scene, trial: Trial, *, filter: Filter | None = None, fit: Fit | Non
     for node in plates if not isinstance(plates, str) else ():
         if node not in (names := [n.name for n in scene.nodes]):
             raise ValueError(f"plates: no node {node!r} in the scene; nodes are {names}")
-    model = inverse_model(scene, trial.root)
-    tree = kinematic_tree(model, trial.root)
+    tree = inverse_tree(scene, trial.root)
+    model = tree.model
     spec = band_spec(model, tree, bands, given=trial.given, n_markers=sum(m.weight > 0 for m in scene.markers))
     lab, table = _trial(trial.markers, grf, bool(plates))  # the bands checked before: a bad band costs no reading
     if lab is not None and not trial.given:
         scene, lab, locked = _marker_set(scene, lab)
         task_notes += locked
         if locked:  # a segment the trial records no marker of, locked: the model and the bands' spec again
-            model = inverse_model(scene, trial.root)
-            tree = kinematic_tree(model, trial.root)
+            tree = inverse_tree(scene, trial.root)
+            model = tree.model
             spec = band_spec(model, tree, bands, given=trial.given,
                              n_markers=sum(m.weight > 0 for m in scene.markers))
     if not trial.given:

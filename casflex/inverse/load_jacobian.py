@@ -98,7 +98,11 @@ def load_derivatives(tree: KinematicTree, t: np.ndarray, plates, z: np.ndarray, 
     kin = tree if kinematics is None else kinematics
     if kin is not tree and (kin.names != tree.names or kin.model.dof_names != m.dof_names):
         raise ValueError(f"kinematics: its coordinates {kin.names} and dofs are not the tree's {tree.names}")
-    f, names = _frame_loads(tree, index, kin.rates)
+    rates = kin.rates
+    built_with, f, names = tree.built(("frame_loads", tuple(index.tolist()), id(rates)),
+                                      lambda: (rates, *_frame_loads(tree, index, rates)))
+    if built_with is not rates:  # another tree's rates that had this one's id: built for these
+        f, names = _frame_loads(tree, index, rates)
     e0 = plate_loads(m, list(plates), t, np.zeros((k, m.n_dof))) if plates else np.zeros((k, m.n_dof))
     nl, nu, n = len(names), len(index), tree.n
     size = min(BLOCK, k)

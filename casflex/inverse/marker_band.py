@@ -92,7 +92,8 @@ def fit_covariances(tree: KinematicTree, fit: FittedMotion, y: np.ndarray, sigma
     decided = np.isfinite(fit.rms)
     w = marker_weights(tree)
     W = np.where(np.isfinite(y) & decided[:, None], 1.0 if w is None else w**2, 0.0)  # (n, 2 m)
-    _, J, H = dense_outputs(_fit_terms(tree).map(n), [fit.z.T, np.nan_to_num(y).T, W.T])  # one call, every frame
+    terms = tree.built(("marker_fit_terms",), lambda: _fit_terms(tree))
+    _, J, H = dense_outputs(terms.map(n), [fit.z.T, np.nan_to_num(y).T, W.T])  # one call, every frame
     J = J.reshape(y.shape[1], n, nz).transpose(1, 0, 2)
     H = H.reshape(nz, n, nz).transpose(1, 0, 2)
     free = _free(tree, fit.z) & decided[:, None]

@@ -74,7 +74,8 @@ def rigid_loads(tree: KinematicTree, t: np.ndarray, z: np.ndarray, zd: np.ndarra
         raise ValueError(f"the scene has {m.n_dof} dofs and {m.n_con} joint rows: with the {tree.n} coordinates they "
                          "do not decide its motion; flexible segments need the flexible inverse")
     size = min(BLOCK, t.size)
-    f = _dense(_frame_function(tree).map(size))
+    f = BufferedCall(tree.built(("inverse_frame", size), lambda: _dense(
+        tree.built(("inverse_frame",), lambda: _frame_function(tree)).map(size))))
     parts = [_block(tree, f, size, t[s:s + size], z[s:s + size], zd[s:s + size], zdd[s:s + size], p, external)
              for s in range(0, t.size, size)]
     q, qd, qdd, lam = (np.concatenate([pt[i] for pt in parts]) for i in range(4))
@@ -105,10 +106,11 @@ def _block(tree: KinematicTree, f: BufferedCall, size: int, t, z, zd, zdd, p, ex
     return q, qd, qdd, lam
 
 
-def _dense(f: ca.Function) -> BufferedCall:
-    """``f`` with dense outputs, called on numpy memory (no DM conversions: they took as long as the frames' work)."""
+def _dense(f: ca.Function) -> ca.Function:
+    """``f`` with dense outputs, to be called on numpy memory (:class:`~casflex.codegen.BufferedCall`: no DM
+    conversions, which took as long as the frames' work)."""
     ins = [ca.MX.sym(f.name_in(i), f.sparsity_in(i)) for i in range(f.n_in())]
-    return BufferedCall(ca.Function(f"{f.name()}_dense", ins, [ca.densify(o) for o in f.call(ins)]))
+    return ca.Function(f"{f.name()}_dense", ins, [ca.densify(o) for o in f.call(ins)])
 
 
 def loads_by_name(tree: KinematicTree, q: np.ndarray, qd: np.ndarray, lam: np.ndarray,

@@ -16,7 +16,9 @@ a hinge closing a loop.
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TypeVar
 
 import casadi as ca
 import numpy as np
@@ -26,6 +28,8 @@ from casflex.model import Model
 from casflex.model.constraints import _offset
 
 __all__ = ["KinematicTree", "kinematic_tree"]
+
+_T = TypeVar("_T")
 
 
 def _rot(th, v):
@@ -81,6 +85,21 @@ class KinematicTree:
     @property
     def n(self) -> int:
         return len(self.names)
+
+    @functools.cached_property
+    def _built(self) -> dict:
+        return {}
+
+    def built(self, key: tuple, build: Callable[[], _T]) -> _T:
+        """What ``build()`` makes of this tree alone (another module's CasADi Function of it: the marker fit
+        mapped over a block of frames, the rigid inverse's frame), made once per tree under ``key`` (the
+        maker's name first, then what else it depends on): a tree shared by the runs of one scene
+        (:func:`casflex.inverse.built.inverse_tree`) builds it for the first. Only Functions and other
+        immutable values: a Function's buffer (:class:`casflex.codegen.BufferedCall`) is each caller's own."""
+        memo = self._built
+        if key not in memo:
+            memo.setdefault(key, build())  # two threads building at once keep the first one's
+        return memo[key]
 
     @functools.cached_property
     def forward(self) -> ca.Function:

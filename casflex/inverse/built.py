@@ -1,0 +1,129 @@
+"""What inverse dynamics builds from the scene alone, built once: the model it drives (the scene without its root's
+supports), the model's kinematic tree and the tree's CasADi Functions (``forward``, ``rates``, ``marker_fit``).
+
+Built from a scene, they cost about 0.1 s of a study's 0.3 s trial on Hamner's 1 s run (the functions' symbolic
+build; the model's assembly more in a new process), the same for every trial of a subject. So:
+
+- in a process, they are kept by the scene's content and the root (:func:`inverse_tree`): the scene is a frozen
+  dataclass compared field by field, so two subjects whose scenes differ in one mass or one length never share a
+  model, and the runs of one subject (a study worker's trials, their calibrated scene read again each time)
+  share one; a tree shared so keeps what other modules build from it (:meth:`KinematicTree.built
+  <casflex.inverse.tree.KinematicTree.built>`: the marker fit mapped over frames, the rigid inverse's frame);
+- across processes, the model and the three Functions are kept in ``$CASFLEX_CACHE``
+  (:func:`casflex.codegen.store_built`; ``casflex cache`` counts them, ``--clear`` removes them) under a key of the
+  scene's content (its ``repr``: every field, the floats to the last bit), the root, the source of the modules that
+  build them (:data:`SOURCES`: a changed line of casflex's model or elements is a new entry) and casflex's, CasADi's,
+  numpy's and Python's versions (:func:`casflex.codegen.built_key`). Loading the entry (0.01 s) replaces the
+  model's assembly and the functions' build (0.15 s in a new process); a damaged entry is built again and replaced.
+
+The Functions loaded are CasADi's own serialisation of those built: the same operations on the same constants, the
+same numbers to the last bit (tests/test_inverse_built.py).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import hashlib
+import os
+from pathlib import Path
+
+from casflex.inverse.tree import KinematicTree, kinematic_tree
+
+__all__ = ["inverse_scene", "inverse_tree", "SOURCES"]
+
+_PACKAGE = Path(__file__).resolve().parents[1]
+#: The code that builds what :func:`inverse_tree` keeps (folders: every module in them), relative to casflex/: its
+#: bytes are part of the cache key.
+SOURCES = ("model", "elements", "scene", "inverse/tree.py", "inverse/built.py")
+#: The tree's Functions kept on disk with the model (``marker_fit`` where the scene has markers).
+FUNCTIONS = ("forward", "rates", "marker_fit")
+
+
+def inverse_scene(scene, root: str | None = None):
+    """The scene inverse dynamics drives: ``scene`` (a Scene, or a scene name or path, loaded) without the supports of
+    its root (default: its first node), which the root's driver replaces (they would fix what the data moves). A
+    support on another node is refused in one line: the data, not the scene, say where the segments go."""
+    from casflex.scene import Scene
+
+    if not isinstance(scene, Scene):
+        from casflex.scene.io import load_scene
+
+        scene = load_scene(scene)
+    root = scene.nodes[0].name if root is None else root
+    for s in scene.supports:
+        if s.node != root:
+            raise ValueError(f"support {s.name!r}: inverse dynamics drives the scene from its root {root!r} only; "
+                             "remove the support or make its node the root (--root)")
+    return dataclasses.replace(scene, supports=()) if scene.supports else scene
+
+
+def inverse_tree(scene, root: str | None = None) -> KinematicTree:
+    """The kinematic tree (:func:`casflex.inverse.tree.kinematic_tree`) of the model of :func:`inverse_scene`
+    ``(scene, root)``, its Functions built, kept in this process and on disk (module docstring). ValueError in one
+    line where the scene cannot be driven so (a support off the root, a tree the hinges do not make)."""
+    scene = inverse_scene(scene, root)
+    root = scene.nodes[0].name if root is None else root
+    try:
+        hash(scene)
+    except TypeError:  # a scene holding an unhashable value: its own tree
+        return _tree(scene, root)
+    return _kept(scene, root)
+
+
+@functools.lru_cache(maxsize=16)
+def _kept(scene, root: str) -> KinematicTree:
+    return _tree(scene, root)
+
+
+def _tree(scene, root: str) -> KinematicTree:
+    """The tree of ``scene`` (its root's supports off) from the disk cache, else built and stored there."""
+    from casflex.codegen import built_key, load_built, store_built
+
+    key = built_key(repr(scene), root, _source_digest(), _version())
+    entry = load_built("inverse", key)
+    if _whole(entry) and entry["model"].scene == scene:  # the scene compared too: a key's collision builds anew
+        tree = kinematic_tree(entry["model"], root)
+        for name in FUNCTIONS:
+            if name in entry:  # the cached properties, as KinematicTree would build them
+                tree.__dict__[name] = entry[name]
+        return tree
+    from casflex.model import assemble
+
+    tree = kinematic_tree(assemble(scene), root)
+    entry = {"model": tree.model, "forward": tree.forward, "rates": tree.rates}
+    if scene.markers:
+        entry["marker_fit"] = tree.marker_fit
+    store_built("inverse", key, entry)
+    return tree
+
+
+def _whole(entry: object) -> bool:
+    """Whether a loaded entry has what :func:`_tree` stores (an entry of another shape: built again)."""
+    import casadi as ca
+
+    from casflex.model import Model
+
+    return (isinstance(entry, dict) and isinstance(entry.get("model"), Model)
+            and all(isinstance(entry.get(n), ca.Function) for n in ("forward", "rates"))
+            and (not entry["model"].scene.markers or isinstance(entry.get("marker_fit"), ca.Function)))
+
+
+def _version() -> str:
+    from casflex import __version__
+
+    return __version__
+
+
+@functools.lru_cache(maxsize=1)
+def _source_digest() -> str:
+    """SHA-256 of the :data:`SOURCES`' bytes (each file's name with them): 1 ms, once per process."""
+    h = hashlib.sha256()
+    for part in SOURCES:
+        path = _PACKAGE / part
+        files = [path] if path.suffix == ".py" else sorted(
+            Path(e.path) for e in os.scandir(path) if e.name.endswith(".py"))
+        for f in files:
+            h.update(f"{f.relative_to(_PACKAGE).as_posix()}\n".encode())
+            h.update(f.read_bytes())
+    return h.hexdigest()
