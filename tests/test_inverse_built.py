@@ -224,3 +224,20 @@ def test_the_cache_command_counts_and_clears_the_built_entries(cache, capsys):
     assert "1 built model" in capsys.readouterr().out
     assert main(["cache", "--clear"]) == 0
     assert codegen.built_entries() == []
+
+
+def test_an_opensim_model_is_read_again_when_its_file_changes(cache, tmp_path):
+    from casflex.inverse.built import osim_scene
+
+    path = tmp_path / "model.osim"
+    text = (LAB / "hamner_subject02_planar.osim").read_text()
+    path.write_text(text)
+    first, _ = osim_scene(path)
+    assert osim_scene(path)[0] == first  # the kept one
+    path.write_text(text.replace("<mass>10.325396529749399</mass>", "<mass>11.325396529749399</mass>", 1))
+    pelvis = next(b for b in osim_scene(path)[0].bodies if b.name == "pelvis")
+    assert pelvis.mass == 11.325396529749399  # the file's new mass, not the kept scene's
+    (tmp_path / "other").mkdir()
+    (tmp_path / "other" / "model.osim").write_text(path.read_text())  # the same bytes elsewhere: its own entry
+    osim_scene(tmp_path / "other" / "model.osim")
+    assert len([p for p in codegen.built_entries() if p.name.startswith("osim-")]) == 3

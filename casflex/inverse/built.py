@@ -30,7 +30,7 @@ from pathlib import Path
 
 from casflex.inverse.tree import KinematicTree, kinematic_tree
 
-__all__ = ["inverse_scene", "inverse_tree", "SOURCES"]
+__all__ = ["inverse_scene", "inverse_tree", "osim_scene", "SOURCES"]
 
 _PACKAGE = Path(__file__).resolve().parents[1]
 #: The code that builds what :func:`inverse_tree` keeps (folders: every module in them), relative to casflex/: its
@@ -96,6 +96,44 @@ def _tree(scene, root: str) -> KinematicTree:
         entry["marker_fit"] = tree.marker_fit
     store_built("inverse", key, entry)
     return tree
+
+
+def osim_scene(path: str | os.PathLike[str]) -> tuple[object, tuple[str, ...]]:
+    """(the planar scene, its warnings) of the OpenSim model file ``path``
+    (:func:`casflex.scene.from_osim.scene_from_osim`: what the scene leaves out of the model), kept on disk by the
+    file's bytes and the path as given (which the warnings name; module docstring): the next run of the same file
+    loads them (1 ms) instead of reading the model (0.04 s) and importing its reader (0.04 s). A file changed while
+    it was read is not kept."""
+    from casflex.codegen import built_key, load_built, store_built
+
+    source = os.fspath(path)
+    digest = _file_digest(source)
+    key = built_key(source, digest or "", _source_digest(), _version())
+    entry = load_built("osim", key) if digest is not None else None
+    if _scene_entry(entry):
+        return entry
+    from casflex.scene.from_osim import scene_from_osim
+
+    made = scene_from_osim(source)
+    out = (made.scene, tuple(made.warnings))
+    if digest is not None and _file_digest(source) == digest:
+        store_built("osim", key, out)
+    return out
+
+
+def _file_digest(path: str) -> str | None:
+    """SHA-256 of the file's bytes, or None where it cannot be read (the reader then says why)."""
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    except OSError:
+        return None
+
+
+def _scene_entry(entry: object) -> bool:
+    from casflex.scene import Scene
+
+    return (isinstance(entry, tuple) and len(entry) == 2 and isinstance(entry[0], Scene)
+            and isinstance(entry[1], tuple) and all(isinstance(w, str) for w in entry[1]))
 
 
 def _whole(entry: object) -> bool:

@@ -27,6 +27,7 @@ import numpy as np
 
 from casflex import interrupt
 from casflex.inverse.tree import KinematicTree
+from casflex.lab.checks import median
 
 try:  # np.linalg.solve's own kernel: its wrapper (an errstate each call) costs as much as the 14 x 14 solve
     from numpy.linalg._umath_linalg import solve1 as _solve1
@@ -302,7 +303,7 @@ def fit_markers(tree: KinematicTree, t: np.ndarray, y: np.ndarray, *, max_gap: f
     if max_misfit is not None:  # the first frame with a marker too far is named, as the fit meets it
         for i in np.flatnonzero(ok & (np.nan_to_num(misfit, nan=0.0) > max_misfit).any(axis=1)):
             _check_misfit(misfit[i], t[i], max_misfit, labels, source, _held(Z[i], bounds, tree))
-    report = [f"marker fit: {n} frames, misfit RMS median {1e3 * np.nanmedian(rms):.1f} mm, "
+    report = [f"marker fit: {n} frames, misfit RMS median {1e3 * median(rms, skip_nan=True):.1f} mm, "
               f"max {1e3 * np.nanmax(rms):.1f} mm"] if np.isfinite(rms).any() else []
     report += _by_marker(misfit, labels, tree) + _at_limits(Z, bounds, tree)
     Z = _fill(t, Z, max_gap, report, source)

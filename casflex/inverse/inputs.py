@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from casflex.inverse.built import inverse_scene, inverse_tree
+from casflex.inverse.built import inverse_scene, inverse_tree, osim_scene
 from casflex.inverse.options import Bands, Filter, Fit, Flexible, Trial
 from casflex.inverse.plates import Plate, model_weight, plate_from_table
 from casflex.inverse.tree import KinematicTree
@@ -120,7 +120,7 @@ def _external_loads(grf, plates) -> tuple[object, dict | str]:
     if grf is None or isinstance(grf, LabTable) or not os.fspath(grf).lower().endswith(".xml"):
         return grf, plates if isinstance(plates, str) else dict(plates or {})
     from casflex.lab.setups import read_external_loads
-    from casflex.scene.from_osim import node_name
+    from casflex.scene.items import node_name
 
     ext = read_external_loads(grf)  # plates given with it: refused by Trial
     prefixes = {body: ext.prefix(body) for body in ext.plates}
@@ -299,10 +299,8 @@ def _osim_scene(scene) -> tuple[object, list[str]]:
 
     if isinstance(scene, Scene) or not os.fspath(scene).lower().endswith(".osim"):
         return scene, []
-    from casflex.scene.from_osim import scene_from_osim
-
-    made = scene_from_osim(scene)
-    return made.scene, list(made.warnings)
+    made, warnings = osim_scene(scene)  # read once: the next run of the same file takes it from the cache
+    return made, list(warnings)
 
 
 def weighted(scene, tasks) -> tuple[object, list[str]]:

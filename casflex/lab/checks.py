@@ -45,7 +45,7 @@ if TYPE_CHECKING:
 
 __all__ = ["LAB_EXTENT", "MAX_MARKER_SPEED", "MAX_PLATE_FORCE", "MAX_FREE_MOMENT", "MAX_MISFIT", "STATIC_SPREAD",
            "SCALE_FACTOR", "MAX_ANGLE", "RANGE_MARGIN", "TINY_ANGLES", "MAX_MOMENT_PER_KG", "check_markers",
-           "check_plate_values", "check_static", "check_scale", "check_coordinates", "check_moments"]
+           "check_plate_values", "check_static", "check_scale", "check_coordinates", "check_moments", "median"]
 
 LAB_EXTENT = 100.0
 MAX_MARKER_SPEED = 50.0
@@ -147,6 +147,21 @@ def check_static(lab: LabMarkers, labels: Sequence[str]) -> None:
                          f"limit is {1e3 * STATIC_SPREAD:.0f} mm)")
 
 
+def median(values, *, skip_nan: bool = False) -> float:
+    """``np.median`` of the values (flattened; ``skip_nan``: ``np.nanmedian``), the same number to the last bit
+    (the middle one, or the two middle ones' sum over 2), NaN for none, without numpy's median's check for NaN, which
+    imports numpy.ma: 0.02 s of an inverse command's start."""
+    a = np.asarray(values, dtype=float).ravel()
+    if skip_nan:
+        a = a[~np.isnan(a)]
+    elif np.isnan(a).any():
+        return math.nan
+    if not a.size:
+        return math.nan
+    s, k = np.sort(a), a.size // 2
+    return float(s[k]) if a.size % 2 else float((s[k - 1] + s[k]) / 2)
+
+
 def _median_ratio(seg: np.ndarray, scene_xy: np.ndarray, trial_xy: np.ndarray) -> float:
     """The median, over pairs of markers on one segment and the frames, of trial over scene distance (1: none)."""
     ratios = []
@@ -159,7 +174,7 @@ def _median_ratio(seg: np.ndarray, scene_xy: np.ndarray, trial_xy: np.ndarray) -
         d = np.sqrt(((trial_xy[:, a] - trial_xy[:, b]) ** 2).sum(axis=2))  # (n, pairs)
         ratios.append((d / d0)[np.isfinite(d)])
     every = np.concatenate(ratios) if ratios else np.zeros(0)
-    return float(np.median(every)) if every.size else 1.0
+    return median(every) if every.size else 1.0
 
 
 def check_scale(source: str, units: str, scene_xy: np.ndarray, trial_xy: np.ndarray, segment: Sequence[int]) -> None:

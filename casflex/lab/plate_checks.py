@@ -44,6 +44,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from casflex.lab.checks import median
+
 __all__ = [
     "scene_mass",
     "MAX_PULL",
@@ -131,7 +133,7 @@ def _spike(where: str, t: np.ndarray, force3: np.ndarray, weight: float) -> None
         if f.size < 3:
             return
         loaded = f[f > _LOADED]
-        level = max(weight, float(np.median(loaded)) if loaded.size else 0.0)
+        level = max(weight, median(loaded) if loaded.size else 0.0)
         if not level > 0:
             return
         above = f[1:-1] - np.maximum(f[:-2], f[2:])
@@ -194,7 +196,7 @@ def check_plate_foot(
     F, x = force[stance], node_xy[stance]
     about = moment[stance] - (x[:, 0] * F[:, 1] - x[:, 1] * F[:, 0])
     d = np.abs(about) / np.linalg.norm(F, axis=1)
-    mid = float(np.median(d))
+    mid = median(d)
     if mid > MAX_COP_DISTANCE:
         ts = t[stance]
         raise ValueError(

@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import math
 import os
-import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -42,6 +41,7 @@ import numpy as np
 
 from casflex.scene.coordinates import Coordinate
 from casflex.scene.functions import Clamped, Linear, Multiplier, SimmSpline
+from casflex.scene.items import node_name
 from casflex.scene.markers import Marker
 from casflex.scene.muscles import Muscle, PathPoint, Wrap
 from casflex.scene.osim import OsimJoint, OsimModel, axis_rotation, read_osim
@@ -81,12 +81,6 @@ class OsimScene:
     #: origin (3,) m in the ground at the default pose; it moves with the parent; where OpenSim reports a reaction
     #: on the parent)
     joint_frames: Mapping[str, tuple[str, str, np.ndarray]] = field(default_factory=dict)
-
-
-def node_name(s: str) -> str:
-    """The scene name of an OpenSim body, joint or marker: its name with '.', ':', '[', ']' and spaces made '_'
-    (casflex's names may not hold them); a body's node is so named."""
-    return re.sub(r"[.:\[\]\s]", "_", s) or "_"
 
 
 class _Builder:

@@ -7,6 +7,7 @@ N, N m, Pa). :mod:`casflex.scene` holds the whole :class:`~casflex.scene.Scene` 
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from typing import Any
 
@@ -76,6 +77,12 @@ def _name(owner: str, field: str, value: Any) -> str:
     if any(c in value for c in ".:[] \t\n"):
         raise SceneError.at(owner, field, f"name {value!r} may not contain '.', ':', '[', ']' or spaces")
     return value
+
+
+def node_name(s: str) -> str:
+    """The scene name of an OpenSim body, joint or marker: its name with '.', ':', '[', ']' and spaces made '_'
+    (casflex's names may not hold them, :func:`_name`); a body's node is so named."""
+    return re.sub(r"[.:\[\]\s]", "_", s) or "_"
 
 
 def _node_pair(owner: str, value: Any) -> tuple[str, str]:
