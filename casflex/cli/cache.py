@@ -1,5 +1,5 @@
-"""``casflex cache``: where the compiled libraries and the built models are kept, how many, how large; ``--clear``
-empties it."""
+"""``casflex cache``: where the compiled libraries and the built entries (:func:`casflex.codegen.store_built`) are kept,
+how many, how large; ``--clear`` empties it."""
 
 from __future__ import annotations
 
@@ -19,8 +19,8 @@ def cmd_cache(args: argparse.Namespace, outputs: Outputs) -> int:
         except FileNotFoundError:  # replaced or removed by another process meanwhile
             pass
     print(f"casflex cache: {cache_dir()} (set CASFLEX_CACHE to move it): {len(entries)} compiled libraries, "
-          f"{len(built)} built model{'' if len(built) == 1 else 's'} (inverse dynamics' models and their functions, "
-          f"one per scene), {size / 2**20:.1f} MiB")
+          f"{len(built)} built {'entry' if len(built) == 1 else 'entries'} (OpenSim models read, inverse dynamics' "
+          f"models and their functions), {size / 2**20:.1f} MiB")
     if args.clear:
         count, freed = clear_cache()
         print(f"  removed {count} files ({freed / 2**20:.1f} MiB); the next runs build what they need again")
@@ -29,6 +29,6 @@ def cmd_cache(args: argparse.Namespace, outputs: Outputs) -> int:
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
     s = sub.add_parser("cache", help="show (or --clear) the cache of compiled libraries and built models")
-    s.add_argument("--clear", action="store_true", help="remove every compiled library and built model from the "
+    s.add_argument("--clear", action="store_true", help="remove every compiled library and built entry from the "
                                                         "cache")
     s.set_defaults(func=cmd_cache)
