@@ -197,7 +197,7 @@ def fit_pose(tree: KinematicTree, y: np.ndarray, start: np.ndarray | None = None
     f = tree.marker_fit
     if start is None:
         start = _kabsch_start(tree, y, np.array(f(tree.coordinates(tree.model.q0))[0]).ravel())
-    return _solve_frame(f, start, y, w=marker_weights(tree), bounds=coordinate_bounds(tree))
+    return _solve_frame(_MarkerFit(f, tree), start, y, w=marker_weights(tree), bounds=coordinate_bounds(tree))
 
 
 def undecided(tree: KinematicTree, used: np.ndarray) -> list[int]:

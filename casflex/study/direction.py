@@ -135,11 +135,10 @@ def fitted_plane(scene, lab: LabMarkers, vertical: str, root: str | None = None,
     """(plane, report line): of the four horizontal directions, the one in whose plane the scene (calibrated to the
     subject) fits ``frames`` frames of the trial best (their summed misfit; frames spread over those with half the
     markers seen): a running or walking trial on a treadmill, whose mean is no pose the scene's x can be read from."""
+    from casflex.inverse.built import inverse_tree
     from casflex.inverse.fit import fit_pose
-    from casflex.inverse.inputs import inverse_model
-    from casflex.inverse.tree import kinematic_tree
 
-    tree = kinematic_tree(inverse_model(scene, root), root)
+    tree = inverse_tree(scene, root)  # built once for the subject's trials (casflex.inverse.built)
     labels = {m.name: m.lab_label for m in tree.model.scene.markers if m.lab_label in lab.labels}
     seen = np.flatnonzero(np.isfinite(np.stack([lab.marker(lb) for lb in labels.values()], axis=1)).all(axis=2)
                           .sum(axis=1) >= max(1, len(labels) // 2))
