@@ -16,6 +16,12 @@ written (a first run of each, not counted, as an installed package has it); the 
 finished process) and the ratios of the best and the median of the pairs' ratios; and, fitted over the trials,
 each tool's time as fixed + per second of trial, whose ratio the long trials' ratio tends to. OpenSim runs in its
 own interpreter: ``OPENSIM_PYTHON`` (a Python with OpenSim 4.6, the peers extra), else this one if it has OpenSim.
+
+casflex runs with its own new ``CASFLEX_CACHE`` (a folder of the run's): the untimed first run reads the model and
+builds its functions and keeps them there (casflex.inverse.built), so the timed runs find them, as a user's runs
+after the first do (the warm cache: the columns "casflex"); the cold column times the same command with that
+cache emptied before each run (a user's first run of a model, or after ``casflex cache --clear``), in turn with
+the others.
 """
 
 from __future__ import annotations
@@ -74,13 +80,26 @@ def _trials(tmp: Path, quick: bool) -> list[tuple[str, Trial, dict]]:
     return out + [("Hamner run, 5 s", five, files), ("Hamner run, 10 s", run, files)]
 
 
+#: casflex's cache during the run (module docstring): set by :func:`run`, emptied before each cold run
+_CACHE: dict[str, Path] = {}
+#: the name in :func:`side_by_side`'s commands of the run on an emptied cache
+COLD = "casflex, cold cache"
+
+
 def _env() -> dict:
-    """The commands' environment: bytecode written and read, as an installed package's (a first run writes it)."""
-    return {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    """The commands' environment: bytecode written and read, as an installed package's (a first run writes it);
+    casflex's cache the run's own (module docstring)."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    if "dir" in _CACHE:
+        env["CASFLEX_CACHE"] = str(_CACHE["dir"])
+    return env
 
 
-def _timed(cmd: list[str], cwd: Path) -> tuple[float, float]:
-    """(wall, CPU) s of one run of ``cmd`` in a fresh process; CPU: its user + system time as the OS counts it."""
+def _timed(cmd: list[str], cwd: Path, cold: bool = False) -> tuple[float, float]:
+    """(wall, CPU) s of one run of ``cmd`` in a fresh process; CPU: its user + system time as the OS counts it.
+    ``cold``: casflex's cache emptied first (what the run then builds is kept for the next warm one)."""
+    if cold and "dir" in _CACHE:
+        shutil.rmtree(_CACHE["dir"], ignore_errors=True)
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
     done = subprocess.run(cmd, capture_output=True, text=True, cwd=cwd, env=_env())
@@ -98,15 +117,16 @@ def side_by_side(cmds: dict[str, list[str]], cwd: Path, repeat: int) -> dict:
     runs: dict[str, list[tuple[float, float]]] = {name: [] for name in cmds}
     for _ in range(repeat):
         for name, cmd in cmds.items():
-            runs[name].append(_timed(cmd, cwd))
+            runs[name].append(_timed(cmd, cwd, cold=name == COLD))
     return runs
 
 
 def _summary(label: str, trial: Trial, runs: dict) -> dict:
-    cf, osim = np.array(runs["casflex"]), np.array(runs["opensim"])
+    cf, osim, cold = np.array(runs["casflex"]), np.array(runs["opensim"]), np.array(runs[COLD])
     t0, t1 = trial.window
     return {"trial": label, "seconds": t1 - t0, "frames": int(round((t1 - t0) * trial.rate)) + 1,
             "cf_wall": float(cf[:, 0].min()), "cf_cpu": float(cf[:, 1].min()),
+            "cold_wall": float(cold[:, 0].min()), "cold_cpu": float(cold[:, 1].min()),
             "os_wall": float(osim[:, 0].min()), "os_cpu": float(osim[:, 1].min()),
             "ratio_pairs": float(statistics.median(cf[:, 0] / osim[:, 0])), "runs": runs}
 
@@ -116,6 +136,7 @@ def run(quick: bool, repeat: int) -> dict:
     out: dict = {"trials": [], "opensim": opensim is not None}
     with tempfile.TemporaryDirectory(prefix="casflex-bench-opensim-") as tmp:
         tmp = Path(tmp)
+        _CACHE["dir"] = tmp / "cache"  # the run's own (module docstring), gone with the folder
         help_runs = side_by_side({"help": [sys.executable, "-m", "casflex", "inverse", "--help"],
                                   "python": [sys.executable, "-c", "pass"]}, tmp, 3 * repeat)
         out["help"] = {k: [min(v[0] for v in r), min(v[1] for v in r)] for k, r in help_runs.items()}
@@ -125,8 +146,10 @@ def run(quick: bool, repeat: int) -> dict:
             work = tmp / f"out_{len(out['trials'])}"
             work.mkdir()
             cmds = commands(files, trial, work, sys.executable, opensim)
+            cmds[COLD] = cmds["casflex"]  # the same command, its cache emptied first (_timed)
             out["trials"].append(_summary(label, trial, side_by_side(cmds, work, repeat)))
             shutil.rmtree(work, ignore_errors=True)
+    _CACHE.clear()
     return out
 
 
@@ -179,16 +202,22 @@ def _page(banner: Banner, res: dict, repeat: int) -> tuple[str, list[str]]:
              "Each command a fresh process, the two tools in turn (A B A B), best of "
              f"{repeat} runs each after an untimed first one; CPU = user + system time of the process. The machine "
              "is shared (the load average above): the ratios, taken side by side in one run, are the figures to "
-             "read; the absolute times move with the load. What each trial is: studies/bench_opensim_trials.py.", ""]
+             "read; the absolute times move with the load. What each trial is: studies/bench_opensim_trials.py.", "",
+             "casflex's columns are its runs as a user sees them after the first: the model read and its functions "
+             "built once, by the untimed first run, and kept in its cache (`CASFLEX_CACHE`, a new folder of this "
+             "run's); the cold column is the same command with that cache emptied before each run (a first run of "
+             "a model), timed in turn with the others.", ""]
     if not res["opensim"]:
         lines += ["Skipped the trials: no Python with OpenSim (set OPENSIM_PYTHON, or install the peers extra).", ""]
     else:
         lines += ["## The trials", "", *table(
-            ["trial", "length (s)", "frames", "casflex wall (s)", "casflex CPU (s)", "OpenSim wall (s)",
-             "OpenSim CPU (s)", "ratio, wall (best)", "ratio, wall (median of pairs)", "ratio, CPU"],
+            ["trial", "length (s)", "frames", "casflex wall (s)", "casflex CPU (s)", "casflex CPU, cold cache (s)",
+             "OpenSim wall (s)", "OpenSim CPU (s)", "ratio, wall (best)", "ratio, wall (median of pairs)",
+             "ratio, CPU"],
             [[r["trial"], f"{r['seconds']:.2f}", r["frames"], f"{r['cf_wall']:.2f}", f"{r['cf_cpu']:.2f}",
+              f"{r['cold_cpu']:.2f}" if "cold_cpu" in r else "-",
               f"{r['os_wall']:.2f}", f"{r['os_cpu']:.2f}", f"{r['cf_wall'] / r['os_wall']:.2f}",
-              f"{r['ratio_pairs']:.2f}", f"{r['cf_cpu'] / r['os_cpu']:.2f}"] for r in rows], "lrrrrrrrrr"), ""]
+              f"{r['ratio_pairs']:.2f}", f"{r['cf_cpu'] / r['os_cpu']:.2f}"] for r in rows], "lrrrrrrrrrr"), ""]
         same = _same_model(rows)
         if len(same) > 1:
             (cf0, cf1), (os0, os1) = _trend(same, "cf_cpu"), _trend(same, "os_cpu")
