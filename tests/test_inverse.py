@@ -284,3 +284,22 @@ def test_the_fast_marker_fit_gives_the_numbers_of_the_plain_one():
                                                                                       bounds)
             assert np.array_equal(want[0], got[0]) and np.array_equal(want[1], got[1]), (i, bounds[1])
         assert got[0][k] == hi2[k]  # the held path was taken
+
+
+def test_the_loads_are_each_frame_s_whatever_the_chunks_and_blocks(monkeypatch):
+    """The frames are evaluated in chunks of fixed sizes (each chunk's Function built once per tree, whatever the
+    trial's length) and blocks: every frame's numbers are its own, to the last bit."""
+    from casflex.inverse import rigid
+
+    model, tree = _tree()
+    t = np.linspace(0.0, 1.0, 613)  # 512 + 64 + 4 x 8 + 5 x 1
+    motion = _swing(t, moving_root=True)
+    whole = rigid_loads(tree, t, *motion, model.p_nominal)
+    monkeypatch.setattr(rigid, "BLOCK", 100)  # blocks of 64 + 4 x 8 + 4 x 1, the last 13 frames
+    blocks = rigid_loads(tree, t, *motion, model.p_nominal)
+    for i in (0, 17, 511, 512, 575, 600, 612):  # chunks of 1 frame: each frame alone
+        one = rigid_loads(tree, t[i:i + 1], *(m[i:i + 1] for m in motion), model.p_nominal)
+        for k in whole:
+            assert np.array_equal(one[k][0], whole[k][i]) and np.array_equal(one[k][0], blocks[k][i]), (k, i)
+    built = {key for key in tree._built if key[0] == "inverse_frame"}
+    assert built == {("inverse_frame",), *(("inverse_frame", s) for s in rigid.SIZES)}  # not one per length

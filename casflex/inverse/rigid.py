@@ -59,9 +59,12 @@ def _frame_function(tree: KinematicTree) -> ca.Function:
                        ["z", "zd", "zdd", "t", "p"], ["q", "qd", "qdd", "r", "B"])
 
 
-#: Frames solved at once: the mapped frame Function and the per-frame matrices of a block stay small (1e6
-#: frames at once took 6 GB), and the map is built once for all blocks.
+#: Frames solved at once: the per-frame matrices of a block stay small (1e6 frames at once took 6 GB).
 BLOCK = 4096
+#: The frame Function is evaluated mapped over chunks of these many frames (a block's frames by the largest that
+#: fit, then the smaller): each chunk's Function is built once per tree (:meth:`KinematicTree.built`), whatever the
+#: trials' lengths (a map over a trial's own length, densified, took 6 ms to build at 61 frames and 62 at 512).
+SIZES = (512, 64, 8, 1)
 
 
 def rigid_loads(tree: KinematicTree, t: np.ndarray, z: np.ndarray, zd: np.ndarray, zdd: np.ndarray,
@@ -73,28 +76,35 @@ def rigid_loads(tree: KinematicTree, t: np.ndarray, z: np.ndarray, zd: np.ndarra
     if m.n_con != m.n_dof - tree.n:
         raise ValueError(f"the scene has {m.n_dof} dofs and {m.n_con} joint rows: with the {tree.n} coordinates they "
                          "do not decide its motion; flexible segments need the flexible inverse")
-    size = min(BLOCK, t.size)
-    f = BufferedCall(tree.built(("inverse_frame", size), lambda: _dense(
-        tree.built(("inverse_frame",), lambda: _frame_function(tree)).map(size))))
-    parts = [_block(tree, f, size, t[s:s + size], z[s:s + size], zd[s:s + size], zdd[s:s + size], p, external)
-             for s in range(0, t.size, size)]
+    calls: dict[int, BufferedCall] = {}  # this call's buffers of the tree's chunk Functions
+    parts = [_block(tree, calls, t[s:s + BLOCK], z[s:s + BLOCK], zd[s:s + BLOCK], zdd[s:s + BLOCK], p, external)
+             for s in range(0, t.size, BLOCK)]
     q, qd, qdd, lam = (np.concatenate([pt[i] for pt in parts]) for i in range(4))
     out = loads_by_name(tree, q, qd, lam, p)
     return {"q": q, "qd": qd, "qdd": qdd, "lam": lam, **out}
 
 
-def _block(tree: KinematicTree, f: BufferedCall, size: int, t, z, zd, zdd, p, external):
-    """(q, qd, qdd, lam) of up to ``size`` frames by the mapped frame Function ``f`` (the last block padded
-    with its last frame)."""
+def _chunk(tree: KinematicTree, calls: dict[int, BufferedCall], size: int) -> BufferedCall:
+    """The frame Function mapped over ``size`` frames, densified, on numpy memory (its buffer ``calls``')."""
+    if size not in calls:
+        frame = tree.built(("inverse_frame",), lambda: _frame_function(tree))
+        calls[size] = BufferedCall(tree.built(("inverse_frame", size), lambda: _dense(frame.map(size))))
+    return calls[size]
+
+
+def _block(tree: KinematicTree, calls: dict[int, BufferedCall], t, z, zd, zdd, p, external):
+    """(q, qd, qdd, lam) of the frames t (k,) by the frame Function mapped over chunks of :data:`SIZES` frames."""
     m, k = tree.model, t.size
-    pad = np.r_[np.arange(k), np.full(size - k, k - 1)]
     # a matrix (rows, size) of the mapped Function is column-major: a C-ordered (size, rows) array, frame by frame
-    args = [np.ascontiguousarray(a, dtype=float) for a in (z[pad], zd[pad], zdd[pad], t[pad], np.tile(p, (size, 1)))]
-    q, qd, qdd, r = (np.empty((size, m.n_dof)) for _ in range(4))
-    Bt = np.empty((size, m.n_dof, m.n_con))  # B (n_con, size n_dof) column-major: each frame's B transposed
-    f(args, [q, qd, qdd, r, Bt])
-    q, qd, qdd, r = q[:k], qd[:k], qdd[:k], r[:k]
-    B = Bt.transpose(0, 2, 1)[:k]
+    args = [np.ascontiguousarray(a, dtype=float) for a in (z, zd, zdd, t, np.tile(p, (k, 1)))]
+    q, qd, qdd, r = (np.empty((k, m.n_dof)) for _ in range(4))
+    Bt = np.empty((k, m.n_dof, m.n_con))  # B (n_con, size n_dof) column-major: each frame's B transposed
+    s = 0
+    for size in SIZES:
+        while k - s >= size:
+            _chunk(tree, calls, size)([a[s:s + size] for a in args], [o[s:s + size] for o in (q, qd, qdd, r, Bt)])
+            s += size
+    B = Bt.transpose(0, 2, 1)
     if external is not None:
         r = r - external(t, q)
     A = np.concatenate([B, np.broadcast_to(driver_rows(tree), (k, tree.n, m.n_dof))], axis=1)
