@@ -337,9 +337,17 @@ BUILT_SUFFIX, _BUILT_HEAD = ".built", b"casflex-built 1 "
 def built_key(*parts: str) -> str:
     """The cache key (24 hex digits) of an entry built from ``parts`` (the content it is made of and the code
     that makes it, the caller's) and of what else its build and its loading depend on: CasADi's, numpy's and
-    Python's versions and the machine."""
-    where = (ca.__version__, np.__version__, sys.version, platform.machine())
+    Python's versions, the machine and its C library (whose cos and sin gave the constants a build folds in)."""
+    where = (ca.__version__, np.__version__, sys.version, platform.machine(), _libc())
     return hashlib.sha256("\n".join((*parts, *where)).encode()).hexdigest()[:24]
+
+
+@functools.lru_cache(maxsize=1)
+def _libc() -> str:
+    try:
+        return os.confstr("CS_GNU_LIBC_VERSION") or ""
+    except (AttributeError, ValueError, OSError):  # not a GNU system: its platform string
+        return platform.platform()
 
 
 def _built_path(stem: str, key: str) -> Path:

@@ -242,3 +242,30 @@ def test_an_opensim_model_is_read_again_when_its_file_changes(cache, tmp_path):
     (tmp_path / "other" / "model.osim").write_text(path.read_text())  # the same bytes elsewhere: its own entry
     osim_scene(tmp_path / "other" / "model.osim")
     assert len([p for p in codegen.built_entries() if p.name.startswith("osim-")]) == 3
+
+
+_WRITER = """
+import sys
+from casflex import codegen
+value = {"payload": bytes(range(256)) * 4000, "n": 1}
+for _ in range(int(sys.argv[1])):
+    codegen.store_built("inverse", "c" * 24, value)
+"""
+
+
+def test_two_processes_writing_one_entry_leave_it_whole_for_its_readers(cache):
+    import subprocess
+    import sys
+
+    value = {"payload": bytes(range(256)) * 4000, "n": 1}  # 1 MB: a write takes a while
+    env = dict(os.environ, CASFLEX_CACHE=str(cache))
+    writers = [subprocess.Popen([sys.executable, "-c", _WRITER, "40"], env=env) for _ in range(2)]
+    seen = []
+    while any(w.poll() is None for w in writers):
+        got = codegen.load_built("inverse", "c" * 24)  # None: no entry yet, or a damaged (half-written) one
+        seen.append("none" if got is None else "value" if got == value else "other")
+    assert [w.wait() for w in writers] == [0, 0]
+    first = seen.index("value") if "value" in seen else len(seen)
+    assert "other" not in seen and "none" not in seen[first:]  # once there, always whole
+    assert codegen.load_built("inverse", "c" * 24) == value
+    assert sorted(p.name for p in cache.iterdir()) == [f"inverse-{'c' * 24}.built"]  # no temporary file left
