@@ -1,5 +1,6 @@
 """What inverse dynamics builds from the scene alone, built once: the model it drives (the scene without its root's
-supports), the model's kinematic tree and the tree's CasADi Functions (``forward``, ``rates``, ``marker_fit``).
+supports), the model's kinematic tree and the tree's CasADi Functions (``forward``, ``marker_fit``, and what other
+modules build of them).
 
 Built from a scene, they cost about 0.1 s of a study's 0.3 s trial on Hamner's 1 s run (the functions' symbolic
 build; the model's assembly more in a new process), the same for every trial of a subject. So:
@@ -9,12 +10,14 @@ build; the model's assembly more in a new process), the same for every trial of 
   model, and the runs of one subject (a study worker's trials, their calibrated scene read again each time)
   share one; a tree shared so keeps what other modules build from it (:meth:`KinematicTree.built
   <casflex.inverse.tree.KinematicTree.built>`: the marker fit mapped over frames, the rigid inverse's frame);
-- across processes, the model and the three Functions are kept in ``$CASFLEX_CACHE``
+- across processes, the model and the :data:`FUNCTIONS` are kept in ``$CASFLEX_CACHE``
   (:func:`casflex.codegen.store_built`; ``casflex cache`` counts them, ``--clear`` removes them) under a key of the
   scene's content (its ``repr``: every field, the floats to the last bit), the root, the source of the modules that
   build them (:data:`SOURCES`: a changed line of casflex's model or elements is a new entry) and casflex's, CasADi's,
-  numpy's and Python's versions (:func:`casflex.codegen.built_key`). Loading the entry (0.01 s) replaces the
-  model's assembly and the functions' build (0.15 s in a new process); a damaged entry is built again and replaced.
+  numpy's and Python's versions, the machine and its C library (:func:`casflex.codegen.built_key`). Loading the
+  entry (0.02 s) replaces the model's assembly and the functions' build (0.13-0.15 s in a new process); a damaged
+  entry is built again and replaced. An OpenSim model's planar scene is kept so too, by its file's bytes
+  (:func:`osim_scene`).
 
 The Functions loaded are CasADi's own serialisation of those built: the same operations on the same constants, the
 same numbers to the last bit (tests/test_inverse_built.py).
@@ -36,8 +39,10 @@ _PACKAGE = Path(__file__).resolve().parents[1]
 #: The code that builds what :func:`inverse_tree` keeps (folders: every module in them), relative to casflex/: its
 #: bytes are part of the cache key.
 SOURCES = ("model", "elements", "scene", "inverse/tree.py", "inverse/built.py")
-#: The tree's Functions kept on disk with the model (``marker_fit`` where the scene has markers).
-FUNCTIONS = ("forward", "rates", "marker_fit")
+#: The tree's Functions kept on disk with the model (``marker_fit`` where the scene has markers): those that load
+#: faster than they build (Hamner's planar model: forward 1.6 ms against 44, marker_fit 6.4 against 36; rates 6.3
+#: against 4.1 ms and the maps over frames, 31 ms against 1.4 at 64 frames, are built).
+FUNCTIONS = ("forward", "marker_fit")
 
 
 def inverse_scene(scene, root: str | None = None):
@@ -91,7 +96,7 @@ def _tree(scene, root: str) -> KinematicTree:
     from casflex.model import assemble
 
     tree = kinematic_tree(assemble(scene), root)
-    entry = {"model": tree.model, "forward": tree.forward, "rates": tree.rates}
+    entry = {"model": tree.model, "forward": tree.forward}
     if scene.markers:
         entry["marker_fit"] = tree.marker_fit
     store_built("inverse", key, entry)
@@ -143,7 +148,7 @@ def _whole(entry: object) -> bool:
     from casflex.model import Model
 
     return (isinstance(entry, dict) and isinstance(entry.get("model"), Model)
-            and all(isinstance(entry.get(n), ca.Function) for n in ("forward", "rates"))
+            and isinstance(entry.get("forward"), ca.Function)
             and (not entry["model"].scene.markers or isinstance(entry.get("marker_fit"), ca.Function)))
 
 
