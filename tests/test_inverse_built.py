@@ -269,3 +269,14 @@ def test_two_processes_writing_one_entry_leave_it_whole_for_its_readers(cache):
     assert "other" not in seen and "none" not in seen[first:]  # once there, always whole
     assert codegen.load_built("inverse", "c" * 24) == value
     assert sorted(p.name for p in cache.iterdir()) == [f"inverse-{'c' * 24}.built"]  # no temporary file left
+
+
+def test_without_the_code_s_sources_nothing_is_kept_on_disk(cache, monkeypatch):
+    monkeypatch.setattr(built_mod, "_PACKAGE", cache.parent / "no casflex here")  # an installation without sources
+    built_mod._source_digest.cache_clear()
+    try:
+        scene = loads_scene(pendulum())
+        assert np.array_equal(_loads(inverse_tree(scene)), _loads(kinematic_tree(inverse_model(scene))))
+        assert codegen.built_entries() == []
+    finally:
+        built_mod._source_digest.cache_clear()

@@ -85,8 +85,9 @@ def _tree(scene, root: str) -> KinematicTree:
     """The tree of ``scene`` (its root's supports off) from the disk cache, else built and stored there."""
     from casflex.codegen import built_key, load_built, store_built
 
-    key = built_key(repr(scene), root, _source_digest(), _version())
-    entry = load_built("inverse", key)
+    code = _source_digest()
+    key = built_key(repr(scene), root, code or "", _version())
+    entry = load_built("inverse", key) if code else None
     if _whole(entry) and entry["model"].scene == scene:  # the scene compared too: a key's collision builds anew
         tree = kinematic_tree(entry["model"], root)
         for name in FUNCTIONS:
@@ -99,7 +100,8 @@ def _tree(scene, root: str) -> KinematicTree:
     entry = {"model": tree.model, "forward": tree.forward}
     if scene.markers:
         entry["marker_fit"] = tree.marker_fit
-    store_built("inverse", key, entry)
+    if code:
+        store_built("inverse", key, entry)
     return tree
 
 
@@ -112,16 +114,16 @@ def osim_scene(path: str | os.PathLike[str]) -> tuple[object, tuple[str, ...]]:
     from casflex.codegen import built_key, load_built, store_built
 
     source = os.fspath(path)
-    digest = _file_digest(source)
-    key = built_key(source, digest or "", _source_digest(), _version())
-    entry = load_built("osim", key) if digest is not None else None
+    digest, code = _file_digest(source), _source_digest()
+    key = built_key(source, digest or "", code or "", _version())
+    entry = load_built("osim", key) if digest and code else None
     if _scene_entry(entry):
         return entry
     from casflex.scene.from_osim import scene_from_osim
 
     made = scene_from_osim(source)
     out = (made.scene, tuple(made.warnings))
-    if digest is not None and _file_digest(source) == digest:
+    if digest and code and _file_digest(source) == digest:
         store_built("osim", key, out)
     return out
 
@@ -159,14 +161,20 @@ def _version() -> str:
 
 
 @functools.lru_cache(maxsize=1)
-def _source_digest() -> str:
-    """SHA-256 of the :data:`SOURCES`' bytes (each file's name with them): 1 ms, once per process."""
+def _source_digest() -> str | None:
+    """SHA-256 of the :data:`SOURCES`' bytes (each file's name with them): 1 ms, once per process; None where they
+    cannot be read (an installation without its sources: nothing is then kept on disk, the code being unknown)."""
     h = hashlib.sha256()
-    for part in SOURCES:
-        path = _PACKAGE / part
-        files = [path] if path.suffix == ".py" else sorted(
-            Path(e.path) for e in os.scandir(path) if e.name.endswith(".py"))
-        for f in files:
-            h.update(f"{f.relative_to(_PACKAGE).as_posix()}\n".encode())
-            h.update(f.read_bytes())
+    try:
+        for part in SOURCES:
+            path = _PACKAGE / part
+            files = [path] if path.suffix == ".py" else sorted(
+                Path(e.path) for e in os.scandir(path) if e.name.endswith(".py"))
+            if not files:
+                return None
+            for f in files:
+                h.update(f"{f.relative_to(_PACKAGE).as_posix()}\n".encode())
+                h.update(f.read_bytes())
+    except OSError:
+        return None
     return h.hexdigest()
