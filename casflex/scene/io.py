@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import math
 import os
-import tomllib
 from dataclasses import MISSING, fields
 from pathlib import Path
 from typing import Any
@@ -97,6 +96,8 @@ def load_scene(source: str | os.PathLike[str]) -> Scene:
 def loads_scene(text: str, *, source: str = "<string>", base: str | os.PathLike[str] | None = None) -> Scene:
     """Parse a scene from TOML text; ``base``: the folder that data files it names are relative to
     (default: the working folder; :mod:`casflex.scene.files`)."""
+    import tomllib  # here: its import compiles its patterns (0.01 s), which a command on an OpenSim model never needs
+
     from casflex.scene.files import resolve_file_inputs
 
     try:
