@@ -332,6 +332,10 @@ def compiled_nlpsol(name: str, plugin: str, nlp: dict, opts: dict, *, interprete
 #: A built entry's file: its first line is this and the SHA-256 of the rest (the pickled value), which is read
 #: only when they agree: a truncated or damaged file is rebuilt, never fed to the unpickler.
 BUILT_SUFFIX, _BUILT_HEAD = ".built", b"casflex-built 1 "
+#: The built entries the cache keeps: beyond, a store removes those used longest ago (their files' times, renewed
+#: by each load): entries of scenes no longer run and of casflex's earlier code (a new key) do not pile up
+#: (Hamner's model's is 131 kB; 256 of them 34 MB).
+MAX_BUILT = 256
 
 
 def built_key(*parts: str) -> str:
@@ -369,10 +373,13 @@ def load_built(stem: str, key: str) -> object | None:
         log.info("%s: damaged (its checksum disagrees): built again", path)
         return None
     try:
-        return pickle.loads(zlib.decompress(body))
+        value = pickle.loads(zlib.decompress(body))
     except Exception as exc:  # noqa: BLE001 - any failure to read the entry back means: build it again
         log.info("%s: not read (%s): built again", path, exc)
         return None
+    with contextlib.suppress(OSError):  # used now: the last the cache's bound removes (a read-only cache: kept as is)
+        os.utime(path)
+    return value
 
 
 def store_built(stem: str, key: str, value: object) -> None:
@@ -390,12 +397,25 @@ def store_built(stem: str, key: str, value: object) -> None:
             fh.write(_BUILT_HEAD + hashlib.sha256(body).hexdigest().encode() + b"\n" + body)
         os.replace(tmp, path)
         tmp = None
+        _bound_built(path.parent)
     except OSError as exc:
         log.info("%s: not written (%s): the next run builds it again", path, exc)
     finally:
         if tmp is not None:
             with contextlib.suppress(OSError):
                 os.unlink(tmp)
+
+
+def _bound_built(d: Path) -> None:
+    """The built entries in ``d`` beyond :data:`MAX_BUILT` removed, those used longest ago first (another process
+    reading one meanwhile finds none and builds it again)."""
+    entries = []
+    for f in d.glob(f"*{BUILT_SUFFIX}"):
+        with contextlib.suppress(OSError):
+            entries.append((f.stat().st_mtime, f))
+    for _, f in sorted(entries)[:max(0, len(entries) - MAX_BUILT)]:
+        with contextlib.suppress(OSError):
+            f.unlink()
 
 
 def cache_entries() -> list[Path]:

@@ -280,3 +280,15 @@ def test_without_the_code_s_sources_nothing_is_kept_on_disk(cache, monkeypatch):
         assert codegen.built_entries() == []
     finally:
         built_mod._source_digest.cache_clear()
+
+
+def test_the_cache_keeps_the_entries_used_last_up_to_its_bound(cache, monkeypatch):
+    monkeypatch.setattr(codegen, "MAX_BUILT", 3)
+    for k, key in enumerate("abc"):
+        codegen.store_built("inverse", key * 24, {"n": k})
+    for k, path in enumerate(codegen.built_entries()):  # a, b, c: written long ago, in that order
+        os.utime(path, (1.0 + k, 1.0 + k))
+    assert codegen.load_built("inverse", "a" * 24) == {"n": 0}  # the first written, used now
+    codegen.store_built("inverse", "d" * 24, {"n": 3})  # one too many: the one used longest ago goes, b
+    assert codegen.load_built("inverse", "b" * 24) is None
+    assert [codegen.load_built("inverse", k * 24)["n"] for k in "acd"] == [0, 2, 3]
