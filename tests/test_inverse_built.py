@@ -292,3 +292,18 @@ def test_the_cache_keeps_the_entries_used_last_up_to_its_bound(cache, monkeypatc
     codegen.store_built("inverse", "d" * 24, {"n": 3})  # one too many: the one used longest ago goes, b
     assert codegen.load_built("inverse", "b" * 24) is None
     assert [codegen.load_built("inverse", k * 24)["n"] for k in "acd"] == [0, 2, 3]
+
+
+def test_an_opensim_path_that_is_no_file_is_the_reader_s_to_refuse(cache, tmp_path):
+    from casflex.inverse.built import osim_scene
+
+    folder = tmp_path / "model.osim"
+    folder.mkdir()
+    pipe = tmp_path / "pipe.osim"
+    os.mkfifo(pipe)  # opened for its bytes, it would wait for a writer for ever
+    for path in (folder, tmp_path / "missing.osim"):
+        with pytest.raises(ValueError, match=f"^{path}: "):
+            osim_scene(path)
+    from casflex.inverse.built import _file_digest
+
+    assert _file_digest(str(pipe)) is None and codegen.built_entries() == []

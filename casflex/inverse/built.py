@@ -29,6 +29,7 @@ import dataclasses
 import functools
 import hashlib
 import os
+import stat
 from pathlib import Path
 
 from casflex.inverse.tree import KinematicTree, kinematic_tree
@@ -128,12 +129,25 @@ def osim_scene(path: str | os.PathLike[str]) -> tuple[object, tuple[str, ...]]:
     return out
 
 
+#: bytes: a model file larger than this is read each time, not kept (a whole-body model with its muscles is a few
+#: MiB; hashing a huge one would only delay the reader's refusal)
+MAX_KEPT_FILE = 64 * 2**20
+
+
 def _file_digest(path: str) -> str | None:
-    """SHA-256 of the file's bytes, or None where it cannot be read (the reader then says why)."""
+    """SHA-256 of the file's bytes, read in pieces; None (nothing kept) where it cannot be read, is no regular file
+    (a pipe would block) or is larger than :data:`MAX_KEPT_FILE`: the reader then reads it, as without the cache."""
+    h = hashlib.sha256()
     try:
-        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+        st = os.stat(path)
+        if not stat.S_ISREG(st.st_mode) or st.st_size > MAX_KEPT_FILE:
+            return None
+        with open(path, "rb") as fh:
+            while block := fh.read(1 << 20):
+                h.update(block)
     except OSError:
         return None
+    return h.hexdigest()
 
 
 def _scene_entry(entry: object) -> bool:
