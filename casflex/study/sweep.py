@@ -207,8 +207,8 @@ def _call(fn: Callable[..., dict] | bytes, kwargs: dict) -> dict:
 
 def run_sweep(runs: Iterable[Run], record: str | os.PathLike[str], *, scheduler: str | None = None,
               n_workers: int | None = None, retry_failed: bool = False,
-              progress: bool | Callable[[int, int, str], None] = True, session: Session | None = None
-              ) -> SweepResult:
+              progress: bool | Callable[[int, int, str], None] = True, session: Session | None = None,
+              on_record: Callable[[str, dict, bool], None] | None = None) -> SweepResult:
     """Run every run without a valid record on dask.distributed; return all recorded results.
 
     ``n_workers``: the local cluster's processes (default 2, at most :func:`max_workers`; ValueError beyond,
@@ -217,6 +217,9 @@ def run_sweep(runs: Iterable[Run], record: str | os.PathLike[str], *, scheduler:
     keeps every finished record and returns with ``interrupted=True``; calling again with the same ``record``
     resumes. ``session``: the :class:`Session` to run on (its cluster started at its first run, and kept for the
     caller's next sweep; ``scheduler`` and ``n_workers`` are then the session's), else one of the sweep's own.
+    ``on_record(key, record, executed)``: called with each run's record as it is known, those recorded before
+    (``executed`` False) before any run, each run's as soon as it is written (in this process, while the others
+    run: the caller's work on it overlaps theirs).
     """
     t0 = time.perf_counter()
     runs = list(runs)
@@ -237,6 +240,8 @@ def run_sweep(runs: Iterable[Run], record: str | os.PathLike[str], *, scheduler:
             reused.append(r.key)
         else:
             todo.append(r)
+    for key in reused if on_record else ():
+        on_record(key, results[key], False)
     report = progress if callable(progress) else (_text_progress if progress else None)
     executed: list[str] = []
     interrupted = False
@@ -258,6 +263,8 @@ def run_sweep(runs: Iterable[Run], record: str | os.PathLike[str], *, scheduler:
             executed.append(key)
             if report:
                 report(len(reused) + len(executed), len(runs), key)
+            if on_record:
+                on_record(key, out, True)
 
         try:
             for revival in range(REVIVALS + 1):
