@@ -448,15 +448,16 @@ def _execute(client: Any, runs: list[Run], blobs: dict, finished: Callable[[str,
     for i in range(0, len(runs), batch):
         futures = {client.submit(_call, blobs[r.fn], r.kwargs, key=f"casflex-{r.key}-{os.getpid()}-{last}",
                                  pure=False): r.key for r in runs[i:i + batch]}
-        # as_completed hands over each future as it finishes: O(1) a run, where distributed.wait over all the
-        # pending ones in turn cost O(runs) a run on the client's event loop (the local scheduler's thread)
-        pending, alone_since, checked = as_completed(futures), None, time.monotonic()
+        # as_completed hands over each future as it finishes, where distributed.wait waited anew on every pending
+        # future at each finished run (O(runs) a run, small beside dask's own work per task at 200 runs)
+        pending, alone_since, checked, handled = as_completed(futures), None, time.monotonic(), set()
         try:
             while not pending.is_empty():
                 done = pending.next_batch(block=False)
                 if not done:
                     time.sleep(_WAKE_S)
                 for fut in done:
+                    handled.add(fut)
                     key = futures[fut]
                     try:
                         out = fut.result()
@@ -479,7 +480,7 @@ def _execute(client: Any, runs: list[Run], blobs: dict, finished: Callable[[str,
                 elif alone_since is None:
                     alone_since = time.monotonic()
                 elif time.monotonic() - alone_since > NO_WORKERS_S:
-                    left = [f for f in futures if not f.done()]
+                    left = [f for f in futures if f not in handled]
                     client.cancel(left)
                     raise _NoWorkers({futures[f] for f in left} | {r.key for r in runs[i + batch:]} | killed)
         except KeyboardInterrupt:
