@@ -661,3 +661,34 @@ def test_a_trial_with_marked_events_and_no_window_is_cut_to_their_span():
     assert (t0, t1) == (pytest.approx(2.7 - EVENTS_MARGIN), pytest.approx(lab.t[-1]))  # clipped to the trial
     assert report[0].startswith("window: 2.600-3.396 s, the marked gait events' span +- 0.1 s")
     assert _window(dataclasses.replace(trial, window=(2.6, 3.0)), marked) == (2.6, 3.0, [])
+
+
+def test_a_subject_s_figure_is_drawn_while_the_other_subjects_trials_run(folder, monkeypatch):
+    # the 11 figures of a 200-trial study were drawn after its last record (34 s of 127 on one worker): each
+    # subject's is drawn here as soon as its trials are recorded, the same PNG as drawn from the whole study's plan
+    from casflex.cli import study as command
+    from casflex.study import runner
+
+    calls, returned = [], []
+    run_study, draw_figure = runner.run_study, command.draw_figure
+
+    def run(*args, **kwargs):
+        out = run_study(*args, **kwargs)
+        returned.append(True)
+        return out
+
+    monkeypatch.setattr(command, "draw_figure", lambda plan: calls.append((plan["title"], bool(returned))) or
+                        draw_figure(plan))
+    monkeypatch.setattr(runner, "run_study", run)
+    out = folder / "out"
+    assert main(["study", str(write(folder)), "--out", str(out), "--quiet"]) == 0
+    # each figure drawn once, the subjects' before the runs ended, the group's after
+    assert sorted(calls) == [("hamner running: s02", False), ("hamner running: s02_again", False),
+                             ("hamner running: the subjects' means", True)], calls
+    study = load_study(str(folder / "study.toml"))
+    whole = run_study(study, out / "record", progress=False)  # every record reused: the whole study's plans
+    plans, _ = command._figure_plans(runner.per_kg(whole, study), study.name)
+    again = folder / "again"
+    again.mkdir()
+    command._draw_figures(plans, again, {})
+    assert all((again / name).read_bytes() == (out / name).read_bytes() for name in plans)

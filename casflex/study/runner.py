@@ -369,9 +369,36 @@ def _calibration_kwargs(study: Study, s) -> dict:
     return kwargs | {k: v for k, v in extra.items() if v is not None}
 
 
+def _subject_hook(study: Study, plan: dict, calibrated: dict, on_subject: Callable[[str, dict], None]
+                  ) -> Callable[[str, dict, bool], None]:
+    """The sweep's ``on_record`` that calls ``on_subject`` (:func:`run_study`) once a subject's trials are all
+    recorded, one of them in this sweep."""
+    of = {r.key: subject for (subject, _), r in plan.items()}
+    left = {subject: {r.key for (s, _), r in plan.items() if s == subject} for subject in {s for s, _ in plan}}
+    got: dict[str, dict] = {}
+    ran: set[str] = set()
+
+    def on_record(key: str, rec: dict, executed: bool) -> None:
+        subject = of.get(key)
+        if subject is None:
+            return
+        got[key] = rec
+        left[subject].discard(key)
+        if executed:
+            ran.add(subject)
+        if left[subject] or subject not in ran:
+            return
+        trials = {(s, t): TrialRecord.from_json(got[plan[(s, t)].key])
+                  for s, t in ((s.name, t.name) for s, t in study.trials()) if s == subject and (s, t) in plan
+                  and "error" not in got[plan[(s, t)].key]}
+        on_subject(subject, {"subjects": calibrated, "trials": trials})
+
+    return on_record
+
+
 def run_study(study: Study, record: str | Path, *, scheduler: str | None = None, n_workers: int | None = None,
               progress: Callable[[int, int, str], None] | bool = True, retry_failed: bool = False,
-              session=None) -> dict:
+              session=None, on_subject: Callable[[str, dict], None] | None = None) -> dict:
     """Calibrate every subject and run every trial (module docstring), resuming from ``record``; returns
     {"subjects": {name: its Calibration}, "trials": {(subject, trial): its TrialRecord}, "failed": [(what, why)],
     "interrupted": bool, "records": {(subject, trial): its record's path}}. A failed calibration fails its
@@ -379,7 +406,10 @@ def run_study(study: Study, record: str | Path, *, scheduler: str | None = None,
     worker lost, a file since mended), where by default its record stands until its inputs change. ``session``:
     the :class:`casflex.study.sweep.Session` to run on (kept open for the caller: the figures'), else one of its
     own (``scheduler``, ``n_workers``): one cluster for the calibrations, the trials and the muscles, started only
-    where a run is to be done."""
+    where a run is to be done. ``on_subject(name, {"subjects": every Calibration, "trials": its trials' records})``:
+    called as soon as the last of a subject's trials run in this call is recorded, while the others run (the
+    figures': :mod:`casflex.cli.study`); its trials' records as :func:`run_study` returns them (in the study's
+    order, the failed left out); not called for a subject none of whose trials is run."""
     from casflex.study.sweep import Session, run_sweep
 
     if session is None:
@@ -398,7 +428,8 @@ def run_study(study: Study, record: str | Path, *, scheduler: str | None = None,
     interrupted = cal.interrupted
     if not interrupted:
         plan = _plan(study, calibrated)
-        done = run_sweep(list(plan.values()), record, **sweep)
+        hook = _subject_hook(study, plan, calibrated, on_subject) if on_subject is not None else None
+        done = run_sweep(list(plan.values()), record, **sweep, on_record=hook)
         interrupted = done.interrupted
         for s, t in study.trials():
             rec = done.results.get(plan[(s.name, t.name)].key) if (s.name, t.name) in plan else None

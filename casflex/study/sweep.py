@@ -48,6 +48,7 @@ NO_WORKERS_S = 60.0
 #: how many times a sweep's own LocalCluster is started anew after it lost every worker
 REVIVALS = 3
 _POLL_S = 2.0  # s between checks of the workers while no run finishes
+_WAKE_S = 0.02  # s between looks for finished runs while none is (a record written at most this late)
 #: the field of a record that names its run (its key): a record is taken only under its own name
 IDENTITY = "run"
 #: bytes of memory allowed a local worker: one peaked at 0.10 GB resident in tests/test_study.py's study (Hamner's
@@ -162,7 +163,35 @@ def _ship_by_value(fns: Iterable[Callable[..., Any]]) -> dict[Callable[..., Any]
     return out
 
 
+#: bytes: a worker's heap keeps up to this much freed memory for its next run, and serves blocks up to half of it from
+#: the heap (:func:`worker_malloc`)
+WORKER_HEAP_KEEP = 64 << 20
+
+
+@functools.lru_cache(maxsize=1)
+def worker_malloc() -> bool:
+    """Undo, once per worker process, what dask's nanny sets for its workers' memory (``MALLOC_TRIM_THRESHOLD_=65536``
+    in distributed.nanny.pre-spawn-environ): under it glibc returns every freed block above 64 KiB to the system
+    and no longer raises its mmap threshold (128 KiB) as a run's arrays grow, so that each of a trial's many
+    temporary arrays is mapped anew and faulted in page by page: 10 500 page faults and +35 % of CPU per trial
+    of the 200-trial study (docs/tables/bench_study200.md), against 200 here. Blocks up to half of
+    :data:`WORKER_HEAP_KEEP` from the heap, up to that much kept: the worker's memory reported to its nanny is
+    at most that much above what it uses. The allocator's policy only: the numbers computed are the same. True
+    where applied (glibc; elsewhere nothing is done)."""
+    import ctypes
+    import ctypes.util
+
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):  # not glibc (macOS, Windows, musl without mallopt): its own policy stands
+        return False
+    m_trim_threshold, m_mmap_threshold = -1, -3  # glibc's malloc.h
+    return bool(mallopt(m_mmap_threshold, WORKER_HEAP_KEEP // 2)) & bool(mallopt(m_trim_threshold, WORKER_HEAP_KEEP))
+
+
 def _call(fn: Callable[..., dict] | bytes, kwargs: dict) -> dict:
+    worker_malloc()
     try:
         if isinstance(fn, bytes):
             import cloudpickle
@@ -178,8 +207,8 @@ def _call(fn: Callable[..., dict] | bytes, kwargs: dict) -> dict:
 
 def run_sweep(runs: Iterable[Run], record: str | os.PathLike[str], *, scheduler: str | None = None,
               n_workers: int | None = None, retry_failed: bool = False,
-              progress: bool | Callable[[int, int, str], None] = True, session: Session | None = None
-              ) -> SweepResult:
+              progress: bool | Callable[[int, int, str], None] = True, session: Session | None = None,
+              on_record: Callable[[str, dict, bool], None] | None = None) -> SweepResult:
     """Run every run without a valid record on dask.distributed; return all recorded results.
 
     ``n_workers``: the local cluster's processes (default 2, at most :func:`max_workers`; ValueError beyond,
@@ -188,6 +217,9 @@ def run_sweep(runs: Iterable[Run], record: str | os.PathLike[str], *, scheduler:
     keeps every finished record and returns with ``interrupted=True``; calling again with the same ``record``
     resumes. ``session``: the :class:`Session` to run on (its cluster started at its first run, and kept for the
     caller's next sweep; ``scheduler`` and ``n_workers`` are then the session's), else one of the sweep's own.
+    ``on_record(key, record, executed)``: called with each run's record as it is known, those recorded before
+    (``executed`` False) before any run, each run's as soon as it is written (in this process, while the others
+    run: the caller's work on it overlaps theirs).
     """
     t0 = time.perf_counter()
     runs = list(runs)
@@ -208,6 +240,8 @@ def run_sweep(runs: Iterable[Run], record: str | os.PathLike[str], *, scheduler:
             reused.append(r.key)
         else:
             todo.append(r)
+    for key in reused if on_record else ():
+        on_record(key, results[key], False)
     report = progress if callable(progress) else (_text_progress if progress else None)
     executed: list[str] = []
     interrupted = False
@@ -229,6 +263,8 @@ def run_sweep(runs: Iterable[Run], record: str | os.PathLike[str], *, scheduler:
             executed.append(key)
             if report:
                 report(len(reused) + len(executed), len(runs), key)
+            if on_record:
+                on_record(key, out, True)
 
         try:
             for revival in range(REVIVALS + 1):
@@ -347,6 +383,15 @@ class Session:
         self.close()
 
 
+#: dask's settings for the sweeps' own local clusters, whose scheduler and nannies share the sweep's process: their
+#: periodic looks less often (each server's event-loop tick, every 20 ms by default; the nannies' look at their
+#: workers' memory, every 100 ms: a nanny still stops a worker past its memory within a second; the machine's
+#: load), and no statistical profile of the workers' runs (their stack looked at every 10 ms, for the dashboard).
+#: An idle two-worker cluster cost this process 9.2 % of a core and each worker 6.5 %; with these 2.0 and 0.6 %.
+QUIET_CLUSTER = {"distributed.worker.memory.monitor-interval": "1s", "distributed.admin.system-monitor.interval": "2s",
+                 "distributed.worker.profile.enabled": False, "distributed.admin.tick.interval": "500ms"}
+
+
 def _local_cluster(n_workers: int, started: list) -> Any:
     """A LocalCluster of ``n_workers`` single-threaded processes, appended to ``started`` before this returns.
 
@@ -362,9 +407,10 @@ def _local_cluster(n_workers: int, started: list) -> Any:
     preload = [preload] if isinstance(preload, str) else list(preload)
     argv = dask.config.get("distributed.worker.preload-argv") or []
     argv = [argv] * len(preload) if argv and isinstance(argv[0], str) else list(argv) or [[]] * len(preload)
-    started.append(LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=":0",
-                                silence_logs=40, preload=[*preload, "casflex.study._worker"],
-                                preload_argv=[*argv, []]))
+    with dask.config.set(QUIET_CLUSTER):
+        started.append(LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
+                                    dashboard_address=":0", silence_logs=40,
+                                    preload=[*preload, "casflex.study._worker"], preload_argv=[*argv, []]))
     return started[-1]
 
 
@@ -395,22 +441,23 @@ def _execute(client: Any, runs: list[Run], blobs: dict, finished: Callable[[str,
     completes; returns the keys of runs whose worker died (recorded as failed only when
     ``last``). Raises _NoWorkers when the scheduler has had no worker for NO_WORKERS_S while
     runs were pending. Ctrl-C cancels what is pending and propagates."""
-    from distributed import wait
+    from distributed import as_completed
     from distributed.scheduler import KilledWorker
 
     killed: set[str] = set()
     for i in range(0, len(runs), batch):
         futures = {client.submit(_call, blobs[r.fn], r.kwargs, key=f"casflex-{r.key}-{os.getpid()}-{last}",
                                  pure=False): r.key for r in runs[i:i + batch]}
-        pending, alone_since = set(futures), None
+        # as_completed hands over each future as it finishes, where distributed.wait waited anew on every pending
+        # future at each finished run (O(runs) a run, small beside dask's own work per task at 200 runs)
+        pending, alone_since, checked, handled = as_completed(futures), None, time.monotonic(), set()
         try:
-            while pending:
-                try:
-                    done = wait(pending, timeout=_POLL_S, return_when="FIRST_COMPLETED").done
-                except TimeoutError:
-                    done = set()
+            while not pending.is_empty():
+                done = pending.next_batch(block=False)
+                if not done:
+                    time.sleep(_WAKE_S)
                 for fut in done:
-                    pending.discard(fut)
+                    handled.add(fut)
                     key = futures[fut]
                     try:
                         out = fut.result()
@@ -422,14 +469,20 @@ def _execute(client: Any, runs: list[Run], blobs: dict, finished: Callable[[str,
                     except Exception as exc:  # noqa: BLE001 - any other failure of the run is its result
                         out = {"error": f"{type(exc).__name__}: {exc}"}
                     finished(key, out)
+                if done:
+                    alone_since, checked = None, time.monotonic()
+                elif time.monotonic() - checked < _POLL_S:
+                    continue
+                checked = time.monotonic()
                 # dask waits for workers forever: a cluster that lost them all would hang the sweep
-                if done or client.nthreads():
+                if client.nthreads():
                     alone_since = None
                 elif alone_since is None:
                     alone_since = time.monotonic()
                 elif time.monotonic() - alone_since > NO_WORKERS_S:
-                    client.cancel(list(pending))
-                    raise _NoWorkers({futures[f] for f in pending} | {r.key for r in runs[i + batch:]} | killed)
+                    left = [f for f in futures if f not in handled]
+                    client.cancel(left)
+                    raise _NoWorkers({futures[f] for f in left} | {r.key for r in runs[i + batch:]} | killed)
         except KeyboardInterrupt:
             client.cancel(list(futures))
             raise
