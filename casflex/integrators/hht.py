@@ -70,6 +70,7 @@ from casflex.integrators.hht_pieces import (
     step_blocks,
 )
 from casflex.integrators.modified import ModifiedNewton
+from casflex.integrators.newton_band import band_newton
 from casflex.model import Model
 
 __all__ = ["HHT", "check_newton", "hht_coefficients", "roundoff_tolerance", "ROUNDOFF_FLOOR", "NEWTON"]
@@ -89,6 +90,12 @@ def check_newton(tol: float, max_iter: int, newton: str) -> None:
         raise ValueError(f"max_iter: expected an integer >= 1, got {max_iter!r}")
     if newton not in NEWTON:
         raise ValueError(f"newton: expected one of {NEWTON}, got {newton!r}")
+
+
+def _inline(f: ca.Function, *args: ca.MX) -> list[ca.MX]:
+    """``f(*args)``, an MX Function's graph written into the caller's: each Function boundary in the
+    generated code copies the outputs, 10 % of a step's instructions at 32 elements per bar (twobar)."""
+    return f.call(list(args), f.is_a("MXFunction"), False)
 
 
 def expand_by_default(model: Model) -> bool:
@@ -168,9 +175,21 @@ class HHT:
         factor, apply = (band.factor.expand(), band.apply.expand()) if expand else (band.factor, band.apply)
         object.__setattr__(self, "_band", band.bandwidth)
         z0, P = ca.MX.sym("z0", resid.nnz_in(0)), ca.MX.sym("prm", resid.nnz_in(1))
-        J0, G0 = jac(z0, P)
-        F0 = factor(J0.nz[:])
-        update = ca.Function("hht_update", [z0, P], [z0 - apply(F0, G0), ca.norm_inf(G0), F0], ["z0", "prm"],
+        if expand:
+            J0, G0 = jac(z0, P)
+            F0 = factor(J0.nz[:])
+            dz0 = apply(F0, G0)
+            F, r = ca.MX.sym("F", band.size), ca.MX.sym("r", resid.nnz_out(0))
+            fast = {"rhs": ca.Function("hht_rhs", [z0, P], [resid(z0, P)] * 2, ["z", "prm"], ["G", "r"]),
+                    "band_update": ca.Function("hht_band_update", [F, r, P], [apply(F, r)], ["F", "r", "prm"], ["dz"]),
+                    "finish_step": finish}
+        else:  # the same update, assembled straight into the band storage (newton_band.py)
+            fast = band_newton(m, lay, self.alpha, self.tol, prepare.nnz_out(1), band)
+            first, cols, rows, G0, r0, cols_s = _inline(fast.pop("jacobian_band"), z0, P)
+            piv, U, L = band.factor_parts(first, cols, rows)
+            F0 = ca.vertcat(piv, ca.vec(U), ca.vec(L))
+            dz0 = band.solve_parts(piv, U, L, r0) / cols_s
+        update = ca.Function("hht_update", [z0, P], [z0 - dz0, ca.norm_inf(G0), F0], ["z0", "prm"],
                              ["z1", "g0", "F"])
         newton = ca.rootfinder("hht_newton", "fast_newton", resid, {
             "abstol": self.tol, "abstolStep": 1e-2 * self.tol**0.5, "max_iter": max(self.max_iter - 1, 1),
@@ -183,7 +202,7 @@ class HHT:
         self._fn.update(prepare=prepare, residual=resid, jacobian=jac, finish=finish,
                         scale=scale_function(m, self.alpha), initial=initial_function(m, lay), post=post,
                         update=update, newton=newton, band_factor=factor, band_apply=apply,
-                        more=ca.Function.conditional("hht_converge", [keep], more))
+                        more=ca.Function.conditional("hht_converge", [keep], more), **fast)
         self._fn["sensitivity"] = step_blocks(m, lay, self.alpha, prepare, resid, finish, expand)
         self._fn["step"] = self._step_with_derivative()
 
@@ -193,9 +212,9 @@ class HHT:
         m = self.model
         n, nx, npar = m.n_dof, self.nx, m.n_p
         x0, t0, p, h, d = self._fn["prepare"].mx_in()
-        zg, pr = self._fn["prepare"](x0, t0, p, h, d)
-        z1, g0, _ = self._fn["update"](zg, pr)
-        xa, ra, done = self._fn["finish"](z1, pr)
+        zg, pr = _inline(self._fn["prepare"], x0, t0, p, h, d)
+        z1, g0, _ = _inline(self._fn["update"], zg, pr)
+        xa, ra, done = _inline(self._fn["finish_step"], z1, pr)
         X1, res1 = self._fn["more"](1 - done, ca.if_else(ra < g0, z1, zg), pr, xa, ra)
         OX1, ORES = ca.MX.sym("out_x1", nx), ca.MX.sym("out_res")
         G_z, G_w, X_z, X_w = self._fn["sensitivity"](x0, t0, p, h, d, OX1)
@@ -266,7 +285,7 @@ class HHT:
         updates can be counted: (x1, final scaled residual, Newton updates)."""
         z0, prm = self._fn["prepare"](x0, t0, p, h, d)
         z1, g0, _ = self._fn["update"](z0, prm)
-        x1, res, done = self._fn["finish"](z1, prm)
+        x1, res, done = self._fn["finish_step"](z1, prm)
         updates = 1
         if not bool(done) and self.max_iter > 1:
             z = self._fn["newton"](z1 if float(res) < float(g0) else z0, prm)
