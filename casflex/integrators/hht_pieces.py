@@ -213,8 +213,11 @@ def mapped_hht(m: Model, alpha: float, tangent: bool):
     over its elements, g and c the same for all."""
     def evaluate(k: int, args: list):
         grp = m.groups[k]
-        f = hht_kernel(grp.kind, alpha, m.inertia, tangent)
-        return f.map(f"{f.name()}_{grp.n}", "serial", grp.n, [f.n_in() - 2, f.n_in() - 1], [])(*args)
+        # the padded tangent kernel, which the step's own update maps (newton_band.py): one copy of its code
+        f = hht_kernel(grp.kind, alpha, m.inertia, tangent, tangent)
+        out = f.map(f"{f.name()}_{grp.n}", "serial", grp.n, [f.n_in() - 2, f.n_in() - 1], [])(*args)
+        nd = grp.spec.n_dof
+        return (out[0], ca.reshape(out[1][:nd * nd, :], nd, nd * grp.n)) if tangent else out
     return evaluate
 
 

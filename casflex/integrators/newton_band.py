@@ -30,34 +30,61 @@ from casflex.model import Model
 __all__ = ["band_newton", "band_storage"]
 
 
-def _plain_map(m: Model, alpha: float, tangent: bool):
+def _plain_map(m: Model, alpha: float, tangent: bool, padded: dict | None = None):
     """``evaluate(k, args)`` for :func:`newton_terms`: group k's kernel mapped over its elements, its
-    shared inputs (g, c: the last two) repeated for each."""
+    shared inputs (g, c: the last two) repeated for each by one gather. ``padded``: the kernels give K
+    padded with 0 and 1 (:func:`hht_kernel`), kept in ``padded[k]``; K itself is then a view of it."""
     def evaluate(k: int, args: list):
         grp = m.groups[k]
-        f = hht_kernel(grp.kind, alpha, m.inertia, tangent).map(grp.n, "serial")
-        return f(*args[:-2], *(ca.repmat(a, 1, grp.n) for a in args[-2:]))
+        f = hht_kernel(grp.kind, alpha, m.inertia, tangent, padded is not None).map(grp.n, "serial")
+        out = f(*args[:-2], *(ca.reshape(a[list(range(a.numel())) * grp.n], a.numel(), grp.n) for a in args[-2:]))
+        if padded is None:
+            return out
+        nd = grp.spec.n_dof
+        padded[k] = out[1]
+        return out[0], ca.reshape(out[1][:nd * nd, :], nd, nd * grp.n)
     return evaluate
 
 
-def band_storage(t: dict, band: BandLU) -> list[ca.MX]:
+def _sources(asm, blocks: list, padded: dict, entries: np.ndarray) -> tuple[int, list[tuple[int, int, np.ndarray]]]:
+    """How the band entries ``entries`` (positions in [nz, 0, 1]) are summed from the element matrices:
+    (the group whose padded output the first gather reads, [(depth, group, where in its output or -1)])."""
+    nnz, zero = asm.sparsity.nnz(), asm.offsets[-1]
+    size = [b - a for a, b in zip(asm.offsets[:-1], asm.offsets[1:], strict=True)]
+    base = max(padded, key=lambda g: size[g])
+    terms = []
+    for c, src in enumerate(asm.lists or [[]]):
+        src = np.append(np.asarray(src, dtype=int), [zero, zero])[entries]
+        grp = np.searchsorted(asm.offsets, src, side="right") - 1  # the group of each source (len: none)
+        for g, K in enumerate(blocks):
+            nd2 = int(K.size1()) ** 2 if K is not None else 0
+            loc = src - asm.offsets[g]
+            at = np.where(grp == g, loc // max(nd2, 1) * (nd2 + 2 * (g in padded)) + loc % max(nd2, 1), -1)
+            if c == 0 and g == base:  # its own 0 and 1 (after element 0's K) stand for no source and the padding
+                at = np.where(grp == g, at, nd2)
+                at[entries == nnz + 1] = nd2 + 1
+            terms.append((c, g, at))
+    return base, terms
+
+
+def band_storage(t: dict, band: BandLU, padded: dict) -> list[ca.MX]:
     """The assembled element matrices (unscaled, ``t["blocks"]`` of :func:`newton_terms`) in ``band``'s
-    storage (its three parts, :attr:`BandLU.entries`): one gather of the element matrices straight into
-    the band's layout, then the second (third, ...) element that adds to an entry added where there is one."""
+    storage (its three parts, :attr:`BandLU.entries`): one gather straight into the band's layout from
+    the largest group's padded kernel output, then each other contribution (a second element at a
+    shared node, another group) added where there is one."""
     asm, blocks = t["asm"], t["blocks"]
-    blocks = [ca.vec(K) if K is not None else ca.DM.zeros(b - a)
-              for K, a, b in zip(blocks, asm.offsets[:-1], asm.offsets[1:], strict=True)]
-    zero = asm.offsets[-1]  # where the element matrices' sources hold 0 (sum_lists), then 1 for the padding
-    ext = ca.vertcat(*blocks, ca.DM([0.0, 1.0]))
-    lists = [np.append(np.asarray(s, dtype=int), [zero, zero + 1 if c == 0 else zero])
-             for c, s in enumerate(asm.lists or [[]])]
     parts = []
     for entries in band.entries:
-        out = ext[lists[0][entries].tolist()]
-        for sources in lists[1:]:
-            at = np.flatnonzero(sources[entries] != zero)
-            if at.size:
-                out[at.tolist()] = out[at.tolist()] + ext[sources[entries][at].tolist()]
+        base, terms = _sources(asm, blocks, padded, entries)
+        out = None
+        for c, g, at in terms:
+            if c == 0 and g == base:
+                out = padded[g][at.tolist()]
+                continue
+            where = np.flatnonzero(at >= 0)
+            if where.size:
+                src = padded[g] if g in padded else ca.vec(blocks[g])
+                out[where.tolist()] = out[where.tolist()] + src[at[where].tolist()]
         parts.append(out)
     return parts
 
@@ -71,9 +98,10 @@ def band_newton(m: Model, lay: Layout, alpha: float, tol: float, n_prm: int,
     from A's packed factors F (as :attr:`BandLU.factor` packs them); ``hht_finish_band(z, prm) -> (x1, res, done)``, as
     ``hht_finish`` (:func:`~casflex.integrators.hht_pieces.newton_functions`)."""
     z, P = ca.MX.sym("z", len(lay.free) + lay.n_mu), ca.MX.sym("prm", n_prm)
-    t = newton_terms(m, lay, alpha, z, P, None, _plain_map(m, alpha, True))
+    padded = {}
+    t = newton_terms(m, lay, alpha, z, P, None, _plain_map(m, alpha, True, padded))
     cse = {"cse": True}
-    jac = ca.Function("hht_jacobian_band", [z, P], [*band_storage(t, band), t["G_t"], t["rhs_t"], t["cols_s"]],
+    jac = ca.Function("hht_jacobian_band", [z, P], [*band_storage(t, band, padded), t["G_t"], t["rhs_t"], t["cols_s"]],
                       ["z", "prm"], ["first", "cols", "rows", "G", "r", "cols_s"], cse)
     r = _plain_map(m, alpha, False)
     t = newton_terms(m, lay, alpha, z, P, r, lambda k, args: (r(k, args), None))
