@@ -164,8 +164,11 @@ def band_lu(sp: ca.Sparsity, name: str = "band", late: int = 0) -> BandLU:
     entries = (np.array([at(i, j) for j in range(w) for i in range(w)], dtype=int),
                np.array([at(k + 1 + i, k + w) for k in range(N) for i in range(w)], dtype=int),
                np.array([at(k + w, k + 1 + j) for k in range(N) for j in range(b)], dtype=int))
-    acc = (lu.mapaccum(f"{name}_lu_{blocks}", blocks, 1), fwd.mapaccum(f"{name}_forward_{blocks}", blocks, [0], [0]),
-           bwd.mapaccum(f"{name}_backward_{blocks}", blocks, [0], [0]))
+    # one level of calls (not CasADi's tower of 10): the tower copies each level's outputs into the next
+    one = {"base": -1}
+    acc = (lu.mapaccum(f"{name}_lu_{blocks}", blocks, [0], [0], one),
+           fwd.mapaccum(f"{name}_forward_{blocks}", blocks, [0], [0], one),
+           bwd.mapaccum(f"{name}_backward_{blocks}", blocks, [0], [0], one))
     lu = BandLU(None, None, None, b, entries, acc, (perm, inv))
     nz = ca.MX.sym("nz", sp.nnz())
     ext = ca.vertcat(nz, ca.DM([0.0, 1.0]))
