@@ -14,7 +14,7 @@ import numpy as np
 
 from casflex.elements.kernels import hht_kernel, kernel
 from casflex.model import Model
-from casflex.model.assembly import MatrixAssembly, gather, scatter, scatter_at
+from casflex.model.assembly import MatrixAssembly, gather, scatter, scatter_add, scatter_at
 from casflex.model.constraints import gather_at, mapped_joint, split
 
 __all__ = ["Layout", "ROUNDOFF_FLOOR", "newton_updates", "hht_coefficients", "roundoff_tolerance", "prm_layout",
@@ -235,9 +235,9 @@ def newton_terms(m: Model, lay: Layout, alpha: float, z: ca.MX, P: ca.MX, residu
     blocks = []
     for k, grp in enumerate(m.groups):
         if residual is not None:
-            R = R + scatter(residual(k, args[k]), grp, n)
+            R = scatter_add(R, residual(k, args[k]), grp)
         r_e, K_e = tangent(k, args[k])
-        R_t = R_t + scatter(r_e, grp, n)  # the same residual, from the kernel that also gives K
+        R_t = scatter_add(R_t, r_e, grp)  # the same residual, from the kernel that also gives K
         blocks.append(K_e)
     R = R if residual is not None else R_t
     row = -np.ones(n + nmu, dtype=int)
