@@ -185,7 +185,7 @@ class HHT:
                     "finish_step": finish}
         else:  # the same update, assembled straight into the band storage (newton_band.py)
             fast = band_newton(m, lay, self.alpha, self.tol, prepare.nnz_out(1), band)
-            first, cols, rows, G0, r0, cols_s = _inline(fast.pop("jacobian_band"), z0, P)
+            first, cols, rows, G0, r0, cols_s = _inline(fast["jacobian_band"], z0, P)
             piv, U, L = band.factor_parts(first, cols, rows)
             F0 = ca.vertcat(piv, ca.vec(U), ca.vec(L))
             dz0 = band.solve_parts(piv, U, L, r0) / cols_s
