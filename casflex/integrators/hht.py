@@ -24,7 +24,9 @@ dofs. This is the same solution as Newton on (q, lambda) together, with a smalle
 is not a saddle point. The Jacobian is exact (AD; the paper drops the inertia derivatives).
 Residual and Jacobian are assembled from element kernels (:mod:`casflex.elements.kernels`)
 mapped over the element groups, or, for models of a few elements, expanded into flat code
-(``expand``, :func:`expand_by_default`).
+(``expand``, :func:`expand_by_default`). On the mapped path the step's own update assembles the
+Jacobian straight into the banded LU's storage, unscaled (:mod:`casflex.integrators.newton_band`);
+``hht_jacobian`` (the sparse scaled dG/dz) serves CasADi's Newton and the derivatives.
 
 The unknowns and equations are scaled so that one dimensionless tolerance works for any
 stiffness or mass: each momentum row i is divided by d_i * l_i, d_i a rotation-invariant
