@@ -193,12 +193,16 @@ class HHT:
             dz0 = band.solve_parts(piv, U, L, r0) / cols_s
         update = ca.Function("hht_update", [z0, P], [z0 - dz0, ca.norm_inf(G0), F0], ["z0", "prm"],
                              ["z1", "g0", "F"])
-        newton = ca.rootfinder("hht_newton", "fast_newton", resid, {
+        # CasADi's Newton on the step's own residual and end (the same numbers as resid's and finish's, one copy of
+        # the code in a compiled step), with the sparse scaled Jacobian
+        G_step = fast["rhs"](z0, P)[0]
+        newton = ca.rootfinder("hht_newton", "fast_newton", ca.Function("hht_residual_step", [z0, P], [G_step]), {
             "abstol": self.tol, "abstolStep": 1e-2 * self.tol**0.5, "max_iter": max(self.max_iter - 1, 1),
             "error_on_fail": False, "jacobian_function": jac})
         xa, ra = ca.MX.sym("x1", self.nx), ca.MX.sym("res")
         keep = ca.Function("hht_done", [z0, P, xa, ra], [xa, ra])
-        more = ca.Function("hht_more", [z0, P, xa, ra], finish(newton(z0, P), P)[:2] if self.max_iter > 1 else [xa, ra])
+        more = ca.Function("hht_more", [z0, P, xa, ra],
+                           fast["finish_step"](newton(z0, P), P)[:2] if self.max_iter > 1 else [xa, ra])
         post = post_function(m)
         post = post.expand() if expand else post  # per state, and for a few elements flat code is 3x faster
         self._fn.update(prepare=prepare, residual=resid, jacobian=jac, finish=finish,
@@ -292,7 +296,7 @@ class HHT:
         if not bool(done) and self.max_iter > 1:
             z = self._fn["newton"](z1 if float(res) < float(g0) else z0, prm)
             updates += newton_updates(self._fn["newton"])
-            x1, res, _ = self._fn["finish"](z, prm)
+            x1, res, _ = self._fn["finish_step"](z, prm)
         return np.array(x1).ravel(), float(res), updates
 
     def step_residual(self, x0: np.ndarray, x1: np.ndarray, t0: float, p: np.ndarray, h: float,

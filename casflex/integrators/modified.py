@@ -109,5 +109,5 @@ class ModifiedNewton:
         if not bool(db) and self.max_iter > 1:
             z = f["newton"](z2 if float(rb) < float(g) else zs, pr)
             updates += newton_updates(f["newton"])
-            xb, rb, _ = f["finish"](z, pr)
+            xb, rb, _ = f["finish_step"](z, pr)
         return np.array(xb).ravel(), float(rb), np.array(F2).ravel(), updates, True
