@@ -76,10 +76,9 @@ def band_storage(t: dict, band: BandLU, padded: dict) -> list[ca.MX]:
     parts = []
     for entries in band.entries:
         base, terms = _sources(asm, blocks, padded, entries)
-        out = None
+        out = next(padded[g][at.tolist()] for c, g, at in terms if c == 0 and g == base)
         for c, g, at in terms:
             if c == 0 and g == base:
-                out = padded[g][at.tolist()]
                 continue
             where = np.flatnonzero(at >= 0)
             if where.size:
