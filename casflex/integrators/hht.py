@@ -208,7 +208,7 @@ class HHT:
                            fast["finish_step"](newton(z0, P), P)[:2] if self.max_iter > 1 else [xa, ra])
         post = post_function(m)
         post = post.expand() if expand else post  # per state, and for a few elements flat code is 3x faster
-        self._fn.update(prepare=prepare, residual=resid, jacobian=jac, finish=finish,
+        self._fn.update(prepare=prepare, residual=resid, jacobian=jac, finish=finish, flat=expand or not m.groups,
                         scale=scale_function(m, self.alpha), initial=initial_function(m, lay), post=post,
                         update=update, newton=newton, band_factor=factor, band_apply=apply,
                         more=ca.Function.conditional("hht_converge", [keep], more), **fast)
@@ -221,11 +221,13 @@ class HHT:
         m = self.model
         n, nx, npar = m.n_dof, self.nx, m.n_p
         x0, t0, p, h, d = self._fn["prepare"].mx_in()
-        # the pieces stay Functions: written into one, their loops made gcc's value-range passes superlinear
-        # (twobar, 8 el./bar: 43 % more of cc1's instructions for the library)
-        zg, pr = self._fn["prepare"](x0, t0, p, h, d)
-        z1, g0 = self._fn["update_step"](zg, pr)
-        xa, ra, done = self._fn["finish_step"](z1, pr)
+        # on the mapped path the pieces stay Functions: written into one, their loops made gcc's value-range
+        # passes superlinear (twobar, 8 el./bar: 43 % more of cc1's instructions for the library); the flat
+        # path's are small, and written into the step they save their outputs' copies (3 % at 1 el./bar)
+        call = _inline if self._fn["flat"] else (lambda f, *a: f(*a))
+        zg, pr = call(self._fn["prepare"], x0, t0, p, h, d)
+        z1, g0 = call(self._fn["update_step"], zg, pr)
+        xa, ra, done = call(self._fn["finish_step"], z1, pr)
         X1, res1 = self._fn["more"](1 - done, ca.if_else(ra < g0, z1, zg), pr, xa, ra)
         OX1, ORES = ca.MX.sym("out_x1", nx), ca.MX.sym("out_res")
         G_z, G_w, X_z, X_w = self._fn["sensitivity"](x0, t0, p, h, d, OX1)
