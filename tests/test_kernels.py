@@ -68,3 +68,15 @@ def test_model_kernels_agree_with_the_element():
     assert T == pytest.approx(float(ca.Function("T", [qs], [el.kinetic_energy(qs, ca.DM(qd))])(q)), rel=1e-14)
     assert V == pytest.approx(float(ca.Function("V", [qs], [el.strain_energy(qs)])(q)), rel=1e-14)
     assert Vg == pytest.approx(float(ca.Function("Vg", [qs], [el.gravity_energy(qs, G)])(q)), rel=1e-14)
+
+
+@pytest.mark.parametrize("kind", ["beam", "spring", "torsion"])
+def test_padded_hht_kernel_is_the_kernel_with_0_and_1_after_K(kind):
+    """The padded tangent kernel (its map's output holds the constants the band assembly gathers): vec(K), 0, 1,
+    bitwise the unpadded kernel's K and r."""
+    f, fp = hht_kernel(kind, -0.1, "lagrange", True), hht_kernel(kind, -0.1, "lagrange", True, True)
+    rng = np.random.default_rng(5)
+    args = [rng.normal(size=f.size_in(i)) for i in range(f.n_in())]
+    (r, K), (rp, Kp) = f(*args), fp(*args)
+    assert np.array_equal(np.array(rp), np.array(r))
+    assert np.array_equal(np.array(Kp).ravel(), np.concatenate([np.array(K).ravel(order="F"), [0.0, 1.0]]))

@@ -288,14 +288,15 @@ def kernel(kind: str, what: str, form: str = "lagrange") -> ca.Function:
 
 
 @functools.cache
-def hht_kernel(kind: str, alpha: float, form: str, with_tangent: bool) -> ca.Function:
+def hht_kernel(kind: str, alpha: float, form: str, with_tangent: bool, padded: bool = False) -> ca.Function:
     """The element's part of the HHT residual (Eq. 4) and, ``with_tangent``, its exact tangent.
 
     Inputs q, qd, qdd: the element's dofs at t_{n+1}; qa: its dofs at q_alpha = (1 + alpha) q_{n+1}
     - alpha q_n, where the mass is taken (absent at alpha = 0, where qa = q); c = (gamma / (beta h),
     1 / (beta h^2)). Outputs r = M(qa) qdd + (1 + alpha) (h + f_int - g) and K = dr/dq_{n+1} with
     qd, qdd and qa following q_{n+1} through the Newmark relations (dqd/dq = c[0], dqdd/dq = c[1],
-    dqa/dq = 1 + alpha).
+    dqa/dq = 1 + alpha). ``padded``: K as the column vec(K) followed by 0 and 1, so that a map's output holds
+    the constants that an assembly gathers beside the entries (:mod:`casflex.integrators.newton_band`).
     """
     k, q, qd, pr, g, el = _symbols(kind)
     qdd = ca.SX.sym("qdd", k.n_dof)
@@ -312,5 +313,7 @@ def hht_kernel(kind: str, alpha: float, form: str, with_tangent: bool) -> ca.Fun
     tag = f"{kind}_hht_a{round(-alpha * 1e6)}_{form}"  # alpha in the name: one C symbol per variant
     if not with_tangent:
         return ca.Function(f"{tag}_r", ins, [r], names, ["r"], CSE)
-    K = c[1] * M + w * dMa + w * (dh_dq + ca.jacobian(f, q) + c[0] * dh_dqd)
-    return ca.Function(tag, ins, [r, ca.densify(K)], names, ["r", "K"], CSE)
+    K = ca.densify(c[1] * M + w * dMa + w * (dh_dq + ca.jacobian(f, q) + c[0] * dh_dqd))
+    if padded:
+        return ca.Function(f"{tag}_padded", ins, [r, ca.densify(ca.vertcat(ca.vec(K), 0, 1))], names, ["r", "K"], CSE)
+    return ca.Function(tag, ins, [r, K], names, ["r", "K"], CSE)

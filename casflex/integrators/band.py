@@ -18,7 +18,8 @@ did not converge, continues with CasADi's Newton and its QR (pivoting by Househo
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import dataclasses
+from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
@@ -82,18 +83,18 @@ def _blocks(b: int) -> tuple[ca.Function, ca.Function, ca.Function]:
         W = nxt
     lu = ca.Function("band_lu_block", [W0, C, R], [W, ca.vertcat(*piv), ca.horzcat(*ups), ca.horzcat(*lows)],
                      ["W", "C", "R"], ["W_next", "pivots", "U", "L"], cse)
-    y0, rhs, lk = ca.SX.sym("y", b), ca.SX.sym("rhs", K), ca.SX.sym("l", b, K)
-    y, out = y0, []
-    for j in range(K):  # y_k = rhs_k - sum_i L[k, k-1-i] y_{k-1-i}; y holds the last b, newest first
-        out.append(rhs[j] - ca.dot(lk[:, j], y))
-        y = ca.vertcat(out[-1], y[:b - 1]) if b > 1 else out[-1]
-    fwd = ca.Function("band_forward_block", [y0, rhs, lk], [y, ca.vertcat(*out)], cse)
+    a0, rhs, lk = ca.SX.sym("a", b), ca.SX.sym("rhs", K), ca.SX.sym("l", b, K)
+    a, out = a0, []
+    for j in range(K):  # by columns: y_k = rhs_k - a_k, then L's column k (rows k+1 .. k+b) times y_k joins the
+        out.append(rhs[j] - a[0])  # sums a of the next b rows: L is used as the elimination stores it
+        a = (ca.vertcat(a[1:b], 0) if b > 1 else ca.SX.zeros(1)) + lk[:, j] * out[-1]
+    fwd = ca.Function("band_forward_block", [a0, rhs, lk], [a, ca.vertcat(*out)], cse)
     x0, yk, uk, pk = ca.SX.sym("x", b), ca.SX.sym("y", K), ca.SX.sym("u", b, K), ca.SX.sym("piv", K)
     x, out = x0, []
-    for j in range(K):  # backwards: x_k = (y_k - sum_i U[k, k+1+i] x_{k+1+i}) / pivot_k
+    for j in reversed(range(K)):  # backwards: x_k = (y_k - sum_i U[k, k+1+i] x_{k+1+i}) / pivot_k
         out.append((yk[j] - ca.dot(uk[:, j], x)) / pk[j])
         x = ca.vertcat(out[-1], x[:b - 1]) if b > 1 else out[-1]
-    bwd = ca.Function("band_backward_block", [x0, yk, uk, pk], [x, ca.vertcat(*out)], cse)
+    bwd = ca.Function("band_backward_block", [x0, yk, uk, pk], [x, ca.vertcat(*out[::-1])], cse)
     return lu, fwd, bwd
 
 
@@ -105,16 +106,45 @@ class BandLU:
     order), packed in one vector F = [pivots, U, L] (size :attr:`size`); ``apply(F, rhs) -> x``:
     the solution of A x = rhs with them; ``solve(nz, rhs) -> x``: both in one. A factorisation can
     thus be kept and applied again (the modified Newton of :class:`~casflex.integrators.HHT`).
+
+    A caller that assembles the matrix straight into the band storage (:mod:`.newton_band`) builds
+    the same graph with :meth:`factor_parts` and :meth:`solve_parts`: the storage's three parts are
+    ``nz_ext[i]`` for the index lists :attr:`entries` into nz_ext = [nz, 0, 1].
     """
 
     factor: ca.Function
     apply: ca.Function
     solve: ca.Function
     bandwidth: int
+    entries: tuple[np.ndarray, np.ndarray, np.ndarray]  # first window (w x w), columns' (w x N), rows' borders (b x N)
+    _acc: tuple[ca.Function, ca.Function, ca.Function] = field(repr=False)  # elimination, forward (mapped), back
+    _perm: tuple[np.ndarray, np.ndarray] = field(repr=False)  # the order and its inverse
 
     @property
     def size(self) -> int:
         return self.factor.nnz_out(0)
+
+    def factor_parts(self, first: ca.MX, cols: ca.MX, rows: ca.MX) -> tuple[ca.MX, ca.MX, ca.MX]:
+        """(pivots (N,), U (b, N), L (b, N)) of the matrix in band storage (vectors as :attr:`entries` lists them)."""
+        b, w = self.bandwidth, self.bandwidth + 1
+        N = cols.numel() // w
+        _, piv, U, L = self._acc[0](ca.reshape(first, w, w), ca.reshape(cols, w, N), ca.reshape(rows, b, N))
+        return ca.vec(piv), U, L
+
+    def solve_parts(self, piv: ca.MX, U: ca.MX, L: ca.MX, rhs: ca.MX) -> ca.MX:
+        """The solution x of A x = rhs from A's factors (:meth:`factor_parts`)."""
+        b = self.bandwidth
+        N, K = piv.numel(), BLOCK
+        blocks, n = N // K, rhs.numel()
+        perm, inv = self._perm
+        _, y = self._acc[1](ca.MX.zeros(b), ca.reshape(ca.vertcat(rhs[perm.tolist()], ca.MX.zeros(N - n)), K, blocks),
+                            ca.reshape(L, b, N))
+        y = ca.vec(y)
+        # the blocks from the last, each a slice of the factors in their order (a reversed copy cost 10 % more)
+        x, xs = ca.MX.zeros(b), [None] * blocks
+        for j in reversed(range(blocks)):
+            x, xs[j] = self._acc[2](x, y[j * K:(j + 1) * K], U[:, j * K:(j + 1) * K], piv[j * K:(j + 1) * K])
+        return ca.vertcat(*xs)[inv.tolist()]
 
 
 def band_lu(sp: ca.Sparsity, name: str = "band", late: int = 0) -> BandLU:
@@ -132,26 +162,23 @@ def band_lu(sp: ca.Sparsity, name: str = "band", late: int = 0) -> BandLU:
         return (one if i == j else zero) if i >= n or j >= n else where.get((i, j), zero)
 
     lu, fwd, bwd = _blocks(b)
+    entries = (np.array([at(i, j) for j in range(w) for i in range(w)], dtype=int),
+               np.array([at(k + 1 + i, k + w) for k in range(N) for i in range(w)], dtype=int),
+               np.array([at(k + w, k + 1 + j) for k in range(N) for j in range(b)], dtype=int))
+    # one level of calls (not CasADi's tower of 10): the tower copies each level's outputs into the next
+    one = {"base": -1}
+    acc = (lu.mapaccum(f"{name}_lu_{blocks}", blocks, [0], [0], one),
+           fwd.mapaccum(f"{name}_forward_{blocks}", blocks, [0], [0], one),
+           bwd)
+    lu = BandLU(None, None, None, b, entries, acc, (perm, inv))
     nz = ca.MX.sym("nz", sp.nnz())
     ext = ca.vertcat(nz, ca.DM([0.0, 1.0]))
-    first = ca.reshape(ext[[at(i, j) for j in range(w) for i in range(w)]], w, w)
-    borders_c = ca.reshape(ext[[at(k + 1 + i, k + w) for k in range(N) for i in range(w)]], w, N)
-    borders_r = ca.reshape(ext[[at(k + w, k + 1 + j) for k in range(N) for j in range(b)]], b, N)
-    _, piv, U, L = lu.mapaccum(f"{name}_lu_{blocks}", blocks, 1)(first, borders_c, borders_r)
-    factor = ca.Function(f"{name}_factor", [nz], [ca.vertcat(ca.vec(piv), ca.vec(U), ca.vec(L))], ["nz"], ["F"])
-
+    factor = ca.Function(f"{name}_factor", [nz], [ca.vertcat(*map(ca.vec, lu.factor_parts(*(ext[e.tolist()]
+                                                                                         for e in entries))))],
+                         ["nz"], ["F"])
     F, rhs = ca.MX.sym("F", N * (1 + 2 * b)), ca.MX.sym("rhs", n)
-    piv, U, L = F[:N], ca.reshape(F[N:N + b * N], b, N), F[N + b * N:]
-    # L's column k holds the multipliers of rows k+1 .. k+b; row k of the forward sweep needs L[k, k-1-i]
-    L = ca.vertcat(ca.MX.zeros(b * b), L)
-    lk = ca.reshape(L[[(k - 1 - i + b) * b + i for k in range(N) for i in range(b)]], b, N)
-    _, y = fwd.mapaccum(f"{name}_forward_{blocks}", blocks, [0], [0])(
-        ca.MX.zeros(b), ca.reshape(ca.vertcat(rhs[perm.tolist()], ca.MX.zeros(N - n)), K, blocks), lk)
-    y = ca.vec(y)
-    back = list(range(N - 1, -1, -1))
-    _, x = bwd.mapaccum(f"{name}_backward_{blocks}", blocks, [0], [0])(
-        ca.MX.zeros(b), ca.reshape(y[back], K, blocks), U[:, back], ca.reshape(piv[back], K, blocks))
-    apply = ca.Function(f"{name}_apply", [F, rhs], [ca.vec(x)[back][inv.tolist()]], ["F", "rhs"], ["x"])
+    apply = ca.Function(f"{name}_apply", [F, rhs], [lu.solve_parts(F[:N], ca.reshape(F[N:N + b * N], b, N),
+                                                                   F[N + b * N:], rhs)], ["F", "rhs"], ["x"])
     nz2, rhs2 = ca.MX.sym("nz", sp.nnz()), ca.MX.sym("rhs", n)
     solve = ca.Function(f"{name}_solve", [nz2, rhs2], [apply(factor(nz2), rhs2)], ["nz", "rhs"], ["x"])
-    return BandLU(factor, apply, solve, b)
+    return dataclasses.replace(lu, factor=factor, apply=apply, solve=solve)

@@ -24,7 +24,9 @@ dofs. This is the same solution as Newton on (q, lambda) together, with a smalle
 is not a saddle point. The Jacobian is exact (AD; the paper drops the inertia derivatives).
 Residual and Jacobian are assembled from element kernels (:mod:`casflex.elements.kernels`)
 mapped over the element groups, or, for models of a few elements, expanded into flat code
-(``expand``, :func:`expand_by_default`).
+(``expand``, :func:`expand_by_default`). On the mapped path the step's own update assembles the
+Jacobian straight into the banded LU's storage, unscaled (:mod:`casflex.integrators.newton_band`);
+``hht_jacobian`` (the sparse scaled dG/dz) serves CasADi's Newton and the derivatives.
 
 The unknowns and equations are scaled so that one dimensionless tolerance works for any
 stiffness or mass: each momentum row i is divided by d_i * l_i, d_i a rotation-invariant
@@ -70,6 +72,7 @@ from casflex.integrators.hht_pieces import (
     step_blocks,
 )
 from casflex.integrators.modified import ModifiedNewton
+from casflex.integrators.newton_band import band_newton
 from casflex.model import Model
 
 __all__ = ["HHT", "check_newton", "hht_coefficients", "roundoff_tolerance", "ROUNDOFF_FLOOR", "NEWTON"]
@@ -89,6 +92,12 @@ def check_newton(tol: float, max_iter: int, newton: str) -> None:
         raise ValueError(f"max_iter: expected an integer >= 1, got {max_iter!r}")
     if newton not in NEWTON:
         raise ValueError(f"newton: expected one of {NEWTON}, got {newton!r}")
+
+
+def _inline(f: ca.Function, *args: ca.MX) -> list[ca.MX]:
+    """``f(*args)``, an MX Function's graph written into the caller's: each Function boundary in the
+    generated code copies the outputs (the band storage's 2324 numbers at 32 elements per bar, twobar)."""
+    return f.call(list(args), f.is_a("MXFunction"), False)
 
 
 def expand_by_default(model: Model) -> bool:
@@ -168,22 +177,41 @@ class HHT:
         factor, apply = (band.factor.expand(), band.apply.expand()) if expand else (band.factor, band.apply)
         object.__setattr__(self, "_band", band.bandwidth)
         z0, P = ca.MX.sym("z0", resid.nnz_in(0)), ca.MX.sym("prm", resid.nnz_in(1))
-        J0, G0 = jac(z0, P)
-        F0 = factor(J0.nz[:])
-        update = ca.Function("hht_update", [z0, P], [z0 - apply(F0, G0), ca.norm_inf(G0), F0], ["z0", "prm"],
+        if expand or not m.groups:  # (the band path gathers from an element group's kernel output)
+            J0, G0 = jac(z0, P)
+            F0 = factor(J0.nz[:])
+            dz0 = apply(F0, G0)
+            F, r = ca.MX.sym("F", band.size), ca.MX.sym("r", resid.nnz_out(0))
+            fast = {"rhs": ca.Function("hht_rhs", [z0, P], [resid(z0, P)] * 2, ["z", "prm"], ["G", "r"]),
+                    "band_update": ca.Function("hht_band_update", [F, r, P], [apply(F, r)], ["F", "r", "prm"], ["dz"]),
+                    "finish_step": finish}
+        else:  # the same update, assembled straight into the band storage (newton_band.py)
+            fast = band_newton(m, lay, self.alpha, self.tol, prepare.nnz_out(1), band)
+            first, cols, rows, G0, r0, cols_s = _inline(fast["jacobian_band"], z0, P)
+            piv, U, L = band.factor_parts(first, cols, rows)
+            F0 = ca.vertcat(piv, ca.vec(U), ca.vec(L))
+            dz0 = band.solve_parts(piv, U, L, r0) / cols_s
+        update = ca.Function("hht_update", [z0, P], [z0 - dz0, ca.norm_inf(G0), F0], ["z0", "prm"],
                              ["z1", "g0", "F"])
-        newton = ca.rootfinder("hht_newton", "fast_newton", resid, {
+        # the step's: without the factors, which it does not keep (an output is computed and copied when unused)
+        fast["update_step"] = ca.Function("hht_update_step", [z0, P], [z0 - dz0, ca.norm_inf(G0)], ["z0", "prm"],
+                                          ["z1", "g0"])
+        # CasADi's Newton on the step's own residual and end (the same numbers as resid's and finish's, one copy of
+        # the code in a compiled step), with the sparse scaled Jacobian
+        G_step = fast["rhs"](z0, P)[0]
+        newton = ca.rootfinder("hht_newton", "fast_newton", ca.Function("hht_residual_step", [z0, P], [G_step]), {
             "abstol": self.tol, "abstolStep": 1e-2 * self.tol**0.5, "max_iter": max(self.max_iter - 1, 1),
             "error_on_fail": False, "jacobian_function": jac})
         xa, ra = ca.MX.sym("x1", self.nx), ca.MX.sym("res")
         keep = ca.Function("hht_done", [z0, P, xa, ra], [xa, ra])
-        more = ca.Function("hht_more", [z0, P, xa, ra], finish(newton(z0, P), P)[:2] if self.max_iter > 1 else [xa, ra])
+        more = ca.Function("hht_more", [z0, P, xa, ra],
+                           fast["finish_step"](newton(z0, P), P)[:2] if self.max_iter > 1 else [xa, ra])
         post = post_function(m)
         post = post.expand() if expand else post  # per state, and for a few elements flat code is 3x faster
-        self._fn.update(prepare=prepare, residual=resid, jacobian=jac, finish=finish,
+        self._fn.update(prepare=prepare, residual=resid, jacobian=jac, finish=finish, flat=expand or not m.groups,
                         scale=scale_function(m, self.alpha), initial=initial_function(m, lay), post=post,
                         update=update, newton=newton, band_factor=factor, band_apply=apply,
-                        more=ca.Function.conditional("hht_converge", [keep], more))
+                        more=ca.Function.conditional("hht_converge", [keep], more), **fast)
         self._fn["sensitivity"] = step_blocks(m, lay, self.alpha, prepare, resid, finish, expand)
         self._fn["step"] = self._step_with_derivative()
 
@@ -193,9 +221,13 @@ class HHT:
         m = self.model
         n, nx, npar = m.n_dof, self.nx, m.n_p
         x0, t0, p, h, d = self._fn["prepare"].mx_in()
-        zg, pr = self._fn["prepare"](x0, t0, p, h, d)
-        z1, g0, _ = self._fn["update"](zg, pr)
-        xa, ra, done = self._fn["finish"](z1, pr)
+        # on the mapped path the pieces stay Functions: written into one, their loops made gcc's value-range
+        # passes superlinear (twobar, 8 el./bar: 43 % more of cc1's instructions for the library); the flat
+        # path's are small, and written into the step they save their outputs' copies (3 % at 1 el./bar)
+        call = _inline if self._fn["flat"] else (lambda f, *a: f(*a))
+        zg, pr = call(self._fn["prepare"], x0, t0, p, h, d)
+        z1, g0 = call(self._fn["update_step"], zg, pr)
+        xa, ra, done = call(self._fn["finish_step"], z1, pr)
         X1, res1 = self._fn["more"](1 - done, ca.if_else(ra < g0, z1, zg), pr, xa, ra)
         OX1, ORES = ca.MX.sym("out_x1", nx), ca.MX.sym("out_res")
         G_z, G_w, X_z, X_w = self._fn["sensitivity"](x0, t0, p, h, d, OX1)
@@ -265,13 +297,13 @@ class HHT:
         """One step as :attr:`step` takes it (bitwise), driven from Python so that the Newton
         updates can be counted: (x1, final scaled residual, Newton updates)."""
         z0, prm = self._fn["prepare"](x0, t0, p, h, d)
-        z1, g0, _ = self._fn["update"](z0, prm)
-        x1, res, done = self._fn["finish"](z1, prm)
+        z1, g0 = self._fn["update_step"](z0, prm)
+        x1, res, done = self._fn["finish_step"](z1, prm)
         updates = 1
         if not bool(done) and self.max_iter > 1:
             z = self._fn["newton"](z1 if float(res) < float(g0) else z0, prm)
             updates += newton_updates(self._fn["newton"])
-            x1, res, _ = self._fn["finish"](z, prm)
+            x1, res, _ = self._fn["finish_step"](z, prm)
         return np.array(x1).ravel(), float(res), updates
 
     def step_residual(self, x0: np.ndarray, x1: np.ndarray, t0: float, p: np.ndarray, h: float,

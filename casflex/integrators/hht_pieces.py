@@ -14,11 +14,12 @@ import numpy as np
 
 from casflex.elements.kernels import hht_kernel, kernel
 from casflex.model import Model
-from casflex.model.assembly import MatrixAssembly, gather, scatter, scatter_at
+from casflex.model.assembly import MatrixAssembly, gather, scatter, scatter_add, scatter_at
 from casflex.model.constraints import gather_at, mapped_joint, split
 
 __all__ = ["Layout", "ROUNDOFF_FLOOR", "newton_updates", "hht_coefficients", "roundoff_tolerance", "prm_layout",
-           "prepare_function", "newton_functions", "scale_function", "initial_function", "post_function", "step_blocks"]
+           "prepare_function", "newton_functions", "newton_terms", "group_args", "mapped_hht",
+           "finish_outputs", "scale_function", "initial_function", "post_function", "step_blocks"]
 
 #: A scaled residual is accepted down to ROUNDOFF_FLOOR * eps * max|q / l| (see roundoff_tolerance).
 ROUNDOFF_FLOOR = 10.0
@@ -190,6 +191,92 @@ def _state(m: Model, lay: Layout, alpha: float, z: ca.MX, parts: dict) -> tuple[
     return q1, qd1, qdd1, q_alpha, mu1
 
 
+def group_args(m: Model, alpha: float, z: ca.MX, P: ca.MX, lay: Layout) -> tuple[dict, tuple, list[list]]:
+    """(prm's parts by name, the state (q1, qd1, qdd1, q_alpha, mu1) of the unknowns z, and per element
+    group the arguments of its HHT kernel: the gathered dofs, properties, gravity g and c)."""
+    parts, o = {}, 0
+    for key, size in prm_layout(m):
+        parts[key], o = P[o:o + size], o + size
+    state = _state(m, lay, alpha, z, parts)
+    q1, qd1, qdd1, q_alpha, _ = state
+    gamma, beta = hht_coefficients(alpha)
+    coef = ca.vertcat(gamma / (beta * parts["h"]), 1 / (beta * parts["h"] ** 2))
+    g, args = m.gravity(parts["p"]), []
+    for grp in m.groups:
+        a = [gather(v, grp) for v in (q1, qd1, qdd1)] + ([gather(q_alpha, grp)] if alpha != 0.0 else [])
+        args.append(a + [grp.props(parts["p"]), g, coef])
+    return parts, state, args
+
+
+def mapped_hht(m: Model, alpha: float, tangent: bool):
+    """``evaluate(k, args)`` for :func:`newton_terms`: group k's HHT kernel (``tangent``: with K) mapped
+    over its elements, g and c the same for all."""
+    def evaluate(k: int, args: list):
+        grp = m.groups[k]
+        # the padded tangent kernel, which the step's own update maps (newton_band.py): one copy of its code
+        f = hht_kernel(grp.kind, alpha, m.inertia, tangent, tangent)
+        out = f.map(f"{f.name()}_{grp.n}", "serial", grp.n, [f.n_in() - 2, f.n_in() - 1], [])(*args)
+        nd = grp.spec.n_dof
+        return (out[0], ca.reshape(out[1][:nd * nd, :], nd, nd * grp.n)) if tangent else out
+    return evaluate
+
+
+def newton_terms(m: Model, lay: Layout, alpha: float, z: ca.MX, P: ca.MX, residual, tangent) -> dict:
+    """The HHT equations of the unknowns z (see :func:`newton_functions`) with the element groups'
+    kernel outputs from ``residual(k, args) -> r`` and ``tangent(k, args) -> (r, K)`` (k: the group,
+    args: its kernel's arguments, :func:`group_args`; ``residual`` None: R is R_t): R, R_t (the same
+    residual from the two kernels), G, G_t (scaled), the Jacobian's scaled nonzeros jnz and its
+    assembly, the state, the element matrices and the unscaled residuals."""
+    n, free, ell, nmu = m.n_dof, lay.free, lay.ell, lay.n_mu
+    parts, state, args = group_args(m, alpha, z, P, lay)
+    q1, _, _, _, mu1 = state
+    dp = parts["d"]
+    R = R_t = -alpha * parts["f_n"] - parts["f_ext"]
+    blocks = []
+    for k, grp in enumerate(m.groups):
+        if residual is not None:
+            R = scatter_add(R, residual(k, args[k]), grp)
+        r_e, K_e = tangent(k, args[k])
+        R_t = scatter_add(R_t, r_e, grp)  # the same residual, from the kernel that also gives K
+        blocks.append(K_e)
+    R = R if residual is not None else R_t
+    row = -np.ones(n + nmu, dtype=int)
+    row[free] = np.arange(len(free))
+    row[n:] = len(free) + np.arange(nmu)
+    asm = MatrixAssembly(m.groups + m.joint_groups, row, row)
+    scale_f = (dp * ell)[free]
+    if nmu:
+        f_j, phi_j, j_blocks = _joint_terms(m, lay, q1, mu1, alpha)
+        R, R_t, blocks = R + f_j, R_t + f_j, blocks + j_blocks
+        phi = phi_j - alpha * parts["phi0"]
+        G_phi = phi / ca.DM(lay.ell_mu)
+        rows_s = ca.vertcat(scale_f, ca.DM(lay.ell_mu))  # the rows' and the unknowns' scales
+        cols_s = ca.vertcat(ca.DM(ell[free]), lay.mu_scale(dp))
+        jnz = asm.nonzeros(blocks) * cols_s[asm.nz_cols.tolist()] / rows_s[asm.nz_rows.tolist()]
+        G, G_t = ca.vertcat(R[free] / scale_f, G_phi), ca.vertcat(R_t[free] / scale_f, G_phi)
+        rhs, rhs_t = ca.vertcat(R[free], phi), ca.vertcat(R_t[free], phi)
+    else:
+        fr_idx = np.array(free, dtype=int)
+        jnz = asm.nonzeros(blocks) * ca.DM(ell[fr_idx[asm.nz_cols]]) / (dp * ell)[fr_idx[asm.nz_rows].tolist()]
+        G, G_t = R[free] / scale_f, R_t[free] / scale_f
+        rhs, rhs_t, cols_s = R[free], R_t[free], ca.DM(ell[free])
+    # rhs, rhs_t: the residuals unscaled (G = rhs / rows' scales); blocks: the element matrices unscaled, whose
+    # assembly A gives the scaled Jacobian dG/dz = diag(rows' scales)^-1 A diag(cols_s)
+    return {"R": R, "R_t": R_t, "G": G, "G_t": G_t, "jnz": jnz, "asm": asm, "state": state, "blocks": blocks,
+            "rhs": rhs, "rhs_t": rhs_t, "cols_s": cols_s}
+
+
+def finish_outputs(m: Model, lay: Layout, alpha: float, tol: float, G1: ca.MX, r_fixed: ca.MX,
+                   state: tuple) -> list:
+    """[x1, res, done] of ``hht_finish`` from the residual G1 and the fixed rows r_fixed at the solution."""
+    q1, qd1, qdd1, _, mu1 = state
+    lam1 = -r_fixed / (1 + alpha) if lay.fixed else ca.MX(0, 1)
+    x1 = ca.densify(ca.vertcat(q1, qd1, qdd1, lam1, mu1))  # dense: the C interface is plain arrays
+    res = ca.norm_inf(G1) if lay.free or lay.n_mu else ca.MX(0)
+    floor = ROUNDOFF_FLOOR * np.finfo(float).eps * ca.mmax(ca.fabs(q1 / lay.ell))
+    return [x1, res, res <= ca.fmax(tol, floor)]
+
+
 def newton_functions(m: Model, lay: Layout, alpha: float, tol: float, n_prm: int, expand: bool):
     """(residual, jacobian, finish) of the unknowns z = (u, nu): the free dofs' scaled updates u and
     the joints' scaled multipliers nu (:class:`Layout`), and the known ``prm``.
@@ -200,58 +287,20 @@ def newton_functions(m: Model, lay: Layout, alpha: float, tol: float, n_prm: int
     from the fixed rows), the final max |G|, and whether that converges the step: res at most tol, or
     the round-off floor of the coordinates (:func:`roundoff_tolerance`).
     """
-    n, free, ell, nmu = m.n_dof, lay.free, lay.ell, lay.n_mu
-    z, P = ca.MX.sym("z", len(free) + nmu), ca.MX.sym("prm", n_prm)
-    parts, o = {}, 0
-    for key, size in prm_layout(m):
-        parts[key], o = P[o:o + size], o + size
-    dp, pp = parts["d"], parts["p"]
-    q1, qd1, qdd1, q_alpha, mu1 = _state(m, lay, alpha, z, parts)
-    gamma, beta = hht_coefficients(alpha)
-    coef = ca.vertcat(gamma / (beta * parts["h"]), 1 / (beta * parts["h"] ** 2))
-    g = m.gravity(pp)
-    R = R_t = -alpha * parts["f_n"] - parts["f_ext"]
-    blocks = []
-    for grp in m.groups:
-        args = [gather(v, grp) for v in (q1, qd1, qdd1)] + ([gather(q_alpha, grp)] if alpha != 0.0 else [])
-        args += [grp.props(pp), g, coef]
-        fr, fk = (hht_kernel(grp.kind, alpha, m.inertia, tangent) for tangent in (False, True))
-        rep = [fr.n_in() - 2, fr.n_in() - 1]  # g and c: the same for every element
-        R = R + scatter(fr.map(f"{fr.name()}_{grp.n}", "serial", grp.n, rep, [])(*args), grp, n)
-        r_e, K_e = fk.map(f"{fk.name()}_{grp.n}", "serial", grp.n, rep, [])(*args)
-        R_t = R_t + scatter(r_e, grp, n)  # the same residual, from the kernel that also gives K
-        blocks.append(K_e)
-    row = -np.ones(n + nmu, dtype=int)
-    row[free] = np.arange(len(free))
-    row[n:] = len(free) + np.arange(nmu)
-    asm = MatrixAssembly(m.groups + m.joint_groups, row, row)
-    scale_f = (dp * ell)[free]
-    if nmu:
-        f_j, phi_j, j_blocks = _joint_terms(m, lay, q1, mu1, alpha)
-        R, R_t, blocks = R + f_j, R_t + f_j, blocks + j_blocks
-        G_phi = (phi_j - alpha * parts["phi0"]) / ca.DM(lay.ell_mu)
-        rows_s = ca.vertcat(scale_f, ca.DM(lay.ell_mu))  # the rows' and the unknowns' scales
-        cols_s = ca.vertcat(ca.DM(ell[free]), lay.mu_scale(dp))
-        jnz = asm.nonzeros(blocks) * cols_s[asm.nz_cols.tolist()] / rows_s[asm.nz_rows.tolist()]
-        G, G_t = ca.vertcat(R[free] / scale_f, G_phi), ca.vertcat(R_t[free] / scale_f, G_phi)
-    else:
-        fr_idx = np.array(free, dtype=int)
-        jnz = asm.nonzeros(blocks) * ca.DM(ell[fr_idx[asm.nz_cols]]) / (dp * ell)[fr_idx[asm.nz_rows].tolist()]
-        G, G_t = R[free] / scale_f, R_t[free] / scale_f
+    z, P = ca.MX.sym("z", len(lay.free) + lay.n_mu), ca.MX.sym("prm", n_prm)
+    t = newton_terms(m, lay, alpha, z, P, mapped_hht(m, alpha, False), mapped_hht(m, alpha, True))
     cse = {"cse": True}
-    resid = ca.Function("hht_residual", [z, P], [G], ["z", "prm"], ["G"], cse)
-    jac = ca.Function("hht_jacobian", [z, P], [ca.MX(asm.sparsity, jnz), G_t], ["z", "prm"], ["jac_G_z", "G"], cse)
+    resid = ca.Function("hht_residual", [z, P], [t["G"]], ["z", "prm"], ["G"], cse)
+    jac = ca.Function("hht_jacobian", [z, P], [ca.MX(t["asm"].sparsity, t["jnz"]), t["G_t"]], ["z", "prm"],
+                      ["jac_G_z", "G"], cse)
     # the residual once more at the solution, with the fixed rows that give the multipliers
-    resid_all = ca.Function("hht_residual_all", [z, P], [G, R[lay.fixed]], ["z", "prm"], ["G", "r_fixed"], cse)
+    resid_all = ca.Function("hht_residual_all", [z, P], [t["G"], t["R"][lay.fixed]], ["z", "prm"], ["G", "r_fixed"],
+                            cse)
     if expand:
         resid, jac, resid_all = resid.expand(), jac.expand(), resid_all.expand()
     G1, r_fixed = resid_all(z, P)
-    lam1 = -r_fixed / (1 + alpha) if lay.fixed else ca.MX(0, 1)
-    x1 = ca.densify(ca.vertcat(q1, qd1, qdd1, lam1, mu1))  # dense: the C interface is plain arrays
-    res = ca.norm_inf(G1) if free or nmu else ca.MX(0)
-    floor = ROUNDOFF_FLOOR * np.finfo(float).eps * ca.mmax(ca.fabs(q1 / ell))
-    done = res <= ca.fmax(tol, floor)
-    finish = ca.Function("hht_finish", [z, P], [x1, res, done], ["z", "prm"], ["x1", "res", "done"])
+    finish = ca.Function("hht_finish", [z, P], finish_outputs(m, lay, alpha, tol, G1, r_fixed, t["state"]),
+                         ["z", "prm"], ["x1", "res", "done"])
     return resid, jac, finish
 
 

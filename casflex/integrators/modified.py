@@ -50,17 +50,18 @@ class ModifiedNewton:
 
     def __post_init__(self) -> None:
         f = self.fn
-        prepare, resid, finish, update, apply = f["prepare"], f["residual"], f["finish"], f["update"], f["band_apply"]
+        prepare, rhs, finish, update = f["prepare"], f["rhs"], f["finish_step"], f["update"]
+        band_update = f["band_update"]
         nF = update.nnz_out(2)
         nx = finish.nnz_out(0)
         x0, t0, p, h, d = prepare.mx_in()
         F = ca.MX.sym("F", nF)
         zg, pr = prepare(x0, t0, p, h, d)
-        G0 = resid(zg, pr)
-        z1 = zg - apply(F, G0)
+        G0, r0 = rhs(zg, pr)
+        z1 = zg - band_update(F, r0, pr)
         xa, ra, done = finish(z1, pr)
         # refresh: the exact step from the better point, its factors kept
-        zs, P, X, R, FF = (ca.MX.sym(k, s) for k, s in (("z", resid.nnz_in(0)), ("prm", resid.nnz_in(1)), ("x1", nx),
+        zs, P, X, R, FF = (ca.MX.sym(k, s) for k, s in (("z", rhs.nnz_in(0)), ("prm", rhs.nnz_in(1)), ("x1", nx),
                                                           ("res", 1), ("F", nF)))
         z2, g, F2 = update(zs, P)
         xb, rb, db = finish(z2, P)
@@ -96,17 +97,17 @@ class ModifiedNewton:
 
         f = self.fn
         zg, pr = f["prepare"](x0, t0, p, h, d)
-        G0 = f["residual"](zg, pr)
-        z1 = zg - f["band_apply"](F, G0)
-        xa, ra, done = f["finish"](z1, pr)
+        G0, r0 = f["rhs"](zg, pr)
+        z1 = zg - f["band_update"](F, r0, pr)
+        xa, ra, done = f["finish_step"](z1, pr)
         if bool(done):
             return np.array(xa).ravel(), float(ra), F, 1, False
         zs = z1 if float(ra) < float(ca.norm_inf(G0)) else zg
         z2, g, F2 = f["update"](zs, pr)
-        xb, rb, db = f["finish"](z2, pr)
+        xb, rb, db = f["finish_step"](z2, pr)
         updates = 2
         if not bool(db) and self.max_iter > 1:
             z = f["newton"](z2 if float(rb) < float(g) else zs, pr)
             updates += newton_updates(f["newton"])
-            xb, rb, _ = f["finish"](z, pr)
+            xb, rb, _ = f["finish_step"](z, pr)
         return np.array(xb).ravel(), float(rb), np.array(F2).ravel(), updates, True

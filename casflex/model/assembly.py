@@ -21,7 +21,7 @@ import numpy as np
 from casflex.elements.joints import joint_spec
 from casflex.elements.kernels import KINDS, Kind
 
-__all__ = ["ElementGroup", "MatrixAssembly", "gather", "scatter", "scatter_at"]
+__all__ = ["ElementGroup", "MatrixAssembly", "gather", "scatter", "scatter_add", "scatter_at"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -79,6 +79,21 @@ def gather(v: ca.MX | ca.SX, group: ElementGroup) -> ca.MX | ca.SX:
 def scatter(values: ca.MX | ca.SX, group: ElementGroup, n: int) -> ca.MX | ca.SX:
     """Element vectors (n_dof of the kind, n_el) summed into a global vector (n,)."""
     return summed(ca.vec(values), group.scatter_lists(n))
+
+
+def scatter_add(base: ca.MX | ca.SX, values: ca.MX | ca.SX, group: ElementGroup) -> ca.MX | ca.SX:
+    """``base + scatter(values, group, n)``, the same numbers; for a group that reaches few of the n
+    entries (a few springs beside a meshed beam) added in place at those entries only: a full
+    scatter costs a gather and a sum over all n entries whatever the group's size."""
+    n = base.numel()
+    lists = group.scatter_lists(n)
+    targets = np.flatnonzero(np.any(np.asarray(lists) != group.dofs.size, axis=0)) if lists else np.zeros(0, int)
+    if 2 * targets.size >= n or isinstance(base, ca.DM):
+        return base + scatter(values, group, n)
+    out = type(base)(base)
+    at = targets.tolist()
+    out[at] = base[at] + summed(ca.vec(values), [[lst[t] for t in at] for lst in lists])
+    return out
 
 
 def scatter_at(values: ca.MX | ca.SX, at: np.ndarray, n: int) -> ca.MX | ca.SX:

@@ -1,0 +1,113 @@
+"""The exact Newton update of an HHT step on a mapped mesh, assembled straight into the banded LU's storage.
+
+:func:`~casflex.integrators.hht_pieces.newton_functions` gives the scaled Jacobian dG/dz as a sparse
+matrix: the element matrices summed into its nonzeros, each scaled by its column's and row's scale,
+then gathered once more into the storage that the banded LU (:mod:`.band`) factorises. Each of these is
+a pass over some 2000 numbers at 32 elements per bar (twobar), and all of them together cost more
+instructions than the element kernels. Here the element matrices are summed into the band storage
+directly (one gather per contribution depth, i.e. 2) and are not scaled: with the scales D_r of the
+rows and D_c of the unknowns, dG/dz = D_r^-1 A D_c for the assembled matrix A, so the update is
+
+    dz = (dG/dz)^-1 G = D_c^-1 A^-1 (D_r G) = D_c^-1 A^-1 r,
+
+r the unscaled residual, which the step has before it scales it. The LU has no pivoting, and without
+pivoting elimination does the same operations on A as on D_r^-1 A D_c up to the scales: the updates
+agree to round-off (the states to the Newton tolerance, tests/test_hht.py). The kernels are mapped
+without the wrapper that repeats their shared inputs (gravity, the Newmark coefficients) and copies
+their outputs: the inputs are repeated in the graph, the outputs stay where the map wrote them.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from casflex.elements.kernels import hht_kernel
+from casflex.integrators.band import BandLU
+from casflex.integrators.hht_pieces import Layout, finish_outputs, newton_terms
+from casflex.model import Model
+
+__all__ = ["band_newton", "band_storage"]
+
+
+def _plain_map(m: Model, alpha: float, tangent: bool, padded: dict | None = None):
+    """``evaluate(k, args)`` for :func:`newton_terms`: group k's kernel mapped over its elements, its
+    shared inputs (g, c: the last two) repeated for each by one gather. ``padded``: the kernels give K
+    padded with 0 and 1 (:func:`hht_kernel`), kept in ``padded[k]``; K itself is then a view of it."""
+    def evaluate(k: int, args: list):
+        grp = m.groups[k]
+        f = hht_kernel(grp.kind, alpha, m.inertia, tangent, padded is not None).map(grp.n, "serial")
+        out = f(*args[:-2], *(ca.reshape(a[list(range(a.numel())) * grp.n], a.numel(), grp.n) for a in args[-2:]))
+        if padded is None:
+            return out
+        nd = grp.spec.n_dof
+        padded[k] = out[1]
+        return out[0], ca.reshape(out[1][:nd * nd, :], nd, nd * grp.n)
+    return evaluate
+
+
+def _sources(asm, blocks: list, padded: dict, entries: np.ndarray) -> tuple[int, list[tuple[int, int, np.ndarray]]]:
+    """How the band entries ``entries`` (positions in [nz, 0, 1]) are summed from the element matrices:
+    (the group whose padded output the first gather reads, [(depth, group, where in its output or -1)])."""
+    nnz, zero = asm.sparsity.nnz(), asm.offsets[-1]
+    size = [b - a for a, b in zip(asm.offsets[:-1], asm.offsets[1:], strict=True)]
+    base = max(padded, key=lambda g: size[g])
+    terms = []
+    for c, src in enumerate(asm.lists or [[]]):
+        src = np.append(np.asarray(src, dtype=int), [zero, zero])[entries]
+        grp = np.searchsorted(asm.offsets, src, side="right") - 1  # the group of each source (len: none)
+        for g, K in enumerate(blocks):
+            nd2 = int(K.size1()) ** 2 if K is not None else 0
+            loc = src - asm.offsets[g]
+            at = np.where(grp == g, loc // max(nd2, 1) * (nd2 + 2 * (g in padded)) + loc % max(nd2, 1), -1)
+            if c == 0 and g == base:  # its own 0 and 1 (after element 0's K) stand for no source and the padding
+                at = np.where(grp == g, at, nd2)
+                at[entries == nnz + 1] = nd2 + 1
+            terms.append((c, g, at))
+    return base, terms
+
+
+def band_storage(t: dict, band: BandLU, padded: dict) -> list[ca.MX]:
+    """The assembled element matrices (unscaled, ``t["blocks"]`` of :func:`newton_terms`) in ``band``'s
+    storage (its three parts, :attr:`BandLU.entries`): one gather straight into the band's layout from
+    the largest group's padded kernel output, then each other contribution (a second element at a
+    shared node, another group) added where there is one."""
+    asm, blocks = t["asm"], t["blocks"]
+    parts = []
+    for entries in band.entries:
+        base, terms = _sources(asm, blocks, padded, entries)
+        out = next(padded[g][at.tolist()] for c, g, at in terms if c == 0 and g == base)
+        for c, g, at in terms:
+            if c == 0 and g == base:
+                continue
+            where = np.flatnonzero(at >= 0)
+            if where.size:
+                src = padded[g] if g in padded else ca.vec(blocks[g])
+                out[where.tolist()] = out[where.tolist()] + src[at[where].tolist()]
+        parts.append(out)
+    return parts
+
+
+def band_newton(m: Model, lay: Layout, alpha: float, tol: float, n_prm: int,
+                band: BandLU) -> dict[str, ca.Function]:
+    """The step's Functions on the band (see the module): ``hht_jacobian_band(z, prm) -> (first, cols, rows,
+    G, r, cols_s)``, the assembled matrix A in ``band``'s storage (:meth:`BandLU.factor_parts`), the scaled
+    and unscaled residuals at z and the unknowns' scales;
+    ``hht_rhs(z, prm) -> (G, r)``, the residuals alone; ``hht_band_update(F, r, prm) -> dz``, the update
+    from A's packed factors F (as :attr:`BandLU.factor` packs them); ``hht_finish_band(z, prm) -> (x1, res, done)``, as
+    ``hht_finish`` (:func:`~casflex.integrators.hht_pieces.newton_functions`)."""
+    z, P = ca.MX.sym("z", len(lay.free) + lay.n_mu), ca.MX.sym("prm", n_prm)
+    padded = {}
+    t = newton_terms(m, lay, alpha, z, P, None, _plain_map(m, alpha, True, padded))
+    cse = {"cse": True}
+    jac = ca.Function("hht_jacobian_band", [z, P], [*band_storage(t, band, padded), t["G_t"], t["rhs_t"], t["cols_s"]],
+                      ["z", "prm"], ["first", "cols", "rows", "G", "r", "cols_s"], cse)
+    r = _plain_map(m, alpha, False)
+    t = newton_terms(m, lay, alpha, z, P, r, lambda k, args: (r(k, args), None))
+    rhs = ca.Function("hht_rhs", [z, P], [t["G"], t["rhs"]], ["z", "prm"], ["G", "r"], cse)
+    outs = finish_outputs(m, lay, alpha, tol, t["G"], t["R"][lay.fixed], t["state"])
+    finish = ca.Function("hht_finish_band", [z, P], outs,
+                         ["z", "prm"], ["x1", "res", "done"], cse)
+    F, rr = ca.MX.sym("F", band.size), ca.MX.sym("r", z.numel())
+    update = ca.Function("hht_band_update", [F, rr, P], [band.apply(F, rr) / t["cols_s"]], ["F", "r", "prm"], ["dz"])
+    return {"jacobian_band": jac, "rhs": rhs, "band_update": update, "finish_step": finish}
