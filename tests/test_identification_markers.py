@@ -115,7 +115,9 @@ def test_multiple_shooting_on_a_model_of_the_wrong_form_within_its_bounds_does_n
     r = identify_nlp(_heavy_with_free_torsion_springs(), recording(names, 1.0), 1.0, start=1.0,
                      shooting=Shooting("multiple-shooting", interval=10),
                      run=ModelRun(dt=2e-3, alpha=0.0, newton_tol=1e-14))
-    assert r.status == "Solved_To_Acceptable_Level" and not any(r.at_bound.values()), (r.status, r.message)
+    # converged, under either of IPOPT's labels (which one is round-off at its tolerance: see the test below)
+    assert r.status in ("Solve_Succeeded", "Solved_To_Acceptable_Level"), (r.status, r.message)
+    assert not any(r.at_bound.values()), r.parameters
     assert not r.success, r.parameters
     assert r.extra["refusal"]["other"] == []  # the residuals alone withhold it
     res = r.extra["experiments"]["data"]["residuals"]
@@ -134,7 +136,11 @@ def test_multiple_shooting_residuals_above_the_declared_noise_do_not_say_success
     r = identify_nlp(_heavy_with_free_torsion_springs(), Experiment(recording(names, 0.5), noise=NOISE), 0.5, start=1.0,
                      shooting=Shooting("multiple-shooting", interval=10),
                      run=ModelRun(dt=2e-3, alpha=0.0, newton_tol=1e-14))
-    assert r.status == "Solve_Succeeded" and not any(r.at_bound.values()), (r.status, r.message)
+    # IPOPT converges: which of its two converged labels it ends with is round-off at its tolerance on this wrong
+    # model (a sum reordered in the band solver turned 'Solve_Succeeded' into 'Solved_To_Acceptable_Level' with the
+    # same parameters to 1e-11 and the same objective to 1e-15)
+    assert r.status in ("Solve_Succeeded", "Solved_To_Acceptable_Level"), (r.status, r.message)
+    assert not any(r.at_bound.values()), r.parameters
     assert not r.success, r.parameters
     res = r.extra["experiments"]["data"]["residuals"]
     assert pooled_fit(res) > FIT_THRESHOLD  # measured 98.4 %
