@@ -264,3 +264,44 @@ def test_a_worker_s_runs_keep_their_freed_memory_for_the_next(tmp_path):
     assert rec["environ"] == "65536", "dask's nanny no longer sets it: the test checks nothing"
     assert rec["faults"] < 2000, rec  # 100 arrays of 256 pages each mapped anew: 25 600 faults
     assert rec["profile"] is False  # the workers' statistical profiler off (casflex.study.sweep.QUIET_CLUSTER)
+
+
+def test_a_ctrl_c_before_a_dask_call_s_first_step_leaves_no_traceback(caplog):
+    # distributed 2026.8's sync(): a KeyboardInterrupt while the loop has not yet run the call's coroutine makes the
+    # loop run cancel(), which reads `future` unassigned; tornado logs the NameError with a traceback (seen in
+    # test_study_cluster's Ctrl-C test, 1 run in ~20). Reproduced here for certain: the loop is kept busy meanwhile.
+    import threading
+    import time
+    from unittest import mock
+
+    from distributed.utils import LoopRunner, sync
+
+    from casflex.study.sweep import quiet_sync_cancel
+
+    quiet_sync_cancel()
+    runner = LoopRunner(asynchronous=False)
+    runner.start()
+    wait = threading.Event.wait
+
+    def interrupted(self, timeout=None):
+        if threading.get_ident() == threading.main_thread().ident:
+            raise KeyboardInterrupt
+        return wait(self, timeout)
+
+    async def work():
+        return 1
+
+    try:
+        runner.loop.add_callback(time.sleep, 0.3)
+        with caplog.at_level("ERROR"), mock.patch.object(threading.Event, "wait", interrupted):
+            with pytest.raises(KeyboardInterrupt):
+                sync(runner.loop, work)
+            time.sleep(0.6)  # the loop's sleep ends, then its cancel() runs
+            # any other error of tornado's still reaches the log
+            runner.loop.add_callback(lambda: undefined_name)  # noqa: F821
+            time.sleep(0.2)
+    finally:
+        runner.stop()
+    names = [type(r.exc_info[1]).__name__ for r in caplog.records if r.exc_info]
+    assert names == ["NameError"], names
+    assert "undefined_name" in str(caplog.records[-1].exc_info[1])

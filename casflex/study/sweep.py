@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import functools
 import json
+import logging
 import os
 import re
 import sys
@@ -353,6 +354,8 @@ class Session:
         if self._client is None:
             from distributed import Client
 
+            quiet_sync_cancel()
+
             cluster = None if self.scheduler is not None else _local_cluster(self.n_workers, self._started)
             try:
                 self._client = Client(self.scheduler if self.scheduler is not None else cluster)
@@ -381,6 +384,31 @@ class Session:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+class _SyncCancelRace(logging.Filter):
+    """Drops one log record of dask's, a bug of its ``distributed.utils.sync`` (2026.8): a Ctrl-C in the moment
+    between a blocking call's start and its coroutine's first step makes the loop run ``cancel()``, which reads the
+    coroutine's ``future`` before it is assigned. Tornado logs the NameError with a traceback on stderr (the
+    interrupted command already says "interrupted" in one line); every other record passes."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        exc = record.exc_info[1] if record.exc_info else None
+        return not (isinstance(exc, NameError) and "'future'" in str(exc) and exc.__traceback__ is not None
+                    and _innermost(exc.__traceback__).tb_frame.f_code.co_name == "cancel")
+
+
+def _innermost(tb: Any) -> Any:
+    while tb.tb_next is not None:
+        tb = tb.tb_next
+    return tb
+
+
+def quiet_sync_cancel() -> None:
+    """Install :class:`_SyncCancelRace` on tornado's application logger, once per process."""
+    log = logging.getLogger("tornado.application")
+    if not any(isinstance(f, _SyncCancelRace) for f in log.filters):
+        log.addFilter(_SyncCancelRace())
 
 
 #: dask's settings for the sweeps' own local clusters, whose scheduler and nannies share the sweep's process: their
