@@ -56,6 +56,10 @@ CASES = [
     ("identify twobar --method direct --data measured --noise 1e-3 --seed -1", r"argument --seed: must be a seed >= 0"),
     ("export twobar --out nosuch/x", r"--out: directory 'nosuch' does not exist"),
     ("export twobar --out e --dt 0.0007", r"--t-end: 3 s is not a whole number of steps --dt = 0.0007 s"),
+    # argparse keeps a repeated option's last value without a word: one of two values the user wrote
+    ("simulate twobar --dt 1e-3 --out a.npz --dt=2e-3", r"argument --dt: given twice \(--dt 0.001 and --dt 0.002\)"),
+    ("identify twobar --method direct --method indirect", r"argument --method: given twice"),
+    ("static twobar --steps 3 --ste 4", r"argument --steps: given twice"),
 ]
 
 

@@ -33,9 +33,37 @@ class CliParser(argparse.ArgumentParser):
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = _NUMBER  # argparse's attribute for "looks like a negative number"
+        self.register("action", None, _StoreOnce)
+        self.register("action", "store", _StoreOnce)
+
+    def parse_known_args(self, args=None, namespace=None):  # noqa: ANN001, ANN201 (argparse's signature)
+        parsed, rest = super().parse_known_args(args, namespace)
+        parsed.__dict__.pop(_StoreOnce.SEEN, None)
+        return parsed, rest
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"casflex: error: {message}\n")
+
+
+class _StoreOnce(argparse._StoreAction):
+    """argparse's "store", refusing an option given twice: argparse keeps the last value without a word, so
+    ``--dt 1e-3 ... --dt 1e-2`` (an edited command line, a script's defaults before the user's) ran with one of
+    two values the user wrote. Options meant to repeat use "append"."""
+
+    SEEN = "_casflex_options_seen"
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:  # noqa: ANN001
+        seen = namespace.__dict__.setdefault(self.SEEN, {})
+        if option_string is not None and self.dest in seen:
+            raise argparse.ArgumentError(self, f"given twice ({seen[self.dest]} and {option_string} {_shown(values)}):"
+                                               " give it once")
+        if option_string is not None:
+            seen[self.dest] = f"{option_string} {_shown(values)}"
+        super().__call__(parser, namespace, values, option_string)
+
+
+def _shown(values: object) -> str:
+    return " ".join(map(str, values)) if isinstance(values, list) else str(values)
 
 
 def _parse_number(text: str) -> float:
