@@ -30,10 +30,12 @@ ARGS = ["simulate", "twobar", "--t-end", "0.3", "--out", "run.npz", "--plots", "
 #: or killed by the signal: a shell shows 130); the moments are drawn after it. From the entry point
 #: on, casflex catches it (casflex._entry: nothing heavy is imported before) and exits with 130.
 INTERRUPTED = (130, -signal.SIGINT, 1)
-#: 14 moments, about 2.5 s each (20 until stop 21, cut for the suite's 10-minute budget). A moment is
-#: uniform over the run: a phase of a tenth of it is hit with probability 0.77 per run (0.88 with 20);
-#: the seed is fixed, the run's timing is not, so successive CI runs hit different moments.
-MOMENTS = 14
+#: 8 moments, about 2.5 s each, stratified: one drawn uniformly in each eighth of the run (14 uniform moments until
+#: the suite's time was cut again; 20 before). Every phase of a quarter of the run or longer (start-up and assembly,
+#: the HHT steps, the figures) is hit on every run, and a phase of a tenth (post-processing, the animation) with
+#: probability at least 0.8 (14 uniform moments: 0.77, and a quarter missed with probability 0.018); the seed is
+#: fixed, the run's timing is not, so successive CI runs hit different moments.
+MOMENTS = 8
 #: SIGTERM and SIGHUP take Ctrl-C's path through casflex: fewer moments each (the suite's budget).
 TERM_MOMENTS = 4
 
@@ -74,6 +76,14 @@ def _wrote(lines: list[tuple[float, str]]) -> float | None:
     return next((t for t, line in lines if "wrote" in line), None)
 
 
+def _until(until: float, lines: list[tuple[float, str]], t0: float) -> float:
+    """``until``, or this run's time to its outputs if shorter: a run that finished before its moment was faster
+    than the calibration's, and the remaining strata are drawn within its run (no stratum missed over and over)."""
+    time.sleep(0.1)  # the reader thread takes the last lines
+    wrote = _wrote(lines)
+    return until if wrote is None else min(until, wrote - t0)
+
+
 @pytest.fixture(scope="module")
 def calibration(tmp_path_factory) -> tuple[float, Path]:
     """Seconds until the outputs are written (the fastest of two runs), and a directory with the
@@ -101,7 +111,8 @@ def test_sigint_at_random_moments_exits_130_and_writes_nothing(calibration, tmp_
     for attempt in range(100):
         if len(codes) == MOMENTS:
             break
-        moment = rng.uniform(early, 0.95 * until)
+        stratum = len(codes)  # the next eighth of the run without a moment yet
+        moment = early + (0.95 * until - early) * (stratum + rng.uniform()) / MOMENTS
         cwd = tmp_path / f"run{attempt}"
         cwd.mkdir()
         t0 = time.monotonic()
@@ -109,12 +120,14 @@ def test_sigint_at_random_moments_exits_130_and_writes_nothing(calibration, tmp_
         time.sleep(max(0.0, t0 + moment - time.monotonic()))
         if proc.poll() is not None or _wrote(lines) is not None:  # finished already: not a moment inside the run
             proc.wait(timeout=300)
+            until = _until(until, lines, t0)
             continue
         proc.send_signal(signal.SIGINT)
         code = proc.wait(timeout=60)
         err = proc.stderr.read()
         if code == 0:  # after the commit (its 'wrote' line not read yet): a finished run
             _committed_whole(cwd, calibration[1], {}, lines, f"SIGINT at {moment:.2f} s")  # cwd began empty
+            until = _until(until, lines, t0)
             continue
         assert code in INTERRUPTED, f"SIGINT at {moment:.2f} s: exit {code}\n{err}"
         assert list(cwd.iterdir()) == [], f"SIGINT at {moment:.2f} s left {sorted(os.listdir(cwd))}"
@@ -164,7 +177,7 @@ def test_sigterm_and_sighup_at_random_moments_exit_128_plus_n_and_keep_earlier_o
     for attempt in range(30):
         if len(codes) == TERM_MOMENTS:
             break
-        moment = rng.uniform(early, 0.95 * until)
+        moment = early + (0.95 * until - early) * (len(codes) + rng.uniform()) / TERM_MOMENTS  # a quarter each
         cwd = tmp_path / f"run{attempt}"
         shutil.copytree(finished, cwd)  # the outputs of an earlier run: run.npz and figs/ with its figures
         before = _tree(cwd)
@@ -173,6 +186,7 @@ def test_sigterm_and_sighup_at_random_moments_exit_128_plus_n_and_keep_earlier_o
         time.sleep(max(0.0, t0 + moment - time.monotonic()))
         if proc.poll() is not None or _wrote(lines) is not None:  # finished already: not a moment inside the run
             proc.wait(timeout=300)
+            until = _until(until, lines, t0)
             continue
         proc.send_signal(signum)
         code = proc.wait(timeout=60)
@@ -180,6 +194,7 @@ def test_sigterm_and_sighup_at_random_moments_exit_128_plus_n_and_keep_earlier_o
         name = signal.Signals(signum).name
         if code == 0:  # the signal came after the commit (its 'wrote' line not read yet: a busy machine)
             _committed_whole(cwd, finished, before, lines, f"{name} at {moment:.2f} s")
+            until = _until(until, lines, t0)
             continue
         assert code in (128 + signum, -signum), f"{name} at {moment:.2f} s: exit {code}\n{err}"
         assert _tree(cwd) == before, f"{name} at {moment:.2f} s changed {sorted(os.listdir(cwd))}"

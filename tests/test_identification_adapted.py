@@ -61,9 +61,12 @@ def test_measured_rotations_are_ignored(twobar, sim):
 def test_an_unmeasured_translation_becomes_an_unknown(twobar, sim):
     # positions only, x5 missing: derivatives by the smoothing spline, x5 a cubic unknown (with 5
     # unknown dofs, 2 samples give 24 equations for 20 unknowns per instant: the paper's window)
+    # the first second only (the instants lie in it): scipy's cross-validated spline runs a Python loop per sample
+    # (the fit: 20 s of CPU on 2.4 s of data, 8 s on 1 s); the errors are the same to 4e-6 (0.066 % and 0.270 %)
     trans = [c for c in sim.channels if not c.startswith("theta") and c != "x5"]
     cols = [sim.channels.index(c) for c in trans]
-    data = MeasurementSet(sim.t, tuple(trans), sim.q[:, cols], None, None)
+    rows = np.flatnonzero(sim.t <= 1.0 + 1e-9)
+    data = MeasurementSet(sim.t[rows], tuple(trans), sim.q[np.ix_(rows, cols)], None, None)
     r = identify_adapted_direct(twobar, data, [0.2, 0.4, 0.6], start=0.8)
     assert r.extra["window"] == 2 and "x5" in r.extra["unknown_dofs"]["0.2"]
     assert r.extra["smoothing"]["method"] == "spline" and r.extra["beam_forces"] == "unknown"
