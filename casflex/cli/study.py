@@ -136,16 +136,10 @@ def draw_figure(plan: dict) -> bytes:
     :func:`casflex.plotting._figure._save` renders it (the same bytes), and returned (a worker on another machine
     returns it). Neither written to a temporary file and read back (an fsync) nor cleared (the figure's artists
     dropped one by one: 13 % of its time): the figure is freed with its last reference."""
-    import io
-
-    from casflex import interrupt
-    from casflex.plotting._figure import DPI
+    from casflex.plotting._figure import render
     from casflex.plotting.gait import gait_figure
 
-    buf = io.BytesIO()
-    gait_figure(path=None, **plan).savefig(buf, format="png", dpi=DPI)
-    interrupt.check()  # a Ctrl-C that matplotlib swallowed while rendering
-    return buf.getvalue()
+    return render(gait_figure(path=None, **plan))
 
 
 def _fingerprint(plan: dict) -> str:
