@@ -557,7 +557,8 @@ def render(raw: dict, out_dir: Path | None, banner: Banner | None = None) -> dic
             f"stream ({steady1:.3f} s per record against {work:.3f} s of work; "
             f"{100 * (steady1 - work_best) / work_best:+.0f} % against the best call); the one-off costs: the "
             f"start-up {rec1[0]:.1f} s to the first record, {best[1]['wall'] - rec1[-1]:.1f} s after the last "
-            f"({raw['subjects'] + 1} figures, {raw['subjects']} of them drawn while the trials ran; the table; the "
+            f"({raw['subjects'] + 1} figures, {raw['subjects']} of them drawn while the trials ran; the table, its "
+            "subjects' lines made while they ran; the "
             f"summary); over the whole command {whole:+.0f} % per trial."
             if rec1 else "- No record times (none written?).",
             f"- The same command on its finished outputs (nothing to run; process, imports, study check, freshness "
