@@ -26,6 +26,16 @@ def test_atomic_write_json_round_trip(tmp_path):
     assert [p.name for p in path.parent.iterdir()] == ["r.json"]
 
 
+def test_a_write_is_flushed_to_the_disk_unless_not_durable(tmp_path, monkeypatch):
+    synced = []
+    monkeypatch.setattr("os.fsync", synced.append)
+    atomic_write_bytes(tmp_path / "a.bin", b"x")
+    assert len(synced) == 1
+    path = atomic_write_json(tmp_path / "b.json", {"p": np.array([1.5])}, durable=False, indent=None)
+    assert len(synced) == 1  # a sweep's record: its reader refuses a partial one
+    assert path.read_text() == '{"p": [1.5]}\n'
+
+
 def test_an_interrupted_write_leaves_the_old_file_and_no_temporary(tmp_path, monkeypatch):
     path = tmp_path / "a.bin"
     atomic_write_bytes(path, b"old")

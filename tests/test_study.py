@@ -318,6 +318,23 @@ def test_a_changed_option_redoes_the_runs_it_changes_and_only_those(folder, caps
     assert [last[f] == again[f] for f in ("s02.png", "group.png", "loads.csv")] == [True, True, False]
 
 
+def test_the_table_is_made_from_each_subject_s_lines_as_its_trials_finish_the_same_bytes(folder, monkeypatch):
+    # a subject's lines of loads.csv are made as soon as its trials are recorded (while the others run), not all
+    # after the last record: the same table, bit for bit, as the one a resumed study (nothing run) makes after
+    import casflex.cli.study as command
+
+    made = []
+    table = command._table
+    monkeypatch.setattr(command, "_table", lambda rows: made.append(len(rows)) or table(rows))
+    path = write(folder)
+    record = folder / "record"
+    assert main(["study", str(path), "--out", str(folder / "first"), "--record", str(record), "--quiet"]) == 0
+    assert made == []  # every subject's lines made as its trials finished
+    assert main(["study", str(path), "--out", str(folder / "again"), "--record", str(record), "--quiet"]) == 0
+    assert len(made) == 1 and made[0] > 0  # nothing run: the table made after, from the records
+    assert (folder / "again" / "loads.csv").read_bytes() == (folder / "first" / "loads.csv").read_bytes()
+
+
 def test_the_table_quotes_a_name_only_where_csv_must():
     # loads.csv is formatted directly (twice as fast as the csv module) where no name holds a comma, a quote or a
     # line break; a name that does is quoted as the csv module quotes it

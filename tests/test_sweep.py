@@ -218,6 +218,22 @@ def test_a_scheduler_that_does_not_answer_leaves_no_record_folder(tmp_path):
     assert not (tmp_path / "rec").exists()
 
 
+def test_records_are_not_flushed_and_one_cut_short_is_run_again(tmp_path, monkeypatch, capsys):
+    # a record is written without an fsync (its largest cost); a crash that loses its data leaves an empty or
+    # partial file, which is refused and its run done again
+    def no_fsync(fd):
+        raise AssertionError("a record flushed to the disk")
+
+    monkeypatch.setattr("os.fsync", no_fsync)
+    runs = [Run("bad", identification_run, {"method": "no-such-method", "start": 1.0, "t_end": 0.75})]
+    first = run_sweep(runs, tmp_path, n_workers=1, progress=False)
+    assert first.executed == ("bad",) and "method" in first.results["bad"]["error"]
+    (tmp_path / "bad.json").write_text("")  # what a power cut before the data reached the disk leaves
+    again = run_sweep(runs, tmp_path, n_workers=1, progress=False)
+    assert again.executed == ("bad",) and "is not JSON" in capsys.readouterr().err
+    assert json.loads((tmp_path / "bad.json").read_text())["run"] == "bad"
+
+
 def test_a_record_is_taken_only_as_its_own_run_s(tmp_path, capsys):
     # a record copied under another run's name, one without its name, one that is no object or lacks a field of
     # its run's records: none is taken as done (each said); the run's own record is

@@ -23,18 +23,27 @@ def _table(rows: list[tuple]) -> str:
     """loads.csv's text: each value and band by repr (the shortest text that reads back to the same double). Its
     rows formatted directly where no name needs CSV's quoting (a comma, a quote, a line break), else by the csv
     module: the same text, twice as fast (160 000 rows for 200 trials)."""
-    names = {r[i] for r in rows for i in (0, 1, 2, 3, 8)}
-    if any(isinstance(n, str) and any(c in n for c in ',"\r\n') for n in names):
+    body = _rows_text(rows)
+    if body is None:
         buf = io.StringIO()
         w = csv.writer(buf, lineterminator="\n")
         w.writerow(_HEAD)
         w.writerows([(*r[:5], f"{r[5]:g}", repr(r[6]), "" if r[7] is None else repr(r[7]), r[8],
                       "" if r[9] is None else str(r[9]).lower(), repr(r[10]), repr(r[11])) for r in rows])
         return buf.getvalue()
-    return "".join([",".join(_HEAD) + "\n", *(
+    return ",".join(_HEAD) + "\n" + body
+
+
+def _rows_text(rows: list[tuple]) -> str | None:
+    """loads.csv's lines of ``rows`` without its header, formatted directly; None where a name needs CSV's quoting
+    (:func:`_table` then writes the whole table by the csv module)."""
+    names = {r[i] for r in rows for i in (0, 1, 2, 3, 8)}
+    if any(isinstance(n, str) and any(c in n for c in ',"\r\n') for n in names):
+        return None
+    return "".join([
         f"{r[0]},{r[1]},{r[2]},{'' if r[3] is None else r[3]},{r[4]},{r[5]:g},{r[6]!r},"
         f"{'' if r[7] is None else repr(r[7])},{r[8]},{'' if r[9] is None else str(r[9]).lower()},{r[10]!r},{r[11]!r}\n"
-        for r in rows)])
+        for r in rows])
 
 
 def _passive_table(out: dict) -> str | None:
@@ -136,16 +145,10 @@ def draw_figure(plan: dict) -> bytes:
     :func:`casflex.plotting._figure._save` renders it (the same bytes), and returned (a worker on another machine
     returns it). Neither written to a temporary file and read back (an fsync) nor cleared (the figure's artists
     dropped one by one: 13 % of its time): the figure is freed with its last reference."""
-    import io
-
-    from casflex import interrupt
-    from casflex.plotting._figure import DPI
+    from casflex.plotting._figure import render
     from casflex.plotting.gait import gait_figure
 
-    buf = io.BytesIO()
-    gait_figure(path=None, **plan).savefig(buf, format="png", dpi=DPI)
-    interrupt.check()  # a Ctrl-C that matplotlib swallowed while rendering
-    return buf.getvalue()
+    return render(gait_figure(path=None, **plan))
 
 
 def _fingerprint(plan: dict) -> str:
@@ -198,10 +201,16 @@ class _EarlyFigures:
     def __init__(self, study, options: dict, kept: dict[str, str]) -> None:
         self.study, self.options, self.kept = study, options, kept
         self.drawn: dict[str, tuple[str, bytes]] = {}
+        self.rows: dict[str, tuple[tuple, str | None]] = {}  # subject -> (its trials, its loads.csv lines)
 
     def __call__(self, subject: str, out: dict) -> None:
-        from casflex.study.runner import per_kg
+        from casflex.study.runner import per_kg, tidy_rows
 
+        try:  # its lines of loads.csv too (0.7 s of CPU for 200 trials, else all after the last record)
+            self.rows[subject] = (tuple(out["trials"]), _rows_text(tidy_rows(per_kg(out, self.study),
+                                                                              per_kg=self.options["per_kg"])))
+        except Exception:  # noqa: BLE001 - the table is then made after the trials, where its error is reported
+            pass
         name = f"{subject}.png"
         try:
             plan = _figure_plans(per_kg(out, self.study), self.study.name, **self.options)[0].get(name)
@@ -209,6 +218,16 @@ class _EarlyFigures:
                 self.drawn[name] = (fp, draw_figure(plan))
         except Exception:  # noqa: BLE001 - drawn again after the trials, where its error is reported
             pass
+
+    def table(self, out: dict) -> str | None:
+        """loads.csv's text of ``out``'s trials from the subjects' lines made as their trials finished, where each
+        subject's were made from the same trials (in the table's order), else None (:func:`_table` writes it)."""
+        order = list(out["trials"])
+        subjects = list(dict.fromkeys(s for s, _ in order))
+        parts = [self.rows.get(s, ((), None)) for s in subjects]
+        if any(text is None for _, text in parts) or [k for keys, _ in parts for k in keys] != order:
+            return None
+        return ",".join(_HEAD) + "\n" + "".join(text for _, text in parts)
 
 
 def _muscles(out: dict, directory: Path, study) -> list[str]:
@@ -413,7 +432,7 @@ def _run(args: argparse.Namespace, study, staging: Path, record: Path, old: dict
 
         def tables() -> None:  # while the workers draw the figures
             rows.extend(tidy_rows(per_kg(out, study), per_kg=kg))
-            (staging / "loads.csv").write_text(_table(rows))
+            (staging / "loads.csv").write_text(early.table(out) or _table(rows))
             if passive is not None:
                 (staging / "passive.csv").write_text(passive)
 

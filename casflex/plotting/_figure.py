@@ -30,16 +30,26 @@ def _new_figure(figsize: tuple[float, float], layout: str | None = "constrained"
     return fig
 
 
+#: zlib's level for PNG files: 1, not Pillow's 6, the same pixels in a file about 5 % larger, encoded in half the time
+#: (a study's gait figure, 1080 x 2016 pixels: 0.13 -> 0.07 s of CPU)
+PNG_COMPRESS_LEVEL = 1
+
+
+def render(fig: Figure, fmt: str = "png", dpi: float = DPI) -> bytes:
+    """``fig`` rendered into memory in format ``fmt`` (PNG at :data:`PNG_COMPRESS_LEVEL`)."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format=fmt, dpi=dpi, **({"pil_kwargs": {"compress_level": PNG_COMPRESS_LEVEL}}
+                                             if fmt == "png" else {}))
+    interrupt.check()  # a Ctrl-C that matplotlib swallowed while rendering
+    return buf.getvalue()
+
+
 def _save(fig: Figure, path: str | os.PathLike[str] | None, dpi: float = DPI) -> None:
     """Render ``fig`` into memory and write it atomically to ``path`` (format from the suffix)."""
     if path is None:
         return
     path = Path(path)
-    fmt = path.suffix.lstrip(".").lower() or "png"
-    buf = io.BytesIO()
-    fig.savefig(buf, format=fmt, dpi=dpi)
-    interrupt.check()  # a Ctrl-C that matplotlib swallowed while rendering
-    atomic_write_bytes(path, buf.getvalue())
+    atomic_write_bytes(path, render(fig, path.suffix.lstrip(".").lower() or "png", dpi))
 
 
 def _panel_grid(n: int, cols: int, size: tuple[float, float]) -> tuple[Figure, list]:

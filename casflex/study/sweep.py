@@ -259,7 +259,10 @@ def run_sweep(runs: Iterable[Run], record: str | os.PathLike[str], *, scheduler:
         blobs = _ship_by_value({r.fn for r in todo})
 
         def finished(key: str, out: dict) -> None:
-            atomic_write_json(rec / f"{key}.json", {IDENTITY: key, **{k: v for k, v in out.items() if k != IDENTITY}})
+            # Neither flushed to the disk nor indented (7 -> 2 ms of this process's CPU a trial's record, 55 kB): a
+            # record a crash cut short or lost is refused by _read and its run done again, as an interrupted one is
+            atomic_write_json(rec / f"{key}.json", {IDENTITY: key, **{k: v for k, v in out.items() if k != IDENTITY}},
+                              durable=False, indent=None)
             results[key] = out
             executed.append(key)
             if report:

@@ -166,3 +166,25 @@ def test_the_study_s_figures_and_a_normative_band_no_curve_takes(record, tmp_pat
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(pytest.main([__file__]))
+
+
+def test_the_study_s_figure_is_the_same_pixels_as_matplotlib_s_own_placement_and_png(record):
+    # draw_figure gives each panel's title its height and encodes the PNG at zlib level 1 (cheaper): the pixels
+    # must be those of matplotlib placing the titles itself (measuring the tick labels) at Pillow's default level
+    import io
+
+    from PIL import Image
+
+    from casflex.cli.study import _figure_plans, draw_figure
+    from casflex.plotting._figure import DPI
+
+    plan = _figure_plans(record, "run")[0]["s02.png"]
+    png = draw_figure(plan)
+    fig = gait_figure(path=None, **plan)
+    for ax in fig.axes:
+        ax._autotitlepos = True  # matplotlib's own placement, as a title set without its height has it
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=DPI)
+    mine, theirs = (np.asarray(Image.open(io.BytesIO(b)).convert("RGBA")) for b in (png, buf.getvalue()))
+    assert png != buf.getvalue()  # another encoding ...
+    assert mine.shape == theirs.shape and (mine == theirs).all()  # ... of the same pixels
