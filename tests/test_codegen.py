@@ -136,6 +136,23 @@ def test_two_processes_build_a_library_once_and_a_third_pays_nothing(tmp_path):
     assert len(list(tmp_path.glob("cache_probe-*.so"))) == 1 and not list(tmp_path.glob("*.tmp"))
 
 
+def test_is_cached_answers_by_the_library_key_without_compiling(tmp_path, monkeypatch):
+    import casadi as ca
+
+    monkeypatch.setenv("CASFLEX_CACHE", str(tmp_path))
+    x = ca.SX.sym("x")
+    f, g = ca.Function("probe_f", [x], [2 * ca.sin(x)]), ca.Function("probe_f", [x], [3 * ca.sin(x)])
+    assert not codegen.is_cached([f], stem="probe", optimise="-O1") and not list(tmp_path.iterdir())
+    codegen.compile_functions([f], stem="probe", optimise="-O1")
+    assert codegen.is_cached([f], stem="probe", optimise="-O1")
+    # another function, level or stem is another library
+    assert not codegen.is_cached([g], stem="probe", optimise="-O1")
+    assert not codegen.is_cached([f], stem="probe", optimise="-O3")
+    assert not codegen.is_cached([f], stem="probe2", optimise="-O1")
+    monkeypatch.setenv("CC", "no-such-compiler")
+    assert not codegen.is_cached([f], stem="probe", optimise="-O1")  # no compiler: nothing to load
+
+
 def test_a_compiled_nlp_solver_follows_the_interpreted_iterates_and_is_cached(tmp_path, monkeypatch):
     import casadi as ca
 

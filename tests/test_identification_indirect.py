@@ -161,3 +161,42 @@ def test_a_scene_far_from_the_origin_is_identified():
     assert r.success, r.message
     # measured 1.7e-7 (6e-11 at the origin): the data's positions carry the round-off of 1e4 m
     np.testing.assert_allclose(r.p, far.p_nominal, rtol=1e-5)
+
+
+@pytest.mark.parametrize("scene", ["twobar", "threelink"])
+def test_the_final_trajectory_compiles_only_a_library_that_is_built(scene, monkeypatch):
+    # the fit's last simulation (its trajectory): a first run's few hundred steps interpreted, not 4-12 s of gcc;
+    # with the HHT library built (in the process, or on disk) compiled; the same numbers either way
+    import casflex.simulate.run as run
+    from casflex import codegen
+
+    model = casflex.assemble(casflex.load_scene(scene))
+    data = simulated_set(model, t_end=0.3, tol=TOL)
+    kw = {"run": ModelRun(newton_tol=TOL), "uncertainty": Uncertainty(model_error="none", form="none")}
+    builds, real = [], run.compile_functions
+
+    def refused(*args, **kwargs):
+        builds.append(kwargs.get("stem"))
+        raise AssertionError("the final simulation compiled the HHT library")
+
+    monkeypatch.setattr(run, "_LIBRARIES", type(run._LIBRARIES)())  # nothing built in this process
+    monkeypatch.setattr(run, "is_cached", lambda *a, **k: False)  # nor on disk: a first run
+    monkeypatch.setattr(run, "compile_functions", refused)
+    first = identify_indirect(model, data, H, **kw)
+    assert first.success and builds == [] and not first.trajectories[0].meta["compiled"]
+    assert first.extra["compiled"]  # the fit's own sensitivities stay compiled
+
+    monkeypatch.setattr(run, "compile_functions", real)
+    run.compiled_library(run.integrator_for(model, alpha=first.extra["alpha"], tol=TOL))  # built in the process
+    built = identify_indirect(model, data, H, **kw).trajectories[0]
+    monkeypatch.setattr(run, "_LIBRARIES", type(run._LIBRARIES)())
+    monkeypatch.setattr(run, "is_cached", codegen.is_cached)  # on disk only (a later process)
+    cached = identify_indirect(model, data, H, **kw).trajectories[0]
+    assert built.meta["compiled"] and cached.meta["compiled"] and cached.meta["stats"]["compile_cached"]
+    for tr in (built, cached):
+        for key in ("q", "qd", "qdd", "lam"):
+            if codegen.bitwise_expected():  # the default build flags: compiled runs are the interpreted ones
+                np.testing.assert_array_equal(getattr(tr, key), getattr(first.trajectories[0], key))
+            else:  # other flags: each step solves the same equations to the Newton tolerance
+                np.testing.assert_allclose(getattr(tr, key), getattr(first.trajectories[0], key), rtol=1e-8,
+                                           atol=1e-8 * np.abs(getattr(tr, key)).max())

@@ -16,6 +16,7 @@ from casflex.simulate.run import (
     ENERGY_GROWTH,
     SimulationError,
     check_memory,
+    compile_pays,
     compiled_library,
     format_bytes,
     initial_state,
@@ -27,8 +28,8 @@ from casflex.simulate.run import (
 )
 
 __all__ = ["simulate", "simulated_set", "Stepping", "Start", "SimulationError", "integrator_for", "step_count",
-           "check_memory", "CHUNK", "ENERGY_GROWTH", "compiled_library", "initial_state", "memory_available",
-           "format_bytes"]
+           "check_memory", "CHUNK", "ENERGY_GROWTH", "compiled_library", "compile_pays", "initial_state",
+           "memory_available", "format_bytes"]
 
 
 class _Verb(types.ModuleType):

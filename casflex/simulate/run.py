@@ -29,7 +29,7 @@ import casadi as ca
 import numpy as np
 
 from casflex import interrupt
-from casflex.codegen import BufferedCall, CompiledLibrary, compile_functions
+from casflex.codegen import BufferedCall, CompiledLibrary, compile_functions, is_cached
 from casflex.data import MeasurementSet
 from casflex.integrators.hht import HHT
 from casflex.model import Model, assemble
@@ -39,7 +39,7 @@ from casflex.scene import Scene
 from casflex.simulate.options import Start, Stepping
 
 __all__ = ["simulate", "simulated_set", "SimulationError", "integrator_for", "step_count", "check_memory", "CHUNK",
-           "ENERGY_GROWTH"]
+           "ENERGY_GROWTH", "compile_pays"]
 
 #: Steps per compiled call: progress and Ctrl-C are handled between chunks.
 CHUNK = 250
@@ -68,17 +68,39 @@ def integrator_for(model: Model, *, alpha: float, tol: float = 1e-12, max_iter: 
     return cache[key]
 
 
+def _library_functions(integ: HHT) -> list[ca.Function]:
+    if integ.newton == "modified":
+        mod = integ.modified
+        funcs = [mod.chunk(CHUNK), mod.chunk(1), mod.factor_at]
+    else:
+        funcs = [integ.step, integ.trajectory(CHUNK)]
+    return [*funcs, integ.post.map(f"hht_post_{CHUNK}", "serial", CHUNK, [2], [])]
+
+
 def compiled_library(integ: HHT) -> CompiledLibrary:
     """The compiled step and chunk Functions of ``integ`` (built once per process)."""
     if integ not in _LIBRARIES:
-        if integ.newton == "modified":
-            mod = integ.modified
-            funcs = [mod.chunk(CHUNK), mod.chunk(1), mod.factor_at]
-        else:
-            funcs = [integ.step, integ.trajectory(CHUNK)]
-        funcs.append(integ.post.map(f"hht_post_{CHUNK}", "serial", CHUNK, [2], []))
-        _LIBRARIES[integ] = compile_functions(funcs, stem="casflex_hht")
+        _LIBRARIES[integ] = compile_functions(_library_functions(integ), stem="casflex_hht")
     return _LIBRARIES[integ]
+
+
+#: What a first compile of an HHT library costs (s of gcc CPU at -O3): twobar's took 3.3-10.6 s from 1 to 32
+#: elements per bar (docs/tables/bench_simulate.md, cold build); the lower end, so a run that pays is compiled.
+COMPILE_S = 4.0
+#: The interpreted step's CPU cost (s) as a + b n_dof at one Newton update per step: twobar with 1 and 8 elements
+#: per bar (15 and 57 dofs) took 0.40 and 0.74 ms per step; more updates per step cost more (the estimate is low).
+INTERPRETED_STEP_S = (0.28e-3, 8e-6)
+
+
+def compile_pays(integ: HHT, n_steps: int) -> bool:
+    """Whether ``n_steps`` steps of ``integ`` should run compiled: its library is built (in this process or in
+    ``$CASFLEX_CACHE``), or interpreting them would take longer than compiling it (:data:`COMPILE_S`;
+    :data:`INTERPRETED_STEP_S`: twobar interpreted pays 4 s at ~10 000 steps). The two paths give the same
+    numbers (module docstring), so the choice costs time only."""
+    a, b = INTERPRETED_STEP_S
+    if integ in _LIBRARIES or n_steps * (a + b * integ.model.n_dof) > COMPILE_S:
+        return True
+    return is_cached(_library_functions(integ), stem="casflex_hht")
 
 
 def step_count(t_end: float, dt: float, *, names: tuple[str, str] = ("t_end", "dt")) -> int:
