@@ -93,3 +93,24 @@ def test_modified_newton_on_the_band_reuses_the_unscaled_factors():
     assert refreshes < 30  # measured 0 of 60 (twobar at dt = 2e-4, 3 elements per bar)
     # a chord step leaves up to cond(G_z) tol of error (modified.py); measured 2.7e-15 m over these 60 steps
     np.testing.assert_allclose(x[:n], xe[:n], rtol=0, atol=1e-11)
+
+
+@pytest.mark.parametrize("expand", [False, True])
+def test_a_step_ends_converged_exactly_when_its_residual_is_within_tol_or_the_roundoff_floor(expand):
+    """finish_step's `done` (the floor's pass taken only above tol, a conditional branch) is res <= max(tol,
+    floor) as HHT.tolerance says, on both sides of tol and of the floor: tol = 1e-16 lies below twobar's
+    round-off floor (10 eps max|q / l|, about 1e-15), so residuals between them converge only through the floor."""
+    model = _twobar(3)
+    integ = HHT(model, tol=1e-16, expand=expand)
+    p, n = model.params(None), model.n_dof
+    x0 = initial_state(integ, p)
+    d = np.array(integ.scale(x0[:n], x0[n:2 * n], p, 1e-3)).ravel()
+    zg, prm = integ.prepare(x0, 0.0, p, 1e-3, d)
+    z1 = np.array(integ._fn["update_step"](zg, prm)[0]).ravel()
+    seen = []
+    for s in [0.0, *np.logspace(-16, -6, 21)]:
+        x1, res, done = integ._fn["finish_step"](z1 + s, prm)
+        limit = float(integ.tolerance(np.array(x1).ravel()[:n]))
+        assert bool(done) == (float(res) <= limit), (s, float(res), limit)
+        seen.append((float(res) > integ.tol, bool(done)))
+    assert (True, True) in seen and (True, False) in seen  # the floor's branch taken, and a step refused
