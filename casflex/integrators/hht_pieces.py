@@ -191,9 +191,10 @@ def _state(m: Model, lay: Layout, alpha: float, z: ca.MX, parts: dict) -> tuple[
     return q1, qd1, qdd1, q_alpha, mu1
 
 
-def group_args(m: Model, alpha: float, z: ca.MX, P: ca.MX, lay: Layout) -> tuple[dict, tuple, list[list]]:
+def group_args(m: Model, alpha: float, z: ca.MX, P: ca.MX, lay: Layout, dofs=gather) -> tuple[dict, tuple, list[list]]:
     """(prm's parts by name, the state (q1, qd1, qdd1, q_alpha, mu1) of the unknowns z, and per element
-    group the arguments of its HHT kernel: the gathered dofs, properties, gravity g and c)."""
+    group the arguments of its HHT kernel: the element dofs of each state vector (``dofs(v, group)``, by
+    default :func:`gather`), properties, gravity g and c)."""
     parts, o = {}, 0
     for key, size in prm_layout(m):
         parts[key], o = P[o:o + size], o + size
@@ -203,7 +204,7 @@ def group_args(m: Model, alpha: float, z: ca.MX, P: ca.MX, lay: Layout) -> tuple
     coef = ca.vertcat(gamma / (beta * parts["h"]), 1 / (beta * parts["h"] ** 2))
     g, args = m.gravity(parts["p"]), []
     for grp in m.groups:
-        a = [gather(v, grp) for v in (q1, qd1, qdd1)] + ([gather(q_alpha, grp)] if alpha != 0.0 else [])
+        a = [dofs(v, grp) for v in (q1, qd1, qdd1)] + ([dofs(q_alpha, grp)] if alpha != 0.0 else [])
         args.append(a + [grp.props(parts["p"]), g, coef])
     return parts, state, args
 
@@ -221,14 +222,14 @@ def mapped_hht(m: Model, alpha: float, tangent: bool):
     return evaluate
 
 
-def newton_terms(m: Model, lay: Layout, alpha: float, z: ca.MX, P: ca.MX, residual, tangent) -> dict:
+def newton_terms(m: Model, lay: Layout, alpha: float, z: ca.MX, P: ca.MX, residual, tangent, dofs=gather) -> dict:
     """The HHT equations of the unknowns z (see :func:`newton_functions`) with the element groups'
     kernel outputs from ``residual(k, args) -> r`` and ``tangent(k, args) -> (r, K)`` (k: the group,
-    args: its kernel's arguments, :func:`group_args`; ``residual`` None: R is R_t): R, R_t (the same
+    args: its kernel's arguments, :func:`group_args` with ``dofs``; ``residual`` None: R is R_t): R, R_t (the same
     residual from the two kernels), G, G_t (scaled), the Jacobian's scaled nonzeros jnz and its
     assembly, the state, the element matrices and the unscaled residuals."""
     n, free, ell, nmu = m.n_dof, lay.free, lay.ell, lay.n_mu
-    parts, state, args = group_args(m, alpha, z, P, lay)
+    parts, state, args = group_args(m, alpha, z, P, lay, dofs)
     q1, _, _, _, mu1 = state
     dp = parts["d"]
     R = R_t = -alpha * parts["f_n"] - parts["f_ext"]
