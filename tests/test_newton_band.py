@@ -11,7 +11,7 @@ import pytest
 
 import casflex
 from casflex.integrators.hht import HHT
-from casflex.model.assembly import scatter, scatter_add
+from casflex.model.assembly import gather, node_blocks, node_dofs, scatter, scatter_add
 from casflex.simulate.run import initial_state
 
 
@@ -73,6 +73,24 @@ def test_scatter_add_is_base_plus_scatter_bitwise():
         f = ca.Function("f", [base, vals], [scatter_add(base, vals, grp), base + scatter(vals, grp, n)])
         a, b = f(rng.normal(size=n), rng.normal(size=(grp.spec.n_dof, grp.n)))
         assert np.array_equal(np.array(a), np.array(b)), grp.kind
+
+
+@pytest.mark.parametrize("scene", ["twobar", "knee_pendulum", "slidercrank"])
+def test_node_dofs_are_the_gathered_element_dofs_split_at_the_nodes(scene):
+    """node_dofs (slices along a meshed bar, gathers elsewhere), its node blocks stacked, is gather's table of
+    the element dofs, bitwise, for every element group; twobar's beams are read as slices, no index list."""
+    model = _twobar(8) if scene == "twobar" else casflex.assemble(casflex.load_scene(scene))
+    v = ca.MX.sym("v", model.n_dof)
+    x = np.random.default_rng(3).normal(size=model.n_dof)
+    for grp in model.groups:
+        parts = node_dofs(v, grp)
+        assert [int(p.size1()) for p in parts] == [b - a for a, b in node_blocks(grp.dofs)], grp.kind
+        a, b = ca.Function("f", [v], [ca.vertcat(*parts), gather(v, grp)])(x)
+        assert np.array_equal(np.array(a), np.array(b)), grp.kind
+    beams = next(g for g in _twobar(32).groups if g.kind == "beam")
+    assert node_blocks(beams.dofs) == ((0, 3), (3, 6))
+    read = str(node_dofs(ca.MX.sym("v", 201), beams)[0])
+    assert read == "horzcat(v[3:6], reshape(v[15:108]), v[9:12], reshape(v[108:201]))", read
 
 
 def test_modified_newton_on_the_band_reuses_the_unscaled_factors():
