@@ -11,7 +11,7 @@ import pytest
 
 import casflex
 from casflex.integrators.hht import HHT
-from casflex.model.assembly import scatter, scatter_add
+from casflex.model.assembly import gather, node_blocks, node_dofs, scatter, scatter_add
 from casflex.simulate.run import initial_state
 
 
@@ -75,6 +75,24 @@ def test_scatter_add_is_base_plus_scatter_bitwise():
         assert np.array_equal(np.array(a), np.array(b)), grp.kind
 
 
+@pytest.mark.parametrize("scene", ["twobar", "knee_pendulum", "slidercrank"])
+def test_node_dofs_are_the_gathered_element_dofs_split_at_the_nodes(scene):
+    """node_dofs (slices along a meshed bar, gathers elsewhere), its node blocks stacked, is gather's table of
+    the element dofs, bitwise, for every element group; twobar's beams are read as slices, no index list."""
+    model = _twobar(8) if scene == "twobar" else casflex.assemble(casflex.load_scene(scene))
+    v = ca.MX.sym("v", model.n_dof)
+    x = np.random.default_rng(3).normal(size=model.n_dof)
+    for grp in model.groups:
+        parts = node_dofs(v, grp)
+        assert [int(p.size1()) for p in parts] == [b - a for a, b in node_blocks(grp.dofs)], grp.kind
+        a, b = ca.Function("f", [v], [ca.vertcat(*parts), gather(v, grp)])(x)
+        assert np.array_equal(np.array(a), np.array(b)), grp.kind
+    beams = next(g for g in _twobar(32).groups if g.kind == "beam")
+    assert node_blocks(beams.dofs) == ((0, 3), (3, 6))
+    read = str(node_dofs(ca.MX.sym("v", 201), beams)[0])
+    assert read == "horzcat(v[3:6], reshape(v[15:108]), v[9:12], reshape(v[108:201]))", read
+
+
 def test_modified_newton_on_the_band_reuses_the_unscaled_factors():
     """The modified Newton keeps the update's factors (of the unscaled matrix on the mapped path) and its chord
     updates converge most steps: a factor kept in the wrong scaling would refresh at every step."""
@@ -93,3 +111,24 @@ def test_modified_newton_on_the_band_reuses_the_unscaled_factors():
     assert refreshes < 30  # measured 0 of 60 (twobar at dt = 2e-4, 3 elements per bar)
     # a chord step leaves up to cond(G_z) tol of error (modified.py); measured 2.7e-15 m over these 60 steps
     np.testing.assert_allclose(x[:n], xe[:n], rtol=0, atol=1e-11)
+
+
+@pytest.mark.parametrize("expand", [False, True])
+def test_a_step_ends_converged_exactly_when_its_residual_is_within_tol_or_the_roundoff_floor(expand):
+    """finish_step's `done` (the floor's pass taken only above tol, a conditional branch) is res <= max(tol,
+    floor) as HHT.tolerance says, on both sides of tol and of the floor: tol = 1e-16 lies below twobar's
+    round-off floor (10 eps max|q / l|, about 1e-15), so residuals between them converge only through the floor."""
+    model = _twobar(3)
+    integ = HHT(model, tol=1e-16, expand=expand)
+    p, n = model.params(None), model.n_dof
+    x0 = initial_state(integ, p)
+    d = np.array(integ.scale(x0[:n], x0[n:2 * n], p, 1e-3)).ravel()
+    zg, prm = integ.prepare(x0, 0.0, p, 1e-3, d)
+    z1 = np.array(integ._fn["update_step"](zg, prm)[0]).ravel()
+    seen = []
+    for s in [0.0, *np.logspace(-16, -6, 21)]:
+        x1, res, done = integ._fn["finish_step"](z1 + s, prm)
+        limit = float(integ.tolerance(np.array(x1).ravel()[:n]))
+        assert bool(done) == (float(res) <= limit), (s, float(res), limit)
+        seen.append((float(res) > integ.tol, bool(done)))
+    assert (True, True) in seen and (True, False) in seen  # the floor's branch taken, and a step refused

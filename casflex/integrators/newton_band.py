@@ -22,22 +22,28 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from casflex.elements.kernels import hht_kernel
+from casflex.elements.kernels import hht_kernel_split
 from casflex.integrators.band import BandLU
 from casflex.integrators.hht_pieces import Layout, finish_outputs, newton_terms
 from casflex.model import Model
+from casflex.model.assembly import node_blocks, node_dofs
 
 __all__ = ["band_newton", "band_storage"]
 
 
 def _plain_map(m: Model, alpha: float, tangent: bool, padded: dict | None = None):
-    """``evaluate(k, args)`` for :func:`newton_terms`: group k's kernel mapped over its elements, its
-    shared inputs (g, c: the last two) repeated for each by one gather. ``padded``: the kernels give K
-    padded with 0 and 1 (:func:`hht_kernel`), kept in ``padded[k]``; K itself is then a view of it."""
+    """``evaluate(k, args)`` for :func:`newton_terms` with ``dofs=node_dofs``: group k's kernel, its dof inputs
+    split into node blocks, mapped over its elements, its shared inputs (g, c: the last two) repeated for each
+    by one gather. ``padded``: the kernels give K padded with 0 and 1 (:func:`hht_kernel`), kept in
+    ``padded[k]``; K itself is then a view of it."""
     def evaluate(k: int, args: list):
         grp = m.groups[k]
-        f = hht_kernel(grp.kind, alpha, m.inertia, tangent, padded is not None).map(grp.n, "serial")
-        out = f(*args[:-2], *(ca.reshape(a[list(range(a.numel())) * grp.n], a.numel(), grp.n) for a in args[-2:]))
+        n_vec = sum(isinstance(a, list) for a in args)
+        f = hht_kernel_split(grp.kind, alpha, m.inertia, tangent, padded is not None, node_blocks(grp.dofs))
+        f = f.map(grp.n, "serial")
+        dofs = [b for a in args[:n_vec] for b in a]
+        out = f(*dofs, *args[n_vec:-2],
+                *(ca.reshape(a[list(range(a.numel())) * grp.n], a.numel(), grp.n) for a in args[-2:]))
         if padded is None:
             return out
         nd = grp.spec.n_dof
@@ -98,12 +104,12 @@ def band_newton(m: Model, lay: Layout, alpha: float, tol: float, n_prm: int,
     ``hht_finish`` (:func:`~casflex.integrators.hht_pieces.newton_functions`)."""
     z, P = ca.MX.sym("z", len(lay.free) + lay.n_mu), ca.MX.sym("prm", n_prm)
     padded = {}
-    t = newton_terms(m, lay, alpha, z, P, None, _plain_map(m, alpha, True, padded))
+    t = newton_terms(m, lay, alpha, z, P, None, _plain_map(m, alpha, True, padded), node_dofs)
     cse = {"cse": True}
     jac = ca.Function("hht_jacobian_band", [z, P], [*band_storage(t, band, padded), t["G_t"], t["rhs_t"], t["cols_s"]],
                       ["z", "prm"], ["first", "cols", "rows", "G", "r", "cols_s"], cse)
     r = _plain_map(m, alpha, False)
-    t = newton_terms(m, lay, alpha, z, P, r, lambda k, args: (r(k, args), None))
+    t = newton_terms(m, lay, alpha, z, P, r, lambda k, args: (r(k, args), None), node_dofs)
     rhs = ca.Function("hht_rhs", [z, P], [t["G"], t["rhs"]], ["z", "prm"], ["G", "r"], cse)
     outs = finish_outputs(m, lay, alpha, tol, t["G"], t["R"][lay.fixed], t["state"])
     finish = ca.Function("hht_finish_band", [z, P], outs,
