@@ -278,14 +278,9 @@ def finish_outputs(m: Model, lay: Layout, alpha: float, tol: float, G1: ca.MX, r
     x1 = ca.densify(ca.vertcat(q1, qd1, qdd1, lam1, mu1))  # dense: the C interface is plain arrays
     res = ca.norm_inf(G1) if lay.free or lay.n_mu else ca.MX(0)
     # res <= max(tol, floor), the floor's pass over q1 (4.4k of a step's 399k instructions at 32 el./bar, twobar)
-    # taken only for a residual above tol: a branch of a conditional on q1 itself (an if_else would recompute q1
-    # from the unknowns in its branch, 18 kB of C), the same truth value (NaN included)
-    qs, rs = ca.MX.sym("q1", q1.numel()), ca.MX.sym("res")
-    floor = ca.Function("hht_floor", [qs, rs],
-                        [rs <= ROUNDOFF_FLOOR * np.finfo(float).eps * ca.mmax(ca.fabs(qs / lay.ell))])
-    within = ca.Function("hht_within_tol", [qs, rs], [ca.MX(1)])
-    done = ca.Function.conditional("hht_converged", [floor], within)(res <= tol, q1, res)
-    return [x1, res, done]
+    # taken only for a residual above tol: a branch of a conditional, the same truth value (NaN included)
+    floor = ROUNDOFF_FLOOR * np.finfo(float).eps * ca.mmax(ca.fabs(q1 / lay.ell))
+    return [x1, res, ca.if_else(res <= tol, 1, res <= floor, True)]
 
 
 def newton_functions(m: Model, lay: Layout, alpha: float, tol: float, n_prm: int, expand: bool):
