@@ -317,23 +317,3 @@ def hht_kernel(kind: str, alpha: float, form: str, with_tangent: bool, padded: b
     if padded:
         return ca.Function(f"{tag}_padded", ins, [r, ca.densify(ca.vertcat(ca.vec(K), 0, 1))], names, ["r", "K"], CSE)
     return ca.Function(tag, ins, [r, K], names, ["r", "K"], CSE)
-
-
-@functools.cache
-def hht_kernel_split(kind: str, alpha: float, form: str, with_tangent: bool, padded: bool,
-                     blocks: tuple[tuple[int, int], ...]) -> ca.Function:
-    """:func:`hht_kernel` with each of its element dof inputs (q, qd, qdd and, for alpha < 0, qa) split into the
-    node ``blocks`` (rows [a, b) of the element's dofs, :func:`casflex.model.assembly.node_blocks`): the same
-    expressions (the kernel called on the blocks stacked), for inputs read as slices of the global vectors
-    (:func:`casflex.model.assembly.node_dofs`). One Function per variant: its code is generated once."""
-    f = hht_kernel(kind, alpha, form, with_tangent, padded)
-    n_vec = 3 if alpha == 0.0 else 4
-    ins, call, names = [], [], []
-    for i in range(f.n_in()):
-        if i < n_vec:
-            parts = [ca.SX.sym(f"{f.name_in(i)}{j}", b - a) for j, (a, b) in enumerate(blocks)]
-            ins, call = ins + parts, call + [ca.vertcat(*parts)]
-            names += [f"{f.name_in(i)}{j}" for j in range(len(blocks))]
-        else:
-            ins, call, names = ins + [f.sx_in(i)], call + [f.sx_in(i)], names + [f.name_in(i)]
-    return ca.Function(f"{f.name()}_nodes{len(blocks)}", ins, f.call(call), names, f.name_out(), CSE)

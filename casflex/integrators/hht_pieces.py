@@ -12,9 +12,9 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from casflex.elements.kernels import hht_kernel_split, kernel
+from casflex.elements.kernels import hht_kernel, kernel
 from casflex.model import Model
-from casflex.model.assembly import MatrixAssembly, gather, node_blocks, node_dofs, scatter, scatter_add, scatter_at
+from casflex.model.assembly import MatrixAssembly, gather, scatter, scatter_add, scatter_at
 from casflex.model.constraints import gather_at, mapped_joint, split
 
 __all__ = ["Layout", "ROUNDOFF_FLOOR", "newton_updates", "hht_coefficients", "roundoff_tolerance", "prm_layout",
@@ -210,16 +210,13 @@ def group_args(m: Model, alpha: float, z: ca.MX, P: ca.MX, lay: Layout, dofs=gat
 
 
 def mapped_hht(m: Model, alpha: float, tangent: bool):
-    """``evaluate(k, args)`` for :func:`newton_terms` with ``dofs=node_dofs``: group k's HHT kernel (``tangent``:
-    with K) mapped over its elements, g and c the same for all."""
+    """``evaluate(k, args)`` for :func:`newton_terms`: group k's HHT kernel (``tangent``: with K) mapped
+    over its elements, g and c the same for all."""
     def evaluate(k: int, args: list):
         grp = m.groups[k]
-        # the padded tangent kernel with its dofs split at the nodes, which the step's own update maps
-        # (newton_band.py): one copy of its code
-        f = hht_kernel_split(grp.kind, alpha, m.inertia, tangent, tangent, node_blocks(grp.dofs))
-        n_vec = sum(isinstance(a, list) for a in args)
-        out = f.map(f"{f.name()}_{grp.n}", "serial", grp.n, [f.n_in() - 2, f.n_in() - 1], [])(
-            *(b for a in args[:n_vec] for b in a), *args[n_vec:])
+        # the padded tangent kernel, which the step's own update maps (newton_band.py): one copy of its code
+        f = hht_kernel(grp.kind, alpha, m.inertia, tangent, tangent)
+        out = f.map(f"{f.name()}_{grp.n}", "serial", grp.n, [f.n_in() - 2, f.n_in() - 1], [])(*args)
         nd = grp.spec.n_dof
         return (out[0], ca.reshape(out[1][:nd * nd, :], nd, nd * grp.n)) if tangent else out
     return evaluate
@@ -294,7 +291,7 @@ def newton_functions(m: Model, lay: Layout, alpha: float, tol: float, n_prm: int
     the round-off floor of the coordinates (:func:`roundoff_tolerance`).
     """
     z, P = ca.MX.sym("z", len(lay.free) + lay.n_mu), ca.MX.sym("prm", n_prm)
-    t = newton_terms(m, lay, alpha, z, P, mapped_hht(m, alpha, False), mapped_hht(m, alpha, True), node_dofs)
+    t = newton_terms(m, lay, alpha, z, P, mapped_hht(m, alpha, False), mapped_hht(m, alpha, True))
     cse = {"cse": True}
     resid = ca.Function("hht_residual", [z, P], [t["G"]], ["z", "prm"], ["G"], cse)
     jac = ca.Function("hht_jacobian", [z, P], [ca.MX(t["asm"].sparsity, t["jnz"]), t["G_t"]], ["z", "prm"],

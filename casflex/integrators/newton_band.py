@@ -22,25 +22,63 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from casflex.elements.kernels import hht_kernel_split
+from casflex.elements.kernels import hht_kernel
 from casflex.integrators.band import BandLU
 from casflex.integrators.hht_pieces import Layout, finish_outputs, newton_terms
 from casflex.model import Model
-from casflex.model.assembly import node_blocks, node_dofs
 
 __all__ = ["band_newton", "band_storage"]
 
 
+def _node_blocks(dofs: np.ndarray) -> list[tuple[int, int]]:
+    """The rows [a, b) of an element dof table (n_el, n_dof) that are consecutive dofs in every element (a
+    node's dofs): the kernels' dof inputs split at these rows (:func:`_split_kernel`)."""
+    cuts = [0] + [r for r in range(1, dofs.shape[1]) if np.any(dofs[:, r] != dofs[:, r - 1] + 1)] + [dofs.shape[1]]
+    return list(zip(cuts[:-1], cuts[1:], strict=True))
+
+
+def _node_dofs(v: ca.MX, grp) -> list[ca.MX]:
+    """The group's element dofs of v (n,) as one (b - a, n_el) matrix per node block [a, b) (:func:`_node_blocks`):
+    side by side slices of v where consecutive elements' nodes are consecutive (along a meshed bar), which the
+    generated code reads in place (a gather through an index list costs 6-7 instructions a number; twobar,
+    32 el./bar: 6 of them a step, 15k of its instructions); elsewhere gathers."""
+    out = []
+    for a, b in _node_blocks(grp.dofs):
+        first, w = grp.dofs[:, a], b - a
+        runs = np.split(np.arange(grp.n), np.flatnonzero(np.diff(first) != w) + 1)
+        if len(runs) > max(4, grp.n // 4):  # no chains: one gather, not many small copies
+            out.append(ca.reshape(v[grp.dofs[:, a:b].T.ravel().tolist()], w, grp.n))
+            continue
+        out.append(ca.horzcat(*(ca.reshape(v[int(first[r[0]]):int(first[r[0]]) + w * r.size], w, r.size)
+                                for r in runs)))
+    return out
+
+
+def _split_kernel(f: ca.Function, n_vec: int, blocks: list[tuple[int, int]]) -> ca.Function:
+    """``f`` with each of its first ``n_vec`` inputs (the element dofs of q, qd, ...) split into the node
+    ``blocks``: the same expressions (f called on the blocks stacked), read from the slices of :func:`_node_dofs`."""
+    ins, call, names = [], [], []
+    for i in range(f.n_in()):
+        if i < n_vec:
+            parts = [ca.SX.sym(f"{f.name_in(i)}{j}", b - a) for j, (a, b) in enumerate(blocks)]
+            ins, names, call = ins + parts, names + [f"{f.name_in(i)}{j}" for j in range(len(blocks))], \
+                call + [ca.vertcat(*parts)]
+        else:
+            ins, names, call = ins + [f.sx_in(i)], names + [f.name_in(i)], call + [f.sx_in(i)]
+    return ca.Function(f"{f.name()}_nodes{len(blocks)}", ins, f.call(call), names, f.name_out(), {"cse": True})
+
+
 def _plain_map(m: Model, alpha: float, tangent: bool, padded: dict | None = None):
-    """``evaluate(k, args)`` for :func:`newton_terms` with ``dofs=node_dofs``: group k's kernel, its dof inputs
+    """``evaluate(k, args)`` for :func:`newton_terms` with ``dofs=_node_dofs``: group k's kernel, its dof inputs
     split into node blocks, mapped over its elements, its shared inputs (g, c: the last two) repeated for each
     by one gather. ``padded``: the kernels give K padded with 0 and 1 (:func:`hht_kernel`), kept in
     ``padded[k]``; K itself is then a view of it."""
     def evaluate(k: int, args: list):
         grp = m.groups[k]
         n_vec = sum(isinstance(a, list) for a in args)
-        f = hht_kernel_split(grp.kind, alpha, m.inertia, tangent, padded is not None, node_blocks(grp.dofs))
-        f = f.map(grp.n, "serial")
+        kern = _split_kernel(hht_kernel(grp.kind, alpha, m.inertia, tangent, padded is not None), n_vec,
+                             _node_blocks(grp.dofs))
+        f = kern.map(grp.n, "serial")
         dofs = [b for a in args[:n_vec] for b in a]
         out = f(*dofs, *args[n_vec:-2],
                 *(ca.reshape(a[list(range(a.numel())) * grp.n], a.numel(), grp.n) for a in args[-2:]))
@@ -104,12 +142,12 @@ def band_newton(m: Model, lay: Layout, alpha: float, tol: float, n_prm: int,
     ``hht_finish`` (:func:`~casflex.integrators.hht_pieces.newton_functions`)."""
     z, P = ca.MX.sym("z", len(lay.free) + lay.n_mu), ca.MX.sym("prm", n_prm)
     padded = {}
-    t = newton_terms(m, lay, alpha, z, P, None, _plain_map(m, alpha, True, padded), node_dofs)
+    t = newton_terms(m, lay, alpha, z, P, None, _plain_map(m, alpha, True, padded), _node_dofs)
     cse = {"cse": True}
     jac = ca.Function("hht_jacobian_band", [z, P], [*band_storage(t, band, padded), t["G_t"], t["rhs_t"], t["cols_s"]],
                       ["z", "prm"], ["first", "cols", "rows", "G", "r", "cols_s"], cse)
     r = _plain_map(m, alpha, False)
-    t = newton_terms(m, lay, alpha, z, P, r, lambda k, args: (r(k, args), None), node_dofs)
+    t = newton_terms(m, lay, alpha, z, P, r, lambda k, args: (r(k, args), None), _node_dofs)
     rhs = ca.Function("hht_rhs", [z, P], [t["G"], t["rhs"]], ["z", "prm"], ["G", "r"], cse)
     outs = finish_outputs(m, lay, alpha, tol, t["G"], t["R"][lay.fixed], t["state"])
     finish = ca.Function("hht_finish_band", [z, P], outs,

@@ -21,8 +21,7 @@ import numpy as np
 from casflex.elements.joints import joint_spec
 from casflex.elements.kernels import KINDS, Kind
 
-__all__ = ["ElementGroup", "MatrixAssembly", "gather", "node_blocks", "node_dofs", "scatter", "scatter_add",
-           "scatter_at"]
+__all__ = ["ElementGroup", "MatrixAssembly", "gather", "scatter", "scatter_add", "scatter_at"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -75,30 +74,6 @@ class ElementGroup:
 def gather(v: ca.MX | ca.SX, group: ElementGroup) -> ca.MX | ca.SX:
     """The group's element dofs of a global vector v (n,): shape (n_dof of the kind, n_el)."""
     return ca.reshape(v[group.dofs.ravel().tolist()], group.spec.n_dof, group.n)
-
-
-def node_blocks(dofs: np.ndarray) -> tuple[tuple[int, int], ...]:
-    """The rows [a, b) of an element dof table (n_el, n_dof of the kind) that are consecutive dofs in every
-    element (a node's dofs)."""
-    cuts = [0] + [r for r in range(1, dofs.shape[1]) if np.any(dofs[:, r] != dofs[:, r - 1] + 1)] + [dofs.shape[1]]
-    return tuple(zip(cuts[:-1], cuts[1:], strict=True))
-
-
-def node_dofs(v: ca.MX | ca.SX, group: ElementGroup) -> list:
-    """The group's element dofs of v (n,) as one (b - a, n_el) matrix per node block [a, b) (:func:`node_blocks`):
-    slices of v side by side where consecutive elements' nodes are consecutive (along a meshed bar), which
-    generated code reads in place (a gather through an index list costs 6-7 instructions a number: twobar,
-    32 el./bar, 6 of them a step, 10k of its instructions); elsewhere (no chains) gathers."""
-    out = []
-    for a, b in node_blocks(group.dofs):
-        first, w = group.dofs[:, a], b - a
-        runs = np.split(np.arange(group.n), np.flatnonzero(np.diff(first) != w) + 1)
-        if len(runs) > max(4, group.n // 4):  # no chains: one gather, not many small copies
-            out.append(ca.reshape(v[group.dofs[:, a:b].T.ravel().tolist()], w, group.n))
-        else:
-            out.append(ca.horzcat(*(ca.reshape(v[int(first[r[0]]):int(first[r[0]]) + w * r.size], w, r.size)
-                                    for r in runs)))
-    return out
 
 
 def scatter(values: ca.MX | ca.SX, group: ElementGroup, n: int) -> ca.MX | ca.SX:
