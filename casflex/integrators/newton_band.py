@@ -47,7 +47,7 @@ def _node_dofs(v: ca.MX, grp) -> list[ca.MX]:
         first, w = grp.dofs[:, a], b - a
         runs = np.split(np.arange(grp.n), np.flatnonzero(np.diff(first) != w) + 1)
         if len(runs) > max(4, grp.n // 4):  # no chains: one gather, not many small copies
-            out.append(ca.reshape(v[grp.dofs[:, a:b].T.ravel().tolist()], w, grp.n))
+            out.append(ca.reshape(v[grp.dofs[:, a:b].ravel().tolist()], w, grp.n))
             continue
         out.append(ca.horzcat(*(ca.reshape(v[int(first[r[0]]):int(first[r[0]]) + w * r.size], w, r.size)
                                 for r in runs)))
