@@ -18,10 +18,37 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import dataclasses  # noqa: E402
 import math  # noqa: E402
+import shutil  # noqa: E402
+import tempfile  # noqa: E402
 
 import pytest  # noqa: E402
 
 from casflex import Beam, Load, Node, Scene, Support  # noqa: E402
+
+#: The session's own compiled-code cache when CASFLEX_CACHE is unset (made by pytest_configure, removed by
+#: pytest_unconfigure); None when the user's CASFLEX_CACHE is kept or a parent process made the directory.
+_SESSION_CACHE: str | None = None
+
+
+def pytest_configure(config) -> None:
+    """Compiled libraries and built models go to a temporary CASFLEX_CACHE for the session unless the caller set one
+    (as .ci/any-machine does, or to keep a cache across sessions): the tests never write to ~/.cache/casflex. Set
+    here, before any test module is imported and before xdist starts its workers, which inherit it and so share one
+    cache (the controller, which made it, removes it)."""
+    global _SESSION_CACHE
+    if os.environ.get("CASFLEX_CACHE"):
+        return
+    _SESSION_CACHE = tempfile.mkdtemp(prefix="casflex-test-cache-")
+    os.environ["CASFLEX_CACHE"] = _SESSION_CACHE
+
+
+def pytest_unconfigure(config) -> None:
+    global _SESSION_CACHE
+    if _SESSION_CACHE is not None:
+        shutil.rmtree(_SESSION_CACHE, ignore_errors=True)
+        os.environ.pop("CASFLEX_CACHE", None)
+        _SESSION_CACHE = None
+
 
 #: A steel-like default section (SI): E (Pa), A (m^2), I (m^4), rho (kg/m^3).
 STEEL = {"E": 2.1e11, "A": 1e-4, "I": 1e-9, "rho": 7800.0}

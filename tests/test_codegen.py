@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import platform
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -169,3 +170,44 @@ def test_a_compiled_nlp_solver_follows_the_interpreted_iterates_and_is_cached(tm
     assert len(codegen.cache_entries()) == 1  # found, not built again
     count, size = codegen.clear_cache()
     assert count >= 1 and size > 0 and codegen.cache_entries() == []
+
+
+_SESSION_PROBE = """
+import os
+from pathlib import Path
+
+from casflex import codegen
+
+
+def test_store():
+    codegen.store_built("session_probe", "k", {"a": 1})
+    Path(os.environ["PROBE_OUT"]).write_text(str(codegen.cache_dir()))
+"""
+
+
+@pytest.mark.parametrize("user_cache", [False, True])
+def test_a_test_session_writes_its_cache_to_a_temporary_folder_unless_casflex_cache_is_set(tmp_path, user_cache):
+    """tests/conftest.py: with CASFLEX_CACHE unset a test session caches in a folder of its own, removed at its end,
+    never in ~/.cache/casflex (HOME here is a new folder); a CASFLEX_CACHE the caller set (.ci/any-machine) is kept."""
+    import subprocess
+    import sys
+
+    home, out, probe = tmp_path / "home", tmp_path / "cache_dir.txt", tmp_path / "test_probe.py"
+    home.mkdir()
+    probe.write_text(_SESSION_PROBE)
+    env = {k: v for k, v in os.environ.items() if k != "CASFLEX_CACHE"} | {
+        "HOME": str(home), "PROBE_OUT": str(out),
+        "PYTHONPATH": os.pathsep.join([str(os.path.dirname(__file__)), os.environ.get("PYTHONPATH", "")])}
+    if user_cache:
+        env["CASFLEX_CACHE"] = str(tmp_path / "mine")
+    # the repository's conftest as a plugin, from tmp_path: no ini file, so no -n 2 of pyproject's addopts
+    run = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "conftest", "-p", "no:cacheprovider",
+                          str(probe)], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
+    used = Path(out.read_text())
+    assert not (home / ".cache").exists(), sorted(str(p) for p in home.rglob("*"))
+    if user_cache:
+        assert used == tmp_path / "mine" and list(used.glob("session_probe-*"))  # kept, with what was stored
+    else:
+        assert used.name.startswith("casflex-test-cache-") and not used.exists()  # the session's own, removed
+
