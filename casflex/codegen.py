@@ -56,6 +56,8 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from casflex.results import atomic_write_bytes
+
 __all__ = ["BufferedCall", "CompiledLibrary", "compile_functions", "compiled", "compiled_nlpsol", "generate_c",
            "cache_dir", "cache_entries", "built_entries", "clear_cache", "CodegenError", "CFLAGS", "FLAGS_ENV",
            "user_flags", "build_flags", "bitwise_expected", "built_key", "is_cached", "load_built", "store_built"]
@@ -402,27 +404,19 @@ def load_built(stem: str, key: str) -> object | None:
 
 
 def store_built(stem: str, key: str, value: object) -> None:
-    """Keep ``value`` (pickled, zlib-compressed) under ``stem`` and ``key`` in the cache: written to a temporary
-    file in the cache and renamed over the entry, so that a reader sees a whole file or none, whoever writes it
-    at the same time or stops half-way (a Ctrl-C). A cache that cannot be written (read-only, full) is passed
-    over: the next run builds again."""
+    """Keep ``value`` (pickled, zlib-compressed) under ``stem`` and ``key`` in the cache, written atomically
+    (:func:`casflex.results.atomic_write_bytes`: a reader sees a whole file or none, whoever writes it at the same
+    time or stops half-way, a Ctrl-C), not flushed to the disk: a damaged entry is built again (:func:`load_built`
+    checks its checksum). A cache that cannot be written (read-only, full) is passed over: the next run builds
+    again."""
     body = zlib.compress(pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL), 1)  # 1/6 of the size, 5 ms to read
     path = _built_path(stem, key)
-    tmp = None
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f"{path.stem}.", suffix=f"{BUILT_SUFFIX}.tmp")
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(_BUILT_HEAD + hashlib.sha256(body).hexdigest().encode() + b"\n" + body)
-        os.replace(tmp, path)
-        tmp = None
+        atomic_write_bytes(path, _BUILT_HEAD + hashlib.sha256(body).hexdigest().encode() + b"\n" + body,
+                           durable=False)
         _bound_built(path.parent)
     except OSError as exc:
         log.info("%s: not written (%s): the next run builds it again", path, exc)
-    finally:
-        if tmp is not None:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
 
 
 def _bound_built(d: Path) -> None:
@@ -457,7 +451,7 @@ def clear_cache() -> tuple[int, int]:
     if not d.is_dir():
         return 0, 0
     for f in [*d.glob("*.so"), *d.glob(".*.lock"), *d.glob("native*.txt"), *d.glob("*.so.tmp"),
-              *d.glob(f"*{BUILT_SUFFIX}"), *d.glob(f"*{BUILT_SUFFIX}.tmp")]:
+              *d.glob(f"*{BUILT_SUFFIX}"), *d.glob(f".*{BUILT_SUFFIX}.*.tmp")]:
         try:  # a file another process renames or removes meanwhile is not this one's to count
             size += f.stat().st_size
             f.unlink()

@@ -24,7 +24,8 @@ PACKAGE = Path(__file__).resolve().parents[1] / "casflex"
 #: The floors, from the ground up, as docs/architecture.md draws them: a folder (or a module directly under
 #: casflex/) imports only from its own folder and from folders on floors below its own.
 FLOORS = (
-    ("codegen", "results", "interrupt"),  # shared by all
+    ("results", "interrupt"),  # shared by all: records and atomic files, signals
+    ("codegen",),  # shared by all: compiled code and its cache (written by results' atomic write)
     ("data",),  # measurement sets: pure data
     ("lab",),
     ("elements", "scene"),

@@ -211,3 +211,22 @@ def test_a_test_session_writes_its_cache_to_a_temporary_folder_unless_casflex_ca
     else:
         assert used.name.startswith("casflex-test-cache-") and not used.exists()  # the session's own, removed
 
+
+def test_a_built_entry_is_written_by_the_shared_atomic_write_unflushed_and_its_leftovers_cleared(tmp_path, monkeypatch):
+    """store_built writes through results.atomic_write_bytes (one copy of the temporary-file-and-rename code),
+    durable=False (a damaged entry is built again: no fsync); a temporary file of that writer left by a killed
+    process is one ``casflex cache --clear`` removes."""
+    from casflex import results
+
+    monkeypatch.setenv("CASFLEX_CACHE", str(tmp_path))
+    assert codegen.atomic_write_bytes is results.atomic_write_bytes
+    calls, synced = [], []
+    real = results.atomic_write_bytes
+    monkeypatch.setattr(codegen, "atomic_write_bytes", lambda *a, **k: calls.append(k) or real(*a, **k))
+    monkeypatch.setattr("os.fsync", synced.append)
+    codegen.store_built("probe", "k" * 24, {"x": 1})
+    assert calls == [{"durable": False}] and synced == [] and codegen.load_built("probe", "k" * 24) == {"x": 1}
+    entry = codegen.built_entries()[0]
+    left = tmp_path / f".{entry.name}.x1y2z3.tmp"  # as atomic_write_bytes names its temporary file (mkstemp)
+    left.write_bytes(b"half")
+    assert codegen.clear_cache()[0] == 2 and list(tmp_path.iterdir()) == []
