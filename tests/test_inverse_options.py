@@ -30,6 +30,7 @@ from casflex.inverse.options import BandError
     (lambda: Filter(cutoff_plates=-3.0), "cutoff_plates: expected a frequency in Hz > 0 or none .* or 'same'"),
     (lambda: Filter(kind="spline"), "filter: one of butterworth, opensim, got 'spline'"),
     (lambda: Fit(max_misfit=0.0), "max_misfit: must be a distance > 0 m, got 0.0"),
+    (lambda: Fit(max_misfit=150), r"max_misfit: must be at most 1 m .*in m, not mm\), got 150"),
     (lambda: Fit(max_gap=-0.1), "max_gap: must be a time >= 0 s"),
     (lambda: Bands(marker_noise=-1.0), "marker_noise: must be a distance >= 0 m"),
     (lambda: Bands(marker_noise=0.001, asked=False), r"bands: not asked \(False\), yet uncertain or marker_noise"),

@@ -6,6 +6,7 @@ model, as two "subjects" (the same model and data twice: the mechanics of a stud
 from __future__ import annotations
 
 import csv
+import dataclasses
 import shutil
 from pathlib import Path
 from types import SimpleNamespace
@@ -85,6 +86,10 @@ def write(folder: Path, extra: str = "") -> Path:
     (('plane = "X,Y"', 'plane = "X,Y"\nnormalise = "mass"', 1), "subjects[0].mass: needed by options.normalise"),
     (('plane = "X,Y"', 'plane = "X,Y"\nspeed = 3', 1), "options.speed: unknown field"),
     (('plane = "X,Y"', 'plane = "X,Y"\ncycles = "some"', 1), "options.cycles"),
+    (("cutoff = 6.0", "cutoff = 6.0\nmax_misfit = 0", 1), "options.max_misfit: must be a distance > 0 m, got 0"),
+    (("cutoff = 6.0", "cutoff = 6.0\nmax_misfit = 150", 1), "options.max_misfit: must be at most 1 m"),
+    (("cutoff = 6.0", 'cutoff = 6.0\nmax_misfit = "0.15"', 1), "options.max_misfit: expected a distance in m"),
+    (("cutoff = 6.0", "cutoff = 6.0\nmax_misfit = true", 1), "options.max_misfit: expected a distance in m"),
     # knowable from the files' headers, refused before any work (they failed each trial at run time)
     (("window = [0.25, 1.15]", "window = [0.25, 3.0]", 1),
      "subjects[0].trials[1].window: the window 0.25..3 s is not within the markers' times 0.2..1.2 s"),
@@ -709,3 +714,45 @@ def test_a_subject_s_figure_is_drawn_while_the_other_subjects_trials_run(folder,
     again.mkdir()
     command._draw_figures(plans, again, {})
     assert all((again / name).read_bytes() == (out / name).read_bytes() for name in plans)
+
+
+def _shoulder_off(folder: Path, dx_mm: float = 170.0, after: float = 1.0) -> str:
+    """The running trial with R.Acromium moved dx_mm forward from ``after`` s: the planar trunk's fit leaves it about
+    120 mm off (as Hamner's whole running trial leaves that shoulder marker 102 mm off past 1.7 s)."""
+    lines = (LAB / "hamner_running_whole.trc").read_text().splitlines()
+    col = 2 + 3 * [n for n in lines[3].split("\t")[2:] if n].index("R.Acromium")  # its X column
+    for i in range(5, len(lines)):
+        row = lines[i].split("\t")
+        if len(row) > col and row[1] and float(row[1]) >= after:
+            row[col] = f"{float(row[col]) + dx_mm:.6f}"
+            lines[i] = "\t".join(row)
+    (folder / "shoulder_off.trc").write_text("\n".join(lines) + "\n")
+    return str(folder / "shoulder_off.trc")
+
+
+def test_the_study_file_s_max_misfit_reaches_each_trial_s_marker_fit(folder):
+    """options.max_misfit (m) is the marker fit's limit in each trial's inverse dynamics: a shoulder marker ~120 mm
+    off is refused at the default 0.1 m, naming the option, and taken at 0.2 m; a study without it keeps its runs'
+    fingerprints (its records are not redone), one with it gets others."""
+    from casflex import load_scene
+    from casflex.scene import dumps_scene
+    from casflex.study.runner import _run, trial_run
+
+    trc = _shoulder_off(folder)
+    path = write(folder)
+    plain = load_study(str(path))
+    path.write_text(path.read_text().replace("cutoff = 6.0", "cutoff = 6.0\nmax_misfit = 0.2"))
+    study = load_study(str(path))
+    assert plain.options.trials.max_misfit is None and study.options.trials.max_misfit == 0.2
+    assert study.options.trials.fit.misfit == 0.2 and plain.options.trials.fit.misfit == 0.1
+    scene = dumps_scene(load_scene(str(folder / "hamner_subject02_planar.osim")))
+    trial = dataclasses.replace(plain.subjects[0].trials[0], markers=trc)
+    with pytest.raises(ValueError, match=r"marker 'R.Acromium' lies 1\d\d mm .*max_misfit 100 mm.*options.max_misfit"):
+        trial_run(scene=scene, trial=trial, options=plain.options.trials, uncertain=())
+    rec = trial_run(scene=scene, trial=trial, options=study.options.trials, uncertain=())
+    assert rec["loads"] and any("R.Acromium" in line for line in rec["report"])
+    legacy = dataclasses.asdict(plain.options.trials)  # the options' fingerprint before max_misfit existed
+    legacy.pop("max_misfit")
+    key = {name: _run("trial", trial_run, {"scene": scene, "trial": trial, "options": o}, ()).key
+           for name, o in (("plain", plain.options.trials), ("legacy", legacy), ("given", study.options.trials))}
+    assert key["plain"] == key["legacy"] != key["given"]

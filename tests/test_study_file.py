@@ -28,7 +28,8 @@ FILES = ("hamner_subject02_planar.osim", "hamner_running_whole.trc", "hamner_run
 VALID = {
     "name": "fuzz",
     "options": {"plane": "X,Y", "cutoff": 6.0, "cutoff_plates": "same", "tasks": "hamner_tasks_ik.xml",
-                "normalise": "none", "passive": ["knee_r"], "bands": False, "cycles": "clean"},
+                "normalise": "none", "passive": ["knee_r"], "bands": False, "cycles": "clean",
+                "max_misfit": 0.15},
     "subjects": [
         {"name": "s02", "model": "hamner_subject02_planar.osim", "mass": 70.0,
          "trials": [{"name": "run", "markers": "hamner_running_whole.trc", "grf": "hamner_running_whole_grf.mot",

@@ -235,7 +235,7 @@ def add_trial_options(s: argparse.ArgumentParser) -> None:
     s.add_argument("--t-end", type=positive("a time in s"), help="use the trial up to this time, s")
     s.add_argument("--max-misfit", type=positive("a distance in m"), metavar="M",
                    help="refuse a marker farther than this from the fitted pose, m (default 0.1: no soft-tissue "
-                        "artefact is that large)")
+                        "artefact is that large; at most 1)")
     s.add_argument("--uncertain", type=uncertain_option, action="append", metavar="TARGET=SD|P%|LO:HI",
                    help="a property known only within an uncertainty (a segment's mass or inertia from an "
                         "anthropometric table: shank.mass=10%%, shank.inertia=0.04:0.06), added to the scene's "

@@ -425,7 +425,8 @@ def _check_misfit(misfit: np.ndarray, t: float, limit: float | None, labels, sou
     raise ValueError(f"{source}: at t = {t:g} s marker {name!r} lies {1e3 * misfit[k]:.0f} mm from where the best pose "
                      f"of the scene puts it (max_misfit {1e3 * limit:g} mm): {why}a marker lost or mislabelled, the "
                      "wrong plane or units, a scene not calibrated to this subject (casflex calibrate), or motion out "
-                     "of the plane the scene cannot follow (a running trunk's twist: raise --max-misfit)")
+                     "of the plane the scene cannot follow (a running trunk's twist: raise --max-misfit, in a study "
+                     "options.max_misfit)")
 
 
 def _fill(t: np.ndarray, Z: np.ndarray, max_gap: float, report: list[str], source: str = "data") -> np.ndarray:

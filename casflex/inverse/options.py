@@ -205,6 +205,10 @@ class Filter:
         return f"coordinates filtered: {how} at {self.cutoff:g} Hz"
 
 
+#: The largest ``max_misfit`` taken, m: beyond it the check would pass anything (a value in mm, 150 for 0.15 m).
+MAX_MISFIT_LIMIT = 1.0
+
+
 @dataclass(frozen=True)
 class Fit:
     """The marker fit's limits: ``max_gap`` s, the longest stretch of frames whose markers do not decide the pose
@@ -219,6 +223,9 @@ class Fit:
             raise OptionRefused("max_gap", f"must be a time >= 0 s, got {self.max_gap!r}")
         if self.max_misfit is not None and not (_number(self.max_misfit) and self.max_misfit > 0):
             raise OptionRefused("max_misfit", f"must be a distance > 0 m, got {self.max_misfit!r}")
+        if self.max_misfit is not None and self.max_misfit > MAX_MISFIT_LIMIT:
+            raise OptionRefused("max_misfit", f"must be at most {MAX_MISFIT_LIMIT:g} m (a marker farther than that "
+                                f"is no marker of the subject: the limit is in m, not mm), got {self.max_misfit!r}")
 
     @property
     def misfit(self) -> float:

@@ -131,7 +131,7 @@ def muscle_run(*, model: str, scene: str, trial: Trial, options: TrialOptions, p
     grf = trial.grf if external else table
     t0, t1 = trial.window or (None, None)
     inputs = prepare(sc, Inverse(lab, grf=grf, plates=plates, plane=plane, root=options.root, t_start=t0, t_end=t1,
-                                 tasks=options.tasks), filter=options.filter,
+                                 tasks=options.tasks), filter=options.filter, fit=options.fit,
                      bands=Bands([parse(u) for u in uncertain] or None, asked=bool(options.bands)))
     weight = scene_mass(sc) * float(np.hypot(*sc.gravity))
     tm, report = _trial_muscles(model, sc, muscles, options.root, inputs.t, inputs.plates, body_weight=weight)

@@ -198,7 +198,7 @@ def trial_run(*, scene: str, trial: Trial, options: TrialOptions, uncertain: tup
     plates, feet, event_report, found = _events(sc, lab, table, trial.plates, plane)
     grf = trial.grf if trial.grf is not None and trial.grf.lower().endswith(".xml") else table
     res = inverse_dynamics(sc, Inverse(lab, grf=grf, plates=plates, plane=plane, root=options.root, t_start=t0,
-                                       t_end=t1, tasks=options.tasks), filter=options.filter,
+                                       t_end=t1, tasks=options.tasks), filter=options.filter, fit=options.fit,
                            bands=Bands([parse(u) for u in uncertain] or None,  # false: none, even where the subject
                                        asked=bool(options.bands)))             # declares uncertainty
     feet = {f: [c for c in cs if res.t[0] <= c[0] and c[1] <= res.t[-1]] for f, cs in feet.items()}  # the window's
@@ -287,8 +287,13 @@ _FIELDS = {"calibrate_run": ("scene", "report"),
 
 
 def _jsonable(value: object) -> object:
-    """A value in a run's fingerprint: an option value by its fields, anything else as text."""
-    return dataclasses.asdict(value) if dataclasses.is_dataclass(value) else str(value)
+    """A value in a run's fingerprint: an option value by its fields (those added later left out where None:
+    :data:`~casflex.study.study_file.FINGERPRINT_OMITS_NONE`), anything else as text."""
+    from casflex.study.study_file import FINGERPRINT_OMITS_NONE
+
+    if not dataclasses.is_dataclass(value):
+        return str(value)
+    return {k: v for k, v in dataclasses.asdict(value).items() if not (k in FINGERPRINT_OMITS_NONE and v is None)}
 
 
 def _run(name: str, fn: Callable[..., dict], kwargs: dict, files: tuple[str | None, ...]):

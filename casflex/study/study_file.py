@@ -26,6 +26,8 @@ cycles = "clean"               # the means and figures from the cycles whose sta
                                # (loads.csv flags each cycle: clean, t0, t1); "all": every cycle
 passive = []                   # hinges whose net moment a spring-damper is fitted to, per trial ("knee_r") or
                                # per swing phase ("knee_r:swing"): casflex.inverse.passive; passive.csv
+max_misfit = 0.1               # m, a marker farther than this from the fitted pose stops the trial (as casflex
+                               # inverse --max-misfit; at most 1 m)
 
 [options.muscles]              # optional: each trial's muscles and joint reactions too (casflex.study.muscles:
 exponent = 2.0                 # its keys); the subjects' models .osim with their muscles; muscles.csv
@@ -62,14 +64,14 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
-from casflex.inverse.options import Filter, OptionRefused
+from casflex.inverse.options import Filter, Fit, OptionRefused
 
 __all__ = ["Study", "Subject", "Trial", "Options", "TrialOptions", "load_study"]
 
 _OPTIONS = {"plane": str, "vertical": str, "cutoff": (int, float, str), "cutoff_plates": (int, float, str),
             "filter": str,
             "root": str, "tasks": str, "normalise": str, "cycles": str, "passive": list, "calibrate": bool,
-            "scale": bool, "bands": bool}
+            "scale": bool, "bands": bool, "max_misfit": (int, float)}
 _NORMALISE = ("none", "mass")
 _CYCLES = ("clean", "all")
 
@@ -79,7 +81,9 @@ class TrialOptions:
     """What each trial's inverse dynamics is asked (module docstring; every run's fingerprint: a change redoes the
     trials): ``plane`` (or "auto": each trial's own), ``vertical``, the ``filter`` (:class:`casflex.inverse.Filter`),
     ``root``, ``tasks`` (a resolved path or None), ``bands`` (each load's band, or none even where the subject
-    declares uncertainty) and ``passive`` ((hinge, "trial" or "swing") each)."""
+    declares uncertainty), ``passive`` ((hinge, "trial" or "swing") each) and ``max_misfit`` (m, the marker fit's
+    limit, :class:`casflex.inverse.Fit`; None: its default, and left out of the runs' fingerprints,
+    :data:`FINGERPRINT_OMITS_NONE`)."""
 
     plane: str = "X,Y"
     vertical: str = "Y"
@@ -88,6 +92,17 @@ class TrialOptions:
     tasks: str | None = None
     bands: bool = False
     passive: tuple[tuple[str, str], ...] = ()
+    max_misfit: float | None = None
+
+    @property
+    def fit(self) -> Fit:
+        """The marker fit's limits (:class:`casflex.inverse.Fit`) each trial's inverse dynamics takes."""
+        return Fit(max_misfit=self.max_misfit)
+
+
+#: TrialOptions' fields added after studies had records: left out of a run's fingerprint where None (their
+#: default), so that a study not giving them keeps its records (casflex.study.runner._run).
+FINGERPRINT_OMITS_NONE = ("max_misfit",)
 
 
 @dataclass(frozen=True)
@@ -198,7 +213,8 @@ def _options(base: Path, table: Any) -> Options:
     t = _check_keys("options", table, set(_OPTIONS) | {"muscles"}, set())
     for k, typ in _OPTIONS.items():
         if k in t and not isinstance(t[k], typ) or (k in t and typ is not bool and isinstance(t[k], bool)):
-            want = {bool: "true or false", str: "a text", list: "a list"}.get(typ, "a frequency in Hz or a word")
+            want = {bool: "true or false", str: "a text", list: "a list", (int, float): "a distance in m"}.get(
+                typ, "a frequency in Hz or a word")
             raise StudyError(f"options.{k}: expected {want}, got {t[k]!r}")
     from casflex.lab import Plane
 
@@ -220,10 +236,22 @@ def _options(base: Path, table: Any) -> Options:
     tasks = _tasks(base, "options.tasks", t["tasks"]) if t.get("tasks") else None
     trials = TrialOptions(plane=t.get("plane", "X,Y"), vertical=vertical.upper(), filter=_filter(t),
                           root=t.get("root") or None, tasks=tasks, bands=t.get("bands", False),
-                          passive=tuple((p.partition(":")[0], p.partition(":")[2] or "trial") for p in passive))
+                          passive=tuple((p.partition(":")[0], p.partition(":")[2] or "trial") for p in passive),
+                          max_misfit=_max_misfit(t))
     muscles = _muscles(base, t["muscles"]) if "muscles" in t else None
     return Options(trials, calibrate=t.get("calibrate", True), scale=t.get("scale", False),
                    normalise=t.get("normalise", "none"), cycles=t.get("cycles", "clean"), muscles=muscles)
+
+
+def _max_misfit(t: dict) -> float | None:
+    """The [options] table's ``max_misfit`` (m), checked by :class:`casflex.inverse.Fit`; StudyError naming the
+    field."""
+    value = t.get("max_misfit")
+    try:
+        Fit(max_misfit=value)
+    except OptionRefused as exc:
+        raise StudyError(exc.said(lambda o: f"options.{o}")) from None
+    return None if value is None else float(value)
 
 
 def _muscles(base: Path, table: Any):
