@@ -713,13 +713,15 @@ def test_a_subject_s_figure_is_drawn_while_the_other_subjects_trials_run(folder,
 
 def test_a_model_is_read_once_per_worker_and_content_for_its_subjects_calibrations(tmp_path, monkeypatch):
     # each calibration read the .osim twice (its scene, then its warnings): 2 x 50 ms a subject of Hamner's model
+    import functools
+
     import casflex.scene.from_osim as from_osim
     from casflex.study import runner
 
     reads = []
     real = from_osim.scene_from_osim
     monkeypatch.setattr(from_osim, "scene_from_osim", lambda *a, **k: reads.append(a[0]) or real(*a, **k))
-    runner._osim.cache_clear()
+    getattr(runner, "_osim", functools.lru_cache()(print)).cache_clear()  # a worker that read none yet
     model = tmp_path / "leg.osim"
     shutil.copy(LAB / "hamner_subject02_leg.osim", model)
     kw = dict(model=str(model), static=None, plane="X,Y", root="pelvis", calibrate=True, scale=False)
