@@ -68,10 +68,25 @@ def jsonable(x: Any) -> Any:
     return x
 
 
+def _native(x: Any) -> Any:
+    raise TypeError(type(x).__name__)
+
+
+def json_text(obj: Any, indent: int | None = 2) -> str:
+    """``jsonable(obj)`` as JSON text (``indent`` None: on one line). ``obj`` is encoded as it is where JSON's
+    encoder takes it without a change (no numpy value, no non-finite float: a sweep's record, 38 kB, 1.3 ms of CPU
+    less than its walk by :func:`jsonable`), else walked first. The same text but for a dict key True, False or
+    None (no casflex output has one), which JSON's encoder writes true, false, null and :func:`jsonable` "True"."""
+    try:
+        return json.dumps(obj, indent=indent, allow_nan=False, default=_native)
+    except (TypeError, ValueError):
+        return json.dumps(jsonable(obj), indent=indent)
+
+
 def atomic_write_json(path: str | os.PathLike[str], obj: Any, durable: bool = True, indent: int | None = 2) -> Path:
-    """Write ``jsonable(obj)`` as JSON (``indent`` None: on one line), atomically (``durable``:
+    """Write ``jsonable(obj)`` as JSON (``indent`` None: on one line; :func:`json_text`), atomically (``durable``:
     :func:`atomic_write_bytes`)."""
-    return atomic_write_text(path, json.dumps(jsonable(obj), indent=indent, sort_keys=False) + "\n", durable)
+    return atomic_write_text(path, json_text(obj, indent) + "\n", durable)
 
 
 #: Keys of a trajectory .npz file and what they hold (n = number of time points).

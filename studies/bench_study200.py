@@ -10,7 +10,9 @@ motion for every trial: the machinery's cost, not 200 answers.
 Timed, each a new process and a new output (record) folder, as a user runs it: ``casflex study STUDY --out NEW
 --workers W --quiet`` for W = 1 and 2, taken in turn (twice, ``--quick`` once); then the same command on its
 finished outputs (best of 3); then on an external scheduler (``dask scheduler`` and ``dask worker --nthreads 1``
-processes started here on a free port of localhost): ``--scheduler ADDRESS`` with one worker, then with two. The
+processes started here on a free port of localhost, with the settings docs/lab.md gives for a cluster that runs
+studies, casflex.study.sweep.QUIET_CLUSTER's, in their environment): ``--scheduler ADDRESS`` with one worker, then
+with two. The
 scheduler's task stream (each task's start and stop and its worker) is read for the external runs, the records'
 modification times (each trial's record written as it finishes) for the local ones: the start-up before the first
 record, the steady stream of records, the table and figures after the last. CPU time: the commands' and their
@@ -222,7 +224,11 @@ class External:
     """A ``dask scheduler`` and its ``dask worker`` processes (one single-threaded worker each) on localhost."""
 
     def __init__(self, folder: Path, env: dict) -> None:
-        self.folder, self.env, self.procs = folder, env, []
+        from casflex.study.sweep import QUIET_CLUSTER
+
+        # started as docs/lab.md tells a cluster that runs studies to start: the local cluster's settings
+        quiet = {"DASK_" + k.upper().replace(".", "__").replace("-", "_"): str(v) for k, v in QUIET_CLUSTER.items()}
+        self.folder, self.env, self.procs = folder, dict(env, **quiet), []
         exe = Path(sys.executable).with_name("dask")
         self.dask = str(exe) if exe.exists() else shutil.which("dask") or "dask"
         self.address = f"tcp://127.0.0.1:{_free_port()}"

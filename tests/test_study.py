@@ -756,3 +756,60 @@ def test_the_study_file_s_max_misfit_reaches_each_trial_s_marker_fit(folder):
     key = {name: _run("trial", trial_run, {"scene": scene, "trial": trial, "options": o}, ()).key
            for name, o in (("plain", plain.options.trials), ("legacy", legacy), ("given", study.options.trials))}
     assert key["plain"] == key["legacy"] != key["given"]
+
+
+def test_a_model_is_read_once_per_worker_and_content_for_its_subjects_calibrations(tmp_path, monkeypatch):
+    # each calibration read the .osim twice (its scene, then its warnings): 2 x 50 ms a subject of Hamner's model
+    import functools
+
+    import casflex.scene.from_osim as from_osim
+    from casflex.study import runner
+
+    reads = []
+    real = from_osim.scene_from_osim
+    monkeypatch.setattr(from_osim, "scene_from_osim", lambda *a, **k: reads.append(a[0]) or real(*a, **k))
+    getattr(runner, "_osim", functools.lru_cache()(print)).cache_clear()  # a worker that read none yet
+    model = tmp_path / "leg.osim"
+    shutil.copy(LAB / "hamner_subject02_leg.osim", model)
+    kw = dict(model=str(model), static=None, plane="X,Y", root="pelvis", calibrate=True, scale=False)
+    first, second = runner.calibrate_run(**kw, mass=50.0), runner.calibrate_run(**kw, mass=60.0)
+    assert len(reads) == 1, reads
+    assert first["report"][:-1] == second["report"][:-1] and first["scene"] != second["scene"]  # their own masses
+    model.write_text(model.read_text().replace("<OpenSimDocument", "<!-- edited -->\n<OpenSimDocument", 1))
+    runner.calibrate_run(**kw, mass=50.0)
+    assert len(reads) == 2  # a changed file is read again
+
+
+def test_the_figures_and_the_output_share_each_trial_s_record_made_once(folder, monkeypatch):
+    # the trials' TrialRecords were made from their JSON twice: for each subject's figure, and after the last trial
+    # for the output (1.5 ms each: 0.3 s after the last record of a 200-trial study)
+    from casflex.study import runner
+    from casflex.study.records import TrialRecord
+    from casflex.study.sweep import SweepResult
+
+    made, seen = [], {}
+    monkeypatch.setattr(TrialRecord, "from_json", classmethod(lambda cls, d: made.append(d) or object()))
+
+    def sweep(runs, record, on_record=None, **_):  # every run done at once, as the sweep reports a finished one
+        out = {r.key: {"scene": "s", "report": []} if r.key.startswith("calibrate") else {"t": [0, 1]} for r in runs}
+        for key, rec in out.items():
+            if on_record is not None:
+                on_record(key, rec, True)
+        return SweepResult(out, tuple(out), (), False, 0.0)
+
+    monkeypatch.setattr("casflex.study.sweep.run_sweep", sweep)
+    monkeypatch.setattr(runner.Calibration, "from_json", classmethod(lambda cls, d: SimpleNamespace(**d)))
+    out = runner.run_study(load_study(str(write(folder))), folder / "rec", session=object(),
+                           on_subject=lambda subject, got: seen.update(got["trials"]))
+    assert len(made) == 3 and seen == out["trials"] and len(out["trials"]) == 3
+
+
+def test_the_command_imports_no_plotting_before_its_cluster_without_a_normative_band():
+    # --normative's check imported casflex.plotting.gait (matplotlib, 0.9 s of CPU) before the cluster's start
+    import subprocess
+    import sys
+
+    code = ("import sys\nfrom casflex.cli.study import _normative\nassert _normative(None, False) is None\n"
+            "print(sorted(m for m in sys.modules if m.startswith(('matplotlib', 'casflex.plotting'))))")
+    got = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert got.strip() == "[]", got

@@ -321,3 +321,18 @@ def test_a_ctrl_c_before_a_dask_call_s_first_step_leaves_no_traceback(caplog):
     names = [type(r.exc_info[1]).__name__ for r in caplog.records if r.exc_info]
     assert names == ["NameError"], names
     assert "undefined_name" in str(caplog.records[-1].exc_info[1])
+
+
+def test_a_run_s_record_travels_as_one_buffer_and_the_local_scheduler_does_not_steal(tmp_path):
+    # a record returned as a dict was walked by dask's sizeof (twice) and serializer in the worker: 8.1 -> 5.9 ms of
+    # a worker's CPU a 38 kB record; a sweep's runs are alike and queued on the scheduler: nothing to steal
+    from casflex.study.sweep import Session, _call, _result
+
+    blob = _call(dict, {"a": [1.5, 2.0]})
+    assert isinstance(blob, bytes) and _result(blob) == {"a": [1.5, 2.0]}
+    assert _result(_call(list, {})) == {"error": "run function returned list, expected a dict"}
+    with Session(None, 1) as session:
+        assert session.client().run_on_scheduler(lambda dask_scheduler: "stealing" in dask_scheduler.extensions) \
+            is False
+    res = run_sweep([Run(f"r{i}", dict, {"i": i}) for i in range(3)], tmp_path / "rec", n_workers=1, progress=False)
+    assert res.results == {f"r{i}": {"i": i} for i in range(3)}

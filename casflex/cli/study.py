@@ -264,11 +264,13 @@ def _check_cluster(args: argparse.Namespace) -> None:
 
 
 def _normative(path: str | None, per_kg: bool) -> dict | None:
-    """--normative's bands, checked before any work (:func:`casflex.plotting.gait.read_normative`)."""
-    from casflex.plotting.gait import read_normative
-
+    """--normative's bands, checked before any work (:func:`casflex.plotting.gait.read_normative`). Without one,
+    matplotlib is not imported here (0.9 s of CPU before the cluster's start): the figures import it while the
+    trials run."""
     if path is None:
         return None
+    from casflex.plotting.gait import read_normative
+
     try:
         return read_normative(path, {"angle": "deg", "moment": "N m/kg" if per_kg else "N m"})
     except ValueError as exc:
