@@ -12,10 +12,10 @@ import io
 import os
 from pathlib import Path
 
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from casflex import interrupt
+from casflex.plotting._canvas import Canvas
 from casflex.results import atomic_write_bytes
 
 #: Resolution of saved PNG figures (dots per inch).
@@ -23,10 +23,11 @@ DPI = 120
 
 
 def _new_figure(figsize: tuple[float, float], layout: str | None = "constrained") -> Figure:
-    """A figure of ``figsize`` (inches) on its own Agg canvas; ``layout`` None for a grid laid out by hand (the
-    constrained layout's cost grows with the square of the panels: minutes for a hundred)."""
+    """A figure of ``figsize`` (inches) on its own Agg canvas (its texts rasterised once in the process:
+    :mod:`casflex.plotting._canvas`); ``layout`` None for a grid laid out by hand (the constrained layout's cost
+    grows with the square of the panels: minutes for a hundred)."""
     fig = Figure(figsize=figsize, layout=layout)
-    FigureCanvasAgg(fig)
+    Canvas(fig)
     return fig
 
 
