@@ -21,6 +21,7 @@ from collections import OrderedDict
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg, RendererAgg
+from matplotlib.font_manager import fontManager, get_font
 from matplotlib.ft2font import FT2Font
 
 #: texts kept (least recently drawn dropped first): a few kB each, a study's figures draw some 300 different ones
@@ -56,8 +57,33 @@ def _coverage(renderer: RendererAgg, gc, fx: float, fy: float, s: str, prop, ang
     return image, int(cols[0]) - half, int(rows[-1]) + 1 - half
 
 
+_heights: dict[tuple, tuple[float, float, float]] = {}
+
+
 class _Renderer(RendererAgg):
-    """matplotlib's Agg renderer but its texts drawn from the store (module docstring)."""
+    """matplotlib's Agg renderer but its texts drawn from the store (module docstring), and each font's line
+    metrics kept (:meth:`_get_font_height_metrics`)."""
+
+    def _get_font_height_metrics(self, prop) -> tuple[float, float, float]:
+        """(ascent, descent, line gap) in pixels of ``prop``'s font at this renderer's dpi, as matplotlib's
+        ``Text._get_layout`` reads them from the font's tables at every layout of every text (a quarter of a
+        gait figure's text layout), kept by the font's properties."""
+        key = (tuple(prop.get_family()), prop.get_style(), prop.get_variant(), prop.get_weight(),
+               prop.get_stretch(), prop.get_size_in_points(), prop.get_file(), float(self.dpi))
+        found = _heights.get(key)
+        if found is None:
+            font = get_font(fontManager._find_fonts_by_props(prop))
+            for table, gap, ascent, descent in (("OS/2", "sTypoLineGap", "sTypoAscender", "sTypoDescender"),
+                                                ("hhea", "lineGap", "ascent", "descent")):
+                t = font.get_sfnt_table(table)
+                if t is not None:
+                    scale = 1 / font.get_sfnt_table("head")["unitsPerEm"] * prop.get_size_in_points() * self.dpi / 72
+                    found = (t[ascent] * scale, -t[descent] * scale, t[gap] * scale)
+                    break
+            else:
+                return None, None, None  # matplotlib measures "lp" instead
+            _heights[key] = found
+        return found
 
     def draw_text(self, gc, x, y, s, prop, angle, ismath=False, mtext=None):  # noqa: D102 - RendererAgg's
         if ismath or mtext is None or mtext.get_animated() or not s.strip():

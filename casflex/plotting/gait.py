@@ -39,6 +39,7 @@ import numpy as np
 from matplotlib import collections
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from matplotlib.ticker import FixedLocator
 
 from casflex.plotting._figure import _new_figure, _save, render
 
@@ -56,6 +57,8 @@ _TITLES = {"hip_flexion": "Hip flexion/extension", "knee_angle": "Knee flexion/e
            "pelvis_tilt": "Pelvic tilt", "arm_flex": "Shoulder flexion/extension", "elbow_flex": "Elbow flexion",
            "mtp_angle": "Toe (MTP) flexion", "subtalar_angle": "Subtalar angle", "hip": "Hip", "knee": "Knee",
            "ankle": "Ankle"}
+#: the gait cycle's ticks (%)
+_PERCENT_TICKS = (0, 20, 40, 60, 80, 100)
 _SIDES = {"r": "right", "l": "left", "right": "right", "left": "left"}
 _MOMENT = ("_moment", ".moment", "_force", ".force")
 
@@ -215,6 +218,7 @@ def _panel(ax, percent, names: list[str], curves: dict[str, np.ndarray], toe_off
     ax.axhline(0.0, color="0.6", lw=0.6)
     ax.grid(True, alpha=0.3)
     ax.set_xlim(0, 100)
+    ax.xaxis.set_major_locator(FixedLocator(_PERCENT_TICKS))  # the ticks matplotlib's locator finds, not looked for at each draw
 
 
 @dataclass(frozen=True)
@@ -297,8 +301,12 @@ def _build(percent, curves: dict[str, np.ndarray], toe_off: dict[str, list[float
             # each draw measures the panel's tick labels to place it, 15 % of the figure's CPU for the same pixels
             ax.set_title(f"{joint_title(joint)} {kind}", y=1.0)
             ax.set_ylabel(arr.ylabels[key])
-    for ax in axes[-1]:
-        ax.set_xlabel("gait cycle (%)")
+    for column in axes.T:  # the x axis's numbers and name under each column's lowest panel: the same 0-100 % above
+        shown = [ax for ax in column if ax.get_visible()]
+        for ax in shown[:-1]:
+            ax.tick_params(axis="x", labelbottom=False)
+        if shown:
+            shown[-1].set_xlabel("gait cycle (%)")
     _legend(fig, h)
     fig.suptitle(title, y=1 - 0.2 / h, va="center")
     return _Drawn(fig, arr.shape, h, artists)
