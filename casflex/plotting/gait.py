@@ -218,7 +218,8 @@ def _panel(ax, percent, names: list[str], curves: dict[str, np.ndarray], toe_off
     ax.axhline(0.0, color="0.6", lw=0.6)
     ax.grid(True, alpha=0.3)
     ax.set_xlim(0, 100)
-    ax.xaxis.set_major_locator(FixedLocator(_PERCENT_TICKS))  # the ticks matplotlib's locator finds, not looked for at each draw
+    # the ticks matplotlib's locator finds, not looked for at each draw
+    ax.xaxis.set_major_locator(FixedLocator(_PERCENT_TICKS))
 
 
 @dataclass(frozen=True)
