@@ -87,35 +87,62 @@ PAD = 4.0 / 72.0
 def _fit_column(fig: Figure, axes: list, height_ratios: list[float] | None = None) -> None:
     """Lay out ``axes``, one column of panels top to bottom, by hand where the constrained layout would: every
     margin and gap just holding the panels' tick labels, axis labels, titles and legends (:data:`PAD` beside them),
-    the y axes' labels aligned, the figure's title (``suptitle``, if any) above. One measurement of each panel (the
-    constrained layout measures each twice and draws the figure once more to do so, a third of a figure's CPU;
-    ``align_ylabels`` measures every panel's tick labels for every panel's label). At the figure's saved dpi
-    (:data:`DPI`): the same pixels' sizes."""
+    the y axes' labels aligned left of every panel's tick labels, the figure's title (``suptitle``, if any) above.
+    Each panel measured once, and again where its new size gave it other tick labels (the constrained layout
+    measures each twice and draws the figure once more to do so; ``align_ylabels`` measures every panel's tick
+    labels for every panel's label at each draw). At the figure's saved dpi (:data:`DPI`): the same pixels."""
     fig.set_dpi(DPI)
     renderer = fig.canvas.get_renderer()
+    needed = None
+    for _ in range(3):  # a panel's new height may give it other tick labels (wider): measured again
+        again = _margins(axes, renderer)
+        if needed is not None and max(abs(a - b) for a, b in zip(again, needed, strict=True)) < 0.5:
+            break
+        needed = again
+        _place(fig, axes, renderer, needed, height_ratios)
+
+
+def _margins(axes: list, renderer) -> tuple[float, ...]:
+    """(the y labels' anchor left of the panels, the margin left of them, right of them, then above and below each
+    panel) in pixels, as they are now, each y label's placed at the anchor (its right edge: the label's side
+    facing the panel)."""
+    dpi = renderer.dpi
+    anchor = 0.0
+    for ax in axes:
+        box = ax.get_window_extent(renderer)
+        shown = ax.yaxis.label.get_visible()
+        ax.yaxis.label.set_visible(False)  # the tick labels' and the offset's extent, without the label
+        ticks = ax.yaxis.get_tightbbox(renderer)
+        ax.yaxis.label.set_visible(shown)
+        left = min(box.x0, ticks.x0) if ticks is not None else box.x0
+        anchor = min(anchor, left - box.x0 - ax.yaxis.labelpad * dpi / 72)
+    for ax in axes:
+        ax.yaxis.set_label_coords(anchor / ax.get_window_extent(renderer).width, 0.5)
+    boxes = [(ax.get_window_extent(renderer).frozen(), ax.get_tightbbox(renderer)) for ax in axes]
+    return (anchor, max(box.x0 - tight.x0 for box, tight in boxes),
+            max(0.0, max(tight.x1 - box.x1 for box, tight in boxes)),
+            *(max(0.0, tight.y1 - box.y1) for box, tight in boxes),  # titles, legends above a panel
+            *(max(0.0, box.y0 - tight.y0) for box, tight in boxes))  # tick labels and axis label under it
+
+
+def _place(fig: Figure, axes: list, renderer, needed: tuple[float, ...], height_ratios: list[float] | None) -> None:
+    """The panels placed for the margins ``needed`` (:func:`_margins`), the y labels at their anchor."""
     width, height = fig.get_size_inches() * DPI
     pad = PAD * DPI
-    boxes = [(ax.get_window_extent(renderer).frozen(), ax.get_tightbbox(renderer)) for ax in axes]  # as they are now
-    labels = [(box, ax.yaxis.label.get_window_extent(renderer)) for ax, (box, _) in zip(axes, boxes, strict=True)
-              if ax.yaxis.label.get_text()]
-    left = max(box.x0 - tight.x0 for box, tight in boxes)
-    right = max(0.0, max(tight.x1 - box.x1 for box, tight in boxes))
-    above = [max(0.0, tight.y1 - box.y1) for box, tight in boxes]  # titles, legends above a panel
-    below = [max(0.0, box.y0 - tight.y0) for box, tight in boxes]  # tick labels and axis label under it
+    n = len(axes)
+    anchor, left, right = needed[:3]
+    above, below = needed[3:3 + n], needed[3 + n:]
     title = fig._suptitle.get_window_extent(renderer).height + pad if fig._suptitle is not None else 0.0
     top, bottom = pad + title + above[0], below[-1] + pad
-    gaps = [below[i] + above[i + 1] + pad for i in range(len(axes) - 1)]
-    ratios = np.asarray(height_ratios or [1.0] * len(axes), dtype=float)
+    gaps = [below[i] + above[i + 1] + pad for i in range(n - 1)]
+    ratios = np.asarray(height_ratios or [1.0] * n, dtype=float)
     heights = (height - top - bottom - sum(gaps)) * ratios / ratios.sum()
-    x0, w = (left + pad) / width, (width - left - right - 2 * pad) / width
+    w = width - left - right - 2 * pad
     y = height - top
     for i, ax in enumerate(axes):
         y -= heights[i]
-        ax.set_position([x0, y / height, w, heights[i] / height])
+        ax.set_position([(left + pad) / width, y / height, w / width, heights[i] / height])
+        ax.yaxis.set_label_coords(anchor / w, 0.5)
         y -= gaps[i] if i < len(gaps) else 0.0
-    if labels:  # aligned: each label where the leftmost is (its anchor its right edge), in its panel's coordinates
-        x = min(label.x1 - box.x0 for box, label in labels)
-        for ax in axes:
-            ax.yaxis.set_label_coords(x / (w * width), 0.5)
     if fig._suptitle is not None:
         fig._suptitle.set_y(1.0 - pad / height)
