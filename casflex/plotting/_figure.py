@@ -88,18 +88,26 @@ def _fit_column(fig: Figure, axes: list, height_ratios: list[float] | None = Non
     """Lay out ``axes``, one column of panels top to bottom, by hand where the constrained layout would: every
     margin and gap just holding the panels' tick labels, axis labels, titles and legends (:data:`PAD` beside them),
     the y axes' labels aligned left of every panel's tick labels, the figure's title (``suptitle``, if any) above.
-    Each panel measured once, and again where its new size gave it other tick labels (the constrained layout
+    Each panel measured once, and again where its new size gave it other ticks (the constrained layout
     measures each twice and draws the figure once more to do so; ``align_ylabels`` measures every panel's tick
     labels for every panel's label at each draw). At the figure's saved dpi (:data:`DPI`): the same pixels."""
     fig.set_dpi(DPI)
     renderer = fig.canvas.get_renderer()
-    needed = None
-    for _ in range(3):  # a panel's new height may give it other tick labels (wider): measured again
-        again = _margins(axes, renderer)
-        if needed is not None and max(abs(a - b) for a, b in zip(again, needed, strict=True)) < 0.5:
+    n, inch = len(axes), DPI
+    # first placed where such figures' panels end up (tick labels of 4-5 characters, maybe a title or legend above
+    # the first panel, the time axis's labels under the last), so that the panels measured there keep their ticks
+    _place(fig, axes, renderer, (-0.42 * inch, 0.6 * inch, 0.1 * inch, *[0.1 * inch] + [0.0] * (n - 1),
+                                 *[0.05 * inch] * (n - 1) + [0.45 * inch]), height_ratios)
+    for _ in range(3):  # a panel's new size may give it other ticks (other labels' widths): measured again
+        ticks = _ticks(axes)
+        _place(fig, axes, renderer, _margins(axes, renderer), height_ratios)
+        if _ticks(axes) == ticks:
             break
-        needed = again
-        _place(fig, axes, renderer, needed, height_ratios)
+
+
+def _ticks(axes: list) -> list[tuple]:
+    """Each panel's ticks (where its locators put them for its size and limits)."""
+    return [(tuple(ax.xaxis.get_majorticklocs()), tuple(ax.yaxis.get_majorticklocs())) for ax in axes]
 
 
 def _margins(axes: list, renderer) -> tuple[float, ...]:
