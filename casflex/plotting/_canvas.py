@@ -5,7 +5,8 @@ each draw; a study's gait figures draw the same tick labels, titles and axis lab
 figure, the same strings from one figure to the next). :class:`_Renderer` keeps each text's coverage (its alpha, 0-255)
 by everything the pixels depend on: the string, the font, the size, the angle, the antialiasing, the dpi, the
 position's fraction of a pixel (1/64, FreeType's unit: the glyphs are rendered at the same sub-pixel offset, so the
-same pixels up to 8-bit rounding) and the text's font features and language; a text drawn again is one
+same pixels up to 8-bit rounding), the text's font features and language, the fonts rcParams name for its families
+and the hinting; a text drawn again is one
 ``draw_text_image`` of its stored coverage in the text's colour. Animated texts (an animation's time label, new each
 frame) and mathtext are drawn as matplotlib draws them.
 
@@ -20,6 +21,7 @@ import threading
 from collections import OrderedDict
 
 import numpy as np
+from matplotlib import rcParams
 from matplotlib.backends.backend_agg import FigureCanvasAgg, RendererAgg
 from matplotlib.font_manager import fontManager, get_font
 from matplotlib.ft2font import FT2Font
@@ -60,6 +62,15 @@ def _coverage(renderer: RendererAgg, gc, fx: float, fy: float, s: str, prop, ang
 _heights: dict[tuple, tuple[float, float, float]] = {}
 
 
+def _font_key(prop) -> tuple:
+    """What a text's font is: its properties and the fonts its families name (rcParams' lists: a family
+    ``sans-serif`` is the first of them found)."""
+    family = tuple(prop.get_family())
+    return (family, tuple(tuple(rcParams.get(f"font.{f}", ())) for f in family), prop.get_style(),
+            prop.get_variant(), prop.get_weight(), prop.get_stretch(), prop.get_size_in_points(), prop.get_file(),
+            prop.get_math_fontfamily())
+
+
 class _Renderer(RendererAgg):
     """matplotlib's Agg renderer but its texts drawn from the store (module docstring), and each font's line
     metrics kept (:meth:`_get_font_height_metrics`)."""
@@ -68,8 +79,7 @@ class _Renderer(RendererAgg):
         """(ascent, descent, line gap) in pixels of ``prop``'s font at this renderer's dpi, as matplotlib's
         ``Text._get_layout`` reads them from the font's tables at every layout of every text (a quarter of a
         gait figure's text layout), kept by the font's properties."""
-        key = (tuple(prop.get_family()), prop.get_style(), prop.get_variant(), prop.get_weight(),
-               prop.get_stretch(), prop.get_size_in_points(), prop.get_file(), float(self.dpi))
+        key = (*_font_key(prop), float(self.dpi))
         found = _heights.get(key)
         if found is None:
             font = get_font(fontManager._find_fonts_by_props(prop))
@@ -93,10 +103,9 @@ class _Renderer(RendererAgg):
         if fx >= 1.0 or fy >= 1.0:  # rounded up to the next pixel
             X, fx = (X + 1, 0.0) if fx >= 1.0 else (X, fx)  # noqa: N806
             Y, fy = (Y + 1, 0.0) if fy >= 1.0 else (Y, fy)  # noqa: N806
-        key = (s, tuple(prop.get_family()), prop.get_style(), prop.get_variant(), prop.get_weight(),
-               prop.get_stretch(), prop.get_size_in_points(), prop.get_file(), float(angle),
-               bool(gc.get_antialiased()), fx, fy, float(self.dpi), str(mtext.get_fontfeatures()),
-               mtext.get_language())
+        key = (s, *_font_key(prop), float(angle), bool(gc.get_antialiased()), fx, fy, float(self.dpi),
+               str(mtext.get_fontfeatures()), mtext.get_language(), rcParams["text.hinting"],
+               rcParams["text.hinting_factor"])
         with _lock:
             entry = _texts.get(key)
             if entry is not None:

@@ -54,3 +54,21 @@ def test_an_animated_text_is_drawn_by_matplotlib_not_stored():
     renderer = fig.canvas.get_renderer()
     fig.texts[0].draw(renderer)  # as an animation's blit draws it
     assert not _canvas._texts
+
+
+def test_a_text_in_a_font_rcparams_name_otherwise_is_rasterised_again():
+    # the store's key holds the fonts rcParams name for the text's family: another list, another font's glyphs
+    import matplotlib
+
+    def draw() -> np.ndarray:
+        fig = Figure(figsize=(2.0, 1.0))
+        _canvas.Canvas(fig)
+        fig.text(0.1, 0.4, "Hip 120", family="sans-serif", fontsize=14)
+        fig.canvas.draw()
+        return np.asarray(fig.canvas.buffer_rgba()).copy()
+
+    _canvas.clear()
+    first = draw()
+    with matplotlib.rc_context({"font.sans-serif": ["DejaVu Sans Mono"]}):
+        mono = draw()
+    assert len(_canvas._texts) == 2 and not (first == mono).all()
