@@ -12,10 +12,11 @@ import io
 import os
 from pathlib import Path
 
-from matplotlib.backends.backend_agg import FigureCanvasAgg
+import numpy as np
 from matplotlib.figure import Figure
 
 from casflex import interrupt
+from casflex.plotting._canvas import Canvas
 from casflex.results import atomic_write_bytes
 
 #: Resolution of saved PNG figures (dots per inch).
@@ -23,10 +24,11 @@ DPI = 120
 
 
 def _new_figure(figsize: tuple[float, float], layout: str | None = "constrained") -> Figure:
-    """A figure of ``figsize`` (inches) on its own Agg canvas; ``layout`` None for a grid laid out by hand (the
-    constrained layout's cost grows with the square of the panels: minutes for a hundred)."""
+    """A figure of ``figsize`` (inches) on its own Agg canvas (its texts rasterised once in the process:
+    :mod:`casflex.plotting._canvas`); ``layout`` None for a grid laid out by hand (the constrained layout's cost
+    grows with the square of the panels: minutes for a hundred)."""
     fig = Figure(figsize=figsize, layout=layout)
-    FigureCanvasAgg(fig)
+    Canvas(fig)
     return fig
 
 
@@ -75,3 +77,80 @@ def _finish_panels(fig: Figure, axes: list, n: int, title: str, path: str | os.P
 def _close(fig: Figure) -> None:
     """Drop a figure's artists (figures are not registered anywhere, so this only frees memory sooner)."""
     fig.clear()
+
+
+#: the margins' and gaps' padding of :func:`_fit_column` (inches): the constrained layout's default (3 points)
+#: and a little more
+PAD = 4.0 / 72.0
+
+
+def _fit_column(fig: Figure, axes: list, height_ratios: list[float] | None = None) -> None:
+    """Lay out ``axes``, one column of panels top to bottom, by hand where the constrained layout would: every
+    margin and gap just holding the panels' tick labels, axis labels, titles and legends (:data:`PAD` beside them),
+    the y axes' labels aligned left of every panel's tick labels, the figure's title (``suptitle``, if any) above.
+    Each panel measured once, and again where its new size gave it other ticks (the constrained layout
+    measures each twice and draws the figure once more to do so; ``align_ylabels`` measures every panel's tick
+    labels for every panel's label at each draw). At the figure's saved dpi (:data:`DPI`): the same pixels."""
+    fig.set_dpi(DPI)
+    renderer = fig.canvas.get_renderer()
+    n, inch = len(axes), DPI
+    # first placed where such figures' panels end up (tick labels of 4-5 characters, maybe a title or legend above
+    # the first panel, the time axis's labels under the last), so that the panels measured there keep their ticks
+    _place(fig, axes, renderer, (-0.42 * inch, 0.6 * inch, 0.1 * inch, *[0.1 * inch] + [0.0] * (n - 1),
+                                 *[0.05 * inch] * (n - 1) + [0.45 * inch]), height_ratios)
+    for _ in range(3):  # a panel's new size may give it other ticks (other labels' widths): measured again
+        ticks = _ticks(axes)
+        _place(fig, axes, renderer, _margins(axes, renderer), height_ratios)
+        if _ticks(axes) == ticks:
+            break
+
+
+def _ticks(axes: list) -> list[tuple]:
+    """Each panel's ticks (where its locators put them for its size and limits)."""
+    return [(tuple(ax.xaxis.get_majorticklocs()), tuple(ax.yaxis.get_majorticklocs())) for ax in axes]
+
+
+def _margins(axes: list, renderer) -> tuple[float, ...]:
+    """(the y labels' anchor left of the panels, the margin left of them, right of them, then above and below each
+    panel) in pixels, as they are now, each y label's placed at the anchor (its right edge: the label's side
+    facing the panel)."""
+    dpi = renderer.dpi
+    anchor = 0.0
+    for ax in axes:
+        box = ax.get_window_extent(renderer)
+        shown = ax.yaxis.label.get_visible()
+        ax.yaxis.label.set_visible(False)  # the tick labels' and the offset's extent, without the label
+        ticks = ax.yaxis.get_tightbbox(renderer)
+        ax.yaxis.label.set_visible(shown)
+        left = min(box.x0, ticks.x0) if ticks is not None else box.x0
+        anchor = min(anchor, left - box.x0 - ax.yaxis.labelpad * dpi / 72)
+    for ax in axes:
+        ax.yaxis.set_label_coords(anchor / ax.get_window_extent(renderer).width, 0.5)
+    boxes = [(ax.get_window_extent(renderer).frozen(), ax.get_tightbbox(renderer)) for ax in axes]
+    return (anchor, max(box.x0 - tight.x0 for box, tight in boxes),
+            max(0.0, max(tight.x1 - box.x1 for box, tight in boxes)),
+            *(max(0.0, tight.y1 - box.y1) for box, tight in boxes),  # titles, legends above a panel
+            *(max(0.0, box.y0 - tight.y0) for box, tight in boxes))  # tick labels and axis label under it
+
+
+def _place(fig: Figure, axes: list, renderer, needed: tuple[float, ...], height_ratios: list[float] | None) -> None:
+    """The panels placed for the margins ``needed`` (:func:`_margins`), the y labels at their anchor."""
+    width, height = fig.get_size_inches() * DPI
+    pad = PAD * DPI
+    n = len(axes)
+    anchor, left, right = needed[:3]
+    above, below = needed[3:3 + n], needed[3 + n:]
+    title = fig._suptitle.get_window_extent(renderer).height + pad if fig._suptitle is not None else 0.0
+    top, bottom = pad + title + above[0], below[-1] + pad
+    gaps = [below[i] + above[i + 1] + pad for i in range(n - 1)]
+    ratios = np.asarray(height_ratios or [1.0] * n, dtype=float)
+    heights = (height - top - bottom - sum(gaps)) * ratios / ratios.sum()
+    w = width - left - right - 2 * pad
+    y = height - top
+    for i, ax in enumerate(axes):
+        y -= heights[i]
+        ax.set_position([(left + pad) / width, y / height, w / width, heights[i] / height])
+        ax.yaxis.set_label_coords(anchor / w, 0.5)
+        y -= gaps[i] if i < len(gaps) else 0.0
+    if fig._suptitle is not None:
+        fig._suptitle.set_y(1.0 - pad / height)

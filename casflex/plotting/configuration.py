@@ -9,7 +9,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from casflex.model import Model
-from casflex.plotting._figure import _new_figure, _save
+from casflex.plotting._figure import _fit_column, _new_figure, _save
 
 _BEAM_COLOR = "#1f4e79"
 _SPRING_COLOR = "#c0392b"
@@ -270,8 +270,9 @@ def plot_configuration(model: Model, q: np.ndarray | None = None, ax: Axes | Non
     Axes in m with equal aspect. Draws into ``ax`` if given, else a new figure; returns the figure.
     """
     q = _check_q(model, q)
+    own = ax is None
     if ax is None:
-        fig = _new_figure((6.0, 6.0))
+        fig = _new_figure((6.0, 6.0), layout=None)  # laid out by hand below (the constrained layout's cost)
         ax = fig.add_subplot()
     else:
         fig = ax.figure
@@ -289,5 +290,7 @@ def plot_configuration(model: Model, q: np.ndarray | None = None, ax: Axes | Non
     if legend:
         ax.legend(loc="best", fontsize="small")
     ax.set_title(title if title is not None else f"{model.scene.name}: configuration")
+    if own:
+        _fit_column(fig, [ax])
     _save(fig, path)
     return fig

@@ -36,11 +36,14 @@ import re
 from dataclasses import dataclass
 
 import numpy as np
+from matplotlib import collections
+from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from matplotlib.ticker import FixedLocator
 
-from casflex.plotting._figure import _new_figure, _save
+from casflex.plotting._figure import _new_figure, _save, render
 
-__all__ = ["Normative", "gait_figure", "read_normative", "split_side", "sign_factor", "joint_title"]
+__all__ = ["GaitFigures", "Normative", "gait_figure", "read_normative", "split_side", "sign_factor", "joint_title"]
 
 #: Gait labs' colours: left red, right green; a curve of no side blue.
 _COLOURS = {"left": "tab:red", "right": "tab:green", None: "tab:blue"}
@@ -54,6 +57,8 @@ _TITLES = {"hip_flexion": "Hip flexion/extension", "knee_angle": "Knee flexion/e
            "pelvis_tilt": "Pelvic tilt", "arm_flex": "Shoulder flexion/extension", "elbow_flex": "Elbow flexion",
            "mtp_angle": "Toe (MTP) flexion", "subtalar_angle": "Subtalar angle", "hip": "Hip", "knee": "Knee",
            "ankle": "Ankle"}
+#: the gait cycle's ticks (%)
+_PERCENT_TICKS = (0, 20, 40, 60, 80, 100)
 _SIDES = {"r": "right", "l": "left", "right": "right", "left": "left"}
 _MOMENT = ("_moment", ".moment", "_force", ".force")
 
@@ -94,12 +99,15 @@ def joint_title(key: str) -> str:
     return _TITLES.get(base) or re.sub(r"[_.]+", " ", base).strip().capitalize()
 
 
+_MODEL = "the model's sign"
+
+
 def sign_factor(name: str, clinical: bool, coordinate_sign: float = 1.0) -> tuple[float, str]:
     """(the factor the curve ``name`` is drawn with, what its positive values are) under the model's or the
     clinical signs (module docstring); ``coordinate_sign``: the scene coordinate's ``sign`` (lab names)."""
     joint = _joint(split_side(name)[0])
     if not clinical or joint is None:
-        return 1.0, ("the model's sign" if not clinical or joint is None else "")
+        return 1.0, _MODEL
     factor, positive = _CLINICAL[joint][1 if is_moment(name) else 0]
     return factor * coordinate_sign, positive
 
@@ -173,32 +181,136 @@ def read_normative(path: str | os.PathLike[str], units: dict[str, str] | None = 
     return out
 
 
-def _band(ax, percent, curves: np.ndarray, colour: str, label: str) -> None:
+def _mean_sd(curves: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     c = np.atleast_2d(curves)
-    mean = c.mean(axis=0)
-    sd = c.std(axis=0, ddof=1) if c.shape[0] > 1 else np.zeros(c.shape[1])
-    ax.fill_between(percent, mean - sd, mean + sd, color=colour, alpha=0.2, lw=0)
-    ax.plot(percent, mean, color=colour, label=label)
+    return c.mean(axis=0), c.std(axis=0, ddof=1) if c.shape[0] > 1 else np.zeros(c.shape[1])
+
+
+def _curve(percent, curves: dict[str, np.ndarray], toe_off: dict[str, list[float]], factors: dict[str, float],
+           what: str, name: str) -> tuple[np.ndarray, np.ndarray, str, float | None, str | None]:
+    """One curve's band as drawn: (mean, sd, the band's label, the mean toe-off or None, its label)."""
+    side = split_side(name)[1]
+    c = np.atleast_2d(curves[name]) * factors.get(name, 1.0)
+    who = (side or "mean").capitalize()
+    mean, sd = _mean_sd(c)
+    label = f"{who}: mean +- 1 SD ({c.shape[0]} {what if c.shape[0] > 1 else what[:-1]})"
+    offs = [v for v in toe_off.get(name, []) if v is not None]
+    if not offs:
+        return mean, sd, label, None, None
+    toe = f"{side.capitalize() + ' t' if side else 'T'}oe-off ({np.mean(offs):.0f} %)"
+    return mean, sd, label, float(np.mean(offs)), toe
 
 
 def _panel(ax, percent, names: list[str], curves: dict[str, np.ndarray], toe_off: dict[str, list[float]],
-           factors: dict[str, float], what: str, norm: Normative | None) -> None:
+           factors: dict[str, float], what: str, norm: Normative | None, artists: dict[str, tuple]) -> None:
+    """The panel's bands, means and toe-offs; ``artists``: name -> (its band, its mean's line, its toe-off's
+    line or None), filled (:class:`GaitFigures` draws the next figure over them)."""
     if norm is not None:
         ax.fill_between(norm.percent, norm.mean - norm.sd, norm.mean + norm.sd, color="0.6", alpha=0.35, lw=0,
                         label="normative mean +- 1 SD")
     for name in names:
-        side = split_side(name)[1]
-        colour = _COLOURS[side]
-        c = np.atleast_2d(curves[name]) * factors.get(name, 1.0)
-        who = (side or "mean").capitalize()
-        _band(ax, percent, c, colour, f"{who}: mean +- 1 SD ({c.shape[0]} {what if c.shape[0] > 1 else what[:-1]})")
-        offs = [v for v in toe_off.get(name, []) if v is not None]
-        if offs:
-            ax.axvline(float(np.mean(offs)), color=colour, ls="--", lw=1.0,
-                       label=f"{side.capitalize() + ' t' if side else 'T'}oe-off ({np.mean(offs):.0f} %)")
+        colour = _COLOURS[split_side(name)[1]]
+        mean, sd, label, off, off_label = _curve(percent, curves, toe_off, factors, what, name)
+        band = ax.fill_between(percent, mean - sd, mean + sd, color=colour, alpha=0.2, lw=0)
+        line, = ax.plot(percent, mean, color=colour, label=label)
+        toe = None if off is None else ax.axvline(off, color=colour, ls="--", lw=1.0, label=off_label)
+        artists[name] = (band, line, toe)
     ax.axhline(0.0, color="0.6", lw=0.6)
     ax.grid(True, alpha=0.3)
     ax.set_xlim(0, 100)
+    # the ticks matplotlib's locator finds, not looked for at each draw
+    ax.xaxis.set_major_locator(FixedLocator(_PERCENT_TICKS))
+
+
+@dataclass(frozen=True)
+class _Arrangement:
+    """What a gait figure's panels are (one row per joint, its angle and moment): two figures of the same
+    :attr:`shape` have the same panels, titles, axis labels, curves and toe-off lines, their data apart."""
+
+    order: list[str]  # the joints, top to bottom
+    joints: dict[str, dict[str, str]]  # joint -> {"angle": panel key, "moment": panel key}
+    names: dict[str, list[str]]  # panel key -> its curves, sorted
+    factors: dict[str, float]  # curve -> its sign's factor
+    ylabels: dict[str, str]  # panel key -> its y axis's label
+    shape: tuple
+
+
+def _arrange(percent, curves: dict[str, np.ndarray], toe_off: dict[str, list[float]], units: dict[str, str],
+             clinical: bool, coordinate_signs: dict[str, float] | None, normative: dict[str, Normative] | None
+             ) -> _Arrangement:
+    keys: dict[str, list[str]] = {}
+    for name in curves:
+        keys.setdefault(split_side(name)[0], []).append(name)
+    joints: dict[str, dict[str, str]] = {}  # joint key -> {"angle": panel key, "moment": panel key}
+    for key in keys:
+        joints.setdefault(_base(key), {})["moment" if is_moment(key) else "angle"] = key
+    order = sorted(joints, key=lambda j: (["hip", "knee", "ankle"].index(_joint(j)) if _joint(j) else 3, j))
+    signs = coordinate_signs or {}
+    factors, positive = {}, {}
+    for name in curves:  # a lab moment's sign is its coordinate's (hip_flexion_r_moment: hip_flexion_r's)
+        factors[name], positive[split_side(name)[0]] = sign_factor(name, clinical,
+                                                                   signs.get(name.removesuffix("_moment"), 1.0))
+    ylabels = {key: f"{units[names[0]]} ({positive[key] if positive[key] == _MODEL else positive[key] + ' +'})"
+               for key, names in keys.items()}
+    norms = {k: (n.percent.tobytes(), n.mean.tobytes(), n.sd.tobytes()) for k, n in (normative or {}).items()
+             if k in keys}
+    has_toe = {n: any(v is not None for v in toe_off.get(n, [])) for n in curves}
+    shape = (tuple(order), tuple((j, tuple(sorted(joints[j].items()))) for j in order),
+             tuple((k, tuple(sorted(v)), ylabels[k]) for k, v in sorted(keys.items())), tuple(sorted(has_toe.items())),
+             tuple(sorted(norms.items())), np.asarray(percent, dtype=float).tobytes())
+    return _Arrangement(order, joints, {k: sorted(v) for k, v in keys.items()}, factors, ylabels, shape)
+
+
+def _legend(fig: Figure, h: float) -> None:
+    """One legend for the figure, each label once (a panel's normative band too), below the panels."""
+    seen: dict[str, object] = {}
+    for ax in fig.axes:
+        for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
+            seen.setdefault(label, handle)
+    fig.legend(list(seen.values()), list(seen), loc="lower center", bbox_to_anchor=(0.5, 0.05 / h), ncols=3,
+               fontsize="small")
+
+
+@dataclass
+class _Drawn:
+    """A drawn gait figure and its curves' artists by (panel key, curve)."""
+
+    fig: Figure
+    shape: tuple
+    height: float
+    artists: dict[tuple[str, str], tuple]
+
+
+def _build(percent, curves: dict[str, np.ndarray], toe_off: dict[str, list[float]], title: str, what: str,
+           arr: _Arrangement, normative: dict[str, Normative] | None) -> _Drawn:
+    h = 2.7 * len(arr.order) + 0.6
+    fig = _new_figure((9.0, h), layout=None)  # laid out by hand: the constrained layout took 40 % of the figure's time
+    fig.subplots_adjust(left=0.8 / 9.0, right=1 - 0.15 / 9.0, top=1 - 0.55 / h, bottom=1.25 / h, wspace=0.3,
+                        hspace=0.62 / 2.1)
+    axes = np.atleast_2d(fig.subplots(len(arr.order), 2, squeeze=False))
+    artists: dict[tuple[str, str], tuple] = {}
+    for row, joint in zip(axes, arr.order, strict=True):
+        for ax, kind in zip(row, ("angle", "moment"), strict=True):
+            key = arr.joints[joint].get(kind)
+            if key is None:
+                ax.set_visible(False)
+                continue
+            mine: dict[str, tuple] = {}
+            _panel(ax, percent, arr.names[key], curves, toe_off, arr.factors, what, (normative or {}).get(key), mine)
+            artists |= {(key, name): a for name, a in mine.items()}
+            # the title's height given (the axes' top, where matplotlib puts it with no tick label above): else
+            # each draw measures the panel's tick labels to place it, 15 % of the figure's CPU for the same pixels
+            ax.set_title(f"{joint_title(joint)} {kind}", y=1.0)
+            ax.set_ylabel(arr.ylabels[key])
+    for column in axes.T:  # the x axis's numbers and name under each column's lowest panel: the same 0-100 % above
+        shown = [ax for ax in column if ax.get_visible()]
+        for ax in shown[:-1]:
+            ax.tick_params(axis="x", labelbottom=False)
+        if shown:
+            shown[-1].set_xlabel("gait cycle (%)")
+    _legend(fig, h)
+    fig.suptitle(title, y=1 - 0.2 / h, va="center")
+    return _Drawn(fig, arr.shape, h, artists)
 
 
 def gait_figure(percent: np.ndarray, curves: dict[str, np.ndarray], toe_off: dict[str, list[float]], title: str,
@@ -212,43 +324,59 @@ def gait_figure(percent: np.ndarray, curves: dict[str, np.ndarray], toe_off: dic
     saying what the m rows are ("cycles", "subjects"); ``toe_off``: name -> the rows' toe-offs (%); ``clinical``:
     the clinical signs (module docstring; ``coordinate_signs``: the scene coordinates' signs by name);
     ``normative``: a band per panel key (:func:`read_normative`)."""
-    keys: dict[str, list[str]] = {}
-    for name in curves:
-        keys.setdefault(split_side(name)[0], []).append(name)
-    joints: dict[str, dict[str, str]] = {}  # joint key -> {"angle": panel key, "moment": panel key}
-    for key in keys:
-        joints.setdefault(_base(key), {})["moment" if is_moment(key) else "angle"] = key
-    order = sorted(joints, key=lambda j: (["hip", "knee", "ankle"].index(_joint(j)) if _joint(j) else 3, j))
-    h = 2.7 * len(order) + 0.6
-    fig = _new_figure((9.0, h), layout=None)  # laid out by hand: the constrained layout took 40 % of the figure's time
-    fig.subplots_adjust(left=0.8 / 9.0, right=1 - 0.15 / 9.0, top=1 - 0.55 / h, bottom=1.25 / h, wspace=0.3,
-                        hspace=0.62 / 2.1)
-    axes = np.atleast_2d(fig.subplots(len(order), 2, squeeze=False))
-    signs = coordinate_signs or {}
-    factors, positive = {}, {}
-    for name in curves:  # a lab moment's sign is its coordinate's (hip_flexion_r_moment: hip_flexion_r's)
-        factors[name], positive[split_side(name)[0]] = sign_factor(name, clinical,
-                                                                   signs.get(name.removesuffix("_moment"), 1.0))
-    for row, joint in zip(axes, order, strict=True):
-        for ax, kind in zip(row, ("angle", "moment"), strict=True):
-            key = joints[joint].get(kind)
-            if key is None:
-                ax.set_visible(False)
-                continue
-            _panel(ax, percent, sorted(keys[key]), curves, toe_off, factors, what, (normative or {}).get(key))
-            sign = positive[key] if positive[key] == "the model's sign" else f"{positive[key]} +"
-            # the title's height given (the axes' top, where matplotlib puts it with no tick label above): else
-            # each draw measures the panel's tick labels to place it, 15 % of the figure's CPU for the same pixels
-            ax.set_title(f"{joint_title(joint)} {kind}", y=1.0)
-            ax.set_ylabel(f"{units[keys[key][0]]} ({sign})")
-    for ax in axes[-1]:
-        ax.set_xlabel("gait cycle (%)")
-    seen: dict[str, object] = {}  # one legend for the figure: each label once (a panel's normative band too)
-    for ax in fig.axes:
-        for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
-            seen.setdefault(label, handle)
-    fig.legend(list(seen.values()), list(seen), loc="lower center", bbox_to_anchor=(0.5, 0.05 / h), ncols=3,
-               fontsize="small")
-    fig.suptitle(title, y=1 - 0.2 / h, va="center")
+    arr = _arrange(percent, curves, toe_off, units, clinical, coordinate_signs, normative)
+    fig = _build(percent, curves, toe_off, title, what, arr, normative).fig
     _save(fig, path)
     return fig
+
+
+#: where this matplotlib lets a drawn figure take other data (a band's set_data, the data limits of collections
+#: recomputed): else :class:`GaitFigures` draws each figure anew
+_REUSABLE = (hasattr(getattr(collections, "FillBetweenPolyCollection", None), "set_data")
+             and hasattr(Axes, "_update_collection_limits"))
+
+
+class GaitFigures:
+    """Gait figures drawn one after another (a study's subjects'), each rendered into PNG bytes: a figure of the
+    same shape as the previous one (the same panels, curves and toe-off lines: :class:`_Arrangement`) is drawn
+    over it, its data, labels and title replaced, its axes, ticks and texts kept (a new figure: 0.2 s to build
+    and its 180 ticks made again at the first draw); the same pixels as :func:`gait_figure`'s. One per thread."""
+
+    def __init__(self) -> None:
+        self._last: _Drawn | None = None
+
+    def png(self, percent: np.ndarray, curves: dict[str, np.ndarray], toe_off: dict[str, list[float]], title: str,
+            *, units: dict[str, str], what: str = "cycles", clinical: bool = False,
+            coordinate_signs: dict[str, float] | None = None, normative: dict[str, Normative] | None = None
+            ) -> bytes:
+        """The PNG of :func:`gait_figure` of these arguments (its ``path`` apart)."""
+        arr = _arrange(percent, curves, toe_off, units, clinical, coordinate_signs, normative)
+        last = self._last
+        if _REUSABLE and last is not None and last.shape == arr.shape:
+            _redraw(last, percent, curves, toe_off, title, what, arr)
+        else:
+            self._last = last = None  # the previous figure freed before the next is built
+            self._last = last = _build(percent, curves, toe_off, title, what, arr, normative)
+        return render(last.fig)
+
+
+def _redraw(drawn: _Drawn, percent, curves: dict[str, np.ndarray], toe_off: dict[str, list[float]], title: str,
+            what: str, arr: _Arrangement) -> None:
+    """``drawn`` (a figure of ``arr``'s shape) showing these curves: each band, mean and toe-off given its data and
+    label, each panel's data limits recomputed from its artists, the legend made again, the title replaced."""
+    for (_, name), (band, line, toe) in drawn.artists.items():
+        mean, sd, label, off, off_label = _curve(percent, curves, toe_off, arr.factors, what, name)
+        band.set_data(percent, mean - sd, mean + sd)
+        line.set_data(percent, mean)
+        line.set_label(label)
+        if toe is not None:
+            toe.set_xdata([off, off])
+            toe.set_label(off_label)
+    for ax in drawn.fig.axes:
+        if ax.get_visible():
+            ax.relim()  # the lines' and the bands' (and the normative band's: the same)
+            ax.autoscale_view()  # y only: x is fixed at 0-100 %
+    for legend in list(drawn.fig.legends):
+        legend.remove()
+    _legend(drawn.fig, drawn.height)
+    drawn.fig.suptitle(title, y=1 - 0.2 / drawn.height, va="center")

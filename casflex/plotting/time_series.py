@@ -13,7 +13,7 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from casflex.plotting._figure import _new_figure, _save
+from casflex.plotting._figure import _fit_column, _new_figure, _save
 from casflex.plotting.joints import _trailing_number, joint_elements
 from casflex.plotting.series import _ENERGY_LABELS, KINDS, _check_kind, _node_names, _series
 from casflex.results import Trajectory
@@ -63,7 +63,7 @@ def plot_node(traj: Trajectory, node: str = "5", *, kind: str = "q",
     nodes = _node_names(traj)
     if node not in nodes:
         raise ValueError(f"unknown node {node!r}; nodes are {nodes}")
-    fig = _new_figure((7.0, 6.5))
+    fig = _new_figure((7.0, 6.5), layout=None)
     axes = fig.subplots(3, 1, sharex=True)
     for ax, d in zip(axes, ("x", "y", "theta"), strict=True):
         values, label, unit = _series(traj, f"{d}{node}", kind)
@@ -71,7 +71,7 @@ def plot_node(traj: Trajectory, node: str = "5", *, kind: str = "q",
         ax.set_ylabel(f"{label} ({unit})")
     fig.suptitle(_title(traj, f"node {node} {KINDS[kind][0]}"))
     _finish_time_axes(axes, traj.t)
-    fig.align_ylabels(axes)
+    _fit_column(fig, list(axes))
     _save(fig, path)
     return fig
 
@@ -84,7 +84,7 @@ def plot_energies(traj: Trajectory, path: str | os.PathLike[str] | None = None) 
     either sign and O(dt^2); at alpha < 0 mostly the energy numerical damping removed, negative),
     the work of the external loads and the energy the dampers dissipated, when there are any.
     """
-    fig = _new_figure((7.0, 5.8))
+    fig = _new_figure((7.0, 5.8), layout=None)
     top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=[3, 1.4])
     e = traj.energies
     styles = {"kinetic": ("C0", "-"), "elastic": ("C2", "-"), "gravity": ("C1", "-"), "total": ("black", "--")}
@@ -103,7 +103,7 @@ def plot_energies(traj: Trajectory, path: str | os.PathLike[str] | None = None) 
     what = "energies" + (f" (HHT alpha = {alpha:g})" if isinstance(alpha, (int, float)) else "")
     fig.suptitle(_title(traj, what))
     _finish_time_axes([top, bottom], traj.t)
-    fig.align_ylabels([top, bottom])
+    _fit_column(fig, [top, bottom], [3, 1.4])
     _save(fig, path)
     return fig
 
@@ -119,7 +119,7 @@ def plot_joint_forces(traj: Trajectory, element: str | int | Sequence[str] = "1"
     """
     springs, torsions = joint_elements(traj, element)
     n_ax = int(bool(springs)) + int(bool(torsions))
-    fig = _new_figure((7.0, 2.6 + 2.2 * n_ax))
+    fig = _new_figure((7.0, 2.6 + 2.2 * n_ax), layout=None)
     axes = list(np.atleast_1d(fig.subplots(n_ax, 1, sharex=True)))
     ax_iter = iter(axes)
     if springs:
@@ -147,7 +147,7 @@ def plot_joint_forces(traj: Trajectory, element: str | int | Sequence[str] = "1"
     what = f"joint {numbers.pop()}" if len(numbers) == 1 and None not in numbers else "joint"
     fig.suptitle(_title(traj, f"{what} forces ({', '.join(springs + torsions)})"))
     _finish_time_axes(axes, traj.t)
-    fig.align_ylabels(axes)
+    _fit_column(fig, list(axes))
     _save(fig, path)
     return fig
 
@@ -168,7 +168,7 @@ def plot_comparison(trajs: Mapping[str, Trajectory], quantity: str | Sequence[st
     names = [quantity] if isinstance(quantity, str) else list(quantity)
     if not names:
         raise ValueError("quantity: expected at least one series name")
-    fig = _new_figure((7.0, 1.2 + 2.1 * len(names)))
+    fig = _new_figure((7.0, 1.2 + 2.1 * len(names)), layout=None)
     axes = list(np.atleast_1d(fig.subplots(len(names), 1, sharex=True)))
     styles = ["-", "--", "-.", ":"]
     t_lo, t_hi = math.inf, -math.inf
@@ -188,6 +188,6 @@ def plot_comparison(trajs: Mapping[str, Trajectory], quantity: str | Sequence[st
     if title is None:
         title = f"comparison: {', '.join(names)}" + (f" ({KINDS[kind][0]})" if kind != "q" else "")
     fig.suptitle(title)
-    fig.align_ylabels(axes)
+    _fit_column(fig, list(axes))
     _save(fig, path)
     return fig

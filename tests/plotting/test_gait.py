@@ -164,6 +164,58 @@ def test_the_study_s_figures_and_a_normative_band_no_curve_takes(record, tmp_pat
     assert [o for _, o in kept["arm_flex_l"]["s02"]] == [None] == [o for _, o in kept["lumbar_extension"]["s02"]]
 
 
+def _other(plan: dict, rows: int, shift: float, title: str) -> dict:
+    """``plan`` with other curves (``rows`` cycles each, scaled and shifted), toe-offs and title: the same panels."""
+    rng = np.random.default_rng(rows)
+    curves = {n: np.vstack([2.0 * c[0] + shift + rng.normal(0.0, 3.0, c.shape[1]) for _ in range(rows)])
+              for n, c in plan["curves"].items()}
+    return plan | {"curves": curves, "title": title,
+                   "toe_off": {n: [None if v is None else v + shift / 10 for v in vs] * rows
+                               for n, vs in plan["toe_off"].items()}}
+
+
+def test_a_figure_drawn_over_the_previous_one_is_the_same_png_as_drawn_anew(record):
+    # GaitFigures draws a subject's figure over the previous one of the same panels (its axes, ticks and texts
+    # kept): the bytes of a new figure's, whatever was drawn before; another shape is drawn anew
+    from casflex.cli.study import _figure_plans
+    from casflex.plotting._figure import render
+    from casflex.plotting.gait import _REUSABLE, GaitFigures
+
+    plan = _figure_plans(record, "run")[0]["s02.png"]
+    second, third = _other(plan, 3, 40.0, "run: s03"), _other(plan, 7, -25.0, "run: s04")
+    fewer = plan | {"curves": {n: c for n, c in plan["curves"].items() if "knee" not in n}}
+    figures = GaitFigures()
+    pngs, drawn_on = [], []
+    for p in (plan, second, third, fewer, plan):
+        pngs.append(figures.png(**p))
+        drawn_on.append(figures._last.fig)
+    fresh = [render(gait_figure(path=None, **p)) for p in (plan, second, third, fewer, plan)]
+    assert pngs == fresh
+    assert len(set(pngs)) == 4  # each figure its own (the first and last the same plan)
+    same = [a is b for a, b in zip(drawn_on, drawn_on[1:], strict=False)]
+    # the second and third subjects drawn over the first's figure; without the knee another figure, and another
+    # again with it (one figure kept: the last)
+    assert same == ([True, True, False, False] if _REUSABLE else [False] * 4)
+    assert len(drawn_on[3].axes) == 10
+
+
+def test_the_gait_cycle_s_numbers_are_under_each_column_s_lowest_panel(record, tmp_path):
+    rec = record["trials"][("s02", "run")]
+    curves = {n: np.array(rec.loads.get(n, rec.angles.get(n)).value) for n in
+              ("hip_flexion_r", "hip_flexion_r_moment", "knee_angle_r", "ankle_angle_r", "ankle_angle_r_moment")}
+    fig = gait_figure(PERCENT, curves, {}, "s02", None, units={n: "N m" if "moment" in n else "deg" for n in curves})
+    fig.canvas.draw()
+    shown = {ax.get_title(): [t.get_text() for t in ax.get_xticklabels() if t.get_visible() and t.get_text()]
+             for ax in fig.axes if ax.get_visible()}
+    numbers = ["0", "20", "40", "60", "80", "100"]
+    assert shown == {"Hip flexion/extension angle": [], "Hip flexion/extension moment": [],
+                     "Knee flexion/extension angle": [], "Ankle dorsi/plantarflexion angle": numbers,
+                     "Ankle dorsi/plantarflexion moment": numbers}
+    # the knee has no moment here: the hip's moment's panel is its column's lowest but one
+    assert {ax.get_title(): ax.get_xlabel() for ax in fig.axes if ax.get_visible() and ax.get_xlabel()} == {
+        "Ankle dorsi/plantarflexion angle": "gait cycle (%)", "Ankle dorsi/plantarflexion moment": "gait cycle (%)"}
+
+
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(pytest.main([__file__]))
 

@@ -127,3 +127,55 @@ def test_plot_comparison_errors(twobar):
         plotting.plot_comparison({"a": tr}, ["qd:y9"])
     with pytest.raises(ValueError, match="at least one"):
         plotting.plot_comparison({}, ["y5"])
+
+
+def _drawn_tick_labels(ax, which: str = "xy") -> list:
+    """The tick labels drawn (those of ticks within the view; matplotlib keeps others, not drawn)."""
+    out = []
+    for axis in {"y": [ax.yaxis], "xy": [ax.xaxis, ax.yaxis]}[which]:
+        lo, hi = sorted(axis.get_view_interval())
+        tol = 1e-9 * (hi - lo)
+        out += [t.label1 for t in axis.get_major_ticks() if lo - tol <= t.get_loc() <= hi + tol
+                and t.label1.get_visible() and t.label1.get_text()]
+    return out
+
+
+@pytest.mark.parametrize("draw", ["node", "energies", "joint", "comparison", "configuration"])
+def test_figures_laid_out_by_hand_hold_their_texts_in_the_figure_apart(twobar, draw):
+    # _fit_column lays the panels out where the constrained layout did (one measurement, not the constrained
+    # layout's three passes): every text inside the figure, a panel's y label left of its tick labels and clear of
+    # them, the y labels aligned, the figure's title above every panel's title and legend
+
+    from casflex.plotting._figure import PAD
+
+    model, tr = twobar
+    fig = {"node": lambda: plotting.plot_node(tr, "5", kind="qdd"), "energies": lambda: plotting.plot_energies(tr),
+           "joint": lambda: plotting.plot_joint_forces(tr, "1"),
+           "comparison": lambda: plotting.plot_comparison({"a": tr, "b": tr}, ["x5", "spring1.force"]),
+           "configuration": lambda: plotting.plot_configuration(model)}[draw]()
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    page = fig.bbox
+    axes = [ax for ax in fig.axes if ax.get_visible()]
+    texts = [fig._suptitle] if fig._suptitle is not None else []
+    for ax in axes:
+        texts += [ax.title, ax._left_title, ax.xaxis.label, ax.yaxis.label, *(ax.get_legend().get_texts()
+                                                                             if ax.get_legend() else [])]
+        texts += _drawn_tick_labels(ax)
+    texts = [t for t in texts if t.get_visible() and t.get_text()]
+    for t in texts:
+        box = t.get_window_extent(renderer)
+        assert page.x0 - 0.5 <= box.x0 and box.x1 <= page.x1 + 0.5 and page.y0 - 0.5 <= box.y0 and \
+            box.y1 <= page.y1 + 0.5, (t.get_text(), box, page)
+    inks = [ax.get_tightbbox(renderer) for ax in axes]
+    assert min(b.x0 for b in inks) == pytest.approx(PAD * fig.dpi, abs=1.0)  # the left margin: the pad, no more
+    labels = [ax.yaxis.label.get_window_extent(renderer) for ax in axes]
+    assert max(b.x1 for b in labels) - min(b.x1 for b in labels) < 0.5  # aligned (their side facing the panels)
+    for ax, label in zip(axes, labels, strict=True):
+        ticks = [t.get_window_extent(renderer) for t in _drawn_tick_labels(ax, "y")]
+        assert label.x1 < min(b.x0 for b in ticks), ax.get_ylabel()
+    for upper, lower in zip(inks, inks[1:], strict=False):
+        assert lower.y1 < upper.y0  # no panel's texts over another's
+    title = fig._suptitle.get_window_extent(renderer) if fig._suptitle is not None else None
+    if title is not None:
+        assert inks[0].y1 < title.y0
