@@ -298,6 +298,7 @@ def _build(percent, curves: dict[str, np.ndarray], toe_off: dict[str, list[float
             mine: dict[str, tuple] = {}
             _panel(ax, percent, arr.names[key], curves, toe_off, arr.factors, what, (normative or {}).get(key), mine)
             artists |= {(key, name): a for name, a in mine.items()}
+            _rescale(ax)
             # the title's height given (the axes' top, where matplotlib puts it with no tick label above): else
             # each draw measures the panel's tick labels to place it, 15 % of the figure's CPU for the same pixels
             ax.set_title(f"{joint_title(joint)} {kind}", y=1.0)
@@ -360,6 +361,20 @@ class GaitFigures:
         return render(last.fig)
 
 
+def _rescale(ax) -> None:
+    """The panel's y limits from its data as matplotlib's autoscale sets them (the data's span and the axes' margin
+    on each side), computed from the data alone: matplotlib takes a line at y = 0 (``axhline``) through the data
+    transform and back, whose last bits depend on the limits the panel had before, so a figure drawn over another
+    had limits 3e-14 off a new one's, a few curve pixels one level apart. x is fixed at 0-100 %."""
+    ys = [np.zeros(1)]  # the zero line
+    ys += [path.vertices[:, 1] for coll in ax.collections for path in coll.get_paths()]  # the bands (normative too)
+    ys += [np.asarray(line.get_ydata(), dtype=float) for line in ax.get_lines()
+           if line.get_transform() == ax.transData]  # the means (not the toe-offs', in the axes' height)
+    lo, hi = ax.yaxis.get_major_locator().nonsingular(np.nanmin(np.concatenate(ys)), np.nanmax(np.concatenate(ys)))
+    margin = (hi - lo) * ax.margins()[1]
+    ax.set_ylim(lo - margin, hi + margin)
+
+
 def _redraw(drawn: _Drawn, percent, curves: dict[str, np.ndarray], toe_off: dict[str, list[float]], title: str,
             what: str, arr: _Arrangement) -> None:
     """``drawn`` (a figure of ``arr``'s shape) showing these curves: each band, mean and toe-off given its data and
@@ -374,8 +389,7 @@ def _redraw(drawn: _Drawn, percent, curves: dict[str, np.ndarray], toe_off: dict
             toe.set_label(off_label)
     for ax in drawn.fig.axes:
         if ax.get_visible():
-            ax.relim()  # the lines' and the bands' (and the normative band's: the same)
-            ax.autoscale_view()  # y only: x is fixed at 0-100 %
+            _rescale(ax)
     for legend in list(drawn.fig.legends):
         legend.remove()
     _legend(drawn.fig, drawn.height)
