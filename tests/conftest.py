@@ -153,6 +153,26 @@ def twobar_meshed(elements: int) -> Scene:
     return dataclasses.replace(scene, beams=tuple(dataclasses.replace(b, elements=elements) for b in scene.beams))
 
 
+#: The modules with the longest tests (10-45 s each; the profiles of 2026-11-28/29), longest first. They run first:
+#: pytest-xdist hands the tests out in collection order and keeps two queued on a worker to the end, so a long test
+#: collected last (test_study_muscles, test_sweep: 15-30 s) ran while the other worker had nothing left, and the
+#: run's end waited on it. Only the order of whole modules changes (their module-scoped fixtures are made once).
+LONG_FIRST = ("test_leg_scene", "test_cli_interrupt", "test_study_muscles", "test_dampers",
+              "test_identification_priors", "test_cli_identify", "test_studies", "test_study",
+              "test_identification_realdata", "test_identification_indirect", "test_study_cluster", "test_sweep",
+              "test_identification_markers", "test_identification_adapted", "test_identification_form")
+
+
+def pytest_collection_modifyitems(items: list) -> None:
+    """The modules of :data:`LONG_FIRST` before the others (each module's tests in their order)."""
+    rank = {f"tests/{name}.py": k for k, name in enumerate(LONG_FIRST)}
+
+    def key(item) -> int:
+        return rank.get(item.nodeid.split("::")[0], len(rank))
+
+    items.sort(key=key)  # stable: the other modules keep pytest's order
+
+
 def pytest_terminal_summary(terminalreporter) -> None:
     """The versions this run was made with (shown also under -q): a failure report is
     reproducible only with them."""

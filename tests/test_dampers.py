@@ -19,7 +19,7 @@ import casflex
 from casflex import Beam, Node, Parameter, Scene, Spring, Support, TorsionSpring, assemble
 from casflex.data import MeasurementSet
 from casflex.elements.kernels import DAMPERS, KINDS, hht_kernel
-from casflex.identification import ModelRun, Solver, identify_indirect
+from casflex.identification import ModelRun, Solver, Uncertainty, identify_indirect
 from casflex.identification.estimate import estimate
 from casflex.identification.measurement import Experiment
 from casflex.simulate import Start, Stepping, simulate
@@ -192,7 +192,9 @@ def test_dampers_identified_from_exudyn_markers():
     t, q, _ = _damped_exudyn(names, 0.0, 3.0, 10)
     data = MeasurementSet(t, names, q + np.random.default_rng(0).normal(0, 1e-3, q.shape), None, None)
     model = assemble(casflex.load_scene(DAMPED / "twobar_damped.toml"))
-    r = identify_indirect(model, data, start=0.8, run=ModelRun(dt=1e-3))
+    # form="none": the other beam theory's refit compiled a second sensitivity library (~6 s of gcc) and left every
+    # estimate and standard error as they were (to 4 digits: measured); it has its own tests (test_identification_form)
+    r = identify_indirect(model, data, start=0.8, run=ModelRun(dt=1e-3), uncertainty=Uncertainty(form="none"))
     assert r.success, r.message
     err = r.p - model.p_nominal
     se = np.array([r.std_errors[k] for k in model.parameter_names])

@@ -158,8 +158,10 @@ def test_estimated_initial_state_from_nodes_and_markers(model):
 
     names = ("x3", "y3", "xm2", "ym2", "xm4", "ym4")
     data = recording(names, 1.0, seed=1).window(0.3, 1.0)
+    # form "none": the other beam theory's refit compiled a library of its own (6 s of CPU with gcc) and left every
+    # estimate and standard error as they were (to 4 digits: measured); it has its own tests (test_identification_form)
     r = identify_indirect(model, Experiment(data, initial_state="estimate", noise=NOISE), start=0.8,
-                          run=ModelRun(dt=1e-3), uncertainty=Uncertainty(model_error="none"))
+                          run=ModelRun(dt=1e-3), uncertainty=Uncertainty(model_error="none", form="none"))
     assert r.success, r.message
     for name, truth in zip(model.parameter_names, model.p_nominal, strict=True):
         assert abs(r.parameters[name] - truth) <= 3 * r.std_errors[name], name

@@ -141,8 +141,10 @@ def test_threelink_from_three_markers():
     # within 1.83 SE without it, 1.75 with it (the noise-free test above checks the refit itself)
     model = casflex.assemble(casflex.load_scene("threelink"))
     names = ("x3", "y3", "x5", "y5", "x7", "y7")
+    # form "none" too: the other beam theory's refit left every estimate and standard error as they were (to 4 digits:
+    # measured), at 3.6 s of CPU; it has its own tests (test_identification_form)
     r = identify_indirect(model, recording("threelink", names, 0.0, 2.0, 1e-3, seed=2), start=1.3,
-                          run=ModelRun(dt=1e-3), uncertainty=Uncertainty(model_error="none"))
+                          run=ModelRun(dt=1e-3), uncertainty=Uncertainty(model_error="none", form="none"))
     assert r.success, r.message
     err = np.abs(r.p - model.p_nominal)
     se = np.array(list(r.std_errors.values()))

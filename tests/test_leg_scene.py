@@ -110,8 +110,11 @@ def test_leg_identified_from_its_markers_mid_stride():
     data = MeasurementSet(tr.t[rows], marker_channels(fine), y + np.random.default_rng(0).normal(0, 1e-3, y.shape),
                           None, None)
     model = casflex.assemble(leg)
+    # form="none": the other beam theory's refit (rotary inertia) compiled a second 1 MB sensitivity library (12-20 s
+    # of gcc, half the test's CPU) and moved the standard errors by 0-5 % (err/se 1.77-1.88 with it, 1.86-1.89
+    # without: measured); the form refit has its own tests (test_identification_form, test_cli_identify's forms)
     r = identify_indirect(model, Experiment(data, initial_state="estimate"), start=0.7, run=ModelRun(dt=1e-3),
-                          uncertainty=Uncertainty(model_error="none"))
+                          uncertainty=Uncertainty(model_error="none", form="none"))
     assert r.success, r.message
     se = np.array([r.std_errors[k] for k in model.parameter_names])
     assert np.all(np.abs(r.p - model.p_nominal) < 3 * se), (r.p, se)
