@@ -151,9 +151,11 @@ def test_multiple_shooting_residuals_above_the_declared_noise_do_not_say_success
 
 def test_estimated_initial_state_from_nodes_and_markers(model):
     # the default method (Gauss-Newton single shooting) on the recording mid-motion (0.3-1 s): its
-    # estimated initial state is linearised at the kinematic fit relaxed onto the slow manifold. Before,
-    # linearised at the fit with bar2 stretched by the noise, seeds 1 and 2 of 0-3 stopped at a 78 % fit
-    # with kt on its bounds; now all four succeed, |z| <= 1.6
+    # estimated initial state is linearised at the kinematic fit relaxed onto the slow manifold. When that was
+    # added, linearised at the fit with bar2 stretched by the noise, seeds 1 and 2 of 0-3 stopped at a 78 % fit
+    # with kt on its bounds. Measured 2026-11-29: today's fit passes seeds 1 and 2 with the relaxation skipped
+    # too, so this test no longer guards the relaxation (an open gap, said in the note); it guards the
+    # estimated initial state from nodes and markers
     from casflex.identification import identify_indirect
 
     names = ("x3", "y3", "xm2", "ym2", "xm4", "ym4")
