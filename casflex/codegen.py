@@ -288,10 +288,9 @@ def _build(cc: str, flags: tuple[str, ...], c_file: Path, built: Path, target: P
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         raise CodegenError(f"compiling {stem}.c failed ({' '.join(cmd)}):\n{proc.stderr[-2000:]}")
-    fd, tmp_target = tempfile.mkstemp(dir=target.parent, suffix=".so.tmp")
-    os.close(fd)
-    shutil.copyfile(built, tmp_target)
-    os.replace(tmp_target, target)
+    # the shared atomic write (its temporary file removed on any failure, a Ctrl-C too); not flushed to the disk, as
+    # before (a library a power cut left short fails to load, naming its file: `casflex cache --clear` removes it)
+    atomic_write_bytes(target, built.read_bytes(), durable=False)
 
 
 def compiled(f: ca.Function, *, optimise: str = "-O1") -> ca.Function:

@@ -230,3 +230,23 @@ def test_a_built_entry_is_written_by_the_shared_atomic_write_unflushed_and_its_l
     left = tmp_path / f".{entry.name}.x1y2z3.tmp"  # as atomic_write_bytes names its temporary file (mkstemp)
     left.write_bytes(b"half")
     assert codegen.clear_cache()[0] == 2 and list(tmp_path.iterdir()) == []
+
+
+def test_a_library_whose_write_fails_leaves_no_temporary_file(tmp_path, monkeypatch):
+    """The compiled library reaches the cache through results.atomic_write_bytes, whose temporary file is removed
+    when the rename fails (its own copy-and-rename left a .so.tmp behind)."""
+    import casadi as ca
+
+    monkeypatch.setenv("CASFLEX_CACHE", str(tmp_path))
+    x = ca.SX.sym("x")
+    real = os.replace
+
+    def refuse(src, dst, *a, **k):
+        if str(dst).endswith(".so"):
+            raise OSError("disk full (simulated)")
+        return real(src, dst, *a, **k)
+
+    monkeypatch.setattr(os, "replace", refuse)
+    with pytest.raises(OSError, match="disk full"):
+        codegen.compiled(ca.Function("probe_write", [x], [x * x]))
+    assert [p.name for p in tmp_path.iterdir() if p.name.endswith(".tmp")] == []
