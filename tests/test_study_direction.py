@@ -66,7 +66,22 @@ def test_a_straight_walk_passes_and_a_turn_or_a_backward_walk_is_refused():
         check_straight(_trial(90.0, turn_deg=2 * MAX_TURN + 10), LABELS, "Y,Z")
     with pytest.raises(ValueError, match="backwards"):
         check_straight(_trial(-90.0), LABELS, "Y,Z")
+    with pytest.raises(ValueError, match="backwards"):
+        check_straight(_trial(180.0, turn_deg=10.0), LABELS, "X,Z")  # its headings either side of 180 degrees
+    with pytest.raises(ValueError, match="walks straight at -40 degrees"):  # a diagonal walkway, the plane along X
+        check_straight(_trial(40.0), LABELS, "X,Z")
     assert "does not move" in check_straight(_trial(0.0, speed=0.0), LABELS, "X,Z")
+
+
+def test_a_treadmill_s_sway_is_not_a_turn_and_a_walk_there_and_back_is():
+    # a treadmill runner's pelvis sways forward and back (here 6 cm at 1.4 Hz: up to 0.53 m/s, either sign) over
+    # 10 s: Hamner's whole running trial (10 s) was refused as "the subject turns (the heading from -174 to +174
+    # degrees ...)"; a walk out and back turns (2.4 m on a half circle, 0.76 m across) and is refused as before
+    sway = _trial(0.0, speed=0.0, duration=10.0)
+    sway.xyz[:, :, 0] += 0.06 * np.sin(2 * np.pi * 1.4 * sway.t)[:, None]
+    assert "does not move from its place (within 0.12 m" in check_straight(sway, LABELS, "X,Z")
+    with pytest.raises(ValueError, match="turns"):
+        check_straight(_trial(0.0, turn_deg=180.0), LABELS, "X,Z")
 
 
 def test_a_facing_the_markers_cannot_tell_is_refused():
@@ -100,7 +115,7 @@ def test_a_treadmill_trial_with_a_leg_only_marker_set_is_straight(plane):
 
     scene, lab = _hamner_legs()
     got, report = _trial_plane(scene, lab, plane, "Y")
-    assert got == "X,Y" and report[-1].startswith("straight"), report
+    assert got == "X,Y" and report[-1].startswith(("straight", "heading not checked: the subject does not")), report
 
 
 def test_a_trial_without_the_pelvis_markers_says_which_are_missing():

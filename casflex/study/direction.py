@@ -15,7 +15,9 @@ scenes are (OpenSim's convention: x forward, y up):
 
 :func:`check_straight` refuses a trial in which the subject turns: a planar model sees a turn's steps foreshortened
 and its joints' moments about the wrong axis, without a word. It compares the heading of the markers' median
-horizontal velocity, while the subject moves faster than :data:`WALKING_SPEED`, with the plane's x.
+horizontal velocity, while the subject moves faster than :data:`WALKING_SPEED`, with the plane's x; not in a trial
+whose markers stay within :data:`MIN_TRAVEL` of their place (a treadmill: its runner's pelvis sways forward and
+back at up to 0.4 m/s, a velocity of either sign that no heading describes).
 
 Travel and heading are read from the markers of the root segment (:func:`travel_labels`: the pelvis of OpenSim's
 models), which moves with the body as a whole: a leg's markers swing forward and back at twice the body's speed
@@ -168,6 +170,11 @@ def check_straight(lab: LabMarkers, labels: list[str], plane: str) -> str:
         return "heading not checked: too few frames or markers"
     steps = _median_steps(lab, labels)
     x_axis, up = pl.matrix[0], np.cross(*pl.matrix)
+    path = np.vstack([np.zeros(3), np.cumsum(np.nan_to_num(steps), axis=0)])
+    extent = float(np.hypot(np.ptp(path @ x_axis), np.ptp(path @ up)))
+    if extent < MIN_TRAVEL:  # a treadmill's sway or a static trial: velocities of either sign, no heading to judge
+        return (f"heading not checked: the subject does not move from its place (within {extent:.2f} m over the "
+                f"trial: a static trial or a treadmill)")
     w = max(1, int(round(0.1 * lab.rate)))  # 0.1 s of steps: a stride's sway, not the markers' noise
     if steps.shape[0] < w:
         return "heading not checked: a record shorter than 0.1 s"
@@ -177,14 +184,24 @@ def check_straight(lab: LabMarkers, labels: list[str], plane: str) -> str:
     forward, side = v @ x_axis, v @ up
     moving = np.hypot(forward, side) >= WALKING_SPEED
     if not moving.any():
-        return "heading not checked: the subject does not move (a static trial or a treadmill)"
-    heading = np.degrees(np.arctan2(side[moving], forward[moving]))
-    lo, hi = float(np.min(heading)), float(np.max(heading))
+        return f"heading not checked: the subject never moves at {WALKING_SPEED:g} m/s or faster"
+    heading = np.arctan2(side[moving], forward[moving])
+    mean = float(np.arctan2(np.sin(heading).mean(), np.cos(heading).mean()))  # the walk's direction, no wrap at 180
+    dev = np.degrees(np.angle(np.exp(1j * (heading - mean))))  # each heading's signed angle from it
+    lo, hi = float(np.degrees(heading.min())), float(np.degrees(heading.max()))
     where = f"the heading from {lo:+.0f} to {hi:+.0f} degrees off the plane's x ({pl.x}) while moving"
-    if np.median(np.abs(heading)) > 90.0:
+    turns = "a planar model needs straight walking; give a window in which it walks straight"
+    off = max(-lo, hi) > MAX_TURN  # refused whatever follows: only the reason is chosen below
+    if off and np.abs(dev).max() > MAX_TURN:
+        raise ValueError(f"the subject turns ({where}: {np.abs(dev).max():.0f} degrees from its mean direction, "
+                         f"more than {MAX_TURN:g}): {turns}")
+    if abs(np.degrees(mean)) > 90.0:
         raise ValueError(f"the subject walks backwards in the plane {plane} ({where}): give the plane along its "
                          f"travel, or plane = \"auto\"")
-    if max(-lo, hi) > MAX_TURN:
-        raise ValueError(f"the subject turns ({where}, more than {MAX_TURN:g}): a planar model needs straight "
-                         f"walking; give a window in which it walks straight")
+    if off and np.ptp(dev) < MAX_TURN:  # its headings close together: a diagonal walkway
+        raise ValueError(f"the subject walks straight at {np.degrees(mean):+.0f} degrees to the plane's x ({where}, "
+                         f"within {np.ptp(dev):.0f} degrees of each other): give the plane along its travel, or "
+                         f"plane = \"auto\"")
+    if off:
+        raise ValueError(f"the subject turns ({where}, more than {MAX_TURN:g}): {turns}")
     return f"straight: {where}"
