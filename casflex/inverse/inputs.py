@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from casflex.inverse.built import inverse_scene, inverse_tree, osim_scene
+from casflex.inverse.heading import heading_line
 from casflex.inverse.options import Bands, Filter, Fit, Flexible, Trial
 from casflex.inverse.plates import Plate, model_weight, plate_from_table
 from casflex.inverse.tree import KinematicTree
@@ -385,8 +386,9 @@ def prepare(scene, trial: Trial, *, filter: Filter | None = None, fit: Fit | Non
             spec = band_spec(model, tree, bands, given=trial.given,
                              n_markers=sum(m.weight > 0 for m in scene.markers))
     if not trial.given:
-        t, y, labels, rate, notes = _from_markers(model, tree, lab, pl, trial.t_start, trial.t_end)
-        z, report, source = None, [], lab.source
+        t, y, labels, rate, notes = _from_markers(model, tree, lab, pl, trial.t_start, trial.t_end)  # units checked
+        heading = heading_line(scene, lab, f"{pl.x},{pl.y}", tree.root, trial.t_start, trial.t_end)  # before the fit
+        z, report, source = None, [heading], lab.source
     else:
         t, z, report, source = _from_coordinates(model, tree, trial.coordinates, trial.t_start, trial.t_end)
         y, labels, rate, notes = np.zeros((t.size, 0)), (), 1.0 / float(t[1] - t[0]), []

@@ -106,18 +106,17 @@ def _frames(lab, window: tuple[float, float] | None):
 def _trial_plane(sc, lab, plane: str, vertical: str, static: bool = False, root: str | None = None
                  ) -> tuple[str, list[str]]:
     """(the trial's plane, report lines): ``plane``, or where "auto" the one the subject travels or faces in
-    (:mod:`.direction`: a static trial by its markers, another by the scene's fit); the subject's heading, from
-    the root segment's markers (:func:`.direction.travel_labels`), checked against it (ValueError where it turns,
-    or where the trial has none of the root's markers)."""
-    from casflex.study.direction import check_straight, facing_plane, fitted_plane, travel_labels, walking_plane
+    (:mod:`.direction`: a static trial by its markers, another by the scene's fit), its travel read from the root
+    segment's markers (:func:`.direction.travel_labels`: ValueError where the trial has none of them). The heading
+    is checked against the plane by the trial's inverse dynamics (:mod:`casflex.inverse.heading`)."""
+    from casflex.study.direction import facing_plane, fitted_plane, travel_labels, walking_plane
 
     labels = travel_labels(sc, lab, root)
-    report = []
-    if plane == "auto":
-        plane, line = walking_plane(lab, labels, vertical) or (facing_plane if static else fitted_plane)(
-            sc, lab, vertical, *([root] if not static else []))
-        report.append(line)
-    return plane, [*report, check_straight(lab, labels, plane)]
+    if plane != "auto":
+        return plane, []
+    plane, line = walking_plane(lab, labels, vertical) or (facing_plane if static else fitted_plane)(
+        sc, lab, vertical, *([root] if not static else []))
+    return plane, [line]
 
 
 def _load_feet(scene, names: list[str], feet: list[str]) -> dict[str, str | None]:
