@@ -41,6 +41,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.ticker import FixedLocator
 
+from casflex.plotting import _axes
 from casflex.plotting._figure import _new_figure, _save, render
 
 __all__ = ["GaitFigures", "Normative", "gait_figure", "read_normative", "split_side", "sign_factor", "joint_title"]
@@ -287,7 +288,7 @@ def _build(percent, curves: dict[str, np.ndarray], toe_off: dict[str, list[float
     fig = _new_figure((9.0, h), layout=None)  # laid out by hand: the constrained layout took 40 % of the figure's time
     fig.subplots_adjust(left=0.8 / 9.0, right=1 - 0.15 / 9.0, top=1 - 0.55 / h, bottom=1.25 / h, wspace=0.3,
                         hspace=0.62 / 2.1)
-    axes = np.atleast_2d(fig.subplots(len(arr.order), 2, squeeze=False))
+    axes = np.atleast_2d(fig.subplots(len(arr.order), 2, squeeze=False, subplot_kw={"axes_class": _axes.Axes}))
     artists: dict[tuple[str, str], tuple] = {}
     for row, joint in zip(axes, arr.order, strict=True):
         for ax, kind in zip(row, ("angle", "moment"), strict=True):

@@ -216,6 +216,27 @@ def test_the_gait_cycle_s_numbers_are_under_each_column_s_lowest_panel(record, t
         "Ankle dorsi/plantarflexion angle": "gait cycle (%)", "Ankle dorsi/plantarflexion moment": "gait cycle (%)"}
 
 
+def test_the_gait_figure_s_axes_draw_matplotlib_s_pixels(record, monkeypatch):
+    # casflex's axes (their ticks found once a draw, grid lines and marks drawn as one line each): the PNG of
+    # matplotlib's own axes, for a figure drawn anew and one drawn over another
+    from matplotlib.axes import Axes
+
+    from casflex.cli.study import _figure_plans
+    from casflex.plotting import _axes
+    from casflex.plotting._figure import render
+    from casflex.plotting.gait import GaitFigures
+
+    plan = _figure_plans(record, "run", clinical=True)[0]["s02.png"]
+    plans = [plan, _other(plan, 3, 40.0, "run: s03")]
+    ours = [GaitFigures().png(**plans[0]), GaitFigures().png(**plans[1])]
+    figures = GaitFigures()
+    ours += [figures.png(**p) for p in plans]
+    monkeypatch.setattr(_axes, "Axes", Axes)
+    theirs = [render(gait_figure(path=None, **p)) for p in plans]
+    assert type(figures._last.fig.axes[0]) is not Axes  # the figure drawn over was casflex's
+    assert ours == theirs + theirs
+
+
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(pytest.main([__file__]))
 
