@@ -9,7 +9,6 @@ import functools
 import io
 import os
 import sys
-import threading
 from collections.abc import Callable
 from pathlib import Path
 
@@ -179,15 +178,7 @@ def draw_figure(plan: dict) -> bytes:
     (:class:`casflex.plotting.gait.GaitFigures`, the same pixels), else freed with its last reference."""
     from casflex.plotting.gait import GaitFigures
 
-    figures = getattr(_figures, "gait", None)
-    if figures is None:
-        figures = _figures.gait = GaitFigures()
-    return figures.png(**plan)
-
-
-#: each thread's :class:`casflex.plotting.gait.GaitFigures`: a subject's figure drawn over the previous one of the
-#: same shape (its axes, ticks and texts kept: a third of a figure's CPU)
-_figures = threading.local()
+    return GaitFigures.of_thread().png(**plan)
 
 
 def _fingerprint(plan: dict) -> str:

@@ -237,6 +237,20 @@ def test_the_gait_figure_s_axes_draw_matplotlib_s_pixels(record, monkeypatch):
     assert ours == theirs + theirs
 
 
+def test_each_thread_draws_over_its_own_figures():
+    # a study draws its figures in its command's thread and a dask worker's threads: one GaitFigures each
+    import threading
+
+    from casflex.plotting.gait import GaitFigures
+
+    mine = GaitFigures.of_thread()
+    other = []
+    worker = threading.Thread(target=lambda: other.extend([GaitFigures.of_thread(), GaitFigures.of_thread()]))
+    worker.start()
+    worker.join()
+    assert GaitFigures.of_thread() is mine and other[0] is other[1] and other[0] is not mine
+
+
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(pytest.main([__file__]))
 
