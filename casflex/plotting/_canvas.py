@@ -23,6 +23,7 @@ from collections import OrderedDict
 import matplotlib
 import numpy as np
 from matplotlib import cbook, rcParams
+from matplotlib import text as mpl_text
 from matplotlib.backends.backend_agg import FigureCanvasAgg, RendererAgg
 from matplotlib.font_manager import fontManager, get_font
 from matplotlib.ft2font import FT2Font
@@ -42,11 +43,19 @@ counts = {"kept": 0, "rasterised": 0}
 ENABLED = hasattr(FT2Font, "_layout")
 
 
+def _measured(renderer, s, prop, ismath, dpi):
+    return renderer.get_text_width_height_descent(s, prop, ismath)
+
+
+#: the text's size as matplotlib's text layout measured it (its cache of them), else measured here
+_metrics = getattr(mpl_text, "_get_text_metrics_with_cache", _measured)
+
+
 def _coverage(renderer: RendererAgg, gc, fx: float, fy: float, s: str, prop, angle: float, mtext
               ) -> tuple[np.ndarray | None, int, int]:
     """The text rasterised by matplotlib on a scratch canvas with its pen at (``half + fx``, ``half + fy``):
     (its coverage cropped to its ink, the ink's left and bottom edge from the pen's whole pixel; None: no ink)."""
-    w, h, _ = renderer.get_text_width_height_descent(s, prop, False)
+    w, h, _ = _metrics(renderer, s, prop, False, renderer.dpi)  # the text's layout measured them: kept
     half = int(math.ceil(w + h)) + 4  # any angle: the glyphs lie within w + h of the pen
     scratch = RendererAgg(2 * half, 2 * half, renderer.dpi)
     ink = scratch.new_gc()
