@@ -105,6 +105,7 @@ class _Once:
         for t in shown:
             t.label1.draw(renderer)
             t.label2.draw(renderer)
+        for t in ticks:
             t.stale = False
 
 
