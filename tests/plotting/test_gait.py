@@ -251,6 +251,20 @@ def test_each_thread_draws_over_its_own_figures():
     assert GaitFigures.of_thread() is mine and other[0] is other[1] and other[0] is not mine
 
 
+def test_each_subject_s_scene_is_read_once_for_the_clinical_signs(record, monkeypatch):
+    # each subject's figure plan asks for every subject's coordinates' signs (30 ms a whole-body scene's reading):
+    # read once a scene in the process, the same plan after
+    from casflex.cli import study
+    from casflex.scene import io
+
+    study._scene_signs.cache_clear()
+    read = []
+    monkeypatch.setattr(io, "loads_scene", lambda text, f=io.loads_scene: read.append(1) or f(text))
+    plans = [study._figure_plans(record, "run", clinical=True)[0]["s02.png"] for _ in range(3)]
+    assert len(read) == 1 and plans[0]["coordinate_signs"] and plans[2]["coordinate_signs"] == \
+        plans[0]["coordinate_signs"]
+
+
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(pytest.main([__file__]))
 
