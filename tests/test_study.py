@@ -352,6 +352,33 @@ def test_the_table_quotes_a_name_only_where_csv_must():
     assert odd.splitlines()[1] == '"s,02",run,knee_angle_r_moment,calcn_r,1,0,0.30000000000000004,2.5,N m,true,0.39,1.1'
 
 
+def test_a_subject_s_lines_made_from_its_records_are_the_rows_lines():
+    # a subject's lines of loads.csv are made from its records' cycles directly (a cycle's names and times
+    # formatted once, its values by repr): the text of its rows, with and without bands, a foot or its clean flags
+    # (made-up values of every magnitude, and a nan); a name that CSV quotes leaves them to the csv module
+    from casflex.cli.study import _loads_text, _rows_text
+    from casflex.study.records import CycleLoad, TrialRecord
+    from casflex.study.runner import tidy_rows
+
+    rng = np.random.default_rng(5)
+
+    def cycles(n):
+        return tuple(tuple(float(v) for v in rng.normal(0.0, 10.0 ** rng.integers(-9, 9), 101)) for _ in range(n))
+
+    value = cycles(2)
+    value = (value[0][:7] + (float("nan"),) + value[0][8:], value[1])
+    loads = {"knee_angle_r_moment": CycleLoad("calcn_r", ((0.1, 0.8), (0.8, 1.5000000000000002)), (True, False),
+                                              value, cycles(2)),
+             "pelvis_tx_force": CycleLoad(None, ((0.3, 1.1),), (), cycles(1)),
+             "ankle_angle_l_moment": CycleLoad("calcn_l", (), (), ())}
+    rec = TrialRecord(None, "X,Y", (), (), loads, (0.0, 2.0))
+    out = {"trials": {("s02", "run"): rec, ("s03", "run 2"): rec}}
+    for per_kg in (False, True):
+        text = _loads_text(out, per_kg)
+        assert text == _rows_text(tidy_rows(out, per_kg=per_kg)) and text.count("\n") == 2 * 3 * 101
+    assert _loads_text({"trials": {("s,02", "run"): rec}}) is None
+
+
 def test_a_changed_data_file_at_the_same_path_is_run_again(folder, capsys):
     # the fingerprint holds the files' contents, not only their paths: a trial re-exported in place is redone
     path = write(folder)

@@ -9,7 +9,6 @@ import functools
 import io
 import os
 import sys
-import threading
 from collections.abc import Callable
 from pathlib import Path
 
@@ -39,12 +38,42 @@ def _rows_text(rows: list[tuple]) -> str | None:
     """loads.csv's lines of ``rows`` without its header, formatted directly; None where a name needs CSV's quoting
     (:func:`_table` then writes the whole table by the csv module)."""
     names = {r[i] for r in rows for i in (0, 1, 2, 3, 8)}
-    if any(isinstance(n, str) and any(c in n for c in ',"\r\n') for n in names):
+    if any(_quoted(n) for n in names):
         return None
     return "".join([
         f"{r[0]},{r[1]},{r[2]},{'' if r[3] is None else r[3]},{r[4]},{r[5]:g},{r[6]!r},"
         f"{'' if r[7] is None else repr(r[7])},{r[8]},{'' if r[9] is None else str(r[9]).lower()},{r[10]!r},{r[11]!r}\n"
         for r in rows])
+
+
+def _quoted(name) -> bool:
+    """Whether CSV quotes ``name`` (a comma, a quote, a line break in it)."""
+    return isinstance(name, str) and any(c in name for c in ',"\r\n')
+
+
+def _loads_text(out: dict, per_kg: bool = False) -> str | None:
+    """``_rows_text(tidy_rows(out, per_kg))`` (:func:`casflex.study.runner.tidy_rows`), the same text made from the
+    records' cycles without the rows: each cycle's names, times and unit formatted once, its values (and bands)
+    by repr, joined with the percents (16 000 lines a subject of 20 trials: 94-104 -> 24-29 ms of CPU)."""
+    from casflex.study.runner import PERCENT, unit_of
+
+    percents = [f"{float(p):g}" for p in PERCENT]
+    parts: list[str] = []
+    for (subject, trial), rec in out["trials"].items():
+        for name, ld in rec.loads.items():
+            unit = unit_of(name, per_kg)
+            if any(_quoted(n) for n in (subject, trial, name, ld.foot, unit)):
+                return None
+            foot = "" if ld.foot is None else ld.foot
+            clean = ld.clean or [None] * len(ld.value)
+            for k, values in enumerate(ld.value):
+                head = f"{subject},{trial},{name},{foot},{k + 1},"
+                t0, t1 = ld.cycles[k]
+                tail = f",{unit},{'' if clean[k] is None else str(clean[k]).lower()},{t0!r},{t1!r}\n"
+                cells = (zip(percents, map(repr, values), [""] * len(values), strict=True) if ld.band is None else
+                         zip(percents, map(repr, values), map(repr, ld.band[k]), strict=True))
+                parts += [head, (tail + head).join(map(",".join, cells)), tail]
+    return "".join(parts)
 
 
 def _passive_table(out: dict) -> str | None:
@@ -96,12 +125,19 @@ def _kept(out: dict, all_cycles: bool, kind: str) -> dict[str, dict[str, list[tu
 
 def _coordinate_signs(out: dict) -> dict[str, float]:
     """The subjects' scene coordinates' signs by name (the clinical signs turn a coordinate of sign -1 again)."""
-    from casflex.scene.io import loads_scene
-
     signs: dict[str, float] = {}
     for rec in out["subjects"].values():
-        signs |= {c.name: c.sign for c in getattr(loads_scene(rec.scene), "coordinates", ())}
+        signs |= dict(_scene_signs(rec.scene))
     return signs
+
+
+@functools.lru_cache(maxsize=256)
+def _scene_signs(scene: str) -> tuple[tuple[str, float], ...]:
+    """(name, sign) of the scene's coordinates, each scene read once in the process: each subject's figure plan
+    asks for every subject's (30 ms a whole-body scene: 3 s of a 10-subject study's command with clinical signs)."""
+    from casflex.scene.io import loads_scene
+
+    return tuple((c.name, c.sign) for c in getattr(loads_scene(scene), "coordinates", ()))
 
 
 def _figure_plans(out: dict, title: str, per_kg: bool = False, all_cycles: bool = False, clinical: bool = False,
@@ -149,15 +185,7 @@ def draw_figure(plan: dict) -> bytes:
     (:class:`casflex.plotting.gait.GaitFigures`, the same pixels), else freed with its last reference."""
     from casflex.plotting.gait import GaitFigures
 
-    figures = getattr(_figures, "gait", None)
-    if figures is None:
-        figures = _figures.gait = GaitFigures()
-    return figures.png(**plan)
-
-
-#: each thread's :class:`casflex.plotting.gait.GaitFigures`: a subject's figure drawn over the previous one of the
-#: same shape (its axes, ticks and texts kept: a third of a figure's CPU)
-_figures = threading.local()
+    return GaitFigures.of_thread().png(**plan)
 
 
 def _fingerprint(plan: dict) -> str:
@@ -213,11 +241,10 @@ class _EarlyFigures:
         self.rows: dict[str, tuple[tuple, str | None]] = {}  # subject -> (its trials, its loads.csv lines)
 
     def __call__(self, subject: str, out: dict) -> None:
-        from casflex.study.runner import per_kg, tidy_rows
+        from casflex.study.runner import per_kg
 
         try:  # its lines of loads.csv too (0.7 s of CPU for 200 trials, else all after the last record)
-            self.rows[subject] = (tuple(out["trials"]), _rows_text(tidy_rows(per_kg(out, self.study),
-                                                                              per_kg=self.options["per_kg"])))
+            self.rows[subject] = (tuple(out["trials"]), _loads_text(per_kg(out, self.study), self.options["per_kg"]))
         except Exception:  # noqa: BLE001 - the table is then made after the trials, where its error is reported
             pass
         name = f"{subject}.png"
@@ -439,11 +466,17 @@ def _run(args: argparse.Namespace, study, staging: Path, record: Path, old: dict
                   file=sys.stderr)
             raise KeyboardInterrupt
         plans, notes = _figure_plans(per_kg(out, study), study.name, **options)
-        rows, passive = [], _passive_table(out)
+        passive, counted = _passive_table(out), []  # loads.csv's rows, counted while the workers draw
 
         def tables() -> None:  # while the workers draw the figures
-            rows.extend(tidy_rows(per_kg(out, study), per_kg=kg))
-            (staging / "loads.csv").write_text(early.table(out) or _table(rows))
+            text = early.table(out)
+            if text is None:  # a subject's lines not made as its trials finished: the rows of all now
+                rows = tidy_rows(per_kg(out, study), per_kg=kg)
+                text = _table(rows)
+                counted.append(len(rows))
+            else:  # a line a row (no name in the subjects' lines needs quoting)
+                counted.append(text.count("\n") - 1)
+            (staging / "loads.csv").write_text(text)
             if passive is not None:
                 (staging / "passive.csv").write_text(passive)
 
@@ -451,14 +484,14 @@ def _run(args: argparse.Namespace, study, staging: Path, record: Path, old: dict
     for note in notes:
         print(f"casflex: warning: {note}", file=sys.stderr)
     figures = [*plans, *_muscles(out, staging, study)]
-    code = _summary(study, out, rows, passive, figures, n, staging)
+    code = _summary(study, out, counted[0], passive, figures, n, staging)
     _write_manifest(staging, old, _inputs_key(args, study, record), prints, code)
     return code
 
 
-def _summary(study, out: dict, rows: list, passive: str | None, figures: list[str], n: int, staging: Path) -> int:
+def _summary(study, out: dict, rows: int, passive: str | None, figures: list[str], n: int, staging: Path) -> int:
     """summary.txt, printed too: the trials done, each trial's plates and cycles, the failures; the exit status."""
-    lines = [f"{len(out['trials'])} of {n} trial(s) done, {len(rows)} rows in loads.csv"
+    lines = [f"{len(out['trials'])} of {n} trial(s) done, {rows} rows in loads.csv"
              + (f", {passive.count(chr(10)) - 1} passive fit(s) in passive.csv" if passive else "")
              + f"; figures: {', '.join(figures) or 'none'}"]
     lines += [f"  {s.name}: mass {s.mass:g} kg read from {s.mass_from}" for s in study.subjects if s.mass_from]

@@ -33,6 +33,7 @@ import csv
 import math
 import os
 import re
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,6 +42,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.ticker import FixedLocator
 
+from casflex.plotting import _axes
 from casflex.plotting._figure import _new_figure, _save, render
 
 __all__ = ["GaitFigures", "Normative", "gait_figure", "read_normative", "split_side", "sign_factor", "joint_title"]
@@ -287,7 +289,7 @@ def _build(percent, curves: dict[str, np.ndarray], toe_off: dict[str, list[float
     fig = _new_figure((9.0, h), layout=None)  # laid out by hand: the constrained layout took 40 % of the figure's time
     fig.subplots_adjust(left=0.8 / 9.0, right=1 - 0.15 / 9.0, top=1 - 0.55 / h, bottom=1.25 / h, wspace=0.3,
                         hspace=0.62 / 2.1)
-    axes = np.atleast_2d(fig.subplots(len(arr.order), 2, squeeze=False))
+    axes = np.atleast_2d(fig.subplots(len(arr.order), 2, squeeze=False, subplot_kw={"axes_class": _axes.Axes}))
     artists: dict[tuple[str, str], tuple] = {}
     for row, joint in zip(axes, arr.order, strict=True):
         for ax, kind in zip(row, ("angle", "moment"), strict=True):
@@ -341,10 +343,22 @@ class GaitFigures:
     """Gait figures drawn one after another (a study's subjects'), each rendered into PNG bytes: a figure of the
     same shape as the previous one (the same panels, curves and toe-off lines: :class:`_Arrangement`) is drawn
     over it, its data, labels and title replaced, its axes, ticks and texts kept (a new figure: 0.2 s to build
-    and its 180 ticks made again at the first draw); the same pixels as :func:`gait_figure`'s. One per thread."""
+    and its 180 ticks made again at the first draw); the same pixels as :func:`gait_figure`'s. One per thread
+    (:meth:`of_thread`): a figure is drawn in one thread at a time."""
+
+    _threads = threading.local()
 
     def __init__(self) -> None:
         self._last: _Drawn | None = None
+
+    @classmethod
+    def of_thread(cls) -> GaitFigures:
+        """The calling thread's :class:`GaitFigures` (made at its first call; figures may be drawn in several
+        threads at once: a dask worker's with several threads, a study's command and its workers in one process)."""
+        figures = getattr(cls._threads, "figures", None)
+        if figures is None:
+            figures = cls._threads.figures = cls()
+        return figures
 
     def png(self, percent: np.ndarray, curves: dict[str, np.ndarray], toe_off: dict[str, list[float]], title: str,
             *, units: dict[str, str], what: str = "cycles", clinical: bool = False,

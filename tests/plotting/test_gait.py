@@ -216,13 +216,62 @@ def test_the_gait_cycle_s_numbers_are_under_each_column_s_lowest_panel(record, t
         "Ankle dorsi/plantarflexion angle": "gait cycle (%)", "Ankle dorsi/plantarflexion moment": "gait cycle (%)"}
 
 
+def test_the_gait_figure_s_axes_draw_matplotlib_s_pixels(record, monkeypatch):
+    # casflex's axes (their ticks found once a draw, grid lines and marks drawn as one line each): the PNG of
+    # matplotlib's own axes, for a figure drawn anew and one drawn over another
+    from matplotlib.axes import Axes
+
+    from casflex.cli.study import _figure_plans
+    from casflex.plotting import _axes
+    from casflex.plotting._figure import render
+    from casflex.plotting.gait import GaitFigures
+
+    plan = _figure_plans(record, "run", clinical=True)[0]["s02.png"]
+    plans = [plan, _other(plan, 3, 40.0, "run: s03")]
+    ours = [GaitFigures().png(**plans[0]), GaitFigures().png(**plans[1])]
+    figures = GaitFigures()
+    ours += [figures.png(**p) for p in plans]
+    monkeypatch.setattr(_axes, "Axes", Axes)
+    theirs = [render(gait_figure(path=None, **p)) for p in plans]
+    assert type(figures._last.fig.axes[0]) is not Axes  # the figure drawn over was casflex's
+    assert ours == theirs + theirs
+
+
+def test_each_thread_draws_over_its_own_figures():
+    # a study draws its figures in its command's thread and a dask worker's threads: one GaitFigures each
+    import threading
+
+    from casflex.plotting.gait import GaitFigures
+
+    mine = GaitFigures.of_thread()
+    other = []
+    worker = threading.Thread(target=lambda: other.extend([GaitFigures.of_thread(), GaitFigures.of_thread()]))
+    worker.start()
+    worker.join()
+    assert GaitFigures.of_thread() is mine and other[0] is other[1] and other[0] is not mine
+
+
+def test_each_subject_s_scene_is_read_once_for_the_clinical_signs(record, monkeypatch):
+    # each subject's figure plan asks for every subject's coordinates' signs (30 ms a whole-body scene's reading):
+    # read once a scene in the process, the same plan after
+    from casflex.cli import study
+    from casflex.scene import io
+
+    study._scene_signs.cache_clear()
+    read = []
+    monkeypatch.setattr(io, "loads_scene", lambda text, f=io.loads_scene: read.append(1) or f(text))
+    plans = [study._figure_plans(record, "run", clinical=True)[0]["s02.png"] for _ in range(3)]
+    assert len(read) == 1 and plans[0]["coordinate_signs"] and plans[2]["coordinate_signs"] == \
+        plans[0]["coordinate_signs"]
+
+
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(pytest.main([__file__]))
 
 
 def test_the_study_s_figure_is_the_same_pixels_as_matplotlib_s_own_placement_and_png(record):
-    # draw_figure gives each panel's title its height and encodes the PNG at zlib level 1 (cheaper): the pixels
-    # must be those of matplotlib placing the titles itself (measuring the tick labels) at Pillow's default level
+    # draw_figure gives each panel's title its height and encodes the PNG itself (casflex.plotting._png, cheaper):
+    # the pixels must be those of matplotlib placing the titles itself (measuring the tick labels) through Pillow
     import io
 
     from PIL import Image
@@ -236,7 +285,7 @@ def test_the_study_s_figure_is_the_same_pixels_as_matplotlib_s_own_placement_and
     for ax in fig.axes:
         ax._autotitlepos = True  # matplotlib's own placement, as a title set without its height has it
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=DPI)
+    fig.savefig(buf, format="png", dpi=DPI, pil_kwargs={"compress_level": 6})  # Pillow's options: Pillow's PNG
     mine, theirs = (np.asarray(Image.open(io.BytesIO(b)).convert("RGBA")) for b in (png, buf.getvalue()))
     assert png != buf.getvalue()  # another encoding ...
     assert mine.shape == theirs.shape and (mine == theirs).all()  # ... of the same pixels
