@@ -480,7 +480,7 @@ def estimate(model: Model, experiments: Sequence[Experiment], *, run: ModelRun |
     pmap = ParameterMap.of(model, transform)
     p0 = start_values(model, start)
     setup = {"dt": dt, "alpha": alpha, "pmap": pmap, "compiled": compiled, "newton_tol": newton_tol,
-             "initial": initial_states(model, experiments, p0)}
+             "initial": initial_states(model, experiments, p0), "vary": vary}
     problem = OutputError(model, experiments, **setup)
     w0 = problem.pack(pmap.theta(p0))
     build_s = time.perf_counter() - t_build
