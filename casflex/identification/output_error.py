@@ -195,7 +195,7 @@ class OutputError:
                 self.last_runs[e] = (w.copy(), run) if run.converged else None
             else:  # the model run alone: the same states, a third of the cost (twobar, 4 directions)
                 run = run_states(self.integ, x0.ravel(), p, sm.t0, sm.dt, sm.n_steps, sm.needed_steps,
-                                 compiled=self.compiled, vary=self.vary)
+                                 compiled=self.compiled)
             if not run.converged:
                 raise _Diverged(f"experiment {e + 1}: the model's Newton failed at t = "
                                 f"{sm.t0 + run.failed_step * sm.dt:.6g} s")
