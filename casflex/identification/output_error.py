@@ -92,13 +92,14 @@ class OutputError:
     def __init__(self, model: Model, experiments: list[Experiment], *, dt: float, alpha: float,
                  pmap: ParameterMap, compiled: bool, newton_tol: float,
                  initial: list[InitialState] | None = None, previous: OutputError | None = None,
-                 vary: Mapping[str, tuple[float, float]] | None = None) -> None:
+                 vary: Mapping[str, tuple[float, float]] | None = None, refit: bool = False) -> None:
         from casflex.simulate import integrator_for
 
         self.model, self.experiments, self.dt, self.pmap, self.compiled = model, experiments, dt, pmap, compiled
         self.integ = integrator_for(model, alpha=alpha, tol=newton_tol)
         # the properties the fit's other forms vary: run-time inputs of the compiled code, one library for them all
         self.vary = tuple((t, (float(lo), float(hi))) for t, (lo, hi) in (vary or {}).items())
+        self.refit = refit  # a refit in another form: its model runs without sensitivities on the forms' library too
         self.maps = [SampleMap.of(model, e, dt) for e in experiments]
         self.row_offsets = np.concatenate([[0], np.cumsum([sm.y.size for sm in self.maps])]).astype(int)
         self.free = free_dofs(model)
@@ -195,7 +196,7 @@ class OutputError:
                 self.last_runs[e] = (w.copy(), run) if run.converged else None
             else:  # the model run alone: the same states, a third of the cost (twobar, 4 directions)
                 run = run_states(self.integ, x0.ravel(), p, sm.t0, sm.dt, sm.n_steps, sm.needed_steps,
-                                 compiled=self.compiled)
+                                 compiled=self.compiled, vary=self.vary if self.refit else None)
             if not run.converged:
                 raise _Diverged(f"experiment {e + 1}: the model's Newton failed at t = "
                                 f"{sm.t0 + run.failed_step * sm.dt:.6g} s")

@@ -161,33 +161,37 @@ def run_sensitivities(integ: HHT, x0: np.ndarray, p: np.ndarray, t0: float, dt: 
     return SensitivityRun(keep, Xk, Sk, True, None, d)
 
 
-def _state_functions(integ: HHT, compiled: bool) -> tuple:
-    """(chunk call, one-step call) of the plain HHT run: the simulator's compiled library (BufferedCalls), or
-    the CasADi Functions. That of ``integ`` itself, not :func:`_form_integrator`'s: the trajectories at a fit's
-    answer (:func:`casflex.simulate.simulate`) run on it."""
+def _state_functions(integ: HHT, compiled: bool, vary: Vary | None) -> tuple:
+    """(chunk call, one-step call, steps per chunk, run-time inputs appended to p) of the plain HHT run: the
+    simulator's compiled library (BufferedCalls) of ``integ`` itself (``vary`` None: the trajectories at a fit's answer,
+    :func:`casflex.simulate.simulate`, run on it) or of :func:`_form_integrator`'s (a refit in another form), or
+    the CasADi Functions."""
     from casflex.simulate.run import CHUNK as SIM_CHUNK
     from casflex.simulate.run import compiled_library
 
-    chunk = integ.trajectory(SIM_CHUNK)
     if compiled and shutil.which("gcc") is not None:
-        lib = compiled_library(integ)
-        return BufferedCall(lib[chunk.name()]), BufferedCall(lib[integ.step.name()]), SIM_CHUNK
-    return chunk, integ.step, SIM_CHUNK
+        code, inputs = (integ, np.zeros(0)) if vary is None else _form_integrator(integ, vary)
+        lib = compiled_library(code)
+        return BufferedCall(lib[code.trajectory(SIM_CHUNK).name()]), BufferedCall(lib[code.step.name()]), SIM_CHUNK, \
+            inputs
+    return integ.trajectory(SIM_CHUNK), integ.step, SIM_CHUNK, np.zeros(0)
 
 
 def run_states(integ: HHT, x0: np.ndarray, p: np.ndarray, t0: float, dt: float, n_steps: int, keep: np.ndarray, *,
-               compiled: bool = True) -> SensitivityRun:
+               compiled: bool = True, vary: Vary | None = None) -> SensitivityRun:
     """:func:`run_sensitivities` without the sensitivities (``S`` has no directions): the model run alone, at
     about a third of the cost of one in 4 directions (twobar). The same steps, Newton scaling and step times, so
-    the states agree with a run with sensitivities to the Newton tolerance."""
+    the states agree with a run with sensitivities to the Newton tolerance. ``vary``: as :func:`run_sensitivities`'s,
+    for a refit in another form (its runs on the library its forms share); None: the model's own library."""
     n = integ.model.n_dof
-    chunk_fn, step_fn, chunk = _state_functions(integ, compiled)
+    chunk_fn, step_fn, chunk, inputs = _state_functions(integ, compiled, vary)
     d = np.array(integ.scale(x0[:n], x0[n:2 * n], p, dt)).ravel()
     keep = np.asarray(keep, dtype=int)
     X = np.empty((n_steps + 1, integ.nx))
     X[0] = x0
     R = np.empty(chunk)
-    pv, hv, done = np.ascontiguousarray(p, dtype=float), np.array([float(dt)]), 0
+    pv = np.ascontiguousarray(np.concatenate([np.asarray(p, dtype=float), inputs]))
+    hv, done = np.array([float(dt)]), 0
     while done < n_steps:
         m = chunk if n_steps - done >= chunk else 1
         fn = chunk_fn if m == chunk else step_fn
