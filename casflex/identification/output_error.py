@@ -92,13 +92,15 @@ class OutputError:
     def __init__(self, model: Model, experiments: list[Experiment], *, dt: float, alpha: float,
                  pmap: ParameterMap, compiled: bool, newton_tol: float,
                  initial: list[InitialState] | None = None, previous: OutputError | None = None,
-                 vary: Mapping[str, tuple[float, float]] | None = None, refit: bool = False) -> None:
+                 vary: Mapping[str, tuple[float, float]] | None = None, refit: bool = False,
+                 forms: bool = True) -> None:
         from casflex.simulate import integrator_for
 
         self.model, self.experiments, self.dt, self.pmap, self.compiled = model, experiments, dt, pmap, compiled
         self.integ = integrator_for(model, alpha=alpha, tol=newton_tol)
         # the properties the fit's other forms vary: run-time inputs of the compiled code, one library for them all
-        self.vary = tuple((t, (float(lo), float(hi))) for t, (lo, hi) in (vary or {}).items())
+        # (None: a model never refitted in another form, e.g. the model error's refined mesh, runs its own)
+        self.vary = tuple((t, (float(lo), float(hi))) for t, (lo, hi) in (vary or {}).items()) if forms else None
         self.refit = refit  # a refit in another form: its model runs without sensitivities on the forms' library too
         self.maps = [SampleMap.of(model, e, dt) for e in experiments]
         self.row_offsets = np.concatenate([[0], np.cumsum([sm.y.size for sm in self.maps])]).astype(int)

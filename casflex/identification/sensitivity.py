@@ -79,7 +79,7 @@ def _integrator(model: Model, alpha: float, tol: float, max_iter: int, expand: b
     return HHT(model, alpha=alpha, tol=tol, max_iter=max_iter, expand=expand)
 
 
-def _functions(integ: HHT, compiled: bool, n_dir: int, vary: Vary = ()) -> tuple:
+def _functions(integ: HHT, compiled: bool, n_dir: int, vary: Vary | None = ()) -> tuple:
     """(chunk call, one-step call, run-time inputs appended to p) in ``n_dir`` directions: BufferedCalls of
     compiled code (:func:`_form_integrator`'s), or the CasADi Functions (no inputs)."""
     key = (bool(compiled), n_dir, vary)
@@ -89,7 +89,7 @@ def _functions(integ: HHT, compiled: bool, n_dir: int, vary: Vary = ()) -> tuple
             log.warning("no C compiler (gcc): the sensitivities run interpreted, some tens of times slower")
             compiled = False
         if compiled:
-            code, inputs = _form_integrator(integ, vary)
+            code, inputs = (integ, np.zeros(0)) if vary is None else _form_integrator(integ, vary)
             funcs = [code.sensitivity(CHUNK, n_dir), code.sensitivity(1, n_dir)]
             lib = compile_functions(funcs, stem="casflex_sensitivity", optimise="-O1")
             cache[key] = (*(BufferedCall(lib[f.name()]) for f in funcs), inputs)
@@ -100,7 +100,8 @@ def _functions(integ: HHT, compiled: bool, n_dir: int, vary: Vary = ()) -> tuple
 
 def run_sensitivities(integ: HHT, x0: np.ndarray, p: np.ndarray, t0: float, dt: float, n_steps: int,
                       keep: np.ndarray, *, seed: tuple[np.ndarray, np.ndarray] | None = None,
-                      compiled: bool = True, scale: np.ndarray | None = None, vary: Vary = ()) -> SensitivityRun:
+                      compiled: bool = True, scale: np.ndarray | None = None, vary: Vary | None = ()
+                      ) -> SensitivityRun:
     """Step from x0 at t0 (s) ``n_steps`` steps of ``dt`` (s) with parameters p; keep the states
     and sensitivities at the step ends in ``keep`` (sorted indices in 0..n_steps).
 
@@ -108,7 +109,8 @@ def run_sensitivities(integ: HHT, x0: np.ndarray, p: np.ndarray, t0: float, dt: 
     of w = (x_0, p). A fit carries its unknowns' directions only: the cost per step grows with D.
     ``scale``: the Newton scaling of the run this one continues (its ``scale``; default from x0), so that
     the continued steps are those of one run. ``vary``: the properties the fit's other forms vary, ((target,
-    (lower, upper)), ...), run-time inputs of the compiled code (:func:`_form_integrator`)."""
+    (lower, upper)), ...), run-time inputs of the compiled code (:func:`_form_integrator`); None: the compiled code
+    of ``integ``'s model itself (a model never refitted in another form)."""
     model = integ.model
     n, nx = model.n_dof, integ.nx
     if seed is None:
