@@ -84,7 +84,7 @@ def pinned(problem: OutputError, f: Fit, scene: Scene) -> dict[str, dict]:
     states = [problem.state(f.w, e) for e in range(len(problem.experiments))]
     prob = OutputError(model_x, problem.experiments, dt=problem.dt, alpha=problem.integ.alpha, pmap=pmap,
                        compiled=problem.compiled, newton_tol=problem.integ.tol,
-                       initial=initial_states(model_x, problem.experiments, p, states), forms=False)
+                       initial=initial_states(model_x, problem.experiments, p, states))
     _, J = prob.evaluate(prob.pack(pmap.theta(p)))
     info = J.T @ J
     n_x, n_p = model_x.n_p, model.n_p
