@@ -142,6 +142,34 @@ def test_vary_refits_at_both_ends(twobar):
         identify_indirect(twobar, data, uncertainty=Uncertainty(vary={"bar2.E": (2.5e11, 1.5e11)}))
 
 
+def test_the_fit_and_its_forms_run_one_compiled_library(twobar, monkeypatch):
+    """The other beam theory and both ends of a varied property are run-time inputs of the fit's compiled
+    sensitivities: one library serves the fit and its three refits (before, each form compiled its own:
+    twobar's 387 kB of C at gcc -O1, 5 s each); the refits' model runs without sensitivities share one more."""
+    from casflex.identification import sensitivity
+    from casflex.simulate import run as simulate_run
+
+    built: dict[str, set] = {"casflex_sensitivity": set(), "casflex_hht": set()}
+
+    def spy(module):
+        original = module.compile_functions
+
+        def compile_functions(funcs, *, stem, **kw):
+            lib = original(funcs, stem=stem, **kw)
+            built[stem].add(lib.path)
+            return lib
+        monkeypatch.setattr(module, "compile_functions", compile_functions)
+
+    spy(sensitivity)
+    spy(simulate_run)
+    # an E range of this test's own: its refits are new models here, whatever ran before in this process
+    r = identify_indirect(twobar, _forms_recording("twobar_rotary", 3), horizon=0.3, start=0.8, run=ModelRun(dt=1e-3),
+                          uncertainty=Uncertainty(model_error="none", vary={"bar2.E": (1.6e11, 2.4e11)}))
+    assert len(r.extra["forms"]) == 3 and all(f["verdict"] != "not compared" for f in r.extra["forms"])
+    assert len(built["casflex_sensitivity"]) == 1, built
+    assert len(built["casflex_hht"]) <= 2, built  # the fit's own (its trajectories run on it) and the refits'
+
+
 def _mixed_noise(seed: int) -> tuple[MeasurementSet, dict[str, float]]:
     """Exudyn's twobar (the scene's form), node 3 measured to 0.2 mm and node 5 to 2 mm, 3 s at 100 Hz."""
     z = np.load(DATA / "twobar_exudyn.npz")

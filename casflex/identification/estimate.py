@@ -242,7 +242,7 @@ def _model_error(model: Model, experiments: list[Experiment], first: Fit, proble
     p1 = problem.pmap.p(first.w[:model.n_p])
     states = [transfer_state(model, fine, *problem.state(first.w, e)) for e in range(len(experiments))]
     prob = OutputError(fine, experiments, dt=dt / 2, alpha=alpha, pmap=pmap, compiled=compiled, newton_tol=newton_tol,
-                       initial=initial_states(fine, experiments, p1, states))
+                       initial=initial_states(fine, experiments, p1, states), forms=False)
     w0 = prob.pack(first.w[:model.n_p])
     sub = Budget(max_iterations=min(30, budget.max_iterations), max_time=budget.max_time)
     try:
@@ -480,7 +480,7 @@ def estimate(model: Model, experiments: Sequence[Experiment], *, run: ModelRun |
     pmap = ParameterMap.of(model, transform)
     p0 = start_values(model, start)
     setup = {"dt": dt, "alpha": alpha, "pmap": pmap, "compiled": compiled, "newton_tol": newton_tol,
-             "initial": initial_states(model, experiments, p0)}
+             "initial": initial_states(model, experiments, p0), "vary": vary}
     problem = OutputError(model, experiments, **setup)
     w0 = problem.pack(pmap.theta(p0))
     build_s = time.perf_counter() - t_build

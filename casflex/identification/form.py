@@ -191,8 +191,8 @@ def _refit(alt_model: Model, problem: OutputError, first: Fit, p_hat: dict[str, 
     same = alt_model.dof_names == problem.model.dof_names
     states = [problem.state(first.w, e) for e in range(len(problem.experiments))] if same else None
     prob = OutputError(alt_model, problem.experiments, dt=problem.dt, alpha=setup["alpha"], pmap=pmap,
-                       compiled=problem.compiled, newton_tol=setup["newton_tol"],
-                       initial=initial_states(alt_model, problem.experiments, p0, states))
+                       compiled=problem.compiled, newton_tol=setup["newton_tol"], vary=dict(problem.vary or ()),
+                       refit=True, initial=initial_states(alt_model, problem.experiments, p0, states))
 
     def rejected(r: np.ndarray, offset: float) -> bool:
         """Ruled out for good (REJECT_SE, REJECT_AIC): at its solution chi^2 is lower by about offset^2,

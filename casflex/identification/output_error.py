@@ -91,11 +91,17 @@ class OutputError:
 
     def __init__(self, model: Model, experiments: list[Experiment], *, dt: float, alpha: float,
                  pmap: ParameterMap, compiled: bool, newton_tol: float,
-                 initial: list[InitialState] | None = None, previous: OutputError | None = None) -> None:
+                 initial: list[InitialState] | None = None, previous: OutputError | None = None,
+                 vary: Mapping[str, tuple[float, float]] | None = None, refit: bool = False,
+                 forms: bool = True) -> None:
         from casflex.simulate import integrator_for
 
         self.model, self.experiments, self.dt, self.pmap, self.compiled = model, experiments, dt, pmap, compiled
         self.integ = integrator_for(model, alpha=alpha, tol=newton_tol)
+        # the properties the fit's other forms vary: run-time inputs of the compiled code, one library for them all
+        # (None: a model never refitted in another form, e.g. the model error's refined mesh, runs its own)
+        self.vary = tuple((t, (float(lo), float(hi))) for t, (lo, hi) in (vary or {}).items()) if forms else None
+        self.refit = refit  # a refit in another form: its model runs without sensitivities on the forms' library too
         self.maps = [SampleMap.of(model, e, dt) for e in experiments]
         self.row_offsets = np.concatenate([[0], np.cumsum([sm.y.size for sm in self.maps])]).astype(int)
         self.free = free_dofs(model)
@@ -188,11 +194,11 @@ class OutputError:
             if jacobian:
                 run = self._continued(e, w, p, M0.shape[1]) or run_sensitivities(
                     self.integ, x0.ravel(), p, sm.t0, sm.dt, sm.n_steps, np.union1d(sm.needed_steps, [sm.n_steps]),
-                    seed=(M0, np.eye(npar, M0.shape[1])), compiled=self.compiled)
+                    seed=(M0, np.eye(npar, M0.shape[1])), compiled=self.compiled, vary=self.vary)
                 self.last_runs[e] = (w.copy(), run) if run.converged else None
             else:  # the model run alone: the same states, a third of the cost (twobar, 4 directions)
                 run = run_states(self.integ, x0.ravel(), p, sm.t0, sm.dt, sm.n_steps, sm.needed_steps,
-                                 compiled=self.compiled)
+                                 compiled=self.compiled, vary=self.vary if self.refit else None)
             if not run.converged:
                 raise _Diverged(f"experiment {e + 1}: the model's Newton failed at t = "
                                 f"{sm.t0 + run.failed_step * sm.dt:.6g} s")
@@ -258,7 +264,8 @@ class OutputError:
             return None
         npar = self.model.n_p
         tail = run_sensitivities(self.integ, run.X[-1], p, sm.t0 + n0 * sm.dt, sm.dt, sm.n_steps - n0, later - n0,
-                                 seed=(run.S[-1].T, np.eye(npar, nw)), compiled=self.compiled, scale=run.scale)
+                                 seed=(run.S[-1].T, np.eye(npar, nw)), compiled=self.compiled, scale=run.scale,
+                                 vary=self.vary)
         return SensitivityRun(np.concatenate([early, tail.steps + n0]), np.concatenate([run.X[idx], tail.X]),
                               np.concatenate([run.S[idx], tail.S]), tail.converged,
                               None if tail.converged else n0 + tail.failed_step, run.scale)

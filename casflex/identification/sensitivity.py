@@ -16,6 +16,7 @@ The cost is linear in the number of steps and grows with D: twobar (15 dofs, 4 p
 
 from __future__ import annotations
 
+import functools
 import shutil
 import weakref
 from dataclasses import dataclass
@@ -25,13 +26,18 @@ import numpy as np
 from casflex import interrupt
 from casflex.codegen import BufferedCall, compile_functions, log
 from casflex.integrators.hht import HHT
+from casflex.model import Model, form_inputs
 
 __all__ = ["SensitivityRun", "run_sensitivities", "run_states", "CHUNK"]
 
 #: Steps per compiled call.
 CHUNK = 250
+#: The properties an identification's other forms vary: ((target, (lower, upper)), ...) (hashable)
+Vary = tuple[tuple[str, tuple[float, float]], ...]
 
 _LIBS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+#: integrator -> {vary: (the integrator whose compiled code runs its steps, the run-time inputs)}
+_FORMS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 @dataclass(frozen=True)
@@ -52,34 +58,59 @@ class SensitivityRun:
     scale: np.ndarray | None = None
 
 
-def _functions(integ: HHT, compiled: bool, n_dir: int) -> tuple:
-    """(chunk call, one-step call) in ``n_dir`` directions: BufferedCalls of compiled code, or the
-    CasADi Functions."""
-    key = (bool(compiled), n_dir)
+def _form_integrator(integ: HHT, vary: Vary = ()) -> tuple[HHT, np.ndarray]:
+    """The integrator whose compiled code runs ``integ``'s steps, and the run-time inputs appended to p for it:
+    that of the model with the beams' rotary inertia and the properties in ``vary`` ((target, (lower, upper)),
+    ...) as inputs (:func:`casflex.model.form_inputs`), so that a fit and its refits in other forms (:mod:`.form`)
+    share one library; ``integ`` itself for a scene without beams and nothing to vary."""
+    cache = _FORMS.setdefault(integ, {})
+    if vary not in cache:
+        found = form_inputs(integ.model, dict(vary))
+        if found is None:
+            cache[vary] = (integ, np.zeros(0))
+        else:
+            model, values = found
+            cache[vary] = (_integrator(model, integ.alpha, integ.tol, integ.max_iter, integ.expand), values)
+    return cache[vary]
+
+
+@functools.lru_cache(maxsize=8)
+def _integrator(model: Model, alpha: float, tol: float, max_iter: int, expand: bool | None) -> HHT:
+    return HHT(model, alpha=alpha, tol=tol, max_iter=max_iter, expand=expand)
+
+
+def _functions(integ: HHT, compiled: bool, n_dir: int, vary: Vary | None = ()) -> tuple:
+    """(chunk call, one-step call, run-time inputs appended to p) in ``n_dir`` directions: BufferedCalls of
+    compiled code (:func:`_form_integrator`'s), or the CasADi Functions (no inputs)."""
+    key = (bool(compiled), n_dir, vary)
     cache = _LIBS.setdefault(integ, {})
     if key not in cache:
-        funcs = [integ.sensitivity(CHUNK, n_dir), integ.sensitivity(1, n_dir)]
         if compiled and shutil.which("gcc") is None:
             log.warning("no C compiler (gcc): the sensitivities run interpreted, some tens of times slower")
             compiled = False
         if compiled:
+            code, inputs = (integ, np.zeros(0)) if vary is None else _form_integrator(integ, vary)
+            funcs = [code.sensitivity(CHUNK, n_dir), code.sensitivity(1, n_dir)]
             lib = compile_functions(funcs, stem="casflex_sensitivity", optimise="-O1")
-            cache[key] = tuple(BufferedCall(lib[f.name()]) for f in funcs)
+            cache[key] = (*(BufferedCall(lib[f.name()]) for f in funcs), inputs)
         else:
-            cache[key] = tuple(funcs)
+            cache[key] = (integ.sensitivity(CHUNK, n_dir), integ.sensitivity(1, n_dir), np.zeros(0))
     return cache[key]
 
 
 def run_sensitivities(integ: HHT, x0: np.ndarray, p: np.ndarray, t0: float, dt: float, n_steps: int,
                       keep: np.ndarray, *, seed: tuple[np.ndarray, np.ndarray] | None = None,
-                      compiled: bool = True, scale: np.ndarray | None = None) -> SensitivityRun:
+                      compiled: bool = True, scale: np.ndarray | None = None, vary: Vary | None = ()
+                      ) -> SensitivityRun:
     """Step from x0 at t0 (s) ``n_steps`` steps of ``dt`` (s) with parameters p; keep the states
     and sensitivities at the step ends in ``keep`` (sorted indices in 0..n_steps).
 
     ``seed``: (dx0/dw (nx, D), dp/dw (n_p, D)), the directions w to carry; default every direction
     of w = (x_0, p). A fit carries its unknowns' directions only: the cost per step grows with D.
     ``scale``: the Newton scaling of the run this one continues (its ``scale``; default from x0), so that
-    the continued steps are those of one run."""
+    the continued steps are those of one run. ``vary``: the properties the fit's other forms vary, ((target,
+    (lower, upper)), ...), run-time inputs of the compiled code (:func:`_form_integrator`); None: the compiled code
+    of ``integ``'s model itself (a model never refitted in another form)."""
     model = integ.model
     n, nx = model.n_dof, integ.nx
     if seed is None:
@@ -88,15 +119,16 @@ def run_sensitivities(integ: HHT, x0: np.ndarray, p: np.ndarray, t0: float, dt: 
     nw = S0.shape[1]
     if S0.shape != (nx, nw) or P.shape != (model.n_p, nw):
         raise ValueError(f"seed: expected shapes ({nx}, D) and ({model.n_p}, D), got {S0.shape} and {P.shape}")
-    chunk_fn, step_fn = _functions(integ, compiled, nw)
+    chunk_fn, step_fn, inputs = _functions(integ, compiled, nw, vary)
     d = np.array(integ.scale(x0[:n], x0[n:2 * n], p, dt)).ravel() if scale is None else np.asarray(scale, float)
     keep = np.asarray(keep, dtype=int)
     Xk = np.empty((keep.size, nx))
     Sk = np.empty((keep.size, nw, nx))
     x = np.ascontiguousarray(x0, dtype=float)
     S = np.ascontiguousarray(S0.T)  # S^T: row j = dx/dw_j (a column-major nx x nw matrix)
-    Pv = np.ascontiguousarray(P.T)
-    pv = np.ascontiguousarray(p, dtype=float)
+    # the run-time inputs (constant: no directions) after the parameters
+    Pv = np.ascontiguousarray(np.hstack([P.T, np.zeros((nw, inputs.size))]))
+    pv = np.ascontiguousarray(np.concatenate([np.asarray(p, dtype=float), inputs]))
     hv = np.array([float(dt)])
     j = 0
     if keep.size and keep[0] == 0:
@@ -131,32 +163,37 @@ def run_sensitivities(integ: HHT, x0: np.ndarray, p: np.ndarray, t0: float, dt: 
     return SensitivityRun(keep, Xk, Sk, True, None, d)
 
 
-def _state_functions(integ: HHT, compiled: bool) -> tuple:
-    """(chunk call, one-step call) of the plain HHT run: the simulator's compiled library (BufferedCalls), or
+def _state_functions(integ: HHT, compiled: bool, vary: Vary | None) -> tuple:
+    """(chunk call, one-step call, steps per chunk, run-time inputs appended to p) of the plain HHT run: the
+    simulator's compiled library (BufferedCalls) of ``integ`` itself (``vary`` None: the trajectories at a fit's answer,
+    :func:`casflex.simulate.simulate`, run on it) or of :func:`_form_integrator`'s (a refit in another form), or
     the CasADi Functions."""
     from casflex.simulate.run import CHUNK as SIM_CHUNK
     from casflex.simulate.run import compiled_library
 
-    chunk = integ.trajectory(SIM_CHUNK)
     if compiled and shutil.which("gcc") is not None:
-        lib = compiled_library(integ)
-        return BufferedCall(lib[chunk.name()]), BufferedCall(lib[integ.step.name()]), SIM_CHUNK
-    return chunk, integ.step, SIM_CHUNK
+        code, inputs = (integ, np.zeros(0)) if vary is None else _form_integrator(integ, vary)
+        lib = compiled_library(code)
+        return BufferedCall(lib[code.trajectory(SIM_CHUNK).name()]), BufferedCall(lib[code.step.name()]), SIM_CHUNK, \
+            inputs
+    return integ.trajectory(SIM_CHUNK), integ.step, SIM_CHUNK, np.zeros(0)
 
 
 def run_states(integ: HHT, x0: np.ndarray, p: np.ndarray, t0: float, dt: float, n_steps: int, keep: np.ndarray, *,
-               compiled: bool = True) -> SensitivityRun:
+               compiled: bool = True, vary: Vary | None = None) -> SensitivityRun:
     """:func:`run_sensitivities` without the sensitivities (``S`` has no directions): the model run alone, at
     about a third of the cost of one in 4 directions (twobar). The same steps, Newton scaling and step times, so
-    the states agree with a run with sensitivities to the Newton tolerance."""
+    the states agree with a run with sensitivities to the Newton tolerance. ``vary``: as :func:`run_sensitivities`'s,
+    for a refit in another form (its runs on the library its forms share); None: the model's own library."""
     n = integ.model.n_dof
-    chunk_fn, step_fn, chunk = _state_functions(integ, compiled)
+    chunk_fn, step_fn, chunk, inputs = _state_functions(integ, compiled, vary)
     d = np.array(integ.scale(x0[:n], x0[n:2 * n], p, dt)).ravel()
     keep = np.asarray(keep, dtype=int)
     X = np.empty((n_steps + 1, integ.nx))
     X[0] = x0
     R = np.empty(chunk)
-    pv, hv, done = np.ascontiguousarray(p, dtype=float), np.array([float(dt)]), 0
+    pv = np.ascontiguousarray(np.concatenate([np.asarray(p, dtype=float), inputs]))
+    hv, done = np.array([float(dt)]), 0
     while done < n_steps:
         m = chunk if n_steps - done >= chunk else 1
         fn = chunk_fn if m == chunk else step_fn

@@ -8,6 +8,7 @@
 - :mod:`casflex.model.markers`: where the scene's markers are as the model moves.
 """
 
+from casflex.model.forms import form_inputs
 from casflex.model.model import INERTIA_FORMS, Model, assemble, assembled
 
-__all__ = ["Model", "assemble", "assembled", "INERTIA_FORMS"]
+__all__ = ["Model", "assemble", "assembled", "form_inputs", "INERTIA_FORMS"]

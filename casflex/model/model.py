@@ -258,9 +258,10 @@ def _mesh(scene: Scene):
     return order, nodes, beam_elems
 
 
-def _groups(scene: Scene, order, nodes, beam_elems, idx) -> tuple[ElementGroup, ...]:
-    """The scene's elements by kind, with their dofs and property tables (parameters in slots)."""
-    slot_of = {par.target: i for i, par in enumerate(scene.parameters)}
+def _groups(scene: Scene, order, nodes, beam_elems, idx, params: tuple[Parameter, ...]) -> tuple[ElementGroup, ...]:
+    """The scene's elements by kind, with their dofs and property tables (``params``, the parameters and run-time
+    inputs, in slots)."""
+    slot_of = {par.target: i for i, par in enumerate(params)}
     out = []
 
     def group(kind: str, items: list[tuple[str, str, list[int], list[float], tuple]]):
@@ -288,7 +289,7 @@ def _groups(scene: Scene, order, nodes, beam_elems, idx) -> tuple[ElementGroup, 
                                  (nodes[na][2], nodes[nb][2]), E=b.E, A=b.A, I=b.I, rho=b.rho)
         beams.append((el.name, b.name, [idx[na] + j for j in range(3)] + [idx[nb] + j for j in range(3)],
                       [el.L0, *el.offsets, b.E, b.A, b.I, b.rho, float(b.rotary_inertia)],
-                      ("", "", "", "E", "A", "I", "rho", "")))
+                      ("", "", "", "E", "A", "I", "rho", "rotary_inertia")))
     group("beam", beams)
 
     def ends(s) -> tuple[list[int], list[float]]:
@@ -362,6 +363,28 @@ def _joint_outputs(groups: tuple[ElementGroup, ...], q: ca.MX, mu: ca.MX, n: int
     return y, names
 
 
+def _input(scene: Scene, target: str) -> Parameter:
+    """A run-time input of :func:`assemble` as a parameter (its slot in the property tables, appended to p): a
+    beam's ``rotary_inertia`` (its weight, 0 or 1) or a property that could be a parameter (not one already)."""
+    owner, _, fld = target.partition(".")
+    if fld == "rotary_inertia":
+        if owner not in {b.name for b in scene.beams}:
+            raise ValueError(f"inputs: {target!r}: no beam {owner!r}")
+    else:
+        scene.property_value(target, where="inputs")  # an unknown target: SceneError naming it
+        if target in {p.target for p in scene.parameters}:
+            raise ValueError(f"inputs: {target!r} is a parameter already")
+    return Parameter(f"input_{owner}_{fld}", target, lower=-math.inf)
+
+
+def _value(scene: Scene, target: str) -> float:
+    """A parameter's or run-time input's value in ``scene`` (a beam's rotary_inertia: its weight, 0 or 1)."""
+    owner, _, fld = target.partition(".")
+    if fld == "rotary_inertia":
+        return float(scene.item(owner).rotary_inertia)
+    return scene.property_value(target)
+
+
 def assembled(scene: Scene, *, inertia: str | None = None) -> Model:
     """:func:`assemble`'s Model of ``scene``, shared in this process by every call with an equal scene,
     and with it its integrators and compiled code: an identification's refined and alternative models
@@ -375,11 +398,11 @@ def assembled(scene: Scene, *, inertia: str | None = None) -> Model:
 
 
 @functools.lru_cache(maxsize=16)
-def _assembled(scene: Scene, inertia: str) -> Model:
-    return assemble(scene, inertia=inertia)
+def _assembled(scene: Scene, inertia: str, inputs: tuple[str, ...] = ()) -> Model:
+    return assemble(scene, inertia=inertia, inputs=inputs)
 
 
-def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
+def assemble(scene: Scene, *, inertia: str | None = None, inputs: tuple[str, ...] = ()) -> Model:
     """Build the symbolic model of ``scene`` (see the module docstring).
 
     Parameters
@@ -387,6 +410,8 @@ def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
     scene : Scene
     inertia : {"lagrange", "seed"}, optional
         Form of the velocity-dependent inertia term; default ``scene.run.inertia``.
+    inputs : targets ``"<beam>.rotary_inertia"`` made run-time inputs: parameters of the model appended to
+        the scene's (:func:`form_inputs`).
     """
     inertia = scene.run.inertia if inertia is None else inertia
     if inertia not in INERTIA_FORMS:
@@ -398,7 +423,13 @@ def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
     q0 = np.array([v for name in order for v in nodes[name][:3]], dtype=float)
     qd0 = np.array([v for name in order for v in nodes[name][3:]], dtype=float)
     is_rot = np.array([i % 3 == 2 for i in range(n)])
-    groups = _groups(scene, order, nodes, beam_elems, idx)
+    params = scene.parameters + tuple(_input(scene, t) for t in inputs)
+    groups = _groups(scene, order, nodes, beam_elems, idx, params)
+    slotted = {k for grp in groups for *_, k, _ in grp.slots}
+    loads = {ld.name for ld in scene.loads}
+    for k, par in enumerate(params[len(scene.parameters):], start=len(scene.parameters)):
+        if k not in slotted and par.target.partition(".")[0] not in loads | {"gravity"}:
+            raise ValueError(f"inputs: {par.target!r} is not a number in the model's equations")
 
     cons = support_constraints(scene, {d: i for i, d in enumerate(dof_names)}, q0)
     jgroups, jrows = joint_groups(scene, nodes, idx, n)
@@ -415,8 +446,8 @@ def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
                          "the equations of motion would be singular; add a support for them")
 
     # -- small SX pieces: gravity, loads, constraints ------------------------------------------
-    ps = ca.SX.sym("p", len(scene.parameters))
-    symbol = {par.target: ps[i] for i, par in enumerate(scene.parameters)}
+    ps = ca.SX.sym("p", len(params))
+    symbol = {par.target: ps[i] for i, par in enumerate(params)}
     gravity = ca.Function("gravity", [ps], [ca.vertcat(*(symbol.get(f"gravity.{c}", scene.gravity[i])
                                                          for i, c in enumerate("xy")))], ["p"], ["g"])
     ts = ca.SX.sym("t")
@@ -443,7 +474,7 @@ def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
 
     # -- structured Functions: element kernels mapped over the groups ---------------------------
     q, qd, qdd = ca.MX.sym("q", n), ca.MX.sym("qd", n), ca.MX.sym("qdd", n)
-    lam, t, p = ca.MX.sym("lam", len(cons) + len(jrows)), ca.MX.sym("t"), ca.MX.sym("p", len(scene.parameters))
+    lam, t, p = ca.MX.sym("lam", len(cons) + len(jrows)), ca.MX.sym("t"), ca.MX.sym("p", len(params))
     g = gravity(p)
     props = [grp.props(p) for grp in groups]
 
@@ -498,8 +529,8 @@ def assemble(scene: Scene, *, inertia: str | None = None) -> Model:
         dof_names=dof_names,
         is_rotation=is_rot,
         constraints=tuple(cons),
-        parameters=scene.parameters,
-        p_nominal=np.array([scene.property_value(par.target) for par in scene.parameters], dtype=float),
+        parameters=params,
+        p_nominal=np.array([_value(scene, par.target) for par in params], dtype=float),
         q0=q0,
         qd0=qd0,
         output_names=names,
