@@ -369,6 +369,8 @@ class Session:
     def client(self) -> Any:
         """The session's dask Client, connected (its local cluster started) at the first call."""
         if self._client is None:
+            if self.scheduler is None:  # its imports under way on another core while this process imports dask's
+                fork_server()
             from distributed import Client
 
             quiet_sync_cancel()
@@ -440,6 +442,56 @@ QUIET_CLUSTER = {"distributed.worker.memory.monitor-interval": "1s", "distribute
                  "distributed.scheduler.work-stealing": False}
 
 
+#: what a local cluster's worker processes import before their first run, once, in the fork server they are forked from
+#: (:func:`fork_server`): the SIGINT guard first, dask's worker (dask, tornado, msgpack, numpy, ...: 0.8 s of CPU), the
+#: lab path's modules that a study's calibrations and trials import (CasADi, casflex's model, scene, inverse and
+#: study modules: 0.5 s). Spawned, each worker imported them itself (1.3 s a worker, before its first run). A
+#: module missing here is imported by the worker at its first use, as before.
+WORKER_MODULES = ("casflex.study._worker", "distributed", "casflex.inverse.calibrate", "casflex.inverse.passive",
+                  "casflex.study.runner", "casflex.study.events", "casflex.study.direction")
+
+
+def fork_server() -> bool:
+    """Start multiprocessing's fork server with :data:`WORKER_MODULES` (once per process: it serves every local
+    cluster of the process), where the local clusters start their workers by dask's default, spawn; True where
+    they are forked from it (:func:`_local_cluster`). Returns at once: the server imports the modules on its own
+    (on an idle core, while this process goes on), and a worker's start waits for it only as long as it imports.
+
+    Started with dask's environment for its workers (``distributed.nanny.pre-spawn-environ``: one BLAS thread,
+    the allocator's trim threshold), which the nanny would set in this process before each spawn: a forked
+    worker inherits the server's. The server ignores SIGINT, as its workers do (casflex.study._worker, its first
+    module); it ends with this process (multiprocessing's own: it watches a pipe from here)."""
+    import multiprocessing
+    from multiprocessing import forkserver
+
+    if "forkserver" not in multiprocessing.get_all_start_methods() or _start_method() != "spawn":
+        return False  # no fork server here (Windows), or a start method the user chose: dask's as configured
+    import dask
+
+    os.environ.update({k: str(v) for k, v in dask.config.get("distributed.nanny.pre-spawn-environ").items()})
+    forkserver.set_forkserver_preload(list(WORKER_MODULES))  # for its start (again, where it died)
+    forkserver.ensure_running()
+    return True
+
+
+def _start_method() -> str:
+    """dask's start method for its workers' processes (``distributed.worker.multiprocessing-method``, "spawn" by
+    default), read before distributed is imported: its defaults added to dask's configuration as distributed
+    adds them at its import (the same defaults: a user's settings and DASK_ variables take precedence)."""
+    import dask
+
+    key = "distributed.worker.multiprocessing-method"
+    if dask.config.get(key, None) is None:
+        import importlib.util
+
+        import yaml
+
+        (where,) = importlib.util.find_spec("distributed").submodule_search_locations
+        with open(os.path.join(where, "distributed.yaml")) as f:
+            dask.config.update_defaults(yaml.safe_load(f))
+    return dask.config.get(key)
+
+
 def _local_cluster(n_workers: int, started: list) -> Any:
     """A LocalCluster of ``n_workers`` single-threaded processes, appended to ``started`` before this returns.
 
@@ -455,7 +507,13 @@ def _local_cluster(n_workers: int, started: list) -> Any:
     preload = [preload] if isinstance(preload, str) else list(preload)
     argv = dask.config.get("distributed.worker.preload-argv") or []
     argv = [argv] * len(preload) if argv and isinstance(argv[0], str) else list(argv) or [[]] * len(preload)
-    with dask.config.set(QUIET_CLUSTER):
+    forked = fork_server()
+    if forked:  # dask's get_mp_context would set its own list of modules for the server (this one is started)
+        import distributed.utils
+
+        distributed.utils._forkserver_preload_set = True
+    method = {"distributed.worker.multiprocessing-method": "forkserver"} if forked else {}
+    with dask.config.set({**QUIET_CLUSTER, **method}):
         started.append(LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
                                     dashboard_address=":0", silence_logs=40,
                                     preload=[*preload, "casflex.study._worker"], preload_argv=[*argv, []]))
