@@ -65,7 +65,7 @@ def main() -> int:
             code = interrupt.exit_status(signum)
         if code in interrupt.EXIT_STATUSES:  # inside the guard: its hook keeps finalizer noise off stderr to the end
             _exit_interrupted(code, hurried=signals.count > 1)
-    _skip_final_collection()
+        _skip_final_collection()
     return code
 
 

@@ -577,9 +577,10 @@ def _execute(client: Any, runs: list[Run], blobs: dict, finished: Callable[[str,
                     except Exception as exc:  # noqa: BLE001 - any other failure of the run is its result
                         out = {"error": f"{type(exc).__name__}: {exc}"}
                     finished(key, out)
-                if done:
+                if done:  # runs finish: workers there (a look at the scheduler's workers is a round trip through it)
                     alone_since, checked = None, time.monotonic()
-                elif time.monotonic() - checked < _POLL_S:
+                    continue
+                if time.monotonic() - checked < _POLL_S:
                     continue
                 checked = time.monotonic()
                 # dask waits for workers forever: a cluster that lost them all would hang the sweep
