@@ -336,3 +336,31 @@ def test_a_run_s_record_travels_as_one_buffer_and_the_local_scheduler_does_not_s
             is False
     res = run_sweep([Run(f"r{i}", dict, {"i": i}) for i in range(3)], tmp_path / "rec", n_workers=1, progress=False)
     assert res.results == {f"r{i}": {"i": i} for i in range(3)}
+
+
+def _nap(i: int) -> dict:
+    import time
+
+    time.sleep(0.02)
+    return {"i": i}
+
+
+def test_the_scheduler_s_workers_are_asked_for_only_while_no_run_finishes(tmp_path):
+    # client.nthreads() is a round trip through the scheduler; it was asked at every finished run (162 times in a
+    # 200-trial study on one worker), where the watch for a cluster without workers needs it only after _POLL_S s
+    # without a finished run
+    import time
+
+    from casflex.study.sweep import _POLL_S, Session
+
+    asked = []
+    with Session(None, 1) as session:
+        client = session.client()
+        real = client.nthreads
+        client.nthreads = lambda *a, **k: asked.append(1) or real(*a, **k)
+        t0 = time.monotonic()
+        res = run_sweep([Run(f"n{i}", _nap, {"i": i}) for i in range(30)], tmp_path / "rec", session=session,
+                        progress=False)
+        wall = time.monotonic() - t0
+    assert sorted(res.executed) == sorted(f"n{i}" for i in range(30))
+    assert len(asked) <= wall / _POLL_S + 1, (len(asked), wall)  # one look per quiet _POLL_S at most
