@@ -364,3 +364,36 @@ def test_the_scheduler_s_workers_are_asked_for_only_while_no_run_finishes(tmp_pa
         wall = time.monotonic() - t0
     assert sorted(res.executed) == sorted(f"n{i}" for i in range(30))
     assert len(asked) <= wall / _POLL_S + 1, (len(asked), wall)  # one look per quiet _POLL_S at most
+
+
+def _worker_state() -> dict:
+    import logging
+    import signal
+    import sys
+
+    from casflex.study.sweep import WORKER_MODULES
+
+    return {"modules": [m for m in WORKER_MODULES if m not in sys.modules], "parent": os.getppid(),
+            "sigint": signal.getsignal(signal.SIGINT), "blocked": signal.SIGINT in signal.pthread_sigmask(
+                signal.SIG_BLOCK, []), "log": logging.getLogger("distributed").level,
+            "trim": os.environ.get("MALLOC_TRIM_THRESHOLD_")}
+
+
+@pytest.mark.skipif(os.name != "posix", reason="the fork server (POSIX)")
+def test_local_workers_are_forked_with_the_lab_path_imported_ignoring_ctrl_c(tmp_path):
+    # spawned, each worker imported dask and casflex's lab path itself (1.3 s of CPU a worker before its first run);
+    # forked from the fork server they have them, with its SIGINT ignored (and not left blocked), the workers' quiet
+    # log and dask's environment for its workers
+    import logging
+    import signal
+    from multiprocessing import forkserver
+
+    import dask
+
+    from casflex.study.sweep import Session
+
+    with Session(None, 1) as session:
+        got = session.client().run(_worker_state)
+    trim = str(dask.config.get("distributed.nanny.pre-spawn-environ")["MALLOC_TRIM_THRESHOLD_"])
+    assert list(got.values()) == [{"modules": [], "parent": forkserver._forkserver._forkserver_pid,
+                                   "sigint": signal.SIG_IGN, "blocked": False, "log": logging.CRITICAL, "trim": trim}]

@@ -17,6 +17,8 @@ import threading
 def _quiet() -> None:
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+        if hasattr(signal, "pthread_sigmask"):  # the fork server starts with it blocked (fork_server): ignored now
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     # a worker whose scheduler the interrupted command closed first logs its failed heartbeat with a traceback on
     # the command's stderr; a run's own failure reaches the command as its result, so the workers' logs say nothing
     # more (after the nanny's own level for its worker, silence_logs, which it sets before the preloads run)

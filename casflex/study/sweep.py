@@ -29,7 +29,9 @@ import json
 import logging
 import os
 import re
+import signal
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -470,7 +472,16 @@ def fork_server() -> bool:
 
     os.environ.update({k: str(v) for k, v in dask.config.get("distributed.nanny.pre-spawn-environ").items()})
     forkserver.set_forkserver_preload(list(WORKER_MODULES))  # for its start (again, where it died)
-    forkserver.ensure_running()
+    # SIGINT blocked while the server is started, as multiprocessing starts its resource tracker: the server starts
+    # with it blocked until casflex.study._worker ignores it (a Ctrl-C in its first 50 ms printed its traceback);
+    # a Ctrl-C meanwhile reaches this process as soon as it is unblocked
+    main = threading.current_thread() is threading.main_thread() and hasattr(signal, "pthread_sigmask")
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if main else None
+    try:
+        forkserver.ensure_running()
+    finally:
+        if mask is not None:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
     return True
 
 
