@@ -376,24 +376,38 @@ def _worker_state() -> dict:
     return {"modules": [m for m in WORKER_MODULES if m not in sys.modules], "parent": os.getppid(),
             "sigint": signal.getsignal(signal.SIGINT), "blocked": signal.SIGINT in signal.pthread_sigmask(
                 signal.SIG_BLOCK, []), "log": logging.getLogger("distributed").level,
-            "trim": os.environ.get("MALLOC_TRIM_THRESHOLD_")}
+            "trim": os.environ.get("MALLOC_TRIM_THRESHOLD_"), "hash": hash("casflex"),
+            "late": os.environ.get("CASFLEX_TEST_LATE")}
+
+
+def _hash_with_seed(seed: str) -> int:
+    import subprocess
+    import sys
+
+    return int(subprocess.run([sys.executable, "-c", "print(hash('casflex'))"], capture_output=True, text=True,
+                              env={**os.environ, "PYTHONHASHSEED": seed}, check=True).stdout)
 
 
 @pytest.mark.skipif(os.name != "posix", reason="the fork server (POSIX)")
-def test_local_workers_are_forked_with_the_lab_path_imported_ignoring_ctrl_c(tmp_path):
+def test_local_workers_are_forked_with_the_lab_path_imported_ignoring_ctrl_c(tmp_path, monkeypatch):
     # spawned, each worker imported dask and casflex's lab path itself (1.3 s of CPU a worker before its first run);
     # forked from the fork server they have them, with its SIGINT ignored (and not left blocked), the workers' quiet
-    # log and dask's environment for its workers
+    # log, dask's environment for its workers (its nanny's hash seed) and a variable set after the server started
     import logging
     import signal
     from multiprocessing import forkserver
 
     import dask
 
-    from casflex.study.sweep import Session
+    from casflex.study.sweep import Session, fork_server
 
+    fork_server()
+    monkeypatch.setenv("CASFLEX_TEST_LATE", "set after the fork server's start")
     with Session(None, 1) as session:
         got = session.client().run(_worker_state)
-    trim = str(dask.config.get("distributed.nanny.pre-spawn-environ")["MALLOC_TRIM_THRESHOLD_"])
+    trim = os.environ.get("MALLOC_TRIM_THRESHOLD_",
+                          str(dask.config.get("distributed.nanny.pre-spawn-environ")["MALLOC_TRIM_THRESHOLD_"]))
     assert list(got.values()) == [{"modules": [], "parent": forkserver._forkserver._forkserver_pid,
-                                   "sigint": signal.SIG_IGN, "blocked": False, "log": logging.CRITICAL, "trim": trim}]
+                                   "sigint": signal.SIG_IGN, "blocked": False, "log": logging.CRITICAL, "trim": trim,
+                                   "hash": _hash_with_seed(os.environ.get("PYTHONHASHSEED", "6640")),
+                                   "late": "set after the fork server's start"}]

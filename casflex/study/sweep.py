@@ -463,14 +463,25 @@ def fork_server() -> bool:
     the allocator's trim threshold), which the nanny would set in this process before each spawn: a forked
     worker inherits the server's. The server ignores SIGINT, as its workers do (casflex.study._worker, its first
     module); it ends with this process (multiprocessing's own: it watches a pipe from here)."""
+    import importlib.util
     import multiprocessing
     from multiprocessing import forkserver
 
+    if importlib.util.find_spec("distributed") is None:
+        return False  # dask's distributed missing: its import says so, as without a fork server
     if "forkserver" not in multiprocessing.get_all_start_methods() or _start_method() != "spawn":
         return False  # no fork server here (Windows), or a start method the user chose: dask's as configured
     import dask
 
-    os.environ.update({k: str(v) for k, v in dask.config.get("distributed.nanny.pre-spawn-environ").items()})
+    # as distributed.nanny.Nanny makes it (the variables set here take precedence; its fixed hash seed)
+    spawn_env = {k: os.environ.get(k, str(v)) for k, v in dask.config.get("distributed.nanny.pre-spawn-environ").items()
+                 if v is not None}
+    if spawn_env.get("PYTHONHASHSEED") in (None, "0"):
+        spawn_env["PYTHONHASHSEED"] = "6640"
+    os.environ.update(spawn_env)
+    if getattr(forkserver._forkserver, "_forkserver_pid", None) is None:
+        _SERVER_ENV.clear()
+        _SERVER_ENV.update(os.environ)
     forkserver.set_forkserver_preload(list(WORKER_MODULES))  # for its start (again, where it died)
     # SIGINT blocked while the server is started, as multiprocessing starts its resource tracker: the server starts
     # with it blocked until casflex.study._worker ignores it (a Ctrl-C in its first 50 ms printed its traceback);
@@ -485,6 +496,20 @@ def fork_server() -> bool:
     return True
 
 
+#: the environment the fork server started with, which its workers inherit (:func:`_changed_env`)
+_SERVER_ENV: dict[str, str] = {}
+
+
+def _changed_env() -> dict[str, str]:
+    """The variables of this process's environment set or changed since the fork server started (a long-lived
+    process's, a notebook's): given to the forked workers as a spawned worker inherits them (dask's nanny sets them
+    in its worker; ``distributed.nanny.environ``'s keep their precedence; a variable removed stays in the workers)."""
+    import dask
+
+    configured = dask.config.get("distributed.nanny.environ", None) or {}
+    return {k: v for k, v in os.environ.items() if _SERVER_ENV.get(k) != v and k not in configured}
+
+
 def _start_method() -> str:
     """dask's start method for its workers' processes (``distributed.worker.multiprocessing-method``, "spawn" by
     default), read before distributed is imported: its defaults added to dask's configuration as distributed
@@ -495,7 +520,7 @@ def _start_method() -> str:
     if dask.config.get(key, None) is None:
         import importlib.util
 
-        import yaml
+        import yaml  # dask's own dependency
 
         (where,) = importlib.util.find_spec("distributed").submodule_search_locations
         with open(os.path.join(where, "distributed.yaml")) as f:
@@ -524,8 +549,9 @@ def _local_cluster(n_workers: int, started: list) -> Any:
 
         distributed.utils._forkserver_preload_set = True
     method = {"distributed.worker.multiprocessing-method": "forkserver"} if forked else {}
+    env = {"env": _changed_env()} if forked else {}
     with dask.config.set({**QUIET_CLUSTER, **method}):
-        started.append(LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
+        started.append(LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, **env,
                                     dashboard_address=":0", silence_logs=40,
                                     preload=[*preload, "casflex.study._worker"], preload_argv=[*argv, []]))
     return started[-1]
