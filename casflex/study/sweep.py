@@ -533,9 +533,10 @@ def _local_cluster(n_workers: int, started: list) -> Any:
 
     Its workers preload :mod:`casflex.study._worker` (besides dask's configured preloads): they ignore SIGINT,
     which a Ctrl-C at a terminal sends to the whole process group, and this process handles by closing them.
-    (A child started by spawn keeps neither a blocked signal mask nor a handler: the worker itself must ignore
-    the signal. The preload runs once it has imported dask, about a second in; under the ``casflex`` command,
-    casflex._entry does it as soon as the worker's Python has started.)"""
+    The workers are forked from the fork server (:func:`fork_server`), which ignores SIGINT from its first module
+    on, so that a worker does from its first moment. (A worker spawned, where there is no fork server or its nanny
+    restarts it, ignores it from the preload, once it has imported dask, about a second in; under the ``casflex``
+    command, casflex._entry does it as soon as the worker's Python has started.)"""
     import dask
     from distributed import LocalCluster
 
