@@ -371,7 +371,7 @@ def _worker_state() -> dict:
     import signal
     import sys
 
-    from casflex.study.sweep import WORKER_MODULES
+    from casflex.study.fork_server import WORKER_MODULES
 
     return {"modules": [m for m in WORKER_MODULES if m not in sys.modules], "parent": os.getppid(),
             "sigint": signal.getsignal(signal.SIGINT), "blocked": signal.SIGINT in signal.pthread_sigmask(
@@ -399,7 +399,8 @@ def test_local_workers_are_forked_with_the_lab_path_imported_ignoring_ctrl_c(tmp
 
     import dask
 
-    from casflex.study.sweep import Session, fork_server
+    from casflex.study.fork_server import fork_server
+    from casflex.study.sweep import Session
 
     fork_server()
     monkeypatch.setenv("CASFLEX_TEST_LATE", "set after the fork server's start")

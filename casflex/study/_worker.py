@@ -2,7 +2,7 @@
 process ignores SIGINT from here on. A Ctrl-C at a terminal goes to the whole process group; the sweep's own
 process takes it and closes its cluster, while a worker that took it too printed its KeyboardInterrupt's
 traceback. Done at import, the earliest moment dask runs a preload in a spawned worker (as the Worker is made),
-and first of all in the fork server that forks the workers (:func:`casflex.study.sweep.fork_server`), whose
+and first of all in the fork server that forks the workers (:func:`casflex.study.fork_server`), whose
 children start with its handlers; again in :func:`dask_setup`, as dask sets up each Worker (a forked worker has
 the module from the server: its import does not run again). SIGTERM, by which dask's nanny stops a worker, stays
 as it is. At exit, no last garbage collection (:func:`_skip_final_collection`)."""
