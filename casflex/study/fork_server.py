@@ -53,6 +53,9 @@ def fork_server() -> bool:
     # SIGINT blocked while the server is started, as multiprocessing starts its resource tracker: the server starts
     # with it blocked until casflex.study._worker ignores it (a Ctrl-C in its first 50 ms printed its traceback);
     # a Ctrl-C meanwhile reaches this process as soon as it is unblocked
+    from multiprocessing import resource_tracker
+
+    resource_tracker.ensure_running()  # first: starting it unblocks SIGINT after its own start (its way to block it)
     main = threading.current_thread() is threading.main_thread() and hasattr(signal, "pthread_sigmask")
     mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if main else None
     try:
