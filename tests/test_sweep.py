@@ -412,3 +412,60 @@ def test_local_workers_are_forked_with_the_lab_path_imported_ignoring_ctrl_c(tmp
                                    "sigint": signal.SIG_IGN, "blocked": False, "log": logging.CRITICAL, "trim": trim,
                                    "hash": _hash_with_seed(os.environ.get("PYTHONHASHSEED", "6640")),
                                    "late": "set after the fork server's start"}]
+
+
+class _LostOnce:
+    """A run's future whose result is not there at the first fetch: lost with the worker that held it, computed
+    again (dask then waits for a worker to compute it, forever where none comes)."""
+
+    def __init__(self) -> None:
+        self.calls: list = []
+
+    def result(self, timeout=None):
+        import pickle
+
+        self.calls.append(timeout)
+        if len(self.calls) == 1:
+            raise TimeoutError(f"timed out after {timeout} s.")
+        return pickle.dumps({"y": 1})
+
+
+class _Completed:
+    """distributed.as_completed's part that the sweep uses."""
+
+    def __init__(self, futures) -> None:
+        self.queue = list(futures)
+
+    def is_empty(self) -> bool:
+        return not self.queue
+
+    def next_batch(self, block: bool = True) -> list:
+        out, self.queue = self.queue, []
+        return out
+
+    def add(self, future) -> None:
+        self.queue.append(future)
+
+
+def test_a_result_lost_with_its_worker_is_waited_for_as_a_pending_run(monkeypatch):
+    # the sweep fetched a finished run's result with a blocking result(): where the worker that held it died (a run
+    # that killed it next) and no worker came back, the sweep waited forever, its watch for a cluster without
+    # workers never reached (a test process seen so under load 13); now the fetch waits _POLL_S and the run is
+    # pending again
+    import distributed
+
+    from casflex.study.sweep import _POLL_S, _execute
+
+    fut = _LostOnce()
+
+    class Client:
+        def map(self, *args, **kwargs):
+            return [fut]
+
+        def nthreads(self):
+            return {"tcp://worker": 1}
+
+    monkeypatch.setattr(distributed, "as_completed", _Completed)
+    got: dict = {}
+    killed = _execute(Client(), [Run("a", dict, {})], {dict: b""}, lambda k, out: got.setdefault(k, out), batch=1)
+    assert got == {"a": {"y": 1}} and killed == set() and fut.calls == [_POLL_S, _POLL_S]

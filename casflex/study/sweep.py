@@ -520,20 +520,28 @@ def _execute(client: Any, runs: list[Run], blobs: dict, finished: Callable[[str,
                 done = pending.next_batch(block=False)
                 if not done:
                     time.sleep(_WAKE_S)
+                got = False
                 for fut in done:
-                    handled.add(fut)
                     key = futures[fut]
                     try:
-                        out = _result(fut.result())
+                        out = _result(fut.result(timeout=_POLL_S))
+                    except TimeoutError:
+                        # its result not fetched: lost with the worker that held it (a run that killed that worker
+                        # next) and computed again, which needs a worker; waited for as a pending run, so that the
+                        # watch below still sees a cluster left without one (a blocking result() waited forever)
+                        pending.add(fut)
+                        continue
                     except KilledWorker as exc:
-                        if not last:
-                            killed.add(key)
-                            continue
-                        out = {"error": f"KilledWorker: {exc}"}
+                        out = {"error": f"KilledWorker: {exc}"} if last else None
                     except Exception as exc:  # noqa: BLE001 - any other failure of the run is its result
                         out = {"error": f"{type(exc).__name__}: {exc}"}
-                    finished(key, out)
-                if done:  # runs finish: workers there (a look at the scheduler's workers is a round trip through it)
+                    handled.add(fut)
+                    got = True
+                    if out is None:
+                        killed.add(key)
+                    else:
+                        finished(key, out)
+                if got:  # runs finish: workers there (a look at the scheduler's workers is a round trip through it)
                     alone_since, checked = None, time.monotonic()
                     continue
                 if time.monotonic() - checked < _POLL_S:
