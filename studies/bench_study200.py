@@ -183,14 +183,16 @@ class TreeCPU:
 
 
 def _role(pid: int) -> str:
-    """A process's role from its command line: a local cluster's worker (multiprocessing's spawn), its resource
-    tracker, an external dask worker or scheduler."""
+    """A process's role from its command line: a local cluster's worker (multiprocessing's spawn, or forked from
+    its fork server: the server, which imports the workers' modules once, counted with them), its resource tracker,
+    an external dask worker or scheduler."""
     try:
         cmd = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
     except OSError:
         return "?"
-    for key, role in (("resource_tracker", "tracker"), ("spawn_main", "worker"), ("dask worker", "worker"),
-                      ("dask-worker", "worker"), ("scheduler", "scheduler")):
+    for key, role in (("resource_tracker", "tracker"), ("multiprocessing.forkserver", "worker"),
+                      ("spawn_main", "worker"), ("dask worker", "worker"), ("dask-worker", "worker"),
+                      ("scheduler", "scheduler")):
         if key in cmd:
             return role
     return "worker" if " worker " in cmd else "other"

@@ -551,3 +551,25 @@ def test_examples_in_docs_scene_format_load():
     assert cantilever.beams[0].elements == 4 and len(cantilever.loads[0].table) == 4
     for block in blocks:  # every documented field is a real one
         assert loads_scene(dumps_scene(loads_scene(block))) == loads_scene(block)
+
+
+def test_an_osim_model_s_scene_and_warnings_come_from_one_reader_with_load_scene_s_errors(tmp_path):
+    """scene.io.load_osim: what load_scene and a study's calibrations (casflex.study.runner._osim) read from an .osim
+    file, the reader's ValueError given as load_scene's SceneError."""
+    from casflex.scene.from_osim import scene_from_osim
+    from casflex.scene.io import load_osim
+    from casflex.scene.items import SceneError
+    from casflex.study.runner import _osim
+
+    leg = Path(__file__).parent / "data" / "lab" / "hamner_subject02_leg.osim"
+    made = scene_from_osim(leg)
+    scene, warnings = load_osim(leg)
+    text = dumps_scene(made.scene)  # the scene's text (its items compare by identity where they hold functions)
+    assert dumps_scene(scene) == dumps_scene(load_scene(leg)) == text and warnings == tuple(made.warnings)
+    cached = _osim(str(leg), "digest")
+    assert dumps_scene(cached[0]) == text and cached[1] == warnings
+    bad = tmp_path / "bad.osim"
+    bad.write_text("<OpenSimDocument Version='30000'><Model name='m'/></OpenSimDocument>")
+    for read in (load_osim, load_scene, lambda p: _osim(str(p), None)):
+        with pytest.raises(SceneError, match=r"format 30000; casflex reads format 4.x"):
+            read(bad)

@@ -336,3 +336,136 @@ def test_a_run_s_record_travels_as_one_buffer_and_the_local_scheduler_does_not_s
             is False
     res = run_sweep([Run(f"r{i}", dict, {"i": i}) for i in range(3)], tmp_path / "rec", n_workers=1, progress=False)
     assert res.results == {f"r{i}": {"i": i} for i in range(3)}
+
+
+def _nap(i: int) -> dict:
+    import time
+
+    time.sleep(0.02)
+    return {"i": i}
+
+
+def test_the_scheduler_s_workers_are_asked_for_only_while_no_run_finishes(tmp_path):
+    # client.nthreads() is a round trip through the scheduler; it was asked at every finished run (162 times in a
+    # 200-trial study on one worker), where the watch for a cluster without workers needs it only after _POLL_S s
+    # without a finished run
+    import time
+
+    from casflex.study.sweep import _POLL_S, Session
+
+    asked = []
+    with Session(None, 1) as session:
+        client = session.client()
+        real = client.nthreads
+        client.nthreads = lambda *a, **k: asked.append(1) or real(*a, **k)
+        t0 = time.monotonic()
+        res = run_sweep([Run(f"n{i}", _nap, {"i": i}) for i in range(30)], tmp_path / "rec", session=session,
+                        progress=False)
+        wall = time.monotonic() - t0
+    assert sorted(res.executed) == sorted(f"n{i}" for i in range(30))
+    assert len(asked) <= wall / _POLL_S + 1, (len(asked), wall)  # one look per quiet _POLL_S at most
+
+
+def _worker_state() -> dict:
+    import logging
+    import signal
+    import sys
+
+    from casflex.study.fork_server import WORKER_MODULES
+
+    return {"modules": [m for m in WORKER_MODULES if m not in sys.modules], "parent": os.getppid(),
+            "sigint": signal.getsignal(signal.SIGINT), "blocked": signal.SIGINT in signal.pthread_sigmask(
+                signal.SIG_BLOCK, []), "log": logging.getLogger("distributed").level,
+            "trim": os.environ.get("MALLOC_TRIM_THRESHOLD_"), "hash": hash("casflex"),
+            "late": os.environ.get("CASFLEX_TEST_LATE")}
+
+
+def _hash_with_seed(seed: str) -> int:
+    import subprocess
+    import sys
+
+    return int(subprocess.run([sys.executable, "-c", "print(hash('casflex'))"], capture_output=True, text=True,
+                              env={**os.environ, "PYTHONHASHSEED": seed}, check=True).stdout)
+
+
+@pytest.mark.skipif(os.name != "posix", reason="the fork server (POSIX)")
+def test_local_workers_are_forked_with_the_lab_path_imported_ignoring_ctrl_c(tmp_path, monkeypatch):
+    # spawned, each worker imported dask and casflex's lab path itself (1.3 s of CPU a worker before its first run);
+    # forked from the fork server they have them, with its SIGINT ignored (and not left blocked), the workers' quiet
+    # log, dask's environment for its workers (its nanny's hash seed) and a variable set after the server started
+    import logging
+    import signal
+    from multiprocessing import forkserver
+
+    import dask
+
+    from casflex.study.fork_server import fork_server
+    from casflex.study.sweep import Session
+
+    fork_server()
+    monkeypatch.setenv("CASFLEX_TEST_LATE", "set after the fork server's start")
+    with Session(None, 1) as session:
+        got = session.client().run(_worker_state)
+    trim = os.environ.get("MALLOC_TRIM_THRESHOLD_",
+                          str(dask.config.get("distributed.nanny.pre-spawn-environ")["MALLOC_TRIM_THRESHOLD_"]))
+    assert list(got.values()) == [{"modules": [], "parent": forkserver._forkserver._forkserver_pid,
+                                   "sigint": signal.SIG_IGN, "blocked": False, "log": logging.CRITICAL, "trim": trim,
+                                   "hash": _hash_with_seed(os.environ.get("PYTHONHASHSEED", "6640")),
+                                   "late": "set after the fork server's start"}]
+
+
+class _LostOnce:
+    """A run's future whose result is not there at the first fetch: lost with the worker that held it, computed
+    again (dask then waits for a worker to compute it, forever where none comes)."""
+
+    def __init__(self) -> None:
+        self.calls: list = []
+
+    def result(self, timeout=None):
+        import pickle
+
+        self.calls.append(timeout)
+        if len(self.calls) == 1:
+            raise TimeoutError(f"timed out after {timeout} s.")
+        return pickle.dumps({"y": 1})
+
+
+class _Completed:
+    """distributed.as_completed's part that the sweep uses."""
+
+    def __init__(self, futures) -> None:
+        self.queue = list(futures)
+
+    def is_empty(self) -> bool:
+        return not self.queue
+
+    def next_batch(self, block: bool = True) -> list:
+        out, self.queue = self.queue, []
+        return out
+
+    def add(self, future) -> None:
+        self.queue.append(future)
+
+
+def test_a_result_lost_with_its_worker_is_waited_for_as_a_pending_run(monkeypatch):
+    # the sweep fetched a finished run's result with a blocking result(): where the worker that held it died (a run
+    # that killed it next) and no worker came back, the sweep waited forever, its watch for a cluster without
+    # workers never reached (a test process seen so under load 13); now the fetch waits _POLL_S and the run is
+    # pending again
+    import distributed
+
+    from casflex.study.sweep import _POLL_S, _execute
+
+    fut = _LostOnce()
+
+    class Client:
+        def map(self, *args, **kwargs):
+            return [fut]
+
+        def nthreads(self):
+            return {"tcp://worker": 1}
+
+    monkeypatch.setattr(distributed, "as_completed", _Completed)
+    got: dict = {}
+    killed = _execute(Client(), [Run("a", dict, {})], {dict: b""}, lambda k, out: got.setdefault(k, out), batch=1)
+    assert got == {"a": {"y": 1}} and killed == set() and fut.calls == [_POLL_S, _POLL_S]

@@ -31,8 +31,8 @@ from casflex.scene.scene import (
 )
 from casflex.scene.uncertain import Uncertain
 
-__all__ = ["load_scene", "loads_scene", "dumps_scene", "save_scene", "builtin_scenes", "builtin_scene_text",
-           "scene_from_dict"]
+__all__ = ["load_scene", "load_osim", "loads_scene", "dumps_scene", "save_scene", "builtin_scenes",
+           "builtin_scene_text", "scene_from_dict"]
 
 _BUILTIN_DIR = Path(__file__).parent / "builtin"
 _LISTS: dict[str, type] = {
@@ -71,14 +71,7 @@ def load_scene(source: str | os.PathLike[str]) -> Scene:
     ``"twobar"``)."""
     text_source = str(source)
     if text_source.lower().endswith(".osim"):
-        from casflex.scene.from_osim import scene_from_osim
-
-        try:
-            return scene_from_osim(source).scene
-        except SceneError:
-            raise
-        except ValueError as exc:
-            raise SceneError(str(exc)) from None
+        return load_osim(source)[0]
     if text_source in builtin_scenes():
         path = _BUILTIN_DIR / f"{text_source}.toml"
     else:
@@ -91,6 +84,20 @@ def load_scene(source: str | os.PathLike[str]) -> Scene:
     except (OSError, UnicodeDecodeError) as exc:
         raise SceneError(f"scene file {path}: cannot be read ({exc})") from None
     return loads_scene(text, source=str(path), base=path.parent)
+
+
+def load_osim(source: str | os.PathLike[str]) -> tuple[Scene, tuple[str, ...]]:
+    """(the planar scene, its warnings: what it leaves out of the model) of the OpenSim model file ``source``
+    (:func:`casflex.scene.from_osim.scene_from_osim`), its refusal a SceneError, as :func:`load_scene`'s."""
+    from casflex.scene.from_osim import scene_from_osim
+
+    try:
+        got = scene_from_osim(source)
+    except SceneError:
+        raise
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
+    return got.scene, tuple(got.warnings)
 
 
 def loads_scene(text: str, *, source: str = "<string>", base: str | os.PathLike[str] | None = None) -> Scene:

@@ -1,13 +1,43 @@
 """A dask worker preload of the sweep's local clusters (:func:`casflex.study.sweep._local_cluster`): the worker
 process ignores SIGINT from here on. A Ctrl-C at a terminal goes to the whole process group; the sweep's own
 process takes it and closes its cluster, while a worker that took it too printed its KeyboardInterrupt's
-traceback. Done at import, the earliest moment dask runs a preload in the worker (as the Worker is made);
-SIGTERM, by which dask's nanny stops a worker, stays as it is."""
+traceback. Done at import, the earliest moment dask runs a preload in a spawned worker (as the Worker is made),
+and first of all in the fork server that forks the workers (:func:`casflex.study.fork_server`), whose
+children start with its handlers; again in :func:`dask_setup`, as dask sets up each Worker (a forked worker has
+the module from the server: its import does not run again). SIGTERM, by which dask's nanny stops a worker, stays
+as it is. At exit, no last garbage collection (:func:`_skip_final_collection`)."""
 
+import atexit
+import gc
 import logging
 import signal
+import threading
 
-signal.signal(signal.SIGINT, signal.SIG_IGN)
-# a worker whose scheduler the interrupted command closed first logs its failed heartbeat with a traceback on the
-# command's stderr; a run's own failure reaches the command as its result, so the workers' logs say nothing more
-logging.getLogger("distributed").setLevel(logging.CRITICAL)
+
+def _quiet() -> None:
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        if hasattr(signal, "pthread_sigmask"):  # the fork server starts with it blocked (fork_server): ignored now
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    # a worker whose scheduler the interrupted command closed first logs its failed heartbeat with a traceback on
+    # the command's stderr; a run's own failure reaches the command as its result, so the workers' logs say nothing
+    # more (after the nanny's own level for its worker, silence_logs, which it sets before the preloads run)
+    logging.getLogger("distributed").setLevel(logging.CRITICAL)
+
+
+def dask_setup(worker: object) -> None:
+    """dask's hook, called as each Worker starts (in its process): :func:`_quiet` again."""
+    _quiet()
+
+
+def _skip_final_collection() -> None:
+    """At the process's exit: the interpreter's last garbage collection skipped (as casflex._entry does for the
+    command). It walks every object of the process (dask's, CasADi's, numpy's): half a second of a spawned worker's
+    exit, for which the nanny waits at the cluster's close, and of the fork server's, which holds the command's
+    stdout and stderr open meanwhile (a caller reading them to their end waits for it)."""
+    gc.disable()
+    gc.freeze()
+
+
+_quiet()
+atexit.register(_skip_final_collection)

@@ -80,19 +80,13 @@ def calibrate_run(*, model: str, static: str | None, plane: str, root: str | Non
 
 @functools.lru_cache(maxsize=8)
 def _osim(path: str, digest: str | None) -> tuple:
-    """(the planar scene, its warnings) of the OpenSim model at ``path`` (:func:`casflex.scene.load_scene`'s errors),
-    read once per process and content (``digest``, :func:`_digest`): a study's subjects often share a model, and a
-    worker calibrates one after the other (50 ms a read of Hamner's model). A scene is immutable: sharing it is safe."""
-    from casflex.scene import SceneError
-    from casflex.scene.from_osim import scene_from_osim
+    """(the planar scene, its warnings) of the OpenSim model at ``path`` (:func:`casflex.scene.io.load_osim`, the
+    reader of :func:`casflex.scene.load_scene`), read once per process and content (``digest``, :func:`_digest`): a
+    study's subjects often share a model, and a worker calibrates one after the other (50 ms a read of Hamner's
+    model). A scene is immutable: sharing it is safe."""
+    from casflex.scene.io import load_osim
 
-    try:
-        got = scene_from_osim(path)
-    except SceneError:
-        raise
-    except ValueError as exc:
-        raise SceneError(str(exc)) from None
-    return got.scene, tuple(got.warnings)
+    return load_osim(path)
 
 
 def _frames(lab, window: tuple[float, float] | None):

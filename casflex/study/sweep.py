@@ -369,6 +369,10 @@ class Session:
     def client(self) -> Any:
         """The session's dask Client, connected (its local cluster started) at the first call."""
         if self._client is None:
+            if self.scheduler is None:  # its imports under way on another core while this process imports dask's
+                from casflex.study.fork_server import fork_server
+
+                fork_server()
             from distributed import Client
 
             quiet_sync_cancel()
@@ -445,9 +449,10 @@ def _local_cluster(n_workers: int, started: list) -> Any:
 
     Its workers preload :mod:`casflex.study._worker` (besides dask's configured preloads): they ignore SIGINT,
     which a Ctrl-C at a terminal sends to the whole process group, and this process handles by closing them.
-    (A child started by spawn keeps neither a blocked signal mask nor a handler: the worker itself must ignore
-    the signal. The preload runs once it has imported dask, about a second in; under the ``casflex`` command,
-    casflex._entry does it as soon as the worker's Python has started.)"""
+    The workers are forked from the fork server (:mod:`casflex.study.fork_server`), which ignores SIGINT from its
+    first module on, so that a worker does from its first moment. (A worker spawned, where there is no fork server
+    or its nanny restarts it, ignores it from the preload, once it has imported dask, about a second in; under the
+    ``casflex`` command, casflex._entry does it as soon as the worker's Python has started.)"""
     import dask
     from distributed import LocalCluster
 
@@ -455,8 +460,17 @@ def _local_cluster(n_workers: int, started: list) -> Any:
     preload = [preload] if isinstance(preload, str) else list(preload)
     argv = dask.config.get("distributed.worker.preload-argv") or []
     argv = [argv] * len(preload) if argv and isinstance(argv[0], str) else list(argv) or [[]] * len(preload)
-    with dask.config.set(QUIET_CLUSTER):
-        started.append(LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
+    from casflex.study.fork_server import changed_env, fork_server
+
+    forked = fork_server()
+    if forked:  # dask's get_mp_context would set its own list of modules for the server (this one is started)
+        import distributed.utils
+
+        distributed.utils._forkserver_preload_set = True
+    method = {"distributed.worker.multiprocessing-method": "forkserver"} if forked else {}
+    env = {"env": changed_env()} if forked else {}
+    with dask.config.set({**QUIET_CLUSTER, **method}):
+        started.append(LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, **env,
                                     dashboard_address=":0", silence_logs=40,
                                     preload=[*preload, "casflex.study._worker"], preload_argv=[*argv, []]))
     return started[-1]
@@ -506,22 +520,31 @@ def _execute(client: Any, runs: list[Run], blobs: dict, finished: Callable[[str,
                 done = pending.next_batch(block=False)
                 if not done:
                     time.sleep(_WAKE_S)
+                got = False
                 for fut in done:
-                    handled.add(fut)
                     key = futures[fut]
                     try:
-                        out = _result(fut.result())
+                        out = _result(fut.result(timeout=_POLL_S))
+                    except TimeoutError:
+                        # its result not fetched: lost with the worker that held it (a run that killed that worker
+                        # next) and computed again, which needs a worker; waited for as a pending run, so that the
+                        # watch below still sees a cluster left without one (a blocking result() waited forever)
+                        pending.add(fut)
+                        continue
                     except KilledWorker as exc:
-                        if not last:
-                            killed.add(key)
-                            continue
-                        out = {"error": f"KilledWorker: {exc}"}
+                        out = {"error": f"KilledWorker: {exc}"} if last else None
                     except Exception as exc:  # noqa: BLE001 - any other failure of the run is its result
                         out = {"error": f"{type(exc).__name__}: {exc}"}
-                    finished(key, out)
-                if done:
+                    handled.add(fut)
+                    got = True
+                    if out is None:
+                        killed.add(key)
+                    else:
+                        finished(key, out)
+                if got:  # runs finish: workers there (a look at the scheduler's workers is a round trip through it)
                     alone_since, checked = None, time.monotonic()
-                elif time.monotonic() - checked < _POLL_S:
+                    continue
+                if time.monotonic() - checked < _POLL_S:
                     continue
                 checked = time.monotonic()
                 # dask waits for workers forever: a cluster that lost them all would hang the sweep
