@@ -198,6 +198,11 @@ def _role(pid: int) -> str:
     return "worker" if " worker " in cmd else "other"
 
 
+#: CPU s of this benchmark's commands' processes that it does not reap (the fork server and its workers), so that
+#: the machine's other load (/proc/stat's busy time less this benchmark's) leaves them out
+_UNREAPED = [0.0]
+
+
 def _command(study: Path, out: Path, env: dict, *options: str, others: dict[int, str] | None = None) -> dict:
     """One ``casflex study`` command into ``out``: wall s, CPU s (the command's and its local workers'), its
     stdout, the records' modification times (s after the start) of its trials, and the CPU of each process
@@ -209,6 +214,11 @@ def _command(study: Path, out: Path, env: dict, *options: str, others: dict[int,
     stdout, stderr = proc.communicate()
     wall, cpu = time.perf_counter() - w0, _children_cpu() - c0
     procs = tree.stop()
+    # the local workers are forked by a fork server that the command does not wait for as it exits (init reaps it):
+    # their CPU never reaches this process's children's; /proc's samples of the tree have it
+    unreaped = 0.0 if others else max(0.0, sum(d["main"] + d["threads"] for d in procs.values()) - cpu)
+    _UNREAPED[0] += unreaped
+    cpu += unreaped
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)}: exit {proc.returncode}\n{stdout[-2000:]}\n{stderr[-2000:]}")
     stamps = sorted(p.stat().st_mtime - t0 for p in (out / "record").glob("trial-*.json")) \
@@ -464,7 +474,15 @@ def _trial_work(folder: Path, repeat: int, name: str = "one.toml") -> dict:
         times.append(time.perf_counter() - t0)
         cpus.append(time.process_time() - c0)
     return {"first": times[0], "best": min(times[1:]), "median": float(np.median(times[1:])),
-            "cpu": float(np.median(cpus[1:]))}
+            "cpu": float(np.median(cpus[1:])), "times": times[1:], "cpus": cpus[1:]}
+
+
+def _pooled(before: dict, after: dict) -> dict:
+    """One trial's work measured before the commands and after the local ones, pooled: this machine's speed drifts
+    by a quarter over minutes (a process's repeated calls 135-227 ms), and the steady stream's records span both."""
+    times, cpus = before["times"] + after["times"], before["cpus"] + after["cpus"]
+    return {"first": before["first"], "best": min(times), "median": float(np.median(times)),
+            "cpu": float(np.median(cpus)), "medians": (before["median"], after["median"])}
 
 
 def main(quick: bool = False, out_dir: Path | None = None) -> dict:
@@ -487,20 +505,27 @@ def main(quick: bool = False, out_dir: Path | None = None) -> dict:
             for w in (1, 2):
                 k += 1
                 local[w].append(_command(study, folder / f"out{k}", env, "--workers", str(w)))
+        one = _pooled(one, _trial_work(folder, 5 if quick else 15))
         again = [_command(study, folder / "out1", env, "--workers", "1") for _ in range(3)]
         ext, ext_tasks = _external_runs(folder, study, env)
         bands = _bands_runs(folder, env, *((2, 2) if quick else (10, 20)), 2 if quick else 5)
         bands["plain"] = one["median"]
         tables = {name: (folder / name / "loads.csv").read_text()
                   for name in [f"out{i + 1}" for i in range(k)] + ["ext1", "ext2"]}
-    samples, up1, busy1, own1 = load.stop(), _uptime(), _busy_s(), _own_s()
+    samples, up1, busy1, own1 = load.stop(), _uptime(), _busy_s(), _own_s() + _UNREAPED[0]
     others = None if busy0 is None or busy1 is None else max(0.0, (busy1 - busy0) - (own1 - own0)) / banner.wall
     return render({"quick": quick, "subjects": subjects, "trials": trials, "work": one["median"],
                    "work_best": one["best"], "work_first": one["first"], "work_cpu": one["cpu"], "local": local,
+                   "work_medians": one["medians"],
                    "again": again, "ext": ext,
                    "ext_tasks": ext_tasks, "bands": bands,
                    "same_tables": len(set(tables.values())) == 1, "n_tables": len(tables),
                    "load": {"up0": up0, "up1": up1, "samples": samples, "others": others}}, out_dir, banner)
+
+
+def _medians(raw: dict) -> str:
+    m = raw.get("work_medians")
+    return f": their medians {m[0]:.3f} and {m[1]:.3f} s, this machine's speed drifts" if m else ""
 
 
 def render(raw: dict, out_dir: Path | None, banner: Banner | None = None) -> dict:
@@ -545,8 +570,9 @@ def render(raw: dict, out_dir: Path | None, banner: Banner | None = None) -> dic
             "(61 frames at 60 Hz, 41 markers, two plates) on the planar whole-body model, each subject's masses "
             "scaled to its own mass; no bands. One trial's work in one process (casflex.study.runner.trial_run, no "
             f"dask, the subject's scene read once as a worker reads it): {work:.3f} s (the median of repeated calls, "
-            f"as the steady stream's records are a mean over calls under the same load; the best {work_best:.3f} s, "
-            f"the first call {raw['work_first']:.2f} s).", "",
+            f"as the steady stream's records are a mean over calls under the same load, taken before the commands "
+            f"and after the local ones and pooled{_medians(raw)}; the best {work_best:.3f} s, the first call "
+            f"{raw['work_first']:.2f} s).", "",
             "## The command, a new process and a new record folder each time", "",
             *table(["cluster", "wall s", "CPU s (all processes)", "trials per minute", "wall s per trial",
                     "whole command: overhead per trial (of the work)", "start-up: first record s",
