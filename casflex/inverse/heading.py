@@ -88,7 +88,7 @@ def check_straight(lab: LabMarkers, labels: list[str], plane: str) -> str:
     heading = np.arctan2(side[moving], forward[moving])
     mean = float(np.arctan2(np.sin(heading).mean(), np.cos(heading).mean()))  # the walk's direction, no wrap at 180
     dev = np.degrees(np.angle(np.exp(1j * (heading - mean))))  # each heading's signed angle from it
-    lo, hi = float(np.degrees(heading.min())), float(np.degrees(heading.max()))
+    lo, hi = np.degrees(mean) + float(dev.min()), np.degrees(mean) + float(dev.max())  # unwrapped about the mean
     where = f"the heading from {lo:+.0f} to {hi:+.0f} degrees off the plane's x ({pl.x}) while moving"
     turns = "a planar model needs straight walking; give a window in which it walks straight"
     off = max(-lo, hi) > MAX_TURN  # refused whatever follows: only the reason is chosen below
