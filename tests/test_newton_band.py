@@ -58,7 +58,7 @@ def test_mapped_and_flat_steps_agree():
         x0 = initial_state(integ, p)
         d = np.array(integ.scale(x0[:n], x0[n:2 * n], p, 1e-3)).ravel()
         X, res = integ.trajectory(50)(x0, 0.0, p, 1e-3, d)
-        assert float(np.max(res)) <= 1e-12  # every step converged to tol
+        assert float(np.max(np.array(res))) <= 1e-12  # every step converged to tol
         states.append(np.array(X)[:n])
     # 1e-13 m: both solve each step to tol = 1e-12 of the length scale (0.1 m), round-off apart
     np.testing.assert_allclose(states[0], states[1], rtol=0, atol=1e-13)
