@@ -65,16 +65,5 @@ def main() -> int:
             code = interrupt.exit_status(signum)
         if code in interrupt.EXIT_STATUSES:  # inside the guard: its hook keeps finalizer noise off stderr to the end
             _exit_interrupted(code, hurried=signals.count > 1)
-        _skip_final_collection()
+        interrupt.skip_final_collection()
     return code
-
-
-def _skip_final_collection() -> None:
-    """The command is done: the interpreter's last garbage collection at exit is skipped. It walks every object the
-    command made (CasADi's, numpy's, matplotlib's, dask's), 1-2 s of a study's command on a loaded machine after its
-    last output, for memory the process's end frees anyway. Objects still go away as at any exit (files flushed and
-    closed, the exit handlers run, threads joined): only the cycle collector no longer looks at them."""
-    import gc
-
-    gc.disable()
-    gc.freeze()

@@ -22,7 +22,8 @@ import numpy as np
 
 from casflex.lab import LabMarkers, Plane
 
-__all__ = ["travel_labels", "check_straight", "heading_line", "MIN_TRAVEL", "WALKING_SPEED", "MAX_TURN"]
+__all__ = ["travel_labels", "median_steps", "check_straight", "heading_line", "MIN_TRAVEL", "WALKING_SPEED",
+           "MAX_TURN"]
 
 #: m: less travel than this over a trial is standing (a static trial, a treadmill)
 MIN_TRAVEL = 0.5
@@ -49,7 +50,7 @@ def travel_labels(scene, lab: LabMarkers, root: str | None = None) -> list[str]:
     return seen
 
 
-def _median_steps(lab: LabMarkers, labels: list[str]) -> np.ndarray:
+def median_steps(lab: LabMarkers, labels: list[str]) -> np.ndarray:
     """(n - 1, 3) m: each frame-to-frame step of the markers' median displacement (over the markers seen in both
     frames; NaN where fewer than half of them are: a record's ends, where markers enter the cameras' view one by
     one). Steps, not positions: a marker seen late joins without a jump."""
@@ -68,7 +69,7 @@ def check_straight(lab: LabMarkers, labels: list[str], plane: str) -> str:
     pl = Plane.parse(plane)
     if lab.t.size < 2 or not labels:
         return "heading not checked: too few frames or markers"
-    steps = _median_steps(lab, labels)
+    steps = median_steps(lab, labels)
     x_axis, up = pl.matrix[0], np.cross(*pl.matrix)
     path = np.vstack([np.zeros(3), np.cumsum(np.nan_to_num(steps), axis=0)])
     extent = float(np.hypot(np.ptp(path @ x_axis), np.ptp(path @ up)))

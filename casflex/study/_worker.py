@@ -5,10 +5,9 @@ traceback. Done at import, the earliest moment dask runs a preload in a spawned 
 and first of all in the fork server that forks the workers (:func:`casflex.study.fork_server`), whose
 children start with its handlers; again in :func:`dask_setup`, as dask sets up each Worker (a forked worker has
 the module from the server: its import does not run again). SIGTERM, by which dask's nanny stops a worker, stays
-as it is. At exit, no last garbage collection (:func:`_skip_final_collection`)."""
+as it is. At exit, no last garbage collection (:func:`casflex.interrupt.skip_final_collection`)."""
 
 import atexit
-import gc
 import logging
 import signal
 import threading
@@ -30,14 +29,7 @@ def dask_setup(worker: object) -> None:
     _quiet()
 
 
-def _skip_final_collection() -> None:
-    """At the process's exit: the interpreter's last garbage collection skipped (as casflex._entry does for the
-    command). It walks every object of the process (dask's, CasADi's, numpy's): half a second of a spawned worker's
-    exit, for which the nanny waits at the cluster's close, and of the fork server's, which holds the command's
-    stdout and stderr open meanwhile (a caller reading them to their end waits for it)."""
-    gc.disable()
-    gc.freeze()
-
-
 _quiet()
-atexit.register(_skip_final_collection)
+from casflex.interrupt import skip_final_collection  # noqa: E402 (after SIGINT is ignored: casflex's imports)
+
+atexit.register(skip_final_collection)

@@ -23,7 +23,7 @@ import warnings
 
 import numpy as np
 
-from casflex.inverse.heading import MAX_TURN, MIN_TRAVEL, WALKING_SPEED, _median_steps, check_straight, travel_labels
+from casflex.inverse.heading import MAX_TURN, MIN_TRAVEL, WALKING_SPEED, check_straight, median_steps, travel_labels
 from casflex.lab import LabMarkers, Plane
 
 __all__ = ["travel_labels", "walking_plane", "facing_plane", "fitted_plane", "check_straight", "MIN_TRAVEL",
@@ -46,7 +46,7 @@ def walking_plane(lab: LabMarkers, labels: list[str], vertical: str) -> tuple[st
     where it travels less than :data:`MIN_TRAVEL`."""
     if lab.t.size < 2 or not labels:
         return None
-    d = np.nansum(_median_steps(lab, labels), axis=0)
+    d = np.nansum(median_steps(lab, labels), axis=0)
     h = _horizontal(vertical)
     if np.hypot(*d[h]) < MIN_TRAVEL:
         return None
