@@ -30,7 +30,11 @@ their bands (``bands = true``, six segment masses uncertain by 10 %), 10 subject
 on 1 and 2 local workers, one command each.
 
 The per-trial overhead (the goal: below 10 % of a trial's work) is the steady stream's: the wall s a worker spends
-per record less one trial's work in one process (the median of repeated calls), over the work. The one-off costs
+per record less one trial's work, over the work. A trial's work is what its records say its run cost in its worker
+(the run's thread's CPU, casflex.study.sweep.RUN_TIME: the mean over the command's trials), measured where and
+while the study ran; beside it, against one trial in one process apart (the median of repeated calls, before and
+after the commands: this machine's speed drifts by a quarter over minutes, and a reference taken apart drifts with
+it). The one-off costs
 of a study (the start-up to the first record, the outputs after the last) are columns of their own, and the whole
 command's wall per trial less the work is reported beside them.
 """
@@ -41,6 +45,7 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as the dask workers run (distributed's pre-spawn environ)
 
+import json  # noqa: E402
 import shutil  # noqa: E402
 import signal  # noqa: E402
 import socket  # noqa: E402
@@ -54,6 +59,8 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 from _study import Banner, assert_checks, checks, cli, png, table, write_outputs  # noqa: E402
 from bench_study import FILES, LAB, UNCERTAIN, LoadSampler, _busy_s, _own_s, _uptime  # noqa: E402
+
+from casflex.study.sweep import RUN_TIME  # noqa: E402
 
 
 def study_text(subjects: int, trials: int, bands: bool = False) -> str:
@@ -92,7 +99,7 @@ def _bands_section(bands: dict) -> list[str]:
         rows.append([f"local, {w} worker{'s' if w > 1 else ''}", f"{r[w]['wall']:.1f}", f"{r[w]['cpu']:.1f}",
                      f"{60.0 * n / r[w]['wall']:.1f}", f"{rec[0]:.1f}" if rec else "-",
                      f"{_steady(rec):.3f}" if rec else "-",
-                     f"{_steady_overhead(rec, w, bands['work']):+.0f} %" if rec else "-",
+                     f"{_own_work(r[w]):.3f}", f"{_steady_overhead(rec, w, _own_work(r[w])):+.0f} %" if rec else "-",
                      f"{r[w]['wall'] - rec[-1]:.1f}" if rec else "-"])
     return ["## The second configuration: the same trials with their bands", "",
             f"The study as above with its bands (``bands = true``, six segment masses uncertain by 10 % per subject: "
@@ -103,8 +110,9 @@ def _bands_section(bands: dict) -> list[str]:
             "command each, not repeated: beside the 1 s study without bands, which answers the goal, not in its "
             "place.", "",
             *table(["cluster", "wall s", "CPU s (all processes)", "trials per minute", "start-up: first record s",
-                    "s per record (steady)", "steady stream: overhead per trial (of the work)",
-                    "after the last record s"], rows, "lrrrrrrr"), "",
+                    "s per record (steady)", "a trial's own CPU s (its records)",
+                    "steady stream: overhead per trial (of its own CPU)", "after the last record s"], rows,
+                  "lrrrrrrrr"), "",
             f"- 2 workers against 1: **{r[1]['wall'] / r[2]['wall']:.2f} x** (local cluster).", ""]
 
 
@@ -221,9 +229,11 @@ def _command(study: Path, out: Path, env: dict, *options: str, others: dict[int,
     cpu += unreaped
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)}: exit {proc.returncode}\n{stdout[-2000:]}\n{stderr[-2000:]}")
-    stamps = sorted(p.stat().st_mtime - t0 for p in (out / "record").glob("trial-*.json")) \
-        if (out / "record").is_dir() else []
-    return {"wall": wall, "cpu": cpu, "stdout": stdout, "records": stamps, "procs": procs}
+    files = sorted((out / "record").glob("trial-*.json")) if (out / "record").is_dir() else []
+    stamps = sorted(p.stat().st_mtime - t0 for p in files)
+    costs = [json.loads(p.read_text()).get(RUN_TIME) for p in files]
+    return {"wall": wall, "cpu": cpu, "stdout": stdout, "records": stamps, "procs": procs,
+            "run_cpu": [c["cpu_s"] for c in costs if c], "run_wall": [c["wall_s"] for c in costs if c]}
 
 
 def _free_port() -> int:
@@ -380,6 +390,12 @@ def _overhead(wall: float, n: int, work: float) -> float:
 def _steady(records: list[float]) -> float:
     """s per record in the steady stream: from the first record to the last, over the records between."""
     return (records[-1] - records[0]) / (len(records) - 1) if len(records) > 1 else float("nan")
+
+
+def _own_work(run: dict) -> float:
+    """A trial's own work in a command: the mean of its trials' runs' CPU s in their workers, from their records
+    (casflex.study.sweep.RUN_TIME; nan where the records do not say)."""
+    return float(np.mean(run["run_cpu"])) if run.get("run_cpu") else float("nan")
 
 
 def _steady_overhead(records: list[float], workers: int, work: float) -> float:
@@ -541,16 +557,19 @@ def render(raw: dict, out_dir: Path | None, banner: Banner | None = None) -> dic
     rows = []
     for name, r, workers in (("local, 1 worker", best[1], 1), ("local, 2 workers", best[2], 2),
                              ("external, 1 worker", ext[1], 1), ("external, 2 workers", ext[2], 2)):
-        rec = r["records"]
+        rec, own = r["records"], _own_work(r)
         rows.append([name, f"{r['wall']:.1f}", f"{r['cpu']:.1f}", f"{60.0 * n / r['wall']:.1f}",
                      f"{r['wall'] / n:.3f}", f"{_overhead(r['wall'], n, work):+.0f} %",
-                     f"{rec[0]:.1f}" if rec else "-", f"{_steady(rec):.3f}",
+                     f"{rec[0]:.1f}" if rec else "-", f"{_steady(rec):.3f}", f"{own:.3f}",
+                     f"{_steady_overhead(rec, workers, own):+.0f} %" if rec else "-",
                      f"{_steady_overhead(rec, workers, work):+.0f} %" if rec else "-",
                      f"{r['wall'] - rec[-1]:.1f}" if rec else "-"])
     tl = {w: ext[w]["timeline"] for w in (1, 2)}
     rec1 = best[1]["records"]
     steady1 = _steady(rec1)
-    per_trial = _steady_overhead(rec1, 1, work) if rec1 else float("nan")
+    own1 = _own_work(best[1])
+    per_trial = _steady_overhead(rec1, 1, own1) if rec1 else float("nan")
+    per_trial_apart = _steady_overhead(rec1, 1, work) if rec1 else float("nan")
     whole = _overhead(best[1]["wall"], n, work)
     work_best = raw.get("work_best", work)
     ld = raw["load"]
@@ -576,20 +595,27 @@ def render(raw: dict, out_dir: Path | None, banner: Banner | None = None) -> dic
             "## The command, a new process and a new record folder each time", "",
             *table(["cluster", "wall s", "CPU s (all processes)", "trials per minute", "wall s per trial",
                     "whole command: overhead per trial (of the work)", "start-up: first record s",
-                    "s per record (steady)", "steady stream: overhead per trial (of the work)",
-                    "after the last record s (table, figures)"], rows, "lrrrrrrrrr"), "",
+                    "s per record (steady)", "a trial's own CPU s (its records)",
+                    "steady stream: overhead per trial (of its own CPU)",
+                    "steady stream: overhead per trial (of one process's)",
+                    "after the last record s (table, figures)"], rows, "lrrrrrrrrrrr"), "",
             "What each part costs: the **steady stream**'s overhead per trial is the wall s a worker spends per record "
             "(s per record x workers) less one trial's work, over the work: what a trial costs beyond its own work "
             "once the study runs (dask's round trip, the record written, the worker's share of the machine with the "
-            "command's process). The **one-off costs** of a study, whatever its size: the start-up (process, "
+            "command's process). A trial's work is what its records say its run cost (the run's thread's CPU in its "
+            "worker, from the call to the return: casflex.study.sweep.RUN_TIME; the mean over the command's trials, "
+            "a subject's first trial with its model's build), measured where and while the study ran; beside it, "
+            "against one trial in one process apart (above: this machine's speed drifts between the two). The "
+            "**one-off costs** of a study, whatever its size: the start-up (process, "
             "imports, study check, the cluster's start, the workers' imports, the calibrations, and a first trial) "
             "and the time after the last record (the last subject's figure, the group's, the table, the summary). "
             "The **whole command**'s overhead per trial spreads them over this study's trials.", "",
             f"- 2 workers against 1: **{speed_local:.2f} x** on the local cluster, **{speed_ext:.2f} x** on the "
             "external scheduler.",
             f"- The overhead per trial on 1 local worker: **{per_trial:+.0f} %** of a trial's work in the steady "
-            f"stream ({steady1:.3f} s per record against {work:.3f} s of work; "
-            f"{100 * (steady1 - work_best) / work_best:+.0f} % against the best call); the one-off costs: the "
+            f"stream ({steady1:.3f} s per record against {own1:.3f} s of a trial's own CPU in its worker, its "
+            f"records' mean; {per_trial_apart:+.0f} % against one process's {work:.3f} s, "
+            f"{100 * (steady1 - work_best) / work_best:+.0f} % against its best call); the one-off costs: the "
             f"start-up {rec1[0]:.1f} s to the first record, {best[1]['wall'] - rec1[-1]:.1f} s after the last "
             f"({raw['subjects'] + 1} figures, {raw['subjects']} of them drawn while the trials ran; the table, its "
             "subjects' lines made while they ran; the "

@@ -10,7 +10,7 @@ import pytest
 
 pytest.importorskip("distributed")
 
-from casflex.study.sweep import Run, identification_run, run_sweep  # noqa: E402
+from casflex.study.sweep import RUN_TIME, Run, identification_run, run_sweep  # noqa: E402
 
 
 def _runs():
@@ -329,13 +329,37 @@ def test_a_run_s_record_travels_as_one_buffer_and_the_local_scheduler_does_not_s
     from casflex.study.sweep import Session, _call, _result
 
     blob = _call(dict, {"a": [1.5, 2.0]})
-    assert isinstance(blob, bytes) and _result(blob) == {"a": [1.5, 2.0]}
-    assert _result(_call(list, {})) == {"error": "run function returned list, expected a dict"}
+    assert isinstance(blob, bytes) and _result(blob).keys() == {"a", RUN_TIME} and _result(blob)["a"] == [1.5, 2.0]
+    assert _result(_call(list, {}))["error"] == "run function returned list, expected a dict"
     with Session(None, 1) as session:
         assert session.client().run_on_scheduler(lambda dask_scheduler: "stealing" in dask_scheduler.extensions) \
             is False
     res = run_sweep([Run(f"r{i}", dict, {"i": i}) for i in range(3)], tmp_path / "rec", n_workers=1, progress=False)
-    assert res.results == {f"r{i}": {"i": i} for i in range(3)}
+    assert {k: {f: v for f, v in r.items() if f != RUN_TIME} for k, r in res.results.items()} == \
+        {f"r{i}": {"i": i} for i in range(3)}
+
+
+def _spin(seconds: float) -> dict:
+    """A run that keeps its thread busy for ``seconds`` of CPU, then sleeps as long."""
+    import time
+
+    t0 = time.thread_time()
+    while time.thread_time() - t0 < seconds:
+        pass
+    time.sleep(seconds)
+    return {"spun": seconds}
+
+
+def test_a_record_says_what_its_run_cost_in_its_worker(tmp_path):
+    # the run's own thread's CPU and its wall, from the call to the return: a study's per-trial overhead is measured
+    # against what its runs cost where and while they ran (a reference taken apart drifts with the machine's speed)
+    res = run_sweep([Run("spin", _spin, {"seconds": 0.2})], tmp_path / "rec", n_workers=1, progress=False)
+    cost = res.results["spin"][RUN_TIME]
+    on_disk = json.loads((tmp_path / "rec" / "spin.json").read_text())[RUN_TIME]
+    assert on_disk == cost
+    # the thread's CPU counts the spin's 0.2 s, not the sleep (1 s of margin for a loaded machine's overrun); the wall
+    # counts both (1 ms for the two clocks' resolutions)
+    assert 0.2 <= cost["cpu_s"] < 1.2 and cost["wall_s"] >= cost["cpu_s"] + 0.2 - 1e-3
 
 
 def _nap(i: int) -> dict:

@@ -7,7 +7,8 @@ finishes, with its key in the field ``"run"`` (:data:`IDENTITY`), so an interrup
 the same record directory redoes only the runs without a valid record: a file that is no JSON object, that
 names another run (a record copied by hand under another name) or that lacks a field the run's record holds
 (:attr:`Run.fields`) is not taken as done, and said on stderr. A run that raises is recorded too, with
-``{"error": "..."}``, and is not retried unless ``retry_failed=True``.
+``{"error": "..."}``, and is not retried unless ``retry_failed=True``. Each record says what its run cost in its
+worker (:data:`RUN_TIME`: its thread's CPU s and its wall s, from the call to the return).
 
 By default the runs go to a ``LocalCluster`` of ``n_workers`` single-threaded processes (at most
 :func:`max_workers`: the machine's cores and memory; once started they ignore Ctrl-C, which the sweep's
@@ -40,7 +41,8 @@ import numpy as np
 
 from casflex.results import atomic_write_json
 
-__all__ = ["Run", "SweepResult", "Session", "run_sweep", "identification_run", "max_workers", "unreachable", "IDENTITY"]
+__all__ = ["Run", "SweepResult", "Session", "run_sweep", "identification_run", "max_workers", "unreachable", "IDENTITY",
+           "RUN_TIME"]
 
 _KEY = re.compile(r"^[A-Za-z0-9_.=+-]{1,200}$")
 #: s with no worker at all on the scheduler before the pending runs are given up on this cluster (a
@@ -52,6 +54,10 @@ _POLL_S = 2.0  # s between checks of the workers while no run finishes
 _WAKE_S = 0.02  # s between looks for finished runs while none is (a record written at most this late)
 #: the field of a record that names its run (its key): a record is taken only under its own name
 IDENTITY = "run"
+#: the field of a record (the runs run in this version) with the run's own cost in its worker: ``{"cpu_s": its
+#: thread's CPU s, "wall_s": its wall s}`` from the run function's call to its return (not dask's transfers, the
+#: result's pickling or the record's writing): what a run's work is, measured where and while the sweep ran it
+RUN_TIME = "run_time"
 #: bytes of memory allowed a local worker: one peaked at 0.10 GB resident in tests/test_study.py's study (Hamner's
 #: running trial, ps every 0.25 s); 10 x that for longer trials, bands, compiled models and the scheduler's share
 WORKER_BYTES = 1 << 30
@@ -192,7 +198,8 @@ def worker_malloc() -> bool:
 
 
 def _call(fn: Callable[..., dict] | bytes, kwargs: dict) -> bytes:
-    """``fn(**kwargs)`` in a worker: its record, pickled (:func:`_result`), or ``{"error": ...}`` where it failed.
+    """``fn(**kwargs)`` in a worker: its record, pickled (:func:`_result`), or ``{"error": ...}`` where it failed;
+    with its cost (:data:`RUN_TIME`) where it returned.
 
     Returned as bytes, not as the dict: dask then holds and sends an opaque buffer, where a dict's result is
     walked by dask's sizeof (twice) and its serializer on the worker (a trial's record: 2600 numbers in nested
@@ -203,9 +210,11 @@ def _call(fn: Callable[..., dict] | bytes, kwargs: dict) -> bytes:
             import cloudpickle
 
             fn = cloudpickle.loads(fn)
+        cpu, wall = time.thread_time(), time.perf_counter()
         out = fn(**kwargs)
         if not isinstance(out, dict):
             out = {"error": f"run function returned {type(out).__name__}, expected a dict"}
+        out[RUN_TIME] = {"cpu_s": time.thread_time() - cpu, "wall_s": time.perf_counter() - wall}
     except Exception as exc:  # noqa: BLE001 - a failed run is a result of the sweep, recorded
         out = {"error": f"{type(exc).__name__}: {exc}"}
     import pickle
