@@ -20,30 +20,27 @@ _HEAD = ["subject", "trial", "load", "foot", "cycle", "percent", "value", "band"
 
 
 def _table(rows: list[tuple]) -> str:
-    """loads.csv's text: each value and band by repr (the shortest text that reads back to the same double). Its
-    rows formatted directly where no name needs CSV's quoting (a comma, a quote, a line break), else by the csv
-    module: the same text, twice as fast (160 000 rows for 200 trials)."""
-    body = _rows_text(rows)
-    if body is None:
-        buf = io.StringIO()
-        w = csv.writer(buf, lineterminator="\n")
-        w.writerow(_HEAD)
-        w.writerows([(*r[:5], f"{r[5]:g}", repr(r[6]), "" if r[7] is None else repr(r[7]), r[8],
-                      "" if r[9] is None else str(r[9]).lower(), repr(r[10]), repr(r[11])) for r in rows])
-        return buf.getvalue()
-    return ",".join(_HEAD) + "\n" + body
+    """loads.csv's text of ``rows`` (:func:`casflex.study.runner.tidy_rows`) by the csv module, each value and band
+    by repr (the shortest text that reads back to the same double): where a name needs CSV's quoting (a comma, a
+    quote, a line break), else :func:`_loads_text` makes the same text twice as fast (:func:`_loads_csv`)."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(_HEAD)
+    w.writerows([(*r[:5], f"{r[5]:g}", repr(r[6]), "" if r[7] is None else repr(r[7]), r[8],
+                  "" if r[9] is None else str(r[9]).lower(), repr(r[10]), repr(r[11])) for r in rows])
+    return buf.getvalue()
 
 
-def _rows_text(rows: list[tuple]) -> str | None:
-    """loads.csv's lines of ``rows`` without its header, formatted directly; None where a name needs CSV's quoting
-    (:func:`_table` then writes the whole table by the csv module)."""
-    names = {r[i] for r in rows for i in (0, 1, 2, 3, 8)}
-    if any(_quoted(n) for n in names):
-        return None
-    return "".join([
-        f"{r[0]},{r[1]},{r[2]},{'' if r[3] is None else r[3]},{r[4]},{r[5]:g},{r[6]!r},"
-        f"{'' if r[7] is None else repr(r[7])},{r[8]},{'' if r[9] is None else str(r[9]).lower()},{r[10]!r},{r[11]!r}\n"
-        for r in rows])
+def _loads_csv(out: dict, per_kg: bool = False) -> tuple[str, int]:
+    """loads.csv's text of ``out``'s trials and its rows' count: from the records' cycles (:func:`_loads_text`), or
+    by the csv module (:func:`_table`) where a name needs quoting."""
+    from casflex.study.runner import tidy_rows
+
+    body = _loads_text(out, per_kg)
+    if body is not None:
+        return ",".join(_HEAD) + "\n" + body, body.count("\n")
+    rows = tidy_rows(out, per_kg=per_kg)
+    return _table(rows), len(rows)
 
 
 def _quoted(name) -> bool:
@@ -52,9 +49,10 @@ def _quoted(name) -> bool:
 
 
 def _loads_text(out: dict, per_kg: bool = False) -> str | None:
-    """``_rows_text(tidy_rows(out, per_kg))`` (:func:`casflex.study.runner.tidy_rows`), the same text made from the
-    records' cycles without the rows: each cycle's names, times and unit formatted once, its values (and bands)
-    by repr, joined with the percents (16 000 lines a subject of 20 trials: 94-104 -> 24-29 ms of CPU)."""
+    """loads.csv's lines of ``out``'s trials, without its header, as the csv module writes the rows of
+    :func:`casflex.study.runner.tidy_rows` (:func:`_table`), made from the records' cycles without the rows: each
+    cycle's names, times and unit formatted once, its values (and bands) by repr, joined with the percents (16 000
+    lines a subject of 20 trials: 94-104 -> 24-29 ms of CPU); None where a name needs CSV's quoting."""
     from casflex.study.runner import PERCENT, unit_of
 
     percents = [f"{float(p):g}" for p in PERCENT]
@@ -257,7 +255,7 @@ class _EarlyFigures:
 
     def table(self, out: dict) -> str | None:
         """loads.csv's text of ``out``'s trials from the subjects' lines made as their trials finished, where each
-        subject's were made from the same trials (in the table's order), else None (:func:`_table` writes it)."""
+        subject's were made from the same trials (in the table's order), else None (:func:`_loads_csv` makes it)."""
         order = list(out["trials"])
         subjects = list(dict.fromkeys(s for s, _ in order))
         parts = [self.rows.get(s, ((), None)) for s in subjects]
@@ -439,7 +437,7 @@ def cmd_study(args: argparse.Namespace, outputs: Outputs) -> int:
 
 def _run(args: argparse.Namespace, study, staging: Path, record: Path, old: dict) -> int:
     """The study run (what is not recorded yet), its table, figures and summary staged in ``staging``."""
-    from casflex.study.runner import check_against_models, per_kg, run_study, tidy_rows
+    from casflex.study.runner import check_against_models, per_kg, run_study
     from casflex.study.study_file import StudyError
     from casflex.study.sweep import Session
 
@@ -470,10 +468,9 @@ def _run(args: argparse.Namespace, study, staging: Path, record: Path, old: dict
 
         def tables() -> None:  # while the workers draw the figures
             text = early.table(out)
-            if text is None:  # a subject's lines not made as its trials finished: the rows of all now
-                rows = tidy_rows(per_kg(out, study), per_kg=kg)
-                text = _table(rows)
-                counted.append(len(rows))
+            if text is None:  # a subject's lines not made as its trials finished: the table of all now
+                text, rows = _loads_csv(per_kg(out, study), kg)
+                counted.append(rows)
             else:  # a line a row (no name in the subjects' lines needs quoting)
                 counted.append(text.count("\n") - 1)
             (staging / "loads.csv").write_text(text)
