@@ -12,9 +12,9 @@ scenes are (OpenSim's convention: x forward, y up):
 - a trial in which the subject stays (a treadmill; the scene calibrated): the direction in whose plane the scene
   fits the trial's frames best (:func:`fitted_plane`).
 
-Whether a trial is straight enough for a planar model (:func:`check_straight`) and whose markers tell the subject's
-travel (:func:`travel_labels`) are :mod:`casflex.inverse.heading`'s, which every marker trial's inverse dynamics runs;
-imported here for the study's plane.
+Whether a trial is straight enough for a planar model and whose markers tell the subject's travel are
+:mod:`casflex.inverse.heading`'s (:func:`~casflex.inverse.heading.check_straight`, which every marker trial's inverse
+dynamics runs, and :func:`~casflex.inverse.heading.travel_labels`, which the study's plane uses).
 """
 
 from __future__ import annotations
@@ -23,12 +23,10 @@ import warnings
 
 import numpy as np
 
-from casflex.inverse.heading import MAX_TURN, MIN_TRAVEL, WALKING_SPEED, check_straight, median_steps, travel_labels
+from casflex.inverse.heading import MIN_TRAVEL, median_steps
 from casflex.lab import LabMarkers, Plane
 
-__all__ = ["travel_labels", "walking_plane", "facing_plane", "fitted_plane", "check_straight", "MIN_TRAVEL",
-           "WALKING_SPEED", "MAX_TURN",
-           "MIN_CORRELATION"]
+__all__ = ["walking_plane", "facing_plane", "fitted_plane", "MIN_CORRELATION"]
 
 #: a facing needs the markers to lie along it as the scene's do at least this well (biomechZoo's sample study's
 #: statics on a Plug-in Gait model: 0.78-0.91 facing, 0.02-0.07 across)
