@@ -116,6 +116,43 @@ def spread_fits(meshes: list[int], dofs: list[int], times: dict) -> dict:
             "el_median": float(np.median(k_el)), "el_min": min(k_el), "el_max": max(k_el), "rounds": len(k_dofs)}
 
 
+#: the parts of a step (breakdown): the first pattern a CasADi Function's name matches (re.search) names its part
+PARTS = (("map loops (a call per element)", r"^map\d+_"), ("kernels, tangent (r and K)", r"_padded"),
+         ("kernels, residual", r"_hht_a\d+_\w+_r(_|$)"), ("libm (atan2, sincos)", r"^ext:(__)?(atan2|sincos|ieee754)"),
+         ("flat: kernels + band assembly", r"^hht_jacobian$"), ("flat: residual", r"^hht_residual_all$"),
+         ("band LU", r"band_"), ("update: band assembly, state passes", r"^hht_update_step$"),
+         ("step end (residual's sums, state, test)", r"^hht_finish_band$"), ("copies, clears", r"casadi_(copy|clear)$"),
+         ("step and chunk (Function boundaries)", r"^hht_(step|steps|trajectory|done|converge)"))
+
+
+def breakdown(elements: int) -> dict[str, float]:
+    """Instructions per step of the compiled 250-step chunk (twobar, ``elements`` per bar, dt = 1e-3) per part of
+    the step (:data:`PARTS`; the rest as "other"), from callgrind on the library's C built with -g
+    (``_callgrind.per_function``)."""
+    import re
+
+    from _callgrind import per_function
+
+    from casflex.codegen import build_flags, generate_c
+    from casflex.simulate import CHUNK, initial_state, integrator_for
+    from casflex.simulate.run import _library_functions
+
+    model = twobar(elements)
+    integ = integrator_for(model, alpha=0.0)
+    p, n = model.params(None), model.n_dof
+    x0 = initial_state(integ, p)
+    d = np.array(integ.scale(x0[:n], x0[n:2 * n], p, 1e-3)).ravel()
+    with tempfile.TemporaryDirectory(prefix="casflex-bd-") as tmp:
+        c_file, _ = generate_c(_library_functions(integ), tmp, "lib")
+        per = per_function(c_file, f"hht_trajectory_{CHUNK}", [x0, np.zeros(1), p, np.array([1e-3]), d],
+                           build_flags("-O3"))
+    out: dict[str, float] = {}
+    for name, count in (per or {}).items():
+        part = next((label for label, pattern in PARTS if re.search(pattern, name)), "other")
+        out[part] = out.get(part, 0.0) + count / CHUNK
+    return out
+
+
 def slope(x, y) -> float:  # of the least-squares line through the log-log points
     return float(np.polyfit(np.log(x), np.log(y), 1)[0])
 
@@ -262,6 +299,14 @@ if __name__ == "__main__":
     elif sys.argv[1:2] == ["--timing-worker"]:  # hidden: the interleaved rounds, JSON on stdout
         print(json.dumps(timing_worker([int(e) for e in sys.argv[2].split(",")], float(sys.argv[3]),
                                        int(sys.argv[4]))))
+    elif sys.argv[1:2] == ["--breakdown"]:  # where a step's instructions go: --breakdown 1,8,32 (k a step)
+        els = [int(e) for e in sys.argv[2].split(",")]
+        parts = {e: breakdown(e) for e in els}
+        print("| part | " + " | ".join(f"{e} el./bar" for e in els) + " |")
+        print("|---|" + "--:|" * len(els))
+        for label in [lab for lab, _ in PARTS] + ["other"]:
+            print(f"| {label} | " + " | ".join(f"{parts[e].get(label, 0) / 1e3:.1f}" for e in els) + " |")
+        print("| total | " + " | ".join(f"{sum(parts[e].values()) / 1e3:.1f}" for e in els) + " |")
     elif sys.argv[1:2] == ["--mesh-part"]:  # the interleaved timing alone: --mesh-part 1,32 [rounds], no page
         els, n_rounds = [int(e) for e in sys.argv[2].split(",")], int(sys.argv[3]) if len(sys.argv) > 3 else ROUNDS
         res = interleaved(els, 3.0, n_rounds)
