@@ -304,22 +304,3 @@ def test_casadis_newton_the_fallback_ends_where_the_banded_step_does(scene, alph
     dq = np.abs(np.array(x_fb).ravel()[:n] - np.array(x_fast).ravel()[:n]) / np.where(model.is_rotation, 1.0,
                                                                                       model.length_scale)
     assert dq.max() <= bound, (dq.max(), bound)  # the state's positions are the unknowns, scaled (free dofs)
-
-
-def test_trajectory_is_one_loop_of_the_step_with_its_numbers(tmp_path):
-    """hht_trajectory_N calls the step N times in one loop (mapaccum base -1), not through CasADi's default tower
-    of nested 10-step Functions, whose every level copied the states out (twobar, 32 el./bar: 7k instructions a
-    step); its states are the chained steps', bitwise."""
-    model = casflex.assemble(casflex.load_scene("twobar"))
-    integ = HHT(model, alpha=-0.05)
-    p, h = model.p_nominal, 1e-3
-    d = np.array(integ.scale(model.q0, model.qd0, p, h)).ravel()
-    x = initial_state(integ, p)
-    X, _ = integ.trajectory(25)(x, 0.0, p, h, d)
-    for k in range(25):
-        x = np.array(integ.step(x, k * h, p, h, d)[0]).ravel()
-        assert np.array_equal(np.array(X[:, k]).ravel(), x), k
-    cg = ca.CodeGenerator("traj.c")
-    cg.add(integ.trajectory(25))
-    cg.generate(str(tmp_path) + "/")
-    assert "_acc10" not in (tmp_path / "traj.c").read_text()

@@ -375,9 +375,7 @@ class HHT:
         """
         key = f"traj{n_steps}"
         if key not in self._fn:
-            # one loop of N calls (base -1), not CasADi's default tower of nested 10-step Functions, each level of
-            # which copies the states out (twobar, 32 el./bar: 7k instructions a step)
-            acc = self.step.mapaccum(f"hht_steps_{n_steps}", n_steps, [0], [0], {"base": -1})
+            acc = self.step.mapaccum(f"hht_steps_{n_steps}", n_steps, 1)
             X0, T0, Pm, H, D = self.step.mx_in()
             grid = T0 + H * ca.DM(np.arange(n_steps)).T
             X, res = acc(X0, grid, ca.repmat(Pm, 1, n_steps), ca.repmat(H, 1, n_steps), ca.repmat(D, 1, n_steps))
