@@ -81,11 +81,13 @@ def in_fresh_process(script: str, args: list[str], env: dict, timeout: float = 3
 
 
 def cold_and_cached(script: str, cold: list[str], cached: list[str], timeout: float = 3600,
-                    env: dict | None = None) -> tuple[dict, dict]:
+                    env: dict | None = None, cache: str | None = None) -> tuple[dict, dict]:
     """``in_fresh_process`` twice with one new, empty ``CASFLEX_CACHE`` (and the variables ``env``): the first
-    process builds every compiled function (cold), the second finds them on disk (cached). Their JSON answers."""
-    with tempfile.TemporaryDirectory(prefix="casflex-bench-cache-") as cache:
-        env = dict(os.environ, **(env or {}), CASFLEX_CACHE=cache)
+    process builds every compiled function (cold), the second finds them on disk (cached). Their JSON answers.
+    ``cache``: that directory instead of a new one (kept; cold as long as it holds nothing the first process builds,
+    e.g. one cache for several meshes, each with its own libraries, which a later process then finds)."""
+    with tempfile.TemporaryDirectory(prefix="casflex-bench-cache-") as new:
+        env = dict(os.environ, **(env or {}), CASFLEX_CACHE=cache or new)
         return in_fresh_process(script, cold, env, timeout), in_fresh_process(script, cached, env, timeout)
 
 

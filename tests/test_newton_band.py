@@ -13,6 +13,7 @@ import casflex
 from casflex.integrators.hht import HHT
 from casflex.integrators.newton_band import _node_blocks as node_blocks
 from casflex.integrators.newton_band import _node_dofs as node_dofs
+from casflex.integrators.newton_band import _shared_entries as shared_entries
 from casflex.model.assembly import gather, scatter, scatter_add
 from casflex.simulate.run import initial_state
 
@@ -137,3 +138,39 @@ def test_a_step_ends_converged_exactly_when_its_residual_is_within_tol_or_the_ro
         assert bool(done) == (float(res) <= limit), (s, float(res), limit)
         seen.append((float(res) > integ.tol, bool(done)))
     assert (True, True) in seen and (True, False) in seen  # the floor's branch taken, and a step refused
+
+
+@pytest.mark.parametrize("stiffer", [1.0, 2.0])
+def test_kernel_constants_baked_only_where_every_element_has_them(stiffer):
+    """The mapped kernels take a property row (and gravity) as constants written into their code only where
+    every element of the group has the same number (newton_band._shared_entries): twobar's E, A, I, density
+    and rotary inertia, not the element lengths and angles (which differ at round-off along the mesh); with
+    one bar stiffer, E goes too. The step on the band then agrees with the flat step (numeric properties per
+    element) to round-off: a constant taken from the first element for all of them would move the soft bar."""
+    scene = casflex.load_scene("twobar")
+    beams = tuple(dataclasses.replace(b, elements=2, E=b.E * (stiffer if i == 0 else 1.0))
+                  for i, b in enumerate(scene.beams))
+    model = casflex.assemble(dataclasses.replace(scene, beams=beams))
+    beam = next(g for g in model.groups if g.kind == "beam")
+    known, values = shared_entries(beam.props(ca.MX.sym("p", model.n_p)), beam.n)
+    assert known.tolist() == [False, False, False, stiffer == 1.0, True, True, True, True]
+    assert values[3] == (scene.beams[0].E if stiffer == 1.0 else values[3])
+    assert shared_entries(None, beam.n, model.gravity)[0].all()  # twobar's gravity is no parameter
+    p, n = model.params(None), model.n_dof
+    states = []
+    for expand in (False, True):
+        integ = HHT(model, alpha=-0.1, expand=expand)
+        x0 = initial_state(integ, p)
+        d = np.array(integ.scale(x0[:n], x0[n:2 * n], p, 1e-3)).ravel()
+        X, res = integ.trajectory(50)(x0, 0.0, p, 1e-3, d)
+        assert float(np.max(np.array(res))) <= 1e-12
+        states.append(np.array(X)[:n])
+    # 1e-13 m: both solve each step to tol = 1e-12 of the length scale (0.1 m), round-off apart
+    np.testing.assert_allclose(states[0], states[1], rtol=0, atol=1e-13)
+
+
+def test_gravity_with_a_parameter_stays_an_input():
+    """Gravity that depends on the parameters is not a constant of the kernels (it changes with p)."""
+    p = ca.SX.sym("p", 2)
+    assert shared_entries(None, 4, ca.Function("gravity", [p], [ca.vertcat(0, -p[1])])) is None
+    assert shared_entries(ca.MX.sym("props", 8, 4), 4) is None  # a table with parameters in it

@@ -214,7 +214,7 @@ def simulate(
     status = "success"
     done = 0
     stepper = _Stepper(integ, lib, pv, dt, d, t0, X[0])
-    t_run = time.perf_counter()
+    t_run, cpu_run = time.perf_counter(), time.process_time()
     try:
         while done < n_steps:
             good, failure = stepper.advance(X, iters, done, n_steps - done)
@@ -229,7 +229,7 @@ def simulate(
         failure = f"interrupted by the user at t = {t0 + done * dt:.6g} s (step {done} of {n_steps})"
         if report:
             sys.stderr.write("\n")
-    run_s = time.perf_counter() - t_run
+    run_s, run_cpu_s = time.perf_counter() - t_run, time.process_time() - cpu_run
     if failure and status == "success":
         status = "newton_failed"
         if report:
@@ -243,7 +243,8 @@ def simulate(
     traj = _trajectory(integ, X[:done + 1], Y, iters[:done], dt, pv, status, failure, t0, {
         "scene": model.scene.name, "alpha": alpha, "dt": dt, "t0": t0, "t_end": t_end, "inertia": model.inertia,
         "compiled": bool(compiled), "tol": tol, "max_iter": max_iter, "newton": newton,
-        "stats": {"steps": done, "build_s": build_s, "run_s": run_s, "jacobian_refreshes": stepper.refreshes,
+        "stats": {"steps": done, "build_s": build_s, "run_s": run_s, "run_cpu_s": run_cpu_s,
+                  "jacobian_refreshes": stepper.refreshes,
                   "compile_s": lib.build_s if lib is not None else 0.0,
                   "compile_cached": lib.cached if lib is not None else None,
                   "newton_iterations": int(iters[:done].sum()) if not compiled else None},
