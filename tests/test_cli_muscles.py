@@ -65,6 +65,9 @@ def test_bad_muscles_and_actuators_are_refused_naming_them(tmp_path, capsys):
                                                        "<coordinate>knee_bend_r</coordinate>"))
     _refused(tmp_path, capsys, [str(MODEL), *TRIAL, "--actuators", str(acts)],
              "coordinate: no coordinate 'knee_bend_r' in the model")
+    acts.write_text(Path(RESERVES).read_text().replace('name="knee_angle_l_reserve"', 'name="soleus_r"'))
+    _refused(tmp_path, capsys, [str(MODEL), *TRIAL, "--actuators", str(acts)],  # its control was the muscle's column
+             "CoordinateActuator 'soleus_r': a muscle of the model has that name")
     text = MODEL.read_text()
     at = text.index("<socket_parent_frame>/bodyset/tibia_r</socket_parent_frame>", text.index("<PathPointSet"))
     missing = tmp_path / "missing.osim"  # a path point's body, not a joint's

@@ -88,7 +88,7 @@ class TrialMuscles:
         self.root_coordinates = tuple(c for c in coords if c.of.startswith(root))
         self.joint_coordinates = tuple(c for c in coords if not c.of.startswith(root))
         self.notes = check_actuators(tuple(actuators), self.scene, source,
-                                     bodies=set(osim.frames) - {"ground"})
+                                     bodies=set(osim.frames) - {"ground"}, muscles=[m.name for m in self.muscles])
         self._split_actuators(tuple(actuators), source)
         if not self.residuals:
             self.notes.append(f"no residual actuator on the root ({tree.root}): its loads (the inverse dynamics' "
