@@ -86,3 +86,27 @@ def test_the_figures_are_written(run, tmp_path):
     _, res, trial, out = run
     paths = save_muscle_figures(muscle_result(trial, out, res.z), tmp_path)
     assert [p.name for p in paths] == list(FIGURES) and all(p.stat().st_size > 10_000 for p in paths)
+
+
+@pytest.mark.parametrize(("change", "said"), [
+    # the tendon longer than the path: each gave exit 0, the soleus carrying nothing and the reserves 31 % of the
+    # ankle's moment in its place
+    ({"tendon_slack_length": 2.0}, r"at full activation it pulls at most 0 % of its max isometric force over the "
+                                   r"trial \(its path 0.3\d\d-0.3\d\d m long, shorter than its tendon slack length 2 m "
+                                   r"at every frame\)"),
+    ({"optimal_fiber_length": 5.0}, r"at full activation it pulls at most 0 % .* its fibre 0.425-0.425 optimal "
+                                    r"fibre lengths \(5 m\)\)"),
+    # a fibre of 1 um stretched to 6e4 optimal lengths: refused as "passive: not finite at (0, 33)", naming nothing
+    ({"optimal_fiber_length": 1e-6}, r"its passive force is not finite at t = 0.2 s .* its fibre 2.64e\+04-6.8e\+04 "
+                                     r"optimal fibre lengths \(1e-06 m\)\)"),
+])
+def test_a_muscle_that_cannot_pull_in_the_trial_is_refused_naming_it(run, change, said):
+    import dataclasses
+
+    osim, res, trial, _ = run
+    muscles = tuple(dataclasses.replace(m, **change) if m.name == "soleus_r" else m for m in osim.muscles)
+    weak = TrialMuscles(dataclasses.replace(osim, muscles=muscles), trial.tree, res.t, res.plates,
+                        reserve_actuators(osim.scene, trial.tree.root, 1.0), joints=JOINTS)
+    with pytest.raises(ValueError, match=rf"^{MODEL}: ForceSet: Thelen2003Muscle 'soleus_r': {said}: check its "
+                                         "tendon_slack_length, optimal_fiber_length and path points$"):
+        weak.solve(res.z, res.zd, res.zdd)

@@ -36,6 +36,10 @@ from casflex.scene.from_osim import node_name
 
 __all__ = ["FrameOutputs", "TrialMuscles", "muscle_result", "reserve_actuators"]
 
+#: The least a muscle must pull at full activation, at its best frame of the trial, as a fraction of its max
+#: isometric force (:meth:`TrialMuscles._check_capacity`); a real muscle pulls 0.9-1.3 there.
+WEAKEST = 0.01
+
 
 @dataclass(frozen=True, eq=False)
 class FrameOutputs:
@@ -181,6 +185,7 @@ class TrialMuscles:
         arms = geo["moment_arms"][:, :, cols]
         moments = np.column_stack([loads[lab_name(c)] for c in self.joint_coordinates])
         active0, passive0 = self.capacity(geo["lengths"], geo["speeds"])
+        self._check_capacity(active0, passive0, geo, options)
         capacity = [self._capacity_of(v, geo, active0, passive0) for v in variants]
         reserves = np.array([self.reserves[c.name].optimal_force if c.name in self.reserves else 0.0
                              for c in self.joint_coordinates])
@@ -204,6 +209,36 @@ class TrialMuscles:
             out.append(FrameOutputs(s, residuals, self._reactions(loads, geometry, s.forces), geo["lengths"],
                                     geo["speeds"], arms, active, passive, moments))
         return out
+
+    def _check_capacity(self, active: np.ndarray, passive: np.ndarray, geo, options: StaticOptimization) -> None:
+        """ValueError naming the muscle whose force at full activation or passive force is not finite at a frame
+        (a fibre stretched to 1e5 optimal lengths: an optimal fibre length or a path point off by orders), or,
+        with the force-length-velocity curves, that pulls with less than :data:`WEAKEST` of its max isometric force
+        at every frame of the trial (a tendon slack length longer than the path, an optimal fibre length ten times
+        too long, a path point on the wrong body): it could carry nothing, and static optimization would hand its
+        share to the others and the reserves without a word. The models' own muscles pull 0.9-1.3 times their max
+        isometric force at their best frame over a run or a walk (Hamner's 92, Rajagopal's 80)."""
+        for i, m in enumerate(self.muscles):
+            bad = ~(np.isfinite(active[:, i]) & np.isfinite(passive[:, i]))
+            best = np.max(active[:, i], initial=0.0, where=~bad) / m.max_isometric_force
+            if not bad.any() and (best >= WEAKEST or not options.force_length_velocity):
+                continue
+            r = rigid_tendon(m, geo["lengths"][:, i], geo["speeds"][:, i])
+            lm, lt = r.norm_fiber_length, geo["lengths"][:, i]
+            where = f"its path {np.nanmin(lt):.3g}-{np.nanmax(lt):.3g} m long, "
+            where += (f"shorter than its tendon slack length {m.tendon_slack_length:g} m at every frame"
+                      if np.nanmax(lt) <= m.tendon_slack_length else
+                      f"its tendon at its slack length {m.tendon_slack_length:g} m, its fibre {np.nanmin(lm):.3g}-"
+                      f"{np.nanmax(lm):.3g} optimal fibre lengths ({m.optimal_fiber_length:g} m)")
+            head = f"{self.osim.source}: ForceSet: {m.kind} {m.name!r}" if self.osim.source else f"muscle {m.name!r}"
+            if bad.any():
+                k = int(np.argmax(bad))
+                why = f"its {'active' if not np.isfinite(active[k, i]) else 'passive'} force is not finite at t = " \
+                      f"{self.t[k]:g} s"
+            else:
+                why = f"at full activation it pulls at most {100 * best:.2g} % of its max isometric force over the trial"
+            raise ValueError(f"{head}: {why} ({where}): check its tendon_slack_length, optimal_fiber_length and path "
+                             "points")
 
     def _capacity_of(self, muscles, geo, active0, passive0) -> tuple[np.ndarray, np.ndarray]:
         """(active, passive) (k, n_m) of ``muscles``: the model's (``active0``, ``passive0``) but in the columns
