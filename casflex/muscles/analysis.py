@@ -236,7 +236,8 @@ class TrialMuscles:
                 why = f"its {'active' if not np.isfinite(active[k, i]) else 'passive'} force is not finite at t = " \
                       f"{self.t[k]:g} s"
             else:
-                why = f"at full activation it pulls at most {100 * best:.2g} % of its max isometric force over the trial"
+                why = (f"at full activation it pulls at most {100 * best:.2g} % of its max isometric force over the "
+                       "trial")
             raise ValueError(f"{head}: {why} ({where}): check its tendon_slack_length, optimal_fiber_length and path "
                              "points")
 
