@@ -86,6 +86,9 @@ class TrialMuscles:
         unknown = [j for j in self.joints if j not in hinges]
         if unknown:
             raise ValueError(f"joints: no hinge {unknown[0]!r} in the scene; its hinges are {hinges}")
+        twice = [j for i, j in enumerate(self.joints) if j in self.joints[:i]]
+        if twice:
+            raise ValueError(f"joints: {twice[0]!r} given twice; give each joint once")
         self.paths = MusclePaths(tree, self.muscles)
         coords = list(self.scene.coordinates)
         root = f"{tree.root}."
