@@ -110,3 +110,23 @@ def test_a_muscle_that_cannot_pull_in_the_trial_is_refused_naming_it(run, change
     with pytest.raises(ValueError, match=rf"^{MODEL}: ForceSet: Thelen2003Muscle 'soleus_r': {said}: check its "
                                          "tendon_slack_length, optimal_fiber_length and path points$"):
         weak.solve(res.z, res.zd, res.zdd)
+
+
+def test_a_residual_whose_bounds_the_roots_balance_exceeds_is_refused(run):
+    """The residuals carry the root's loads whole (no muscle reaches it): FX bounded to +-10 N wrote -71.6 N and
+    more at 56 of the 61 frames, outside its bounds, with exit 0; wide bounds change nothing."""
+    import dataclasses
+
+    osim, res, trial, out = run
+    acts = reserve_actuators(osim.scene, trial.tree.root, 1.0)
+    for bound, refused in ((10.0, True), (1e4, False)):
+        bounded = tuple(dataclasses.replace(a, min_control=-bound, max_control=bound) if a.name == "FX" else a
+                        for a in acts)
+        tm = TrialMuscles(osim, trial.tree, res.t, res.plates, bounded, joints=JOINTS, source="reserves.xml")
+        if refused:
+            said = (r"^reserves.xml: PointActuator 'FX': the root's balance \(the inverse dynamics' residual\) "
+                    r"needs a control of -?\d+\.?\d* at t = [\d.]+ s, outside its bounds \[-10, 10\] \(\d+ of 61 frames\)")
+            with pytest.raises(ValueError, match=said):
+                tm.solve(res.z, res.zd, res.zdd)
+        else:
+            assert np.array_equal(tm.solve(res.z, res.zd, res.zdd).residuals, out.residuals)

@@ -74,6 +74,7 @@ class TrialMuscles:
                  optimization: StaticOptimization | None = None, reaction: JointReaction | None = None,
                  joints: tuple[str, ...] = (), source: str = "actuators") -> None:
         self.osim, self.tree, self.t, self.plates = osim, tree, np.asarray(t, dtype=float), tuple(plates)
+        self.source = source
         self.scene = tree.model.scene
         self.muscles = tuple(osim.muscles)
         if not self.muscles:
@@ -264,7 +265,17 @@ class TrialMuscles:
         rows = [list(self.scene.coordinates).index(c) for c in self.root_coordinates]
         A = actuator_columns(self.tree, self.scene, tuple(self.residuals), self.osim.frames, z)[:, rows, :]
         tau = np.column_stack([loads[lab_name(c)] for c in self.root_coordinates])
-        return np.stack([np.linalg.lstsq(A[i], tau[i], rcond=None)[0] for i in range(k)])
+        u = np.stack([np.linalg.lstsq(A[i], tau[i], rcond=None)[0] for i in range(k)])
+        for j, a in enumerate(self.residuals):  # no muscle reaches the root: its loads are theirs, bounds or not
+            out = (u[:, j] < a.min_control - 1e-9 * (1 + abs(a.min_control))) | \
+                  (u[:, j] > a.max_control + 1e-9 * (1 + abs(a.max_control)))
+            if out.any():
+                i = int(np.argmax(out))
+                raise ValueError(f"{self.source}: {a.kind} {a.name!r}: the root's balance (the inverse dynamics' "
+                                 f"residual) needs a control of {u[i, j]:.4g} at t = {self.t[i]:g} s, outside its "
+                                 f"bounds [{a.min_control:g}, {a.max_control:g}] ({int(out.sum())} of {k} frames): "
+                                 "widen min_control and max_control (the residuals carry the root's loads whole)")
+        return u
 
     def _reaction_geometry(self, z: np.ndarray) -> dict[str, tuple]:
         """joint -> (unit (k, 3, n_m), lever (k, 1, 2), child and parent angles (k, 1), offset (k, 1, 2) or None):
