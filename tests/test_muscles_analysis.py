@@ -125,7 +125,8 @@ def test_a_residual_whose_bounds_the_roots_balance_exceeds_is_refused(run):
         tm = TrialMuscles(osim, trial.tree, res.t, res.plates, bounded, joints=JOINTS, source="reserves.xml")
         if refused:
             said = (r"^reserves.xml: PointActuator 'FX': the root's balance \(the inverse dynamics' residual\) "
-                    r"needs a control of -?\d+\.?\d* at t = [\d.]+ s, outside its bounds \[-10, 10\] \(\d+ of 61 frames\)")
+                    r"needs a control of -?\d+\.?\d* at t = [\d.]+ s, outside its bounds \[-10, 10\] "
+                    r"\(\d+ of 61 frames\)")
             with pytest.raises(ValueError, match=said):
                 tm.solve(res.z, res.zd, res.zdd)
         else:
