@@ -131,3 +131,15 @@ def test_a_residual_whose_bounds_the_roots_balance_exceeds_is_refused(run):
                 tm.solve(res.z, res.zd, res.zdd)
         else:
             assert np.array_equal(tm.solve(res.z, res.zd, res.zdd).residuals, out.residuals)
+
+
+def test_a_bad_curve_property_is_refused_naming_the_model_before_the_work(run):
+    """Thelen's FmaxTendonStrain of 0: refused once static optimization had begun, after the marker fit and the
+    inverse dynamics, without the file's name; now when the trial's muscles are made."""
+    import dataclasses
+
+    osim, res, trial, _ = run
+    muscles = tuple(dataclasses.replace(m, properties=(("FmaxTendonStrain", 0.0), *m.properties))
+                    if m.name == "soleus_r" else m for m in osim.muscles)
+    with pytest.raises(ValueError, match=rf"^{MODEL}: muscle 'soleus_r'.FmaxTendonStrain: must be > 0, got 0$"):
+        TrialMuscles(dataclasses.replace(osim, muscles=muscles), trial.tree, res.t, res.plates)

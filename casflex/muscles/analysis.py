@@ -28,7 +28,7 @@ from casflex.inverse.lab_names import lab_name
 from casflex.inverse.tree import KinematicTree
 from casflex.muscles.actuators import actuator_columns, check_actuators
 from casflex.muscles.compliant import solve_compliant
-from casflex.muscles.curves import rigid_tendon
+from casflex.muscles.curves import muscle_curves, rigid_tendon
 from casflex.muscles.path import MusclePaths
 from casflex.muscles.reaction import JointReaction, JointReactions, joint_reactions
 from casflex.muscles.static_optimization import StaticOptimization, StaticOptimizationResult, solve_static_optimization
@@ -80,6 +80,11 @@ class TrialMuscles:
         if not self.muscles:
             raise ValueError("the model has no muscle casflex computes (Millard2012EquilibriumMuscle, "
                              "Thelen2003Muscle, DeGrooteFregly2016Muscle)")
+        for m in self.muscles:  # a curve's bad property refused now, naming the model, not after the inverse
+            try:
+                muscle_curves(m)
+            except ValueError as exc:
+                raise ValueError(f"{osim.source}: {exc}" if osim.source else str(exc)) from None
         self.optimization = optimization or StaticOptimization()
         self.reaction = reaction or JointReaction()
         hinges = list(tree.hinges)
