@@ -143,3 +143,26 @@ def test_a_bad_curve_property_is_refused_naming_the_model_before_the_work(run):
                     if m.name == "soleus_r" else m for m in osim.muscles)
     with pytest.raises(ValueError, match=rf"^{MODEL}: muscle 'soleus_r'.FmaxTendonStrain: must be > 0, got 0$"):
         TrialMuscles(dataclasses.replace(osim, muscles=muscles), trial.tree, res.t, res.plates)
+
+
+@pytest.mark.parametrize(("prop", "kind", "said"), [
+    # OpenSim's SO bounds each muscle by its own controls: casflex gave [0.01, 1] to all, the file's 0.5 ignored
+    (("max_control", 0.5), None, r"Thelen2003Muscle 'soleus_r'.max_control: 0.5, where static optimization bounds "
+                                 r"every muscle's activation by \[0.01, 1\]"),
+    (("min_control", 0.05), None, r"'soleus_r'.min_control: 0.05, where static optimization bounds"),
+    # OpenSim refuses a Millard muscle's minimum_activation below 0; casflex ignored it
+    (("minimum_activation", -0.5), "Millard2012EquilibriumMuscle",
+     r"Millard2012EquilibriumMuscle 'soleus_r'.minimum_activation: must be in \[0, 1\)"),
+])
+def test_a_muscles_own_activation_bounds_are_refused_where_static_optimization_cannot_honour_them(run, prop, kind,
+                                                                                                  said):
+    import dataclasses
+
+    osim, res, trial, _ = run
+    muscles = tuple(dataclasses.replace(m, properties=(prop, *m.properties), kind=kind or m.kind)
+                    if m.name == "soleus_r" else m for m in osim.muscles)
+    with pytest.raises(ValueError, match=rf"^{MODEL}: ForceSet: .*{said}"):
+        TrialMuscles(dataclasses.replace(osim, muscles=muscles), trial.tree, res.t, res.plates)
+    same = tuple(dataclasses.replace(m, properties=(("min_control", 0.01), ("max_control", 1.0), *m.properties))
+                 if m.name == "soleus_r" else m for m in osim.muscles)
+    TrialMuscles(dataclasses.replace(osim, muscles=same), trial.tree, res.t, res.plates)  # the bounds given: taken

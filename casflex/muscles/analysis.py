@@ -86,6 +86,7 @@ class TrialMuscles:
             except ValueError as exc:
                 raise ValueError(f"{osim.source}: {exc}" if osim.source else str(exc)) from None
         self.optimization = optimization or StaticOptimization()
+        self._check_controls()
         self.reaction = reaction or JointReaction()
         hinges = list(tree.hinges)
         self.joints = tuple(joints) or tuple(hinges)
@@ -108,6 +109,25 @@ class TrialMuscles:
                               "residuals) are not balanced by static optimization; give them as PointActuator and "
                               "TorqueActuator (e.g. OpenSim's FX, FY, MZ) or --reserves")
         self._slide = self._slides()
+
+    def _check_controls(self) -> None:
+        """ValueError naming the muscle whose file bounds its activation otherwise than static optimization's
+        ``activation_bounds``, which casflex applies to every muscle: its ``min_control`` or ``max_control`` (OpenSim's
+        SO bounds each muscle by its own; they were ignored), or a Millard muscle's ``minimum_activation`` outside
+        [0, 1) (ignored too: OpenSim refuses it below 0)."""
+        lo, hi = self.optimization.activation_bounds
+        head = f"{self.osim.source}: " if self.osim.source else ""
+        for m in self.muscles:
+            for tag, bound in (("min_control", lo), ("max_control", hi)):
+                v = m.property(tag, bound)
+                if v != bound:
+                    raise ValueError(f"{head}ForceSet: {m.kind} {m.name!r}.{tag}: {v:g}, where static optimization "
+                                     f"bounds every muscle's activation by [{lo:g}, {hi:g}] (--activation-bounds, "
+                                     "options.muscles.activation_bounds): give those bounds, or remove the muscle's")
+            a = m.property("minimum_activation", 0.0)
+            if m.kind == "Millard2012EquilibriumMuscle" and not 0.0 <= a < 1.0:
+                raise ValueError(f"{head}ForceSet: {m.kind} {m.name!r}.minimum_activation: must be in [0, 1) (OpenSim "
+                                 f"refuses it below 0; at 1 the muscle could never relax), got {a:g}")
 
     def _split_actuators(self, actuators, source: str) -> None:
         """The reserves (a CoordinateActuator on a joint's coordinate: static optimization's) and the residuals
