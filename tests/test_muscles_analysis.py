@@ -166,3 +166,16 @@ def test_a_muscles_own_activation_bounds_are_refused_where_static_optimization_c
     same = tuple(dataclasses.replace(m, properties=(("min_control", 0.01), ("max_control", 1.0), *m.properties))
                  if m.name == "soleus_r" else m for m in osim.muscles)
     TrialMuscles(dataclasses.replace(osim, muscles=same), trial.tree, res.t, res.plates)  # the bounds given: taken
+
+
+def test_residuals_that_carry_the_body_are_said(run):
+    """The run without its plates: the residual FY carries the body's weight (1.4 BW RMS) and the hip's contact
+    force peaks at half its value with them, exit 0 without a word; with the plates, FY carries 0.19 BW (RMS)."""
+    from casflex.muscles.analysis import residual_warnings
+
+    osim, res, trial, out = run
+    assert residual_warnings(trial, out) == []
+    bare = TrialMuscles(osim, trial.tree, res.t, (), reserve_actuators(osim.scene, trial.tree.root, 1.0),
+                        joints=JOINTS)
+    (line,) = residual_warnings(bare, bare.solve(res.z, res.zd, res.zdd))
+    assert line.startswith("residual 'FY' carries 1.") and "the ground reactions are missing" in line, line

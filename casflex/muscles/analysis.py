@@ -34,11 +34,15 @@ from casflex.muscles.reaction import JointReaction, JointReactions, joint_reacti
 from casflex.muscles.static_optimization import StaticOptimization, StaticOptimizationResult, solve_static_optimization
 from casflex.scene.from_osim import node_name
 
-__all__ = ["FrameOutputs", "TrialMuscles", "muscle_result", "reserve_actuators"]
+__all__ = ["FrameOutputs", "TrialMuscles", "muscle_result", "reserve_actuators", "residual_warnings"]
 
 #: The least a muscle must pull at full activation, at its best frame of the trial, as a fraction of its max
 #: isometric force (:meth:`TrialMuscles._check_capacity`); a real muscle pulls 0.9-1.3 there.
 WEAKEST = 0.01
+#: The residual force (RMS over the trial, in body weights) beyond which the root's balance is said: Hamner's run
+#: with its plates 0.19 BW (FY), without them 1.4 BW (the residuals carry the body's weight and the muscles carry
+#: what the ground's push would have made them carry: the hip's peak 4.8 BW for 10.4).
+RESIDUAL_WARNING = 0.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -395,6 +399,26 @@ def reserve_actuators(scene, root: str, optimal_force: float) -> tuple:
             Actuator("FY", "PointActuator", optimal_force, body=root, direction=(0.0, 1.0, 0.0), force_is_global=True),
             Actuator("MZ", "TorqueActuator", optimal_force, body=root, other="ground"),
             *(Actuator(f"{c.name}_reserve", "CoordinateActuator", optimal_force, coordinate=c.name) for c in coords))
+
+
+def residual_warnings(trial: TrialMuscles, out: FrameOutputs) -> list[str]:
+    """The lines that say a residual force on the root carries more than :data:`RESIDUAL_WARNING` body weights RMS
+    over the trial (its ground reactions missing, on the wrong body or scaled wrong): the muscles then carry another
+    motion's loads, whatever their own numbers look like."""
+    from casflex.lab.plate_checks import scene_mass
+
+    w = scene_mass(trial.scene) * float(np.hypot(*trial.scene.gravity))
+    lines = []
+    for j, a in enumerate(trial.residuals):
+        if a.kind != "PointActuator" or not w > 0:
+            continue
+        f = out.residuals[:, j] * a.optimal_force
+        rms = float(np.sqrt(np.mean(f ** 2)))
+        if rms > RESIDUAL_WARNING * w:
+            lines.append(f"residual {a.name!r} carries {rms / w:.2f} body weights RMS over the trial (at most "
+                         f"{np.abs(f).max() / w:.2f}; a trial with its ground reactions, a few tenths): the ground "
+                         "reactions are missing, on another body or in other units; the muscles carry another motion")
+    return lines
 
 
 def _turn(angle: np.ndarray, v: np.ndarray) -> np.ndarray:
