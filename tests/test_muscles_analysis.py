@@ -179,3 +179,17 @@ def test_residuals_that_carry_the_body_are_said(run):
                         joints=JOINTS)
     (line,) = residual_warnings(bare, bare.solve(res.z, res.zd, res.zdd))
     assert line.startswith("residual 'FY' carries 1.") and "the ground reactions are missing" in line, line
+
+
+def test_a_muscle_that_crosses_no_coordinate_of_the_plane_is_said(run):
+    """Both its ends on one segment (or only on coordinates the plane holds still): it carries nothing and its
+    activation stays at the lower bound; exit 0 without a word before. The run's own muscles all cross one."""
+    import dataclasses
+
+    _, res, trial, out = run
+    assert not any("cross no coordinate" in line for line in muscle_result(trial, out, res.z).report)
+    i = [m.name for m in trial.muscles].index("soleus_r")
+    arms = out.arms.copy()
+    arms[:, i, :] = 0.0
+    report = muscle_result(trial, dataclasses.replace(out, arms=arms), res.z).report
+    assert "muscles soleus_r cross no coordinate of the plane (moment arms 0 at every frame)" in report[-1]

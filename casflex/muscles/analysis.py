@@ -463,6 +463,10 @@ def muscle_result(trial: TrialMuscles, out: FrameOutputs, z: np.ndarray, report=
         for suffix, v in zip(("fx", "fy", "fz", "mx", "my", "mz", "px", "py", "pz"), values, strict=True):
             columns[f"{h}_on_{on}_in_{frame}_{suffix}"] = v
         resultants[h] = np.hypot(load[:, 0], load[:, 1]) * (trial.reaction.body_weight or 1.0)
+    idle = [m.name for i, m in enumerate(trial.muscles) if np.abs(out.arms[:, i, :]).max() < 1e-9]
+    if idle:  # both ends on one segment, or crossing only coordinates the plane holds still
+        report = (*report, f"muscles {', '.join(idle)} cross no coordinate of the plane (moment arms 0 at every "
+                           "frame): they carry no moment, their activations stay at the lower bound")
     g = float(np.hypot(*trial.scene.gravity))
     empty = np.zeros((k, 0))
     return MuscleResult(t=trial.t, muscles=tuple(m.name for m in trial.muscles), activations=out.so.activations,
