@@ -54,6 +54,11 @@ def test_bad_options_are_refused_naming_them(tmp_path, capsys):
     _refused(tmp_path, capsys, [str(MODEL), *TRIAL, "--exponent", "0.5"], "--exponent: expected a number >= 1")
     _refused(tmp_path, capsys, [str(MODEL), *TRIAL, "--activation-bounds", "1:0.5"], "--activation-bounds: ")
     _refused(tmp_path, capsys, [str(MODEL), *TRIAL, "--joints", "hip_x"], "joints: no hinge 'hip_x'")
+    _refused(tmp_path, capsys, [str(MODEL), *TRIAL, "--joints", "hip_r,knee_r,hip_r"], "joints: 'hip_r' given twice")
+    _refused(tmp_path, capsys, [str(MODEL), *TRIAL, "--activation-bounds", "0.01:5"],  # activations to 2.88, exit 0
+             "--activation-bounds: expected 0 <= lower < upper <= 1")
+    _refused(tmp_path, capsys, [str(MODEL), *TRIAL, "--exponent", "20"],  # IPOPT stopped: a traceback
+             "--exponent: expected a number >= 1 and at most 10")
     _refused(tmp_path, capsys, ["hamner_leg", *TRIAL], "model: expected an OpenSim model (.osim)")
 
 
@@ -65,6 +70,9 @@ def test_bad_muscles_and_actuators_are_refused_naming_them(tmp_path, capsys):
                                                        "<coordinate>knee_bend_r</coordinate>"))
     _refused(tmp_path, capsys, [str(MODEL), *TRIAL, "--actuators", str(acts)],
              "coordinate: no coordinate 'knee_bend_r' in the model")
+    acts.write_text(Path(RESERVES).read_text().replace('name="knee_angle_l_reserve"', 'name="soleus_r"'))
+    _refused(tmp_path, capsys, [str(MODEL), *TRIAL, "--actuators", str(acts)],  # its control was the muscle's column
+             "CoordinateActuator 'soleus_r': a muscle of the model has that name")
     text = MODEL.read_text()
     at = text.index("<socket_parent_frame>/bodyset/tibia_r</socket_parent_frame>", text.index("<PathPointSet"))
     missing = tmp_path / "missing.osim"  # a path point's body, not a joint's
@@ -133,6 +141,8 @@ def test_bad_band_options_are_refused(tmp_path, capsys):
     _refused(tmp_path, capsys, [str(MODEL), *TRIAL, "--muscle-uncertainty", "tendon_slack_length=60%"],
              "--muscle-uncertainty: tendon_slack_length: expected a relative standard deviation in [0, 0.5)")
     _refused(tmp_path, capsys, [str(MODEL), *TRIAL, "--criteria", "2"], "--criteria: expected exponents >= 1 other")
+    _refused(tmp_path, capsys, [str(MODEL), *TRIAL, "--criteria", "20"],  # the spread's solve stopped, after the work
+             "--criteria: expected exponents >= 1 other than --exponent (2) and at most 10, got 20")
 
 
 def test_the_command_imports_neither_the_simulator_nor_identification_nor_plotting(tmp_path):

@@ -89,6 +89,26 @@ def test_bad_coordinate_tables_are_refused_in_one_line(fitted, tmp_path):
         inverse_dynamics(LEG, Trial(coordinates=good, tasks={"R.Heel": 1.0}))
 
 
+@pytest.mark.parametrize("no_rate", [False, True])
+def test_times_in_milliseconds_are_refused_naming_the_file(fitted, tmp_path, no_rate):
+    """Times in ms (OpenSim writes s): the rate the frames' slope gives rounds to 0 Hz, which raised
+    ZeroDivisionError (a traceback); that division mended, the trial ran unfiltered as 1000 s of motion and gave
+    exit 0 with accelerations a million times too small. ``no_rate``: DataRate=0 in the header, the same division."""
+    good = _table(fitted, tmp_path)
+    lines = good.read_text().splitlines()
+    head = lines.index("endheader") + 2
+    lines[head:] = ["\t".join([f"{float(row.split(chr(9))[0]) * 1e3:.6g}", *row.split("\t")[1:]])
+                    for row in lines[head:]]
+    if no_rate:
+        lines.insert(1, "DataRate=0")
+    bad = tmp_path / "ms.mot"
+    bad.write_text("\n".join(lines) + "\n")
+    for cutoff in (None, 6.0):
+        with pytest.raises(ValueError, match=r"the frames are 16.67 s apart \(0.06 Hz; the trial runs \d+ s\): "
+                                             r"times in ms, not s\?") as err:
+            inverse_dynamics(LEG, Trial(coordinates=bad, grf=GRF, plates=PLATES), filter=Filter(cutoff=cutoff))
+        assert str(err.value).startswith(f"{bad}: ") and "\n" not in str(err.value)
+
 def test_the_command_takes_coordinates_and_refuses_both_or_neither(fitted, tmp_path):
     import subprocess
     import sys

@@ -118,6 +118,19 @@ def test_an_actuator_on_a_missing_coordinate_or_body_is_refused(leg, tmp_path):
     assert "holds still" in check_actuators(acts, osim.scene, "acts.xml", model_coordinates={"subtalar_angle_r"})[0]
 
 
+def test_an_actuator_named_as_a_muscle_or_another_actuator_is_refused(leg, tmp_path):
+    """The results hold one column per name: a reserve named as a muscle wrote its control (up to 21.8) in the
+    muscle's activation column, with exit 0; two actuators of one name (the model's and the file's) lost one."""
+    osim, _ = leg
+    acts = read_actuators(_write(tmp_path, "<CoordinateActuator name='soleus_r'><coordinate>hip_flexion_r"
+                                           "</coordinate></CoordinateActuator>"))
+    check_actuators(acts, osim.scene, "acts.xml")  # the muscles' names not given: nothing to compare
+    with pytest.raises(ValueError, match=r"^acts.xml: CoordinateActuator 'soleus_r': a muscle of the model has that "
+                                         r"name; give the actuator its own"):
+        check_actuators(acts, osim.scene, "acts.xml", muscles=["hamstrings_r", "soleus_r"])
+    with pytest.raises(ValueError, match=r"^acts.xml: two actuators named 'soleus_r' \(the model's and the file's"):
+        check_actuators(acts + acts, osim.scene, "acts.xml")
+
 def test_written_actuators_read_back_as_they_were(tmp_path):
     """write_actuators (a study's reserves) writes what read_actuators reads back field for field: the pipeline's
     file through both, and infinite control bounds."""

@@ -86,3 +86,110 @@ def test_the_figures_are_written(run, tmp_path):
     _, res, trial, out = run
     paths = save_muscle_figures(muscle_result(trial, out, res.z), tmp_path)
     assert [p.name for p in paths] == list(FIGURES) and all(p.stat().st_size > 10_000 for p in paths)
+
+
+@pytest.mark.parametrize(("change", "said"), [
+    # the tendon longer than the path: each gave exit 0, the soleus carrying nothing and the reserves 31 % of the
+    # ankle's moment in its place
+    ({"tendon_slack_length": 2.0}, r"at full activation it pulls at most 0 % of its max isometric force over the "
+                                   r"trial \(its path 0.3\d\d-0.3\d\d m long, shorter than its tendon slack length 2 m "
+                                   r"at every frame\)"),
+    ({"optimal_fiber_length": 5.0}, r"at full activation it pulls at most 0 % .* its fibre 0.425-0.425 optimal "
+                                    r"fibre lengths \(5 m\)\)"),
+    # a fibre of 1 um stretched to 6e4 optimal lengths: refused as "passive: not finite at (0, 33)", naming nothing
+    ({"optimal_fiber_length": 1e-6}, r"its passive force is not finite at t = 0.2 s .* its fibre 2.64e\+04-6.8e\+04 "
+                                     r"optimal fibre lengths \(1e-06 m\)\)"),
+])
+def test_a_muscle_that_cannot_pull_in_the_trial_is_refused_naming_it(run, change, said):
+    import dataclasses
+
+    osim, res, trial, _ = run
+    muscles = tuple(dataclasses.replace(m, **change) if m.name == "soleus_r" else m for m in osim.muscles)
+    weak = TrialMuscles(dataclasses.replace(osim, muscles=muscles), trial.tree, res.t, res.plates,
+                        reserve_actuators(osim.scene, trial.tree.root, 1.0), joints=JOINTS)
+    with pytest.raises(ValueError, match=rf"^{MODEL}: ForceSet: Thelen2003Muscle 'soleus_r': {said}: check its "
+                                         "tendon_slack_length, optimal_fiber_length and path points$"):
+        weak.solve(res.z, res.zd, res.zdd)
+
+
+def test_a_residual_whose_bounds_the_roots_balance_exceeds_is_refused(run):
+    """The residuals carry the root's loads whole (no muscle reaches it): FX bounded to +-10 N wrote -71.6 N and
+    more at 56 of the 61 frames, outside its bounds, with exit 0; wide bounds change nothing."""
+    import dataclasses
+
+    osim, res, trial, out = run
+    acts = reserve_actuators(osim.scene, trial.tree.root, 1.0)
+    for bound, refused in ((10.0, True), (1e4, False)):
+        bounded = tuple(dataclasses.replace(a, min_control=-bound, max_control=bound) if a.name == "FX" else a
+                        for a in acts)
+        tm = TrialMuscles(osim, trial.tree, res.t, res.plates, bounded, joints=JOINTS, source="reserves.xml")
+        if refused:
+            said = (r"^reserves.xml: PointActuator 'FX': the root's balance \(the inverse dynamics' residual\) "
+                    r"needs a control of -?\d+\.?\d* at t = [\d.]+ s, outside its bounds \[-10, 10\] "
+                    r"\(\d+ of 61 frames\)")
+            with pytest.raises(ValueError, match=said):
+                tm.solve(res.z, res.zd, res.zdd)
+        else:
+            assert np.array_equal(tm.solve(res.z, res.zd, res.zdd).residuals, out.residuals)
+
+
+def test_a_bad_curve_property_is_refused_naming_the_model_before_the_work(run):
+    """Thelen's FmaxTendonStrain of 0: refused once static optimization had begun, after the marker fit and the
+    inverse dynamics, without the file's name; now when the trial's muscles are made."""
+    import dataclasses
+
+    osim, res, trial, _ = run
+    muscles = tuple(dataclasses.replace(m, properties=(("FmaxTendonStrain", 0.0), *m.properties))
+                    if m.name == "soleus_r" else m for m in osim.muscles)
+    with pytest.raises(ValueError, match=rf"^{MODEL}: muscle 'soleus_r'.FmaxTendonStrain: must be > 0, got 0$"):
+        TrialMuscles(dataclasses.replace(osim, muscles=muscles), trial.tree, res.t, res.plates)
+
+
+@pytest.mark.parametrize(("prop", "kind", "said"), [
+    # OpenSim's SO bounds each muscle by its own controls: casflex gave [0.01, 1] to all, the file's 0.5 ignored
+    (("max_control", 0.5), None, r"Thelen2003Muscle 'soleus_r'.max_control: 0.5, where static optimization bounds "
+                                 r"every muscle's activation by \[0.01, 1\]"),
+    (("min_control", 0.05), None, r"'soleus_r'.min_control: 0.05, where static optimization bounds"),
+    # OpenSim refuses a Millard muscle's minimum_activation below 0; casflex ignored it
+    (("minimum_activation", -0.5), "Millard2012EquilibriumMuscle",
+     r"Millard2012EquilibriumMuscle 'soleus_r'.minimum_activation: must be in \[0, 1\)"),
+])
+def test_a_muscles_own_activation_bounds_are_refused_where_static_optimization_cannot_honour_them(run, prop, kind,
+                                                                                                  said):
+    import dataclasses
+
+    osim, res, trial, _ = run
+    muscles = tuple(dataclasses.replace(m, properties=(prop, *m.properties), kind=kind or m.kind)
+                    if m.name == "soleus_r" else m for m in osim.muscles)
+    with pytest.raises(ValueError, match=rf"^{MODEL}: ForceSet: .*{said}"):
+        TrialMuscles(dataclasses.replace(osim, muscles=muscles), trial.tree, res.t, res.plates)
+    same = tuple(dataclasses.replace(m, properties=(("min_control", 0.01), ("max_control", 1.0), *m.properties))
+                 if m.name == "soleus_r" else m for m in osim.muscles)
+    TrialMuscles(dataclasses.replace(osim, muscles=same), trial.tree, res.t, res.plates)  # the bounds given: taken
+
+
+def test_residuals_that_carry_the_body_are_said(run):
+    """The run without its plates: the residual FY carries the body's weight (1.4 BW RMS) and the hip's contact
+    force peaks at half its value with them, exit 0 without a word; with the plates, FY carries 0.19 BW (RMS)."""
+    from casflex.muscles.analysis import residual_warnings
+
+    osim, res, trial, out = run
+    assert residual_warnings(trial, out) == []
+    bare = TrialMuscles(osim, trial.tree, res.t, (), reserve_actuators(osim.scene, trial.tree.root, 1.0),
+                        joints=JOINTS)
+    (line,) = residual_warnings(bare, bare.solve(res.z, res.zd, res.zdd))
+    assert line.startswith("residual 'FY' carries 1.") and "the ground reactions are missing" in line, line
+
+
+def test_a_muscle_that_crosses_no_coordinate_of_the_plane_is_said(run):
+    """Both its ends on one segment (or only on coordinates the plane holds still): it carries nothing and its
+    activation stays at the lower bound; exit 0 without a word before. The run's own muscles all cross one."""
+    import dataclasses
+
+    _, res, trial, out = run
+    assert not any("cross no coordinate" in line for line in muscle_result(trial, out, res.z).report)
+    i = [m.name for m in trial.muscles].index("soleus_r")
+    arms = out.arms.copy()
+    arms[:, i, :] = 0.0
+    report = muscle_result(trial, dataclasses.replace(out, arms=arms), res.z).report
+    assert "muscles soleus_r cross no coordinate of the plane (moment arms 0 at every frame)" in report[-1]

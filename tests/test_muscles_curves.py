@@ -234,6 +234,9 @@ def _refusal(kind: str, properties, match: str, **common):
      r"\.FiberForceLengthCurve\.stiffness_at_low_force: OpenSim takes .* all together or none"),
     ("Millard2012EquilibriumMuscle", [("TendonForceLengthCurve.strain_at_one_norm_force", 0.0)], {},
      r"\.TendonForceLengthCurve\.strain_at_one_norm_force: must be > 0"),
+    # equal to strain_at_zero_force: the default stiffness 2 / (e1 - e0) raised ZeroDivisionError (a traceback)
+    ("Millard2012EquilibriumMuscle", [("FiberForceLengthCurve.strain_at_one_norm_force", 0.0)], {},
+     r"\.FiberForceLengthCurve\.strain_at_one_norm_force: must be > strain_at_zero_force \(0\), got 0"),
     ("Millard2012EquilibriumMuscle", [("ignore_tendon_compliance", 0.5)], {}, r"\.ignore_tendon_compliance: must be 0"),
     ("Millard2012EquilibriumMuscle", [("maximum_pennation_angle", -0.1)], {}, r"\.maximum_pennation_angle: must be"),
     ("Thelen2003Muscle", [("Flen", 1.0)], {}, r"\.Flen: must be > 1"),

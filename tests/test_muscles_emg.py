@@ -53,6 +53,23 @@ def test_bad_emg_is_refused_naming_the_file_and_column(tmp_path, columns, kwargs
         emg_envelopes(_emg(tmp_path, **kwargs), columns, np.linspace(0.1, 1.2, 67), muscles)
 
 
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_an_emg_gap_is_refused_naming_it(tmp_path, bad):
+    """A NaN gap (a channel lost for 50 ms) or one infinite sample: the filters ran through it and the envelope was
+    all NaN, refused as "flat over the trial's window" (untrue) with numpy's RuntimeWarnings on stderr."""
+    path = _emg(tmp_path)
+    lines = path.read_text().splitlines()
+    first = lines.index("endheader") + 2
+    for i in range(first + 700, first + (750 if np.isnan(bad) else 701)):
+        cells = lines[i].split("\t")
+        cells[1] = str(bad)
+        lines[i] = "\t".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+    n = 50 if np.isnan(bad) else 1
+    with pytest.raises(ValueError, match=rf"emg: .*emg.sto: column 'SOL' \(for 'soleus_r'\) has no number at {n} "
+                                         r"samples \(t = 0.7\.\.0.7\d* s; NaN or infinite\); fill the gap"):
+        emg_envelopes(path, {"soleus_r": "SOL"}, np.linspace(0.1, 1.2, 67))
+
 def test_the_command_draws_the_emg_and_refuses_it_half_given(tmp_path, capsys):
     emg = str(_emg(tmp_path))
     out, plots = tmp_path / "out", tmp_path / "plots"

@@ -179,6 +179,11 @@ def test_passive_forces_as_known_forces_and_max_isometric_without_curves():
     (dict(max_iterations=0), "max_iterations"),
     (dict(infeasible="ignore"), "infeasible: expected 'raise' or 'report'"),
     (dict(passive="yes"), "passive: expected True or False"),
+    # an activation above 1 (the command wrote 2.88 with --activation-bounds 0.01:5, exit 0)
+    (dict(activation_bounds=(0.01, 5.0)), r"activation_bounds: expected 0 <= lower < upper <= 1 \(an activation"),
+    # IPOPT stopped at p = 20 on Hamner's run (Maximum_Iterations): a RuntimeError's traceback from the command
+    (dict(exponent=20.0), r"exponent: expected a number >= 1 and at most 10 \(OpenSim's activation_exponent\), "
+                          r"got 20.0"),
 ])
 def test_options_refuse_bad_values(options, message):
     with pytest.raises(ValueError, match=message):

@@ -157,6 +157,12 @@ def write(folder: Path, muscles: str = "", old: str = "", new: str = "") -> Path
      "options.muscles.uncertainty.tendon_slack_length: expected a relative standard deviation in [0, 0.5)"),
     ("criteria = [2.0]", "", "", "options.muscles.criteria: expected exponents >= 1 other than exponent (2)"),
     ("speed = 1", "", "", "options.muscles.speed: unknown field"),
+    ("criteria = [20.0]", "", "", "options.muscles.criteria: expected exponents >= 1 other than exponent (2) and at "
+                                  "most 10, got [20.0]"),
+    ("activation_bounds = [0.01, 5.0]", "", "", "options.muscles.activation_bounds: expected 0 <= lower < upper <= 1"),
+    ("", 'joints = ["hip_r", "hip_l"]', "joints = []", "options.muscles.joints: expected a list of joint names (leave "
+                                                       "the key out for every hinge), got []"),
+    ("", 'joints = ["hip_r", "hip_l"]', 'joints = ["hip_r", "hip_r"]', "options.muscles.joints: 'hip_r' given twice"),
     ("", 'actuators = "hamner_reserve_actuators.xml"', 'actuators = "none.xml"',
      "options.muscles.actuators: none.xml: no such file"),
 ])

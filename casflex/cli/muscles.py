@@ -76,8 +76,9 @@ def cmd_muscles(args: argparse.Namespace, outputs: Outputs) -> int:
     from casflex.cli.inverse import _progress, inverse_options
     from casflex.inverse import prepare, solve
     from casflex.muscles import _so_lines
-    from casflex.muscles.analysis import TrialMuscles, muscle_result, reserve_actuators
+    from casflex.muscles.analysis import TrialMuscles, muscle_result, reserve_actuators, residual_warnings
     from casflex.muscles.result import file_names
+    from casflex.muscles.static_optimization import MAX_EXPONENT
     from casflex.scene.from_osim import scene_from_osim
     from casflex.scene.osim_actuators import read_actuators
 
@@ -88,9 +89,9 @@ def cmd_muscles(args: argparse.Namespace, outputs: Outputs) -> int:
     uncertainty = _uncertainty(args)
     emg_columns = _emg_columns(args)
     criteria = tuple(args.criteria or ())
-    if any(not (p >= 1.0) or p == optimization.exponent for p in criteria):
-        raise OptionError(f"--criteria: expected exponents >= 1 other than --exponent ({optimization.exponent:g}), "
-                          f"got {' '.join(f'{p:g}' for p in criteria)}")
+    if any(not (1.0 <= p <= MAX_EXPONENT) or p == optimization.exponent for p in criteria):
+        raise OptionError(f"--criteria: expected exponents >= 1 other than --exponent ({optimization.exponent:g}) "
+                          f"and at most {MAX_EXPONENT:g}, got {' '.join(f'{p:g}' for p in criteria)}")
     banded = uncertainty is not None or chosen["bands"].asked or args.uncertain or args.marker_noise is not None
     if banded and optimization.tendon == "compliant":
         raise OptionError("--tendon: 'compliant' takes no bands yet (each perturbed property or frame set would be a "
@@ -121,7 +122,10 @@ def cmd_muscles(args: argparse.Namespace, outputs: Outputs) -> int:
         print(f"casflex: warning: {line}", file=sys.stderr)
     res = solve(inputs, progress=None if args.quiet else _progress)
     frames = trial.solve(res.z, res.zd, res.zdd)
-    result = muscle_result(trial, frames, res.z, report=(*trial.notes, *_so_lines(frames)),
+    residual = residual_warnings(trial, frames)
+    for line in residual:
+        print(f"casflex: warning: {line}", file=sys.stderr)
+    result = muscle_result(trial, frames, res.z, report=(*trial.notes, *_so_lines(frames), *residual),
                            settings={"model": args.model, "trial": args.data or args.coordinates})
     if banded:
         result = _with_bands(result, trial, inputs, res, uncertainty, criteria or (3.0,), args.draws)

@@ -31,6 +31,9 @@ __all__ = ["InverseInputs", "prepare", "inverse_model", "read_markers", "weighte
 
 #: The fewest frames an inverse takes (the filter's padding and the end differences need them).
 MIN_FRAMES = 10
+#: s: the widest step between frames (1 Hz): motion capture records at 50-200 Hz, OpenSim's IK writes its frames'
+#: times; frames further apart are times in another unit (ms) and would give rates a thousand times too small.
+MAX_STEP = 1.0
 #: Bytes a frame of the inverse needs per value of its result (:func:`_memory` counts the values), with the
 #: copies made while the result is assembled and written: ``casflex inverse hamner_leg --out loads.csv`` on
 #: 2e4 and 1e5 frames peaked at 122 and 362 MB (/usr/bin/time -v), 3.0 kB a frame of 136 values, 22.6 bytes
@@ -196,6 +199,9 @@ def _even_frames(t: np.ndarray, rate: float, source: str) -> np.ndarray:
     not evenly spaced: the rates are differences on an even grid, filtered or not."""
     grid = even_times(t, rate if np.isfinite(rate) else None)
     h = np.diff(grid)
+    if np.median(h) > MAX_STEP:  # no lab records motion that slowly: times in ms read as s (a 1000 s trial)
+        raise ValueError(f"{source}: the frames are {np.median(h):.4g} s apart ({1.0 / np.median(h):.3g} Hz; the "
+                         f"trial runs {t[-1] - t[0]:.4g} s): times in ms, not s? give the times in seconds")
     if np.ptp(h) > 1e-6 * h.mean():
         step = np.median(h)
         dev = np.abs(h - step)

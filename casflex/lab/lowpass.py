@@ -24,7 +24,7 @@ def even_times(t: np.ndarray, rate: float | None = None) -> np.ndarray:
         return t
     k = np.arange(t.size)
     h = np.polyfit(k, t, 1)[0]
-    if rate is not None and abs(1.0 / rate - h) < 0.01 * h:
+    if rate is not None and rate > 0 and abs(1.0 / rate - h) < 0.01 * h:  # rate 0: a header's, or times in ms
         h = 1.0 / rate
     for grid in (t[0] + h * k, np.mean(t - h * k) + h * k):  # from the first time as written, else centred
         if np.max(np.abs(t - grid)) <= 0.1 * h:

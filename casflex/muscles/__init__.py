@@ -51,7 +51,7 @@ def muscle_analysis(model, trial: Trial, *, filter: Filter | None = None, fit: F
     where the inputs can tell.
     """
     from casflex.inverse import prepare, solve
-    from casflex.muscles.analysis import TrialMuscles, muscle_result, reserve_actuators
+    from casflex.muscles.analysis import TrialMuscles, muscle_result, reserve_actuators, residual_warnings
     from casflex.scene.from_osim import scene_from_osim
     from casflex.scene.osim_actuators import read_actuators
 
@@ -64,7 +64,8 @@ def muscle_analysis(model, trial: Trial, *, filter: Filter | None = None, fit: F
                            reaction=reaction, joints=joints, source=str(actuators or model))
     res = solve(inputs)
     out = muscles.solve(res.z, res.zd, res.zdd)
-    return muscle_result(muscles, out, res.z, report=(*res.report, *muscles.notes, *_so_lines(out)))
+    return muscle_result(muscles, out, res.z, report=(*res.report, *muscles.notes, *_so_lines(out),
+                                                      *residual_warnings(muscles, out)))
 
 
 def _so_lines(out) -> tuple[str, ...]:

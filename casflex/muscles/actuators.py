@@ -36,14 +36,24 @@ def _own(tree: KinematicTree, coordinate) -> int:
 
 
 def check_actuators(actuators: tuple[Actuator, ...], scene, source: str, *, model_coordinates=(),
-                    bodies=()) -> list[str]:
-    """ValueError in one line for an actuator naming a coordinate or body the model lacks; the report's lines for
-    those the planar scene leaves without effect (a coordinate of the model it does not move: locked or out of
-    the plane; a force or torque with no part in the plane)."""
+                    bodies=(), muscles=()) -> list[str]:
+    """ValueError in one line for an actuator naming a coordinate or body the model lacks, or taking the name of a
+    muscle (``muscles``: their names) or of another actuator (the model's and the file's together: OpenSim refuses
+    two forces of one name, and the results' columns, one per name, would take one for the other); the report's
+    lines for those the planar scene leaves without effect (a coordinate of the model it does not move: locked or
+    out of the plane; a force or torque with no part in the plane)."""
     lab = {c.name for c in scene.coordinates}
     nodes = {n.name for n in scene.nodes}
     report = []
+    muscles, seen = set(muscles), set()
     for a in actuators:
+        if a.name in muscles:
+            raise ValueError(f"{source}: {a.kind} {a.name!r}: a muscle of the model has that name; give the actuator "
+                             "its own (the results' columns, one per name, would take one for the other)")
+        if a.name in seen:
+            raise ValueError(f"{source}: two actuators named {a.name!r} (the model's and the file's together); give "
+                             "each its own name (the results' columns would take one for the other)")
+        seen.add(a.name)
         if a.kind == "CoordinateActuator" and a.coordinate not in lab:
             if a.coordinate not in model_coordinates:
                 raise ValueError(f"{source}: CoordinateActuator {a.name!r}: coordinate: no coordinate "

@@ -28,13 +28,21 @@ from casflex.inverse.lab_names import lab_name
 from casflex.inverse.tree import KinematicTree
 from casflex.muscles.actuators import actuator_columns, check_actuators
 from casflex.muscles.compliant import solve_compliant
-from casflex.muscles.curves import rigid_tendon
+from casflex.muscles.curves import muscle_curves, rigid_tendon
 from casflex.muscles.path import MusclePaths
 from casflex.muscles.reaction import JointReaction, JointReactions, joint_reactions
 from casflex.muscles.static_optimization import StaticOptimization, StaticOptimizationResult, solve_static_optimization
 from casflex.scene.from_osim import node_name
 
-__all__ = ["FrameOutputs", "TrialMuscles", "muscle_result", "reserve_actuators"]
+__all__ = ["FrameOutputs", "TrialMuscles", "muscle_result", "reserve_actuators", "residual_warnings"]
+
+#: The least a muscle must pull at full activation, at its best frame of the trial, as a fraction of its max
+#: isometric force (:meth:`TrialMuscles._check_capacity`); a real muscle pulls 0.9-1.3 there.
+WEAKEST = 0.01
+#: The residual force (RMS over the trial, in body weights) beyond which the root's balance is said: Hamner's run
+#: with its plates 0.19 BW (FY), without them 1.4 BW (the residuals carry the body's weight and the muscles carry
+#: what the ground's push would have made them carry: the hip's peak 4.8 BW for 10.4).
+RESIDUAL_WARNING = 0.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -70,31 +78,60 @@ class TrialMuscles:
                  optimization: StaticOptimization | None = None, reaction: JointReaction | None = None,
                  joints: tuple[str, ...] = (), source: str = "actuators") -> None:
         self.osim, self.tree, self.t, self.plates = osim, tree, np.asarray(t, dtype=float), tuple(plates)
+        self.source = source
         self.scene = tree.model.scene
         self.muscles = tuple(osim.muscles)
         if not self.muscles:
             raise ValueError("the model has no muscle casflex computes (Millard2012EquilibriumMuscle, "
                              "Thelen2003Muscle, DeGrooteFregly2016Muscle)")
+        for m in self.muscles:  # a curve's bad property refused now, naming the model, not after the inverse
+            try:
+                muscle_curves(m)
+            except ValueError as exc:
+                raise ValueError(f"{osim.source}: {exc}" if osim.source else str(exc)) from None
         self.optimization = optimization or StaticOptimization()
+        self._check_controls()
         self.reaction = reaction or JointReaction()
         hinges = list(tree.hinges)
         self.joints = tuple(joints) or tuple(hinges)
         unknown = [j for j in self.joints if j not in hinges]
         if unknown:
             raise ValueError(f"joints: no hinge {unknown[0]!r} in the scene; its hinges are {hinges}")
+        twice = [j for i, j in enumerate(self.joints) if j in self.joints[:i]]
+        if twice:
+            raise ValueError(f"joints: {twice[0]!r} given twice; give each joint once")
         self.paths = MusclePaths(tree, self.muscles)
         coords = list(self.scene.coordinates)
         root = f"{tree.root}."
         self.root_coordinates = tuple(c for c in coords if c.of.startswith(root))
         self.joint_coordinates = tuple(c for c in coords if not c.of.startswith(root))
         self.notes = check_actuators(tuple(actuators), self.scene, source,
-                                     bodies=set(osim.frames) - {"ground"})
+                                     bodies=set(osim.frames) - {"ground"}, muscles=[m.name for m in self.muscles])
         self._split_actuators(tuple(actuators), source)
         if not self.residuals:
             self.notes.append(f"no residual actuator on the root ({tree.root}): its loads (the inverse dynamics' "
                               "residuals) are not balanced by static optimization; give them as PointActuator and "
                               "TorqueActuator (e.g. OpenSim's FX, FY, MZ) or --reserves")
         self._slide = self._slides()
+
+    def _check_controls(self) -> None:
+        """ValueError naming the muscle whose file bounds its activation otherwise than static optimization's
+        ``activation_bounds``, which casflex applies to every muscle: its ``min_control`` or ``max_control`` (OpenSim's
+        SO bounds each muscle by its own; they were ignored), or a Millard muscle's ``minimum_activation`` outside
+        [0, 1) (ignored too: OpenSim refuses it below 0)."""
+        lo, hi = self.optimization.activation_bounds
+        head = f"{self.osim.source}: " if self.osim.source else ""
+        for m in self.muscles:
+            for tag, bound in (("min_control", lo), ("max_control", hi)):
+                v = m.property(tag, bound)
+                if v != bound:
+                    raise ValueError(f"{head}ForceSet: {m.kind} {m.name!r}.{tag}: {v:g}, where static optimization "
+                                     f"bounds every muscle's activation by [{lo:g}, {hi:g}] (--activation-bounds, "
+                                     "options.muscles.activation_bounds): give those bounds, or remove the muscle's")
+            a = m.property("minimum_activation", 0.0)
+            if m.kind == "Millard2012EquilibriumMuscle" and not 0.0 <= a < 1.0:
+                raise ValueError(f"{head}ForceSet: {m.kind} {m.name!r}.minimum_activation: must be in [0, 1) (OpenSim "
+                                 f"refuses it below 0; at 1 the muscle could never relax), got {a:g}")
 
     def _split_actuators(self, actuators, source: str) -> None:
         """The reserves (a CoordinateActuator on a joint's coordinate: static optimization's) and the residuals
@@ -181,6 +218,7 @@ class TrialMuscles:
         arms = geo["moment_arms"][:, :, cols]
         moments = np.column_stack([loads[lab_name(c)] for c in self.joint_coordinates])
         active0, passive0 = self.capacity(geo["lengths"], geo["speeds"])
+        self._check_capacity(active0, passive0, geo, options)
         capacity = [self._capacity_of(v, geo, active0, passive0) for v in variants]
         reserves = np.array([self.reserves[c.name].optimal_force if c.name in self.reserves else 0.0
                              for c in self.joint_coordinates])
@@ -205,6 +243,37 @@ class TrialMuscles:
                                     geo["speeds"], arms, active, passive, moments))
         return out
 
+    def _check_capacity(self, active: np.ndarray, passive: np.ndarray, geo, options: StaticOptimization) -> None:
+        """ValueError naming the muscle whose force at full activation or passive force is not finite at a frame
+        (a fibre stretched to 1e5 optimal lengths: an optimal fibre length or a path point off by orders), or,
+        with the force-length-velocity curves, that pulls with less than :data:`WEAKEST` of its max isometric force
+        at every frame of the trial (a tendon slack length longer than the path, an optimal fibre length ten times
+        too long, a path point on the wrong body): it could carry nothing, and static optimization would hand its
+        share to the others and the reserves without a word. The models' own muscles pull 0.9-1.3 times their max
+        isometric force at their best frame over a run or a walk (Hamner's 92, Rajagopal's 80)."""
+        for i, m in enumerate(self.muscles):
+            bad = ~(np.isfinite(active[:, i]) & np.isfinite(passive[:, i]))
+            best = np.max(active[:, i], initial=0.0, where=~bad) / m.max_isometric_force
+            if not bad.any() and (best >= WEAKEST or not options.force_length_velocity):
+                continue
+            r = rigid_tendon(m, geo["lengths"][:, i], geo["speeds"][:, i])
+            lm, lt = r.norm_fiber_length, geo["lengths"][:, i]
+            where = f"its path {np.nanmin(lt):.3g}-{np.nanmax(lt):.3g} m long, "
+            where += (f"shorter than its tendon slack length {m.tendon_slack_length:g} m at every frame"
+                      if np.nanmax(lt) <= m.tendon_slack_length else
+                      f"its tendon at its slack length {m.tendon_slack_length:g} m, its fibre {np.nanmin(lm):.3g}-"
+                      f"{np.nanmax(lm):.3g} optimal fibre lengths ({m.optimal_fiber_length:g} m)")
+            head = f"{self.osim.source}: ForceSet: {m.kind} {m.name!r}" if self.osim.source else f"muscle {m.name!r}"
+            if bad.any():
+                k = int(np.argmax(bad))
+                why = f"its {'active' if not np.isfinite(active[k, i]) else 'passive'} force is not finite at t = " \
+                      f"{self.t[k]:g} s"
+            else:
+                why = (f"at full activation it pulls at most {100 * best:.2g} % of its max isometric force over the "
+                       "trial")
+            raise ValueError(f"{head}: {why} ({where}): check its tendon_slack_length, optimal_fiber_length and path "
+                             "points")
+
     def _capacity_of(self, muscles, geo, active0, passive0) -> tuple[np.ndarray, np.ndarray]:
         """(active, passive) (k, n_m) of ``muscles``: the model's (``active0``, ``passive0``) but in the columns
         of the muscles that differ from the model's."""
@@ -225,7 +294,17 @@ class TrialMuscles:
         rows = [list(self.scene.coordinates).index(c) for c in self.root_coordinates]
         A = actuator_columns(self.tree, self.scene, tuple(self.residuals), self.osim.frames, z)[:, rows, :]
         tau = np.column_stack([loads[lab_name(c)] for c in self.root_coordinates])
-        return np.stack([np.linalg.lstsq(A[i], tau[i], rcond=None)[0] for i in range(k)])
+        u = np.stack([np.linalg.lstsq(A[i], tau[i], rcond=None)[0] for i in range(k)])
+        for j, a in enumerate(self.residuals):  # no muscle reaches the root: its loads are theirs, bounds or not
+            out = (u[:, j] < a.min_control - 1e-9 * (1 + abs(a.min_control))) | \
+                  (u[:, j] > a.max_control + 1e-9 * (1 + abs(a.max_control)))
+            if out.any():
+                i = int(np.argmax(out))
+                raise ValueError(f"{self.source}: {a.kind} {a.name!r}: the root's balance (the inverse dynamics' "
+                                 f"residual) needs a control of {u[i, j]:.4g} at t = {self.t[i]:g} s, outside its "
+                                 f"bounds [{a.min_control:g}, {a.max_control:g}] ({int(out.sum())} of {k} frames): "
+                                 "widen min_control and max_control (the residuals carry the root's loads whole)")
+        return u
 
     def _reaction_geometry(self, z: np.ndarray) -> dict[str, tuple]:
         """joint -> (unit (k, 3, n_m), lever (k, 1, 2), child and parent angles (k, 1), offset (k, 1, 2) or None):
@@ -322,6 +401,26 @@ def reserve_actuators(scene, root: str, optimal_force: float) -> tuple:
             *(Actuator(f"{c.name}_reserve", "CoordinateActuator", optimal_force, coordinate=c.name) for c in coords))
 
 
+def residual_warnings(trial: TrialMuscles, out: FrameOutputs) -> list[str]:
+    """The lines that say a residual force on the root carries more than :data:`RESIDUAL_WARNING` body weights RMS
+    over the trial (its ground reactions missing, on the wrong body or scaled wrong): the muscles then carry another
+    motion's loads, whatever their own numbers look like."""
+    from casflex.lab.plate_checks import scene_mass
+
+    w = scene_mass(trial.scene) * float(np.hypot(*trial.scene.gravity))
+    lines = []
+    for j, a in enumerate(trial.residuals):
+        if a.kind != "PointActuator" or not w > 0:
+            continue
+        f = out.residuals[:, j] * a.optimal_force
+        rms = float(np.sqrt(np.mean(f ** 2)))
+        if rms > RESIDUAL_WARNING * w:
+            lines.append(f"residual {a.name!r} carries {rms / w:.2f} body weights RMS over the trial (at most "
+                         f"{np.abs(f).max() / w:.2f}; a trial with its ground reactions, a few tenths): the ground "
+                         "reactions are missing, on another body or in other units; the muscles carry another motion")
+    return lines
+
+
 def _turn(angle: np.ndarray, v: np.ndarray) -> np.ndarray:
     """v (2,) turned by the angles (k,): (k, 2)."""
     c, s = np.cos(angle), np.sin(angle)
@@ -364,6 +463,10 @@ def muscle_result(trial: TrialMuscles, out: FrameOutputs, z: np.ndarray, report=
         for suffix, v in zip(("fx", "fy", "fz", "mx", "my", "mz", "px", "py", "pz"), values, strict=True):
             columns[f"{h}_on_{on}_in_{frame}_{suffix}"] = v
         resultants[h] = np.hypot(load[:, 0], load[:, 1]) * (trial.reaction.body_weight or 1.0)
+    idle = [m.name for i, m in enumerate(trial.muscles) if np.abs(out.arms[:, i, :]).max() < 1e-9]
+    if idle:  # both ends on one segment, or crossing only coordinates the plane holds still
+        report = (*report, f"muscles {', '.join(idle)} cross no coordinate of the plane (moment arms 0 at every "
+                           "frame): they carry no moment, their activations stay at the lower bound")
     g = float(np.hypot(*trial.scene.gravity))
     empty = np.zeros((k, 0))
     return MuscleResult(t=trial.t, muscles=tuple(m.name for m in trial.muscles), activations=out.so.activations,

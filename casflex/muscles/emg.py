@@ -63,7 +63,12 @@ def emg_envelopes(path: str | os.PathLike[str], columns: Mapping[str, str], t: n
     inside = (te >= t[0] - 1e-9) & (te <= t[-1] + 1e-9)
     out = {}
     for m, c in columns.items():
-        env = envelope(te, np.asarray(table.column(c), dtype=float))
+        x = np.asarray(table.column(c), dtype=float)
+        bad = ~np.isfinite(x)
+        if bad.any():  # the filters run over the whole record: one NaN would make the whole envelope NaN
+            raise ValueError(f"{where}: column {c!r} (for {m!r}) has no number at {int(bad.sum())} samples (t = "
+                             f"{te[bad][0]:g}..{te[bad][-1]:g} s; NaN or infinite); fill the gap or cut the file")
+        env = envelope(te, x)
         peak = env[inside].max()
         if not peak > 0:
             raise ValueError(f"{where}: column {c!r} (for {m!r}) is flat over the trial's window")

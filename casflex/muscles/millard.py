@@ -233,6 +233,8 @@ def millard_curves(muscle: Muscle) -> MillardCurves:
             fv[f"{side}_slope_at_vmax"] = max(fv[f"{side}_slope_at_vmax"], 0.5 * fv[f"{side}_slope_near_vmax"])
     e0 = _number(muscle, f"{FPE}.strain_at_zero_force", 0.0)
     e1 = _number(muscle, f"{FPE}.strain_at_one_norm_force", 0.7)
+    if not e1 > e0:  # before the default stiffness 2 / (e1 - e0) divides by it
+        raise refuse(f"{FPE}.strain_at_one_norm_force", f"must be > strain_at_zero_force ({e0:g}), got {e1:g}")
     k_low, k_iso, c_pe = _optional_trio(muscle, refuse, FPE, ("stiffness_at_low_force", "stiffness_at_one_norm_force",
                                                               "curviness"), (0.2, 2.0 / (e1 - e0), 0.75))
     et = _number(muscle, f"{FSE}.strain_at_one_norm_force", 0.049)

@@ -81,6 +81,8 @@ class OsimScene:
     #: origin (3,) m in the ground at the default pose; it moves with the parent; where OpenSim reports a reaction
     #: on the parent)
     joint_frames: Mapping[str, tuple[str, str, np.ndarray]] = field(default_factory=dict)
+    #: the model file read ("" where the scene was made otherwise): what a refusal of one of its muscles names
+    source: str = ""
 
 
 class _Builder:
@@ -495,4 +497,4 @@ def scene_from_osim(source: str | os.PathLike[str] | OsimModel, name: str | None
     report = [f"{model.source}: {len(bodies)} bodies, {len(b.joints)} joints, {len(markers)} markers, "
               f"{len(b.coords)} coordinates in the x-y plane", *b.report, *b.dropped, *b.warnings]
     return OsimScene(scene, tuple(report), tuple(b.dropped), tuple(b.warnings), muscles, dict(b.pose),
-                     dict(b.joint_frames))
+                     dict(b.joint_frames), source=str(model.source))

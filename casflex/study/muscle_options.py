@@ -95,8 +95,11 @@ def muscle_options(t: dict, actuators: str | None) -> MuscleOptions:
         if not kw["reserves"] > 0:
             raise ValueError(f"reserves: expected an optimal force > 0 (N m), got {t['reserves']!r}")
     joints = t.get("joints", [])
-    if not isinstance(joints, list) or not all(isinstance(j, str) and j.strip() for j in joints):
-        raise ValueError(f"joints: expected a list of joint names, got {joints!r}")
+    if not isinstance(joints, list) or not joints or not all(isinstance(j, str) and j.strip() for j in joints):
+        raise ValueError(f"joints: expected a list of joint names (leave the key out for every hinge), got {joints!r}")
+    twice = [j for i, j in enumerate(joints) if j in joints[:i]]
+    if twice:
+        raise ValueError(f"joints: {twice[0]!r} given twice; give each joint once")
     kw["joints"] = tuple(joints)
     kw |= {k: t[k] for k in ("on", "frame") if k in t}
     if "uncertainty" in t:
@@ -106,9 +109,11 @@ def muscle_options(t: dict, actuators: str | None) -> MuscleOptions:
         raise ValueError(f"criteria: expected a list of exponents, got {crit!r}")
     kw["criteria"] = tuple(_number("criteria", p) for p in crit)
     opts = MuscleOptions(**kw)
-    if any(not p >= 1.0 or p == opts.exponent for p in opts.criteria):
-        raise ValueError(f"criteria: expected exponents >= 1 other than exponent ({opts.exponent:g}), got "
-                         f"{list(opts.criteria)}")
+    from casflex.muscles.static_optimization import MAX_EXPONENT  # here: it loads CasADi
+
+    if any(not 1.0 <= p <= MAX_EXPONENT or p == opts.exponent for p in opts.criteria):
+        raise ValueError(f"criteria: expected exponents >= 1 other than exponent ({opts.exponent:g}) and at most "
+                         f"{MAX_EXPONENT:g}, got {list(opts.criteria)}")
     opts.optimization()  # each checks its fields: "<field>: <reason>"
     JointReaction(on=opts.on, frame=opts.frame)
     return opts
