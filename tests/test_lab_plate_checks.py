@@ -292,3 +292,18 @@ def test_a_plate_on_the_toes_or_the_heel_is_taken():
         moments.append(res.loads["knee_angle_r_moment"])
     # the plate's moment about the origin is moved exactly to either node: the same knee moment to round-off
     assert np.abs(moments[0] - moments[1]).max() < 1e-9 * np.abs(moments[1]).max()
+
+
+def test_a_surface_the_table_writes_half_a_metre_low_refuses_nothing(tmp_path, capsys):
+    """A plate in a stair's step whose centres of pressure a table writes at the floor's height: the ankle lies
+    0.57 m above that surface, but no node of the leg lies lower near the line of force; taken (a knee given the
+    plate is still refused: the ankle lies under it)."""
+
+    def low(v):
+        v[:, PX + 1] -= 0.5  # ground_force_py
+
+    code = main([str(a) for a in [*BASE, "--loads", _mot(tmp_path, low), "--plate", "ankle=ground_"]])
+    _, err = capsys.readouterr()
+    assert code == 0 and "error" not in err, err
+    _refused([*BASE, "--loads", _mot(tmp_path, low), "--plate", "knee=ground_"], capsys,
+             r"it is applied to 'knee', whose node lies 0.9\d m above the plate's surface")

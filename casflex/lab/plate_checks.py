@@ -49,7 +49,10 @@ meets it (OpenSim's Hamner running trial, whose stance peaks at 2.25 body weight
   calcn 0.008-0.043 m on Hamner's run (whole trial, IK and fitted), the Rajagopal walk and biomechZoo's 12
   children's straight walks (22 plates), the ankle 0.070 m (Hamner's stride) and 0.117 m (walking2.c3d), the
   toes 0.006-0.014 m; a knee 0.48-0.50 m, a hip 0.88 m (Hamner, walking2); a child's knee (some 0.28 of its
-  height) from 1 m tall up. Above 0.25 m: 2.1 times the highest foot, half the lowest knee measured.
+  height) from 1 m tall up. Above 0.25 m: 2.1 times the highest foot, half the lowest knee measured. Refused only
+  where the node lies as high above the lowest node near the line of force too (the foot under the thigh): a plate
+  in a stair's step whose centres of pressure a table writes at the floor's height, or a model without feet
+  (a plate under a residual limb, a knee kneeling), is taken.
 """
 
 from __future__ import annotations
@@ -237,6 +240,22 @@ def _cop(force: np.ndarray, moment: np.ndarray, up: np.ndarray, floor: float) ->
     return s[:, None] * across + floor * up
 
 
+def _above_the_body(node_xy: np.ndarray, force: np.ndarray, moment: np.ndarray, up: np.ndarray,
+                    nodes: dict[str, np.ndarray]) -> float:
+    """m: how high the node (positions (k, 2) m) lies above the lowest of ``nodes`` whose median distance to the
+    line of force (force (k, 2) N, moment about the origin (k,) N m) is within :data:`MAX_COP_DISTANCE`, medians
+    over the samples: the foot under a thigh, whatever the surface's height a table gives (a plate in a stair's
+    step whose centres of pressure are written at the floor's). Where the body has nothing lower (a model without
+    feet), 0."""
+    size = np.linalg.norm(force, axis=1)
+    low = median(node_xy @ up)
+    for xy in nodes.values():
+        d = np.abs(moment - (xy[:, 0] * force[:, 1] - xy[:, 1] * force[:, 0])) / size
+        if median(d) <= MAX_COP_DISTANCE:
+            low = min(low, median(xy @ up))
+    return median(node_xy @ up) - low
+
+
 def check_bearing(
     where: str,
     node: str,
@@ -250,13 +269,14 @@ def check_bearing(
 ) -> None:
     """ValueError in one line when the node a plate acts on lies higher than :data:`MAX_NODE_HEIGHT` above the
     plate's surface (at ``floor`` m along ``up`` (2,)) over its stance (the median over its samples at times t (k,)
-    s; force (k, 2) N, moment about the origin (k,) N m, the node's positions (k, 2) m): the plate given to a thigh
-    or a shank, not to the foot on it. The refusal names the nodes of ``nodes`` (name -> (k, 2) m) that could bear
-    it: those within :data:`MAX_NODE_HEIGHT` of the surface and :data:`MAX_COP_DISTANCE` of the centre of
-    pressure, the nearest first (module docstring)."""
+    s; force (k, 2) N, moment about the origin (k,) N m, the node's positions (k, 2) m) and as high above the
+    lowest node of ``nodes`` near the line of force (:func:`_above_the_body`: a surface whose height the table
+    gives wrong refuses nothing): the plate given to a thigh or a shank, not to the foot on it. The refusal names
+    the nodes of ``nodes`` (name -> (k, 2) m) that could bear it: those within :data:`MAX_NODE_HEIGHT` of the
+    surface and :data:`MAX_COP_DISTANCE` of the centre of pressure, the nearest first (module docstring)."""
     high = node_xy @ up - floor
     mid = median(high)
-    if not mid > MAX_NODE_HEIGHT:
+    if not mid > MAX_NODE_HEIGHT or not _above_the_body(node_xy, force, moment, up, nodes) > MAX_NODE_HEIGHT:
         return
     cop = _cop(force, moment, up, floor)
     near = []
