@@ -227,3 +227,83 @@ def test_a_sample_dropped_to_zero_mid_stance_is_refused_naming_its_time(tmp_path
         r"grf.mot: plate 'ground_': a single sample of 0 N at t = 0.517 s stands 1412 N below both its "
         r"neighbours' \(1412 and 1455 N.*the limit 0.75\): no foot unloads and reloads a plate so in one sample",
     )
+
+
+def test_a_plate_given_to_the_knee_is_refused_naming_the_foot(tmp_path, capsys):
+    """The knee stands over the foot (its line of force passes 0.1 m from it): only its height tells it, 0.5 m
+    above the plate's surface; the ankle, 0.07 m (median over the stance), is named instead."""
+    line = _refused(
+        [*BASE, "--loads", GRF, "--plate", "knee=ground_"],
+        capsys,
+        r"hamner_running_stride_grf.mot: plate 'ground_': it is applied to 'knee', whose node lies 0.4\d m above "
+        r"the plate's surface over its stance",
+        tmp_path / "loads.csv",
+    )
+    assert "within 0.25 m of the floor" in line and "the nodes near its centre of pressure are 'ankle' (0.07 m" in line
+
+
+MUSCLES = Path(__file__).parent / "data" / "muscles"
+HAMNER_IK = MUSCLES / "hamner_run_ik.mot"  # OpenSim's IK of Hamner's run on the planar model with its muscles
+WHOLE_GRF = LAB / "hamner_running_whole_grf.mot"
+
+
+def _external_loads(tmp_path: Path, right: str, left: str) -> Path:
+    """An OpenSim ExternalLoads file applying the whole run's plates to the bodies ``right`` and ``left``."""
+    force = """<ExternalForce name="{body}"><applied_to_body>{body}</applied_to_body>
+<force_expressed_in_body>ground</force_expressed_in_body><point_expressed_in_body>ground</point_expressed_in_body>
+<force_identifier>{p}ground_force_v</force_identifier><point_identifier>{p}ground_force_p</point_identifier>
+<torque_identifier>{p}ground_torque_</torque_identifier></ExternalForce>"""
+    loads = tmp_path / "loads.xml"
+    loads.write_text(
+        f'<?xml version="1.0"?><OpenSimDocument><ExternalLoads name="loads"><objects>'
+        f"{force.format(body=right, p='')}{force.format(body=left, p='1_')}"
+        f"</objects><datafile>{WHOLE_GRF}</datafile></ExternalLoads></OpenSimDocument>"
+    )
+    return loads
+
+
+def test_an_external_loads_file_applying_the_plate_to_the_femur_is_refused_by_casflex_muscles(tmp_path, capsys):
+    """applied_to_body femur_r: the hip 0.88 m above the plate (it stands over the foot: 0.02 m across the
+    floor); casflex muscles gave exit 0 with the hip contact force at 4.7 body weights for 9.4 (on calcn_r)."""
+    model = MUSCLES / "hamner_subject02_planar_muscles.osim"
+    line = _refused(
+        ["muscles", model, "--coordinates", HAMNER_IK, "--loads", _external_loads(tmp_path, "femur_r", "calcn_l"),
+         "--actuators", MUSCLES / "hamner_reserve_actuators.xml", "--joints", "hip_r", "--quiet"],
+        capsys,
+        r"hamner_running_whole_grf.mot: plate 'ground_': it is applied to 'femur_r', whose node lies 0.88 m above "
+        r"the plate's surface over its stance \(median of 17 samples at t = 0.43\d*..1.2 s; 0.8\d..0.9\d m\)",
+        tmp_path / "out",
+    )
+    assert "an ExternalLoads file's applied_to_body" in line
+    assert "'toes_r' (0.01 m high)" in line and "'calcn_r' (0.0" in line  # the right foot's nodes named
+
+
+def test_a_plate_on_the_toes_or_the_heel_is_taken():
+    """The toes (their node at the metatarsophalangeal joint) bear a plate as the heel does: 0.006-0.014 m and
+    0.026-0.040 m above the plate's surface (medians over the stances of Hamner's run), far under the limit."""
+    from casflex.inverse import Filter, Trial, inverse_dynamics
+
+    model = MUSCLES / "hamner_subject02_planar_muscles.osim"
+    moments = []
+    for foot in ("toes", "calcn"):
+        trial = Trial(coordinates=str(HAMNER_IK), grf=str(WHOLE_GRF),
+                      plates={f"{foot}_r": "ground_", f"{foot}_l": "1_ground_"})
+        res = inverse_dynamics(model, trial, filter=Filter(10))
+        moments.append(res.loads["knee_angle_r_moment"])
+    # the plate's moment about the origin is moved exactly to either node: the same knee moment to round-off
+    assert np.abs(moments[0] - moments[1]).max() < 1e-9 * np.abs(moments[1]).max()
+
+
+def test_a_surface_the_table_writes_half_a_metre_low_refuses_nothing(tmp_path, capsys):
+    """A plate in a stair's step whose centres of pressure a table writes at the floor's height: the ankle lies
+    0.57 m above that surface, but no node of the leg lies lower near the line of force; taken (a knee given the
+    plate is still refused: the ankle lies under it)."""
+
+    def low(v):
+        v[:, PX + 1] -= 0.5  # ground_force_py
+
+    code = main([str(a) for a in [*BASE, "--loads", _mot(tmp_path, low), "--plate", "ankle=ground_"]])
+    _, err = capsys.readouterr()
+    assert code == 0 and "error" not in err, err
+    _refused([*BASE, "--loads", _mot(tmp_path, low), "--plate", "knee=ground_"], capsys,
+             r"it is applied to 'knee', whose node lies 0.9\d m above the plate's surface")

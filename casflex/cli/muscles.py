@@ -118,7 +118,7 @@ def cmd_muscles(args: argparse.Namespace, outputs: Outputs) -> int:
         acts += reserve_actuators(osim.scene, inputs.tree.root, args.reserves)
     trial = TrialMuscles(osim, inputs.tree, inputs.t, inputs.plates, acts, optimization=optimization,
                          reaction=reaction, joints=joints, source=args.actuators or args.model)
-    for line in [*osim.warnings, *inputs.warnings]:
+    for line in [*osim.warnings, *inputs.warnings, *trial.warnings]:
         print(f"casflex: warning: {line}", file=sys.stderr)
     res = solve(inputs, progress=None if args.quiet else _progress)
     frames = trial.solve(res.z, res.zd, res.zdd)

@@ -124,7 +124,9 @@ def solve(inputs: InverseInputs, *, bands: Bands | None = None, flexible: Flexib
     if lab:  # the summary speaks the lab's language
         settings["moments"] = [lab_name(c) for c in model.scene.coordinates
                                if not c.of.startswith(f"{tree.root}.") and lab_name(c) in lab]
-    _check_moments(inputs, {name: loads[name] for name in settings["moments"] if name in loads})
+    forces = _check_moments(inputs, {name: loads[name] for name in settings["moments"] if name in loads}, loads)
+    report += forces
+    warnings += forces
     band, parts = {}, {}
     fitted, units = lab_coordinates(model.scene, tree.names, fit.z)  # the IK result, unfiltered
     if inputs.band_spec is not None:
@@ -141,11 +143,13 @@ def solve(inputs: InverseInputs, *, bands: Bands | None = None, flexible: Flexib
 _G = 9.81
 
 
-def _check_moments(inputs: InverseInputs, moments: dict[str, np.ndarray]) -> None:
-    """ValueError when a joint moment exceeds what a body can carry (:func:`casflex.lab.checks.check_moments`):
-    the body's mass is the scene's (bodies and beams) or, when larger, the plates' largest total force over g (a
-    model of a leg is a third of the subject whose weight the plates carry)."""
-    from casflex.lab.checks import check_moments
+def _check_moments(inputs: InverseInputs, moments: dict[str, np.ndarray], loads: dict[str, np.ndarray]) -> list[str]:
+    """ValueError when a joint moment exceeds what a body can carry (:func:`casflex.lab.checks.check_moments`);
+    the lines that say a joint's force (``loads``' ``<joint>.fx``, ``.fy``) exceeds what a joint passes on
+    (:func:`casflex.lab.checks.joint_force_lines`). The body's mass is the scene's (bodies and beams) or, when
+    larger, the plates' largest total force over g (a model of a leg is a third of the subject whose weight the
+    plates carry)."""
+    from casflex.lab.checks import check_moments, joint_force_lines
 
     sc = inputs.model.scene
     nodes = {n.name: np.array([n.x, n.y]) for n in sc.nodes}
@@ -154,5 +158,9 @@ def _check_moments(inputs: InverseInputs, moments: dict[str, np.ndarray]) -> Non
     if inputs.plates:
         total = sum(np.linalg.norm(p.at(inputs.t)[0], axis=1) for p in inputs.plates)
         mass = max(mass, float(np.nanmax(total)) / _G)
-    if mass > 0:
-        check_moments(inputs.settings.get("source") or "inverse dynamics", inputs.t, moments, mass)
+    if not mass > 0:
+        return []
+    source = inputs.settings.get("source") or "inverse dynamics"
+    check_moments(source, inputs.t, moments, mass)
+    joints = [k[:-3] for k in loads if k.endswith(".fx") and k != "root.fx" and f"{k[:-3]}.fy" in loads]
+    return joint_force_lines(source, inputs.t, {j: np.hypot(loads[f"{j}.fx"], loads[f"{j}.fy"]) for j in joints}, mass)

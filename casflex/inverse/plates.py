@@ -19,7 +19,7 @@ offset), and the plate is never evaluated outside its samples (:meth:`Plate.at`)
 
 A plate is checked against the body (:mod:`casflex.lab.plate_checks`): its unfiltered record in
 :func:`plate_from_table` (it pushes, carries a stance, holds no single-sample spike; a window it carries no
-load in is said), its line of force against its node's fitted place in :func:`plates_under_feet`.
+load in is said), its line of force and its surface against its node's fitted place in :func:`plates_under_feet`.
 """
 
 from __future__ import annotations
@@ -48,7 +48,9 @@ MAX_PLATE_GAP_S = 0.02
 class Plate:
     """One plate acting on ``node``: t (n,) s, force (n, 2) N in the plane, moment (n,) N m about the
     lab's origin (module docstring); ``name``: the columns' prefix; ``notes``: what was done to its samples
-    (gaps filled, unloaded samples), a line each."""
+    (gaps filled, unloaded samples), a line each; ``floor`` (m): the height of its surface along the model's up in
+    the plane, the median height of its centres of pressure where loaded (None: not known), against which the node
+    it acts on is checked (:func:`casflex.lab.plate_checks.check_bearing`)."""
 
     name: str
     node: str
@@ -57,6 +59,7 @@ class Plate:
     moment: np.ndarray
     notes: tuple[str, ...] = ()
     source: str = ""  # the file and the plate, as messages name them
+    floor: float | None = None  # m: its surface's height along the model's up in the plane (None: not known)
 
     def at(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(force (k, 2), moment (k,)) at times t (s), linear between samples. ValueError for a time more than
@@ -164,11 +167,31 @@ def plate_from_table(table: LabTable, prefix: str, node: str, plane: Plane, cuto
     else:
         fv, W = None, 0.0
     check_plate_record(where, written, whole, fv, W, _normal(table, prefix, E, weight))
+    floor = _floor(table, prefix, rows, E, fv, weight)
     empty = window_load(where, t, force, weight, window) if window is not None else None
     notes += [empty] if empty else []
     check_cutoff(cutoff, t, f"{where}'s samples")
     both = lowpass(t, np.column_stack([force, moment]), cutoff, what=where)
-    return Plate(prefix, node, t, both[:, :2], both[:, 2], tuple(notes), where)
+    return Plate(prefix, node, t, both[:, :2], both[:, 2], tuple(notes), where, floor)
+
+
+def _floor(table: LabTable, prefix: str, rows: slice, E: np.ndarray, fv: np.ndarray | None,
+           weight: np.ndarray | None) -> float | None:
+    """m: the height of the plate's surface along the model's up in the plane (lab axes ``E`` (2, 3)): the median
+    height of its centres of pressure (the table's ``<prefix>force_p{x,y,z}``, unfiltered) where its vertical
+    force ``fv`` (N, the table's ``rows``) exceeds 20 N; None where the table or the weight gives none."""
+    from casflex.lab.checks import median
+    from casflex.lab.filtering import _plate_columns
+
+    p = _plate_columns(table, prefix)
+    if fv is None or f"{p}force_px" not in table.names:
+        return None
+    up = -np.asarray(weight, dtype=float) / np.linalg.norm(weight)
+    P = np.column_stack([table.column(f"{p}force_p{a}")[rows] for a in "xyz"]).astype(float)
+    with np.errstate(invalid="ignore"):
+        h = (P @ E.T) @ up
+        on = np.isfinite(h) & (fv > 20.0)
+    return median(h[on]) if on.any() else None
 
 
 def _normal(table: LabTable, prefix: str, E: np.ndarray, weight: np.ndarray | None) -> str | None:
@@ -211,12 +234,15 @@ def model_weight(model) -> np.ndarray:
 
 def plates_under_feet(model, plates: list[Plate], t: np.ndarray, q: np.ndarray) -> None:
     """ValueError in one line for a plate whose force passes farther from its node than a centre of pressure
-    under the foot can (:func:`casflex.lab.plate_checks.check_plate_foot`) over its stance, with the fitted
-    configurations q (k, n_dof) at times t (k,) s: the plate under another foot, or its origin wrong."""
+    under the foot can, or whose node lies higher above the plate than a foot's
+    (:func:`casflex.lab.plate_checks.check_plate_foot`) over its stance, with the fitted configurations q
+    (k, n_dof) at times t (k,) s: the plate under another foot, its origin wrong, or given to a thigh or a shank
+    (the refusal names the nodes near its centre of pressure)."""
     from casflex.lab.plate_checks import check_plate_foot
 
     weight = model_weight(model)
+    nodes = {n: q[:, 3 * k:3 * k + 2] for k, n in enumerate(model.node_names)}
     for pl in plates:
-        i = 3 * model.node_names.index(pl.node)
         F, Mo = pl.at(t)
-        check_plate_foot(pl.source or f"plate {pl.name!r}", pl.node, t, F, Mo, q[:, i:i + 2], weight)
+        check_plate_foot(pl.source or f"plate {pl.name!r}", pl.node, t, F, Mo, nodes[pl.node], weight, pl.floor,
+                         nodes)

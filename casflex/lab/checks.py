@@ -30,6 +30,10 @@ measurement never meets it:
 - :func:`check_moments`: :data:`MAX_MOMENT_PER_KG` (20 N m/kg) of the body's mass; the largest joint moments
   measured in people are 3-5 N m/kg (the hip and knee in sprinting and in landings): 20 is no body, but a
   unit error in the coordinates or the markers.
+- :func:`joint_force_lines`: :data:`MAX_JOINT_FORCE_BW` (30) body weights of a joint's intersegmental force is
+  said, not refused: the net force a joint passes on is the ground's push plus the segments' inertia (Hamner's
+  run: the ankle's 2.5 body weights; walking2's 1.2; landings 5-15); 30 is the plates' forces in another unit, a
+  plate on the wrong body, or markers or coordinates in other units.
 """
 
 from __future__ import annotations
@@ -44,8 +48,9 @@ if TYPE_CHECKING:
     from casflex.lab.tables import LabMarkers, LabTable
 
 __all__ = ["LAB_EXTENT", "MAX_MARKER_SPEED", "MAX_PLATE_FORCE", "MAX_FREE_MOMENT", "MAX_MISFIT", "STATIC_SPREAD",
-           "SCALE_FACTOR", "MAX_ANGLE", "RANGE_MARGIN", "TINY_ANGLES", "MAX_MOMENT_PER_KG", "check_markers",
-           "check_plate_values", "check_static", "check_scale", "check_coordinates", "check_moments", "median"]
+           "SCALE_FACTOR", "MAX_ANGLE", "RANGE_MARGIN", "TINY_ANGLES", "MAX_MOMENT_PER_KG", "MAX_JOINT_FORCE_BW",
+           "check_markers", "check_plate_values", "check_static", "check_scale", "check_coordinates", "check_moments",
+           "joint_force_lines", "median"]
 
 LAB_EXTENT = 100.0
 MAX_MARKER_SPEED = 50.0
@@ -58,6 +63,7 @@ MAX_ANGLE = 2.0 * math.pi
 RANGE_MARGIN = math.radians(30.0)
 TINY_ANGLES = math.pi
 MAX_MOMENT_PER_KG = 20.0
+MAX_JOINT_FORCE_BW = 30.0
 
 
 def check_markers(lab: LabMarkers, labels: Sequence[str], frames: np.ndarray | None = None) -> None:
@@ -274,3 +280,21 @@ def check_moments(source: str, t: np.ndarray, moments: dict[str, np.ndarray], ma
                              f"a body of {mass:.3g} kg; no human joint carries {MAX_MOMENT_PER_KG:g} N m/kg (3-5 in "
                              "sprinting and landing): the coordinates' or the markers' units are wrong, or the scene "
                              "is not this trial's")
+
+
+def joint_force_lines(source: str, t: np.ndarray, forces: dict[str, np.ndarray], mass: float) -> list[str]:
+    """The lines that say a joint's intersegmental force (``forces``: joint -> its magnitude (k,) N at times t (k,)
+    s) exceeds :data:`MAX_JOINT_FORCE_BW` times the weight of ``mass`` (kg x 9.81; the body's, as
+    :func:`check_moments` takes it), naming the joint, the peak and its time; ``source``: the trial."""
+    weight = 9.81 * mass
+    lines = []
+    for name, f in forces.items():
+        with np.errstate(invalid="ignore"):
+            k = int(np.nanargmax(f)) if np.isfinite(f).any() else -1
+        if k >= 0 and f[k] > MAX_JOINT_FORCE_BW * weight:
+            lines.append(f"{source}: the force at {name} reaches {f[k]:.4g} N at t = {t[k]:g} s, {f[k] / weight:.3g} "
+                         f"body weights of a body of {mass:.3g} kg; no human joint passes on {MAX_JOINT_FORCE_BW:g} "
+                         "(the ground's push and the segments' inertia: 1-3 walking and running, 5-15 landing): the "
+                         "plates' forces in another unit or on the wrong body, or the markers' or coordinates' "
+                         "units wrong")
+    return lines

@@ -38,6 +38,21 @@ meets it (OpenSim's Hamner running trial, whose stance peaks at 2.25 body weight
   distance across the floor, whatever the node's height. Measured (medians): Hamner's stride, the ankle 0.11 m
   (0.00-0.17 over the stance); its whole trial, calcn_r 0.13 m and calcn_l 0.19 m; walking2.c3d's right ankle
   0.12 m; a plate given to the other foot, 0.54 m (walking2) and 0.55 m (Hamner).
+- :data:`MAX_NODE_HEIGHT` (m): the segment a plate bears on is the foot standing on it, whose node (its joint
+  with the shank, a heel, the toes) lies near the floor: the node's height above the plate's surface (the median
+  height of its centres of pressure where loaded, :attr:`casflex.inverse.Plate.floor`), median over the stance,
+  within 0.25 m. Higher, the plate is given to a thigh or a shank (an ExternalLoads file's ``applied_to_body``
+  femur_r): the line-of-force check above passes (the hip stands over the foot), the loads are wrong (Hamner's
+  run with its right plate on femur_r: the hip contact force 4.7 body weights for 9.4; on tibia_r the ankle
+  moment 5 N m for 185). The node, not the segment's nearest point: a shank reaches down to the ankle, 0.1 m
+  above the floor, a thigh's node (the hip) and a shank's (the knee) do not. Measured (medians over each stance):
+  calcn 0.008-0.043 m on Hamner's run (whole trial, IK and fitted), the Rajagopal walk and biomechZoo's 12
+  children's straight walks (22 plates), the ankle 0.070 m (Hamner's stride) and 0.117 m (walking2.c3d), the
+  toes 0.006-0.014 m; a knee 0.48-0.50 m, a hip 0.88 m (Hamner, walking2); a child's knee (some 0.28 of its
+  height) from 1 m tall up. Above 0.25 m: 2.1 times the highest foot, half the lowest knee measured. Refused only
+  where the node lies as high above the lowest node near the line of force too (the foot under the thigh): a plate
+  in a stair's step whose centres of pressure a table writes at the floor's height, or a model without feet
+  (a plate under a residual limb, a knee kneeling), is taken.
 """
 
 from __future__ import annotations
@@ -54,9 +69,11 @@ __all__ = [
     "SPIKE",
     "DROP",
     "MAX_COP_DISTANCE",
+    "MAX_NODE_HEIGHT",
     "check_plate_record",
     "window_load",
     "check_plate_foot",
+    "check_bearing",
 ]
 
 MAX_PULL = 100.0
@@ -65,6 +82,7 @@ MIN_PEAK = 0.2
 SPIKE = 2.0
 DROP = 0.75
 MAX_COP_DISTANCE = 0.4
+MAX_NODE_HEIGHT = 0.25
 #: N: the vertical force below which a plate carries no load (the readers' limit for a centre of pressure)
 _LOADED = 20.0
 
@@ -181,11 +199,15 @@ def check_plate_foot(
     moment: np.ndarray,
     node_xy: np.ndarray,
     weight: np.ndarray | None,
+    floor: float | None = None,
+    nodes: dict[str, np.ndarray] | None = None,
 ) -> None:
     """ValueError in one line when the line of a plate's force passes farther than :data:`MAX_COP_DISTANCE`
-    from the node it acts on over its stance: force (k, 2) N and moment about the lab's origin (k,) N m in the
-    plane, the node's position ``node_xy`` (k, 2) m, at times t (k,) s; the stance: the samples whose vertical
-    force exceeds a quarter of its peak and 20 N (module docstring)."""
+    from the node it acts on over its stance, or (``floor`` given: the plate's surface's height along the model's
+    up, m) when that node lies higher than :data:`MAX_NODE_HEIGHT` above the surface (:func:`check_bearing`):
+    force (k, 2) N and moment about the lab's origin (k,) N m in the plane, the node's position ``node_xy``
+    (k, 2) m, at times t (k,) s; the stance: the samples whose vertical force exceeds a quarter of its peak and
+    20 N (module docstring). ``nodes``: every node's positions (k, 2) m, to name the foot in the refusal."""
     up = _up(weight) if weight is not None else None
     if up is None:
         return
@@ -205,3 +227,70 @@ def check_plate_foot(
             f"m): a centre of pressure lies under its foot, within a foot's length of it (the limit "
             f"is {MAX_COP_DISTANCE:g} m); the plate is under another foot, or its origin is wrong"
         )
+    if floor is not None:
+        others = {k: v[stance] for k, v in (nodes or {}).items()}
+        check_bearing(where, node, t[stance], F, moment[stance], x, up, floor, others)
+
+
+def _cop(force: np.ndarray, moment: np.ndarray, up: np.ndarray, floor: float) -> np.ndarray:
+    """m, (k, 2): where the line of force (force (k, 2) N, moment about the origin (k,) N m, its vertical force
+    positive) meets the surface at the height ``floor`` (m) along ``up`` (2,): the centre of pressure."""
+    across = np.array([up[1], -up[0]])  # the floor's direction: across x up = 1
+    s = (moment - floor * (up[0] * force[:, 1] - up[1] * force[:, 0])) / (force @ up)
+    return s[:, None] * across + floor * up
+
+
+def _above_the_body(node_xy: np.ndarray, force: np.ndarray, moment: np.ndarray, up: np.ndarray,
+                    nodes: dict[str, np.ndarray]) -> float:
+    """m: how high the node (positions (k, 2) m) lies above the lowest of ``nodes`` whose median distance to the
+    line of force (force (k, 2) N, moment about the origin (k,) N m) is within :data:`MAX_COP_DISTANCE`, medians
+    over the samples: the foot under a thigh, whatever the surface's height a table gives (a plate in a stair's
+    step whose centres of pressure are written at the floor's). Where the body has nothing lower (a model without
+    feet), 0."""
+    size = np.linalg.norm(force, axis=1)
+    low = median(node_xy @ up)
+    for xy in nodes.values():
+        d = np.abs(moment - (xy[:, 0] * force[:, 1] - xy[:, 1] * force[:, 0])) / size
+        if median(d) <= MAX_COP_DISTANCE:
+            low = min(low, median(xy @ up))
+    return median(node_xy @ up) - low
+
+
+def check_bearing(
+    where: str,
+    node: str,
+    t: np.ndarray,
+    force: np.ndarray,
+    moment: np.ndarray,
+    node_xy: np.ndarray,
+    up: np.ndarray,
+    floor: float,
+    nodes: dict[str, np.ndarray],
+) -> None:
+    """ValueError in one line when the node a plate acts on lies higher than :data:`MAX_NODE_HEIGHT` above the
+    plate's surface (at ``floor`` m along ``up`` (2,)) over its stance (the median over its samples at times t (k,)
+    s; force (k, 2) N, moment about the origin (k,) N m, the node's positions (k, 2) m) and as high above the
+    lowest node of ``nodes`` near the line of force (:func:`_above_the_body`: a surface whose height the table
+    gives wrong refuses nothing): the plate given to a thigh or a shank, not to the foot on it. The refusal names
+    the nodes of ``nodes`` (name -> (k, 2) m) that could bear it: those within :data:`MAX_NODE_HEIGHT` of the
+    surface and :data:`MAX_COP_DISTANCE` of the centre of pressure, the nearest first (module docstring)."""
+    high = node_xy @ up - floor
+    mid = median(high)
+    if not mid > MAX_NODE_HEIGHT or not _above_the_body(node_xy, force, moment, up, nodes) > MAX_NODE_HEIGHT:
+        return
+    cop = _cop(force, moment, up, floor)
+    near = []
+    for name, xy in nodes.items():
+        h, d = median(xy @ up - floor), median(np.linalg.norm(xy - cop, axis=1))
+        if h <= MAX_NODE_HEIGHT and d <= MAX_COP_DISTANCE:
+            near.append((d, name, h))
+    feet = ", ".join(f"{n!r} ({h:.2f} m high)" for _, n, h in sorted(near)[:3])
+    raise ValueError(
+        f"{where}: it is applied to {node!r}, whose node lies {mid:.2f} m above the plate's surface over its stance "
+        f"(median of {t.size} samples at t = {t[0]:g}..{t[-1]:g} s; {high.min():.2f}..{high.max():.2f} m): a plate "
+        f"bears on the foot standing on it, whose node lies within {MAX_NODE_HEIGHT:g} m of the floor (an ankle "
+        f"0.05-0.12 m, a heel or the toes 0-0.05 m; a knee lies 0.4-0.55 m high, a hip 0.8-1 m); apply it to the "
+        "foot (--plate NODE=PREFIX, an ExternalLoads file's applied_to_body)"
+        + (f": the nodes near its centre of pressure are {feet}" if feet else "")
+    )
+

@@ -89,6 +89,8 @@ class TrialMuscles:
                 muscle_curves(m)
             except ValueError as exc:
                 raise ValueError(f"{osim.source}: {exc}" if osim.source else str(exc)) from None
+        #: lines said on stderr and in the report: muscles stronger than a human's (:mod:`casflex.muscles.strength`)
+        self.warnings = self._check_strength()
         self.optimization = optimization or StaticOptimization()
         self._check_controls()
         self.reaction = reaction or JointReaction()
@@ -105,14 +107,27 @@ class TrialMuscles:
         root = f"{tree.root}."
         self.root_coordinates = tuple(c for c in coords if c.of.startswith(root))
         self.joint_coordinates = tuple(c for c in coords if not c.of.startswith(root))
-        self.notes = check_actuators(tuple(actuators), self.scene, source,
-                                     bodies=set(osim.frames) - {"ground"}, muscles=[m.name for m in self.muscles])
+        self.notes = [*self.warnings, *check_actuators(tuple(actuators), self.scene, source,
+                                                       bodies=set(osim.frames) - {"ground"},
+                                                       muscles=[m.name for m in self.muscles])]
         self._split_actuators(tuple(actuators), source)
         if not self.residuals:
             self.notes.append(f"no residual actuator on the root ({tree.root}): its loads (the inverse dynamics' "
                               "residuals) are not balanced by static optimization; give them as PointActuator and "
                               "TorqueActuator (e.g. OpenSim's FX, FY, MZ) or --reserves")
         self._slide = self._slides()
+
+    def _check_strength(self) -> list[str]:
+        """The lines that say a muscle is stronger than a human's against the body's weight; ValueError naming
+        the muscle whose max isometric force no body has (:func:`casflex.muscles.strength.check_strength`): the
+        model's weight, or a third of the plates' largest total force where that is more (a model of a leg)."""
+        from casflex.lab.plate_checks import scene_mass
+        from casflex.muscles.strength import check_strength
+
+        weight = scene_mass(self.scene) * float(np.hypot(*self.scene.gravity))
+        total = sum((np.linalg.norm(p.at(self.t)[0], axis=1) for p in self.plates), np.zeros(self.t.size))
+        head = f"{self.osim.source}: ForceSet: " if self.osim.source else ""
+        return check_strength(self.muscles, weight, head, float(total.max(initial=0.0)))
 
     def _check_controls(self) -> None:
         """ValueError naming the muscle whose file bounds its activation otherwise than static optimization's
