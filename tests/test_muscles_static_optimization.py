@@ -264,3 +264,27 @@ def test_muscles_with_no_force_anywhere_leave_every_frame_refused_by_name():
     with pytest.raises(ValueError, match=r"frame 0: knee: no activation within the bounds carries its moment of 5 N m"):
         solve_static_optimization(np.full((k, 1), 5.0), np.full((k, 1, 1), 0.05), np.zeros((k, 1)),
                                   coordinates=["knee"])
+
+
+def test_each_muscle_within_its_own_bounds_in_the_qp_ipopt_and_the_active_set():
+    """Two identical muscles on one joint, the first bounded by 0.3 (OpenSim's per-muscle max_control): the
+    second carries the rest; the QP (p = 2), IPOPT (p = 3) and the active-set solve of ``near`` agree."""
+    import dataclasses
+
+    m = np.array([[10.0], [30.0], [40.0]])  # N m: 0.16, 0.47, 0.63 of both muscles' full activation together
+    arms, active = np.full((3, 2, 1), 0.04), np.full((3, 2), 800.0)
+    opts = StaticOptimization(activation_bounds=(0.0, 1.0), muscle_bounds=((0.0, 0.3), (0.0, 1.0)))
+    for p in (2.0, 3.0):
+        r = solve_static_optimization(m, arms, active, options=dataclasses.replace(opts, exponent=p))
+        a = r.activations
+        assert r.success and a[:, 0].max() == pytest.approx(0.3, abs=1e-8)  # held at its own bound
+        assert a[0, 0] == pytest.approx(a[0, 1], rel=1e-6)  # below it: shared equally
+        assert np.allclose(a.sum(axis=1) * 0.04 * 800.0, m[:, 0], rtol=1e-8)
+    near = solve_static_optimization(m * 0.999, arms, active, options=opts)
+    again = solve_static_optimization(m, arms, active, options=opts, near=near)
+    qp = solve_static_optimization(m, arms, active, options=opts)
+    assert again.stats["kept"].all() and np.allclose(again.activations, qp.activations, atol=1e-8)
+    with pytest.raises(ValueError, match=r"^muscle_bounds: expected 2 pairs \(one per muscle\), got 1$"):
+        solve_static_optimization(m, arms, active, options=dataclasses.replace(opts, muscle_bounds=((0.0, 1.0),)))
+    with pytest.raises(ValueError, match=r"^muscle_bounds\[0\]: expected 0 <= lower < upper <= 1, got \(0.0, 2.0\)"):
+        StaticOptimization(muscle_bounds=((0.0, 2.0),))

@@ -17,6 +17,7 @@ coordinates go to static optimization, with the CoordinateActuators on them as i
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -90,7 +91,7 @@ class TrialMuscles:
             except ValueError as exc:
                 raise ValueError(f"{osim.source}: {exc}" if osim.source else str(exc)) from None
         self.optimization = optimization or StaticOptimization()
-        self._check_controls()
+        bounds_note = self._muscle_bounds()
         self.reaction = reaction or JointReaction()
         hinges = list(tree.hinges)
         self.joints = tuple(joints) or tuple(hinges)
@@ -107,6 +108,7 @@ class TrialMuscles:
         self.joint_coordinates = tuple(c for c in coords if not c.of.startswith(root))
         self.notes = check_actuators(tuple(actuators), self.scene, source,
                                      bodies=set(osim.frames) - {"ground"}, muscles=[m.name for m in self.muscles])
+        self.notes += bounds_note
         self._split_actuators(tuple(actuators), source)
         if not self.residuals:
             self.notes.append(f"no residual actuator on the root ({tree.root}): its loads (the inverse dynamics' "
@@ -114,24 +116,42 @@ class TrialMuscles:
                               "TorqueActuator (e.g. OpenSim's FX, FY, MZ) or --reserves")
         self._slide = self._slides()
 
-    def _check_controls(self) -> None:
-        """ValueError naming the muscle whose file bounds its activation otherwise than static optimization's
-        ``activation_bounds``, which casflex applies to every muscle: its ``min_control`` or ``max_control`` (OpenSim's
-        SO bounds each muscle by its own; they were ignored), or a Millard muscle's ``minimum_activation`` outside
-        [0, 1) (ignored too: OpenSim refuses it below 0)."""
+    def _muscle_bounds(self) -> list[str]:
+        """Each muscle's activation bounds as OpenSim's SO takes them (StaticOptimization.cpp, ``record``: each
+        actuator's ``getMinControl()``, ``getMaxControl()``): its own ``min_control`` / ``max_control`` where its
+        file gives them, else static optimization's ``activation_bounds`` (--activation-bounds: casflex's stand-in
+        for the kinds' defaults); a Millard or Thelen muscle's ``minimum_activation`` raises its lower bound to it
+        (OpenSim refuses a ``min_control`` below it). Set as ``muscle_bounds`` when any differs; the report's line
+        naming those muscles. ValueError naming the muscle and the tag for bounds no activation can take."""
         lo, hi = self.optimization.activation_bounds
         head = f"{self.osim.source}: " if self.osim.source else ""
+        pairs, own = [], []
         for m in self.muscles:
-            for tag, bound in (("min_control", lo), ("max_control", hi)):
-                v = m.property(tag, bound)
-                if v != bound:
-                    raise ValueError(f"{head}ForceSet: {m.kind} {m.name!r}.{tag}: {v:g}, where static optimization "
-                                     f"bounds every muscle's activation by [{lo:g}, {hi:g}] (--activation-bounds, "
-                                     "options.muscles.activation_bounds): give those bounds, or remove the muscle's")
+            where = f"{head}ForceSet: {m.kind} {m.name!r}"
             a = m.property("minimum_activation", 0.0)
             if m.kind == "Millard2012EquilibriumMuscle" and not 0.0 <= a < 1.0:
-                raise ValueError(f"{head}ForceSet: {m.kind} {m.name!r}.minimum_activation: must be in [0, 1) (OpenSim "
-                                 f"refuses it below 0; at 1 the muscle could never relax), got {a:g}")
+                raise ValueError(f"{where}.minimum_activation: must be in [0, 1) (OpenSim refuses it below 0; at 1 "
+                                 f"the muscle could never relax), got {a:g}")
+            a = a if m.kind in ("Millard2012EquilibriumMuscle", "Thelen2003Muscle") else 0.0
+            given = {tag: m.property(tag, math.nan) for tag in ("min_control", "max_control")}
+            if given["min_control"] < a:
+                raise ValueError(f"{where}.min_control: {given['min_control']:g} is below its minimum_activation "
+                                 f"{a:g} (OpenSim refuses the model): give min_control >= minimum_activation")
+            pair = (max(lo if math.isnan(given["min_control"]) else given["min_control"], a),
+                    hi if math.isnan(given["max_control"]) else given["max_control"])
+            if not (math.isfinite(pair[1]) and 0.0 <= pair[0] < pair[1] <= 1.0):
+                tag = "max_control" if not math.isnan(given["max_control"]) else "min_control"
+                raise ValueError(f"{where}.{tag}: its activation bounds would be [{pair[0]:g}, {pair[1]:g}] (its own "
+                                 f"min_control / max_control, the others from the activation bounds [{lo:g}, {hi:g}]):"
+                                 " expected 0 <= lower < upper <= 1 (an activation is the fraction of its force)")
+            pairs.append(pair)
+            if pair != (lo, hi):
+                own.append(f"{m.name} [{pair[0]:g}, {pair[1]:g}]")
+        if not own:
+            return []
+        self.optimization = dataclasses.replace(self.optimization, muscle_bounds=tuple(pairs))
+        return [f"muscles {', '.join(own)} bounded by their own min_control / max_control (or minimum_activation; "
+                f"as OpenSim's static optimization), the others by the activation bounds [{lo:g}, {hi:g}]"]
 
     def _split_actuators(self, actuators, source: str) -> None:
         """The reserves (a CoordinateActuator on a joint's coordinate: static optimization's) and the residuals
@@ -428,8 +448,6 @@ def _turn(angle: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 def _with_reserve_bounds(options: StaticOptimization, bounds: tuple[float, float]) -> StaticOptimization:
-    import dataclasses
-
     return dataclasses.replace(options, reserve_bounds=bounds)
 
 

@@ -55,6 +55,9 @@ class StaticOptimization:
     passive : apply the passive fibre forces as known forces (True); OpenSim's SO does not (False)
     activation_bounds : (lower, upper) of every activation [the muscles' min_control, max_control: 0.01, 1 for
         Millard2012EquilibriumMuscle, whose min_control is its minimum_activation]
+    muscle_bounds : ((lower, upper), ...) one pair per muscle, in place of ``activation_bounds`` where the muscles'
+        own differ [each muscle's min_control, max_control: OpenSim bounds each by its own]; () every muscle by
+        ``activation_bounds``
     reserve_bounds : (lower, upper) of the reserves' controls [their min_control, max_control: -inf, inf]
     tolerance : IPOPT's tol and constr_viol_tol (relative to the moments' scale) [optimizer_convergence_criterion,
         1e-4: loose; 1e-10 here so that the answer is the optimum, not an iterate near it]
@@ -70,6 +73,7 @@ class StaticOptimization:
     force_length_velocity: bool = True
     passive: bool = False
     activation_bounds: tuple[float, float] = (0.01, 1.0)
+    muscle_bounds: tuple[tuple[float, float], ...] = ()
     reserve_bounds: tuple[float, float] = (-math.inf, math.inf)
     tolerance: float = 1e-10
     max_iterations: int = 3000
@@ -87,6 +91,10 @@ class StaticOptimization:
         if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo < hi <= 1.0):
             raise ValueError("activation_bounds: expected 0 <= lower < upper <= 1 (an activation is the fraction of "
                              f"the muscle's force it gives), got {self.activation_bounds!r}")
+        for i, pair in enumerate(self.muscle_bounds):
+            lo, hi = _pair(f"muscle_bounds[{i}]", pair)
+            if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo < hi <= 1.0):
+                raise ValueError(f"muscle_bounds[{i}]: expected 0 <= lower < upper <= 1, got {pair!r}")
         lo, hi = _pair("reserve_bounds", self.reserve_bounds)
         if not (lo <= 0.0 <= hi and lo < hi):
             raise ValueError(f"reserve_bounds: expected lower <= 0 <= upper, got {self.reserve_bounds!r}")
@@ -101,6 +109,17 @@ class StaticOptimization:
         if self.tendon == "compliant" and not self.force_length_velocity:
             raise ValueError("tendon: 'compliant' needs force_length_velocity (a tendon's stretch matters through the "
                              "fibre's force-length curve only)")
+
+
+    def bounds(self, n_m: int) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper) (n_m,): each muscle's activation bounds (``muscle_bounds``, else ``activation_bounds``);
+        ValueError when ``muscle_bounds`` holds another number of pairs."""
+        if not self.muscle_bounds:
+            return np.full(n_m, float(self.activation_bounds[0])), np.full(n_m, float(self.activation_bounds[1]))
+        if len(self.muscle_bounds) != n_m:
+            raise ValueError(f"muscle_bounds: expected {n_m} pairs (one per muscle), got {len(self.muscle_bounds)}")
+        b = np.asarray(self.muscle_bounds, dtype=float)
+        return b[:, 0].copy(), b[:, 1].copy()
 
 
 def _real(x) -> bool:
@@ -258,7 +277,7 @@ def _on_active_set(problem: _Problem, target: np.ndarray, near: StaticOptimizati
     of the balance, exact; ``kept`` where that is the optimum (the balance met, the free unknowns within their
     bounds, the held ones' reduced gradients of the sign that keeps them there; to 1e-9)."""
     k, n_m, n_c = problem.arms.shape
-    lo, hi = problem.options.activation_bounds
+    lo, hi = problem.options.bounds(n_m)
     n_r = problem.held.size
     G = np.zeros((k, n_c, n_m + n_r))
     G[:, :, :n_m] = np.einsum("kmc,km->kcm", problem.arms, problem.active)
@@ -275,8 +294,9 @@ def _on_active_set(problem: _Problem, target: np.ndarray, near: StaticOptimizati
     lam = -2.0 * np.einsum("kcv,kv->kc", pinv.transpose(0, 2, 1), np.where(held, 0.0, v))
     grad = 2.0 * v + np.einsum("kcv,kc->kv", G, lam)
     rlo, rhi = problem.options.reserve_bounds
-    low = np.r_[np.full(n_m, lo), np.full(n_r, rlo)]
-    high = np.r_[np.full(n_m, hi), np.full(n_r, rhi)]
+    low = np.r_[lo, np.full(n_r, rlo)]
+    high = np.r_[hi, np.full(n_r, rhi)]
+    lo, hi = np.r_[lo, np.full(n_r, -np.inf)], np.r_[hi, np.full(n_r, np.inf)]  # the reserves are never held
     tol = 1e-9
     balance = np.abs(np.einsum("kcv,kv->kc", G, v) - target) <= tol * problem.scale
     inside = (v >= low - tol) & (v <= high + tol)
@@ -369,9 +389,9 @@ class _Problem:
         rows = np.abs(full).max(axis=2).ravel() * np.tile(self.scale, arms.shape[0])  # N m per unit
         self.keep = rows > 1e-9 * max(float((rows).max()), 1e-300)
         self.G = _block_diagonal(full, self.keep.reshape(k, n_c))
-        lo, hi = options.activation_bounds
+        lo, hi = options.bounds(n_m)
         rlo, rhi = options.reserve_bounds
-        one = np.r_[np.full(n_m, lo), np.zeros(2 * n_r)], np.r_[np.full(n_m, hi), np.full(n_r, rhi), np.full(n_r, -rlo)]
+        one = np.r_[lo, np.zeros(2 * n_r)], np.r_[hi, np.full(n_r, rhi), np.full(n_r, -rlo)]
         self.lbx, self.ubx = np.tile(one[0], k), np.tile(one[1], k)
 
     def _blocks(self) -> np.ndarray:
