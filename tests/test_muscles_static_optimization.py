@@ -288,3 +288,18 @@ def test_each_muscle_within_its_own_bounds_in_the_qp_ipopt_and_the_active_set():
         solve_static_optimization(m, arms, active, options=dataclasses.replace(opts, muscle_bounds=((0.0, 1.0),)))
     with pytest.raises(ValueError, match=r"^muscle_bounds\[0\]: expected 0 <= lower < upper <= 1, got \(0.0, 2.0\)"):
         StaticOptimization(muscle_bounds=((0.0, 2.0),))
+
+
+def test_ipopt_stopping_short_names_the_frame_that_fails_alone():
+    """p = 3 with IPOPT held to 30 iterations on OpenSim's inputs of Hamner's run: the whole trial stops short
+    (a RuntimeError before, naming no frame); each frame alone converges but the one at 0.883 s."""
+    from casflex.muscles.static_optimization import StaticOptimizationError
+
+    d, cols, moments, _ = _reference()
+    with pytest.raises(StaticOptimizationError, match=r"^static optimization \(exponent 3\): IPOPT stopped "
+                       r"\(Maximum_Iterations_Exceeded\) at t = 0.883333 s \(frame 41\), on moments the activations "
+                       r"can carry: try exponent 2") as info:
+        solve_static_optimization(moments, d["arms"][:, :, cols], d["active"], reserves=np.ones(len(JOINTS)),
+                                  options=StaticOptimization(exponent=3.0, max_iterations=30), coordinates=JOINTS,
+                                  times=d["t"])
+    assert info.value.frames == (41,)

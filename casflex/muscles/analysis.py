@@ -254,7 +254,7 @@ class TrialMuscles:
         else:
             sos = [solve_static_optimization(moments, arms, a, ps, reserves, options, coordinates=names,
                                              max_isometric=[m.max_isometric_force for m in v],
-                                             near=None if near is None else near.so)
+                                             near=None if near is None else near.so, times=self.t)
                    for v, (a, ps) in zip(variants, capacity, strict=True)]
         residuals, geometry = self._residuals(loads, z), self._reaction_geometry(z)
         out = []

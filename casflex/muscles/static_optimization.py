@@ -37,12 +37,22 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["MAX_EXPONENT", "StaticOptimization", "StaticOptimizationResult", "solve_static_optimization"]
+__all__ = ["MAX_EXPONENT", "StaticOptimization", "StaticOptimizationError", "StaticOptimizationResult",
+           "solve_static_optimization"]
 
 #: The largest exponent p of the cost sum a^p taken: at p = 20 a^p of an activation at its bound 0.01 is 1e-40 and
 #: IPOPT stopped on Hamner's run (Maximum_Iterations, a traceback), at 10 it converged (the literature's criteria
 #: are p = 1, 2, 3 and the min-max one, which large p only approaches).
 MAX_EXPONENT = 10.0
+
+
+class StaticOptimizationError(RuntimeError):
+    """IPOPT stopped short on moments the activations can carry (an exponent other than 2 at a hard frame); the
+    message names the frames (their times where given) and what to try; ``frames`` their indices."""
+
+    def __init__(self, message: str, frames: tuple[int, ...] = ()):
+        super().__init__(message)
+        self.frames = frames
 
 
 @dataclass(frozen=True)
@@ -208,7 +218,8 @@ def _check(moments, arms, active, passive, reserves, coordinates):
 def solve_static_optimization(moments, arms, active, passive=None, reserves=None,
                               options: StaticOptimization | None = None, *, max_isometric=None,
                               coordinates: Sequence[str] | None = None,
-                              near: StaticOptimizationResult | None = None) -> StaticOptimizationResult:
+                              near: StaticOptimizationResult | None = None,
+                              times: Sequence[float] | None = None) -> StaticOptimizationResult:
     """Static optimization of k frames (module docstring).
 
     moments (k, n_c) N m (N on a translation): the generalized forces the muscles and reserves must carry (the
@@ -218,7 +229,9 @@ def solve_static_optimization(moments, arms, active, passive=None, reserves=None
     coordinate's reserve optimal force (0 or None: no reserve); max_isometric (n_m,) N: the forces per unit
     activation when ``options.force_length_velocity`` is False; coordinates: names for the report; near: the
     result of nearby inputs with the same frames (the bands' perturbations): with p = 2, each frame solved on its
-    active set (:func:`_on_active_set`), the QP only for the frames where that set changed.
+    active set (:func:`_on_active_set`), the QP only for the frames where that set changed; times (k,) s: the
+    frames' times, for the messages. Where IPOPT stops short on the whole trial each frame is solved alone; a frame
+    that still fails raises :class:`StaticOptimizationError` naming it.
     """
     import time
 
@@ -237,7 +250,8 @@ def solve_static_optimization(moments, arms, active, passive=None, reserves=None
         infeasible = ()
         if not kept.all():  # the frames whose active set changed: the QP
             sub = solve_static_optimization(moments[~kept], arms[~kept], active[~kept], passive[~kept], r, options,
-                                            coordinates=names)
+                                            coordinates=names, times=None if times is None else
+                                            np.asarray(times)[~kept])
             v = x.reshape(k, problem.n_v)
             v[~kept, :n_m] = sub.activations
             u = sub.reserve_controls[:, problem.held]
@@ -255,11 +269,12 @@ def solve_static_optimization(moments, arms, active, passive=None, reserves=None
         infeasible = _infeasible(short, names, options.tolerance * problem.scale)
         if infeasible and options.infeasible == "raise":
             raise ValueError(_report(infeasible, len(infeasible), target, names))
-        x, it2, ok, stats = problem.solve(target - short if infeasible else target, qp=False)
+        goal = target - short if infeasible else target
+        x, it2, ok, stats = problem.solve(goal, qp=False)
         iterations += it2
-        if not ok or not np.all(np.isfinite(x)):
-            raise RuntimeError(f"static optimization: IPOPT stopped ({stats.get('return_status')}) on moments the "
-                               "activations can carry; raise max_iterations or loosen tolerance")
+        if not ok or not np.all(np.isfinite(x)):  # the frames one by one: the failing ones named, or all solved
+            x, it2, stats = _frame_by_frame(problem, goal, times)
+            iterations += it2
     report = _report(infeasible, len(infeasible), target, names) if infeasible else ""
     return _result(problem, x, target, infeasible, report, passive, options, iterations,
                    time.perf_counter() - start, stats)
@@ -305,6 +320,31 @@ def _on_active_set(problem: _Problem, target: np.ndarray, near: StaticOptimizati
     kept = balance.all(axis=1) & (inside | held).all(axis=1) & sign.all(axis=1)
     x = np.concatenate([v[:, :n_m], np.maximum(v[:, n_m:], 0.0), np.maximum(-v[:, n_m:], 0.0)], axis=1)
     return x.ravel(), kept
+
+
+def _frame_by_frame(problem: _Problem, target: np.ndarray, times) -> tuple[np.ndarray, int, dict]:
+    """(x, iterations, stats): each frame of ``target`` solved alone by IPOPT (after the whole trial's solve
+    stopped short); :class:`StaticOptimizationError` naming the frames that fail alone too."""
+    k = target.shape[0]
+    xs, failed, iterations, status = [], [], 0, ""
+    for f in range(k):
+        one = _Problem(problem.arms[f:f + 1], problem.active[f:f + 1], problem.reserves, target[f:f + 1],
+                       problem.options)
+        x, it, ok, stats = one.solve(target[f:f + 1], qp=False)
+        iterations += it
+        if not ok or not np.all(np.isfinite(x)):
+            failed.append(f)
+            status = status or str(stats.get("return_status"))
+        xs.append(x)
+    if failed:
+        p = problem.options.exponent
+        at = [f"t = {times[f]:g} s (frame {f})" if times is not None else f"frame {f}" for f in failed[:3]]
+        more = f" and {len(failed) - 3} more frames" if len(failed) > 3 else ""
+        raise StaticOptimizationError(
+            f"static optimization (exponent {p:g}): IPOPT stopped ({status}) at {', '.join(at)}{more}, on moments "
+            "the activations can carry: try exponent 2 (a QP, which does not stop short), reserves on the joints "
+            "(--reserves, options.muscles.reserves), or a smaller exponent", tuple(failed))
+    return np.concatenate(xs), iterations, {"return_status": "frame by frame", "success": True}
 
 
 def _infeasible(short: np.ndarray, names, tol: np.ndarray) -> tuple[tuple[int, str, float], ...]:
