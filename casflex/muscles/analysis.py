@@ -35,7 +35,8 @@ from casflex.muscles.reaction import JointReaction, JointReactions, joint_reacti
 from casflex.muscles.static_optimization import StaticOptimization, StaticOptimizationResult, solve_static_optimization
 from casflex.scene.from_osim import node_name
 
-__all__ = ["FrameOutputs", "TrialMuscles", "muscle_result", "reserve_actuators", "residual_warnings"]
+__all__ = ["FrameOutputs", "TrialMuscles", "muscle_result", "reserve_actuators", "residual_warnings",
+           "uncrossed_notes"]
 
 #: The least a muscle must pull at full activation, at its best frame of the trial, as a fraction of its max
 #: isometric force (:meth:`TrialMuscles._check_capacity`); a real muscle pulls 0.9-1.3 there.
@@ -441,6 +442,14 @@ def residual_warnings(trial: TrialMuscles, out: FrameOutputs) -> list[str]:
     return lines
 
 
+def uncrossed_notes(trial: TrialMuscles, out: FrameOutputs) -> list[str]:
+    """The line naming the muscles that cross no coordinate of the plane (both ends on one segment, or crossing only
+    coordinates the plane holds still), if any."""
+    idle = [m.name for i, m in enumerate(trial.muscles) if np.abs(out.arms[:, i, :]).max() < 1e-9]
+    return [f"muscles {', '.join(idle)} cross no coordinate of the plane (moment arms 0 at every frame): they "
+            "carry no moment, their activations stay at the lower bound"] if idle else []
+
+
 def _turn(angle: np.ndarray, v: np.ndarray) -> np.ndarray:
     """v (2,) turned by the angles (k,): (k, 2)."""
     c, s = np.cos(angle), np.sin(angle)
@@ -481,10 +490,7 @@ def muscle_result(trial: TrialMuscles, out: FrameOutputs, z: np.ndarray, report=
         for suffix, v in zip(("fx", "fy", "fz", "mx", "my", "mz", "px", "py", "pz"), values, strict=True):
             columns[f"{h}_on_{on}_in_{frame}_{suffix}"] = v
         resultants[h] = np.hypot(load[:, 0], load[:, 1]) * (trial.reaction.body_weight or 1.0)
-    idle = [m.name for i, m in enumerate(trial.muscles) if np.abs(out.arms[:, i, :]).max() < 1e-9]
-    if idle:  # both ends on one segment, or crossing only coordinates the plane holds still
-        report = (*report, f"muscles {', '.join(idle)} cross no coordinate of the plane (moment arms 0 at every "
-                           "frame): they carry no moment, their activations stay at the lower bound")
+    report = (*report, *uncrossed_notes(trial, out))
     g = float(np.hypot(*trial.scene.gravity))
     empty = np.zeros((k, 0))
     return MuscleResult(t=trial.t, muscles=tuple(m.name for m in trial.muscles), activations=out.so.activations,

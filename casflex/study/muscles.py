@@ -146,7 +146,11 @@ def muscle_run(*, model: str, scene: str, trial: Trial, options: TrialOptions, p
                           criteria=muscles.criteria, draws="auto")
         bands = {n: b["total"] for n, b in mb.bands.items() if n in values}
         lines = [*mb.summary([n for n in values if n.endswith("_resultant")]), *mb.report]
-    notes = [*tm.notes, *([frames.so.report] if frames.so.report else [])]
+    from casflex.muscles.analysis import residual_warnings, uncrossed_notes
+
+    # what `casflex muscles` says of the trial, the same lines: the residuals' warning, the muscles crossing nothing
+    notes = [*tm.notes, *([frames.so.report] if frames.so.report else []), *residual_warnings(tm, frames),
+             *uncrossed_notes(tm, frames)]
     outputs = _cut(sc, tm, res.t, values, bands, cycles)
     return MuscleRecord((*report, *notes, *lines), tuple(notes), outputs,
                         {n: _unit(n) for n in outputs}, weight).to_json()
