@@ -223,3 +223,16 @@ def test_a_muscle_that_crosses_no_coordinate_of_the_plane_is_said(run):
     arms[:, i, :] = 0.0
     report = muscle_result(trial, dataclasses.replace(out, arms=arms), res.z).report
     assert "muscles soleus_r cross no coordinate of the plane (moment arms 0 at every frame)" in report[-1]
+
+
+def test_coordinates_nothing_acts_on_are_known_from_the_model_and_refused_at_the_solve(run):
+    """Without reserves the arms' coordinates have nothing to carry their moments: known at the model's default pose
+    (what a study checks before any run) and refused when the trial is solved."""
+    osim, res, trial, _ = run
+    bare = TrialMuscles(osim, trial.tree, res.t, res.plates, joints=JOINTS)
+    names = [c.name for c, b in zip(bare.joint_coordinates, bare.bare_coordinates(), strict=True) if b]
+    assert names == ["arm_flex_r", "arm_flex_l", "elbow_flex_r", "elbow_flex_l"]
+    assert not any(trial.bare_coordinates())  # the reserves act on every coordinate
+    with pytest.raises(ValueError, match=r"^arm_flex_r, arm_flex_l, elbow_flex_r, elbow_flex_l: no muscle crosses it "
+                                         r"and no reserve acts on it"):
+        bare.solve(res.z, res.zd, res.zdd)

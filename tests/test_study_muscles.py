@@ -176,6 +176,12 @@ def test_bad_muscle_options_are_refused_naming_the_field(folder, muscles, old, n
     ('joints = ["hip_r", "hip_l"]', 'joints = ["hip_x"]', "options.muscles.joints: 'hip_x' is not a hinge of"),
     ('model = "hamner_subject02_planar_muscles.osim"\nmass', 'model = "hamner_leg"\nmass',
      "subjects[1].model: options.muscles needs an OpenSim model (.osim) with its muscles, got 'hamner_leg'"),
+    # neither actuators nor reserves: the study passed its checks and each muscle run failed on the arms ("no muscle
+    # crosses it and no reserve acts on it"), after the calibrations and the trials' runs
+    ('actuators = "hamner_reserve_actuators.xml"', '', "options.muscles: neither actuators nor reserves given, and "
+     "nothing acts on arm_flex_r, arm_flex_l, elbow_flex_r, elbow_flex_l, which no muscle of subjects[0]'s model "
+     "(hamner_subject02_planar_muscles.osim) crosses: static optimization has nothing to carry their moments; give "
+     "reserves = N"),
 ])
 def test_muscle_options_are_checked_against_the_models_before_any_run(folder, old, new, message):
     study = load_study(str(write(folder, "", old, new)))

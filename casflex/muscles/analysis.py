@@ -201,6 +201,19 @@ class TrialMuscles:
             cols.append(ca.jacobian(P, z)[:, self.tree.names.index(f"{h}.angle")])
         return ca.Function("hinge_slides", [z], [ca.horzcat(*cols)])
 
+    def bare_coordinates(self, arms: np.ndarray | None = None) -> list[bool]:
+        """Per joint coordinate (``joint_coordinates``' order): True where no muscle crosses it (moment arms below
+        1e-9 m in ``arms`` (k, n_m, n_c), default at the model's default pose) and no reserve acts on it: static
+        optimization has nothing to carry its moment."""
+        if arms is None:
+            z0 = self.tree.coordinates(np.asarray(self.tree.model.q0, dtype=float).ravel())
+            geo = self.paths.evaluate(np.atleast_2d(z0), np.zeros((1, np.size(z0))))
+            cols = [list(self.scene.coordinates).index(c) for c in self.joint_coordinates]
+            arms = geo["moment_arms"][:, :, cols]
+        held = {c for c, a in self.reserves.items() if a.optimal_force > 0.0}
+        return [bool(np.abs(arms[:, :, i]).max(initial=0.0) < 1e-9 and c.name not in held)
+                for i, c in enumerate(self.joint_coordinates)]
+
     def capacity(self, lengths: np.ndarray, speeds: np.ndarray, muscles=None) -> tuple[np.ndarray, np.ndarray]:
         """(active, passive) (k, n_m) N: each muscle's force along its tendon at full activation and its passive
         force (:func:`casflex.muscles.curves.rigid_tendon`, OpenSim's values), at the paths' lengths and speeds."""
@@ -243,8 +256,8 @@ class TrialMuscles:
         capacity = [self._capacity_of(v, geo, active0, passive0) for v in variants]
         reserves = np.array([self.reserves[c.name].optimal_force if c.name in self.reserves else 0.0
                              for c in self.joint_coordinates])
-        bare = [c.name for i, c in enumerate(self.joint_coordinates)
-                if np.abs(arms[:, :, i]).max() < 1e-9 and not reserves[i] and np.abs(moments[:, i]).max() > 1e-6]
+        bare = [c.name for i, (c, b) in enumerate(zip(self.joint_coordinates, self.bare_coordinates(arms), strict=True))
+                if b and np.abs(moments[:, i]).max() > 1e-6]
         if bare:
             raise ValueError(f"{', '.join(bare)}: no muscle crosses it and no reserve acts on it: its moment has "
                              "nothing to carry it; give reserves (an actuator file, or --reserves / actuators=N)")

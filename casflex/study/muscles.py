@@ -89,10 +89,17 @@ def check_muscles(i: int, model: str, scene, opts: MuscleOptions, root: str | No
         raise StudyError(f"options.muscles.joints: {bad[0]!r} is not a hinge of subjects[{i}]'s model (hinges: "
                          f"{hinges[:12]})")
     try:
-        _trial_muscles(model, scene, opts, root, osim=osim)
+        tm, _ = _trial_muscles(model, scene, opts, root, osim=osim)
     except ValueError as exc:
         field = "options.muscles.actuators" if opts.actuators else f"subjects[{i}].model"
         raise StudyError(f"{field}: {exc}") from None
+    bare = [c.name for c, b in zip(tm.joint_coordinates, tm.bare_coordinates(), strict=True) if b]
+    if bare:  # each muscle run would fail on them ("no muscle crosses it and no reserve acts on it")
+        field, given = ("options.muscles.actuators", f"{Path(opts.actuators).name} has no reserve on") \
+            if opts.actuators else ("options.muscles", "neither actuators nor reserves given, and nothing acts on")
+        raise StudyError(f"{field}: {given} {', '.join(bare)}, which no muscle of subjects[{i}]'s model "
+                         f"({Path(model).name}) crosses: static optimization has nothing to carry their moments; "
+                         "give reserves = N (N m, on every joint coordinate) or an actuators file with reserves there")
 
 
 def _feet_of(scene, trial_muscles, names: list[str], feet: list[str]) -> dict[str, str | None]:
