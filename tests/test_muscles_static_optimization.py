@@ -303,3 +303,18 @@ def test_ipopt_stopping_short_names_the_frame_that_fails_alone():
                                   options=StaticOptimization(exponent=3.0, max_iterations=30), coordinates=JOINTS,
                                   times=d["t"])
     assert info.value.frames == (41,)
+
+
+def test_a_shortfall_ipopt_stopped_on_is_no_refusal_of_moments_out_of_reach():
+    """p = 3 with IPOPT held to 5 iterations: the least-shortfall problem stops short too, and its iterate was taken
+    as what the activations cannot carry ("frame 0: knee_angle_l: ... 115.432 N m out of reach", moments the
+    reserves carry); now its stop is said as IPOPT's, not as the moments'."""
+    from casflex.muscles.static_optimization import StaticOptimizationError
+
+    d, cols, moments, _ = _reference()
+    with pytest.raises(StaticOptimizationError, match=r"^static optimization \(exponent 3\): IPOPT stopped "
+                       r"\(Maximum_Iterations_Exceeded\) at t = 0.2 s \(frame 0\), .* finding what the activations "
+                       r"cannot carry: try exponent 2"):
+        solve_static_optimization(moments, d["arms"][:, :, cols], d["active"], reserves=np.ones(len(JOINTS)),
+                                  options=StaticOptimization(exponent=3.0, max_iterations=5), coordinates=JOINTS,
+                                  times=d["t"])

@@ -266,6 +266,8 @@ def solve_static_optimization(moments, arms, active, passive=None, reserves=None
     short, infeasible = np.zeros((k, n_c)), ()
     if not ok:
         short = problem.shortfall(target)
+        if problem.shortfall_status:  # stopped short: its shortfall is no measure; the frames one by one
+            short = _shortfall_by_frame(problem, target, times)
         infeasible = _infeasible(short, names, options.tolerance * problem.scale)
         if infeasible and options.infeasible == "raise":
             raise ValueError(_report(infeasible, len(infeasible), target, names))
@@ -322,28 +324,50 @@ def _on_active_set(problem: _Problem, target: np.ndarray, near: StaticOptimizati
     return x.ravel(), kept
 
 
+def _one_frame(problem: _Problem, target: np.ndarray, f: int) -> _Problem:
+    return _Problem(problem.arms[f:f + 1], problem.active[f:f + 1], problem.reserves, target[f:f + 1],
+                    problem.options)
+
+
+def _stopped(problem: _Problem, failed: list[int], status: str, times, doing: str) -> StaticOptimizationError:
+    """The error naming the frames where IPOPT stopped short (their times where given) and what to try."""
+    at = [f"t = {times[f]:g} s (frame {f})" if times is not None else f"frame {f}" for f in failed[:3]]
+    more = f" and {len(failed) - 3} more frames" if len(failed) > 3 else ""
+    return StaticOptimizationError(
+        f"static optimization (exponent {problem.options.exponent:g}): IPOPT stopped ({status}) at {', '.join(at)}"
+        f"{more}, {doing}: try exponent 2 (a QP, which does not stop short), reserves on the joints (--reserves, "
+        "options.muscles.reserves), or a smaller exponent", tuple(failed))
+
+
+def _shortfall_by_frame(problem: _Problem, target: np.ndarray, times) -> np.ndarray:
+    """(k, n_c) N m: :meth:`_Problem.shortfall` frame by frame (after the whole trial's stopped short);
+    :class:`StaticOptimizationError` naming the frames where it stops short too."""
+    out, failed, status = [], [], ""
+    for f in range(target.shape[0]):
+        one = _one_frame(problem, target, f)
+        out.append(one.shortfall(target[f:f + 1]))
+        if one.shortfall_status:
+            failed.append(f)
+            status = status or one.shortfall_status
+    if failed:
+        raise _stopped(problem, failed, status, times, "finding what the activations cannot carry")
+    return np.concatenate(out)
+
+
 def _frame_by_frame(problem: _Problem, target: np.ndarray, times) -> tuple[np.ndarray, int, dict]:
     """(x, iterations, stats): each frame of ``target`` solved alone by IPOPT (after the whole trial's solve
     stopped short); :class:`StaticOptimizationError` naming the frames that fail alone too."""
     k = target.shape[0]
     xs, failed, iterations, status = [], [], 0, ""
     for f in range(k):
-        one = _Problem(problem.arms[f:f + 1], problem.active[f:f + 1], problem.reserves, target[f:f + 1],
-                       problem.options)
-        x, it, ok, stats = one.solve(target[f:f + 1], qp=False)
+        x, it, ok, stats = _one_frame(problem, target, f).solve(target[f:f + 1], qp=False)
         iterations += it
         if not ok or not np.all(np.isfinite(x)):
             failed.append(f)
             status = status or str(stats.get("return_status"))
         xs.append(x)
     if failed:
-        p = problem.options.exponent
-        at = [f"t = {times[f]:g} s (frame {f})" if times is not None else f"frame {f}" for f in failed[:3]]
-        more = f" and {len(failed) - 3} more frames" if len(failed) > 3 else ""
-        raise StaticOptimizationError(
-            f"static optimization (exponent {p:g}): IPOPT stopped ({status}) at {', '.join(at)}{more}, on moments "
-            "the activations can carry: try exponent 2 (a QP, which does not stop short), reserves on the joints "
-            "(--reserves, options.muscles.reserves), or a smaller exponent", tuple(failed))
+        raise _stopped(problem, failed, status, times, "on moments the activations can carry")
     return np.concatenate(xs), iterations, {"return_status": "frame by frame", "success": True}
 
 
@@ -498,6 +522,7 @@ class _Problem:
 
         n, rows = self.G.shape[1], self.G.shape[0]
         b = (target / self.scale).ravel()
+        self.shortfall_status = ""  # IPOPT's status where it stopped short, else ""
         if rows == 0:  # nothing acts on any row (no muscle has force there): every row falls short by all it needs
             return b.reshape(target.shape) * self.scale
         z = ca.MX.sym("z", n + 2 * rows)
@@ -507,6 +532,7 @@ class _Problem:
         ubz = np.r_[self.ubx, np.full(2 * rows, np.inf)]
         sol = np.array(solver(x0=np.clip(np.zeros(lbz.size), lbz, ubz), lbx=lbz, ubx=ubz, lbg=b[self.keep],
                               ubg=b[self.keep])["x"]).ravel()
+        self.shortfall_status = "" if solver.stats()["success"] else str(solver.stats()["return_status"])
         s = b.copy()  # the rows nothing acts on fall short by all they require
         s[self.keep] = sol[n:n + rows] - sol[n + rows:]
         return s.reshape(target.shape) * self.scale
