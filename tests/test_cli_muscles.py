@@ -93,6 +93,26 @@ def test_a_frame_no_activation_can_carry_is_refused_naming_it(tmp_path, capsys):
              "no activation within the bounds carries its moment")
 
 
+def test_ipopt_stopping_short_is_one_line_naming_the_frames_and_what_to_try(tmp_path, capsys, monkeypatch):
+    """IPOPT stopping short on moments the activations can carry (an exponent other than 2 at a hard frame, here
+    made to stop at every solve): a RuntimeError's traceback before; now the frames one by one, those that fail
+    named with their times and what to try, in one line (exit 2, the statics' and the simulator's convention for a
+    solver that fails), nothing written."""
+    from casflex.muscles import static_optimization as so
+
+    solve = so._Problem.solve
+
+    def stopping(self, target, qp=True):
+        x, it, _, stats = solve(self, target, qp)  # p = 3: IPOPT's every time
+        return x, it, False, {**stats, "return_status": "Maximum_Iterations_Exceeded"}
+
+    monkeypatch.setattr(so._Problem, "solve", stopping)
+    _refused(tmp_path, capsys, [str(MODEL), *TRIAL, "--actuators", RESERVES, "--exponent", "3"],
+             "static optimization (exponent 3): IPOPT stopped (Maximum_Iterations_Exceeded) at t = 0.2 s (frame 0), "
+             "t = 0.216667 s (frame 1), t = 0.233333 s (frame 2) and 22 more frames, on moments the activations can "
+             "carry: try exponent 2")
+
+
 def test_reserves_by_option_and_the_root_left_unbalanced_said(tmp_path, capsys):
     """--reserves 1: OpenSim's reserve file's actuators made by option (one on each joint coordinate, FX, FY, MZ):
     the same activations as the file's (the file's residuals sit 3.4 cm behind the pelvis' origin: the root's

@@ -97,6 +97,10 @@ def _write(tmp_path, body: str) -> Path:
      "two actuators named 'r'"),
     ("<PointActuator name='p'><body>pelvis</body><direction>0 0 0</direction></PointActuator>",
      "PointActuator 'p': direction: is zero"),
+    # read first-wins without a word before (OpenSim too): which one counts would be a guess
+    ("<CoordinateActuator name='r'><coordinate>hip_flexion_r</coordinate><optimal_force>1</optimal_force>"
+     "<optimal_force>100</optimal_force></CoordinateActuator>", "CoordinateActuator 'r': optimal_force: given 2 "
+     "times; give it once"),
 ])
 def test_an_actuator_file_that_cannot_be_honoured_is_refused_by_name(tmp_path, body, message):
     with pytest.raises(ValueError, match=re.escape(message)) as err:

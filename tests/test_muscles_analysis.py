@@ -145,27 +145,57 @@ def test_a_bad_curve_property_is_refused_naming_the_model_before_the_work(run):
         TrialMuscles(dataclasses.replace(osim, muscles=muscles), trial.tree, res.t, res.plates)
 
 
-@pytest.mark.parametrize(("prop", "kind", "said"), [
-    # OpenSim's SO bounds each muscle by its own controls: casflex gave [0.01, 1] to all, the file's 0.5 ignored
-    (("max_control", 0.5), None, r"Thelen2003Muscle 'soleus_r'.max_control: 0.5, where static optimization bounds "
-                                 r"every muscle's activation by \[0.01, 1\]"),
-    (("min_control", 0.05), None, r"'soleus_r'.min_control: 0.05, where static optimization bounds"),
-    # OpenSim refuses a Millard muscle's minimum_activation below 0; casflex ignored it
-    (("minimum_activation", -0.5), "Millard2012EquilibriumMuscle",
-     r"Millard2012EquilibriumMuscle 'soleus_r'.minimum_activation: must be in \[0, 1\)"),
-])
-def test_a_muscles_own_activation_bounds_are_refused_where_static_optimization_cannot_honour_them(run, prop, kind,
-                                                                                                  said):
+def _own(osim, props: dict, kind=None):
+    """``osim`` with soleus_r's and med_gas_r's properties ``props`` added (and their kind ``kind``)."""
     import dataclasses
 
+    muscles = tuple(dataclasses.replace(m, properties=(*props.get(m.name, ()), *m.properties), kind=kind or m.kind)
+                    if m.name in props else m for m in osim.muscles)
+    return dataclasses.replace(osim, muscles=muscles)
+
+
+def test_a_muscles_own_activation_bounds_bound_it_as_opensims_static_optimization(run):
+    """OpenSim's SO bounds each muscle by its own min_control / max_control (StaticOptimization.cpp, record: each
+    actuator's getMinControl, getMaxControl): a max_control of 0.5 was refused (before: ignored, exit 0); now the
+    soleus stops at 0.5 where it reached 1, the gastrocnemius stays at or above its min_control 0.05, the others
+    keep [0.01, 1] (the activation bounds), and the report says which muscles have their own."""
+    osim, res, trial, out = run
+    i, j = ([m.name for m in trial.muscles].index(n) for n in ("soleus_r", "med_gas_r"))
+    assert out.so.activations[:, i].max() > 0.9 and out.so.activations[:, j].min() < 0.02  # the bounds will act
+    own = _own(osim, {"soleus_r": (("max_control", 0.5),), "med_gas_r": (("min_control", 0.05),)})
+    tm = TrialMuscles(own, trial.tree, res.t, res.plates, reserve_actuators(osim.scene, trial.tree.root, 1.0),
+                      joints=JOINTS)
+    bounded = tm.solve(res.z, res.zd, res.zdd)
+    a = bounded.so.activations
+    assert bounded.so.success and np.abs(bounded.so.violation).max() < 1e-6
+    assert a[:, i].max() == pytest.approx(0.5, abs=1e-8) and a[:, j].min() == pytest.approx(0.05, abs=1e-8)
+    others = np.ones(a.shape[1], dtype=bool)
+    others[[i, j]] = False
+    assert a[:, others].min() >= 0.01 - 1e-9 and a[:, others].max() > 0.9
+    assert "muscles med_gas_r [0.05, 1], soleus_r [0.01, 0.5] bounded by their own min_control / max_control" in \
+        " ".join(tm.notes)
+    assert not any("their own" in line for line in trial.notes)
+
+
+@pytest.mark.parametrize(("props", "kind", "said"), [
+    # OpenSim refuses a Millard muscle's minimum_activation below 0; casflex ignored it
+    ((("minimum_activation", -0.5),), "Millard2012EquilibriumMuscle",
+     r"Millard2012EquilibriumMuscle 'soleus_r'.minimum_activation: must be in \[0, 1\)"),
+    # OpenSim refuses a min_control below the muscle's minimum_activation
+    ((("min_control", 0.02), ("minimum_activation", 0.05)), None,
+     r"'soleus_r'.min_control: 0.02 is below its minimum_activation 0.05 \(OpenSim refuses the model\)"),
+    # an activation above 1 is a force above the muscle's (--activation-bounds' refusal, per muscle)
+    ((("max_control", 2.0),), None, r"'soleus_r'.max_control: its activation bounds would be \[0.01, 2\]"),
+    ((("min_control", 0.6), ("max_control", 0.5)), None, r"'soleus_r'.max_control: its activation bounds would be "
+                                                          r"\[0.6, 0.5\]"),
+])
+def test_a_muscles_own_activation_bounds_no_activation_can_take_are_refused(run, props, kind, said):
     osim, res, trial, _ = run
-    muscles = tuple(dataclasses.replace(m, properties=(prop, *m.properties), kind=kind or m.kind)
-                    if m.name == "soleus_r" else m for m in osim.muscles)
     with pytest.raises(ValueError, match=rf"^{MODEL}: ForceSet: .*{said}"):
-        TrialMuscles(dataclasses.replace(osim, muscles=muscles), trial.tree, res.t, res.plates)
-    same = tuple(dataclasses.replace(m, properties=(("min_control", 0.01), ("max_control", 1.0), *m.properties))
-                 if m.name == "soleus_r" else m for m in osim.muscles)
-    TrialMuscles(dataclasses.replace(osim, muscles=same), trial.tree, res.t, res.plates)  # the bounds given: taken
+        TrialMuscles(_own(osim, {"soleus_r": props}, kind), trial.tree, res.t, res.plates)
+    # a minimum_activation above the activation bounds' lower raises the muscle's: its activation cannot go below
+    tm = TrialMuscles(_own(osim, {"soleus_r": (("minimum_activation", 0.05),)}), trial.tree, res.t, res.plates)
+    assert tm.optimization.bounds(len(tm.muscles))[0][[m.name for m in tm.muscles].index("soleus_r")] == 0.05
 
 
 def test_residuals_that_carry_the_body_are_said(run):
@@ -193,3 +223,16 @@ def test_a_muscle_that_crosses_no_coordinate_of_the_plane_is_said(run):
     arms[:, i, :] = 0.0
     report = muscle_result(trial, dataclasses.replace(out, arms=arms), res.z).report
     assert "muscles soleus_r cross no coordinate of the plane (moment arms 0 at every frame)" in report[-1]
+
+
+def test_coordinates_nothing_acts_on_are_known_from_the_model_and_refused_at_the_solve(run):
+    """Without reserves the arms' coordinates have nothing to carry their moments: known at the model's default pose
+    (what a study checks before any run) and refused when the trial is solved."""
+    osim, res, trial, _ = run
+    bare = TrialMuscles(osim, trial.tree, res.t, res.plates, joints=JOINTS)
+    names = [c.name for c, b in zip(bare.joint_coordinates, bare.bare_coordinates(), strict=True) if b]
+    assert names == ["arm_flex_r", "arm_flex_l", "elbow_flex_r", "elbow_flex_l"]
+    assert not any(trial.bare_coordinates())  # the reserves act on every coordinate
+    with pytest.raises(ValueError, match=r"^arm_flex_r, arm_flex_l, elbow_flex_r, elbow_flex_l: no muscle crosses it "
+                                         r"and no reserve acts on it"):
+        bare.solve(res.z, res.zd, res.zdd)

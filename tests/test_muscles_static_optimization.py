@@ -264,3 +264,57 @@ def test_muscles_with_no_force_anywhere_leave_every_frame_refused_by_name():
     with pytest.raises(ValueError, match=r"frame 0: knee: no activation within the bounds carries its moment of 5 N m"):
         solve_static_optimization(np.full((k, 1), 5.0), np.full((k, 1, 1), 0.05), np.zeros((k, 1)),
                                   coordinates=["knee"])
+
+
+def test_each_muscle_within_its_own_bounds_in_the_qp_ipopt_and_the_active_set():
+    """Two identical muscles on one joint, the first bounded by 0.3 (OpenSim's per-muscle max_control): the
+    second carries the rest; the QP (p = 2), IPOPT (p = 3) and the active-set solve of ``near`` agree."""
+    import dataclasses
+
+    m = np.array([[10.0], [30.0], [40.0]])  # N m: 0.16, 0.47, 0.63 of both muscles' full activation together
+    arms, active = np.full((3, 2, 1), 0.04), np.full((3, 2), 800.0)
+    opts = StaticOptimization(activation_bounds=(0.0, 1.0), muscle_bounds=((0.0, 0.3), (0.0, 1.0)))
+    for p in (2.0, 3.0):
+        r = solve_static_optimization(m, arms, active, options=dataclasses.replace(opts, exponent=p))
+        a = r.activations
+        assert r.success and a[:, 0].max() == pytest.approx(0.3, abs=1e-8)  # held at its own bound
+        assert a[0, 0] == pytest.approx(a[0, 1], rel=1e-6)  # below it: shared equally
+        assert np.allclose(a.sum(axis=1) * 0.04 * 800.0, m[:, 0], rtol=1e-8)
+    near = solve_static_optimization(m * 0.999, arms, active, options=opts)
+    again = solve_static_optimization(m, arms, active, options=opts, near=near)
+    qp = solve_static_optimization(m, arms, active, options=opts)
+    assert again.stats["kept"].all() and np.allclose(again.activations, qp.activations, atol=1e-8)
+    with pytest.raises(ValueError, match=r"^muscle_bounds: expected 2 pairs \(one per muscle\), got 1$"):
+        solve_static_optimization(m, arms, active, options=dataclasses.replace(opts, muscle_bounds=((0.0, 1.0),)))
+    with pytest.raises(ValueError, match=r"^muscle_bounds\[0\]: expected 0 <= lower < upper <= 1, got \(0.0, 2.0\)"):
+        StaticOptimization(muscle_bounds=((0.0, 2.0),))
+
+
+def test_ipopt_stopping_short_names_the_frame_that_fails_alone():
+    """p = 3 with IPOPT held to 30 iterations on OpenSim's inputs of Hamner's run: the whole trial stops short
+    (a RuntimeError before, naming no frame); each frame alone converges but the one at 0.883 s."""
+    from casflex.muscles.static_optimization import StaticOptimizationError
+
+    d, cols, moments, _ = _reference()
+    with pytest.raises(StaticOptimizationError, match=r"^static optimization \(exponent 3\): IPOPT stopped "
+                       r"\(Maximum_Iterations_Exceeded\) at t = 0.883333 s \(frame 41\), on moments the activations "
+                       r"can carry: try exponent 2") as info:
+        solve_static_optimization(moments, d["arms"][:, :, cols], d["active"], reserves=np.ones(len(JOINTS)),
+                                  options=StaticOptimization(exponent=3.0, max_iterations=30), coordinates=JOINTS,
+                                  times=d["t"])
+    assert info.value.frames == (41,)
+
+
+def test_a_shortfall_ipopt_stopped_on_is_no_refusal_of_moments_out_of_reach():
+    """p = 3 with IPOPT held to 5 iterations: the least-shortfall problem stops short too, and its iterate was taken
+    as what the activations cannot carry ("frame 0: knee_angle_l: ... 115.432 N m out of reach", moments the
+    reserves carry); now its stop is said as IPOPT's, not as the moments'."""
+    from casflex.muscles.static_optimization import StaticOptimizationError
+
+    d, cols, moments, _ = _reference()
+    with pytest.raises(StaticOptimizationError, match=r"^static optimization \(exponent 3\): IPOPT stopped "
+                       r"\(Maximum_Iterations_Exceeded\) at t = 0.2 s \(frame 0\), .* finding what the activations "
+                       r"cannot carry: try exponent 2"):
+        solve_static_optimization(moments, d["arms"][:, :, cols], d["active"], reserves=np.ones(len(JOINTS)),
+                                  options=StaticOptimization(exponent=3.0, max_iterations=5), coordinates=JOINTS,
+                                  times=d["t"])

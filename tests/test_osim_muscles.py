@@ -109,6 +109,13 @@ HAM = '<Millard2012EquilibriumMuscle name="hamstrings_r">'
     ("<minimum_activation>0.01", "<minimum_activation>nan", r"\.minimum_activation: 'nan' is no number"),
     ("<isometric_slope>5", "<isometric_slope>inf", r"ForceVelocityCurve\.isometric_slope: 'inf' is no number"),
     ("/bodyset/tibia_r", "/bodyset/tibia_x", r"path point 'bifemlh_r-P2': on 'tibia_x', no body of the model"),
+    # an element given twice was read first-wins without a word (OpenSim too): which one counts would be a guess
+    ("<max_isometric_force>2700", "<max_isometric_force>1000</max_isometric_force><max_isometric_force>2700",
+     r"\.max_isometric_force: given 2 times; give it once"),
+    ("<minimum_activation>0.01", "<max_control>0.5</max_control><max_control>1</max_control><minimum_activation>0.01",
+     r"\.max_control: given 2 times; give it once"),
+    ("<isometric_slope>5", "<isometric_slope>4</isometric_slope><isometric_slope>5",
+     r"\.ForceVelocityCurve\.isometric_slope: given 2 times; give it once"),
 ])
 def test_bad_muscle_numbers_and_bodies_are_refused(tmp_path, old, new, pattern):
     _refused(_model(tmp_path, old, new, within=HAM),

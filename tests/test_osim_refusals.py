@@ -179,8 +179,13 @@ def test_a_clamped_coordinate_without_range_is_refused_an_unclamped_one_is_free(
             "<inertia>-0.5 0.0055056100000000002 0.055164100000000001 0 0 0</inertia>",
             "body 'tibia_r'.inertia: -0.5 0.00550561 0.0551641 0 0 0 is no body's inertia",
         ),
+        (  # read first-wins without a word before
+            "<mass>3.2505228525130199</mass>",
+            "<mass>3.2505228525130199</mass><mass>32.5</mass>",
+            "body 'tibia_r'.mass: given 2 times; give it once",
+        ),
     ],
-    ids=["spline-nan", "spline-inf", "huge-mass", "negative-inertia"],
+    ids=["spline-nan", "spline-inf", "huge-mass", "negative-inertia", "mass-twice"],
 )
 def test_a_number_no_model_has_is_refused_naming_the_element(tmp_path, old, new, said):
     assert old in TEXT

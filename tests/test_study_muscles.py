@@ -176,6 +176,12 @@ def test_bad_muscle_options_are_refused_naming_the_field(folder, muscles, old, n
     ('joints = ["hip_r", "hip_l"]', 'joints = ["hip_x"]', "options.muscles.joints: 'hip_x' is not a hinge of"),
     ('model = "hamner_subject02_planar_muscles.osim"\nmass', 'model = "hamner_leg"\nmass',
      "subjects[1].model: options.muscles needs an OpenSim model (.osim) with its muscles, got 'hamner_leg'"),
+    # neither actuators nor reserves: the study passed its checks and each muscle run failed on the arms ("no muscle
+    # crosses it and no reserve acts on it"), after the calibrations and the trials' runs
+    ('actuators = "hamner_reserve_actuators.xml"', '', "options.muscles: neither actuators nor reserves given, and "
+     "nothing acts on arm_flex_r, arm_flex_l, elbow_flex_r, elbow_flex_l, which no muscle of subjects[0]'s model "
+     "(hamner_subject02_planar_muscles.osim) crosses: static optimization has nothing to carry their moments; give "
+     "reserves = N"),
 ])
 def test_muscle_options_are_checked_against_the_models_before_any_run(folder, old, new, message):
     study = load_study(str(write(folder, "", old, new)))
@@ -237,3 +243,32 @@ def test_the_criteria_default_to_the_other_of_2_and_3(folder):
     """The bands' spread is to p = 3 beside p = 2, and to p = 2 beside p = 3 (the issue's two criteria)."""
     assert load_study(str(write(folder))).options.muscles.criteria == (3.0,)
     assert load_study(str(write(folder, "exponent = 3.0"))).options.muscles.criteria == (2.0,)
+
+
+def test_a_muscle_runs_record_says_what_casflex_muscles_says(folder, tmp_path):
+    """The residual warning (the run without its plates: FY carries 1.4 BW RMS) and the muscles crossing no
+    coordinate of the plane (soleus_r's ends both on the tibia) reached `casflex muscles`' output only: a study's
+    muscle run built its own record without them. Now its warnings (the summary's lines) hold the same text."""
+    from casflex.scene import dumps_scene
+    from casflex.study.muscles import muscle_run
+
+    text = (folder / "hamner_subject02_planar_muscles.osim").read_text()
+    old = "<PathPoint name=\"soleus_r-P2\">"
+    at = text.index(old)
+    end = text.index("</PathPoint>", at)
+    text = text[:at] + text[at:end].replace("/bodyset/calcn_r", "/bodyset/tibia_r") + text[end:]
+    # its path now 0.205 m: the tendon shortened so that the fibre sits near its optimal length (else refused as a
+    # muscle that cannot pull)
+    text = text.replace("<tendon_slack_length>0.27766217612689298</tendon_slack_length>",
+                        "<tendon_slack_length>0.155</tendon_slack_length>", 1)
+    (folder / "hamner_subject02_planar_muscles.osim").write_text(text)
+    study = load_study(str(write(folder)))
+    s = study.subjects[0]
+    scene = dumps_scene(scene_from_osim(s.model, muscles=True).scene)  # the subject unscaled: the model's scene
+    rec = muscle_run(model=s.model, scene=scene, trial=s.trials[0], options=study.options.trials, plane="X,Y",
+                     plates=None, cycles={}, muscles=study.options.muscles, uncertain=())
+    warnings = rec["warnings"]
+    assert any(w.startswith("residual 'FY' carries 1.") and "the ground reactions are missing" in w
+               for w in warnings), warnings
+    assert "muscles soleus_r cross no coordinate of the plane (moment arms 0 at every frame): they carry no moment, " \
+           "their activations stay at the lower bound" in warnings, warnings

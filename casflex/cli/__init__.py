@@ -56,7 +56,8 @@ def _parser(argv: list[str] | None = None) -> CliParser:
 #: imported, since only then can the command have raised one (importing casflex.statics to name its error would
 #: load scipy, 0.6 s, on every refused input).
 _MODULE_ERRORS = (("casflex.codegen", "CodegenError"), ("casflex.simulate", "SimulationError"),
-                  ("casflex.statics", "StaticsError"))
+                  ("casflex.statics", "StaticsError"),
+                  ("casflex.muscles.static_optimization", "StaticOptimizationError"))
 
 
 def _known_errors() -> tuple[type[BaseException], ...]:

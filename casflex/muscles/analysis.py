@@ -17,6 +17,7 @@ coordinates go to static optimization, with the CoordinateActuators on them as i
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -34,7 +35,8 @@ from casflex.muscles.reaction import JointReaction, JointReactions, joint_reacti
 from casflex.muscles.static_optimization import StaticOptimization, StaticOptimizationResult, solve_static_optimization
 from casflex.scene.from_osim import node_name
 
-__all__ = ["FrameOutputs", "TrialMuscles", "muscle_result", "reserve_actuators", "residual_warnings"]
+__all__ = ["FrameOutputs", "TrialMuscles", "muscle_result", "reserve_actuators", "residual_warnings",
+           "uncrossed_notes"]
 
 #: The least a muscle must pull at full activation, at its best frame of the trial, as a fraction of its max
 #: isometric force (:meth:`TrialMuscles._check_capacity`); a real muscle pulls 0.9-1.3 there.
@@ -92,7 +94,7 @@ class TrialMuscles:
         #: lines said on stderr and in the report: muscles stronger than a human's (:mod:`casflex.muscles.strength`)
         self.warnings = self._check_strength()
         self.optimization = optimization or StaticOptimization()
-        self._check_controls()
+        bounds_note = self._muscle_bounds()
         self.reaction = reaction or JointReaction()
         hinges = list(tree.hinges)
         self.joints = tuple(joints) or tuple(hinges)
@@ -109,7 +111,7 @@ class TrialMuscles:
         self.joint_coordinates = tuple(c for c in coords if not c.of.startswith(root))
         self.notes = [*self.warnings, *check_actuators(tuple(actuators), self.scene, source,
                                                        bodies=set(osim.frames) - {"ground"},
-                                                       muscles=[m.name for m in self.muscles])]
+                                                       muscles=[m.name for m in self.muscles]), *bounds_note]
         self._split_actuators(tuple(actuators), source)
         if not self.residuals:
             self.notes.append(f"no residual actuator on the root ({tree.root}): its loads (the inverse dynamics' "
@@ -129,24 +131,42 @@ class TrialMuscles:
         head = f"{self.osim.source}: ForceSet: " if self.osim.source else ""
         return check_strength(self.muscles, weight, head, float(total.max(initial=0.0)))
 
-    def _check_controls(self) -> None:
-        """ValueError naming the muscle whose file bounds its activation otherwise than static optimization's
-        ``activation_bounds``, which casflex applies to every muscle: its ``min_control`` or ``max_control`` (OpenSim's
-        SO bounds each muscle by its own; they were ignored), or a Millard muscle's ``minimum_activation`` outside
-        [0, 1) (ignored too: OpenSim refuses it below 0)."""
+    def _muscle_bounds(self) -> list[str]:
+        """Each muscle's activation bounds as OpenSim's SO takes them (StaticOptimization.cpp, ``record``: each
+        actuator's ``getMinControl()``, ``getMaxControl()``): its own ``min_control`` / ``max_control`` where its
+        file gives them, else static optimization's ``activation_bounds`` (--activation-bounds: casflex's stand-in
+        for the kinds' defaults); a Millard or Thelen muscle's ``minimum_activation`` raises its lower bound to it
+        (OpenSim refuses a ``min_control`` below it). Set as ``muscle_bounds`` when any differs; the report's line
+        naming those muscles. ValueError naming the muscle and the tag for bounds no activation can take."""
         lo, hi = self.optimization.activation_bounds
         head = f"{self.osim.source}: " if self.osim.source else ""
+        pairs, own = [], []
         for m in self.muscles:
-            for tag, bound in (("min_control", lo), ("max_control", hi)):
-                v = m.property(tag, bound)
-                if v != bound:
-                    raise ValueError(f"{head}ForceSet: {m.kind} {m.name!r}.{tag}: {v:g}, where static optimization "
-                                     f"bounds every muscle's activation by [{lo:g}, {hi:g}] (--activation-bounds, "
-                                     "options.muscles.activation_bounds): give those bounds, or remove the muscle's")
+            where = f"{head}ForceSet: {m.kind} {m.name!r}"
             a = m.property("minimum_activation", 0.0)
             if m.kind == "Millard2012EquilibriumMuscle" and not 0.0 <= a < 1.0:
-                raise ValueError(f"{head}ForceSet: {m.kind} {m.name!r}.minimum_activation: must be in [0, 1) (OpenSim "
-                                 f"refuses it below 0; at 1 the muscle could never relax), got {a:g}")
+                raise ValueError(f"{where}.minimum_activation: must be in [0, 1) (OpenSim refuses it below 0; at 1 "
+                                 f"the muscle could never relax), got {a:g}")
+            a = a if m.kind in ("Millard2012EquilibriumMuscle", "Thelen2003Muscle") else 0.0
+            given = {tag: m.property(tag, math.nan) for tag in ("min_control", "max_control")}
+            if given["min_control"] < a:
+                raise ValueError(f"{where}.min_control: {given['min_control']:g} is below its minimum_activation "
+                                 f"{a:g} (OpenSim refuses the model): give min_control >= minimum_activation")
+            pair = (max(lo if math.isnan(given["min_control"]) else given["min_control"], a),
+                    hi if math.isnan(given["max_control"]) else given["max_control"])
+            if not (math.isfinite(pair[1]) and 0.0 <= pair[0] < pair[1] <= 1.0):
+                tag = "max_control" if not math.isnan(given["max_control"]) else "min_control"
+                raise ValueError(f"{where}.{tag}: its activation bounds would be [{pair[0]:g}, {pair[1]:g}] (its own "
+                                 f"min_control / max_control, the others from the activation bounds [{lo:g}, {hi:g}]):"
+                                 " expected 0 <= lower < upper <= 1 (an activation is the fraction of its force)")
+            pairs.append(pair)
+            if pair != (lo, hi):
+                own.append(f"{m.name} [{pair[0]:g}, {pair[1]:g}]")
+        if not own:
+            return []
+        self.optimization = dataclasses.replace(self.optimization, muscle_bounds=tuple(pairs))
+        return [f"muscles {', '.join(own)} bounded by their own min_control / max_control (or minimum_activation; "
+                f"as OpenSim's static optimization), the others by the activation bounds [{lo:g}, {hi:g}]"]
 
     def _split_actuators(self, actuators, source: str) -> None:
         """The reserves (a CoordinateActuator on a joint's coordinate: static optimization's) and the residuals
@@ -195,6 +215,19 @@ class TrialMuscles:
             cols.append(ca.jacobian(P, z)[:, self.tree.names.index(f"{h}.angle")])
         return ca.Function("hinge_slides", [z], [ca.horzcat(*cols)])
 
+    def bare_coordinates(self, arms: np.ndarray | None = None) -> list[bool]:
+        """Per joint coordinate (``joint_coordinates``' order): True where no muscle crosses it (moment arms below
+        1e-9 m in ``arms`` (k, n_m, n_c), default at the model's default pose) and no reserve acts on it: static
+        optimization has nothing to carry its moment."""
+        if arms is None:
+            z0 = self.tree.coordinates(np.asarray(self.tree.model.q0, dtype=float).ravel())
+            geo = self.paths.evaluate(np.atleast_2d(z0), np.zeros((1, np.size(z0))))
+            cols = [list(self.scene.coordinates).index(c) for c in self.joint_coordinates]
+            arms = geo["moment_arms"][:, :, cols]
+        held = {c for c, a in self.reserves.items() if a.optimal_force > 0.0}
+        return [bool(np.abs(arms[:, :, i]).max(initial=0.0) < 1e-9 and c.name not in held)
+                for i, c in enumerate(self.joint_coordinates)]
+
     def capacity(self, lengths: np.ndarray, speeds: np.ndarray, muscles=None) -> tuple[np.ndarray, np.ndarray]:
         """(active, passive) (k, n_m) N: each muscle's force along its tendon at full activation and its passive
         force (:func:`casflex.muscles.curves.rigid_tendon`, OpenSim's values), at the paths' lengths and speeds."""
@@ -237,8 +270,8 @@ class TrialMuscles:
         capacity = [self._capacity_of(v, geo, active0, passive0) for v in variants]
         reserves = np.array([self.reserves[c.name].optimal_force if c.name in self.reserves else 0.0
                              for c in self.joint_coordinates])
-        bare = [c.name for i, c in enumerate(self.joint_coordinates)
-                if np.abs(arms[:, :, i]).max() < 1e-9 and not reserves[i] and np.abs(moments[:, i]).max() > 1e-6]
+        bare = [c.name for i, (c, b) in enumerate(zip(self.joint_coordinates, self.bare_coordinates(arms), strict=True))
+                if b and np.abs(moments[:, i]).max() > 1e-6]
         if bare:
             raise ValueError(f"{', '.join(bare)}: no muscle crosses it and no reserve acts on it: its moment has "
                              "nothing to carry it; give reserves (an actuator file, or --reserves / actuators=N)")
@@ -249,7 +282,7 @@ class TrialMuscles:
         else:
             sos = [solve_static_optimization(moments, arms, a, ps, reserves, options, coordinates=names,
                                              max_isometric=[m.max_isometric_force for m in v],
-                                             near=None if near is None else near.so)
+                                             near=None if near is None else near.so, times=self.t)
                    for v, (a, ps) in zip(variants, capacity, strict=True)]
         residuals, geometry = self._residuals(loads, z), self._reaction_geometry(z)
         out = []
@@ -436,6 +469,14 @@ def residual_warnings(trial: TrialMuscles, out: FrameOutputs) -> list[str]:
     return lines
 
 
+def uncrossed_notes(trial: TrialMuscles, out: FrameOutputs) -> list[str]:
+    """The line naming the muscles that cross no coordinate of the plane (both ends on one segment, or crossing only
+    coordinates the plane holds still), if any."""
+    idle = [m.name for i, m in enumerate(trial.muscles) if np.abs(out.arms[:, i, :]).max() < 1e-9]
+    return [f"muscles {', '.join(idle)} cross no coordinate of the plane (moment arms 0 at every frame): they "
+            "carry no moment, their activations stay at the lower bound"] if idle else []
+
+
 def _turn(angle: np.ndarray, v: np.ndarray) -> np.ndarray:
     """v (2,) turned by the angles (k,): (k, 2)."""
     c, s = np.cos(angle), np.sin(angle)
@@ -443,8 +484,6 @@ def _turn(angle: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 def _with_reserve_bounds(options: StaticOptimization, bounds: tuple[float, float]) -> StaticOptimization:
-    import dataclasses
-
     return dataclasses.replace(options, reserve_bounds=bounds)
 
 
@@ -478,10 +517,7 @@ def muscle_result(trial: TrialMuscles, out: FrameOutputs, z: np.ndarray, report=
         for suffix, v in zip(("fx", "fy", "fz", "mx", "my", "mz", "px", "py", "pz"), values, strict=True):
             columns[f"{h}_on_{on}_in_{frame}_{suffix}"] = v
         resultants[h] = np.hypot(load[:, 0], load[:, 1]) * (trial.reaction.body_weight or 1.0)
-    idle = [m.name for i, m in enumerate(trial.muscles) if np.abs(out.arms[:, i, :]).max() < 1e-9]
-    if idle:  # both ends on one segment, or crossing only coordinates the plane holds still
-        report = (*report, f"muscles {', '.join(idle)} cross no coordinate of the plane (moment arms 0 at every "
-                           "frame): they carry no moment, their activations stay at the lower bound")
+    report = (*report, *uncrossed_notes(trial, out))
     g = float(np.hypot(*trial.scene.gravity))
     empty = np.zeros((k, 0))
     return MuscleResult(t=trial.t, muscles=tuple(m.name for m in trial.muscles), activations=out.so.activations,

@@ -94,8 +94,8 @@ def muscle_outputs(trial, out, bounds: bool = False) -> dict[str, np.ndarray]:
         res |= {f"{stem}_fx": L[:, 0], f"{stem}_fy": L[:, 1], f"{stem}_mz": L[:, 2],
                 f"{j}_resultant": np.hypot(L[:, 0], L[:, 1])}
     if bounds:
-        lo, hi = trial.optimization.activation_bounds
         a = so.activations
+        lo, hi = trial.optimization.bounds(a.shape[1])
         flags = np.where(a <= lo + AT_BOUND, -1.0, np.where(a >= hi - AT_BOUND, 1.0, 0.0))
         res |= {f"_bound.{m.name}": flags[:, i] for i, m in enumerate(trial.muscles)}
     return res

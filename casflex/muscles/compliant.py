@@ -141,18 +141,18 @@ def solve_compliant(moments, arms, lengths, muscles, reserves=None, options: Sta
     n_v = 2 * n_m + 2 * n_r
     x = ca.MX.sym("x", n_v, k)
     fm = f.map(k)
-    live = np.column_stack([~_slack(m, lmt[:, i], options.activation_bounds[0], options.passive)
+    lo, hi = options.bounds(n_m)
+    live = np.column_stack([~_slack(m, lmt[:, i], lo[i], options.passive)
                             for i, m in enumerate(muscles)]).astype(float) if n_m else np.zeros((k, 0))
     args = (lmt.T, live.T, arms[:, :, sub].reshape(k, n_m * sub.size).T, m_[:, sub].T)
     cost, rows, _ = fm(x, *args)
-    lo, hi = options.activation_bounds
     rlo, rhi = options.reserve_bounds
     bounds = [_fibre_bounds(m) for m in muscles]
     longest = np.column_stack([_rigid_start(m, lmt[:, i]) for i, m in enumerate(muscles)]) if n_m else \
         np.zeros((k, 0))
-    lbx = np.tile(np.r_[np.full(n_m, lo), [b[0] for b in bounds], np.zeros(2 * n_r)], (k, 1))
-    ubx = np.column_stack([np.full((k, n_m), hi), longest, np.full((k, n_r), rhi), np.full((k, n_r), -rlo)])
-    x0 = np.column_stack([np.full((k, n_m), lo), longest, np.zeros((k, 2 * n_r))])
+    lbx = np.tile(np.r_[lo, [b[0] for b in bounds], np.zeros(2 * n_r)], (k, 1))
+    ubx = np.column_stack([np.broadcast_to(hi, (k, n_m)), longest, np.full((k, n_r), rhi), np.full((k, n_r), -rlo)])
+    x0 = np.column_stack([np.broadcast_to(lo, (k, n_m)), longest, np.zeros((k, 2 * n_r))])
     tol = options.tolerance
     solver = ca.nlpsol("compliant_static_optimization", "ipopt",
                        {"x": ca.vec(x), "f": ca.sum2(cost), "g": ca.vec(rows)},

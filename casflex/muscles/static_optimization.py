@@ -37,12 +37,22 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["MAX_EXPONENT", "StaticOptimization", "StaticOptimizationResult", "solve_static_optimization"]
+__all__ = ["MAX_EXPONENT", "StaticOptimization", "StaticOptimizationError", "StaticOptimizationResult",
+           "solve_static_optimization"]
 
 #: The largest exponent p of the cost sum a^p taken: at p = 20 a^p of an activation at its bound 0.01 is 1e-40 and
 #: IPOPT stopped on Hamner's run (Maximum_Iterations, a traceback), at 10 it converged (the literature's criteria
 #: are p = 1, 2, 3 and the min-max one, which large p only approaches).
 MAX_EXPONENT = 10.0
+
+
+class StaticOptimizationError(RuntimeError):
+    """IPOPT stopped short on moments the activations can carry (an exponent other than 2 at a hard frame); the
+    message names the frames (their times where given) and what to try; ``frames`` their indices."""
+
+    def __init__(self, message: str, frames: tuple[int, ...] = ()):
+        super().__init__(message)
+        self.frames = frames
 
 
 @dataclass(frozen=True)
@@ -55,6 +65,9 @@ class StaticOptimization:
     passive : apply the passive fibre forces as known forces (True); OpenSim's SO does not (False)
     activation_bounds : (lower, upper) of every activation [the muscles' min_control, max_control: 0.01, 1 for
         Millard2012EquilibriumMuscle, whose min_control is its minimum_activation]
+    muscle_bounds : ((lower, upper), ...) one pair per muscle, in place of ``activation_bounds`` where the muscles'
+        own differ [each muscle's min_control, max_control: OpenSim bounds each by its own]; () every muscle by
+        ``activation_bounds``
     reserve_bounds : (lower, upper) of the reserves' controls [their min_control, max_control: -inf, inf]
     tolerance : IPOPT's tol and constr_viol_tol (relative to the moments' scale) [optimizer_convergence_criterion,
         1e-4: loose; 1e-10 here so that the answer is the optimum, not an iterate near it]
@@ -70,6 +83,7 @@ class StaticOptimization:
     force_length_velocity: bool = True
     passive: bool = False
     activation_bounds: tuple[float, float] = (0.01, 1.0)
+    muscle_bounds: tuple[tuple[float, float], ...] = ()
     reserve_bounds: tuple[float, float] = (-math.inf, math.inf)
     tolerance: float = 1e-10
     max_iterations: int = 3000
@@ -87,6 +101,10 @@ class StaticOptimization:
         if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo < hi <= 1.0):
             raise ValueError("activation_bounds: expected 0 <= lower < upper <= 1 (an activation is the fraction of "
                              f"the muscle's force it gives), got {self.activation_bounds!r}")
+        for i, pair in enumerate(self.muscle_bounds):
+            lo, hi = _pair(f"muscle_bounds[{i}]", pair)
+            if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo < hi <= 1.0):
+                raise ValueError(f"muscle_bounds[{i}]: expected 0 <= lower < upper <= 1, got {pair!r}")
         lo, hi = _pair("reserve_bounds", self.reserve_bounds)
         if not (lo <= 0.0 <= hi and lo < hi):
             raise ValueError(f"reserve_bounds: expected lower <= 0 <= upper, got {self.reserve_bounds!r}")
@@ -101,6 +119,17 @@ class StaticOptimization:
         if self.tendon == "compliant" and not self.force_length_velocity:
             raise ValueError("tendon: 'compliant' needs force_length_velocity (a tendon's stretch matters through the "
                              "fibre's force-length curve only)")
+
+
+    def bounds(self, n_m: int) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper) (n_m,): each muscle's activation bounds (``muscle_bounds``, else ``activation_bounds``);
+        ValueError when ``muscle_bounds`` holds another number of pairs."""
+        if not self.muscle_bounds:
+            return np.full(n_m, float(self.activation_bounds[0])), np.full(n_m, float(self.activation_bounds[1]))
+        if len(self.muscle_bounds) != n_m:
+            raise ValueError(f"muscle_bounds: expected {n_m} pairs (one per muscle), got {len(self.muscle_bounds)}")
+        b = np.asarray(self.muscle_bounds, dtype=float)
+        return b[:, 0].copy(), b[:, 1].copy()
 
 
 def _real(x) -> bool:
@@ -189,7 +218,8 @@ def _check(moments, arms, active, passive, reserves, coordinates):
 def solve_static_optimization(moments, arms, active, passive=None, reserves=None,
                               options: StaticOptimization | None = None, *, max_isometric=None,
                               coordinates: Sequence[str] | None = None,
-                              near: StaticOptimizationResult | None = None) -> StaticOptimizationResult:
+                              near: StaticOptimizationResult | None = None,
+                              times: Sequence[float] | None = None) -> StaticOptimizationResult:
     """Static optimization of k frames (module docstring).
 
     moments (k, n_c) N m (N on a translation): the generalized forces the muscles and reserves must carry (the
@@ -199,7 +229,9 @@ def solve_static_optimization(moments, arms, active, passive=None, reserves=None
     coordinate's reserve optimal force (0 or None: no reserve); max_isometric (n_m,) N: the forces per unit
     activation when ``options.force_length_velocity`` is False; coordinates: names for the report; near: the
     result of nearby inputs with the same frames (the bands' perturbations): with p = 2, each frame solved on its
-    active set (:func:`_on_active_set`), the QP only for the frames where that set changed.
+    active set (:func:`_on_active_set`), the QP only for the frames where that set changed; times (k,) s: the
+    frames' times, for the messages. Where IPOPT stops short on the whole trial each frame is solved alone; a frame
+    that still fails raises :class:`StaticOptimizationError` naming it.
     """
     import time
 
@@ -218,7 +250,8 @@ def solve_static_optimization(moments, arms, active, passive=None, reserves=None
         infeasible = ()
         if not kept.all():  # the frames whose active set changed: the QP
             sub = solve_static_optimization(moments[~kept], arms[~kept], active[~kept], passive[~kept], r, options,
-                                            coordinates=names)
+                                            coordinates=names, times=None if times is None else
+                                            np.asarray(times)[~kept])
             v = x.reshape(k, problem.n_v)
             v[~kept, :n_m] = sub.activations
             u = sub.reserve_controls[:, problem.held]
@@ -233,14 +266,17 @@ def solve_static_optimization(moments, arms, active, passive=None, reserves=None
     short, infeasible = np.zeros((k, n_c)), ()
     if not ok:
         short = problem.shortfall(target)
+        if problem.shortfall_status:  # stopped short: its shortfall is no measure; the frames one by one
+            short = _shortfall_by_frame(problem, target, times)
         infeasible = _infeasible(short, names, options.tolerance * problem.scale)
         if infeasible and options.infeasible == "raise":
             raise ValueError(_report(infeasible, len(infeasible), target, names))
-        x, it2, ok, stats = problem.solve(target - short if infeasible else target, qp=False)
+        goal = target - short if infeasible else target
+        x, it2, ok, stats = problem.solve(goal, qp=False)
         iterations += it2
-        if not ok or not np.all(np.isfinite(x)):
-            raise RuntimeError(f"static optimization: IPOPT stopped ({stats.get('return_status')}) on moments the "
-                               "activations can carry; raise max_iterations or loosen tolerance")
+        if not ok or not np.all(np.isfinite(x)):  # the frames one by one: the failing ones named, or all solved
+            x, it2, stats = _frame_by_frame(problem, goal, times)
+            iterations += it2
     report = _report(infeasible, len(infeasible), target, names) if infeasible else ""
     return _result(problem, x, target, infeasible, report, passive, options, iterations,
                    time.perf_counter() - start, stats)
@@ -258,7 +294,7 @@ def _on_active_set(problem: _Problem, target: np.ndarray, near: StaticOptimizati
     of the balance, exact; ``kept`` where that is the optimum (the balance met, the free unknowns within their
     bounds, the held ones' reduced gradients of the sign that keeps them there; to 1e-9)."""
     k, n_m, n_c = problem.arms.shape
-    lo, hi = problem.options.activation_bounds
+    lo, hi = problem.options.bounds(n_m)
     n_r = problem.held.size
     G = np.zeros((k, n_c, n_m + n_r))
     G[:, :, :n_m] = np.einsum("kmc,km->kcm", problem.arms, problem.active)
@@ -275,8 +311,9 @@ def _on_active_set(problem: _Problem, target: np.ndarray, near: StaticOptimizati
     lam = -2.0 * np.einsum("kcv,kv->kc", pinv.transpose(0, 2, 1), np.where(held, 0.0, v))
     grad = 2.0 * v + np.einsum("kcv,kc->kv", G, lam)
     rlo, rhi = problem.options.reserve_bounds
-    low = np.r_[np.full(n_m, lo), np.full(n_r, rlo)]
-    high = np.r_[np.full(n_m, hi), np.full(n_r, rhi)]
+    low = np.r_[lo, np.full(n_r, rlo)]
+    high = np.r_[hi, np.full(n_r, rhi)]
+    lo, hi = np.r_[lo, np.full(n_r, -np.inf)], np.r_[hi, np.full(n_r, np.inf)]  # the reserves are never held
     tol = 1e-9
     balance = np.abs(np.einsum("kcv,kv->kc", G, v) - target) <= tol * problem.scale
     inside = (v >= low - tol) & (v <= high + tol)
@@ -285,6 +322,53 @@ def _on_active_set(problem: _Problem, target: np.ndarray, near: StaticOptimizati
     kept = balance.all(axis=1) & (inside | held).all(axis=1) & sign.all(axis=1)
     x = np.concatenate([v[:, :n_m], np.maximum(v[:, n_m:], 0.0), np.maximum(-v[:, n_m:], 0.0)], axis=1)
     return x.ravel(), kept
+
+
+def _one_frame(problem: _Problem, target: np.ndarray, f: int) -> _Problem:
+    return _Problem(problem.arms[f:f + 1], problem.active[f:f + 1], problem.reserves, target[f:f + 1],
+                    problem.options)
+
+
+def _stopped(problem: _Problem, failed: list[int], status: str, times, doing: str) -> StaticOptimizationError:
+    """The error naming the frames where IPOPT stopped short (their times where given) and what to try."""
+    at = [f"t = {times[f]:g} s (frame {f})" if times is not None else f"frame {f}" for f in failed[:3]]
+    more = f" and {len(failed) - 3} more frames" if len(failed) > 3 else ""
+    return StaticOptimizationError(
+        f"static optimization (exponent {problem.options.exponent:g}): IPOPT stopped ({status}) at {', '.join(at)}"
+        f"{more}, {doing}: try exponent 2 (a QP, which does not stop short), reserves on the joints (--reserves, "
+        "options.muscles.reserves), or a smaller exponent", tuple(failed))
+
+
+def _shortfall_by_frame(problem: _Problem, target: np.ndarray, times) -> np.ndarray:
+    """(k, n_c) N m: :meth:`_Problem.shortfall` frame by frame (after the whole trial's stopped short);
+    :class:`StaticOptimizationError` naming the frames where it stops short too."""
+    out, failed, status = [], [], ""
+    for f in range(target.shape[0]):
+        one = _one_frame(problem, target, f)
+        out.append(one.shortfall(target[f:f + 1]))
+        if one.shortfall_status:
+            failed.append(f)
+            status = status or one.shortfall_status
+    if failed:
+        raise _stopped(problem, failed, status, times, "finding what the activations cannot carry")
+    return np.concatenate(out)
+
+
+def _frame_by_frame(problem: _Problem, target: np.ndarray, times) -> tuple[np.ndarray, int, dict]:
+    """(x, iterations, stats): each frame of ``target`` solved alone by IPOPT (after the whole trial's solve
+    stopped short); :class:`StaticOptimizationError` naming the frames that fail alone too."""
+    k = target.shape[0]
+    xs, failed, iterations, status = [], [], 0, ""
+    for f in range(k):
+        x, it, ok, stats = _one_frame(problem, target, f).solve(target[f:f + 1], qp=False)
+        iterations += it
+        if not ok or not np.all(np.isfinite(x)):
+            failed.append(f)
+            status = status or str(stats.get("return_status"))
+        xs.append(x)
+    if failed:
+        raise _stopped(problem, failed, status, times, "on moments the activations can carry")
+    return np.concatenate(xs), iterations, {"return_status": "frame by frame", "success": True}
 
 
 def _infeasible(short: np.ndarray, names, tol: np.ndarray) -> tuple[tuple[int, str, float], ...]:
@@ -369,9 +453,9 @@ class _Problem:
         rows = np.abs(full).max(axis=2).ravel() * np.tile(self.scale, arms.shape[0])  # N m per unit
         self.keep = rows > 1e-9 * max(float((rows).max()), 1e-300)
         self.G = _block_diagonal(full, self.keep.reshape(k, n_c))
-        lo, hi = options.activation_bounds
+        lo, hi = options.bounds(n_m)
         rlo, rhi = options.reserve_bounds
-        one = np.r_[np.full(n_m, lo), np.zeros(2 * n_r)], np.r_[np.full(n_m, hi), np.full(n_r, rhi), np.full(n_r, -rlo)]
+        one = np.r_[lo, np.zeros(2 * n_r)], np.r_[hi, np.full(n_r, rhi), np.full(n_r, -rlo)]
         self.lbx, self.ubx = np.tile(one[0], k), np.tile(one[1], k)
 
     def _blocks(self) -> np.ndarray:
@@ -438,6 +522,7 @@ class _Problem:
 
         n, rows = self.G.shape[1], self.G.shape[0]
         b = (target / self.scale).ravel()
+        self.shortfall_status = ""  # IPOPT's status where it stopped short, else ""
         if rows == 0:  # nothing acts on any row (no muscle has force there): every row falls short by all it needs
             return b.reshape(target.shape) * self.scale
         z = ca.MX.sym("z", n + 2 * rows)
@@ -447,6 +532,7 @@ class _Problem:
         ubz = np.r_[self.ubx, np.full(2 * rows, np.inf)]
         sol = np.array(solver(x0=np.clip(np.zeros(lbz.size), lbz, ubz), lbx=lbz, ubx=ubz, lbg=b[self.keep],
                               ubg=b[self.keep])["x"]).ravel()
+        self.shortfall_status = "" if solver.stats()["success"] else str(solver.stats()["return_status"])
         s = b.copy()  # the rows nothing acts on fall short by all they require
         s[self.keep] = sol[n:n + rows] - sol[n + rows:]
         return s.reshape(target.shape) * self.scale

@@ -196,8 +196,9 @@ class _Reader:
     def vector(self, el, tag: str, n: int | None, owner: str, default: np.ndarray | None = None) -> np.ndarray:
         """The numbers of ``el``'s element ``tag``: ``n`` of them (None: any number, at least one), each finite
         and of a magnitude up to :data:`LARGEST`; ValueError naming the file, ``owner`` and the tag otherwise.
-        ``default``: the value of an element left out (OpenSim's property default)."""
-        node = el.find(tag)
+        ``default``: the value of an element left out (OpenSim's property default); the element given twice
+        refused (which one counts would be a guess: OpenSim reads the first)."""
+        node = self.single(el, tag, owner)
         if node is None and default is not None:
             return default
         text = "" if node is None or node.text is None else node.text
@@ -213,8 +214,16 @@ class _Reader:
                              "length (m), mass (kg), inertia or angle of a model is that large")
         return v
 
+    def single(self, el, tag: str, owner: str):
+        """``el``'s element ``tag`` (None where left out); ValueError naming it where ``el`` holds two."""
+        found = el.findall(tag)
+        if len(found) > 1:
+            raise ValueError(f"{self.source}: {owner}.{tag}: given {len(found)} times; give it once (which one counts "
+                             "would be a guess: OpenSim reads the first without a word)")
+        return found[0] if found else None
+
     def number(self, el, tag: str, owner: str, default: float | None = None) -> float:
-        if el.find(tag) is None and default is not None:
+        if self.single(el, tag, owner) is None and default is not None:
             return default
         return float(self.vector(el, tag, 1, owner)[0])
 

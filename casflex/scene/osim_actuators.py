@@ -72,7 +72,10 @@ class _Element:
         return ValueError(f"{self.source}: {self.where}: {tag}: {what}")
 
     def text(self, tag: str) -> str | None:
-        node = self.el.find(tag)
+        found = self.el.findall(tag)
+        if len(found) > 1:  # which one counts would be a guess (OpenSim reads the first without a word)
+            raise self.fail(tag, f"given {len(found)} times; give it once")
+        node = found[0] if found else None
         return None if node is None or node.text is None else node.text.strip()
 
     def numbers(self, tag: str, n: int, default: tuple[float, ...]) -> tuple[float, ...]:

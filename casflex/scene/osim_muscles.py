@@ -96,7 +96,11 @@ def _numbers(r, m, owner: str) -> tuple[dict[str, float], tuple[tuple[str, float
     for el in m:
         if el.tag in _NOT_NUMBERS or el.tag in numbers or not isinstance(el.tag, str):
             continue
-        if len(el):  # an object (a Millard curve): its numbers
+        r.single(m, el.tag, owner)  # a property given twice (two max_control): refused, not read first-wins
+        if len(el):  # an object (a Millard curve): its numbers, each given once
+            for c in el:
+                if isinstance(c.tag, str):
+                    r.single(el, c.tag, f"{owner}.{el.tag}")
             props += [(f"{el.tag}.{k}", v) for k, v in _scalars(r, el, f"{owner}.{el.tag}")]
         else:
             props += _scalars(r, [el], owner)

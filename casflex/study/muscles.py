@@ -7,7 +7,7 @@ lengths by the muscle-tendon length's ratio, as OpenSim's ScaleTool), cut into t
 [options.muscles]              # the table present: the muscles are computed; every key optional
 exponent = 2.0                 # static optimization's sum of activation^p (OpenSim's activation_exponent)
 force_length_velocity = true   # false: a muscle's force per activation is its max isometric force
-activation_bounds = [0.01, 1.0]
+activation_bounds = [0.01, 1.0]  # of the muscles without min_control / max_control of their own (theirs win)
 actuators = "reserves.xml"     # reserves and residuals (an OpenSim ForceSet file), added to the model's own
 reserves = 100.0               # or: a reserve of this optimal force (N m) on every joint coordinate, FX FY MZ
 joints = ["hip_r", "hip_l"]    # the joints whose reactions the table holds (default: every hinge)
@@ -89,10 +89,17 @@ def check_muscles(i: int, model: str, scene, opts: MuscleOptions, root: str | No
         raise StudyError(f"options.muscles.joints: {bad[0]!r} is not a hinge of subjects[{i}]'s model (hinges: "
                          f"{hinges[:12]})")
     try:
-        _trial_muscles(model, scene, opts, root, osim=osim)
+        tm, _ = _trial_muscles(model, scene, opts, root, osim=osim)
     except ValueError as exc:
         field = "options.muscles.actuators" if opts.actuators else f"subjects[{i}].model"
         raise StudyError(f"{field}: {exc}") from None
+    bare = [c.name for c, b in zip(tm.joint_coordinates, tm.bare_coordinates(), strict=True) if b]
+    if bare:  # each muscle run would fail on them ("no muscle crosses it and no reserve acts on it")
+        field, given = ("options.muscles.actuators", f"{Path(opts.actuators).name} has no reserve on") \
+            if opts.actuators else ("options.muscles", "neither actuators nor reserves given, and nothing acts on")
+        raise StudyError(f"{field}: {given} {', '.join(bare)}, which no muscle of subjects[{i}]'s model "
+                         f"({Path(model).name}) crosses: static optimization has nothing to carry their moments; "
+                         "give reserves = N (N m, on every joint coordinate) or an actuators file with reserves there")
 
 
 def _feet_of(scene, trial_muscles, names: list[str], feet: list[str]) -> dict[str, str | None]:
@@ -146,7 +153,11 @@ def muscle_run(*, model: str, scene: str, trial: Trial, options: TrialOptions, p
                           criteria=muscles.criteria, draws="auto")
         bands = {n: b["total"] for n, b in mb.bands.items() if n in values}
         lines = [*mb.summary([n for n in values if n.endswith("_resultant")]), *mb.report]
-    notes = [*tm.notes, *([frames.so.report] if frames.so.report else [])]
+    from casflex.muscles.analysis import residual_warnings, uncrossed_notes
+
+    # what `casflex muscles` says of the trial, the same lines: the residuals' warning, the muscles crossing nothing
+    notes = [*tm.notes, *([frames.so.report] if frames.so.report else []), *residual_warnings(tm, frames),
+             *uncrossed_notes(tm, frames)]
     outputs = _cut(sc, tm, res.t, values, bands, cycles)
     return MuscleRecord((*report, *notes, *lines), tuple(notes), outputs,
                         {n: _unit(n) for n in outputs}, weight).to_json()
