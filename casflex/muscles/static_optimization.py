@@ -120,7 +120,6 @@ class StaticOptimization:
             raise ValueError("tendon: 'compliant' needs force_length_velocity (a tendon's stretch matters through the "
                              "fibre's force-length curve only)")
 
-
     def bounds(self, n_m: int) -> tuple[np.ndarray, np.ndarray]:
         """(lower, upper) (n_m,): each muscle's activation bounds (``muscle_bounds``, else ``activation_bounds``);
         ValueError when ``muscle_bounds`` holds another number of pairs."""
