@@ -50,3 +50,38 @@ def test_two_id_setups_naming_each_other_are_refused_naming_the_loop(tmp_path):
         ),
     ):
         read_external_loads(a)
+
+
+MUSCLES = Path(__file__).parent / "data" / "muscles"
+_R_ASIS_WEIGHT = "<weight>      50.00000000 </weight>"  # the first task's, R.ASIS's, in hamner_tasks_ik.xml
+
+
+@pytest.mark.parametrize("edit, said", [
+    (lambda t: t.replace(_R_ASIS_WEIGHT, _R_ASIS_WEIGHT + "<weight>1</weight>", 1),
+     "IKMarkerTask 'R.ASIS': weight given 2 times; give it once"),
+    (lambda t: t.replace("</IKMarkerTask>", '</IKMarkerTask><IKMarkerTask name="R.ASIS"><apply>true</apply>'
+                         "<weight>1</weight></IKMarkerTask>", 1),
+     "two tasks named 'R.ASIS'; give each marker or coordinate one task"),
+])
+def test_a_task_given_twice_is_refused_naming_it(tmp_path, edit, said):
+    # OpenSim reads a property given twice first-wins without a word, and a second task of one name was taken last
+    # (which weight was meant is a guess): refused; the repo's task files read as before
+    text = (DATA / "hamner_tasks_ik.xml").read_text()
+    assert _R_ASIS_WEIGHT in text and read_tasks(DATA / "hamner_tasks_ik.xml").weights["R.ASIS"] == 50.0
+    bad = tmp_path / "tasks.xml"
+    bad.write_text(edit(text))
+    with pytest.raises(ValueError, match=re.escape(f"{bad}: {said}")):
+        read_tasks(bad)
+    assert read_tasks(MUSCLES / "rajagopal_walk_ik_tasks.xml").weights
+
+
+def test_an_external_force_property_given_twice_is_refused_naming_it(tmp_path):
+    text = (MUSCLES / "rajagopal_walk_grf.xml").read_text()
+    good = read_external_loads(MUSCLES / "rajagopal_walk_grf.xml")
+    body = next(iter(good.plates))
+    tag = f"<applied_to_body>{body}</applied_to_body>"
+    assert tag in text
+    bad = tmp_path / "grf.xml"
+    bad.write_text(text.replace(tag, tag + "<applied_to_body>femur_r</applied_to_body>", 1))
+    with pytest.raises(ValueError, match=re.escape(f"{bad}: ExternalForce ") + ".*applied_to_body given 2 times"):
+        read_external_loads(bad)

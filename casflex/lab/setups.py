@@ -31,6 +31,15 @@ def _parse(path: str):
         raise ValueError(f"{path}: cannot read it ({exc.strerror or exc})") from None
 
 
+def _text(path: str, el: ET.Element, tag: str, owner: str, default: str = "") -> str:
+    """``el``'s element ``tag``'s text, stripped (``default`` where left out or empty); ValueError in one line
+    naming it where ``el`` holds it twice (OpenSim reads the first without a word: which one was meant is a guess)."""
+    found = el.findall(tag)
+    if len(found) > 1:
+        raise ValueError(f"{path}: {owner}: {tag} given {len(found)} times; give it once")
+    return ((found[0].text or "").strip() if found else "") or default
+
+
 def _named(path: str, name: str, element: str, seen: tuple[str, ...]) -> str:
     """The file ``name`` that ``path``'s ``element`` names (relative to ``path``'s directory); ValueError in one
     line when it is one of the files ``seen`` on the way here (a setup naming itself, two naming each other)."""
@@ -65,8 +74,11 @@ def read_tasks(path: str | os.PathLike[str], _seen: tuple[str, ...] = ()) -> Mar
             if task.tag not in ("IKMarkerTask", "IKCoordinateTask"):
                 continue
             name = task.get("name", "")
-            apply = (task.findtext("apply") or "true").strip().lower() == "true"
-            text = (task.findtext("weight") or "1").strip()
+            owner = f"{task.tag} {name!r}"
+            if name in weights or name in coords:
+                raise ValueError(f"{path}: two tasks named {name!r}; give each marker or coordinate one task")
+            apply = _text(path, task, "apply", owner, "true").lower() == "true"
+            text = _text(path, task, "weight", owner, "1")
             try:
                 w = float(text)
             except ValueError:
@@ -103,12 +115,13 @@ class ExternalLoads:
 def _identifiers(path: str, force: ET.Element) -> tuple[str, tuple[str, str, str]]:
     """(body, (force, point, torque) identifiers) of an ``ExternalForce`` expressed in the ground."""
     name = force.get("name", "")
-    body = (force.findtext("applied_to_body") or "").strip()
+    owner = f"ExternalForce {name!r}"
+    body = _text(path, force, "applied_to_body", owner)
     for tag in ("force_expressed_in_body", "point_expressed_in_body"):
-        frame = (force.findtext(tag) or "ground").strip()
+        frame = _text(path, force, tag, owner, "ground")
         if frame != "ground":
             raise ValueError(f"{path}: ExternalForce {name!r}: {tag} is {frame!r}; casflex takes plates in the ground")
-    ident = tuple((force.findtext(f"{tag}_identifier") or "").strip() for tag in ("force", "point", "torque"))
+    ident = tuple(_text(path, force, f"{tag}_identifier", owner) for tag in ("force", "point", "torque"))
     if not body or not ident[0] or not ident[1]:
         raise ValueError(f"{path}: ExternalForce {name!r}: needs applied_to_body, force_identifier and "
                          f"point_identifier, got {body!r}, {ident[0]!r} and {ident[1]!r}")
@@ -139,7 +152,7 @@ def read_external_loads(path: str | os.PathLike[str], _seen: tuple[str, ...] = (
         plates[body] = ident
     if not plates:
         raise ValueError(f"{path}: no ExternalForce")
-    data = (loads.findtext("datafile") or "").strip()
+    data = _text(path, loads, "datafile", "ExternalLoads")
     if not data:
         raise ValueError(f"{path}: no datafile: the ground reactions' file is not named")
     return ExternalLoads(path, os.path.join(os.path.dirname(path), data), plates)
