@@ -129,3 +129,14 @@ def test_the_command_refuses_bands_with_compliant_tendons(tmp_path, capsys):
     err = [ln for ln in capsys.readouterr().err.splitlines() if not ln.startswith("casflex: warning: ")]
     assert code == 2 and len(err) == 1 and "--tendon: 'compliant' takes no bands yet" in err[0], err
     assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
+
+
+def test_the_equilibrium_of_a_muscle_too_short_for_one_is_its_slack_tendon():
+    # just above its tendon slack length, at half activation, the fibre cannot shorten enough to be in equilibrium:
+    # the tendon is slack (force 0, the fibre at its shortest), as well below it; IPOPT's infeasible iterate was
+    # returned (15.5 N, no equilibrium)
+    m = _soleus()
+    below = tendon_equilibrium(m, 0.9 * m.tendon_slack_length, 0.5)
+    assert below[0] == 0.0 and tendon_equilibrium(m, 1.01 * m.tendon_slack_length, 0.5) == below
+    T, ln = tendon_equilibrium(m, m.tendon_slack_length + m.optimal_fiber_length, 0.5)
+    assert T > 0.0 and ln > below[1]  # stretched: an equilibrium, its fibre longer

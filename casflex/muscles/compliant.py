@@ -69,14 +69,22 @@ def _rigid_start(m, lmt: np.ndarray) -> np.ndarray:
 
 def tendon_equilibrium(m, lmt: float, a: float, *, passive: bool = True) -> tuple[float, float]:
     """(tendon force N, normalised fibre length) of muscle m at muscle-tendon length lmt (m) and activation a, the
-    fibre's velocity 0 (module docstring): the fibre-tendon equilibrium solved by IPOPT (a scalar root)."""
+    fibre's velocity 0 (module docstring): the fibre-tendon equilibrium solved by IPOPT (a scalar root); a muscle
+    too short to be in equilibrium (:func:`_slack`: its tendon slack) carries nothing, (0, its shortest fibre)
+    as :func:`solve_compliant` takes it; ValueError naming the muscle where IPOPT finds no equilibrium else (its
+    last iterate is none: it was returned)."""
     ln = ca.SX.sym("ln")
     tendon, fibre = _frame_terms(m, lmt, a, ln, passive)
     lo = _fibre_bounds(m)[0]
+    if _slack(m, np.array([lmt]), a, passive)[0]:
+        return 0.0, lo
     solver = ca.nlpsol("equilibrium", "ipopt", {"x": ln, "f": 0, "g": (fibre - tendon) / m.max_isometric_force},
                        {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.tol": 1e-14})
     top = float(_rigid_start(m, np.array([lmt]))[0])
     x = float(solver(x0=top, lbx=lo, ubx=max(top, lo), lbg=0, ubg=0)["x"])
+    if not solver.stats()["success"]:
+        raise ValueError(f"muscle {m.name!r}: no fibre-tendon equilibrium at a muscle-tendon length of {lmt:g} m and "
+                         f"activation {a:g} (IPOPT: {solver.stats()['return_status']})")
     return float(ca.Function("t", [ln], [tendon])(x)), x
 
 
