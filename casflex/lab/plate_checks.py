@@ -216,8 +216,7 @@ def check_plate_foot(
     if not stance.any():
         return
     F, x = force[stance], node_xy[stance]
-    about = moment[stance] - (x[:, 0] * F[:, 1] - x[:, 1] * F[:, 0])
-    d = np.abs(about) / np.linalg.norm(F, axis=1)
+    d = _line_distance(x, F, moment[stance])
     mid = median(d)
     if mid > MAX_COP_DISTANCE:
         ts = t[stance]
@@ -230,6 +229,12 @@ def check_plate_foot(
     if floor is not None:
         others = {k: v[stance] for k, v in (nodes or {}).items()}
         check_bearing(where, node, t[stance], F, moment[stance], x, up, floor, others)
+
+
+def _line_distance(xy: np.ndarray, force: np.ndarray, moment: np.ndarray) -> np.ndarray:
+    """m, (k,): how far the line of force (force (k, 2) N, moment about the origin (k,) N m) passes from the points
+    ``xy`` (k, 2) m: the moment about each point over the force."""
+    return np.abs(moment - (xy[:, 0] * force[:, 1] - xy[:, 1] * force[:, 0])) / np.linalg.norm(force, axis=1)
 
 
 def _cop(force: np.ndarray, moment: np.ndarray, up: np.ndarray, floor: float) -> np.ndarray:
@@ -247,11 +252,9 @@ def _above_the_body(node_xy: np.ndarray, force: np.ndarray, moment: np.ndarray, 
     over the samples: the foot under a thigh, whatever the surface's height a table gives (a plate in a stair's
     step whose centres of pressure are written at the floor's). Where the body has nothing lower (a model without
     feet), 0."""
-    size = np.linalg.norm(force, axis=1)
     low = median(node_xy @ up)
     for xy in nodes.values():
-        d = np.abs(moment - (xy[:, 0] * force[:, 1] - xy[:, 1] * force[:, 0])) / size
-        if median(d) <= MAX_COP_DISTANCE:
+        if median(_line_distance(xy, force, moment)) <= MAX_COP_DISTANCE:
             low = min(low, median(xy @ up))
     return median(node_xy @ up) - low
 
