@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -236,6 +237,34 @@ def test_plate_auto_applies_each_plate_s_contacts_to_the_foot_over_each(tmp_path
     code, _, err = _run([*whole, "--plate", "auto", "--plate", "calcn_r=ground_"], capsys)
     assert code == 2 and err.strip() == "casflex: error: --plate: auto (each contact to the foot over it) takes " \
                                         "every plate: give it alone"
+
+
+def _scaled_plates(src: Path, factor: float, dest: Path) -> Path:
+    """``src`` (.mot) with its forces and torques times ``factor`` (a plate's units mistaken)."""
+    lines = src.read_text().splitlines()
+    k = next(i for i, line in enumerate(lines) if line.strip().lower() == "endheader") + 1
+    names = lines[k].split()
+    scaled = [str(float(v) * factor) if ("force_v" in n or "torque" in n) else v
+              for row in lines[k + 1:] for n, v in zip(names, row.split(), strict=True)]
+    rows = [scaled[i:i + len(names)] for i in range(0, len(scaled), len(names))]
+    dest.write_text("\n".join([*lines[:k + 1], *("\t".join(r) for r in rows)]) + "\n")
+    return dest
+
+
+@pytest.mark.parametrize("factor", [10.0, 1 / 4.448])
+def test_plates_in_another_unit_are_said_naming_their_share_of_the_motion_s_needs(factor, tmp_path, capsys):
+    # before: daN plates gave the ankle 1951 N m and lbf read as N 42 N m (193 with the plates' N), exit 0 and no
+    # word (the moments' check takes the plates' peak for the body's weight); the unscaled trial's share is 0.994
+    whole = ["inverse", str(LAB / "hamner_subject02_planar.osim"), "--data", str(LAB / "hamner_running_whole.trc"),
+             "--tasks", str(LAB / "hamner_tasks_ik.xml"), "--plate", "auto", "--quiet"]
+    code, _, err = _run([*whole, "--loads", str(LAB / "hamner_running_whole_grf.mot")], capsys)
+    assert code == 0 and "push" not in err, err
+    grf = _scaled_plates(LAB / "hamner_running_whole_grf.mot", factor, tmp_path / "grf.mot")
+    code, _, err = _run([*whole, "--loads", str(grf)], capsys)
+    said = re.search(r"they push ([0-9.]+) times what the model's motion needs of the ground", err)
+    # the motion's needs do not change with the plates' unit: the share scales by the factor exactly; 0.5 %: the
+    # printed 3 digits (0.25 %) and the unscaled share's own 3 digits
+    assert code == 0 and said and float(said[1]) == pytest.approx(0.994 * factor, rel=5e-3), err
 
 
 def test_a_c3d_trial_s_plates_are_its_own_without_loads(tmp_path, capsys):

@@ -575,3 +575,17 @@ def test_a_model_with_massless_feet_names_the_foot_its_markers_left(tmp_path):
     with pytest.raises(ValueError, match=r"do not decide \['ankle_angle_r'\] in any frame: segment 'talus_r' has no "
                                          r"marker to place it \(nodes \['talus_r', 'calcn_r', 'toes_r'\] and no body"):
         inverse_dynamics(osim, Trial(TRC))
+
+
+def test_the_plates_share_of_the_motion_s_needs_is_said_only_outside_its_bounds():
+    from casflex.lab.checks import PLATE_SHARE, plate_share_lines
+
+    t = np.linspace(0.0, 1.0, 101)
+    needed = 700.0 * np.clip(np.sin(2 * np.pi * t), 0.0, None) + 5.0  # a stance, then flight
+    assert plate_share_lines("trial.trc", t, 1.0 * needed, needed) == []  # a whole body
+    assert plate_share_lines("trial.trc", t, 2.7 * needed, needed) == []  # a leg with its pelvis
+    for share in (0.9 * PLATE_SHARE[0], 1.1 * PLATE_SHARE[1]):
+        (line,) = plate_share_lines("trial.trc", t, share * needed, needed)
+        assert line.startswith("trial.trc: where the plates are loaded (") and f"push {share:.3g} times" in line
+    edge = np.where(t < 0.02, 30.0, 0.0)  # two loaded frames: too few to tell a share
+    assert plate_share_lines("trial.trc", t, edge, needed) == []

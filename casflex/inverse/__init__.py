@@ -125,6 +125,7 @@ def solve(inputs: InverseInputs, *, bands: Bands | None = None, flexible: Flexib
         settings["moments"] = [lab_name(c) for c in model.scene.coordinates
                                if not c.of.startswith(f"{tree.root}.") and lab_name(c) in lab]
     forces = _check_moments(inputs, {name: loads[name] for name in settings["moments"] if name in loads}, loads)
+    forces += _plate_share(inputs, plates, loads)
     report += forces
     warnings += forces
     band, parts = {}, {}
@@ -137,6 +138,20 @@ def solve(inputs: InverseInputs, *, bands: Bands | None = None, flexible: Flexib
                          settings=settings, warnings=warnings, marker_labels=inputs.labels, marker_misfit=fit.misfit,
                          plates=inputs.plates, bands=band, band_parts=parts, fitted=fitted, fitted_units=units)
 
+
+
+def _plate_share(inputs: InverseInputs, plates: list[Plate], loads: dict[str, np.ndarray]) -> list[str]:
+    """The line that says the plates push far more or less than the motion needs of the ground
+    (:func:`casflex.lab.checks.plate_share_lines`): their forces and the root's residual along the model's up."""
+    from casflex.lab.checks import plate_share_lines
+
+    g = np.asarray(inputs.model.scene.gravity, dtype=float)
+    if not plates or "root.fx" not in loads or not np.hypot(*g) > 0:
+        return []
+    up = -g / np.hypot(*g)
+    pushed = sum(p.at(inputs.t)[0] for p in plates) @ up
+    residual = loads["root.fx"] * up[0] + loads["root.fy"] * up[1]
+    return plate_share_lines(inputs.settings.get("source") or "inverse dynamics", inputs.t, pushed, pushed + residual)
 
 
 #: m/s^2: the weight the plates' largest total force is taken for (:func:`_check_moments`)

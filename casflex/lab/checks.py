@@ -34,6 +34,11 @@ measurement never meets it:
   said, not refused: the net force a joint passes on is the ground's push plus the segments' inertia (Hamner's
   run: the ankle's 2.5 body weights; walking2's 1.2; landings 5-15); 30 is the plates' forces in another unit, a
   plate on the wrong body, or markers or coordinates in other units.
+- :func:`plate_share_lines`: where the plates are loaded, their vertical force over what the model's motion needs
+  of the ground (the plates' plus the root's residual): about 1 for a model of the whole body (Hamner's run 0.99),
+  for part of one the subject's weight over the part's (a leg with its pelvis: 2.6 on Hamner's run, 2.8 on
+  walking2). Outside :data:`PLATE_SHARE` (0.6-8) it is said: plates in daN (10) or kgf (9.81), lbf read as N
+  (0.225), masses in lb read as kg (0.45).
 """
 
 from __future__ import annotations
@@ -49,8 +54,9 @@ if TYPE_CHECKING:
 
 __all__ = ["LAB_EXTENT", "MAX_MARKER_SPEED", "MAX_PLATE_FORCE", "MAX_FREE_MOMENT", "MAX_MISFIT", "STATIC_SPREAD",
            "SCALE_FACTOR", "MAX_ANGLE", "RANGE_MARGIN", "TINY_ANGLES", "MAX_MOMENT_PER_KG", "MAX_JOINT_FORCE_BW",
+           "PLATE_SHARE",
            "check_markers", "check_plate_values", "check_static", "check_scale", "check_coordinates", "check_moments",
-           "joint_force_lines", "median"]
+           "joint_force_lines", "plate_share_lines", "median"]
 
 LAB_EXTENT = 100.0
 MAX_MARKER_SPEED = 50.0
@@ -64,6 +70,7 @@ RANGE_MARGIN = math.radians(30.0)
 TINY_ANGLES = math.pi
 MAX_MOMENT_PER_KG = 20.0
 MAX_JOINT_FORCE_BW = 30.0
+PLATE_SHARE = (0.6, 8.0)
 
 
 def check_markers(lab: LabMarkers, labels: Sequence[str], frames: np.ndarray | None = None) -> None:
@@ -298,3 +305,32 @@ def joint_force_lines(source: str, t: np.ndarray, forces: dict[str, np.ndarray],
                          "plates' forces in another unit or on the wrong body, or the markers' or coordinates' "
                          "units wrong")
     return lines
+
+
+def plate_share_lines(source: str, t: np.ndarray, plates: np.ndarray, needed: np.ndarray) -> list[str]:
+    """The line that says the plates push far more or far less than the model's motion needs of the ground.
+
+    ``plates`` (k,) N: the plates' summed force along the model's up at times t (k,) s; ``needed`` (k,) N: the
+    upward external force the model's motion needs (the plates' plus the root's residual along up). Their ratio,
+    the median over the frames where the plates carry more than a quarter of their peak (and 20 N: the contacts'
+    edges divide small numbers), is the plates' share of the motion's needs: a whole body's 1, part of one more
+    (it stands on the plates with the rest of the subject). Outside :data:`PLATE_SHARE` the plates' units or the
+    model's masses are off (module docstring); said, not refused: a model of a shank and foot, or a seat or a
+    rail the plates do not measure, give such shares in earnest. ``source``: the trial."""
+    peak = float(np.nanmax(plates, initial=0.0))
+    loaded = np.isfinite(plates) & np.isfinite(needed) & (plates > max(20.0, 0.25 * peak))
+    if loaded.sum() < 3:
+        return []
+    with np.errstate(divide="ignore", invalid="ignore"):
+        share = float(np.median(plates[loaded] / needed[loaded]))
+    lo, hi = PLATE_SHARE
+    if lo <= share <= hi:
+        return []
+    what = (f"the plates' forces in another unit (daN: 10, kgf: 9.81) or the model's masses too small (for part "
+            f"of a body: the subject weighs {share:.3g} times it)" if share > hi else
+            "the plates' forces in another unit (lbf read as N: 0.225), the model's masses too large (lb read as "
+            "kg: 0.45), the feet off the plates, or a support the plates do not measure (a seat, a rail)")
+    return [f"{source}: where the plates are loaded ({loaded.sum()} frames, t = {t[loaded][0]:g}..{t[loaded][-1]:g} "
+            f"s) they push {share:.3g} times what the model's motion needs of the ground (the median; a whole "
+            f"body's plates about 1, a leg's with its pelvis 4-6): {what}; the loads are the motion's under those "
+            "forces"]
