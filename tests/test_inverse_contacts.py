@@ -119,3 +119,80 @@ def test_plates_auto_is_refused_with_coordinates_given_and_a_plate_on_two_nodes_
     for bad in ("automatic", {"calcn_r": []}, {"calcn_r": ["ground_", "ground_"]}, ["ground_"]):
         with pytest.raises(OptionRefused, match="plates: expected node -> the plate's column prefix"):
             Trial(lab, grf=grf, plates=bad)
+
+
+MUSCLES = Path(__file__).parent / "data" / "muscles"
+
+
+def _wrench(parts) -> np.ndarray:
+    """(n, 9) one plate carrying the loads ``parts`` [(F, P, T) (n, 3) each] together: the force summed, the centre of
+    pressure their vertical forces' mean on the floor (y = 0, where the walk's plates write theirs), the torque the
+    rest of the moment about the origin."""
+    F = sum(f for f, _, _ in parts)
+    M = sum(np.cross(p, f) + tq for f, p, tq in parts)
+    P = np.zeros_like(F)
+    fy = np.where(F[:, 1] > 0, F[:, 1], np.inf)
+    for a in (0, 2):
+        P[:, a] = sum(np.where(f[:, 1] > 0, p[:, a] * f[:, 1], 0.0) for f, p, _ in parts) / fy
+    return np.column_stack([F, P, M - np.cross(P, F)])
+
+
+def test_a_plate_carrying_both_feet_at_once_is_refused_not_given_to_the_nearer():
+    """The Rajagopal walk's feet's ground reactions (per foot, from its lab) on one plate (a treadmill's), or the left
+    foot's first 0.15 s of stance on the right's plate (a double support on one plate): the contact was given whole
+    to calcn_r (exit 0: the left's load on the right foot); refused, naming the plate, the time and both feet. Each
+    foot on its own plate: as the lab's file gives them."""
+    import casflex
+    from casflex.study.events import plate_contacts
+
+    scene = casflex.load_scene(MUSCLES / "rajagopal_walk_planar_muscles.osim")
+    lab, grf = read_trc(MUSCLES / "rajagopal_walk.trc"), read_sto(MUSCLES / "rajagopal_walk_grf.mot")
+    def cols(kind: str) -> np.ndarray:
+        return np.column_stack([grf.column(kind.format(a)) for a in "xyz"])
+
+    foot = {s: (cols(f"ground_force_{s}_v{{}}"), cols(f"ground_force_{s}_p{{}}"), cols(f"ground_torque_{s}_{{}}"))
+            for s in "rl"}
+    apart = _table(grf, {"ground_": _wrench([foot["r"]]), "1_ground_": _wrench([foot["l"]])}, "apart")
+    assert [(c.plate, c.foot) for c in plate_contacts(scene, lab, apart)] == [
+        ("ground_", "calcn_r"), ("ground_", "calcn_r"), ("1_ground_", "calcn_l")]
+    one = _table(grf, {"ground_": _wrench([foot["r"], foot["l"]])}, "one")
+    with pytest.raises(ValueError, match=r"plate 'ground_', contact 0.268-\[end\] s: its centre of pressure lies "
+                                         r"0.48 m across the floor from calcn_r's nearest marker at t = 1.020 s .*"
+                                         r"nearer calcn_l's .*both feet on the plate at once"):
+        plate_contacts(scene, lab, one)
+    early = (grf.t < 0.836 + 0.15)[:, None]  # the left foot strikes at 0.836 s
+    F, P, T = foot["l"]
+    on, off = ((np.where(early, F, 0.0), P, np.where(early, T, 0.0)),
+               (np.where(early, 0.0, F), P, np.where(early, 0.0, T)))
+    part = _table(grf, {"ground_": _wrench([foot["r"], on]), "1_ground_": _wrench([off])}, "part")
+    with pytest.raises(ValueError, match=r"plate 'ground_', contact 0.268-1.023 s: .* at t = 0.985 s .*nearer calcn_l"):
+        plate_contacts(scene, lab, part)
+
+
+def test_a_plate_grazed_by_a_foot_for_less_than_a_stance_is_refused(hamner):
+    """The left foot's load at 0.800 and 0.817 s (936 and 1049 N) written to the right foot's plate too: a 49 ms
+    contact, dropped as too short, whose samples went to the plate's only foot, calcn_r, in its swing (exit 0)."""
+    from casflex.study.events import plate_contacts
+
+    scene, lab, grf = hamner
+    two = (grf.t > 0.79) & (grf.t < 0.82)
+    tap = _table(grf, {"ground_": np.where(two[:, None], _plate(grf, "1_ground_"), _plate(grf, "ground_")),
+                       "1_ground_": _plate(grf, "1_ground_")}, "tap")
+    with pytest.raises(ValueError, match=r"plate 'ground_': a contact of 49 ms at t = 0.783-0.833 s peaking at "
+                                         r"1049 N, shorter than a stance \(0.05 s\) and above noise \(100 N\)"):
+        plate_contacts(scene, lab, tap)
+
+
+def test_a_stance_the_record_cuts_short_goes_to_its_own_foot(hamner):
+    """Both feet on one plate in turn (as above) from t = 0.300 s: the left foot's stance then has 2 samples (0.300,
+    0.317 s: 27 ms) in the record, which was dropped as too short and given to calcn_r, the plate's next foot (its
+    ankle moment off by 61 N m, exit 0). Kept, it goes to calcn_l: the loads are the two plates'."""
+    import dataclasses
+
+    scene, lab, grf = hamner
+    i = int(np.argmax(grf.t >= 0.3))
+    grf, lab = dataclasses.replace(grf, t=grf.t[i:], values=grf.values[i:]), \
+        dataclasses.replace(lab, t=lab.t[i:], xyz=lab.xyz[i:])
+    right = grf.column("ground_force_vy") > 0
+    one = _table(grf, {"ground_": np.where(right[:, None], _plate(grf, "ground_"), _plate(grf, "1_ground_"))}, "one")
+    _same(_moments(scene, lab, one, "auto"), _moments(scene, lab, grf, ORIGINAL))

@@ -276,3 +276,25 @@ def test_a_cycle_is_clean_only_where_its_stance_stands_wholly_on_the_foot_s_plat
         (ok, said), = clean_cycles(found, "calcn_r", spans, "ground_")
         assert not ok and why in said, (what, said)
     assert clean_cycles(good, "calcn_r", spans, None)[0][0] is False  # no plate applied to the foot
+
+
+def test_a_cycle_between_two_plate_strikes_with_a_stride_off_the_plates_between_is_left_out(hamner):
+    """Hamner's right stride (0.390-1.101 s) three times over, its stance on a plate in the first and the third only:
+    the plate strikes 0.390 and 1.823 s made one 1.43 s "cycle" of two strides, clean (its stance on the plate) and
+    normalised as one (exit 0). The heel marker strikes at 1.129 s inside it: it is left out, and the report says
+    so; with the middle stance on a plate too, the two cycles are kept."""
+    scene, lab, grf = hamner
+    (first, *_), (r0, r1) = plate_contacts(scene, lab, grf), (0.390, 1.101)
+    period = round((r1 - r0) * 60) / 60  # 43 frames at 60 Hz: the stride's frames tiled end to end
+    rows = np.flatnonzero((lab.t >= r0 - 1e-9) & (lab.t < r0 + period - 1e-9))
+    shift = lab.xyz[rows[-1] + 1] - lab.xyz[rows[0]]  # the stride's advance, so that the markers run on
+    xyz = np.concatenate([lab.xyz[rows] + k * np.nanmedian(shift, axis=0) * [1, 0, 1] for k in range(3)])
+    t = np.concatenate([lab.t[rows] + k * period for k in range(3)])
+    tiled = dataclasses.replace(lab, t=t, xyz=xyz)
+    found = [first, dataclasses.replace(first, strike=first.strike + 2 * period, off=first.off + 2 * period)]
+    by, lines = gait_cycles(found, scene, tiled, "X,Y")
+    assert by["calcn_r"] == []  # before: [(0.390, 1.823)]
+    assert lines[0] == ("calcn_r: 0 cycle(s) from the plates' strikes at 0.390, 1.823 s; 0.390-1.823 s left out: "
+                        "R.Heel strikes at 1.129 s inside it (a stride off the plates)")
+    three = [*found[:1], dataclasses.replace(first, strike=first.strike + period, off=first.off + period), found[1]]
+    assert gait_cycles(three, scene, tiled, "X,Y")[0]["calcn_r"] == cycles([c.strike for c in three])

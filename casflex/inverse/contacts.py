@@ -165,19 +165,84 @@ def read_trial(markers, grf, plates: bool = True, required: bool = True) -> tupl
     return markers, grf if plates else None
 
 
-def _foot_distance(lab: LabMarkers, labels, t, P, w, axes) -> tuple[float, float]:
-    """(distance, height) m of the foot with the markers ``labels`` from the centres of pressure P (k, 3) m
-    at the times t (k,) s, means weighted by w (k,) N; inf where its markers are missing throughout."""
+def _foot_samples(lab: LabMarkers, labels, t, P, axes) -> tuple[np.ndarray, np.ndarray]:
+    """(across, up) (k,) m: the distance across the floor of the foot's (markers ``labels``) nearest marker from the
+    centres of pressure P (k, 3) m at the times t (k,) s, and its lowest marker's height above them; inf where its
+    markers are missing."""
     X = np.empty((t.size, len(labels), 3))  # the markers at the plate's times
     for j, lb in enumerate(labels):
         X[:, j] = np.column_stack([np.interp(t, lab.t, c) for c in lab.marker(lb).T])
     d = X - P[:, None, :]
     across, up = np.linalg.norm(d @ axes[:2].T, axis=2), d @ axes[2]
-    across, up = (np.where(np.isfinite(v), v, np.inf).min(axis=1) for v in (across, up))
+    return tuple(np.where(np.isfinite(v), v, np.inf).min(axis=1) for v in (across, up))
+
+
+def _foot_distance(across: np.ndarray, up: np.ndarray, w: np.ndarray) -> tuple[float, float]:
+    """(distance, height) m of a foot from :func:`_foot_samples`' (across, up), means weighted by w (k,) N; inf
+    where its markers are missing throughout."""
     ok = np.isfinite(across)
     if not ok.any():
         return np.inf, np.inf
     return float(np.average(across[ok], weights=w[ok])), float(np.average(up[ok], weights=w[ok]))
+
+
+#: m: a centre of pressure lies within a foot's outline, near its markers (heel, toe, the metatarsals'): measured
+#: over each contact's samples loaded above a quarter of its peak, at most 0.064-0.070 m from the nearest of the
+#: foot's on Hamner's run and 0.11 m on the Rajagopal walk; with the other foot on the plate too (the right stance
+#: and the left's first 0.1 s on one plate) 0.25 m, and a treadmill's single plate 0.48 m (the centre of pressure
+#: between the feet, nearer the other over 42 % of the load).
+MAX_COP_FROM_FOOT = 0.2
+
+
+def _one_foot(p: str, a, b, foot: str, each: dict, t: np.ndarray, fv: np.ndarray, max_height: float) -> None:
+    """ValueError in one line where the plate ``p``'s contact (a, b) s given to ``foot`` carries another foot at once:
+    a sample loaded above a quarter of the contact's peak (and 20 N) whose centre of pressure lies more than
+    :data:`MAX_COP_FROM_FOOT` across the floor from ``foot``'s nearest marker and nearer another foot's, that foot
+    within ``max_height`` m above it (``each``: node -> :func:`_foot_samples`' (across, up) at the times t (k,) s,
+    vertical force fv (k,) N). Its load is the two feet's together, which no nearest foot may share out."""
+    across = each[foot][0]
+    big = fv > max(MIN_PLATE_FORCE, 0.25 * float(fv.max()))
+    for n, (o_across, o_up) in each.items():
+        both = big & (across > MAX_COP_FROM_FOOT) & (o_across < across) & (o_up <= max_height)
+        if n != foot and both.any():
+            i = int(np.argmax(np.where(both, across, -np.inf)))
+            share = 100.0 * fv[o_across < across].sum() / fv.sum()
+            raise ValueError(
+                f"plate {p!r}, contact {_span(a, b)}: its centre of pressure lies {across[i]:.2f} m across the floor "
+                f"from {foot}'s nearest marker at t = {t[i]:.3f} s ({fv[i]:.0f} N; a foot's within "
+                f"{MAX_COP_FROM_FOOT:g} m), nearer {n}'s ({o_across[i]:.2f} m; over {share:.0f} % of the contact's "
+                f"load): both feet on the plate at once (a treadmill's single plate, or a double support on one "
+                "plate): its load is theirs together and cannot go to one foot; give each foot its own plate"
+            )
+
+
+def _short(p: str, t: np.ndarray, fv: np.ndarray, threshold: float, min_duration: float
+           ) -> list[tuple[float | None, float | None]]:
+    """The contacts of the plate ``p`` (vertical force fv (n,) N at times t (n,) s) shorter than ``min_duration`` s
+    that carry a load, their force above :data:`casflex.lab.plate_checks.MAX_PULL` (100 N: a noise's or an offset's
+    level; a blip of noise above ``threshold`` is not a contact): at the record's start or end, a stance the record
+    cuts, kept (its load goes to the foot over it, not to the plate's other feet); elsewhere, ValueError in one line:
+    too short to be a stance (20-30 ms for a heel's impact alone) and too loaded for noise, a foot grazing the plate,
+    whose load would go to a foot in swing."""
+    from casflex.lab.plate_checks import MAX_PULL
+
+    out = []
+    for a, b in contacts(t, fv, threshold, 0.0):
+        lo, hi = (t[0] if a is None else a), (t[-1] if b is None else b)
+        if hi - lo >= min_duration:
+            continue
+        inside = (t >= lo) & (t <= hi) & np.isfinite(fv)
+        peak = float(fv[inside].max(initial=-np.inf))
+        if not peak > MAX_PULL:
+            continue
+        if a is None or b is None:
+            out.append((a, b))
+            continue
+        raise ValueError(f"plate {p!r}: a contact of {1e3 * (b - a):.0f} ms at t = {_span(a, b)} peaking at "
+                         f"{peak:.0f} N, shorter than a stance ({min_duration:g} s) and above noise "
+                         f"({MAX_PULL:g} N): a foot grazing the plate, whose load would go to another foot; cut it "
+                         "from the record (set its force to 0) or give each plate its node")
+    return out
 
 
 def plate_contacts(scene, markers, grf=None, plane: Plane | str = "X,Y", prefixes=None, *,
@@ -204,15 +269,16 @@ def plate_contacts(scene, markers, grf=None, plane: Plane | str = "X,Y", prefixe
         # a plate that pulls or spikes would have its stances missed or cut: refused, whether a foot is found on it
         check_plate_record(f"{table.source}: plate {p!r}", table.t, force, fv, weight, stance=False)
         P = np.column_stack([table.column(f"{p}force_p{a}") for a in "xyz"])
-        for a, b in contacts(table.t, fv, threshold, min_duration):
+        spans = contacts(table.t, fv, threshold, min_duration) + _short(p, table.t, fv, threshold, min_duration)
+        for a, b in sorted(spans, key=lambda s: -np.inf if s[0] is None else s[0]):
             lo, hi = (table.t[0] if a is None else a), (table.t[-1] if b is None else b)
             rows = (table.t >= lo) & (table.t <= hi) & (fv > threshold) & np.isfinite(P).all(axis=1)
             rows &= (table.t >= lab.t[0]) & (table.t <= lab.t[-1])
             if not rows.any():
                 raise ValueError(f"plate {p!r}, contact {_span(a, b)}: no centre of pressure within the markers' "
                                  f"times {lab.t[0]:g}..{lab.t[-1]:g} s")
-            score = sorted(((n, *_foot_distance(lab, labels, table.t[rows], P[rows], fv[rows], axes))
-                            for n, labels in cands.items()), key=lambda s: s[1])
+            each = {n: _foot_samples(lab, labels, table.t[rows], P[rows], axes) for n, labels in cands.items()}
+            score = sorted(((n, *_foot_distance(*each[n], fv[rows])) for n in cands), key=lambda s: s[1])
             near = [s for s in score if s[1] <= max_distance and s[2] <= max_height]
             if not near:
                 raise ValueError(f"plate {p!r}, contact {_span(a, b)}: no foot within {max_distance:g} m across the "
@@ -220,6 +286,7 @@ def plate_contacts(scene, markers, grf=None, plane: Plane | str = "X,Y", prefixe
                                  f"{score[0][0]}, {score[0][1]:.2f} m and {score[0][2]:.2f} m); plane {pl.x},{pl.y}"
                                  " (a foot the scene does not model, e.g. a leg's other foot: name each plate's node, "
                                  "plates={node: prefix})")
+            _one_foot(p, a, b, near[0][0], each, table.t[rows], fv[rows], max_height)
             found.append(Contact(p, a, b, near[0][0], near[0][1], near[0][2],
                                  tuple(s for s in score if s is not near[0])))
     return found
