@@ -10,7 +10,10 @@ numpy only: no model is assembled.
   from the right, so distances keep it.
 - A contact (:func:`contacts`): fv above ``threshold`` (20 N: below it casflex's C3D plates give no centre of
   pressure), crossings interpolated linearly, shorter than ``min_duration`` dropped; loaded at the record's
-  start or end: strike or off None, never a cycle's end.
+  start or end: strike or off None, never a cycle's end. A shorter one that carries a load (above 100 N, beyond a
+  noise's level: :func:`_short`) is kept at the record's start or end (a stance the record cuts: its load goes to its
+  own foot, not the plate's next) and refused elsewhere (a foot grazing the plate: its load would go to a foot in
+  swing).
 - A foot (:func:`feet`): a node carrying markers (a body's on it, a beam's on its end farther from the root)
   with none on the nodes beyond it from the root (the scene's first node) along joints and beams: OpenSim's
   calcn_r, calcn_l (the toes carry none), and a wrist's radius, which the height check sets apart. Where the
@@ -19,7 +22,10 @@ numpy only: no model is assembled.
   from the centre of pressure and its lowest marker's height above it, averaged over the contact weighted by
   fv (the centre of pressure is noise where the force is small); of the feet within ``max_distance`` (0.3 m)
   across and ``max_height`` (0.1 m) above, the nearest. On Hamner's trial the foot on the plate: 0.05 m and
-  0.04-0.05 m; the other foot coming down at the end of a stance: 0.17 m and 0.15 m. None: ValueError.
+  0.04-0.05 m; the other foot coming down at the end of a stance: 0.17 m and 0.15 m. None: ValueError. A contact
+  whose centre of pressure, loaded, lies farther than :data:`MAX_COP_FROM_FOOT` from its foot's markers and nearer
+  another foot's (:func:`_one_foot`) carries both feet at once (a treadmill's single plate, a double support on one
+  plate): ValueError, as no nearest foot can take their load together.
 - A plate's samples shared among its feet (:func:`plate_shares`): each sample goes to the foot of the contact
   nearest in time (inside a contact, its foot; between two contacts of different feet, the boundary halfway
   between the first's off and the second's strike, where the plate carries no load): the shares partition the

@@ -53,6 +53,14 @@ meets it (OpenSim's Hamner running trial, whose stance peaks at 2.25 body weight
   where the node lies as high above the lowest node near the line of force too (the foot under the thigh): a plate
   in a stair's step whose centres of pressure a table writes at the floor's height, or a model without feet
   (a plate under a residual limb, a knee kneeling), is taken.
+- :data:`MIN_SHEAR` (x W), :data:`MIN_TRAVEL` (m/s): a stance brakes the travelling body (its force along the floor
+  against the travel) over its first half and propels it over its second; a whole stance (loaded above 20 N from
+  unloaded to unloaded within the trial) that on average propels by more than 0.02 W over its first half and brakes
+  by more than 0.02 W over its second, the body (its nodes' mean) travelling faster than 0.3 m/s over it, has its
+  force along the floor's sign flipped (a column negated, a plate's own axes). A step starting or stopping a walk
+  brakes or propels over both halves, never the other way round. Measured: the Rajagopal walk (1.23 m/s), -0.083 to
+  -0.086 W then +0.077 to +0.079 W; walking2.c3d's right leg, -0.33 then +0.33 (W the leg's). Hamner's run is on a
+  treadmill (the body travels at 0.04-0.10 m/s): not checked.
 """
 
 from __future__ import annotations
@@ -74,6 +82,9 @@ __all__ = [
     "window_load",
     "check_plate_foot",
     "check_bearing",
+    "check_shear",
+    "MIN_SHEAR",
+    "MIN_TRAVEL",
 ]
 
 MAX_PULL = 100.0
@@ -83,6 +94,8 @@ SPIKE = 2.0
 DROP = 0.75
 MAX_COP_DISTANCE = 0.4
 MAX_NODE_HEIGHT = 0.25
+MIN_SHEAR = 0.02
+MIN_TRAVEL = 0.3
 #: N: the vertical force below which a plate carries no load (the readers' limit for a centre of pressure)
 _LOADED = 20.0
 
@@ -297,3 +310,41 @@ def check_bearing(
         + (f": the nodes near its centre of pressure are {feet}" if feet else "")
     )
 
+
+
+def shear_halves(force: np.ndarray, up: np.ndarray, travel: float) -> list[tuple[int, int, float, float]]:
+    """[(start, stop), its first half's and its second half's mean force along the travel (N)] of each whole stance
+    (a run of vertical force above 20 N that the samples neither start nor end in) of a plate's force (k, 2) N in
+    the plane, the model's up ``up`` (2,) and the body travelling along the floor's direction times ``travel``'s
+    sign."""
+    from casflex.lab.lowpass import runs
+
+    along = force @ (np.sign(travel) * np.array([up[1], -up[0]]))
+    out = []
+    for s, e in runs(force @ up > _LOADED):
+        if s > 0 and e < force.shape[0] and e - s >= 4:
+            m = (s + e) // 2
+            out.append((s, e, float(along[s:m].mean()), float(along[m:e].mean())))
+    return out
+
+
+def check_shear(where: str, t: np.ndarray, force: np.ndarray, weight: np.ndarray | None, body_x: np.ndarray) -> None:
+    """ValueError in one line for a plate whose force along the floor (force (k, 2) N in the plane at times t (k,) s)
+    propels the body in the first half of a whole stance and brakes it in the second, each by more than
+    :data:`MIN_SHEAR` x W on average, while the body (``body_x`` (k,) m: its nodes' mean position along the floor)
+    travels faster than :data:`MIN_TRAVEL` m/s over it (module docstring): a stance brakes, then propels."""
+    up = _up(weight) if weight is not None else None
+    if up is None:
+        return
+    W = float(np.linalg.norm(weight))
+    for s, e, first, second in shear_halves(force, up, 1.0):
+        v = (body_x[e - 1] - body_x[s]) / (t[e - 1] - t[s])
+        a, b = (first, second) if v > 0 else (-first, -second)
+        if abs(v) > MIN_TRAVEL and a > MIN_SHEAR * W and b < -MIN_SHEAR * W:
+            raise ValueError(
+                f"{where}: over its stance at t = {t[s]:g}..{t[e - 1]:g} s its force along the floor pushes the body "
+                f"on ({a:.0f} N on average over its first half) then holds it back ({b:.0f} N over its second), the "
+                f"body travelling at {abs(v):.2f} m/s: a stance brakes the body, then propels it (beyond "
+                f"{MIN_SHEAR:g} x its weight, {MIN_SHEAR * W:.0f} N); the horizontal force's sign is flipped (a "
+                "column negated, a plate's own axes)"
+            )

@@ -9,7 +9,8 @@ offers too). numpy only: no model is assembled.
 - Cycles (:func:`gait_cycles`): a foot's strike to its next, from the strikes the lab marked in the file (a C3D's
   events: :func:`marked_strikes`) where the foot has two, else from the plates where it has two plate strikes (a
   stance straddling two plates strikes once: :func:`foot_strikes`), else from its heel marker
-  (:func:`marker_strikes`), said in the report.
+  (:func:`marker_strikes`), said in the report. A cycle between two plate strikes inside which the heel marker
+  strikes (:func:`_one_stride`: a stride off the plates) is left out and said.
 - A clean cycle (:func:`clean_cycles`): its stance wholly on plates applied to the foot (one, or two it straddles:
   their wrenches are summed), as labs take kinetics only from such cycles: a cycle whose stance is off every plate
   (its strikes from the heel marker), on a plate not applied to the foot, or on a plate another foot shares at the
