@@ -196,3 +196,22 @@ def test_a_stance_the_record_cuts_short_goes_to_its_own_foot(hamner):
     right = grf.column("ground_force_vy") > 0
     one = _table(grf, {"ground_": np.where(right[:, None], _plate(grf, "ground_"), _plate(grf, "1_ground_"))}, "one")
     _same(_moments(scene, lab, one, "auto"), _moments(scene, lab, grf, ORIGINAL))
+
+
+def test_a_plate_whose_unloaded_reading_chatters_around_the_threshold_is_refused(hamner):
+    """The right plate reading 20 +- 5 N unloaded (an offset not zeroed, noise): its contacts chattered (this draw:
+    the second stance struck at 1.045 s for 1.101, the cycle's end 56 ms early, and a 55 ms contact 0.667-0.722 s
+    after the first, exit 0; other draws: a strike 30 ms early, the noise given to calcn_l, or a refusal saying no
+    foot was over the noise). Refused, naming the plate and its unloaded reading; the recorded plates (0 N unloaded,
+    the Rajagopal walk's up to 9 N; walking2.c3d's -14 and -19 N, robust standard deviations 0.8 and 1.3 N) pass."""
+    import dataclasses
+
+    from casflex.study.events import plate_contacts
+
+    scene, lab, grf = hamner
+    values, i = grf.values.copy(), grf.names.index("ground_force_vy")
+    unloaded = values[:, i] < 20.0
+    values[unloaded, i] = 20.0 + 5.0 * np.random.default_rng(9).standard_normal(unloaded.sum())
+    with pytest.raises(ValueError, match=r"plate 'ground_': unloaded it reads 19.8 \+- 5.4 N \(median and robust "
+                                         r"standard deviation of its 34 samples under 100 N away from its stances"):
+        plate_contacts(scene, lab, dataclasses.replace(grf, values=values))

@@ -10,10 +10,11 @@ numpy only: no model is assembled.
   from the right, so distances keep it.
 - A contact (:func:`contacts`): fv above ``threshold`` (20 N: below it casflex's C3D plates give no centre of
   pressure), crossings interpolated linearly, shorter than ``min_duration`` dropped; loaded at the record's
-  start or end: strike or off None, never a cycle's end. A shorter one that carries a load (above 100 N, beyond a
-  noise's level: :func:`_short`) is kept at the record's start or end (a stance the record cuts: its load goes to its
-  own foot, not the plate's next) and refused elsewhere (a foot grazing the plate: its load would go to a foot in
-  swing).
+  start or end: strike or off None, never a cycle's end. In :func:`plate_contacts` (:func:`_plate_spans`) a shorter
+  one above 100 N (beyond a noise's level) is kept at the record's start or end (a stance the record cuts: its load
+  goes to its own foot, not the plate's next) and refused elsewhere (a foot grazing the plate: its load would go to a
+  foot in swing); a plate whose unloaded reading reaches the threshold (noise, an offset: its contacts' times would
+  chatter) is refused (:func:`_unloaded`).
 - A foot (:func:`feet`): a node carrying markers (a body's on it, a beam's on its end farther from the root)
   with none on the nodes beyond it from the root (the scene's first node) along joints and beams: OpenSim's
   calcn_r, calcn_l (the toes carry none), and a wrist's radius, which the height check sets apart. Where the
@@ -222,32 +223,58 @@ def _one_foot(p: str, a, b, foot: str, each: dict, t: np.ndarray, fv: np.ndarray
             )
 
 
-def _short(p: str, t: np.ndarray, fv: np.ndarray, threshold: float, min_duration: float
-           ) -> list[tuple[float | None, float | None]]:
-    """The contacts of the plate ``p`` (vertical force fv (n,) N at times t (n,) s) shorter than ``min_duration`` s
-    that carry a load, their force above :data:`casflex.lab.plate_checks.MAX_PULL` (100 N: a noise's or an offset's
-    level; a blip of noise above ``threshold`` is not a contact): at the record's start or end, a stance the record
-    cuts, kept (its load goes to the foot over it, not to the plate's other feet); elsewhere, ValueError in one line:
-    too short to be a stance (20-30 ms for a heel's impact alone) and too loaded for noise, a foot grazing the plate,
-    whose load would go to a foot in swing."""
+def _unloaded(p: str, t: np.ndarray, fv: np.ndarray, threshold: float, min_duration: float) -> None:
+    """ValueError in one line where the plate ``p``'s unloaded reading (its vertical force fv (n,) N at times t (n,) s
+    under :data:`casflex.lab.plate_checks.MAX_PULL` and ``min_duration`` s from any sample above it: away from a
+    stance's edges), median plus three robust standard deviations (1.4826 x the median absolute deviation), reaches
+    ``threshold`` N: noise or an offset around the level a contact starts at makes its strikes and offs chatter
+    (Hamner's run with its right plate reading 20 +- 5 N unloaded: the strike 49 ms early). At least 20 such samples,
+    else not checked (a plate loaded throughout)."""
     from casflex.lab.plate_checks import MAX_PULL
 
+    high = t[fv > MAX_PULL]
+    far = fv <= MAX_PULL
+    if high.size:
+        k = np.clip(np.searchsorted(high, t), 1, high.size - 1) if high.size > 1 else np.zeros(t.size, dtype=int)
+        near = np.minimum(np.abs(t - high[k]), np.abs(t - high[np.maximum(k - 1, 0)]))
+        far &= near > min_duration
+    if far.sum() < 20:
+        return
+    level = float(np.median(fv[far]))
+    spread = 1.4826 * float(np.median(np.abs(fv[far] - level)))
+    if level + 3.0 * spread >= threshold:
+        i = int(np.flatnonzero(far)[np.argmax(fv[far])])
+        raise ValueError(f"plate {p!r}: unloaded it reads {level:.1f} +- {spread:.1f} N (median and robust standard "
+                         f"deviation of its {int(far.sum())} samples under {MAX_PULL:g} N away from its stances; up to "
+                         f"{fv[i]:.0f} N at t = {t[i]:.3f} s): within reach of the {threshold:g} N a contact starts "
+                         "at, its strikes and offs would chatter; zero the plate (subtract its unloaded reading) or "
+                         "filter its noise")
+
+
+def _plate_spans(p: str, t: np.ndarray, fv: np.ndarray, threshold: float, min_duration: float
+                 ) -> list[tuple[float | None, float | None]]:
+    """The contacts of the plate ``p`` (vertical force fv (n,) N at times t (n,) s, above ``threshold``; module
+    docstring) in time order. One shorter than ``min_duration`` s is dropped where it never exceeds
+    :data:`casflex.lab.plate_checks.MAX_PULL` (100 N: a noise's level); above it, it is kept at the record's start or
+    end (a stance the record cuts: its load goes to its own foot, not to the plate's next) and refused in one line
+    elsewhere (a foot grazing the plate, too loaded for noise: its load would go to a foot in swing). A plate whose
+    unloaded reading reaches the threshold is refused (:func:`_unloaded`)."""
+    from casflex.lab.plate_checks import MAX_PULL
+
+    ok = np.isfinite(fv)
+    t, fv = t[ok], fv[ok]
+    _unloaded(p, t, fv, threshold, min_duration)
     out = []
     for a, b in contacts(t, fv, threshold, 0.0):
         lo, hi = (t[0] if a is None else a), (t[-1] if b is None else b)
-        if hi - lo >= min_duration:
-            continue
-        inside = (t >= lo) & (t <= hi) & np.isfinite(fv)
-        peak = float(fv[inside].max(initial=-np.inf))
-        if not peak > MAX_PULL:
-            continue
-        if a is None or b is None:
+        peak = float(fv[(t >= lo) & (t <= hi)].max(initial=-np.inf))
+        if hi - lo >= min_duration or (a is None or b is None) and peak > MAX_PULL:
             out.append((a, b))
-            continue
-        raise ValueError(f"plate {p!r}: a contact of {1e3 * (b - a):.0f} ms at t = {_span(a, b)} peaking at "
-                         f"{peak:.0f} N, shorter than a stance ({min_duration:g} s) and above noise "
-                         f"({MAX_PULL:g} N): a foot grazing the plate, whose load would go to another foot; cut it "
-                         "from the record (set its force to 0) or give each plate its node")
+        elif peak > MAX_PULL:
+            raise ValueError(f"plate {p!r}: a contact of {1e3 * (b - a):.0f} ms at t = {_span(a, b)} peaking at "
+                             f"{peak:.0f} N, shorter than a stance ({min_duration:g} s) and above noise "
+                             f"({MAX_PULL:g} N): a foot grazing the plate, whose load would go to another foot; cut "
+                             "it from the record (set its force to 0) or give each plate its node")
     return out
 
 
@@ -275,8 +302,7 @@ def plate_contacts(scene, markers, grf=None, plane: Plane | str = "X,Y", prefixe
         # a plate that pulls or spikes would have its stances missed or cut: refused, whether a foot is found on it
         check_plate_record(f"{table.source}: plate {p!r}", table.t, force, fv, weight, stance=False)
         P = np.column_stack([table.column(f"{p}force_p{a}") for a in "xyz"])
-        spans = contacts(table.t, fv, threshold, min_duration) + _short(p, table.t, fv, threshold, min_duration)
-        for a, b in sorted(spans, key=lambda s: -np.inf if s[0] is None else s[0]):
+        for a, b in _plate_spans(p, table.t, fv, threshold, min_duration):
             lo, hi = (table.t[0] if a is None else a), (table.t[-1] if b is None else b)
             rows = (table.t >= lo) & (table.t <= hi) & (fv > threshold) & np.isfinite(P).all(axis=1)
             rows &= (table.t >= lab.t[0]) & (table.t <= lab.t[-1])
