@@ -298,3 +298,24 @@ def test_a_cycle_between_two_plate_strikes_with_a_stride_off_the_plates_between_
                         "R.Heel strikes at 1.129 s inside it (a stride off the plates)")
     three = [*found[:1], dataclasses.replace(first, strike=first.strike + period, off=first.off + period), found[1]]
     assert gait_cycles(three, scene, tiled, "X,Y")[0]["calcn_r"] == cycles([c.strike for c in three])
+
+
+def test_a_stance_on_a_plate_s_edge_is_not_clean(hamner):
+    """The right foot on the edge of its plate, its heel on the floor: the plate records a fifth of its load (a peak
+    of 291 N, 0.45 of the body's weight, for 1455 N): the cycle was clean, its loads below the hip without four
+    fifths of the ground reaction (exit 0). Not clean now, said; the recorded stance (2.25 W) is clean."""
+    from casflex.lab.plate_checks import scene_mass
+    from casflex.study.events import AUTO, clean_cycles
+
+    scene, lab, grf = hamner
+    weight = scene_mass(scene) * 9.80665
+    values = grf.values.copy()
+    for k in ("force_vx", "force_vy", "force_vz", "torque_x", "torque_y", "torque_z"):
+        values[:, grf.names.index(f"ground_{k}")] *= 0.2
+    edge = plate_contacts(scene, lab, dataclasses.replace(grf, values=values))
+    spans = cycles(foot_strikes(edge)["calcn_r"])
+    assert clean_cycles(edge, "calcn_r", spans, AUTO) == [(True, "stance on 'ground_' 0.403-0.649 s")]  # before
+    (ok, why), = clean_cycles(edge, "calcn_r", spans, AUTO, weight=weight)
+    assert not ok and why.startswith("its stance on 'ground_' 0.403-0.649 s peaks at 291 N, 0.45 of the body's weight")
+    whole = plate_contacts(scene, lab, grf)
+    assert clean_cycles(whole, "calcn_r", spans, "ground_", weight=weight)[0][0]

@@ -143,7 +143,8 @@ def feet(scene) -> dict[str, tuple[str, ...]]:
 class Contact:
     """One contact of the plate ``plate`` (its columns' prefix): ``strike``, ``off`` (s, None: the record
     starts or ends during it), the ``foot`` (node) over it, ``distance`` and ``height`` (m: module docstring),
-    and ``others``: (node, distance, height) of the other feet, nearest first."""
+    ``others``: (node, distance, height) of the other feet, nearest first, and ``peak`` (N): its largest vertical
+    force (NaN: not known)."""
 
     plate: str
     strike: float | None
@@ -152,6 +153,7 @@ class Contact:
     distance: float
     height: float
     others: tuple[tuple[str, float, float], ...] = ()
+    peak: float = float("nan")
 
 
 def read_trial(markers, grf, plates: bool = True, required: bool = True) -> tuple[LabMarkers, LabTable | None]:
@@ -320,7 +322,7 @@ def plate_contacts(scene, markers, grf=None, plane: Plane | str = "X,Y", prefixe
                                  "plates={node: prefix})")
             _one_foot(p, a, b, near[0][0], each, table.t[rows], fv[rows], max_height)
             found.append(Contact(p, a, b, near[0][0], near[0][1], near[0][2],
-                                 tuple(s for s in score if s is not near[0])))
+                                 tuple(s for s in score if s is not near[0]), float(fv[rows].max())))
     return found
 
 
