@@ -282,7 +282,8 @@ def test_a_cycle_between_two_plate_strikes_with_a_stride_off_the_plates_between_
     """Hamner's right stride (0.390-1.101 s) three times over, its stance on a plate in the first and the third only:
     the plate strikes 0.390 and 1.823 s made one 1.43 s "cycle" of two strides, clean (its stance on the plate) and
     normalised as one (exit 0). The heel marker strikes at 1.129 s inside it: it is left out, and the report says
-    so; with the middle stance on a plate too, the two cycles are kept."""
+    so; with the middle stance on a plate too, the two cycles are kept. The lab's marked strikes missing the middle
+    one: left out alike."""
     scene, lab, grf = hamner
     (first, *_), (r0, r1) = plate_contacts(scene, lab, grf), (0.390, 1.101)
     period = round((r1 - r0) * 60) / 60  # 43 frames at 60 Hz: the stride's frames tiled end to end
@@ -298,6 +299,9 @@ def test_a_cycle_between_two_plate_strikes_with_a_stride_off_the_plates_between_
                         "R.Heel strikes at 1.129 s inside it (a stride off the plates)")
     three = [*found[:1], dataclasses.replace(first, strike=first.strike + period, off=first.off + period), found[1]]
     assert gait_cycles(three, scene, tiled, "X,Y")[0]["calcn_r"] == cycles([c.strike for c in three])
+    marked = dataclasses.replace(tiled, events=(("Right", "Foot Strike", 0.39), ("Right", "Foot Strike", 1.823)))
+    by, lines = gait_cycles(three, scene, marked, "X,Y")  # the middle strike not marked: left out likewise
+    assert by["calcn_r"] == [] and lines[0].endswith("R.Heel strikes at 1.129 s inside it (a strike not marked)")
 
 
 def test_a_stance_on_a_plate_s_edge_is_not_clean(hamner):

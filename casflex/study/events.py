@@ -10,7 +10,8 @@ offers too). numpy only: no model is assembled.
   events: :func:`marked_strikes`) where the foot has two, else from the plates where it has two plate strikes (a
   stance straddling two plates strikes once: :func:`foot_strikes`), else from its heel marker
   (:func:`marker_strikes`), said in the report. A cycle between two plate strikes inside which the heel marker
-  strikes (:func:`_one_stride`: a stride off the plates) is left out and said.
+  strikes (:func:`_one_stride`: a stride off the plates) is left out and said; so is one between two marked strikes
+  (a strike the lab did not mark).
 - A clean cycle (:func:`clean_cycles`): its stance wholly on plates applied to the foot (one, or two it straddles:
   their wrenches are summed), as labs take kinetics only from such cycles: a cycle whose stance is off every plate
   (its strikes from the heel marker), on a plate not applied to the foot, or on a plate another foot shares at the
@@ -217,10 +218,11 @@ def gait_cycles(found: list[Contact], scene, markers, plane: Plane | str = "X,Y"
             how = f"{label}'s" if label else "no heel marker's (heel=)"
         out[node] = cycles(s, max_duration)
         said = "" if s is plate else f" ({len(plate)} plate strike(s): {_times(plate)} s)"
-        if s is plate and label:  # a stride off the plates between two plate strikes: two strides, not a cycle
+        if label and not how.startswith(label):  # a strike off the plates or not marked between two: two strides
             out[node], dropped = _one_stride(out[node], marker_strikes(lab.t, lab.marker(label) @ up, lift))
-            said += "".join(f"; {a:.3f}-{b:.3f} s left out: {label} strikes at {m:.3f} s inside it (a stride off "
-                            "the plates)" for a, b, m in dropped)
+            why = "a stride off the plates" if s is plate else "a strike not marked"
+            said += "".join(f"; {a:.3f}-{b:.3f} s left out: {label} strikes at {m:.3f} s inside it ({why})"
+                            for a, b, m in dropped)
         lines.append(f"{node}: {len(out[node])} cycle(s) from {how} strikes at {_times(s)} s{said}")
     return out, lines
 
