@@ -206,16 +206,17 @@ MAX_COP_FROM_FOOT = 0.2
 def _one_foot(p: str, a, b, foot: str, each: dict, t: np.ndarray, fv: np.ndarray, max_height: float) -> None:
     """ValueError in one line where the plate ``p``'s contact (a, b) s given to ``foot`` carries another foot at once:
     a sample loaded above a quarter of the contact's peak (and 20 N) whose centre of pressure lies more than
-    :data:`MAX_COP_FROM_FOOT` across the floor from ``foot``'s nearest marker and nearer another foot's, that foot
-    within ``max_height`` m above it (``each``: node -> :func:`_foot_samples`' (across, up) at the times t (k,) s,
-    vertical force fv (k,) N). Its load is the two feet's together, which no nearest foot may share out."""
+    :data:`MAX_COP_FROM_FOOT` across the floor from ``foot``'s nearest marker (where one is seen) and nearer another
+    foot's, that foot within ``max_height`` m above it (``each``: node -> :func:`_foot_samples`' (across, up) at the
+    times t (k,) s, vertical force fv (k,) N). Its load is the two feet's together, which no nearest foot may share
+    out."""
     across = each[foot][0]
     big = fv > max(MIN_PLATE_FORCE, 0.25 * float(fv.max()))
     for n, (o_across, o_up) in each.items():
-        both = big & (across > MAX_COP_FROM_FOOT) & (o_across < across) & (o_up <= max_height)
+        both = big & np.isfinite(across) & (across > MAX_COP_FROM_FOOT) & (o_across < across) & (o_up <= max_height)
         if n != foot and both.any():
             i = int(np.argmax(np.where(both, across, -np.inf)))
-            share = 100.0 * fv[o_across < across].sum() / fv.sum()
+            share = 100.0 * fv[np.isfinite(across) & (o_across < across)].sum() / fv.sum()
             raise ValueError(
                 f"plate {p!r}, contact {_span(a, b)}: its centre of pressure lies {across[i]:.2f} m across the floor "
                 f"from {foot}'s nearest marker at t = {t[i]:.3f} s ({fv[i]:.0f} N; a foot's within "
