@@ -204,12 +204,12 @@ MAX_COP_FROM_FOOT = 0.2
 
 
 def _one_foot(p: str, a, b, foot: str, each: dict, t: np.ndarray, fv: np.ndarray, max_height: float) -> None:
-    """ValueError in one line where the plate ``p``'s contact (a, b) s given to ``foot`` carries another foot at once:
-    a sample loaded above a quarter of the contact's peak (and 20 N) whose centre of pressure lies more than
-    :data:`MAX_COP_FROM_FOOT` across the floor from ``foot``'s nearest marker (where one is seen) and nearer another
-    foot's, that foot within ``max_height`` m above it (``each``: node -> :func:`_foot_samples`' (across, up) at the
-    times t (k,) s, vertical force fv (k,) N). Its load is the two feet's together, which no nearest foot may share
-    out."""
+    """ValueError in one line where the plate ``p``'s (the file and the plate, as said) contact (a, b) s given to
+    ``foot`` carries another foot at once: a sample loaded above a quarter of the contact's peak (and 20 N) whose
+    centre of pressure lies more than :data:`MAX_COP_FROM_FOOT` across the floor from ``foot``'s nearest marker
+    (where one is seen) and nearer another foot's, that foot within ``max_height`` m above it (``each``: node ->
+    :func:`_foot_samples`' (across, up) at the times t (k,) s, vertical force fv (k,) N). Its load is the two feet's
+    together, which no nearest foot may share out."""
     across = each[foot][0]
     big = fv > max(MIN_PLATE_FORCE, 0.25 * float(fv.max()))
     for n, (o_across, o_up) in each.items():
@@ -218,7 +218,7 @@ def _one_foot(p: str, a, b, foot: str, each: dict, t: np.ndarray, fv: np.ndarray
             i = int(np.argmax(np.where(both, across, -np.inf)))
             share = 100.0 * fv[np.isfinite(across) & (o_across < across)].sum() / fv.sum()
             raise ValueError(
-                f"plate {p!r}, contact {_span(a, b)}: its centre of pressure lies {across[i]:.2f} m across the floor "
+                f"{p}, contact {_span(a, b)}: its centre of pressure lies {across[i]:.2f} m across the floor "
                 f"from {foot}'s nearest marker at t = {t[i]:.3f} s ({fv[i]:.0f} N; a foot's within "
                 f"{MAX_COP_FROM_FOOT:g} m), nearer {n}'s ({o_across[i]:.2f} m; over {share:.0f} % of the contact's "
                 f"load): both feet on the plate at once (a treadmill's single plate, or a double support on one "
@@ -227,12 +227,12 @@ def _one_foot(p: str, a, b, foot: str, each: dict, t: np.ndarray, fv: np.ndarray
 
 
 def _unloaded(p: str, t: np.ndarray, fv: np.ndarray, threshold: float, min_duration: float) -> None:
-    """ValueError in one line where the plate ``p``'s unloaded reading (its vertical force fv (n,) N at times t (n,) s
-    under :data:`casflex.lab.plate_checks.MAX_PULL` and ``min_duration`` s from any sample above it: away from a
-    stance's edges), median plus three robust standard deviations (1.4826 x the median absolute deviation), reaches
-    ``threshold`` N: noise or an offset around the level a contact starts at makes its strikes and offs chatter
-    (Hamner's run with its right plate reading 20 +- 5 N unloaded: the strike 49 ms early). At least 20 such samples,
-    else not checked (a plate loaded throughout)."""
+    """ValueError in one line where the plate ``p``'s (the file and the plate, as said) unloaded reading (its vertical
+    force fv (n,) N at times t (n,) s under :data:`casflex.lab.plate_checks.MAX_PULL` and ``min_duration`` s from any
+    sample above it: away from a stance's edges), median plus three robust standard deviations (1.4826 x the median
+    absolute deviation), reaches ``threshold`` N: noise or an offset around the level a contact starts at makes its
+    strikes and offs chatter (Hamner's run with its right plate reading 20 +- 5 N unloaded: the strike 49 ms early). At
+    least 20 such samples, else not checked (a plate loaded throughout)."""
     from casflex.lab.plate_checks import MAX_PULL
 
     high = t[fv > MAX_PULL]
@@ -247,7 +247,7 @@ def _unloaded(p: str, t: np.ndarray, fv: np.ndarray, threshold: float, min_durat
     spread = 1.4826 * float(np.median(np.abs(fv[far] - level)))
     if level + 3.0 * spread >= threshold:
         i = int(np.flatnonzero(far)[np.argmax(fv[far])])
-        raise ValueError(f"plate {p!r}: unloaded it reads {level:.1f} +- {spread:.1f} N (median and robust standard "
+        raise ValueError(f"{p}: unloaded it reads {level:.1f} +- {spread:.1f} N (median and robust standard "
                          f"deviation of its {int(far.sum())} samples under {MAX_PULL:g} N away from its stances; up to "
                          f"{fv[i]:.0f} N at t = {t[i]:.3f} s): within reach of the {threshold:g} N a contact starts "
                          "at, its strikes and offs would chatter; zero the plate (subtract its unloaded reading) or "
@@ -256,12 +256,12 @@ def _unloaded(p: str, t: np.ndarray, fv: np.ndarray, threshold: float, min_durat
 
 def _plate_spans(p: str, t: np.ndarray, fv: np.ndarray, threshold: float, min_duration: float
                  ) -> list[tuple[float | None, float | None]]:
-    """The contacts of the plate ``p`` (vertical force fv (n,) N at times t (n,) s, above ``threshold``; module
-    docstring) in time order. One shorter than ``min_duration`` s is dropped where it never exceeds
-    :data:`casflex.lab.plate_checks.MAX_PULL` (100 N: a noise's level); above it, it is kept at the record's start or
-    end (a stance the record cuts: its load goes to its own foot, not to the plate's next) and refused in one line
-    elsewhere (a foot grazing the plate, too loaded for noise: its load would go to a foot in swing). A plate whose
-    unloaded reading reaches the threshold is refused (:func:`_unloaded`)."""
+    """The contacts of the plate ``p`` (the file and the plate, as said; vertical force fv (n,) N at times t (n,) s,
+    above ``threshold``; module docstring) in time order. One shorter than ``min_duration`` s is dropped where it
+    never exceeds :data:`casflex.lab.plate_checks.MAX_PULL` (100 N: a noise's level); above it, it is kept at the
+    record's start or end (a stance the record cuts: its load goes to its own foot, not to the plate's next) and
+    refused in one line elsewhere (a foot grazing the plate, too loaded for noise: its load would go to a foot in
+    swing). A plate whose unloaded reading reaches the threshold is refused (:func:`_unloaded`)."""
     from casflex.lab.plate_checks import MAX_PULL
 
     ok = np.isfinite(fv)
@@ -274,7 +274,7 @@ def _plate_spans(p: str, t: np.ndarray, fv: np.ndarray, threshold: float, min_du
         if hi - lo >= min_duration or (a is None or b is None) and peak > MAX_PULL:
             out.append((a, b))
         elif peak > MAX_PULL:
-            raise ValueError(f"plate {p!r}: a contact of {1e3 * (b - a):.0f} ms at t = {_span(a, b)} peaking at "
+            raise ValueError(f"{p}: a contact of {1e3 * (b - a):.0f} ms at t = {_span(a, b)} peaking at "
                              f"{peak:.0f} N, shorter than a stance ({min_duration:g} s) and above noise "
                              f"({MAX_PULL:g} N): a foot grazing the plate, whose load would go to another foot; cut "
                              "it from the record (set its force to 0) or give each plate its node")
@@ -303,25 +303,26 @@ def plate_contacts(scene, markers, grf=None, plane: Plane | str = "X,Y", prefixe
         fv = vertical_force(table, p, pl)
         force = np.column_stack([table.column(f"{p}force_v{a}") for a in "xyz"])
         # a plate that pulls or spikes would have its stances missed or cut: refused, whether a foot is found on it
-        check_plate_record(f"{table.source}: plate {p!r}", table.t, force, fv, weight, stance=False)
+        where = f"{table.source}: plate {p!r}" if table.source else f"plate {p!r}"
+        check_plate_record(where, table.t, force, fv, weight, stance=False)
         P = np.column_stack([table.column(f"{p}force_p{a}") for a in "xyz"])
-        for a, b in _plate_spans(p, table.t, fv, threshold, min_duration):
+        for a, b in _plate_spans(where, table.t, fv, threshold, min_duration):
             lo, hi = (table.t[0] if a is None else a), (table.t[-1] if b is None else b)
             rows = (table.t >= lo) & (table.t <= hi) & (fv > threshold) & np.isfinite(P).all(axis=1)
             rows &= (table.t >= lab.t[0]) & (table.t <= lab.t[-1])
             if not rows.any():
-                raise ValueError(f"plate {p!r}, contact {_span(a, b)}: no centre of pressure within the markers' "
+                raise ValueError(f"{where}, contact {_span(a, b)}: no centre of pressure within the markers' "
                                  f"times {lab.t[0]:g}..{lab.t[-1]:g} s")
             each = {n: _foot_samples(lab, labels, table.t[rows], P[rows], axes) for n, labels in cands.items()}
             score = sorted(((n, *_foot_distance(*each[n], fv[rows])) for n in cands), key=lambda s: s[1])
             near = [s for s in score if s[1] <= max_distance and s[2] <= max_height]
             if not near:
-                raise ValueError(f"plate {p!r}, contact {_span(a, b)}: no foot within {max_distance:g} m across the "
+                raise ValueError(f"{where}, contact {_span(a, b)}: no foot within {max_distance:g} m across the "
                                  f"floor of its centre of pressure and {max_height:g} m above it (nearest: "
                                  f"{score[0][0]}, {score[0][1]:.2f} m and {score[0][2]:.2f} m); plane {pl.x},{pl.y}"
                                  " (a foot the scene does not model, e.g. a leg's other foot: name each plate's node, "
                                  "plates={node: prefix})")
-            _one_foot(p, a, b, near[0][0], each, table.t[rows], fv[rows], max_height)
+            _one_foot(where, a, b, near[0][0], each, table.t[rows], fv[rows], max_height)
             found.append(Contact(p, a, b, near[0][0], near[0][1], near[0][2],
                                  tuple(s for s in score if s is not near[0]), float(fv[rows].max())))
     return found
