@@ -335,3 +335,30 @@ def test_a_plate_whose_force_along_the_floor_has_its_sign_flipped_is_refused():
                                          r"body travelling at 1.23 m/s: .* sign is flipped"):
         inverse_dynamics(model, Trial(lab, grf=LabTable(grf.t, tuple(names), values, source="walk"), plates=plates,
                                       tasks=tasks))
+
+
+def test_a_treadmill_s_single_plate_given_to_one_foot_is_refused():
+    """The Rajagopal walk's two feet's ground reactions on one plate (a treadmill's), given to calcn_r by name: the
+    median line of force passed 0.16 m from it (under the 0.4 m limit) and the left foot's load went to the right
+    foot, exit 0. Refused: the line passes farther than 0.4 m at 20 % of the stance's samples (a foot alone: none;
+    at most 0.27 m on the repo's trials)."""
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_inverse_contacts import _wrench
+
+    from casflex.inverse import Trial, inverse_dynamics
+    from casflex.lab import LabTable, read_sto, read_trc
+
+    grf = read_sto(MUSCLES / "rajagopal_walk_grf.mot")
+
+    def cols(kind: str) -> np.ndarray:
+        return np.column_stack([grf.column(kind.format(a)) for a in "xyz"])
+
+    feet = [(cols(f"ground_force_{s}_v{{}}"), cols(f"ground_force_{s}_p{{}}"), cols(f"ground_torque_{s}_{{}}"))
+            for s in "rl"]
+    kinds = ("force_vx", "force_vy", "force_vz", "force_px", "force_py", "force_pz", "torque_x", "torque_y", "torque_z")
+    one = LabTable(grf.t, tuple(f"ground_{k}" for k in kinds), _wrench(feet), source="one")
+    with pytest.raises(ValueError, match=r"^one: plate 'ground_': its force passes more than 0.4 m from 'calcn_r' at "
+                                         r"20 % of its stance's 144 samples \(up to 0.59 m at t = 0.99 s; median 0.16"):
+        inverse_dynamics(MUSCLES / "rajagopal_walk_planar_muscles.osim",
+                         Trial(read_trc(MUSCLES / "rajagopal_walk.trc"), grf=one, plates={"calcn_r": "ground_"},
+                               tasks=str(MUSCLES / "rajagopal_walk_ik_tasks.xml")))

@@ -37,7 +37,12 @@ meets it (OpenSim's Hamner running trial, whose stance peaks at 2.25 body weight
   of pressure (the node's distance to it, |M_node| / |F| in the plane): for a force near vertical, the
   distance across the floor, whatever the node's height. Measured (medians): Hamner's stride, the ankle 0.11 m
   (0.00-0.17 over the stance); its whole trial, calcn_r 0.13 m and calcn_l 0.19 m; walking2.c3d's right ankle
-  0.12 m; a plate given to the other foot, 0.54 m (walking2) and 0.55 m (Hamner).
+  0.12 m; a plate given to the other foot, 0.54 m (walking2) and 0.55 m (Hamner). :data:`FAR_SHARE`: the line
+  passing farther than 0.4 m at more than a tenth of the stance's samples is refused too, whatever the median: the
+  plate carries another foot at once (a treadmill's single plate under both feet given to one: the Rajagopal
+  walk's, 20 % and 37 % of the samples, up to 0.59 and 0.74 m, medians 0.16 and 0.29 m); on the repo's trials the
+  line passes at most 0.27 m from the foot's node at any sample (Hamner's whole run; its stride 0.21, the
+  Rajagopal walk 0.24, walking2.c3d 0.15).
 - :data:`MAX_NODE_HEIGHT` (m): the segment a plate bears on is the foot standing on it, whose node (its joint
   with the shank, a heel, the toes) lies near the floor: the node's height above the plate's surface (the median
   height of its centres of pressure where loaded, :attr:`casflex.inverse.Plate.floor`), median over the stance,
@@ -77,6 +82,7 @@ __all__ = [
     "SPIKE",
     "DROP",
     "MAX_COP_DISTANCE",
+    "FAR_SHARE",
     "MAX_NODE_HEIGHT",
     "check_plate_record",
     "window_load",
@@ -93,6 +99,7 @@ MIN_PEAK = 0.2
 SPIKE = 2.0
 DROP = 0.75
 MAX_COP_DISTANCE = 0.4
+FAR_SHARE = 0.1
 MAX_NODE_HEIGHT = 0.25
 MIN_SHEAR = 0.02
 MIN_TRAVEL = 0.3
@@ -238,6 +245,16 @@ def check_plate_foot(
             f"{int(stance.sum())} samples at t = {ts[0]:g}..{ts[-1]:g} s; {d.min():.2f}..{d.max():.2f} "
             f"m): a centre of pressure lies under its foot, within a foot's length of it (the limit "
             f"is {MAX_COP_DISTANCE:g} m); the plate is under another foot, or its origin is wrong"
+        )
+    far = d > MAX_COP_DISTANCE
+    if far.mean() > FAR_SHARE:
+        i = int(np.argmax(d))
+        raise ValueError(
+            f"{where}: its force passes more than {MAX_COP_DISTANCE:g} m from {node!r} at {100 * far.mean():.0f} % of "
+            f"its stance's {int(stance.sum())} samples (up to {d[i]:.2f} m at t = {t[stance][i]:g} s; median "
+            f"{mid:.2f} m): a foot's centre of pressure lies within a foot's length of it throughout; the plate "
+            "carries another foot, at once (a treadmill's single plate, both feet on it) or in turn (give each foot "
+            "its own plate, or --plate auto)"
         )
     if floor is not None:
         others = {k: v[stance] for k, v in (nodes or {}).items()}
