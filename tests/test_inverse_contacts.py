@@ -222,3 +222,25 @@ def test_a_plate_whose_unloaded_reading_chatters_around_the_threshold_is_refused
                                          r"\+- 5.4 N \(median and robust standard deviation of its 34 samples under "
                                          r"100 N away from its stances"):
         plate_contacts(scene, lab, dataclasses.replace(grf, values=values))
+
+
+def test_a_plate_a_foot_stands_on_but_applied_to_no_node_is_said(hamner):
+    """The right stance straddling plates 0 and 3 (as above) with only plate 0 applied to calcn_r (and plate 1 to
+    calcn_l): the toes' plate's load (836 N) was left out of the foot's ground reaction without a word (exit 0).
+    Said now, naming the plate, the foot and its contact; a plate under no foot of the scene (walking2.c3d's left
+    plate with a right leg) says nothing (tests/test_lab_plate_checks.py)."""
+    from casflex.inverse import Trial, prepare
+
+    scene, lab, grf = hamner
+    w = np.clip((0.665 - grf.t) / (0.665 - 0.39), 0.0, 1.0)
+    straddle = _table(grf, {"ground_": _plate(grf, "ground_", w), "1_ground_": _plate(grf, "1_ground_"),
+                            "3_ground_": _plate(grf, "ground_", 1 - w)}, "straddle")
+    inputs = prepare(scene, Trial(lab, grf=straddle, plates=ORIGINAL, tasks=str(TASKS)))
+    said = [ln for ln in inputs.warnings if ln.startswith("plate '")]
+    assert said == ["plate '3_ground_' (straddle): calcn_r stands on it 0.410-0.665 s inside the window, but it is "
+                    "applied to no node: its load (836 N) is left out of calcn_r's ground reaction; apply it (--plate "
+                    "calcn_r=3_ground_, a node may take two plates) or --plate auto"]
+    assert sum(ln in said for ln in inputs.report) == 1
+    full = prepare(scene, Trial(lab, grf=straddle, plates=ORIGINAL | {"calcn_r": ["ground_", "3_ground_"]},
+                                tasks=str(TASKS)))
+    assert not [ln for ln in full.warnings if ln.startswith("plate '")]
