@@ -328,15 +328,13 @@ def check_bearing(
     )
 
 
-
-def shear_halves(force: np.ndarray, up: np.ndarray, travel: float) -> list[tuple[int, int, float, float]]:
-    """[(start, stop), its first half's and its second half's mean force along the travel (N)] of each whole stance
-    (a run of vertical force above 20 N that the samples neither start nor end in) of a plate's force (k, 2) N in
-    the plane, the model's up ``up`` (2,) and the body travelling along the floor's direction times ``travel``'s
-    sign."""
+def _shear_halves(force: np.ndarray, up: np.ndarray) -> list[tuple[int, int, float, float]]:
+    """[(start, stop, its first half's and its second half's mean force (N) along the floor's direction (up
+    turned clockwise: the plane's x for y up))] of each whole stance (a run of vertical force above 20 N that the
+    samples neither start nor end in) of a plate's force (k, 2) N in the plane, the model's up ``up`` (2,)."""
     from casflex.lab.lowpass import runs
 
-    along = force @ (np.sign(travel) * np.array([up[1], -up[0]]))
+    along = force @ np.array([up[1], -up[0]])
     out = []
     for s, e in runs(force @ up > _LOADED):
         if s > 0 and e < force.shape[0] and e - s >= 4:
@@ -354,7 +352,7 @@ def check_shear(where: str, t: np.ndarray, force: np.ndarray, weight: np.ndarray
     if up is None:
         return
     W = float(np.linalg.norm(weight))
-    for s, e, first, second in shear_halves(force, up, 1.0):
+    for s, e, first, second in _shear_halves(force, up):
         v = (body_x[e - 1] - body_x[s]) / (t[e - 1] - t[s])
         a, b = (first, second) if v > 0 else (-first, -second)
         if abs(v) > MIN_TRAVEL and a > MIN_SHEAR * W and b < -MIN_SHEAR * W:
