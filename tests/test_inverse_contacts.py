@@ -244,3 +244,17 @@ def test_a_plate_a_foot_stands_on_but_applied_to_no_node_is_said(hamner):
     full = prepare(scene, Trial(lab, grf=straddle, plates=ORIGINAL | {"calcn_r": ["ground_", "3_ground_"]},
                                 tasks=str(TASKS)))
     assert not [ln for ln in full.warnings if ln.startswith("plate '")]
+
+
+def test_an_unused_plate_s_offset_refuses_nothing(hamner):
+    """A third plate no foot steps on, reading 18-20.5 N (an offset not zeroed; 19 +- 0.7 N, median and robust SD):
+    no contact (its samples above 20 N last under 0.05 s), and the chatter check, for plates carrying a stance, leaves
+    it be (a trial was refused for a plate it does not use)."""
+    from casflex.study.events import plate_contacts
+
+    scene, lab, grf = hamner
+    idle = _plate(grf, "ground_", 0.0)
+    idle[:, 1] = np.array([18.0, 19.0, 20.5, 19.0])[np.arange(grf.t.size) % 4]  # one sample above 20 N in four
+    three = _table(grf, {"ground_": _plate(grf, "ground_"), "1_ground_": _plate(grf, "1_ground_"), "2_ground_": idle},
+                   "three")
+    assert [c.plate for c in plate_contacts(scene, lab, three)] == ["ground_"] * 2 + ["1_ground_"] * 2

@@ -261,12 +261,14 @@ def _plate_spans(p: str, t: np.ndarray, fv: np.ndarray, threshold: float, min_du
     never exceeds :data:`casflex.lab.plate_checks.MAX_PULL` (100 N: a noise's level); above it, it is kept at the
     record's start or end (a stance the record cuts: its load goes to its own foot, not to the plate's next) and
     refused in one line elsewhere (a foot grazing the plate, too loaded for noise: its load would go to a foot in
-    swing). A plate whose unloaded reading reaches the threshold is refused (:func:`_unloaded`)."""
+    swing). A plate whose unloaded reading reaches the threshold is refused (:func:`_unloaded`) where it carries a
+    stance (above 100 N): an unused plate's offset changes no contact of a foot."""
     from casflex.lab.plate_checks import MAX_PULL
 
     ok = np.isfinite(fv)
     t, fv = t[ok], fv[ok]
-    _unloaded(p, t, fv, threshold, min_duration)
+    if fv.max(initial=-np.inf) > MAX_PULL:  # a plate no foot steps on (an offset, noise) is left as it was
+        _unloaded(p, t, fv, threshold, min_duration)
     out = []
     for a, b in contacts(t, fv, threshold, 0.0):
         lo, hi = (t[0] if a is None else a), (t[-1] if b is None else b)
