@@ -258,3 +258,20 @@ def test_an_unused_plate_s_offset_refuses_nothing(hamner):
     three = _table(grf, {"ground_": _plate(grf, "ground_"), "1_ground_": _plate(grf, "1_ground_"), "2_ground_": idle},
                    "three")
     assert [c.plate for c in plate_contacts(scene, lab, three)] == ["ground_"] * 2 + ["1_ground_"] * 2
+
+
+def test_a_window_between_a_foot_s_contacts_keeps_its_filtered_share(hamner):
+    """Both feet on one plate in turn, cut to 0.70-1.05 s: the right foot's contacts (0.390-0.665, 1.101-end s) lie
+    outside, so its share was left out, but the plates' filter spreads its stance into the window (the two plates,
+    named: its load there): the ankle moment was 14.8 N m off at 0.70 s (exit 0). Kept within two periods of the
+    cut-off: the two plates' loads again."""
+    from casflex.inverse import Trial, inverse_dynamics
+
+    scene, lab, grf = hamner
+    right = grf.column("ground_force_vy") > 0
+    one = _table(grf, {"ground_": np.where(right[:, None], _plate(grf, "ground_"), _plate(grf, "1_ground_"))}, "one")
+    cut = {"t_start": 0.70, "t_end": 1.05, "tasks": str(TASKS)}
+    got, want = (inverse_dynamics(scene, Trial(lab, grf=g, plates=p, **cut)) for g, p in ((one, "auto"),
+                                                                                          (grf, ORIGINAL)))
+    _same({k: got.loads[k] for k in want.settings["moments"]}, {k: want.loads[k] for k in want.settings["moments"]})
+    assert got.settings["plates"] == {"calcn_l": "ground_", "calcn_r": "ground_"}
