@@ -90,7 +90,8 @@ def _span(a: float | None, b: float | None) -> str:
 def vertical_force(table: LabTable, prefix: str, plane: Plane | str = "X,Y") -> np.ndarray:
     """(n,) N: the plate ``prefix``'s force along the model's y (module docstring)."""
     p, up = _plate_columns(table, prefix), _plane(plane).matrix[1]
-    return np.column_stack([table.column(f"{p}force_v{a}") for a in "xyz"]) @ up
+    with np.errstate(invalid="ignore"):  # a sample that is not a number stays one (contacts() leaves it out)
+        return np.column_stack([table.column(f"{p}force_v{a}") for a in "xyz"]) @ up
 
 
 def tree_walk(scene) -> tuple[dict[str, str | None], list[str]]:
