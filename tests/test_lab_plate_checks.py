@@ -307,3 +307,58 @@ def test_a_surface_the_table_writes_half_a_metre_low_refuses_nothing(tmp_path, c
     assert code == 0 and "error" not in err, err
     _refused([*BASE, "--loads", _mot(tmp_path, low), "--plate", "knee=ground_"], capsys,
              r"it is applied to 'knee', whose node lies 0.9\d m above the plate's surface")
+
+
+def test_a_plate_whose_force_along_the_floor_has_its_sign_flipped_is_refused():
+    """The Rajagopal walk (overground, 1.23 m/s) with the right plate's ground_force_vx negated: exit 0 with every
+    moment wrong (the right hip's off by up to 290 N m on Hamner's; here the stance propels then brakes). Refused,
+    naming the plate and the stance; the walk as recorded brakes (-0.086 W over each stance's first half) then
+    propels (+0.079 W): taken. Hamner's run (on a treadmill: the body travels at 0.1 m/s) is not checked."""
+    from casflex.inverse import Trial, inverse_dynamics
+    from casflex.lab import LabTable, read_sto, read_trc
+
+    grf = read_sto(MUSCLES / "rajagopal_walk_grf.mot")
+    kinds = ("force_vx", "force_vy", "force_vz", "force_px", "force_py", "force_pz", "torque_x", "torque_y", "torque_z")
+    names = [f"{p}{k}" for p in ("ground_", "1_ground_") for k in kinds]
+    side = {s: {k: "ground_" + k.replace("force_", f"force_{s}_").replace("torque_", f"torque_{s}_") for k in kinds}
+            for s in "rl"}  # the walk's columns, ground_force_r_vx ...: one a foot
+    values = np.column_stack([grf.column(side[s][k]) for s in "rl" for k in kinds])
+    lab = read_trc(MUSCLES / "rajagopal_walk.trc")
+    plates = {"calcn_r": "ground_", "calcn_l": "1_ground_"}
+    tasks = str(MUSCLES / "rajagopal_walk_ik_tasks.xml")
+    model = MUSCLES / "rajagopal_walk_planar_muscles.osim"
+    inverse_dynamics(model, Trial(lab, grf=LabTable(grf.t, tuple(names), values, source="walk"), plates=plates,
+                                  tasks=tasks))
+    values[:, 0] *= -1
+    with pytest.raises(ValueError, match=r"walk: plate 'ground_': over its stance at t = 0.26..1.02 s its force along "
+                                         r"the floor pushes the body on \(72 N .* then holds it back \(-66 N .* the "
+                                         r"body travelling at 1.23 m/s: .* sign is flipped"):
+        inverse_dynamics(model, Trial(lab, grf=LabTable(grf.t, tuple(names), values, source="walk"), plates=plates,
+                                      tasks=tasks))
+
+
+def test_a_treadmill_s_single_plate_given_to_one_foot_is_refused():
+    """The Rajagopal walk's two feet's ground reactions on one plate (a treadmill's), given to calcn_r by name: the
+    median line of force passed 0.16 m from it (under the 0.4 m limit) and the left foot's load went to the right
+    foot, exit 0. Refused: the line passes farther than 0.4 m at 20 % of the stance's samples (a foot alone: none;
+    at most 0.27 m on the repo's trials)."""
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_inverse_contacts import _wrench
+
+    from casflex.inverse import Trial, inverse_dynamics
+    from casflex.lab import LabTable, read_sto, read_trc
+
+    grf = read_sto(MUSCLES / "rajagopal_walk_grf.mot")
+
+    def cols(kind: str) -> np.ndarray:
+        return np.column_stack([grf.column(kind.format(a)) for a in "xyz"])
+
+    feet = [(cols(f"ground_force_{s}_v{{}}"), cols(f"ground_force_{s}_p{{}}"), cols(f"ground_torque_{s}_{{}}"))
+            for s in "rl"]
+    kinds = ("force_vx", "force_vy", "force_vz", "force_px", "force_py", "force_pz", "torque_x", "torque_y", "torque_z")
+    one = LabTable(grf.t, tuple(f"ground_{k}" for k in kinds), _wrench(feet), source="one")
+    with pytest.raises(ValueError, match=r"^one: plate 'ground_': its force passes more than 0.4 m from 'calcn_r' at "
+                                         r"20 % of its stance's 144 samples \(up to 0.59 m at t = 0.99 s; median 0.16"):
+        inverse_dynamics(MUSCLES / "rajagopal_walk_planar_muscles.osim",
+                         Trial(read_trc(MUSCLES / "rajagopal_walk.trc"), grf=one, plates={"calcn_r": "ground_"},
+                               tasks=str(MUSCLES / "rajagopal_walk_ik_tasks.xml")))

@@ -276,3 +276,50 @@ def test_a_cycle_is_clean_only_where_its_stance_stands_wholly_on_the_foot_s_plat
         (ok, said), = clean_cycles(found, "calcn_r", spans, "ground_")
         assert not ok and why in said, (what, said)
     assert clean_cycles(good, "calcn_r", spans, None)[0][0] is False  # no plate applied to the foot
+
+
+def test_a_cycle_between_two_plate_strikes_with_a_stride_off_the_plates_between_is_left_out(hamner):
+    """Hamner's right stride (0.390-1.101 s) three times over, its stance on a plate in the first and the third only:
+    the plate strikes 0.390 and 1.823 s made one 1.43 s "cycle" of two strides, clean (its stance on the plate) and
+    normalised as one (exit 0). The heel marker strikes at 1.129 s inside it: it is left out, and the report says
+    so; with the middle stance on a plate too, the two cycles are kept. The lab's marked strikes missing the middle
+    one: left out alike."""
+    scene, lab, grf = hamner
+    (first, *_), (r0, r1) = plate_contacts(scene, lab, grf), (0.390, 1.101)
+    period = round((r1 - r0) * 60) / 60  # 43 frames at 60 Hz: the stride's frames tiled end to end
+    rows = np.flatnonzero((lab.t >= r0 - 1e-9) & (lab.t < r0 + period - 1e-9))
+    shift = lab.xyz[rows[-1] + 1] - lab.xyz[rows[0]]  # the stride's advance, so that the markers run on
+    xyz = np.concatenate([lab.xyz[rows] + k * np.nanmedian(shift, axis=0) * [1, 0, 1] for k in range(3)])
+    t = np.concatenate([lab.t[rows] + k * period for k in range(3)])
+    tiled = dataclasses.replace(lab, t=t, xyz=xyz)
+    found = [first, dataclasses.replace(first, strike=first.strike + 2 * period, off=first.off + 2 * period)]
+    by, lines = gait_cycles(found, scene, tiled, "X,Y")
+    assert by["calcn_r"] == []  # before: [(0.390, 1.823)]
+    assert lines[0] == ("calcn_r: 0 cycle(s) from the plates' strikes at 0.390, 1.823 s; 0.390-1.823 s left out: "
+                        "R.Heel strikes at 1.129 s inside it (a stride off the plates)")
+    three = [*found[:1], dataclasses.replace(first, strike=first.strike + period, off=first.off + period), found[1]]
+    assert gait_cycles(three, scene, tiled, "X,Y")[0]["calcn_r"] == cycles([c.strike for c in three])
+    marked = dataclasses.replace(tiled, events=(("Right", "Foot Strike", 0.39), ("Right", "Foot Strike", 1.823)))
+    by, lines = gait_cycles(three, scene, marked, "X,Y")  # the middle strike not marked: left out likewise
+    assert by["calcn_r"] == [] and lines[0].endswith("R.Heel strikes at 1.129 s inside it (a strike not marked)")
+
+
+def test_a_stance_on_a_plate_s_edge_is_not_clean(hamner):
+    """The right foot on the edge of its plate, its heel on the floor: the plate records a fifth of its load (a peak
+    of 291 N, 0.45 of the body's weight, for 1455 N): the cycle was clean, its loads below the hip without four
+    fifths of the ground reaction (exit 0). Not clean now, said; the recorded stance (2.25 W) is clean."""
+    from casflex.lab.plate_checks import scene_mass
+    from casflex.study.events import AUTO, clean_cycles
+
+    scene, lab, grf = hamner
+    weight = scene_mass(scene) * 9.80665
+    values = grf.values.copy()
+    for k in ("force_vx", "force_vy", "force_vz", "torque_x", "torque_y", "torque_z"):
+        values[:, grf.names.index(f"ground_{k}")] *= 0.2
+    edge = plate_contacts(scene, lab, dataclasses.replace(grf, values=values))
+    spans = cycles(foot_strikes(edge)["calcn_r"])
+    assert clean_cycles(edge, "calcn_r", spans, AUTO) == [(True, "stance on 'ground_' 0.403-0.649 s")]  # before
+    (ok, why), = clean_cycles(edge, "calcn_r", spans, AUTO, weight=weight)
+    assert not ok and why.startswith("its stance on 'ground_' 0.403-0.649 s peaks at 291 N, 0.45 of the body's weight")
+    whole = plate_contacts(scene, lab, grf)
+    assert clean_cycles(whole, "calcn_r", spans, "ground_", weight=weight)[0][0]

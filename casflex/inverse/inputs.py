@@ -267,21 +267,51 @@ def _one_node_a_plate(table, pairs: list[tuple[str, str]]) -> None:
         seen[p] = node
 
 
-def _shares(model: Model, lab, table, plates, plane, window: tuple[float, float]
+def _unapplied(model: Model, lab, table, pairs: list[tuple[str, str]], plane, window: tuple[float, float]
+               ) -> list[str]:
+    """Warnings (lines starting "plate '") for the table's plates that ``pairs`` (node, prefix) apply to no node
+    but that a foot of the scene stands on inside the ``window`` (s) by the trial's markers ``lab``
+    (:func:`casflex.inverse.contacts.plate_contacts`; a plate under no foot of the scene, e.g. a leg model's other
+    foot's, says nothing): its load is left out of that foot's ground reaction (a stance straddling it and a plate
+    that is applied)."""
+    from casflex.inverse.contacts import _span, plate_contacts, plate_prefixes
+    from casflex.lab.filtering import _plate_columns
+
+    if lab is None:
+        return []
+    given = {_plate_columns(table, p) for _, p in pairs}
+    lines = []
+    for p in (p for p in plate_prefixes(table) if p not in given):
+        try:
+            found = plate_contacts(model.scene, lab, table, plane, [p])
+        except ValueError:  # no foot of the scene over it, or a record plate_contacts refuses: not this check's
+            continue
+        on = [c for c in found if (c.strike is None or c.strike <= window[1]) and (c.off is None or c.off >= window[0])]
+        if on:
+            lines.append(f"plate {p!r} ({table.source}): {on[0].foot} stands on it {_span(on[0].strike, on[0].off)} "
+                         f"inside the window, but it is applied to no node: its load ({on[0].peak:.0f} N) is left out "
+                         f"of {on[0].foot}'s ground reaction; apply it (--plate {on[0].foot}={p}, a node may take two "
+                         "plates) or --plate auto")
+    return lines
+
+
+def _shares(model: Model, lab, table, plates, plane, window: tuple[float, float], reach: float = 0.0
             ) -> tuple[list[tuple[str, str, tuple | None]], dict, list[str]]:
     """([(prefix, node, spans or None: all its samples)], the settings' plates, report lines): the trial's
     ``plates`` resolved. A mapping node -> prefix (or prefixes): each plate on its node over the whole trial (a
     plate given to two nodes refused); "auto" (the trial's markers ``lab`` given): each plate's contacts to the foot
     over each (:func:`casflex.inverse.contacts.plate_shares`), a foot's share of a plate kept where one of its
-    contacts on it falls in the ``window`` (s)."""
+    contacts on it falls in the ``window`` (s) widened by ``reach`` (s) on each side: the plates' filter spreads a
+    stance's load that far (two periods of its cut-off: Hamner's run cut to 0.7-1.05 s, the right stance ending at
+    0.665 s, gave the ankle moment 14.8 N m off at 0.7 s with the share left out)."""
     from casflex.inverse.contacts import AUTO, plate_contacts, plate_prefixes, plate_shares
 
     if not (isinstance(plates, str) and plates == AUTO):
         pairs = [(node, p) for node, v in plates.items() for p in ([v] if isinstance(v, str) else v)]
         _one_node_a_plate(table, pairs)
-        return [(p, node, None) for node, p in pairs], plates, []
+        return [(p, node, None) for node, p in pairs], plates, _unapplied(model, lab, table, pairs, plane, window)
     found = plate_contacts(model.scene, lab, table, plane, plate_prefixes(table))
-    lo, hi = window
+    lo, hi = window[0] - reach, window[1] + reach
     inside = {(c.plate, c.foot) for c in found
               if (c.strike is None or c.strike <= hi) and (c.off is None or c.off >= lo)}
     out, lines, said = [], [], {}
@@ -404,7 +434,11 @@ def prepare(scene, trial: Trial, *, filter: Filter | None = None, fit: Fit | Non
     plate_list = []
     fc = filter.plates
     window = (float(t[0]), float(t[-1]))
-    shares, plates, share_report = _shares(model, lab, table, plates, pl, window) if plates else ([], plates, [])
+    reach = 2.0 / fc if fc else 0.0  # s: how far the plates' filter spreads a load (two periods of its cut-off)
+    shares, plates, share_report = _shares(model, lab, table, plates, pl, window, reach) if plates else \
+        ([], plates, [])
+    unapplied = [ln for ln in share_report if "applied to no node" in ln]  # a warning (in the report too, once)
+    share_report, warnings = [ln for ln in share_report if ln not in unapplied], warnings + unapplied
     for prefix, node, spans in shares:
         plate = plate_from_table(table, prefix, node, pl, fc, window=window, rate=rate, trial=source,
                                  weight=model_weight(model), spans=spans)

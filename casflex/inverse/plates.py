@@ -235,14 +235,18 @@ def model_weight(model) -> np.ndarray:
 def plates_under_feet(model, plates: list[Plate], t: np.ndarray, q: np.ndarray) -> None:
     """ValueError in one line for a plate whose force passes farther from its node than a centre of pressure
     under the foot can, or whose node lies higher above the plate than a foot's
-    (:func:`casflex.lab.plate_checks.check_plate_foot`) over its stance, with the fitted configurations q
-    (k, n_dof) at times t (k,) s: the plate under another foot, its origin wrong, or given to a thigh or a shank
-    (the refusal names the nodes near its centre of pressure)."""
-    from casflex.lab.plate_checks import check_plate_foot
+    (:func:`casflex.lab.plate_checks.check_plate_foot`) over its stance, or whose force along the floor propels the
+    body first and brakes it after (:func:`casflex.lab.plate_checks.check_shear`: its sign flipped), with the fitted
+    configurations q (k, n_dof) at times t (k,) s: the plate under another foot, its origin wrong, or given to a
+    thigh or a shank (the refusal names the nodes near its centre of pressure)."""
+    from casflex.lab.plate_checks import _up, check_plate_foot, check_shear
 
     weight = model_weight(model)
     nodes = {n: q[:, 3 * k:3 * k + 2] for k, n in enumerate(model.node_names)}
+    up = _up(weight)
+    body_x = np.mean([xy @ [up[1], -up[0]] for xy in nodes.values()], axis=0) if up is not None else None
     for pl in plates:
         F, Mo = pl.at(t)
         check_plate_foot(pl.source or f"plate {pl.name!r}", pl.node, t, F, Mo, nodes[pl.node], weight, pl.floor,
                          nodes)
+        check_shear(pl.source or f"plate {pl.name!r}", t, F, weight, body_x)

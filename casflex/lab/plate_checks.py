@@ -37,7 +37,12 @@ meets it (OpenSim's Hamner running trial, whose stance peaks at 2.25 body weight
   of pressure (the node's distance to it, |M_node| / |F| in the plane): for a force near vertical, the
   distance across the floor, whatever the node's height. Measured (medians): Hamner's stride, the ankle 0.11 m
   (0.00-0.17 over the stance); its whole trial, calcn_r 0.13 m and calcn_l 0.19 m; walking2.c3d's right ankle
-  0.12 m; a plate given to the other foot, 0.54 m (walking2) and 0.55 m (Hamner).
+  0.12 m; a plate given to the other foot, 0.54 m (walking2) and 0.55 m (Hamner). :data:`FAR_SHARE`: the line
+  passing farther than 0.4 m at more than a tenth of the stance's samples is refused too, whatever the median: the
+  plate carries another foot at once (a treadmill's single plate under both feet given to one: the Rajagopal
+  walk's, 20 % and 37 % of the samples, up to 0.59 and 0.74 m, medians 0.16 and 0.29 m); on the repo's trials the
+  line passes at most 0.27 m from the foot's node at any sample (Hamner's whole run; its stride 0.21, the
+  Rajagopal walk 0.24, walking2.c3d 0.15).
 - :data:`MAX_NODE_HEIGHT` (m): the segment a plate bears on is the foot standing on it, whose node (its joint
   with the shank, a heel, the toes) lies near the floor: the node's height above the plate's surface (the median
   height of its centres of pressure where loaded, :attr:`casflex.inverse.Plate.floor`), median over the stance,
@@ -53,6 +58,14 @@ meets it (OpenSim's Hamner running trial, whose stance peaks at 2.25 body weight
   where the node lies as high above the lowest node near the line of force too (the foot under the thigh): a plate
   in a stair's step whose centres of pressure a table writes at the floor's height, or a model without feet
   (a plate under a residual limb, a knee kneeling), is taken.
+- :data:`MIN_SHEAR` (x W), :data:`MIN_TRAVEL` (m/s): a stance brakes the travelling body (its force along the floor
+  against the travel) over its first half and propels it over its second; a whole stance (loaded above 20 N from
+  unloaded to unloaded within the trial) that on average propels by more than 0.02 W over its first half and brakes
+  by more than 0.02 W over its second, the body (its nodes' mean) travelling faster than 0.3 m/s over it, has its
+  force along the floor's sign flipped (a column negated, a plate's own axes). A step starting or stopping a walk
+  brakes or propels over both halves, never the other way round. Measured: the Rajagopal walk (1.23 m/s), -0.083 to
+  -0.086 W then +0.077 to +0.079 W; walking2.c3d's right leg, -0.33 then +0.33 (W the leg's). Hamner's run is on a
+  treadmill (the body travels at 0.04-0.10 m/s): not checked.
 """
 
 from __future__ import annotations
@@ -69,11 +82,15 @@ __all__ = [
     "SPIKE",
     "DROP",
     "MAX_COP_DISTANCE",
+    "FAR_SHARE",
     "MAX_NODE_HEIGHT",
     "check_plate_record",
     "window_load",
     "check_plate_foot",
     "check_bearing",
+    "check_shear",
+    "MIN_SHEAR",
+    "MIN_TRAVEL",
 ]
 
 MAX_PULL = 100.0
@@ -82,7 +99,10 @@ MIN_PEAK = 0.2
 SPIKE = 2.0
 DROP = 0.75
 MAX_COP_DISTANCE = 0.4
+FAR_SHARE = 0.1
 MAX_NODE_HEIGHT = 0.25
+MIN_SHEAR = 0.02
+MIN_TRAVEL = 0.3
 #: N: the vertical force below which a plate carries no load (the readers' limit for a centre of pressure)
 _LOADED = 20.0
 
@@ -226,6 +246,16 @@ def check_plate_foot(
             f"m): a centre of pressure lies under its foot, within a foot's length of it (the limit "
             f"is {MAX_COP_DISTANCE:g} m); the plate is under another foot, or its origin is wrong"
         )
+    far = d > MAX_COP_DISTANCE
+    if far.mean() > FAR_SHARE:
+        i = int(np.argmax(d))
+        raise ValueError(
+            f"{where}: its force passes more than {MAX_COP_DISTANCE:g} m from {node!r} at {100 * far.mean():.0f} % of "
+            f"its stance's {int(stance.sum())} samples (up to {d[i]:.2f} m at t = {t[stance][i]:g} s; median "
+            f"{mid:.2f} m): a foot's centre of pressure lies within a foot's length of it throughout; the plate "
+            "carries another foot, at once (a treadmill's single plate, both feet on it) or in turn (give each foot "
+            "its own plate, or --plate auto)"
+        )
     if floor is not None:
         others = {k: v[stance] for k, v in (nodes or {}).items()}
         check_bearing(where, node, t[stance], F, moment[stance], x, up, floor, others)
@@ -297,3 +327,39 @@ def check_bearing(
         + (f": the nodes near its centre of pressure are {feet}" if feet else "")
     )
 
+
+def _shear_halves(force: np.ndarray, up: np.ndarray) -> list[tuple[int, int, float, float]]:
+    """[(start, stop, its first half's and its second half's mean force (N) along the floor's direction (up
+    turned clockwise: the plane's x for y up))] of each whole stance (a run of vertical force above 20 N that the
+    samples neither start nor end in) of a plate's force (k, 2) N in the plane, the model's up ``up`` (2,)."""
+    from casflex.lab.lowpass import runs
+
+    along = force @ np.array([up[1], -up[0]])
+    out = []
+    for s, e in runs(force @ up > _LOADED):
+        if s > 0 and e < force.shape[0] and e - s >= 4:
+            m = (s + e) // 2
+            out.append((s, e, float(along[s:m].mean()), float(along[m:e].mean())))
+    return out
+
+
+def check_shear(where: str, t: np.ndarray, force: np.ndarray, weight: np.ndarray | None, body_x: np.ndarray) -> None:
+    """ValueError in one line for a plate whose force along the floor (force (k, 2) N in the plane at times t (k,) s)
+    propels the body in the first half of a whole stance and brakes it in the second, each by more than
+    :data:`MIN_SHEAR` x W on average, while the body (``body_x`` (k,) m: its nodes' mean position along the floor)
+    travels faster than :data:`MIN_TRAVEL` m/s over it (module docstring): a stance brakes, then propels."""
+    up = _up(weight) if weight is not None else None
+    if up is None:
+        return
+    W = float(np.linalg.norm(weight))
+    for s, e, first, second in _shear_halves(force, up):
+        v = (body_x[e - 1] - body_x[s]) / (t[e - 1] - t[s])
+        a, b = (first, second) if v > 0 else (-first, -second)
+        if abs(v) > MIN_TRAVEL and a > MIN_SHEAR * W and b < -MIN_SHEAR * W:
+            raise ValueError(
+                f"{where}: over its stance at t = {t[s]:g}..{t[e - 1]:g} s its force along the floor pushes the body "
+                f"on ({a:.0f} N on average over its first half) then holds it back ({b:.0f} N over its second), the "
+                f"body travelling at {abs(v):.2f} m/s: a stance brakes the body, then propels it (beyond "
+                f"{MIN_SHEAR:g} x its weight, {MIN_SHEAR * W:.0f} N); the horizontal force's sign is flipped (a "
+                "column negated, a plate's own axes)"
+            )

@@ -9,12 +9,19 @@ offers too). numpy only: no model is assembled.
 - Cycles (:func:`gait_cycles`): a foot's strike to its next, from the strikes the lab marked in the file (a C3D's
   events: :func:`marked_strikes`) where the foot has two, else from the plates where it has two plate strikes (a
   stance straddling two plates strikes once: :func:`foot_strikes`), else from its heel marker
-  (:func:`marker_strikes`), said in the report.
+  (:func:`marker_strikes`), said in the report. A cycle between two plate strikes inside which the heel marker
+  strikes (:func:`_one_stride`: a stride off the plates) is left out and said; so is one between two marked strikes
+  (a strike the lab did not mark).
 - A clean cycle (:func:`clean_cycles`): its stance wholly on plates applied to the foot (one, or two it straddles:
   their wrenches are summed), as labs take kinetics only from such cycles: a cycle whose stance is off every plate
   (its strikes from the heel marker), on a plate not applied to the foot, or on a plate another foot shares at the
   time, has loads below the hip without the foot's ground reaction (Hamner's right ankle: a peak of -0.78 N m/kg
   averaged with such a cycle, -1.54 from the clean).
+  A stance peaking under half the body's weight (:data:`MIN_STANCE_PEAK`; the model's mass x g: lenient for a
+  model of part of the body) is not wholly on its plates (a foot on a plate's edge, its heel or toes on the floor):
+  a stance bears the body's weight at least once, 1-1.3 body weights walking, 2-3 running (measured: Hamner's run
+  2.25-2.38, the Rajagopal walk 1.09-1.13; walking2.c3d 4.56 times its right leg's model); NaN peaks (contacts made
+  by hand) are not checked.
 - The feet that walk (:func:`ground_feet`): the feet whose markers come down to the floor (a wrist's never do); a
   foot among them that touches no plate has no kinetic cycle (its leg's loads are not the other foot's).
 """
@@ -211,26 +218,50 @@ def gait_cycles(found: list[Contact], scene, markers, plane: Plane | str = "X,Y"
             how = f"{label}'s" if label else "no heel marker's (heel=)"
         out[node] = cycles(s, max_duration)
         said = "" if s is plate else f" ({len(plate)} plate strike(s): {_times(plate)} s)"
+        if label and not how.startswith(label):  # a strike off the plates or not marked between two: two strides
+            out[node], dropped = _one_stride(out[node], marker_strikes(lab.t, lab.marker(label) @ up, lift))
+            why = "a stride off the plates" if s is plate else "a strike not marked"
+            said += "".join(f"; {a:.3f}-{b:.3f} s left out: {label} strikes at {m:.3f} s inside it ({why})"
+                            for a, b, m in dropped)
         lines.append(f"{node}: {len(out[node])} cycle(s) from {how} strikes at {_times(s)} s{said}")
     return out, lines
 
 
+def _one_stride(spans: list[tuple[float, float]], heel: list[float]
+                ) -> tuple[list[tuple[float, float]], list[tuple[float, float, float]]]:
+    """(the cycles ``spans`` (s) that hold one stride, [(t0, t1, the heel's strike inside)] those that hold two): a
+    cycle between two plate strikes inside which the heel marker strikes (:func:`marker_strikes`: -4 to +21 ms from
+    the plates' on Hamner's run) farther than a quarter of the cycle from both its ends is two strides, the one
+    between them struck off every plate; normalised as one cycle it would be a wrong curve."""
+    keep, dropped = [], []
+    for a, b in spans:
+        inner = [m for m in heel if a + 0.25 * (b - a) < m < b - 0.25 * (b - a)]
+        (dropped.append((a, b, inner[0])) if inner else keep.append((a, b)))
+    return keep, dropped
+
+
+#: x W: a stance wholly on plates peaks above half the body's weight (module docstring)
+MIN_STANCE_PEAK = 0.5
+
+
 def clean_cycles(found: list[Contact], node: str, spans: list[tuple[float, float]],
-                 plate: str | Sequence[str] | None, slack: float = 0.05) -> list[tuple[bool, str]]:
+                 plate: str | Sequence[str] | None, slack: float = 0.05, weight: float = 0.0
+                 ) -> list[tuple[bool, str]]:
     """(clean, why) for each gait cycle (t0, t1) s in ``spans`` of the foot ``node`` (module docstring). ``plate``:
     what inverse dynamics applies to the foot: a plate's prefix or several (over the whole trial), None (none), or
     :data:`AUTO` (each contact to the foot over it). Clean where a stance of the foot (its contacts ``found``,
     :func:`plate_contacts`, merged where they overlap: :func:`_stances`) strikes within ``slack`` s of t0 (the heel
     marker's strikes are -4 to +21 ms from the plates' on Hamner's trial) and comes off before t1, every contact
     of it on a plate applied to the foot, and no other foot on those plates (or on a plate applied to this foot)
-    during it; ``why`` says what is wrong, or the stance's span and plates."""
+    during it, and (``weight`` N, the body's; 0: not checked) its contacts' peaks summed above
+    :data:`MIN_STANCE_PEAK` x ``weight``; ``why`` says what is wrong, or the stance's span and plates."""
     auto = isinstance(plate, str) and plate == AUTO
     applied = set() if plate is None or auto else {plate} if isinstance(plate, str) else set(plate)
     stances = _stances(found, node)
-    return [_clean(found, node, stances, t0, t1, auto, applied, slack) for t0, t1 in spans]
+    return [_clean(found, node, stances, t0, t1, auto, applied, slack, weight) for t0, t1 in spans]
 
 
-def _clean(found, node, stances, t0, t1, auto, applied, slack) -> tuple[bool, str]:
+def _clean(found, node, stances, t0, t1, auto, applied, slack, weight=0.0) -> tuple[bool, str]:
     """:func:`clean_cycles` of one cycle (t0, t1) s."""
     def on(cs) -> str:
         return " and ".join(repr(p) for p in dict.fromkeys(c.plate for c in cs))
@@ -259,6 +290,11 @@ def _clean(found, node, stances, t0, t1, auto, applied, slack) -> tuple[bool, st
         c = also[0]
         return False, f"{c.foot} on {c.plate!r} {_span(c.strike, c.off)} during its stance on {on(cs)} " \
                       f"{_span(strike, off)}"
+    peak = sum(c.peak for c in cs)  # of a stance straddling plates, at least its peak
+    if weight > 0 and peak < MIN_STANCE_PEAK * weight:
+        return False, (f"its stance on {on(cs)} {_span(strike, off)} peaks at {peak:.0f} N, {peak / weight:.2f} of "
+                       f"the body's weight (a stance wholly on plates, above {MIN_STANCE_PEAK:g}): the foot partly off "
+                       "the plate (on its edge)")
     return True, f"stance on {on(cs)} {_span(strike, off)}"
 
 

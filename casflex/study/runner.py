@@ -234,7 +234,10 @@ def _cycle_loads(sc, res, lab, found, plates: dict | str, feet: dict, plane: str
     names = _loads_of(res)
     walking = ground_feet(sc, lab, plane) if found else []  # no plates read: said in the report already
     first = next((f for f, cs in feet.items() if cs), next(iter(feet), None))  # a foot with cycles
-    clean = {f: clean_cycles(found, f, cs, plates if isinstance(plates, str) else plates.get(f))
+    from casflex.lab.plate_checks import scene_mass
+
+    weight = scene_mass(sc) * float(np.hypot(*sc.gravity))
+    clean = {f: clean_cycles(found, f, cs, plates if isinstance(plates, str) else plates.get(f), weight=weight)
              for f, cs in feet.items()}
     loads, notes, bare = {}, [], {}
     for name, foot in _load_feet(sc, names, [*feet, *(f for f in walking if f not in feet)]).items():
