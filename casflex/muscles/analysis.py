@@ -254,9 +254,9 @@ class TrialMuscles:
         """:meth:`solve` for each of ``variants`` (each a tuple of muscles, the model's with some properties
         changed: the bands'), at once: the loads, paths and reaction geometry computed once, the forces at full
         activation only of the muscles that differ from the model's (one variant per solve of static
-        optimization: the walk's 108 variants stacked as one problem took 22 s, solved one by one 15 s);
-        ``near``: the outputs of nearby inputs at the same frames (the bands' perturbations): with p = 2 each
-        variant's frames are solved on their active set, the QP only where it changed (3 s for those 108:
+        optimization: on the Rajagopal walk 24 variants stacked as one problem took 18 s CPU, solved one by one
+        11 s); ``near``: the outputs of nearby inputs at the same frames (the bands' perturbations): with p = 2
+        each variant's frames are solved on their active set, the QP only where it changed (1.4 s for those 24:
         :func:`~casflex.muscles.static_optimization.solve_static_optimization`'s ``near``)."""
         options = optimization or self.optimization
         p = self.tree.model.p_nominal if p is None else p

@@ -7,9 +7,10 @@ of the muscles' (:meth:`casflex.muscles.analysis.TrialMuscles.solve`), so the in
 
 - **muscles**: each declared uncertain muscle property (:class:`~casflex.muscles.options.MuscleUncertainty`,
   a relative SD, independent between muscles and properties) moved by +SD and -SD, the trial re-solved: its part
-  is (out(+SD) - out(-SD)) / 2 (a secant over +-1 SD; measured on the walk against a Monte Carlo of 300 draws it
-  is closer than the derivative where static optimization's active set changes within the SD: hamstrings_r's
-  peak force, 10 % on every max isometric force: Monte Carlo 27 N, secant 22 N, derivative 2.4 N);
+  is (out(+SD) - out(-SD)) / 2 (a secant over +-1 SD; on the Rajagopal walk, 10 % on every tendon slack length,
+  against a Monte Carlo of 300 draws it is closer than the derivative at 45 of the 51 muscles' peak forces of
+  50 N or more, e.g. gasmed_r's: Monte Carlo 713 N, secant 721 N, derivative 1636 N; not at the joint reactions'
+  peaks, where neither is: docs/muscles.md, "Bands");
 - **anthropometry**: the inverse's ``[[uncertain]]`` properties (its :class:`~casflex.inverse.bands.BandSpec`),
   each moved by +-SD, the loads of the model with those properties as parameters fed to the muscles
   (:func:`casflex.inverse.bands.anthropometry` with the muscles' outputs as its function);
@@ -24,7 +25,8 @@ linear each muscle property is (the largest second difference over the first).
 
 The perturbed problems are solved on the nominal solution's active set (closed form, exact, the QP only for the
 frames whose set changed: :func:`~casflex.muscles.static_optimization.solve_static_optimization`'s ``near``):
-the walk's 18 muscles x 3 properties x 2 signs (108 problems of 151 frames) in about 3 s.
+the Rajagopal walk's 80 muscles x 3 properties x 2 signs (480 problems of 166 frames) in 24 s CPU, where one
+such problem solved whole takes 0.46 s.
 
 **Criteria** (a modelling choice, not noise: never in the SD): the same outputs with other exponents p of
 static optimization's cost (OpenSim's activation_exponent; 3 beside the trial's 2), and their differences.
@@ -146,8 +148,9 @@ class MuscleBands:
 
     def summary(self, names=None) -> list[str]:
         """One line per output (default: each joint's resultant, then each muscle's force) at its peak, e.g.
-        "hip_r resultant: peak 3.23 BW (2302 N) at t = 0.53 s +- 0.33 BW (muscles 0.3, anthropometry 0.1, markers
-        0; largest soleus_r.tendon_slack_length 0.25, ...); p=3: peak 3.1 BW, max |diff| 0.2, RMS 0.08"."""
+        "hip_r resultant: peak 3.97 BW (3314 N) at t = 0.81 s +- 0.348 BW (muscles 0.348, anthropometry 0.00999,
+        markers 0; largest soleus_r.tendon_slack_length 0.23, ...); p=3: peak 4.05 BW, max |diff| 0.334, RMS 0.0957"
+        (the Rajagopal walk's, first order)."""
         if names is None:
             names = [n for n in self.values if n.endswith("_resultant")] + \
                     [n for n in self.values if f"{n}.activation" in self.values]
@@ -268,8 +271,9 @@ def muscle_bands(trial, inputs, fit, z: np.ndarray, zd: np.ndarray, zdd: np.ndar
     no such part) and its marker ``fit`` (None: fitted again where the inputs are markers); the spread of the
     exponents ``criteria`` beside the trial's; ``draws`` > 0: the muscles' part checked by a Monte Carlo of that
     many draws (:func:`monte_carlo`, ``MuscleBands.monte_carlo``), "auto": :data:`AUTO_DRAWS` where an optimal
-    fibre or tendon slack length is uncertain (the outputs are far from linear in them: on the walk the first-order
-    part understates the knee's peak contact force's band sixfold), none otherwise; where drawn, the Monte Carlo's
+    fibre or tendon slack length is uncertain (the outputs are far from linear in them: on the Rajagopal walk, 10 %
+    on every tendon slack length, the secants understate the band of the knee's peak contact force twofold and
+    the ankle's tenfold), none otherwise; where drawn, the Monte Carlo's
     SD is the muscles' part (the first-order one said beside it). ValueError in one line for what cannot be
     honoured."""
     if draws == "auto":

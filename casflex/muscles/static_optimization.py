@@ -20,8 +20,9 @@ min_control is its minimum_activation, 0.01), u free (or within ``reserve_bounds
 OpenSim states the balance as accelerations (udot(a, u) = the kinematics' udot), the same set of solutions since
 the mass matrix is invertible; it solves each frame with IPOPT to its ``optimizer_convergence_criterion`` (1e-4,
 loose). Here all frames are one sparse problem (block diagonal: a frame's unknowns meet only its own rows), solved
-to ``tolerance``: for p = 2 a QP, by CasADi's interior-point ``ipqp`` (0.09 s for the 151 frames, 18 muscles and
-10 coordinates of Gait10dof18musc's walk; IPOPT 0.45 s, per frame 1.2 s; OpenSim's SO 3.4 s), else by IPOPT.
+to ``tolerance``: for p = 2 a QP, by CasADi's interior-point ``ipqp`` (0.45 s CPU for the 166 frames, 80 muscles
+and 11 coordinates of the Rajagopal pipeline's walk; IPOPT 1.2-1.5 s, per frame 1.4 s; OpenSim's SO 28 s wall),
+else by IPOPT.
 The reserves' |u|^p is u+^p + u-^p with u = u+ - u-, u+- >= 0 (exact at the optimum, smooth for any p >= 1).
 A frame whose moments no activation within the bounds can carry is found, when the solve fails, by a problem
 that minimises the shortfall |A x - b|_1 (an exact measure: the least moment the bounds leave uncarried);
@@ -281,8 +282,9 @@ def solve_static_optimization(moments, arms, active, passive=None, reserves=None
                    time.perf_counter() - start, stats)
 
 
-#: An activation within this of a bound in the nearby solution is taken as held there (the QP's are within 4e-8
-#: of theirs on the walk, its free ones 6e-5 or more away).
+#: An activation within this of a bound in the nearby solution is taken as held there (on the Rajagopal walk 8196
+#: of the QP's 13280 activations lie within 1e-10 of a bound and 30 between 1e-8 and 1e-5: one free by less than
+#: this and held moves by less than it; a set that is not the optimum's fails the checks of _on_active_set).
 AT_BOUND = 1e-6
 
 
@@ -486,7 +488,8 @@ class _Problem:
         p = self.options.exponent
         if p == 2.0 and qp:
             return self._qp(b, target)
-        x = ca.SX.sym("x", self.G.shape[1])  # SX: a tenth of MX's evaluation time on the walk's 4800 unknowns
+        # SX: evaluated in 0.016 s CPU of IPOPT's 1.2 s on the Rajagopal walk (MX 0.025 s)
+        x = ca.SX.sym("x", self.G.shape[1])
         solver = self._ipopt(x, ca.sum1(ca.fabs(x) ** p), ca.mtimes(_dm(self.G), x))
         x0 = np.clip(np.zeros_like(self.lbx), self.lbx, self.ubx)
         sol = solver(x0=x0, lbx=self.lbx, ubx=self.ubx, lbg=b, ubg=b)
@@ -500,7 +503,7 @@ class _Problem:
 
     def _qp(self, b, target):
         """p = 2: a QP (cost x^T x, the rows G x = b, the bounds), by CasADi's sparse interior-point QP solver
-        ``ipqp``: 0.09 s on the walk where IPOPT took 0.45 s, the same optimum to 1e-14."""
+        ``ipqp``: 0.45 s CPU on the Rajagopal walk (166 frames, 80 muscles) where IPOPT took 1.2-1.5 s."""
         import casadi as ca
 
         n = self.G.shape[1]
