@@ -144,3 +144,22 @@ def test_a_coupled_knee_scales_with_its_thigh():
     d0, d1 = (np.linalg.norm(y[:, None] - y[None], axis=2) for y in (
         np.array(t.marker_fit(z)[0]).reshape(-1, 2) for t in (t0, t1)))
     assert np.max(np.abs(d1 - 1.2 * d0)) < 1e-12  # m: metre-sized sums of products, to round-off
+
+
+def test_a_subject_s_mass_far_from_the_model_s_is_warned(tmp_path, capsys):
+    # a mass in pounds, 10 times off, or a whole body's mass on a model of the leg: the bodies scaled to it, exit 0,
+    # nothing said (a 70 kg subject on hamner_leg's 23 kg: the thigh of 25 kg)
+    static = str(LAB / "hamner_static_excerpt.trc")
+    for mass, said in ((25.0, None), (70.0, "3.03 times the model's 23.1 kg"), (700.0, "30.3 times"),
+                       (5.0, "0.216 times")):
+        code = main(["calibrate", "hamner_leg", "--static", static, "--root", "pelvis", "--scale", "--mass",
+                     str(mass), "--out", str(tmp_path / "s.toml")])
+        err = capsys.readouterr().err
+        assert code == 0 and (said is None) == ("casflex: warning: the subject's mass" not in err), (mass, err)
+        assert said is None or said in err
+    from casflex.study.runner import calibrate_run  # a study's subject weighed, not measured: said alike
+
+    out = calibrate_run(model="hamner_leg", static=None, plane="X,Y", root="pelvis", calibrate=False, scale=False,
+                        mass=160.0)
+    assert any(r.startswith("warning: the subject's mass 160 kg is 6.93 times") and "pounds (72.6 kg)" in r
+               for r in out["report"])

@@ -32,7 +32,7 @@ import numpy as np
 
 from casflex.inverse.tree import KinematicTree, kinematic_tree
 
-__all__ = ["calibrate", "with_mass"]
+__all__ = ["calibrate", "with_mass", "mass_lines", "MASS_WARN"]
 
 
 def _rot(th: float) -> np.ndarray:
@@ -124,6 +124,26 @@ def _scaled_joint(j, sc, new, s: float, c: int):
     return j
 
 
+#: a subject's mass more than this factor from the model's total is said: adults weigh 45-150 kg, a generic model
+#: 65-80 kg; a factor 2 is a mass in pounds (2.2), ten times off, or a model of part of the body (Hamner's leg, 23 kg)
+#: given the whole body's mass, whose segments would then weigh two or three times a subject's
+MASS_WARN = 2.0
+
+
+def mass_lines(scene, mass: float) -> list[str]:
+    """The report's warning (a list of none or one line) where the subject's ``mass`` (kg) is more than
+    :data:`MASS_WARN` times the scene's bodies' total, or less than its inverse."""
+    total = sum(b.mass for b in scene.bodies)
+    r = mass / total
+    if 1.0 / MASS_WARN <= r <= MASS_WARN:
+        return []
+    why = (f"a mass in pounds ({mass * 0.45359237:.1f} kg), 10 times off, or a model of part of the body given the "
+           "whole body's mass?" if r > 1.0 else "a mass 10 times off, or a subject unlike the model (a child's mass "
+           "on an adult's model)?")
+    return [f"warning: the subject's mass {mass:g} kg is {r:.3g} times the model's {total:.1f} kg (its bodies' "
+            f"masses scaled by it): {why}"]
+
+
 def with_mass(scene, mass: float):
     """The scene with its bodies' masses scaled together to ``mass`` (kg), their inertias with them (the segments'
     sizes as they are): a subject weighed but not measured."""
@@ -169,6 +189,7 @@ def _scaled(tree, sc, ym: np.ndarray, labels: list[str], source: str, mass: floa
     y0 = np.array([[m.x, m.y] for m in sc.markers])
     s = _scales(tree, y0, ym, labels, source)
     sc = _scaled_scene(tree, s)
+    lines_mass = [] if mass is None else mass_lines(sc, mass)
     sc = sc if mass is None else with_mass(sc, mass)
     names = {c: next(n for i, n in enumerate(model.node_names) if tree.cluster[i] == c) for c in s}
     lines = ["segments scaled (by the node that carries each): "
@@ -176,7 +197,7 @@ def _scaled(tree, sc, ym: np.ndarray, labels: list[str], source: str, mass: floa
     lines += [f"warning: segment {names[c]!r} scaled by {v:.3f}, beyond {SCALE_WARN[0]:g}-{SCALE_WARN[1]:g} (its "
               "static markers' distances over the scene's): a marker mislabelled or on another segment?"
               for c, v in s.items() if not SCALE_WARN[0] <= v <= SCALE_WARN[1]]
-    return sc, lines
+    return sc, lines + lines_mass
 
 
 def _placed(sc, model, tree, z: np.ndarray, ym: np.ndarray, report: list[str]):

@@ -52,7 +52,7 @@ def calibrate_run(*, model: str, static: str | None, plane: str, root: str | Non
     (:mod:`.direction`)."""
     from casflex import load_scene
     from casflex.inverse.calibrate import calibrate as place
-    from casflex.inverse.calibrate import with_mass
+    from casflex.inverse.calibrate import mass_lines, with_mass
     from casflex.inverse.inputs import read_markers
     from casflex.scene import dumps_scene
 
@@ -72,6 +72,7 @@ def calibrate_run(*, model: str, static: str | None, plane: str, root: str | Non
         report += placed
     if mass is not None and not placed_mass:  # weighed, not measured: the masses to it, the sizes as they are
         total = sum(b.mass for b in scene.bodies)
+        report += mass_lines(scene, mass)
         scene = with_mass(scene, mass)
         report.append(f"the model's masses scaled from {total:.1f} kg to the subject's {mass:g} kg (inertias with "
                       "them; the segments' sizes as they are)")
