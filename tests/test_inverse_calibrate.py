@@ -163,3 +163,19 @@ def test_a_subject_s_mass_far_from_the_model_s_is_warned(tmp_path, capsys):
                         mass=160.0)
     assert any(r.startswith("warning: the subject's mass 160 kg is 6.93 times") and "pounds (72.6 kg)" in r
                for r in out["report"])
+
+
+def test_a_static_pose_beyond_a_clamped_range_is_warned(tmp_path):
+    # Hamner's leg with the knee's range clamped to [-120, -28.6] degrees; the subject stands with it straight: the fit
+    # holds the knee at -28.6 degrees and the shank's markers were placed turned 0.5 rad on it (moved 30-55 mm, one
+    # of them said as a far move), the clamp unsaid
+    text = (LAB / "hamner_subject02_leg.osim").read_text()
+    clamped = text.replace("<range>-2.0943950999999998 0.17453293</range>", "<range>-2.0943950999999998 -0.5</range>")
+    assert clamped != text
+    (tmp_path / "clamped.osim").write_text(clamped)
+    static = str(LAB / "hamner_static_excerpt.trc")
+    _, report = calibrate(str(tmp_path / "clamped.osim"), static, root="pelvis")
+    said = [r for r in report if r.startswith("warning: the static pose holds")]
+    assert len(said) == 1 and said[0].startswith("warning: the static pose holds knee_angle_r at a limit of its range")
+    _, report = calibrate(str(LAB / "hamner_subject02_leg.osim"), static, root="pelvis")
+    assert not [r for r in report if r.startswith("warning: ")]  # the model's own range: nothing to say

@@ -223,7 +223,7 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
               mass: float | None = None):
     """(the calibrated scene, report lines) from the static trial ``static`` (LabMarkers or a .trc/.c3d
     path), module docstring."""
-    from casflex.inverse.fit import check_decided, fit_pose
+    from casflex.inverse.fit import _held, check_decided, coordinate_bounds, fit_pose
     from casflex.inverse.inputs import inverse_model, read_markers
     from casflex.inverse.locking import lock_unmarked
     from casflex.lab import LabMarkers, Plane, markers_in_plane
@@ -276,6 +276,7 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
         raise ValueError(f"static trial: its markers do not decide the pose: {_undecided_at(tree, z, ym)} (a segment "
                          "with fewer than two seen markers and no other way to place it): record them, or take the "
                          "segment out of the scene")
+    held = _held(z, coordinate_bounds(tree), tree)
     markers, moved, far = _placed(sc, model, tree, z, ym, report)
     out = dataclasses.replace(sc, markers=tuple(markers))
     out = dataclasses.replace(out, markers=tuple(dataclasses.replace(m, weight=0.0) if m.name in centres else m
@@ -290,6 +291,10 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
                       f"{1e3 * before:.1f} mm scaled{worse}")
     report.append(f"markers placed: moved by {1e3 * np.median(moved):.1f} mm (median), {1e3 * max(moved):.1f} mm "
                   f"(most); static misfit RMS {1e3 * before:.1f} mm before, {1e3 * after:.2g} mm after")
+    if held:  # the markers would be placed on a pose the subject was not in: said, as OpenSim's marker placer does it
+        report.append(f"warning: the static pose holds {', '.join(held)} at a limit of its range (the model's clamped "
+                      f"range; the subject stood beyond it): the markers are placed on the pose held there, the static "
+                      f"misfit {1e3 * before:.1f} mm before: widen the range, or the model is not of this subject")
     if far:
         report.append(f"warning: markers moved more than {1e3 * MOVE_WARN:.0f} mm on their segments: {', '.join(far)}: "
                       "a marker on another segment, labels swapped, or a model not of this subject?")
