@@ -841,3 +841,18 @@ def test_the_command_imports_no_plotting_before_its_cluster_without_a_normative_
             "print(sorted(m for m in sys.modules if m.startswith(('matplotlib', 'casflex.plotting'))))")
     got = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert got.strip() == "[]", got
+
+
+def test_a_static_window_between_two_frames_is_one_line_naming_it():
+    # within the static trial's times (the study file's check passes) but between its frames at 0.1 and 0.117 s: the
+    # calibration failed with "data.t: expected a 1-d array of finite times (s)", naming neither the file nor the field
+    from casflex.study.runner import calibrate_run
+
+    static = str(LAB / "hamner_static_excerpt.trc")
+    with pytest.raises(ValueError, match=r"hamner_static_excerpt.trc: static_window 0.101..0.11 s holds none of its "
+                                         r"frames \(at 60 Hz\)"):
+        calibrate_run(model="hamner_leg", static=static, plane="X,Y", root="pelvis", calibrate=True, scale=False,
+                      mass=None, static_window=(0.101, 0.11))
+    out = calibrate_run(model="hamner_leg", static=static, plane="X,Y", root="pelvis", calibrate=True, scale=False,
+                        mass=None, static_window=(0.1, 0.1))  # one frame: averaged alone
+    assert "static trial: 1 frames averaged, 13 of 13 markers seen" in out["report"]

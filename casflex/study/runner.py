@@ -91,10 +91,13 @@ def _osim(path: str, digest: str | None) -> tuple:
 
 
 def _frames(lab, window: tuple[float, float] | None):
-    """The static trial's frames within ``window`` (s; all where None)."""
+    """The static trial's frames within ``window`` (s; all where None); ValueError naming it where it holds none."""
     if window is None:
         return lab
     inside = (lab.t >= window[0] - 1e-9) & (lab.t <= window[1] + 1e-9)
+    if not inside.any():  # within the trial's times (the study file's check) but between two frames
+        raise ValueError(f"{lab.source}: static_window {window[0]:g}..{window[1]:g} s holds none of its frames (at "
+                         f"{lab.rate:g} Hz): give a window of one frame or more")
     return dataclasses.replace(lab, t=lab.t[inside], xyz=lab.xyz[inside])
 
 
