@@ -74,8 +74,9 @@ def _scales(tree: KinematicTree, y0: np.ndarray, ym: np.ndarray, labels: list[st
                             f"{1e3 * np.linalg.norm(y0[i] - y0[j]):.0f})" for i, j in pairs[:4])
             raise ValueError(f"{source}: segment {node!r} would be scaled by {out[c]:.3g}: its markers lie {far} apart "
                              f"in the static trial (the median of {len(pairs)} pairs beyond a factor {SCALE_FACTOR:g} "
-                             "of the scene's): markers that coincide or are mislabelled; fix the labels, or calibrate "
-                             "without scaling")
+                             "of the scene's): markers that coincide or are mislabelled, or a segment held across "
+                             "the plane (an arm out to the side: its markers' projections coincide); fix the labels, "
+                             "or calibrate without scaling")
     return out
 
 
