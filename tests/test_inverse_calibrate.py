@@ -7,6 +7,7 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
+import pytest
 from inverse_scenes import pendulum
 
 from casflex.cli import main
@@ -179,3 +180,48 @@ def test_a_static_pose_beyond_a_clamped_range_is_warned(tmp_path):
     assert len(said) == 1 and said[0].startswith("warning: the static pose holds knee_angle_r at a limit of its range")
     _, report = calibrate(str(LAB / "hamner_subject02_leg.osim"), static, root="pelvis")
     assert not [r for r in report if r.startswith("warning: ")]  # the model's own range: nothing to say
+
+
+def test_a_segment_the_static_trial_lacks_is_locked_for_the_static_fit_only(tmp_path):
+    # Hamner's whole body (planar) on the static excerpt's pelvis and right leg: the left leg, trunk and arms were
+    # written welded and their markers dropped (11 hinges to 3, 46 markers to 19); the running trial, which records
+    # them, then ran on a body whose left leg hung still: the right knee's moment 17 N m off (of 225), the root's
+    # residual force 500 N, the left leg's moments absent, exit 0
+    model = str(LAB / "hamner_subject02_planar.osim")
+    static = str(LAB / "hamner_static_excerpt.trc")
+    sc = load_scene(model)
+    hinges = {j.name for j in sc.joints if j.kind == "hinge"}
+    for scale in (False, True):
+        out, report = calibrate(model, static, root="pelvis", scale=scale)
+        assert any(r.startswith("segment 'femur_l': the static trial") for r in report)  # locked for the fit, said
+        assert {j.name for j in out.joints if j.kind == "hinge"} == hinges
+        assert [c.name for c in out.coordinates] == [c.name for c in sc.coordinates]
+        assert [m.name for m in out.markers] == [m.name for m in sc.markers]
+        left = np.array([[[a.x, a.y], [b.x, b.y]] for a, b in zip(sc.markers, out.markers, strict=True)
+                         if a.lab_label.startswith("L.Thigh")])  # (3, before/after, 2)
+        if scale:  # never seen: the thigh keeps its size, carried by the scaled pelvis
+            assert ", femur_l 1.000" in next(r for r in report if r.startswith("segments scaled"))
+            d = [np.linalg.norm(left[:, k, None] - left[None, :, k], axis=2) for k in (0, 1)]
+            assert np.allclose(d[0], d[1], rtol=0, atol=1e-12)
+        else:  # never seen: where they were
+            assert left.size and np.array_equal(left[:, 0], left[:, 1])
+    plain, _ = calibrate(model, static, root="pelvis")
+    right = {m.name: (m.x, m.y) for m in plain.markers if m.lab_label.startswith("R.Shank")}
+    assert right and all((m.x, m.y) != (m0.x, m0.y) for m in plain.markers for m0 in sc.markers
+                         if m.name == m0.name and m.name in right)  # the seen ones placed
+
+
+def test_labels_that_differ_by_case_only_are_warned():
+    # 'R.HEEL' in the trial for the scene's 'R.Heel': the heel's marker was left where it was, said as a marker the
+    # trial lacks, nothing pointing at the label
+    from casflex.lab.tables import read_trc
+
+    lab = read_trc(LAB / "hamner_static_excerpt.trc")
+    upper = dataclasses.replace(lab, labels=tuple(x.upper() if x == "R.Heel" else x for x in lab.labels))
+    _, report = calibrate("hamner_leg", upper, root="pelvis")
+    said = [r for r in report if r.startswith("warning: ")]
+    assert said == ["warning: the static trial's labels 'R.HEEL' for 'R.Heel' differ from the scene's by case or "
+                    "spaces only: those markers are left where they were (labels are matched exactly): fix the labels"]
+    lower = dataclasses.replace(lab, labels=tuple(x.lower() for x in lab.labels))
+    with pytest.raises(ValueError, match=r"is seen in the trial \(it has 'r.asis' for 'R.ASIS', .*matched exactly\)"):
+        calibrate("hamner_leg", lower, root="pelvis")

@@ -802,7 +802,8 @@ def test_a_model_is_read_once_per_worker_and_content_for_its_subjects_calibratio
     kw = dict(model=str(model), static=None, plane="X,Y", root="pelvis", calibrate=True, scale=False)
     first, second = runner.calibrate_run(**kw, mass=50.0), runner.calibrate_run(**kw, mass=60.0)
     assert len(reads) == 1, reads
-    assert first["report"][:-1] == second["report"][:-1] and first["scene"] != second["scene"]  # their own masses
+    same = [[r for r in rec["report"] if " kg" not in r] for rec in (first, second)]  # the lines of its mass aside
+    assert same[0] == same[1] and first["scene"] != second["scene"]  # their own masses
     model.write_text(model.read_text().replace("<OpenSimDocument", "<!-- edited -->\n<OpenSimDocument", 1))
     runner.calibrate_run(**kw, mass=50.0)
     assert len(reads) == 2  # a changed file is read again

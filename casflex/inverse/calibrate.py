@@ -18,7 +18,9 @@ projected on the plane:
 2. **Marker placement**: the static pose is fitted (the tree's coordinates, least squares over the
    markers, :mod:`casflex.inverse.fit`), and every seen marker is moved onto its measured position,
    expressed on its segment and carried back to the scene's configuration. The misfit before and
-   after is reported; a marker the trial lacks (lost, or never recorded) stays where it is (reported).
+   after is reported; a marker the trial lacks (lost, or never recorded) stays where it is (reported). A segment
+   the trial has none of the markers of is locked for the fit (:mod:`casflex.inverse.locking`), and for it only:
+   the scene returned keeps its joints and markers.
 
 The result is a new scene (write it with :func:`casflex.save_scene`) and the report's lines.
 """
@@ -220,14 +222,48 @@ def _placed(sc, model, tree, z: np.ndarray, ym: np.ndarray, report: list[str]):
     return markers, moved, far
 
 
+def _static_mean(lab, sc, pl) -> np.ndarray:
+    """The static trial's mean (n_m, 2) m in the plane ``pl`` of the scene ``sc``'s markers (NaN: never seen; every
+    label in ``lab``)."""
+    from casflex.lab import markers_in_plane
+
+    ms = markers_in_plane(lab, {m.name: m.lab_label for m in sc.markers}, pl)
+    with warnings.catch_warnings():  # a marker never seen: its mean NaN, said below
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmean(ms.q, axis=0).reshape(-1, 2)
+
+
+def _warnings(before: float, held: list[str], far: list[str]) -> list[str]:
+    """The report's warnings of the static pose held at a limit ``held`` and of the markers moved far ``far``."""
+    out = []
+    if held:  # the markers would be placed on a pose the subject was not in: said, as OpenSim's marker placer does it
+        out.append(f"warning: the static pose holds {', '.join(held)} at a limit of its range (the model's clamped "
+                   f"range; the subject stood beyond it): the markers are placed on the pose held there, the static "
+                   f"misfit {1e3 * before:.1f} mm before: widen the range, or the model is not of this subject")
+    if far:
+        out.append(f"warning: markers moved more than {1e3 * MOVE_WARN:.0f} mm on their segments: {', '.join(far)}: "
+                   "a marker on another segment, labels swapped, or a model not of this subject?")
+    return out
+
+
+def _near_labels(wanted, recorded) -> str:
+    """The trial's labels ``recorded`` that differ from the scene's absent ones ``wanted`` by case or spaces only, as
+    a phrase ("" where none): labels are matched exactly, and such a marker would be left where it was."""
+    folded = {r.strip().casefold(): r for r in recorded}
+    near = [(w, folded[w.strip().casefold()]) for w in wanted if w.strip().casefold() in folded]
+    return ", ".join(f"{r!r} for {w!r}" for w, r in near)
+
+
 def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, scale: bool = False,
               mass: float | None = None):
     """(the calibrated scene, report lines) from the static trial ``static`` (LabMarkers or a .trc/.c3d
-    path), module docstring."""
+    path), module docstring. A segment the static trial has none of the markers of is locked for the static fit
+    only (:func:`casflex.inverse.locking.lock_unmarked`): the scene returned keeps its joints and its markers (where
+    they were; scaled, it keeps its size), for the trials that record them."""
     from casflex.inverse.fit import _held, check_decided, coordinate_bounds, fit_pose
     from casflex.inverse.inputs import inverse_model, read_markers
     from casflex.inverse.locking import lock_unmarked
-    from casflex.lab import LabMarkers, Plane, markers_in_plane
+    from casflex.lab import LabMarkers, Plane
     from casflex.lab.checks import check_markers, check_scale, check_static
     from casflex.lab.marker_sets import JOINT_CENTRES, joint_centres
     from casflex.scene import Scene, load_scene
@@ -239,35 +275,37 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
     scene = scene if isinstance(scene, Scene) else load_scene(scene)
     lab, early = joint_centres(lab, [m.lab_label for m in scene.markers])
     centres = {m.name for m in scene.markers if m.weight == 0 and m.lab_label in JOINT_CENTRES}
-    scene = dataclasses.replace(scene, markers=tuple(  # the joint centres place the segments here (weight 1)
-        dataclasses.replace(m, weight=1.0) if m.name in centres else m for m in scene.markers))
-    scene, locked = lock_unmarked(scene, lab.labels, f"the static trial {lab.source}")
+    full = inverse_model(dataclasses.replace(scene, markers=tuple(  # the joint centres place the segments (weight 1)
+        dataclasses.replace(m, weight=1.0) if m.name in centres else m for m in scene.markers)), root).scene
+    recorded, where = lab.labels, f"the static trial {lab.source}"
+    scene, locked = lock_unmarked(full, recorded, where)
     early += locked
     model = inverse_model(scene, root)
     tree = kinematic_tree(model, root)
     sc = model.scene
     labels = {m.name: m.lab_label for m in sc.markers}
-    absent = tuple(dict.fromkeys(lb for lb in labels.values() if lb not in lab.labels))
+    absent = tuple(dict.fromkeys(m.lab_label for m in full.markers if m.lab_label not in lab.labels))
     if absent:  # a marker the static trial never recorded: like one it lost, left where it is (reported below)
         lab = dataclasses.replace(lab, labels=lab.labels + absent, xyz=np.concatenate(
             [lab.xyz, np.full((lab.t.size, len(absent), 3), np.nan)], axis=1))
     check_markers(lab, tuple(labels.values()))
     check_static(lab, tuple(labels.values()))
-    ms = markers_in_plane(lab, labels, pl)
-    if not np.isfinite(ms.q).any():
-        raise ValueError(f"{lab.source}: none of the scene's markers {list(labels.values())} is seen in the trial")
-    with warnings.catch_warnings():  # a marker never seen: its mean NaN, said below
-        warnings.simplefilter("ignore", RuntimeWarning)
-        ym = np.nanmean(ms.q, axis=0).reshape(-1, 2)  # the static trial's mean
+    ym = _static_mean(lab, sc, pl)
+    near = _near_labels(absent, recorded)
+    if not np.isfinite(ym).any():
+        raise ValueError(f"{lab.source}: none of the scene's markers {list(labels.values())} is seen in the trial"
+                         + f" (it has {near}: labels are matched exactly)" * bool(near))
     check_scale(lab.source, lab.units, np.array([[m.x, m.y] for m in sc.markers]), ym[None],
                 [tree.cluster[i] for i in tree.marker_nodes])
     report = [*early, f"static trial: {lab.t.size} frames averaged, {int(np.isfinite(ym).all(1).sum())} of "
                        f"{len(sc.markers)} markers seen"]
     check_decided(tree, ym.ravel()[None], tuple(labels.values()), lab.source)
     unscaled = fit_pose(tree, ym.ravel())[1]
-    if scale:
-        sc, lines = _scaled(tree, sc, ym, list(labels.values()), lab.source, mass)
+    if scale:  # on the whole tree: a segment locked for the fit has no marker seen, and keeps its size
+        full, lines = _scaled(kinematic_tree(inverse_model(full, root), root), full, _static_mean(lab, full, pl),
+                              [m.lab_label for m in full.markers], lab.source, mass)
         report += lines
+        sc = lock_unmarked(full, recorded, where)[0]
     elif mass is not None:
         raise ValueError("mass: scales the bodies with the segments (scale=True)")
     model = inverse_model(sc, root)
@@ -279,24 +317,20 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
                          "segment out of the scene")
     held = _held(z, coordinate_bounds(tree), tree)
     markers, moved, far = _placed(sc, model, tree, z, ym, report)
-    out = dataclasses.replace(sc, markers=tuple(markers))
-    out = dataclasses.replace(out, markers=tuple(dataclasses.replace(m, weight=0.0) if m.name in centres else m
-                                                 for m in out.markers))  # the marker fit's weights again
-    after_model = inverse_model(out, root)
-    y_after = np.array(kinematic_tree(after_model, root).marker_fit(z)[0]).reshape(-1, 2)
+    y_after = np.array(kinematic_tree(inverse_model(dataclasses.replace(sc, markers=tuple(markers)), root), root)
+                       .marker_fit(z)[0]).reshape(-1, 2)
     ok = np.isfinite(ym).all(axis=1)
     after = float(np.sqrt(np.mean(np.sum((y_after[ok] - ym[ok]) ** 2, axis=1))))
+    placed = {m.name: m for m in markers}
+    out = dataclasses.replace(full, markers=tuple(  # the marker fit's weights again
+        dataclasses.replace(m, weight=0.0) if m.name in centres else m
+        for m in (placed.get(m.name, m) for m in full.markers)))
     if scale:
         worse = " (the pairs do not measure the segments' lengths: calibrate without scaling)" * (before > unscaled)
         report.append(f"the static pose's misfit with the scene's markers: {1e3 * unscaled:.1f} mm unscaled, "
                       f"{1e3 * before:.1f} mm scaled{worse}")
     report.append(f"markers placed: moved by {1e3 * np.median(moved):.1f} mm (median), {1e3 * max(moved):.1f} mm "
                   f"(most); static misfit RMS {1e3 * before:.1f} mm before, {1e3 * after:.2g} mm after")
-    if held:  # the markers would be placed on a pose the subject was not in: said, as OpenSim's marker placer does it
-        report.append(f"warning: the static pose holds {', '.join(held)} at a limit of its range (the model's clamped "
-                      f"range; the subject stood beyond it): the markers are placed on the pose held there, the static "
-                      f"misfit {1e3 * before:.1f} mm before: widen the range, or the model is not of this subject")
-    if far:
-        report.append(f"warning: markers moved more than {1e3 * MOVE_WARN:.0f} mm on their segments: {', '.join(far)}: "
-                      "a marker on another segment, labels swapped, or a model not of this subject?")
-    return out, report
+    near = [f"warning: the static trial's labels {near} differ from the scene's by case or spaces only: those "
+            "markers are left where they were (labels are matched exactly): fix the labels"] * bool(near)
+    return out, report + near + _warnings(before, held, far)
