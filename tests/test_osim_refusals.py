@@ -442,3 +442,19 @@ def test_an_element_named_as_opensim_names_a_base_class_s_property_is_read(tmp_p
     broken = _model(tmp_path, TEXT[:at] + force.replace("</ForceSet>", "") + TEXT[at:], "broken.osim")
     code, _, err = _run(["import", str(broken), "--out", str(tmp_path / "x.toml")], capsys)
     assert code == 2 and "broken.osim: not an OpenSim model (XML: mismatched tag" in err  # the file's own fault
+
+
+def test_a_marker_on_a_body_the_model_lacks_is_refused_naming_it(tmp_path, capsys):
+    # R.ASIS on /bodyset/humerus_r in a model of the leg: OpenSim refuses the model (its socket finds no frame);
+    # casflex inverse and calibrate left the marker out of the fit without a word, exit 0 (import alone said it)
+    text = TEXT.replace("<socket_parent_frame>/bodyset/pelvis</socket_parent_frame>",
+                        "<socket_parent_frame>/bodyset/humerus_r</socket_parent_frame>", 1)
+    path = _model(tmp_path, text)
+    code, _, err = _run([*_inverse(path), "--out", str(tmp_path / "x.csv")], capsys)
+    assert code == 2 and err.strip().endswith("MarkerSet: marker 'R.ASIS' is on '/bodyset/humerus_r', a body the "
+                                              "model does not have: fix its socket_parent_frame (OpenSim refuses "
+                                              "such a model)")
+    assert not (tmp_path / "x.csv").exists()
+    ground = _model(tmp_path, TEXT.replace("<socket_parent_frame>/bodyset/pelvis</socket_parent_frame>",
+                                           "<socket_parent_frame>/ground</socket_parent_frame>", 1), "ground.osim")
+    assert "marker 'R.ASIS': on 'ground', massless; left out" in scene_from_osim(ground).report  # OpenSim's too

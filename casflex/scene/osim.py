@@ -412,9 +412,14 @@ class _Reader:
 
     def markers(self) -> tuple[OsimMarker, ...]:
         out = []
+        bodies = {b.get("name", "") for b in self.model.findall("BodySet/objects/Body")}
         for m in self.model.findall("MarkerSet/objects/Marker"):
             name = m.get("name", "")
-            body = (m.findtext("socket_parent_frame") or "").strip().rsplit("/", 1)[-1]
+            frame = (m.findtext("socket_parent_frame") or "").strip()
+            body = frame.rsplit("/", 1)[-1]
+            if frame.rpartition("/")[0].endswith("bodyset") and body not in bodies:  # was left out of the fit, unsaid
+                raise ValueError(f"{self.source}: MarkerSet: marker {name!r} is on {frame!r}, a body the model does "
+                                 "not have: fix its socket_parent_frame (OpenSim refuses such a model)")
             out.append(OsimMarker(name, body, self.vector(m, "location", 3, f"marker {name!r}")))
         self.unique("MarkerSet", "marker", (m.name for m in out))
         return tuple(out)
