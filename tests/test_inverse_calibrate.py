@@ -15,7 +15,7 @@ from casflex.inverse import inverse_model, kinematic_tree
 from casflex.inverse.calibrate import calibrate
 from casflex.lab import LabMarkers
 from casflex.model.markers import body_centres, marker_positions
-from casflex.scene.io import load_scene, loads_scene
+from casflex.scene.io import dumps_scene, load_scene, loads_scene
 
 LAB = Path(__file__).parent / "data" / "lab"
 
@@ -225,3 +225,22 @@ def test_labels_that_differ_by_case_only_are_warned():
     lower = dataclasses.replace(lab, labels=tuple(x.lower() for x in lab.labels))
     with pytest.raises(ValueError, match=r"is seen in the trial \(it has 'r.asis' for 'R.ASIS', .*matched exactly\)"):
         calibrate("hamner_leg", lower, root="pelvis")
+
+
+def test_a_fixed_marker_is_left_where_the_model_has_it(tmp_path):
+    # an OpenSim model's <fixed>true</fixed> (the Rajagopal pipeline's scaled model has 13): OpenSim 4.6's marker
+    # placer leaves R.Thigh.Front where it is (measured: its location unchanged, the others moved); casflex moved it
+    text = (LAB / "hamner_subject02_leg.osim").read_text()
+    at = text.index("<fixed>false</fixed>", text.index('<Marker name="R.Thigh.Front">'))
+    path = tmp_path / "fixed.osim"
+    path.write_text(text[:at] + "<fixed>true</fixed>" + text[at + len("<fixed>false</fixed>"):])
+    model = load_scene(str(path))
+    assert [m.label for m in model.markers if m.fixed] == ["R.Thigh.Front"]
+    cal, report = calibrate(model, str(LAB / "hamner_static_excerpt.trc"), root="pelvis")
+    assert "marker 'R_Thigh_Front' (R.Thigh.Front): fixed in the model, left where it was (as OpenSim's marker " \
+           "placer leaves it)" in report
+    before, after = ({m.label: (m.x, m.y, m.fixed) for m in s.markers} for s in (model, cal))
+    assert after["R.Thigh.Front"] == before["R.Thigh.Front"]
+    assert after["R.Thigh.Rear"] != before["R.Thigh.Rear"]
+    text = dumps_scene(cal)
+    assert "fixed = true" in text and loads_scene(text) == cal  # written and read back

@@ -209,9 +209,11 @@ def _placed(sc, model, tree, z: np.ndarray, ym: np.ndarray, report: list[str]):
     q = np.array(tree.forward(z)).ravel()
     markers, moved, far = [], [], []
     for k, (m, i) in enumerate(zip(sc.markers, tree.marker_nodes, strict=True)):
-        if not np.isfinite(ym[k]).all():
+        if not np.isfinite(ym[k]).all() or m.fixed:
             markers.append(m)
-            report.append(f"marker {m.name!r} ({m.lab_label}): not in the static trial, left where it was")
+            report.append(f"marker {m.name!r} ({m.lab_label}): " + ("fixed in the model, left where it was (as "
+                          "OpenSim's marker placer leaves it)" if m.fixed else "not in the static trial, left where "
+                          "it was"))
             continue
         x_fit, th_fit = q[3 * i:3 * i + 2], q[3 * i + 2]
         x0, th0 = model.q0[3 * i:3 * i + 2], model.q0[3 * i + 2]
@@ -330,7 +332,8 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
         report.append(f"the static pose's misfit with the scene's markers: {1e3 * unscaled:.1f} mm unscaled, "
                       f"{1e3 * before:.1f} mm scaled{worse}")
     report.append(f"markers placed: moved by {1e3 * np.median(moved):.1f} mm (median), {1e3 * max(moved):.1f} mm "
-                  f"(most); static misfit RMS {1e3 * before:.1f} mm before, {1e3 * after:.2g} mm after")
+                  f"(most); static misfit RMS {1e3 * before:.1f} mm before, {1e3 * after:.2g} mm after" if moved else
+                  f"markers placed: none (each seen one fixed); static misfit RMS {1e3 * before:.1f} mm")
     near = [f"warning: the static trial's labels {near} differ from the scene's by case or spaces only: those "
             "markers are left where they were (labels are matched exactly): fix the labels"] * bool(near)
     return out, report + near + _warnings(before, held, far)

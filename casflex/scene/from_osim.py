@@ -300,7 +300,7 @@ class _Builder:
                                    "by it")
                 R, p = self.pose[mk.body]
                 x = p + R @ mk.location
-                out.append(Marker(node_name(mk.name), carrier, float(x[0]), float(x[1]), label=mk.name))
+                out.append(Marker(node_name(mk.name), carrier, float(x[0]), float(x[1]), label=mk.name, fixed=mk.fixed))
                 continue
             if mk.body not in self.pose or node not in on:
                 why = "massless" if mk.body in self.pose else "no body of the tree"
@@ -308,7 +308,7 @@ class _Builder:
                 continue
             R, p = self.pose[mk.body]
             x = p + R @ mk.location
-            out.append(Marker(node_name(mk.name), on[node], float(x[0]), float(x[1]), label=mk.name))
+            out.append(Marker(node_name(mk.name), on[node], float(x[0]), float(x[1]), label=mk.name, fixed=mk.fixed))
         return out
 
 

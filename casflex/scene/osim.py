@@ -79,6 +79,7 @@ class OsimMarker:
     name: str
     body: str
     location: np.ndarray
+    fixed: bool = False  # <fixed>true</fixed>: OpenSim's marker placer leaves it where it is
 
 
 @dataclass(frozen=True)
@@ -420,7 +421,8 @@ class _Reader:
             if frame.rpartition("/")[0].endswith("bodyset") and body not in bodies:  # was left out of the fit, unsaid
                 raise ValueError(f"{self.source}: MarkerSet: marker {name!r} is on {frame!r}, a body the model does "
                                  "not have: fix its socket_parent_frame (OpenSim refuses such a model)")
-            out.append(OsimMarker(name, body, self.vector(m, "location", 3, f"marker {name!r}")))
+            out.append(OsimMarker(name, body, self.vector(m, "location", 3, f"marker {name!r}"),
+                                  (m.findtext("fixed") or "").strip().lower() == "true"))
         self.unique("MarkerSet", "marker", (m.name for m in out))
         return tuple(out)
 
