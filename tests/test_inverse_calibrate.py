@@ -244,3 +244,19 @@ def test_a_fixed_marker_is_left_where_the_model_has_it(tmp_path):
     assert after["R.Thigh.Rear"] != before["R.Thigh.Rear"]
     text = dumps_scene(cal)
     assert "fixed = true" in text and loads_scene(text) == cal  # written and read back
+
+
+def test_a_static_trial_facing_against_the_plane_is_refused_naming_the_plane_to_give(tmp_path, capsys):
+    # Hamner's static trial turned to face -X (X and Z negated), calibrated in the plane X,Y: the plane saw the
+    # subject mirrored (its knees bent forward) and the markers were placed on that fit, moved by up to 192 mm, exit 0
+    from casflex.lab.tables import read_trc, write_trc
+
+    lab = read_trc(LAB / "hamner_static_excerpt.trc")
+    back = write_trc(tmp_path / "back.trc", dataclasses.replace(lab, xyz=lab.xyz * np.array([-1.0, 1.0, -1.0])))
+    args = ["calibrate", "hamner_leg", "--static", str(back), "--root", "pelvis", "--out", str(tmp_path / "s.toml")]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "back.trc: the subject faces -X in the static trial, not the plane's x X (" in err
+    assert err.rstrip().endswith("give the plane -X,Y") and not (tmp_path / "s.toml").exists()
+    assert main([*args, "--plane=-X,Y"]) == 0  # the plane it faces: placed as the trial facing X is
+    assert "moved by 2.5 mm (median)" in capsys.readouterr().out

@@ -256,6 +256,23 @@ def _near_labels(wanted, recorded) -> str:
     return ", ".join(f"{r!r} for {w!r}" for w, r in near)
 
 
+def _check_facing(scene, lab, pl) -> None:
+    """ValueError in one line where the static trial's subject faces another horizontal direction than the plane
+    ``pl``'s x (:func:`casflex.inverse.heading.facing_plane`, where it can tell): the plane would see it mirrored
+    (facing -x: its knees bent forward) or from the front, and the markers would be placed on that."""
+    from casflex.inverse.heading import facing_plane
+
+    if pl.y.startswith("-") or len(lab.t) == 0:
+        return
+    try:
+        best, line = facing_plane(scene, lab, pl.y.lstrip("+"))
+    except ValueError:  # too few markers, or no direction stands out: the fit's misfit and moves say the rest
+        return
+    if best.split(",")[0].lstrip("+") != pl.x.lstrip("+"):
+        raise ValueError(f"{lab.source}: the subject faces {best.split(',')[0]} in the static trial, not the plane's "
+                         f"x {pl.x} ({line.split('(', 1)[1].rstrip(')')}): give the plane {best}")
+
+
 def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, scale: bool = False,
               mass: float | None = None):
     """(the calibrated scene, report lines) from the static trial ``static`` (LabMarkers or a .trc/.c3d
@@ -280,6 +297,7 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
     full = inverse_model(dataclasses.replace(scene, markers=tuple(  # the joint centres place the segments (weight 1)
         dataclasses.replace(m, weight=1.0) if m.name in centres else m for m in scene.markers)), root).scene
     recorded, where = lab.labels, f"the static trial {lab.source}"
+    _check_facing(full, lab, pl)
     scene, locked = lock_unmarked(full, recorded, where)
     early += locked
     model = inverse_model(scene, root)
