@@ -235,9 +235,15 @@ def _static_mean(lab, sc, pl) -> np.ndarray:
         return np.nanmean(ms.q, axis=0).reshape(-1, 2)
 
 
-def _warnings(before: float, held: list[str], far: list[str]) -> list[str]:
-    """The report's warnings of the static pose held at a limit ``held`` and of the markers moved far ``far``."""
+def _warnings(before: float, held: list[str], far: list[str], unscaled: float | None = None) -> list[str]:
+    """The report's warnings of the static pose held at a limit ``held``, of the markers moved far ``far``, and of a
+    scaling that fits the static pose worse (misfit ``before``, m) than the scene unscaled (``unscaled``; None: not
+    scaled): a study's summary and the command's stderr show warnings, not the report's other lines."""
     out = []
+    if unscaled is not None and before > unscaled:
+        out.append(f"warning: the scaled segments fit the static pose worse than the scene's ({1e3 * before:.1f} mm "
+                   f"RMS, {1e3 * unscaled:.1f} mm unscaled): their markers' pairs do not measure the segments' lengths "
+                   "(skin clusters, or segments across the plane): calibrate without scaling")
     if held:  # the markers would be placed on a pose the subject was not in: said, as OpenSim's marker placer does it
         out.append(f"warning: the static pose holds {', '.join(held)} at a limit of its range (the model's clamped "
                    f"range; the subject stood beyond it): the markers are placed on the pose held there, the static "
@@ -346,12 +352,11 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
         dataclasses.replace(m, weight=0.0) if m.name in centres else m
         for m in (placed.get(m.name, m) for m in full.markers)))
     if scale:
-        worse = " (the pairs do not measure the segments' lengths: calibrate without scaling)" * (before > unscaled)
         report.append(f"the static pose's misfit with the scene's markers: {1e3 * unscaled:.1f} mm unscaled, "
-                      f"{1e3 * before:.1f} mm scaled{worse}")
+                      f"{1e3 * before:.1f} mm scaled")
     report.append(f"markers placed: moved by {1e3 * np.median(moved):.1f} mm (median), {1e3 * max(moved):.1f} mm "
                   f"(most); static misfit RMS {1e3 * before:.1f} mm before, {1e3 * after:.2g} mm after" if moved else
                   f"markers placed: none (each seen one fixed); static misfit RMS {1e3 * before:.1f} mm")
     near = [f"warning: the static trial's labels {near} differ from the scene's by case or spaces only: those "
             "markers are left where they were (labels are matched exactly): fix the labels"] * bool(near)
-    return out, report + near + _warnings(before, held, far)
+    return out, report + near + _warnings(before, held, far, unscaled if scale else None)
