@@ -457,4 +457,6 @@ def test_a_marker_on_a_body_the_model_lacks_is_refused_naming_it(tmp_path, capsy
     assert not (tmp_path / "x.csv").exists()
     ground = _model(tmp_path, TEXT.replace("<socket_parent_frame>/bodyset/pelvis</socket_parent_frame>",
                                            "<socket_parent_frame>/ground</socket_parent_frame>", 1), "ground.osim")
-    assert "marker 'R.ASIS': on 'ground', massless; left out" in scene_from_osim(ground).report  # OpenSim's too
+    # on the ground: it moves with no coordinate, a fit gains nothing from it (it was said to be 'massless')
+    assert "marker 'R.ASIS': on 'ground', the ground: it moves with no coordinate; left out" in scene_from_osim(
+        ground).report

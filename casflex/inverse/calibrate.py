@@ -271,7 +271,8 @@ def _check_facing(scene, lab, pl) -> None:
     if pl.y.startswith("-") or len(lab.t) == 0:
         return
     try:
-        best, line = facing_plane(scene, lab, pl.y.lstrip("+"))
+        with np.errstate(all="ignore"):  # markers on one vertical line (no x spread): no facing, ValueError below
+            best, line = facing_plane(scene, lab, pl.y.lstrip("+"))
     except ValueError:  # too few markers, or no direction stands out: the fit's misfit and moves say the rest
         return
     if best.split(",")[0].lstrip("+") != pl.x.lstrip("+"):

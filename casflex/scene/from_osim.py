@@ -303,7 +303,8 @@ class _Builder:
                 out.append(Marker(node_name(mk.name), carrier, float(x[0]), float(x[1]), label=mk.name, fixed=mk.fixed))
                 continue
             if mk.body not in self.pose or node not in on:
-                why = "massless" if mk.body in self.pose else "no body of the tree"
+                why = ("the ground: it moves with no coordinate" if mk.body == "ground" else "massless"
+                       if mk.body in self.pose else "no body of the tree")
                 self.dropped.append(f"marker {mk.name!r}: on {mk.body!r}, {why}; left out")
                 continue
             R, p = self.pose[mk.body]
