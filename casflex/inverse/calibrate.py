@@ -50,6 +50,10 @@ SCALE_WARN = (0.5, 1.5)
 MOVE_WARN = 0.05
 
 
+#: m: a scaled scene that fits the static pose worse than the scene unscaled by more than this is warned of (a tenth of
+#: a millimetre: no scaling measured by markers is better than that, and round-off at a perfect fit is far below it)
+WORSE_BY = 1e-4
+
 #: m: a pair of markers closer than this in the scene's plane measures their placement, not the segment's size (a
 #: few mm of placement is 10 % of it; two markers across a limb, a wrist's two, project within it)
 MIN_PAIR = 0.05
@@ -235,12 +239,15 @@ def _static_mean(lab, sc, pl) -> np.ndarray:
         return np.nanmean(ms.q, axis=0).reshape(-1, 2)
 
 
-def _warnings(before: float, held: list[str], far: list[str], unscaled: float | None = None) -> list[str]:
-    """The report's warnings of the static pose held at a limit ``held``, of the markers moved far ``far``, and of a
-    scaling that fits the static pose worse (misfit ``before``, m) than the scene unscaled (``unscaled``; None: not
-    scaled): a study's summary and the command's stderr show warnings, not the report's other lines."""
-    out = []
-    if unscaled is not None and before > unscaled:
+def _warnings(before: float, held: list[str], far: list[str], unscaled: float | None = None, near: str = ""
+              ) -> list[str]:
+    """The report's warnings of labels that differ from the scene's by case only ``near``, of a scaling that fits the
+    static pose worse (misfit ``before``, m) than the scene unscaled (``unscaled``; None: not scaled), of the static
+    pose held at a limit ``held`` and of the markers moved far ``far``: a study's summary and the command's stderr
+    show warnings, not the report's other lines."""
+    out = [f"warning: the static trial's labels {near} differ from the scene's by case or spaces only: those markers "
+           "are left where they were (labels are matched exactly): fix the labels"] * bool(near)
+    if unscaled is not None and before > unscaled + WORSE_BY:
         out.append(f"warning: the scaled segments fit the static pose worse than the scene's ({1e3 * before:.1f} mm "
                    f"RMS, {1e3 * unscaled:.1f} mm unscaled): their markers' pairs do not measure the segments' lengths "
                    "(skin clusters, or segments across the plane): calibrate without scaling")
@@ -358,6 +365,4 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
     report.append(f"markers placed: moved by {1e3 * np.median(moved):.1f} mm (median), {1e3 * max(moved):.1f} mm "
                   f"(most); static misfit RMS {1e3 * before:.1f} mm before, {1e3 * after:.2g} mm after" if moved else
                   f"markers placed: none (each seen one fixed); static misfit RMS {1e3 * before:.1f} mm")
-    near = [f"warning: the static trial's labels {near} differ from the scene's by case or spaces only: those "
-            "markers are left where they were (labels are matched exactly): fix the labels"] * bool(near)
-    return out, report + near + _warnings(before, held, far, unscaled if scale else None)
+    return out, report + _warnings(before, held, far, unscaled if scale else None, near)
