@@ -278,3 +278,18 @@ def test_a_scaling_that_fits_worse_is_a_warning_a_study_s_summary_shows():
         exact.markers, _scaled_markers(), strict=True)))
     _, report = calibrate(loads_scene(pendulum()), _static(exact, np.array([0.0, 1.0, 0.0, 0.3])), scale=True)
     assert not [r for r in report if r.startswith("warning: ")]
+
+
+def test_a_flexible_scene_s_mass_counts_its_beams():
+    # hamner_leg_flexible: its bones are beams (0.64 kg); --mass 30 scaled the bodies alone to 30 kg, the scene then
+    # weighed 30.67 kg; now bodies and beams (their densities) together, as the inverse's checks count them
+    from casflex.inverse.calibrate import scene_mass, with_mass
+
+    sc = load_scene("hamner_leg_flexible")
+    assert 0.6 < scene_mass(sc) - sum(b.mass for b in sc.bodies) < 0.7
+    out = with_mass(sc, 30.0)
+    assert abs(scene_mass(out) - 30.0) < 1e-12
+    f = 30.0 / scene_mass(sc)
+    assert all(abs(b.rho - a.rho * f) < 1e-12 * a.rho for a, b in zip(sc.beams, out.beams, strict=True))
+    cal, _ = calibrate(sc, str(LAB / "hamner_static_excerpt.trc"), root="pelvis", scale=True, mass=30.0)
+    assert abs(scene_mass(cal) - 30.0) < 1e-9

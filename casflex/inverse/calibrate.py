@@ -34,7 +34,7 @@ import numpy as np
 
 from casflex.inverse.tree import KinematicTree, kinematic_tree
 
-__all__ = ["calibrate", "with_mass", "mass_lines", "MASS_WARN"]
+__all__ = ["calibrate", "with_mass", "mass_lines", "scene_mass", "MASS_WARN"]
 
 
 def _rot(th: float) -> np.ndarray:
@@ -137,10 +137,17 @@ def _scaled_joint(j, sc, new, s: float, c: int):
 MASS_WARN = 2.0
 
 
+def scene_mass(scene) -> float:
+    """kg: the scene's mass, its rigid bodies' and its beams' (rho A L)."""
+    nodes = {n.name: (n.x, n.y) for n in scene.nodes}
+    return sum(b.mass for b in scene.bodies) + sum(b.rho * b.A * float(np.hypot(*np.subtract(
+        nodes[b.nodes[1]], nodes[b.nodes[0]]))) for b in scene.beams)
+
+
 def mass_lines(scene, mass: float) -> list[str]:
     """The report's warning (a list of none or one line) where the subject's ``mass`` (kg) is more than
-    :data:`MASS_WARN` times the scene's bodies' total, or less than its inverse."""
-    total = sum(b.mass for b in scene.bodies)
+    :data:`MASS_WARN` times the scene's total (:func:`scene_mass`), or less than its inverse."""
+    total = scene_mass(scene)
     r = mass / total
     if 1.0 / MASS_WARN <= r <= MASS_WARN:
         return []
@@ -152,13 +159,15 @@ def mass_lines(scene, mass: float) -> list[str]:
 
 
 def with_mass(scene, mass: float):
-    """The scene with its bodies' masses scaled together to ``mass`` (kg), their inertias with them (the segments'
-    sizes as they are): a subject weighed but not measured."""
+    """The scene with its masses scaled together to ``mass`` (kg): its bodies' masses and inertias and its beams'
+    densities (the segments' sizes as they are; the beams' mass counted: a flexible leg's bones weighed 0.67 kg over
+    the subject's mass): a subject weighed but not measured."""
     if not mass > 0:
         raise ValueError(f"mass: must be > 0 kg, got {mass}")
-    f = mass / sum(b.mass for b in scene.bodies)
+    f = mass / scene_mass(scene)
     return dataclasses.replace(scene, bodies=tuple(dataclasses.replace(b, mass=b.mass * f, inertia=b.inertia * f)
-                                                   for b in scene.bodies))
+                                                   for b in scene.bodies),
+                               beams=tuple(dataclasses.replace(b, rho=b.rho * f) for b in scene.beams))
 
 
 def _parents_first(tree: KinematicTree) -> list[str]:

@@ -52,7 +52,7 @@ def calibrate_run(*, model: str, static: str | None, plane: str, root: str | Non
     (:mod:`.direction`)."""
     from casflex import load_scene
     from casflex.inverse.calibrate import calibrate as place
-    from casflex.inverse.calibrate import mass_lines, with_mass
+    from casflex.inverse.calibrate import mass_lines, scene_mass, with_mass
     from casflex.inverse.inputs import read_markers
     from casflex.scene import dumps_scene
 
@@ -71,7 +71,7 @@ def calibrate_run(*, model: str, static: str | None, plane: str, root: str | Non
         scene, placed = place(scene, lab, plane, root=root, scale=scale, mass=mass if scale else None)
         report += placed
     if mass is not None and not placed_mass:  # weighed, not measured: the masses to it, the sizes as they are
-        total = sum(b.mass for b in scene.bodies)
+        total = scene_mass(scene)
         report += mass_lines(scene, mass)
         scene = with_mass(scene, mass)
         report.append(f"the model's masses scaled from {total:.1f} kg to the subject's {mass:g} kg (inertias with "
