@@ -293,3 +293,16 @@ def test_a_flexible_scene_s_mass_counts_its_beams():
     assert all(abs(b.rho - a.rho * f) < 1e-12 * a.rho for a, b in zip(sc.beams, out.beams, strict=True))
     cal, _ = calibrate(sc, str(LAB / "hamner_static_excerpt.trc"), root="pelvis", scale=True, mass=30.0)
     assert abs(scene_mass(cal) - 30.0) < 1e-9
+
+
+def test_a_plane_whose_y_is_not_the_standing_subject_s_axis_is_warned(capsys, tmp_path):
+    # --plane X,Z on a lab whose vertical is Y: the subject seen from above, its pose fitted so and its markers placed
+    # 6-18 cm off; the only word was of markers moved far ("a marker on another segment, labels swapped ...?")
+    static = str(LAB / "hamner_static_excerpt.trc")
+    args = ["calibrate", "hamner_leg", "--static", static, "--root", "pelvis", "--out", str(tmp_path / "s.toml")]
+    assert main([*args, "--plane", "X,Z"]) == 0
+    assert "casflex: warning: the subject stands along Y in the static trial (the markers' heights' correlation " \
+           "1.00), not along the plane's y Z (-0.51): a plane whose y is not the lab's vertical?" in \
+           capsys.readouterr().err
+    assert main(args) == 0
+    assert "stands along" not in capsys.readouterr().err

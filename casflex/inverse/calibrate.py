@@ -296,6 +296,35 @@ def _check_facing(scene, lab, pl) -> None:
                          f"x {pl.x} ({line.split('(', 1)[1].rstrip(')')}): give the plane {best}")
 
 
+#: a static trial's markers whose heights in the scene correlate with a lab axis at least this well stand along it
+#: (Hamner's static: 1.00 with Y; 0.31 with X, -0.51 with Z: a leg's markers lie forward and to the side)
+ALONG = 0.8
+
+
+def _vertical_lines(scene, lab, pl) -> list[str]:
+    """The report's warning (none or one line) where the subject of the static trial stands along a lab axis other
+    than the plane's y: the plane sees it lying or from above (a plane whose y is not the lab's vertical), and its
+    pose is fitted so (a subject lying in the plane, rarely recorded as a static trial, is the other reason)."""
+    labels = [m.lab_label for m in scene.markers if m.lab_label in lab.labels]
+    with warnings.catch_warnings():  # a marker never seen: its mean NaN, left out
+        warnings.simplefilter("ignore", RuntimeWarning)
+        mean = np.array([np.nanmean(lab.marker(lb), axis=0) for lb in labels]).reshape(-1, 3)
+    y = np.array([m.y for m in scene.markers if m.lab_label in lab.labels])
+    ok = np.isfinite(mean).all(axis=1)
+    if ok.sum() < 3 or np.ptp(y[ok]) == 0.0:
+        return []
+    with np.errstate(all="ignore"):
+        c = np.nan_to_num([np.corrcoef(y[ok], mean[ok, k])[0, 1] for k in range(3)])
+    k = int(np.argmax(np.abs(c)))
+    mine = float(pl.matrix[1] @ c)  # the plane's y's correlation (signed)
+    axis = ('-' if c[k] < 0 else '') + 'XYZ'[k]
+    if abs(c[k]) < ALONG or axis == pl.y.lstrip("+"):
+        return []
+    return [f"warning: the subject stands along {axis} in the static trial (the markers' heights' correlation "
+            f"{abs(c[k]):.2f}), not along the plane's y {pl.y} ({mine:+.2f}): a plane whose y is not the lab's "
+            "vertical? (the pose is fitted lying or seen from above)"]
+
+
 def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, scale: bool = False,
               mass: float | None = None):
     """(the calibrated scene, report lines) from the static trial ``static`` (LabMarkers or a .trc/.c3d
@@ -321,6 +350,7 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
         dataclasses.replace(m, weight=1.0) if m.name in centres else m for m in scene.markers)), root).scene
     recorded, where = lab.labels, f"the static trial {lab.source}"
     _check_facing(full, lab, pl)
+    early += _vertical_lines(full, lab, pl)
     scene, locked = lock_unmarked(full, recorded, where)
     early += locked
     model = inverse_model(scene, root)
