@@ -110,3 +110,23 @@ def test_a_clamped_coordinate_s_range_is_its_limits_through_the_scene_file():
         Coordinate("q", "hip", limits=(0.5, 0.5))
     with pytest.raises(SceneError, match=r"limits: expected \[lower, upper\]"):
         Coordinate("q", "hip", limits=(0.5,))
+
+
+def test_a_marker_on_a_massless_body_welded_to_a_massive_one_is_carried_by_it(tmp_path):
+    # Hamner's calcaneus of mass 0 (welded to the talus: the subtalar joint locked): its four markers were left out
+    # ("massless; left out"), the foot then had none and every trial was refused ("the markers do not decide
+    # ['ankle_angle_r']"); OpenSim keeps them. Now on the talus's body where OpenSim puts them (at every pose: the
+    # same rigid segment), said in the report
+    import re
+
+    text = re.sub(r'(<Body name="calcn_r">\s*<mass>)[^<]*', r"\g<1>0", LEG.read_text())
+    path = tmp_path / "massless_calcn.osim"
+    path.write_text(text)
+    made, ref = scene_from_osim(path), scene_from_osim(LEG)
+    assert [(m.label, m.x, m.y) for m in made.scene.markers] == [(m.label, m.x, m.y) for m in ref.scene.markers]
+    assert {m.on for m in made.scene.markers if m.label in ("R.Heel", "R.Toe.Tip")} == {"talus_r"}
+    assert "marker 'R.Heel': on 'calcn_r', massless, welded to 'talus_r': carried by it" in made.report
+    model, model_ref = (inverse_model(s.scene) for s in (made, ref))
+    from casflex.model.markers import marker_positions
+
+    assert np.allclose(marker_positions(model, model.q0), marker_positions(model_ref, model_ref.q0), rtol=0, atol=1e-15)

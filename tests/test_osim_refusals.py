@@ -423,3 +423,40 @@ def test_a_frame_s_orientation_or_translation_left_out_is_opensim_s_default(tmp_
     bare = re.sub(r"\s*<orientation>0 0 0</orientation>", "", TEXT)
     assert bare.count("<orientation>") < TEXT.count("<orientation>")
     assert dumps_scene(scene_from_osim(_model(tmp_path, bare)).scene) == dumps_scene(scene_from_osim(LEG).scene)
+
+
+def test_an_element_named_as_opensim_names_a_base_class_s_property_is_read(tmp_path, capsys):
+    # <HuntCrossleyForce::ContactParametersSet> (OpenSim writes it so: its ToyLanding, WalkerModel, SoccerKick, Jumper
+    # and BouncingBlock models) is no XML name: such a model OpenSim loads was refused as "not an OpenSim model (XML:
+    # not well-formed (invalid token))", whatever else it held; now read, the force listed as ignored
+    force = ('<ForceSet name="forceset"><objects><HuntCrossleyForce name="contact">'
+             '<HuntCrossleyForce::ContactParametersSet name="contact_parameters"><objects>'
+             '<HuntCrossleyForce::ContactParameters><geometry>a b</geometry><stiffness>1e8</stiffness>'
+             '</HuntCrossleyForce::ContactParameters></objects></HuntCrossleyForce::ContactParametersSet>'
+             '</HuntCrossleyForce></objects></ForceSet>\n')
+    at = TEXT.index("<MarkerSet")
+    path = _model(tmp_path, TEXT[:at] + force + TEXT[at:])
+    made = scene_from_osim(path)
+    assert [m.label for m in made.scene.markers] == [m.label for m in scene_from_osim(LEG).scene.markers]
+    assert "ignored: 1 ForceSet HuntCrossleyForce" in made.report
+    broken = _model(tmp_path, TEXT[:at] + force.replace("</ForceSet>", "") + TEXT[at:], "broken.osim")
+    code, _, err = _run(["import", str(broken), "--out", str(tmp_path / "x.toml")], capsys)
+    assert code == 2 and "broken.osim: not an OpenSim model (XML: mismatched tag" in err  # the file's own fault
+
+
+def test_a_marker_on_a_body_the_model_lacks_is_refused_naming_it(tmp_path, capsys):
+    # R.ASIS on /bodyset/humerus_r in a model of the leg: OpenSim refuses the model (its socket finds no frame);
+    # casflex inverse and calibrate left the marker out of the fit without a word, exit 0 (import alone said it)
+    text = TEXT.replace("<socket_parent_frame>/bodyset/pelvis</socket_parent_frame>",
+                        "<socket_parent_frame>/bodyset/humerus_r</socket_parent_frame>", 1)
+    path = _model(tmp_path, text)
+    code, _, err = _run([*_inverse(path), "--out", str(tmp_path / "x.csv")], capsys)
+    assert code == 2 and err.strip().endswith("MarkerSet: marker 'R.ASIS' is on '/bodyset/humerus_r', a body the "
+                                              "model does not have: fix its socket_parent_frame (OpenSim refuses "
+                                              "such a model)")
+    assert not (tmp_path / "x.csv").exists()
+    ground = _model(tmp_path, TEXT.replace("<socket_parent_frame>/bodyset/pelvis</socket_parent_frame>",
+                                           "<socket_parent_frame>/ground</socket_parent_frame>", 1), "ground.osim")
+    # on the ground: it moves with no coordinate, a fit gains nothing from it (it was said to be 'massless')
+    assert "marker 'R.ASIS': on 'ground', the ground: it moves with no coordinate; left out" in scene_from_osim(
+        ground).report

@@ -272,3 +272,16 @@ def test_a_muscle_runs_record_says_what_casflex_muscles_says(folder, tmp_path):
                for w in warnings), warnings
     assert "muscles soleus_r cross no coordinate of the plane (moment arms 0 at every frame): they carry no moment, " \
            "their activations stay at the lower bound" in warnings, warnings
+
+
+def test_muscles_follow_a_subject_scaled_on_a_static_trial_without_some_segments_markers():
+    # the static excerpt records the pelvis and the right leg only: the calibration wrote the other segments welded,
+    # and the muscles refused the subject ("its nodes or coordinates differ"); now those keep their joints and size
+    from casflex.inverse.calibrate import calibrate
+
+    osim = scene_from_osim(DATA / "hamner_subject02_planar_muscles.osim", muscles=True)
+    after, _ = calibrate(osim.scene, str(LAB / "hamner_static_excerpt.trc"), root="pelvis", scale=True)
+    moved, report = scaled_muscles(osim, after, "pelvis")
+    assert report[0].startswith("muscles: their path points scaled with their segments")
+    left = [(a, b) for a, b in zip(osim.muscles, moved.muscles, strict=True) if a.name.endswith("_l")]
+    assert left and all(abs(b.optimal_fiber_length / a.optimal_fiber_length - 1) < 0.01 for a, b in left)

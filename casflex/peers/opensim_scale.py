@@ -9,12 +9,12 @@ from collections.abc import Mapping
 
 from casflex.peers.opensim import _opensim, _run
 
-__all__ = ["scaled_muscles"]
+__all__ = ["scaled_muscles", "write_scaled"]
 
 _HERE = "casflex.peers.opensim_scale"
 
 
-def _scaled_here(model_path: str, factors: dict[str, float]) -> dict:
+def _scaled_model(model_path: str, factors: dict[str, float]):
     osim = _opensim()
     model = osim.Model(model_path)
     state = model.initSystem()
@@ -26,6 +26,16 @@ def _scaled_here(model_path: str, factors: dict[str, float]) -> dict:
         s.setApply(True)
         scales.cloneAndAppend(s)
     model.scale(state, scales, False, -1.0)  # the masses as they are: casflex scales them apart
+    return model
+
+
+def _write_scaled_here(model_path: str, factors: dict[str, float], out: str) -> str:
+    _scaled_model(model_path, factors).printToXML(out)
+    return out
+
+
+def _scaled_here(model_path: str, factors: dict[str, float]) -> dict:
+    model = _scaled_model(model_path, factors)
     state = model.initSystem()
     model.realizePosition(state)
     muscles = model.getMuscles()
@@ -43,3 +53,12 @@ def scaled_muscles(model_path: str | os.PathLike[str], factors: Mapping[str, flo
     along its three axes; bodies not named keep their size), masses kept: each muscle's (muscle-tendon length m at
     the default pose, optimal fibre length m, tendon slack length m, maximum isometric force N) after it."""
     return _run(f"{_HERE}:_scaled_here", worker, os.fspath(model_path), {str(k): float(v) for k, v in factors.items()})
+
+
+def write_scaled(model_path: str | os.PathLike[str], factors: Mapping[str, float], out: str | os.PathLike[str], *,
+                 worker: bool | None = None) -> str:
+    """Write OpenSim 4's ``Model::scale`` of the model at ``model_path`` (``factors`` as :func:`scaled_muscles`',
+    masses kept) to the model file ``out``: its markers, joints and a custom joint's translation functions scaled
+    as OpenSim scales them; returns the path."""
+    return _run(f"{_HERE}:_write_scaled_here", worker, os.fspath(model_path),
+                {str(k): float(v) for k, v in factors.items()}, os.fspath(out))

@@ -275,18 +275,41 @@ class _Builder:
             out.append(RigidBody(name, node_name(b.name), b.mass, float(Ig[2, 2]), float(com[0]), float(com[1])))
         return out
 
+    def welded_body(self, node: str, on: dict[str, str]) -> str | None:
+        """The body (its name) of the nearest node welded to the massless ``node`` (the same rigid segment: a marker
+        on a massless calcaneus welded to the talus moves with the talus), None where no weld reaches one."""
+        welds = [j.nodes for j in self.joints if j.kind == "weld" and len(j.nodes) == 2]
+        seen, todo = {node}, [node]
+        while todo:
+            n = todo.pop(0)
+            if n in on:
+                return on[n]
+            nxt = [b if a == n else a for a, b in welds if n in (a, b) and (b if a == n else a) not in seen]
+            seen.update(nxt)
+            todo += nxt
+        return None
+
     def markers(self, bodies: list[RigidBody]) -> list[Marker]:
         on = {b.node: b.name for b in bodies}
         out = []
         for mk in self.m.markers:
             node = node_name(mk.body)
+            carrier = self.welded_body(node, on) if mk.body in self.pose and node not in on else None
+            if carrier is not None:  # OpenSim keeps it: left out, the segment could lose its only markers
+                self.report.append(f"marker {mk.name!r}: on {mk.body!r}, massless, welded to {carrier!r}: carried "
+                                   "by it")
+                R, p = self.pose[mk.body]
+                x = p + R @ mk.location
+                out.append(Marker(node_name(mk.name), carrier, float(x[0]), float(x[1]), label=mk.name, fixed=mk.fixed))
+                continue
             if mk.body not in self.pose or node not in on:
-                why = "massless" if mk.body in self.pose else "no body of the tree"
+                why = ("the ground: it moves with no coordinate" if mk.body == "ground" else "massless"
+                       if mk.body in self.pose else "no body of the tree")
                 self.dropped.append(f"marker {mk.name!r}: on {mk.body!r}, {why}; left out")
                 continue
             R, p = self.pose[mk.body]
             x = p + R @ mk.location
-            out.append(Marker(node_name(mk.name), on[node], float(x[0]), float(x[1]), label=mk.name))
+            out.append(Marker(node_name(mk.name), on[node], float(x[0]), float(x[1]), label=mk.name, fixed=mk.fixed))
         return out
 
 

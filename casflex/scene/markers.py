@@ -16,7 +16,9 @@ class Marker:
     """A point fixed on the beam or rigid body ``on``, at (x, y) (m) in the scene's initial
     configuration; ``label``: the lab's label of the marker it stands for in a trial's TRC file
     (default: its name; :mod:`casflex.lab`); ``weight``: its weight in the marker fit (>= 0, as an OpenSim
-    IK task's: the fit minimises the sum of weight * squared distance; 0 leaves it out)."""
+    IK task's: the fit minimises the sum of weight * squared distance; 0 leaves it out); ``fixed``: where it sits
+    on its segment is given, not measured: a static trial's calibration leaves it there (OpenSim's ``<fixed>``,
+    which its marker placer keeps)."""
 
     name: str
     on: str
@@ -24,6 +26,7 @@ class Marker:
     y: float
     label: str | None = None
     weight: float = 1.0
+    fixed: bool = False
 
     def __post_init__(self) -> None:
         where = _owner("marker", self.name)
@@ -35,6 +38,8 @@ class Marker:
         if weight < 0:
             raise SceneError.at(where, "weight", f"must be >= 0, got {weight:g}")
         object.__setattr__(self, "weight", weight)
+        if not isinstance(self.fixed, bool):
+            raise SceneError.at(where, "fixed", f"expected true or false, got {self.fixed!r}")
         if self.label is not None and (not isinstance(self.label, str) or not self.label.strip()):
             raise SceneError.at(where, "label", f"expected the lab's marker label (a string), got {self.label!r}")
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 
@@ -78,6 +79,7 @@ class OsimMarker:
     name: str
     body: str
     location: np.ndarray
+    fixed: bool = False  # <fixed>true</fixed>: OpenSim's marker placer leaves it where it is
 
 
 @dataclass(frozen=True)
@@ -156,6 +158,26 @@ def axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
 
 
+#: an element named as OpenSim names a property of a base class (``<HuntCrossleyForce::ContactParametersSet>``): no
+#: XML name, which OpenSim reads and writes (its ToyLanding, WalkerModel, SoccerKick and Jumper models)
+_QUALIFIED_TAG = re.compile(r"<(/?)([A-Za-z_][\w.-]*)::([A-Za-z_][\w.-]*)")
+
+
+def _with_qualified_tags(source: str, exc: ET.ParseError):
+    """The root of the model file ``source`` that ET could not parse (``exc``), its elements named ``A::B`` read as
+    ``A__B`` (OpenSim's own names: nothing casflex takes); ValueError naming the XML's fault where that is not it."""
+    try:
+        with open(source, encoding="utf-8") as fh:
+            text = fh.read()
+        if _QUALIFIED_TAG.search(text):
+            return ET.fromstring(_QUALIFIED_TAG.sub(r"<\1\2__\3", text))
+    except ET.ParseError as other:  # the file's own fault beside those names (its line and column unchanged)
+        exc = other
+    except (UnicodeDecodeError, OSError):
+        pass
+    raise ValueError(f"{source}: not an OpenSim model (XML: {exc})") from None
+
+
 class _Reader:
     def __init__(self, path: str):
         self.source = os.fspath(path)
@@ -169,7 +191,7 @@ class _Reader:
         try:
             root = ET.parse(self.source).getroot()
         except ET.ParseError as exc:
-            raise ValueError(f"{self.source}: not an OpenSim model (XML: {exc})") from None
+            root = _with_qualified_tags(self.source, exc)
         except OSError as exc:
             raise ValueError(f"{self.source}: cannot read it ({exc.strerror or exc})") from None
         self.joint_frames: dict[str, dict] = {}  # joint name -> its offset frames (:meth:`frames`)
@@ -391,10 +413,16 @@ class _Reader:
 
     def markers(self) -> tuple[OsimMarker, ...]:
         out = []
+        bodies = {b.get("name", "") for b in self.model.findall("BodySet/objects/Body")}
         for m in self.model.findall("MarkerSet/objects/Marker"):
             name = m.get("name", "")
-            body = (m.findtext("socket_parent_frame") or "").strip().rsplit("/", 1)[-1]
-            out.append(OsimMarker(name, body, self.vector(m, "location", 3, f"marker {name!r}")))
+            frame = (m.findtext("socket_parent_frame") or "").strip()
+            body = frame.rsplit("/", 1)[-1]
+            if frame.rpartition("/")[0].endswith("bodyset") and body not in bodies:  # was left out of the fit, unsaid
+                raise ValueError(f"{self.source}: MarkerSet: marker {name!r} is on {frame!r}, a body the model does "
+                                 "not have: fix its socket_parent_frame (OpenSim refuses such a model)")
+            out.append(OsimMarker(name, body, self.vector(m, "location", 3, f"marker {name!r}"),
+                                  (m.findtext("fixed") or "").strip().lower() == "true"))
         self.unique("MarkerSet", "marker", (m.name for m in out))
         return tuple(out)
 

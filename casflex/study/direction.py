@@ -8,7 +8,8 @@ scenes are (OpenSim's convention: x forward, y up):
   :data:`MIN_TRAVEL`): x along that displacement's larger horizontal lab axis, with its sign
   (:func:`walking_plane`);
 - a static trial (before the scene is calibrated to the subject): of the four horizontal directions, the one
-  along which the markers lie as the scene's lie along its x (:func:`facing_plane`);
+  along which the markers lie as the scene's lie along its x (:func:`facing_plane`, :mod:`casflex.inverse.heading`'s:
+  the calibration checks a given plane with it);
 - a trial in which the subject stays (a treadmill; the scene calibrated): the direction in whose plane the scene
   fits the trial's frames best (:func:`fitted_plane`).
 
@@ -19,24 +20,12 @@ dynamics runs, and :func:`~casflex.inverse.heading.travel_labels`, which the stu
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 
-from casflex.inverse.heading import MIN_TRAVEL, median_steps
+from casflex.inverse.heading import _AXES, MIN_CORRELATION, MIN_TRAVEL, _horizontal, facing_plane, median_steps
 from casflex.lab import LabMarkers, Plane
 
 __all__ = ["walking_plane", "facing_plane", "fitted_plane", "MIN_CORRELATION"]
-
-#: a facing needs the markers to lie along it as the scene's do at least this well (biomechZoo's sample study's
-#: statics on a Plug-in Gait model: 0.78-0.91 facing, 0.02-0.07 across)
-MIN_CORRELATION = 0.3
-
-_AXES = "XYZ"
-
-
-def _horizontal(vertical: str) -> list[int]:
-    return [k for k in range(3) if _AXES[k] != vertical.lstrip("+-").upper()]
 
 
 def walking_plane(lab: LabMarkers, labels: list[str], vertical: str) -> tuple[str, str] | None:
@@ -52,38 +41,6 @@ def walking_plane(lab: LabMarkers, labels: list[str], vertical: str) -> tuple[st
     plane = f"{'-' if d[k] < 0 else ''}{_AXES[k]},{vertical}"
     return plane, f"plane {plane}: the subject travels {np.hypot(*d[h]):.2f} m along {'-' if d[k] < 0 else '+'}" \
                   f"{_AXES[k]}"
-
-
-def facing_plane(scene, lab: LabMarkers, vertical: str) -> tuple[str, str]:
-    """(plane, report line): of the four horizontal directions, the one along which the trial's markers (their
-    mean over its frames) lie as the scene's lie along its x (the largest slope of their lab coordinate on the
-    scene's x: the subject's toes ahead of its heels, its pelvis's front ahead of its back, whatever its size;
-    refused where their correlation is below :data:`MIN_CORRELATION`; module docstring)."""
-    markers = [m for m in scene.markers if m.lab_label in lab.labels]
-    x0 = np.array([m.x for m in markers])
-    with warnings.catch_warnings():  # a marker never seen: its mean NaN, left out below
-        warnings.simplefilter("ignore", RuntimeWarning)
-        mean = np.array([np.nanmean(lab.marker(m.lab_label), axis=0) for m in markers]).reshape(-1, 3)
-    seen = np.isfinite(mean).all(axis=1)
-    if seen.sum() < 3:
-        raise ValueError(f"{lab.source}: fewer than 3 of the scene's markers seen: cannot tell which way the "
-                         f"subject faces; give the plane")
-    r, slope = {}, {}
-    x = x0[seen] - x0[seen].mean()
-    for k in _horizontal(vertical):
-        lab_k = mean[seen, k] - mean[seen, k].mean()
-        b = float(x @ lab_k / (x @ x))  # the lab axis's metres per metre of the scene's x: a subject's size
-        with np.errstate(all="ignore"):  # a lab axis the markers do not spread along: no correlation (0)
-            c = float(np.nan_to_num(np.corrcoef(x, lab_k)[0, 1]))
-        for sign, axis in ((1.0, f"{_AXES[k]},{vertical}"), (-1.0, f"-{_AXES[k]},{vertical}")):
-            r[axis], slope[axis] = sign * c, sign * b
-    best = max(slope, key=slope.get)
-    if r[best] < MIN_CORRELATION:
-        raise ValueError(f"{lab.source}: cannot tell which way the subject faces (the markers' correlation with the "
-                         f"scene's x at most {r[best]:+.2f} along {best}): give the plane")
-    others = ", ".join(f"{p} {v:+.2f}" for p, v in r.items() if p != best)
-    return best, f"plane {best}: the subject faces {best.split(',')[0]} (the markers' correlation with the " \
-                 f"scene's x {r[best]:+.2f}, {slope[best]:.2f} m per m; {others} in the others)"
 
 
 def fitted_plane(scene, lab: LabMarkers, vertical: str, root: str | None = None, frames: int = 5) -> tuple[str, str]:

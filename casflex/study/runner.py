@@ -52,7 +52,7 @@ def calibrate_run(*, model: str, static: str | None, plane: str, root: str | Non
     (:mod:`.direction`)."""
     from casflex import load_scene
     from casflex.inverse.calibrate import calibrate as place
-    from casflex.inverse.calibrate import with_mass
+    from casflex.inverse.calibrate import mass_lines, scene_mass, with_mass
     from casflex.inverse.inputs import read_markers
     from casflex.scene import dumps_scene
 
@@ -71,7 +71,8 @@ def calibrate_run(*, model: str, static: str | None, plane: str, root: str | Non
         scene, placed = place(scene, lab, plane, root=root, scale=scale, mass=mass if scale else None)
         report += placed
     if mass is not None and not placed_mass:  # weighed, not measured: the masses to it, the sizes as they are
-        total = sum(b.mass for b in scene.bodies)
+        total = scene_mass(scene)
+        report += mass_lines(scene, mass)
         scene = with_mass(scene, mass)
         report.append(f"the model's masses scaled from {total:.1f} kg to the subject's {mass:g} kg (inertias with "
                       "them; the segments' sizes as they are)")
@@ -90,10 +91,13 @@ def _osim(path: str, digest: str | None) -> tuple:
 
 
 def _frames(lab, window: tuple[float, float] | None):
-    """The static trial's frames within ``window`` (s; all where None)."""
+    """The static trial's frames within ``window`` (s; all where None); ValueError naming it where it holds none."""
     if window is None:
         return lab
     inside = (lab.t >= window[0] - 1e-9) & (lab.t <= window[1] + 1e-9)
+    if not inside.any():  # within the trial's times (the study file's check) but between two frames
+        raise ValueError(f"{lab.source}: static_window {window[0]:g}..{window[1]:g} s holds none of its frames (at "
+                         f"{lab.rate:g} Hz): give a window of one frame or more")
     return dataclasses.replace(lab, t=lab.t[inside], xyz=lab.xyz[inside])
 
 
