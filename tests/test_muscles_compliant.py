@@ -140,3 +140,19 @@ def test_the_equilibrium_of_a_muscle_too_short_for_one_is_its_slack_tendon():
     assert below[0] == 0.0 and tendon_equilibrium(m, 1.01 * m.tendon_slack_length, 0.5) == below
     T, ln = tendon_equilibrium(m, m.tendon_slack_length + m.optimal_fiber_length, 0.5)
     assert T > 0.0 and ln > below[1]  # stretched: an equilibrium, its fibre longer
+
+
+def test_an_equilibrium_ipopt_stops_on_with_a_search_direction_too_small_is_taken():
+    # Hamner's add_brev_l at 0.13872976421448543 m and activation 0.3 (a pose of the peers' comparison with OpenSim's
+    # equilibrateMuscles): IPOPT, asked for 1e-14, stops with Search_Direction_Becomes_Too_Small on the root (the
+    # forces 1.2e-14 F_iso apart), which was refused as "no equilibrium" (21 of the comparison's 330 on this machine)
+    import casadi as ca
+
+    from casflex.muscles.compliant import _frame_terms
+
+    model = Path(__file__).parent / "data" / "muscles" / "hamner_subject02_planar_muscles.osim"
+    (m,) = [m for m in scene_from_osim(model, muscles=True).muscles if m.name == "add_brev_l"]
+    lmt = 0.13872976421448543
+    T, ln = tendon_equilibrium(m, lmt, 0.3)
+    tendon, fibre = (float(ca.evalf(e)) for e in _frame_terms(m, lmt, 0.3, ln, True))
+    assert T > 0.0 and T == pytest.approx(tendon, abs=1e-9) and abs(fibre - tendon) <= 1e-9 * m.max_isometric_force
