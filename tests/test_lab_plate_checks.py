@@ -390,8 +390,9 @@ def test_a_centre_of_pressure_above_the_foot_is_refused(tmp_path, capsys):
 def test_a_fore_aft_force_swapped_with_the_sideways_one_is_said(tmp_path):
     """The stride's vx and vz swapped (a Y-up file's fore-aft and sideways forces): the planar model drops the force
     across its plane, here the fore-aft one: the moments off by up to 204 N m (the hip's) with exit 0. Over a straight
-    stance the force across carries 0.07-0.44 of the fore-aft force's impulse (the repo's trials: Hamner's run,
-    walking2.c3d, the Rajagopal walk), swapped 2.3-14 times: said above 1 (a warning: a cutting step carries more)."""
+    stance the force across carries 0.07-0.55 of the fore-aft force's impulse (Hamner's run, walking2.c3d, the
+    Rajagopal walk, biomechZoo's straight walks), swapped 1.8-14 times: said above 1 (a warning: a turn's step carries
+    up to 3.2)."""
     from casflex.inverse import Filter, Trial, inverse_dynamics
 
     def swap(v):
