@@ -362,3 +362,48 @@ def test_a_treadmill_s_single_plate_given_to_one_foot_is_refused():
         inverse_dynamics(MUSCLES / "rajagopal_walk_planar_muscles.osim",
                          Trial(read_trc(MUSCLES / "rajagopal_walk.trc"), grf=one, plates={"calcn_r": "ground_"},
                                tasks=str(MUSCLES / "rajagopal_walk_ik_tasks.xml")))
+
+
+def test_a_centre_of_pressure_above_the_foot_is_refused(tmp_path, capsys):
+    """The stride's COP columns py and pz swapped (a Y-up file whose vertical coordinate now holds the sideways
+    position, here 0.18-0.20 m: a plate to the side of the lab's origin): every moment 39 N m off with exit 0. A
+    centre of pressure lies on the surface the foot stands on: as recorded 0.001-0.051 m below the foot's lowest
+    marker (medians over the stances of the repo's trials), here 0.14 m above it: refused. A COP metres below (mm
+    read as m, -5 m) is refused by the line of force (it passes metres from the foot); half a metre below (a stair's
+    plate written at the floor's height) is taken (test_a_surface_the_table_writes_half_a_metre_low_refuses_nothing)."""
+
+    def swap(v):
+        v[:, [PX + 1, PX + 2]] = np.column_stack([v[:, PX + 2] + 0.3, v[:, PX + 1]])
+
+    _refused([*BASE, "--loads", _mot(tmp_path, swap), "--plate", "ankle=ground_"], capsys,
+             r"grf.mot: plate 'ground_': its centre of pressure lies 0.14 m above the lowest point of 'ankle' \(its "
+             r"node and its markers\) over its stance at t = 0.433333..0.616667 s .*columns swapped",
+             tmp_path / "loads.csv")
+
+    def deep(v):
+        v[:, PX + 1] -= 5.0
+
+    _refused([*BASE, "--loads", _mot(tmp_path, deep), "--plate", "ankle=ground_"], capsys,
+             r"grf.mot: plate 'ground_': its force passes \d+\.\d\d m from 'ankle'")
+
+
+def test_a_fore_aft_force_swapped_with_the_sideways_one_is_said(tmp_path):
+    """The stride's vx and vz swapped (a Y-up file's fore-aft and sideways forces): the planar model drops the force
+    across its plane, here the fore-aft one: the moments off by up to 204 N m (the hip's) with exit 0. Over a straight
+    stance the force across carries 0.07-0.55 of the fore-aft force's impulse (Hamner's run, walking2.c3d, the
+    Rajagopal walk, biomechZoo's straight walks), swapped 1.8-14 times: said above 1 (a warning: a turn's step carries
+    up to 3.2)."""
+    from casflex.inverse import Filter, Trial, inverse_dynamics
+
+    def swap(v):
+        v[:, [VY - 1, VY + 1]] = v[:, [VY + 1, VY - 1]]
+
+    res = inverse_dynamics("hamner_leg", Trial(str(TRC), grf=str(_mot(tmp_path, swap)), plates={"ankle": "ground_"},
+                                               root="pelvis"), filter=Filter(10))
+    said = [w for w in res.warnings if "across the model's plane" in w]
+    assert len(said) == 1 and re.search(
+        r"grf.mot: plate 'ground_': over its stance at t = 0.4..0.65 s its force across the model's plane carries "
+        r"30.2 N s, more than its force along the floor \(12.3 N s; .*columns swapped", said[0]), said
+    res = inverse_dynamics("hamner_leg", Trial(str(TRC), grf=str(GRF), plates={"ankle": "ground_"}, root="pelvis"),
+                           filter=Filter(10))
+    assert not [w for w in res.warnings if "across" in w], res.warnings

@@ -236,3 +236,30 @@ def test_coordinates_nothing_acts_on_are_known_from_the_model_and_refused_at_the
     with pytest.raises(ValueError, match=r"^arm_flex_r, arm_flex_l, elbow_flex_r, elbow_flex_l: no muscle crosses it "
                                          r"and no reserve acts on it"):
         bare.solve(res.z, res.zd, res.zdd)
+
+
+def test_a_degroote_muscle_s_default_lower_bound_is_0_as_opensim_s(run):
+    """OpenSim 4.6 gives a DeGrooteFregly2016Muscle without its own min_control 0 (a new muscle's
+    finalizeFromProperties(); getMinControl()), a Millard's or Thelen's 0.01: casflex gave every muscle the
+    activation bounds' 0.01, a DeGroote model's SO differing from OpenSim's. Now each kind's default, said; given
+    activation bounds (--activation-bounds 0.02:1) still bound every muscle without its own; a Thelen model's bounds
+    unchanged (none set per muscle)."""
+    import dataclasses
+
+    from casflex.muscles.static_optimization import StaticOptimization
+
+    osim, res, trial, _ = run
+    assert not trial.optimization.muscle_bounds and trial.optimization.bounds(3)[0].tolist() == [0.01] * 3  # Thelen
+    dg = dataclasses.replace(osim, muscles=tuple(dataclasses.replace(m, kind="DeGrooteFregly2016Muscle")
+                                                 if m.name in ("soleus_r", "med_gas_r") else m for m in osim.muscles))
+    names = [m.name for m in dg.muscles]
+    i, j, k = (names.index(n) for n in ("soleus_r", "med_gas_r", "tib_ant_r"))
+    tm = TrialMuscles(dg, trial.tree, res.t, res.plates)
+    lo, hi = tm.optimization.bounds(len(names))
+    assert (lo[i], lo[j], lo[k]) == (0.0, 0.0, 0.01) and hi.min() == 1.0
+    assert "muscles med_gas_r [0, 1], soleus_r [0, 1] bounded by their kind's OpenSim default" in " ".join(tm.notes)
+    tm = TrialMuscles(dg, trial.tree, res.t, res.plates, optimization=StaticOptimization(activation_bounds=(0.02, 1)))
+    lo, hi = tm.optimization.bounds(len(names))
+    assert lo.tolist() == [0.02] * len(names) and hi.tolist() == [1.0] * len(names)
+    own = _own(dg, {"soleus_r": (("min_control", 0.05),)})  # a muscle's own still wins
+    assert TrialMuscles(own, trial.tree, res.t, res.plates).optimization.bounds(len(names))[0][i] == 0.05

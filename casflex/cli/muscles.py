@@ -195,9 +195,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                         "muscle's fibre and tendon in static equilibrium, the fibre's length solved with the "
                         "activations (docs/muscles.md)")
     s.add_argument("--activation-bounds", type=_bounds, metavar="LO:HI",
-                   help="the activations' bounds (default 0.01:1, Millard's minimum activation) of the muscles "
-                        "whose model gives no min_control / max_control of their own (a muscle's own win, as in "
-                        "OpenSim's static optimization)")
+                   help="the activations' bounds of the muscles whose model gives no min_control / max_control of "
+                        "their own (a muscle's own win, as in OpenSim's static optimization); default: each kind's "
+                        "OpenSim default (0.01:1 for Millard and Thelen, 0:1 for DeGrooteFregly2016Muscle)")
     s.add_argument("--joints", metavar="J1,J2", help="the joints whose reactions are written (default: every hinge)")
     s.add_argument("--on", choices=("child", "parent"), default="child",
                    help="the reaction on the joint's child (default) or parent body, as OpenSim's apply_on_bodies")

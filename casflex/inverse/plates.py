@@ -32,7 +32,7 @@ from casflex.lab import LabTable, Plane
 from casflex.lab.c3d import MIN_PLATE_FORCE
 from casflex.lab.filtering import plate_wrench
 from casflex.lab.lowpass import check_cutoff, even_times, lowpass, runs
-from casflex.lab.plate_checks import check_plate_record, window_load
+from casflex.lab.plate_checks import across_plane, check_plate_record, window_load
 
 __all__ = ["Plate", "plate_from_table", "plate_loads", "plates_under_feet", "model_weight", "MAX_PLATE_GAP",
            "MAX_PLATE_GAP_S"]
@@ -60,6 +60,9 @@ class Plate:
     notes: tuple[str, ...] = ()
     source: str = ""  # the file and the plate, as messages name them
     floor: float | None = None  # m: its surface's height along the model's up in the plane (None: not known)
+    #: m, (n,): its centre of pressure's height along the model's up at t as the table writes it (unfiltered; NaN
+    #: where unloaded), checked against the foot's lowest point (None: not known)
+    heights: np.ndarray | None = None
 
     def at(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(force (k, 2), moment (k,)) at times t (s), linear between samples. ValueError for a time more than
@@ -167,31 +170,35 @@ def plate_from_table(table: LabTable, prefix: str, node: str, plane: Plane, cuto
     else:
         fv, W = None, 0.0
     check_plate_record(where, written, whole, fv, W, _normal(table, prefix, E, weight))
-    floor = _floor(table, prefix, rows, E, fv, weight)
+    floor, heights = _floor(table, prefix, rows, E, fv, weight)
+    if fv is not None:
+        across = across_plane(where, written, whole, E, -np.asarray(weight) / W)
+        notes += [across] if across else []
     empty = window_load(where, t, force, weight, window) if window is not None else None
     notes += [empty] if empty else []
     check_cutoff(cutoff, t, f"{where}'s samples")
     both = lowpass(t, np.column_stack([force, moment]), cutoff, what=where)
-    return Plate(prefix, node, t, both[:, :2], both[:, 2], tuple(notes), where, floor)
+    return Plate(prefix, node, t, both[:, :2], both[:, 2], tuple(notes), where, floor, heights)
 
 
 def _floor(table: LabTable, prefix: str, rows: slice, E: np.ndarray, fv: np.ndarray | None,
-           weight: np.ndarray | None) -> float | None:
-    """m: the height of the plate's surface along the model's up in the plane (lab axes ``E`` (2, 3)): the median
+           weight: np.ndarray | None) -> tuple[float | None, np.ndarray | None]:
+    """(m: the height of the plate's surface along the model's up in the plane (lab axes ``E`` (2, 3)): the median
     height of its centres of pressure (the table's ``<prefix>force_p{x,y,z}``, unfiltered) where its vertical
-    force ``fv`` (N, the table's ``rows``) exceeds 20 N; None where the table or the weight gives none."""
+    force ``fv`` (N, the table's ``rows``) exceeds 20 N; m, (n,): those heights, NaN elsewhere); (None, None) where
+    the table or the weight gives none."""
     from casflex.lab.checks import median
     from casflex.lab.filtering import _plate_columns
 
     p = _plate_columns(table, prefix)
     if fv is None or f"{p}force_px" not in table.names:
-        return None
+        return None, None
     up = -np.asarray(weight, dtype=float) / np.linalg.norm(weight)
     P = np.column_stack([table.column(f"{p}force_p{a}")[rows] for a in "xyz"]).astype(float)
     with np.errstate(invalid="ignore"):
         h = (P @ E.T) @ up
         on = np.isfinite(h) & (fv > 20.0)
-    return median(h[on]) if on.any() else None
+    return (median(h[on]), np.where(on, h, np.nan)) if on.any() else (None, None)
 
 
 def _normal(table: LabTable, prefix: str, E: np.ndarray, weight: np.ndarray | None) -> str | None:
@@ -239,7 +246,7 @@ def plates_under_feet(model, plates: list[Plate], t: np.ndarray, q: np.ndarray) 
     body first and brakes it after (:func:`casflex.lab.plate_checks.check_shear`: its sign flipped), with the fitted
     configurations q (k, n_dof) at times t (k,) s: the plate under another foot, its origin wrong, or given to a
     thigh or a shank (the refusal names the nodes near its centre of pressure)."""
-    from casflex.lab.plate_checks import _up, check_plate_foot, check_shear
+    from casflex.lab.plate_checks import _up, check_cop_height, check_plate_foot, check_shear
 
     weight = model_weight(model)
     nodes = {n: q[:, 3 * k:3 * k + 2] for k, n in enumerate(model.node_names)}
@@ -247,6 +254,25 @@ def plates_under_feet(model, plates: list[Plate], t: np.ndarray, q: np.ndarray) 
     body_x = np.mean([xy @ [up[1], -up[0]] for xy in nodes.values()], axis=0) if up is not None else None
     for pl in plates:
         F, Mo = pl.at(t)
-        check_plate_foot(pl.source or f"plate {pl.name!r}", pl.node, t, F, Mo, nodes[pl.node], weight, pl.floor,
-                         nodes)
-        check_shear(pl.source or f"plate {pl.name!r}", t, F, weight, body_x)
+        where = pl.source or f"plate {pl.name!r}"
+        check_plate_foot(where, pl.node, t, F, Mo, nodes[pl.node], weight, pl.floor, nodes)
+        if pl.heights is not None and up is not None:
+            cop = np.interp(t, pl.t, pl.heights)  # NaN beside the unloaded samples: passed over
+            check_cop_height(where, pl.node, t, F @ up, cop, _foot_low(model, pl.node, q, up))
+        check_shear(where, t, F, weight, body_x)
+
+
+def _foot_low(model, node: str, q: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """m, (k,): the height along ``up`` (2,) of the lowest of ``node`` and the markers on the rigid bodies fixed
+    to it (a foot's heel and toe markers) at the configurations q (k, n_dof)."""
+    i = model.node_names.index(node)
+    low = q[:, 3 * i:3 * i + 2] @ up
+    on = {b.name for b in model.scene.bodies if b.node == node}
+    phi = q[:, 3 * i + 2] - model.q0[3 * i + 2]
+    c, s = np.cos(phi), np.sin(phi)
+    for m in model.scene.markers:
+        if m.on in on:
+            rx, ry = m.x - model.q0[3 * i], m.y - model.q0[3 * i + 1]
+            xy = np.column_stack([q[:, 3 * i] + c * rx - s * ry, q[:, 3 * i + 1] + s * rx + c * ry])
+            low = np.minimum(low, xy @ up)
+    return low

@@ -58,6 +58,30 @@ meets it (OpenSim's Hamner running trial, whose stance peaks at 2.25 body weight
   where the node lies as high above the lowest node near the line of force too (the foot under the thigh): a plate
   in a stair's step whose centres of pressure a table writes at the floor's height, or a model without feet
   (a plate under a residual limb, a knee kneeling), is taken.
+- :data:`MAX_COP_ABOVE` (m): a centre of pressure lies on the surface the foot stands on (a floor, a ramp, a
+  step), never above the foot: over each stance (its samples loaded above a quarter of the record's peak), the
+  median height of the centre of pressure as the table writes it above the lowest of the foot's node and its
+  markers (heel and toe markers sit 2-6 cm above the sole) within 0.1 m. Higher, the table's vertical column
+  holds another coordinate (a Y-up file's py and pz swapped: the sideways position, 0.2 m, read as the height;
+  Hamner's stride so: every moment 39 N m off). Measured (medians over each stance): 0.001-0.051 m *below* the
+  lowest point on Hamner's run (calcn, toes, ankle; whole trial, stride, IK), walking2.c3d and the Rajagopal walk,
+  at most 0.001 m above it at any sample; biomechZoo's 12 children's straight walks (24 stances, the lab's COP
+  against the lowest of the foot's heel, toe and ankle markers as recorded) 0.019-0.032 m below; 0.1 m: a foot
+  marker calibrated that low still passes the marker fit (its misfit limit). Below the foot is not refused here:
+  a plate under a stair's step writes its centres of pressure at its own surface, the floor's, on the force's line
+  (the loads right); metres below (mm read as m) the line of force passes metres from the foot
+  (:data:`MAX_COP_DISTANCE`).
+- :data:`MAX_ACROSS` (x): the planar model drops the force across its plane; in straight gait that force is a
+  fraction of the force along the floor (peaks of 0.05-0.1 body weight against 0.2 walking, 0.3-0.5 running). A
+  stance (a run of 4 samples and more loaded above 20 N, the record unfiltered) whose force across carries more
+  impulse (the integral of its magnitude) than its force along the floor is said (:func:`across_plane`), not
+  refused (a cutting or turning step carries more; :mod:`casflex.inverse.heading` refuses a turning trial): the
+  fore-aft and sideways columns swapped (a Y-up file's vx and vz: Hamner's stride so, the hip moment 204 N m off)
+  or the wrong plane. Measured (each stance): 0.07-0.41 on Hamner's run (whole trial and stride), 0.26 on
+  walking2.c3d, 0.37-0.44 on the Rajagopal walk, 0.14-0.55 on biomechZoo's 12 children's straight walks (24
+  stances; the plane's x their pelvis's travel); swapped, their inverses, 1.8-14: the limit 1 lies 1.8 times above
+  the largest and below the smallest. Their walks with a 90-degree turn (the heading check refuses them): 0.54-3.2,
+  15 of 22 stances above 1.
 - :data:`MIN_SHEAR` (x W), :data:`MIN_TRAVEL` (m/s): a stance brakes the travelling body (its force along the floor
   against the travel) over its first half and propels it over its second; a whole stance (loaded above 20 N from
   unloaded to unloaded within the trial) that on average propels by more than 0.02 W over its first half and brakes
@@ -91,6 +115,10 @@ __all__ = [
     "check_shear",
     "MIN_SHEAR",
     "MIN_TRAVEL",
+    "check_cop_height",
+    "MAX_COP_ABOVE",
+    "across_plane",
+    "MAX_ACROSS",
 ]
 
 MAX_PULL = 100.0
@@ -103,6 +131,8 @@ FAR_SHARE = 0.1
 MAX_NODE_HEIGHT = 0.25
 MIN_SHEAR = 0.02
 MIN_TRAVEL = 0.3
+MAX_COP_ABOVE = 0.1
+MAX_ACROSS = 1.0
 #: N: the vertical force below which a plate carries no load (the readers' limit for a centre of pressure)
 _LOADED = 20.0
 
@@ -363,3 +393,58 @@ def check_shear(where: str, t: np.ndarray, force: np.ndarray, weight: np.ndarray
                 f"{MIN_SHEAR:g} x its weight, {MIN_SHEAR * W:.0f} N); the horizontal force's sign is flipped (a "
                 "column negated, a plate's own axes)"
             )
+
+
+def check_cop_height(where: str, node: str, t: np.ndarray, fv: np.ndarray, cop: np.ndarray, low: np.ndarray) -> None:
+    """ValueError in one line for a stance (a run of samples whose vertical force ``fv`` (k,) N exceeds a quarter of
+    its record's peak and 20 N, at times t (k,) s) over which the plate's centre of pressure (its height ``cop``
+    (k,) m along the model's up as the table writes it; NaN: passed over) lies, median, more than
+    :data:`MAX_COP_ABOVE` above the lowest point ``low`` (k,) m of the foot ``node`` bears on (its node and its
+    markers): a centre of pressure lies on the surface the foot stands on (module docstring)."""
+    from casflex.lab.lowpass import runs
+
+    stance = fv > max(_LOADED, 0.25 * float(fv.max(initial=0.0)))
+    for s, e in runs(stance):
+        h = (cop - low)[s:e]
+        h = h[np.isfinite(h)]
+        if h.size and median(h) > MAX_COP_ABOVE:
+            raise ValueError(
+                f"{where}: its centre of pressure lies {median(h):.2f} m above the lowest point of {node!r} (its "
+                f"node and its markers) over its stance at t = {t[s]:g}..{t[e - 1]:g} s (median of {h.size} "
+                f"samples; {h.min():.2f}..{h.max():.2f} m): a centre of pressure lies on the surface the foot stands "
+                f"on, at most {MAX_COP_ABOVE:g} m above its lowest marker; its coordinates' columns swapped (the "
+                "vertical's holding the sideways position: a Y-up file read as Z-up?) or the wrong plane"
+            )
+
+
+def across_plane(where: str, t: np.ndarray, force3: np.ndarray, E: np.ndarray, up: np.ndarray) -> str | None:
+    """A line (a warning) for the first stance (a run of at least 4 samples of vertical force above 20 N) of a
+    plate's record (force ``force3`` (n, 3) N in the lab at times t (n,) s, unfiltered) over which its force across
+    the model's plane (lab axes ``E`` (2, 3)) carries more than :data:`MAX_ACROSS` times the impulse of its force
+    along the floor (the integrals of their magnitudes, N s; ``up`` (2,): the model's up in the plane), else None
+    (module docstring): in straight gait the force across is a fraction of the fore-aft one; more, the columns are
+    swapped or the plane is wrong (a cutting or turning step aside)."""
+    from casflex.lab.lowpass import runs
+
+    normal = np.cross(E[0], E[1])
+    along = np.array([up[1], -up[0]]) @ E
+    with np.errstate(invalid="ignore"):
+        fv = force3 @ (up @ E)
+        loaded = fv > _LOADED
+    for s, e in runs(loaded):
+        if e - s < 4:
+            continue
+        ts = t[s:e]
+        across, fore = (_impulse(ts, np.abs(force3[s:e] @ d)) for d in (normal, along))
+        if across > MAX_ACROSS * fore:
+            return (f"{where}: over its stance at t = {ts[0]:g}..{ts[-1]:g} s its force across the model's plane "
+                    f"carries {across:.3g} N s, more than its force along the floor ({fore:.3g} N s; in straight gait "
+                    f"the force across carries 0.07-0.55 of it, the limit {MAX_ACROSS:g}): the planar model drops that "
+                    "force; its columns swapped (the fore-aft and the sideways force: a Y-up file's vx and vz), or the "
+                    "wrong plane?")
+    return None
+
+
+def _impulse(t: np.ndarray, f: np.ndarray) -> float:
+    """N s: the trapezoidal integral of the force f (k,) N over the times t (k,) s."""
+    return float(np.sum(0.5 * (f[1:] + f[:-1]) * np.diff(t)))

@@ -32,7 +32,12 @@ from casflex.muscles.compliant import solve_compliant
 from casflex.muscles.curves import muscle_curves, rigid_tendon
 from casflex.muscles.path import MusclePaths
 from casflex.muscles.reaction import JointReaction, JointReactions, joint_reactions
-from casflex.muscles.static_optimization import StaticOptimization, StaticOptimizationResult, solve_static_optimization
+from casflex.muscles.static_optimization import (
+    DEFAULT_BOUNDS,
+    StaticOptimization,
+    StaticOptimizationResult,
+    solve_static_optimization,
+)
 from casflex.scene.from_osim import node_name
 
 __all__ = ["FrameOutputs", "TrialMuscles", "muscle_result", "reserve_actuators", "residual_warnings",
@@ -134,13 +139,16 @@ class TrialMuscles:
     def _muscle_bounds(self) -> list[str]:
         """Each muscle's activation bounds as OpenSim's SO takes them (StaticOptimization.cpp, ``record``: each
         actuator's ``getMinControl()``, ``getMaxControl()``): its own ``min_control`` / ``max_control`` where its
-        file gives them, else static optimization's ``activation_bounds`` (--activation-bounds: casflex's stand-in
-        for the kinds' defaults); a Millard or Thelen muscle's ``minimum_activation`` raises its lower bound to it
-        (OpenSim refuses a ``min_control`` below it). Set as ``muscle_bounds`` when any differs; the report's line
-        naming those muscles. ValueError naming the muscle and the tag for bounds no activation can take."""
-        lo, hi = self.optimization.activation_bounds
+        file gives them, else static optimization's ``activation_bounds`` (--activation-bounds) where given, else
+        its kind's OpenSim default (:data:`casflex.muscles.static_optimization.DEFAULT_BOUNDS`: a
+        DeGrooteFregly2016Muscle's min_control 0, a Millard's or Thelen's 0.01); a Millard or Thelen muscle's
+        ``minimum_activation`` raises its lower bound to it (OpenSim refuses a ``min_control`` below it). Set as
+        ``muscle_bounds`` when any differs from (0.01, 1) (or the bounds given); the report's lines naming those
+        muscles. ValueError naming the muscle and the tag for bounds no activation can take."""
+        given_bounds = self.optimization.activation_bounds
+        lo, hi = given_bounds or DEFAULT_BOUNDS["Millard2012EquilibriumMuscle"]
         head = f"{self.osim.source}: " if self.osim.source else ""
-        pairs, own = [], []
+        pairs, own, kind = [], [], []
         for m in self.muscles:
             where = f"{head}ForceSet: {m.kind} {m.name!r}"
             a = m.property("minimum_activation", 0.0)
@@ -152,21 +160,28 @@ class TrialMuscles:
             if given["min_control"] < a:
                 raise ValueError(f"{where}.min_control: {given['min_control']:g} is below its minimum_activation "
                                  f"{a:g} (OpenSim refuses the model): give min_control >= minimum_activation")
-            pair = (max(lo if math.isnan(given["min_control"]) else given["min_control"], a),
-                    hi if math.isnan(given["max_control"]) else given["max_control"])
+            mlo, mhi = given_bounds or DEFAULT_BOUNDS.get(m.kind, (lo, hi))
+            pair = (max(mlo if math.isnan(given["min_control"]) else given["min_control"], a),
+                    mhi if math.isnan(given["max_control"]) else given["max_control"])
             if not (math.isfinite(pair[1]) and 0.0 <= pair[0] < pair[1] <= 1.0):
                 tag = "max_control" if not math.isnan(given["max_control"]) else "min_control"
                 raise ValueError(f"{where}.{tag}: its activation bounds would be [{pair[0]:g}, {pair[1]:g}] (its own "
-                                 f"min_control / max_control, the others from the activation bounds [{lo:g}, {hi:g}]):"
-                                 " expected 0 <= lower < upper <= 1 (an activation is the fraction of its force)")
+                                 "min_control / max_control, the others from the activation bounds "
+                                 f"[{mlo:g}, {mhi:g}]): expected 0 <= lower < upper <= 1 (an activation is the "
+                                 "fraction of its force)")
             pairs.append(pair)
             if pair != (lo, hi):
-                own.append(f"{m.name} [{pair[0]:g}, {pair[1]:g}]")
-        if not own:
+                mine = not (math.isnan(given["min_control"]) and math.isnan(given["max_control"])) or pair[0] == a > mlo
+                (own if mine or (mlo, mhi) == (lo, hi) else kind).append(f"{m.name} [{pair[0]:g}, {pair[1]:g}]")
+        if not own and not kind:
             return []
         self.optimization = dataclasses.replace(self.optimization, muscle_bounds=tuple(pairs))
-        return [f"muscles {', '.join(own)} bounded by their own min_control / max_control (or minimum_activation; "
-                f"as OpenSim's static optimization), the others by the activation bounds [{lo:g}, {hi:g}]"]
+        lines = [f"muscles {', '.join(own)} bounded by their own min_control / max_control (or minimum_activation; "
+                 f"as OpenSim's static optimization), the others by the activation bounds [{lo:g}, {hi:g}]"] if own \
+            else []
+        return lines + ([f"muscles {', '.join(kind)} bounded by their kind's OpenSim default (a "
+                         "DeGrooteFregly2016Muscle's min_control 0; --activation-bounds sets every muscle's)"]
+                        if kind else [])
 
     def _split_actuators(self, actuators, source: str) -> None:
         """The reserves (a CoordinateActuator on a joint's coordinate: static optimization's) and the residuals

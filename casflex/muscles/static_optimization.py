@@ -38,8 +38,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["MAX_EXPONENT", "StaticOptimization", "StaticOptimizationError", "StaticOptimizationResult",
-           "solve_static_optimization"]
+__all__ = ["MAX_EXPONENT", "DEFAULT_BOUNDS", "StaticOptimization", "StaticOptimizationError",
+           "StaticOptimizationResult", "solve_static_optimization"]
 
 #: The largest exponent p of the cost sum a^p taken: at p = 20 a^p of an activation at its bound 0.01 is 1e-40 and
 #: IPOPT stopped on Hamner's run (Maximum_Iterations, a traceback), at 10 it converged (the literature's criteria
@@ -56,6 +56,12 @@ class StaticOptimizationError(RuntimeError):
         self.frames = frames
 
 
+#: each muscle kind's activation bounds in OpenSim 4.6 where its file gives no min_control / max_control (a new
+#: muscle's ``finalizeFromProperties(); getMinControl()``): Millard's min_control is its minimum_activation (0.01)
+DEFAULT_BOUNDS = {"Millard2012EquilibriumMuscle": (0.01, 1.0), "Thelen2003Muscle": (0.01, 1.0),
+                  "DeGrooteFregly2016Muscle": (0.0, 1.0)}
+
+
 @dataclass(frozen=True)
 class StaticOptimization:
     """Static optimization's choices (OpenSim's names in brackets).
@@ -64,8 +70,11 @@ class StaticOptimization:
     force_length_velocity : a muscle's force per unit activation is its active force at full activation along
         the fibres' force-length-velocity curves (True); False: its max isometric force [use_muscle_physiology]
     passive : apply the passive fibre forces as known forces (True); OpenSim's SO does not (False)
-    activation_bounds : (lower, upper) of every activation [the muscles' min_control, max_control: 0.01, 1 for
-        Millard2012EquilibriumMuscle, whose min_control is its minimum_activation]
+    activation_bounds : (lower, upper) of every activation [the muscles' min_control, max_control]; None: each
+        muscle kind's OpenSim default (:data:`DEFAULT_BOUNDS`: 0.01, 1 for Millard2012EquilibriumMuscle, whose
+        min_control is its minimum_activation, and Thelen2003Muscle; 0, 1 for DeGrooteFregly2016Muscle), which
+        :class:`casflex.muscles.analysis.TrialMuscles` sets per muscle in ``muscle_bounds``; without them (this
+        class alone) 0.01, 1
     muscle_bounds : ((lower, upper), ...) one pair per muscle, in place of ``activation_bounds`` where the muscles'
         own differ [each muscle's min_control, max_control: OpenSim bounds each by its own]; () every muscle by
         ``activation_bounds``
@@ -83,7 +92,7 @@ class StaticOptimization:
     exponent: float = 2.0
     force_length_velocity: bool = True
     passive: bool = False
-    activation_bounds: tuple[float, float] = (0.01, 1.0)
+    activation_bounds: tuple[float, float] | None = None
     muscle_bounds: tuple[tuple[float, float], ...] = ()
     reserve_bounds: tuple[float, float] = (-math.inf, math.inf)
     tolerance: float = 1e-10
@@ -98,7 +107,8 @@ class StaticOptimization:
         for name in ("force_length_velocity", "passive"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name}: expected True or False, got {getattr(self, name)!r}")
-        lo, hi = _pair("activation_bounds", self.activation_bounds)
+        lo, hi = _pair("activation_bounds", self.activation_bounds) if self.activation_bounds is not None else \
+            DEFAULT_BOUNDS["Millard2012EquilibriumMuscle"]
         if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo < hi <= 1.0):
             raise ValueError("activation_bounds: expected 0 <= lower < upper <= 1 (an activation is the fraction of "
                              f"the muscle's force it gives), got {self.activation_bounds!r}")
@@ -125,7 +135,8 @@ class StaticOptimization:
         """(lower, upper) (n_m,): each muscle's activation bounds (``muscle_bounds``, else ``activation_bounds``);
         ValueError when ``muscle_bounds`` holds another number of pairs."""
         if not self.muscle_bounds:
-            return np.full(n_m, float(self.activation_bounds[0])), np.full(n_m, float(self.activation_bounds[1]))
+            lo, hi = self.activation_bounds or DEFAULT_BOUNDS["Millard2012EquilibriumMuscle"]
+            return np.full(n_m, float(lo)), np.full(n_m, float(hi))
         if len(self.muscle_bounds) != n_m:
             raise ValueError(f"muscle_bounds: expected {n_m} pairs (one per muscle), got {len(self.muscle_bounds)}")
         b = np.asarray(self.muscle_bounds, dtype=float)

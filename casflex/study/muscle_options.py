@@ -20,13 +20,14 @@ KEYS = {"exponent", "force_length_velocity", "activation_bounds", "actuators", "
 @dataclass(frozen=True)
 class MuscleOptions:
     """``[options.muscles]``, checked: static optimization's ``exponent``, ``force_length_velocity`` and
-    ``activation_bounds``; the ``actuators`` file (resolved path) or ``reserves`` (N m); the reported ``joints``
+    ``activation_bounds`` (None: each muscle kind's OpenSim default, a DeGrooteFregly2016Muscle's 0, 1, the
+    others' 0.01, 1); the ``actuators`` file (resolved path) or ``reserves`` (N m); the reported ``joints``
     (() every hinge), the reactions' ``on`` and ``frame``; the muscles' ``uncertainty`` and the ``criteria``
     (exponents) for the bands."""
 
     exponent: float = 2.0
     force_length_velocity: bool = True
-    activation_bounds: tuple[float, float] = (0.01, 1.0)
+    activation_bounds: tuple[float, float] | None = None  # None: each muscle kind's OpenSim default
     actuators: str | None = None
     reserves: float | None = None
     joints: tuple[str, ...] = ()

@@ -7,7 +7,8 @@ lengths by the muscle-tendon length's ratio, as OpenSim's ScaleTool), cut into t
 [options.muscles]              # the table present: the muscles are computed; every key optional
 exponent = 2.0                 # static optimization's sum of activation^p (OpenSim's activation_exponent)
 force_length_velocity = true   # false: a muscle's force per activation is its max isometric force
-activation_bounds = [0.01, 1.0]  # of the muscles without min_control / max_control of their own (theirs win)
+activation_bounds = [0.01, 1.0]  # of the muscles without min_control / max_control of their own (theirs win);
+                               # default: each kind's OpenSim default (DeGroote's [0, 1], the others' [0.01, 1])
 actuators = "reserves.xml"     # reserves and residuals (an OpenSim ForceSet file), added to the model's own
 reserves = 100.0               # or: a reserve of this optimal force (N m) on every joint coordinate, FX FY MZ
 joints = ["hip_r", "hip_l"]    # the joints whose reactions the table holds (default: every hinge)
