@@ -194,6 +194,52 @@ def test_external_forces_whose_columns_carry_the_side_in_their_names(tmp_path, p
     assert any("plates 'calcn_r_' on calcn_r" in line for line in res.report)
 
 
+def _force(name: str, body: str, stems: tuple[str, str, str]) -> str:
+    return (f'<ExternalForce name="{name}"><applied_to_body>{body}</applied_to_body><force_expressed_in_body>ground'
+            "</force_expressed_in_body><point_expressed_in_body>ground</point_expressed_in_body>"
+            f"<force_identifier>{stems[0]}</force_identifier><point_identifier>{stems[1]}</point_identifier>"
+            f"<torque_identifier>{stems[2]}</torque_identifier></ExternalForce>")
+
+
+def test_an_external_loads_file_with_two_plates_on_one_foot_sums_them_as_opensim(tmp_path):
+    # an overground walk's ExternalLoads: the right foot on one plate, a stride later on another (two ExternalForces
+    # on calcn_r, which OpenSim sums); before: refused, "two external forces act on 'calcn_r'". Hamner's right plate
+    # split at 0.9 s, between the right stances (0.39-0.67 s, 1.10 s-end), into two plates, the second's columns
+    # named without a common prefix: the loads are the unsplit plate's (the filter is linear)
+    table = read_sto(DATA / "hamner_running_whole_grf.mot")
+    late = table.t >= 0.9
+    names, cols = list(table.names), [table.values]
+    for stem, new in (("ground_force_v", "late_force_v"), ("ground_force_p", "late_point_"),
+                      ("ground_torque_", "late_torque_")):
+        for axis in "xyz":
+            v = table.column(f"{stem}{axis}")
+            cols.append(np.where(late, v, 0.0)[:, None])
+            if stem != "ground_force_p":  # the first plate's centre of pressure kept where it is unloaded
+                cols[0][late, names.index(f"{stem}{axis}")] = 0.0
+            names.append(f"{new}{axis}")
+    lines = ["name split", f"datacolumns {len(names) + 1}", f"datarows {table.t.size}", "endheader",
+             "\t".join(["time", *names])]
+    values = np.hstack(cols)
+    lines += ["\t".join(repr(float(x)) for x in (t, *row)) for t, row in zip(table.t, values, strict=True)]
+    (tmp_path / "split.mot").write_text("\n".join(lines) + "\n")
+    loads = tmp_path / "loads.xml"
+    loads.write_text('<?xml version="1.0" encoding="UTF-8" ?><OpenSimDocument Version="30516"><ExternalLoads '
+                     'name="loads"><objects>'
+                     + _force("r1", "calcn_r", ("ground_force_v", "ground_force_p", "ground_torque_"))
+                     + _force("l", "calcn_l", ("1_ground_force_v", "1_ground_force_p", "1_ground_torque_"))
+                     + _force("r2", "calcn_r", ("late_force_v", "late_point_", "late_torque_"))
+                     + "</objects><datafile>split.mot</datafile></ExternalLoads></OpenSimDocument>")
+    model, markers = DATA / "hamner_subject02_planar.osim", DATA / "hamner_running_whole.trc"
+    fit = Fit(max_misfit=0.2)
+    split = inverse_dynamics(model, Trial(markers, grf=loads), fit=fit)
+    whole = inverse_dynamics(model, Trial(markers, grf=DATA / "hamner_running_whole_grf.mot",
+                                          plates={"calcn_r": "ground_", "calcn_l": "1_ground_"}), fit=fit)
+    for name in ("ankle_angle_r_moment", "knee_angle_r_moment", "hip_flexion_r_moment", "root.fy"):
+        peak = np.abs(whole.loads[name]).max()
+        assert np.abs(split.loads[name] - whole.loads[name]).max() < 1e-9 * peak, name  # rounding in the sum
+    assert any("'calcn_r_2_' on calcn_r" in line for line in split.report), split.report
+
+
 def _clamped_knee(tmp_path, upper: float) -> Path:
     """The leg with its knee's range [-2.0944, upper] rad, clamped (the file's other coordinates as they are)."""
     text = LEG.read_text()

@@ -118,7 +118,7 @@ def _external_loads(grf, plates) -> tuple[object, dict | str]:
     file given as ``grf`` names both (:func:`casflex.lab.setups.read_external_loads`; its bodies are the
     nodes of a model read from .osim). A plate whose identifiers are not ``<prefix>force_v`` ... (e.g.
     ``ground_force_r_v``, ``ground_force_r_p``, ``ground_torque_r_``) has its columns copied under the prefix
-    ``<body>_``."""
+    ``<body>_`` (``<body>_<k>_`` for a body's k-th plate: several on one body are summed, as OpenSim sums them)."""
     from casflex.lab import LabTable, read_sto
 
     if grf is None or isinstance(grf, LabTable) or not os.fspath(grf).lower().endswith(".xml"):
@@ -127,20 +127,23 @@ def _external_loads(grf, plates) -> tuple[object, dict | str]:
     from casflex.scene.items import node_name
 
     ext = read_external_loads(grf)  # plates given with it: refused by Trial
-    prefixes = {body: ext.prefix(body) for body in ext.plates}
-    if all(p is not None for p in prefixes.values()):
-        return ext.datafile, {node_name(body): p for body, p in prefixes.items()}
-    table = read_sto(ext.datafile)
-    names, columns = list(table.names), [table.values]
-    for body, (force, point, torque) in ext.plates.items():
-        if prefixes[body] is None:
-            prefixes[body] = alias = f"{node_name(body)}_"
-            for stem, new in ((force, "force_v"), (point, "force_p"), (torque, "torque_")):
-                for axis in "xyz" if stem else ():
-                    columns.append(table.column(f"{stem}{axis}")[:, None])
-                    names.append(f"{alias}{new}{axis}")
-    table = dataclasses.replace(table, names=tuple(names), values=np.hstack(columns))
-    return table, {node_name(body): p for body, p in prefixes.items()}
+    prefixes = {body: [ext.prefix(ident) for ident in idents] for body, idents in ext.plates.items()}
+    if any(None in ps for ps in prefixes.values()):
+        table = read_sto(ext.datafile)
+        names, columns = list(table.names), [table.values]
+        for body, idents in ext.plates.items():
+            for k, (ident, p) in enumerate(zip(idents, prefixes[body], strict=True)):
+                if p is not None:
+                    continue
+                prefixes[body][k] = alias = f"{node_name(body)}_{k + 1}_" if len(idents) > 1 else f"{node_name(body)}_"
+                for stem, new in zip(ident, ("force_v", "force_p", "torque_"), strict=True):
+                    for axis in "xyz" if stem else ():
+                        columns.append(table.column(f"{stem}{axis}")[:, None])
+                        names.append(f"{alias}{new}{axis}")
+        source = dataclasses.replace(table, names=tuple(names), values=np.hstack(columns))
+    else:
+        source = ext.datafile
+    return source, {node_name(body): ps[0] if len(ps) == 1 else ps for body, ps in prefixes.items()}
 
 
 def _from_markers(model: Model, tree: KinematicTree, lab, plane, t_start, t_end):

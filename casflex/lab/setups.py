@@ -97,17 +97,19 @@ def read_tasks(path: str | os.PathLike[str], _seen: tuple[str, ...] = ()) -> Mar
 @dataclass(frozen=True)
 class ExternalLoads:
     """An ``ExternalLoads`` file's plates: ``datafile`` (the ground reactions' .mot, its path resolved from
-    the file's directory), ``plates`` body -> (force, point, torque) identifiers, the columns' stems
-    (``("ground_force_v", "ground_force_p", "ground_torque_")``: columns ``ground_force_vx`` ...)."""
+    the file's directory), ``plates`` body -> its plates' (force, point, torque) identifiers, in the file's order
+    (a foot on plate 1, a stride later on plate 3: two ExternalForces on one body, OpenSim sums them), the
+    columns' stems (``("ground_force_v", "ground_force_p", "ground_torque_")``: columns ``ground_force_vx`` ...)."""
 
     source: str
     datafile: str
-    plates: dict[str, tuple[str, str, str]]
+    plates: dict[str, tuple[tuple[str, str, str], ...]]
 
-    def prefix(self, body: str) -> str | None:
-        """The column prefix of ``body``'s plate where its identifiers are ``<prefix>force_v``,
-        ``<prefix>force_p``, ``<prefix>torque_`` (OpenSim's examples; casflex's plates), else None."""
-        force, point, torque = self.plates[body]
+    @staticmethod
+    def prefix(identifiers: tuple[str, str, str]) -> str | None:
+        """The column prefix of a plate whose identifiers are ``<prefix>force_v``, ``<prefix>force_p``,
+        ``<prefix>torque_`` (OpenSim's examples; casflex's plates), else None."""
+        force, point, torque = identifiers
         p = force[:-len("force_v")] if force.endswith("force_v") else None
         return p if p is not None and point == f"{p}force_p" and torque == f"{p}torque_" else None
 
@@ -140,16 +142,14 @@ def read_external_loads(path: str | os.PathLike[str], _seen: tuple[str, ...] = (
         if inner:
             return read_external_loads(_named(path, inner, "external_loads_file", _seen), (*_seen, path))
         raise ValueError(f"{path}: no ExternalLoads: not an OpenSim external loads or inverse dynamics setup file")
-    plates: dict[str, tuple[str, str, str]] = {}
+    plates: dict[str, tuple[tuple[str, str, str], ...]] = {}
     for force in loads.iter("ExternalForce"):
         body, ident = _identifiers(path, force)
-        if body in plates:
-            raise ValueError(f"{path}: two external forces act on {body!r}; casflex takes one plate a body")
-        twin = next((b for b, other in plates.items() if other[0] == ident[0]), None)
+        twin = next((b for b, others in plates.items() if any(o[0] == ident[0] for o in others)), None)
         if twin is not None:
             raise ValueError(f"{path}: the external forces on {twin!r} and {body!r} both take the columns "
-                             f"{ident[0]!r}: one plate's load would be counted twice; give each body its own plate")
-        plates[body] = ident
+                             f"{ident[0]!r}: one plate's load would be counted twice; give each plate once")
+        plates[body] = (*plates.get(body, ()), ident)
     if not plates:
         raise ValueError(f"{path}: no ExternalForce")
     data = _text(path, loads, "datafile", "ExternalLoads")
