@@ -181,6 +181,34 @@ def test_opensims_external_loads_file_names_the_plates(tmp_path, plain):
     assert cli.returncode == 0 and "plates 'ground_' on calcn_r" in cli.stdout, cli.stderr
 
 
+def test_what_an_id_setup_asks_beyond_its_plates_and_is_not_done_is_said(tmp_path):
+    # an ID setup given as the plates' file: its cut-off and time range were left out without a word (the loads
+    # then differ from OpenSim's ID tool run on that setup); said where they differ from the options
+    import shutil
+
+    shutil.copy(GRF, tmp_path / GRF.name)
+    _external(tmp_path)
+    setup = tmp_path / "id_setup.xml"
+    tool = ("<OpenSimDocument><InverseDynamicsTool><external_loads_file>loads.xml</external_loads_file>{}"
+            "</InverseDynamicsTool></OpenSimDocument>")
+    for extra, said in (("", []),
+                        ("<lowpass_cutoff_frequency_for_coordinates>6</lowpass_cutoff_frequency_for_coordinates>"
+                         "<time_range> 0 2</time_range>", []),
+                        ("<lowpass_cutoff_frequency_for_coordinates>10</lowpass_cutoff_frequency_for_coordinates>"
+                         "<time_range> 0.5 0.9</time_range>",
+                         ["its lowpass_cutoff_frequency_for_coordinates 10 Hz is not applied: the coordinates are "
+                          "filtered at 6 Hz (--cutoff 10",
+                          "its time_range 0.5-0.9 s is not applied: the loads cover 0.4-1.11667 s (--t-start 0.5 "
+                          "--t-end 0.9"]),
+                        ("<lowpass_cutoff_frequency_for_coordinates>-1</lowpass_cutoff_frequency_for_coordinates>",
+                         ["its lowpass_cutoff_frequency_for_coordinates -1 (unfiltered) is not applied"])):
+        setup.write_text(tool.format(extra))
+        warnings = inverse_dynamics(LEG, Trial(TRC, grf=setup)).warnings
+        got = [w for w in warnings if w.startswith(f"{setup}: its ")]
+        assert len(got) == len(said), warnings
+        assert all(g.startswith(f"{setup}: {s}") for g, s in zip(got, said, strict=True)), warnings
+
+
 def test_external_forces_whose_columns_carry_the_side_in_their_names(tmp_path, plain):
     # Rajagopal's grf_walk.xml: ground_force_r_v, ground_force_r_p, ground_torque_r_ (no common prefix)
     text = GRF.read_text().replace("ground_force_v", "ground_force_r_v").replace("ground_force_p", "ground_force_r_p") \

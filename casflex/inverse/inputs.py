@@ -146,6 +146,31 @@ def _external_loads(grf, plates) -> tuple[object, dict | str]:
     return source, {node_name(body): ps[0] if len(ps) == 1 else ps for body, ps in prefixes.items()}
 
 
+def _setup_unapplied(grf, filter: Filter, t: np.ndarray) -> list[str]:
+    """The lines that say what an inverse dynamics setup given as ``grf`` asks and is not done: its coordinates'
+    cut-off other than ``filter``'s, its time range other than the trial's frames ``t`` (s) by more than a frame
+    (casflex takes the plates from it; the filter and the window are the options': --cutoff, --t-start, --t-end)."""
+    from casflex.lab.setups import id_setup_settings
+
+    if grf is None or not isinstance(grf, str | os.PathLike) or not os.fspath(grf).lower().endswith(".xml"):
+        return []
+    setup = id_setup_settings(grf)
+    lines = []
+    if "cutoff" in setup and setup["cutoff"] != filter.cutoff:
+        want = f"{setup['cutoff']:g} Hz" if setup["cutoff"] else "-1 (unfiltered)"
+        how = f"--cutoff {setup['cutoff']:g}" if setup["cutoff"] else "--no-filter"
+        have = f"at {filter.cutoff:g} Hz" if filter.cutoff else "not at all"
+        lines.append(f"{os.fspath(grf)}: its lowpass_cutoff_frequency_for_coordinates {want} is not applied: the "
+                     f"coordinates are filtered {have} ({how}, with --match opensim for OpenSim's filter, does as the "
+                     "setup says)")
+    if "time_range" in setup:
+        (t0, t1), step = setup["time_range"], float(t[1] - t[0]) if t.size > 1 else 0.0
+        if max(t0, float(t[0])) - float(t[0]) > step or float(t[-1]) - min(t1, float(t[-1])) > step:
+            lines.append(f"{os.fspath(grf)}: its time_range {t0:g}-{t1:g} s is not applied: the loads cover "
+                         f"{float(t[0]):g}-{float(t[-1]):g} s (--t-start {t0:g} --t-end {t1:g} does as the setup says)")
+    return lines
+
+
 def _from_markers(model: Model, tree: KinematicTree, lab, plane, t_start, t_end):
     """(t, the scene markers' channels y (n, 2 m), their labels, the rate, warnings) of a marker trial."""
     if not model.scene.markers:
@@ -433,7 +458,7 @@ def prepare(scene, trial: Trial, *, filter: Filter | None = None, fit: Fit | Non
         y, labels, rate, notes = np.zeros((t.size, 0)), (), 1.0 / float(t[1] - t[0]), []
     cutoff = filter.cutoff
     check_cutoff(cutoff, t, "markers" if z is None else "coordinates")
-    warnings = [*task_notes, *notes]
+    warnings = [*task_notes, *notes, *_setup_unapplied(trial.grf, filter, t)]
     plate_list = []
     fc = filter.plates
     window = (float(t[0]), float(t[-1]))

@@ -9,7 +9,7 @@ import os
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
-__all__ = ["ExternalLoads", "MarkerTasks", "read_external_loads", "read_tasks"]
+__all__ = ["ExternalLoads", "MarkerTasks", "id_setup_settings", "read_external_loads", "read_tasks"]
 
 
 @dataclass(frozen=True)
@@ -156,3 +156,30 @@ def read_external_loads(path: str | os.PathLike[str], _seen: tuple[str, ...] = (
     if not data:
         raise ValueError(f"{path}: no datafile: the ground reactions' file is not named")
     return ExternalLoads(path, os.path.join(os.path.dirname(path), data), plates)
+
+
+def id_setup_settings(path: str | os.PathLike[str]) -> dict[str, object]:
+    """What an inverse dynamics setup file (``<InverseDynamicsTool>``) asks of the trial beyond its plates:
+    ``cutoff`` (its ``lowpass_cutoff_frequency_for_coordinates``, Hz; None where it is -1: unfiltered) and
+    ``time_range`` ((start, end) s), each where the file gives it; {} for a file that is no such setup."""
+    path = os.fspath(path)
+    tool = _parse(path)
+    tool = tool if tool.tag == "InverseDynamicsTool" else tool.find(".//InverseDynamicsTool")
+    if tool is None:
+        return {}
+    owner = f"InverseDynamicsTool {tool.get('name', '')!r}"
+    out: dict[str, object] = {}
+    try:
+        cutoff = _text(path, tool, "lowpass_cutoff_frequency_for_coordinates", owner)
+        cutoff = float(cutoff) if cutoff else None
+        span = [float(v) for v in _text(path, tool, "time_range", owner).split()]
+    except ValueError as exc:
+        if "given" in str(exc):
+            raise
+        raise ValueError(f"{path}: {owner}: lowpass_cutoff_frequency_for_coordinates and time_range must be "
+                         "numbers") from None
+    if cutoff is not None:
+        out["cutoff"] = cutoff if cutoff > 0 else None
+    if len(span) == 2:
+        out["time_range"] = (span[0], span[1])
+    return out
