@@ -207,6 +207,14 @@ def test_what_an_id_setup_asks_beyond_its_plates_and_is_not_done_is_said(tmp_pat
         got = [w for w in warnings if w.startswith(f"{setup}: its ")]
         assert len(got) == len(said), warnings
         assert all(g.startswith(f"{setup}: {s}") for g, s in zip(got, said, strict=True)), warnings
+    ik = tmp_path / "ik_setup.xml"  # an IK setup naming the task file: its time range likewise
+    shutil.copy(DATA / "hamner_tasks_ik.xml", tmp_path / "tasks.xml")
+    for extra, n in (("", 0), ("<time_range> 0.4 1.2</time_range>", 0), ("<time_range> 0.6 1.0</time_range>", 1)):
+        ik.write_text(f'<OpenSimDocument><InverseKinematicsTool><IKTaskSet file="tasks.xml"/>{extra}'
+                      "</InverseKinematicsTool></OpenSimDocument>")
+        warnings = inverse_dynamics(LEG, Trial(TRC, grf=GRF, plates={"calcn_r": "ground_"}, tasks=ik)).warnings
+        got = [w for w in warnings if w.startswith(f"{ik}: its time_range 0.6-1 s is not applied")]
+        assert len(got) == n, warnings
 
 
 def test_external_forces_whose_columns_carry_the_side_in_their_names(tmp_path, plain):

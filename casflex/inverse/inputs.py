@@ -146,17 +146,18 @@ def _external_loads(grf, plates) -> tuple[object, dict | str]:
     return source, {node_name(body): ps[0] if len(ps) == 1 else ps for body, ps in prefixes.items()}
 
 
-def _setup_unapplied(grf, filter: Filter, t: np.ndarray) -> list[str]:
-    """The lines that say what an inverse dynamics setup given as ``grf`` asks and is not done: its coordinates'
-    cut-off other than ``filter``'s, its time range other than the trial's frames ``t`` (s) by more than a frame
-    (casflex takes the plates from it; the filter and the window are the options': --cutoff, --t-start, --t-end)."""
-    from casflex.lab.setups import id_setup_settings
+def _setup_unapplied(grf, filter: Filter | None, t: np.ndarray) -> list[str]:
+    """The lines that say what an inverse dynamics setup given as ``grf`` (or an inverse kinematics setup given as
+    the tasks, ``filter`` None) asks and is not done: its coordinates' cut-off other than ``filter``'s, its time
+    range other than the trial's frames ``t`` (s) by more than a frame (casflex takes the plates or the tasks from
+    it; the filter and the window are the options': --cutoff, --t-start, --t-end)."""
+    from casflex.lab.setups import tool_settings
 
     if grf is None or not isinstance(grf, str | os.PathLike) or not os.fspath(grf).lower().endswith(".xml"):
         return []
-    setup = id_setup_settings(grf)
+    setup = tool_settings(grf)
     lines = []
-    if "cutoff" in setup and setup["cutoff"] != filter.cutoff:
+    if filter is not None and "cutoff" in setup and setup["cutoff"] != filter.cutoff:
         want = f"{setup['cutoff']:g} Hz" if setup["cutoff"] else "-1 (unfiltered)"
         how = f"--cutoff {setup['cutoff']:g}" if setup["cutoff"] else "--no-filter"
         have = f"at {filter.cutoff:g} Hz" if filter.cutoff else "not at all"
@@ -458,7 +459,7 @@ def prepare(scene, trial: Trial, *, filter: Filter | None = None, fit: Fit | Non
         y, labels, rate, notes = np.zeros((t.size, 0)), (), 1.0 / float(t[1] - t[0]), []
     cutoff = filter.cutoff
     check_cutoff(cutoff, t, "markers" if z is None else "coordinates")
-    warnings = [*task_notes, *notes, *_setup_unapplied(trial.grf, filter, t)]
+    warnings = [*task_notes, *notes, *_setup_unapplied(trial.grf, filter, t), *_setup_unapplied(trial.tasks, None, t)]
     plate_list = []
     fc = filter.plates
     window = (float(t[0]), float(t[-1]))

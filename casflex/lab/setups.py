@@ -9,7 +9,7 @@ import os
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
-__all__ = ["ExternalLoads", "MarkerTasks", "id_setup_settings", "read_external_loads", "read_tasks"]
+__all__ = ["ExternalLoads", "MarkerTasks", "read_external_loads", "read_tasks", "tool_settings"]
 
 
 @dataclass(frozen=True)
@@ -158,13 +158,15 @@ def read_external_loads(path: str | os.PathLike[str], _seen: tuple[str, ...] = (
     return ExternalLoads(path, os.path.join(os.path.dirname(path), data), plates)
 
 
-def id_setup_settings(path: str | os.PathLike[str]) -> dict[str, object]:
-    """What an inverse dynamics setup file (``<InverseDynamicsTool>``) asks of the trial beyond its plates:
-    ``cutoff`` (its ``lowpass_cutoff_frequency_for_coordinates``, Hz; None where it is -1: unfiltered) and
-    ``time_range`` ((start, end) s), each where the file gives it; {} for a file that is no such setup."""
+def tool_settings(path: str | os.PathLike[str]) -> dict[str, object]:
+    """What an inverse dynamics or kinematics setup file (``<InverseDynamicsTool>``, ``<InverseKinematicsTool>``)
+    asks of the trial beyond its plates or tasks: ``cutoff`` (an ID setup's
+    ``lowpass_cutoff_frequency_for_coordinates``, Hz; None where it is -1: unfiltered) and ``time_range`` ((start,
+    end) s), each where the file gives it; {} for a file that is no such setup (an ExternalLoads or task file)."""
     path = os.fspath(path)
-    tool = _parse(path)
-    tool = tool if tool.tag == "InverseDynamicsTool" else tool.find(".//InverseDynamicsTool")
+    root = _parse(path)
+    tool = next((el for tag in ("InverseDynamicsTool", "InverseKinematicsTool")
+                 for el in ([root] if root.tag == tag else root.findall(f".//{tag}"))), None)
     if tool is None:
         return {}
     owner = f"InverseDynamicsTool {tool.get('name', '')!r}"
