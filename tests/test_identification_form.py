@@ -287,3 +287,14 @@ def test_a_robust_loss_weighs_marker_artefacts_down(twobar):
     for k, v in r.parameters.items():
         assert abs(v - truth[k]) <= 3 * r.std_errors[k], k
     assert r.extra["uncertainty"]["noise"]["kt1"] < plain.extra["uncertainty"]["noise"]["kt1"]
+
+
+def test_a_vary_range_that_excludes_the_scenes_value_is_refused(twobar):
+    # the fit runs at the scene's E = 2.1e11: a range of 1e11..1.5e11 contradicts it (before: refits at both ends,
+    # success, the range never checked against the value the parameters were fitted at)
+    from casflex.identification.form import declared_alternatives
+
+    with pytest.raises(ValueError, match=r"vary bar2.E: the range 1e\+11..1.5e\+11 excludes the scene's value "
+                                         r"2.1e\+11"):
+        declared_alternatives(twobar, form="none", vary={"bar2.E": (1e11, 1.5e11)})
+    assert len(declared_alternatives(twobar, form="none", vary={"bar2.E": (2.1e11, 2.5e11)})) == 2  # an end: fine

@@ -80,3 +80,16 @@ def test_a_recording_that_starts_moving_is_refused_for_the_scene_state(twobar):
     with pytest.raises(ValueError, match="starts moving"):
         check_against_scene(twobar, exp)
     check_against_scene(twobar, Experiment(exp.data, initial_state="velocities"))  # positions trusted
+
+
+def test_a_channel_without_any_sample_is_refused_in_one_line(twobar):
+    # a marker never seen (every value NaN): an IndexError in the first-sample check before
+    data = _rest(twobar)
+    q = data.q.copy()
+    q[:, 2] = np.nan
+    exp = Experiment(MeasurementSet(data.t, data.channels, q, None, None))
+    with pytest.raises(ValueError, match=r"data: channel 'x5' has no sample \(every value is NaN\)"):
+        check_against_scene(twobar, exp)
+    with pytest.raises(ValueError, match="'x5' has no sample"):
+        SampleMap.of(twobar, exp, dt=1e-3)
+    SampleMap.of(twobar, Experiment(exp.data, channels=("x3", "y3", "y5")), dt=1e-3)  # left out: fine

@@ -19,7 +19,7 @@ scene starts), with one line that says what to do.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,7 +29,7 @@ from casflex.identification.choices import INITIAL_STATES  # noqa: F401 (re-expo
 from casflex.model import Model
 from casflex.model.markers import channel_index, channel_values, marker_channels
 
-__all__ = ["Experiment", "SampleMap", "INITIAL_STATES", "check_against_scene", "free_dofs", "nyquist"]
+__all__ = ["Experiment", "SampleMap", "INITIAL_STATES", "check_against_scene", "check_units", "free_dofs", "nyquist"]
 
 
 
@@ -96,6 +96,10 @@ class Experiment:
                 raise ValueError(f"dofs: {c!r} is not in the data (channels: {list(self.data.channels)})")
         if not names:
             raise ValueError("dofs: no channel to compare")
+        empty = [c for c in names if not np.isfinite(self.data.q[:, self.data.channels.index(c)]).any()]
+        if empty:  # a marker never seen: nothing to compare, and no first sample to check or start from
+            raise ValueError(f"data: channel {empty[0]!r} has no sample (every value is NaN); drop it from the file "
+                             "or leave it out of the compared channels (--dofs)")
         if isinstance(self.noise, Mapping):
             extra = [c for c in self.noise if c not in names]
             missing = [c for c in names if c not in self.noise]
@@ -209,6 +213,32 @@ def _speed(data: MeasurementSet, cols: list[int]) -> float:
     return float(np.percentile(rates, 90)) if rates.size else 0.0
 
 
+def check_units(model: Model, data: MeasurementSet, names: Sequence[str] | None = None) -> None:
+    """ValueError with one line when the recording's channels ``names`` (default all) are not in the
+    scene's units: positions that reach 30 times the scene's size (millimetres, centimetres), or
+    times that look like milliseconds (every method's check: docs/identification.md, step 1)."""
+    scene = model.scene
+    names = data.channels if names is None else names
+    cols = [data.channels.index(c) for c in names if not c.startswith("theta")]
+    span = scene.length_scale
+    reach = max(span, max(abs(v) for n in scene.nodes for v in (n.x, n.y)))
+    finite = [c for c in cols if np.isfinite(data.q[:, c]).any()]
+    if finite:
+        big = float(np.nanmax(np.abs(data.q[:, finite])))
+        if big > 30 * reach:
+            factor = 1000 if big > 300 * reach else 100
+            unit = "millimetres" if factor == 1000 else "centimetres"
+            raise ValueError(f"data: positions reach {big:.4g} while the scene spans {span:.3g} m: they look like "
+                             f"{unit} (x {factor}); give positions in metres")
+    t = data.t
+    if t.size < 2:
+        return
+    dt_med = float(np.median(np.diff(t)))
+    if t[-1] - t[0] > 100 * max(scene.run.t_end, 1.0) and dt_med >= 0.1:
+        raise ValueError(f"data: t runs from {t[0]:g} to {t[-1]:g} in steps of {dt_med:g}: the times look like "
+                         f"milliseconds (the scene's run lasts {scene.run.t_end:g} s); give t in seconds")
+
+
 def check_against_scene(model: Model, experiment: Experiment) -> None:
     """ValueError with one line when the data cannot belong to the scene: positions in other
     units than metres, times in milliseconds, or (for ``initial_state`` "scene" and
@@ -216,22 +246,11 @@ def check_against_scene(model: Model, experiment: Experiment) -> None:
     recording that starts moving while the scene starts at rest."""
     data, scene = experiment.data, model.scene
     names = experiment.compared(model)
+    check_units(model, data, names)
     trans = [c for c in names if not c.startswith("theta")]
     cols = [data.channels.index(c) for c in trans]
     span = scene.length_scale
-    reach = max(span, max(abs(v) for n in scene.nodes for v in (n.x, n.y)))
-    if cols:
-        big = float(np.nanmax(np.abs(data.q[:, cols])))
-        if big > 30 * reach:
-            factor = 1000 if big > 300 * reach else 100
-            unit = "millimetres" if factor == 1000 else "centimetres"
-            raise ValueError(f"data: positions reach {big:.4g} while the scene spans {span:.3g} m: they look like "
-                             f"{unit} (x {factor}); give positions in metres")
     t = data.t
-    dt_med = float(np.median(np.diff(t)))
-    if t[-1] - t[0] > 100 * max(scene.run.t_end, 1.0) and dt_med >= 0.1:
-        raise ValueError(f"data: t runs from {t[0]:g} to {t[-1]:g} in steps of {dt_med:g}: the times look like "
-                         f"milliseconds (the scene's run lasts {scene.run.t_end:g} s); give t in seconds")
     if experiment.initial_state == "estimate":
         return
     noise = experiment.noise_level() or 1e-3 * span
