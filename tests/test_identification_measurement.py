@@ -88,7 +88,7 @@ def test_a_channel_without_any_sample_is_refused_in_one_line(twobar):
     q = data.q.copy()
     q[:, 2] = np.nan
     exp = Experiment(MeasurementSet(data.t, data.channels, q, None, None))
-    with pytest.raises(ValueError, match=r"data: channel 'x5' has no sample \(every value is NaN\)"):
+    with pytest.raises(ValueError, match=r"^data: channel 'x5' has no sample \(every value is NaN\)"):
         check_against_scene(twobar, exp)
     with pytest.raises(ValueError, match="'x5' has no sample"):
         SampleMap.of(twobar, exp, dt=1e-3)

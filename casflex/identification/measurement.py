@@ -98,8 +98,8 @@ class Experiment:
             raise ValueError("dofs: no channel to compare")
         empty = [c for c in names if not np.isfinite(self.data.q[:, self.data.channels.index(c)]).any()]
         if empty:  # a marker never seen: nothing to compare, and no first sample to check or start from
-            raise ValueError(f"data: channel {empty[0]!r} has no sample (every value is NaN); drop it from the file "
-                             "or leave it out of the compared channels (--dofs)")
+            raise ValueError(f"{_label(self.data)}: channel {empty[0]!r} has no sample (every value is NaN); drop it "
+                             "from the file or leave it out of the compared channels (--dofs)")
         if isinstance(self.noise, Mapping):
             extra = [c for c in self.noise if c not in names]
             missing = [c for c in names if c not in self.noise]
@@ -213,6 +213,11 @@ def _speed(data: MeasurementSet, cols: list[int]) -> float:
     return float(np.percentile(rates, 90)) if rates.size else 0.0
 
 
+def _label(data: MeasurementSet) -> str:
+    """What a message calls the recording: its file (one of several --data), else "data"."""
+    return str(data.meta.get("path", "data")) if data.source == "file" else "data"
+
+
 def check_units(model: Model, data: MeasurementSet, names: Sequence[str] | None = None) -> None:
     """ValueError with one line when the recording's channels ``names`` (default all) are not in the
     scene's units: positions that reach 30 times the scene's size (millimetres, centimetres), or
@@ -228,15 +233,15 @@ def check_units(model: Model, data: MeasurementSet, names: Sequence[str] | None 
         if big > 30 * reach:
             factor = 1000 if big > 300 * reach else 100
             unit = "millimetres" if factor == 1000 else "centimetres"
-            raise ValueError(f"data: positions reach {big:.4g} while the scene spans {span:.3g} m: they look like "
-                             f"{unit} (x {factor}); give positions in metres")
+            raise ValueError(f"{_label(data)}: positions reach {big:.4g} while the scene spans {span:.3g} m: they look "
+                             f"like {unit} (x {factor}); give positions in metres")
     t = data.t
     if t.size < 2:
         return
     dt_med = float(np.median(np.diff(t)))
     if t[-1] - t[0] > 100 * max(scene.run.t_end, 1.0) and dt_med >= 0.1:
-        raise ValueError(f"data: t runs from {t[0]:g} to {t[-1]:g} in steps of {dt_med:g}: the times look like "
-                         f"milliseconds (the scene's run lasts {scene.run.t_end:g} s); give t in seconds")
+        raise ValueError(f"{_label(data)}: t runs from {t[0]:g} to {t[-1]:g} in steps of {dt_med:g}: the times look "
+                         f"like milliseconds (the scene's run lasts {scene.run.t_end:g} s); give t in seconds")
 
 
 def check_against_scene(model: Model, experiment: Experiment) -> None:
@@ -264,7 +269,7 @@ def check_against_scene(model: Model, experiment: Experiment) -> None:
     j = int(np.argmax(off))
     if off[j] > tol / span:
         unit = "rad" if names[j].startswith("theta") else "m"
-        raise ValueError(f"data: the recording does not start at the scene's initial state: {names[j]} = "
+        raise ValueError(f"{_label(data)}: the recording does not start at the scene's initial state: {names[j]} = "
                          f"{first[j]:.4g} {unit} at the first sample (t = {t[0]:g} s), the scene has {scene_q[j]:.4g} "
                          f"{unit}; use --initial-state estimate")
     if experiment.initial_state == "scene" and cols:
@@ -275,6 +280,6 @@ def check_against_scene(model: Model, experiment: Experiment) -> None:
         moving = (np.abs(v - v_scene) > 5 * se) & (np.abs(v - v_scene) > MOVING * _speed(data, cols))
         if moving.any():
             j = int(np.argmax(np.where(moving, np.abs(v - v_scene), 0.0)))
-            raise ValueError(f"data: the recording starts moving ({trans[j]} at {v[j]:.3g} m/s at t = {t[0]:g} s) "
-                             f"while the scene starts at {v_scene[j]:.3g} m/s; use --initial-state velocities "
-                             "(positions trusted) or estimate")
+            raise ValueError(f"{_label(data)}: the recording starts moving ({trans[j]} at {v[j]:.3g} m/s at t = "
+                             f"{t[0]:g} s) while the scene starts at {v_scene[j]:.3g} m/s; use --initial-state "
+                             "velocities (positions trusted) or estimate")
