@@ -167,3 +167,11 @@ def test_pressed_on_bounds_needs_both_the_bound_and_a_step_beyond_it():
     assert pressed_on_bounds(J, w - np.array([-0.5, 0.5]), w, lb, ub).tolist() == [True, False]
     w = np.array([1.0, 10 - 1e-7])
     assert pressed_on_bounds(J, w - np.array([-0.5, 11.0]), w, lb, ub).tolist() == [False, True]  # far: no
+
+
+def test_parameters_the_data_cannot_separate_do_not_succeed_directly(tmp_path):
+    from test_identification_estimate import _parallel_springs
+
+    model = _parallel_springs(tmp_path)
+    r = identify_direct(model, simulated_set(model, t_end=0.7), [0.69], solver=Solver(verbose=False))
+    assert not r.success and "k1, k1b are not determined by the data" in r.message

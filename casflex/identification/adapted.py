@@ -238,7 +238,8 @@ def identify_adapted_direct(model: Model, data: MeasurementSet, instants: Sequen
               for k, (_, t, _) in enumerate(samples)}
     rotations = {t: {d: v for d, v in s.items() if d.startswith("theta")} for t, s in states.items()}
     at_bound = pb.bound_flags(model, p_hat, scale, pb.pressed_on_bounds(Jv, zv, wv, lbw[:n_p], ubw[:n_p]))
-    reasons = pb.failure_reasons(st, at_bound)
+    reasons = pb.failure_reasons(st, at_bound) + pb.undetermined_reasons(stats["std_errors"],
+                                                                        stats["weakest_direction"])
     return IdentificationResult(
         method="adapted-direct", solver=opts.solver, parameters=dict(zip(names, p_hat.tolist(), strict=True)),
         start=dict(zip(names, p0.tolist(), strict=True)), success=not reasons,

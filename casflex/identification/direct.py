@@ -38,6 +38,7 @@ from casflex.identification.problem import (
     smoothed_if_needed,
     solve_and_polish,
     start_values,
+    undetermined_reasons,
 )
 from casflex.identification.reconstruct import dofs_from_markers
 from casflex.model import Model
@@ -137,7 +138,7 @@ def identify_direct(model: Model, data: MeasurementSet, instants: Sequence[float
     k = n_c + n_ax
     lams = [list(wv[n_p + i * k:n_p + i * k + n_c] * fs) for i in range(len(samples))]
     at_bound = bound_flags(model, p_hat, scale, pressed_on_bounds(Jv, zv, wv, lb_th, ub_th))
-    reasons = failure_reasons(st, at_bound)
+    reasons = failure_reasons(st, at_bound) + undetermined_reasons(stats["std_errors"], stats["weakest_direction"])
     extra = {**opts.record(),
              "force_scale": fs, "residual_norm": float(np.linalg.norm(zv) * fs), "gauss_newton_polish": polished,
              "beam_forces": mode, "smoothing": smoothing_info, "uncertainty": uncertainty,

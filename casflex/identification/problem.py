@@ -26,7 +26,7 @@ __all__ = ["IdentificationResult", "parameter_scale", "start_values", "bound_fla
            "gauss_newton_statistics", "gauss_newton_polish", "robust_statistics", "solver_options_for",
            "least_squares_nlp", "ParameterMap",
            "TRANSFORMS", "HESSIANS", "GAUSS_NEWTON", "NLPOptions", "solve_and_polish", "failure_reasons",
-           "casadi_reason", "smoothed_if_needed"]
+           "casadi_reason", "smoothed_if_needed", "undetermined_reasons"]
 
 
 def parameter_scale(model: Model) -> np.ndarray:
@@ -404,6 +404,22 @@ def solve_and_polish(S: ca.Function, zJ: Any, w0: np.ndarray, lbw: np.ndarray, u
     w, polished = gauss_newton_polish(zJ, w_solver, lbw, ubw)
     return {"w_solver": w_solver, "w": w, "polished": polished, "stats": S.stats(), "solver_s": solver_s,
             "solve_s": time.perf_counter() - t0}
+
+
+def undetermined_reasons(std_errors: dict[str, float], weakest: dict[str, float] | None) -> list[str]:
+    """Why a result whose parameters the data do not determine is not a success: an infinite standard error
+    (the data fix only a combination: two springs in parallel, k1 + k1b; the values are the start's split).
+    ``weakest``: the least determined direction ({name: weight}, :func:`gauss_newton_statistics`)."""
+    names = [k for k, v in std_errors.items() if math.isinf(v)]
+    if not names:
+        return []
+    if len(names) == 1:
+        return [f"{names[0]} is not determined by the data (infinite standard error): the fitted motion does not "
+                "depend on it here"]
+    combo = " ".join(f"{w:+.2f} {k}" for k, w in (weakest or {}).items() if abs(w) > 0.05)
+    return [f"{', '.join(names)} are not determined by the data (infinite standard errors"
+            f"{f'; the undetermined combination: {combo}' if combo else ''}): hold all but one of them in the scene, "
+            "or record motion that separates them"]
 
 
 def failure_reasons(stats: dict, at_bound: dict[str, bool]) -> list[str]:

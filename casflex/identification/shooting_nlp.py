@@ -388,7 +388,7 @@ def _result(s: _SetUp, nlp: _NLP, out: dict[str, Any], build_s: float, record: d
                      "local minimum, a wrong scene or a model that misses the physics)")
     # and the identified model's own simulation fits the recording or leaves white residuals, within the noise
     residual, experiment = _residuals(s, X, record["initial_state"])
-    reasons = other + residual
+    reasons = other + residual + pb.undetermined_reasons(stats["std_errors"], stats["weakest_direction"])
     return IdentificationResult(
         method="indirect", solver=record.pop("solver"), parameters=dict(zip(pn, p_hat.tolist(), strict=True)),
         start=dict(zip(pn, s.p0.tolist(), strict=True)), success=not reasons,
