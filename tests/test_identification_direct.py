@@ -175,3 +175,14 @@ def test_parameters_the_data_cannot_separate_do_not_succeed_directly(tmp_path):
     model = _parallel_springs(tmp_path)
     r = identify_direct(model, simulated_set(model, t_end=0.7), [0.69], solver=Solver(verbose=False))
     assert not r.success and "k1, k1b are not determined by the data" in r.message
+
+
+def test_a_channel_too_sparse_to_smooth_is_named(twobar, sim, tmp_path):
+    # before: "smoothing: a channel has fewer than 5 samples", which of 15 unsaid
+    from casflex.data import load_measurements, save_measurements
+
+    q = sim.q[:200].copy()
+    q[3:, sim.channels.index("y3")] = np.nan
+    path = save_measurements(MeasurementSet(sim.t[:200], sim.channels, q, None, None), tmp_path / "rig.csv")
+    with pytest.raises(ValueError, match=r"rig.csv: channel 'y3': smoothing: 3 finite samples, fewer than the 5"):
+        identify_direct(twobar, load_measurements(path), [0.1])
