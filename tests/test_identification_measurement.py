@@ -93,3 +93,25 @@ def test_a_channel_without_any_sample_is_refused_in_one_line(twobar):
     with pytest.raises(ValueError, match="'x5' has no sample"):
         SampleMap.of(twobar, exp, dt=1e-3)
     SampleMap.of(twobar, Experiment(exp.data, channels=("x3", "y3", "y5")), dt=1e-3)  # left out: fine
+
+
+def test_a_frozen_channel_is_refused_and_a_still_one_passes(twobar):
+    # y3 held at one value (a marker frozen by the capture software) while x3, x5, y5 move: before, the indirect
+    # method failed for other reasons and the adapted direct one reported success with k3 198 +- 17 for 400
+    from casflex.identification.measurement import check_frozen
+
+    t = np.linspace(0, 1, 101)
+    names = ("x3", "y3", "x5", "y5")
+    q0 = np.array([twobar.q0[twobar.dof(c)] for c in names])
+    q = q0 + 0.01 * (1 - np.cos(2 * np.pi * t))[:, None] * np.array([1.0, 0.0, 2.0, 1.0])  # from rest
+    q[:, 1] = q0[1] + 1e-4  # frozen, not at the scene's value
+    exp = Experiment(MeasurementSet(t, names, q, None, None))
+    with pytest.raises(ValueError, match=r"^data: channel 'y3' holds one value \(-0.865925\) at all its 101 samples "
+                                         r"while the others move: a frozen or filled marker\?"):
+        check_against_scene(twobar, exp)
+    check_against_scene(twobar, Experiment(exp.data, channels=("x3", "x5", "y5")))  # left out: fine
+    q[:, 1] = q0[1]  # still at the scene's value (a symmetric scene's noise-free run): fine
+    check_frozen(twobar, MeasurementSet(t, names, q, None, None))
+    still = np.tile([0.0, 0.0, 0.0], (t.size, 1))  # a support's dofs never move: fine wherever they are recorded
+    check_frozen(twobar, MeasurementSet(t, ("x1", "y1", "x5"), np.column_stack([still[:, :2] + 1e-3, q[:, 2]]),
+                                        None, None))

@@ -37,7 +37,7 @@ from casflex import codegen
 from casflex.data import MeasurementSet
 from casflex.identification import problem as pb
 from casflex.identification.initial_state import _kinematic_fit
-from casflex.identification.measurement import check_units
+from casflex.identification.measurement import check_frozen, check_units
 from casflex.identification.options import Smoothing, Solver
 from casflex.identification.problem import IdentificationResult
 from casflex.identification.reconstruct import dofs_from_markers
@@ -121,6 +121,7 @@ def identify_adapted_direct(model: Model, data: MeasurementSet, instants: Sequen
     pb.require_no_joints(model, "the adapted direct method (rotations fitted to the nodes' translations)")
     t_build = time.perf_counter()
     check_units(model, data)  # millimetres or milliseconds: refused, as by the indirect method
+    check_frozen(model, data)
     data, from_markers = dofs_from_markers(model, data, "the adapted direct method", rotations=False)
     if model.n_p == 0:
         raise ValueError("the scene declares no parameters to identify ([[parameters]] in the scene file)")

@@ -21,7 +21,7 @@ import numpy as np
 
 from casflex import codegen
 from casflex.data import MeasurementSet
-from casflex.identification.measurement import check_units
+from casflex.identification.measurement import check_frozen, check_units
 from casflex.identification.options import Smoothing, Solver
 from casflex.identification.problem import (
     IdentificationResult,
@@ -87,6 +87,7 @@ def identify_direct(model: Model, data: MeasurementSet, instants: Sequence[float
     require_no_uncertain(model, "the direct method")
     t_build = time.perf_counter()
     check_units(model, data)  # millimetres or milliseconds: refused, as by the indirect method
+    check_frozen(model, data)
     data, from_markers = dofs_from_markers(model, data, "the direct method")
     data, smoothing_info = smoothed_if_needed(data, smoothing.kind, smoothing.cutoff)
     samples = _instant_data(model, data, instants)

@@ -29,7 +29,8 @@ from casflex.identification.choices import INITIAL_STATES  # noqa: F401 (re-expo
 from casflex.model import Model
 from casflex.model.markers import channel_index, channel_values, marker_channels
 
-__all__ = ["Experiment", "SampleMap", "INITIAL_STATES", "check_against_scene", "check_units", "free_dofs", "nyquist"]
+__all__ = ["Experiment", "SampleMap", "INITIAL_STATES", "check_against_scene", "check_units", "check_frozen",
+           "free_dofs", "nyquist"]
 
 
 
@@ -244,6 +245,40 @@ def check_units(model: Model, data: MeasurementSet, names: Sequence[str] | None 
                          f"like milliseconds (the scene's run lasts {scene.run.t_end:g} s); give t in seconds")
 
 
+#: A channel holding one value at this many samples or more, while others move, is taken for a frozen one
+FROZEN_SAMPLES = 10
+
+
+def check_frozen(model: Model, data: MeasurementSet, names: Sequence[str] | None = None) -> None:
+    """ValueError with one line for a channel (of ``names``, default all the model knows) that holds one value,
+    to the last digit, at every one of its samples (at least FROZEN_SAMPLES) while another channel moves: a
+    marker frozen or filled by the capture software. Only channels the model's free dofs move, at another value
+    than the scene's own (a symmetric scene's noise-free run keeps a dof at its initial value: that passes).
+    Fitted, twobar's y3 frozen gave the adapted direct method success with k3 = 198 +- 17 for 400."""
+    names = [c for c in (data.channels if names is None else names) if c in data.channels]
+    known = [c for c in names if c in model.dof_names or c in marker_channels(model)]
+    moving = [c for c in data.channels if _finite(data, c).size and np.ptp(_finite(data, c)) > 0]
+    q0 = channel_values(model, model.q0, model.qd0)[0][0]
+    free = free_dofs(model)
+    nudged = channel_values(model, model.q0 + 1e-6 * np.eye(model.n_dof)[free], np.zeros((free.size, model.n_dof)))[0]
+    can_move = np.abs(nudged - q0).max(axis=0, initial=0.0) > 0  # a support's dof, a marker on a clamped body: never
+    for c in known:
+        y = _finite(data, c)
+        if y.size < FROZEN_SAMPLES or np.ptp(y) > 0 or not can_move[channel_index(model, c)] \
+                or not [m for m in moving if m != c]:
+            continue
+        if abs(y[0] - q0[channel_index(model, c)]) <= 1e-12 * max(1.0, abs(y[0])):
+            continue
+        raise ValueError(f"{_label(data)}: channel {c!r} holds one value ({y[0]:.6g}) at all its {y.size} samples "
+                         "while the others move: a frozen or filled marker? Drop it (--dofs, the indirect method) or "
+                         "mend the recording")
+
+
+def _finite(data: MeasurementSet, channel: str) -> np.ndarray:
+    y = data.q[:, data.channels.index(channel)]
+    return y[np.isfinite(y)]
+
+
 def check_against_scene(model: Model, experiment: Experiment) -> None:
     """ValueError with one line when the data cannot belong to the scene: positions in other
     units than metres, times in milliseconds, or (for ``initial_state`` "scene" and
@@ -252,6 +287,7 @@ def check_against_scene(model: Model, experiment: Experiment) -> None:
     data, scene = experiment.data, model.scene
     names = experiment.compared(model)
     check_units(model, data, names)
+    check_frozen(model, data, names)
     trans = [c for c in names if not c.startswith("theta")]
     cols = [data.channels.index(c) for c in trans]
     span = scene.length_scale
