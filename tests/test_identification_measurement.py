@@ -115,3 +115,13 @@ def test_a_frozen_channel_is_refused_and_a_still_one_passes(twobar):
     still = np.tile([0.0, 0.0, 0.0], (t.size, 1))  # a support's dofs never move: fine wherever they are recorded
     check_frozen(twobar, MeasurementSet(t, ("x1", "y1", "x5"), np.column_stack([still[:, :2] + 1e-3, q[:, 2]]),
                                         None, None))
+
+
+def test_a_short_recording_in_milliseconds_is_refused(twobar):
+    # 0.3 s of a 3 s scene in ms at 100 Hz: 0 .. 300 "s" in steps of 10, under the 100 runs the check asked for,
+    # simulated for 300 000 steps before the fit failed
+    t = np.arange(0, 0.3001, 0.01) * 1000
+    q = np.tile([twobar.q0[twobar.dof(c)] for c in ("x5", "y5")], (t.size, 1))
+    with pytest.raises(ValueError, match="the times look like milliseconds"):
+        check_against_scene(twobar, Experiment(MeasurementSet(t, ("x5", "y5"), q, None, None)))
+    check_against_scene(twobar, Experiment(MeasurementSet(t / 1000, ("x5", "y5"), q, None, None)))
