@@ -22,6 +22,8 @@ CASES = [
     ("identify twobar --method indirect --hessian exact", r"--hessian: the NLP solver's Hessian; .*--solver ipopt"),
     ("identify twobar --method indirect --vary bar2.Q=1:2", r"--vary bar2.Q: 'bar2' has no numeric property 'Q'"),
     ("identify twobar --method indirect --vary bar2.E=3e11:2e11", r"--vary bar2.E: expected finite lower < upper"),
+    ("identify twobar --method indirect --vary bar2.E=1e11:1.5e11", r"--vary bar2.E: the range 1e\+11..1.5e\+11 "
+                                                                   r"excludes the scene's value 2.1e\+11"),
     ("identify twobar --method indirect --vary torsion3.kt=1:2", r"--vary torsion3.kt: it is parameter 'kt3', fitted"),
     ("identify twobar --method indirect --vary bar2.E", r"argument --vary: expected TARGET=LOWER:UPPER"),
     ("identify twobar --method indirect --alternatives leg", r"--alternatives: scene 'leg' does not declare the "

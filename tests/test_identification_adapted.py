@@ -85,3 +85,10 @@ def test_bad_data_is_named(twobar, sim):
         identify_adapted_direct(twobar, ok, [sim.t[-1]])
     with pytest.raises(ValueError, match="instants"):
         identify_adapted_direct(twobar, ok, [])
+    # positions in millimetres: refused as by the indirect method (before: success, k1 at 200 for 700)
+    with pytest.raises(ValueError, match="look like millimetres"):
+        identify_adapted_direct(twobar, MeasurementSet(sim.t, tuple(trans), sim.q[:, cols] * 1000, None, None), [0.5])
+    frozen = sim.q[:, cols].copy()
+    frozen[:, trans.index("y3")] = -0.86  # a marker the capture software froze
+    with pytest.raises(ValueError, match="channel 'y3' holds one value"):
+        identify_adapted_direct(twobar, MeasurementSet(sim.t, tuple(trans), frozen, None, None), [0.5])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -129,3 +130,59 @@ def test_objective_is_the_residual_at_the_reported_parameters(twobar, sim):
     assert r.objective == pytest.approx(f, rel=1e-6)
     assert set(r.extra["solver_parameters"]) == set(r.parameters)
     assert 0.0 < r.extra["solver_s"] <= r.wall_solve_s
+
+
+def test_positions_in_millimetres_are_refused_as_by_the_indirect_method(twobar, sim):
+    # before: no check; a recording of every dof in mm (rotations in rad) gave success with k1 at 210 for 700
+    mm = np.where([c.startswith("theta") for c in sim.channels], 1.0, 1000.0)
+    data = MeasurementSet(sim.t, sim.channels, sim.q * mm, None, None)
+    with pytest.raises(ValueError, match="look like millimetres"):
+        identify_direct(twobar, data, [0.5])
+    with pytest.raises(ValueError, match="look like milliseconds"):
+        identify_direct(twobar, MeasurementSet(sim.t * 1000, sim.channels, sim.q, None, None), [500.0])
+
+
+def test_a_fit_held_on_a_bound_by_the_interior_point_solver_does_not_succeed(twobar):
+    # Exudyn's twobar, every dof at 100 Hz over 1 s with 0.1 mm noise: the least-squares kt3 is -0.50 (its SE 2.9),
+    # IPOPT stops 8e-8 above the bound 0, 16 x the old 1e-8-of-scale test: success was claimed
+    z = np.load(Path(__file__).parent / "data" / "twobar_exudyn.npz")
+    names = tuple(f"{a}{i}" for i in range(1, 6) for a in ("x", "y", "theta"))
+    rows = np.arange(0, 1001, 10)
+    q = z["q"][np.ix_(rows, [[str(c) for c in z["channels"]].index(n) for n in names])]
+    q = q + np.random.default_rng(0).normal(0, 1e-4, q.shape)
+    r = identify_direct(twobar, MeasurementSet(z["t"][rows], names, q, None, None), [0.1, 0.3, 0.5, 0.7, 0.9],
+                        solver=Solver(verbose=False))
+    assert r.extra["linear_solution"]["kt3"] < 0 <= r.parameters["kt3"] < 1e-6
+    assert r.at_bound["kt3"] and not r.success and "kt3 ended on a bound" in r.message
+    assert not any(r.at_bound[k] for k in ("k1", "k3"))  # interior ones are not flagged
+
+
+def test_pressed_on_bounds_needs_both_the_bound_and_a_step_beyond_it():
+    from casflex.identification.problem import pressed_on_bounds
+
+    J = np.eye(2)
+    lb, ub = np.zeros(2), np.full(2, 10.0)
+    # z = w - target: the unconstrained optimum is the target
+    w = np.array([1e-7, 1e-7])
+    assert pressed_on_bounds(J, w - np.array([-0.5, 0.5]), w, lb, ub).tolist() == [True, False]
+    w = np.array([1.0, 10 - 1e-7])
+    assert pressed_on_bounds(J, w - np.array([-0.5, 11.0]), w, lb, ub).tolist() == [False, True]  # far: no
+
+
+def test_parameters_the_data_cannot_separate_do_not_succeed_directly(tmp_path):
+    from test_identification_estimate import _parallel_springs
+
+    model = _parallel_springs(tmp_path)
+    r = identify_direct(model, simulated_set(model, t_end=0.7), [0.69], solver=Solver(verbose=False))
+    assert not r.success and "k1, k1b are not determined by the data" in r.message
+
+
+def test_a_channel_too_sparse_to_smooth_is_named(twobar, sim, tmp_path):
+    # before: "smoothing: a channel has fewer than 5 samples", which of 15 unsaid
+    from casflex.data import load_measurements, save_measurements
+
+    q = sim.q[:200].copy()
+    q[3:, sim.channels.index("y3")] = np.nan
+    path = save_measurements(MeasurementSet(sim.t[:200], sim.channels, q, None, None), tmp_path / "rig.csv")
+    with pytest.raises(ValueError, match=r"rig.csv: channel 'y3': smoothing: 3 finite samples, fewer than the 5"):
+        identify_direct(twobar, load_measurements(path), [0.1])

@@ -194,3 +194,47 @@ def test_the_model_error_refit_by_chord_steps_gives_the_exact_refits_error(monke
     # to the fit's own tolerance (OFFSET_TOL = 0.01 SE): the refit's answer and so the reported errors
     assert all(abs(me_fast[k] - me_exact[k]) <= 0.01 * se[k] for k in se), (me_fast, me_exact, se)
     assert all(abs(fast.std_errors[k] - exact.std_errors[k]) <= 0.01 * se[k] for k in se)
+
+
+def _parallel_springs(tmp_path):
+    """twobar with a second spring beside spring1 (both parameters, 600 + 100 N/m): only their sum moves anything."""
+    from importlib.resources import files
+
+    text = (files("casflex.scene") / "builtin" / "twobar.toml").read_text()
+    i = text.index("[[torsion_springs]]")
+    text = (text[:i].replace("k = 700.0", "k = 600.0", 1) + '[[springs]]\nname = "spring1b"\nnodes = ["1", "2"]\n'
+            'k = 100.0\nrest_length = 0.1\n\n' + text[i:] + '\n[[parameters]]\nname = "k1b"\ntarget = "spring1b.k"\n'
+            'unit = "N/m"\nlower = 0.0\n')
+    path = tmp_path / "parallel.toml"
+    path.write_text(text)
+    import casflex
+
+    return casflex.assemble(casflex.load_scene(path))
+
+
+def test_parameters_the_data_cannot_separate_do_not_succeed(tmp_path):
+    # two springs in parallel: before, success (exit 0) with k1 = 600 +- inf and k1b = 100 +- inf, the start's split
+    from pathlib import Path
+
+    from casflex.identification import Uncertainty, identify_indirect
+
+    model = _parallel_springs(tmp_path)
+    z = np.load(Path(__file__).parent / "data" / "twobar_exudyn.npz")
+    names, rows = ("x3", "y3", "x5", "y5"), np.arange(0, 501, 10)
+    q = z["q"][np.ix_(rows, [[str(c) for c in z["channels"]].index(n) for n in names])]
+    data = MeasurementSet(z["t"][rows], names, q + np.random.default_rng(0).normal(0, 5e-4, q.shape), None, None)
+    r = identify_indirect(model, data, uncertainty=Uncertainty(model_error="none", form="none"))
+    assert np.isinf(r.std_errors["k1"]) and np.isinf(r.std_errors["k1b"]) and np.isfinite(r.std_errors["k3"])
+    assert not r.success and "k1, k1b are not determined by the data" in r.message
+    assert "-0.71 k1 +0.71 k1b" in r.message and "hardly separable" in r.summary()
+    assert r.parameters["k1"] + r.parameters["k1b"] == pytest.approx(700, rel=1e-3)  # their sum is determined
+
+
+def test_undetermined_reasons_name_the_parameters_and_their_combination():
+    from casflex.identification.problem import undetermined_reasons
+
+    assert undetermined_reasons({"k1": 1.0, "kt1": 0.1}, {"k1": 1.0, "kt1": 0.0}) == []
+    (one,) = undetermined_reasons({"k1": 1.0, "kt1": np.inf}, {"k1": 0.0, "kt1": 1.0})
+    assert one.startswith("kt1 is not determined by the data") and "does not depend on it" in one
+    (two,) = undetermined_reasons({"k1": np.inf, "k1b": np.inf}, {"k1": -0.71, "k1b": 0.71})
+    assert two.startswith("k1, k1b are not determined") and "-0.71 k1 +0.71 k1b" in two

@@ -287,3 +287,47 @@ def test_a_robust_loss_weighs_marker_artefacts_down(twobar):
     for k, v in r.parameters.items():
         assert abs(v - truth[k]) <= 3 * r.std_errors[k], k
     assert r.extra["uncertainty"]["noise"]["kt1"] < plain.extra["uncertainty"]["noise"]["kt1"]
+
+
+def test_a_vary_range_that_excludes_the_scenes_value_is_refused(twobar):
+    # the fit runs at the scene's E = 2.1e11: a range of 1e11..1.5e11 contradicts it (before: refits at both ends,
+    # success, the range never checked against the value the parameters were fitted at)
+    from casflex.identification.form import declared_alternatives
+
+    with pytest.raises(ValueError, match=r"vary bar2.E: the range 1e\+11..1.5e\+11 excludes the scene's value "
+                                         r"2.1e\+11"):
+        declared_alternatives(twobar, form="none", vary={"bar2.E": (1e11, 1.5e11)})
+    assert len(declared_alternatives(twobar, form="none", vary={"bar2.E": (2.1e11, 2.5e11)})) == 2  # an end: fine
+
+
+def test_one_channel_the_model_cannot_explain_is_not_hidden_by_its_own_weight():
+    """Undeclared noise weighs each channel by its own residual RMS: a channel 100 x the others', structured and
+    fitted at 30 %, counted as noise in the pooled fit (the knee pendulum's foot markers' labels swapped: success,
+    exit 0). Honest heterogeneity (white, or well fitted) and a barely moving channel still pass."""
+    from casflex.identification.plausibility import residual_reasons
+
+    def ch(rms, fit, white, motion=1.0):
+        return {"rms": rms, "fit": fit, "white": white, "noise_ratio": None, "motion_w": motion, "residual_w": 1.0}
+
+    good = {c: ch(1e-3, 0.99, True, 100.0) for c in ("x1", "y1", "x2", "y2")}
+    assert residual_reasons("data", good) == []
+    swapped = good | {"xMT5": ch(0.11, 0.67, False), "yMT5": ch(0.13, 0.3, False)}
+    (reason,) = residual_reasons("data", swapped)
+    assert reason.startswith("data: the model does not explain xMT5, yMT5") and "130 x the median" in reason
+    assert residual_reasons("data", good | {"x9": ch(0.02, 0.99, False)}) == []  # noisier, yet fitted
+    assert residual_reasons("data", good | {"x9": ch(0.02, 0.3, True)}) == []  # noisier, white
+    assert residual_reasons("data", good | {"x9": ch(1e-3, 0.0, False)}) == []  # barely moving
+
+
+def test_a_marker_label_swapped_with_another_does_not_succeed():
+    # the knee pendulum's example trial with LMA and MT5 named for each other, the state estimated: before, success
+    # with residuals of 0.11-0.13 m on those four channels (1 mm on the others)
+    from casflex.data import load_measurements
+
+    model = casflex.assemble(casflex.load_scene("knee_pendulum"))
+    d = load_measurements("knee_pendulum_trial").window(0.0, 1.0)
+    swap = {"xLMA": "xMT5", "yLMA": "yMT5", "xMT5": "xLMA", "yMT5": "yLMA"}
+    data = MeasurementSet(d.t, tuple(swap.get(c, c) for c in d.channels), d.q, None, None)
+    r = identify_indirect(model, Experiment(data, initial_state="estimate"),
+                          uncertainty=Uncertainty(model_error="none"))
+    assert not r.success and "the model does not explain xMT5, yMT5, xLMA, yLMA" in r.message

@@ -80,3 +80,48 @@ def test_a_recording_that_starts_moving_is_refused_for_the_scene_state(twobar):
     with pytest.raises(ValueError, match="starts moving"):
         check_against_scene(twobar, exp)
     check_against_scene(twobar, Experiment(exp.data, initial_state="velocities"))  # positions trusted
+
+
+def test_a_channel_without_any_sample_is_refused_in_one_line(twobar):
+    # a marker never seen (every value NaN): an IndexError in the first-sample check before
+    data = _rest(twobar)
+    q = data.q.copy()
+    q[:, 2] = np.nan
+    exp = Experiment(MeasurementSet(data.t, data.channels, q, None, None))
+    with pytest.raises(ValueError, match=r"^data: channel 'x5' has no sample \(every value is NaN\)"):
+        check_against_scene(twobar, exp)
+    with pytest.raises(ValueError, match="'x5' has no sample"):
+        SampleMap.of(twobar, exp, dt=1e-3)
+    SampleMap.of(twobar, Experiment(exp.data, channels=("x3", "y3", "y5")), dt=1e-3)  # left out: fine
+
+
+def test_a_frozen_channel_is_refused_and_a_still_one_passes(twobar):
+    # y3 held at one value (a marker frozen by the capture software) while x3, x5, y5 move: before, the indirect
+    # method failed for other reasons and the adapted direct one reported success with k3 198 +- 17 for 400
+    from casflex.identification.measurement import check_frozen
+
+    t = np.linspace(0, 1, 101)
+    names = ("x3", "y3", "x5", "y5")
+    q0 = np.array([twobar.q0[twobar.dof(c)] for c in names])
+    q = q0 + 0.01 * (1 - np.cos(2 * np.pi * t))[:, None] * np.array([1.0, 0.0, 2.0, 1.0])  # from rest
+    q[:, 1] = q0[1] + 1e-4  # frozen, not at the scene's value
+    exp = Experiment(MeasurementSet(t, names, q, None, None))
+    with pytest.raises(ValueError, match=r"^data: channel 'y3' holds one value \(-0.865925\) at all its 101 samples "
+                                         r"while the others move: a frozen or filled marker\?"):
+        check_against_scene(twobar, exp)
+    check_against_scene(twobar, Experiment(exp.data, channels=("x3", "x5", "y5")))  # left out: fine
+    q[:, 1] = q0[1]  # still at the scene's value (a symmetric scene's noise-free run): fine
+    check_frozen(twobar, MeasurementSet(t, names, q, None, None))
+    still = np.tile([0.0, 0.0, 0.0], (t.size, 1))  # a support's dofs never move: fine wherever they are recorded
+    check_frozen(twobar, MeasurementSet(t, ("x1", "y1", "x5"), np.column_stack([still[:, :2] + 1e-3, q[:, 2]]),
+                                        None, None))
+
+
+def test_a_short_recording_in_milliseconds_is_refused(twobar):
+    # 0.3 s of a 3 s scene in ms at 100 Hz: 0 .. 300 "s" in steps of 10, under the 100 runs the check asked for,
+    # simulated for 300 000 steps before the fit failed
+    t = np.arange(0, 0.3001, 0.01) * 1000
+    q = np.tile([twobar.q0[twobar.dof(c)] for c in ("x5", "y5")], (t.size, 1))
+    with pytest.raises(ValueError, match="the times look like milliseconds"):
+        check_against_scene(twobar, Experiment(MeasurementSet(t, ("x5", "y5"), q, None, None)))
+    check_against_scene(twobar, Experiment(MeasurementSet(t / 1000, ("x5", "y5"), q, None, None)))

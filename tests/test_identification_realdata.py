@@ -101,6 +101,12 @@ def test_millimetres_are_refused(tmp_path, capsys):
     assert main(["identify", "twobar", "--method", "indirect", "--data", str(path), "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "look like millimetres" in err[0]
+    # one of several recordings: the line names its file (before: "data: ...", which of them unsaid)
+    good = save_measurements(d, tmp_path / "m.csv")
+    both = ["--data", str(good), "--data", str(path)]
+    assert main(["identify", "twobar", "--method", "indirect", *both, "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"casflex: error: {path}: positions reach") and "millimetres" in err[0]
 
 
 def test_irregular_samples_with_gaps_in_two_recordings(twobar):

@@ -37,6 +37,7 @@ from casflex import codegen
 from casflex.data import MeasurementSet
 from casflex.identification import problem as pb
 from casflex.identification.initial_state import _kinematic_fit
+from casflex.identification.measurement import check_frozen, check_units
 from casflex.identification.options import Smoothing, Solver
 from casflex.identification.problem import IdentificationResult
 from casflex.identification.reconstruct import dofs_from_markers
@@ -119,6 +120,8 @@ def identify_adapted_direct(model: Model, data: MeasurementSet, instants: Sequen
     # and the fit "succeeds" far off (the double pendulum's elbow spring: kt 10.0 for 6, ct 0.67 for 0.15)
     pb.require_no_joints(model, "the adapted direct method (rotations fitted to the nodes' translations)")
     t_build = time.perf_counter()
+    check_units(model, data)  # millimetres or milliseconds: refused, as by the indirect method
+    check_frozen(model, data)
     data, from_markers = dofs_from_markers(model, data, "the adapted direct method", rotations=False)
     if model.n_p == 0:
         raise ValueError("the scene declares no parameters to identify ([[parameters]] in the scene file)")
@@ -235,8 +238,9 @@ def identify_adapted_direct(model: Model, data: MeasurementSet, instants: Sequen
                             for j, d in enumerate(unknown)}
               for k, (_, t, _) in enumerate(samples)}
     rotations = {t: {d: v for d, v in s.items() if d.startswith("theta")} for t, s in states.items()}
-    at_bound = pb.bound_flags(model, p_hat, scale)
-    reasons = pb.failure_reasons(st, at_bound)
+    at_bound = pb.bound_flags(model, p_hat, scale, pb.pressed_on_bounds(Jv, zv, wv, lbw[:n_p], ubw[:n_p]))
+    reasons = pb.failure_reasons(st, at_bound) + pb.undetermined_reasons(stats["std_errors"],
+                                                                        stats["weakest_direction"])
     return IdentificationResult(
         method="adapted-direct", solver=opts.solver, parameters=dict(zip(names, p_hat.tolist(), strict=True)),
         start=dict(zip(names, p0.tolist(), strict=True)), success=not reasons,

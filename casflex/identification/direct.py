@@ -21,6 +21,7 @@ import numpy as np
 
 from casflex import codegen
 from casflex.data import MeasurementSet
+from casflex.identification.measurement import check_frozen, check_units
 from casflex.identification.options import Smoothing, Solver
 from casflex.identification.problem import (
     IdentificationResult,
@@ -30,12 +31,14 @@ from casflex.identification.problem import (
     bound_flags,
     failure_reasons,
     gauss_newton_statistics,
+    pressed_on_bounds,
     require_fixed_supports,
     require_no_uncertain,
     robust_statistics,
     smoothed_if_needed,
     solve_and_polish,
     start_values,
+    undetermined_reasons,
 )
 from casflex.identification.reconstruct import dofs_from_markers
 from casflex.model import Model
@@ -83,6 +86,8 @@ def identify_direct(model: Model, data: MeasurementSet, instants: Sequence[float
     require_fixed_supports(model, "the direct method")
     require_no_uncertain(model, "the direct method")
     t_build = time.perf_counter()
+    check_units(model, data)  # millimetres or milliseconds: refused, as by the indirect method
+    check_frozen(model, data)
     data, from_markers = dofs_from_markers(model, data, "the direct method")
     data, smoothing_info = smoothed_if_needed(data, smoothing.kind, smoothing.cutoff)
     samples = _instant_data(model, data, instants)
@@ -133,8 +138,8 @@ def identify_direct(model: Model, data: MeasurementSet, instants: Sequence[float
     names = model.parameter_names
     k = n_c + n_ax
     lams = [list(wv[n_p + i * k:n_p + i * k + n_c] * fs) for i in range(len(samples))]
-    at_bound = bound_flags(model, p_hat, scale)
-    reasons = failure_reasons(st, at_bound)
+    at_bound = bound_flags(model, p_hat, scale, pressed_on_bounds(Jv, zv, wv, lb_th, ub_th))
+    reasons = failure_reasons(st, at_bound) + undetermined_reasons(stats["std_errors"], stats["weakest_direction"])
     extra = {**opts.record(),
              "force_scale": fs, "residual_norm": float(np.linalg.norm(zv) * fs), "gauss_newton_polish": polished,
              "beam_forces": mode, "smoothing": smoothing_info, "uncertainty": uncertainty,

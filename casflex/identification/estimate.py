@@ -68,6 +68,7 @@ from casflex.identification.problem import (
     bound_flags,
     gauss_newton_statistics,
     start_values,
+    undetermined_reasons,
 )
 from casflex.identification.result import IdentificationResult
 from casflex.identification.statistics import residual_analysis, sandwich_covariance
@@ -529,6 +530,8 @@ def _result(problem: OutputError, f: Fit, p0: np.ndarray, p_hat: np.ndarray, me:
         problem, f, C, declared, p_hat, dt=dt, alpha=alpha, compiled=compiled, newton_tol=newton_tol)
     at_bound = bound_flags(model, p_hat, pmap.scale)
     reasons = _plausibility(problem, f, channels, {k: at_bound[k] for k in names[keep]})
+    reasons += undetermined_reasons(dict(zip(names[keep], total[keep].tolist(), strict=True)),
+                                    gn.get("weakest_direction"))
     reasons += [f"{exp.name}: the identified model does not run through the recording ({tr.message})"
                 for exp, tr in zip(experiments, trajectories, strict=True) if not tr.success]
     notes: list[str] = []

@@ -91,13 +91,16 @@ def _varied(scene: Scene, vary: Mapping[str, tuple[float, float]]) -> list[Alter
     for target, bounds in vary.items():
         if target in fitted:
             raise ValueError(f"vary {target}: it is parameter {fitted[target]!r}, fitted, not a form to vary")
-        scene.property_value(target, where=f"vary {target}")  # an unknown target: SceneError naming it
+        value = scene.property_value(target, where=f"vary {target}")  # an unknown target: SceneError naming it
         try:
             lo, hi = (float(v) for v in bounds)
         except (TypeError, ValueError):
             raise ValueError(f"vary {target}: expected (lower, upper), got {bounds!r}") from None
         if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
             raise ValueError(f"vary {target}: expected finite lower < upper, got ({lo:g}, {hi:g})")
+        if not lo <= value <= hi:  # the fit itself runs at the scene's value: the declaration contradicts it
+            raise ValueError(f"vary {target}: the range {lo:g}..{hi:g} excludes the scene's value {value:g}, at which "
+                             "the parameters are fitted; set the scene's value inside the range or widen it")
         for v in (lo, hi):
             try:
                 out.append(Alternative(f"{target} = {v:g}", scene.with_property(target, v)))

@@ -19,7 +19,7 @@ scene starts), with one line that says what to do.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,7 +29,8 @@ from casflex.identification.choices import INITIAL_STATES  # noqa: F401 (re-expo
 from casflex.model import Model
 from casflex.model.markers import channel_index, channel_values, marker_channels
 
-__all__ = ["Experiment", "SampleMap", "INITIAL_STATES", "check_against_scene", "free_dofs", "nyquist"]
+__all__ = ["Experiment", "SampleMap", "INITIAL_STATES", "check_against_scene", "check_units", "check_frozen",
+           "free_dofs", "nyquist"]
 
 
 
@@ -96,6 +97,10 @@ class Experiment:
                 raise ValueError(f"dofs: {c!r} is not in the data (channels: {list(self.data.channels)})")
         if not names:
             raise ValueError("dofs: no channel to compare")
+        empty = [c for c in names if not np.isfinite(self.data.q[:, self.data.channels.index(c)]).any()]
+        if empty:  # a marker never seen: nothing to compare, and no first sample to check or start from
+            raise ValueError(f"{_label(self.data)}: channel {empty[0]!r} has no sample (every value is NaN); drop it "
+                             "from the file or leave it out of the compared channels (--dofs)")
         if isinstance(self.noise, Mapping):
             extra = [c for c in self.noise if c not in names]
             missing = [c for c in names if c not in self.noise]
@@ -209,6 +214,74 @@ def _speed(data: MeasurementSet, cols: list[int]) -> float:
     return float(np.percentile(rates, 90)) if rates.size else 0.0
 
 
+def _label(data: MeasurementSet) -> str:
+    """What a message calls the recording: its file (one of several --data), else "data"."""
+    return str(data.meta.get("path", "data")) if data.source == "file" else "data"
+
+
+def check_units(model: Model, data: MeasurementSet, names: Sequence[str] | None = None) -> None:
+    """ValueError with one line when the recording's channels ``names`` (default all) are not in the
+    scene's units: positions that reach 30 times the scene's size (millimetres, centimetres), or
+    times that look like milliseconds (every method's check: docs/identification.md, step 1)."""
+    scene = model.scene
+    names = data.channels if names is None else names
+    cols = [data.channels.index(c) for c in names if not c.startswith("theta")]
+    span = scene.length_scale
+    reach = max(span, max(abs(v) for n in scene.nodes for v in (n.x, n.y)))
+    finite = [c for c in cols if np.isfinite(data.q[:, c]).any()]
+    if finite:
+        big = float(np.nanmax(np.abs(data.q[:, finite])))
+        if big > 30 * reach:
+            factor = 1000 if big > 300 * reach else 100
+            unit = "millimetres" if factor == 1000 else "centimetres"
+            raise ValueError(f"{_label(data)}: positions reach {big:.4g} while the scene spans {span:.3g} m: they look "
+                             f"like {unit} (x {factor}); give positions in metres")
+    t = data.t
+    if t.size < 2:
+        return
+    dt_med = float(np.median(np.diff(t)))
+    span, run = t[-1] - t[0], max(scene.run.t_end, 1.0)
+    # a recording of a tenth of the scene's run in ms spans 100 runs; a shorter one, sampled at 1 kHz or slower,
+    # spans over 10 runs at a sample per second or slower (0.3 s of twobar: 300 "s", 300 000 model steps)
+    if (span > 100 * run and dt_med >= 0.1) or (span > 10 * run and dt_med >= 1.0):
+        raise ValueError(f"{_label(data)}: t runs from {t[0]:g} to {t[-1]:g} in steps of {dt_med:g}: the times look "
+                         f"like milliseconds (the scene's run lasts {scene.run.t_end:g} s); give t in seconds")
+
+
+#: A channel holding one value at this many samples or more, while others move, is taken for a frozen one
+FROZEN_SAMPLES = 10
+
+
+def check_frozen(model: Model, data: MeasurementSet, names: Sequence[str] | None = None) -> None:
+    """ValueError with one line for a channel (of ``names``, default all the model knows) that holds one value,
+    to the last digit, at every one of its samples (at least FROZEN_SAMPLES) while another channel moves: a
+    marker frozen or filled by the capture software. Only channels the model's free dofs move, at another value
+    than the scene's own (a symmetric scene's noise-free run keeps a dof at its initial value: that passes).
+    Fitted, twobar's y3 frozen gave the adapted direct method success with k3 = 198 +- 17 for 400."""
+    names = [c for c in (data.channels if names is None else names) if c in data.channels]
+    known = [c for c in names if c in model.dof_names or c in marker_channels(model)]
+    moving = [c for c in data.channels if _finite(data, c).size and np.ptp(_finite(data, c)) > 0]
+    q0 = channel_values(model, model.q0, model.qd0)[0][0]
+    free = free_dofs(model)
+    nudged = channel_values(model, model.q0 + 1e-6 * np.eye(model.n_dof)[free], np.zeros((free.size, model.n_dof)))[0]
+    can_move = np.abs(nudged - q0).max(axis=0, initial=0.0) > 0  # a support's dof, a marker on a clamped body: never
+    for c in known:
+        y = _finite(data, c)
+        if y.size < FROZEN_SAMPLES or np.ptp(y) > 0 or not can_move[channel_index(model, c)] \
+                or not [m for m in moving if m != c]:
+            continue
+        if abs(y[0] - q0[channel_index(model, c)]) <= 1e-12 * max(1.0, abs(y[0])):
+            continue
+        raise ValueError(f"{_label(data)}: channel {c!r} holds one value ({y[0]:.6g}) at all its {y.size} samples "
+                         "while the others move: a frozen or filled marker? Drop it (--dofs, the indirect method) or "
+                         "mend the recording")
+
+
+def _finite(data: MeasurementSet, channel: str) -> np.ndarray:
+    y = data.q[:, data.channels.index(channel)]
+    return y[np.isfinite(y)]
+
+
 def check_against_scene(model: Model, experiment: Experiment) -> None:
     """ValueError with one line when the data cannot belong to the scene: positions in other
     units than metres, times in milliseconds, or (for ``initial_state`` "scene" and
@@ -216,22 +289,12 @@ def check_against_scene(model: Model, experiment: Experiment) -> None:
     recording that starts moving while the scene starts at rest."""
     data, scene = experiment.data, model.scene
     names = experiment.compared(model)
+    check_units(model, data, names)
+    check_frozen(model, data, names)
     trans = [c for c in names if not c.startswith("theta")]
     cols = [data.channels.index(c) for c in trans]
     span = scene.length_scale
-    reach = max(span, max(abs(v) for n in scene.nodes for v in (n.x, n.y)))
-    if cols:
-        big = float(np.nanmax(np.abs(data.q[:, cols])))
-        if big > 30 * reach:
-            factor = 1000 if big > 300 * reach else 100
-            unit = "millimetres" if factor == 1000 else "centimetres"
-            raise ValueError(f"data: positions reach {big:.4g} while the scene spans {span:.3g} m: they look like "
-                             f"{unit} (x {factor}); give positions in metres")
     t = data.t
-    dt_med = float(np.median(np.diff(t)))
-    if t[-1] - t[0] > 100 * max(scene.run.t_end, 1.0) and dt_med >= 0.1:
-        raise ValueError(f"data: t runs from {t[0]:g} to {t[-1]:g} in steps of {dt_med:g}: the times look like "
-                         f"milliseconds (the scene's run lasts {scene.run.t_end:g} s); give t in seconds")
     if experiment.initial_state == "estimate":
         return
     noise = experiment.noise_level() or 1e-3 * span
@@ -245,7 +308,7 @@ def check_against_scene(model: Model, experiment: Experiment) -> None:
     j = int(np.argmax(off))
     if off[j] > tol / span:
         unit = "rad" if names[j].startswith("theta") else "m"
-        raise ValueError(f"data: the recording does not start at the scene's initial state: {names[j]} = "
+        raise ValueError(f"{_label(data)}: the recording does not start at the scene's initial state: {names[j]} = "
                          f"{first[j]:.4g} {unit} at the first sample (t = {t[0]:g} s), the scene has {scene_q[j]:.4g} "
                          f"{unit}; use --initial-state estimate")
     if experiment.initial_state == "scene" and cols:
@@ -256,6 +319,6 @@ def check_against_scene(model: Model, experiment: Experiment) -> None:
         moving = (np.abs(v - v_scene) > 5 * se) & (np.abs(v - v_scene) > MOVING * _speed(data, cols))
         if moving.any():
             j = int(np.argmax(np.where(moving, np.abs(v - v_scene), 0.0)))
-            raise ValueError(f"data: the recording starts moving ({trans[j]} at {v[j]:.3g} m/s at t = {t[0]:g} s) "
-                             f"while the scene starts at {v_scene[j]:.3g} m/s; use --initial-state velocities "
-                             "(positions trusted) or estimate")
+            raise ValueError(f"{_label(data)}: the recording starts moving ({trans[j]} at {v[j]:.3g} m/s at t = "
+                             f"{t[0]:g} s) while the scene starts at {v_scene[j]:.3g} m/s; use --initial-state "
+                             "velocities (positions trusted) or estimate")

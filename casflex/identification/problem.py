@@ -22,10 +22,11 @@ from casflex.identification.choices import (  # noqa: F401 (re-exported)
 from casflex.identification.result import IdentificationResult
 from casflex.model import Model
 
-__all__ = ["IdentificationResult", "parameter_scale", "start_values", "bound_flags", "gauss_newton_statistics",
-           "gauss_newton_polish", "robust_statistics", "solver_options_for", "least_squares_nlp", "ParameterMap",
+__all__ = ["IdentificationResult", "parameter_scale", "start_values", "bound_flags", "pressed_on_bounds",
+           "gauss_newton_statistics", "gauss_newton_polish", "robust_statistics", "solver_options_for",
+           "least_squares_nlp", "ParameterMap",
            "TRANSFORMS", "HESSIANS", "GAUSS_NEWTON", "NLPOptions", "solve_and_polish", "failure_reasons",
-           "casadi_reason", "smoothed_if_needed"]
+           "casadi_reason", "smoothed_if_needed", "undetermined_reasons"]
 
 
 def parameter_scale(model: Model) -> np.ndarray:
@@ -138,10 +139,32 @@ def start_values(model: Model, start: float | dict[str, float] | np.ndarray | No
     return model.params(start)
 
 
-def bound_flags(model: Model, p: np.ndarray, scale: np.ndarray) -> dict[str, bool]:
-    """{name: True} for parameters within 1e-8 of their scale from a bound."""
-    return {par.name: bool(min(abs(v - par.lower), abs(v - par.upper)) <= 1e-8 * s)
-            for v, par, s in zip(p, model.parameters, scale, strict=True)}
+def bound_flags(model: Model, p: np.ndarray, scale: np.ndarray, pressed: np.ndarray | None = None
+                ) -> dict[str, bool]:
+    """{name: True} for parameters within 1e-8 of their scale from a bound, or ``pressed`` against
+    one (:func:`pressed_on_bounds`: an interior-point solver's answer stops short of it)."""
+    pressed = np.zeros(len(p), dtype=bool) if pressed is None else pressed
+    return {par.name: bool(min(abs(v - par.lower), abs(v - par.upper)) <= 1e-8 * s or on)
+            for v, par, s, on in zip(p, model.parameters, scale, pressed, strict=True)}
+
+
+#: A parameter (decision variable, O(1)) this close to a bound, whose Gauss-Newton step leaves the box
+#: through it, is on that bound: IPOPT stops a barrier-size distance inside (twobar's kt3 direct at 1.6e-7)
+PRESSED = 1e-4
+
+
+def pressed_on_bounds(J: np.ndarray, z: np.ndarray, w: np.ndarray, lb: np.ndarray, ub: np.ndarray) -> np.ndarray:
+    """(len(lb),) True for the first len(lb) unknowns w (the parameters' decision variables, bounds lb, ub)
+    within :data:`PRESSED` of a bound that the unconstrained Gauss-Newton step on z(w) (Jacobian J) crosses:
+    the least-squares optimum lies beyond the bound, the answer is held there."""
+    n_p = len(lb)
+    if not (np.isfinite(J).all() and np.isfinite(z).all()):
+        return np.zeros(n_p, dtype=bool)
+    step = -np.linalg.lstsq(J, z.ravel(), rcond=None)[0][:n_p]
+    th = w[:n_p]
+    low = (th - lb <= PRESSED * np.maximum(1.0, np.abs(lb))) & (th + step < lb)
+    high = (ub - th <= PRESSED * np.maximum(1.0, np.abs(ub))) & (th + step > ub)
+    return low | high
 
 
 def gauss_newton_statistics(J: np.ndarray, r: np.ndarray, n_p: int, names: tuple[str, ...],
@@ -381,6 +404,22 @@ def solve_and_polish(S: ca.Function, zJ: Any, w0: np.ndarray, lbw: np.ndarray, u
     w, polished = gauss_newton_polish(zJ, w_solver, lbw, ubw)
     return {"w_solver": w_solver, "w": w, "polished": polished, "stats": S.stats(), "solver_s": solver_s,
             "solve_s": time.perf_counter() - t0}
+
+
+def undetermined_reasons(std_errors: dict[str, float], weakest: dict[str, float] | None) -> list[str]:
+    """Why a result whose parameters the data do not determine is not a success: an infinite standard error
+    (the data fix only a combination: two springs in parallel, k1 + k1b; the values are the start's split).
+    ``weakest``: the least determined direction ({name: weight}, :func:`gauss_newton_statistics`)."""
+    names = [k for k, v in std_errors.items() if math.isinf(v)]
+    if not names:
+        return []
+    if len(names) == 1:
+        return [f"{names[0]} is not determined by the data (infinite standard error): the fitted motion does not "
+                "depend on it here"]
+    combo = " ".join(f"{w:+.2f} {k}" for k, w in (weakest or {}).items() if abs(w) > 0.05)
+    return [f"{', '.join(names)} are not determined by the data (infinite standard errors"
+            f"{f'; the undetermined combination: {combo}' if combo else ''}): hold all but one of them in the scene, "
+            "or record motion that separates them"]
 
 
 def failure_reasons(stats: dict, at_bound: dict[str, bool]) -> list[str]:

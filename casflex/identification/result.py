@@ -12,7 +12,11 @@ import numpy as np
 
 from casflex.results import atomic_write_json
 
-__all__ = ["IdentificationResult"]
+__all__ = ["IdentificationResult", "COLLINEAR"]
+
+#: A collinearity index above this: the parameters of the least determined combination cannot be told apart
+#: (Brun et al. 2001, Water Res. 35(4):1018), said in the summary
+COLLINEAR = 15.0
 
 
 @dataclass(frozen=True)
@@ -96,6 +100,11 @@ class IdentificationResult:
         lines.append(f"  identifiability: rank {idf['rank']} of {idf['n_unknowns']} unknowns, "
                      f"parameter condition number {idf['parameter_condition']:.3g}, "
                      f"collinearity index {idf.get('collinearity_index', math.nan):.3g}")
+        ci, weakest = idf.get("collinearity_index", math.nan), idf.get("weakest_direction") or {}
+        if ci > COLLINEAR:  # Brun et al. 2001: the parameters cannot be told apart, whatever their errors say
+            combo = " ".join(f"{w:+.2f} {k}" for k, w in weakest.items() if abs(w) > 0.05)
+            lines.append(f"  hardly separable (collinearity index {ci:.3g} > {COLLINEAR:g}): the data determine "
+                         f"least the combination {combo} (scaled parameters)")
         if idf.get("weak"):
             lines.append(f"  weakly identifiable (relative standard error > 10 %): {', '.join(idf['weak'])}")
         for name, exp in self.extra.get("experiments", {}).items():

@@ -376,7 +376,7 @@ def _result(s: _SetUp, nlp: _NLP, out: dict[str, Any], build_s: float, record: d
     stats = pb.gauss_newton_statistics(J, z, n_p, model.parameter_names, pmap.dp_dtheta(u[:n_p]), p_hat)
     converged = bool(newton_res <= s.tol_acc and np.isfinite(X).all())
     st, pn = out["stats"], model.parameter_names
-    at_bound = pb.bound_flags(model, p_hat, pmap.scale)
+    at_bound = pb.bound_flags(model, p_hat, pmap.scale, pb.pressed_on_bounds(J, z, u, *pmap.bounds()))
     # as the default path (estimate): the solver converged, the model runs through, no parameter on a bound
     other = [] if st.get("success", False) else [f"the solver did not converge ({st.get('return_status')})"]
     if not converged:
@@ -388,7 +388,7 @@ def _result(s: _SetUp, nlp: _NLP, out: dict[str, Any], build_s: float, record: d
                      "local minimum, a wrong scene or a model that misses the physics)")
     # and the identified model's own simulation fits the recording or leaves white residuals, within the noise
     residual, experiment = _residuals(s, X, record["initial_state"])
-    reasons = other + residual
+    reasons = other + residual + pb.undetermined_reasons(stats["std_errors"], stats["weakest_direction"])
     return IdentificationResult(
         method="indirect", solver=record.pop("solver"), parameters=dict(zip(pn, p_hat.tolist(), strict=True)),
         start=dict(zip(pn, s.p0.tolist(), strict=True)), success=not reasons,

@@ -35,7 +35,7 @@ def _spline(t: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nd
 
     ok = np.isfinite(y)
     if ok.sum() < 5:
-        raise ValueError("smoothing: a channel has fewer than 5 samples")
+        raise ValueError(f"smoothing: {int(ok.sum())} finite samples, fewer than the 5 a spline needs")
     s = make_smoothing_spline(t[ok], y[ok])  # lam=None: generalized cross-validation
     return s(t), s.derivative(1)(t), s.derivative(2)(t)
 
@@ -70,11 +70,17 @@ def smooth(data: MeasurementSet, method: str = "spline", cutoff: float | None = 
     q, qd, qdd = (np.empty_like(data.q, dtype=float) for _ in range(3))
     settings = {}
     for c, name in enumerate(data.channels):
-        if method == "spline":
-            q[:, c], qd[:, c], qdd[:, c] = _spline(data.t, data.q[:, c])
-            settings[name] = {"smoothing": "generalized cross-validation"}
-        else:
-            q[:, c], qd[:, c], qdd[:, c] = _butterworth(data.t, data.q[:, c], float(cutoff))
-            settings[name] = {"cutoff_hz": float(cutoff)}
+        try:
+            if method == "spline":
+                q[:, c], qd[:, c], qdd[:, c] = _spline(data.t, data.q[:, c])
+                settings[name] = {"smoothing": "generalized cross-validation"}
+            else:
+                q[:, c], qd[:, c], qdd[:, c] = _butterworth(data.t, data.q[:, c], float(cutoff))
+                settings[name] = {"cutoff_hz": float(cutoff)}
+        except ValueError as exc:  # which channel (and file): a recording holds tens
+            if str(exc).startswith(("cutoff", "smoothing 'butterworth': needs")):  # the option's or the times' fault
+                raise
+            where = f"{data.meta['path']}: " if data.source == "file" and "path" in data.meta else ""
+            raise ValueError(f"{where}channel {name!r}: {exc}") from None
     meta = {**data.meta, "smoothing": {"method": method, "channels": settings}}
     return MeasurementSet(data.t, data.channels, q, qd, qdd, source=data.source, meta=meta)
