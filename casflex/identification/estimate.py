@@ -378,7 +378,8 @@ def _plausibility(problem: OutputError, fitted: Fit, channels: list[dict], at_bo
         reasons.append(fitted.message or f"the solver stopped without converging ({fitted.status})")
     bound = [k for k, v in at_bound.items() if v]
     if bound:
-        reasons.append(f"{', '.join(bound)} ended on a bound: the best fit lies outside the parameters' range")
+        reasons.append(f"{', '.join(bound)} ended on a bound: the best fit lies outside the parameters' range, "
+                       "or the fit left its start's basin (try other starts: --starts N, or start values nearer)")
     for e, res in enumerate(channels):
         reasons += residual_reasons(problem.experiments[e].name or f"experiment {e + 1}", res)
     return reasons

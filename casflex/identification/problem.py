@@ -427,7 +427,8 @@ def failure_reasons(stats: dict, at_bound: dict[str, bool]) -> list[str]:
     reasons = [] if stats.get("success", False) else [f"the solver did not converge ({stats.get('return_status')})"]
     bound = [k for k, v in at_bound.items() if v]
     if bound:
-        reasons.append(f"{', '.join(bound)} ended on a bound: the best fit lies outside the parameters' range")
+        reasons.append(f"{', '.join(bound)} ended on a bound: the best fit lies outside the parameters' range, "
+                       "or the fit left its start's basin (try other starts: --starts N, or start values nearer)")
     return reasons
 
 

@@ -385,7 +385,7 @@ def _result(s: _SetUp, nlp: _NLP, out: dict[str, Any], build_s: float, record: d
                      "the recording")
     if bound := [k for k, v in at_bound.items() if v]:  # no optimum inside the range
         other.append(f"{', '.join(bound)} ended on a bound: the best fit lies outside the parameters' range (a "
-                     "local minimum, a wrong scene or a model that misses the physics)")
+                     "local minimum: try other starts, --starts N; a wrong scene or a model that misses the physics)")
     # and the identified model's own simulation fits the recording or leaves white residuals, within the noise
     residual, experiment = _residuals(s, X, record["initial_state"])
     reasons = other + residual + pb.undetermined_reasons(stats["std_errors"], stats["weakest_direction"])
