@@ -16,12 +16,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.hamner_so import DATA, both_static_optimizations
+
 needs_opensim = pytest.mark.skipif(importlib.util.find_spec("opensim") is None, reason="OpenSim is not installed")
 
-DATA = Path(__file__).parent / "data" / "muscles"
-LAB = Path(__file__).parent / "data" / "lab"
 DEGROOTE = ("soleus_r", "tib_post_r")
-T0, T1 = 0.2, 0.4
 THELEN_ONLY = ("FmaxTendonStrain", "FmaxMuscleStrain", "KshapeActive", "KshapePassive", "Af", "Flen")
 
 
@@ -43,37 +42,13 @@ def _degroote_model(dest: Path) -> Path:
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
-    from casflex.inverse import Filter, prepare, solve
-    from casflex.inverse import Trial as InverseTrial
-    from casflex.lab.tables import read_sto
-    from casflex.muscles.analysis import TrialMuscles
-    from casflex.peers.opensim_analyses import Trial, static_optimization
-    from casflex.peers.opensim_tools import exact_times, external_loads
     from casflex.scene.from_osim import scene_from_osim
-    from casflex.scene.osim_actuators import read_actuators
 
     tmp = tmp_path_factory.mktemp("hamner_degroote")
     model = _degroote_model(tmp / "degroote.osim")
-    coords = DATA / "hamner_run_ik.mot"
-    grf = exact_times(LAB / "hamner_running_whole_grf.mot", tmp / "grf.mot", T0, 60.0)
-    loads = external_loads(tmp / "loads.xml", grf, {"calcn_r": "ground_", "calcn_l": "1_ground_"})
-    reserves = DATA / "hamner_reserve_actuators.xml"
-    so = static_optimization(Trial(str(model), str(coords), loads=loads, forces=(str(reserves),), cutoff=10.0,
-                                   t_start=T0, t_end=T1), tmp / "so", joints=["hip_r"], on="child", frame="child")
-    osim = scene_from_osim(model, muscles=True)
-    assert [m.kind for m in osim.muscles if m.name in DEGROOTE] == ["DeGrooteFregly2016Muscle"] * 2
-    inputs = prepare(model, InverseTrial(coordinates=coords, grf=loads), filter=Filter(10.0, None, "opensim"))
-    res = solve(inputs)
-    trial = TrialMuscles(osim, inputs.tree, res.t, res.plates, read_actuators(reserves))
-    out = trial.solve(res.z, res.zd, res.zdd)
-    act, force = read_sto(so["activation"]), read_sto(so["force"])
-    keep = [i for i, t in enumerate(act.t) if not any(abs(t - f) < 1e-6 for f in so["failed"])]
-    rows = [int(np.argmin(np.abs(res.t - t))) for t in act.t[keep]]
-    assert np.abs(res.t[rows] - act.t[keep]).max() < 1e-6
-    names = [m.name for m in osim.muscles]
-    return {"names": names, "trial": trial, "out": out, "rows": rows, "keep": keep, "failed": so["failed"],
-            "act": np.column_stack([act.column(n) for n in names])[keep],
-            "force": np.column_stack([force.column(n) for n in names])[keep]}
+    assert [m.kind for m in scene_from_osim(model, muscles=True).muscles if m.name in DEGROOTE] == \
+        ["DeGrooteFregly2016Muscle"] * 2
+    return both_static_optimizations(model, tmp, (("hip_r", "femur_r"),))
 
 
 @needs_opensim

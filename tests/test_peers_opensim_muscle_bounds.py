@@ -14,13 +14,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.hamner_so import DATA, both_static_optimizations
+
 needs_opensim = pytest.mark.skipif(importlib.util.find_spec("opensim") is None, reason="OpenSim is not installed")
 
-DATA = Path(__file__).parent / "data" / "muscles"
-LAB = Path(__file__).parent / "data" / "lab"
 JOINTS = (("hip_r", "femur_r"), ("knee_r", "tibia_r"), ("ankle_r", "talus_r"))
 OWN = {"semimem_r": (None, 0.5), "bifemsh_r": (0.03, 0.5), "soleus_r": (0.05, None)}
-T0, T1 = 0.2, 0.4
 
 
 def _bounded_model(dest: Path) -> Path:
@@ -37,39 +36,8 @@ def _bounded_model(dest: Path) -> Path:
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
-    from casflex.inverse import Filter, prepare, solve
-    from casflex.inverse import Trial as InverseTrial
-    from casflex.lab.tables import read_sto
-    from casflex.muscles.analysis import TrialMuscles
-    from casflex.muscles.reaction import JointReaction
-    from casflex.peers.opensim_analyses import Trial, static_optimization
-    from casflex.peers.opensim_tools import exact_times, external_loads
-    from casflex.scene.from_osim import scene_from_osim
-    from casflex.scene.osim_actuators import read_actuators
-
     tmp = tmp_path_factory.mktemp("hamner_bounds")
-    model = _bounded_model(tmp / "bounded.osim")
-    coords = DATA / "hamner_run_ik.mot"  # OpenSim's IK, its times the frames' exact sixtieths
-    grf = exact_times(LAB / "hamner_running_whole_grf.mot", tmp / "grf.mot", T0, 60.0)
-    loads = external_loads(tmp / "loads.xml", grf, {"calcn_r": "ground_", "calcn_l": "1_ground_"})
-    reserves = DATA / "hamner_reserve_actuators.xml"
-    so = static_optimization(Trial(str(model), str(coords), loads=loads, forces=(str(reserves),), cutoff=10.0,
-                                   t_start=T0, t_end=T1), tmp / "so", joints=[j for j, _ in JOINTS], on="child",
-                             frame="child")
-    osim = scene_from_osim(model, muscles=True)
-    inputs = prepare(model, InverseTrial(coordinates=coords, grf=loads), filter=Filter(10.0, None, "opensim"))
-    res = solve(inputs)
-    trial = TrialMuscles(osim, inputs.tree, res.t, res.plates, read_actuators(reserves),
-                         reaction=JointReaction(on="child", frame="child"), joints=tuple(j for j, _ in JOINTS))
-    out = trial.solve(res.z, res.zd, res.zdd)
-    act, force = read_sto(so["activation"]), read_sto(so["force"])
-    keep = [i for i, t in enumerate(act.t) if not any(abs(t - f) < 1e-6 for f in so["failed"])]
-    rows = [int(np.argmin(np.abs(res.t - t))) for t in act.t[keep]]
-    assert np.abs(res.t[rows] - act.t[keep]).max() < 1e-6
-    names = [m.name for m in osim.muscles]
-    return {"names": names, "trial": trial, "out": out, "rows": rows, "keep": keep, "failed": so["failed"],
-            "act": np.column_stack([act.column(n) for n in names])[keep],
-            "force": np.column_stack([force.column(n) for n in names])[keep], "jr": read_sto(so["reactions"])}
+    return both_static_optimizations(_bounded_model(tmp / "bounded.osim"), tmp, JOINTS)
 
 
 @needs_opensim
