@@ -10,8 +10,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from casflex.inverse.heading import facing_plane
 from casflex.lab import LabMarkers
-from casflex.study.direction import facing_plane, walking_plane
+from casflex.study.direction import walking_plane
 
 #: scene x, y (m) of the markers: the toe and the pelvis's front ahead of the heel and its back
 SCENE = {"HEE": (-0.05, 0.05), "TOE": (0.15, 0.03), "ASI": (0.12, 0.95), "SACR": (-0.08, 0.97)}

@@ -24,7 +24,7 @@ import numpy as np
 from casflex.lab import LabMarkers, Plane
 
 __all__ = ["travel_labels", "median_steps", "check_straight", "heading_line", "facing_plane", "MIN_TRAVEL",
-           "WALKING_SPEED", "MAX_TURN", "MIN_CORRELATION"]
+           "WALKING_SPEED", "MAX_TURN", "MIN_CORRELATION", "LAB_AXES", "horizontal_axes"]
 
 #: m: less travel than this over a trial is standing (a static trial, a treadmill)
 MIN_TRAVEL = 0.5
@@ -122,11 +122,13 @@ def heading_line(scene, lab: LabMarkers, plane: str, root: str | None, t_start: 
 #: statics on a Plug-in Gait model: 0.78-0.91 facing, 0.02-0.07 across)
 MIN_CORRELATION = 0.3
 
-_AXES = "XYZ"
+#: the lab's axes, by their index in a marker's coordinates
+LAB_AXES = "XYZ"
 
 
-def _horizontal(vertical: str) -> list[int]:
-    return [k for k in range(3) if _AXES[k] != vertical.lstrip("+-").upper()]
+def horizontal_axes(vertical: str) -> list[int]:
+    """The indices of the lab's two horizontal axes, ``vertical`` ("Y", "+Z", ...) the up one."""
+    return [k for k in range(3) if LAB_AXES[k] != vertical.lstrip("+-").upper()]
 
 
 def facing_plane(scene, lab: LabMarkers, vertical: str) -> tuple[str, str]:
@@ -145,12 +147,12 @@ def facing_plane(scene, lab: LabMarkers, vertical: str) -> tuple[str, str]:
                          f"subject faces; give the plane")
     r, slope = {}, {}
     x = x0[seen] - x0[seen].mean()
-    for k in _horizontal(vertical):
+    for k in horizontal_axes(vertical):
         lab_k = mean[seen, k] - mean[seen, k].mean()
         b = float(x @ lab_k / (x @ x))  # the lab axis's metres per metre of the scene's x: a subject's size
         with np.errstate(all="ignore"):  # a lab axis the markers do not spread along: no correlation (0)
             c = float(np.nan_to_num(np.corrcoef(x, lab_k)[0, 1]))
-        for sign, axis in ((1.0, f"{_AXES[k]},{vertical}"), (-1.0, f"-{_AXES[k]},{vertical}")):
+        for sign, axis in ((1.0, f"{LAB_AXES[k]},{vertical}"), (-1.0, f"-{LAB_AXES[k]},{vertical}")):
             r[axis], slope[axis] = sign * c, sign * b
     best = max(slope, key=slope.get)
     if r[best] < MIN_CORRELATION:

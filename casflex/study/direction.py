@@ -8,8 +8,8 @@ scenes are (OpenSim's convention: x forward, y up):
   :data:`MIN_TRAVEL`): x along that displacement's larger horizontal lab axis, with its sign
   (:func:`walking_plane`);
 - a static trial (before the scene is calibrated to the subject): of the four horizontal directions, the one
-  along which the markers lie as the scene's lie along its x (:func:`facing_plane`, :mod:`casflex.inverse.heading`'s:
-  the calibration checks a given plane with it);
+  along which the markers lie as the scene's lie along its x (:func:`casflex.inverse.heading.facing_plane`: the
+  calibration checks a given plane with it);
 - a trial in which the subject stays (a treadmill; the scene calibrated): the direction in whose plane the scene
   fits the trial's frames best (:func:`fitted_plane`).
 
@@ -22,10 +22,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from casflex.inverse.heading import _AXES, MIN_CORRELATION, MIN_TRAVEL, _horizontal, facing_plane, median_steps
+from casflex.inverse.heading import LAB_AXES, MIN_TRAVEL, horizontal_axes, median_steps
 from casflex.lab import LabMarkers, Plane
 
-__all__ = ["walking_plane", "facing_plane", "fitted_plane", "MIN_CORRELATION"]
+__all__ = ["walking_plane", "fitted_plane"]
 
 
 def walking_plane(lab: LabMarkers, labels: list[str], vertical: str) -> tuple[str, str] | None:
@@ -34,13 +34,13 @@ def walking_plane(lab: LabMarkers, labels: list[str], vertical: str) -> tuple[st
     if lab.t.size < 2 or not labels:
         return None
     d = np.nansum(median_steps(lab, labels), axis=0)
-    h = _horizontal(vertical)
+    h = horizontal_axes(vertical)
     if np.hypot(*d[h]) < MIN_TRAVEL:
         return None
     k = h[int(np.argmax(np.abs(d[h])))]
-    plane = f"{'-' if d[k] < 0 else ''}{_AXES[k]},{vertical}"
+    plane = f"{'-' if d[k] < 0 else ''}{LAB_AXES[k]},{vertical}"
     return plane, f"plane {plane}: the subject travels {np.hypot(*d[h]):.2f} m along {'-' if d[k] < 0 else '+'}" \
-                  f"{_AXES[k]}"
+                  f"{LAB_AXES[k]}"
 
 
 def fitted_plane(scene, lab: LabMarkers, vertical: str, root: str | None = None, frames: int = 5) -> tuple[str, str]:
@@ -61,9 +61,9 @@ def fitted_plane(scene, lab: LabMarkers, vertical: str, root: str | None = None,
     X = np.stack([lab.marker(m.lab_label)[pick] if m.lab_label in lab.labels else nan
                   for m in tree.model.scene.markers], axis=1)  # (frames, the scene's markers, 3), NaN: not in it
     misfit = {}
-    for k in _horizontal(vertical):
+    for k in horizontal_axes(vertical):
         for sign in ("", "-"):
-            plane = f"{sign}{_AXES[k]},{vertical}"
+            plane = f"{sign}{LAB_AXES[k]},{vertical}"
             y = (X @ Plane.parse(plane).matrix.T).reshape(pick.size, -1)
             misfit[plane] = float(sum(fit_pose(tree, yi)[1] for yi in y))
     best = min(misfit, key=misfit.get)

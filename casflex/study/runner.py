@@ -107,8 +107,8 @@ def _trial_plane(sc, lab, plane: str, vertical: str, static: bool = False, root:
     (:mod:`.direction`: a static trial by its markers, another by the scene's fit), its travel read from the root
     segment's markers (:func:`casflex.inverse.heading.travel_labels`: ValueError where the trial has none of them).
     The heading is checked against the plane by the trial's inverse dynamics (:mod:`casflex.inverse.heading`)."""
-    from casflex.inverse.heading import travel_labels
-    from casflex.study.direction import facing_plane, fitted_plane, walking_plane
+    from casflex.inverse.heading import facing_plane, travel_labels
+    from casflex.study.direction import fitted_plane, walking_plane
 
     labels = travel_labels(sc, lab, root)
     if plane != "auto":
