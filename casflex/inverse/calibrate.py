@@ -331,7 +331,7 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
     path), module docstring. A segment the static trial has none of the markers of is locked for the static fit
     only (:func:`casflex.inverse.locking.lock_unmarked`): the scene returned keeps its joints and its markers (where
     they were; scaled, it keeps its size), for the trials that record them."""
-    from casflex.inverse.fit import _held, check_decided, coordinate_bounds, fit_pose
+    from casflex.inverse.fit import at_limits, check_decided, coordinate_bounds, fit_pose
     from casflex.inverse.inputs import inverse_model, read_markers
     from casflex.inverse.locking import lock_unmarked
     from casflex.lab import LabMarkers, Plane
@@ -388,7 +388,7 @@ def calibrate(scene, static, plane: str = "X,Y", *, root: str | None = None, sca
         raise ValueError(f"static trial: its markers do not decide the pose: {_undecided_at(tree, z, ym)} (a segment "
                          "with fewer than two seen markers and no other way to place it): record them, or take the "
                          "segment out of the scene")
-    held = _held(z, coordinate_bounds(tree), tree)
+    held = at_limits(z, coordinate_bounds(tree), tree)
     markers, moved, far = _placed(sc, model, tree, z, ym, report)
     y_after = np.array(kinematic_tree(inverse_model(dataclasses.replace(sc, markers=tuple(markers)), root), root)
                        .marker_fit(z)[0]).reshape(-1, 2)

@@ -83,7 +83,7 @@ def plate_prefixes(table: LabTable) -> list[str]:
     return [n[:-len("force_vx")] for n in table.names if n.endswith("force_vx")]
 
 
-def _span(a: float | None, b: float | None) -> str:
+def span_text(a: float | None, b: float | None) -> str:
     return f"{'[start]' if a is None else f'{a:.3f}'}-{'[end]' if b is None else f'{b:.3f}'} s"
 
 
@@ -219,7 +219,7 @@ def _one_foot(p: str, a, b, foot: str, each: dict, t: np.ndarray, fv: np.ndarray
             i = int(np.argmax(np.where(both, across, -np.inf)))
             share = 100.0 * fv[np.isfinite(across) & (o_across < across)].sum() / fv.sum()
             raise ValueError(
-                f"{p}, contact {_span(a, b)}: its centre of pressure lies {across[i]:.2f} m across the floor "
+                f"{p}, contact {span_text(a, b)}: its centre of pressure lies {across[i]:.2f} m across the floor "
                 f"from {foot}'s nearest marker at t = {t[i]:.3f} s ({fv[i]:.0f} N; a foot's within "
                 f"{MAX_COP_FROM_FOOT:g} m), nearer {n}'s ({o_across[i]:.2f} m; over {share:.0f} % of the contact's "
                 f"load): both feet on the plate at once (a treadmill's single plate, or a double support on one "
@@ -277,7 +277,7 @@ def _plate_spans(p: str, t: np.ndarray, fv: np.ndarray, threshold: float, min_du
         if hi - lo >= min_duration or (a is None or b is None) and peak > MAX_PULL:
             out.append((a, b))
         elif peak > MAX_PULL:
-            raise ValueError(f"{p}: a contact of {1e3 * (b - a):.0f} ms at t = {_span(a, b)} peaking at "
+            raise ValueError(f"{p}: a contact of {1e3 * (b - a):.0f} ms at t = {span_text(a, b)} peaking at "
                              f"{peak:.0f} N, shorter than a stance ({min_duration:g} s) and above noise "
                              f"({MAX_PULL:g} N): a foot grazing the plate, whose load would go to another foot; cut "
                              "it from the record (set its force to 0) or give each plate its node")
@@ -314,13 +314,13 @@ def plate_contacts(scene, markers, grf=None, plane: Plane | str = "X,Y", prefixe
             rows = (table.t >= lo) & (table.t <= hi) & (fv > threshold) & np.isfinite(P).all(axis=1)
             rows &= (table.t >= lab.t[0]) & (table.t <= lab.t[-1])
             if not rows.any():
-                raise ValueError(f"{where}, contact {_span(a, b)}: no centre of pressure within the markers' "
+                raise ValueError(f"{where}, contact {span_text(a, b)}: no centre of pressure within the markers' "
                                  f"times {lab.t[0]:g}..{lab.t[-1]:g} s")
             each = {n: _foot_samples(lab, labels, table.t[rows], P[rows], axes) for n, labels in cands.items()}
             score = sorted(((n, *_foot_distance(*each[n], fv[rows])) for n in cands), key=lambda s: s[1])
             near = [s for s in score if s[1] <= max_distance and s[2] <= max_height]
             if not near:
-                raise ValueError(f"{where}, contact {_span(a, b)}: no foot within {max_distance:g} m across the "
+                raise ValueError(f"{where}, contact {span_text(a, b)}: no foot within {max_distance:g} m across the "
                                  f"floor of its centre of pressure and {max_height:g} m above it (nearest: "
                                  f"{score[0][0]}, {score[0][1]:.2f} m and {score[0][2]:.2f} m); plane {pl.x},{pl.y}"
                                  " (a foot the scene does not model, e.g. a leg's other foot: name each plate's node, "

@@ -302,7 +302,7 @@ def fit_markers(tree: KinematicTree, t: np.ndarray, y: np.ndarray, *, max_gap: f
     misfit[ok] = np.where(used, np.hypot(pairs[..., 0], pairs[..., 1]), np.nan)
     if max_misfit is not None:  # the first frame with a marker too far is named, as the fit meets it
         for i in np.flatnonzero(ok & (np.nan_to_num(misfit, nan=0.0) > max_misfit).any(axis=1)):
-            _check_misfit(misfit[i], t[i], max_misfit, labels, source, _held(Z[i], bounds, tree))
+            _check_misfit(misfit[i], t[i], max_misfit, labels, source, at_limits(Z[i], bounds, tree))
     report = [f"marker fit: {n} frames, misfit RMS median {1e3 * median(rms, skip_nan=True):.1f} mm, "
               f"max {1e3 * np.nanmax(rms):.1f} mm"] if np.isfinite(rms).any() else []
     report += _by_marker(misfit, labels, tree) + _at_limits(Z, bounds, tree)
@@ -388,7 +388,7 @@ def _at_limit(Z: np.ndarray, bounds: tuple[np.ndarray, np.ndarray] | None, tree:
     return {lab.get(n, n): int(at[:, k].sum()) for k, n in enumerate(tree.names) if at[:, k].any()}
 
 
-def _held(z: np.ndarray, bounds: tuple[np.ndarray, np.ndarray] | None, tree: KinematicTree) -> list[str]:
+def at_limits(z: np.ndarray, bounds: tuple[np.ndarray, np.ndarray] | None, tree: KinematicTree) -> list[str]:
     """The lab names of the coordinates at a limit in the pose z."""
     return list(_at_limit(z, bounds, tree))
 

@@ -303,7 +303,7 @@ def _unapplied(model: Model, lab, table, pairs: list[tuple[str, str]], plane, wi
     (:func:`casflex.inverse.contacts.plate_contacts`; a plate under no foot of the scene, e.g. a leg model's other
     foot's, says nothing): its load is left out of that foot's ground reaction (a stance straddling it and a plate
     that is applied)."""
-    from casflex.inverse.contacts import _span, plate_contacts, plate_prefixes
+    from casflex.inverse.contacts import plate_contacts, plate_prefixes, span_text
     from casflex.lab.filtering import _plate_columns
 
     if lab is None:
@@ -317,7 +317,8 @@ def _unapplied(model: Model, lab, table, pairs: list[tuple[str, str]], plane, wi
             continue
         on = [c for c in found if (c.strike is None or c.strike <= window[1]) and (c.off is None or c.off >= window[0])]
         if on:
-            lines.append(f"plate {p!r} ({table.source}): {on[0].foot} stands on it {_span(on[0].strike, on[0].off)} "
+            span = span_text(on[0].strike, on[0].off)
+            lines.append(f"plate {p!r} ({table.source}): {on[0].foot} stands on it {span} "
                          f"inside the window, but it is applied to no node: its load ({on[0].peak:.0f} N) is left out "
                          f"of {on[0].foot}'s ground reaction; apply it (--plate {on[0].foot}={p}, a node may take two "
                          "plates) or --plate auto")

@@ -246,11 +246,11 @@ def plates_under_feet(model, plates: list[Plate], t: np.ndarray, q: np.ndarray) 
     body first and brakes it after (:func:`casflex.lab.plate_checks.check_shear`: its sign flipped), with the fitted
     configurations q (k, n_dof) at times t (k,) s: the plate under another foot, its origin wrong, or given to a
     thigh or a shank (the refusal names the nodes near its centre of pressure)."""
-    from casflex.lab.plate_checks import _up, check_cop_height, check_plate_foot, check_shear
+    from casflex.lab.plate_checks import check_cop_height, check_plate_foot, check_shear, weight_up
 
     weight = model_weight(model)
     nodes = {n: q[:, 3 * k:3 * k + 2] for k, n in enumerate(model.node_names)}
-    up = _up(weight)
+    up = weight_up(weight)
     body_x = np.mean([xy @ [up[1], -up[0]] for xy in nodes.values()], axis=0) if up is not None else None
     for pl in plates:
         F, Mo = pl.at(t)

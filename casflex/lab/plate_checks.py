@@ -137,7 +137,7 @@ MAX_ACROSS = 1.0
 _LOADED = 20.0
 
 
-def _up(weight: np.ndarray) -> np.ndarray | None:
+def weight_up(weight: np.ndarray) -> np.ndarray | None:
     """The model's up in its plane (2,), against the weight (N, (2,)); None where it has none."""
     w = np.asarray(weight, dtype=float)
     size = float(np.linalg.norm(w))
@@ -228,7 +228,7 @@ def window_load(
     """A line saying that the plate (its force (n, 2) N in the plane at times t (n,) s) carries no load
     (its vertical force under 20 N) inside ``window`` (s), else None: its load there is zero, as computed
     (module docstring)."""
-    up = _up(weight) if weight is not None else None
+    up = weight_up(weight) if weight is not None else None
     if up is None:
         return None
     inside = (t >= window[0] - 1e-9) & (t <= window[1] + 1e-9)
@@ -258,7 +258,7 @@ def check_plate_foot(
     force (k, 2) N and moment about the lab's origin (k,) N m in the plane, the node's position ``node_xy``
     (k, 2) m, at times t (k,) s; the stance: the samples whose vertical force exceeds a quarter of its peak and
     20 N (module docstring). ``nodes``: every node's positions (k, 2) m, to name the foot in the refusal."""
-    up = _up(weight) if weight is not None else None
+    up = weight_up(weight) if weight is not None else None
     if up is None:
         return
     fv = force @ up
@@ -378,7 +378,7 @@ def check_shear(where: str, t: np.ndarray, force: np.ndarray, weight: np.ndarray
     propels the body in the first half of a whole stance and brakes it in the second, each by more than
     :data:`MIN_SHEAR` x W on average, while the body (``body_x`` (k,) m: its nodes' mean position along the floor)
     travels faster than :data:`MIN_TRAVEL` m/s over it (module docstring): a stance brakes, then propels."""
-    up = _up(weight) if weight is not None else None
+    up = weight_up(weight) if weight is not None else None
     if up is None:
         return
     W = float(np.linalg.norm(weight))

@@ -36,7 +36,6 @@ from casflex.inverse.contacts import (
     AUTO,
     Contact,
     _plane,
-    _span,
     below,
     contacts,
     feet,
@@ -44,6 +43,7 @@ from casflex.inverse.contacts import (
     plate_prefixes,
     plate_shares,
     read_trial,
+    span_text,
     tree_walk,
     vertical_force,
 )
@@ -85,7 +85,7 @@ def plates_of(found: list[Contact], prefixes: list[str], threshold: float = MIN_
         if not mine:
             lines.append(f"plate {p!r}: no contact above {threshold:g} N: left out")
             continue
-        by = {c.foot: [_span(d.strike, d.off) for d in mine if d.foot == c.foot] for c in mine}
+        by = {c.foot: [span_text(d.strike, d.off) for d in mine if d.foot == c.foot] for c in mine}
         if len(by) > 1:
             raise ValueError(f"plate {p!r} is stepped on by " + " and ".join(f"{n} ({', '.join(s)})" for n, s in
                              by.items()) + ": no one node takes it over the trial; give plates=\"auto\" (each "
@@ -115,7 +115,7 @@ def contact_lines(found: list[Contact], prefixes: list[str], threshold: float = 
             lines.append(f"plate {p!r}: no contact above {threshold:g} N: left out")
         for foot in dict.fromkeys(c.foot for c in mine):
             theirs = [c for c in mine if c.foot == foot]
-            lines.append(_plate_line(p, foot, theirs, [_span(c.strike, c.off) for c in theirs]))
+            lines.append(_plate_line(p, foot, theirs, [span_text(c.strike, c.off) for c in theirs]))
     return lines
 
 
@@ -273,7 +273,7 @@ def _clean(found, node, stances, t0, t1, auto, applied, slack, weight=0.0) -> tu
     if st is None:
         near = [s for s in stances if (-np.inf if s[0] is None else s[0]) < (t0 + t1) / 2  # in its stance
                 and (np.inf if s[1] is None else s[1]) > t0]
-        said = f" (its contact {_span(near[0][0], near[0][1])} on {on(near[0][2])})" if near else \
+        said = f" (its contact {span_text(near[0][0], near[0][1])} on {on(near[0][2])})" if near else \
             " (the foot off every plate)"
         return False, f"no strike on {which} within {slack:g} s of {t0:.3f} s{said}"
     strike, off, cs = st
@@ -281,21 +281,21 @@ def _clean(found, node, stances, t0, t1, auto, applied, slack, weight=0.0) -> tu
         return False, f"its stance on {on(cs)} from {strike:.3f} s does not end within the cycle"
     for c in cs:
         if not auto and c.plate not in applied:
-            return False, (f"{node} on {c.plate!r} {_span(c.strike, c.off)} during its stance {_span(strike, off)}: "
-                           "not applied to it")
+            return False, (f"{node} on {c.plate!r} {span_text(c.strike, c.off)} during its stance "
+                           f"{span_text(strike, off)}: not applied to it")
     plates = {c.plate for c in cs} | applied
     also = [c for c in found if c.foot != node and c.plate in plates
             and (c.strike is None or c.strike < off) and (c.off is None or c.off > strike)]
     if also:
         c = also[0]
-        return False, f"{c.foot} on {c.plate!r} {_span(c.strike, c.off)} during its stance on {on(cs)} " \
-                      f"{_span(strike, off)}"
+        return False, f"{c.foot} on {c.plate!r} {span_text(c.strike, c.off)} during its stance on {on(cs)} " \
+                      f"{span_text(strike, off)}"
     peak = sum(c.peak for c in cs)  # of a stance straddling plates, at least its peak
     if weight > 0 and peak < MIN_STANCE_PEAK * weight:
-        return False, (f"its stance on {on(cs)} {_span(strike, off)} peaks at {peak:.0f} N, {peak / weight:.2f} of "
+        return False, (f"its stance on {on(cs)} {span_text(strike, off)} peaks at {peak:.0f} N, {peak / weight:.2f} of "
                        f"the body's weight (a stance wholly on plates, above {MIN_STANCE_PEAK:g}): the foot partly off "
                        "the plate (on its edge)")
-    return True, f"stance on {on(cs)} {_span(strike, off)}"
+    return True, f"stance on {on(cs)} {span_text(strike, off)}"
 
 
 def ground_feet(scene, lab: LabMarkers, plane: Plane | str = "X,Y", max_height: float = 0.15) -> list[str]:
