@@ -144,11 +144,11 @@ def _plate_share(inputs: InverseInputs, plates: list[Plate], loads: dict[str, np
     """The line that says the plates push far more or less than the motion needs of the ground
     (:func:`casflex.lab.checks.plate_share_lines`): their forces and the root's residual along the model's up."""
     from casflex.lab.checks import plate_share_lines
+    from casflex.lab.plate_checks import weight_up
 
-    g = np.asarray(inputs.model.scene.gravity, dtype=float)
-    if not plates or "root.fx" not in loads or not np.hypot(*g) > 0:
+    up = weight_up(inputs.model.scene.gravity)
+    if not plates or "root.fx" not in loads or up is None:
         return []
-    up = -g / np.hypot(*g)
     pushed = sum(p.at(inputs.t)[0] for p in plates) @ up
     residual = loads["root.fx"] * up[0] + loads["root.fy"] * up[1]
     return plate_share_lines(inputs.settings.get("source") or "inverse dynamics", inputs.t, pushed, pushed + residual)

@@ -189,15 +189,16 @@ def _floor(table: LabTable, prefix: str, rows: slice, E: np.ndarray, fv: np.ndar
     the table or the weight gives none."""
     from casflex.lab.checks import median
     from casflex.lab.filtering import _plate_columns
+    from casflex.lab.plate_checks import weight_up
 
     p = _plate_columns(table, prefix)
-    if fv is None or f"{p}force_px" not in table.names:
+    up = weight_up(weight) if weight is not None else None
+    if fv is None or up is None or f"{p}force_px" not in table.names:
         return None, None
-    up = -np.asarray(weight, dtype=float) / np.linalg.norm(weight)
     P = np.column_stack([table.column(f"{p}force_p{a}")[rows] for a in "xyz"]).astype(float)
     with np.errstate(invalid="ignore"):
         h = (P @ E.T) @ up
-        on = np.isfinite(h) & (fv > 20.0)
+        on = np.isfinite(h) & (fv > MIN_PLATE_FORCE)
     return (median(h[on]), np.where(on, h, np.nan)) if on.any() else (None, None)
 
 
